@@ -1,0 +1,278 @@
+"""Pose bases: a 3D pose is ``mean + B @ alpha`` in the normalised model frame.
+
+Learning (paper Sec. 4.2): sparse bases by L1-regularised dictionary learning
+(Mairal et al.; the paper's choice), PCA, and class-wise PCA (Ramakrishna et al. 2012).
+Poses are normalised with :func:`pose_lifter.core.skeleton.normalise_pose` first
+(centred, body frame, right lower leg = 1).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import BasisFileError, InvalidInputError
+from .skeleton import N_JOINTS, limb_lengths
+
+__all__ = [
+    "PoseBases",
+    "learn_sparse_bases",
+    "learn_pca_bases",
+    "learn_classwise_pca_bases",
+    "sparse_codes",
+    "DEFAULT_BASES_PATH",
+]
+
+#: The basis file shipped with the package (see tools/learn_default_bases.sh).
+DEFAULT_BASES_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "bases_sparse200.npz"
+_FORMAT_VERSION: Final[int] = 1
+
+
+@dataclass
+class PoseBases:
+    """A learned pose model.
+
+    Attributes
+    ----------
+    mean : ndarray, shape (36,)
+        Mean pose ``mu`` (joint-major, model frame, right lower leg = 1).
+    components : ndarray, shape (36, k)
+        The bases ``B`` as columns.
+    method : str
+        ``"sparse"``, ``"pca"`` or ``"classwise-pca"``.
+    start_alphas : ndarray, shape (n_starts, k)
+        Coefficients of k-means cluster centres of the training poses: the multi-start
+        initialisations (paper Sec. 4.4.2). Row 0 is always the mean pose (zeros).
+    limb_proportions : ndarray, shape (8,)
+        Mean limb lengths of the training poses (right lower leg = 1).
+    metadata : dict
+        Free-form description: training data, learning parameters, command.
+    """
+
+    mean: NDArray[np.float64]
+    components: NDArray[np.float64]
+    method: str
+    start_alphas: NDArray[np.float64]
+    limb_proportions: NDArray[np.float64]
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.mean = np.asarray(self.mean, dtype=np.float64).reshape(-1)
+        self.components = np.asarray(self.components, dtype=np.float64)
+        self.start_alphas = np.atleast_2d(np.asarray(self.start_alphas, dtype=np.float64))
+        self.limb_proportions = np.asarray(self.limb_proportions, dtype=np.float64)
+        d = 3 * N_JOINTS
+        if self.mean.shape != (d,):
+            raise BasisFileError(f"mean must have {d} entries, got {self.mean.shape}")
+        if self.components.ndim != 2 or self.components.shape[0] != d:
+            raise BasisFileError(f"components must be ({d}, k), got {self.components.shape}")
+        if self.start_alphas.shape[1] != self.n_bases:
+            raise BasisFileError("start_alphas must have one column per basis")
+        if self.limb_proportions.shape != (8,):
+            raise BasisFileError("limb_proportions must have 8 entries")
+        for name, arr in (("mean", self.mean), ("components", self.components),
+                          ("start_alphas", self.start_alphas)):
+            if not np.all(np.isfinite(arr)):
+                raise BasisFileError(f"{name} has non-finite values")
+
+    @property
+    def n_bases(self) -> int:
+        """Number of bases ``k``."""
+        return int(self.components.shape[1])
+
+    @property
+    def mean_pose(self) -> NDArray[np.float64]:
+        """The mean pose, shape (12, 3)."""
+        return self.mean.reshape(N_JOINTS, 3)
+
+    def pose(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``mean + B @ alpha`` as poses; alpha of shape (..., k) -> (..., 12, 3)."""
+        a = np.asarray(alpha, dtype=np.float64)
+        return np.asarray((self.mean + a @ self.components.T).reshape(*a.shape[:-1], N_JOINTS, 3))
+
+    def with_starts(self, n_starts: int) -> NDArray[np.float64]:
+        """The first ``n_starts`` multi-start coefficient vectors, shape (n, k)."""
+        n = max(1, min(int(n_starts), self.start_alphas.shape[0]))
+        return self.start_alphas[:n]
+
+    def save(self, path: str | Path) -> None:
+        """Write an ``.npz`` file (arrays + JSON metadata)."""
+        meta = dict(self.metadata)
+        meta["format_version"] = _FORMAT_VERSION
+        meta["method"] = self.method
+        meta["n_bases"] = self.n_bases
+        np.savez_compressed(
+            Path(path),
+            mean=self.mean,
+            components=self.components,
+            start_alphas=self.start_alphas,
+            limb_proportions=self.limb_proportions,
+            metadata=np.array(json.dumps(meta, sort_keys=True)),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> PoseBases:
+        """Read a basis file; ``None`` loads the packaged default."""
+        p = Path(path) if path is not None else DEFAULT_BASES_PATH
+        if not p.is_file():
+            raise BasisFileError(f"basis file not found: {p}")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                meta = json.loads(str(z["metadata"]))
+                return cls(
+                    mean=z["mean"],
+                    components=z["components"],
+                    method=str(meta.get("method", "unknown")),
+                    start_alphas=z["start_alphas"],
+                    limb_proportions=z["limb_proportions"],
+                    metadata=meta,
+                )
+        except (KeyError, ValueError, OSError) as exc:
+            raise BasisFileError(f"cannot read basis file {p}: {exc}") from exc
+
+
+def _as_training_matrix(poses: NDArray[np.float64]) -> NDArray[np.float64]:
+    arr = np.asarray(poses, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[1:] != (N_JOINTS, 3):
+        raise InvalidInputError(f"training poses must be (N, {N_JOINTS}, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidInputError("training poses contain non-finite values")
+    return arr.reshape(arr.shape[0], -1)
+
+
+def sparse_codes(
+    poses: NDArray[np.float64], mean: NDArray[np.float64], components: NDArray[np.float64], theta: float
+) -> NDArray[np.float64]:
+    """L1-regularised coefficients of poses (paper Sec. 4.2 reconstruction test).
+
+    Minimises ``0.5 * ||y - mu - B alpha||_2^2 + theta * ||alpha||_1`` per pose.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (N, 12, 3)
+    mean : ndarray, shape (36,)
+    components : ndarray, shape (36, k)
+    theta : float
+
+    Returns
+    -------
+    ndarray, shape (N, k)
+    """
+    from sklearn.linear_model import Lasso
+
+    y = _as_training_matrix(poses) - mean
+    d = y.shape[1]
+    # sklearn's Lasso minimises 1/(2 n_samples) ||y - X w||^2 + a ||w||_1 with n_samples = d.
+    model = Lasso(alpha=theta / d, fit_intercept=False, max_iter=5000, tol=1e-6)
+    model.fit(components, y.T)
+    return np.atleast_2d(np.asarray(model.coef_, dtype=np.float64))
+
+
+def _kmeans_starts(
+    x: NDArray[np.float64], mean: NDArray[np.float64], components: NDArray[np.float64],
+    n_starts: int, seed: int, theta: float,
+) -> NDArray[np.float64]:
+    from sklearn.cluster import KMeans
+
+    n_clusters = max(1, min(n_starts - 1, x.shape[0]))
+    km = KMeans(n_clusters=n_clusters, n_init=4, random_state=seed).fit(x)
+    centres = km.cluster_centers_.reshape(-1, N_JOINTS, 3)
+    # order clusters by size, largest first, so a prefix of starts is the most useful one
+    order = np.argsort(-np.bincount(km.labels_, minlength=n_clusters), kind="stable")
+    codes = sparse_codes(centres[order], mean, components, theta)
+    return np.vstack([np.zeros((1, components.shape[1])), codes])
+
+
+def _finish(
+    x: NDArray[np.float64], mean: NDArray[np.float64], comps: NDArray[np.float64], method: str,
+    n_starts: int, seed: int, theta: float, metadata: dict[str, Any] | None,
+) -> PoseBases:
+    meta = dict(metadata or {})
+    meta.update({"n_training_poses": int(x.shape[0]), "seed": seed, "n_starts": n_starts})
+    props = limb_lengths(x.reshape(-1, N_JOINTS, 3)).mean(axis=0)
+    return PoseBases(
+        mean=mean,
+        components=comps,
+        method=method,
+        start_alphas=_kmeans_starts(x, mean, comps, n_starts, seed, theta),
+        limb_proportions=props / props[7],
+        metadata=meta,
+    )
+
+
+def learn_sparse_bases(
+    poses: NDArray[np.float64], n_bases: int = 200, sparsity: float = 0.1, n_starts: int = 30,
+    seed: int = 0, n_iter: int = 2000, metadata: dict[str, Any] | None = None,
+) -> PoseBases:
+    """Sparse bases by L1-regularised dictionary learning (the paper's choice).
+
+    Minimises ``sum_t 0.5 ||y_t - mu - B alpha_t||^2 + sparsity ||alpha_t||_1`` over unit-norm
+    columns of ``B`` and the codes (scikit-learn ``MiniBatchDictionaryLearning``).
+
+    Parameters
+    ----------
+    poses : ndarray, shape (N, 12, 3)
+        Normalised training poses.
+    n_bases : int
+        ``k``; may exceed 36 (overcomplete, paper: 200).
+    sparsity : float
+        The L1 weight of learning (and of the cluster-centre codes).
+    """
+    from sklearn.decomposition import MiniBatchDictionaryLearning
+
+    x = _as_training_matrix(poses)
+    mean = x.mean(axis=0)
+    dl = MiniBatchDictionaryLearning(
+        n_components=n_bases, alpha=sparsity, max_iter=n_iter, batch_size=256,
+        random_state=seed, transform_algorithm="lasso_cd", transform_alpha=sparsity,
+        fit_algorithm="cd",
+    )
+    dl.fit(x - mean)
+    comps = np.asarray(dl.components_, dtype=np.float64).T
+    comps /= np.maximum(np.linalg.norm(comps, axis=0, keepdims=True), 1e-12)
+    meta = {"sparsity": sparsity, **(metadata or {})}
+    return _finish(x, mean, comps, "sparse", n_starts, seed, sparsity, meta)
+
+
+def learn_pca_bases(
+    poses: NDArray[np.float64], n_bases: int = 30, n_starts: int = 30, seed: int = 0,
+    metadata: dict[str, Any] | None = None,
+) -> PoseBases:
+    """The first ``n_bases`` principal components (at most 36) as bases."""
+    x = _as_training_matrix(poses)
+    mean = x.mean(axis=0)
+    _, _, vt = np.linalg.svd(x - mean, full_matrices=False)
+    k = min(n_bases, vt.shape[0])
+    return _finish(x, mean, vt[:k].T.copy(), "pca", n_starts, seed, 0.01, metadata)
+
+
+def learn_classwise_pca_bases(
+    poses: NDArray[np.float64], labels: NDArray[Any], n_per_class: int = 12, n_starts: int = 30,
+    seed: int = 0, metadata: dict[str, Any] | None = None,
+) -> PoseBases:
+    """Class-wise PCA (Ramakrishna et al. 2012): PCA per action class, components stacked.
+
+    Each class is centred on its own mean; the bases are expressed around the global mean.
+    """
+    x = _as_training_matrix(poses)
+    lab = np.asarray(labels)
+    if lab.shape != (x.shape[0],):
+        raise InvalidInputError("labels must have one entry per pose")
+    mean = x.mean(axis=0)
+    cols: list[NDArray[np.float64]] = []
+    for c in np.unique(lab):
+        xc = x[lab == c]
+        # class mean offset as one basis, then the class's principal directions
+        offset = xc.mean(axis=0) - mean
+        if np.linalg.norm(offset) > 1e-9:
+            cols.append(offset / np.linalg.norm(offset))
+        _, _, vt = np.linalg.svd(xc - xc.mean(axis=0), full_matrices=False)
+        cols.extend(vt[: min(n_per_class, vt.shape[0])])
+    comps = np.stack(cols, axis=1)
+    meta = {"classes": [str(c) for c in np.unique(lab)], "n_per_class": n_per_class, **(metadata or {})}
+    return _finish(x, mean, comps, "classwise-pca", n_starts, seed, 0.01, meta)

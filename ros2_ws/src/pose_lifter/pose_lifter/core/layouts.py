@@ -1,0 +1,94 @@
+"""2D keypoint layouts of common detectors, mapped onto the paper's 12 joints."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InvalidInputError, UnknownLayoutError
+from .skeleton import N_JOINTS
+
+__all__ = ["Layout", "LAYOUTS", "get_layout", "to_model_joints"]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A detector's keypoint layout.
+
+    Attributes
+    ----------
+    name : str
+    n_keypoints : int
+        Keypoints per skeleton in this layout.
+    model_indices : tuple of int, length 12
+        ``model_indices[j]`` is the layout index of the paper's joint ``j``
+        (order of :data:`pose_lifter.core.skeleton.JOINT_NAMES`).
+    """
+
+    name: str
+    n_keypoints: int
+    model_indices: tuple[int, ...]
+
+
+LAYOUTS: Final[dict[str, Layout]] = {
+    # COCO-17: 5 l_sho, 6 r_sho, 7 l_elb, 8 r_elb, 9 l_wri, 10 r_wri, 11 l_hip, 12 r_hip,
+    # 13 l_knee, 14 r_knee, 15 l_ank, 16 r_ank.
+    "coco17": Layout("coco17", 17, (5, 7, 9, 6, 8, 10, 11, 13, 15, 12, 14, 16)),
+    # Human3.6M 17: 1 r_hip, 2 r_knee, 3 r_ank, 4 l_hip, 5 l_knee, 6 l_ank, 11 l_sho,
+    # 12 l_elb, 13 l_wri, 14 r_sho, 15 r_elb, 16 r_wri.
+    "h36m17": Layout("h36m17", 17, (11, 12, 13, 14, 15, 16, 4, 5, 6, 1, 2, 3)),
+    # OpenPose BODY_25: 2 r_sho, 3 r_elb, 4 r_wri, 5 l_sho, 6 l_elb, 7 l_wri, 9 r_hip,
+    # 10 r_knee, 11 r_ank, 12 l_hip, 13 l_knee, 14 l_ank.
+    "body25": Layout("body25", 25, (5, 6, 7, 2, 3, 4, 12, 13, 14, 9, 10, 11)),
+    # The paper's own 12 joints.
+    "wang12": Layout("wang12", 12, tuple(range(N_JOINTS))),
+}
+
+
+def get_layout(name: str) -> Layout:
+    """Look up a layout by name (``coco17``, ``h36m17``, ``body25``, ``wang12``)."""
+    try:
+        return LAYOUTS[name.strip().lower()]
+    except (KeyError, AttributeError):
+        raise UnknownLayoutError(
+            f"unknown keypoint layout {name!r}; expected one of {sorted(LAYOUTS)}"
+        ) from None
+
+
+def to_model_joints(
+    keypoints: NDArray[np.float64], confidence: NDArray[np.float64] | None, layout: str | Layout
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Select the paper's 12 joints from a detector skeleton.
+
+    Parameters
+    ----------
+    keypoints : ndarray, shape (K, 2)
+        Pixels, in the layout's order.
+    confidence : ndarray, shape (K,), or None
+        Per-keypoint confidence in [0, 1]; None means all 1.
+    layout : str or Layout
+
+    Returns
+    -------
+    points : ndarray, shape (12, 2)
+    confidence : ndarray, shape (12,)
+    """
+    lay = layout if isinstance(layout, Layout) else get_layout(layout)
+    kp = np.asarray(keypoints, dtype=np.float64)
+    if kp.shape != (lay.n_keypoints, 2):
+        raise InvalidInputError(
+            f"layout {lay.name!r} needs keypoints of shape ({lay.n_keypoints}, 2), got {kp.shape}"
+        )
+    if confidence is None:
+        conf = np.ones(lay.n_keypoints)
+    else:
+        conf = np.asarray(confidence, dtype=np.float64)
+        if conf.shape != (lay.n_keypoints,):
+            raise InvalidInputError(
+                f"layout {lay.name!r} needs {lay.n_keypoints} confidences, got shape {conf.shape}"
+            )
+    idx = np.asarray(lay.model_indices)
+    return kp[idx].copy(), conf[idx].copy()

@@ -1,0 +1,101 @@
+"""Error metrics, named after the protocols they implement.
+
+All take poses of shape ``(..., J, 3)`` and return per-pose values of shape ``(...)``
+(or per-joint ``(..., J)``) in the units of the inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .skeleton import RIGHT_LOWER_LEG, limb_lengths
+
+__all__ = ["mpjpe", "p_mpjpe", "procrustes_align", "per_joint_error", "normalised_error"]
+
+
+def per_joint_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Euclidean error of every joint, shape ``(..., J)``."""
+    return np.asarray(np.linalg.norm(np.asarray(pred) - np.asarray(gt), axis=-1))
+
+
+def mpjpe(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Mean per-joint position error (Protocol #1), after removing each pose's centroid.
+
+    Parameters
+    ----------
+    pred, gt : ndarray, shape (..., J, 3)
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    p = np.asarray(pred, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    p = p - p.mean(axis=-2, keepdims=True)
+    g = g - g.mean(axis=-2, keepdims=True)
+    return np.asarray(per_joint_error(p, g).mean(axis=-1))
+
+
+def procrustes_align(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Similarity transform (rotation, scale, translation) of ``pred`` onto ``gt``.
+
+    Minimises ``||s R p + t - g||_F`` with ``R`` a proper rotation (reflection-safe: the
+    sign of the smallest singular direction is flipped when ``det < 0``).
+
+    Parameters
+    ----------
+    pred, gt : ndarray, shape (..., J, 3)
+
+    Returns
+    -------
+    ndarray, shape (..., J, 3)
+        The aligned prediction.
+    """
+    p = np.asarray(pred, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    mu_p = p.mean(axis=-2, keepdims=True)
+    mu_g = g.mean(axis=-2, keepdims=True)
+    p0 = p - mu_p
+    g0 = g - mu_g
+    h = np.swapaxes(p0, -1, -2) @ g0  # (..., 3, 3)
+    u, s, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(u @ vt))
+    d = np.where(d == 0, 1.0, d)
+    s = s.copy()
+    s[..., -1] *= d
+    u = u.copy()
+    u[..., :, -1] *= d[..., None]
+    rot = u @ vt  # p0 @ rot ~ g0
+    norm_p = np.sum(p0**2, axis=(-2, -1))
+    scale = np.sum(s, axis=-1) / np.where(norm_p > 0, norm_p, 1.0)
+    return np.asarray(scale[..., None, None] * (p0 @ rot) + mu_g)
+
+
+def p_mpjpe(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """MPJPE after similarity (Procrustes) alignment, "Protocol #2"; shape ``(...)``."""
+    return np.asarray(per_joint_error(procrustes_align(pred, gt), gt).mean(axis=-1))
+
+
+def normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The paper's criterion ``||y - y_hat||_2`` in units of the right lower leg.
+
+    Both poses are centred and scaled to a unit right lower leg, and ``pred`` is aligned to
+    ``gt`` by a rotation (the weak-perspective camera leaves global rotation and depth sign
+    to the estimate; Procrustes without scale). Returns the 2-norm of the stacked 3n-vector
+    difference, shape ``(...)``.
+    """
+    p = np.asarray(pred, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    p = p - p.mean(axis=-2, keepdims=True)
+    g = g - g.mean(axis=-2, keepdims=True)
+    p = p / limb_lengths(p)[..., RIGHT_LOWER_LEG][..., None, None]
+    g = g / limb_lengths(g)[..., RIGHT_LOWER_LEG][..., None, None]
+    h = np.swapaxes(p, -1, -2) @ g
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(u @ vt))
+    d = np.where(d == 0, 1.0, d)
+    u = u.copy()
+    u[..., :, -1] *= d[..., None]
+    aligned = p @ (u @ vt)
+    return np.asarray(np.linalg.norm((aligned - g).reshape(*g.shape[:-2], -1), axis=-1))

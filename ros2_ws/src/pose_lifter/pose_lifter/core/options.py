@@ -1,0 +1,175 @@
+"""Solver options and the paper's method variants, validated in one place.
+
+The ROS node validates live parameter changes through :meth:`LifterOptions.replace`, so the
+core and the node accept exactly the same values.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Final, Literal
+
+from .errors import OptionsError
+
+__all__ = ["Variant", "VARIANTS", "get_variant", "LifterOptions"]
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One of the paper's ablations (Sec. 4.3.1).
+
+    Attributes
+    ----------
+    name : str
+        e.g. ``"L1WAWS"``: L1/L2 loss, With/No Anthropomorphic (limb) constraints,
+        With/No Sparsity.
+    loss : {"l1", "l2"}
+    limbs : bool
+    sparsity : bool
+    """
+
+    name: str
+    loss: Literal["l1", "l2"]
+    limbs: bool
+    sparsity: bool
+
+
+def _variant(name: str) -> Variant:
+    loss: Literal["l1", "l2"] = "l1" if name[:2] == "L1" else "l2"
+    return Variant(name, loss, name[2:4] == "WA", name[4:6] == "WS")
+
+
+#: The full method is L1WAWS; the other seven are the paper's baselines.
+VARIANTS: Final[dict[str, Variant]] = {
+    n: _variant(n)
+    for n in ("L1WAWS", "L1WANS", "L1NAWS", "L1NANS", "L2WAWS", "L2WANS", "L2NAWS", "L2NANS")
+}
+
+
+def get_variant(name: str) -> Variant:
+    """Variant by name (case-insensitive); ``"full"`` is L1WAWS."""
+    key = str(name).strip().upper()
+    if key == "FULL":
+        key = "L1WAWS"
+    if key not in VARIANTS:
+        raise OptionsError(f"unknown variant {name!r}; expected 'full' or one of {sorted(VARIANTS)}")
+    return VARIANTS[key]
+
+
+@dataclass(frozen=True)
+class LifterOptions:
+    """Everything that tunes a solve. Units: 2D input is normalised (see ``Lifter``) so the
+    loss and ``theta`` are in right-lower-leg units whatever the image size.
+
+    Attributes
+    ----------
+    variant : str
+        Paper variant (``"full"`` = L1WAWS).
+    theta : float
+        Weight of ``||alpha||_1`` (paper's theta), > 0 when the variant uses sparsity.
+    max_alternations : int
+        Camera/pose alternations (paper: 20).
+    alternation_tol : float
+        Stop when the relative objective decrease of one alternation is below this.
+    pose_max_iter, pose_tol : int, float
+        Outer ADM of the pose step: iteration cap and relative residual tolerance.
+    inner_max_iter, inner_tol : int, float
+        Inner (Q, P) ADM of the alpha-step.
+    camera_max_iter, camera_tol : int, float
+        ADM of the camera step.
+    eta, delta, tau : float
+        Penalties of the pose ADM, inner ADM and camera ADM (constant: see the pitfalls).
+    n_starts : int
+        Cold-start multi-start count (paper: 30 k-means centres; 1 = mean pose only).
+    confidence_threshold : float
+        A joint with confidence below this is treated as missing (weight 0).
+    min_visible_joints : int
+        Fewer visible joints than this raises ``TooFewJointsError``.
+    limb_proportions : {"anthropometric", "bases"}
+        Limb-length targets: the anthropometric table, or the training data's mean.
+    alpha_step : {"reduced", "full"}
+        Lift the alpha-step in the 36-dim pose space (exactly equivalent, fast) or in the
+        paper's (k+1)-dim coefficient space.
+    alpha_solver : {"admm", "newton"}
+        The paper's rank-1 lifted ADM, or a direct local solver of the same problem.
+    camera_solver, pose_solver : {"admm", "cvxpy"}
+        Closed-form ADM path, or the cvxpy reference for the convex subproblems.
+    """
+
+    variant: str = "full"
+    theta: float = 0.05
+    max_alternations: int = 20
+    alternation_tol: float = 1e-4
+    pose_max_iter: int = 100
+    pose_tol: float = 1e-4
+    inner_max_iter: int = 60
+    inner_tol: float = 1e-6
+    camera_max_iter: int = 100
+    camera_tol: float = 1e-5
+    eta: float = 1.0
+    delta: float = 1.0
+    tau: float = 1.0
+    n_starts: int = 30
+    confidence_threshold: float = 0.1
+    min_visible_joints: int = 6
+    limb_proportions: str = "bases"
+    alpha_step: str = "reduced"
+    alpha_solver: str = "admm"
+    camera_solver: str = "admm"
+    pose_solver: str = "admm"
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    @property
+    def method(self) -> Variant:
+        """The :class:`Variant` named by ``variant``."""
+        return get_variant(self.variant)
+
+    def validate(self) -> None:
+        """Raise :class:`OptionsError` on any value out of range."""
+        get_variant(self.variant)
+        _positive_int = ("max_alternations", "pose_max_iter", "inner_max_iter", "camera_max_iter",
+                         "n_starts")
+        for name in _positive_int:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 100_000:
+                raise OptionsError(f"{name} must be an integer in [1, 100000], got {v!r}")
+        for name in ("theta",):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not 0.0 <= float(v) <= 1e6:
+                raise OptionsError(f"{name} must be in [0, 1e6], got {v!r}")
+        for name in ("alternation_tol", "pose_tol", "inner_tol", "camera_tol"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not 0.0 < float(v) < 1.0:
+                raise OptionsError(f"{name} must be in (0, 1), got {v!r}")
+        for name in ("eta", "delta", "tau"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not 1e-6 <= float(v) <= 1e6:
+                raise OptionsError(f"{name} must be in [1e-6, 1e6], got {v!r}")
+        if not 0.0 <= float(self.confidence_threshold) <= 1.0:
+            raise OptionsError(f"confidence_threshold must be in [0, 1], got {self.confidence_threshold!r}")
+        if not isinstance(self.min_visible_joints, int) or not 3 <= self.min_visible_joints <= 12:
+            raise OptionsError(f"min_visible_joints must be an integer in [3, 12], got {self.min_visible_joints!r}")
+        choices: dict[str, tuple[str, ...]] = {
+            "limb_proportions": ("anthropometric", "bases"),
+            "alpha_step": ("reduced", "full"),
+            "alpha_solver": ("admm", "newton"),
+            "camera_solver": ("admm", "cvxpy"),
+            "pose_solver": ("admm", "cvxpy"),
+        }
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise OptionsError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
+
+    def replace(self, **changes: Any) -> LifterOptions:
+        """A validated copy with some fields changed (unknown names raise ``OptionsError``)."""
+        names = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise OptionsError(f"unknown option(s): {unknown}")
+        try:
+            return dataclasses.replace(self, **changes)
+        except TypeError as exc:
+            raise OptionsError(str(exc)) from exc

@@ -1,0 +1,34 @@
+"""pose_lifter: ament_python package (core + node + CLI); also installs with plain pip."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "pose_lifter"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "tests"]),
+    package_data={"pose_lifter": ["py.typed", "data/*.npz"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools", "numpy", "scipy", "scikit-learn"],
+    extras_require={"tools": ["rosbags", "tqdm", "matplotlib"], "reference": ["cvxpy", "clarabel", "scs"]},
+    zip_safe=False,
+    maintainer="pose_lifter maintainers",
+    maintainer_email="pose-lifter@example.com",
+    description="Robust 3D human pose lifting from 2D keypoints (Wang et al., CVPR 2014).",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    entry_points={
+        "console_scripts": [
+            "lifter = pose_lifter.node:main",
+            "pose-lifter = pose_lifter.cli:main",
+        ],
+    },
+)
