@@ -1,0 +1,252 @@
+"""rosbags MCAP read/write of the pose_lifter messages, without building anything.
+
+The ``pose_lifter_msgs`` types are registered into a ROS 2 Jazzy typestore from their
+``.msg`` text (the rosbags way: ``typestore.register(get_types_from_msg(text, name))``).
+The ``.msg`` files are read from the source tree (``ros2_ws/src/pose_lifter_msgs/msg``) when
+it is next to this package, otherwise from the copies shipped as package data
+(``pose_lifter/msg/*.msg``; a test keeps the copies equal to the originals).
+
+Bags are written as single ``.mcap`` files (rosbag2 storage, version 9 metadata is
+embedded in the MCAP file; ``ros2 bag play file.mcap``, Foxglove and RViz read them).
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Final
+
+import numpy as np
+
+__all__ = [
+    "MSG_NAMES",
+    "MSG_PACKAGE",
+    "BagError",
+    "BagMessage",
+    "BagWriter",
+    "bag_topics",
+    "message_factory",
+    "msg_dir",
+    "pose_lifter_typestore",
+    "read_messages",
+]
+
+MSG_PACKAGE: Final[str] = "pose_lifter_msgs"
+#: Our message names in dependency order.
+MSG_NAMES: Final[tuple[str, ...]] = (
+    "Keypoint2D", "Skeleton2D", "Skeleton2DArray", "CameraEstimate", "Skeleton3D", "Skeleton3DArray",
+)
+_PACKAGE_MSG_DIR: Final[Path] = Path(__file__).resolve().parent / "msg"
+_SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[2] / MSG_PACKAGE / "msg"
+
+
+class BagError(RuntimeError):
+    """A bag cannot be read or written (missing file, missing topic, bad type)."""
+
+
+def msg_dir() -> Path:
+    """Directory of the ``pose_lifter_msgs`` ``.msg`` files (source tree first, then package data)."""
+    for d in (_SOURCE_MSG_DIR, _PACKAGE_MSG_DIR):
+        if all((d / f"{n}.msg").is_file() for n in MSG_NAMES):
+            return d
+    raise BagError(f"pose_lifter_msgs .msg files not found in {_SOURCE_MSG_DIR} or {_PACKAGE_MSG_DIR}")
+
+
+@lru_cache(maxsize=1)
+def pose_lifter_typestore() -> Any:
+    """A ROS 2 Jazzy typestore with the ``pose_lifter_msgs`` types registered (cached)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    d = msg_dir()
+    types: dict[str, Any] = {}
+    for name in MSG_NAMES:
+        types.update(get_types_from_msg((d / f"{name}.msg").read_text(), f"{MSG_PACKAGE}/msg/{name}"))
+    store.register(types)
+    return store
+
+
+_NUMPY_DTYPES: Final[dict[str, str]] = {
+    "bool": "bool", "byte": "uint8", "char": "uint8", "int8": "int8", "uint8": "uint8",
+    "int16": "int16", "uint16": "uint16", "int32": "int32", "uint32": "uint32",
+    "int64": "int64", "uint64": "uint64", "float32": "float32", "float64": "float64",
+}
+
+
+def _default_value(store: Any, desc: tuple[Any, Any]) -> Any:
+    from rosbags.interfaces import Nodetype
+
+    kind, sub = desc
+    if kind == Nodetype.BASE:
+        typ = sub[0]
+        if typ == "string" or typ == "wstring":
+            return ""
+        if typ == "bool":
+            return False
+        if typ.startswith("float"):
+            return 0.0
+        return 0
+    if kind == Nodetype.NAME:
+        return _default_message(store, sub)
+    inner, size = sub
+    if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
+        n = size if kind == Nodetype.ARRAY else 0
+        return np.zeros(n, dtype=_NUMPY_DTYPES[inner[1][0]])
+    if kind == Nodetype.ARRAY:
+        return [_default_value(store, inner) for _ in range(size)]
+    return []
+
+
+def _default_message(store: Any, msgtype: str, **fields: Any) -> Any:
+    cls = store.types[msgtype]
+    _, fielddefs = store.fielddefs[msgtype]
+    unknown = set(fields) - {name for name, _ in fielddefs}
+    if unknown:
+        raise TypeError(f"{msgtype} has no field(s) {sorted(unknown)}")
+    values = {name: fields[name] if name in fields else _default_value(store, desc)
+              for name, desc in fielddefs}
+    return cls(**values)
+
+
+def message_factory(msgtype: str, store: Any | None = None) -> Callable[..., Any]:
+    """A constructor for a rosbags message class that fills omitted fields with defaults.
+
+    rosbags message classes are dataclasses without defaults; rclpy classes have defaults.
+    The factory makes both usable the same way: ``factory(x=1.0, y=2.0)``.
+    """
+    st = store if store is not None else pose_lifter_typestore()
+    if msgtype not in st.types:
+        raise BagError(f"message type {msgtype!r} is not in the typestore")
+
+    def make(**fields: Any) -> Any:
+        return _default_message(st, msgtype, **fields)
+
+    make.__name__ = msgtype.rsplit("/", 1)[-1]
+    make.__qualname__ = make.__name__
+    make.__doc__ = f"Build a {msgtype} (omitted fields get their ROS defaults)."
+    return make
+
+
+class BagWriter:
+    """Write messages to a single ``.mcap`` file (rosbag2 MCAP storage, metadata version 9).
+
+    rosbags writes a rosbag2 directory; on close the MCAP file inside it is moved to
+    ``path`` and the directory is removed.
+
+    Examples
+    --------
+    >>> with BagWriter("out.mcap") as w:                           # doctest: +SKIP
+    ...     w.add_topic("/keypoints_2d", "pose_lifter_msgs/msg/Skeleton2DArray")
+    ...     w.write("/keypoints_2d", stamp_ns, msg)
+    """
+
+    def __init__(self, path: str | Path, overwrite: bool = False) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.path = Path(path)
+        if self.path.suffix != ".mcap":
+            raise BagError(f"bag path must end in .mcap, got {self.path}")
+        if self.path.exists() and not overwrite:
+            raise BagError(f"{self.path} exists already (pass overwrite=True to replace it)")
+        self.store = pose_lifter_typestore()
+        self._tmp = Path(tempfile.mkdtemp(prefix=".bagwriter-", dir=self.path.parent.resolve()))
+        self._bagdir = self._tmp / self.path.stem
+        self._writer = Writer(self._bagdir, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._connections: dict[str, Any] = {}
+        self._open = False
+
+    def open(self) -> BagWriter:
+        self._writer.open()
+        self._open = True
+        return self
+
+    def __enter__(self) -> BagWriter:
+        return self.open()
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close(discard=exc_type is not None)
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        """Declare a topic (once) with its message type, e.g. ``sensor_msgs/msg/CameraInfo``."""
+        if topic in self._connections:
+            return
+        if msgtype not in self.store.types:
+            raise BagError(f"message type {msgtype!r} is not in the typestore")
+        self._connections[topic] = self._writer.add_connection(topic, msgtype, typestore=self.store)
+
+    def write(self, topic: str, stamp_ns: int, msg: Any, msgtype: str | None = None) -> None:
+        """Serialise and write one message (the topic is added on first use)."""
+        if topic not in self._connections:
+            self.add_topic(topic, msgtype or str(msg.__msgtype__))
+        conn = self._connections[topic]
+        self._writer.write(conn, int(stamp_ns), self.store.serialize_cdr(msg, conn.msgtype))
+
+    def close(self, discard: bool = False) -> None:
+        """Finish the file (or throw it away with ``discard``)."""
+        try:
+            if self._open:
+                self._writer.close()
+                self._open = False
+                if not discard:
+                    files = sorted(self._bagdir.glob("*.mcap"))
+                    if len(files) != 1:
+                        raise BagError(f"expected one .mcap file in {self._bagdir}, found {files}")
+                    shutil.move(str(files[0]), str(self.path))
+        finally:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+
+
+@dataclass(frozen=True)
+class BagMessage:
+    """One deserialised message of a bag."""
+
+    topic: str
+    msgtype: str
+    stamp_ns: int
+    msg: Any
+
+
+def bag_topics(path: str | Path) -> dict[str, str]:
+    """Topic -> message type of a bag."""
+    from rosbags.highlevel import AnyReader
+
+    p = _existing(path)
+    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+        return {c.topic: c.msgtype for c in reader.connections}
+
+
+def _existing(path: str | Path) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise BagError(f"bag not found: {p}")
+    return p
+
+
+def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+    """Deserialised messages of a bag (MCAP file or rosbag2 directory), in time order.
+
+    Parameters
+    ----------
+    path : str or Path
+    topics : iterable of str, optional
+        Only these topics (all when None).
+    """
+    from rosbags.highlevel import AnyReader
+
+    p = _existing(path)
+    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+        wanted = set(topics) if topics is not None else None
+        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        if wanted is not None:
+            missing = wanted - {c.topic for c in conns}
+            if missing:
+                raise BagError(f"{p} has no topic(s) {sorted(missing)}")
+        for conn, stamp, raw in reader.messages(connections=conns):
+            yield BagMessage(conn.topic, conn.msgtype, int(stamp), reader.deserialize(raw, conn.msgtype))

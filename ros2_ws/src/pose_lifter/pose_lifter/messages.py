@@ -1,0 +1,466 @@
+"""Duck-typed conversion between ROS messages and the core's arrays.
+
+Every function reads message fields by attribute name (``msg.keypoints``, ``kp.x``) and builds
+messages through a ``types`` namespace, never by ``isinstance``, so the same code serves rclpy
+message classes (the node) and rosbags typestore classes (bags, CLI, tests).
+
+``types`` is any object with these attributes, each a callable taking keyword fields:
+``Keypoint2D, Skeleton2D, Skeleton2DArray, CameraEstimate, Skeleton3D, Skeleton3DArray``
+(pose_lifter_msgs), ``Point, Quaternion, Pose, Vector3`` (geometry_msgs), ``Header, ColorRGBA``
+(std_msgs), ``Time, Duration`` (builtin_interfaces), ``Marker, MarkerArray``
+(visualization_msgs) and ``CameraInfo`` (sensor_msgs). :func:`rosbags_types` and
+:func:`rclpy_types` build it.
+
+Frames: 3D joints are in the camera optical frame (x right, y down, z forward), metres.
+"""
+
+from __future__ import annotations
+
+import colorsys
+from collections.abc import Iterable, Sequence
+from types import SimpleNamespace
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .core.errors import InvalidInputError
+from .core.layouts import get_layout, to_model_joints
+from .core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
+from .core.types import LiftResult
+
+__all__ = [
+    "MESSAGE_TYPES",
+    "arrays_to_skeleton2d",
+    "camera_estimate",
+    "camera_info",
+    "delete_markers",
+    "intrinsics_from_camera_info",
+    "make_header",
+    "ns_to_stamp",
+    "place_in_camera",
+    "rclpy_types",
+    "result_to_skeleton3d",
+    "rosbags_types",
+    "skeleton2d_array",
+    "skeleton2d_to_arrays",
+    "skeleton3d_from_joints",
+    "skeleton3d_to_joints",
+    "skeleton_markers",
+    "skeletons3d_array",
+    "stamp_to_ns",
+    "track_color",
+]
+
+#: Attribute of the ``types`` namespace -> full ROS message type name.
+MESSAGE_TYPES: Final[dict[str, str]] = {
+    "Keypoint2D": "pose_lifter_msgs/msg/Keypoint2D",
+    "Skeleton2D": "pose_lifter_msgs/msg/Skeleton2D",
+    "Skeleton2DArray": "pose_lifter_msgs/msg/Skeleton2DArray",
+    "CameraEstimate": "pose_lifter_msgs/msg/CameraEstimate",
+    "Skeleton3D": "pose_lifter_msgs/msg/Skeleton3D",
+    "Skeleton3DArray": "pose_lifter_msgs/msg/Skeleton3DArray",
+    "Point": "geometry_msgs/msg/Point",
+    "Quaternion": "geometry_msgs/msg/Quaternion",
+    "Pose": "geometry_msgs/msg/Pose",
+    "Vector3": "geometry_msgs/msg/Vector3",
+    "Header": "std_msgs/msg/Header",
+    "ColorRGBA": "std_msgs/msg/ColorRGBA",
+    "Time": "builtin_interfaces/msg/Time",
+    "Duration": "builtin_interfaces/msg/Duration",
+    "Marker": "visualization_msgs/msg/Marker",
+    "MarkerArray": "visualization_msgs/msg/MarkerArray",
+    "CameraInfo": "sensor_msgs/msg/CameraInfo",
+}
+
+# visualization_msgs/Marker constants (fixed by the message definition)
+_SPHERE_LIST: Final[int] = 7
+_LINE_LIST: Final[int] = 5
+_ADD: Final[int] = 0
+_DELETE: Final[int] = 2
+
+
+def rosbags_types(store: Any | None = None) -> SimpleNamespace:
+    """The ``types`` namespace from a rosbags typestore (default: ours, see :mod:`pose_lifter.bags`).
+
+    Each attribute is a factory that fills omitted fields with ROS defaults, like rclpy classes.
+    """
+    from .bags import message_factory, pose_lifter_typestore
+
+    st = store if store is not None else pose_lifter_typestore()
+    return SimpleNamespace(**{attr: message_factory(name, st) for attr, name in MESSAGE_TYPES.items()})
+
+
+def rclpy_types() -> SimpleNamespace:
+    """The ``types`` namespace from the rclpy message packages (needs a sourced ROS workspace)."""
+    import importlib
+
+    out: dict[str, Any] = {}
+    for attr, name in MESSAGE_TYPES.items():
+        pkg, _, cls = name.split("/")
+        out[attr] = getattr(importlib.import_module(f"{pkg}.msg"), cls)
+    return SimpleNamespace(**out)
+
+
+# --------------------------------------------------------------------------- stamps, headers
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """``builtin_interfaces/Time`` -> integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, types: Any) -> Any:
+    """Integer nanoseconds -> ``builtin_interfaces/Time``."""
+    sec, nsec = divmod(int(ns), 1_000_000_000)
+    return types.Time(sec=sec, nanosec=nsec)
+
+
+def make_header(stamp_ns: int, frame_id: str, types: Any) -> Any:
+    """A ``std_msgs/Header``."""
+    return types.Header(stamp=ns_to_stamp(stamp_ns, types), frame_id=frame_id)
+
+
+# --------------------------------------------------------------------------- 2D
+
+
+def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The paper's 12 joints of a ``Skeleton2D``.
+
+    Keypoints whose confidence is 0 (missing) may carry non-finite coordinates; they are
+    returned as 0. Any other non-finite value raises.
+
+    Parameters
+    ----------
+    skel : Skeleton2D-like
+        Has ``keypoints``, each with ``x``, ``y``, ``confidence``.
+    layout : str
+        The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``).
+
+    Returns
+    -------
+    points : ndarray, shape (12, 2)
+        Pixels.
+    confidence : ndarray, shape (12,)
+
+    Raises
+    ------
+    UnknownLayoutError
+        Unknown layout name.
+    InvalidInputError
+        Wrong number of keypoints for the layout, or non-finite values.
+    """
+    lay = get_layout(layout)
+    kps = list(skel.keypoints)
+    xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
+    conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
+    points, confidence = to_model_joints(xy, conf, lay)
+    if not np.all(np.isfinite(confidence)):
+        raise InvalidInputError("keypoint confidences must be finite")
+    bad = ~np.all(np.isfinite(points), axis=1)
+    if np.any(bad & (confidence > 0)):
+        names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
+        raise InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}")
+    points[bad] = 0.0
+    return points, confidence
+
+
+def arrays_to_skeleton2d(
+    keypoints: NDArray[np.float64], confidence: NDArray[np.float64], track_id: int, types: Any
+) -> Any:
+    """A ``Skeleton2D`` from keypoints in some layout's order.
+
+    Parameters
+    ----------
+    keypoints : ndarray, shape (K, 2)
+    confidence : ndarray, shape (K,)
+    track_id : int
+    types : namespace of message factories
+    """
+    kp = np.asarray(keypoints, dtype=np.float64)
+    cf = np.asarray(confidence, dtype=np.float64)
+    if kp.ndim != 2 or kp.shape[1] != 2 or cf.shape != (kp.shape[0],):
+        raise InvalidInputError(f"keypoints (K, 2) and confidence (K,) expected, got {kp.shape}, {cf.shape}")
+    return types.Skeleton2D(
+        track_id=int(track_id),
+        keypoints=[types.Keypoint2D(x=float(x), y=float(y), confidence=float(c))
+                   for (x, y), c in zip(kp, cf, strict=True)],
+    )
+
+
+def skeleton2d_array(header: Any, layout: str, skeletons: Sequence[Any], types: Any) -> Any:
+    """A ``Skeleton2DArray``."""
+    get_layout(layout)
+    return types.Skeleton2DArray(header=header, layout=layout, skeletons=list(skeletons))
+
+
+# --------------------------------------------------------------------------- 3D
+
+
+def place_in_camera(
+    result: LiftResult,
+    leg_length_m: float,
+    focal: tuple[float, float] | None,
+    principal_point: tuple[float, float] | None,
+    default_distance_m: float,
+) -> NDArray[np.float64]:
+    """Metric 3D joints in the camera optical frame (x right, y down, z forward).
+
+    The lifted pose is centred and in right-lower-leg units; it becomes metric with
+    ``leg_length_m``. The weak-perspective scale fixes the depth of the centroid when the
+    focal length is known: ``Z = f * leg_length_m / scale`` (``f`` = mean of ``fx, fy``), and
+    the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
+    ``Y = (t_y - c_y) Z / f_y``. Without camera intrinsics the centroid is put at
+    ``(0, 0, default_distance_m)``.
+
+    Parameters
+    ----------
+    result : LiftResult
+        ``pose_camera`` (12, 3) in the camera frame; ``camera.scale`` in pixels per leg unit;
+        ``camera.translation`` (2,) the image position of the pose centroid (pixels).
+    leg_length_m : float
+        Length of the right lower leg in metres (> 0).
+    focal : (fx, fy) or None
+        Pixels.
+    principal_point : (cx, cy) or None
+        Pixels; None with a focal length puts the centroid on the optical axis.
+    default_distance_m : float
+        Centroid depth when ``focal`` is None (> 0).
+
+    Returns
+    -------
+    ndarray, shape (12, 3)
+        Metres.
+    """
+    if not np.isfinite(leg_length_m) or leg_length_m <= 0:
+        raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
+    pose = np.asarray(result.pose_camera, dtype=np.float64)
+    if pose.shape != (N_JOINTS, 3) or not np.all(np.isfinite(pose)):
+        raise InvalidInputError(f"pose_camera must be a finite ({N_JOINTS}, 3) array")
+    local = (pose - pose.mean(axis=0)) * float(leg_length_m)
+    if focal is None:
+        if not np.isfinite(default_distance_m) or default_distance_m <= 0:
+            raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")
+        centroid = np.array([0.0, 0.0, float(default_distance_m)])
+    else:
+        fx, fy = (float(focal[0]), float(focal[1]))
+        scale = float(result.camera.scale)
+        if not (fx > 0 and fy > 0 and np.isfinite(fx) and np.isfinite(fy)):
+            raise InvalidInputError(f"focal lengths must be > 0, got {focal!r}")
+        if not np.isfinite(scale) or scale <= 0:
+            raise InvalidInputError(f"camera scale must be > 0, got {scale!r}")
+        z = 0.5 * (fx + fy) * float(leg_length_m) / scale
+        t = np.asarray(result.camera.translation, dtype=np.float64)
+        if principal_point is None:
+            x = y = 0.0
+        else:
+            x = (float(t[0]) - float(principal_point[0])) * z / fx
+            y = (float(t[1]) - float(principal_point[1])) * z / fy
+        centroid = np.array([x, y, z])
+    return np.asarray(local + centroid)
+
+
+def _quaternion_xyzw(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
+    from scipy.spatial.transform import Rotation
+
+    return np.asarray(Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_quat())
+
+
+def camera_estimate(result: LiftResult, types: Any) -> Any:
+    """``CameraEstimate`` of a lift (projection row-major, scale, body->camera rotation, translation)."""
+    cam = result.camera
+    q = _quaternion_xyzw(cam.rotation)
+    return types.CameraEstimate(
+        projection=np.asarray(cam.projection, dtype=np.float64).reshape(6).copy(),
+        scale=float(cam.scale),
+        orientation=types.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+        translation=np.asarray(cam.translation, dtype=np.float64).reshape(2).copy(),
+    )
+
+
+def _points(joints_m: NDArray[np.float64], types: Any) -> list[Any]:
+    j = np.asarray(joints_m, dtype=np.float64)
+    if j.shape != (N_JOINTS, 3):
+        raise InvalidInputError(f"joints must be ({N_JOINTS}, 3), got {j.shape}")
+    return [types.Point(x=float(a), y=float(b), z=float(c)) for a, b, c in j]
+
+
+def result_to_skeleton3d(
+    result: LiftResult,
+    track_id: int,
+    joints_m: NDArray[np.float64],
+    types: Any,
+    solve_time: float = 0.0,
+    warm_started: bool = False,
+) -> Any:
+    """A ``Skeleton3D`` from a lift and its metric joints (see :func:`place_in_camera`).
+
+    Parameters
+    ----------
+    result : LiftResult
+    track_id : int
+    joints_m : ndarray, shape (12, 3)
+        Metres, camera optical frame.
+    types : namespace of message factories
+    solve_time : float
+        Seconds.
+    warm_started : bool
+    """
+    return types.Skeleton3D(
+        track_id=int(track_id),
+        joint_names=list(JOINT_NAMES),
+        joints=_points(joints_m, types),
+        camera=camera_estimate(result, types),
+        objective=float(result.objective),
+        reprojection_error=float(result.reprojection_error),
+        iterations=int(result.n_iter),
+        converged=bool(result.converged),
+        solve_time=float(solve_time),
+        warm_started=bool(warm_started),
+    )
+
+
+def skeleton3d_from_joints(track_id: int, joints_m: NDArray[np.float64], types: Any) -> Any:
+    """A ``Skeleton3D`` carrying only joints (ground truth); the solver fields stay default."""
+    return types.Skeleton3D(
+        track_id=int(track_id), joint_names=list(JOINT_NAMES), joints=_points(joints_m, types),
+        converged=True,
+    )
+
+
+def skeleton3d_to_joints(skel: Any) -> NDArray[np.float64]:
+    """Joints of a ``Skeleton3D`` as an array (12, 3) in the core order.
+
+    ``joint_names`` (when filled) are used to reorder; unknown or missing names raise.
+    """
+    pts = np.array([[float(p.x), float(p.y), float(p.z)] for p in skel.joints], dtype=np.float64)
+    names = list(skel.joint_names)
+    if names:
+        if len(names) != len(pts):
+            raise InvalidInputError("Skeleton3D joint_names and joints differ in length")
+        index = {n: i for i, n in enumerate(names)}
+        missing = [n for n in JOINT_NAMES if n not in index]
+        if missing:
+            raise InvalidInputError(f"Skeleton3D lacks joints {missing}")
+        pts = pts[[index[n] for n in JOINT_NAMES]]
+    if pts.shape != (N_JOINTS, 3):
+        raise InvalidInputError(f"Skeleton3D must have {N_JOINTS} joints, got {len(pts)}")
+    return pts
+
+
+def skeletons3d_array(header: Any, skeletons: Sequence[Any], types: Any) -> Any:
+    """A ``Skeleton3DArray``."""
+    return types.Skeleton3DArray(header=header, skeletons=list(skeletons))
+
+
+# --------------------------------------------------------------------------- markers
+
+
+def track_color(track_id: int) -> tuple[float, float, float]:
+    """A stable, distinct RGB colour per track (golden-ratio hues); grey for untracked (< 0)."""
+    if track_id < 0:
+        return (0.7, 0.7, 0.7)
+    hue = (0.12 + 0.618033988749895 * int(track_id)) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 0.95)
+    return (r, g, b)
+
+
+def _marker_id(track_id: int, position: int) -> int:
+    """int32 marker id: the track id, or ``-1 - position`` for untracked skeletons."""
+    if track_id >= 0:
+        return int(track_id) % (2**31 - 1)
+    return -1 - int(position)
+
+
+def _duration(seconds: float, types: Any) -> Any:
+    ns = max(0, round(float(seconds) * 1e9))
+    sec, nsec = divmod(ns, 1_000_000_000)
+    return types.Duration(sec=int(sec), nanosec=int(nsec))
+
+
+def skeleton_markers(
+    header: Any,
+    tracks: Iterable[tuple[int, NDArray[np.float64]]],
+    ns: str,
+    lifetime: float,
+    types: Any,
+    deleted_track_ids: Iterable[int] = (),
+    joint_diameter: float = 0.05,
+    line_width: float = 0.02,
+) -> Any:
+    """``MarkerArray``: per track a SPHERE_LIST of joints (namespace ``{ns}/joints``) and a
+    LINE_LIST of bones (``{ns}/bones``, :data:`BONES_FOR_DRAWING`), both with id = track id
+    (untracked skeletons get ids -1, -2, ... by position), coloured per track.
+
+    Parameters
+    ----------
+    header : Header
+        Frame of the joints (camera optical frame) and stamp.
+    tracks : iterable of (track_id, joints (12, 3) metres)
+    ns : str
+        Marker namespace prefix.
+    lifetime : float
+        Seconds (0 = forever).
+    types : namespace of message factories
+    deleted_track_ids : iterable of int
+        Tracks that vanished: DELETE markers for them are appended.
+    """
+    markers: list[Any] = []
+    untracked = 0
+    for track_id, joints in tracks:
+        mid = _marker_id(int(track_id), untracked)
+        if track_id < 0:
+            untracked += 1
+        pts = _points(joints, types)
+        r, g, b = track_color(int(track_id))
+        common = {
+            "header": header, "id": mid, "action": _ADD,
+            "pose": types.Pose(orientation=types.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+            "color": types.ColorRGBA(r=float(r), g=float(g), b=float(b), a=1.0),
+            "lifetime": _duration(lifetime, types), "frame_locked": False,
+        }
+        markers.append(types.Marker(
+            ns=f"{ns}/joints", type=_SPHERE_LIST, points=pts,
+            scale=types.Vector3(x=joint_diameter, y=joint_diameter, z=joint_diameter), **common,
+        ))
+        markers.append(types.Marker(
+            ns=f"{ns}/bones", type=_LINE_LIST, points=[pts[j] for bone in BONES_FOR_DRAWING for j in bone],
+            scale=types.Vector3(x=line_width, y=0.0, z=0.0), **common,
+        ))
+    markers.extend(delete_markers(header, deleted_track_ids, ns, types))
+    return types.MarkerArray(markers=markers)
+
+
+def delete_markers(header: Any, track_ids: Iterable[int], ns: str, types: Any) -> list[Any]:
+    """DELETE markers (joints and bones) for tracks that vanished."""
+    out: list[Any] = []
+    for track_id in track_ids:
+        if track_id < 0:
+            continue
+        for kind in ("joints", "bones"):
+            out.append(types.Marker(header=header, ns=f"{ns}/{kind}", id=_marker_id(int(track_id), 0),
+                                    action=_DELETE))
+    return out
+
+
+# --------------------------------------------------------------------------- camera info
+
+
+def camera_info(
+    header: Any, width: int, height: int, fx: float, fy: float, cx: float, cy: float, types: Any
+) -> Any:
+    """A distortion-free pinhole ``sensor_msgs/CameraInfo``."""
+    k = np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], dtype=np.float64)
+    p = np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0], dtype=np.float64)
+    return types.CameraInfo(
+        header=header, height=int(height), width=int(width), distortion_model="plumb_bob",
+        d=np.zeros(5, dtype=np.float64), k=k, r=np.eye(3, dtype=np.float64).reshape(9), p=p,
+    )
+
+
+def intrinsics_from_camera_info(msg: Any) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``((fx, fy), (cx, cy))`` from a ``CameraInfo`` (reads ``msg.k`` like image_geometry)."""
+    k = np.asarray(msg.k, dtype=np.float64).reshape(-1)
+    if k.shape != (9,) or not np.all(np.isfinite(k)) or k[0] <= 0 or k[4] <= 0:
+        raise InvalidInputError("CameraInfo.k must be a finite 3x3 matrix with positive focal lengths")
+    return (float(k[0]), float(k[4])), (float(k[2]), float(k[5]))

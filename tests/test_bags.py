@@ -1,0 +1,65 @@
+"""pose_lifter.bags: typestore from the .msg files, MCAP write/read round trips."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pose_lifter import bags
+from pose_lifter import messages as m
+
+REPO = Path(__file__).resolve().parents[1]
+SOURCE_MSG = REPO / "ros2_ws" / "src" / "pose_lifter_msgs" / "msg"
+PACKAGE_MSG = REPO / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter" / "msg"
+
+
+def test_packaged_msg_copies_equal_the_originals() -> None:
+    originals = sorted(p.name for p in SOURCE_MSG.glob("*.msg"))
+    assert originals == sorted(f"{n}.msg" for n in bags.MSG_NAMES)
+    for name in originals:
+        assert (PACKAGE_MSG / name).read_text() == (SOURCE_MSG / name).read_text(), (
+            f"{name}: run `cp {SOURCE_MSG}/*.msg {PACKAGE_MSG}/`"
+        )
+
+
+def test_typestore_has_our_types() -> None:
+    store = bags.pose_lifter_typestore()
+    for name in bags.MSG_NAMES:
+        assert f"pose_lifter_msgs/msg/{name}" in store.types
+    names = [f[0] for f in store.fielddefs["pose_lifter_msgs/msg/Skeleton3D"][1]]
+    assert names[:4] == ["track_id", "joint_names", "joints", "camera"]
+
+
+def test_message_factory_rejects_unknown_fields() -> None:
+    make = bags.message_factory("geometry_msgs/msg/Point")
+    assert make(x=1.0).y == 0.0
+    with pytest.raises(TypeError):
+        make(w=1.0)
+    with pytest.raises(bags.BagError):
+        bags.message_factory("nope_msgs/msg/Nope")
+
+
+def test_write_read_roundtrip(tmp_path: Path) -> None:
+    t = m.rosbags_types()
+    path = tmp_path / "x.mcap"
+    kp = np.arange(34, dtype=float).reshape(17, 2)
+    with bags.BagWriter(path) as w:
+        for i in range(3):
+            header = m.make_header(1_000 + i, "cam", t)
+            w.write("/keypoints_2d", 1_000 + i, m.skeleton2d_array(
+                header, "coco17", [m.arrays_to_skeleton2d(kp + i, np.ones(17), 0, t)], t))
+            w.write("/camera_info", 1_000 + i, m.camera_info(header, 640, 480, 500, 500, 320, 240, t))
+    assert path.is_file() and not any(p.name.startswith(".bagwriter") for p in tmp_path.iterdir())
+    assert bags.bag_topics(path) == {"/keypoints_2d": "pose_lifter_msgs/msg/Skeleton2DArray",
+                                     "/camera_info": "sensor_msgs/msg/CameraInfo"}
+    got = list(bags.read_messages(path, ["/keypoints_2d"]))
+    assert [g.stamp_ns for g in got] == [1000, 1001, 1002]
+    pts, _ = m.skeleton2d_to_arrays(got[2].msg.skeletons[0], got[2].msg.layout)
+    assert pts[0, 0] == kp[5, 0] + 2
+    with pytest.raises(bags.BagError):
+        list(bags.read_messages(path, ["/nope"]))
+    with pytest.raises(bags.BagError):
+        bags.BagWriter(path)  # exists
+    with pytest.raises(bags.BagError):
+        list(bags.read_messages(tmp_path / "missing.mcap"))
