@@ -1,0 +1,289 @@
+"""``pose-lifter``: offline commands (learn bases, make bags, lift bags, evaluate, demo).
+
+Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["build_parser", "learn_bases", "main", "make_bag"]
+
+_ACK = ("The data used in this project was obtained from mocap.cs.cmu.edu. The database was "
+        "created with funding from NSF EIA-0196217.")
+
+
+def _command_line(argv: Sequence[str] | None) -> str:
+    args = list(sys.argv[1:] if argv is None else argv)
+    return shlex.join(["pose-lifter", *args])
+
+
+# --------------------------------------------------------------------------- learn-bases
+
+
+def learn_bases(
+    method: str = "sparse", n_bases: int | None = None, data_dir: str | Path | None = None, step: int = 8,
+    sparsity: float = 0.1, n_starts: int = 30, n_per_class: int = 6, seed: int = 0, n_iter: int = 2000,
+    command: str = "",
+) -> Any:
+    """Learn bases from the paper's training split (MANIFEST ``paper_split == train``).
+
+    Every ``step``-th frame of the 120 Hz trials is used (8 -> 15 Hz: consecutive frames are
+    nearly identical), normalised with :func:`pose_lifter.core.skeleton.normalise_pose`.
+    Class-wise PCA uses the trials as classes (each CMU playground trial is one activity mix).
+
+    Returns
+    -------
+    PoseBases
+    """
+    from . import mocap
+    from .core.bases import learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
+    from .core.skeleton import normalise_pose
+
+    d = mocap.resolve_data_dir(data_dir)
+    trials = sorted({t.trial for t in mocap.read_manifest(d) if t.paper_split == "train"})
+    if not trials:
+        raise mocap.MocapDataError(f"no paper_split=train trials in {d / 'MANIFEST.csv'}")
+    clips = [normalise_pose(mocap.load_trial(t, d, step=step)) for t in trials]
+    poses = np.concatenate(clips)
+    labels = np.concatenate([np.full(len(c), t) for c, t in zip(clips, trials, strict=True)])
+    meta = {
+        "command": command, "training_trials": trials, "frame_step": step, "source_fps": 120,
+        "data": "CMU Graphics Lab Motion Capture Database, " + _ACK,
+        "normalisation": "pose_lifter.core.skeleton.normalise_pose (centroid, body frame, "
+                         "right lower leg = 1)",
+    }
+    with warnings.catch_warnings():
+        # the lasso of the cluster-centre codes reports slow convergence on tiny duality gaps
+        warnings.filterwarnings("ignore", message="Objective did not converge")
+        if method == "sparse":
+            return learn_sparse_bases(poses, n_bases=n_bases or 200, sparsity=sparsity, n_starts=n_starts,
+                                      seed=seed, n_iter=n_iter, metadata=meta)
+        if method == "pca":
+            return learn_pca_bases(poses, n_bases=n_bases or 30, n_starts=n_starts, seed=seed, metadata=meta)
+        if method == "classwise-pca":
+            return learn_classwise_pca_bases(poses, labels, n_per_class=n_per_class, n_starts=n_starts,
+                                             seed=seed, metadata=meta)
+    raise ValueError(f"unknown method {method!r}")
+
+
+def _cmd_learn_bases(args: argparse.Namespace) -> int:
+    import time
+
+    t0 = time.perf_counter()
+    bases = learn_bases(args.method, args.n_bases, args.data, args.step, args.sparsity, args.starts,
+                        args.n_per_class, args.seed, args.n_iter, args.command)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    bases.save(out)
+    print(f"{bases.method}: {bases.n_bases} bases from {bases.metadata['n_training_poses']} poses "
+          f"of {len(bases.metadata['training_trials'])} trials in {time.perf_counter() - t0:.1f} s -> {out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- make-bag
+
+
+def make_bag(
+    trials: Sequence[str], out: str | Path, data_dir: str | Path | None = None, fps: float = 30.0,
+    start: float = 0.0, frames: int | None = None, overwrite: bool = False, **scene: Any,
+) -> Any:
+    """Film mocap trials with the virtual camera and write the bag.
+
+    Parameters
+    ----------
+    trials : sequence of str
+        One trial per person (track ids 0, 1, ...).
+    out : path
+        ``.mcap`` file.
+    data_dir : path, optional
+    fps : float
+    start : float
+        Seconds into each trial.
+    frames : int, optional
+        Output frames (default: as many as the shortest trial allows).
+    **scene
+        Other :class:`pose_lifter.scenes.SceneOptions` fields.
+
+    Returns
+    -------
+    Scene
+    """
+    from . import mocap, scenes
+
+    d = mocap.resolve_data_dir(data_dir)
+    opts = scenes.SceneOptions(fps=fps, **scene)
+    people = []
+    for t in trials:
+        row = mocap.find_trial(t, d)
+        step = max(1, round(row.fps / fps))
+        first = round(start * row.fps)
+        clip = mocap.load_trial(t, d, step=1)[first::step]
+        if frames is not None:
+            clip = clip[:frames]
+        if len(clip) == 0:
+            raise ValueError(f"trial {t} has no frames after {start} s")
+        people.append(clip)
+    scene_ = scenes.build_scene(people, opts, source_fps=fps)
+    scenes.write_scene_bag(scene_, out, overwrite=overwrite)
+    return scene_
+
+
+def _cmd_make_bag(args: argparse.Namespace) -> int:
+    scene = make_bag(
+        args.trials, args.out, args.data, fps=args.fps, start=args.start, frames=args.frames,
+        overwrite=args.overwrite, view_angle=args.view_angle, orbit_speed=args.orbit_speed,
+        distance=args.distance, follow=not args.no_follow, spacing=args.spacing, noise=args.noise,
+        outliers=args.outliers, missing=args.missing, seed=args.seed,
+    )
+    n_people, n_frames = scene.joints_camera.shape[:2]
+    print(f"{args.out}: {n_frames} frames at {args.fps:g} Hz, {n_people} people (tracks {scene.track_ids})")
+    return 0
+
+
+# --------------------------------------------------------------------------- lift / evaluate
+
+
+def _lifter(args: argparse.Namespace) -> Any:
+    from .core.bases import PoseBases
+    from .core.lifter import Lifter
+    from .core.options import LifterOptions
+
+    bases = PoseBases.load(args.bases)
+    opts = LifterOptions(variant=args.variant, camera_solver=args.solver, pose_solver=args.solver,
+                         n_starts=args.starts)
+    return Lifter(bases, opts)
+
+
+def _cmd_lift(args: argparse.Namespace) -> int:
+    from .offline import lift_bag
+
+    summary, _ = lift_bag(args.input, args.out, _lifter(args), warm_start=not args.no_warm_start,
+                          leg_length_m=args.leg_length, every=args.every, max_messages=args.max_messages,
+                          progress=not args.quiet, overwrite=args.overwrite)
+    print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
+          f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
+          f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
+    for f in summary.failures[:5]:
+        print(f"  failed: {f}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .core.bases import PoseBases
+    from .offline import evaluate_bag, format_evaluation
+
+    ev = evaluate_bag(args.bag, PoseBases.load(args.bases))
+    print(format_evaluation(ev, as_json=args.json))
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    return int(run_demo(args))
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def _add_lifter_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bases", default=None, help="basis file (.npz); default: the packaged sparse bases")
+    p.add_argument("--variant", default="full", help="paper variant: full (= L1WAWS) or L1NAWS, L2WANS, ...")
+    p.add_argument("--solver", choices=("admm", "cvxpy"), default="admm",
+                   help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference")
+    p.add_argument("--starts", type=int, default=30, help="cold-start multi-start count (1 = mean pose)")
+    p.add_argument("--no-warm-start", action="store_true", help="solve every frame cold")
+    p.add_argument("--leg-length", type=float, default=0.43,
+                   help="right lower leg in metres, to make the lifted pose metric")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``pose-lifter`` argument parser."""
+    parser = argparse.ArgumentParser(prog="pose-lifter", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("learn-bases", help="learn pose bases from the paper's CMU training split")
+    p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
+                   "$POSE_LIFTER_CMU_DATA)")
+    p.add_argument("--method", choices=("sparse", "pca", "classwise-pca"), default="sparse")
+    p.add_argument("--n-bases", type=int, default=None, help="default 200 (sparse), 30 (pca)")
+    p.add_argument("--sparsity", type=float, default=0.1, help="L1 weight of sparse learning")
+    p.add_argument("--n-per-class", type=int, default=6, help="classwise-pca components per class")
+    p.add_argument("--step", type=int, default=8, help="use every STEP-th 120 Hz frame (default 8: 15 Hz)")
+    p.add_argument("--starts", type=int, default=30, help="multi-start poses stored (k-means + mean)")
+    p.add_argument("--n-iter", type=int, default=2000, help="dictionary-learning iterations")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, help="output .npz")
+    p.set_defaults(func=_cmd_learn_bases)
+
+    p = sub.add_parser("make-bag", help="film mocap trials with a virtual camera into an MCAP bag")
+    p.add_argument("trials", nargs="+", help="one trial id per person, e.g. 07_05 02_05")
+    p.add_argument("--out", required=True, help="output .mcap")
+    p.add_argument("--data", default=None, help="CMU data dir")
+    p.add_argument("--fps", type=float, default=30.0, help="frame rate (mocap is 120 Hz)")
+    p.add_argument("--start", type=float, default=0.0, help="seconds into each trial")
+    p.add_argument("--frames", type=int, default=None, help="number of frames (default: all)")
+    p.add_argument("--view-angle", type=float, default=0.0,
+                   help="degrees about the vertical axis from the first person's initial facing "
+                   "direction (0 = front, 90 = their left side, 180 = behind)")
+    p.add_argument("--orbit-speed", type=float, default=0.0, help="camera orbit, degrees per second")
+    p.add_argument("--distance", type=float, default=5.0, help="camera distance in metres")
+    p.add_argument("--no-follow", action="store_true", help="static camera (default: slides with the people)")
+    p.add_argument("--spacing", type=float, default=1.4, help="metres between people")
+    p.add_argument("--noise", type=float, default=0.0, help="2D Gaussian noise std, right-lower-leg units")
+    p.add_argument("--outliers", type=float, default=0.0, help="fraction of joints displaced 1-3 legs")
+    p.add_argument("--missing", type=float, default=0.0, help="fraction of joints with confidence 0")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=_cmd_make_bag)
+
+    p = sub.add_parser("lift", help="lift every /keypoints_2d message of a bag")
+    p.add_argument("input", help="input .mcap")
+    p.add_argument("--out", required=True, help="output .mcap (input topics + /skeletons_3d + markers)")
+    _add_lifter_options(p)
+    p.add_argument("--every", type=int, default=1, help="lift every N-th message only")
+    p.add_argument("--max-messages", type=int, default=None, help="stop after N lifted messages")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=_cmd_lift)
+
+    p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
+    p.add_argument("bag", help="a lifted .mcap")
+    p.add_argument("--bases", default=None, help="bases for the mean-pose floor (default: packaged)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("demo", help="lift a committed bag, print errors, write out/demo.mcap + out/demo.png")
+    p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
+    p.add_argument("--out", default="out", help="output directory")
+    _add_lifter_options(p)
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pose-lifter`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.command = _command_line(argv)
+    from .bags import BagError
+    from .core.errors import PoseLifterError
+
+    try:
+        return int(args.func(args))
+    except (PoseLifterError, BagError, FileNotFoundError) as exc:
+        print(f"pose-lifter {args.cmd}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

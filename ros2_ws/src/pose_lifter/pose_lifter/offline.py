@@ -1,0 +1,410 @@
+"""Offline work on bags: lift every ``/keypoints_2d`` message, and evaluate against ground truth.
+
+``lift_bag`` is what the node does, frame by frame, without ROS: per-track warm starts,
+metric placement in the camera frame from ``/camera_info``, ``/skeletons_3d`` and
+``/skeleton_markers`` written next to the input topics. ``evaluate_bag`` matches
+``/skeletons_3d`` to ``/ground_truth/skeletons_3d`` by stamp and track id and reports the
+errors with two floors that any lifter must beat (see ``shared/notes/method-pitfalls.md``).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import messages as m
+from .bags import BagWriter, read_messages
+from .core.bases import PoseBases
+from .core.errors import InvalidInputError, TooFewJointsError
+from .core.lifter import Lifter
+from .core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
+from .core.skeleton import N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
+from .core.types import WarmStart
+from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_MARKERS, TOPIC_SKELETONS
+
+__all__ = [
+    "DEFAULT_DISTANCE_M",
+    "DEFAULT_LEG_LENGTH_M",
+    "Evaluation",
+    "FrameLift",
+    "LiftSummary",
+    "evaluate_bag",
+    "format_evaluation",
+    "lift_bag",
+    "lift_messages",
+]
+
+#: Right lower leg (knee-ankle) in metres used to make lifted poses metric (CMU adults: 0.41-0.44).
+DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
+#: Depth of the pose centroid when no CameraInfo is available.
+DEFAULT_DISTANCE_M: Final[float] = 5.0
+_MARKER_NS: Final[str] = "pose_lifter"
+_MSG_2D: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
+_MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
+_MSG_MARKERS: Final[str] = "visualization_msgs/msg/MarkerArray"
+
+
+@dataclass
+class LiftSummary:
+    """What :func:`lift_bag` did."""
+
+    n_messages: int = 0
+    n_skeletons: int = 0
+    n_lifted: int = 0
+    n_failed: int = 0
+    n_warm: int = 0
+    solve_time_s: float = 0.0
+    failures: list[str] = field(default_factory=list)
+
+    @property
+    def mean_solve_time_ms(self) -> float:
+        return 1e3 * self.solve_time_s / max(1, self.n_lifted)
+
+
+@dataclass(frozen=True)
+class FrameLift:
+    """One lifted skeleton (for plots and tests)."""
+
+    stamp_ns: int
+    track_id: int
+    points_2d: NDArray[np.float64]
+    confidence: NDArray[np.float64]
+    joints_m: NDArray[np.float64]
+    warm_started: bool
+    solve_time: float
+
+
+def _intrinsics(camera_infos: list[tuple[int, Any]], stamp: int
+                ) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
+    """Intrinsics of the latest CameraInfo at or before ``stamp`` (else the first one)."""
+    if not camera_infos:
+        return None, None
+    chosen = camera_infos[0][1]
+    for s, info in camera_infos:
+        if s > stamp:
+            break
+        chosen = info
+    focal, pp = m.intrinsics_from_camera_info(chosen)
+    return focal, pp
+
+
+def lift_messages(
+    keypoint_msgs: list[tuple[int, Any]],
+    camera_infos: list[tuple[int, Any]],
+    lifter: Lifter,
+    warm_start: bool = True,
+    leg_length_m: float = DEFAULT_LEG_LENGTH_M,
+    default_distance_m: float = DEFAULT_DISTANCE_M,
+    progress: bool = False,
+    on_frame: Callable[[int, Any, list[FrameLift], list[Any]], None] | None = None,
+    summary: LiftSummary | None = None,
+) -> list[FrameLift]:
+    """Lift ``Skeleton2DArray`` messages in order with per-track warm starts.
+
+    Parameters
+    ----------
+    keypoint_msgs : list of (stamp_ns, Skeleton2DArray)
+    camera_infos : list of (stamp_ns, CameraInfo), time-ordered
+    lifter : Lifter
+    warm_start : bool
+        Start each tracked person (track_id >= 0) from its previous frame's solution.
+    leg_length_m, default_distance_m : float
+        See :func:`pose_lifter.messages.place_in_camera`.
+    progress : bool
+        Show a tqdm progress bar.
+    on_frame : callable, optional
+        ``on_frame(stamp_ns, msg, lifted, results)`` after each message (``results`` holds the
+        LiftResult of each lifted skeleton, in the order of ``lifted``).
+    summary : LiftSummary, optional
+        Filled in place.
+    """
+    from tqdm import tqdm
+
+    summ = summary if summary is not None else LiftSummary()
+    warm: dict[int, WarmStart] = {}
+    out: list[FrameLift] = []
+    for stamp, msg in tqdm(keypoint_msgs, desc="lifting", unit="msg", disable=not progress):
+        summ.n_messages += 1
+        focal, pp = _intrinsics(camera_infos, stamp)
+        lifted: list[FrameLift] = []
+        results: list[Any] = []
+        seen: set[int] = set()
+        for skel in msg.skeletons:
+            summ.n_skeletons += 1
+            tid = int(skel.track_id)
+            try:
+                pts, conf = m.skeleton2d_to_arrays(skel, msg.layout)
+                start = warm.get(tid) if (warm_start and tid >= 0) else None
+                t0 = time.perf_counter()
+                res = lifter.lift(pts, conf, warm=start)
+                dt = time.perf_counter() - t0
+                joints = m.place_in_camera(res, leg_length_m, focal, pp, default_distance_m)
+            except (InvalidInputError, TooFewJointsError) as exc:
+                summ.n_failed += 1
+                if len(summ.failures) < 20:
+                    summ.failures.append(f"{stamp} track {tid}: {exc}")
+                warm.pop(tid, None)
+                continue
+            summ.n_lifted += 1
+            summ.n_warm += int(start is not None)
+            summ.solve_time_s += dt
+            if tid >= 0:
+                warm[tid] = res.warm_start()
+                seen.add(tid)
+            lifted.append(FrameLift(stamp, tid, pts, conf, joints, start is not None, dt))
+            results.append(res)
+        for tid in list(warm):
+            if tid not in seen:
+                del warm[tid]
+        out.extend(lifted)
+        if on_frame is not None:
+            on_frame(stamp, msg, lifted, results)
+    return out
+
+
+def lift_bag(
+    in_path: str | Path,
+    out_path: str | Path,
+    lifter: Lifter,
+    warm_start: bool = True,
+    leg_length_m: float = DEFAULT_LEG_LENGTH_M,
+    default_distance_m: float = DEFAULT_DISTANCE_M,
+    every: int = 1,
+    max_messages: int | None = None,
+    progress: bool = True,
+    overwrite: bool = False,
+    marker_lifetime: float = 0.0,
+) -> tuple[LiftSummary, list[FrameLift]]:
+    """Lift every ``/keypoints_2d`` message of a bag into a new bag.
+
+    The output holds all input topics (same stamps) plus ``/skeletons_3d``
+    (``Skeleton3DArray``, camera optical frame, metres) and ``/skeleton_markers``
+    (``MarkerArray``: joints and bones per track, DELETE for vanished tracks).
+
+    Parameters
+    ----------
+    in_path, out_path : path
+        MCAP files.
+    lifter : Lifter
+    warm_start : bool
+    leg_length_m, default_distance_m : float
+    every : int
+        Lift only every ``every``-th keypoint message (the others are copied but not lifted).
+    max_messages : int, optional
+        Stop after this many keypoint messages (inputs are cut there too).
+    progress : bool
+    overwrite : bool
+    marker_lifetime : float
+        Seconds (0 = until replaced/deleted).
+    """
+    if every < 1:
+        raise ValueError("every must be >= 1")
+    types = m.rosbags_types()
+    messages = list(read_messages(in_path))
+    kp_all = [(x.stamp_ns, x.msg) for x in messages if x.topic == TOPIC_KEYPOINTS]
+    if not kp_all:
+        raise InvalidInputError(f"{in_path} has no {TOPIC_KEYPOINTS} messages")
+    if max_messages is not None:
+        kp_all = kp_all[: max_messages * every]
+        last = kp_all[-1][0]
+        messages = [x for x in messages if x.stamp_ns <= last]
+    to_lift = kp_all[::every]
+    infos = [(x.stamp_ns, x.msg) for x in messages if x.topic == TOPIC_CAMERA_INFO]
+    summary = LiftSummary()
+    outputs: dict[int, tuple[Any, Any]] = {}
+    previous: set[int] = set()
+
+    def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
+        nonlocal previous
+        skels = [m.result_to_skeleton3d(r, f.track_id, f.joints_m, types, f.solve_time, f.warm_started)
+                 for f, r in zip(lifted, results, strict=True)]
+        now = {f.track_id for f in lifted if f.track_id >= 0}
+        markers = m.skeleton_markers(msg.header, [(f.track_id, f.joints_m) for f in lifted], _MARKER_NS,
+                                     marker_lifetime, types, deleted_track_ids=sorted(previous - now))
+        previous = now
+        outputs[stamp] = (m.skeletons3d_array(msg.header, skels, types), markers)
+
+    frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
+                           progress, record, summary)
+    with BagWriter(out_path, overwrite=overwrite) as w:
+        for x in messages:
+            w.write(x.topic, x.stamp_ns, x.msg, x.msgtype)
+            if x.topic == TOPIC_KEYPOINTS and x.stamp_ns in outputs:
+                skels, markers = outputs.pop(x.stamp_ns)
+                w.write(TOPIC_SKELETONS, x.stamp_ns, skels, _MSG_3D)
+                w.write(TOPIC_MARKERS, x.stamp_ns, markers, _MSG_MARKERS)
+    return summary, frames
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+@dataclass
+class Evaluation:
+    """Errors of a lifted bag against its ground truth, per matched skeleton.
+
+    Arrays have one entry per matched (stamp, track) pair. Floors are computed on the same
+    pairs: ``flat`` is the 2D input with zero depth, ``mean_pose`` the bases' mean pose,
+    both similarity-aligned to the truth.
+    """
+
+    n_ground_truth: int
+    n_estimates: int
+    n_matched: int
+    mpjpe_mm: NDArray[np.float64]
+    p_mpjpe_mm: NDArray[np.float64]
+    normalised: NDArray[np.float64]
+    flat_p_mpjpe_mm: NDArray[np.float64]
+    flat_normalised: NDArray[np.float64]
+    mean_pose_p_mpjpe_mm: NDArray[np.float64]
+    mean_pose_normalised: NDArray[np.float64]
+    track_ids: NDArray[np.int64]
+
+    def table(self) -> dict[str, dict[str, float | None]]:
+        """Mean errors: {row: {"mpjpe_mm", "p_mpjpe_mm", "normalised"}}."""
+
+        def mean(a: NDArray[np.float64]) -> float | None:
+            return float(np.mean(a)) if a.size else None
+
+        return {
+            "lifter": {"mpjpe_mm": mean(self.mpjpe_mm), "p_mpjpe_mm": mean(self.p_mpjpe_mm),
+                       "normalised": mean(self.normalised)},
+            "flat_floor": {"mpjpe_mm": None, "p_mpjpe_mm": mean(self.flat_p_mpjpe_mm),
+                           "normalised": mean(self.flat_normalised)},
+            "mean_pose_floor": {"mpjpe_mm": None, "p_mpjpe_mm": mean(self.mean_pose_p_mpjpe_mm),
+                                "normalised": mean(self.mean_pose_normalised)},
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (means, medians, counts, per-track means)."""
+        per_track = {}
+        for tid in np.unique(self.track_ids):
+            sel = self.track_ids == tid
+            per_track[str(int(tid))] = {
+                "n": int(sel.sum()), "mpjpe_mm": float(self.mpjpe_mm[sel].mean()),
+                "p_mpjpe_mm": float(self.p_mpjpe_mm[sel].mean()),
+                "normalised": float(self.normalised[sel].mean()),
+            }
+        return {
+            "n_ground_truth": self.n_ground_truth, "n_estimates": self.n_estimates,
+            "n_matched": self.n_matched, "mean": self.table(),
+            "median": {"lifter": {"mpjpe_mm": _median(self.mpjpe_mm),
+                                  "p_mpjpe_mm": _median(self.p_mpjpe_mm),
+                                  "normalised": _median(self.normalised)}},
+            "per_track": per_track,
+        }
+
+
+def _median(a: NDArray[np.float64]) -> float | None:
+    return float(np.median(a)) if a.size else None
+
+
+def _aligned_normalised(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``||similarity-aligned pred - gt||_2`` over the 36-vector, in units of the truth's right
+    lower leg (the floors' version of the paper's criterion: their own legs are meaningless)."""
+    aligned = procrustes_align(pred, gt)
+    leg = limb_lengths(gt)[..., RIGHT_LOWER_LEG]
+    return np.asarray(np.linalg.norm((aligned - gt).reshape(*gt.shape[:-2], -1), axis=-1) / leg)
+
+
+def _flat(points: NDArray[np.float64], confidence: NDArray[np.float64]) -> NDArray[np.float64]:
+    """2D input with zero depth; missing joints at the centroid of the visible ones."""
+    pts = np.array(points, dtype=np.float64, copy=True)
+    vis = confidence > 0
+    if vis.any():
+        pts[~vis] = pts[vis].mean(axis=0)
+    return np.concatenate([pts, np.zeros((N_JOINTS, 1))], axis=1)
+
+
+def evaluate_bag(path: str | Path, bases: PoseBases | None = None) -> Evaluation:
+    """Match ``/skeletons_3d`` with ``/ground_truth/skeletons_3d`` by (stamp, track id).
+
+    Parameters
+    ----------
+    path : path
+        A bag written by :func:`lift_bag` (or any bag with both topics and ``/keypoints_2d``).
+    bases : PoseBases, optional
+        For the mean-pose floor (default: the packaged bases).
+    """
+    b = bases if bases is not None else PoseBases.load()
+    gt: dict[tuple[int, int], NDArray[np.float64]] = {}
+    est: dict[tuple[int, int], NDArray[np.float64]] = {}
+    inp: dict[tuple[int, int], tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+    for x in read_messages(path):
+        if x.topic == TOPIC_GROUND_TRUTH:
+            s = m.stamp_to_ns(x.msg.header.stamp)
+            for sk in x.msg.skeletons:
+                gt[(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
+        elif x.topic == TOPIC_SKELETONS:
+            s = m.stamp_to_ns(x.msg.header.stamp)
+            for sk in x.msg.skeletons:
+                est[(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
+        elif x.topic == TOPIC_KEYPOINTS:
+            s = m.stamp_to_ns(x.msg.header.stamp)
+            for sk in x.msg.skeletons:
+                try:
+                    inp[(s, int(sk.track_id))] = m.skeleton2d_to_arrays(sk, x.msg.layout)
+                except InvalidInputError:
+                    continue
+    if not gt:
+        raise InvalidInputError(f"{path} has no {TOPIC_GROUND_TRUTH} messages")
+    keys = sorted(k for k in est if k in gt)
+    if not est:  # an input bag: floors only, over every ground-truth skeleton with 2D input
+        floor_keys = sorted(k for k in gt if k in inp)
+    else:
+        floor_keys = [k for k in keys if k in inp]
+    pred = np.array([est[k] for k in keys]).reshape(-1, N_JOINTS, 3)
+    truth = np.array([gt[k] for k in keys]).reshape(-1, N_JOINTS, 3)
+    ftruth = np.array([gt[k] for k in floor_keys]).reshape(-1, N_JOINTS, 3)
+    flat = np.array([_flat(*inp[k]) for k in floor_keys]).reshape(-1, N_JOINTS, 3)
+    meanp = np.broadcast_to(b.mean_pose, ftruth.shape)
+
+    def per_pose(fn: Callable[..., NDArray[np.float64]], p: NDArray[np.float64], g: NDArray[np.float64],
+                 factor: float = 1.0) -> NDArray[np.float64]:
+        return factor * fn(p, g) if len(g) else np.zeros(0)
+
+    return Evaluation(
+        n_ground_truth=len(gt), n_estimates=len(est), n_matched=len(keys),
+        mpjpe_mm=per_pose(mpjpe, pred, truth, 1e3), p_mpjpe_mm=per_pose(p_mpjpe, pred, truth, 1e3),
+        normalised=per_pose(normalised_error, pred, truth),
+        flat_p_mpjpe_mm=per_pose(p_mpjpe, flat, ftruth, 1e3),
+        flat_normalised=per_pose(_aligned_normalised, flat, ftruth),
+        mean_pose_p_mpjpe_mm=per_pose(p_mpjpe, meanp, ftruth, 1e3),
+        mean_pose_normalised=per_pose(_aligned_normalised, meanp, ftruth),
+        track_ids=np.array([k[1] for k in keys], dtype=np.int64),
+    )
+
+
+def format_evaluation(ev: Evaluation, as_json: bool = False) -> str:
+    """The error table as text (or JSON)."""
+    if as_json:
+        return json.dumps(ev.to_dict(), indent=2, sort_keys=True)
+
+    def f(v: float | None, fmt: str) -> str:
+        return "n/a" if v is None else format(v, fmt)
+
+    rows = ev.table()
+    lines = [
+        f"matched {ev.n_matched} of {ev.n_ground_truth} ground-truth skeletons "
+        f"({ev.n_estimates} estimates)",
+        f"{'':22s}{'MPJPE mm':>10s}{'P-MPJPE mm':>12s}{'normalised':>12s}",
+    ]
+    labels = {"lifter": "lifter", "flat_floor": "floor: flat 2D", "mean_pose_floor": "floor: mean pose"}
+    for key, label in labels.items():
+        r = rows[key]
+        lines.append(f"{label:22s}{f(r['mpjpe_mm'], '.1f'):>10s}{f(r['p_mpjpe_mm'], '.1f'):>12s}"
+                     f"{f(r['normalised'], '.3f'):>12s}")
+    lines.append("normalised: the paper's error in right-lower-leg units (lifter: rotation-aligned, "
+                 "own leg = 1; floors: similarity-aligned, truth's leg = 1)")
+    if len(np.unique(ev.track_ids)) > 1:
+        for tid, d in ev.to_dict()["per_track"].items():
+            lines.append(f"  track {tid}: n={d['n']} MPJPE {d['mpjpe_mm']:.1f} mm, "
+                         f"P-MPJPE {d['p_mpjpe_mm']:.1f} mm, normalised {d['normalised']:.3f}")
+    return "\n".join(lines)
