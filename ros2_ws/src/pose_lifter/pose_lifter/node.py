@@ -1,0 +1,453 @@
+"""The live lifter: a ROS 2 node that lifts every 2D skeleton it receives to 3D.
+
+One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
+
+1. ``keypoints_2d`` (``pose_lifter_msgs/Skeleton2DArray``, sensor-data QoS) arrives.
+2. Each skeleton is converted to the paper's 12 joints (:func:`messages.skeleton2d_to_arrays`),
+   checked, and lifted by the core :class:`~pose_lifter.core.Lifter`: warm-started from the same
+   track's previous solution when there is one, cold (multi-start) otherwise.
+3. The lift is placed in the camera optical frame in metres (:func:`messages.place_in_camera`:
+   depth from the weak-perspective scale and ``camera_info``'s focal length, or a parameter
+   distance without ``camera_info``).
+4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
+   frame), then ``skeleton_markers`` (``visualization_msgs/MarkerArray``).
+
+Every input frame gets exactly one ``Skeleton3DArray`` answer with the same header. A skeleton
+that cannot be lifted (bad input or a failed solve) is left out of it with one rate-limited
+warning; the other skeletons of the frame are still published, and a frame with no liftable
+skeleton is answered with an empty array. Nothing non-finite is ever published.
+
+Parameters (declared once, with ranges; see ``config/lifter.yaml``) are validated on every live
+change by the same :class:`~pose_lifter.core.LifterOptions` the core uses; a bad value is refused
+with the core's reason.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+import rclpy
+from numpy.typing import NDArray
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
+
+from . import messages
+from .core import Lifter, LifterOptions, PoseBases, PoseLifterError, WarmStart
+from .core.errors import InvalidInputError, OptionsError
+from .core.layouts import Layout, get_layout
+
+__all__ = ["PARAMS", "LifterNode", "ParamSpec", "TrackState", "main"]
+
+NODE_NAME: Final[str] = "pose_lifter"
+MARKER_NS: Final[str] = "pose_lifter"
+
+
+class SkipSkeleton(Exception):
+    """One skeleton of a frame is left out of the answer.
+
+    Parameters
+    ----------
+    kind : str
+        Short category, counted in the statistics line (e.g. ``"duplicate track id"``).
+    text : str
+        The warning.
+    """
+
+    def __init__(self, kind: str, text: str) -> None:
+        super().__init__(text)
+        self.kind = kind
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A node parameter: default, description and range.
+
+    ``option`` parameters carry the name of a :class:`LifterOptions` field; their default is
+    that field's default and their live changes are validated by ``LifterOptions.replace``.
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    option: bool = False
+    read_only: bool = False
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(name=self.name, description=self.description, read_only=self.read_only)
+        if self.low is not None and self.high is not None:
+            if isinstance(self.default, bool):
+                pass
+            elif isinstance(self.default, int):
+                d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=1)]
+            elif isinstance(self.default, float):
+                d.floating_point_range = [
+                    FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)
+                ]
+        return d
+
+
+_DEFAULT_OPTIONS: Final[LifterOptions] = LifterOptions()
+
+
+def _opt(name: str, description: str, low: float | None = None, high: float | None = None) -> ParamSpec:
+    return ParamSpec(name, getattr(_DEFAULT_OPTIONS, name), description, low, high, option=True)
+
+
+#: Every parameter of the node, in the order of ``config/lifter.yaml``.
+PARAMS: Final[tuple[ParamSpec, ...]] = (
+    ParamSpec("bases_file", "", "Pose basis file (.npz, PoseBases.save); empty = the packaged default."),
+    _opt("variant", "Paper variant: 'full' (= L1WAWS) or L1WAWS, L1WANS, ..., L2NANS."),
+    _opt("theta", "Weight of ||alpha||_1 (sparsity), right-lower-leg units.", 0.0, 100.0),
+    _opt("max_alternations", "Camera/pose alternations per solve.", 1, 1000),
+    _opt("alternation_tol", "Stop alternating below this relative objective decrease, in (0, 1).", 0.0, 1.0),
+    _opt("pose_max_iter", "Iteration cap of the pose-step ADM.", 1, 10000),
+    _opt("pose_tol", "Relative residual tolerance of the pose-step ADM, in (0, 1).", 0.0, 1.0),
+    _opt("inner_max_iter", "Iteration cap of the inner alpha-step ADM.", 1, 10000),
+    _opt("inner_tol", "Tolerance of the inner alpha-step ADM, in (0, 1).", 0.0, 1.0),
+    _opt("camera_max_iter", "Iteration cap of the camera-step ADM.", 1, 10000),
+    _opt("camera_tol", "Tolerance of the camera-step ADM, in (0, 1).", 0.0, 1.0),
+    _opt("n_starts", "Starts of a cold (multi-start) solve; 1 = mean pose only.", 1, 1000),
+    _opt("confidence_threshold", "Keypoints with lower confidence are treated as missing.", 0.0, 1.0),
+    _opt("min_visible_joints", "Skip a skeleton with fewer visible model joints.", 3, 12),
+    _opt("limb_proportions", "Limb-length targets: 'bases' (training mean) or 'anthropometric'."),
+    _opt("alpha_solver", "Alpha-step solver: 'admm' (the paper's) or 'newton'."),
+    ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame."),
+    ParamSpec("track_timeout", 1.0, "Seconds (input stamps) after which an unseen track is forgotten.",
+              0.0, 3600.0),
+    ParamSpec("lower_leg_length", 0.43, "Right lower-leg (knee-ankle) length in metres: the metric scale.",
+              0.05, 2.0),
+    ParamSpec("default_distance", 5.0, "Depth of the skeleton centroid in metres when no camera_info "
+              "has been received.", 0.01, 1000.0),
+    ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
+    ParamSpec("max_skeletons", 64, "Skeletons lifted per frame at most; the rest are skipped.", 1, 10000),
+    ParamSpec("max_coordinate", 1.0e5, "Keypoints farther than this from the image origin (pixels) "
+              "are absurd: the skeleton is skipped.", 1.0, 1.0e9),
+    ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
+              read_only=True),
+)
+_SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
+
+
+@dataclass
+class TrackState:
+    """What the node remembers about one tracked person.
+
+    Attributes
+    ----------
+    warm : WarmStart
+        Camera and coefficients of the last solve: the next frame starts from them.
+    last_stamp_ns : int
+        Stamp of that frame (input clock).
+    """
+
+    warm: WarmStart
+    last_stamp_ns: int
+
+
+@dataclass
+class FrameStats:
+    """Counters between two statistics log lines."""
+
+    started: float = field(default_factory=time.monotonic)
+    frames: int = 0
+    lifted: int = 0
+    warm: int = 0
+    latencies: list[float] = field(default_factory=list)
+    solve_times: list[float] = field(default_factory=list)
+    skipped: Counter[str] = field(default_factory=Counter)
+
+
+def _all_finite(*values: Any) -> bool:
+    return all(bool(np.all(np.isfinite(np.asarray(v, dtype=np.float64)))) for v in values)
+
+
+class LifterNode(Node):
+    """Lifts ``keypoints_2d`` to ``skeletons_3d`` (+ ``skeleton_markers``), see the module doc.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (e.g. ``parameter_overrides``).
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self._types = messages.rclpy_types()
+        for spec in PARAMS:
+            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+
+        # Invalid start-up values are fatal with the core's message (there is nothing to run).
+        self._bases = self._load_bases(self._param("bases_file"))
+        options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
+        self._lifter = Lifter(self._bases, options)
+        self._pending: tuple[PoseBases, LifterOptions] | None = None
+
+        self._tracks: dict[int, TrackState] = {}
+        self._shown_tracks: set[int] = set()  # track ids with markers on screen
+        self._shown_untracked = 0  # untracked skeletons with markers on screen
+        self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
+        self._stats = FrameStats()
+
+        qos_override = QoSOverridingOptions.with_default_policies()
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self._pub_skeletons = self.create_publisher(
+            self._types.Skeleton3DArray, "skeletons_3d", reliable, qos_overriding_options=qos_override)
+        self._pub_markers = self.create_publisher(
+            self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
+        self._sub_keypoints = self.create_subscription(
+            self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
+            qos_overriding_options=qos_override)
+        self._sub_camera_info = self.create_subscription(
+            self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
+            qos_overriding_options=qos_override)
+
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        period = float(self._param("stats_period"))
+        self._stats_timer = self.create_timer(period, self._log_stats) if period > 0 else None
+        self.get_logger().info(
+            f"lifting {self._sub_keypoints.topic_name} -> {self._pub_skeletons.topic_name}: "
+            f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
+            f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}"
+        )
+
+    # ------------------------------------------------------------------ parameters
+
+    def _param(self, name: str) -> Any:
+        return self.get_parameter(name).value
+
+    @staticmethod
+    def _load_bases(path: str) -> PoseBases:
+        return PoseBases.load(Path(path).expanduser() if path else None)
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """On-set callback: build the new options (and bases) or refuse with the reason."""
+        ours = [p for p in params if p.name in _SPECS]
+        if not ours:
+            return SetParametersResult(successful=True)
+        try:
+            bases = self._bases
+            for p in ours:
+                if p.name == "bases_file":
+                    bases = self._load_bases(str(p.value))
+            changes = {p.name: p.value for p in ours if _SPECS[p.name].option}
+            options = self._lifter.options.replace(**changes) if changes else self._lifter.options
+            if options.n_starts > bases.start_alphas.shape[0]:
+                # not an error: the lifter uses the starts it has
+                self.get_logger().info(
+                    f"n_starts={options.n_starts} but the bases carry {bases.start_alphas.shape[0]} starts")
+        except (OptionsError, PoseLifterError, OSError, ValueError) as err:
+            self._pending = None
+            return SetParametersResult(successful=False, reason=str(err))
+        self._pending = (bases, options)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        """Post-set callback: switch to what :meth:`_validate_parameters` built."""
+        if self._pending is None:
+            return
+        bases, options = self._pending
+        self._pending = None
+        if bases is not self._bases:
+            self._bases = bases
+            self._tracks.clear()  # coefficients of other bases are meaningless
+        if bases is not self._lifter.bases or options != self._lifter.options:
+            self._lifter = Lifter(bases, options)
+        if not self._param("warm_start"):
+            self._tracks.clear()
+        names = ", ".join(f"{p.name}={p.value!r}" for p in params if p.name in _SPECS)
+        if names:
+            self.get_logger().info(f"parameters changed: {names}")
+
+    # ------------------------------------------------------------------ callbacks
+
+    def on_camera_info(self, msg: Any) -> None:
+        """Keep the latest intrinsics (a bad CameraInfo is ignored with a warning)."""
+        try:
+            self._intrinsics = messages.intrinsics_from_camera_info(msg)
+        except (InvalidInputError, ValueError, TypeError) as err:
+            self._warn_skip("camera_info", str(err))
+
+    def on_keypoints(self, msg: Any) -> None:
+        """Lift one frame and publish its answer (always, even when every skeleton is skipped)."""
+        received = time.perf_counter()
+        stamp_ns = messages.stamp_to_ns(msg.header.stamp)
+        if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
+            stamp_ns = self.get_clock().now().nanoseconds
+        lifted: list[Any] = []
+        shown: list[tuple[int, NDArray[np.float64]]] = []
+        try:
+            layout = get_layout(str(msg.layout))
+            skeletons: Sequence[Any] = msg.skeletons
+            limit = int(self._param("max_skeletons"))
+            if len(skeletons) > limit:
+                self._warn_skip("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
+                                f"lifting the first {limit} (max_skeletons)")
+                skeletons = skeletons[:limit]
+            seen: set[int] = set()
+            for skel in skeletons:
+                try:
+                    out, joints = self._lift_one(skel, layout, stamp_ns, seen)
+                except SkipSkeleton as err:
+                    self._warn_skip(err.kind, f"skeleton skipped: {err}")
+                    continue
+                except PoseLifterError as err:
+                    self._warn_skip(type(err).__name__, f"skeleton skipped: {err}")
+                    continue
+                except Exception as err:  # a solver bug must not cost the other skeletons
+                    self._warn_skip("unexpected", f"skeleton skipped after an unexpected error: {err!r}")
+                    continue
+                lifted.append(out)
+                shown.append((int(out.track_id), joints))
+        except PoseLifterError as err:  # e.g. unknown layout: the whole frame is unusable
+            self._warn_skip(type(err).__name__, f"frame skipped: {err}")
+        except Exception as err:  # never let one frame kill the node
+            self._warn_skip("unexpected", f"frame skipped after an unexpected error: {err!r}")
+        self._expire_tracks(stamp_ns)
+
+        self._pub_skeletons.publish(messages.skeletons3d_array(msg.header, lifted, self._types))
+        if self._param("publish_markers"):
+            self._publish_markers(msg.header, shown)
+        self._stats.frames += 1
+        self._stats.lifted += len(lifted)
+        self._stats.warm += sum(1 for s in lifted if s.warm_started)
+        self._stats.solve_times.extend(float(s.solve_time) for s in lifted)
+        self._stats.latencies.append(time.perf_counter() - received)
+
+    def _lift_one(
+        self, skel: Any, layout: Layout, stamp_ns: int, seen: set[int]
+    ) -> tuple[Any, NDArray[np.float64]]:
+        """Lift one skeleton -> (``Skeleton3D``, metric joints (12, 3)); raise to skip it."""
+        track_id = int(skel.track_id)
+        if track_id >= 0:
+            if track_id in seen:
+                raise SkipSkeleton("duplicate track id",
+                                   f"duplicate track id {track_id} in one frame: later copy skipped")
+            seen.add(track_id)
+        points, confidence = messages.skeleton2d_to_arrays(skel, layout.name)
+        visible = confidence >= self._lifter.options.confidence_threshold
+        if not np.any(visible):
+            raise SkipSkeleton("no confident keypoints",
+                               f"track {track_id}: no keypoint above the confidence threshold")
+        limit = float(self._param("max_coordinate"))
+        if np.max(np.abs(points[visible])) > limit:
+            raise SkipSkeleton("absurd coordinates",
+                               f"track {track_id}: keypoints beyond {limit:g} px (max_coordinate)")
+
+        warm: WarmStart | None = None
+        track = self._tracks.get(track_id) if track_id >= 0 else None
+        if track is not None:
+            timeout_ns = int(float(self._param("track_timeout")) * 1e9)
+            age = stamp_ns - track.last_stamp_ns
+            if -timeout_ns <= age < 0:
+                raise SkipSkeleton("out-of-order stamp",
+                                   f"track {track_id}: stamp {-age / 1e9:.3f} s older than its last frame")
+            if age < -timeout_ns:  # the input clock jumped back (e.g. a looping bag)
+                del self._tracks[track_id]
+            elif age <= timeout_ns and self._param("warm_start"):
+                warm = track.warm
+
+        start = time.perf_counter()
+        result = self._lifter.lift(points, confidence, warm=warm)
+        solve_time = time.perf_counter() - start
+        if not _all_finite(result.pose_camera, result.alpha, result.camera.rotation, result.camera.scale,
+                           result.camera.translation, result.objective, result.reprojection_error):
+            raise SkipSkeleton("non-finite result", f"track {track_id}: the solve returned non-finite values")
+        focal, centre = self._intrinsics if self._intrinsics is not None else (None, None)
+        joints = messages.place_in_camera(result, float(self._param("lower_leg_length")), focal, centre,
+                                          float(self._param("default_distance")))
+        if not _all_finite(joints):
+            raise SkipSkeleton("non-finite result", f"track {track_id}: non-finite metric joints")
+        out = messages.result_to_skeleton3d(result, track_id, joints, self._types,
+                                            solve_time=solve_time, warm_started=warm is not None)
+        if track_id >= 0:
+            self._tracks[track_id] = TrackState(result.warm_start(), stamp_ns)
+        return out, joints
+
+    def _expire_tracks(self, stamp_ns: int) -> None:
+        timeout_ns = int(float(self._param("track_timeout")) * 1e9)
+        stale = [t for t, s in self._tracks.items() if stamp_ns - s.last_stamp_ns > timeout_ns]
+        for t in stale:
+            del self._tracks[t]
+
+    def _publish_markers(self, header: Any, shown: list[tuple[int, NDArray[np.float64]]]) -> None:
+        tracked = {t for t, _ in shown if t >= 0}
+        untracked = sum(1 for t, _ in shown if t < 0)
+        gone = sorted(self._shown_tracks - tracked)
+        markers = messages.skeleton_markers(header, shown, MARKER_NS, 0.0, self._types,
+                                            deleted_track_ids=gone)
+        # untracked skeletons have ids -1, -2, ... by position: delete the positions now unused
+        for position in range(untracked, self._shown_untracked):
+            for kind in ("joints", "bones"):
+                markers.markers.append(self._types.Marker(
+                    header=header, ns=f"{MARKER_NS}/{kind}", id=-1 - position,
+                    action=self._types.Marker.DELETE))
+        self._shown_tracks = tracked
+        self._shown_untracked = untracked
+        self._pub_markers.publish(markers)
+
+    # ------------------------------------------------------------------ diagnostics
+
+    def _warn_skip(self, kind: str, text: str) -> None:
+        """Count a skipped input and warn (one call site, so one rate-limited warning stream)."""
+        self._stats.skipped[kind] += 1
+        self.get_logger().warning(f"{text} (this warning is rate-limited; counts in the stats line)",
+                                  throttle_duration_sec=5.0)
+
+    def _log_stats(self) -> None:
+        s = self._stats
+        elapsed = max(time.monotonic() - s.started, 1e-9)
+        if s.frames == 0 and not s.skipped:
+            self._stats = FrameStats()
+            return
+        lat = np.asarray(s.latencies) * 1e3
+        solve = np.asarray(s.solve_times) * 1e3
+        text = (f"{s.frames} frames ({s.frames / elapsed:.1f} Hz), {s.lifted} skeletons "
+                f"({s.warm} warm)")
+        if lat.size:
+            text += f", latency mean {lat.mean():.1f} ms p95 {np.percentile(lat, 95):.1f} ms"
+        if solve.size:
+            text += f", solve mean {solve.mean():.1f} ms"
+        if s.skipped:
+            text += ", skipped: " + ", ".join(f"{k} {n}" for k, n in sorted(s.skipped.items()))
+        self.get_logger().info(text)
+        self._stats = FrameStats()
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run pose_lifter lifter``."""
+    rclpy.init(args=args)
+    node: LifterNode | None = None
+    try:
+        node = LifterNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except PoseLifterError as err:  # bad start-up parameters or basis file: say why, exit 1
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {err}")
+        raise SystemExit(1) from None
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,216 @@
+"""The installed ``lifter`` on a real ROS 2 graph (separate process, Fast DDS, localhost).
+
+Frames go in lock step: the next frame is published only after the answer to the previous one,
+as a detector running at the lifter's rate would do.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from pose_lifter import messages as m
+from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.skeleton import JOINT_NAMES
+from scipy.spatial.transform import Rotation
+
+from .conftest import PARAMS_YAML, GraphClient, all_finite
+
+pytestmark = pytest.mark.ros
+
+#: A standing person (metres; x to the subject's left, y up, z forward), paper joint order.
+STANDING = np.array([
+    [0.19, 1.42, 0.0], [0.24, 1.13, 0.05], [0.26, 0.88, 0.12],
+    [-0.19, 1.42, 0.0], [-0.24, 1.13, 0.05], [-0.26, 0.88, 0.12],
+    [0.10, 0.92, 0.0], [0.11, 0.50, 0.03], [0.11, 0.08, 0.0],
+    [-0.10, 0.92, 0.0], [-0.11, 0.50, 0.03], [-0.11, 0.08, 0.0],
+])
+
+
+def coco_keypoints(pose_m: np.ndarray, yaw_deg: float, centre: tuple[float, float] = (320.0, 240.0),
+                   px_per_m: float = 150.0) -> tuple[np.ndarray, np.ndarray]:
+    """Scaled-orthographic image of a pose in COCO-17 order (face keypoints missing)."""
+    rotated = pose_m @ Rotation.from_euler("y", yaw_deg, degrees=True).as_matrix().T
+    xy = np.column_stack([-rotated[:, 0], -rotated[:, 1]]) * px_per_m  # image x right, y down
+    xy -= xy.mean(axis=0) - np.asarray(centre)
+    kp = np.zeros((17, 2))
+    conf = np.zeros(17)
+    idx = list(get_layout("coco17").model_indices)
+    kp[idx] = xy
+    conf[idx] = 0.9
+    return kp, conf
+
+
+def frame(t: Any, stamp_ns: int, skeletons: list[tuple[int, np.ndarray, np.ndarray]],
+          layout: str = "coco17", frame_id: str = "camera_optical") -> Any:
+    """A Skeleton2DArray (rclpy) from (track_id, keypoints (K, 2), confidence (K,)) triples."""
+    return t.Skeleton2DArray(
+        header=m.make_header(stamp_ns, frame_id, t), layout=layout,
+        skeletons=[m.arrays_to_skeleton2d(kp, c, tid, t) for tid, kp, c in skeletons])
+
+
+def good_frame(t: Any, i: int, track_id: int = 0, yaw_deg: float = 30.0) -> Any:
+    kp, c = coco_keypoints(STANDING, yaw_deg + 2.0 * i)
+    return frame(t, 1_000_000_000 + i * 100_000_000, [(track_id, kp, c)])
+
+
+def test_params_yaml_is_loaded_and_every_key_declared(start_lifter: Any, graph: GraphClient) -> None:
+    lifter = start_lifter(params_file=PARAMS_YAML)
+    graph.wait_for_lifter(lifter)
+    declared = yaml.safe_load(PARAMS_YAML.read_text())["pose_lifter"]["ros__parameters"]
+    reported = graph.get_parameters(*declared)
+    assert reported == declared
+
+
+def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: GraphClient) -> None:
+    lifter = start_lifter()
+    graph.wait_for_lifter(lifter)
+
+    ok = graph.set_parameters(theta=0.2, n_starts=3, warm_start=False)
+    assert all(r.successful for r in ok), [r.reason for r in ok]
+    assert graph.get_parameters("theta", "n_starts", "warm_start") == {
+        "theta": 0.2, "n_starts": 3, "warm_start": False}
+
+    # out of the descriptor's range: refused by rclpy before our callback
+    (r,) = graph.set_parameters(confidence_threshold=1.5)
+    assert not r.successful and r.reason
+    # inside the descriptor's range but refused by LifterOptions, with its reason
+    (r,) = graph.set_parameters(alternation_tol=0.0)
+    assert not r.successful and "alternation_tol" in r.reason
+    (r,) = graph.set_parameters(variant="L3XX")
+    assert not r.successful and "variant" in r.reason
+    (r,) = graph.set_parameters(limb_proportions="giraffe")
+    assert not r.successful and "limb_proportions" in r.reason
+    (r,) = graph.set_parameters(bases_file="/nonexistent/bases.npz")
+    assert not r.successful and "/nonexistent/bases.npz" in r.reason
+    # wrong type: refused
+    (r,) = graph.set_parameters(n_starts="many")
+    assert not r.successful
+    # read-only
+    (r,) = graph.set_parameters(stats_period=1.0)
+    assert not r.successful
+    # nothing of the refused changes stuck
+    names = ("alternation_tol", "variant", "limb_proportions", "bases_file", "n_starts")
+    assert graph.get_parameters(*names) == {
+        "alternation_tol": 1e-4, "variant": "full", "limb_proportions": "bases", "bases_file": "",
+        "n_starts": 3}
+    assert lifter.alive()
+
+
+def test_bad_input_never_kills_the_node_nor_publishes_nan(start_lifter: Any, graph: GraphClient) -> None:
+    lifter = start_lifter(params={"n_starts": 2})
+    graph.wait_for_lifter(lifter)
+    t = graph.types
+    kp, c = coco_keypoints(STANDING, 30.0)
+    stamp = iter(range(10**9, 10**12, 10**8))  # strictly increasing stamps, 0.1 s apart
+
+    def skel(track_id: int = 0, keypoints: np.ndarray = kp, confidence: np.ndarray = c) -> Any:
+        return (track_id, keypoints, confidence)
+
+    def with_nan(joint: int, value: float) -> np.ndarray:
+        bad = kp.copy()
+        bad[joint] = value
+        return bad
+
+    bad_frames: list[tuple[str, Any, int]] = [  # (what, frame, skeletons expected in the answer)
+        ("empty array", frame(t, next(stamp), []), 0),
+        ("unknown layout", frame(t, next(stamp), [skel()], layout="coco18"), 0),
+        ("wrong keypoint count", frame(t, next(stamp), [skel(0, kp[:10], c[:10])]), 0),
+        ("absurd keypoint count", frame(t, next(stamp), [skel(0, np.zeros((5000, 2)), np.ones(5000))]), 0),
+        ("NaN keypoint", frame(t, next(stamp), [skel(0, with_nan(5, np.nan))]), 0),
+        ("inf keypoint", frame(t, next(stamp), [skel(0, with_nan(11, np.inf))]), 0),
+        ("NaN confidence", frame(t, next(stamp), [skel(0, kp, np.where(c > 0, np.nan, 0.0))]), 0),
+        ("all-zero confidence", frame(t, next(stamp), [skel(0, kp, np.zeros(17))]), 0),
+        ("absurd coordinates", frame(t, next(stamp), [skel(0, kp * 1e9)]), 0),
+        ("duplicate track ids", frame(t, next(stamp), [skel(7), skel(7)]), 1),
+        ("bad and good mixed", frame(t, next(stamp), [skel(0, with_nan(5, np.nan)), skel(-1)]), 1),
+    ]
+    for what, bad, expected in bad_frames:
+        answer = graph.send(bad)
+        assert len(answer.skeletons.skeletons) == expected, what
+        assert all_finite(answer.skeletons), what
+        good = graph.send(frame(t, next(stamp), [skel(0)]))
+        assert len(good.skeletons.skeletons) == 1, f"good frame after {what}"
+        assert all_finite(good.skeletons)
+
+    # out-of-order stamp for a track: that skeleton is skipped, the untracked one still answered
+    last = next(stamp)
+    graph.send(frame(t, last, [skel(3)]))
+    answer = graph.send(frame(t, last - 50_000_000, [skel(3), skel(-1)]))
+    assert [s.track_id for s in answer.skeletons.skeletons] == [-1]
+
+    # degenerate geometry (every keypoint on one pixel): whatever happens, no NaN and no crash
+    answer = graph.send(frame(t, next(stamp), [skel(0, np.full((17, 2), 100.0))]))
+    assert all_finite(answer.skeletons)
+
+    # more skeletons than max_skeletons: the first max_skeletons are lifted
+    (r,) = graph.set_parameters(max_skeletons=2)
+    assert r.successful
+    answer = graph.send(frame(t, next(stamp), [skel(i) for i in range(5)]))
+    assert [s.track_id for s in answer.skeletons.skeletons] == [0, 1]
+
+    assert lifter.alive()
+    log = lifter.log()
+    assert "skeleton skipped" in log and "rate-limited" in log
+
+
+def test_markers_per_track_and_deleted_when_a_track_disappears(start_lifter: Any, graph: GraphClient) -> None:
+    lifter = start_lifter(params={"n_starts": 2})
+    graph.wait_for_lifter(lifter)
+    t = graph.types
+    kp, c = coco_keypoints(STANDING, 30.0)
+    kp2 = kp + np.array([150.0, 0.0])
+    two = graph.send(frame(t, 10**9, [(4, kp, c), (9, kp2, c), (-1, kp, c)]))
+    adds = [mk for mk in two.markers.markers if mk.action == t.Marker.ADD]
+    assert sorted((mk.ns, mk.id) for mk in adds) == sorted(
+        (f"pose_lifter/{kind}", i) for kind in ("joints", "bones") for i in (4, 9, -1))
+    for mk in adds:
+        assert mk.header.frame_id == "camera_optical"
+        assert all(np.isfinite([p.x, p.y, p.z]).all() for p in mk.points)
+    joints = {mk.id: mk for mk in adds if mk.ns.endswith("joints")}
+    assert len(joints[4].points) == len(JOINT_NAMES)
+    colour = {i: (mk.color.r, mk.color.g, mk.color.b) for i, mk in joints.items()}
+    assert len(set(colour.values())) == 3  # one colour per track
+
+    # track 9 and the untracked skeleton vanish: their markers are deleted, track 4 keeps id and colour
+    one = graph.send(frame(t, 2 * 10**9, [(4, kp, c)]))
+    adds = [mk for mk in one.markers.markers if mk.action == t.Marker.ADD]
+    deletes = sorted((mk.ns, mk.id) for mk in one.markers.markers if mk.action == t.Marker.DELETE)
+    assert sorted((mk.ns, mk.id) for mk in adds) == [("pose_lifter/bones", 4), ("pose_lifter/joints", 4)]
+    assert deletes == sorted((f"pose_lifter/{kind}", i) for kind in ("joints", "bones") for i in (9, -1))
+    same = next(mk for mk in adds if mk.ns.endswith("joints"))
+    assert (same.color.r, same.color.g, same.color.b) == colour[4]
+
+    # publish_markers off: no MarkerArray for the next frame
+    (r,) = graph.set_parameters(publish_markers=False)
+    assert r.successful
+    graph.send(frame(t, 3 * 10**9, [(4, kp, c)]), expect_markers=False)
+    n = len(graph.markers)
+    graph.send(frame(t, 4 * 10**9, [(4, kp, c)]), expect_markers=False)
+    assert len(graph.markers) == n
+
+
+def test_depth_from_camera_info_or_default_distance(start_lifter: Any, graph: GraphClient) -> None:
+    lifter = start_lifter(params={"n_starts": 2, "default_distance": 4.5, "lower_leg_length": 0.4})
+    graph.wait_for_lifter(lifter)
+    t = graph.types
+    kp, c = coco_keypoints(STANDING, 30.0, centre=(400.0, 200.0))
+    answer = graph.send(frame(t, 10**9, [(-1, kp, c)]))
+    (s,) = answer.skeletons.skeletons
+    joints = m.skeleton3d_to_joints(s)
+    np.testing.assert_allclose(joints.mean(axis=0), [0.0, 0.0, 4.5], atol=1e-9)
+
+    fx, fy, cx, cy = 500.0, 500.0, 320.0, 240.0
+    info = m.camera_info(m.make_header(10**9, "camera_optical", t), 640, 480, fx, fy, cx, cy, t)
+    # a camera publishes its camera_info with every image; the lifter uses the latest one
+    for i in range(2, 12):
+        graph.pub_camera_info.publish(info)
+        answer = graph.send(frame(t, i * 10**9, [(-1, kp, c)]))
+    (s,) = answer.skeletons.skeletons
+    joints = m.skeleton3d_to_joints(s)
+    z = fx * 0.4 / s.camera.scale
+    centroid = [(s.camera.translation[0] - cx) * z / fx, (s.camera.translation[1] - cy) * z / fy, z]
+    np.testing.assert_allclose(joints.mean(axis=0), centroid, rtol=1e-9)
+    assert centroid[0] > 0 and centroid[1] < 0  # right of and above the principal point
