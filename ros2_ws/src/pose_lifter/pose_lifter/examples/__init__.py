@@ -1,0 +1,1 @@
+"""Examples of using the lifter downstream (action recognition on ``skeletons_3d``)."""
