@@ -64,6 +64,36 @@ def test_params_yaml_is_loaded_and_every_key_declared(start_lifter: Any, graph: 
     assert reported == declared
 
 
+def test_qos_sensor_data_input_reliable_outputs_and_overrides(start_lifter: Any, graph: GraphClient,
+                                                              tmp_path: Any) -> None:
+    from rclpy.qos import ReliabilityPolicy
+
+    lifter = start_lifter()
+    graph.wait_for_lifter(lifter)
+
+    node = graph.node
+
+    def reliability(topic: str, kind: str) -> list[Any]:
+        infos = (node.get_subscriptions_info_by_topic(topic) if kind == "sub"
+                 else node.get_publishers_info_by_topic(topic))
+        return [i.qos_profile.reliability for i in infos if i.node_name == "pose_lifter"]
+
+    assert reliability("/keypoints_2d", "sub") == [ReliabilityPolicy.BEST_EFFORT]
+    assert reliability("/skeletons_3d", "pub") == [ReliabilityPolicy.RELIABLE]
+    assert reliability("/skeleton_markers", "pub") == [ReliabilityPolicy.RELIABLE]
+    assert lifter.interrupt() == 0
+    graph.spin_until(lambda: reliability("/keypoints_2d", "sub") == [], 10.0, "the lifter to leave the graph")
+
+    # the YAML form documented at the end of config/lifter.yaml
+    overrides = tmp_path / "qos.yaml"
+    overrides.write_text(yaml.safe_dump({"pose_lifter": {"ros__parameters": {"qos_overrides": {
+        "/keypoints_2d": {"subscription": {"reliability": "reliable", "depth": 20}}}}}}))
+    lifter = start_lifter(extra_ros_args=("--params-file", str(overrides)))
+    graph.wait_for_lifter(lifter)
+    graph.spin_until(lambda: reliability("/keypoints_2d", "sub") != [], 10.0, "the new lifter's subscription")
+    assert reliability("/keypoints_2d", "sub") == [ReliabilityPolicy.RELIABLE]
+
+
 def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: GraphClient) -> None:
     lifter = start_lifter()
     graph.wait_for_lifter(lifter)
