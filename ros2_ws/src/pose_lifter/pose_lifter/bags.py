@@ -133,7 +133,8 @@ def message_factory(msgtype: str, store: Any | None = None) -> Callable[..., Any
 
 
 class BagWriter:
-    """Write messages to a single ``.mcap`` file (rosbag2 MCAP storage, metadata version 9).
+    """Write messages to a single ``.mcap`` file (rosbag2 MCAP storage, metadata version 9,
+    zstd-compressed chunks unless ``compress=False``).
 
     rosbags writes a rosbag2 directory; on close the MCAP file inside it is moved to
     ``path`` and the directory is removed.
@@ -145,8 +146,8 @@ class BagWriter:
     ...     w.write("/keypoints_2d", stamp_ns, msg)
     """
 
-    def __init__(self, path: str | Path, overwrite: bool = False) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer
+    def __init__(self, path: str | Path, overwrite: bool = False, compress: bool = True) -> None:
+        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
         self.path = Path(path)
         if self.path.suffix != ".mcap":
@@ -157,6 +158,8 @@ class BagWriter:
         self._tmp = Path(tempfile.mkdtemp(prefix=".bagwriter-", dir=self.path.parent.resolve()))
         self._bagdir = self._tmp / self.path.stem
         self._writer = Writer(self._bagdir, version=9, storage_plugin=StoragePlugin.MCAP)
+        if compress:  # zstd-compressed MCAP chunks (rosbag2 "storage" compression)
+            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._connections: dict[str, Any] = {}
         self._open = False
 

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Regenerate the committed bags in bags/ from the CMU data (called by `make bags`).
+#   bash tools/make_bags.sh [CMU_DATA_DIR]     (default ../shared/data/cmu)
+# Every trial here is an unseen action (MANIFEST paper_split=test); the output is byte-identical
+# on every run (seeded noise, no wall-clock stamps). See bags/README.md.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA="${1:-../shared/data/cmu}"
+PY="${PYTHON:-.venv/bin/python}"
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONHASHSEED=0
+mk() { "$PY" -m pose_lifter.cli make-bag --data "$DATA" --overwrite "$@"; }
+
+# walk (subject 07), camera 30 degrees off the walker's front, clean 2D
+mk 07_05 --out bags/walk_clean.mcap --view-angle 30 --frames 120
+# walk (subject 02), seen from 60 degrees to the right, Gaussian 2D noise 0.1 right-lower-leg
+mk 02_01 --out bags/walk_noisy.mcap --view-angle -60 --noise 0.1 --seed 1
+# run (subject 09, BVH), camera orbiting at 30 deg/s, clean
+mk 09_12 --out bags/run_orbit.mcap --start 2 --frames 120 --orbit-speed 30
+# punch (subject 02), camera 20 degrees off the front, clean
+mk 02_05 --out bags/punch_clean.mcap --start 3 --frames 120 --view-angle 20
+# punch, detector-like 2D: noise 0.05, 5% gross outliers, 10% missing joints
+mk 02_05 --out bags/punch_outliers.mcap --start 8 --frames 120 --view-angle -30 \
+    --noise 0.05 --outliers 0.05 --missing 0.1 --seed 2
+# two people: a walker (track 0, subject 07) and a boxer (track 1, subject 02), noise 0.05
+mk 07_01 02_05 --out bags/two_people.mcap --frames 75 --view-angle 15 --noise 0.05 --seed 3
