@@ -16,7 +16,7 @@ from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.skeleton import JOINT_NAMES
 from scipy.spatial.transform import Rotation
 
-from .conftest import PARAMS_YAML, GraphClient, all_finite
+from .conftest import PARAMS_YAML, REPO, GraphClient, all_finite
 
 pytestmark = pytest.mark.ros
 
@@ -244,3 +244,108 @@ def test_depth_from_camera_info_or_default_distance(start_lifter: Any, graph: Gr
     centroid = [(s.camera.translation[0] - cx) * z / fx, (s.camera.translation[1] - cy) * z / fy, z]
     np.testing.assert_allclose(joints.mean(axis=0), centroid, rtol=1e-9)
     assert centroid[0] > 0 and centroid[1] < 0  # right of and above the principal point
+
+
+# --------------------------------------------------------------------------- a committed bag, replayed
+
+#: The committed bag replayed into the graph (see bags/README.md) and how many of its frames.
+BAG = REPO / "bags" / "walk_clean.mcap"
+BAG_FRAMES = 30
+
+
+def _to_rosbags(msg: Any, msgtype: str) -> Any:
+    """An rclpy message as a rosbags one (CDR round trip), to write it with pose_lifter.bags."""
+    from pose_lifter.bags import pose_lifter_typestore
+    from rclpy.serialization import serialize_message
+
+    return pose_lifter_typestore().deserialize_cdr(bytes(serialize_message(msg)), msgtype)
+
+
+def test_bag_replay_answers_every_frame_like_the_offline_lift(
+    start_lifter: Any, graph: GraphClient, tmp_path: Any
+) -> None:
+    from pose_lifter.bags import BagWriter, pose_lifter_typestore, read_messages
+    from pose_lifter.core import Lifter, LifterOptions, PoseBases
+    from pose_lifter.offline import evaluate_bag, lift_messages
+    from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+
+    store = pose_lifter_typestore()
+    recorded = list(read_messages(BAG))
+    keypoints = [x for x in recorded if x.topic == TOPIC_KEYPOINTS][:BAG_FRAMES]
+    last = keypoints[-1].stamp_ns
+    recorded = [x for x in recorded if x.stamp_ns <= last]
+    camera_infos = [x for x in recorded if x.topic == TOPIC_CAMERA_INFO]
+    assert camera_infos, "the bag has no camera_info"
+
+    def raw(x: Any) -> bytes:  # replay the recorded bytes, as `ros2 bag play` would
+        return bytes(store.serialize_cdr(x.msg, x.msgtype))
+
+    lifter = start_lifter()
+    graph.wait_for_lifter(lifter)
+    t = graph.types
+    # camera_info is best effort: wait until the lifter demonstrably uses it (an untracked probe)
+    probe = frame(t, keypoints[0].stamp_ns - 10**9, [(-1, *coco_keypoints(STANDING, 30.0))],
+                  frame_id="probe")
+    for _ in range(50):
+        graph.pub_camera_info.publish(raw(camera_infos[0]))
+        graph.executor.spin_once(timeout_sec=0.05)
+        (s,) = graph.send(probe).skeletons.skeletons
+        if abs(m.skeleton3d_to_joints(s).mean(axis=0)[2] - 5.0) > 1e-6:  # not the default distance
+            break
+    else:
+        pytest.fail("the lifter never used camera_info")
+
+    def replay() -> list[Any]:
+        answers = []
+        for x in recorded:
+            if x.topic == TOPIC_CAMERA_INFO:
+                graph.pub_camera_info.publish(raw(x))
+            elif x.topic == TOPIC_KEYPOINTS:
+                answers.append(graph.send(raw(x)))
+        return answers
+
+    warm = replay()
+    assert graph.set_parameters(warm_start=False)[0].successful
+    cold = replay()
+
+    # every frame answered, same stamp and frame, one Skeleton3D per input skeleton, no NaN
+    for answers in (warm, cold):
+        assert len(answers) == len(keypoints)
+        for a, x in zip(answers, keypoints, strict=True):
+            assert m.stamp_to_ns(a.skeletons.header.stamp) == x.stamp_ns
+            assert a.skeletons.header.frame_id == x.msg.header.frame_id
+            assert [s.track_id for s in a.skeletons.skeletons] == [s.track_id for s in x.msg.skeletons]
+            assert all_finite(a.skeletons)
+            added = {mk.id for mk in a.markers.markers if mk.action == t.Marker.ADD}
+            assert added == {s.track_id for s in x.msg.skeletons}
+
+    # warm starts: every frame of a track after its first; they need fewer alternations than cold
+    warm_flags = [[s.warm_started for s in a.skeletons.skeletons] for a in warm]
+    assert not any(warm_flags[0]) and all(all(f) for f in warm_flags[1:])
+    assert not any(s.warm_started for a in cold for s in a.skeletons.skeletons)
+    it_warm = np.array([s.iterations for a in warm[1:] for s in a.skeletons.skeletons], dtype=float)
+    it_cold = np.array([s.iterations for a in cold[1:] for s in a.skeletons.skeletons], dtype=float)
+    assert it_warm.mean() < it_cold.mean()
+
+    # the node computes what the offline lift computes (same options, same warm starts)
+    offline = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],
+                            [(x.stamp_ns, x.msg) for x in camera_infos],
+                            Lifter(PoseBases.load(), LifterOptions()), warm_start=True)
+    node_joints = np.array([m.skeleton3d_to_joints(s) for a in warm for s in a.skeletons.skeletons])
+    np.testing.assert_allclose(node_joints, np.array([f.joints_m for f in offline]), atol=1e-6)
+
+    # and its errors against the bag's ground truth: written next to it, evaluated offline
+    out = tmp_path / "node_output.mcap"
+    with BagWriter(out) as w:
+        for x in recorded:
+            if x.topic in (TOPIC_KEYPOINTS, TOPIC_GROUND_TRUTH, TOPIC_CAMERA_INFO):
+                w.write(x.topic, x.stamp_ns, x.msg, x.msgtype)
+        for a in warm:
+            stamp = m.stamp_to_ns(a.skeletons.header.stamp)
+            w.write("/skeletons_3d", stamp, _to_rosbags(a.skeletons, "pose_lifter_msgs/msg/Skeleton3DArray"),
+                    "pose_lifter_msgs/msg/Skeleton3DArray")
+    ev = evaluate_bag(out)
+    assert ev.n_matched == sum(len(x.msg.skeletons) for x in keypoints)
+    table = ev.table()
+    assert table["lifter"]["p_mpjpe_mm"] < table["flat_floor"]["p_mpjpe_mm"]
+    assert table["lifter"]["p_mpjpe_mm"] < table["mean_pose_floor"]["p_mpjpe_mm"]

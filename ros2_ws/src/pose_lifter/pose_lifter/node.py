@@ -211,11 +211,13 @@ class LifterNode(Node):
             self._types.Skeleton3DArray, "skeletons_3d", reliable, qos_overriding_options=qos_override)
         self._pub_markers = self.create_publisher(
             self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
-        self._sub_keypoints = self.create_subscription(
-            self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
-            qos_overriding_options=qos_override)
+        # camera_info first: when an image's camera_info and keypoints are both waiting, the
+        # executor serves subscriptions in creation order, so the keypoints see that camera_info
         self._sub_camera_info = self.create_subscription(
             self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
+            qos_overriding_options=qos_override)
+        self._sub_keypoints = self.create_subscription(
+            self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
 
         self.add_on_set_parameters_callback(self._validate_parameters)
