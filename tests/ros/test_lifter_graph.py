@@ -6,6 +6,7 @@ as a detector running at the lifter's rate would do.
 
 from __future__ import annotations
 
+import signal
 from typing import Any
 
 import numpy as np
@@ -16,7 +17,7 @@ from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.skeleton import JOINT_NAMES
 from scipy.spatial.transform import Rotation
 
-from .conftest import PARAMS_YAML, REPO, GraphClient, all_finite
+from .conftest import PARAMS_YAML, REPO, SHUTDOWN_TIMEOUT, GraphClient, all_finite
 
 pytestmark = pytest.mark.ros
 
@@ -92,6 +93,16 @@ def test_qos_sensor_data_input_reliable_outputs_and_overrides(start_lifter: Any,
     graph.wait_for_lifter(lifter)
     graph.spin_until(lambda: reliability("/keypoints_2d", "sub") != [], 10.0, "the new lifter's subscription")
     assert reliability("/keypoints_2d", "sub") == [ReliabilityPolicy.RELIABLE]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_clean_shutdown_on_signal(start_lifter: Any, graph: GraphClient, sig: int) -> None:
+    lifter = start_lifter()
+    graph.wait_for_lifter(lifter)
+    graph.send(frame(graph.types, 10**9, []))  # it is up and answering
+    lifter.proc.send_signal(sig)
+    assert lifter.proc.wait(SHUTDOWN_TIMEOUT) == 0
+    assert "Traceback" not in lifter.log()
 
 
 def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: GraphClient) -> None:
