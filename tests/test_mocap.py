@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from pathlib import Path
 
@@ -140,3 +141,21 @@ def test_unknown_subject_thorax_estimate_warns() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         mocap.load_trial("09_02", DATA, max_frames=5)  # known subject: no warning
+
+
+@needs_data
+def test_amc_fast_and_fallback_parsers_agree(tmp_path: Path) -> None:
+    lines = (DATA / "asf_amc" / "02_05.amc").read_text().splitlines()
+    head = lines.index(":DEGREES") + 1
+    frame_starts = [i for i in range(head, len(lines)) if lines[i].strip().isdigit()][:4]
+    frames = [lines[a:b] for a, b in itertools.pairwise(frame_starts)]  # 3 frames
+    regular = tmp_path / "regular.amc"
+    regular.write_text("\n".join(lines[:head] + [ln for f in frames for ln in f]) + "\n")
+    shuffled = [frames[0], frames[1], [frames[2][0], *frames[2][1:][::-1]]]  # bone order changes
+    irregular = tmp_path / "irregular.amc"
+    irregular.write_text("\n".join(lines[:head] + [ln for f in shuffled for ln in f]) + "\n")
+    a, b = mocap.parse_amc(regular), mocap.parse_amc(irregular)
+    assert a.keys() == b.keys() and a["root"].shape == (3, 6)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+    np.testing.assert_array_equal(a["rfemur"], mocap.parse_amc(DATA / "asf_amc" / "02_05.amc")["rfemur"][:3])

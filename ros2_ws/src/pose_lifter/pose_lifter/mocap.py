@@ -330,12 +330,14 @@ def _parse_amc_cached(path: str, _mtime: float) -> dict[str, NDArray[np.float64]
     start = next((i for i, ln in enumerate(lines) if ln.strip().upper() == ":DEGREES"), None)
     if start is None:
         start = max((i for i, ln in enumerate(lines) if ln.startswith(":")), default=-1)
+    body = [ln for ln in lines[start + 1 :] if ln.strip() and not ln.lstrip().startswith("#")]
+    fast = _parse_amc_regular(body)
+    if fast is not None:
+        return fast
     values: dict[str, list[list[float]]] = {}
     n_frames = 0
-    for ln in lines[start + 1 :]:
+    for ln in body:
         tok = ln.split()
-        if not tok:
-            continue
         if len(tok) == 1 and tok[0].isdigit():
             n_frames += 1
             continue
@@ -348,6 +350,36 @@ def _parse_amc_cached(path: str, _mtime: float) -> dict[str, NDArray[np.float64]
     if n_frames == 0 or "root" not in out:
         raise MocapDataError(f"{path}: no AMC frames")
     return out
+
+
+def _parse_amc_regular(body: list[str]) -> dict[str, NDArray[np.float64]] | None:
+    """Vectorised parse when every frame lists the same bones in the same order (CMU files);
+    None otherwise (the caller falls back to the line-by-line parser)."""
+    if not body or not body[0].strip().isdigit():
+        return None
+    try:
+        per_frame = next(i for i, ln in enumerate(body[1:], 1) if ln.strip().isdigit())
+    except StopIteration:
+        per_frame = len(body)
+    if len(body) % per_frame:
+        return None
+    layout = [ln.split() for ln in body[1:per_frame]]
+    names = [t[0] for t in layout]
+    counts = [len(t) - 1 for t in layout]
+    width = 1 + sum(1 + c for c in counts)
+    tokens = "\n".join(body).split()
+    n_frames = len(body) // per_frame
+    if len(tokens) != n_frames * width:
+        return None
+    grid = np.array(tokens, dtype=object).reshape(n_frames, width)
+    col = 1
+    out: dict[str, NDArray[np.float64]] = {}
+    for name, c in zip(names, counts, strict=True):
+        if not np.all(grid[:, col] == name):
+            return None
+        out[name] = grid[:, col + 1 : col + 1 + c].astype(np.float64)
+        col += 1 + c
+    return out if "root" in out else None
 
 
 def amc_positions(

@@ -1,0 +1,121 @@
+"""pose-lifter CLI: learn-bases, make-bag, evaluate (lift is exercised in test_bags.py)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pose_lifter import bags, cli, mocap, scenes
+from pose_lifter import messages as m
+from pose_lifter.core.bases import PoseBases
+from pose_lifter.offline import evaluate_bag
+from scipy.spatial.transform import Rotation
+
+try:
+    DATA = mocap.resolve_data_dir()
+except mocap.MocapDataError:
+    DATA = None
+needs_data = pytest.mark.skipif(DATA is None, reason="CMU data not found (../shared/data/cmu or "
+                                "$POSE_LIFTER_CMU_DATA)")
+
+
+def test_help_lists_subcommands(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for cmd in ("learn-bases", "make-bag", "lift", "evaluate", "demo"):
+        assert cmd in out
+
+
+def test_missing_data_is_a_clean_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rc = cli.main(["make-bag", "07_05", "--out", str(tmp_path / "x.mcap"), "--data", str(tmp_path)])
+    assert rc == 2
+    assert "CMU mocap data not found" in capsys.readouterr().err
+
+
+@needs_data
+def test_learn_bases_pca(tmp_path: Path) -> None:
+    out = tmp_path / "b.npz"
+    rc = cli.main(["learn-bases", "--method", "pca", "--n-bases", "12", "--step", "60", "--starts", "4",
+                   "--out", str(out)])
+    assert rc == 0
+    b = PoseBases.load(out)
+    assert b.method == "pca" and b.n_bases == 12 and b.start_alphas.shape == (4, 12)
+    assert "learn-bases --method pca" in b.metadata["command"]
+    assert b.metadata["training_trials"][0] == "01_01" and all(
+        t.startswith("01_") for t in b.metadata["training_trials"])
+    # normalised training data: the mean pose has a unit right lower leg (roughly)
+    assert b.limb_proportions[7] == pytest.approx(1.0)
+    # PCA bases are orthonormal
+    np.testing.assert_allclose(b.components.T @ b.components, np.eye(12), atol=1e-9)
+
+
+@needs_data
+def test_make_bag_and_floors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "w.mcap"
+    rc = cli.main(["make-bag", "07_05", "02_05", "--out", str(out), "--frames", "12", "--fps", "15",
+                   "--noise", "0.05", "--missing", "0.1"])
+    assert rc == 0
+    kp = [x.msg for x in bags.read_messages(out, ["/keypoints_2d"])]
+    assert len(kp) == 12 and [s.track_id for s in kp[0].skeletons] == [0, 1]
+    stamps = [m.stamp_to_ns(x.header.stamp) for x in kp]
+    assert np.allclose(np.diff(stamps), 1e9 / 15, atol=1)
+    # the ground truth is the loaded mocap (15 Hz = every 8th frame), rigidly moved into the camera
+    gt = [x.msg for x in bags.read_messages(out, ["/ground_truth/skeletons_3d"])]
+    truth = np.array([m.skeleton3d_to_joints(x.skeletons[0]) for x in gt])
+    source = mocap.load_trial("07_05", DATA, step=8, max_frames=12)
+    d_truth = np.linalg.norm(truth[:, :, None] - truth[:, None], axis=-1)
+    d_source = np.linalg.norm(source[:, :, None] - source[:, None], axis=-1)
+    np.testing.assert_allclose(d_truth, d_source, atol=1e-9)
+    capsys.readouterr()
+    assert cli.main(["evaluate", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["n_matched"] == 0 and res["n_ground_truth"] == 24
+    assert res["mean"]["lifter"]["p_mpjpe_mm"] is None
+    assert 50 < res["mean"]["flat_floor"]["p_mpjpe_mm"] < 250
+    assert 50 < res["mean"]["mean_pose_floor"]["p_mpjpe_mm"] < 250
+
+
+def _bag_with_estimates(tmp_path: Path, transform: np.ndarray, offset: np.ndarray) -> Path:
+    """A scene bag plus /skeletons_3d = ground truth moved by a rotation and offset."""
+    rng = np.random.default_rng(0)
+    clip = rng.normal(scale=0.3, size=(5, 12, 3)) + np.array([0.0, 1.0, 0.0])
+    sc = scenes.build_scene([clip, clip + 0.01], scenes.SceneOptions(distance=4.0), track_ids=[3, 8])
+    path = tmp_path / "in.mcap"
+    scenes.write_scene_bag(sc, path)
+    t = m.rosbags_types()
+    out = tmp_path / "est.mcap"
+    with bags.BagWriter(out) as w:
+        for x in bags.read_messages(path):
+            w.write(x.topic, x.stamp_ns, x.msg, x.msgtype)
+            if x.topic == "/ground_truth/skeletons_3d" and x.stamp_ns != sc.stamps_ns[-1]:
+                skels = []
+                for sk in x.msg.skeletons:
+                    j = m.skeleton3d_to_joints(sk)
+                    c = j.mean(axis=0)
+                    skels.append(m.skeleton3d_from_joints(sk.track_id, (j - c) @ transform.T + c + offset, t))
+                w.write("/skeletons_3d", x.stamp_ns, m.skeletons3d_array(x.msg.header, skels, t),
+                        "pose_lifter_msgs/msg/Skeleton3DArray")
+    return out
+
+
+def test_evaluate_matches_by_stamp_and_track(tmp_path: Path) -> None:
+    out = _bag_with_estimates(tmp_path, np.eye(3), np.array([0.0, 0.0, 0.5]))
+    ev = evaluate_bag(out)
+    assert (ev.n_ground_truth, ev.n_estimates, ev.n_matched) == (10, 8, 8)
+    # a translated copy of the truth: every centred error is 0
+    np.testing.assert_allclose(ev.mpjpe_mm, 0, atol=1e-9)
+    np.testing.assert_allclose(ev.p_mpjpe_mm, 0, atol=1e-9)
+    np.testing.assert_allclose(ev.normalised, 0, atol=1e-9)
+    assert sorted(set(ev.track_ids.tolist())) == [3, 8]
+
+
+def test_evaluate_rotation_counts_in_mpjpe_only(tmp_path: Path) -> None:
+    rot = Rotation.from_euler("y", 40, degrees=True).as_matrix()
+    ev = evaluate_bag(_bag_with_estimates(tmp_path, rot, np.zeros(3)))
+    assert np.all(ev.mpjpe_mm > 50)
+    np.testing.assert_allclose(ev.p_mpjpe_mm, 0, atol=1e-6)
+    np.testing.assert_allclose(ev.normalised, 0, atol=1e-6)
