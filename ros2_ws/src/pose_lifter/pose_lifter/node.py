@@ -145,6 +145,19 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
 _SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
 
 
+@dataclass(frozen=True)
+class NodeSettings:
+    """The node's own parameters (not solver options), read once per change, not per frame."""
+
+    warm_start: bool
+    track_timeout_ns: int
+    lower_leg_length: float
+    default_distance: float
+    publish_markers: bool
+    max_skeletons: int
+    max_coordinate: float
+
+
 @dataclass
 class TrackState:
     """What the node remembers about one tracked person.
@@ -198,6 +211,7 @@ class LifterNode(Node):
         options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
         self._lifter = Lifter(self._bases, options)
         self._pending: tuple[PoseBases, LifterOptions] | None = None
+        self._settings = self._read_settings()
 
         self._tracks: dict[int, TrackState] = {}
         self._shown_tracks: set[int] = set()  # track ids with markers on screen
@@ -235,6 +249,17 @@ class LifterNode(Node):
     def _param(self, name: str) -> Any:
         return self.get_parameter(name).value
 
+    def _read_settings(self) -> NodeSettings:
+        return NodeSettings(
+            warm_start=bool(self._param("warm_start")),
+            track_timeout_ns=round(float(self._param("track_timeout")) * 1e9),
+            lower_leg_length=float(self._param("lower_leg_length")),
+            default_distance=float(self._param("default_distance")),
+            publish_markers=bool(self._param("publish_markers")),
+            max_skeletons=int(self._param("max_skeletons")),
+            max_coordinate=float(self._param("max_coordinate")),
+        )
+
     @staticmethod
     def _load_bases(path: str) -> PoseBases:
         return PoseBases.load(Path(path).expanduser() if path else None)
@@ -263,6 +288,7 @@ class LifterNode(Node):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         """Post-set callback: switch to what :meth:`_validate_parameters` built."""
+        self._settings = self._read_settings()
         if self._pending is None:
             return
         bases, options = self._pending
@@ -272,7 +298,7 @@ class LifterNode(Node):
             self._tracks.clear()  # coefficients of other bases are meaningless
         if bases is not self._lifter.bases or options != self._lifter.options:
             self._lifter = Lifter(bases, options)
-        if not self._param("warm_start"):
+        if not self._settings.warm_start:
             self._tracks.clear()
         names = ", ".join(f"{p.name}={p.value!r}" for p in params if p.name in _SPECS)
         if names:
@@ -298,7 +324,7 @@ class LifterNode(Node):
         try:
             layout = get_layout(str(msg.layout))
             skeletons: Sequence[Any] = msg.skeletons
-            limit = int(self._param("max_skeletons"))
+            limit = self._settings.max_skeletons
             if len(skeletons) > limit:
                 self._warn_skip("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
                                 f"lifting the first {limit} (max_skeletons)")
@@ -325,7 +351,7 @@ class LifterNode(Node):
         self._expire_tracks(stamp_ns)
 
         self._pub_skeletons.publish(messages.skeletons3d_array(msg.header, lifted, self._types))
-        if self._param("publish_markers"):
+        if self._settings.publish_markers:
             self._publish_markers(msg.header, shown)
         self._stats.frames += 1
         self._stats.lifted += len(lifted)
@@ -348,7 +374,7 @@ class LifterNode(Node):
         if not np.any(visible):
             raise SkipSkeleton("no confident keypoints",
                                f"track {track_id}: no keypoint above the confidence threshold")
-        limit = float(self._param("max_coordinate"))
+        limit = self._settings.max_coordinate
         if np.max(np.abs(points[visible])) > limit:
             raise SkipSkeleton("absurd coordinates",
                                f"track {track_id}: keypoints beyond {limit:g} px (max_coordinate)")
@@ -356,14 +382,14 @@ class LifterNode(Node):
         warm: WarmStart | None = None
         track = self._tracks.get(track_id) if track_id >= 0 else None
         if track is not None:
-            timeout_ns = int(float(self._param("track_timeout")) * 1e9)
+            timeout_ns = self._settings.track_timeout_ns
             age = stamp_ns - track.last_stamp_ns
             if -timeout_ns <= age < 0:
                 raise SkipSkeleton("out-of-order stamp",
                                    f"track {track_id}: stamp {-age / 1e9:.3f} s older than its last frame")
             if age < -timeout_ns:  # the input clock jumped back (e.g. a looping bag)
                 del self._tracks[track_id]
-            elif age <= timeout_ns and self._param("warm_start"):
+            elif age <= timeout_ns and self._settings.warm_start:
                 warm = track.warm
 
         start = time.perf_counter()
@@ -373,8 +399,8 @@ class LifterNode(Node):
                            result.camera.translation, result.objective, result.reprojection_error):
             raise SkipSkeleton("non-finite result", f"track {track_id}: the solve returned non-finite values")
         focal, centre = self._intrinsics if self._intrinsics is not None else (None, None)
-        joints = messages.place_in_camera(result, float(self._param("lower_leg_length")), focal, centre,
-                                          float(self._param("default_distance")))
+        joints = messages.place_in_camera(result, self._settings.lower_leg_length, focal, centre,
+                                          self._settings.default_distance)
         if not _all_finite(joints):
             raise SkipSkeleton("non-finite result", f"track {track_id}: non-finite metric joints")
         out = messages.result_to_skeleton3d(result, track_id, joints, self._types,
@@ -384,7 +410,7 @@ class LifterNode(Node):
         return out, joints
 
     def _expire_tracks(self, stamp_ns: int) -> None:
-        timeout_ns = int(float(self._param("track_timeout")) * 1e9)
+        timeout_ns = self._settings.track_timeout_ns
         stale = [t for t, s in self._tracks.items() if stamp_ns - s.last_stamp_ns > timeout_ns]
         for t in stale:
             del self._tracks[t]
