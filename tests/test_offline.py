@@ -1,0 +1,86 @@
+"""pose_lifter.offline.lift_bag plumbing with a stand-in lifter (the real one: test_bags.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from pose_lifter import bags, offline, scenes
+from pose_lifter import messages as m
+from pose_lifter.core.errors import TooFewJointsError
+from pose_lifter.core.types import Camera, LiftResult, WarmStart
+
+
+class EchoLifter:
+    """Returns the mean of the visible 2D points as the camera translation, a fixed pose, and
+    records the warm starts it was given."""
+
+    def __init__(self) -> None:
+        self.warm: list[WarmStart | None] = []
+        self.pose = np.random.default_rng(0).normal(size=(12, 3))
+        self.pose -= self.pose.mean(axis=0)
+
+    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None) -> LiftResult:
+        self.warm.append(warm)
+        vis = confidence > 0
+        if vis.sum() < 6:
+            raise TooFewJointsError("too few")
+        cam = Camera(np.eye(3), 100.0, points[vis].mean(axis=0))
+        return LiftResult(self.pose, self.pose, cam, np.zeros(3), 1.0, 0.5, 0.0, 3, True, 1, 0, np.ones(12))
+
+
+def make_input(tmp_path: Path) -> tuple[Path, scenes.Scene]:
+    rng = np.random.default_rng(1)
+    clip = rng.normal(scale=0.3, size=(6, 12, 3)) + np.array([0.0, 1.0, 0.0])
+    sc = scenes.build_scene([clip, clip], scenes.SceneOptions(), track_ids=[0, 5])
+    sc.confidence[1, 3, :8] = 0.0  # track 5 vanishes (too few joints) in frame 3
+    path = tmp_path / "in.mcap"
+    scenes.write_scene_bag(sc, path)
+    return path, sc
+
+
+def test_lift_bag_outputs(tmp_path: Path) -> None:
+    path, sc = make_input(tmp_path)
+    lifter: Any = EchoLifter()
+    out = tmp_path / "out.mcap"
+    summary, frames = offline.lift_bag(path, out, lifter, progress=False, leg_length_m=0.5)
+    assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
+    # warm starts: from the second frame of each track on, restarted after the gap of track 5
+    assert summary.n_warm == 11 - 3
+    assert lifter.warm[0] is None and lifter.warm[1] is None and lifter.warm[2] is not None
+    topics = bags.bag_topics(out)
+    assert topics["/skeletons_3d"] == "pose_lifter_msgs/msg/Skeleton3DArray"
+    assert topics["/skeleton_markers"] == "visualization_msgs/msg/MarkerArray"
+    assert {"/keypoints_2d", "/camera_info", "/ground_truth/skeletons_3d"} <= set(topics)
+    msgs = list(bags.read_messages(out))
+    est = [x for x in msgs if x.topic == "/skeletons_3d"]
+    kp = [x for x in msgs if x.topic == "/keypoints_2d"]
+    assert [x.stamp_ns for x in est] == [x.stamp_ns for x in kp] == list(sc.stamps_ns)
+    assert [len(x.msg.skeletons) for x in est] == [2, 2, 2, 1, 2, 2]
+    s = est[4].msg.skeletons[1]
+    assert s.track_id == 5 and not s.warm_started and est[5].msg.skeletons[1].warm_started
+    # metric placement: depth = f * leg / scale = 800 * 0.5 / 100, centroid under the 2D mean
+    j = m.skeleton3d_to_joints(est[0].msg.skeletons[0])
+    assert j.mean(axis=0)[2] == pytest.approx(4.0)
+    np.testing.assert_allclose(j - j.mean(axis=0), lifter.pose * 0.5, atol=1e-12)
+    u = 800 * j.mean(axis=0)[0] / 4.0 + 320
+    assert u == pytest.approx(sc.points_2d[0, 0].mean(axis=0)[0])
+    # markers: two per person; the vanished track gets DELETE markers
+    mk = [x.msg.markers for x in msgs if x.topic == "/skeleton_markers"]
+    assert [len(a) for a in mk[:3]] == [4, 4, 4]
+    assert [(k.id, k.action) for k in mk[3]] == [(0, 0), (0, 0), (5, 2), (5, 2)]
+    assert len(frames) == 11
+
+
+def test_lift_bag_every_and_max(tmp_path: Path) -> None:
+    path, _ = make_input(tmp_path)
+    out = tmp_path / "out.mcap"
+    summary, _ = offline.lift_bag(path, out, EchoLifter(), every=2, max_messages=2, progress=False)  # type: ignore[arg-type]
+    assert summary.n_messages == 2
+    kp = list(bags.read_messages(out, ["/keypoints_2d"]))
+    est = list(bags.read_messages(out, ["/skeletons_3d"]))
+    assert len(kp) == 4 and [x.stamp_ns for x in est] == [kp[0].stamp_ns, kp[2].stamp_ns]
+    with pytest.raises(bags.BagError):
+        offline.lift_bag(path, out, EchoLifter(), progress=False)  # type: ignore[arg-type]
