@@ -208,7 +208,9 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``pose-lifter`` argument parser."""
-    parser = argparse.ArgumentParser(prog="pose-lifter", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="pose-lifter", description="Offline commands: learn bases, make bags, lift bags, evaluate, demo."
+    )
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     p = sub.add_parser("learn-bases", help="learn pose bases from the paper's CMU training split")
