@@ -80,7 +80,7 @@ Loss = Literal["l1", "l2"]
 #:   ``alpha_step_objective_abs``
 #:   ``limb_violation``        max_i | ||C_i y||^2 - L_i | accepted from the fast path.
 TOLERANCES: Final[dict[str, float]] = {
-    "clarabel_tol": 1e-10,
+    "clarabel_tol": 1e-9,
     "scs_eps": 1e-9,
     "slsqp_ftol": 1e-13,
     "camera_xatol": 1e-10,
