@@ -20,12 +20,12 @@ from .errors import BasisFileError, InvalidInputError
 from .skeleton import N_JOINTS, limb_lengths
 
 __all__ = [
-    "PoseBases",
-    "learn_sparse_bases",
-    "learn_pca_bases",
-    "learn_classwise_pca_bases",
-    "sparse_codes",
     "DEFAULT_BASES_PATH",
+    "PoseBases",
+    "learn_classwise_pca_bases",
+    "learn_pca_bases",
+    "learn_sparse_bases",
+    "sparse_codes",
 ]
 
 #: The basis file shipped with the package (see tools/learn_default_bases.sh).

@@ -6,12 +6,12 @@ Every input the solvers cannot use raises one of these, never a NaN result.
 from __future__ import annotations
 
 __all__ = [
-    "PoseLifterError",
+    "BasisFileError",
     "InvalidInputError",
+    "OptionsError",
+    "PoseLifterError",
     "TooFewJointsError",
     "UnknownLayoutError",
-    "BasisFileError",
-    "OptionsError",
 ]
 
 

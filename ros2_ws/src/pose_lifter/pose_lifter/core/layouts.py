@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from .errors import InvalidInputError, UnknownLayoutError
 from .skeleton import N_JOINTS
 
-__all__ = ["Layout", "LAYOUTS", "get_layout", "to_model_joints"]
+__all__ = ["LAYOUTS", "Layout", "get_layout", "to_model_joints"]
 
 
 @dataclass(frozen=True)

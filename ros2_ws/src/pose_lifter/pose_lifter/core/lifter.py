@@ -1,17 +1,53 @@
-"""The lifter: alternation of camera and pose steps, multi-start and warm start."""
+"""The lifter: alternation of camera and pose steps, multi-start and warm start (paper Sec. 3.3).
+
+One solve minimises, over the coefficients ``alpha`` and a scaled-orthographic camera
+``(M0, t)``::
+
+    F = sum_j w_j rho(x_j - M0 y_j - t) + theta ||alpha||_1,   y = mu + B alpha,
+    subject to ||C_i y||^2 = L_i (i = 1..8)
+
+by alternating the camera step and the pose step from a start pose until the relative
+decrease of ``F`` falls below ``alternation_tol`` or ``max_alternations`` is reached. Cold
+solves try ``n_starts`` starts (the mean pose, then k-means centres of the training poses)
+and keep the lowest ``F``; a warm start (previous frame of the same person) replaces them.
+
+Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
+and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
+mean the same at any image size. Results are mapped back to input units.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .bases import PoseBases
+from .camera import camera_step
+from .errors import InvalidInputError, TooFewJointsError
 from .options import LifterOptions
-from .types import LiftResult, WarmStart
+from .pose import LiftedConstraints, PoseModel, QStepFn, pose_step
+from .skeleton import ANTHROPOMETRIC_PROPORTIONS, N_JOINTS
+from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
 __all__ = ["Lifter"]
+
+
+@dataclass(frozen=True)
+class _Normalisation:
+    centre: NDArray[np.float64]
+    spread: float
+
+
+@dataclass(frozen=True)
+class _Run:
+    pose: PoseResult
+    camera: CameraResult
+    objective: float
+    n_iter: int
+    converged: bool
 
 
 class Lifter:
@@ -26,8 +62,130 @@ class Lifter:
 
     def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None) -> None:
         self.bases = bases if bases is not None else PoseBases.load()
-        self.options = options if options is not None else LifterOptions()
+        self._options = options if options is not None else LifterOptions()
+        self._model: PoseModel | None = None
+        self._model_key: str | None = None
+        self._camera_qp: QStepFn | None = None
+        mp = self.bases.mean_pose
+        self._mean_spread = float(np.sqrt(np.mean(np.sum((mp[:, :2] - mp[:, :2].mean(0)) ** 2, axis=1))))
+        self._build()
 
+    @property
+    def options(self) -> LifterOptions:
+        """Current options; assign a new :class:`LifterOptions` to change them."""
+        return self._options
+
+    @options.setter
+    def options(self, value: LifterOptions) -> None:
+        value.validate()
+        self._options = value
+        self._build()
+
+    @property
+    def model(self) -> PoseModel:
+        """Precomputed pose-step data of the current bases and limb targets."""
+        assert self._model is not None
+        return self._model
+
+    def _build(self) -> None:
+        key = self._options.limb_proportions
+        if self._model is None or self._model_key != key:
+            props = self.bases.limb_proportions if key == "bases" else ANTHROPOMETRIC_PROPORTIONS
+            self._model = PoseModel.build(self.bases, props)
+            self._model_key = key
+        self._qstep_fn: QStepFn | None = None
+        if self._options.pose_solver == "cvxpy":
+            from .reference import reference_qstep
+
+            def _q(w: NDArray[np.float64], cons: LiftedConstraints, p: NDArray[np.float64],
+                   g: NDArray[np.float64], delta: float) -> NDArray[np.float64]:
+                return np.asarray(reference_qstep(w, cons.omegas, p, g, delta))
+
+            self._qstep_fn = _q
+
+    # ------------------------------------------------------------------ helpers
+    def _weights(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        x = np.asarray(points, dtype=np.float64)
+        if x.shape != (N_JOINTS, 2):
+            raise InvalidInputError(f"points_2d must have shape ({N_JOINTS}, 2), got {x.shape}")
+        if confidence is None:
+            conf = np.ones(N_JOINTS)
+        else:
+            conf = np.asarray(confidence, dtype=np.float64)
+            if conf.shape != (N_JOINTS,):
+                raise InvalidInputError(f"confidence must have shape ({N_JOINTS},), got {conf.shape}")
+            if not np.all(np.isfinite(conf)):
+                raise InvalidInputError("confidence has non-finite values")
+        w = np.where(conf >= self._options.confidence_threshold, np.clip(conf, 0.0, 1.0), 0.0)
+        # a joint with non-finite coordinates is missing, whatever its confidence
+        bad = ~np.all(np.isfinite(x), axis=1)
+        w[bad] = 0.0
+        n_vis = int(np.count_nonzero(w > 0))
+        if n_vis < self._options.min_visible_joints:
+            raise TooFewJointsError(
+                f"{n_vis} joints visible (confidence >= {self._options.confidence_threshold}); "
+                f"at least {self._options.min_visible_joints} needed"
+            )
+        x = np.where(bad[:, None], 0.0, x)
+        return x, w
+
+    def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> _Normalisation:
+        centre = w @ x / w.sum()
+        spread = float(np.sqrt(w @ np.sum((x - centre) ** 2, axis=1) / w.sum()))
+        if not np.isfinite(spread) or spread <= 1e-9 * max(1.0, float(np.abs(centre).max())):
+            raise InvalidInputError("the visible keypoints are (almost) all at one point")
+        return _Normalisation(centre, spread / self._mean_spread)
+
+    def _camera(self, xn: NDArray[np.float64], pose: NDArray[np.float64], w: NDArray[np.float64],
+                init: Camera | None) -> CameraResult:
+        o = self._options
+        if o.camera_solver == "cvxpy":
+            from .reference import reference_camera
+
+            cam, obj = reference_camera(xn, pose, w, o.method.loss,
+                                        rotation_init=None if init is None else init.rotation)
+            return CameraResult(cam, float(obj), 1, True)
+        return camera_step(xn, pose, w, o.method.loss, init=init, max_iter=o.camera_max_iter,
+                           tol=o.camera_tol, tau=o.tau)
+
+    def _pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
+              alpha0: NDArray[np.float64]) -> PoseResult:
+        o = self._options
+        return pose_step(
+            xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
+            max_iter=o.pose_max_iter, tol=o.pose_tol, eta=o.eta, eta_growth=o.eta_growth, delta=o.delta,
+            inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
+            alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
+        )
+
+    def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
+             cam0: Camera | None) -> _Run:
+        """Alternate camera and pose steps from ``alpha0`` (and optionally a camera)."""
+        o = self._options
+        alpha = alpha0
+        cam = self._camera(xn, self.model.pose(alpha), w, cam0)
+        best: _Run | None = None
+        prev = np.inf
+        converged = False
+        it = 0
+        for it in range(1, o.max_alternations + 1):
+            pres = self._pose(xn, cam.camera, w, alpha)
+            alpha = pres.alpha
+            cam = self._camera(xn, pres.pose, w, cam.camera)
+            th = o.theta if o.method.sparsity else 0.0
+            obj = cam.objective + th * float(np.sum(np.abs(alpha)))
+            pres = PoseResult(pres.alpha, pres.pose, obj, pres.limb_violation, pres.n_iter, pres.converged)
+            if best is None or obj < best.objective:
+                best = _Run(pres, cam, obj, it, False)
+            if prev - obj <= o.alternation_tol * max(abs(prev), 1e-12) and np.isfinite(prev):
+                converged = True
+                break
+            prev = obj
+        assert best is not None
+        return _Run(best.pose, best.camera, best.objective, it, converged)
+
+    # ------------------------------------------------------------------ public
     def lift(
         self,
         points_2d: NDArray[np.float64],
@@ -40,13 +198,59 @@ class Lifter:
         ----------
         points_2d : ndarray, shape (12, 2)
             Image coordinates of the 12 model joints (any consistent unit, e.g. pixels;
-            image y may point down).
+            image y pointing down gives a camera frame with y down, z forward).
         confidence : ndarray, shape (12,), optional
+            Per-joint confidence; below ``options.confidence_threshold`` = missing.
+            Non-finite coordinates also count as missing.
         warm : WarmStart, optional
             Previous solution of the same person: a single start from it replaces the
             multi-start.
+
+        Returns
+        -------
+        LiftResult
+
+        Raises
+        ------
+        InvalidInputError, TooFewJointsError
         """
-        raise NotImplementedError
+        x, w = self._weights(points_2d, confidence)
+        norm = self._normalise(x, w)
+        xn = (x - norm.centre) / norm.spread
+        if warm is not None:
+            if warm.alpha.shape != (self.bases.n_bases,):
+                raise InvalidInputError("warm start alpha does not match the bases")
+            cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
+                          (warm.camera.translation - norm.centre) / norm.spread)
+            runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
+        else:
+            starts = self.bases.with_starts(self._options.n_starts)
+            runs = [(i, self._run(xn, w, a, None)) for i, a in enumerate(starts)]
+        idx, run = min(runs, key=lambda r: r[1].objective)
+        cam_n = run.camera.camera
+        cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
+        pose = run.pose.pose
+        pose_c = pose - pose.mean(axis=0)
+        reproj = np.linalg.norm(x - cam.project(pose), axis=1)
+        vis = w > 0
+        result = LiftResult(
+            pose=pose,
+            pose_camera=pose_c @ cam.rotation.T,
+            camera=cam,
+            alpha=run.pose.alpha,
+            objective=run.objective,
+            reprojection_error=float(reproj[vis].mean()),
+            limb_violation=run.pose.limb_violation,
+            n_iter=run.n_iter,
+            converged=run.converged,
+            n_starts=len(runs),
+            start_index=idx,
+            weights=w,
+        )
+        for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
+            if not np.all(np.isfinite(arr)):
+                raise InvalidInputError("the solve produced non-finite values for this input")
+        return result
 
     def lift_many(
         self,
@@ -54,5 +258,19 @@ class Lifter:
         confidence: NDArray[np.float64] | None = None,
         warm_start: bool = True,
     ) -> Sequence[LiftResult]:
-        """Lift a sequence of one person's frames, shape (T, 12, 2), in order."""
-        raise NotImplementedError
+        """Lift one person's frames in order, shape (T, 12, 2) (confidence (T, 12)).
+
+        With ``warm_start`` each frame starts from the previous result (cold multi-start on
+        the first frame and after a frame that could not be lifted, which is re-raised).
+        """
+        pts = np.asarray(points_2d, dtype=np.float64)
+        if pts.ndim != 3:
+            raise InvalidInputError(f"points_2d must be (T, {N_JOINTS}, 2), got {pts.shape}")
+        conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+        out: list[LiftResult] = []
+        warm: WarmStart | None = None
+        for i in range(pts.shape[0]):
+            res = self.lift(pts[i], None if conf is None else conf[i], warm)
+            out.append(res)
+            warm = res.warm_start() if warm_start else None
+        return out

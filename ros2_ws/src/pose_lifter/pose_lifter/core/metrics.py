@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from .skeleton import RIGHT_LOWER_LEG, limb_lengths
 
-__all__ = ["mpjpe", "p_mpjpe", "procrustes_align", "per_joint_error", "normalised_error"]
+__all__ = ["mpjpe", "normalised_error", "p_mpjpe", "per_joint_error", "procrustes_align"]
 
 
 def per_joint_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:

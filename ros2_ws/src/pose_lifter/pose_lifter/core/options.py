@@ -12,7 +12,7 @@ from typing import Any, Final, Literal
 
 from .errors import OptionsError
 
-__all__ = ["Variant", "VARIANTS", "get_variant", "LifterOptions"]
+__all__ = ["VARIANTS", "LifterOptions", "Variant", "get_variant"]
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,10 @@ class LifterOptions:
     camera_max_iter, camera_tol : int, float
         ADM of the camera step.
     eta, delta, tau : float
-        Penalties of the pose ADM, inner ADM and camera ADM (constant: see the pitfalls).
+        Penalties of the pose ADM (initial), inner ADM and camera ADM (constant: see the
+        pitfalls note).
+    eta_growth : float
+        Per-iteration growth of the pose ADM penalty (the paper's ``eta_k``), >= 1.
     n_starts : int
         Cold-start multi-start count (paper: 30 k-means centres; 1 = mean pose only).
     confidence_threshold : float
@@ -102,12 +105,13 @@ class LifterOptions:
     max_alternations: int = 20
     alternation_tol: float = 1e-4
     pose_max_iter: int = 100
-    pose_tol: float = 1e-4
+    pose_tol: float = 1e-3
     inner_max_iter: int = 60
     inner_tol: float = 1e-6
     camera_max_iter: int = 100
     camera_tol: float = 1e-5
-    eta: float = 1.0
+    eta: float = 0.3
+    eta_growth: float = 1.1
     delta: float = 1.0
     tau: float = 1.0
     n_starts: int = 30
@@ -115,7 +119,7 @@ class LifterOptions:
     min_visible_joints: int = 6
     limb_proportions: str = "bases"
     alpha_step: str = "reduced"
-    alpha_solver: str = "admm"
+    alpha_solver: str = "newton"
     camera_solver: str = "admm"
     pose_solver: str = "admm"
 
@@ -148,10 +152,16 @@ class LifterOptions:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 1e-6 <= float(v) <= 1e6:
                 raise OptionsError(f"{name} must be in [1e-6, 1e6], got {v!r}")
+        if not isinstance(self.eta_growth, (int, float)) or not 1.0 <= float(self.eta_growth) <= 2.0:
+            raise OptionsError(f"eta_growth must be in [1, 2], got {self.eta_growth!r}")
         if not 0.0 <= float(self.confidence_threshold) <= 1.0:
-            raise OptionsError(f"confidence_threshold must be in [0, 1], got {self.confidence_threshold!r}")
+            raise OptionsError(
+                f"confidence_threshold must be in [0, 1], got {self.confidence_threshold!r}"
+            )
         if not isinstance(self.min_visible_joints, int) or not 3 <= self.min_visible_joints <= 12:
-            raise OptionsError(f"min_visible_joints must be an integer in [3, 12], got {self.min_visible_joints!r}")
+            raise OptionsError(
+                f"min_visible_joints must be an integer in [3, 12], got {self.min_visible_joints!r}"
+            )
         choices: dict[str, tuple[str, ...]] = {
             "limb_proportions": ("anthropometric", "bases"),
             "alpha_step": ("reduced", "full"),

@@ -15,18 +15,18 @@ from numpy.typing import NDArray
 from .errors import InvalidInputError
 
 __all__ = [
-    "JOINT_NAMES",
-    "N_JOINTS",
-    "LIMBS",
-    "LIMB_NAMES",
-    "RIGHT_LOWER_LEG",
     "ANTHROPOMETRIC_PROPORTIONS",
     "BONES_FOR_DRAWING",
     "JOINTS_LEFT",
     "JOINTS_RIGHT",
+    "JOINT_NAMES",
+    "LIMBS",
+    "LIMB_NAMES",
+    "N_JOINTS",
+    "RIGHT_LOWER_LEG",
+    "body_frame",
     "limb_lengths",
     "limb_selectors",
-    "body_frame",
     "normalise_pose",
 ]
 
@@ -83,7 +83,7 @@ ANTHROPOMETRIC_PROPORTIONS: Final[NDArray[np.float64]] = np.array(
 ) / 0.246
 
 #: Segments to draw (limbs plus shoulder line, hip line and the two torso sides).
-BONES_FOR_DRAWING: Final[tuple[tuple[int, int], ...]] = LIMBS + ((0, 3), (6, 9), (0, 6), (3, 9))
+BONES_FOR_DRAWING: Final[tuple[tuple[int, int], ...]] = (*LIMBS, (0, 3), (6, 9), (0, 6), (3, 9))
 
 
 def _check_pose(pose: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Camera", "CameraResult", "PoseResult", "LiftResult", "WarmStart"]
+__all__ = ["Camera", "CameraResult", "LiftResult", "PoseResult", "WarmStart"]
 
 
 @dataclass(frozen=True)

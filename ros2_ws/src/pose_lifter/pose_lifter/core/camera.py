@@ -1,0 +1,190 @@
+"""Camera step (paper eq. 5 and appendix B): robust weak-perspective camera by ADM.
+
+Problem (per joint weights ``w_j >= 0``, points ``x_j in R^2``, pose ``y_j in R^3``)::
+
+    minimise_{M0, t}  sum_j w_j * rho(x_j - M0 y_j - t)
+    subject to        M0 = s [r1; r2],  s > 0,  [r1; r2] orthonormal rows
+
+with ``rho = ||.||_1`` (the paper) or ``||.||_2^2`` (the L2 ablations).
+
+Departure from the paper: eq. (5) constrains only ``m1 . m2 = 0``. A weak-perspective camera
+also has ``||m1|| = ||m2||``; without it the camera degenerates (one image axis squashed;
+measured in ``shared/notes/method-pitfalls.md`` §1). We keep the paper's ADM structure but
+split the projection ``N`` (unconstrained, closed-form least squares) from its copy
+``M`` on the scaled-orthographic set (closed-form projection by SVD: the nearest
+``s [r1; r2]`` to ``N`` in Frobenius norm is ``mean(sigma) U V^T``)::
+
+    min  sum_j w_j rho(R_j)   s.t.  R = X - Y N^T - 1 t^T,   N = M,   M scaled-orthographic
+
+Scaled-form ADM with penalty ``tau``:
+    R  <- prox_{rho_w / tau}(X - Y N^T - 1 t^T + U1)        (soft-threshold for L1)
+    N,t<- argmin ||X - R + U1 - Y N^T - 1 t^T||^2 + ||N - M + U2||^2   (4x4 normal equations)
+    M  <- Proj_scaled-orthographic(N + U2)
+    U1 <- U1 + X - Y N^T - 1 t^T - R;   U2 <- U2 + N - M
+Translation is a free variable of the camera (x_j ~ M0 y_j + t), so 2D and 3D need no
+joint-wise centring; missing joints (w_j = 0) drop out of the loss. On exit ``t`` is
+re-optimised exactly for the final ``M`` (weighted median for L1, weighted mean for L2).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InvalidInputError
+from .types import Camera, CameraResult
+
+__all__ = ["camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
+
+
+def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Nearest scaled-orthographic 2x3 matrix ``s [r1; r2]`` to ``n`` (Frobenius norm)."""
+    u, s, vt = np.linalg.svd(n, full_matrices=False)
+    return np.asarray(s.mean() * (u @ vt))
+
+
+def weighted_median(values: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
+    """A minimiser of ``sum_j w_j |values_j - m|`` (values, weights: shape (n,))."""
+    order = np.argsort(values, kind="stable")
+    v = values[order]
+    cw = np.cumsum(weights[order])
+    total = cw[-1]
+    if total <= 0:
+        return float(np.median(values))
+    i = int(np.searchsorted(cw, 0.5 * total))
+    if np.isclose(cw[i], 0.5 * total) and i + 1 < v.size:
+        return float(0.5 * (v[i] + v[i + 1]))
+    return float(v[i])
+
+
+def camera_objective(
+    points: NDArray[np.float64], pose: NDArray[np.float64], weights: NDArray[np.float64],
+    m0: NDArray[np.float64], t: NDArray[np.float64], loss: Literal["l1", "l2"],
+) -> float:
+    """``sum_j w_j rho(x_j - M0 y_j - t)``; points (n,2), pose (n,3), weights (n,)."""
+    r = points - pose @ m0.T - t
+    if loss == "l1":
+        return float(np.sum(weights[:, None] * np.abs(r)))
+    return float(np.sum(weights[:, None] * r * r))
+
+
+def _optimal_translation(
+    points: NDArray[np.float64], pose: NDArray[np.float64], weights: NDArray[np.float64],
+    m0: NDArray[np.float64], loss: Literal["l1", "l2"],
+) -> NDArray[np.float64]:
+    d = points - pose @ m0.T
+    if loss == "l2":
+        return np.asarray(weights @ d / weights.sum())
+    return np.array([weighted_median(d[:, 0], weights), weighted_median(d[:, 1], weights)])
+
+
+def _check(points: NDArray[np.float64], pose: NDArray[np.float64], weights: NDArray[np.float64]) -> None:
+    if points.ndim != 2 or points.shape[1] != 2:
+        raise InvalidInputError(f"points must be (n, 2), got {points.shape}")
+    if pose.shape != (points.shape[0], 3):
+        raise InvalidInputError(f"pose must be ({points.shape[0]}, 3), got {pose.shape}")
+    if weights.shape != (points.shape[0],):
+        raise InvalidInputError(f"weights must be ({points.shape[0]},), got {weights.shape}")
+    if not (np.all(np.isfinite(points)) and np.all(np.isfinite(pose)) and np.all(np.isfinite(weights))):
+        raise InvalidInputError("camera step inputs must be finite")
+    if np.count_nonzero(weights > 0) < 3:
+        raise InvalidInputError("the camera step needs at least 3 joints with positive weight")
+
+
+def camera_step(
+    points: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    loss: Literal["l1", "l2"] = "l1",
+    init: Camera | None = None,
+    max_iter: int = 100,
+    tol: float = 1e-5,
+    tau: float = 1.0,
+) -> CameraResult:
+    """Robust scaled-orthographic camera for a fixed 3D pose (see module docstring).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+    pose : ndarray, shape (n, 3)
+    weights : ndarray, shape (n,)
+        ``>= 0``; at least 3 positive.
+    loss : {"l1", "l2"}
+    init : Camera, optional
+        Warm start; without it the weighted least-squares affine fit projected onto the
+        scaled-orthographic set.
+    max_iter : int
+        Iteration cap.
+    tol : float
+        Stop when the relative primal residuals and the relative change of ``M`` are all
+        below ``tol``.
+    tau : float
+        ADM penalty (constant).
+
+    Returns
+    -------
+    CameraResult
+        The camera, ``objective = sum_j w_j rho(x_j - M0 y_j - t)``, iterations, converged.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    y = np.asarray(pose, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    _check(x, y, w)
+    n = x.shape[0]
+    ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)
+    vis = w > 0
+    if init is None:
+        sw = np.sqrt(w)[:, None]
+        sol, *_ = np.linalg.lstsq(sw * ya, sw * x, rcond=None)  # (4, 2)
+        m = project_scaled_orthographic(sol[:3].T)
+        if not np.isfinite(m).all() or np.linalg.norm(m) < 1e-12:
+            m = np.hstack([np.eye(2), np.zeros((2, 1))])
+        t = _optimal_translation(x, y, w, m, "l2")
+    else:
+        m = init.projection.copy()
+        t = np.asarray(init.translation, dtype=np.float64).copy()
+
+    nmat = m.copy()
+    u1 = np.zeros_like(x)
+    u2 = np.zeros_like(m)
+    # normal equations of the (N, t) step: (Ya^T Ya + D) v = Ya^T Z + D (M - U2)
+    dmat = np.diag([1.0, 1.0, 1.0, 0.0])
+    lhs_inv = np.linalg.inv(ya.T @ ya + dmat)
+    scale_x = max(float(np.linalg.norm(x[vis] - x[vis].mean(axis=0))), 1e-12)
+    converged = False
+    it = 0
+    r = x - y @ m.T - t
+    for it in range(1, max_iter + 1):
+        v = x - y @ nmat.T - t + u1
+        if loss == "l1":
+            thr = w[:, None] / tau
+            r = np.sign(v) * np.maximum(np.abs(v) - thr, 0.0)
+        else:
+            r = tau * v / (2.0 * w[:, None] + tau)
+        z = x - r + u1
+        rhs = ya.T @ z
+        rhs[:3] += (m - u2).T
+        sol = lhs_inv @ rhs  # (4, 2)
+        nmat = sol[:3].T
+        t = sol[3]
+        m_prev = m
+        m = project_scaled_orthographic(nmat + u2)
+        res1 = x - y @ nmat.T - t - r
+        res2 = nmat - m
+        u1 += res1
+        u2 += res2
+        mnorm = max(float(np.linalg.norm(m)), 1e-12)
+        p1 = float(np.linalg.norm(res1)) / scale_x
+        p2 = float(np.linalg.norm(res2)) / mnorm
+        d1 = float(np.linalg.norm(m - m_prev)) / mnorm
+        if p1 < tol and p2 < tol and d1 < tol:
+            converged = True
+            break
+    t = _optimal_translation(x, y, w, m, loss)
+    if not (np.isfinite(m).all() and np.isfinite(t).all()):
+        raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
+    cam = Camera.from_projection(m, t)
+    obj = camera_objective(x, y, w, cam.projection, t, loss)
+    return CameraResult(cam, obj, it, converged)
