@@ -79,6 +79,9 @@ Loss = Literal["l1", "l2"]
 #:                             worse than a local reference from the same start").
 #:   ``alpha_step_objective_abs``
 #:   ``limb_violation``        max_i | ||C_i y||^2 - L_i | accepted from the fast path.
+#:   ``nonconvex_median_ratio``  limb-constrained pose step over a set of problems: fast
+#:   ``nonconvex_max_ratio``     objective / best local reference (SLSQP from several starts),
+#:                               median and worst case.
 TOLERANCES: Final[dict[str, float]] = {
     "clarabel_tol": 1e-9,
     "scs_eps": 1e-9,
@@ -98,6 +101,8 @@ TOLERANCES: Final[dict[str, float]] = {
     "alpha_step_objective_rel": 1e-2,
     "alpha_step_objective_abs": 1e-4,
     "limb_violation": 1e-3,
+    "nonconvex_median_ratio": 1.05,
+    "nonconvex_max_ratio": 1.3,
 }
 
 

@@ -1,0 +1,343 @@
+"""Each fast step of the solver against its independent reference (pose_lifter.core.reference).
+
+Tolerances come from ``reference.TOLERANCES``; problems are small and in normalised units
+(right lower leg = 1, camera scale ~1), as the lifter poses them. Nonconvex steps are
+compared one-sidedly: the fast step must not be worse than a local reference started from
+the same point (or the same basin).
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from pose_lifter.core import reference as ref
+from pose_lifter.core.bases import PoseBases, learn_pca_bases
+from pose_lifter.core.camera import camera_step
+from pose_lifter.core.options import VARIANTS, LifterOptions
+from pose_lifter.core.pose import (
+    PoseModel,
+    lifted_alpha_admm,
+    newton_alpha,
+    pose_step,
+    qstep,
+    restore_feasibility,
+)
+from pose_lifter.core.skeleton import limb_selectors
+from pose_lifter.core.types import Camera
+from scipy.spatial.transform import Rotation
+from synthetic_poses import synthetic_poses
+
+pytest.importorskip("cvxpy")
+TOL = ref.TOLERANCES
+Arr = NDArray[np.float64]
+
+
+@pytest.fixture(scope="module")
+def bases() -> PoseBases:
+    poses, _ = synthetic_poses(300, seed=1)
+    return learn_pca_bases(poses, n_bases=12, n_starts=3, seed=0)
+
+
+@pytest.fixture(scope="module")
+def model(bases: PoseBases) -> PoseModel:
+    return PoseModel.build(bases, bases.limb_proportions)
+
+
+@pytest.fixture(scope="module")
+def test_poses() -> Arr:
+    return synthetic_poses(20, seed=5)[0]
+
+
+def _camera(seed: int, scale: float = 1.3) -> Camera:
+    rng = np.random.default_rng(seed)
+    return Camera(Rotation.random(random_state=seed).as_matrix(), scale, 0.2 * rng.normal(size=2))
+
+
+# ----------------------------------------------------------------------------- camera step
+
+
+def _camera_problem(test_poses: Arr, case: int) -> tuple[Arr, Arr, Arr]:
+    rng = np.random.default_rng(100 + case)
+    y = test_poses[case]
+    x = _camera(case).project(y) + 0.01 * rng.normal(size=(12, 2))
+    if case % 2:
+        x[[3, 8]] += rng.normal(scale=0.6, size=(2, 2))  # gross outliers on 2 joints
+    w = np.ones(12)
+    if case >= 3:
+        w[5] = 0.0  # a missing joint
+    return x, y, w
+
+
+_CAMERA_REFERENCES: dict[tuple[int, str], tuple[Camera, float]] = {}
+
+
+def _check_camera(x: Arr, y: Arr, w: Arr, loss: str, case: int, **kwargs: float) -> None:
+    if (case, loss) not in _CAMERA_REFERENCES:  # shared by the two camera tests
+        _CAMERA_REFERENCES[case, loss] = ref.reference_camera(x, y, w, loss, n_restarts=6, seed=case)
+    c_ref, f_ref = _CAMERA_REFERENCES[case, loss]
+    bound = f_ref * (1 + TOL["camera_objective_rel"]) + TOL["camera_objective_abs"]
+    # cold (the step's own least-squares start) and from the reference's rotation basin
+    for init in (None, c_ref):
+        res = camera_step(x, y, w, loss, init=init, **kwargs)  # type: ignore[arg-type]
+        assert res.objective == pytest.approx(ref.camera_objective(x, y, w, res.camera, loss), rel=1e-12)
+        assert res.objective <= bound, (init is None, res.objective, f_ref)
+        assert np.linalg.norm(res.camera.rotation[:2] - c_ref.rotation[:2]) <= TOL["camera_rotation"]
+        # for its own rotation, (s, t) are optimal too (exact LP/QP with Clarabel)
+        _, _, f_given = ref.reference_camera_given_rotation(x, y, w, res.camera.rotation, loss)
+        assert res.objective <= f_given * (1 + TOL["camera_objective_rel"]) + TOL["camera_objective_abs"]
+
+
+@pytest.mark.parametrize("loss", ["l1", "l2"])
+@pytest.mark.parametrize("case", range(5))
+def test_camera_step_converges_to_reference(test_poses: Arr, loss: str, case: int) -> None:
+    # The ADM itself: run to convergence with a penalty that suits normalised units.
+    x, y, w = _camera_problem(test_poses, case)
+    _check_camera(x, y, w, loss, case, max_iter=3000, tol=1e-9, tau=10.0)
+
+
+_CAMERA_DEFAULT_GAP = pytest.mark.xfail(strict=True, reason=(
+    "finding reported to the lead: with the default options (tau=1, 100 iterations) the L1 "
+    "camera ADM stops 0.5-7% above the optimum (case 3: 6.56 vs 2.04) and L2 case 3 "
+    "(missing joint + outliers) converges to 24.09 vs 1.35 even from the optimum; tau=10 fixes it"))
+
+
+@pytest.mark.parametrize("loss,case", [
+    *(pytest.param("l1", c, marks=_CAMERA_DEFAULT_GAP) for c in range(5)),
+    *(pytest.param("l2", c, marks=_CAMERA_DEFAULT_GAP if c == 3 else ()) for c in range(5)),
+])
+def test_camera_step_with_default_options_matches_reference(test_poses: Arr, loss: str, case: int) -> None:
+    opts = LifterOptions()
+    x, y, w = _camera_problem(test_poses, case)
+    _check_camera(x, y, w, loss, case, max_iter=opts.camera_max_iter, tol=opts.camera_tol, tau=opts.tau)
+
+
+# ---------------------------------------------------------------------------------- Q-step
+
+
+@pytest.mark.parametrize("lifting", ["reduced", "full"])
+@pytest.mark.parametrize("delta", [0.5, 1.0, 10.0])
+def test_qstep_matches_reference(model: PoseModel, lifting: str, delta: float) -> None:
+    cons = model.reduced if lifting == "reduced" else model.full
+    rng = np.random.default_rng(7)
+    d = cons.dim
+    w_mat, p_mat, g_mat = (a + a.T for a in rng.normal(size=(3, d, d)))
+    q_fast = qstep(w_mat, cons, p_mat, g_mat, delta)
+    q_ref = ref.reference_qstep(w_mat, cons.omegas, p_mat, g_mat, delta)
+    assert np.max(np.abs(q_fast - q_ref)) <= TOL["qstep_solution"]
+
+
+# ------------------------------------------------------------------------------ alpha-step
+
+
+def _alpha_problem(bases: PoseBases, y: Arr, seed: int) -> tuple[Arr, Arr]:
+    """A W of the form pose_step builds (||A a - d1||^2 + ||a - d2||^2) and a start z0."""
+    rng = np.random.default_rng(seed)
+    k = bases.n_bases
+    cam = _camera(seed, scale=1.0)
+    m0 = cam.projection
+    a_full = np.einsum("ab,jbk->jak", m0, bases.components.reshape(12, 3, k)).reshape(24, k)
+    x = cam.project(y) + 0.02 * rng.normal(size=(12, 2))
+    d1 = (x - cam.translation - bases.mean.reshape(12, 3) @ m0.T).reshape(-1) + 0.05 * rng.normal(size=24)
+    d2 = 0.1 * rng.normal(size=k)
+    lin = a_full.T @ d1 + d2
+    w_mat = np.zeros((k + 1, k + 1))
+    w_mat[:k, :k] = a_full.T @ a_full + np.eye(k)
+    w_mat[:k, k] = w_mat[k, :k] = -lin
+    w_mat[k, k] = d1 @ d1 + d2 @ d2
+    a0 = bases.components.T @ (y.reshape(-1) - bases.mean) + 0.1 * rng.normal(size=k)
+    return w_mat, np.append(a0, 1.0)
+
+
+@pytest.mark.parametrize("case", range(8))
+def test_alpha_step_admm_feasible_and_above_sdp_bound(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, case: int,
+) -> None:
+    w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
+    cons = model.full
+    z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).z)
+    _, lower = ref.reference_alpha_sdp(w_mat, cons.omegas)
+    assert z[-1] == 1.0
+    assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
+    assert float(z @ w_mat @ z) >= lower - TOL["sdp_bound_rel"] * (1 + abs(lower))
+
+
+_ALPHA_NOT_LOCAL_MIN = pytest.mark.xfail(strict=True, reason=(
+    "finding reported to the lead: the inner ADM (delta=1, 60 iterations) ends 5.0% above the "
+    "local minimum SLSQP reaches from its own output (2.717 -> 2.588); it never meets its "
+    "tolerance in 60 iterations on these problems"))
+
+
+@pytest.mark.parametrize("case", [
+    pytest.param(c, marks=_ALPHA_NOT_LOCAL_MIN if c == 4 else ()) for c in range(8)])
+def test_alpha_step_admm_is_a_local_minimum(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, case: int,
+) -> None:
+    # Nonconvex: the ADM and SLSQP from the same start reach different minima (either may
+    # win). What must hold is that the ADM's answer is itself (nearly) a local minimum:
+    # SLSQP started from it improves it by at most the stated tolerance.
+    w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
+    cons = model.full
+    z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).z)
+    f_fast = float(z @ w_mat @ z)
+    _, f_polished = ref.reference_alpha_local(w_mat, cons.omegas, z)
+    assert f_fast <= f_polished * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "finding reported to the lead: newton_alpha converges to KKT points that are saddles "
+    "(reduced Hessian eigenvalue -0.76, -0.79): 4.858 vs SLSQP 4.351 and 5.135 vs 4.343 from "
+    "the same start; it needs an inertia correction (or a descent safeguard)"))
+@pytest.mark.parametrize("case", range(2))
+def test_alpha_step_newton_not_worse_than_local_reference(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, case: int,
+) -> None:
+    w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
+    cons = model.full
+    z = newton_alpha(w_mat, cons, z0).z
+    _, f_local = ref.reference_alpha_local(w_mat, cons.omegas, z0)
+    assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
+    bound = f_local * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+    assert float(z @ w_mat @ z) <= bound
+
+
+# ------------------------------------------------------------------------------- pose step
+
+
+def _pose_kwargs() -> dict[str, object]:
+    """The pose-step settings the lifter uses by default (``LifterOptions()``)."""
+    opts = LifterOptions()
+    names = {"max_iter": "pose_max_iter", "tol": "pose_tol", "eta": "eta", "eta_growth": "eta_growth",
+             "delta": "delta", "inner_max_iter": "inner_max_iter", "inner_tol": "inner_tol",
+             "alpha_step": "alpha_step", "alpha_solver": "alpha_solver"}
+    accepted = inspect.signature(pose_step).parameters
+    return {k: getattr(opts, v) for k, v in names.items() if k in accepted and hasattr(opts, v)}
+
+
+def _pose_problem(test_poses: Arr, case: int) -> tuple[Arr, Camera, Arr]:
+    rng = np.random.default_rng(200 + case)
+    cam = _camera(case)
+    x = cam.project(test_poses[case]) + 0.02 * rng.normal(size=(12, 2))
+    x[4] += 0.5  # one outlier
+    w = np.ones(12)
+    w[7] = 0.0  # one missing joint
+    return x, cam, w
+
+
+_POSE_DEFAULT_GAP = pytest.mark.xfail(strict=True, reason=(
+    "finding reported to the lead: with the default options (100 iterations, tol 1e-3, eta 0.3 "
+    "x1.1) the pose ADM stops above the convex optimum: L1NAWS +0.3..3.1%, L1NANS +0.8..23.8%, "
+    "L2NANS +2.2..60%; run to convergence it reaches it"))
+
+
+def _check_convex_pose(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int, check_alpha: bool,
+    **kwargs: float,
+) -> None:
+    var = VARIANTS[name]
+    theta = 0.05 if var.sparsity else 0.0
+    x, cam, w = _pose_problem(test_poses, case)
+    res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
+                    **kwargs)  # type: ignore[arg-type]
+    a_ref, f_ref = ref.reference_pose_convex(x, cam, bases.mean, bases.components, w, theta, var.loss)
+    f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
+    assert res.objective == pytest.approx(f_fast, rel=1e-9)
+    assert abs(f_fast - f_ref) <= TOL["pose_objective_rel"] * (1 + f_ref), (f_fast, f_ref)
+    if check_alpha and name == "L2NAWS":  # strictly convex here: the minimiser is unique
+        assert np.max(np.abs(res.alpha - a_ref)) <= TOL["pose_alpha"]
+
+
+@pytest.mark.parametrize("name", ["L1NAWS", "L1NANS", "L2NAWS", "L2NANS"])
+@pytest.mark.parametrize("case", range(2))
+def test_convex_pose_step_converges_to_reference(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
+) -> None:
+    # the ADM run to convergence reaches the convex optimum
+    _check_convex_pose(bases, model, test_poses, name, case, True, max_iter=5000, tol=1e-9)
+
+
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=_POSE_DEFAULT_GAP if n != "L2NAWS" else ())
+    for n in ("L1NAWS", "L1NANS", "L2NAWS", "L2NANS")])
+@pytest.mark.parametrize("case", range(3))
+def test_convex_pose_step_with_default_options_matches_reference(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
+) -> None:
+    # objective only: at the default stopping tolerance alpha itself is ~3e-3 off for L2NAWS
+    _check_convex_pose(bases, model, test_poses, name, case, False, **_pose_kwargs())  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name,case", [(n, c) for n in ("L1WAWS", "L2WAWS") for c in range(6)])
+def test_limb_pose_step_is_feasible_local_minimum(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
+) -> None:
+    # Nonconvex: is the fast result (default options) a local minimum? SLSQP started from it
+    # must not improve it by more than the tolerance.
+    var = VARIANTS[name]
+    theta = 0.05
+    x, cam, w = _pose_problem(test_poses, case)
+    res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
+                    **_pose_kwargs())  # type: ignore[arg-type]
+    f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
+    assert res.objective == pytest.approx(f_fast, rel=1e-9)
+    y = bases.mean + bases.components @ res.alpha
+    lengths_sq = np.sum((limb_selectors() @ y) ** 2, axis=1)
+    assert np.max(np.abs(lengths_sq - model.limb_sq)) <= TOL["limb_violation"]
+    _, f_polished = ref.reference_pose_limbs_local(
+        x, cam, bases.mean, bases.components, w, theta, var.loss, model.limb_sq, res.alpha)
+    assert f_fast <= f_polished * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+
+
+_BEST_LOCAL: dict[tuple[str, int], float] = {}
+
+
+def _best_local_reference(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
+) -> float:
+    """Lowest objective SLSQP reaches from: the mean pose, both fast solvers' results and two
+    random starts (the same set whichever fast solver is being judged)."""
+    if (name, case) not in _BEST_LOCAL:
+        var = VARIANTS[name]
+        x, cam, w = _pose_problem(test_poses, case)
+        rng = np.random.default_rng(300 + case)
+        starts = [np.zeros(bases.n_bases), *(rng.normal(size=bases.n_bases) for _ in range(2))]
+        for solver in ("admm", "newton"):
+            kw = {**_pose_kwargs(), "alpha_solver": solver}
+            starts.append(pose_step(x, cam.projection, cam.translation, w, model, var, 0.05,
+                                    np.zeros(bases.n_bases), **kw).alpha)  # type: ignore[arg-type]
+        values = []
+        for a0 in starts:
+            try:
+                values.append(ref.reference_pose_limbs_local(
+                    x, cam, bases.mean, bases.components, w, 0.05, var.loss, model.limb_sq, a0)[1])
+            except ref.ReferenceSolverError:
+                continue
+        _BEST_LOCAL[name, case] = min(values)
+    return _BEST_LOCAL[name, case]
+
+
+_NEWTON_POOR_MINIMA = pytest.mark.xfail(strict=True, reason=(
+    "finding reported to the lead: with alpha_solver='newton' the pose step ends at local "
+    "minima far above the best local reference (objective ratio median 1.84 / max 3.26 for "
+    "L1WAWS, median 3.20 / max 7.34 for L2WAWS); the lifted ADM: median 1.03 / 1.00"))
+
+
+@pytest.mark.parametrize("name", ["L1WAWS", "L2WAWS"])
+@pytest.mark.parametrize("solver", ["admm", pytest.param("newton", marks=_NEWTON_POOR_MINIMA)])
+def test_limb_pose_step_close_to_best_local_reference(
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, solver: str,
+) -> None:
+    # Nonconvex, so judged over 6 problems: the ratio of the fast objective to the best
+    # local minimum found by SLSQP from several starts, median and worst case.
+    var = VARIANTS[name]
+    ratios = []
+    for case in range(6):
+        x, cam, w = _pose_problem(test_poses, case)
+        kw = {**_pose_kwargs(), "alpha_solver": solver}
+        res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(bases.n_bases),
+                        **kw)  # type: ignore[arg-type]
+        ratios.append(res.objective / _best_local_reference(bases, model, test_poses, name, case))
+    assert np.median(ratios) <= TOL["nonconvex_median_ratio"], ratios
+    assert np.max(ratios) <= TOL["nonconvex_max_ratio"], ratios
