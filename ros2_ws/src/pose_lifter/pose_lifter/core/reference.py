@@ -86,8 +86,8 @@ TOLERANCES: Final[dict[str, float]] = {
     "clarabel_tol": 1e-9,
     "scs_eps": 1e-9,
     "slsqp_ftol": 1e-13,
-    "camera_xatol": 1e-10,
-    "camera_fatol": 1e-13,
+    "camera_xatol": 1e-9,
+    "camera_fatol": 1e-12,
     "kkt": 1e-7,
     "feasibility": 1e-7,
     "sdp_bound_rel": 1e-4,
@@ -415,7 +415,8 @@ def reference_camera(
     squares with ``s`` clipped at 0). ``f`` is minimised over a rotation vector ``v``
     (``R = exp([v]x) R0``) by Nelder-Mead from ``rotation_init`` (if given), the identity,
     and ``n_restarts`` random rotations (seeded): a coarse search from every start, then the
-    two best are refined (Nelder-Mead restarted at its own result until it stops improving).
+    best (and the runner-up unless clearly worse) are refined (Nelder-Mead restarted once at
+    its own result).
     The best rotation's ``(s, t)`` is then re-solved by
     :func:`reference_camera_given_rotation` (cvxpy + Clarabel) and the better of the two
     inner solutions kept.
@@ -479,8 +480,11 @@ def reference_camera(
 
     # coarse search from every start, then refine the two best to full accuracy
     coarse = [search(r0, 1e-3, 1e-6, 1) for r0 in starts]
-    order = np.argsort([v for _, v in coarse], kind="stable")[:2]
-    refined = [search(coarse[i][0], TOLERANCES["camera_xatol"], TOLERANCES["camera_fatol"], 3) for i in order]
+    values = np.array([v for _, v in coarse])
+    order = np.argsort(values, kind="stable")[:2]
+    if len(order) == 2 and values[order[1]] > values[order[0]] * (1 + 1e-3) + 1e-9:
+        order = order[:1]  # the runner-up is clearly worse: refine the best only
+    refined = [search(coarse[i][0], TOLERANCES["camera_xatol"], TOLERANCES["camera_fatol"], 2) for i in order]
     best_rot, _ = min(refined, key=lambda rv: rv[1])
     rot = Rotation.from_matrix(best_rot).as_matrix()  # re-orthonormalise
     s_fast, t_fast, v_fast = inner(x, y @ rot[:2].T, w)
