@@ -172,3 +172,15 @@ def test_gtrs_hard_case_uses_null_direction() -> None:
     a = rk._gtrs(h, c, np.eye(3), np.zeros(3), -11.0)  # ||a||^2 = 11
     np.testing.assert_allclose(a[:2], [1.0, 1.0], atol=1e-9)
     assert abs(a[2]) == pytest.approx(3.0, abs=1e-9)
+
+
+def test_lifter_wrapper_matches_function(bases: PoseBases) -> None:
+    poses, _ = synthetic_poses(2, seed=13)
+    x = np.stack([_camera(7 + i).project(p) for i, p in enumerate(poses)])
+    lifter = rk.RamakrishnaLifter(bases, rk.RamakrishnaOptions(max_bases=3))
+    many = lifter.lift_many(x)
+    assert len(many) == 2
+    one = rk.ramakrishna_lift(x[1], None, bases, options=rk.RamakrishnaOptions(max_bases=3))
+    np.testing.assert_array_equal(many[1].pose, one.pose)
+    with pytest.raises(InvalidInputError):
+        lifter.lift_many(x[0])

@@ -39,6 +39,7 @@ points down, ``pose_camera`` is in a frame with x right, y down, z = x cross y (
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final, Literal
 
@@ -48,9 +49,9 @@ from numpy.typing import NDArray
 from .bases import PoseBases
 from .errors import InvalidInputError, TooFewJointsError
 from .skeleton import N_JOINTS, limb_lengths, limb_selectors
-from .types import Camera, LiftResult
+from .types import Camera, LiftResult, WarmStart
 
-__all__ = ["RamakrishnaOptions", "limb_sum_residual", "ramakrishna_lift"]
+__all__ = ["RamakrishnaLifter", "RamakrishnaOptions", "limb_sum_residual", "ramakrishna_lift"]
 
 _CAMERA_MAJORISATION_STEPS: Final[int] = 10
 
@@ -423,3 +424,39 @@ def ramakrishna_lift(
         start_index=0,
         weights=w,
     )
+
+
+class RamakrishnaLifter:
+    """The baseline behind the same call shape as :class:`pose_lifter.core.lifter.Lifter`.
+
+    Parameters
+    ----------
+    bases : PoseBases
+        Normally class-wise PCA bases (:func:`pose_lifter.core.bases.learn_classwise_pca_bases`).
+    options : RamakrishnaOptions, optional
+    target_lengths : ndarray, shape (8,), optional
+        See :func:`ramakrishna_lift`.
+    """
+
+    def __init__(self, bases: PoseBases, options: RamakrishnaOptions | None = None,
+                 target_lengths: NDArray[np.float64] | None = None) -> None:
+        self.bases = bases
+        self.options = options if options is not None else RamakrishnaOptions()
+        self.target_lengths = target_lengths
+
+    def lift(self, points_2d: NDArray[np.float64], confidence: NDArray[np.float64] | None = None,
+             warm: WarmStart | None = None) -> LiftResult:
+        """Lift one skeleton (12, 2); ``warm`` is accepted and ignored (the method has none)."""
+        return ramakrishna_lift(points_2d, confidence, self.bases, target_lengths=self.target_lengths,
+                                options=self.options)
+
+    def lift_many(self, points_2d: NDArray[np.float64], confidence: NDArray[np.float64] | None = None,
+                  warm_start: bool = True) -> Sequence[LiftResult]:
+        """Lift frames (T, 12, 2) independently (``warm_start`` is ignored)."""
+        pts = np.asarray(points_2d, dtype=np.float64)
+        if pts.ndim != 3 or pts.shape[1:] != (N_JOINTS, 2):
+            raise InvalidInputError(f"points_2d must have shape (T, {N_JOINTS}, 2), got {pts.shape}")
+        conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+        if conf is not None and conf.shape != pts.shape[:2]:
+            raise InvalidInputError(f"confidence must have shape {pts.shape[:2]}, got {conf.shape}")
+        return [self.lift(pts[i], None if conf is None else conf[i]) for i in range(pts.shape[0])]
