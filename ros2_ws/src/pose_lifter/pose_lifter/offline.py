@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import messages as m
-from .bags import BagWriter, read_messages
+from .bags import BagError, BagWriter, read_messages
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, TooFewJointsError
 from .core.lifter import Lifter
@@ -206,6 +206,8 @@ def lift_bag(
     """
     if every < 1:
         raise ValueError("every must be >= 1")
+    if Path(out_path).exists() and not overwrite:  # fail before the (slow) lifting
+        raise BagError(f"{out_path} exists already (pass overwrite=True to replace it)")
     types = m.rosbags_types()
     messages = list(read_messages(in_path))
     kp_all = [(x.stamp_ns, x.msg) for x in messages if x.topic == TOPIC_KEYPOINTS]
