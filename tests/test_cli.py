@@ -119,3 +119,24 @@ def test_evaluate_rotation_counts_in_mpjpe_only(tmp_path: Path) -> None:
     assert np.all(ev.mpjpe_mm > 50)
     np.testing.assert_allclose(ev.p_mpjpe_mm, 0, atol=1e-6)
     np.testing.assert_allclose(ev.normalised, 0, atol=1e-6)
+
+
+def test_demo_plot_writes_png(tmp_path: Path) -> None:
+    from pose_lifter.demo import find_demo_bag, plot_frames
+
+    bag = find_demo_bag()
+    frames: dict[int, dict[int, dict[str, np.ndarray]]] = {}
+    for x in bags.read_messages(bag, ["/keypoints_2d", "/ground_truth/skeletons_3d"]):
+        for sk in x.msg.skeletons:
+            p = frames.setdefault(x.stamp_ns, {}).setdefault(int(sk.track_id), {})
+            if x.topic == "/keypoints_2d":
+                p["points_2d"], p["confidence"] = m.skeleton2d_to_arrays(sk, x.msg.layout)
+            else:
+                p["truth"] = m.skeleton3d_to_joints(sk)
+                p["lifted"] = p["truth"] + 0.05
+    picked = [{"stamp_ns": s, "people": [{"track_id": t, **p} for t, p in frames[s].items()]}
+              for s in sorted(frames)[:2]]
+    assert len(picked[0]["people"]) == 2
+    out = tmp_path / "demo.png"
+    plot_frames(picked, out, title="test")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000

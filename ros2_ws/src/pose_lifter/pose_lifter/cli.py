@@ -268,6 +268,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
     _add_lifter_options(p)
+    p.add_argument("--every", type=int, default=3, help="lift every N-th frame (default 3: 10 Hz)")
     p.set_defaults(func=_cmd_demo)
     return parser
 

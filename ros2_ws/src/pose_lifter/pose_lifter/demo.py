@@ -122,7 +122,7 @@ def run_demo(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     lifter = _lifter(args)
     summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=not args.no_warm_start,
-                               leg_length_m=args.leg_length, overwrite=True)
+                               leg_length_m=args.leg_length, every=args.every, overwrite=True)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     ev = evaluate_bag(out / "demo.mcap", lifter.bases)
