@@ -269,7 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out", help="output directory")
     _add_lifter_options(p)
     p.add_argument("--every", type=int, default=3, help="lift every N-th frame (default 3: 10 Hz)")
-    p.set_defaults(func=_cmd_demo)
+    # a one-minute demo: 10 cold starts per person (the first frame), warm starts after that
+    p.set_defaults(func=_cmd_demo, starts=10)
     return parser
 
 
