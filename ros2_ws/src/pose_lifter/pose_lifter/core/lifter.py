@@ -160,16 +160,21 @@ class Lifter:
         )
 
     def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
-             cam0: Camera | None) -> _Run:
-        """Alternate camera and pose steps from ``alpha0`` (and optionally a camera)."""
+             cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None) -> _Run:
+        """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
+        continue a previous run ``start``."""
         o = self._options
-        alpha = alpha0
-        cam = self._camera(xn, self.model.pose(alpha), w, cam0)
-        best: _Run | None = None
-        prev = np.inf
+        n_alt = o.max_alternations if max_alternations is None else max_alternations
+        if start is not None:
+            alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
+            it0 = start.n_iter
+        else:
+            alpha = alpha0
+            cam = self._camera(xn, self.model.pose(alpha), w, cam0)
+            best, prev, it0 = None, np.inf, 0
         converged = False
-        it = 0
-        for it in range(1, o.max_alternations + 1):
+        it = it0
+        for it in range(it0 + 1, n_alt + 1):
             pres = self._pose(xn, cam.camera, w, alpha)
             alpha = pres.alpha
             cam = self._camera(xn, pres.pose, w, cam.camera)
@@ -225,7 +230,11 @@ class Lifter:
             runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
         else:
             starts = self.bases.with_starts(self._options.n_starts)
-            runs = [(i, self._run(xn, w, a, None)) for i, a in enumerate(starts)]
+            runs = [(i, self._run(xn, w, a, None, max_alternations=1)) for i, a in enumerate(starts)]
+            if len(runs) > 1:  # screen: continue only the most promising starts
+                runs.sort(key=lambda r: r[1].objective)
+                runs = runs[: self._options.n_refine]
+            runs = [(i, self._run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
         idx, run = min(runs, key=lambda r: r[1].objective)
         cam_n = run.camera.camera
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
@@ -243,7 +252,7 @@ class Lifter:
             limb_violation=run.pose.limb_violation,
             n_iter=run.n_iter,
             converged=run.converged,
-            n_starts=len(runs),
+            n_starts=1 if warm is not None else len(self.bases.with_starts(self._options.n_starts)),
             start_index=idx,
             weights=w,
         )

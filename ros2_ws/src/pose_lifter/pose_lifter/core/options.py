@@ -85,6 +85,9 @@ class LifterOptions:
         Per-iteration growth of the pose ADM penalty (the paper's ``eta_k``), >= 1.
     n_starts : int
         Cold-start multi-start count (paper: 30 k-means centres; 1 = mean pose only).
+    n_refine : int
+        Cold starts are screened by one alternation; the ``n_refine`` lowest-objective ones
+        are continued to convergence (``n_refine >= n_starts`` runs every start fully).
     confidence_threshold : float
         A joint with confidence below this is treated as missing (weight 0).
     min_visible_joints : int
@@ -101,20 +104,21 @@ class LifterOptions:
     """
 
     variant: str = "full"
-    theta: float = 0.05
-    max_alternations: int = 20
-    alternation_tol: float = 1e-4
-    pose_max_iter: int = 100
+    theta: float = 0.1
+    max_alternations: int = 10
+    alternation_tol: float = 1e-3
+    pose_max_iter: int = 20
     pose_tol: float = 1e-3
     inner_max_iter: int = 60
     inner_tol: float = 1e-6
-    camera_max_iter: int = 100
-    camera_tol: float = 1e-5
+    camera_max_iter: int = 50
+    camera_tol: float = 1e-4
     eta: float = 0.3
     eta_growth: float = 1.1
     delta: float = 1.0
     tau: float = 1.0
     n_starts: int = 30
+    n_refine: int = 3
     confidence_threshold: float = 0.1
     min_visible_joints: int = 6
     limb_proportions: str = "bases"
@@ -135,7 +139,7 @@ class LifterOptions:
         """Raise :class:`OptionsError` on any value out of range."""
         get_variant(self.variant)
         _positive_int = ("max_alternations", "pose_max_iter", "inner_max_iter", "camera_max_iter",
-                         "n_starts")
+                         "n_starts", "n_refine")
         for name in _positive_int:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 100_000:

@@ -129,6 +129,9 @@ class PoseModel:
         Constraints in the reduced lifting (``d = r + 1``, coordinates ``s = V^T alpha``).
     full : LiftedConstraints
         Constraints in the paper's lifting (``d = k + 1``).
+    limb_cu, limb_cmu, limb_hess : ndarrays, shapes (8, 3, r), (8, 3), (8, r, r)
+        ``C_i U S``, ``C_i mu`` and ``2 (C_i U S)^T (C_i U S)``: the limb constraints in the
+        reduced coordinates evaluated in joint space (used by the Newton alpha-solver).
     """
 
     mean: NDArray[np.float64]
@@ -139,6 +142,9 @@ class PoseModel:
     v: NDArray[np.float64]
     reduced: LiftedConstraints
     full: LiftedConstraints
+    limb_cu: NDArray[np.float64]
+    limb_cmu: NDArray[np.float64]
+    limb_hess: NDArray[np.float64]
 
     @property
     def n_bases(self) -> int:
@@ -176,10 +182,15 @@ class PoseModel:
             out[:, m, m] = np.einsum("a,iab,b->i", mu, ctc, mu) - limb_sq
             return out
 
+        us = u * s
+        cu = np.einsum("iak,kr->iar", c, us)
         return PoseModel(
             mean=mu, components=b, limb_sq=limb_sq, u=u, sig=s, v=v,
-            reduced=LiftedConstraints.build(omegas(u * s)),
+            reduced=LiftedConstraints.build(omegas(us)),
             full=LiftedConstraints.build(omegas(b)),
+            limb_cu=cu,
+            limb_cmu=np.einsum("iak,k->ia", c, mu),
+            limb_hess=2.0 * np.einsum("iar,ias->irs", cu, cu),
         )
 
     def pose(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -338,6 +349,75 @@ def newton_alpha(
     return _Lifted(restore_feasibility(cons, z), it, converged)
 
 
+def newton_reduced(
+    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
+    max_iter: int = 10, tol: float = 1e-9,
+) -> NDArray[np.float64]:
+    """Direct local solver of the reduced alpha-step, constraints evaluated in joint space.
+
+    Minimises ``s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i`` (i = 1..8), the
+    same problem as :func:`newton_alpha` on ``model.reduced`` (tested equal), by SQP with the
+    exact Lagrangian Hessian (``2 G`` where that is not positive definite) from a Gauss-Newton
+    projection of ``s0``; steps are halved until the merit ``f + rho ||g||_1`` decreases.
+    Shapes: gmat (r, r), lin (r,), s0 (r,).
+    """
+    cu, cmu, hc, lsq = model.limb_cu, model.limb_cmu, model.limb_hess, model.limb_sq
+    r = s0.size
+
+    def cons(s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        lv = cmu + cu @ s  # (8, 3)
+        return np.einsum("ia,ia->i", lv, lv) - lsq, lv
+
+    s = s0.copy()
+    for _ in range(30):  # Gauss-Newton projection onto the constraint manifold
+        g, lv = cons(s)
+        if np.max(np.abs(g)) < 1e-12:
+            break
+        jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
+        s = s - jac.T @ np.linalg.solve(jac @ jac.T + 1e-14 * np.eye(8), g)
+    nu = np.zeros(8)
+    rho = 10.0
+    kmat = np.zeros((r + 8, r + 8))
+    for _ in range(max_iter):
+        g, lv = cons(s)
+        jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
+        grad = 2.0 * (gmat @ s - lin)
+        if np.linalg.norm(grad + jac.T @ nu) + np.linalg.norm(g) < tol * max(1.0, float(np.linalg.norm(grad))):
+            break
+        hess = 2.0 * gmat + np.einsum("i,irs->rs", nu, hc)
+        try:  # Newton when the Lagrangian Hessian is positive definite, else Gauss-Newton (2 G)
+            np.linalg.cholesky(hess)
+        except np.linalg.LinAlgError:
+            hess = 2.0 * gmat
+        kmat[:r, :r] = hess
+        kmat[:r, r:] = jac.T
+        kmat[r:, :r] = jac
+        rhs = -np.concatenate([grad, g])
+        try:
+            sol = np.linalg.solve(kmat, rhs)
+        except np.linalg.LinAlgError:
+            sol = np.linalg.lstsq(kmat, rhs, rcond=None)[0]
+        ds, nu_new = sol[:r], sol[r:]
+        rho = max(rho, 2.0 * float(np.max(np.abs(nu_new))))
+        f0 = float(s @ gmat @ s - 2.0 * lin @ s) + rho * float(np.sum(np.abs(g)))
+        a = 1.0
+        while a > 1e-4:
+            cand = s + a * ds
+            gc, _ = cons(cand)
+            if float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(np.sum(np.abs(gc))) <= f0 + 1e-12:
+                break
+            a *= 0.5
+        s = s + a * ds
+        nu = nu_new
+    for _ in range(10):  # final exact feasibility
+        g, lv = cons(s)
+        if np.max(np.abs(g)) < 1e-12:
+            break
+        jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
+        s = s - jac.T @ np.linalg.solve(jac @ jac.T + 1e-14 * np.eye(8), g)
+    return s
+
+
 def pose_objective(
     resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64], theta: float,
     loss: Literal["l1", "l2"],
@@ -455,6 +535,10 @@ def pose_step(
             wmat[r, :r] = -lin
             wmat[r, r] = float(d1 @ d1 + vtd2 @ vtd2)
             z0 = np.append(v.T @ alpha, 1.0)
+        if alpha_solver == "newton" and not full:
+            vtd2 = v.T @ d2
+            s = newton_reduced(g_red, lin, model, z0[:-1])
+            return np.asarray(d2 - v @ vtd2 + v @ s)
         if alpha_solver == "newton":
             z = newton_alpha(wmat, cons, z0).z
         else:
