@@ -382,7 +382,8 @@ def newton_reduced(
         g, lv = cons(s)
         jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
         grad = 2.0 * (gmat @ s - lin)
-        if np.linalg.norm(grad + jac.T @ nu) + np.linalg.norm(g) < tol * max(1.0, float(np.linalg.norm(grad))):
+        kkt = np.linalg.norm(grad + jac.T @ nu) + np.linalg.norm(g)
+        if kkt < tol * max(1.0, float(np.linalg.norm(grad))):
             break
         hess = 2.0 * gmat + np.einsum("i,irs->rs", nu, hc)
         try:  # Newton when the Lagrangian Hessian is positive definite, else Gauss-Newton (2 G)
