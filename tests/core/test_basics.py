@@ -1,0 +1,107 @@
+"""Skeleton, layouts, metrics, bases file: small exact checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pose_lifter.core import (
+    BasisFileError,
+    PoseBases,
+    UnknownLayoutError,
+    get_layout,
+    learn_pca_bases,
+    mpjpe,
+    normalise_pose,
+    p_mpjpe,
+    procrustes_align,
+    to_model_joints,
+)
+from pose_lifter.core.camera import camera_step, weighted_median
+from pose_lifter.core.skeleton import LIMBS, body_frame, limb_lengths
+from pose_lifter.core.types import Camera
+from scipy.spatial.transform import Rotation
+
+
+def _pose(seed: int = 0) -> np.ndarray:
+    return normalise_pose(np.random.default_rng(seed).normal(size=(12, 3)))
+
+
+def test_normalise_pose_is_centred_unit_leg_and_in_body_frame() -> None:
+    raw = np.random.default_rng(1).normal(size=(12, 3)) * 3 + 7
+    p = normalise_pose(raw)
+    assert np.allclose(p.mean(0), 0)
+    assert limb_lengths(p)[7] == pytest.approx(1.0)
+    assert np.allclose(body_frame(p), np.eye(3), atol=1e-12)
+    # a rotated, shifted, scaled copy normalises to the same pose
+    r = Rotation.from_euler("xyz", [10, 70, -20], degrees=True).as_matrix()
+    assert np.allclose(normalise_pose(2.5 * raw @ r.T + 1.0), p, atol=1e-10)
+    assert len(LIMBS) == 8
+
+
+def test_layouts_pick_the_paper_joints() -> None:
+    coco = np.arange(34, dtype=float).reshape(17, 2)
+    pts, conf = to_model_joints(coco, None, "coco17")
+    assert pts[0].tolist() == coco[5].tolist() and pts[3].tolist() == coco[6].tolist()
+    assert pts[11].tolist() == coco[16].tolist() and np.all(conf == 1)
+    b25 = np.arange(50, dtype=float).reshape(25, 2)
+    pts, _ = to_model_joints(b25, np.linspace(0, 1, 25), "body25")
+    assert pts[0].tolist() == b25[5].tolist() and pts[9].tolist() == b25[9].tolist()
+    assert get_layout("H36M17").model_indices[6] == 4
+    with pytest.raises(UnknownLayoutError):
+        get_layout("coco18")
+
+
+def test_p_mpjpe_is_similarity_invariant_and_reflection_safe() -> None:
+    g = _pose(2)
+    r = Rotation.from_euler("xyz", [30, -50, 80], degrees=True).as_matrix()
+    assert p_mpjpe(3.0 * g @ r.T + 5.0, g) == pytest.approx(0.0, abs=1e-9)
+    mirrored = g * np.array([-1.0, 1.0, 1.0])
+    # a mirror image is not a rotation: it must not align perfectly
+    assert p_mpjpe(mirrored, g) > 0.05
+    assert np.linalg.det(np.linalg.svd(procrustes_align(mirrored, g))[2]) != 0
+    assert mpjpe(g + 1.0, g) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_weighted_median_minimises_weighted_l1() -> None:
+    rng = np.random.default_rng(0)
+    v, w = rng.normal(size=9), rng.uniform(0.1, 1, size=9)
+    m = weighted_median(v, w)
+    grid = np.linspace(-3, 3, 2001)
+    best = grid[np.argmin([np.sum(w * np.abs(v - g)) for g in grid])]
+    assert np.sum(w * np.abs(v - m)) <= np.sum(w * np.abs(v - best)) + 1e-12
+
+
+def test_camera_step_recovers_a_camera_despite_two_outliers() -> None:
+    rng = np.random.default_rng(5)
+    y = rng.normal(size=(12, 3))
+    rot = Rotation.random(random_state=4).as_matrix()
+    cam = Camera(rot, 1.7, np.array([0.3, -0.2]))
+    x = cam.project(y)
+    x[[1, 8]] += rng.normal(scale=3.0, size=(2, 2))
+    res = camera_step(x, y, np.ones(12), "l1", max_iter=500, tol=1e-8)
+    assert res.converged
+    assert np.allclose(res.camera.projection, cam.projection, atol=1e-4)
+    assert np.allclose(res.camera.translation, cam.translation, atol=1e-4)
+
+
+def test_bases_round_trip_and_bad_file(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    poses = np.stack([_pose(i) for i in range(60)])
+    b = learn_pca_bases(poses, n_bases=10, n_starts=5, metadata={"data": "random"})
+    f = tmp_path / "b.npz"
+    b.save(f)
+    c = PoseBases.load(f)
+    assert np.array_equal(b.components, c.components) and c.method == "pca"
+    assert c.metadata["data"] == "random" and c.start_alphas.shape == (5, 10)
+    assert np.allclose(c.start_alphas[0], 0)
+    with pytest.raises(BasisFileError):
+        PoseBases.load(tmp_path / "missing.npz")
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(BasisFileError):
+        PoseBases.load(tmp_path / "bad.npz")
+
+
+def test_packaged_bases_match_the_paper_setup() -> None:
+    b = PoseBases.load()
+    assert b.method == "sparse" and b.n_bases == 200
+    assert b.limb_proportions[7] == pytest.approx(1.0)
+    assert b.start_alphas.shape[0] == 30
