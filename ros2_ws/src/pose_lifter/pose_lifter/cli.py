@@ -206,6 +206,13 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
                    help="right lower leg in metres, to make the lifted pose metric")
 
 
+def _cmd_experiments(args: argparse.Namespace) -> int:
+    from .experiments import run_experiments
+
+    run_experiments(args.data, args.out, quick=args.quick, processes=args.processes, command=args.command)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``pose-lifter`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -271,6 +278,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--every", type=int, default=3, help="lift every N-th frame (default 3: 10 Hz)")
     # a one-minute demo: 10 cold starts per person (the first frame), warm starts after that
     p.set_defaults(func=_cmd_demo, starts=10)
+
+    p = sub.add_parser("experiments", help="the paper's experiments (Sec. 4) on CMU data -> PNG/CSV/markdown")
+    p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
+                   "$POSE_LIFTER_CMU_DATA)")
+    p.add_argument("--out", default="out/experiments", help="output directory")
+    p.add_argument("--quick", action="store_true", help="a tiny run (a couple of poses) for tests")
+    p.add_argument("--processes", type=int, default=2, help="worker processes (default 2)")
+    p.set_defaults(func=_cmd_experiments)
     return parser
 
 
