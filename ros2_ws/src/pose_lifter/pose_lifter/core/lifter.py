@@ -20,16 +20,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .bases import PoseBases
-from .camera import camera_step
+from .camera import camera_admm
 from .errors import InvalidInputError, TooFewJointsError
 from .options import LifterOptions
 from .pose import LiftedConstraints, PoseModel, QStepFn, pose_step
-from .skeleton import ANTHROPOMETRIC_PROPORTIONS, N_JOINTS
+from .skeleton import ANTHROPOMETRIC_PROPORTIONS, N_JOINTS, normalise_pose
 from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
 __all__ = ["Lifter"]
@@ -48,6 +49,7 @@ class _Run:
     objective: float
     n_iter: int
     converged: bool
+    state: dict[str, Any]
 
 
 class Lifter:
@@ -138,7 +140,7 @@ class Lifter:
         return _Normalisation(centre, spread / self._mean_spread)
 
     def _camera(self, xn: NDArray[np.float64], pose: NDArray[np.float64], w: NDArray[np.float64],
-                init: Camera | None) -> CameraResult:
+                init: Camera | None, state: dict[str, Any] | None = None) -> CameraResult:
         o = self._options
         if o.camera_solver == "cvxpy":
             from .reference import reference_camera
@@ -146,49 +148,61 @@ class Lifter:
             cam, obj = reference_camera(xn, pose, w, o.method.loss,
                                         rotation_init=None if init is None else init.rotation)
             return CameraResult(cam, float(obj), 1, True)
-        return camera_step(xn, pose, w, o.method.loss, init=init, max_iter=o.camera_max_iter,
-                           tol=o.camera_tol, tau=o.tau)
+        duals = state.get("camera") if state is not None and o.warm_duals else None
+        res, duals_out = camera_admm(xn, pose, w, o.method.loss, init=init, max_iter=o.camera_max_iter,
+                                     tol=o.camera_tol, tau=o.tau, duals=duals)
+        if state is not None:
+            state["camera"] = duals_out
+        return res
 
     def _pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
-              alpha0: NDArray[np.float64]) -> PoseResult:
+              alpha0: NDArray[np.float64], state: dict[str, Any] | None = None) -> PoseResult:
         o = self._options
-        return pose_step(
+        out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+        res = pose_step(
             xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
             max_iter=o.pose_max_iter, tol=o.pose_tol, eta=o.eta, eta_growth=o.eta_growth, delta=o.delta,
             inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
             alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
+            duals=state.get("pose") if state is not None and o.warm_duals else None, state_out=out,
         )
+        if state is not None:
+            state["pose"] = out[0]
+        return res
 
     def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
              cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None) -> _Run:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
-        continue a previous run ``start``."""
+        continue a previous run ``start``. The ADM multipliers of both steps are carried from
+        one alternation to the next (``options.warm_duals``)."""
         o = self._options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
             it0 = start.n_iter
+            state = dict(start.state)
         else:
+            state = {}
             alpha = alpha0
-            cam = self._camera(xn, self.model.pose(alpha), w, cam0)
+            cam = self._camera(xn, self.model.pose(alpha), w, cam0, state)
             best, prev, it0 = None, np.inf, 0
         converged = False
         it = it0
         for it in range(it0 + 1, n_alt + 1):
-            pres = self._pose(xn, cam.camera, w, alpha)
+            pres = self._pose(xn, cam.camera, w, alpha, state)
             alpha = pres.alpha
-            cam = self._camera(xn, pres.pose, w, cam.camera)
+            cam = self._camera(xn, pres.pose, w, cam.camera, state)
             th = o.theta if o.method.sparsity else 0.0
             obj = cam.objective + th * float(np.sum(np.abs(alpha)))
             pres = PoseResult(pres.alpha, pres.pose, obj, pres.limb_violation, pres.n_iter, pres.converged)
             if best is None or obj < best.objective:
-                best = _Run(pres, cam, obj, it, False)
+                best = _Run(pres, cam, obj, it, False, dict(state))
             if prev - obj <= o.alternation_tol * max(abs(prev), 1e-12) and np.isfinite(prev):
                 converged = True
                 break
             prev = obj
         assert best is not None
-        return _Run(best.pose, best.camera, best.objective, it, converged)
+        return _Run(best.pose, best.camera, best.objective, it, converged, best.state)
 
     # ------------------------------------------------------------------ public
     def lift(
@@ -228,6 +242,8 @@ class Lifter:
             cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
                           (warm.camera.translation - norm.centre) / norm.spread)
             runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
+            if self._options.warm_flip:
+                runs.append((-2, self._run(xn, w, self._mirrored_alpha(runs[0][1]), None)))
         else:
             starts = self.bases.with_starts(self._options.n_starts)
             runs = [(i, self._run(xn, w, a, None, max_alternations=1)) for i, a in enumerate(starts)]
@@ -252,7 +268,7 @@ class Lifter:
             limb_violation=run.pose.limb_violation,
             n_iter=run.n_iter,
             converged=run.converged,
-            n_starts=1 if warm is not None else len(self.bases.with_starts(self._options.n_starts)),
+            n_starts=len(runs) if warm is not None else len(self.bases.with_starts(self._options.n_starts)),
             start_index=idx,
             weights=w,
         )

@@ -85,6 +85,9 @@ class LifterOptions:
         Per-iteration growth of the pose ADM penalty (the paper's ``eta_k``), >= 1.
     n_starts : int
         Cold-start multi-start count (paper: 30 k-means centres; 1 = mean pose only).
+    warm_flip : bool
+        With a warm start, also start from the depth-mirrored warm solution (the
+        weak-perspective ambiguity: same 2D, reflected depth) and keep the lower objective.
     n_refine : int
         Cold starts are screened by one alternation; the ``n_refine`` lowest-objective ones
         are continued to convergence (``n_refine >= n_starts`` runs every start fully).
@@ -101,6 +104,10 @@ class LifterOptions:
         The paper's rank-1 lifted ADM, or a direct local solver of the same problem.
     camera_solver, pose_solver : {"admm", "cvxpy"}
         Closed-form ADM path, or the cvxpy reference for the convex subproblems.
+    warm_duals : bool
+        Carry the ADM multipliers of the camera and pose steps from one alternation to the
+        next (warm start of the dual as well as the primal variables); False restarts them
+        at zero in every step.
     """
 
     variant: str = "full"
@@ -119,6 +126,7 @@ class LifterOptions:
     tau: float = 1.0
     n_starts: int = 30
     n_refine: int = 3
+    warm_flip: bool = True
     confidence_threshold: float = 0.1
     min_visible_joints: int = 6
     limb_proportions: str = "bases"
@@ -126,6 +134,7 @@ class LifterOptions:
     alpha_solver: str = "newton"
     camera_solver: str = "admm"
     pose_solver: str = "admm"
+    warm_duals: bool = True
 
     def __post_init__(self) -> None:
         self.validate()
@@ -156,6 +165,8 @@ class LifterOptions:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 1e-6 <= float(v) <= 1e6:
                 raise OptionsError(f"{name} must be in [1e-6, 1e6], got {v!r}")
+        if not isinstance(self.warm_flip, bool):
+            raise OptionsError(f"warm_flip must be a bool, got {self.warm_flip!r}")
         if not isinstance(self.eta_growth, (int, float)) or not 1.0 <= float(self.eta_growth) <= 2.0:
             raise OptionsError(f"eta_growth must be in [1, 2], got {self.eta_growth!r}")
         if not 0.0 <= float(self.confidence_threshold) <= 1.0:
@@ -166,6 +177,8 @@ class LifterOptions:
             raise OptionsError(
                 f"min_visible_joints must be an integer in [3, 12], got {self.min_visible_joints!r}"
             )
+        if not isinstance(self.warm_duals, bool):
+            raise OptionsError(f"warm_duals must be a bool, got {self.warm_duals!r}")
         choices: dict[str, tuple[str, ...]] = {
             "limb_proportions": ("anthropometric", "bases"),
             "alpha_step": ("reduced", "full"),

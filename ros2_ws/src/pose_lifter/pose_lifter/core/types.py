@@ -120,7 +120,7 @@ class LiftResult:
     n_starts : int
         Starts tried.
     start_index : int
-        Which start won (-1 = warm start).
+        Which start won (-1 = the warm start, -2 = its depth-mirrored copy).
     weights : ndarray, shape (12,)
         Per-joint weights used in the loss (0 = missing).
     """
