@@ -28,6 +28,7 @@ re-optimised exactly for the final ``M`` (weighted median for L1, weighted mean 
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 import numpy as np
@@ -36,11 +37,29 @@ from numpy.typing import NDArray
 from .errors import InvalidInputError
 from .types import Camera, CameraResult
 
-__all__ = ["camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
+__all__ = ["camera_admm", "camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
 
 
 def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Nearest scaled-orthographic 2x3 matrix ``s [r1; r2]`` to ``n`` (Frobenius norm)."""
+    """Nearest scaled-orthographic 2x3 matrix ``s [r1; r2]`` to ``n`` (Frobenius norm).
+
+    Closed form without an SVD: with ``A = n n^T`` (2x2), ``sqrt(A) = (A + sqrt(det A) I) / t``
+    and ``t = tr sqrt(A) = sigma_1 + sigma_2``, the answer ``mean(sigma) U V^T =
+    (t / 2) sqrt(A)^{-1} n = (adj(A) + sqrt(det A) I) n / (2 sqrt(det A))``. A (near) rank-1
+    ``n`` falls back to the SVD.
+    """
+    n = np.asarray(n, dtype=np.float64)
+    (a0, a1, a2), (b0, b1, b2) = n.tolist()
+    a = a0 * a0 + a1 * a1 + a2 * a2
+    c = b0 * b0 + b1 * b1 + b2 * b2
+    b = a0 * b0 + a1 * b1 + a2 * b2
+    det = a * c - b * b
+    if det > 1e-20 * (a + c) ** 2 and det > 0.0:
+        sd = math.sqrt(det)
+        f = 0.5 / sd
+        p, q, r = f * (c + sd), -f * b, f * (a + sd)
+        return np.array([[p * a0 + q * b0, p * a1 + q * b1, p * a2 + q * b2],
+                         [q * a0 + r * b0, q * a1 + r * b1, q * a2 + r * b2]])
     u, s, vt = np.linalg.svd(n, full_matrices=False)
     return np.asarray(s.mean() * (u @ vt))
 
@@ -128,6 +147,27 @@ def camera_step(
     CameraResult
         The camera, ``objective = sum_j w_j rho(x_j - M0 y_j - t)``, iterations, converged.
     """
+    return camera_admm(points, pose, weights, loss, init, max_iter, tol, tau)[0]
+
+
+def camera_admm(
+    points: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    loss: Literal["l1", "l2"] = "l1",
+    init: Camera | None = None,
+    max_iter: int = 100,
+    tol: float = 1e-5,
+    tau: float = 1.0,
+    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+) -> tuple[CameraResult, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """:func:`camera_step` with a warm start of the scaled duals ``(U1 (n, 2), U2 (2, 3))``.
+
+    The lifter passes the duals of the previous camera step of the same solve (the pose
+    changed a little since): primal and dual variables of the ADM are then both near their
+    fixed point and the same stopping rule is met in fewer iterations. Returns the result
+    and the final duals.
+    """
     x = np.asarray(points, dtype=np.float64)
     y = np.asarray(pose, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
@@ -145,41 +185,40 @@ def camera_step(
     else:
         m = init.projection.copy()
         t = np.asarray(init.translation, dtype=np.float64).copy()
-
-    nmat = m.copy()
-    u1 = np.zeros_like(x)
-    u2 = np.zeros_like(m)
+    if duals is None:
+        u1 = np.zeros_like(x)
+        u2 = np.zeros_like(m)
+    else:
+        u1, u2 = duals[0].copy(), duals[1].copy()
     # normal equations of the (N, t) step: (Ya^T Ya + D) v = Ya^T Z + D (M - U2)
     dmat = np.diag([1.0, 1.0, 1.0, 0.0])
     lhs_inv = np.linalg.inv(ya.T @ ya + dmat)
+    hat = lhs_inv @ ya.T  # (4, n)
+    lhs3 = lhs_inv[:, :3]  # (4, 3)
     scale_x = max(float(np.linalg.norm(x[vis] - x[vis].mean(axis=0))), 1e-12)
+    thr = np.broadcast_to(w[:, None] / tau, x.shape)
+    l2fac = tau / (2.0 * w[:, None] + tau)
     converged = False
     it = 0
-    r = x - y @ m.T - t
+    sol = np.vstack([m.T, t[None, :]])  # (4, 2) = [N^T; t]
+    proj = ya @ sol
     for it in range(1, max_iter + 1):
-        v = x - y @ nmat.T - t + u1
-        if loss == "l1":
-            thr = w[:, None] / tau
-            r = np.sign(v) * np.maximum(np.abs(v) - thr, 0.0)
-        else:
-            r = tau * v / (2.0 * w[:, None] + tau)
-        z = x - r + u1
-        rhs = ya.T @ z
-        rhs[:3] += (m - u2).T
-        sol = lhs_inv @ rhs  # (4, 2)
+        xu = x + u1
+        v = xu - proj
+        r = v - np.clip(v, -thr, thr) if loss == "l1" else l2fac * v
+        sol = hat @ (xu - r) + lhs3 @ (m - u2).T
+        proj = ya @ sol
         nmat = sol[:3].T
-        t = sol[3]
         m_prev = m
         m = project_scaled_orthographic(nmat + u2)
-        res1 = x - y @ nmat.T - t - r
+        res1 = x - proj - r
         res2 = nmat - m
         u1 += res1
         u2 += res2
-        mnorm = max(float(np.linalg.norm(m)), 1e-12)
-        p1 = float(np.linalg.norm(res1)) / scale_x
-        p2 = float(np.linalg.norm(res2)) / mnorm
-        d1 = float(np.linalg.norm(m - m_prev)) / mnorm
-        if p1 < tol and p2 < tol and d1 < tol:
+        mn2 = max(float(np.vdot(m, m)), 1e-24)
+        tol2 = tol * tol
+        if (float(np.vdot(res1, res1)) < tol2 * scale_x * scale_x and float(np.vdot(res2, res2)) < tol2 * mn2
+                and float(np.vdot(m - m_prev, m - m_prev)) < tol2 * mn2):
             converged = True
             break
     t = _optimal_translation(x, y, w, m, loss)
@@ -187,4 +226,4 @@ def camera_step(
         raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
     cam = Camera.from_projection(m, t)
     obj = camera_objective(x, y, w, cam.projection, t, loss)
-    return CameraResult(cam, obj, it, converged)
+    return CameraResult(cam, obj, it, converged), (u1, u2)

@@ -134,7 +134,7 @@ class LifterOptions:
     alpha_solver: str = "newton"
     camera_solver: str = "admm"
     pose_solver: str = "admm"
-    warm_duals: bool = True
+    warm_duals: bool = False
 
     def __post_init__(self) -> None:
         self.validate()

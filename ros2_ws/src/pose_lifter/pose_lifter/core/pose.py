@@ -357,39 +357,73 @@ def newton_reduced(
 
     Minimises ``s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i`` (i = 1..8), the
     same problem as :func:`newton_alpha` on ``model.reduced`` (tested equal), by SQP with the
-    exact Lagrangian Hessian (``2 G`` where that is not positive definite) from a Gauss-Newton
-    projection of ``s0``; steps are halved until the merit ``f + rho ||g||_1`` decreases.
-    Shapes: gmat (r, r), lin (r,), s0 (r,).
+    exact Lagrangian Hessian (``2 G`` where that is not positive definite on the tangent space
+    of the constraints) from a Gauss-Newton projection of ``s0``; steps are halved until the
+    merit ``f + rho ||g||_1`` decreases. Shapes: gmat (r, r), lin (r,), s0 (r,).
     """
-    cu, cmu, hc, lsq = model.limb_cu, model.limb_cmu, model.limb_hess, model.limb_sq
+    return _newton_reduced(gmat, lin, model, s0, max_iter, tol)[0]
+
+
+_EYE8 = 1e-14 * np.eye(8)
+AUGMENTED_PD_TEST = True
+
+
+def _newton_reduced(
+    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
+    max_iter: int = 10, tol: float = 1e-9,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``."""
     r = s0.size
+    cu24 = model.limb_cu.reshape(24, r)
+    cmu24 = model.limb_cmu.reshape(24)
+    hc = model.limb_hess.reshape(8, r * r)
+    lsq = model.limb_sq
 
     def cons(s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        lv = cmu + cu @ s  # (8, 3)
-        return np.einsum("ia,ia->i", lv, lv) - lsq, lv
+        lv = cmu24 + cu24 @ s  # (24,)
+        return (lv * lv).reshape(8, 3).sum(axis=1) - lsq, lv
 
-    s = s0.copy()
-    for _ in range(30):  # Gauss-Newton projection onto the constraint manifold
-        g, lv = cons(s)
-        if np.max(np.abs(g)) < 1e-12:
-            break
-        jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
-        s = s - jac.T @ np.linalg.solve(jac @ jac.T + 1e-14 * np.eye(8), g)
+    def jacobian(lv: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(2.0 * (cu24 * lv[:, None]).reshape(8, 3, r).sum(axis=1))
+
+    def project(s: NDArray[np.float64], n: int) -> NDArray[np.float64]:
+        for _ in range(n):  # Gauss-Newton (min-norm) steps onto the constraint manifold
+            g, lv = cons(s)
+            if np.abs(g).max() < 1e-12:
+                break
+            jac = jacobian(lv)
+            s = s - jac.T @ np.linalg.solve(jac @ jac.T + _EYE8, g)
+        return s
+
+    s = project(s0.copy(), 30)
     nu = np.zeros(8)
     rho = 10.0
     kmat = np.zeros((r + 8, r + 8))
-    for _ in range(max_iter):
+    g2 = 2.0 * gmat
+    it = 0
+    for it in range(1, max_iter + 1):
         g, lv = cons(s)
-        jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
-        grad = 2.0 * (gmat @ s - lin)
+        jac = jacobian(lv)
+        gs = gmat @ s
+        grad = 2.0 * (gs - lin)
         kkt = np.linalg.norm(grad + jac.T @ nu) + np.linalg.norm(g)
         if kkt < tol * max(1.0, float(np.linalg.norm(grad))):
+            it -= 1
             break
-        hess = 2.0 * gmat + np.einsum("i,irs->rs", nu, hc)
-        try:  # Newton when the Lagrangian Hessian is positive definite, else Gauss-Newton (2 G)
-            np.linalg.cholesky(hess)
+        hess = g2 + (nu @ hc).reshape(r, r)
+        # Newton when the Lagrangian Hessian is positive definite on the tangent space of the
+        # constraints (the second-order sufficient condition), else Gauss-Newton (2 G). Tested
+        # by a Cholesky of the augmented Hessian H + c J^T J (positive definite for a large c
+        # iff the reduced Hessian is); the KKT step is the same with H or H + c J^T J.
+        if AUGMENTED_PD_TEST:
+            jtj = jac.T @ jac
+            test = hess + (10.0 * float(np.abs(hess).max()) / max(float(np.abs(jtj).max()), 1e-300)) * jtj
+        else:
+            test = hess
+        try:
+            np.linalg.cholesky(test)
         except np.linalg.LinAlgError:
-            hess = 2.0 * gmat
+            hess = g2
         kmat[:r, :r] = hess
         kmat[:r, r:] = jac.T
         kmat[r:, :r] = jac
@@ -399,24 +433,18 @@ def newton_reduced(
         except np.linalg.LinAlgError:
             sol = np.linalg.lstsq(kmat, rhs, rcond=None)[0]
         ds, nu_new = sol[:r], sol[r:]
-        rho = max(rho, 2.0 * float(np.max(np.abs(nu_new))))
-        f0 = float(s @ gmat @ s - 2.0 * lin @ s) + rho * float(np.sum(np.abs(g)))
+        rho = max(rho, 2.0 * float(np.abs(nu_new).max()))
+        f0 = float(s @ gs - 2.0 * lin @ s) + rho * float(np.abs(g).sum())
         a = 1.0
         while a > 1e-4:
             cand = s + a * ds
             gc, _ = cons(cand)
-            if float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(np.sum(np.abs(gc))) <= f0 + 1e-12:
+            if float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(np.abs(gc).sum()) <= f0 + 1e-12:
                 break
             a *= 0.5
         s = s + a * ds
         nu = nu_new
-    for _ in range(10):  # final exact feasibility
-        g, lv = cons(s)
-        if np.max(np.abs(g)) < 1e-12:
-            break
-        jac = 2.0 * np.einsum("ia,iar->ir", lv, cu)
-        s = s - jac.T @ np.linalg.solve(jac @ jac.T + 1e-14 * np.eye(8), g)
-    return s
+    return project(s, 10), nu, it
 
 
 def pose_objective(
@@ -449,6 +477,8 @@ def pose_step(
     alpha_step: str = "reduced",
     alpha_solver: str = "admm",
     qstep_fn: QStepFn | None = None,
+    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
 
@@ -480,6 +510,11 @@ def pose_step(
     alpha_solver : {"admm", "newton"}
     qstep_fn : callable, optional
         Replaces the closed-form Q-step (the cvxpy reference path).
+    duals : (ndarray (24,), ndarray (k,)), optional
+        Warm start of the (unscaled) ADM multipliers of ``gamma = c - A alpha`` and
+        ``beta = alpha``, e.g. from the previous alternation (default zeros).
+    state_out : list, optional
+        If given, the final unscaled multipliers are appended to it (for the next warm start).
 
     Returns
     -------
@@ -538,7 +573,7 @@ def pose_step(
             z0 = np.append(v.T @ alpha, 1.0)
         if alpha_solver == "newton" and not full:
             vtd2 = v.T @ d2
-            s = newton_reduced(g_red, lin, model, z0[:-1])
+            s = _newton_reduced(g_red, lin, model, z0[:-1])[0]
             return np.asarray(d2 - v @ vtd2 + v @ s)
         if alpha_solver == "newton":
             z = newton_alpha(wmat, cons, z0).z
@@ -559,8 +594,12 @@ def pose_step(
     best_obj = np.inf
     if not variant.limbs or model.limb_violation(alpha) < feas_tol:
         best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
-    u1 = np.zeros_like(c)
-    u2 = np.zeros(k)
+    if duals is None:
+        u1 = np.zeros_like(c)
+        u2 = np.zeros(k)
+    else:
+        u1 = np.asarray(duals[0], dtype=np.float64) / eta
+        u2 = np.asarray(duals[1], dtype=np.float64) / eta
     beta = alpha.copy()
     converged = False
     it = 0
@@ -597,6 +636,8 @@ def pose_step(
         if primal < tol and dual < tol:
             converged = True
             break
+    if state_out is not None:
+        state_out.append((eta * u1, eta * u2))
     if not np.isfinite(best_obj):
         # no feasible iterate (cannot happen with restore_feasibility unless it failed)
         best_alpha = alpha
