@@ -204,6 +204,15 @@ class Lifter:
         assert best is not None
         return _Run(best.pose, best.camera, best.objective, it, converged, best.state)
 
+    def _mirrored_alpha(self, run: _Run) -> NDArray[np.float64]:
+        """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),
+        re-expressed in its own body frame; minimum-norm coefficients through the bases' SVD."""
+        cam_pose = run.pose.pose @ run.camera.camera.rotation.T
+        cam_pose[:, 2] *= -1.0
+        mirrored = normalise_pose(cam_pose).reshape(-1) - self.model.mean
+        m = self.model
+        return np.asarray(m.v @ ((m.u.T @ mirrored) / m.sig))
+
     # ------------------------------------------------------------------ public
     def lift(
         self,
