@@ -28,7 +28,7 @@ LIFTER_EXE = INSTALL / "pose_lifter" / "lib" / "pose_lifter" / "lifter"
 PARAMS_YAML = INSTALL / "pose_lifter" / "share" / "pose_lifter" / "config" / "lifter.yaml"
 #: Seconds to wait for discovery, for one answer, and for a clean exit after SIGINT.
 DISCOVERY_TIMEOUT = 30.0
-ANSWER_TIMEOUT = 60.0
+ANSWER_TIMEOUT = 180.0
 SHUTDOWN_TIMEOUT = 10.0
 
 
@@ -185,6 +185,7 @@ class GraphClient:
     lifter_name: str = "/pose_lifter"
     skeletons: list[Any] = field(default_factory=list)
     markers: list[Any] = field(default_factory=list)
+    lifter: LifterProcess | None = None
 
     def __post_init__(self) -> None:
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -206,11 +207,13 @@ class GraphClient:
         deadline = time.monotonic() + timeout
         while not condition():
             if time.monotonic() > deadline:
-                pytest.fail(f"timed out after {timeout} s waiting for {what}")
+                log = self.lifter.log()[-3000:] if self.lifter is not None else ""
+                pytest.fail(f"timed out after {timeout} s waiting for {what}; lifter log tail:\n{log}")
             self.executor.spin_once(timeout_sec=0.05)
 
     def wait_for_lifter(self, process: LifterProcess) -> None:
         """Wait until the lifter process is matched on every topic and its services are up."""
+        self.lifter = process
         def ready() -> bool:
             if not process.alive():
                 pytest.fail(f"lifter exited early; log:\n{process.log()}")
