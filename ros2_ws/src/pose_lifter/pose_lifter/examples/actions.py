@@ -150,12 +150,12 @@ class ActionClassifier:
         return self.window * N_JOINTS * (3 if self.kind == "3d" else 2)
 
     def save(self, path: str | Path) -> None:
-        """Write an ``.npz`` (features as float32, labels, settings)."""
+        """Write an ``.npz`` (features as float16: unit-scale features, small file; labels, settings)."""
         if self.features_ is None or self.labels_ is None:
             raise InvalidInputError("the classifier is not fitted")
         settings = {"kind": self.kind, "window": self.window, "step_s": self.step_s,
                     "n_neighbors": self.n_neighbors, "metadata": self.metadata}
-        np.savez_compressed(Path(path), features=self.features_.astype(np.float32),
+        np.savez_compressed(Path(path), features=self.features_.astype(np.float16),
                             labels=self.labels_, settings=json.dumps(settings))
 
     @classmethod
