@@ -27,7 +27,7 @@ INSTALL = REPO / "ros2_ws" / "install"
 LIFTER_EXE = INSTALL / "pose_lifter" / "lib" / "pose_lifter" / "lifter"
 PARAMS_YAML = INSTALL / "pose_lifter" / "share" / "pose_lifter" / "config" / "lifter.yaml"
 #: Seconds to wait for discovery, for one answer, and for a clean exit after SIGINT.
-DISCOVERY_TIMEOUT = 30.0
+DISCOVERY_TIMEOUT = 120.0
 ANSWER_TIMEOUT = 180.0
 SHUTDOWN_TIMEOUT = 10.0
 

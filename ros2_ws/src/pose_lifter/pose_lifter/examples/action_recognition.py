@@ -96,6 +96,10 @@ def main(args: list[str] | None = None) -> None:
     except PoseLifterError as err:
         rclpy.logging.get_logger("action_recognition").fatal(f"cannot start: {err}")
         raise SystemExit(1) from None
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a signal arrived while the node was still starting: rcl calls fail, exit quietly
     finally:
         if node is not None:
             node.destroy_node()
