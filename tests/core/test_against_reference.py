@@ -269,25 +269,34 @@ def test_convex_pose_step_with_default_options_matches_reference(
     _check_convex_pose(bases, model, test_poses, name, case, False, **_pose_kwargs())  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("name,case", [(n, c) for n in ("L1WAWS", "L2WAWS") for c in range(6)])
+_L1_NOT_LOCAL_MIN = pytest.mark.xfail(strict=True, reason=(
+    "finding reported to the lead: with the default options the L1WAWS pose step ends 1.6-3.6% "
+    "above the local minimum SLSQP reaches from its result on 3 of 6 problems (at 2ac609f: "
+    "6.693 -> 6.587, 3.879 -> 3.743, 3.554 -> 3.496)"))
+
+
+@pytest.mark.parametrize("name", [pytest.param("L1WAWS", marks=_L1_NOT_LOCAL_MIN), "L2WAWS"])
 def test_limb_pose_step_is_feasible_local_minimum(
-    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str,
 ) -> None:
     # Nonconvex: is the fast result (default options) a local minimum? SLSQP started from it
-    # must not improve it by more than the tolerance.
+    # must not improve it by more than the tolerance, on any of 6 problems.
     var = VARIANTS[name]
     theta = 0.05
-    x, cam, w = _pose_problem(test_poses, case)
-    res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
-                    **_pose_kwargs())  # type: ignore[arg-type]
-    f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
-    assert res.objective == pytest.approx(f_fast, rel=1e-9)
-    y = bases.mean + bases.components @ res.alpha
-    lengths_sq = np.sum((limb_selectors() @ y) ** 2, axis=1)
-    assert np.max(np.abs(lengths_sq - model.limb_sq)) <= TOL["limb_violation"]
-    _, f_polished = ref.reference_pose_limbs_local(
-        x, cam, bases.mean, bases.components, w, theta, var.loss, model.limb_sq, res.alpha)
-    assert f_fast <= f_polished * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+    gaps = []
+    for case in range(6):
+        x, cam, w = _pose_problem(test_poses, case)
+        res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
+                        **_pose_kwargs())  # type: ignore[arg-type]
+        f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
+        assert res.objective == pytest.approx(f_fast, rel=1e-9)
+        y = bases.mean + bases.components @ res.alpha
+        lengths_sq = np.sum((limb_selectors() @ y) ** 2, axis=1)
+        assert np.max(np.abs(lengths_sq - model.limb_sq)) <= TOL["limb_violation"]
+        _, f_polished = ref.reference_pose_limbs_local(
+            x, cam, bases.mean, bases.components, w, theta, var.loss, model.limb_sq, res.alpha)
+        gaps.append((f_fast - TOL["alpha_step_objective_abs"]) / f_polished - 1.0)
+    assert max(gaps) <= TOL["alpha_step_objective_rel"], gaps
 
 
 _BEST_LOCAL: dict[tuple[str, int], float] = {}
