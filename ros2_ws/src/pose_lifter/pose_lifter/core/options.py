@@ -118,12 +118,12 @@ class LifterOptions:
     pose_tol: float = 1e-3
     inner_max_iter: int = 60
     inner_tol: float = 1e-6
-    camera_max_iter: int = 50
+    camera_max_iter: int = 100
     camera_tol: float = 1e-4
     eta: float = 0.3
     eta_growth: float = 1.1
     delta: float = 1.0
-    tau: float = 1.0
+    tau: float = 10.0
     n_starts: int = 30
     n_refine: int = 3
     warm_flip: bool = True
