@@ -366,6 +366,7 @@ def newton_reduced(
 
 _EYE8 = 1e-14 * np.eye(8)
 AUGMENTED_PD_TEST = True
+SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
 
 def _newton_reduced(
@@ -436,13 +437,27 @@ def _newton_reduced(
         rho = max(rho, 2.0 * float(np.abs(nu_new).max()))
         f0 = float(s @ gs - 2.0 * lin @ s) + rho * float(np.abs(g).sum())
         a = 1.0
+        cand = s + ds
+        gc, lvc = cons(cand)
+        if SECOND_ORDER_CORRECTION and float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(
+                np.abs(gc).sum()) > f0 + 1e-12:
+            # second-order correction (against the Maratos effect: the l1 merit rejecting a
+            # good full step because of the constraints' curvature): one min-norm step back
+            # towards the constraint manifold from s + ds, tried before any step halving
+            jc = jacobian(lvc)
+            soc = cand - jc.T @ np.linalg.solve(jc @ jc.T + _EYE8, gc)
+            gs2, _ = cons(soc)
+            if float(soc @ gmat @ soc - 2.0 * lin @ soc) + rho * float(np.abs(gs2).sum()) <= f0 + 1e-12:
+                s = soc
+                nu = nu_new
+                continue
         while a > 1e-4:
-            cand = s + a * ds
-            gc, _ = cons(cand)
             if float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(np.abs(gc).sum()) <= f0 + 1e-12:
                 break
             a *= 0.5
-        s = s + a * ds
+            cand = s + a * ds
+            gc, _ = cons(cand)
+        s = cand
         nu = nu_new
     return project(s, 10), nu, it
 

@@ -1,0 +1,263 @@
+"""Speed benchmark of the lifter on the committed bags (``make bench``).
+
+Prints, in one run:
+
+* warm-started tracking latency per person-frame (the node's use: ``Lifter.lift(..., warm=
+  previous.warm_start())`` per track), median / p95 / max, with the mean objective and the
+  P-MPJPE against the bags' ground truth (right-lower-leg units);
+* cold-start latency with the default multi-start (``n_starts`` k-means centres);
+* fast path vs the cvxpy+Clarabel reference path (``camera_solver=pose_solver="cvxpy"``: the
+  same alternation and pose ADM with every Q-step solved by Clarabel and the camera by the
+  reference L1 camera solver) on a few frames: time ratio, objective and 3D-error agreement;
+* offline throughput (poses/s) of per-track warm-started lifting, in one process and with a
+  process pool over tracks, and whether the pooled results are identical;
+* peak resident memory (``resource.getrusage``).
+
+BLAS threads are pinned to 1 (threadpoolctl). Times are wall-clock ``perf_counter``; on a
+loaded machine they are pessimistic (the CPU time is printed beside them).
+
+Usage::
+
+    python tools/bench.py [--bags bags/*.mcap] [--frames N] [--cold N] [--ref-frames N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import resource
+import sys
+import time
+import warnings
+from collections import defaultdict
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+from numpy.typing import NDArray
+from pose_lifter import messages as m
+from pose_lifter.bags import read_messages
+from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.errors import InvalidInputError, TooFewJointsError
+from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.metrics import p_mpjpe
+from pose_lifter.core.options import LifterOptions
+from pose_lifter.core.skeleton import normalise_pose
+from pose_lifter.core.types import LiftResult, WarmStart
+from pose_lifter.scenes import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from threadpoolctl import threadpool_limits
+
+REPO = Path(__file__).resolve().parents[1]
+Arr = NDArray[np.float64]
+
+
+@dataclass
+class Track:
+    """One person's frames from one bag: 2D input and (if present) ground truth."""
+
+    name: str
+    points: list[Arr]
+    confidence: list[Arr]
+    truth: list[Arr | None]
+
+
+def load_tracks(paths: Sequence[str], max_frames: int) -> list[Track]:
+    """Per-(bag, track id) sequences of 12-joint 2D keypoints with ground truth."""
+    tracks: list[Track] = []
+    for path in paths:
+        inp: dict[int, list[tuple[int, Arr, Arr]]] = defaultdict(list)
+        gt: dict[tuple[int, int], Arr] = {}
+        for x in read_messages(path, [TOPIC_KEYPOINTS]):
+            s = m.stamp_to_ns(x.msg.header.stamp)
+            for sk in x.msg.skeletons:
+                try:
+                    pts, conf = m.skeleton2d_to_arrays(sk, x.msg.layout)
+                except InvalidInputError:
+                    continue
+                inp[int(sk.track_id)].append((s, pts, conf))
+        try:
+            for x in read_messages(path, [TOPIC_GROUND_TRUTH]):
+                s = m.stamp_to_ns(x.msg.header.stamp)
+                for sk in x.msg.skeletons:
+                    gt[(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
+        except Exception:  # bags without ground truth: no error column
+            pass
+        for tid, frames in sorted(inp.items()):
+            frames = frames[:max_frames]
+            tracks.append(Track(f"{Path(path).stem}#{tid}", [f[1] for f in frames], [f[2] for f in frames],
+                                [gt.get((f[0], tid)) for f in frames]))
+    return tracks
+
+
+def error(res: LiftResult, truth: Arr | None) -> float:
+    """P-MPJPE in right-lower-leg units (NaN without ground truth)."""
+    if truth is None:
+        return float("nan")
+    return float(p_mpjpe(res.pose, normalise_pose(truth)))
+
+
+def pct(a: Sequence[float], q: float) -> float:
+    return float(np.percentile(np.asarray(a), q)) if len(a) else float("nan")
+
+
+def lift_track(lifter: Lifter, tr: Track, warm_start: bool = True
+               ) -> tuple[list[LiftResult | None], list[float], list[float], list[bool]]:
+    """Lift a track frame by frame (warm from the previous frame) like the node does."""
+    results: list[LiftResult | None] = []
+    wall: list[float] = []
+    cpu: list[float] = []
+    warmed: list[bool] = []
+    warm: WarmStart | None = None
+    for pts, conf in zip(tr.points, tr.confidence, strict=True):
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            res: LiftResult | None = lifter.lift(pts, conf, warm=warm if warm_start else None)
+        except (InvalidInputError, TooFewJointsError):
+            res = None
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+        warmed.append(warm is not None and warm_start)
+        results.append(res)
+        warm = res.warm_start() if res is not None else None
+    return results, wall, cpu, warmed
+
+
+def _pool_worker(args: tuple[LifterOptions, Track]) -> list[tuple[Arr, float] | None]:
+    opts, tr = args
+    with threadpool_limits(1):
+        lf = Lifter(PoseBases.load(), opts)
+        res, *_ = lift_track(lf, tr)
+    return [None if r is None else (r.pose, r.objective) for r in res]
+
+
+def row(label: str, wall_ms: Sequence[float], cpu_ms: Sequence[float]) -> str:
+    return (f"  {label:<34s} n={len(wall_ms):4d}  median {pct(wall_ms, 50):9.1f}  p95 {pct(wall_ms, 95):9.1f}"
+            f"  max {pct(wall_ms, 100):9.1f} ms   (cpu median {pct(cpu_ms, 50):.1f} ms)")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--bags", nargs="*", default=sorted(glob.glob(str(REPO / "bags" / "*.mcap"))))
+    ap.add_argument("--frames", type=int, default=30, help="frames per track for the tracking run")
+    ap.add_argument("--cold", type=int, default=6, help="cold-start frames (spread over the tracks)")
+    ap.add_argument("--ref-frames", type=int, default=2, help="frames for the reference comparison")
+    ap.add_argument("--ref-alternations", type=int, default=2,
+                    help="alternations of both paths in the reference comparison (the reference is slow)")
+    ap.add_argument("--workers", type=int, default=2)
+    a = ap.parse_args(argv)
+    warnings.filterwarnings("ignore")
+    threadpool_limits(1)
+    bases = PoseBases.load()
+    tracks = load_tracks(a.bags, a.frames)
+    n_frames = sum(len(t.points) for t in tracks)
+    print(f"bench: {len(a.bags)} bags, {len(tracks)} tracks, {n_frames} person-frames; BLAS threads 1; "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cpus")
+    opts = LifterOptions()
+    print(f"options: defaults (n_starts={opts.n_starts}, n_refine={opts.n_refine}, "
+          f"max_alternations={opts.max_alternations}, alpha_solver={opts.alpha_solver})")
+
+    # 1. warm-started tracking (first frame of each track is cold and reported separately)
+    lf = Lifter(bases, opts)
+    wall_w: list[float] = []
+    cpu_w: list[float] = []
+    wall_c: list[float] = []
+    cpu_c: list[float] = []
+    errs: list[float] = []
+    objs: list[float] = []
+    t_all = time.perf_counter()
+    all_results: list[list[LiftResult | None]] = []
+    for tr in tracks:
+        res, wall, cpu, warmed = lift_track(lf, tr)
+        all_results.append(res)
+        for r, w_, c_, wm, gt in zip(res, wall, cpu, warmed, tr.truth, strict=True):
+            (wall_w if wm else wall_c).append(1e3 * w_)
+            (cpu_w if wm else cpu_c).append(1e3 * c_)
+            if r is not None:
+                errs.append(error(r, gt))
+                objs.append(r.objective)
+    t_track = time.perf_counter() - t_all
+    print("\nfast path, per person-frame:")
+    print(row("warm-started tracking", wall_w, cpu_w))
+    print(row("cold (first frame of a track)", wall_c, cpu_c))
+
+    # 2. cold starts with the full multi-start on frames spread over the tracks
+    wall_k: list[float] = []
+    cpu_k: list[float] = []
+    picks = [(t, i) for t in tracks for i in range(0, len(t.points), max(1, len(t.points) // 2))][: a.cold]
+    for tr, i in picks:
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            lf.lift(tr.points[i], tr.confidence[i])
+        except (InvalidInputError, TooFewJointsError):
+            continue
+        wall_k.append(1e3 * (time.perf_counter() - t0))
+        cpu_k.append(1e3 * (time.process_time() - c0))
+    print(row(f"cold, {opts.n_starts}-start multi-start", wall_k, cpu_k))
+    print(f"  tracking quality: mean objective {np.mean(objs):.4f}, P-MPJPE vs ground truth "
+          f"{np.nanmean(errs):.4f} (right-lower-leg units) over {len(errs)} frames")
+
+    # 3. offline throughput: one process, and a process pool over tracks (identical results?)
+    print("\noffline (per-track warm starts, all frames):")
+    print(f"  1 process: {n_frames / t_track:8.1f} poses/s")
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=a.workers) as ex:
+        pooled = list(ex.map(_pool_worker, [(opts, tr) for tr in tracks]))
+    t_pool = time.perf_counter() - t0
+    same = all(
+        (p is None and r is None) or (p is not None and r is not None and np.array_equal(p[0], r.pose)
+                                      and p[1] == r.objective)
+        for pr, rr in zip(pooled, all_results, strict=True) for p, r in zip(pr, rr, strict=True)
+    )
+    print(f"  {a.workers} processes: {n_frames / t_pool:8.1f} poses/s (incl. start-up), results identical "
+          f"to the per-frame path: {same}")
+
+    # 4. fast vs reference path on a few frames, same options apart from the solvers
+    if a.ref_frames > 0:
+        reference_comparison(bases, tracks, a.ref_frames, a.ref_alternations)
+
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    kb_c = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    print(f"\npeak RSS: {kb / 1024:.0f} MB (this process), {kb_c / 1024:.0f} MB (largest pool worker)")
+    return 0
+
+
+def reference_comparison(bases: PoseBases, tracks: list[Track], n_frames: int, n_alt: int) -> None:
+    """Fast and reference paths on the first frames of the first track (same start, options)."""
+    print(f"\nfast vs cvxpy+Clarabel reference ({n_frames} frames, one start, "
+          f"{n_alt} alternations, inner ADM alpha-step on both):")
+    base = LifterOptions(n_starts=1, max_alternations=n_alt, alpha_solver="admm", warm_flip=False)
+    variants = {
+        "fast (admm Q-step closed form)": base,
+        "fast (default newton alpha-step)": base.replace(alpha_solver="newton"),
+        "reference (Clarabel Q-step, LP camera)": base.replace(camera_solver="cvxpy", pose_solver="cvxpy"),
+    }
+    frames = [(tr, i) for tr in tracks[:1] for i in range(min(n_frames, len(tr.points)))]
+    out: dict[str, tuple[list[float], list[float], list[float]]] = {}
+    for label, o in variants.items():
+        lfv = Lifter(bases, o)
+        ts, ob, er = [], [], []
+        for tr, i in frames:
+            t0 = time.perf_counter()
+            r = lfv.lift(tr.points[i], tr.confidence[i])
+            ts.append(1e3 * (time.perf_counter() - t0))
+            ob.append(r.objective)
+            er.append(error(r, tr.truth[i]))
+        out[label] = (ts, ob, er)
+        print(f"  {label:<40s} median {pct(ts, 50):10.1f} ms  objective {np.mean(ob):.4f}  "
+              f"P-MPJPE {np.nanmean(er):.4f}")
+    ref = out["reference (Clarabel Q-step, LP camera)"]
+    for label in list(variants)[:2]:
+        ts, ob, er = out[label]
+        print(f"  {label}: {pct(ref[0], 50) / pct(ts, 50):7.1f}x faster; objective rel. diff "
+              f"{np.max(np.abs(np.array(ob) - ref[1]) / np.abs(ref[1])):.2%} (max), 3D error rel. diff "
+              f"{np.nanmax(np.abs(np.array(er) - ref[2]) / np.array(ref[2])):.2%} (max)")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
