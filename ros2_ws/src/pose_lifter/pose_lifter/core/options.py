@@ -108,6 +108,8 @@ class LifterOptions:
         Carry the ADM multipliers of the camera and pose steps from one alternation to the
         next (warm start of the dual as well as the primal variables); False restarts them
         at zero in every step.
+    newton_tol : float
+        Relative KKT tolerance of each Newton alpha-step inside the pose ADM.
     """
 
     variant: str = "full"
@@ -135,6 +137,7 @@ class LifterOptions:
     camera_solver: str = "admm"
     pose_solver: str = "admm"
     warm_duals: bool = False
+    newton_tol: float = 1e-9
 
     def __post_init__(self) -> None:
         self.validate()
@@ -157,7 +160,7 @@ class LifterOptions:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0.0 <= float(v) <= 1e6:
                 raise OptionsError(f"{name} must be in [0, 1e6], got {v!r}")
-        for name in ("alternation_tol", "pose_tol", "inner_tol", "camera_tol"):
+        for name in ("alternation_tol", "pose_tol", "inner_tol", "camera_tol", "newton_tol"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0.0 < float(v) < 1.0:
                 raise OptionsError(f"{name} must be in (0, 1), got {v!r}")

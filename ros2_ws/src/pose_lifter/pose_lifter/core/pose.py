@@ -43,6 +43,8 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dgesv as _dgesv
+from scipy.linalg.lapack import dpotrf as _dpotrf
 
 from .bases import PoseBases
 from .errors import InvalidInputError
@@ -365,6 +367,15 @@ def newton_reduced(
 
 
 _EYE8 = 1e-14 * np.eye(8)
+
+
+def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a^-1 b`` by LAPACK gesv called directly (numpy's wrapper costs more than the solve
+    at these sizes); least squares if ``a`` is singular."""
+    _, _, x, info = _dgesv(a, b)
+    if info != 0:
+        return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])
+    return np.asarray(x)
 AUGMENTED_PD_TEST = True
 SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
@@ -393,7 +404,7 @@ def _newton_reduced(
             if np.abs(g).max() < 1e-12:
                 break
             jac = jacobian(lv)
-            s = s - jac.T @ np.linalg.solve(jac @ jac.T + _EYE8, g)
+            s = s - jac.T @ _solve(jac @ jac.T + _EYE8, g)
         return s
 
     s = project(s0.copy(), 30)
@@ -421,18 +432,13 @@ def _newton_reduced(
             test = hess + (10.0 * float(np.abs(hess).max()) / max(float(np.abs(jtj).max()), 1e-300)) * jtj
         else:
             test = hess
-        try:
-            np.linalg.cholesky(test)
-        except np.linalg.LinAlgError:
+        if _dpotrf(test, lower=1, clean=0)[1] != 0:  # not positive definite
             hess = g2
         kmat[:r, :r] = hess
         kmat[:r, r:] = jac.T
         kmat[r:, :r] = jac
         rhs = -np.concatenate([grad, g])
-        try:
-            sol = np.linalg.solve(kmat, rhs)
-        except np.linalg.LinAlgError:
-            sol = np.linalg.lstsq(kmat, rhs, rcond=None)[0]
+        sol = _solve(kmat, rhs)
         ds, nu_new = sol[:r], sol[r:]
         rho = max(rho, 2.0 * float(np.abs(nu_new).max()))
         f0 = float(s @ gs - 2.0 * lin @ s) + rho * float(np.abs(g).sum())
@@ -445,7 +451,7 @@ def _newton_reduced(
             # good full step because of the constraints' curvature): one min-norm step back
             # towards the constraint manifold from s + ds, tried before any step halving
             jc = jacobian(lvc)
-            soc = cand - jc.T @ np.linalg.solve(jc @ jc.T + _EYE8, gc)
+            soc = cand - jc.T @ _solve(jc @ jc.T + _EYE8, gc)
             gs2, _ = cons(soc)
             if float(soc @ gmat @ soc - 2.0 * lin @ soc) + rho * float(np.abs(gs2).sum()) <= f0 + 1e-12:
                 s = soc
@@ -494,6 +500,7 @@ def pose_step(
     qstep_fn: QStepFn | None = None,
     duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
+    newton_tol: float = 1e-9,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
 
@@ -530,6 +537,8 @@ def pose_step(
         ``beta = alpha``, e.g. from the previous alternation (default zeros).
     state_out : list, optional
         If given, the final unscaled multipliers are appended to it (for the next warm start).
+    newton_tol : float
+        Relative KKT tolerance of the reduced Newton alpha-step (``alpha_solver="newton"``).
 
     Returns
     -------
@@ -588,7 +597,7 @@ def pose_step(
             z0 = np.append(v.T @ alpha, 1.0)
         if alpha_solver == "newton" and not full:
             vtd2 = v.T @ d2
-            s = _newton_reduced(g_red, lin, model, z0[:-1])[0]
+            s = _newton_reduced(g_red, lin, model, z0[:-1], tol=newton_tol)[0]
             return np.asarray(d2 - v @ vtd2 + v @ s)
         if alpha_solver == "newton":
             z = newton_alpha(wmat, cons, z0).z
