@@ -36,6 +36,7 @@ inner ADM by a direct local solver of the same problem (SQP / Newton on the KKT 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
@@ -418,8 +419,9 @@ def _newton_reduced(
         jac = jacobian(lv)
         gs = gmat @ s
         grad = 2.0 * (gs - lin)
-        kkt = np.linalg.norm(grad + jac.T @ nu) + np.linalg.norm(g)
-        if kkt < tol * max(1.0, float(np.linalg.norm(grad))):
+        res_d = grad + jac.T @ nu
+        kkt = math.sqrt(float(res_d @ res_d)) + math.sqrt(float(g @ g))
+        if kkt < tol * max(1.0, math.sqrt(float(grad @ grad))):
             it -= 1
             break
         hess = g2 + (nu @ hc).reshape(r, r)
@@ -441,10 +443,16 @@ def _newton_reduced(
         sol = _solve(kmat, rhs)
         ds, nu_new = sol[:r], sol[r:]
         rho = max(rho, 2.0 * float(np.abs(nu_new).max()))
-        f0 = float(s @ gs - 2.0 * lin @ s) + rho * float(np.abs(g).sum())
+        q0 = float(s @ gs - 2.0 * lin @ s)
+        f0 = q0 + rho * float(np.abs(g).sum())
         a = 1.0
         cand = s + ds
         gc, lvc = cons(cand)
+        # along the step the objective is the quadratic q0 + a q1 + a^2 q2 and the limb vectors
+        # are affine in a: no matrix products in the backtracking loop
+        q1 = float(grad @ ds)
+        q2 = float(ds @ gmat @ ds)
+        dlv = lvc - lv
         if SECOND_ORDER_CORRECTION and float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(
                 np.abs(gc).sum()) > f0 + 1e-12:
             # second-order correction (against the Maratos effect: the l1 merit rejecting a
@@ -458,12 +466,12 @@ def _newton_reduced(
                 nu = nu_new
                 continue
         while a > 1e-4:
-            if float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(np.abs(gc).sum()) <= f0 + 1e-12:
+            if q0 + a * (q1 + a * q2) + rho * float(np.abs(gc).sum()) <= f0 + 1e-12:
                 break
             a *= 0.5
-            cand = s + a * ds
-            gc, _ = cons(cand)
-        s = cand
+            lva = lv + a * dlv
+            gc = (lva * lva).reshape(8, 3).sum(axis=1) - lsq
+        s = s + a * ds if a < 1.0 else cand
         nu = nu_new
     return project(s, 10), nu, it
 
@@ -587,6 +595,9 @@ def pose_step(
             lin = mus.T @ d1 + vtd2
             if not variant.limbs:
                 s = np.linalg.solve(g_red, lin)
+                return np.asarray(d2 - v @ vtd2 + v @ s)
+            if alpha_solver == "newton":
+                s = _newton_reduced(g_red, lin, model, v.T @ alpha, tol=newton_tol)[0]
                 return np.asarray(d2 - v @ vtd2 + v @ s)
             r = sig.size
             wmat = np.zeros((r + 1, r + 1))
