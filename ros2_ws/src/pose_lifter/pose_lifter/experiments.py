@@ -438,6 +438,11 @@ def _aggregate(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[dict
     return out
 
 
+# Curves over a condition show mean P-MPJPE: the leg-unit error rescales each estimate by its own
+# right lower leg, so one short-legged estimate can dominate a mean over few poses (see tables).
+_MM_LABEL = "mean P-MPJPE (mm, similarity-aligned)"
+
+
 def _plt() -> Any:
     import matplotlib
 
@@ -527,18 +532,18 @@ def _lift_output(out: Path, name: str, rows: list[dict[str, Any]], keys: list[st
         conds = list(dict.fromkeys((r["cond"], r["level"]) for r in agg))
         xs = np.arange(len(conds))
         for m in order:
-            cell = {(r["cond"], r["level"]): r["err_mean"] for r in agg if r["method"] == m}
+            cell = {(r["cond"], r["level"]): r["pmpjpe_mean"] for r in agg if r["method"] == m}
             ys = [cell.get(c, np.nan) for c in conds]
             ax.plot(xs, ys, marker="o", label=m, **_style(m))
         ax.set_xticks(xs, [c if c == "clean" else f"{int(n)} {c}" for c, n in conds], rotation=20)
-        ax.set(ylabel="mean ||y - y_hat||_2 (leg units)")
+        ax.set(ylabel=_MM_LABEL)
     else:
         for m in order:
             rs = sorted((r for r in agg if r["method"] == m), key=lambda r: r["level"])
-            ax.plot([r["level"] for r in rs], [r["err_mean"] for r in rs], marker="o", ms=3, label=m,
+            ax.plot([r["level"] for r in rs], [r["pmpjpe_mean"] for r in rs], marker="o", ms=3, label=m,
                     **_style(m))
         ax.set(xlabel="2D noise std (right lower leg units)" if name == "exp3_noise" else "yaw (degrees)",
-               ylabel="mean ||y - y_hat||_2 (leg units)")
+               ylabel=_MM_LABEL)
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
