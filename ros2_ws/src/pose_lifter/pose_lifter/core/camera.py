@@ -54,7 +54,7 @@ def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
     c = b0 * b0 + b1 * b1 + b2 * b2
     b = a0 * b0 + a1 * b1 + a2 * b2
     det = a * c - b * b
-    if det > 1e-20 * (a + c) ** 2 and det > 0.0:
+    if det > 1e-8 * (a + c) ** 2:  # else (near) rank 1: cancellation in det, use the SVD
         sd = math.sqrt(det)
         f = 0.5 / sd
         p, q, r = f * (c + sd), -f * b, f * (a + sd)

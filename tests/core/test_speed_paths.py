@@ -1,0 +1,31 @@
+"""Agreement checks of the fast-path implementation details (no timing assertions)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from pose_lifter.core.camera import project_scaled_orthographic
+
+Arr = NDArray[np.float64]
+
+
+def _svd_projection(n: Arr) -> Arr:
+    u, s, vt = np.linalg.svd(n, full_matrices=False)
+    return np.asarray(s.mean() * (u @ vt))
+
+
+def test_closed_form_scaled_orthographic_projection_equals_the_svd() -> None:
+    rng = np.random.default_rng(0)
+    for i in range(500):
+        n = rng.normal(size=(2, 3)) * 10.0 ** rng.uniform(-3, 3)
+        if i % 5 == 0:  # nearly rank 1
+            n[1] = n[0] * rng.normal() + 1e-7 * rng.normal(size=3)
+        got = project_scaled_orthographic(n)
+        ref = _svd_projection(n)
+        # the nearest point is unique unless n is exactly rank 1; compare distances then too
+        assert np.linalg.norm(got - n) <= np.linalg.norm(ref - n) * (1 + 1e-9) + 1e-12
+        if np.linalg.svd(n, compute_uv=False)[1] > 1e-6 * np.linalg.norm(n):
+            np.testing.assert_allclose(got, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+        # always a scaled orthographic matrix
+        g = got @ got.T
+        np.testing.assert_allclose(g, g[0, 0] * np.eye(2), atol=1e-6 * max(1.0, g[0, 0]))
