@@ -344,9 +344,6 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     assert not any(warm_flags[0]) and all(all(f) for f in warm_flags[1:])
     assert not any(s.warm_started for a in cold for s in a.skeletons.skeletons)
     assert len(warm) == len(cold) == BAG_FRAMES
-    it_warm = np.array([s.iterations for a in warm[1:] for s in a.skeletons.skeletons], dtype=float)
-    it_cold = np.array([s.iterations for a in cold[1:] for s in a.skeletons.skeletons], dtype=float)
-    assert it_warm.mean() < it_cold.mean()
 
     # the node computes what the offline lift computes (same options, same warm starts)
     offline = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],
@@ -370,3 +367,8 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     table = ev.table()
     assert table["lifter"]["p_mpjpe_mm"] < table["flat_floor"]["p_mpjpe_mm"]
     assert table["lifter"]["p_mpjpe_mm"] < table["mean_pose_floor"]["p_mpjpe_mm"]
+
+    # warm-started frames need fewer alternations than the same frames from a single cold start
+    it_warm = np.array([s.iterations for a in warm[1:] for s in a.skeletons.skeletons], dtype=float)
+    it_cold = np.array([s.iterations for a in cold[1:] for s in a.skeletons.skeletons], dtype=float)
+    assert it_warm.mean() < it_cold.mean(), (it_warm, it_cold)
