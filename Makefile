@@ -36,7 +36,7 @@ $(VENV)/.stamp: requirements.lock $(PKG)/setup.py $(PKG)/setup.cfg
 venv: $(VENV)/.stamp
 
 lock:
-	$(UV) pip compile --system-certs -p $(PY) requirements.in -o requirements.lock
+	$(UV) pip compile --system-certs -p .venv/bin/python requirements.in -o requirements.lock
 
 lint: venv
 	$(VENV)/bin/ruff check $(PKG)/pose_lifter tests tools

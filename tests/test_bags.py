@@ -75,9 +75,9 @@ REPLAY = {"every": 10, "max_messages": 4, "n_starts": 3}
 #: bag -> (P-MPJPE mm upper band, MPJPE mm upper band): measured with REPLAY plus ~25 % margin
 #: (bags/README.md, "Error bands"). Three bags keep the suite short; the README lists all six.
 BANDS: dict[str, tuple[float, float]] = {
-    "walk_clean": (170.0, 230.0),  # measured 133 / 180
-    "punch_outliers": (170.0, 225.0),  # measured 135 / 176
-    "two_people": (150.0, 255.0),  # measured 117 / 203
+    "walk_clean": (75.0, 95.0),  # measured 57 / 72
+    "punch_outliers": (185.0, 275.0),  # measured 148 / 219
+    "two_people": (125.0, 185.0),  # measured 99 / 148
 }
 
 

@@ -28,7 +28,7 @@ def fake_result(rotation: np.ndarray, scale: float, translation: np.ndarray, see
     return LiftResult(
         pose=pose, pose_camera=pose @ rotation.T, camera=cam, alpha=np.zeros(5), objective=1.5,
         reprojection_error=2.5, limb_violation=0.0, n_iter=7, converged=True, n_starts=3,
-        start_index=1, weights=np.ones(12),
+        start_index=1, weights=np.ones(12), total_alternations=19,
     )
 
 
@@ -102,7 +102,7 @@ def test_result_to_skeleton3d_fields_and_inverse() -> None:
     arr = m.skeletons3d_array(m.make_header(5, "camera_optical", T), [msg], T)
     back = roundtrip(arr, "pose_lifter_msgs/msg/Skeleton3DArray").skeletons[0]
     assert back.track_id == 7 and list(back.joint_names) == list(JOINT_NAMES)
-    assert back.iterations == 7 and back.converged and back.warm_started
+    assert back.iterations == 19 and back.converged and back.warm_started
     assert back.objective == 1.5 and back.reprojection_error == 2.5 and back.solve_time == 0.01
     np.testing.assert_allclose(m.skeleton3d_to_joints(back), joints)
     np.testing.assert_allclose(np.asarray(back.camera.projection).reshape(2, 3), 80.0 * rot[:2])

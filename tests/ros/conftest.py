@@ -8,6 +8,7 @@ localhost-only discovery, so parallel runs and other machines never see each oth
 from __future__ import annotations
 
 import ctypes
+import itertools
 import os
 import random
 import signal
@@ -30,6 +31,8 @@ PARAMS_YAML = INSTALL / "pose_lifter" / "share" / "pose_lifter" / "config" / "li
 DISCOVERY_TIMEOUT = 120.0
 ANSWER_TIMEOUT = 180.0
 SHUTDOWN_TIMEOUT = 10.0
+#: frame_id of the empty frames of the start-up handshake (see GraphClient._handshake).
+HANDSHAKE_FRAME = "pose_lifter_test_handshake"
 
 
 def _require_build() -> None:
@@ -223,6 +226,40 @@ class GraphClient:
                     and self.sub_markers.get_publisher_count() > 0
                     and self.set_client.service_is_ready() and self.get_client.service_is_ready())
         self.spin_until(ready, DISCOVERY_TIMEOUT, "discovery of the lifter")
+        self._handshake()
+
+    def _handshake(self) -> None:
+        """Publish empty frames until the lifter answers one: its best-effort reader has then
+        matched this writer (the writer-side match that ``ready`` sees can come first, and a
+        frame published in between is dropped by design). The handshake's answers are discarded.
+        """
+        from pose_lifter.messages import make_header, stamp_to_ns
+
+        deadline = time.monotonic() + DISCOVERY_TIMEOUT
+        for i in itertools.count(1):
+            self.pub_keypoints.publish(self.types.Skeleton2DArray(
+                header=make_header(i, HANDSHAKE_FRAME, self.types), layout="coco17", skeletons=[]))
+            wait_until = time.monotonic() + 1.0
+            while time.monotonic() < wait_until:
+                self.executor.spin_once(timeout_sec=0.05)
+                # answers come in order: one to an earlier probe (late, not lost) comes before this one
+                if any(a.header.frame_id == HANDSHAKE_FRAME and stamp_to_ns(a.header.stamp) == i
+                       for a in self.skeletons):
+                    break
+            else:
+                if time.monotonic() > deadline:
+                    log = self.lifter.log()[-3000:] if self.lifter is not None else ""
+                    pytest.fail(f"the lifter never answered a handshake frame; lifter log tail:\n{log}")
+                continue
+            break
+        # each answer's MarkerArray follows it (when markers are on): let them arrive, then drop all
+        end = time.monotonic() + 2.0
+        while len(self.markers) < len(self.skeletons) and time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+        if any(a.header.frame_id != HANDSHAKE_FRAME for a in self.skeletons):
+            pytest.fail("an answer to a frame this test never sent arrived during the handshake")
+        self.skeletons.clear()
+        self.markers.clear()
 
     def send(self, frame: Any, expect_markers: bool = True, timeout: float = ANSWER_TIMEOUT) -> Answer:
         """Publish one Skeleton2DArray (message or CDR bytes) and wait for its answer.

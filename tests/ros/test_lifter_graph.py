@@ -60,6 +60,15 @@ def good_frame(t: Any, i: int, track_id: int = 0, yaw_deg: float = 30.0) -> Any:
     return frame(t, 1_000_000_000 + i * 100_000_000, [(track_id, kp, c)])
 
 
+def test_params_yaml_is_the_generated_one() -> None:
+    from pose_lifter.node import params_yaml
+
+    source = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
+    assert source.read_text() == params_yaml(), (
+        "config/lifter.yaml is stale: python -m pose_lifter.node --params-yaml > config/lifter.yaml")
+    assert PARAMS_YAML.read_text() == source.read_text(), "the installed copy is stale: make ros"
+
+
 def test_params_yaml_is_loaded_and_every_key_declared(start_lifter: Any, graph: GraphClient) -> None:
     lifter = start_lifter(params_file=PARAMS_YAML)
     graph.wait_for_lifter(lifter)
@@ -140,14 +149,15 @@ def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: 
     assert not r.successful
     # nothing of the refused changes stuck
     names = ("alternation_tol", "variant", "limb_proportions", "bases_file", "n_starts")
-    assert graph.get_parameters(*names) == {
-        "alternation_tol": 1e-4, "variant": "full", "limb_proportions": "bases", "bases_file": "",
-        "n_starts": 3}
+    from pose_lifter.node import PARAMS
+
+    defaults = {p.name: p.default for p in PARAMS}
+    assert graph.get_parameters(*names) == {**{n: defaults[n] for n in names}, "n_starts": 3}
     assert lifter.alive()
 
 
 def test_bad_input_never_kills_the_node_nor_publishes_nan(start_lifter: Any, graph: GraphClient) -> None:
-    lifter = start_lifter(params=CHEAP)
+    lifter = start_lifter(params={**CHEAP, "stats_period": 2.0})
     graph.wait_for_lifter(lifter)
     t = graph.types
     kp, c = coco_keypoints(STANDING, 30.0)
@@ -199,8 +209,16 @@ def test_bad_input_never_kills_the_node_nor_publishes_nan(start_lifter: Any, gra
     assert [s.track_id for s in answer.skeletons.skeletons] == [0, 1]
 
     assert lifter.alive()
-    log = lifter.log()
-    assert "skeleton skipped" in log and "rate-limited" in log
+    # one warning stream, rate-limited (5 s): far fewer warnings than bad skeletons
+    warnings = [line for line in lifter.log().splitlines() if line.startswith("[WARN]")]
+    assert 1 <= len(warnings) < 5 and all("rate-limited" in w for w in warnings), warnings
+    # the periodic statistics line counts every skipped skeleton by kind, with the latencies
+    def stats_lines() -> list[str]:
+        return [line for line in lifter.log().splitlines() if line.startswith("[INFO]") and "skipped:" in line]
+
+    graph.spin_until(lambda: any("absurd coordinates" in line for line in stats_lines()), 30.0,
+                     "a statistics line counting the absurd coordinates")
+    assert all("latency median" in line for line in stats_lines()), stats_lines()
 
 
 def test_markers_per_track_and_deleted_when_a_track_disappears(start_lifter: Any, graph: GraphClient) -> None:
@@ -268,8 +286,10 @@ def test_depth_from_camera_info_or_default_distance(start_lifter: Any, graph: Gr
 #: The committed bag replayed into the graph (see bags/README.md) and how many of its frames.
 BAG = REPO / "bags" / "two_people.mcap"  # a walker (track 0) and a boxer (track 1), 2D noise
 BAG_FRAMES = 8
+#: The bag's offline error bands (P-MPJPE, MPJPE mm; bags/README.md and tests/test_bags.py).
+TWO_PEOPLE_BAND = (125.0, 185.0)
 #: Cold starts of the node in this test (and of the offline lift it is compared with).
-N_STARTS = 2
+N_STARTS = 4
 
 
 def _to_rosbags(msg: Any, msgtype: str) -> Any:
@@ -324,9 +344,8 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
         return answers
 
     warm = replay(BAG_FRAMES)
-    # the same frames again, every solve from the mean pose alone (a single cold start): a fair
-    # start-for-start comparison with the warm starts (changed live through the parameters)
-    assert all(r.successful for r in graph.set_parameters(warm_start=False, n_starts=1))
+    # the same frames again, every solve cold (the node's multi-start), changed live
+    assert all(r.successful for r in graph.set_parameters(warm_start=False))
     cold = replay(BAG_FRAMES)
 
     # every frame answered, same stamp and frame, one Skeleton3D per input skeleton, no NaN
@@ -365,10 +384,12 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     ev = evaluate_bag(out)
     assert ev.n_matched == sum(len(x.msg.skeletons) for x in keypoints)
     table = ev.table()
-    assert table["lifter"]["p_mpjpe_mm"] < table["flat_floor"]["p_mpjpe_mm"]
+    assert table["lifter"]["p_mpjpe_mm"] < TWO_PEOPLE_BAND[0]
+    assert table["lifter"]["mpjpe_mm"] < TWO_PEOPLE_BAND[1]
     assert table["lifter"]["p_mpjpe_mm"] < table["mean_pose_floor"]["p_mpjpe_mm"]
 
-    # warm-started frames need fewer alternations than the same frames from a single cold start
+    # warm-started frames need fewer alternations (summed over the solve's starts: the work) than
+    # the same frames solved cold
     it_warm = np.array([s.iterations for a in warm[1:] for s in a.skeletons.skeletons], dtype=float)
     it_cold = np.array([s.iterations for a in cold[1:] for s in a.skeletons.skeletons], dtype=float)
     assert it_warm.mean() < it_cold.mean(), (it_warm, it_cold)

@@ -313,7 +313,7 @@ def result_to_skeleton3d(
         camera=camera_estimate(result, types),
         objective=float(result.objective),
         reprojection_error=float(result.reprojection_error),
-        iterations=int(result.n_iter),
+        iterations=int(result.total_alternations),
         converged=bool(result.converged),
         solve_time=float(solve_time),
         warm_started=bool(warm_started),

@@ -51,7 +51,7 @@ from .core import Lifter, LifterOptions, PoseBases, PoseLifterError, WarmStart
 from .core.errors import InvalidInputError, OptionsError
 from .core.layouts import Layout, get_layout
 
-__all__ = ["PARAMS", "LifterNode", "ParamSpec", "TrackState", "main"]
+__all__ = ["PARAMS", "LifterNode", "ParamSpec", "TrackState", "main", "params_yaml"]
 
 NODE_NAME: Final[str] = "pose_lifter"
 MARKER_NS: Final[str] = "pose_lifter"
@@ -124,6 +124,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("camera_max_iter", "Iteration cap of the camera-step ADM.", 1, 10000),
     _opt("camera_tol", "Tolerance of the camera-step ADM, in (0, 1).", 0.0, 1.0),
     _opt("n_starts", "Starts of a cold (multi-start) solve; 1 = mean pose only.", 1, 1000),
+    _opt("n_refine", "Cold starts continued to convergence after one screening alternation each.", 1, 1000),
+    _opt("warm_flip", "Warm solves also try the depth-mirrored previous pose (weak-perspective ambiguity)."),
     _opt("confidence_threshold", "Keypoints with lower confidence are treated as missing.", 0.0, 1.0),
     _opt("min_visible_joints", "Skip a skeleton with fewer visible model joints.", 3, 12),
     _opt("limb_proportions", "Limb-length targets: 'bases' (training mean) or 'anthropometric'."),
@@ -143,6 +145,54 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               read_only=True),
 )
 _SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
+
+_YAML_HEAD: Final[str] = """\
+# Parameters of the pose_lifter node (ros2 run pose_lifter lifter --ros-args --params-file <this>).
+# Generated from pose_lifter.node.PARAMS (the node's declared defaults) by
+#   python -m pose_lifter.node --params-yaml > config/lifter.yaml
+# and checked by tests/ros/test_lifter_graph.py (the node starts with it and reports these values).
+# Doubles are written with a decimal point (ROS parameters are typed).
+pose_lifter:
+  ros__parameters:
+"""
+
+_YAML_TAIL: Final[str] = """\
+    # QoS of the topics can be overridden at start-up (QoSOverridingOptions), e.g. a reliable
+    # input with a deeper queue for a detector that publishes reliably:
+    # qos_overrides:
+    #   /keypoints_2d:
+    #     subscription:
+    #       reliability: reliable
+    #       depth: 20
+"""
+
+
+def _yaml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, float):
+        text = repr(value)
+        if "e" in text and "." not in text.split("e")[0]:
+            mantissa, exponent = text.split("e")
+            text = f"{mantissa}.0e{exponent}"
+        return text
+    return str(value)
+
+
+def params_yaml() -> str:
+    """``config/lifter.yaml``: every parameter with its default, description and range."""
+    lines = [_YAML_HEAD]
+    for p in PARAMS:
+        note = p.description
+        if p.low is not None and p.high is not None:
+            note += f" [{p.low:g}, {p.high:g}]"
+        if p.read_only:
+            note += " (read-only: set at start-up)"
+        lines.append(f"    # {note}\n    {p.name}: {_yaml_value(p.default)}\n")
+    lines.append(_YAML_TAIL)
+    return "".join(lines)
 
 
 @dataclass(frozen=True)
@@ -449,10 +499,11 @@ class LifterNode(Node):
         solve = np.asarray(s.solve_times) * 1e3
         text = (f"{s.frames} frames ({s.frames / elapsed:.1f} Hz), {s.lifted} skeletons "
                 f"({s.warm} warm)")
-        if lat.size:
-            text += f", latency mean {lat.mean():.1f} ms p95 {np.percentile(lat, 95):.1f} ms"
-        if solve.size:
-            text += f", solve mean {solve.mean():.1f} ms"
+        if lat.size:  # per frame, callback in -> answer published
+            text += (f", latency median {np.median(lat):.1f} ms p95 {np.percentile(lat, 95):.1f} ms "
+                     f"max {lat.max():.1f} ms")
+        if solve.size:  # per person-frame
+            text += f", solve median {np.median(solve):.1f} ms p95 {np.percentile(solve, 95):.1f} ms"
         if s.skipped:
             text += ", skipped: " + ", ".join(f"{k} {n}" for k, n in sorted(s.skipped.items()))
         self.get_logger().info(text)
@@ -461,6 +512,11 @@ class LifterNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter lifter``."""
+    import sys
+
+    if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:
+        print(params_yaml(), end="")
+        return
     rclpy.init(args=args)
     node: LifterNode | None = None
     try:

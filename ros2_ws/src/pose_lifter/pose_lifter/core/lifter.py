@@ -254,13 +254,17 @@ class Lifter:
             runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
             if self._options.warm_flip:
                 runs.append((-2, self._run(xn, w, self._mirrored_alpha(runs[0][1]), None)))
+            total = sum(r.n_iter for _, r in runs)
         else:
             starts = self.bases.with_starts(self._options.n_starts)
             runs = [(i, self._run(xn, w, a, None, max_alternations=1)) for i, a in enumerate(starts)]
+            n_screened = len(runs)
             if len(runs) > 1:  # screen: continue only the most promising starts
                 runs.sort(key=lambda r: r[1].objective)
                 runs = runs[: self._options.n_refine]
             runs = [(i, self._run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
+            # a continued run's n_iter counts its screening alternation too
+            total = n_screened - len(runs) + sum(r.n_iter for _, r in runs)
         idx, run = min(runs, key=lambda r: r[1].objective)
         cam_n = run.camera.camera
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
@@ -281,6 +285,7 @@ class Lifter:
             n_starts=len(runs) if warm is not None else len(self.bases.with_starts(self._options.n_starts)),
             start_index=idx,
             weights=w,
+            total_alternations=total,
         )
         for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
             if not np.all(np.isfinite(arr)):

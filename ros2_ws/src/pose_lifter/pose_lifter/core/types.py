@@ -123,6 +123,10 @@ class LiftResult:
         Which start won (-1 = the warm start, -2 = its depth-mirrored copy).
     weights : ndarray, shape (12,)
         Per-joint weights used in the loss (0 = missing).
+    total_alternations : int
+        Camera/pose alternations over all starts (the solve's work: a cold solve's screening
+        alternation of every start plus the refined starts' further ones; a warm solve's
+        warm and mirrored runs).
     """
 
     pose: NDArray[np.float64]
@@ -137,6 +141,7 @@ class LiftResult:
     n_starts: int
     start_index: int
     weights: NDArray[np.float64]
+    total_alternations: int = 0
 
     def warm_start(self) -> WarmStart:
         """The state to warm-start the next frame of the same person."""
