@@ -214,7 +214,8 @@ def test_bad_input_never_kills_the_node_nor_publishes_nan(start_lifter: Any, gra
     assert 1 <= len(warnings) < 5 and all("rate-limited" in w for w in warnings), warnings
     # the periodic statistics line counts every skipped skeleton by kind, with the latencies
     def stats_lines() -> list[str]:
-        return [line for line in lifter.log().splitlines() if line.startswith("[INFO]") and "skipped:" in line]
+        lines = lifter.log().splitlines()
+        return [line for line in lines if line.startswith("[INFO]") and "skipped:" in line]
 
     graph.spin_until(lambda: any("absurd coordinates" in line for line in stats_lines()), 30.0,
                      "a statistics line counting the absurd coordinates")
