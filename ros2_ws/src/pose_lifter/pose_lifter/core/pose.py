@@ -378,14 +378,18 @@ def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
         return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])
     return np.asarray(x)
 AUGMENTED_PD_TEST = True
+#: Start each SQP alpha-step from the previous ADM iteration's multipliers (measured on 3 bags x 30
+#: tracked frames: SQP iterations unchanged ~9.6 per call, objective 0.703/1.467 -> 0.713/1.396).
+WARM_MULTIPLIERS = True
 SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
 
 def _newton_reduced(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
-    max_iter: int = 10, tol: float = 1e-9,
+    max_iter: int = 10, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
-    """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``."""
+    """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``; ``nu0``
+    warm-starts the multipliers (e.g. from the previous ADM iteration's alpha-step)."""
     r = s0.size
     cu24 = model.limb_cu.reshape(24, r)
     cmu24 = model.limb_cmu.reshape(24)
@@ -409,7 +413,7 @@ def _newton_reduced(
         return s
 
     s = project(s0.copy(), 30)
-    nu = np.zeros(8)
+    nu = np.zeros(8) if nu0 is None else nu0.copy()
     rho = 10.0
     kmat = np.zeros((r + 8, r + 8))
     g2 = 2.0 * gmat
@@ -577,6 +581,7 @@ def pose_step(
         g_full = a_full.T @ a_full + np.eye(k)
     g_red = mus.T @ mus + np.eye(sig.size)
     cons = model.full if full else model.reduced
+    nu_prev: list[NDArray[np.float64] | None] = [None]
 
     def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
                      ) -> NDArray[np.float64]:
@@ -597,7 +602,9 @@ def pose_step(
                 s = np.linalg.solve(g_red, lin)
                 return np.asarray(d2 - v @ vtd2 + v @ s)
             if alpha_solver == "newton":
-                s = _newton_reduced(g_red, lin, model, v.T @ alpha, tol=newton_tol)[0]
+                s, nu, _ = _newton_reduced(g_red, lin, model, v.T @ alpha, tol=newton_tol,
+                                               nu0=nu_prev[0] if WARM_MULTIPLIERS else None)
+                nu_prev[0] = nu
                 return np.asarray(d2 - v @ vtd2 + v @ s)
             r = sig.size
             wmat = np.zeros((r + 1, r + 1))
