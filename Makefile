@@ -15,13 +15,14 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast lint demo bench experiments bases bags lock clean ros
+.PHONY: help venv test test-fast lint demo bench bench-node experiments bases bags lock clean ros
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
 	@echo "make test        ruff + mypy + all tests (offline and ROS graph)"
 	@echo "make ros         build ros2_ws (messages + node) with colcon"
 	@echo "make bench       speed: fast path vs cvxpy reference, side by side"
+	@echo "make bench-node  speed of the installed node at 30 Hz with 5 people"
 	@echo "make experiments the paper's experiments on CMU data -> out/experiments"
 	@echo "make bases       re-learn the packaged basis file from ../shared/data/cmu"
 	@echo "make bags        regenerate the committed bags from ../shared/data/cmu"
@@ -53,6 +54,10 @@ demo: venv
 
 bench: venv ros
 	$(PY) tools/bench.py
+
+# the installed node fed bags/five_people.mcap at 30 Hz (issue 5's live measurement)
+bench-node: venv ros
+	source ros2_ws/install/setup.bash && $(PY) tools/bench_node.py
 
 experiments: venv
 	$(PY) -m pose_lifter.cli experiments --data $(CMU_DATA) --out out/experiments

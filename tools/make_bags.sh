@@ -23,3 +23,6 @@ mk 02_05 --out bags/punch_outliers.mcap --start 8 --frames 120 --view-angle -30 
     --noise 0.05 --outliers 0.05 --missing 0.1 --seed 2
 # two people: a walker (track 0, subject 07) and a boxer (track 1, subject 02), noise 0.05
 mk 07_01 02_05 --out bags/two_people.mcap --frames 75 --view-angle 15 --noise 0.05 --seed 3
+# five people (the speed target's scene, tools/bench_node.py): walkers (tracks 0, 2, 3, 4) and a boxer (1),
+# 2.7 s at 30 Hz, noise 0.03
+mk 07_05 02_05 02_01 07_04 07_03 --out bags/five_people.mcap --frames 80 --view-angle 20 --noise 0.03 --seed 4

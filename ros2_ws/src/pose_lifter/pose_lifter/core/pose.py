@@ -378,9 +378,11 @@ def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
         return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])
     return np.asarray(x)
 AUGMENTED_PD_TEST = True
-#: Start each SQP alpha-step from the previous ADM iteration's multipliers (measured on 3 bags x 30
-#: tracked frames: SQP iterations unchanged ~9.6 per call, objective 0.703/1.467 -> 0.713/1.396).
-WARM_MULTIPLIERS = True
+#: Start each SQP alpha-step from the previous ADM iteration's multipliers. Off: measured on 3 bags
+#: x 30 tracked frames, SQP iterations unchanged (~9.6 per call, most calls end at the cap with
+#: line-search steps of 1/32-1/4: the l1 merit's Maratos effect), objectives mixed (0.703/1.467 ->
+#: 0.713/1.396), and the walk_clean band replay went from 57 to 82 mm P-MPJPE.
+WARM_MULTIPLIERS = False
 SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
 

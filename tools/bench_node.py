@@ -1,0 +1,190 @@
+"""Speed of the live node (issue 5): the installed ``lifter`` fed a committed bag at camera rate.
+
+Usage (``make bench-node`` sources the workspace first)::
+
+    source ros2_ws/install/setup.bash
+    .venv/bin/python tools/bench_node.py [--bag bags/five_people.mcap] [--rate 30] [--loops 3]
+
+Starts ``ros2_ws/install/pose_lifter/lib/pose_lifter/lifter`` (what ``ros2 run`` executes) as a
+separate process on a private ROS domain, publishes the bag's ``/keypoints_2d`` (and
+``/camera_info``) at ``--rate`` Hz in real time -- not in lock step: a frame the node cannot
+take in time is dropped by its sensor-data (keep-last) subscription, as behind a real camera --
+and collects ``skeletons_3d``. Each loop over the bag is shifted by the bag's duration so the
+stamps keep increasing (tracks stay warm across loops; the people jump back to their first
+pose). Prints:
+
+* frames answered / published;
+* per person-frame solve time inside the node (``Skeleton3D.solve_time``), warm and cold, median
+  / p95 / max;
+* per frame, callback in -> answer published, from the node's own statistics log lines;
+* per frame, publish -> answer received in this process (adds transport and queueing);
+* the node's peak and current resident memory (``/proc/<pid>/status``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+LIFTER = REPO / "ros2_ws" / "install" / "pose_lifter" / "lib" / "pose_lifter" / "lifter"
+
+
+def _percentiles(values_ms: list[float]) -> str:
+    if not values_ms:
+        return "n/a"
+    a = np.asarray(values_ms)
+    return (f"median {np.median(a):7.1f} ms  p95 {np.percentile(a, 95):7.1f} ms  max {a.max():7.1f} ms"
+            f"  (n={a.size})")
+
+
+def _memory_kb(pid: int) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        key, _, value = line.partition(":")
+        if key in ("VmHWM", "VmRSS"):
+            out[key] = int(value.split()[0])
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bag", default=str(REPO / "bags" / "five_people.mcap"))
+    ap.add_argument("--rate", type=float, default=30.0, help="publishing rate, Hz")
+    ap.add_argument("--loops", type=int, default=3, help="passes over the bag")
+    ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="extra lifter parameter (repeatable), e.g. n_starts:=10")
+    args = ap.parse_args()
+
+    try:
+        import rclpy
+        from pose_lifter_msgs.msg import Skeleton2DArray, Skeleton3DArray
+        from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+        from rclpy.serialization import deserialize_message
+        from sensor_msgs.msg import CameraInfo
+    except ImportError as err:
+        sys.exit(f"{err}: run `make ros` and `source ros2_ws/install/setup.bash` (make bench-node does)")
+    from pose_lifter.bags import pose_lifter_typestore, read_messages
+    from pose_lifter.messages import make_header, ns_to_stamp, rclpy_types, stamp_to_ns
+    from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+
+    store = pose_lifter_typestore()
+    types = rclpy_types()
+    recorded = [x for x in read_messages(args.bag) if x.topic in (TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO)]
+    frames = [x for x in recorded if x.topic == TOPIC_KEYPOINTS]
+    infos = [x for x in recorded if x.topic == TOPIC_CAMERA_INFO]
+    span_ns = frames[-1].stamp_ns - frames[0].stamp_ns + round(1e9 / args.rate)
+
+    def rclpy_msg(x: Any, cls: Any) -> Any:
+        return deserialize_message(bytes(store.serialize_cdr(x.msg, x.msgtype)), cls)
+
+    kp_msgs = [rclpy_msg(x, Skeleton2DArray) for x in frames]
+    info_msg = rclpy_msg(infos[0], CameraInfo) if infos else None
+    n_people = max(len(m.skeletons) for m in kp_msgs)
+
+    domain = random.SystemRandom().randint(1, 101)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+           "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"}
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
+    log = tempfile.NamedTemporaryFile("w+b", suffix=".log", delete=False)
+    cmd = [str(LIFTER), "--ros-args", "-p", "stats_period:=1.0"]
+    for p in args.param:
+        cmd += ["-p", p]
+    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+
+    rclpy.init(domain_id=domain)
+    node = rclpy.create_node("bench_node_client")
+    answers: dict[int, tuple[float, Any]] = {}
+
+    def on_answer(msg: Any) -> None:
+        answers[stamp_to_ns(msg.header.stamp)] = (time.perf_counter(), msg)
+
+    pub = node.create_publisher(Skeleton2DArray, "keypoints_2d", qos_profile_sensor_data)
+    pub_info = node.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
+    node.create_subscription(Skeleton3DArray, "skeletons_3d", on_answer,
+                             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    try:
+        # discovery, then a handshake: empty frames until one is answered (the node's reader matched)
+        deadline = time.monotonic() + 120.0
+        probe = 1
+        while not answers:
+            if time.monotonic() > deadline or proc.poll() is not None:
+                sys.exit(f"the lifter did not answer; log:\n{Path(log.name).read_text()}")
+            if pub.get_subscription_count() > 0:
+                pub.publish(Skeleton2DArray(header=make_header(probe, "handshake", types), layout="coco17"))
+                probe += 1
+            rclpy.spin_once(node, timeout_sec=0.2)
+        answers.clear()
+
+        # real-time replay
+        period = 1.0 / args.rate
+        sent: dict[int, float] = {}
+        start = time.perf_counter()
+        i = 0
+        for loop in range(args.loops):
+            for msg in kp_msgs:
+                target = start + i * period
+                while (now := time.perf_counter()) < target:
+                    rclpy.spin_once(node, timeout_sec=max(0.0, min(target - now, 0.005)))
+                stamp = stamp_to_ns(msg.header.stamp) + loop * span_ns
+                msg.header.stamp = ns_to_stamp(stamp, types)
+                if info_msg is not None:
+                    info_msg.header.stamp = msg.header.stamp
+                    pub_info.publish(info_msg)
+                pub.publish(msg)
+                sent[stamp] = time.perf_counter()
+                msg.header.stamp = ns_to_stamp(stamp - loop * span_ns, types)
+                i += 1
+        # the last frames in flight
+        end = time.perf_counter() + 30.0
+        last = max(sent)
+        while last not in answers and time.perf_counter() < end:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        time.sleep(1.5)  # one more statistics line
+        rclpy.spin_once(node, timeout_sec=0.05)
+        mem = _memory_kb(proc.pid)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+    text = Path(log.name).read_text(errors="replace")
+    warm = [s.solve_time * 1e3 for _, a in answers.values() for s in a.skeletons if s.warm_started]
+    cold = [s.solve_time * 1e3 for _, a in answers.values() for s in a.skeletons if not s.warm_started]
+    e2e = [(t - sent[k]) * 1e3 for k, (t, _) in answers.items() if k in sent]
+    stats = [line for line in text.splitlines() if "frames (" in line]
+    cb = [float(v) for line in stats for v in re.findall(r"latency median ([\d.]+) ms", line)]
+    print(f"bag {Path(args.bag).name}: {len(kp_msgs)} frames x {args.loops} loops at {args.rate:g} Hz, "
+          f"{n_people} people per frame; lifter params {args.param or 'defaults'}")
+    print(f"frames answered: {len(answers)} of {len(sent)} published "
+          f"({len(warm) + len(cold)} person-frames lifted)")
+    print(f"solve per person-frame, warm:  {_percentiles(warm)}")
+    print(f"solve per person-frame, cold:  {_percentiles(cold)}")
+    print(f"publish -> answer received:    {_percentiles(e2e)}")
+    print(f"node stats lines (callback in -> published), per-second medians: "
+          f"{', '.join(f'{v:.0f}' for v in cb) or 'n/a'} ms")
+    for line in stats[-2:]:
+        print("  " + line.split("]: ", 1)[-1])
+    print(f"node memory: peak RSS {mem.get('VmHWM', 0) / 1024:.0f} MB, RSS at the end "
+          f"{mem.get('VmRSS', 0) / 1024:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
