@@ -381,7 +381,9 @@ AUGMENTED_PD_TEST = True
 #: Start each SQP alpha-step from the previous ADM iteration's multipliers. Off: measured on 3 bags
 #: x 30 tracked frames, SQP iterations unchanged (~9.6 per call, most calls end at the cap with
 #: line-search steps of 1/32-1/4: the l1 merit's Maratos effect), objectives mixed (0.703/1.467 ->
-#: 0.713/1.396), and the walk_clean band replay went from 57 to 82 mm P-MPJPE.
+#: 0.713/1.396), and the walk_clean band replay went from 57 to 82 mm P-MPJPE. (Also measured, not
+#: kept: an augmented-Lagrangian merit instead of the l1 one: 6-7 SQP iterations per call and
+#: warm frames 70 -> 49 ms, but objectives 0.713/1.396/0.496 -> 0.779/1.498/0.552 on the three bags.)
 WARM_MULTIPLIERS = False
 SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
@@ -605,7 +607,7 @@ def pose_step(
                 return np.asarray(d2 - v @ vtd2 + v @ s)
             if alpha_solver == "newton":
                 s, nu, _ = _newton_reduced(g_red, lin, model, v.T @ alpha, tol=newton_tol,
-                                               nu0=nu_prev[0] if WARM_MULTIPLIERS else None)
+                                           nu0=nu_prev[0] if WARM_MULTIPLIERS else None)
                 nu_prev[0] = nu
                 return np.asarray(d2 - v @ vtd2 + v @ s)
             r = sig.size
