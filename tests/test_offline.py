@@ -49,7 +49,8 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
     # warm starts: from the second frame of each track on, restarted after the gap of track 5
     assert summary.n_warm == 11 - 3
-    assert lifter.warm[0] is None and lifter.warm[1] is None and lifter.warm[2] is not None
+    # lifts go chain by chain (track 0, then track 5): cold first frames, cold after the failure
+    assert [w is None for w in lifter.warm] == [True] + [False] * 5 + [True, False, False, False, True, False]
     topics = bags.bag_topics(out)
     assert topics["/skeletons_3d"] == "pose_lifter_msgs/msg/Skeleton3DArray"
     assert topics["/skeleton_markers"] == "visualization_msgs/msg/MarkerArray"
@@ -84,3 +85,23 @@ def test_lift_bag_every_and_max(tmp_path: Path) -> None:
     assert len(kp) == 4 and [x.stamp_ns for x in est] == [kp[0].stamp_ns, kp[2].stamp_ns]
     with pytest.raises(bags.BagError):
         offline.lift_bag(path, out, EchoLifter(), progress=False)  # type: ignore[arg-type]
+
+
+def test_workers_lift_tracks_in_parallel_with_identical_results(tmp_path: Path) -> None:
+    from pose_lifter.core import Lifter, LifterOptions, PoseBases
+
+    bag = Path(__file__).resolve().parents[1] / "bags" / "five_people.mcap"
+    lifter = Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=2))
+    runs = []
+    for workers in (1, 2):
+        summary, frames = offline.lift_bag(bag, tmp_path / f"w{workers}.mcap", lifter, max_messages=3,
+                                           progress=False, workers=workers)
+        assert (summary.n_lifted, summary.n_warm, summary.n_failed) == (15, 10, 0)
+        runs.append(frames)
+    one, two = runs
+    assert [(f.stamp_ns, f.track_id, f.warm_started) for f in one] == [
+        (f.stamp_ns, f.track_id, f.warm_started) for f in two]
+    np.testing.assert_array_equal(np.array([f.joints_m for f in one]), np.array([f.joints_m for f in two]))
+    objectives = [[[s.objective for s in x.msg.skeletons]
+                   for x in bags.read_messages(tmp_path / f"w{w}.mcap", ["/skeletons_3d"])] for w in (1, 2)]
+    assert objectives[0] == objectives[1]

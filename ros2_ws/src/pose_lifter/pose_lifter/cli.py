@@ -168,7 +168,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
 
     summary, _ = lift_bag(args.input, args.out, _lifter(args), warm_start=not args.no_warm_start,
                           leg_length_m=args.leg_length, every=args.every, max_messages=args.max_messages,
-                          progress=not args.quiet, overwrite=args.overwrite)
+                          progress=not args.quiet, overwrite=args.overwrite, workers=args.workers)
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
@@ -263,6 +263,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-messages", type=int, default=None, help="stop after N lifted messages")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--workers", type=int, default=1,
+                   help="processes lifting the tracks in parallel (results identical to 1)")
     p.set_defaults(func=_cmd_lift)
 
     p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")

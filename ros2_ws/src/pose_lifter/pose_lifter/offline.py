@@ -95,6 +95,91 @@ def _intrinsics(camera_infos: list[tuple[int, Any]], stamp: int
     return focal, pp
 
 
+@dataclass(frozen=True)
+class _Item:
+    """One skeleton of one message, ready to lift (or the reason it cannot be)."""
+
+    msg_index: int
+    track_id: int
+    points: NDArray[np.float64] | None
+    confidence: NDArray[np.float64] | None
+    focal: tuple[float, float] | None
+    centre: tuple[float, float] | None
+    error: str | None
+
+
+@dataclass(frozen=True)
+class _Done:
+    """What lifting one :class:`_Item` gave: the result and metric joints, or the failure."""
+
+    item: _Item
+    result: Any | None
+    joints_m: NDArray[np.float64] | None
+    warm_started: bool
+    solve_time: float
+    failure: str | None
+
+
+def _chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, Any]],
+            warm_start: bool) -> tuple[list[list[_Item]], list[list[_Item]]]:
+    """Split the skeletons into independent chains: one per track id (in message order) when
+    warm-starting, one per skeleton otherwise. Returns (chains, items per message)."""
+    per_track: dict[int, list[_Item]] = {}
+    chains: list[list[_Item]] = []
+    per_msg: list[list[_Item]] = []
+    for i, (stamp, msg) in enumerate(keypoint_msgs):
+        focal, centre = _intrinsics(camera_infos, stamp)
+        items: list[_Item] = []
+        for skel in msg.skeletons:
+            tid = int(skel.track_id)
+            try:
+                pts, conf = m.skeleton2d_to_arrays(skel, msg.layout)
+                item = _Item(i, tid, pts, conf, focal, centre, None)
+            except (InvalidInputError, TooFewJointsError) as exc:
+                item = _Item(i, tid, None, None, focal, centre, str(exc))
+            items.append(item)
+            if warm_start and tid >= 0:
+                per_track.setdefault(tid, []).append(item)
+            else:
+                chains.append([item])
+        per_msg.append(items)
+    return chains + list(per_track.values()), per_msg
+
+
+def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default_distance_m: float
+                ) -> list[_Done]:
+    """Lift one chain in order: each item warm-starts from the previous one when that was lifted
+    from the previous message (or the same one: a duplicate track id); a failure starts over."""
+    out: list[_Done] = []
+    warm: WarmStart | None = None
+    warm_index = -2
+    for item in chain:
+        start = warm if warm is not None and item.msg_index - warm_index <= 1 else None
+        try:
+            if item.error is not None:
+                raise InvalidInputError(item.error)
+            assert item.points is not None
+            t0 = time.perf_counter()
+            res = lifter.lift(item.points, item.confidence, warm=start)
+            dt = time.perf_counter() - t0
+            joints = m.place_in_camera(res, leg_length_m, item.focal, item.centre, default_distance_m)
+        except (InvalidInputError, TooFewJointsError) as exc:
+            out.append(_Done(item, None, None, False, 0.0, str(exc)))
+            warm = None
+            continue
+        out.append(_Done(item, res, joints, start is not None, dt, None))
+        warm, warm_index = res.warm_start(), item.msg_index
+    return out
+
+
+#: The lifter of the worker processes of :func:`lift_messages` (inherited through fork).
+_WORKER: dict[str, Any] = {}
+
+
+def _worker_chain(chain: list[_Item]) -> list[_Done]:
+    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"])
+
+
 def lift_messages(
     keypoint_msgs: list[tuple[int, Any]],
     camera_infos: list[tuple[int, Any]],
@@ -105,8 +190,14 @@ def lift_messages(
     progress: bool = False,
     on_frame: Callable[[int, Any, list[FrameLift], list[Any]], None] | None = None,
     summary: LiftSummary | None = None,
+    workers: int = 1,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order with per-track warm starts.
+
+    A tracked person (track_id >= 0) starts from its solution in the previous message when it
+    was lifted there (as the node does); untracked skeletons and tracks that were absent or
+    failed in the previous message are solved cold. Tracks are independent chains, so
+    ``workers > 1`` lifts them in parallel processes with results identical to ``workers=1``.
 
     Parameters
     ----------
@@ -118,51 +209,66 @@ def lift_messages(
     leg_length_m, default_distance_m : float
         See :func:`pose_lifter.messages.place_in_camera`.
     progress : bool
-        Show a tqdm progress bar.
+        Show a tqdm progress bar (skeletons).
     on_frame : callable, optional
-        ``on_frame(stamp_ns, msg, lifted, results)`` after each message (``results`` holds the
-        LiftResult of each lifted skeleton, in the order of ``lifted``).
+        ``on_frame(stamp_ns, msg, lifted, results)`` for each message, in order, after the
+        lifting (``results`` holds the LiftResult of each lifted skeleton, in the order of
+        ``lifted``).
     summary : LiftSummary, optional
         Filled in place.
+    workers : int
+        Processes (fork) lifting the chains; 1 lifts in this process.
     """
     from tqdm import tqdm
 
+    if workers < 1:
+        raise ValueError("workers must be >= 1")
     summ = summary if summary is not None else LiftSummary()
-    warm: dict[int, WarmStart] = {}
+    chains, per_msg = _chains(keypoint_msgs, camera_infos, warm_start)
+    done: dict[int, _Done] = {}  # id(item) -> outcome
+    bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
+    if workers == 1 or len(chains) < 2:
+        for chain in chains:
+            for d in _lift_chain(lifter, chain, leg_length_m, default_distance_m):
+                done[id(d.item)] = d
+                bar.update(1)
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
+        _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m)
+        try:
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as ex:
+                for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):
+                    for item, d in zip(chain, outcome, strict=True):  # items come back as copies
+                        done[id(item)] = _Done(item, d.result, d.joints_m, d.warm_started, d.solve_time,
+                                               d.failure)
+                        bar.update(1)
+        finally:
+            _WORKER.clear()
+    bar.close()
+
     out: list[FrameLift] = []
-    for stamp, msg in tqdm(keypoint_msgs, desc="lifting", unit="msg", disable=not progress):
+    for (stamp, msg), items in zip(keypoint_msgs, per_msg, strict=True):
         summ.n_messages += 1
-        focal, pp = _intrinsics(camera_infos, stamp)
         lifted: list[FrameLift] = []
         results: list[Any] = []
-        seen: set[int] = set()
-        for skel in msg.skeletons:
+        for item in items:
             summ.n_skeletons += 1
-            tid = int(skel.track_id)
-            try:
-                pts, conf = m.skeleton2d_to_arrays(skel, msg.layout)
-                start = warm.get(tid) if (warm_start and tid >= 0) else None
-                t0 = time.perf_counter()
-                res = lifter.lift(pts, conf, warm=start)
-                dt = time.perf_counter() - t0
-                joints = m.place_in_camera(res, leg_length_m, focal, pp, default_distance_m)
-            except (InvalidInputError, TooFewJointsError) as exc:
+            d = done[id(item)]
+            if d.failure is not None or d.result is None or d.joints_m is None:
                 summ.n_failed += 1
                 if len(summ.failures) < 20:
-                    summ.failures.append(f"{stamp} track {tid}: {exc}")
-                warm.pop(tid, None)
+                    summ.failures.append(f"{stamp} track {item.track_id}: {d.failure}")
                 continue
             summ.n_lifted += 1
-            summ.n_warm += int(start is not None)
-            summ.solve_time_s += dt
-            if tid >= 0:
-                warm[tid] = res.warm_start()
-                seen.add(tid)
-            lifted.append(FrameLift(stamp, tid, pts, conf, joints, start is not None, dt))
-            results.append(res)
-        for tid in list(warm):
-            if tid not in seen:
-                del warm[tid]
+            summ.n_warm += int(d.warm_started)
+            summ.solve_time_s += d.solve_time
+            assert item.points is not None and item.confidence is not None
+            lifted.append(FrameLift(stamp, item.track_id, item.points, item.confidence, d.joints_m,
+                                    d.warm_started, d.solve_time))
+            results.append(d.result)
         out.extend(lifted)
         if on_frame is not None:
             on_frame(stamp, msg, lifted, results)
@@ -181,6 +287,7 @@ def lift_bag(
     progress: bool = True,
     overwrite: bool = False,
     marker_lifetime: float = 0.0,
+    workers: int = 1,
 ) -> tuple[LiftSummary, list[FrameLift]]:
     """Lift every ``/keypoints_2d`` message of a bag into a new bag.
 
@@ -203,6 +310,9 @@ def lift_bag(
     overwrite : bool
     marker_lifetime : float
         Seconds (0 = until replaced/deleted).
+    workers : int
+        Processes lifting the tracks in parallel (results identical to 1), see
+        :func:`lift_messages`.
     """
     if every < 1:
         raise ValueError("every must be >= 1")
@@ -234,7 +344,7 @@ def lift_bag(
         outputs[stamp] = (m.skeletons3d_array(msg.header, skels, types), markers)
 
     frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
-                           progress, record, summary)
+                           progress, record, summary, workers=workers)
     with BagWriter(out_path, overwrite=overwrite) as w:
         for x in messages:
             w.write(x.topic, x.stamp_ns, x.msg, x.msgtype)
