@@ -6,6 +6,7 @@ on subject 01's playground trials only). Prints P-MPJPE (mm, similarity-aligned)
 flat floor (2D with zero depth), the mean-pose floor and the lifter with 1, 10 and 30 starts.
 
     .venv/bin/python tools/core_accuracy.py [--frames-per-trial 3] [--data ../shared/data/cmu]
+        [--starts 1,10,30] [--alpha-solvers newton,admm]
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ def main() -> None:
     ap.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu)")
     ap.add_argument("--frames-per-trial", type=int, default=3)
     ap.add_argument("--starts", default="1,10,30")
+    ap.add_argument("--alpha-solvers", default="newton",
+                    help="comma-separated LifterOptions.alpha_solver values to compare (newton, admm)")
     args = ap.parse_args()
     trials = list(dict.fromkeys(t.trial for t in read_manifest(args.data) if t.paper_split == "test"))
     yaws = (0.0, 45.0, 90.0, 135.0)
@@ -51,12 +54,16 @@ def main() -> None:
     print(f"{'flat floor (2D, zero depth)':<28} {np.mean(flat):10.1f} {np.median(flat):8.1f} {'':>8}")
     print(f"{'mean-pose floor':<28} {np.mean(meanp):10.1f} {np.median(meanp):8.1f} {'':>8}")
     with threadpool_limits(1):
-        for n in (int(s) for s in args.starts.split(",")):
-            lifter = Lifter(bases, LifterOptions(n_starts=n))
-            t0 = time.perf_counter()
-            errs = [leg * float(p_mpjpe(lifter.lift(x).pose, y)) for y, leg, x in cases]
-            ms = 1000.0 * (time.perf_counter() - t0) / len(cases)
-            print(f"{f'full method, {n} starts':<28} {np.mean(errs):10.1f} {np.median(errs):8.1f} {ms:8.0f}")
+        for solver in args.alpha_solvers.split(","):
+            for n in (int(s) for s in args.starts.split(",")):
+                lifter = Lifter(bases, LifterOptions(n_starts=n, alpha_solver=solver))
+                t0 = time.perf_counter()
+                results = [lifter.lift(x) for _, _, x in cases]
+                ms = 1000.0 * (time.perf_counter() - t0) / len(cases)
+                errs = [c[1] * float(p_mpjpe(r.pose, c[0])) for r, c in zip(results, cases, strict=True)]
+                name = f"full method, {n} starts" + ("" if solver == "newton" else f" ({solver})")
+                print(f"{name:<28} {np.mean(errs):10.1f} {np.median(errs):8.1f} {ms:8.0f}"
+                      f"   objective mean {np.mean([r.objective for r in results]):.4f}")
 
 
 if __name__ == "__main__":
