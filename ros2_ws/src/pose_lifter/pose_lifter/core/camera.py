@@ -24,6 +24,9 @@ Scaled-form ADM with penalty ``tau``:
 Translation is a free variable of the camera (x_j ~ M0 y_j + t), so 2D and 3D need no
 joint-wise centring; missing joints (w_j = 0) drop out of the loss. On exit ``t`` is
 re-optimised exactly for the final ``M`` (weighted median for L1, weighted mean for L2).
+
+The ADM iterations run as a kernel on plain float64 arrays, compiled by numba
+(``njit(cache=True)``) when numba is importable and run as the same Python code otherwise.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ._jit import njit
 from .errors import InvalidInputError
 from .types import Camera, CameraResult
 
@@ -48,8 +52,17 @@ def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
     (t / 2) sqrt(A)^{-1} n = (adj(A) + sqrt(det A) I) n / (2 sqrt(det A))``. A (near) rank-1
     ``n`` falls back to the SVD.
     """
-    n = np.asarray(n, dtype=np.float64)
-    (a0, a1, a2), (b0, b1, b2) = n.tolist()
+    n = np.ascontiguousarray(n, dtype=np.float64)
+    if n.shape != (2, 3):
+        raise ValueError(f"expected a (2, 3) matrix, got shape {n.shape}")
+    return _project_so(n)
+
+
+@njit
+def _project_so(n: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`project_scaled_orthographic` of a C-contiguous (2, 3) float64 array."""
+    a0, a1, a2 = n[0, 0], n[0, 1], n[0, 2]
+    b0, b1, b2 = n[1, 0], n[1, 1], n[1, 2]
     a = a0 * a0 + a1 * a1 + a2 * a2
     c = b0 * b0 + b1 * b1 + b2 * b2
     b = a0 * b0 + a1 * b1 + a2 * b2
@@ -58,8 +71,10 @@ def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
         sd = math.sqrt(det)
         f = 0.5 / sd
         p, q, r = f * (c + sd), -f * b, f * (a + sd)
-        return np.array([[p * a0 + q * b0, p * a1 + q * b1, p * a2 + q * b2],
-                         [q * a0 + r * b0, q * a1 + r * b1, q * a2 + r * b2]])
+        out = np.empty((2, 3))
+        out[0, 0], out[0, 1], out[0, 2] = p * a0 + q * b0, p * a1 + q * b1, p * a2 + q * b2
+        out[1, 0], out[1, 1], out[1, 2] = q * a0 + r * b0, q * a1 + r * b1, q * a2 + r * b2
+        return out
     u, s, vt = np.linalg.svd(n, full_matrices=False)
     return np.asarray(s.mean() * (u @ vt))
 
@@ -198,32 +213,58 @@ def camera_admm(
     scale_x = max(float(np.linalg.norm(x[vis] - x[vis].mean(axis=0))), 1e-12)
     thr = np.broadcast_to(w[:, None] / tau, x.shape)
     l2fac = tau / (2.0 * w[:, None] + tau)
-    converged = False
-    it = 0
-    sol = np.vstack([m.T, t[None, :]])  # (4, 2) = [N^T; t]
-    proj = ya @ sol
-    for it in range(1, max_iter + 1):
-        xu = x + u1
-        v = xu - proj
-        r = v - np.clip(v, -thr, thr) if loss == "l1" else l2fac * v
-        sol = hat @ (xu - r) + lhs3 @ (m - u2).T
-        proj = ya @ sol
-        nmat = sol[:3].T
-        m_prev = m
-        m = project_scaled_orthographic(nmat + u2)
-        res1 = x - proj - r
-        res2 = nmat - m
-        u1 += res1
-        u2 += res2
-        mn2 = max(float(np.vdot(m, m)), 1e-24)
-        tol2 = tol * tol
-        if (float(np.vdot(res1, res1)) < tol2 * scale_x * scale_x and float(np.vdot(res2, res2)) < tol2 * mn2
-                and float(np.vdot(m - m_prev, m - m_prev)) < tol2 * mn2):
-            converged = True
-            break
+    m, u1, u2, it, converged = _camera_kernel(
+        np.ascontiguousarray(x), ya, np.ascontiguousarray(hat), np.ascontiguousarray(lhs3),
+        np.ascontiguousarray(thr), np.ascontiguousarray(l2fac), np.ascontiguousarray(m, dtype=np.float64),
+        np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(u1, dtype=np.float64),
+        np.ascontiguousarray(u2, dtype=np.float64), loss == "l1", int(max_iter), float(tol), scale_x,
+    )
     t = _optimal_translation(x, y, w, m, loss)
     if not (np.isfinite(m).all() and np.isfinite(t).all()):
         raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
     cam = Camera.from_projection(m, t)
     obj = camera_objective(x, y, w, cam.projection, t, loss)
     return CameraResult(cam, obj, it, converged), (u1, u2)
+
+
+@njit
+def _sum_sq(a: NDArray[np.float64]) -> float:
+    """``np.vdot(a, a)`` of a C-contiguous array."""
+    f = a.ravel()
+    return float(f @ f)
+
+
+@njit
+def _camera_kernel(
+    x: NDArray[np.float64], ya: NDArray[np.float64], hat: NDArray[np.float64], lhs3: NDArray[np.float64],
+    thr: NDArray[np.float64], l2fac: NDArray[np.float64], m: NDArray[np.float64], t: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int, tol: float, scale_x: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int, bool]:
+    """The ADM iterations of :func:`camera_admm` on plain arrays (compiled by numba when
+    available): ``(M, U1, U2, iterations, converged)``; ``u1``, ``u2`` are updated in place."""
+    converged = False
+    it = 0
+    sol = np.empty((4, 2))  # [N^T; t]
+    sol[:3] = m.T
+    sol[3] = t
+    proj = ya @ sol
+    tol2 = tol * tol
+    for it in range(1, max_iter + 1):
+        xu = x + u1
+        v = xu - proj
+        r = v - np.minimum(np.maximum(v, -thr), thr) if l1 else l2fac * v
+        sol = hat @ (xu - r) + lhs3 @ (m - u2).T
+        proj = ya @ sol
+        nmat = np.ascontiguousarray(sol[:3].T)
+        m_prev = m
+        m = _project_so(nmat + u2)
+        res1 = x - proj - r
+        res2 = nmat - m
+        u1 += res1
+        u2 += res2
+        mn2 = max(_sum_sq(m), 1e-24)
+        if (_sum_sq(res1) < tol2 * scale_x * scale_x and _sum_sq(res2) < tol2 * mn2
+                and _sum_sq(m - m_prev) < tol2 * mn2):
+            converged = True
+            break
+    return m, u1, u2, it, converged

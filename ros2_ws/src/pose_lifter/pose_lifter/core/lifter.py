@@ -215,6 +215,20 @@ class Lifter:
         return np.asarray(m.v @ ((m.u.T @ mirrored) / m.sig))
 
     # ------------------------------------------------------------------ public
+    def warm_up(self) -> float:
+        """Run the solver once (a cold and a warm lift of the mean pose seen from the side) so
+        that compiled kernels (numba, see ``core._jit``) are compiled or loaded from their cache
+        now rather than on the first real frame. Returns the seconds it took."""
+        import time
+
+        t0 = time.perf_counter()
+        mean = self.bases.mean_pose
+        side = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # a profile view, y down
+        points = 100.0 * mean @ side.T + np.array([320.0, 240.0])
+        first = self.lift(points)
+        self.lift(points + 1.0, warm=first.warm_start())
+        return time.perf_counter() - t0
+
     def lift(
         self,
         points_2d: NDArray[np.float64],

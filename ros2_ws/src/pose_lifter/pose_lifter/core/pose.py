@@ -32,6 +32,14 @@ Two exactly equivalent liftings (``alpha_step``):
 After the inner ADM, a few Gauss-Newton projection steps restore the limb constraints to
 ``1e-10`` (the ADM meets them only to its tolerance). ``alpha_solver="newton"`` replaces the
 inner ADM by a direct local solver of the same problem (SQP / Newton on the KKT system).
+
+Speed: the Newton alpha-step and the per-iteration updates of the outer ADM are kernels on plain
+float64 arrays, compiled by numba (``njit(cache=True)``: compiled once, then loaded from
+``__pycache__``) when numba is importable and run as the same Python code otherwise. Compiled,
+they make the same BLAS/LAPACK calls (gemv/dot, gesv, potrf) and sum in numpy's order
+(:func:`_sum_jit`), so both paths give the same iterates bit for bit (measured). That matters:
+the warm-started solves are chaotic in round-off (a last-bit change grows ~10x per tracked
+frame), so another factorisation or summation order would give visibly different poses.
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dpotrf as _dpotrf
 
+from ._jit import HAVE_NUMBA, njit
 from .bases import PoseBases
 from .errors import InvalidInputError
 from .options import Variant
@@ -367,16 +376,11 @@ def newton_reduced(
     return _newton_reduced(gmat, lin, model, s0, max_iter, tol)[0]
 
 
-_EYE8 = 1e-14 * np.eye(8)
-
-
-def _solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``a^-1 b`` by LAPACK gesv called directly (numpy's wrapper costs more than the solve
-    at these sizes); least squares if ``a`` is singular."""
-    _, _, x, info = _dgesv(a, b)
-    if info != 0:
-        return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])
-    return np.asarray(x)
+# The module flags below are read at call time by the Python wrappers and passed to the kernels
+# as arguments (a compiled kernel would freeze a global's value at compile time, and numba's
+# on-disk cache would keep it).
+#: SQP Newton/Gauss-Newton switch: test the positive definiteness of the augmented Hessian
+#: ``H + c J^T J`` (True) or of ``H`` itself.
 AUGMENTED_PD_TEST = True
 #: Start each SQP alpha-step from the previous ADM iteration's multipliers. Off: measured on 3 bags
 #: x 30 tracked frames, SQP iterations unchanged (~9.6 per call, most calls end at the cap with
@@ -388,43 +392,176 @@ WARM_MULTIPLIERS = False
 SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
 
-def _newton_reduced(
-    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
-    max_iter: int = 10, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
+_EYE8 = 1e-14 * np.eye(8)
+
+
+def _solve_lapack(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a^-1 b`` by LAPACK gesv called directly (numpy's wrapper costs more than the solve
+    at these sizes); least squares if ``a`` is singular."""
+    _, _, x, info = _dgesv(a, b)
+    if info != 0:
+        return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])
+    return np.asarray(x)
+
+
+def _pos_def_lapack(a: NDArray[np.float64]) -> bool:
+    """Whether the Cholesky factorisation (LAPACK potrf, lower triangle) of ``a`` succeeds."""
+    return bool(_dpotrf(a, lower=1, clean=0)[1] == 0)
+
+
+@njit
+def _solve_jit(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`_solve_lapack` inside the compiled kernels: numba's ``solve`` is the same LAPACK
+    gesv (scipy's), raising on a singular ``a``; least squares then (numpy's default rcond)."""
+    try:
+        return np.asarray(np.linalg.solve(a, b), dtype=np.float64)
+    except Exception:  # singular, or non-finite values (gesv propagates them; numba raises)
+        pass
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return np.full(b.shape[0], np.nan)
+    return np.asarray(np.linalg.lstsq(a, b, rcond=2.220446049250313e-16 * max(a.shape[0], a.shape[1]))[0],
+                      dtype=np.float64)
+
+
+@njit
+def _pos_def_jit(a: NDArray[np.float64]) -> bool:
+    """:func:`_pos_def_lapack` inside the compiled kernels (numba's ``cholesky``: the same
+    potrf on the lower triangle, raising where the matrix is not positive definite)."""
+    try:
+        np.linalg.cholesky(a)
+    except Exception:
+        return False
+    return True
+
+
+@njit
+def _block_sum(a: NDArray[np.float64], lo: int, n: int) -> float:
+    """numpy's sum of ``a[lo:lo+n]``, ``n <= 128``: sequential below 8 terms, else 8 partial
+    sums combined as a tree, then the remainder."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return float(res)
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return float(res)
+
+
+@njit
+def _sum_jit(a: NDArray[np.float64]) -> float:
+    """``np.sum`` of a contiguous 1-d array, bit for bit: numpy starts from 0 and sums pairwise
+    (halves rounded down to multiples of 8 until blocks of <= 128, see :func:`_block_sum`);
+    numba's ``np.sum`` sums sequentially, which differs in the last bits, and the warm-started
+    solves amplify those (see the module docstring). The recursion is unrolled with an explicit
+    stack (numba's cache cannot reload recursive functions)."""
+    n = a.size
+    if n <= 128:
+        return 0.0 + _block_sum(a, 0, n)
+    los = np.empty(64, dtype=np.int64)  # depth <= log2(n), far below 64
+    lens = np.empty(64, dtype=np.int64)
+    stage = np.zeros(64, dtype=np.int64)
+    vals = np.empty(64)
+    top, nv = 0, 0
+    los[0], lens[0] = 0, n
+    while top >= 0:
+        lo, m = los[top], lens[top]
+        if m <= 128:
+            vals[nv] = _block_sum(a, lo, m)
+            nv += 1
+            top -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        if stage[top] == 0:  # left half
+            stage[top] = 1
+            top += 1
+            los[top], lens[top], stage[top] = lo, half, 0
+        elif stage[top] == 1:  # right half
+            stage[top] = 2
+            top += 1
+            los[top], lens[top], stage[top] = lo + half, m - half, 0
+        else:  # both done
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+            top -= 1
+    return 0.0 + float(vals[0])
+
+
+def _sum_numpy(a: NDArray[np.float64]) -> float:
+    """``np.sum`` (the plain-Python path of :func:`_sum_jit`)."""
+    return float(np.sum(a))
+
+
+# the compiled kernels call LAPACK through numba and sum in numpy's order; without numba they run
+# as plain Python and call scipy's LAPACK and numpy's sum directly
+_solve = _solve_jit if HAVE_NUMBA else _solve_lapack
+_pos_def = _pos_def_jit if HAVE_NUMBA else _pos_def_lapack
+_sum = _sum_jit if HAVE_NUMBA else _sum_numpy
+
+
+@njit
+def _limbs(s: NDArray[np.float64], cu24: NDArray[np.float64], cmu24: NDArray[np.float64],
+           lsq: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Limb constraint values ``||C_i mu + C_i U S s||^2 - L_i`` (8,) and the limb vectors (24,)."""
+    lv = cmu24 + cu24 @ s
+    return (lv * lv).reshape(8, 3).sum(axis=1) - lsq, lv
+
+
+@njit
+def _limb_jacobian(lv: NDArray[np.float64], cu24: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Jacobian (8, r) of :func:`_limbs` at limb vectors ``lv``."""
+    r = cu24.shape[1]
+    return np.asarray(2.0 * (cu24 * lv.reshape(24, 1)).reshape(8, 3, r).sum(axis=1))
+
+
+@njit
+def _project_limbs(s: NDArray[np.float64], n: int, cu24: NDArray[np.float64], cmu24: NDArray[np.float64],
+                   lsq: NDArray[np.float64], eye8: NDArray[np.float64]) -> NDArray[np.float64]:
+    """At most ``n`` Gauss-Newton (min-norm) steps of ``s`` onto the constraint manifold."""
+    for _ in range(n):
+        g, lv = _limbs(s, cu24, cmu24, lsq)
+        if np.abs(g).max() < 1e-12:
+            break
+        jac = _limb_jacobian(lv, cu24)
+        s = s - jac.T @ _solve(jac @ jac.T + eye8, g)
+    return s
+
+
+@njit
+def _newton_kernel(
+    gmat: NDArray[np.float64], lin: NDArray[np.float64], cu24: NDArray[np.float64],
+    cmu24: NDArray[np.float64], hc: NDArray[np.float64], lsq: NDArray[np.float64],
+    s0: NDArray[np.float64], nu0: NDArray[np.float64], max_iter: int, tol: float,
+    augmented_pd_test: bool, second_order_correction: bool, eye8: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
-    """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``; ``nu0``
-    warm-starts the multipliers (e.g. from the previous ADM iteration's alpha-step)."""
+    """The SQP of :func:`_newton_reduced` on plain arrays (compiled by numba when available)."""
     r = s0.size
-    cu24 = model.limb_cu.reshape(24, r)
-    cmu24 = model.limb_cmu.reshape(24)
-    hc = model.limb_hess.reshape(8, r * r)
-    lsq = model.limb_sq
-
-    def cons(s: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        lv = cmu24 + cu24 @ s  # (24,)
-        return (lv * lv).reshape(8, 3).sum(axis=1) - lsq, lv
-
-    def jacobian(lv: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(2.0 * (cu24 * lv[:, None]).reshape(8, 3, r).sum(axis=1))
-
-    def project(s: NDArray[np.float64], n: int) -> NDArray[np.float64]:
-        for _ in range(n):  # Gauss-Newton (min-norm) steps onto the constraint manifold
-            g, lv = cons(s)
-            if np.abs(g).max() < 1e-12:
-                break
-            jac = jacobian(lv)
-            s = s - jac.T @ _solve(jac @ jac.T + _EYE8, g)
-        return s
-
-    s = project(s0.copy(), 30)
-    nu = np.zeros(8) if nu0 is None else nu0.copy()
+    s = _project_limbs(s0.copy(), 30, cu24, cmu24, lsq, eye8)
+    nu = nu0.copy()
     rho = 10.0
     kmat = np.zeros((r + 8, r + 8))
+    rhs = np.empty(r + 8)
     g2 = 2.0 * gmat
     it = 0
     for it in range(1, max_iter + 1):
-        g, lv = cons(s)
-        jac = jacobian(lv)
+        g, lv = _limbs(s, cu24, cmu24, lsq)
+        jac = _limb_jacobian(lv, cu24)
         gs = gmat @ s
         grad = 2.0 * (gs - lin)
         res_d = grad + jac.T @ nu
@@ -437,51 +574,142 @@ def _newton_reduced(
         # constraints (the second-order sufficient condition), else Gauss-Newton (2 G). Tested
         # by a Cholesky of the augmented Hessian H + c J^T J (positive definite for a large c
         # iff the reduced Hessian is); the KKT step is the same with H or H + c J^T J.
-        if AUGMENTED_PD_TEST:
+        if augmented_pd_test:
             jtj = jac.T @ jac
             test = hess + (10.0 * float(np.abs(hess).max()) / max(float(np.abs(jtj).max()), 1e-300)) * jtj
         else:
             test = hess
-        if _dpotrf(test, lower=1, clean=0)[1] != 0:  # not positive definite
+        if not _pos_def(test):
             hess = g2
         kmat[:r, :r] = hess
         kmat[:r, r:] = jac.T
         kmat[r:, :r] = jac
-        rhs = -np.concatenate([grad, g])
+        rhs[:r] = -grad
+        rhs[r:] = -g
         sol = _solve(kmat, rhs)
         ds, nu_new = sol[:r], sol[r:]
         rho = max(rho, 2.0 * float(np.abs(nu_new).max()))
         q0 = float(s @ gs - 2.0 * lin @ s)
-        f0 = q0 + rho * float(np.abs(g).sum())
+        f0 = q0 + rho * _sum(np.abs(g))
         a = 1.0
         cand = s + ds
-        gc, lvc = cons(cand)
+        gc, lvc = _limbs(cand, cu24, cmu24, lsq)
         # along the step the objective is the quadratic q0 + a q1 + a^2 q2 and the limb vectors
         # are affine in a: no matrix products in the backtracking loop
         q1 = float(grad @ ds)
         q2 = float(ds @ gmat @ ds)
         dlv = lvc - lv
-        if SECOND_ORDER_CORRECTION and float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * float(
-                np.abs(gc).sum()) > f0 + 1e-12:
+        if second_order_correction and float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * _sum(
+                np.abs(gc)) > f0 + 1e-12:
             # second-order correction (against the Maratos effect: the l1 merit rejecting a
             # good full step because of the constraints' curvature): one min-norm step back
             # towards the constraint manifold from s + ds, tried before any step halving
-            jc = jacobian(lvc)
-            soc = cand - jc.T @ _solve(jc @ jc.T + _EYE8, gc)
-            gs2, _ = cons(soc)
-            if float(soc @ gmat @ soc - 2.0 * lin @ soc) + rho * float(np.abs(gs2).sum()) <= f0 + 1e-12:
+            jc = _limb_jacobian(lvc, cu24)
+            soc = cand - jc.T @ _solve(jc @ jc.T + eye8, gc)
+            gs2, _ = _limbs(soc, cu24, cmu24, lsq)
+            if float(soc @ gmat @ soc - 2.0 * lin @ soc) + rho * _sum(np.abs(gs2)) <= f0 + 1e-12:
                 s = soc
                 nu = nu_new
                 continue
         while a > 1e-4:
-            if q0 + a * (q1 + a * q2) + rho * float(np.abs(gc).sum()) <= f0 + 1e-12:
+            if q0 + a * (q1 + a * q2) + rho * _sum(np.abs(gc)) <= f0 + 1e-12:
                 break
             a *= 0.5
             lva = lv + a * dlv
             gc = (lva * lva).reshape(8, 3).sum(axis=1) - lsq
         s = s + a * ds if a < 1.0 else cand
         nu = nu_new
-    return project(s, 10), nu, it
+    return _project_limbs(s, 10, cu24, cmu24, lsq, eye8), nu, it
+
+
+def _limb_arrays(model: PoseModel) -> tuple[
+        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``C_i U S`` (24, r), ``C_i mu`` (24,), the limb Hessians (8, r*r) and ``L_i`` (8,) of
+    ``model`` as C-contiguous arrays for the kernels."""
+    r = model.sig.size
+    return (np.ascontiguousarray(model.limb_cu.reshape(24, r)),
+            np.ascontiguousarray(model.limb_cmu.reshape(24)),
+            np.ascontiguousarray(model.limb_hess.reshape(8, r * r)),
+            np.ascontiguousarray(model.limb_sq))
+
+
+def _newton_reduced(
+    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
+    max_iter: int = 10, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``; ``nu0``
+    warm-starts the multipliers (e.g. from the previous ADM iteration's alpha-step)."""
+    s, nu, it = _newton_kernel(
+        np.ascontiguousarray(gmat, dtype=np.float64), np.ascontiguousarray(lin, dtype=np.float64),
+        *_limb_arrays(model), np.ascontiguousarray(s0, dtype=np.float64),
+        np.zeros(8) if nu0 is None else np.ascontiguousarray(nu0, dtype=np.float64),
+        int(max_iter), float(tol), bool(AUGMENTED_PD_TEST), bool(SECOND_ORDER_CORRECTION), _EYE8,
+    )
+    return s, nu, int(it)
+
+
+@njit
+def _newton_alpha_kernel(
+    d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64], mus: NDArray[np.float64],
+    v: NDArray[np.float64], g_red: NDArray[np.float64], cu24: NDArray[np.float64],
+    cmu24: NDArray[np.float64], hc: NDArray[np.float64], lsq: NDArray[np.float64], nu0: NDArray[np.float64],
+    max_iter: int, tol: float, augmented_pd_test: bool, second_order_correction: bool,
+    eye8: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The reduced Newton alpha-step of :func:`pose_step` (limbs on): ``(alpha, multipliers)``."""
+    vtd2 = v.T @ d2
+    lin = mus.T @ d1 + vtd2
+    s, nu, _ = _newton_kernel(g_red, lin, cu24, cmu24, hc, lsq, v.T @ alpha, nu0, max_iter, tol,
+                              augmented_pd_test, second_order_correction, eye8)
+    return d2 - v @ vtd2 + v @ s, nu
+
+
+@njit
+def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64],
+               theta: float, l1: bool) -> float:
+    """:func:`pose_objective` on plain arrays (``l1`` False: squared loss)."""
+    data = _sum(wts * np.abs(resid)) if l1 else _sum(wts * resid * resid)
+    return float(data + theta * _sum(np.abs(alpha)))
+
+
+@njit
+def _adm_split(
+    c: NDArray[np.float64], ax: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    alpha: NDArray[np.float64], wts: NDArray[np.float64], eta: float, th: float, l1: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """gamma- and beta-steps of the pose ADM: ``(gamma, beta, d1, d2)`` of the module docstring
+    (``ax = A alpha``; ``th = 0``: no sparsity)."""
+    vg = c - ax + u1
+    if l1:
+        gamma = np.sign(vg) * np.maximum(np.abs(vg) - wts / eta, 0.0)
+    else:
+        gamma = eta * vg / (2.0 * wts + eta)
+    vb = alpha + u2
+    beta = np.sign(vb) * np.maximum(np.abs(vb) - th / eta, 0.0) if th > 0 else vb
+    return gamma, beta, c - gamma + u1, beta - u2
+
+
+@njit
+def _adm_dual_update(
+    c: NDArray[np.float64], gamma: NDArray[np.float64], alpha: NDArray[np.float64],
+    beta: NDArray[np.float64], beta_prev: NDArray[np.float64], ax_prev: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64], mus: NDArray[np.float64], v: NDArray[np.float64],
+    wts: NDArray[np.float64], th: float, l1: bool, scale_c: float,
+) -> tuple[NDArray[np.float64], float, float, float]:
+    """After the alpha-step of the pose ADM: ``u1``, ``u2`` updated in place; returns ``A alpha``,
+    the objective and the relative primal and dual residuals."""
+    ax = mus @ (v.T @ alpha)
+    r1 = c - ax - gamma
+    r2 = alpha - beta
+    u1 += r1
+    u2 += r2
+    obj = _objective(c - ax, wts, alpha, th, l1)
+    an = max(1.0, math.sqrt(float(alpha @ alpha)))
+    primal = max(math.sqrt(float(r1 @ r1)) / scale_c, math.sqrt(float(r2 @ r2)) / an)
+    dax = ax - ax_prev
+    dbeta = beta - beta_prev
+    dual = max(math.sqrt(float(dax @ dax)) / scale_c, math.sqrt(float(dbeta @ dbeta)) / an)
+    return ax, obj, primal, dual
 
 
 def pose_objective(
@@ -489,8 +717,9 @@ def pose_objective(
     loss: Literal["l1", "l2"],
 ) -> float:
     """``sum w rho(resid) + theta ||alpha||_1`` (resid, wts: shape (2n,))."""
-    data = np.sum(wts * np.abs(resid)) if loss == "l1" else np.sum(wts * resid * resid)
-    return float(data + theta * np.sum(np.abs(alpha)))
+    return _objective(np.ascontiguousarray(resid, dtype=np.float64),
+                      np.ascontiguousarray(wts, dtype=np.float64),
+                      np.ascontiguousarray(alpha, dtype=np.float64), float(theta), loss == "l1")
 
 
 def pose_step(
@@ -586,6 +815,7 @@ def pose_step(
     g_red = mus.T @ mus + np.eye(sig.size)
     cons = model.full if full else model.reduced
     nu_prev: list[NDArray[np.float64] | None] = [None]
+    limb_arrays = _limb_arrays(model)
 
     def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
                      ) -> NDArray[np.float64]:
@@ -600,15 +830,17 @@ def pose_step(
             wmat[k, k] = float(d1 @ d1 + d2 @ d2)
             z0 = np.append(alpha, 1.0)
         else:
+            if alpha_solver == "newton" and variant.limbs:
+                alpha_new, nu = _newton_alpha_kernel(
+                    d1, d2, alpha, mus, v, g_red, *limb_arrays,
+                    nu_prev[0] if WARM_MULTIPLIERS and nu_prev[0] is not None else np.zeros(8),
+                    10, float(newton_tol), bool(AUGMENTED_PD_TEST), bool(SECOND_ORDER_CORRECTION), _EYE8)
+                nu_prev[0] = nu
+                return alpha_new
             vtd2 = v.T @ d2
             lin = mus.T @ d1 + vtd2
             if not variant.limbs:
                 s = np.linalg.solve(g_red, lin)
-                return np.asarray(d2 - v @ vtd2 + v @ s)
-            if alpha_solver == "newton":
-                s, nu, _ = _newton_reduced(g_red, lin, model, v.T @ alpha, tol=newton_tol,
-                                           nu0=nu_prev[0] if WARM_MULTIPLIERS else None)
-                nu_prev[0] = nu
                 return np.asarray(d2 - v @ vtd2 + v @ s)
             r = sig.size
             wmat = np.zeros((r + 1, r + 1))
@@ -650,35 +882,21 @@ def pose_step(
     converged = False
     it = 0
     scale_c = max(1.0, float(np.linalg.norm(c)))
+    l1 = loss == "l1"
+    ax = a_times(alpha)
     for it in range(1, max_iter + 1):
-        ax = a_times(alpha)
-        vg = c - ax + u1
-        if loss == "l1":
-            gamma = np.sign(vg) * np.maximum(np.abs(vg) - wts / eta, 0.0)
-        else:
-            gamma = eta * vg / (2.0 * wts + eta)
-        beta_prev = beta
-        vb = alpha + u2
-        beta = np.sign(vb) * np.maximum(np.abs(vb) - th / eta, 0.0) if th > 0 else vb
-        alpha_prev = alpha
-        alpha = alpha_update(c - gamma + u1, beta - u2, alpha)
-        ax = a_times(alpha)
-        r1 = c - ax - gamma
-        r2 = alpha - beta
-        u1 += r1
-        u2 += r2
+        beta_prev, ax_prev = beta, ax
+        gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, float(eta), th, l1)
+        alpha = alpha_update(d1, d2, alpha)
+        ax, obj, primal, dual = _adm_dual_update(c, gamma, alpha, beta, beta_prev, ax_prev, u1, u2, mus, v,
+                                                 wts, th, l1, scale_c)
         if eta_growth != 1.0 and eta < eta_max:
             eta_new = min(eta * eta_growth, eta_max)
             u1 *= eta / eta_new
             u2 *= eta / eta_new
             eta = eta_new
-        obj = pose_objective(c - ax, wts, alpha, th, loss)
         if obj < best_obj:
             best_obj, best_alpha = obj, alpha.copy()
-        an = max(1.0, float(np.linalg.norm(alpha)))
-        primal = max(float(np.linalg.norm(r1)) / scale_c, float(np.linalg.norm(r2)) / an)
-        dual = max(float(np.linalg.norm(ax - a_times(alpha_prev))) / scale_c,
-                   float(np.linalg.norm(beta - beta_prev)) / an)
         if primal < tol and dual < tol:
             converged = True
             break
