@@ -126,6 +126,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("camera_tol", "Tolerance of the camera-step ADM, in (0, 1).", 0.0, 1.0),
     _opt("n_starts", "Starts of a cold (multi-start) solve; 1 = mean pose only.", 1, 1000),
     _opt("n_refine", "Cold starts continued to convergence after one screening alternation each.", 1, 1000),
+    _opt("screen_pose_max_iter", "Pose-ADM iteration cap of the screening alternation of cold starts.",
+         1, 10000),
     _opt("warm_flip", "Warm solves also try the depth-mirrored previous pose (weak-perspective ambiguity)."),
     _opt("confidence_threshold", "Keypoints with lower confidence are treated as missing.", 0.0, 1.0),
     _opt("min_visible_joints", "Skip a skeleton with fewer visible model joints.", 3, 12),

@@ -36,6 +36,7 @@ from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 __all__ = ["Lifter"]
 
 
+
 @dataclass(frozen=True)
 class _Normalisation:
     centre: NDArray[np.float64]
@@ -156,12 +157,14 @@ class Lifter:
         return res
 
     def _pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
-              alpha0: NDArray[np.float64], state: dict[str, Any] | None = None) -> PoseResult:
+              alpha0: NDArray[np.float64], state: dict[str, Any] | None = None,
+              max_iter: int | None = None) -> PoseResult:
         o = self._options
         out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
         res = pose_step(
             xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
-            max_iter=o.pose_max_iter, tol=o.pose_tol, eta=o.eta, eta_growth=o.eta_growth, delta=o.delta,
+            max_iter=o.pose_max_iter if max_iter is None else max_iter, tol=o.pose_tol, eta=o.eta,
+            eta_growth=o.eta_growth, delta=o.delta,
             inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
             alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
             duals=state.get("pose") if state is not None and o.warm_duals else None, state_out=out,
@@ -172,7 +175,8 @@ class Lifter:
         return res
 
     def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
-             cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None) -> _Run:
+             cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None,
+             pose_max_iter: int | None = None) -> _Run:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
         continue a previous run ``start``. The ADM multipliers of both steps are carried from
         one alternation to the next (``options.warm_duals``)."""
@@ -190,7 +194,7 @@ class Lifter:
         converged = False
         it = it0
         for it in range(it0 + 1, n_alt + 1):
-            pres = self._pose(xn, cam.camera, w, alpha, state)
+            pres = self._pose(xn, cam.camera, w, alpha, state, pose_max_iter)
             alpha = pres.alpha
             cam = self._camera(xn, pres.pose, w, cam.camera, state)
             th = o.theta if o.method.sparsity else 0.0
@@ -271,7 +275,10 @@ class Lifter:
             total = sum(r.n_iter for _, r in runs)
         else:
             starts = self.bases.with_starts(self._options.n_starts)
-            runs = [(i, self._run(xn, w, a, None, max_alternations=1)) for i, a in enumerate(starts)]
+            # a short first pose step only when it screens (some starts are then dropped)
+            screen = self._options.screen_pose_max_iter if len(starts) > self._options.n_refine else None
+            runs = [(i, self._run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
+                    for i, a in enumerate(starts)]
             n_screened = len(runs)
             if len(runs) > 1:  # screen: continue only the most promising starts
                 runs.sort(key=lambda r: r[1].objective)
