@@ -129,6 +129,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("screen_pose_max_iter", "Pose-ADM iteration cap of the screening alternation of cold starts.",
          1, 10000),
     _opt("warm_flip", "Warm solves also try the depth-mirrored previous pose (weak-perspective ambiguity)."),
+    _opt("warm_flip_screen",
+         "The mirrored start is continued only if one alternation already beats the warm one."),
     _opt("confidence_threshold", "Keypoints with lower confidence are treated as missing.", 0.0, 1.0),
     _opt("min_visible_joints", "Skip a skeleton with fewer visible model joints.", 3, 12),
     _opt("limb_proportions", "Limb-length targets: 'bases' (training mean) or 'anthropometric'."),

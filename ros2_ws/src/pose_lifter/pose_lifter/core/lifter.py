@@ -271,7 +271,15 @@ class Lifter:
                           (warm.camera.translation - norm.centre) / norm.spread)
             runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
             if self._options.warm_flip:
-                runs.append((-2, self._run(xn, w, self._mirrored_alpha(runs[0][1]), None)))
+                mirrored = self._mirrored_alpha(runs[0][1])
+                if self._options.warm_flip_screen:
+                    # one alternation; continued only when it already beats the warm run
+                    flip = self._run(xn, w, mirrored, None, max_alternations=1)
+                    if flip.objective < runs[0][1].objective:
+                        flip = self._run(xn, w, flip.pose.alpha, None, start=flip)
+                else:
+                    flip = self._run(xn, w, mirrored, None)
+                runs.append((-2, flip))
             total = sum(r.n_iter for _, r in runs)
         else:
             starts = self.bases.with_starts(self._options.n_starts)
