@@ -315,6 +315,7 @@ def _bases_task(task: dict[str, Any]) -> dict[str, Any]:
 
 def _lift_tasks(data: _Data, cfg: ExperimentConfig) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """All lift tasks of experiments 2-5, plus the floor rows (computed here, cheap)."""
+    from .core.errors import InvalidInputError
     from .core.metrics import normalised_error, p_mpjpe
 
     rng = np.random.default_rng(cfg.seed + 1)
@@ -334,7 +335,7 @@ def _lift_tasks(data: _Data, cfg: ExperimentConfig) -> tuple[list[dict[str, Any]
         for name, pred in (("flat floor", flat), ("mean-pose floor", mean_pose)):
             try:
                 err, failed = float(normalised_error(pred, gt)), ""
-            except ValueError:  # both right-leg joints missing: the flat floor has no leg
+            except InvalidInputError:  # both right-leg joints missing: the flat floor has no leg
                 err, failed = float("nan"), "degenerate right lower leg"
             floors.append({**{k: v for k, v in base.items() if k != "gt"}, "kind": "floor", "method": name,
                            "err": err, "pmpjpe_mm": float(leg * p_mpjpe(pred, gt)),

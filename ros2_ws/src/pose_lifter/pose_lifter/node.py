@@ -24,6 +24,7 @@ with the core's reason.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -521,8 +522,6 @@ class LifterNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter lifter``."""
-    import sys
-
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:
         print(params_yaml(), end="")
         return

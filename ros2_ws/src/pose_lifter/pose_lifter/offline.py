@@ -9,6 +9,7 @@ errors with two floors that any lifter must beat (see ``shared/notes/method-pitf
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -242,8 +243,7 @@ def lift_messages(
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as ex:
                 for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):
                     for item, d in zip(chain, outcome, strict=True):  # items come back as copies
-                        done[id(item)] = _Done(item, d.result, d.joints_m, d.warm_started, d.solve_time,
-                                               d.failure)
+                        done[id(item)] = dataclasses.replace(d, item=item)
                         bar.update(1)
         finally:
             _WORKER.clear()

@@ -18,6 +18,7 @@ mean the same at any image size. Results are mapped back to input units.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -223,8 +224,6 @@ class Lifter:
         """Run the solver once (a cold and a warm lift of the mean pose seen from the side) so
         that compiled kernels (numba, see ``core._jit``) are compiled or loaded from their cache
         now rather than on the first real frame. Returns the seconds it took."""
-        import time
-
         t0 = time.perf_counter()
         mean = self.bases.mean_pose
         side = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # a profile view, y down

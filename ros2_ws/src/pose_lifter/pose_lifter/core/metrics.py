@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import InvalidInputError
 from .skeleton import RIGHT_LOWER_LEG, limb_lengths
 
 __all__ = ["mpjpe", "normalised_error", "p_mpjpe", "per_joint_error", "procrustes_align"]
@@ -83,8 +84,9 @@ def normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDAr
     Both poses are centred and scaled to a unit right lower leg, and ``pred`` is aligned to
     ``gt`` by a rotation (the weak-perspective camera leaves global rotation and depth sign
     to the estimate; Procrustes without scale). Returns the 2-norm of the stacked 3n-vector
-    difference, shape ``(...)``. Raises ``ValueError`` when an estimate's right lower leg has
-    zero length (e.g. a flat floor whose knee and ankle are both missing).
+    difference, shape ``(...)``. Raises ``InvalidInputError`` (a ``ValueError``) when an
+    estimate's right lower leg has zero length (e.g. a flat floor whose knee and ankle are both
+    missing).
     """
     p = np.asarray(pred, dtype=np.float64)
     g = np.asarray(gt, dtype=np.float64)
@@ -92,7 +94,7 @@ def normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDAr
     g = g - g.mean(axis=-2, keepdims=True)
     leg = limb_lengths(p)[..., RIGHT_LOWER_LEG]
     if np.any(~(leg > 1e-12 * np.maximum(1.0, np.abs(p).max(axis=(-2, -1))))):
-        raise ValueError("an estimate has a zero-length right lower leg: the paper's criterion "
+        raise InvalidInputError("an estimate has a zero-length right lower leg: the paper's criterion "
                          "(estimate scaled by its own leg) is undefined for it")
     p = p / leg[..., None, None]
     g = g / limb_lengths(g)[..., RIGHT_LOWER_LEG][..., None, None]

@@ -44,6 +44,7 @@ frame), so another factorisation or summation order would give visibly different
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -61,6 +62,9 @@ from .errors import InvalidInputError
 from .options import Variant
 from .skeleton import N_JOINTS, limb_selectors
 from .types import PoseResult
+
+#: SQP iteration cap of each Newton alpha-step.
+NEWTON_MAX_ITER = 10
 
 __all__ = [
     "LiftedConstraints",
@@ -157,6 +161,17 @@ class PoseModel:
     limb_cu: NDArray[np.float64]
     limb_cmu: NDArray[np.float64]
     limb_hess: NDArray[np.float64]
+
+    @functools.cached_property
+    def kernel_limbs(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                                    NDArray[np.float64]]:
+        """``C_i U S`` (24, r), ``C_i mu`` (24,), the limb Hessians (8, r*r) and ``L_i`` (8,) as
+        C-contiguous arrays for the compiled Newton kernel (made once per model)."""
+        r = self.sig.size
+        return (np.ascontiguousarray(self.limb_cu.reshape(24, r)),
+                np.ascontiguousarray(self.limb_cmu.reshape(24)),
+                np.ascontiguousarray(self.limb_hess.reshape(8, r * r)),
+                np.ascontiguousarray(self.limb_sq))
 
     @property
     def n_bases(self) -> int:
@@ -363,7 +378,7 @@ def newton_alpha(
 
 def newton_reduced(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
-    max_iter: int = 10, tol: float = 1e-9,
+    max_iter: int = NEWTON_MAX_ITER, tol: float = 1e-9,
 ) -> NDArray[np.float64]:
     """Direct local solver of the reduced alpha-step, constraints evaluated in joint space.
 
@@ -622,26 +637,15 @@ def _newton_kernel(
     return _project_limbs(s, 10, cu24, cmu24, lsq, eye8), nu, it
 
 
-def _limb_arrays(model: PoseModel) -> tuple[
-        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """``C_i U S`` (24, r), ``C_i mu`` (24,), the limb Hessians (8, r*r) and ``L_i`` (8,) of
-    ``model`` as C-contiguous arrays for the kernels."""
-    r = model.sig.size
-    return (np.ascontiguousarray(model.limb_cu.reshape(24, r)),
-            np.ascontiguousarray(model.limb_cmu.reshape(24)),
-            np.ascontiguousarray(model.limb_hess.reshape(8, r * r)),
-            np.ascontiguousarray(model.limb_sq))
-
-
 def _newton_reduced(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
-    max_iter: int = 10, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
+    max_iter: int = NEWTON_MAX_ITER, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
     """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``; ``nu0``
     warm-starts the multipliers (e.g. from the previous ADM iteration's alpha-step)."""
     s, nu, it = _newton_kernel(
         np.ascontiguousarray(gmat, dtype=np.float64), np.ascontiguousarray(lin, dtype=np.float64),
-        *_limb_arrays(model), np.ascontiguousarray(s0, dtype=np.float64),
+        *model.kernel_limbs, np.ascontiguousarray(s0, dtype=np.float64),
         np.zeros(8) if nu0 is None else np.ascontiguousarray(nu0, dtype=np.float64),
         int(max_iter), float(tol), bool(AUGMENTED_PD_TEST), bool(SECOND_ORDER_CORRECTION), _EYE8,
     )
@@ -815,7 +819,6 @@ def pose_step(
     g_red = mus.T @ mus + np.eye(sig.size)
     cons = model.full if full else model.reduced
     nu_prev: list[NDArray[np.float64] | None] = [None]
-    limb_arrays = _limb_arrays(model)
 
     def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
                      ) -> NDArray[np.float64]:
@@ -832,9 +835,10 @@ def pose_step(
         else:
             if alpha_solver == "newton" and variant.limbs:
                 alpha_new, nu = _newton_alpha_kernel(
-                    d1, d2, alpha, mus, v, g_red, *limb_arrays,
+                    d1, d2, alpha, mus, v, g_red, *model.kernel_limbs,
                     nu_prev[0] if WARM_MULTIPLIERS and nu_prev[0] is not None else np.zeros(8),
-                    10, float(newton_tol), bool(AUGMENTED_PD_TEST), bool(SECOND_ORDER_CORRECTION), _EYE8)
+                    NEWTON_MAX_ITER, float(newton_tol), bool(AUGMENTED_PD_TEST),
+                    bool(SECOND_ORDER_CORRECTION), _EYE8)
                 nu_prev[0] = nu
                 return alpha_new
             vtd2 = v.T @ d2
@@ -849,11 +853,7 @@ def pose_step(
             wmat[r, :r] = -lin
             wmat[r, r] = float(d1 @ d1 + vtd2 @ vtd2)
             z0 = np.append(v.T @ alpha, 1.0)
-        if alpha_solver == "newton" and not full:
-            vtd2 = v.T @ d2
-            s = _newton_reduced(g_red, lin, model, z0[:-1], tol=newton_tol)[0]
-            return np.asarray(d2 - v @ vtd2 + v @ s)
-        if alpha_solver == "newton":
+        if alpha_solver == "newton":  # the full lifting (the reduced one returned above)
             z = newton_alpha(wmat, cons, z0).z
         else:
             z = lifted_alpha_admm(wmat, cons, z0, delta, inner_max_iter, inner_tol, qstep_fn).z
