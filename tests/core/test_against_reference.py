@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
 from pose_lifter.core.bases import PoseBases, learn_pca_bases
 from pose_lifter.core.camera import camera_step
+from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.options import VARIANTS, LifterOptions
 from pose_lifter.core.pose import (
     PoseModel,
@@ -24,6 +25,7 @@ from pose_lifter.core.pose import (
     pose_step,
     qstep,
     restore_feasibility,
+    riemannian_alpha,
 )
 from pose_lifter.core.skeleton import limb_selectors
 from pose_lifter.core.types import Camera
@@ -44,6 +46,15 @@ def bases() -> PoseBases:
 @pytest.fixture(scope="module")
 def model(bases: PoseBases) -> PoseModel:
     return PoseModel.build(bases, bases.limb_proportions)
+
+
+@pytest.fixture(scope="module")
+def wide_model() -> PoseModel:
+    """30 PCA bases: enough directions for the limb map to be onto (the Riemannian alpha-step
+    needs that; the 12-basis ``model`` makes it fall back to the SQP)."""
+    poses, _ = synthetic_poses(300, seed=1)
+    wide = learn_pca_bases(poses, n_bases=30, n_starts=3, seed=0)
+    return PoseModel.build(wide, wide.limb_proportions)
 
 
 @pytest.fixture(scope="module")
@@ -204,6 +215,74 @@ def test_alpha_step_newton_not_worse_than_local_reference(
     assert float(z @ w_mat @ z) <= bound
 
 
+def _reduced_alpha_problem(model: PoseModel, y: Arr, seed: int) -> tuple[Arr, Arr, Arr]:
+    """The reduced alpha-step pose_step builds, ``min s^T G s - 2 lin^T s`` (G = (M U S)^T (M U S)
+    + I, lin = (M U S)^T d1 + V^T d2), and a start ``s0`` near ``y``."""
+    rng = np.random.default_rng(seed)
+    cam = _camera(seed, scale=1.0)
+    mus = np.einsum("ab,jbr->jar", cam.projection, model.u.reshape(12, 3, -1)).reshape(24, -1) * model.sig
+    x = cam.project(y) + 0.02 * rng.normal(size=(12, 2))
+    d1 = (x - cam.translation - model.mean.reshape(12, 3) @ cam.projection.T).reshape(-1)
+    d1 = d1 + 0.05 * rng.normal(size=24)
+    d2 = 0.1 * rng.normal(size=model.n_bases)
+    s_true = (model.u.T @ (y.reshape(-1) - model.mean)) / model.sig
+    return mus.T @ mus + np.eye(model.sig.size), mus.T @ d1 + model.v.T @ d2, s_true + 0.1 * rng.normal(
+        size=model.sig.size)
+
+
+@pytest.mark.parametrize("case", range(8))
+def test_alpha_step_riemannian_is_feasible_local_minimum(
+    wide_model: PoseModel, test_poses: Arr, case: int,
+) -> None:
+    # Nonconvex: Riemannian Newton run to its tolerance must end feasible, converged, and at a
+    # point SLSQP (started there, same lifted problem) cannot improve beyond the tolerance.
+    model = wide_model
+    gmat, lin, s0 = _reduced_alpha_problem(model, test_poses[case], case)
+    s, n_iter, converged = riemannian_alpha(gmat, lin, model, s0)
+    assert converged and n_iter < 100
+    cons = model.reduced
+    r = s.size
+    w_mat = np.zeros((r + 1, r + 1))
+    w_mat[:r, :r] = gmat
+    w_mat[:r, r] = w_mat[r, :r] = -lin
+    w_mat[r, r] = lin @ np.linalg.solve(gmat, lin)  # the constant making z^T W z >= 0
+    z = np.append(s, 1.0)
+    assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
+    f_fast = float(z @ w_mat @ z)
+    _, f_polished = ref.reference_alpha_local(w_mat, cons.omegas, z)
+    assert f_fast <= f_polished * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+
+
+def test_riemannian_limb_coordinates_are_exact(wide_model: PoseModel) -> None:
+    model = wide_model
+    coords = model.limb_coordinates
+    assert coords is not None
+    z, n, s0, rad = coords
+    cu24, cmu24 = model.kernel_limbs[:2]
+    assert np.abs(cu24 @ z - np.eye(24)).max() < 1e-12  # l = C mu + C U S s is onto ...
+    assert np.abs(cu24 @ n).max() < 1e-12  # ... and N spans the rest
+    assert np.abs(cmu24 + cu24 @ s0).max() < 1e-12
+    assert np.linalg.matrix_rank(np.hstack([z, n])) == model.sig.size
+    assert np.allclose(rad**2, model.limb_sq, rtol=1e-14, atol=0)
+
+
+def test_riemannian_falls_back_to_newton_without_onto_limb_map(
+    bases: PoseBases, model: PoseModel, test_poses: Arr,
+) -> None:
+    small = bases  # 12 bases: the limb map (24 coordinates) cannot be onto
+    assert model.limb_coordinates is None
+    with pytest.raises(InvalidInputError):
+        riemannian_alpha(np.eye(model.sig.size), np.zeros(model.sig.size), model, np.zeros(model.sig.size))
+    cam = _camera(0)
+    x = cam.project(test_poses[0])
+    kw = {**_pose_kwargs(), "alpha_solver": "riemannian"}
+    a = pose_step(x, cam.projection, cam.translation, np.ones(12), model, VARIANTS["L1WAWS"], 0.05,
+                  np.zeros(small.n_bases), **kw)  # type: ignore[arg-type]
+    b = pose_step(x, cam.projection, cam.translation, np.ones(12), model, VARIANTS["L1WAWS"], 0.05,
+                  np.zeros(small.n_bases), **{**kw, "alpha_solver": "newton"})  # type: ignore[arg-type]
+    assert np.array_equal(a.alpha, b.alpha) and a.objective == b.objective
+
+
 # ------------------------------------------------------------------------------- pose step
 
 
@@ -350,5 +429,37 @@ def test_limb_pose_step_close_to_best_local_reference(
         res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(bases.n_bases),
                         **kw)  # type: ignore[arg-type]
         ratios.append(res.objective / _best_local_reference(bases, model, test_poses, name, case))
+    assert np.median(ratios) <= TOL["nonconvex_median_ratio"], ratios
+    assert np.max(ratios) <= TOL["nonconvex_max_ratio"], ratios
+
+
+@pytest.mark.parametrize("name", ["L1WAWS", "L2WAWS"])
+def test_riemannian_pose_step_close_to_best_local_reference(
+    wide_model: PoseModel, test_poses: Arr, name: str,
+) -> None:
+    # The default alpha-solver (its limb map needs the 30-basis model) judged like the others:
+    # objective / best local minimum SLSQP reaches from the mean pose, a random start and the
+    # Riemannian and Newton pose steps' results, over 4 problems.
+    var = VARIANTS[name]
+    model = wide_model
+    k = model.n_bases
+    ratios = []
+    for case in range(4):
+        x, cam, w = _pose_problem(test_poses, case)
+        kw = {**_pose_kwargs(), "alpha_solver": "riemannian"}
+        res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(k),
+                        **kw)  # type: ignore[arg-type]
+        assert model.limb_violation(res.alpha) <= TOL["limb_violation"]
+        newton = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(k),
+                           **{**kw, "alpha_solver": "newton"})  # type: ignore[arg-type]
+        starts = [np.zeros(k), np.random.default_rng(300 + case).normal(size=k), res.alpha, newton.alpha]
+        values = []
+        for a0 in starts:
+            try:
+                values.append(ref.reference_pose_limbs_local(
+                    x, cam, model.mean, model.components, w, 0.05, var.loss, model.limb_sq, a0)[1])
+            except ref.ReferenceSolverError:
+                continue
+        ratios.append(res.objective / min(values))
     assert np.median(ratios) <= TOL["nonconvex_median_ratio"], ratios
     assert np.max(ratios) <= TOL["nonconvex_max_ratio"], ratios

@@ -111,13 +111,17 @@ def test_l1_beats_l2_with_gross_outliers_on_two_joints(bases: PoseBases, truth: 
     l1 = Lifter(bases, LifterOptions(variant="L1WAWS", n_starts=10))
     l2 = Lifter(bases, LifterOptions(variant="L2WAWS", n_starts=10))
     e1, e2 = [], []
-    for i, y in enumerate(truth[:4]):
+    # 12 cases (the 6 poses, each from 2 views): on 4 the mean ratio moves by +-0.1 with any
+    # change of solver (measured L1/L2 ratio on these 12: 0.64 Newton alpha-step, 0.76 Riemannian)
+    for i in range(12):
+        y = truth[i % len(truth)]
         x = project(y, camera(30.0 + 70.0 * i))
         bad = rng.choice(12, size=2, replace=False)
         x[bad] += rng.choice([-1.0, 1.0], size=(2, 2)) * rng.uniform(150.0, 250.0, size=(2, 2))
         e1.append(float(p_mpjpe(l1.lift(x).pose, y)))
         e2.append(float(p_mpjpe(l2.lift(x).pose, y)))
     assert np.mean(e1) < 0.8 * np.mean(e2), (e1, e2)
+    assert np.mean(np.array(e1) < np.array(e2)) > 0.5, (e1, e2)
 
 
 def test_missing_joints_are_ignored_and_limbs_still_hold(bases: PoseBases, truth: list[Arr]) -> None:

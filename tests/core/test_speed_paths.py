@@ -29,3 +29,32 @@ def test_closed_form_scaled_orthographic_projection_equals_the_svd() -> None:
         # always a scaled orthographic matrix
         g = got @ got.T
         np.testing.assert_allclose(g, g[0, 0] * np.eye(2), atol=1e-6 * max(1.0, g[0, 0]))
+
+
+def test_compiled_weighted_median_equals_numpy_version() -> None:
+    from pose_lifter.core.camera import _weighted_median_jit, weighted_median
+
+    rng = np.random.default_rng(1)
+    for i in range(3000):
+        n = int(rng.integers(1, 14))
+        v = rng.normal(size=n)
+        if i % 3 == 0:
+            v = np.round(v, 1)  # ties
+        w = np.ones(n) if i % 5 == 0 else rng.integers(0, 3, size=n).astype(float)
+        assert _weighted_median_jit(v, w) == weighted_median(v, w)
+
+
+def test_cholesky_solve_solves_or_refuses() -> None:
+    from pose_lifter.core.pose import _cholesky_solve
+
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        a = rng.normal(size=(16, 16))
+        spd = a @ a.T + 1e-3 * np.eye(16)
+        b = rng.normal(size=16)
+        x, ok = _cholesky_solve(spd, b)
+        assert ok
+        np.testing.assert_allclose(spd @ x, b, atol=1e-8 * np.abs(b).max() * np.linalg.cond(spd))
+        sym = 0.5 * (a + a.T)  # indefinite (almost surely)
+        if np.linalg.eigvalsh(sym)[0] < -1e-8:
+            assert not _cholesky_solve(sym, b)[1]

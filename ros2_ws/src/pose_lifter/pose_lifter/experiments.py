@@ -277,6 +277,7 @@ def _lift_task(task: dict[str, Any]) -> NDArray[np.float64]:
                 alpha0, max_iter=5 * o.pose_max_iter, tol=o.pose_tol, eta=o.eta,
                 eta_growth=o.eta_growth, delta=o.delta, inner_max_iter=o.inner_max_iter,
                 inner_tol=o.inner_tol, alpha_step=o.alpha_step, alpha_solver=o.alpha_solver,
+                newton_tol=o.newton_tol, alpha_prox=o.alpha_prox,
             )
             if best is None or res.objective < best.objective:
                 best = res

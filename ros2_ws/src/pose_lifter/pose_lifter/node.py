@@ -135,7 +135,9 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("confidence_threshold", "Keypoints with lower confidence are treated as missing.", 0.0, 1.0),
     _opt("min_visible_joints", "Skip a skeleton with fewer visible model joints.", 3, 12),
     _opt("limb_proportions", "Limb-length targets: 'bases' (training mean) or 'anthropometric'."),
-    _opt("alpha_solver", "Alpha-step solver: 'admm' (the paper's) or 'newton'."),
+    _opt("alpha_solver", "Alpha-step solver: 'riemannian' (Newton on the limb spheres), 'newton' (SQP) "
+         "or 'admm' (the paper's lifted inner ADM)."),
+    _opt("alpha_prox", "Proximal weight of the 'riemannian' alpha-step (0 = none).", 0.0, 1000.0),
     ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame."),
     ParamSpec("track_timeout", 1.0, "Seconds (input stamps) after which an unseen track is forgotten.",
               0.0, 3600.0),

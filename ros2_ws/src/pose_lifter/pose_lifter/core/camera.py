@@ -212,26 +212,80 @@ def camera_admm(
     lhs3 = lhs_inv[:, :3]  # (4, 3)
     scale_x = max(float(np.linalg.norm(x[vis] - x[vis].mean(axis=0))), 1e-12)
     thr = np.broadcast_to(w[:, None] / tau, x.shape)
-    l2fac = tau / (2.0 * w[:, None] + tau)
+    l2fac = np.broadcast_to(tau / (2.0 * w[:, None] + tau), x.shape)  # (n, 2), as thr
     m, u1, u2, it, converged = _camera_kernel(
         np.ascontiguousarray(x), ya, np.ascontiguousarray(hat), np.ascontiguousarray(lhs3),
         np.ascontiguousarray(thr), np.ascontiguousarray(l2fac), np.ascontiguousarray(m, dtype=np.float64),
         np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(u1, dtype=np.float64),
         np.ascontiguousarray(u2, dtype=np.float64), loss == "l1", int(max_iter), float(tol), scale_x,
     )
-    t = _optimal_translation(x, y, w, m, loss)
-    if not (np.isfinite(m).all() and np.isfinite(t).all()):
+    rot, scale, t, obj = _camera_finish(np.ascontiguousarray(x), np.ascontiguousarray(y),
+                                        np.ascontiguousarray(w), m, loss == "l1")
+    if not (np.isfinite(rot).all() and np.isfinite(t).all() and math.isfinite(scale) and scale > 0):
         raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
-    cam = Camera.from_projection(m, t)
-    obj = camera_objective(x, y, w, cam.projection, t, loss)
-    return CameraResult(cam, obj, it, converged), (u1, u2)
+    return CameraResult(Camera(rot, scale, t), obj, it, converged), (u1, u2)
 
 
 @njit
-def _sum_sq(a: NDArray[np.float64]) -> float:
-    """``np.vdot(a, a)`` of a C-contiguous array."""
-    f = a.ravel()
-    return float(f @ f)
+def _weighted_median_jit(values: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
+    """:func:`weighted_median` (same tie rule) inside the compiled kernels."""
+    order = np.argsort(values, kind="mergesort")  # stable, as numpy's "stable"
+    total = 0.0
+    for i in range(values.size):
+        total += weights[i]
+    if total <= 0.0:
+        return float(np.median(values))
+    half = 0.5 * total
+    cw = 0.0
+    for k in range(values.size):
+        cw += weights[order[k]]
+        if cw >= half:  # numpy.searchsorted(cw, half) (side "left")
+            if abs(cw - half) <= 1e-8 + 1e-5 * abs(half) and k + 1 < values.size:  # numpy.isclose
+                return float(0.5 * (values[order[k]] + values[order[k + 1]]))
+            return float(values[order[k]])
+    return float(values[order[values.size - 1]])
+
+
+@njit
+def _camera_finish(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64],
+                   m: NDArray[np.float64], l1: bool
+                   ) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
+    """From the ADM's scaled-orthographic ``M`` (2, 3): the rotation (3, 3) and scale of
+    :meth:`Camera.from_projection`, the optimal translation for ``M`` (weighted median per axis
+    for L1, weighted mean for L2) and the objective ``sum_j w_j rho(x_j - M y_j - t)``."""
+    u, sv, vt = np.linalg.svd(m, full_matrices=False)
+    r2 = u @ vt
+    scale = 0.5 * (sv[0] + sv[1])
+    m0 = scale * r2
+    rot = np.empty((3, 3))
+    rot[:2] = r2
+    rot[2, 0] = r2[0, 1] * r2[1, 2] - r2[0, 2] * r2[1, 1]
+    rot[2, 1] = r2[0, 2] * r2[1, 0] - r2[0, 0] * r2[1, 2]
+    rot[2, 2] = r2[0, 0] * r2[1, 1] - r2[0, 1] * r2[1, 0]
+    n = x.shape[0]
+    d = np.empty((n, 2))
+    for j in range(n):
+        for c in range(2):
+            d[j, c] = x[j, c] - (y[j, 0] * m0[c, 0] + y[j, 1] * m0[c, 1] + y[j, 2] * m0[c, 2])
+    t = np.empty(2)
+    wsum = 0.0
+    for j in range(n):
+        wsum += w[j]
+    for c in range(2):
+        col = np.ascontiguousarray(d[:, c])
+        if l1:
+            t[c] = _weighted_median_jit(col, w)
+        else:
+            e = 0.0
+            for j in range(n):
+                e += w[j] * col[j]
+            t[c] = e / wsum
+    obj = 0.0
+    for j in range(n):
+        for c in range(2):
+            r = d[j, c] - t[c]
+            obj += w[j] * (abs(r) if l1 else r * r)
+    return rot, scale, t, obj
 
 
 @njit
@@ -241,30 +295,70 @@ def _camera_kernel(
     u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int, tol: float, scale_x: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int, bool]:
     """The ADM iterations of :func:`camera_admm` on plain arrays (compiled by numba when
-    available): ``(M, U1, U2, iterations, converged)``; ``u1``, ``u2`` are updated in place."""
+    available): ``(M, U1, U2, iterations, converged)``; ``u1``, ``u2`` are updated in place.
+    Written as loops over the (n, 2) arrays: at these sizes array expressions cost more in
+    temporaries than in arithmetic."""
+    n = x.shape[0]
     converged = False
     it = 0
     sol = np.empty((4, 2))  # [N^T; t]
     sol[:3] = m.T
     sol[3] = t
-    proj = ya @ sol
+    proj = np.empty((n, 2))
+    for j in range(n):
+        for c in range(2):
+            proj[j, c] = (ya[j, 0] * sol[0, c] + ya[j, 1] * sol[1, c] + ya[j, 2] * sol[2, c]
+                          + ya[j, 3] * sol[3, c])
+    z = np.empty((n, 2))
+    r = np.empty((n, 2))
+    nmat = np.empty((2, 3))
     tol2 = tol * tol
     for it in range(1, max_iter + 1):
-        xu = x + u1
-        v = xu - proj
-        r = v - np.minimum(np.maximum(v, -thr), thr) if l1 else l2fac * v
-        sol = hat @ (xu - r) + lhs3 @ (m - u2).T
-        proj = ya @ sol
-        nmat = np.ascontiguousarray(sol[:3].T)
+        for j in range(n):
+            for c in range(2):
+                xu = x[j, c] + u1[j, c]
+                vv = xu - proj[j, c]
+                if l1:
+                    rr = vv - min(max(vv, -thr[j, c]), thr[j, c])
+                else:
+                    rr = l2fac[j, c] * vv
+                r[j, c] = rr
+                z[j, c] = xu - rr
+        # sol = hat @ z + lhs3 @ (M - U2)^T
+        for a in range(4):
+            for c in range(2):
+                e = 0.0
+                for j in range(n):
+                    e += hat[a, j] * z[j, c]
+                for b in range(3):
+                    e += lhs3[a, b] * (m[c, b] - u2[c, b])
+                sol[a, c] = e
+        for c in range(2):
+            for b in range(3):
+                nmat[c, b] = sol[b, c] + u2[c, b]
         m_prev = m
-        m = _project_so(nmat + u2)
-        res1 = x - proj - r
-        res2 = nmat - m
-        u1 += res1
-        u2 += res2
-        mn2 = max(_sum_sq(m), 1e-24)
-        if (_sum_sq(res1) < tol2 * scale_x * scale_x and _sum_sq(res2) < tol2 * mn2
-                and _sum_sq(m - m_prev) < tol2 * mn2):
+        m = _project_so(nmat)
+        res1_sq = 0.0
+        for j in range(n):
+            for c in range(2):
+                p = (ya[j, 0] * sol[0, c] + ya[j, 1] * sol[1, c] + ya[j, 2] * sol[2, c]
+                     + ya[j, 3] * sol[3, c])
+                proj[j, c] = p
+                e = x[j, c] - p - r[j, c]
+                u1[j, c] += e
+                res1_sq += e * e
+        res2_sq = 0.0
+        mn2 = 0.0
+        dm2 = 0.0
+        for c in range(2):
+            for b in range(3):
+                e = sol[b, c] - m[c, b]
+                u2[c, b] += e
+                res2_sq += e * e
+                mn2 += m[c, b] * m[c, b]
+                dm2 += (m[c, b] - m_prev[c, b]) ** 2
+        mn2 = max(mn2, 1e-24)
+        if res1_sq < tol2 * scale_x * scale_x and res2_sq < tol2 * mn2 and dm2 < tol2 * mn2:
             converged = True
             break
     return m, u1, u2, it, converged

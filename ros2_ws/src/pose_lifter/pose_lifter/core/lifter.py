@@ -169,7 +169,7 @@ class Lifter:
             inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
             alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
             duals=state.get("pose") if state is not None and o.warm_duals else None, state_out=out,
-            newton_tol=o.newton_tol,
+            newton_tol=o.newton_tol, alpha_prox=o.alpha_prox,
         )
         if state is not None:
             state["pose"] = out[0]

@@ -65,6 +65,8 @@ from .types import PoseResult
 
 #: SQP iteration cap of each Newton alpha-step.
 NEWTON_MAX_ITER = 10
+#: Iteration cap of each Riemannian Newton alpha-step.
+RIEMANNIAN_MAX_ITER = 3
 
 __all__ = [
     "LiftedConstraints",
@@ -75,6 +77,7 @@ __all__ = [
     "pose_step",
     "qstep",
     "restore_feasibility",
+    "riemannian_alpha",
     "top_eigenpair",
 ]
 
@@ -173,6 +176,25 @@ class PoseModel:
                 np.ascontiguousarray(self.limb_hess.reshape(8, r * r)),
                 np.ascontiguousarray(self.limb_sq))
 
+    @functools.cached_property
+    def limb_coordinates(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                                        NDArray[np.float64]] | None:
+        """The reduced coordinates ``s`` split as ``s = s0 + Z l + N t``, where ``l`` (24,) are the
+        8 limb vectors ``C_i (mu + U S s)`` and ``t`` is free: ``(Z (r, 24), N (r, r - 24), s0 (r,),
+        limb lengths (8,))``. The limb constraints are then ``||l_i|| = sqrt(L_i)``, a product of
+        spheres (the ``"riemannian"`` alpha-solver). None when the limb map ``C U S`` (24, r) does
+        not have full row rank (fewer than 24 independent basis directions, e.g. a small PCA)."""
+        cu24 = self.kernel_limbs[0]
+        if cu24.shape[1] < 24:
+            return None
+        uu, sv, vt = np.linalg.svd(cu24)
+        if sv[-1] <= 1e-8 * sv[0]:
+            return None
+        z = vt[:24].T @ ((uu.T) / sv[:, None])  # (r, 24): cu24 @ z = I
+        n = np.ascontiguousarray(vt[24:].T)  # (r, r - 24): cu24 @ n = 0
+        s0 = -z @ self.kernel_limbs[1]
+        return np.ascontiguousarray(z), n, s0, np.sqrt(self.limb_sq)
+
     @property
     def n_bases(self) -> int:
         return int(self.components.shape[1])
@@ -226,10 +248,13 @@ class PoseModel:
 
     def limb_violation(self, alpha: NDArray[np.float64]) -> float:
         """``max_i | ||C_i y|| - sqrt(L_i) |`` for ``y = mu + B alpha``."""
-        y = self.pose(alpha)
-        c = limb_selectors()
-        lengths = np.linalg.norm(np.einsum("iak,k->ia", c, y.reshape(-1)), axis=1)
-        return float(np.max(np.abs(lengths - np.sqrt(self.limb_sq))))
+        lv = (self._limb_matrix @ (self.mean + self.components @ alpha)).reshape(8, 3)
+        return float(np.max(np.abs(np.sqrt(np.sum(lv * lv, axis=1)) - np.sqrt(self.limb_sq))))
+
+    @functools.cached_property
+    def _limb_matrix(self) -> NDArray[np.float64]:
+        """The 8 ``C_i`` stacked, (24, 36)."""
+        return np.ascontiguousarray(limb_selectors().reshape(24, 3 * N_JOINTS))
 
 
 def qstep(
@@ -389,6 +414,34 @@ def newton_reduced(
     merit ``f + rho ||g||_1`` decreases. Shapes: gmat (r, r), lin (r,), s0 (r,).
     """
     return _newton_reduced(gmat, lin, model, s0, max_iter, tol)[0]
+
+
+def riemannian_alpha(
+    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
+    max_iter: int = 100, tol: float = 1e-10,
+) -> tuple[NDArray[np.float64], int, bool]:
+    """The reduced alpha-step ``min s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i``
+    (the problem of :func:`newton_reduced`) by Riemannian Newton in limb coordinates: the free
+    directions eliminated in closed form (:func:`_sphere_setup`), then :func:`_sphere_newton` on
+    the product of the 8 limb spheres from the limb vectors of ``s0``. Shapes: gmat (r, r)
+    positive definite, lin (r,), s0 (r,). Returns ``(s, iterations, converged)``.
+
+    Raises
+    ------
+    InvalidInputError
+        If the model's limb map is not onto (``model.limb_coordinates`` is None).
+    """
+    coords = model.limb_coordinates
+    if coords is None:
+        raise InvalidInputError("the bases' limb map is not onto (fewer than 24 independent directions)")
+    z, n, sz, rad = coords
+    g = np.ascontiguousarray(gmat, dtype=np.float64)
+    q, rmat, s1, s2 = _sphere_setup(g, z, n)
+    h = np.asarray(lin, dtype=np.float64) - g @ sz
+    cu24, cmu24 = model.kernel_limbs[:2]
+    lv, it, conv = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ np.asarray(s0, dtype=np.float64), rad,
+                                  int(max_iter), float(tol))
+    return sz + s1 @ lv + s2 @ h, int(it), bool(conv)
 
 
 # The module flags below are read at call time by the Python wrappers and passed to the kernels
@@ -637,6 +690,211 @@ def _newton_kernel(
     return _project_limbs(s, 10, cu24, cmu24, lsq, eye8), nu, it
 
 
+@njit
+def _tangent_basis(u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two unit vectors completing the unit 3-vector ``u`` to an orthonormal basis (Duff et al.
+    2017, "Building an orthonormal basis, revisited": no branch near the poles)."""
+    sign = 1.0 if u[2] >= 0.0 else -1.0
+    a = -1.0 / (sign + u[2])
+    b = u[0] * u[1] * a
+    e1 = np.array([1.0 + sign * u[0] * u[0] * a, sign * b, -sign * u[0]])
+    e2 = np.array([b, sign + u[1] * u[1] * a, -u[1]])
+    return e1, e2
+
+
+@njit
+def _retract(x: NDArray[np.float64], prev: NDArray[np.float64], rad: NDArray[np.float64]
+             ) -> NDArray[np.float64]:
+    """Projection of the 8 limb vectors ``x`` (24,) onto their spheres ``||l_i|| = rad_i``; a
+    (near-)zero limb keeps the direction of ``prev``."""
+    out = np.empty(24)
+    for i in range(8):
+        n = math.sqrt(x[3 * i] ** 2 + x[3 * i + 1] ** 2 + x[3 * i + 2] ** 2)
+        src = x
+        if n < 1e-12 * rad[i]:
+            src = prev
+            n = math.sqrt(prev[3 * i] ** 2 + prev[3 * i + 1] ** 2 + prev[3 * i + 2] ** 2)
+        if n == 0.0:
+            out[3 * i], out[3 * i + 1], out[3 * i + 2] = rad[i], 0.0, 0.0
+        else:
+            for j in range(3):
+                out[3 * i + j] = src[3 * i + j] * (rad[i] / n)
+    return out
+
+
+@njit
+def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
+    """``a^-1 b`` by a Cholesky factorisation of the symmetric ``a`` (n, n) (lower triangle read);
+    ``(x, True)``, or ``(b, False)`` when ``a`` is not (numerically) positive definite. Written
+    out: at n = 16 a LAPACK call costs more than the arithmetic."""
+    n = a.shape[0]
+    lo = np.zeros((n, n))
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= lo[j, k] * lo[j, k]
+        if not d > 1e-14 * abs(a[j, j]) or not d > 0.0:
+            return b, False
+        d = math.sqrt(d)
+        lo[j, j] = d
+        for i in range(j + 1, n):
+            e = a[i, j]
+            for k in range(j):
+                e -= lo[i, k] * lo[j, k]
+            lo[i, j] = e / d
+    y = np.empty(n)
+    for i in range(n):
+        e = b[i]
+        for k in range(i):
+            e -= lo[i, k] * y[k]
+        y[i] = e / lo[i, i]
+    x = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        e = y[i]
+        for k in range(i + 1, n):
+            e -= lo[k, i] * x[k]
+        x[i] = e / lo[i, i]
+    return x, True
+
+
+@njit
+def _quad(q: NDArray[np.float64], b: NDArray[np.float64], x: NDArray[np.float64]
+          ) -> tuple[NDArray[np.float64], float]:
+    """``(Q x, x^T Q x - 2 b^T x)`` for (24, 24), (24,), (24,)."""
+    qx = np.empty(24)
+    f = 0.0
+    for i in range(24):
+        e = 0.0
+        for j in range(24):
+            e += q[i, j] * x[j]
+        qx[i] = e
+        f += x[i] * (e - 2.0 * b[i])
+    return qx, f
+
+
+@njit
+def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[np.float64],
+                   rad: NDArray[np.float64], max_iter: int, tol: float
+                   ) -> tuple[NDArray[np.float64], int, bool]:
+    """Riemannian Newton for ``min_l l^T Q l - 2 b^T l`` over the product of 8 spheres
+    ``||l_i|| = rad_i`` (``l`` = the 8 limb vectors, (24,); ``Q`` (24, 24) positive definite).
+
+    Each iteration: the Riemannian gradient (the Euclidean one projected on the tangent
+    spaces, i.e. the KKT residual with least-squares multipliers ``mu_i``), the Riemannian
+    Hessian ``T^T (2 Q + 2 diag(mu_i I_3)) T`` in orthonormal tangent bases ``T`` (24, 16),
+    shifted by a multiple of the identity until it is positive definite (so the step is a
+    descent direction), the step retracted onto the spheres by normalisation, and Armijo
+    backtracking on the objective (every iterate is feasible: no merit function, no Maratos
+    effect). Stops when ``||grad_R|| <= tol * max(1, ||grad||)`` or when the Newton step
+    predicts a decrease below ``1e-13 * max(1, |f|)`` (converged), or when the line search fails
+    (not converged); returns ``(l, iterations, converged)``.
+    """
+    l = _retract(l0, l0, rad)
+    ql, f = _quad(q, b, l)
+    tb = np.empty((24, 2))  # tangent basis: rows 3i..3i+2 hold sphere i's two vectors
+    gr = np.empty(16)
+    mu = np.empty(8)
+    w = np.empty((24, 16))
+    hr = np.empty((16, 16))
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):
+        eg = 2.0 * (ql - b)
+        for i in range(8):
+            u = l[3 * i:3 * i + 3] / rad[i]
+            e1, e2 = _tangent_basis(u)
+            egi = eg[3 * i:3 * i + 3]
+            mu[i] = -(u[0] * egi[0] + u[1] * egi[1] + u[2] * egi[2]) / (2.0 * rad[i])
+            for p in range(3):
+                tb[3 * i + p, 0] = e1[p]
+                tb[3 * i + p, 1] = e2[p]
+            gr[2 * i] = e1[0] * egi[0] + e1[1] * egi[1] + e1[2] * egi[2]
+            gr[2 * i + 1] = e2[0] * egi[0] + e2[1] * egi[1] + e2[2] * egi[2]
+        gn = 0.0
+        for i in range(16):
+            gn += gr[i] * gr[i]
+        if math.sqrt(gn) <= tol * max(1.0, math.sqrt(float(eg @ eg))):
+            converged = True
+            it -= 1
+            break
+        # W = 2 Q T, then H = T^T W + 2 diag(mu_i): T is block diagonal (3 x 2 blocks)
+        for row in range(24):
+            for j in range(8):
+                for c in range(2):
+                    w[row, 2 * j + c] = 2.0 * (q[row, 3 * j] * tb[3 * j, c]
+                                               + q[row, 3 * j + 1] * tb[3 * j + 1, c]
+                                               + q[row, 3 * j + 2] * tb[3 * j + 2, c])
+        scale = 0.0
+        for i in range(8):
+            for e in range(2):
+                for col in range(16):
+                    hr[2 * i + e, col] = (tb[3 * i, e] * w[3 * i, col] + tb[3 * i + 1, e] * w[3 * i + 1, col]
+                                          + tb[3 * i + 2, e] * w[3 * i + 2, col])
+                hr[2 * i + e, 2 * i + e] += 2.0 * mu[i]
+        for i in range(16):
+            scale = max(scale, abs(hr[i, i]))
+        # modified Newton: the smallest shift c * 4^k making it positive definite
+        shift = 0.0
+        ok = False
+        step = gr
+        for _ in range(60):
+            for i in range(16):
+                hr[i, i] += shift
+            step, ok = _cholesky_solve(hr, gr)
+            for i in range(16):
+                hr[i, i] -= shift
+            if ok:
+                break
+            shift = 1e-6 * max(scale, 1e-300) if shift == 0.0 else 4.0 * shift
+        if not ok:
+            break
+        slope = 0.0
+        for i in range(16):
+            step[i] = -step[i]
+            slope += gr[i] * step[i]
+        if not slope < -1e-13 * max(1.0, abs(f)):
+            # the predicted decrease is at the round-off level of f: stationary to working
+            # precision (the gradient test can be out of reach when |Q l| >> |grad|)
+            converged = True
+            break
+        d = np.empty(24)
+        for i in range(8):
+            for p in range(3):
+                d[3 * i + p] = tb[3 * i + p, 0] * step[2 * i] + tb[3 * i + p, 1] * step[2 * i + 1]
+        a = 1.0
+        accepted = False
+        while a > 1e-10:
+            cand = _retract(l + a * d, l, rad)
+            qc, fc = _quad(q, b, cand)
+            if fc <= f + 1e-4 * a * slope:
+                accepted = True
+                break
+            a *= 0.5
+        if not accepted:
+            break
+        l, ql, f = cand, qc, fc
+    return l, it, converged
+
+
+@njit
+def _sphere_setup(g: NDArray[np.float64], z: NDArray[np.float64], n: NDArray[np.float64]
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                             NDArray[np.float64]]:
+    """The alpha-step's quadratic ``s^T G s - 2 lin^T s`` in limb coordinates.
+
+    With ``s = s0 + Z l + N t`` (``l`` the 8 limb vectors (24,), ``t`` free (m,), ``Z`` (r, 24)
+    a right inverse and ``N`` (r, m) a null-space basis of the limb map), the free part ``t`` is
+    eliminated in closed form. Returns ``Q`` (24, 24), ``R`` (24, r), ``S1`` (r, 24), ``S2``
+    (r, r) such that, with ``h = lin - G s0``, the objective is ``l^T Q l - 2 (R h)^T l`` up to a
+    constant and the minimising ``s`` for given ``l`` is ``s0 + S1 l + S2 h``.
+    """
+    gz = g @ z
+    k1 = np.linalg.inv(n.T @ (g @ n)) @ n.T  # (m, r): t = k1 (h - G Z l)
+    gzn = gz.T @ n  # (24, m)
+    q = z.T @ gz - gzn @ (k1 @ gz)
+    return 0.5 * (q + q.T), z.T - gzn @ k1, z - n @ (k1 @ gz), n @ k1
+
+
 def _newton_reduced(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
     max_iter: int = NEWTON_MAX_ITER, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
@@ -666,6 +924,24 @@ def _newton_alpha_kernel(
     s, nu, _ = _newton_kernel(g_red, lin, cu24, cmu24, hc, lsq, v.T @ alpha, nu0, max_iter, tol,
                               augmented_pd_test, second_order_correction, eye8)
     return d2 - v @ vtd2 + v @ s, nu
+
+
+@njit
+def _riemannian_alpha_kernel(
+    d1: NDArray[np.float64], d2: NDArray[np.float64], sk: NDArray[np.float64], mus: NDArray[np.float64],
+    v: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64],
+    s1: NDArray[np.float64], s2: NDArray[np.float64], s0: NDArray[np.float64], cu24: NDArray[np.float64],
+    cmu24: NDArray[np.float64], rad: NDArray[np.float64], max_iter: int, tol: float, prox: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """The alpha-step of :func:`pose_step` (limbs on) by :func:`_sphere_newton` in limb
+    coordinates (see :func:`_sphere_setup`), started from the limb vectors of the current
+    iterate, whose reduced coordinates are ``sk = V^T alpha_k`` (r,). Returns ``(alpha (k,),
+    s = V^T alpha (r,), iterations)``."""
+    vtd2 = v.T @ d2
+    h = mus.T @ d1 + vtd2 + prox * sk - gs0
+    lv, it, _ = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ sk, rad, max_iter, tol)
+    s = s0 + s1 @ lv + s2 @ h
+    return d2 + v @ (s - vtd2), s, it
 
 
 @njit
@@ -716,6 +992,58 @@ def _adm_dual_update(
     return ax, obj, primal, dual
 
 
+@njit
+def _riemannian_adm_kernel(
+    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], v: NDArray[np.float64],
+    gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64], s1: NDArray[np.float64],
+    s2: NDArray[np.float64], s0: NDArray[np.float64], cu24: NDArray[np.float64], cmu24: NDArray[np.float64],
+    rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    best_obj: float, eta: float, eta_growth: float, eta_max: float, th: float, l1: bool, max_iter: int,
+    tol: float, alpha_max_iter: int, alpha_tol: float, prox: float, scale_c: float,
+) -> tuple[NDArray[np.float64], float, float, int, bool]:
+    """The pose ADM loop of :func:`pose_step` with the Riemannian alpha-step, in one kernel (the
+    Python loop's updates; ``V^T alpha`` is carried instead of recomputed). ``u1``, ``u2``
+    (scaled multipliers) are updated in place. Returns ``(best alpha, best objective, final
+    eta, iterations, converged)``; ``best_obj`` is the objective of ``alpha0`` if feasible,
+    else ``inf``."""
+    alpha = alpha0.copy()
+    best_alpha = alpha.copy()
+    beta = alpha.copy()
+    sk = v.T @ alpha
+    ax = mus @ sk
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):
+        beta_prev, ax_prev = beta, ax
+        gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1)
+        alpha, sk, _ = _riemannian_alpha_kernel(d1, d2, sk, mus, v, gs0, q, rmat, s1, s2, s0, cu24, cmu24,
+                                                rad, alpha_max_iter, alpha_tol, prox)
+        ax = mus @ sk
+        r1 = c - ax - gamma
+        r2 = alpha - beta
+        u1 += r1
+        u2 += r2
+        obj = _objective(c - ax, wts, alpha, th, l1)
+        an = max(1.0, math.sqrt(float(alpha @ alpha)))
+        primal = max(math.sqrt(float(r1 @ r1)) / scale_c, math.sqrt(float(r2 @ r2)) / an)
+        dax = ax - ax_prev
+        dbeta = beta - beta_prev
+        dual = max(math.sqrt(float(dax @ dax)) / scale_c, math.sqrt(float(dbeta @ dbeta)) / an)
+        if eta_growth != 1.0 and eta < eta_max:
+            eta_new = min(eta * eta_growth, eta_max)
+            u1 *= eta / eta_new
+            u2 *= eta / eta_new
+            eta = eta_new
+        if obj < best_obj:
+            best_obj, best_alpha = obj, alpha.copy()
+        if primal < tol and dual < tol:
+            converged = True
+            break
+    if not math.isfinite(best_obj):
+        best_alpha = alpha
+    return best_alpha, best_obj, eta, it, converged
+
+
 def pose_objective(
     resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64], theta: float,
     loss: Literal["l1", "l2"],
@@ -750,6 +1078,7 @@ def pose_step(
     duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
     newton_tol: float = 1e-9,
+    alpha_prox: float = 1.0,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
 
@@ -818,6 +1147,17 @@ def pose_step(
         g_full = a_full.T @ a_full + np.eye(k)
     g_red = mus.T @ mus + np.eye(sig.size)
     cons = model.full if full else model.reduced
+    riemannian = alpha_solver == "riemannian" and variant.limbs and not full
+    if riemannian:
+        coords = model.limb_coordinates
+        if coords is None:  # the limb map is not onto: the SQP solves the same problem
+            riemannian, alpha_solver = False, "newton"
+        else:
+            z_l, n_l, s0_l, rad_l = coords
+            g_l = g_red + float(alpha_prox) * np.eye(sig.size)
+            q_l, r_l, s1_l, s2_l = _sphere_setup(g_l, z_l, n_l)
+            gs0_l = g_l @ s0_l
+            cu24_l, cmu24_l = model.kernel_limbs[:2]
     nu_prev: list[NDArray[np.float64] | None] = [None]
 
     def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
@@ -884,7 +1224,12 @@ def pose_step(
     scale_c = max(1.0, float(np.linalg.norm(c)))
     l1 = loss == "l1"
     ax = a_times(alpha)
-    for it in range(1, max_iter + 1):
+    if riemannian:  # the same loop compiled as one kernel
+        best_alpha, best_obj, eta, it, converged = _riemannian_adm_kernel(
+            c, wts, mus, v, gs0_l, q_l, r_l, s1_l, s2_l, s0_l, cu24_l, cmu24_l, rad_l, alpha, u1, u2,
+            float(best_obj), float(eta), float(eta_growth), float(eta_max), th, l1, int(max_iter), float(tol),
+            RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox), scale_c)
+    for it in range(1, 0 if riemannian else max_iter + 1):
         beta_prev, ax_prev = beta, ax
         gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, float(eta), th, l1)
         alpha = alpha_update(d1, d2, alpha)
@@ -903,9 +1248,11 @@ def pose_step(
     if state_out is not None:
         state_out.append((eta * u1, eta * u2))
     if not np.isfinite(best_obj):
-        # no feasible iterate (cannot happen with restore_feasibility unless it failed)
-        best_alpha = alpha
-        best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
+        # no feasible iterate (cannot happen with restore_feasibility unless it failed); the
+        # kernel returns its last iterate then
+        if not riemannian:
+            best_alpha = alpha
+        best_obj = pose_objective(c - a_times(best_alpha), wts, best_alpha, th, loss)
     if not np.all(np.isfinite(best_alpha)):
         raise InvalidInputError("pose step diverged (non-finite coefficients)")
     viol = model.limb_violation(best_alpha) if variant.limbs else 0.0

@@ -116,13 +116,22 @@ def limb_selectors() -> NDArray[np.float64]:
     Returns
     -------
     ndarray, shape (8, 3, 36)
-        ``C[i] @ pose.reshape(-1)`` is the vector along limb ``i``.
+        ``C[i] @ pose.reshape(-1)`` is the vector along limb ``i``. The same read-only array on
+        every call (built once).
     """
+    return _LIMB_SELECTORS
+
+
+def _build_limb_selectors() -> NDArray[np.float64]:
     c = np.zeros((len(LIMBS), 3, 3 * N_JOINTS))
     for i, (j1, j2) in enumerate(LIMBS):
         c[i, :, 3 * j1 : 3 * j1 + 3] += np.eye(3)
         c[i, :, 3 * j2 : 3 * j2 + 3] -= np.eye(3)
+    c.flags.writeable = False
     return c
+
+
+_LIMB_SELECTORS = _build_limb_selectors()
 
 
 def body_frame(pose: NDArray[np.float64]) -> NDArray[np.float64]:
