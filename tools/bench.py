@@ -228,19 +228,30 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def reference_comparison(bases: PoseBases, tracks: list[Track], n_frames: int, n_alt: int) -> None:
-    """Fast and reference paths on the first frames of the first track (same start, options)."""
+    """Fast and reference paths on the first frames of the first track (same start, options).
+
+    The reference is the paper's algorithm with its convex subproblems handed to cvxpy + Clarabel
+    (every Q-step of the inner alpha-step ADM) and the camera step to the reference camera solver.
+    The fast paths run the same alternation from the same start; differences come from the
+    subproblem solvers (closed forms, capped ADMs, another alpha-step algorithm) and, the problem
+    being nonconvex, from the local minima these lead to. Objective differences are signed:
+    negative = the fast path ends lower (better) than the reference.
+    """
     print(f"\nfast vs cvxpy+Clarabel reference ({n_frames} frames, one start, "
-          f"{n_alt} alternations, inner ADM alpha-step on both):")
+          f"{n_alt} alternations; the reference runs the paper's inner ADM alpha-step):")
     base = LifterOptions(n_starts=1, max_alternations=n_alt, alpha_solver="admm", warm_flip=False)
+    ref_label = "reference (Clarabel Q-step, reference camera)"
     variants = {
-        "fast (admm Q-step closed form)": base,
-        "fast (default newton alpha-step)": base.replace(alpha_solver="newton"),
-        "reference (Clarabel Q-step, LP camera)": base.replace(camera_solver="cvxpy", pose_solver="cvxpy"),
+        "fast, paper's inner ADM alpha-step": base,
+        "fast, newton alpha-step": base.replace(alpha_solver="newton"),
+        "fast, riemannian alpha-step (default)": base.replace(alpha_solver="riemannian"),
+        ref_label: base.replace(camera_solver="cvxpy", pose_solver="cvxpy"),
     }
     frames = [(tr, i) for tr in tracks[:1] for i in range(min(n_frames, len(tr.points)))]
     out: dict[str, tuple[list[float], list[float], list[float]]] = {}
     for label, o in variants.items():
         lfv = Lifter(bases, o)
+        lfv.lift(frames[0][0].points[0], frames[0][0].confidence[0])  # compile / load kernels
         ts, ob, er = [], [], []
         for tr, i in frames:
             t0 = time.perf_counter()
@@ -249,14 +260,17 @@ def reference_comparison(bases: PoseBases, tracks: list[Track], n_frames: int, n
             ob.append(r.objective)
             er.append(error(r, tr.truth[i]))
         out[label] = (ts, ob, er)
-        print(f"  {label:<40s} median {pct(ts, 50):10.1f} ms  objective {np.mean(ob):.4f}  "
+        print(f"  {label:<46s} median {pct(ts, 50):10.1f} ms  objective {np.mean(ob):.4f}  "
               f"P-MPJPE {np.nanmean(er):.4f}")
-    ref = out["reference (Clarabel Q-step, LP camera)"]
-    for label in list(variants)[:2]:
+    ref = out[ref_label]
+    for label in list(variants)[:3]:
         ts, ob, er = out[label]
-        print(f"  {label}: {pct(ref[0], 50) / pct(ts, 50):7.1f}x faster; objective rel. diff "
-              f"{np.max(np.abs(np.array(ob) - ref[1]) / np.abs(ref[1])):.2%} (max), 3D error rel. diff "
-              f"{np.nanmax(np.abs(np.array(er) - ref[2]) / np.array(ref[2])):.2%} (max)")
+        d_obj = (np.array(ob) - ref[1]) / np.abs(ref[1])
+        d_err = (np.array(er) - ref[2]) / np.array(ref[2])
+        ok = int(np.sum(d_obj <= 0.01))
+        print(f"  {label}: {pct(ref[0], 50) / pct(ts, 50):8.1f}x faster; objective vs reference "
+              f"{', '.join(f'{d:+.1%}' for d in d_obj)} (<= +1 % on {ok} of {len(ob)}); 3D error "
+              f"{', '.join(f'{d:+.1%}' for d in d_err)}")
 
 
 if __name__ == "__main__":

@@ -291,7 +291,8 @@ def _pose_kwargs() -> dict[str, object]:
     opts = LifterOptions()
     names = {"max_iter": "pose_max_iter", "tol": "pose_tol", "eta": "eta", "eta_growth": "eta_growth",
              "delta": "delta", "inner_max_iter": "inner_max_iter", "inner_tol": "inner_tol",
-             "alpha_step": "alpha_step", "alpha_solver": "alpha_solver"}
+             "alpha_step": "alpha_step", "alpha_solver": "alpha_solver", "alpha_prox": "alpha_prox",
+             "newton_tol": "newton_tol"}
     accepted = inspect.signature(pose_step).parameters
     return {k: getattr(opts, v) for k, v in names.items() if k in accepted and hasattr(opts, v)}
 

@@ -183,14 +183,23 @@ def camera_admm(
     fixed point and the same stopping rule is met in fewer iterations. Returns the result
     and the final duals.
     """
-    x = np.asarray(points, dtype=np.float64)
-    y = np.asarray(pose, dtype=np.float64)
-    w = np.asarray(weights, dtype=np.float64)
+    x = np.ascontiguousarray(points, dtype=np.float64)
+    y = np.ascontiguousarray(pose, dtype=np.float64)
+    w = np.ascontiguousarray(weights, dtype=np.float64)
     _check(x, y, w)
+    return _camera_admm_checked(x, y, w, loss, init, max_iter, tol, tau, duals)
+
+
+def _camera_admm_checked(
+    x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], loss: Literal["l1", "l2"],
+    init: Camera | None, max_iter: int, tol: float, tau: float,
+    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+) -> tuple[CameraResult, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """:func:`camera_admm` on inputs already checked (C-contiguous float64, finite, shapes as
+    documented, >= 3 positive weights): the lifter's per-alternation call."""
     n = x.shape[0]
-    ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)
-    vis = w > 0
     if init is None:
+        ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)
         sw = np.sqrt(w)[:, None]
         sol, *_ = np.linalg.lstsq(sw * ya, sw * x, rcond=None)  # (4, 2)
         m = project_scaled_orthographic(sol[:3].T)
@@ -198,32 +207,64 @@ def camera_admm(
             m = np.hstack([np.eye(2), np.zeros((2, 1))])
         t = _optimal_translation(x, y, w, m, "l2")
     else:
-        m = init.projection.copy()
-        t = np.asarray(init.translation, dtype=np.float64).copy()
+        m = np.ascontiguousarray(init.projection, dtype=np.float64)
+        t = np.array(init.translation, dtype=np.float64)
     if duals is None:
-        u1 = np.zeros_like(x)
-        u2 = np.zeros_like(m)
+        u1 = np.zeros((n, 2))
+        u2 = np.zeros((2, 3))
     else:
-        u1, u2 = duals[0].copy(), duals[1].copy()
-    # normal equations of the (N, t) step: (Ya^T Ya + D) v = Ya^T Z + D (M - U2)
-    dmat = np.diag([1.0, 1.0, 1.0, 0.0])
-    lhs_inv = np.linalg.inv(ya.T @ ya + dmat)
-    hat = lhs_inv @ ya.T  # (4, n)
-    lhs3 = lhs_inv[:, :3]  # (4, 3)
-    scale_x = max(float(np.linalg.norm(x[vis] - x[vis].mean(axis=0))), 1e-12)
-    thr = np.broadcast_to(w[:, None] / tau, x.shape)
-    l2fac = np.broadcast_to(tau / (2.0 * w[:, None] + tau), x.shape)  # (n, 2), as thr
-    m, u1, u2, it, converged = _camera_kernel(
-        np.ascontiguousarray(x), ya, np.ascontiguousarray(hat), np.ascontiguousarray(lhs3),
-        np.ascontiguousarray(thr), np.ascontiguousarray(l2fac), np.ascontiguousarray(m, dtype=np.float64),
-        np.ascontiguousarray(t, dtype=np.float64), np.ascontiguousarray(u1, dtype=np.float64),
-        np.ascontiguousarray(u2, dtype=np.float64), loss == "l1", int(max_iter), float(tol), scale_x,
-    )
-    rot, scale, t, obj = _camera_finish(np.ascontiguousarray(x), np.ascontiguousarray(y),
-                                        np.ascontiguousarray(w), m, loss == "l1")
+        u1 = np.array(duals[0], dtype=np.float64)
+        u2 = np.array(duals[1], dtype=np.float64)
+    rot, scale, t, obj, it, converged = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1", int(max_iter),
+                                                      float(tol), float(tau))
     if not (np.isfinite(rot).all() and np.isfinite(t).all() and math.isfinite(scale) and scale > 0):
         raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
     return CameraResult(Camera(rot, scale, t), obj, it, converged), (u1, u2)
+
+
+@njit
+def _camera_solve(
+    x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], m: NDArray[np.float64],
+    t: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int,
+    tol: float, tau: float,
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float, int, bool]:
+    """Set-up, ADM iterations (:func:`_camera_kernel`) and finish (:func:`_camera_finish`) of
+    the camera step from ``M`` (2, 3), ``t`` (2,); ``u1`` (n, 2), ``u2`` (2, 3) are updated in
+    place. Returns ``(rotation, scale, t, objective, iterations, converged)``."""
+    n = x.shape[0]
+    ya = np.ones((n, 4))
+    ya[:, :3] = y
+    # normal equations of the (N, t) step: (Ya^T Ya + D) v = Ya^T Z + D (M - U2)
+    lhs = ya.T @ ya
+    for i in range(3):
+        lhs[i, i] += 1.0
+    lhs_inv = np.linalg.inv(lhs)
+    hat = np.ascontiguousarray(lhs_inv @ ya.T)  # (4, n)
+    lhs3 = np.ascontiguousarray(lhs_inv[:, :3])  # (4, 3)
+    # spread of the visible points (the residual scale of the stopping rule)
+    cx, cy, nv = 0.0, 0.0, 0
+    for j in range(n):
+        if w[j] > 0:
+            cx += x[j, 0]
+            cy += x[j, 1]
+            nv += 1
+    cx /= nv
+    cy /= nv
+    ss = 0.0
+    for j in range(n):
+        if w[j] > 0:
+            ss += (x[j, 0] - cx) ** 2 + (x[j, 1] - cy) ** 2
+    scale_x = max(math.sqrt(ss), 1e-12)
+    thr = np.empty((n, 2))
+    l2fac = np.empty((n, 2))
+    for j in range(n):
+        for c in range(2):
+            thr[j, c] = w[j] / tau
+            l2fac[j, c] = tau / (2.0 * w[j] + tau)
+    m, u1, u2, it, converged = _camera_kernel(x, ya, hat, lhs3, thr, l2fac, m, t, u1, u2, l1, max_iter, tol,
+                                              scale_x)
+    rot, scale, t_out, obj = _camera_finish(x, y, w, m, l1)
+    return rot, scale, t_out, obj, it, converged
 
 
 @njit

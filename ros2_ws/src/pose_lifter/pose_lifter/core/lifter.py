@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bases import PoseBases
-from .camera import camera_admm
+from .camera import _camera_admm_checked
 from .errors import InvalidInputError, TooFewJointsError
 from .options import LifterOptions
 from .pose import LiftedConstraints, PoseModel, QStepFn, pose_step
@@ -151,8 +151,9 @@ class Lifter:
                                         rotation_init=None if init is None else init.rotation)
             return CameraResult(cam, float(obj), 1, True)
         duals = state.get("camera") if state is not None and o.warm_duals else None
-        res, duals_out = camera_admm(xn, pose, w, o.method.loss, init=init, max_iter=o.camera_max_iter,
-                                     tol=o.camera_tol, tau=o.tau, duals=duals)
+        # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
+        res, duals_out = _camera_admm_checked(xn, pose, w, o.method.loss, init, o.camera_max_iter,
+                                              o.camera_tol, o.tau, duals)
         if state is not None:
             state["camera"] = duals_out
         return res

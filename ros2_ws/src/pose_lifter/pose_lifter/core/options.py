@@ -141,7 +141,7 @@ class LifterOptions:
     theta: float = 0.1
     max_alternations: int = 10
     alternation_tol: float = 1e-3
-    pose_max_iter: int = 30
+    pose_max_iter: int = 40
     pose_tol: float = 1e-3
     inner_max_iter: int = 60
     inner_tol: float = 1e-6

@@ -66,7 +66,7 @@ from .types import PoseResult
 #: SQP iteration cap of each Newton alpha-step.
 NEWTON_MAX_ITER = 10
 #: Iteration cap of each Riemannian Newton alpha-step.
-RIEMANNIAN_MAX_ITER = 3
+RIEMANNIAN_MAX_ITER = 1
 
 __all__ = [
     "LiftedConstraints",
@@ -1006,42 +1006,133 @@ def _riemannian_adm_kernel(
     (scaled multipliers) are updated in place. Returns ``(best alpha, best objective, final
     eta, iterations, converged)``; ``best_obj`` is the objective of ``alpha0`` if feasible,
     else ``inf``."""
+    m = c.size
+    k = alpha0.size
     alpha = alpha0.copy()
     best_alpha = alpha.copy()
     beta = alpha.copy()
+    beta_prev = np.empty(k)
+    gamma = np.empty(m)
+    d1 = np.empty(m)
+    d2 = np.empty(k)
     sk = v.T @ alpha
     ax = mus @ sk
     converged = False
     it = 0
+    # the vector updates are written as loops (fused, no temporaries): the same arithmetic as
+    # _adm_split / _adm_dual_update, summed sequentially
     for it in range(1, max_iter + 1):
-        beta_prev, ax_prev = beta, ax
-        gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1)
+        beta, beta_prev = beta_prev, beta
+        ax_prev = ax
+        for i in range(m):  # gamma-step (prox of the data term)
+            vg = c[i] - ax[i] + u1[i]
+            if l1:
+                gi = math.copysign(max(abs(vg) - wts[i] / eta, 0.0), vg)
+            else:
+                gi = eta * vg / (2.0 * wts[i] + eta)
+            gamma[i] = gi
+            d1[i] = c[i] - gi + u1[i]
+        for i in range(k):  # beta-step (prox of theta ||.||_1)
+            vb = alpha[i] + u2[i]
+            bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
+            beta[i] = bi
+            d2[i] = bi - u2[i]
         alpha, sk, _ = _riemannian_alpha_kernel(d1, d2, sk, mus, v, gs0, q, rmat, s1, s2, s0, cu24, cmu24,
                                                 rad, alpha_max_iter, alpha_tol, prox)
         ax = mus @ sk
-        r1 = c - ax - gamma
-        r2 = alpha - beta
-        u1 += r1
-        u2 += r2
-        obj = _objective(c - ax, wts, alpha, th, l1)
-        an = max(1.0, math.sqrt(float(alpha @ alpha)))
-        primal = max(math.sqrt(float(r1 @ r1)) / scale_c, math.sqrt(float(r2 @ r2)) / an)
-        dax = ax - ax_prev
-        dbeta = beta - beta_prev
-        dual = max(math.sqrt(float(dax @ dax)) / scale_c, math.sqrt(float(dbeta @ dbeta)) / an)
+        r1sq, dsq, data = 0.0, 0.0, 0.0
+        for i in range(m):
+            e = c[i] - ax[i]
+            data += wts[i] * (abs(e) if l1 else e * e)
+            r = e - gamma[i]
+            u1[i] += r
+            r1sq += r * r
+            dsq += (ax[i] - ax_prev[i]) ** 2
+        r2sq, asq, anorm1, dbsq = 0.0, 0.0, 0.0, 0.0
+        for i in range(k):
+            a = alpha[i]
+            r = a - beta[i]
+            u2[i] += r
+            r2sq += r * r
+            asq += a * a
+            anorm1 += abs(a)
+            dbsq += (beta[i] - beta_prev[i]) ** 2
+        obj = data + th * anorm1
+        an = max(1.0, math.sqrt(asq))
+        primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
+        dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
         if eta_growth != 1.0 and eta < eta_max:
             eta_new = min(eta * eta_growth, eta_max)
             u1 *= eta / eta_new
             u2 *= eta / eta_new
             eta = eta_new
         if obj < best_obj:
-            best_obj, best_alpha = obj, alpha.copy()
+            best_obj = obj
+            best_alpha[:] = alpha
         if primal < tol and dual < tol:
             converged = True
             break
     if not math.isfinite(best_obj):
         best_alpha = alpha
     return best_alpha, best_obj, eta, it, converged
+
+
+@njit
+def _limb_violation_jit(y: NDArray[np.float64], limb_matrix: NDArray[np.float64], rad: NDArray[np.float64]
+                        ) -> float:
+    """:meth:`PoseModel.limb_violation` of the pose ``y`` (36,)."""
+    lv = limb_matrix @ y
+    out = 0.0
+    for i in range(8):
+        n = math.sqrt(lv[3 * i] ** 2 + lv[3 * i + 1] ** 2 + lv[3 * i + 2] ** 2)
+        out = max(out, abs(n - rad[i]))
+    return out
+
+
+@njit
+def _riemannian_pose_kernel(
+    x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
+    mean: NDArray[np.float64], u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64],
+    comps: NDArray[np.float64], limb_matrix: NDArray[np.float64], z: NDArray[np.float64],
+    n: NDArray[np.float64], s0: NDArray[np.float64], rad: NDArray[np.float64], cu24: NDArray[np.float64],
+    cmu24: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    th: float, l1: bool, eta: float, eta_growth: float, eta_max: float, max_iter: int, tol: float,
+    alpha_max_iter: int, alpha_tol: float, prox: float,
+) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool]:
+    """:func:`pose_step` with the Riemannian alpha-step, set-up included: ``c = x - t - M mu``,
+    ``M U S``, the limb-coordinate quadratic (:func:`_sphere_setup`), then
+    :func:`_riemannian_adm_kernel`. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,), alpha0 (k,),
+    u1 (24,), u2 (k,) (scaled multipliers, updated in place). Returns ``(alpha, objective, limb
+    violation, pose (36,), final eta, iterations, converged)``."""
+    r = sig.size
+    nj = x.shape[0]
+    wts = np.empty(2 * nj)
+    c = np.empty(2 * nj)
+    mus = np.empty((2 * nj, r))
+    for j in range(nj):
+        for a in range(2):
+            wts[2 * j + a] = w[j]
+            c[2 * j + a] = x[j, a] - t[a] - (m0[a, 0] * mean[3 * j] + m0[a, 1] * mean[3 * j + 1]
+                                             + m0[a, 2] * mean[3 * j + 2])
+            for k in range(r):
+                mus[2 * j + a, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
+                                     + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+    g = mus.T @ mus
+    for k in range(r):
+        g[k, k] += 1.0 + prox
+    q, rmat, s1, s2 = _sphere_setup(g, z, n)
+    gs0 = g @ s0
+    best_obj = np.inf
+    if _limb_violation_jit(mean + comps @ alpha0, limb_matrix, rad) < 1e-6:
+        best_obj = _objective(c - mus @ (v.T @ alpha0), wts, alpha0, th, l1)
+    scale_c = max(1.0, math.sqrt(float(c @ c)))
+    best_alpha, best_obj, eta, it, converged = _riemannian_adm_kernel(
+        c, wts, mus, v, gs0, q, rmat, s1, s2, s0, cu24, cmu24, rad, alpha0, u1, u2, best_obj, eta, eta_growth,
+        eta_max, th, l1, max_iter, tol, alpha_max_iter, alpha_tol, prox, scale_c)
+    if not math.isfinite(best_obj):
+        best_obj = _objective(c - mus @ (v.T @ best_alpha), wts, best_alpha, th, l1)
+    y = mean + comps @ best_alpha
+    return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged
 
 
 def pose_objective(
@@ -1052,6 +1143,43 @@ def pose_objective(
     return _objective(np.ascontiguousarray(resid, dtype=np.float64),
                       np.ascontiguousarray(wts, dtype=np.float64),
                       np.ascontiguousarray(alpha, dtype=np.float64), float(theta), loss == "l1")
+
+
+def _riemannian_pose_step(
+    x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
+    weights: NDArray[np.float64], model: PoseModel, l1: bool, th: float, alpha0: NDArray[np.float64],
+    max_iter: int, tol: float, eta: float, eta_growth: float, eta_max: float,
+    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None, newton_tol: float,
+    alpha_prox: float,
+) -> PoseResult:
+    """:func:`pose_step` with ``alpha_solver="riemannian"`` (limbs on, reduced lifting, onto limb
+    map): one call of :func:`_riemannian_pose_kernel`."""
+    k = model.n_bases
+    alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
+    if alpha.shape != (k,):
+        raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
+    coords = model.limb_coordinates
+    assert coords is not None
+    z, n, s0, rad = coords
+    cu24, cmu24 = model.kernel_limbs[:2]
+    if duals is None:
+        u1, u2 = np.zeros(2 * N_JOINTS), np.zeros(k)
+    else:
+        u1 = np.asarray(duals[0], dtype=np.float64) / eta
+        u2 = np.asarray(duals[1], dtype=np.float64) / eta
+    best, obj, viol, y, eta_end, it, converged = _riemannian_pose_kernel(
+        np.ascontiguousarray(x), np.ascontiguousarray(m0),
+        np.ascontiguousarray(translation, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64),
+        model.mean, model.u, model.sig, model.v, model.components, model._limb_matrix, z, n, s0, rad, cu24,
+        cmu24, alpha, u1, u2, float(th), bool(l1),
+        float(eta), float(eta_growth), float(eta_max), int(max_iter), float(tol), RIEMANNIAN_MAX_ITER,
+        float(newton_tol), float(alpha_prox))
+    if state_out is not None:
+        state_out.append((eta_end * u1, eta_end * u2))
+    if not np.all(np.isfinite(best)):
+        raise InvalidInputError("pose step diverged (non-finite coefficients)")
+    return PoseResult(best, y.reshape(N_JOINTS, 3), float(obj), float(viol), int(it), bool(converged))
 
 
 def pose_step(
@@ -1128,6 +1256,10 @@ def pose_step(
     x = np.asarray(points, dtype=np.float64)
     m0 = np.asarray(projection, dtype=np.float64)
     k = model.n_bases
+    if (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
+            and model.limb_coordinates is not None):
+        return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0, max_iter,
+                                     tol, eta, eta_growth, eta_max, duals, state_out, newton_tol, alpha_prox)
     wts = np.repeat(np.asarray(weights, dtype=np.float64), 2)  # (24,)
     # c = x - t - M mu, as a (24,) vector; A alpha = (M U) (S V^T alpha)
     u3 = model.u.reshape(N_JOINTS, 3, -1)
@@ -1147,17 +1279,8 @@ def pose_step(
         g_full = a_full.T @ a_full + np.eye(k)
     g_red = mus.T @ mus + np.eye(sig.size)
     cons = model.full if full else model.reduced
-    riemannian = alpha_solver == "riemannian" and variant.limbs and not full
-    if riemannian:
-        coords = model.limb_coordinates
-        if coords is None:  # the limb map is not onto: the SQP solves the same problem
-            riemannian, alpha_solver = False, "newton"
-        else:
-            z_l, n_l, s0_l, rad_l = coords
-            g_l = g_red + float(alpha_prox) * np.eye(sig.size)
-            q_l, r_l, s1_l, s2_l = _sphere_setup(g_l, z_l, n_l)
-            gs0_l = g_l @ s0_l
-            cu24_l, cmu24_l = model.kernel_limbs[:2]
+    if alpha_solver == "riemannian":  # not applicable here (limbs off, full lifting or a limb map
+        alpha_solver = "newton"        # that is not onto): the SQP solves the same problem
     nu_prev: list[NDArray[np.float64] | None] = [None]
 
     def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
@@ -1224,12 +1347,7 @@ def pose_step(
     scale_c = max(1.0, float(np.linalg.norm(c)))
     l1 = loss == "l1"
     ax = a_times(alpha)
-    if riemannian:  # the same loop compiled as one kernel
-        best_alpha, best_obj, eta, it, converged = _riemannian_adm_kernel(
-            c, wts, mus, v, gs0_l, q_l, r_l, s1_l, s2_l, s0_l, cu24_l, cmu24_l, rad_l, alpha, u1, u2,
-            float(best_obj), float(eta), float(eta_growth), float(eta_max), th, l1, int(max_iter), float(tol),
-            RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox), scale_c)
-    for it in range(1, 0 if riemannian else max_iter + 1):
+    for it in range(1, max_iter + 1):
         beta_prev, ax_prev = beta, ax
         gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, float(eta), th, l1)
         alpha = alpha_update(d1, d2, alpha)
@@ -1248,11 +1366,9 @@ def pose_step(
     if state_out is not None:
         state_out.append((eta * u1, eta * u2))
     if not np.isfinite(best_obj):
-        # no feasible iterate (cannot happen with restore_feasibility unless it failed); the
-        # kernel returns its last iterate then
-        if not riemannian:
-            best_alpha = alpha
-        best_obj = pose_objective(c - a_times(best_alpha), wts, best_alpha, th, loss)
+        # no feasible iterate (cannot happen with restore_feasibility unless it failed)
+        best_alpha = alpha
+        best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
     if not np.all(np.isfinite(best_alpha)):
         raise InvalidInputError("pose step diverged (non-finite coefficients)")
     viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
