@@ -130,6 +130,22 @@ class LiftedConstraints:
         return np.asarray(np.einsum("i,kij,j->k", z, self.omegas, z))
 
 
+def _lifted_omegas(basis: NDArray[np.float64], mu: NDArray[np.float64], limb_sq: NDArray[np.float64]
+                   ) -> NDArray[np.float64]:
+    """``Omega_i`` (8, m + 1, m + 1) of the lifting ``z = [coefficients; 1]`` for ``y = mu + basis
+    coefficients`` (basis (36, m)): ``z^T Omega_i z = ||C_i y||^2 - L_i``."""
+    c = limb_selectors()
+    ctc = np.einsum("iak,ial->ikl", c, c)  # (8, 36, 36)
+    m = basis.shape[1]
+    out = np.zeros((8, m + 1, m + 1))
+    out[:, :m, :m] = np.einsum("ka,iab,bl->ikl", basis.T, ctc, basis)
+    cross = np.einsum("ka,iab,b->ik", basis.T, ctc, mu)
+    out[:, :m, m] = cross
+    out[:, m, :m] = cross
+    out[:, m, m] = np.einsum("a,iab,b->i", mu, ctc, mu) - limb_sq
+    return out
+
+
 @dataclass(frozen=True)
 class PoseModel:
     """Everything of the pose step that depends only on the bases and limb targets.
@@ -147,7 +163,8 @@ class PoseModel:
     reduced : LiftedConstraints
         Constraints in the reduced lifting (``d = r + 1``, coordinates ``s = V^T alpha``).
     full : LiftedConstraints
-        Constraints in the paper's lifting (``d = k + 1``).
+        Constraints in the paper's lifting (``d = k + 1``): a cached property built on first
+        use (~0.25 s for 200 bases; only ``alpha_step="full"`` needs it).
     limb_cu, limb_cmu, limb_hess : ndarrays, shapes (8, 3, r), (8, 3), (8, r, r)
         ``C_i U S``, ``C_i mu`` and ``2 (C_i U S)^T (C_i U S)``: the limb constraints in the
         reduced coordinates evaluated in joint space (used by the Newton alpha-solver).
@@ -160,7 +177,6 @@ class PoseModel:
     sig: NDArray[np.float64]
     v: NDArray[np.float64]
     reduced: LiftedConstraints
-    full: LiftedConstraints
     limb_cu: NDArray[np.float64]
     limb_cmu: NDArray[np.float64]
     limb_hess: NDArray[np.float64]
@@ -201,7 +217,8 @@ class PoseModel:
 
     @staticmethod
     def build(bases: PoseBases, limb_proportions: NDArray[np.float64]) -> PoseModel:
-        """Precompute the SVD and both liftings' constraint data.
+        """Precompute the SVD and the reduced lifting's constraint data (the paper's lifting,
+        :attr:`full`, is built on first use).
 
         Parameters
         ----------
@@ -218,29 +235,21 @@ class PoseModel:
         r = int(np.sum(s > s[0] * 1e-10))
         u, s, v = u[:, :r], s[:r], vt[:r].T
         c = limb_selectors()  # (8, 3, 36)
-        ctc = np.einsum("iak,ial->ikl", c, c)  # (8, 36, 36)
         limb_sq = props**2
-
-        def omegas(basis: NDArray[np.float64]) -> NDArray[np.float64]:
-            m = basis.shape[1]
-            out = np.zeros((8, m + 1, m + 1))
-            out[:, :m, :m] = np.einsum("ka,iab,bl->ikl", basis.T, ctc, basis)
-            cross = np.einsum("ka,iab,b->ik", basis.T, ctc, mu)
-            out[:, :m, m] = cross
-            out[:, m, :m] = cross
-            out[:, m, m] = np.einsum("a,iab,b->i", mu, ctc, mu) - limb_sq
-            return out
-
         us = u * s
         cu = np.einsum("iak,kr->iar", c, us)
         return PoseModel(
             mean=mu, components=b, limb_sq=limb_sq, u=u, sig=s, v=v,
-            reduced=LiftedConstraints.build(omegas(us)),
-            full=LiftedConstraints.build(omegas(b)),
+            reduced=LiftedConstraints.build(_lifted_omegas(us, mu, limb_sq)),
             limb_cu=cu,
             limb_cmu=np.einsum("iak,k->ia", c, mu),
             limb_hess=2.0 * np.einsum("iar,ias->irs", cu, cu),
         )
+
+    @functools.cached_property
+    def full(self) -> LiftedConstraints:
+        """Constraints in the paper's lifting (``d = k + 1``), built on first use."""
+        return LiftedConstraints.build(_lifted_omegas(self.components, self.mean, self.limb_sq))
 
     def pose(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(mu + B alpha)`` as (12, 3)."""
@@ -691,38 +700,6 @@ def _newton_kernel(
 
 
 @njit
-def _tangent_basis(u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Two unit vectors completing the unit 3-vector ``u`` to an orthonormal basis (Duff et al.
-    2017, "Building an orthonormal basis, revisited": no branch near the poles)."""
-    sign = 1.0 if u[2] >= 0.0 else -1.0
-    a = -1.0 / (sign + u[2])
-    b = u[0] * u[1] * a
-    e1 = np.array([1.0 + sign * u[0] * u[0] * a, sign * b, -sign * u[0]])
-    e2 = np.array([b, sign + u[1] * u[1] * a, -u[1]])
-    return e1, e2
-
-
-@njit
-def _retract(x: NDArray[np.float64], prev: NDArray[np.float64], rad: NDArray[np.float64]
-             ) -> NDArray[np.float64]:
-    """Projection of the 8 limb vectors ``x`` (24,) onto their spheres ``||l_i|| = rad_i``; a
-    (near-)zero limb keeps the direction of ``prev``."""
-    out = np.empty(24)
-    for i in range(8):
-        n = math.sqrt(x[3 * i] ** 2 + x[3 * i + 1] ** 2 + x[3 * i + 2] ** 2)
-        src = x
-        if n < 1e-12 * rad[i]:
-            src = prev
-            n = math.sqrt(prev[3 * i] ** 2 + prev[3 * i + 1] ** 2 + prev[3 * i + 2] ** 2)
-        if n == 0.0:
-            out[3 * i], out[3 * i + 1], out[3 * i + 2] = rad[i], 0.0, 0.0
-        else:
-            for j in range(3):
-                out[3 * i + j] = src[3 * i + j] * (rad[i] / n)
-    return out
-
-
-@njit
 def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
     """``a^-1 b`` by a Cholesky factorisation of the symmetric ``a`` (n, n) (lower triangle read);
     ``(x, True)``, or ``(b, False)`` when ``a`` is not (numerically) positive definite. Written
@@ -758,18 +735,36 @@ def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDA
 
 
 @njit
-def _quad(q: NDArray[np.float64], b: NDArray[np.float64], x: NDArray[np.float64]
-          ) -> tuple[NDArray[np.float64], float]:
-    """``(Q x, x^T Q x - 2 b^T x)`` for (24, 24), (24,), (24,)."""
-    qx = np.empty(24)
+def _retract_into(x: NDArray[np.float64], prev: NDArray[np.float64], rad: NDArray[np.float64],
+                  out: NDArray[np.float64]) -> None:
+    """Projection of the 8 limb vectors ``x`` (24,) onto their spheres ``||l_i|| = rad_i``,
+    written into ``out`` (may be ``x``; not ``prev``); a (near-)zero limb keeps the direction of
+    ``prev``."""
+    for i in range(8):
+        x0, x1, x2 = x[3 * i], x[3 * i + 1], x[3 * i + 2]
+        n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        if n < 1e-12 * rad[i]:
+            x0, x1, x2 = prev[3 * i], prev[3 * i + 1], prev[3 * i + 2]
+            n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+            if n == 0.0:
+                x0, x1, x2, n = 1.0, 0.0, 0.0, 1.0
+        f = rad[i] / n
+        out[3 * i], out[3 * i + 1], out[3 * i + 2] = x0 * f, x1 * f, x2 * f
+
+
+@njit
+def _quad_into(q: NDArray[np.float64], b: NDArray[np.float64], x: NDArray[np.float64],
+               qx: NDArray[np.float64]) -> float:
+    """``Q x`` written into ``qx`` (24,); returns ``x^T Q x - 2 b^T x`` (``Q`` (24, 24) symmetric)."""
+    qx[:] = 0.0
+    for j in range(24):  # Q symmetric: Q x = sum_j Q[j] x_j (vectorisable, no reduction chain)
+        xj = x[j]
+        for i in range(24):
+            qx[i] += q[j, i] * xj
     f = 0.0
     for i in range(24):
-        e = 0.0
-        for j in range(24):
-            e += q[i, j] * x[j]
-        qx[i] = e
-        f += x[i] * (e - 2.0 * b[i])
-    return qx, f
+        f += x[i] * (qx[i] - 2.0 * b[i])
+    return f
 
 
 @njit
@@ -787,10 +782,17 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
     backtracking on the objective (every iterate is feasible: no merit function, no Maratos
     effect). Stops when ``||grad_R|| <= tol * max(1, ||grad||)`` or when the Newton step
     predicts a decrease below ``1e-13 * max(1, |f|)`` (converged), or when the line search fails
-    (not converged); returns ``(l, iterations, converged)``.
+    (not converged); returns ``(l, iterations, converged)``. Written with scalars and reused
+    buffers (it runs once per pose-ADM iteration).
     """
-    l = _retract(l0, l0, rad)
-    ql, f = _quad(q, b, l)
+    l = np.empty(24)
+    _retract_into(l0, l0, rad, l)
+    ql = np.empty(24)
+    f = _quad_into(q, b, l, ql)
+    cand = np.empty(24)
+    qc = np.empty(24)
+    d = np.empty(24)
+    eg = np.empty(24)
     tb = np.empty((24, 2))  # tangent basis: rows 3i..3i+2 hold sphere i's two vectors
     gr = np.empty(16)
     mu = np.empty(8)
@@ -799,37 +801,44 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        eg = 2.0 * (ql - b)
-        for i in range(8):
-            u = l[3 * i:3 * i + 3] / rad[i]
-            e1, e2 = _tangent_basis(u)
-            egi = eg[3 * i:3 * i + 3]
-            mu[i] = -(u[0] * egi[0] + u[1] * egi[1] + u[2] * egi[2]) / (2.0 * rad[i])
-            for p in range(3):
-                tb[3 * i + p, 0] = e1[p]
-                tb[3 * i + p, 1] = e2[p]
-            gr[2 * i] = e1[0] * egi[0] + e1[1] * egi[1] + e1[2] * egi[2]
-            gr[2 * i + 1] = e2[0] * egi[0] + e2[1] * egi[1] + e2[2] * egi[2]
+        egn = 0.0
+        for i in range(24):
+            eg[i] = 2.0 * (ql[i] - b[i])
+            egn += eg[i] * eg[i]
         gn = 0.0
-        for i in range(16):
-            gn += gr[i] * gr[i]
-        if math.sqrt(gn) <= tol * max(1.0, math.sqrt(float(eg @ eg))):
+        for i in range(8):
+            u0, u1, u2 = l[3 * i] / rad[i], l[3 * i + 1] / rad[i], l[3 * i + 2] / rad[i]
+            g0, g1, g2 = eg[3 * i], eg[3 * i + 1], eg[3 * i + 2]
+            # orthonormal completion of u (Duff et al. 2017, "Building an orthonormal basis,
+            # revisited": no branch near the poles)
+            sign = 1.0 if u2 >= 0.0 else -1.0
+            aa = -1.0 / (sign + u2)
+            bb = u0 * u1 * aa
+            e10, e11, e12 = 1.0 + sign * u0 * u0 * aa, sign * bb, -sign * u0
+            e20, e21, e22 = bb, sign + u1 * u1 * aa, -u1
+            tb[3 * i, 0], tb[3 * i + 1, 0], tb[3 * i + 2, 0] = e10, e11, e12
+            tb[3 * i, 1], tb[3 * i + 1, 1], tb[3 * i + 2, 1] = e20, e21, e22
+            mu[i] = -(u0 * g0 + u1 * g1 + u2 * g2) / (2.0 * rad[i])
+            ga = e10 * g0 + e11 * g1 + e12 * g2
+            gb = e20 * g0 + e21 * g1 + e22 * g2
+            gr[2 * i], gr[2 * i + 1] = ga, gb
+            gn += ga * ga + gb * gb
+        if math.sqrt(gn) <= tol * max(1.0, math.sqrt(egn)):
             converged = True
             it -= 1
             break
         # W = 2 Q T, then H = T^T W + 2 diag(mu_i): T is block diagonal (3 x 2 blocks)
         for row in range(24):
             for j in range(8):
-                for c in range(2):
-                    w[row, 2 * j + c] = 2.0 * (q[row, 3 * j] * tb[3 * j, c]
-                                               + q[row, 3 * j + 1] * tb[3 * j + 1, c]
-                                               + q[row, 3 * j + 2] * tb[3 * j + 2, c])
+                q0, q1, q2 = q[row, 3 * j], q[row, 3 * j + 1], q[row, 3 * j + 2]
+                w[row, 2 * j] = 2.0 * (q0 * tb[3 * j, 0] + q1 * tb[3 * j + 1, 0] + q2 * tb[3 * j + 2, 0])
+                w[row, 2 * j + 1] = 2.0 * (q0 * tb[3 * j, 1] + q1 * tb[3 * j + 1, 1] + q2 * tb[3 * j + 2, 1])
         scale = 0.0
         for i in range(8):
             for e in range(2):
+                t0, t1, t2 = tb[3 * i, e], tb[3 * i + 1, e], tb[3 * i + 2, e]
                 for col in range(16):
-                    hr[2 * i + e, col] = (tb[3 * i, e] * w[3 * i, col] + tb[3 * i + 1, e] * w[3 * i + 1, col]
-                                          + tb[3 * i + 2, e] * w[3 * i + 2, col])
+                    hr[2 * i + e, col] = t0 * w[3 * i, col] + t1 * w[3 * i + 1, col] + t2 * w[3 * i + 2, col]
                 hr[2 * i + e, 2 * i + e] += 2.0 * mu[i]
         for i in range(16):
             scale = max(scale, abs(hr[i, i]))
@@ -850,29 +859,33 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
             break
         slope = 0.0
         for i in range(16):
-            step[i] = -step[i]
-            slope += gr[i] * step[i]
+            slope -= gr[i] * step[i]
         if not slope < -1e-13 * max(1.0, abs(f)):
             # the predicted decrease is at the round-off level of f: stationary to working
             # precision (the gradient test can be out of reach when |Q l| >> |grad|)
             converged = True
             break
-        d = np.empty(24)
-        for i in range(8):
+        for i in range(8):  # d = -T step
+            sa, sb = step[2 * i], step[2 * i + 1]
             for p in range(3):
-                d[3 * i + p] = tb[3 * i + p, 0] * step[2 * i] + tb[3 * i + p, 1] * step[2 * i + 1]
+                d[3 * i + p] = -(tb[3 * i + p, 0] * sa + tb[3 * i + p, 1] * sb)
         a = 1.0
         accepted = False
+        fc = f
         while a > 1e-10:
-            cand = _retract(l + a * d, l, rad)
-            qc, fc = _quad(q, b, cand)
+            for i in range(24):
+                cand[i] = l[i] + a * d[i]
+            _retract_into(cand, l, rad, cand)
+            fc = _quad_into(q, b, cand, qc)
             if fc <= f + 1e-4 * a * slope:
                 accepted = True
                 break
             a *= 0.5
         if not accepted:
             break
-        l, ql, f = cand, qc, fc
+        l, cand = cand, l
+        ql, qc = qc, ql
+        f = fc
     return l, it, converged
 
 
@@ -927,21 +940,54 @@ def _newton_alpha_kernel(
 
 
 @njit
+def _axpy_rows(at: NDArray[np.float64], x: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """``out += at.T @ x`` as a sum of the rows of ``at`` (n, m) (C-contiguous): each step is a
+    vectorisable axpy over m, with no floating-point reduction chain (which LLVM may not
+    reorder, so a dot-product loop runs at one add per ~4 cycles)."""
+    for p in range(at.shape[0]):
+        xp = x[p]
+        for q in range(at.shape[1]):
+            out[q] += at[p, q] * xp
+
+
+@njit
 def _riemannian_alpha_kernel(
     d1: NDArray[np.float64], d2: NDArray[np.float64], sk: NDArray[np.float64], mus: NDArray[np.float64],
-    v: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64],
-    s1: NDArray[np.float64], s2: NDArray[np.float64], s0: NDArray[np.float64], cu24: NDArray[np.float64],
-    cmu24: NDArray[np.float64], rad: NDArray[np.float64], max_iter: int, tol: float, prox: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    vc: NDArray[np.float64], vt: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64],
+    rmat_t: NDArray[np.float64], s1_t: NDArray[np.float64], s2_t: NDArray[np.float64],
+    s0: NDArray[np.float64], cu24_t: NDArray[np.float64], cmu24: NDArray[np.float64],
+    rad: NDArray[np.float64], max_iter: int, tol: float, prox: float, alpha_out: NDArray[np.float64],
+    s_out: NDArray[np.float64],
+) -> int:
     """The alpha-step of :func:`pose_step` (limbs on) by :func:`_sphere_newton` in limb
     coordinates (see :func:`_sphere_setup`), started from the limb vectors of the current
-    iterate, whose reduced coordinates are ``sk = V^T alpha_k`` (r,). Returns ``(alpha (k,),
-    s = V^T alpha (r,), iterations)``."""
-    vtd2 = v.T @ d2
-    h = mus.T @ d1 + vtd2 + prox * sk - gs0
-    lv, it, _ = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ sk, rad, max_iter, tol)
-    s = s0 + s1 @ lv + s2 @ h
-    return d2 + v @ (s - vtd2), s, it
+    iterate, whose reduced coordinates are ``sk = V^T alpha_k`` (r,). Writes ``alpha`` (k,) and
+    ``s = V^T alpha`` (r,) into ``alpha_out``, ``s_out`` (which may be ``sk``); returns the
+    Newton iterations. Matrices come C-contiguous and transposed where that makes every product
+    a sum of rows (:func:`_axpy_rows`): ``vc = V`` (k, r), ``vt = V^T`` (r, k), ``mus = M U S``
+    (24, r), ``rmat_t = R^T`` (r, 24), ``s1_t = S1^T`` (24, r), ``s2_t = S2^T`` (r, r),
+    ``cu24_t = (C U S)^T`` (r, 24)."""
+    r = sk.size
+    vtd2 = np.zeros(r)
+    _axpy_rows(vc, d2, vtd2)  # V^T d2
+    h = np.zeros(r)
+    _axpy_rows(mus, d1, h)  # (M U S)^T d1
+    for j in range(r):
+        h[j] += vtd2[j] + prox * sk[j] - gs0[j]
+    b = np.zeros(24)
+    _axpy_rows(rmat_t, h, b)
+    l0 = cmu24.copy()
+    _axpy_rows(cu24_t, sk, l0)
+    lv, it, _ = _sphere_newton(q, b, l0, rad, max_iter, tol)
+    s = s0.copy()
+    _axpy_rows(s1_t, lv, s)
+    _axpy_rows(s2_t, h, s)
+    for j in range(r):
+        s_out[j] = s[j]
+        s[j] -= vtd2[j]
+    alpha_out[:] = d2
+    _axpy_rows(vt, s, alpha_out)  # d2 + V (s - V^T d2)
+    return it
 
 
 @njit
@@ -1021,9 +1067,17 @@ def _riemannian_adm_kernel(
     it = 0
     # the vector updates are written as loops (fused, no temporaries): the same arithmetic as
     # _adm_split / _adm_dual_update, summed sequentially
+    ax_prev = np.empty(m)
+    # C-contiguous operands in the orientation _axpy_rows wants (once per pose step)
+    vc = np.ascontiguousarray(v)
+    vt = np.ascontiguousarray(v.T)
+    mus_t = np.ascontiguousarray(mus.T)
+    rmat_t = np.ascontiguousarray(rmat.T)
+    s1_t = np.ascontiguousarray(s1.T)
+    s2_t = np.ascontiguousarray(s2.T)
+    cu24_t = np.ascontiguousarray(cu24.T)
     for it in range(1, max_iter + 1):
         beta, beta_prev = beta_prev, beta
-        ax_prev = ax
         for i in range(m):  # gamma-step (prox of the data term)
             vg = c[i] - ax[i] + u1[i]
             if l1:
@@ -1037,9 +1091,11 @@ def _riemannian_adm_kernel(
             bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
             beta[i] = bi
             d2[i] = bi - u2[i]
-        alpha, sk, _ = _riemannian_alpha_kernel(d1, d2, sk, mus, v, gs0, q, rmat, s1, s2, s0, cu24, cmu24,
-                                                rad, alpha_max_iter, alpha_tol, prox)
-        ax = mus @ sk
+        _riemannian_alpha_kernel(d1, d2, sk, mus, vc, vt, gs0, q, rmat_t, s1_t, s2_t, s0, cu24_t, cmu24, rad,
+                                 alpha_max_iter, alpha_tol, prox, alpha, sk)
+        ax, ax_prev = ax_prev, ax
+        ax[:] = 0.0
+        _axpy_rows(mus_t, sk, ax)
         r1sq, dsq, data = 0.0, 0.0, 0.0
         for i in range(m):
             e = c[i] - ax[i]
