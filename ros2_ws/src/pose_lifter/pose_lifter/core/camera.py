@@ -215,9 +215,9 @@ def _camera_admm_checked(
     else:
         u1 = np.array(duals[0], dtype=np.float64)
         u2 = np.array(duals[1], dtype=np.float64)
-    rot, scale, t, obj, it, converged = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1", int(max_iter),
-                                                      float(tol), float(tau))
-    if not (np.isfinite(rot).all() and np.isfinite(t).all() and math.isfinite(scale) and scale > 0):
+    rot, scale, t, obj, it, converged, ok = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1", int(max_iter),
+                                                          float(tol), float(tau))
+    if not ok:
         raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
     return CameraResult(Camera(rot, scale, t), obj, it, converged), (u1, u2)
 
@@ -227,10 +227,10 @@ def _camera_solve(
     x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], m: NDArray[np.float64],
     t: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int,
     tol: float, tau: float,
-) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float, int, bool]:
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float, int, bool, bool]:
     """Set-up, ADM iterations (:func:`_camera_kernel`) and finish (:func:`_camera_finish`) of
     the camera step from ``M`` (2, 3), ``t`` (2,); ``u1`` (n, 2), ``u2`` (2, 3) are updated in
-    place. Returns ``(rotation, scale, t, objective, iterations, converged)``."""
+    place. Returns ``(rotation, scale, t, objective, iterations, converged, finite)``."""
     n = x.shape[0]
     ya = np.ones((n, 4))
     ya[:, :3] = y
@@ -264,7 +264,8 @@ def _camera_solve(
     m, u1, u2, it, converged = _camera_kernel(x, ya, hat, lhs3, thr, l2fac, m, t, u1, u2, l1, max_iter, tol,
                                               scale_x)
     rot, scale, t_out, obj = _camera_finish(x, y, w, m, l1)
-    return rot, scale, t_out, obj, it, converged
+    ok = bool(np.all(np.isfinite(rot)) and np.all(np.isfinite(t_out)) and math.isfinite(scale) and scale > 0)
+    return rot, scale, t_out, obj, it, converged, ok
 
 
 @njit

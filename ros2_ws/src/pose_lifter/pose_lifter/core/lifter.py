@@ -18,6 +18,7 @@ mean the same at any image size. Results are mapped back to input units.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,12 +27,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._jit import njit
 from .bases import PoseBases
 from .camera import _camera_admm_checked
 from .errors import InvalidInputError, TooFewJointsError
 from .options import LifterOptions
 from .pose import LiftedConstraints, PoseModel, QStepFn, pose_step
-from .skeleton import ANTHROPOMETRIC_PROPORTIONS, N_JOINTS, normalise_pose
+from .skeleton import ANTHROPOMETRIC_PROPORTIONS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
 __all__ = ["Lifter"]
@@ -52,6 +54,62 @@ class _Run:
     n_iter: int
     converged: bool
     state: dict[str, Any]
+
+
+@njit
+def _mirror_kernel(pose: NDArray[np.float64], rot: NDArray[np.float64], mean: NDArray[np.float64],
+                   u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], bool]:
+    """``V ((U^T (normalise_pose(mirror(pose)) - mu)) / S)`` for one pose (12, 3): the pose in
+    the camera frame (``rot`` (3, 3)) with its depth reflected, then centred, rotated into its
+    body frame (:func:`pose_lifter.core.skeleton.body_frame`: x left hip - right hip, y the spine
+    made orthogonal to x, z = x cross y) and scaled to a unit right lower leg, as
+    :func:`normalise_pose` does (written out: one pose, no temporaries). Returns ``(alpha (k,),
+    ok)``; ``ok`` is False for a degenerate leg or body frame."""
+    n = pose.shape[0]
+    cp = np.empty((n, 3))
+    for j in range(n):
+        for a in range(3):
+            cp[j, a] = pose[j, 0] * rot[a, 0] + pose[j, 1] * rot[a, 1] + pose[j, 2] * rot[a, 2]
+        cp[j, 2] = -cp[j, 2]
+    for a in range(3):
+        c = 0.0
+        for j in range(n):
+            c += cp[j, a]
+        c /= n
+        for j in range(n):
+            cp[j, a] -= c
+    x = cp[6] - cp[9]
+    x = x / math.sqrt(x[0] ** 2 + x[1] ** 2 + x[2] ** 2)
+    up = 0.5 * (cp[0] + cp[3]) - 0.5 * (cp[6] + cp[9])
+    y = up - (up[0] * x[0] + up[1] * x[1] + up[2] * x[2]) * x
+    y = y / math.sqrt(y[0] ** 2 + y[1] ** 2 + y[2] ** 2)
+    z = np.array([x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]])
+    body = np.empty(3 * n)
+    for j in range(n):
+        body[3 * j] = cp[j, 0] * x[0] + cp[j, 1] * x[1] + cp[j, 2] * x[2]
+        body[3 * j + 1] = cp[j, 0] * y[0] + cp[j, 1] * y[1] + cp[j, 2] * y[2]
+        body[3 * j + 2] = cp[j, 0] * z[0] + cp[j, 1] * z[1] + cp[j, 2] * z[2]
+    knee, ankle = LIMBS[RIGHT_LOWER_LEG]
+    leg = math.sqrt((body[3 * knee] - body[3 * ankle]) ** 2 + (body[3 * knee + 1] - body[3 * ankle + 1]) ** 2
+                    + (body[3 * knee + 2] - body[3 * ankle + 2]) ** 2)
+    k = v.shape[0]
+    if not (math.isfinite(leg) and leg > 0.0):
+        return np.zeros(k), False
+    for i in range(3 * n):
+        body[i] = body[i] / leg - mean[i]
+    r = sig.size
+    alpha = np.zeros(k)
+    ok = True
+    for j in range(r):
+        c = 0.0
+        for i in range(3 * n):
+            c += u[i, j] * body[i]
+        c /= sig[j]
+        ok = ok and math.isfinite(c)
+        for i in range(k):
+            alpha[i] += v[i, j] * c
+    return alpha, ok
 
 
 class Lifter:
@@ -213,12 +271,14 @@ class Lifter:
 
     def _mirrored_alpha(self, run: _Run) -> NDArray[np.float64]:
         """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),
-        re-expressed in its own body frame; minimum-norm coefficients through the bases' SVD."""
-        cam_pose = run.pose.pose @ run.camera.camera.rotation.T
-        cam_pose[:, 2] *= -1.0
-        mirrored = normalise_pose(cam_pose).reshape(-1) - self.model.mean
+        re-expressed in its own body frame (:func:`normalise_pose`); minimum-norm coefficients
+        through the bases' SVD."""
         m = self.model
-        return np.asarray(m.v @ ((m.u.T @ mirrored) / m.sig))
+        alpha, ok = _mirror_kernel(np.ascontiguousarray(run.pose.pose), run.camera.camera.rotation, m.mean,
+                                   m.u, m.sig, m.v)
+        if not ok:
+            raise InvalidInputError("a pose has a degenerate right lower leg")
+        return alpha
 
     # ------------------------------------------------------------------ public
     def warm_up(self) -> float:
