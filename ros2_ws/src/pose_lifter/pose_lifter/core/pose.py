@@ -1028,6 +1028,19 @@ def _adm_split(
 
 
 @njit
+def _grow_penalty(eta: float, eta_growth: float, eta_max: float, u1: NDArray[np.float64],
+                  u2: NDArray[np.float64]) -> float:
+    """The pose ADM's penalty schedule: ``eta <- min(eta * eta_growth, eta_max)``, with the
+    scaled multipliers ``u1``, ``u2`` rescaled in place so the unscaled ones are unchanged."""
+    if eta_growth != 1.0 and eta < eta_max:
+        eta_new = min(eta * eta_growth, eta_max)
+        u1 *= eta / eta_new
+        u2 *= eta / eta_new
+        return eta_new
+    return eta
+
+
+@njit
 def _adm_dual_update(
     c: NDArray[np.float64], gamma: NDArray[np.float64], alpha: NDArray[np.float64],
     beta: NDArray[np.float64], beta_prev: NDArray[np.float64], ax_prev: NDArray[np.float64],
@@ -1129,11 +1142,7 @@ def _riemannian_adm_kernel(
         an = max(1.0, math.sqrt(asq))
         primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
         dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
-        if eta_growth != 1.0 and eta < eta_max:
-            eta_new = min(eta * eta_growth, eta_max)
-            u1 *= eta / eta_new
-            u2 *= eta / eta_new
-            eta = eta_new
+        eta = _grow_penalty(eta, eta_growth, eta_max, u1, u2)
         if obj < best_obj:
             best_obj = obj
             best_alpha[:] = alpha
@@ -1303,7 +1312,9 @@ def pose_step(
     inner_max_iter, inner_tol : int, float
         Inner ADM cap and tolerance.
     alpha_step : {"reduced", "full"}
-    alpha_solver : {"admm", "newton"}
+    alpha_solver : {"admm", "newton", "riemannian"}
+        ``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map
+        (``model.limb_coordinates``); otherwise ``"newton"`` is used.
     qstep_fn : callable, optional
         Replaces the closed-form Q-step (the cvxpy reference path).
     duals : (ndarray (24,), ndarray (k,)), optional
@@ -1312,7 +1323,10 @@ def pose_step(
     state_out : list, optional
         If given, the final unscaled multipliers are appended to it (for the next warm start).
     newton_tol : float
-        Relative KKT tolerance of the reduced Newton alpha-step (``alpha_solver="newton"``).
+        Relative KKT tolerance of the reduced Newton alpha-step (``alpha_solver="newton"``) and
+        of the Riemannian one (which stops at ``RIEMANNIAN_MAX_ITER`` steps first, as a rule).
+    alpha_prox : float
+        Proximal weight of the Riemannian alpha-step (``LifterOptions.alpha_prox``).
 
     Returns
     -------
@@ -1421,11 +1435,7 @@ def pose_step(
         alpha = alpha_update(d1, d2, alpha)
         ax, obj, primal, dual = _adm_dual_update(c, gamma, alpha, beta, beta_prev, ax_prev, u1, u2, mus, v,
                                                  wts, th, l1, scale_c)
-        if eta_growth != 1.0 and eta < eta_max:
-            eta_new = min(eta * eta_growth, eta_max)
-            u1 *= eta / eta_new
-            u2 *= eta / eta_new
-            eta = eta_new
+        eta = _grow_penalty(float(eta), float(eta_growth), float(eta_max), u1, u2)
         if obj < best_obj:
             best_obj, best_alpha = obj, alpha.copy()
         if primal < tol and dual < tol:
