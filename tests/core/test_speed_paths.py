@@ -58,3 +58,27 @@ def test_cholesky_solve_solves_or_refuses() -> None:
         sym = 0.5 * (a + a.T)  # indefinite (almost surely)
         if np.linalg.eigvalsh(sym)[0] < -1e-8:
             assert not _cholesky_solve(sym, b)[1]
+
+
+def test_mirrored_start_kernel_equals_normalise_pose() -> None:
+    # the compiled single-pose copy of normalise_pose's body frame in the lifter's mirrored warm
+    # start must stay the same computation as the vectorised one in core.skeleton
+    from pose_lifter.core.lifter import Lifter, _mirror_kernel
+    from pose_lifter.core.skeleton import normalise_pose
+    from scipy.spatial.transform import Rotation
+
+    m = Lifter().model
+    rng = np.random.default_rng(3)
+    for i in range(50):
+        pose = m.pose(0.3 * rng.normal(size=m.n_bases))
+        rot = Rotation.random(random_state=i).as_matrix()
+        got, ok = _mirror_kernel(np.ascontiguousarray(pose), rot, m.mean, m.u, m.sig, m.v)
+        cam = pose @ rot.T
+        cam[:, 2] *= -1.0
+        want = m.v @ ((m.u.T @ (normalise_pose(cam).reshape(-1) - m.mean)) / m.sig)
+        assert ok
+        # 1/sig reaches ~6e5 for the smallest singular value: compare in pose space too
+        np.testing.assert_allclose(m.pose(got), m.pose(want), atol=1e-9)
+        np.testing.assert_allclose(got, want, atol=1e-6 * np.abs(want).max())
+    flat = np.zeros((12, 3))  # degenerate: no body frame, no leg
+    assert not _mirror_kernel(flat, np.eye(3), m.mean, m.u, m.sig, m.v)[1]

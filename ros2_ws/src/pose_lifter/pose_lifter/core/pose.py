@@ -273,6 +273,13 @@ class PoseModel:
         return float(np.max(np.abs(np.sqrt(np.sum(lv * lv, axis=1)) - np.sqrt(self.limb_sq))))
 
     @functools.cached_property
+    def riemannian_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``V`` (k, r), ``V^T`` (r, k) and ``(C U S)^T`` (r, 24), C-contiguous: the Riemannian pose
+        kernel's operands that depend only on the bases (made once per model)."""
+        return (np.ascontiguousarray(self.v), np.ascontiguousarray(self.v.T),
+                np.ascontiguousarray(self.kernel_limbs[0].T))
+
+    @functools.cached_property
     def _limb_matrix(self) -> NDArray[np.float64]:
         """The 8 ``C_i`` stacked, (24, 36)."""
         return np.ascontiguousarray(limb_selectors().reshape(24, 3 * N_JOINTS))
@@ -1065,18 +1072,20 @@ def _adm_dual_update(
 
 @njit
 def _riemannian_adm_kernel(
-    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], v: NDArray[np.float64],
-    gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64], s1: NDArray[np.float64],
-    s2: NDArray[np.float64], s0: NDArray[np.float64], cu24: NDArray[np.float64], cmu24: NDArray[np.float64],
+    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], vc: NDArray[np.float64],
+    vt: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64],
+    s1: NDArray[np.float64], s2: NDArray[np.float64], s0: NDArray[np.float64], cu24_t: NDArray[np.float64],
+    cmu24: NDArray[np.float64],
     rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
     best_obj: float, eta: float, eta_growth: float, eta_max: float, th: float, l1: bool, max_iter: int,
     tol: float, alpha_max_iter: int, alpha_tol: float, prox: float, scale_c: float,
 ) -> tuple[NDArray[np.float64], float, float, int, bool]:
     """The pose ADM loop of :func:`pose_step` with the Riemannian alpha-step, in one kernel (the
     Python loop's updates; ``V^T alpha`` is carried instead of recomputed). ``u1``, ``u2``
-    (scaled multipliers) are updated in place. Returns ``(best alpha, best objective, final
-    eta, iterations, converged)``; ``best_obj`` is the objective of ``alpha0`` if feasible,
-    else ``inf``."""
+    (scaled multipliers) are updated in place. ``vc = V`` (k, r), ``vt = V^T`` (r, k) and
+    ``cu24_t = (C U S)^T`` (r, 24) come C-contiguous (``PoseModel.riemannian_arrays``). Returns
+    ``(best alpha, best objective, final eta, iterations, converged)``; ``best_obj`` is the
+    objective of ``alpha0`` if feasible, else ``inf``."""
     m = c.size
     k = alpha0.size
     alpha = alpha0.copy()
@@ -1086,21 +1095,18 @@ def _riemannian_adm_kernel(
     gamma = np.empty(m)
     d1 = np.empty(m)
     d2 = np.empty(k)
-    sk = v.T @ alpha
+    sk = vt @ alpha
     ax = mus @ sk
     converged = False
     it = 0
     # the vector updates are written as loops (fused, no temporaries): the same arithmetic as
     # _adm_split / _adm_dual_update, summed sequentially
     ax_prev = np.empty(m)
-    # C-contiguous operands in the orientation _axpy_rows wants (once per pose step)
-    vc = np.ascontiguousarray(v)
-    vt = np.ascontiguousarray(v.T)
+    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
     mus_t = np.ascontiguousarray(mus.T)
     rmat_t = np.ascontiguousarray(rmat.T)
     s1_t = np.ascontiguousarray(s1.T)
     s2_t = np.ascontiguousarray(s2.T)
-    cu24_t = np.ascontiguousarray(cu24.T)
     for it in range(1, max_iter + 1):
         beta, beta_prev = beta_prev, beta
         for i in range(m):  # gamma-step (prox of the data term)
@@ -1169,10 +1175,11 @@ def _limb_violation_jit(y: NDArray[np.float64], limb_matrix: NDArray[np.float64]
 @njit
 def _riemannian_pose_kernel(
     x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
-    mean: NDArray[np.float64], u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64],
-    comps: NDArray[np.float64], limb_matrix: NDArray[np.float64], z: NDArray[np.float64],
-    n: NDArray[np.float64], s0: NDArray[np.float64], rad: NDArray[np.float64], cu24: NDArray[np.float64],
-    cmu24: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    mean: NDArray[np.float64], u: NDArray[np.float64], sig: NDArray[np.float64], vc: NDArray[np.float64],
+    vt: NDArray[np.float64], comps: NDArray[np.float64], limb_matrix: NDArray[np.float64],
+    z: NDArray[np.float64], n: NDArray[np.float64], s0: NDArray[np.float64], rad: NDArray[np.float64],
+    cu24_t: NDArray[np.float64], cmu24: NDArray[np.float64], alpha0: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64],
     th: float, l1: bool, eta: float, eta_growth: float, eta_max: float, max_iter: int, tol: float,
     alpha_max_iter: int, alpha_tol: float, prox: float,
 ) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool]:
@@ -1201,13 +1208,13 @@ def _riemannian_pose_kernel(
     gs0 = g @ s0
     best_obj = np.inf
     if _limb_violation_jit(mean + comps @ alpha0, limb_matrix, rad) < 1e-6:
-        best_obj = _objective(c - mus @ (v.T @ alpha0), wts, alpha0, th, l1)
+        best_obj = _objective(c - mus @ (vt @ alpha0), wts, alpha0, th, l1)
     scale_c = max(1.0, math.sqrt(float(c @ c)))
     best_alpha, best_obj, eta, it, converged = _riemannian_adm_kernel(
-        c, wts, mus, v, gs0, q, rmat, s1, s2, s0, cu24, cmu24, rad, alpha0, u1, u2, best_obj, eta, eta_growth,
-        eta_max, th, l1, max_iter, tol, alpha_max_iter, alpha_tol, prox, scale_c)
+        c, wts, mus, vc, vt, gs0, q, rmat, s1, s2, s0, cu24_t, cmu24, rad, alpha0, u1, u2, best_obj, eta,
+        eta_growth, eta_max, th, l1, max_iter, tol, alpha_max_iter, alpha_tol, prox, scale_c)
     if not math.isfinite(best_obj):
-        best_obj = _objective(c - mus @ (v.T @ best_alpha), wts, best_alpha, th, l1)
+        best_obj = _objective(c - mus @ (vt @ best_alpha), wts, best_alpha, th, l1)
     y = mean + comps @ best_alpha
     return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged
 
@@ -1239,19 +1246,19 @@ def _riemannian_pose_step(
     coords = model.limb_coordinates
     assert coords is not None
     z, n, s0, rad = coords
-    cu24, cmu24 = model.kernel_limbs[:2]
+    cmu24 = model.kernel_limbs[1]
     if duals is None:
         u1, u2 = np.zeros(2 * N_JOINTS), np.zeros(k)
     else:
         u1 = np.asarray(duals[0], dtype=np.float64) / eta
         u2 = np.asarray(duals[1], dtype=np.float64) / eta
+    vc, vt, cu24_t = model.riemannian_arrays
     best, obj, viol, y, eta_end, it, converged = _riemannian_pose_kernel(
         np.ascontiguousarray(x), np.ascontiguousarray(m0),
         np.ascontiguousarray(translation, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64),
-        model.mean, model.u, model.sig, model.v, model.components, model._limb_matrix, z, n, s0, rad, cu24,
-        cmu24, alpha, u1, u2, float(th), bool(l1),
-        float(eta), float(eta_growth), float(eta_max), int(max_iter), float(tol), RIEMANNIAN_MAX_ITER,
-        float(newton_tol), float(alpha_prox))
+        model.mean, model.u, model.sig, vc, vt, model.components, model._limb_matrix, z, n, s0, rad, cu24_t,
+        cmu24, alpha, u1, u2, float(th), bool(l1), float(eta), float(eta_growth), float(eta_max),
+        int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox))
     if state_out is not None:
         state_out.append((eta_end * u1, eta_end * u2))
     if not np.all(np.isfinite(best)):
