@@ -160,7 +160,12 @@ def _lifter(args: argparse.Namespace) -> Any:
     bases = PoseBases.load(args.bases)
     opts = LifterOptions(variant=args.variant, camera_solver=args.solver, pose_solver=args.solver,
                          n_starts=args.starts)
-    return Lifter(bases, opts)
+    lifter = Lifter(bases, opts)
+    if args.solver == "admm":
+        # compile (first run after an install, ~25 s) or load the solver kernels now, so that the
+        # per-skeleton times reported are solve times (the reference path has no kernels)
+        lifter.warm_up()
+    return lifter
 
 
 def _cmd_lift(args: argparse.Namespace) -> int:
