@@ -80,17 +80,11 @@ def _project_so(n: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def weighted_median(values: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
-    """A minimiser of ``sum_j w_j |values_j - m|`` (values, weights: shape (n,))."""
-    order = np.argsort(values, kind="stable")
-    v = values[order]
-    cw = np.cumsum(weights[order])
-    total = cw[-1]
-    if total <= 0:
-        return float(np.median(values))
-    i = int(np.searchsorted(cw, 0.5 * total))
-    if np.isclose(cw[i], 0.5 * total) and i + 1 < v.size:
-        return float(0.5 * (v[i] + v[i + 1]))
-    return float(v[i])
+    """A minimiser of ``sum_j w_j |values_j - m|`` (values, weights: shape (n,)): the first sorted
+    value whose cumulative weight reaches half the total, or the midpoint of it and the next when
+    it reaches exactly half; the plain median if the weights sum to 0."""
+    return _weighted_median_jit(np.ascontiguousarray(values, dtype=np.float64),
+                                np.ascontiguousarray(weights, dtype=np.float64))
 
 
 def camera_objective(
@@ -270,7 +264,7 @@ def _camera_solve(
 
 @njit
 def _weighted_median_jit(values: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
-    """:func:`weighted_median` (same tie rule) inside the compiled kernels."""
+    """:func:`weighted_median` (its implementation; also called inside the compiled kernels)."""
     order = np.argsort(values, kind="mergesort")  # stable, as numpy's "stable"
     total = 0.0
     for i in range(values.size):
