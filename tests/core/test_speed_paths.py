@@ -68,10 +68,10 @@ def test_cholesky_solve_solves_or_refuses() -> None:
 
 
 def test_mirrored_start_kernel_equals_normalise_pose() -> None:
-    # the compiled single-pose copy of normalise_pose's body frame in the lifter's mirrored warm
-    # start must stay the same computation as the vectorised one in core.skeleton
+    # the compiled single-pose normalise_pose_flat (in the lifter's mirrored warm start) must stay
+    # the same computation as the vectorised normalise_pose
     from pose_lifter.core.lifter import Lifter, _mirror_kernel
-    from pose_lifter.core.skeleton import normalise_pose
+    from pose_lifter.core.skeleton import normalise_pose, normalise_pose_flat
     from scipy.spatial.transform import Rotation
 
     m = Lifter().model
@@ -82,10 +82,13 @@ def test_mirrored_start_kernel_equals_normalise_pose() -> None:
         got, ok = _mirror_kernel(np.ascontiguousarray(pose), rot, m.mean, m.u, m.sig, m.v)
         cam = pose @ rot.T
         cam[:, 2] *= -1.0
+        flat, ok_flat = normalise_pose_flat(np.ascontiguousarray(cam))
+        assert ok and ok_flat
+        np.testing.assert_allclose(flat, normalise_pose(cam).reshape(-1), atol=1e-12)
         want = m.v @ ((m.u.T @ (normalise_pose(cam).reshape(-1) - m.mean)) / m.sig)
-        assert ok
         # 1/sig reaches ~6e5 for the smallest singular value: compare in pose space too
         np.testing.assert_allclose(m.pose(got), m.pose(want), atol=1e-9)
         np.testing.assert_allclose(got, want, atol=1e-6 * np.abs(want).max())
     flat = np.zeros((12, 3))  # degenerate: no body frame, no leg
     assert not _mirror_kernel(flat, np.eye(3), m.mean, m.u, m.sig, m.v)[1]
+    assert not normalise_pose_flat(flat)[1]

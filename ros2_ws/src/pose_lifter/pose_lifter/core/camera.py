@@ -98,16 +98,6 @@ def camera_objective(
     return float(np.sum(weights[:, None] * r * r))
 
 
-def _optimal_translation(
-    points: NDArray[np.float64], pose: NDArray[np.float64], weights: NDArray[np.float64],
-    m0: NDArray[np.float64], loss: Literal["l1", "l2"],
-) -> NDArray[np.float64]:
-    d = points - pose @ m0.T
-    if loss == "l2":
-        return np.asarray(weights @ d / weights.sum())
-    return np.array([weighted_median(d[:, 0], weights), weighted_median(d[:, 1], weights)])
-
-
 def _check(points: NDArray[np.float64], pose: NDArray[np.float64], weights: NDArray[np.float64]) -> None:
     if points.ndim != 2 or points.shape[1] != 2:
         raise InvalidInputError(f"points must be (n, 2), got {points.shape}")
@@ -199,7 +189,7 @@ def _camera_admm_checked(
         m = project_scaled_orthographic(sol[:3].T)
         if not np.isfinite(m).all() or np.linalg.norm(m) < 1e-12:
             m = np.hstack([np.eye(2), np.zeros((2, 1))])
-        t = _optimal_translation(x, y, w, m, "l2")
+        t = np.asarray(w @ (x - y @ m.T) / w.sum())  # the L2-optimal translation for this M
     else:
         m = np.ascontiguousarray(init.projection, dtype=np.float64)
         t = np.array(init.translation, dtype=np.float64)
@@ -298,30 +288,35 @@ def _camera_finish(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np
     rot[2, 0] = r2[0, 1] * r2[1, 2] - r2[0, 2] * r2[1, 1]
     rot[2, 1] = r2[0, 2] * r2[1, 0] - r2[0, 0] * r2[1, 2]
     rot[2, 2] = r2[0, 0] * r2[1, 1] - r2[0, 1] * r2[1, 0]
-    n = x.shape[0]
-    d = np.empty((n, 2))
-    for j in range(n):
+    t = _optimal_translation(x, y, w, m0, l1)
+    obj = 0.0
+    for j in range(x.shape[0]):
         for c in range(2):
-            d[j, c] = x[j, c] - (y[j, 0] * m0[c, 0] + y[j, 1] * m0[c, 1] + y[j, 2] * m0[c, 2])
+            r = x[j, c] - (y[j, 0] * m0[c, 0] + y[j, 1] * m0[c, 1] + y[j, 2] * m0[c, 2]) - t[c]
+            obj += w[j] * (abs(r) if l1 else r * r)
+    return rot, scale, t, obj
+
+
+@njit
+def _optimal_translation(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64],
+                         m0: NDArray[np.float64], l1: bool) -> NDArray[np.float64]:
+    """The ``t`` (2,) minimising ``sum_j w_j rho(x_j - M0 y_j - t)`` for a fixed ``M0`` (2, 3):
+    per axis the weighted median (L1) or the weighted mean (L2) of ``x_j - M0 y_j``."""
+    n = x.shape[0]
     t = np.empty(2)
-    wsum = 0.0
-    for j in range(n):
-        wsum += w[j]
+    col = np.empty(n)
     for c in range(2):
-        col = np.ascontiguousarray(d[:, c])
+        for j in range(n):
+            col[j] = x[j, c] - (y[j, 0] * m0[c, 0] + y[j, 1] * m0[c, 1] + y[j, 2] * m0[c, 2])
         if l1:
             t[c] = _weighted_median_jit(col, w)
         else:
-            e = 0.0
+            e, wsum = 0.0, 0.0
             for j in range(n):
                 e += w[j] * col[j]
+                wsum += w[j]
             t[c] = e / wsum
-    obj = 0.0
-    for j in range(n):
-        for c in range(2):
-            r = d[j, c] - t[c]
-            obj += w[j] * (abs(r) if l1 else r * r)
-    return rot, scale, t, obj
+    return t
 
 
 @njit

@@ -33,7 +33,7 @@ from .camera import _camera_admm_checked
 from .errors import InvalidInputError, TooFewJointsError
 from .options import LifterOptions
 from .pose import LiftedConstraints, PoseModel, QStepFn, pose_step
-from .skeleton import ANTHROPOMETRIC_PROPORTIONS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from .skeleton import ANTHROPOMETRIC_PROPORTIONS, N_JOINTS, normalise_pose_flat
 from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
 __all__ = ["Lifter"]
@@ -61,47 +61,23 @@ def _mirror_kernel(pose: NDArray[np.float64], rot: NDArray[np.float64], mean: ND
                    u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64]
                    ) -> tuple[NDArray[np.float64], bool]:
     """``V ((U^T (normalise_pose(mirror(pose)) - mu)) / S)`` for one pose (12, 3): the pose in
-    the camera frame (``rot`` (3, 3)) with its depth reflected, then centred, rotated into its
-    body frame (:func:`pose_lifter.core.skeleton.body_frame`: x left hip - right hip, y the spine
-    made orthogonal to x, z = x cross y) and scaled to a unit right lower leg, as
-    :func:`normalise_pose` does (written out: one pose, no temporaries). Returns ``(alpha (k,),
-    ok)``; ``ok`` is False for a degenerate leg or body frame."""
+    the camera frame (``rot`` (3, 3)) with its depth reflected, normalised into its own body
+    frame (:func:`normalise_pose_flat`), then minimum-norm coefficients through the bases' SVD.
+    Returns ``(alpha (k,), ok)``; ``ok`` is False for a degenerate leg or body frame."""
     n = pose.shape[0]
     cp = np.empty((n, 3))
     for j in range(n):
         for a in range(3):
             cp[j, a] = pose[j, 0] * rot[a, 0] + pose[j, 1] * rot[a, 1] + pose[j, 2] * rot[a, 2]
         cp[j, 2] = -cp[j, 2]
-    for a in range(3):
-        c = 0.0
-        for j in range(n):
-            c += cp[j, a]
-        c /= n
-        for j in range(n):
-            cp[j, a] -= c
-    x = cp[6] - cp[9]
-    x = x / math.sqrt(x[0] ** 2 + x[1] ** 2 + x[2] ** 2)
-    up = 0.5 * (cp[0] + cp[3]) - 0.5 * (cp[6] + cp[9])
-    y = up - (up[0] * x[0] + up[1] * x[1] + up[2] * x[2]) * x
-    y = y / math.sqrt(y[0] ** 2 + y[1] ** 2 + y[2] ** 2)
-    z = np.array([x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]])
-    body = np.empty(3 * n)
-    for j in range(n):
-        body[3 * j] = cp[j, 0] * x[0] + cp[j, 1] * x[1] + cp[j, 2] * x[2]
-        body[3 * j + 1] = cp[j, 0] * y[0] + cp[j, 1] * y[1] + cp[j, 2] * y[2]
-        body[3 * j + 2] = cp[j, 0] * z[0] + cp[j, 1] * z[1] + cp[j, 2] * z[2]
-    knee, ankle = LIMBS[RIGHT_LOWER_LEG]
-    leg = math.sqrt((body[3 * knee] - body[3 * ankle]) ** 2 + (body[3 * knee + 1] - body[3 * ankle + 1]) ** 2
-                    + (body[3 * knee + 2] - body[3 * ankle + 2]) ** 2)
+    body, ok = normalise_pose_flat(cp)
     k = v.shape[0]
-    if not (math.isfinite(leg) and leg > 0.0):
-        return np.zeros(k), False
-    for i in range(3 * n):
-        body[i] = body[i] / leg - mean[i]
-    r = sig.size
     alpha = np.zeros(k)
-    ok = True
-    for j in range(r):
+    if not ok:
+        return alpha, False
+    for i in range(3 * n):
+        body[i] -= mean[i]
+    for j in range(sig.size):
         c = 0.0
         for i in range(3 * n):
             c += u[i, j] * body[i]
