@@ -64,7 +64,7 @@ def project(pose: Arr, rot: Arr, scale: float = 120.0, t: tuple[float, float] = 
 
 
 def test_noise_free_in_model_poses_are_recovered(bases: PoseBases, truth: list[Arr]) -> None:
-    lifter = Lifter(bases, LifterOptions(n_starts=30))
+    lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=30))
     errs = []
     for i, y in enumerate(truth):
         res = lifter.lift(project(y, camera(35.0 + 50.0 * i)))
@@ -76,7 +76,7 @@ def test_noise_free_in_model_poses_are_recovered(bases: PoseBases, truth: list[A
 def test_solution_satisfies_limbs_and_camera_is_scaled_orthographic(
     bases: PoseBases, truth: list[Arr]
 ) -> None:
-    lifter = Lifter(bases, LifterOptions(n_starts=5))
+    lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=5))
     res = lifter.lift(project(truth[0], camera(120.0)))
     lengths = limb_lengths(res.pose)
     target = lifter.model.limb_sq**0.5
@@ -93,7 +93,7 @@ def test_solution_satisfies_limbs_and_camera_is_scaled_orthographic(
 def test_warm_start_from_the_optimum_converges_in_few_alternations(
     bases: PoseBases, truth: list[Arr]
 ) -> None:
-    lifter = Lifter(bases, LifterOptions(n_starts=10))
+    lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=10))
     x = project(truth[1], camera(60.0))
     cold = lifter.lift(x)
     warm = lifter.lift(x, warm=cold.warm_start())
@@ -108,8 +108,8 @@ def test_warm_start_from_the_optimum_converges_in_few_alternations(
 
 def test_l1_beats_l2_with_gross_outliers_on_two_joints(bases: PoseBases, truth: list[Arr]) -> None:
     rng = np.random.default_rng(3)
-    l1 = Lifter(bases, LifterOptions(variant="L1WAWS", n_starts=10))
-    l2 = Lifter(bases, LifterOptions(variant="L2WAWS", n_starts=10))
+    l1 = Lifter(bases, LifterOptions(mode="paper", variant="L1WAWS", n_starts=10))
+    l2 = Lifter(bases, LifterOptions(mode="paper", variant="L2WAWS", n_starts=10))
     e1, e2 = [], []
     # 12 cases (the 6 poses, each from 2 views): on 4 the mean ratio moves by +-0.1 with any
     # change of solver (measured L1/L2 ratio on these 12: 0.64 Newton alpha-step, 0.76 Riemannian)
@@ -125,7 +125,7 @@ def test_l1_beats_l2_with_gross_outliers_on_two_joints(bases: PoseBases, truth: 
 
 
 def test_missing_joints_are_ignored_and_limbs_still_hold(bases: PoseBases, truth: list[Arr]) -> None:
-    lifter = Lifter(bases, LifterOptions(n_starts=10))
+    lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=10))
     y = truth[2]
     x = project(y, camera(45.0))
     conf = np.ones(12)
@@ -145,7 +145,7 @@ def test_missing_joints_are_ignored_and_limbs_still_hold(bases: PoseBases, truth
 def test_every_variant_runs_and_respects_its_constraints(
     bases: PoseBases, truth: list[Arr], variant: str
 ) -> None:
-    lifter = Lifter(bases, LifterOptions(variant=variant, n_starts=2, n_refine=1))
+    lifter = Lifter(bases, LifterOptions(mode="paper", variant=variant, n_starts=2, n_refine=1))
     res = lifter.lift(project(truth[3], camera(80.0)))
     assert np.all(np.isfinite(res.pose))
     if variant[2:4] == "WA":
@@ -155,7 +155,7 @@ def test_every_variant_runs_and_respects_its_constraints(
 
 
 def test_bad_inputs_raise_typed_errors(bases: PoseBases) -> None:
-    lifter = Lifter(bases, LifterOptions(n_starts=1))
+    lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=1))
     with pytest.raises(InvalidInputError):
         lifter.lift(np.zeros((11, 2)))
     with pytest.raises(InvalidInputError):
@@ -178,13 +178,13 @@ def test_bad_inputs_raise_typed_errors(bases: PoseBases) -> None:
 
 def test_results_are_deterministic(bases: PoseBases, truth: list[Arr]) -> None:
     x = project(truth[4], camera(150.0))
-    a = Lifter(bases, LifterOptions(n_starts=4)).lift(x)
-    b = Lifter(bases, LifterOptions(n_starts=4)).lift(x)
+    a = Lifter(bases, LifterOptions(mode="paper", n_starts=4)).lift(x)
+    b = Lifter(bases, LifterOptions(mode="paper", n_starts=4)).lift(x)
     assert np.array_equal(a.pose, b.pose) and a.objective == b.objective
 
 
 def test_pose_and_camera_are_invariant_to_image_scale_and_shift(bases: PoseBases, truth: list[Arr]) -> None:
-    lifter = Lifter(bases, LifterOptions(n_starts=4))
+    lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=4))
     y = truth[5]
     a = lifter.lift(project(y, camera(20.0), scale=100.0, t=(300.0, 200.0)))
     b = lifter.lift(project(y, camera(20.0), scale=250.0, t=(40.0, 900.0)))

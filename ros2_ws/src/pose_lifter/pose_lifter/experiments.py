@@ -229,7 +229,7 @@ def _lifter(variant: str, n_starts: int, n_refine: int) -> Any:
 
     key = (variant, n_starts, n_refine)
     if key not in _W["lifters"]:
-        opts = LifterOptions(variant=variant, n_starts=n_starts, n_refine=n_refine)
+        opts = LifterOptions(mode="paper", variant=variant, n_starts=n_starts, n_refine=n_refine)
         _W["lifters"][key] = Lifter(_W["sparse"], opts)
     return _W["lifters"][key]
 

@@ -45,7 +45,10 @@ __all__ = [
     "BVH_JOINTS",
     "CMU_UNIT_M",
     "DATA_ENV_VAR",
+    "EVALUATION_SUBJECTS",
+    "EVALUATION_TRIALS",
     "THORAX_VECTORS",
+    "TRAINING_SUBJECTS",
     "AsfSkeleton",
     "BvhFile",
     "MocapDataError",
@@ -62,6 +65,7 @@ __all__ = [
     "parse_bvh",
     "read_manifest",
     "resolve_data_dir",
+    "split_trials",
 ]
 
 #: Metres per CMU length unit.
@@ -170,6 +174,29 @@ def find_trial(trial_id: str, data_dir: str | Path | None = None) -> Trial:
         raise MocapDataError(f"trial {trial_id!r} is not in the manifest")
     rows.sort(key=lambda t: 0 if t.format == "amc" else 1)
     return rows[0]
+
+
+#: The project's data split (DEVELOPERS.md). Evaluation: people never trained on (subjects 02, 07,
+#: 08) and the long run 09_12; training: the other subjects listed here (subject 09's short runs
+#: included). Subjects in neither list (one trial is reserved for an independent check) are
+#: used for nothing.
+EVALUATION_SUBJECTS: Final[tuple[str, ...]] = ("02", "07", "08")
+EVALUATION_TRIALS: Final[tuple[str, ...]] = ("09_12",)
+TRAINING_SUBJECTS: Final[tuple[str, ...]] = ("01", "03", "05", "06", "09")
+
+
+def split_trials(split: str, data_dir: str | Path | None = None) -> list[str]:
+    """Trial ids of ``split`` (``"train"`` or ``"eval"``), sorted, each once.
+
+    ``"train"`` is every trial of :data:`TRAINING_SUBJECTS` except :data:`EVALUATION_TRIALS`;
+    ``"eval"`` is every trial of :data:`EVALUATION_SUBJECTS` plus :data:`EVALUATION_TRIALS`.
+    """
+    ids = sorted({t.trial for t in read_manifest(data_dir)})
+    if split == "train":
+        return [t for t in ids if t.split("_")[0] in TRAINING_SUBJECTS and t not in EVALUATION_TRIALS]
+    if split == "eval":
+        return [t for t in ids if t.split("_")[0] in EVALUATION_SUBJECTS or t in EVALUATION_TRIALS]
+    raise ValueError(f"split must be 'train' or 'eval', got {split!r}")
 
 
 # --------------------------------------------------------------------------- rotations

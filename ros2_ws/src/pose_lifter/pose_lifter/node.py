@@ -48,12 +48,13 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from . import messages
-from .core import Lifter, LifterOptions, PoseBases, PoseLifterError, WarmStart
+from .core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from .core._jit import HAVE_NUMBA
 from .core.errors import InvalidInputError, OptionsError
 from .core.layouts import Layout, get_layout
+from .core.tracking import OutOfOrderFrameError, TrackPolicy
 
-__all__ = ["PARAMS", "LifterNode", "ParamSpec", "TrackState", "main", "params_yaml"]
+__all__ = ["PARAMS", "LifterNode", "ParamSpec", "main", "params_yaml"]
 
 NODE_NAME: Final[str] = "pose_lifter"
 MARKER_NS: Final[str] = "pose_lifter"
@@ -138,9 +139,20 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("alpha_solver", "Alpha-step solver: 'riemannian' (Newton on the limb spheres), 'newton' (SQP) "
          "or 'admm' (the paper's lifted inner ADM)."),
     _opt("alpha_prox", "Proximal weight of the 'riemannian' alpha-step (0 = none).", 0.0, 1000.0),
+    _opt("mode", "'hybrid' (the learned prior inside the paper's robust fit), 'paper' (the paper's "
+         "method alone) or 'learned' (the prior alone)."),
+    _opt("prior_file", "Learned prior weights (.npz, PosePrior.save); empty = the packaged default."),
+    _opt("prior_weight_xy", "Hybrid: weight of the prior's image positions in the L1 objective.",
+         0.0, 1000.0),
+    _opt("prior_weight_z", "Hybrid: weight of the prior's depths in the L1 objective.", 0.0, 1000.0),
+    _opt("outlier_threshold", "Hybrid: reprojection residual (leg lengths) above which a visible joint "
+         "is dropped as a confident outlier and the prior re-run without it (0 = off).", 0.0, 1000.0),
+    _opt("prior_screen", "Hybrid: warm solves also try the prior's pose (one screening alternation)."),
     ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame."),
     ParamSpec("track_timeout", 1.0, "Seconds (input stamps) after which an unseen track is forgotten.",
               0.0, 3600.0),
+    ParamSpec("reinit_ratio", 2.0, "A warm solve whose objective exceeds this times the track's recent "
+              "median is redone cold (0 = never).", 0.0, 1000.0),
     ParamSpec("lower_leg_length", 0.43, "Right lower-leg (knee-ankle) length in metres: the metric scale.",
               0.05, 2.0),
     ParamSpec("default_distance", 5.0, "Depth of the skeleton centroid in metres when no camera_info "
@@ -208,28 +220,13 @@ class NodeSettings:
     """The node's own parameters (not solver options), read once per change, not per frame."""
 
     warm_start: bool
-    track_timeout_ns: int
+    track_timeout: float
+    reinit_ratio: float
     lower_leg_length: float
     default_distance: float
     publish_markers: bool
     max_skeletons: int
     max_coordinate: float
-
-
-@dataclass
-class TrackState:
-    """What the node remembers about one tracked person.
-
-    Attributes
-    ----------
-    warm : WarmStart
-        Camera and coefficients of the last solve: the next frame starts from them.
-    last_stamp_ns : int
-        Stamp of that frame (input clock).
-    """
-
-    warm: WarmStart
-    last_stamp_ns: int
 
 
 @dataclass
@@ -275,7 +272,7 @@ class LifterNode(Node):
         self._pending: tuple[PoseBases, LifterOptions] | None = None
         self._settings = self._read_settings()
 
-        self._tracks: dict[int, TrackState] = {}
+        self._policy = self._make_policy()
         self._shown_tracks: set[int] = set()  # track ids with markers on screen
         self._shown_untracked = 0  # untracked skeletons with markers on screen
         self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
@@ -314,13 +311,20 @@ class LifterNode(Node):
     def _read_settings(self) -> NodeSettings:
         return NodeSettings(
             warm_start=bool(self._param("warm_start")),
-            track_timeout_ns=round(float(self._param("track_timeout")) * 1e9),
+            track_timeout=float(self._param("track_timeout")),
+            reinit_ratio=float(self._param("reinit_ratio")),
             lower_leg_length=float(self._param("lower_leg_length")),
             default_distance=float(self._param("default_distance")),
             publish_markers=bool(self._param("publish_markers")),
             max_skeletons=int(self._param("max_skeletons")),
             max_coordinate=float(self._param("max_coordinate")),
         )
+
+    def _make_policy(self) -> TrackPolicy:
+        """The core's per-track policy (warm starts, re-initialisation, expiry) with the
+        current lifter and settings."""
+        st = self._settings
+        return TrackPolicy(self._lifter, st.track_timeout, st.warm_start, st.reinit_ratio)
 
     @staticmethod
     def _load_bases(path: str) -> PoseBases:
@@ -357,11 +361,11 @@ class LifterNode(Node):
         self._pending = None
         if bases is not self._bases:
             self._bases = bases
-            self._tracks.clear()  # coefficients of other bases are meaningless
+            self._policy.clear()  # coefficients of other bases are meaningless
         if bases is not self._lifter.bases or options != self._lifter.options:
             self._lifter = Lifter(bases, options)
-        if not self._settings.warm_start:
-            self._tracks.clear()
+        st = self._settings
+        self._policy.configure(self._lifter, st.track_timeout, st.warm_start, st.reinit_ratio)
         names = ", ".join(f"{p.name}={p.value!r}" for p in params if p.name in _SPECS)
         if names:
             self.get_logger().info(f"parameters changed: {names}")
@@ -410,7 +414,7 @@ class LifterNode(Node):
             self._warn_skip(type(err).__name__, f"frame skipped: {err}")
         except Exception as err:  # never let one frame kill the node
             self._warn_skip("unexpected", f"frame skipped after an unexpected error: {err!r}")
-        self._expire_tracks(stamp_ns)
+        self._policy.expire(stamp_ns)
 
         self._pub_skeletons.publish(messages.skeletons3d_array(msg.header, lifted, self._types))
         if self._settings.publish_markers:
@@ -441,22 +445,13 @@ class LifterNode(Node):
             raise SkipSkeleton("absurd coordinates",
                                f"track {track_id}: keypoints beyond {limit:g} px (max_coordinate)")
 
-        warm: WarmStart | None = None
-        track = self._tracks.get(track_id) if track_id >= 0 else None
-        if track is not None:
-            timeout_ns = self._settings.track_timeout_ns
-            age = stamp_ns - track.last_stamp_ns
-            if -timeout_ns <= age < 0:
-                raise SkipSkeleton("out-of-order stamp",
-                                   f"track {track_id}: stamp {-age / 1e9:.3f} s older than its last frame")
-            if age < -timeout_ns:  # the input clock jumped back (e.g. a looping bag)
-                del self._tracks[track_id]
-            elif age <= timeout_ns and self._settings.warm_start:
-                warm = track.warm
-
         start = time.perf_counter()
-        result = self._lifter.lift(points, confidence, warm=warm)
+        try:
+            tracked = self._policy.lift(track_id, stamp_ns, points, confidence)
+        except OutOfOrderFrameError as err:
+            raise SkipSkeleton("out-of-order stamp", str(err)) from err
         solve_time = time.perf_counter() - start
+        result = tracked.result
         if not _all_finite(result.pose_camera, result.alpha, result.camera.rotation, result.camera.scale,
                            result.camera.translation, result.objective, result.reprojection_error):
             raise SkipSkeleton("non-finite result", f"track {track_id}: the solve returned non-finite values")
@@ -466,16 +461,8 @@ class LifterNode(Node):
         if not _all_finite(joints):
             raise SkipSkeleton("non-finite result", f"track {track_id}: non-finite metric joints")
         out = messages.result_to_skeleton3d(result, track_id, joints, self._types,
-                                            solve_time=solve_time, warm_started=warm is not None)
-        if track_id >= 0:
-            self._tracks[track_id] = TrackState(result.warm_start(), stamp_ns)
+                                            solve_time=solve_time, warm_started=tracked.warm_started)
         return out, joints
-
-    def _expire_tracks(self, stamp_ns: int) -> None:
-        timeout_ns = self._settings.track_timeout_ns
-        stale = [t for t, s in self._tracks.items() if stamp_ns - s.last_stamp_ns > timeout_ns]
-        for t in stale:
-            del self._tracks[t]
 
     def _publish_markers(self, header: Any, shown: list[tuple[int, NDArray[np.float64]]]) -> None:
         tracked = {t for t, _ in shown if t >= 0}

@@ -23,11 +23,11 @@ from numpy.typing import NDArray
 from . import messages as m
 from .bags import BagError, BagWriter, read_messages
 from .core.bases import PoseBases
-from .core.errors import InvalidInputError, TooFewJointsError
+from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
 from .core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
 from .core.skeleton import N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
-from .core.types import WarmStart
+from .core.tracking import TrackPolicy
 from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_MARKERS, TOPIC_SKELETONS
 
 __all__ = [
@@ -44,6 +44,8 @@ __all__ = [
 
 #: Right lower leg (knee-ankle) in metres used to make lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
+#: The node's default ``track_timeout`` (seconds of input time a warm start stays valid).
+DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: Depth of the pose centroid when no CameraInfo is available.
 DEFAULT_DISTANCE_M: Final[float] = 5.0
 _MARKER_NS: Final[str] = "pose_lifter"
@@ -101,6 +103,7 @@ class _Item:
     """One skeleton of one message, ready to lift (or the reason it cannot be)."""
 
     msg_index: int
+    stamp_ns: int
     track_id: int
     points: NDArray[np.float64] | None
     confidence: NDArray[np.float64] | None
@@ -131,13 +134,17 @@ def _chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, 
     for i, (stamp, msg) in enumerate(keypoint_msgs):
         focal, centre = _intrinsics(camera_infos, stamp)
         items: list[_Item] = []
+        seen: set[int] = set()
         for skel in msg.skeletons:
             tid = int(skel.track_id)
             try:
+                if tid >= 0 and tid in seen:  # as the node: a later copy is skipped
+                    raise InvalidInputError(f"duplicate track id {tid} in one frame: later copy skipped")
+                seen.add(tid)
                 pts, conf = m.skeleton2d_to_arrays(skel, msg.layout)
-                item = _Item(i, tid, pts, conf, focal, centre, None)
+                item = _Item(i, stamp, tid, pts, conf, focal, centre, None)
             except (InvalidInputError, TooFewJointsError) as exc:
-                item = _Item(i, tid, None, None, focal, centre, str(exc))
+                item = _Item(i, stamp, tid, None, None, focal, centre, str(exc))
             items.append(item)
             if warm_start and tid >= 0:
                 per_track.setdefault(tid, []).append(item)
@@ -147,29 +154,27 @@ def _chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, 
     return chains + list(per_track.values()), per_msg
 
 
-def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default_distance_m: float
-                ) -> list[_Done]:
-    """Lift one chain in order: each item warm-starts from the previous one when that was lifted
-    from the previous message (or the same one: a duplicate track id); a failure starts over."""
+def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default_distance_m: float,
+                track_timeout: float = DEFAULT_TRACK_TIMEOUT_S, warm_start: bool = True) -> list[_Done]:
+    """Lift one chain in order through the node's per-track policy
+    (:class:`pose_lifter.core.tracking.TrackPolicy`: warm starts within ``track_timeout``,
+    re-initialisation, out-of-order frames refused, a failure starts over)."""
     out: list[_Done] = []
-    warm: WarmStart | None = None
-    warm_index = -2
+    policy = TrackPolicy(lifter, track_timeout, warm_start)
     for item in chain:
-        start = warm if warm is not None and item.msg_index - warm_index <= 1 else None
         try:
             if item.error is not None:
                 raise InvalidInputError(item.error)
             assert item.points is not None
             t0 = time.perf_counter()
-            res = lifter.lift(item.points, item.confidence, warm=start)
+            tracked = policy.lift(item.track_id, item.stamp_ns, item.points, item.confidence)
             dt = time.perf_counter() - t0
+            res = tracked.result
             joints = m.place_in_camera(res, leg_length_m, item.focal, item.centre, default_distance_m)
-        except (InvalidInputError, TooFewJointsError) as exc:
+        except PoseLifterError as exc:
             out.append(_Done(item, None, None, False, 0.0, str(exc)))
-            warm = None
             continue
-        out.append(_Done(item, res, joints, start is not None, dt, None))
-        warm, warm_index = res.warm_start(), item.msg_index
+        out.append(_Done(item, res, joints, tracked.warm_started, dt, None))
     return out
 
 
@@ -178,7 +183,7 @@ _WORKER: dict[str, Any] = {}
 
 
 def _worker_chain(chain: list[_Item]) -> list[_Done]:
-    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"])
+    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"])
 
 
 def lift_messages(
@@ -192,6 +197,7 @@ def lift_messages(
     on_frame: Callable[[int, Any, list[FrameLift], list[Any]], None] | None = None,
     summary: LiftSummary | None = None,
     workers: int = 1,
+    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order with per-track warm starts.
 
@@ -219,6 +225,8 @@ def lift_messages(
         Filled in place.
     workers : int
         Processes (fork) lifting the chains; 1 lifts in this process.
+    track_timeout : float
+        Seconds of input time a track's warm start stays valid (the node's ``track_timeout``).
     """
     from tqdm import tqdm
 
@@ -230,7 +238,7 @@ def lift_messages(
     bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
     if workers == 1 or len(chains) < 2:
         for chain in chains:
-            for d in _lift_chain(lifter, chain, leg_length_m, default_distance_m):
+            for d in _lift_chain(lifter, chain, leg_length_m, default_distance_m, track_timeout):
                 done[id(d.item)] = d
                 bar.update(1)
     else:
@@ -238,7 +246,7 @@ def lift_messages(
         from concurrent.futures import ProcessPoolExecutor
 
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
-        _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m)
+        _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout)
         try:
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as ex:
                 for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):

@@ -10,6 +10,7 @@ __all__ = [
     "InvalidInputError",
     "OptionsError",
     "PoseLifterError",
+    "PriorFileError",
     "TooFewJointsError",
     "UnknownLayoutError",
 ]
@@ -36,6 +37,10 @@ class UnknownLayoutError(PoseLifterError, KeyError):
 
 class BasisFileError(PoseLifterError, OSError):
     """A basis file is missing, unreadable or inconsistent."""
+
+
+class PriorFileError(PoseLifterError, OSError):
+    """A learned-prior weights file is missing, unreadable or inconsistent."""
 
 
 class OptionsError(PoseLifterError, ValueError):

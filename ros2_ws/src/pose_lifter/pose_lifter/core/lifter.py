@@ -11,6 +11,25 @@ decrease of ``F`` falls below ``alternation_tol`` or ``max_alternations`` is rea
 solves try ``n_starts`` starts (the mean pose, then k-means centres of the training poses)
 and keep the lowest ``F``; a warm start (previous frame of the same person) replaces them.
 
+Modes (``options.mode``). ``"paper"`` is the above. ``"learned"`` returns the learned prior's pose
+(:mod:`.prior`) alone. ``"hybrid"`` (the default) keeps the prior in the objective::
+
+    F = sum_j w_j |x_j - M0 y_j - t|_1 + theta ||alpha||_1
+        + sum_j p_j |P_j,xy - M0 y_j - t|_1 + sum_j q_j |P_j,z - m3 (y_j - mean_i y_i)|_1,
+    subject to ||C_i y||^2 = L_i,   y = mu + B alpha,   m3 = s r1 x r2,
+
+where ``P`` (12, 3) is the prior's pose for this image (its image positions and relative depths,
+missing joints included) and ``p_j = prior_weight_xy / e_j,xy``, ``q_j = prior_weight_z / e_j,z``
+with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_error``). The pose
+step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
+:class:`.pose.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
+paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
+Starts: the prior's pose (cold), or the warm start plus the prior's pose screened by one
+alternation (``prior_screen``); the depth-mirrored hypothesis is scored as in ``"paper"``. Then an
+outlier pass: visible joints whose reprojection residual exceeds ``outlier_threshold`` (and 3
+times the median) get weight 0, the prior is re-run without them and the fit continued from its
+solution, so a confidently wrong detection does not drag the depth.
+
 Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
 and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
 mean the same at any image size. Results are mapped back to input units.
@@ -30,13 +49,26 @@ from numpy.typing import NDArray
 from ._jit import njit
 from .bases import PoseBases
 from .camera import _camera_admm_checked
-from .errors import InvalidInputError, TooFewJointsError
+from .errors import InvalidInputError, OptionsError, TooFewJointsError
 from .options import LifterOptions
-from .pose import LiftedConstraints, PoseModel, QStepFn, pose_step
-from .skeleton import ANTHROPOMETRIC_PROPORTIONS, N_JOINTS, normalise_pose_flat
+from .pose import LiftedConstraints, PoseModel, PriorRows, QStepFn, pose_step
+from .prior import PosePrior
+from .skeleton import (
+    ANTHROPOMETRIC_PROPORTIONS,
+    N_JOINTS,
+    RIGHT_LOWER_LEG,
+    body_frame,
+    limb_lengths,
+    normalise_pose_flat,
+)
 from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
-__all__ = ["Lifter"]
+__all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter"]
+
+#: The hybrid outlier pass flags a joint only beyond this many times the median disagreement of
+#: the frame's visible joints as well as beyond ``outlier_threshold`` (under heavy Gaussian noise
+#: every joint disagrees a little: the median sets the scale).
+OUTLIER_MEDIAN_FACTOR = 3.0
 
 
 
@@ -58,18 +90,20 @@ class _Run:
 
 @njit
 def _mirror_kernel(pose: NDArray[np.float64], rot: NDArray[np.float64], mean: NDArray[np.float64],
-                   u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64]
+                   u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64], flip: bool = True
                    ) -> tuple[NDArray[np.float64], bool]:
     """``V ((U^T (normalise_pose(mirror(pose)) - mu)) / S)`` for one pose (12, 3): the pose in
     the camera frame (``rot`` (3, 3)) with its depth reflected, normalised into its own body
     frame (:func:`normalise_pose_flat`), then minimum-norm coefficients through the bases' SVD.
+    ``flip`` False: the pose as it is (the hybrid mode's start from the prior's pose).
     Returns ``(alpha (k,), ok)``; ``ok`` is False for a degenerate leg or body frame."""
     n = pose.shape[0]
     cp = np.empty((n, 3))
     for j in range(n):
         for a in range(3):
             cp[j, a] = pose[j, 0] * rot[a, 0] + pose[j, 1] * rot[a, 1] + pose[j, 2] * rot[a, 2]
-        cp[j, 2] = -cp[j, 2]
+        if flip:
+            cp[j, 2] = -cp[j, 2]
     body, ok = normalise_pose_flat(cp)
     k = v.shape[0]
     alpha = np.zeros(k)
@@ -98,9 +132,13 @@ class Lifter:
     options : LifterOptions or None
     """
 
-    def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None) -> None:
+    def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None,
+                 prior: PosePrior | None = None) -> None:
         self.bases = bases if bases is not None else PoseBases.load()
         self._options = options if options is not None else LifterOptions()
+        self._prior: PosePrior | None = prior
+        self._prior_key: str | None = None if prior is None else self._options.prior_file
+        self._prior_rel: NDArray[np.float64] | None = None
         self._model: PoseModel | None = None
         self._model_key: str | None = None
         self._camera_qp: QStepFn | None = None
@@ -120,6 +158,25 @@ class Lifter:
         self._build()
 
     @property
+    def prior(self) -> PosePrior:
+        """The learned prior (loaded from ``options.prior_file`` on first use)."""
+        if self._prior is None or self._prior_key != self._options.prior_file:
+            self._prior = PosePrior.load(self._options.prior_file or None)
+            self._prior_key = self._options.prior_file
+            self._prior_rel = None
+        return self._prior
+
+    def _prior_relative_weights(self) -> NDArray[np.float64]:
+        """(12, 2): per joint, the inverse of the prior's error relative to its mean, for the
+        image-position rows (x and y averaged) and the depth row."""
+        prior = self.prior
+        if self._prior_rel is None:
+            e = prior.abs_error
+            exy = e[:, :2].mean(axis=1)
+            self._prior_rel = np.column_stack([exy.mean() / exy, e[:, 2].mean() / e[:, 2]])
+        return self._prior_rel
+
+    @property
     def model(self) -> PoseModel:
         """Precomputed pose-step data of the current bases and limb targets."""
         assert self._model is not None
@@ -132,6 +189,13 @@ class Lifter:
             self._model = PoseModel.build(self.bases, props)
             self._model_key = key
         self._qstep_fn: QStepFn | None = None
+        if self._options.mode != "paper":
+            _ = self.prior  # load (and validate) the prior now, not on the first frame
+            if self._options.mode == "hybrid" and (self._options.alpha_solver != "riemannian"
+                                                   or not self._options.method.limbs
+                                                   or self.model.limb_coordinates is None):
+                raise OptionsError("mode 'hybrid' needs alpha_solver='riemannian', a variant with limb "
+                                   "constraints and bases with >= 24 independent directions")
         if self._options.pose_solver == "cvxpy":
             from .reference import reference_qstep
 
@@ -176,8 +240,14 @@ class Lifter:
         return _Normalisation(centre, spread / self._mean_spread)
 
     def _camera(self, xn: NDArray[np.float64], pose: NDArray[np.float64], w: NDArray[np.float64],
-                init: Camera | None, state: dict[str, Any] | None = None) -> CameraResult:
+                init: Camera | None, state: dict[str, Any] | None = None,
+                prior: PriorRows | None = None) -> CameraResult:
         o = self._options
+        if prior is not None and np.any(prior.weights[:, 0] > 0):
+            # the prior's image positions are further (pose joint, 2D point) pairs of the L1 fit
+            xn = np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]]))
+            pose = np.ascontiguousarray(np.vstack([pose, pose]))
+            w = np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]]))
         if o.camera_solver == "cvxpy":
             from .reference import reference_camera
 
@@ -194,7 +264,7 @@ class Lifter:
 
     def _pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
               alpha0: NDArray[np.float64], state: dict[str, Any] | None = None,
-              max_iter: int | None = None) -> PoseResult:
+              max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
         o = self._options
         out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
         res = pose_step(
@@ -204,7 +274,7 @@ class Lifter:
             inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
             alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
             duals=state.get("pose") if state is not None and o.warm_duals else None, state_out=out,
-            newton_tol=o.newton_tol, alpha_prox=o.alpha_prox,
+            newton_tol=o.newton_tol, alpha_prox=o.alpha_prox, prior=prior,
         )
         if state is not None:
             state["pose"] = out[0]
@@ -212,7 +282,7 @@ class Lifter:
 
     def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
              cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None,
-             pose_max_iter: int | None = None) -> _Run:
+             pose_max_iter: int | None = None, prior: PriorRows | None = None) -> _Run:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
         continue a previous run ``start``. The ADM multipliers of both steps are carried from
         one alternation to the next (``options.warm_duals``)."""
@@ -225,16 +295,18 @@ class Lifter:
         else:
             state = {}
             alpha = alpha0
-            cam = self._camera(xn, self.model.pose(alpha), w, cam0, state)
+            cam = self._camera(xn, self.model.pose(alpha), w, cam0, state, prior)
             best, prev, it0 = None, np.inf, 0
         converged = False
         it = it0
         for it in range(it0 + 1, n_alt + 1):
-            pres = self._pose(xn, cam.camera, w, alpha, state, pose_max_iter)
+            pres = self._pose(xn, cam.camera, w, alpha, state, pose_max_iter, prior)
             alpha = pres.alpha
-            cam = self._camera(xn, pres.pose, w, cam.camera, state)
+            cam = self._camera(xn, pres.pose, w, cam.camera, state, prior)
             th = o.theta if o.method.sparsity else 0.0
             obj = cam.objective + th * float(np.sum(np.abs(alpha)))
+            if prior is not None:
+                obj += prior.depth_term(pres.pose, cam.camera.projection)
             pres = PoseResult(pres.alpha, pres.pose, obj, pres.limb_violation, pres.n_iter, pres.converged)
             if best is None or obj < best.objective:
                 best = _Run(pres, cam, obj, it, False, dict(state))
@@ -274,6 +346,7 @@ class Lifter:
         points_2d: NDArray[np.float64],
         confidence: NDArray[np.float64] | None = None,
         warm: WarmStart | None = None,
+        limb_proportions: NDArray[np.float64] | None = None,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -287,7 +360,11 @@ class Lifter:
             Non-finite coordinates also count as missing.
         warm : WarmStart, optional
             Previous solution of the same person: a single start from it replaces the
-            multi-start.
+            multi-start. In hybrid mode its pose is also blended into the prior term's target
+            (``options.temporal_weight``: temporal smoothness).
+        limb_proportions : ndarray, shape (8,), optional
+            Hybrid: the person's limb proportions (e.g. a track's estimate over its frames), used
+            for the limb constraints with ``options.prior_limbs``.
 
         Returns
         -------
@@ -299,38 +376,190 @@ class Lifter:
         """
         x, w = self._weights(points_2d, confidence)
         norm = self._normalise(x, w)
+        mode = self._options.mode
+        if mode == "learned":
+            return self._lift_learned(x, w, norm)
         xn = (x - norm.centre) / norm.spread
+        cam0: Camera | None = None
         if warm is not None:
             if warm.alpha.shape != (self.bases.n_bases,):
                 raise InvalidInputError("warm start alpha does not match the bases")
             cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
                           (warm.camera.translation - norm.centre) / norm.spread)
+        if mode == "hybrid":
+            runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w, norm, warm, cam0,
+                                                                      limb_proportions)
+        else:
+            runs, total, n_starts = self._paper_runs(xn, w, warm, cam0)
+            prior_pose = None
+        idx, run = min(runs, key=lambda r: r[1].objective)
+        return self._result(x, w, norm, idx, run, n_starts, total, prior_pose)
+
+    def _paper_runs(self, xn: NDArray[np.float64], w: NDArray[np.float64], warm: WarmStart | None,
+                    cam0: Camera | None) -> tuple[list[tuple[int, _Run]], int, int]:
+        """The paper's starts: the warm start and its mirrored copy, or the screened multi-start.
+        Returns ``(runs as (start index, run), total alternations, starts tried)``."""
+        if warm is not None:
             runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
             if self._options.warm_flip:
-                mirrored = self._mirrored_alpha(runs[0][1])
-                if self._options.warm_flip_screen:
-                    # one alternation; continued only when it already beats the warm run
-                    flip = self._run(xn, w, mirrored, None, max_alternations=1)
-                    if flip.objective < runs[0][1].objective:
-                        flip = self._run(xn, w, flip.pose.alpha, None, start=flip)
-                else:
-                    flip = self._run(xn, w, mirrored, None)
-                runs.append((-2, flip))
-            total = sum(r.n_iter for _, r in runs)
+                runs.append((-2, self._mirrored_run(xn, w, runs[0][1], None)))
+            return runs, sum(r.n_iter for _, r in runs), len(runs)
+        starts = self.bases.with_starts(self._options.n_starts)
+        # a short first pose step only when it screens (some starts are then dropped)
+        screen = self._options.screen_pose_max_iter if len(starts) > self._options.n_refine else None
+        runs = [(i, self._run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
+                for i, a in enumerate(starts)]
+        n_screened = len(runs)
+        if len(runs) > 1:  # screen: continue only the most promising starts
+            runs.sort(key=lambda r: r[1].objective)
+            runs = runs[: self._options.n_refine]
+        runs = [(i, self._run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
+        # a continued run's n_iter counts its screening alternation too
+        return runs, n_screened - len(runs) + sum(r.n_iter for _, r in runs), len(starts)
+
+    def _mirrored_run(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: _Run,
+                      prior: PriorRows | None) -> _Run:
+        """The depth-mirrored copy of ``run`` as a start: screened by one alternation and continued
+        when it already beats ``run`` (``warm_flip_screen``), or run to convergence."""
+        mirrored = self._mirrored_alpha(run)
+        if self._options.warm_flip_screen:
+            flip = self._run(xn, w, mirrored, None, max_alternations=1, prior=prior)
+            if flip.objective < run.objective:
+                flip = self._run(xn, w, flip.pose.alpha, None, start=flip, prior=prior)
+            return flip
+        return self._run(xn, w, mirrored, None, prior=prior)
+
+    def _prior_rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
+                    limb_proportions: NDArray[np.float64] | None = None,
+                    previous: NDArray[np.float64] | None = None) -> tuple[PriorRows, NDArray[np.float64]]:
+        """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
+        normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
+        same frame) by ``options.temporal_weight``; limb radii from ``limb_proportions`` (a
+        track's estimate, ``options.prior_limbs``). Returns the rows and the prior's pose in
+        input units."""
+        pose = self.prior.predict(x, w > 0)
+        target = np.empty((N_JOINTS, 3))
+        target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
+        target[:, 2] = pose[:, 2] / norm.spread
+        if not np.all(np.isfinite(target)):
+            raise InvalidInputError("the learned prior gave non-finite values for this input")
+        tw = self._options.temporal_weight
+        if previous is not None and tw > 0:
+            target = (target + tw * previous) / (1.0 + tw)
+        rel = self._prior_relative_weights()
+        o = self._options
+        weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
+        radii = None
+        if o.prior_limbs and limb_proportions is not None:
+            radii = self.limb_radii(limb_proportions)
+        return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
+
+    @staticmethod
+    def limb_proportions_of(pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """A person's limb proportions from a 3D pose (12, 3): the 8 limb lengths with each
+        left/right pair averaged (bones are symmetric; it halves the noise of an estimate),
+        shape (8,), in the pose's units."""
+        lengths = limb_lengths(pose)
+        pairs = 0.5 * (lengths[[0, 1, 4, 5]] + lengths[[2, 3, 6, 7]])
+        return np.asarray(pairs[[0, 1, 0, 1, 2, 3, 2, 3]])
+
+    def limb_radii(self, proportions: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """Limb-constraint radii (8,) with the ratios of ``proportions`` and the geometric-mean
+        size of the model's own limbs (so the person keeps the bases' scale); None when the
+        proportions are unusable (non-finite or not positive)."""
+        p = np.asarray(proportions, dtype=np.float64)
+        if p.shape != (8,) or not np.all(np.isfinite(p)) or np.any(p <= 0):
+            return None
+        own = np.sqrt(self.model.limb_sq)
+        return np.ascontiguousarray(p * np.exp(np.mean(np.log(own)) - np.mean(np.log(p))))
+
+    def _start_alpha(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Minimum-norm coefficients of a camera-frame pose (12, 3) in its own body frame (zeros,
+        the mean pose, for a degenerate pose)."""
+        m = self.model
+        alpha, ok = _mirror_kernel(np.ascontiguousarray(pose), np.eye(3), m.mean, m.u, m.sig, m.v, False)
+        return alpha if ok else np.zeros(self.bases.n_bases)
+
+    def _hybrid_runs(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
+                     norm: _Normalisation, warm: WarmStart | None, cam0: Camera | None,
+                     limb_proportions: NDArray[np.float64] | None
+                     ) -> tuple[list[tuple[int, _Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
+        """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
+        Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the
+        prior's pose in input units)``."""
+        o = self._options
+        previous = None
+        if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
+            prev = self.model.pose(warm.alpha)
+            previous = np.column_stack([cam0.project(prev),
+                                        cam0.scale * (prev - prev.mean(axis=0)) @ cam0.rotation[2]])
+        prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous)
+        a_prior = self._start_alpha(prior.target)
+        runs: list[tuple[int, _Run]] = []
+        if warm is not None:
+            runs.append((-1, self._run(xn, w, warm.alpha, cam0, prior=prior)))
+            if o.prior_screen:
+                pr = self._run(xn, w, a_prior, None, max_alternations=1, prior=prior)
+                if pr.objective < runs[0][1].objective:
+                    pr = self._run(xn, w, pr.pose.alpha, None, start=pr, prior=prior)
+                runs.append((-3, pr))
         else:
-            starts = self.bases.with_starts(self._options.n_starts)
-            # a short first pose step only when it screens (some starts are then dropped)
-            screen = self._options.screen_pose_max_iter if len(starts) > self._options.n_refine else None
-            runs = [(i, self._run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
-                    for i, a in enumerate(starts)]
-            n_screened = len(runs)
-            if len(runs) > 1:  # screen: continue only the most promising starts
-                runs.sort(key=lambda r: r[1].objective)
-                runs = runs[: self._options.n_refine]
-            runs = [(i, self._run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
-            # a continued run's n_iter counts its screening alternation too
-            total = n_screened - len(runs) + sum(r.n_iter for _, r in runs)
-        idx, run = min(runs, key=lambda r: r[1].objective)
+            runs.append((-3, self._run(xn, w, a_prior, None, prior=prior)))
+        if o.warm_flip:
+            best = min(runs, key=lambda r: r[1].objective)[1]
+            runs.append((-2, self._mirrored_run(xn, w, best, prior)))
+        total = sum(r.n_iter for _, r in runs)
+        n_starts = len(runs)
+        for _ in range(o.outlier_passes if o.outlier_threshold > 0 else 0):
+            idx, run = min(runs, key=lambda r: r[1].objective)
+            cam = run.camera.camera
+            # a joint disagrees with the image when it is far from the fit's projection or from
+            # the prior's image position (the prior is trained with confident outliers)
+            resid = np.maximum(np.linalg.norm(xn - cam.project(run.pose.pose), axis=1),
+                               np.linalg.norm(xn - prior.target[:, :2], axis=1))
+            vis = w > 0
+            limit = max(o.outlier_threshold, OUTLIER_MEDIAN_FACTOR * float(np.median(resid[vis])))
+            out = vis & (resid > limit)
+            if not np.any(out) or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
+                break
+            w = w.copy()
+            w[out] = 0.0
+            prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous)
+            # continue the fit, and start again from the prior's new pose: the lower objective
+            cont = self._run(xn, w, run.pose.alpha, cam, prior=prior)
+            fresh = self._run(xn, w, self._start_alpha(prior.target), None, prior=prior)
+            runs = [(idx, cont), (-3, fresh)]
+            total += cont.n_iter + fresh.n_iter
+        return runs, total, n_starts, w, prior_pose
+
+    def _lift_learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation
+                      ) -> LiftResult:
+        """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
+        own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
+        positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
+        error of the visible joints in the normalised units."""
+        pose_in = self.prior.predict(x, w > 0)
+        centred = pose_in - pose_in.mean(axis=0)
+        flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
+        if not ok or not np.all(np.isfinite(flat)):
+            raise InvalidInputError("the learned prior gave a degenerate pose for this input")
+        body = flat.reshape(N_JOINTS, 3)
+        rot = body_frame(centred)
+        leg = float(limb_lengths(centred)[RIGHT_LOWER_LEG])
+        cam = Camera(np.ascontiguousarray(rot.T), leg, pose_in[:, :2].mean(axis=0))
+        reproj = np.linalg.norm(x - cam.project(body), axis=1)
+        vis = w > 0
+        alpha = self._start_alpha(centred)
+        lv = np.abs(limb_lengths(body) - np.sqrt(self.model.limb_sq))
+        return LiftResult(
+            pose=body, pose_camera=body @ cam.rotation.T, camera=cam, alpha=alpha,
+            objective=float(w @ np.abs(x - cam.project(body)).sum(axis=1)) / norm.spread,
+            reprojection_error=float(reproj[vis].mean()), limb_violation=float(lv.max()), n_iter=0,
+            converged=True, n_starts=1, start_index=-4, weights=w, total_alternations=0, prior_pose=pose_in)
+
+    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation, idx: int,
+                run: _Run, n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
+        """The winning run mapped back to input units, checked finite."""
         cam_n = run.camera.camera
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
         pose = run.pose.pose
@@ -347,10 +576,11 @@ class Lifter:
             limb_violation=run.pose.limb_violation,
             n_iter=run.n_iter,
             converged=run.converged,
-            n_starts=len(runs) if warm is not None else len(self.bases.with_starts(self._options.n_starts)),
+            n_starts=n_starts,
             start_index=idx,
             weights=w,
             total_alternations=total,
+            prior_pose=prior_pose,
         )
         for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
             if not np.all(np.isfinite(arr)):

@@ -83,6 +83,7 @@ RIEMANNIAN_MAX_ITER = 1
 __all__ = [
     "LiftedConstraints",
     "PoseModel",
+    "PriorRows",
     "lifted_alpha_admm",
     "newton_alpha",
     "pose_objective",
@@ -1182,17 +1183,31 @@ def _riemannian_pose_kernel(
     u1: NDArray[np.float64], u2: NDArray[np.float64],
     th: float, l1: bool, eta: float, eta_growth: float, eta_max: float, max_iter: int, tol: float,
     alpha_max_iter: int, alpha_tol: float, prox: float,
+    xp: NDArray[np.float64], pw: NDArray[np.float64], m3: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool]:
     """:func:`pose_step` with the Riemannian alpha-step, set-up included: ``c = x - t - M mu``,
     ``M U S``, the limb-coordinate quadratic (:func:`_sphere_setup`), then
     :func:`_riemannian_adm_kernel`. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,), alpha0 (k,),
-    u1 (24,), u2 (k,) (scaled multipliers, updated in place). Returns ``(alpha, objective, limb
-    violation, pose (36,), final eta, iterations, converged)``."""
+    u1 (m,), u2 (k,) (scaled multipliers, updated in place; ``m`` = 24 + the prior rows below).
+
+    Prior rows (the hybrid mode's L1 prior term, :class:`pose_lifter.core.lifter.Lifter`): for
+    each joint ``j`` with ``pw[j, 0] > 0`` two rows ``pw[j, 0] |xp[j, a] - t_a - M_a y_j|`` (the
+    prior's image position, a = x, y), and with ``pw[j, 1] > 0`` one row
+    ``pw[j, 1] |xp[j, 2] - m3 (y_j - mean_i y_i)|`` (its depth relative to the joints' mean;
+    ``m3`` = scale times the camera's third rotation row). ``pw`` all zero: the paper's problem.
+    Returns ``(alpha, objective, limb violation, pose (36,), final eta, iterations,
+    converged)``."""
     r = sig.size
     nj = x.shape[0]
-    wts = np.empty(2 * nj)
-    c = np.empty(2 * nj)
-    mus = np.empty((2 * nj, r))
+    n_xy = 0
+    n_z = 0
+    for j in range(nj):
+        n_xy += 1 if pw[j, 0] > 0.0 else 0
+        n_z += 1 if pw[j, 1] > 0.0 else 0
+    m = 2 * nj + 2 * n_xy + n_z
+    wts = np.empty(m)
+    c = np.empty(m)
+    mus = np.empty((m, r))
     for j in range(nj):
         for a in range(2):
             wts[2 * j + a] = w[j]
@@ -1201,6 +1216,34 @@ def _riemannian_pose_kernel(
             for k in range(r):
                 mus[2 * j + a, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
                                      + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+    row = 2 * nj
+    for j in range(nj):  # the prior's image positions: rows like the data rows
+        if pw[j, 0] > 0.0:
+            for a in range(2):
+                wts[row] = pw[j, 0]
+                c[row] = xp[j, a] - t[a] - (m0[a, 0] * mean[3 * j] + m0[a, 1] * mean[3 * j + 1]
+                                            + m0[a, 2] * mean[3 * j + 2])
+                for k in range(r):
+                    mus[row, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
+                                   + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+                row += 1
+    if n_z > 0:  # the prior's relative depths: m3 (y_j - mean_i y_i)
+        ubar = np.zeros((3, r))
+        mbar = np.zeros(3)
+        for j in range(nj):
+            for a in range(3):
+                mbar[a] += mean[3 * j + a] / nj
+                for k in range(r):
+                    ubar[a, k] += u[3 * j + a, k] / nj
+        for j in range(nj):
+            if pw[j, 1] > 0.0:
+                wts[row] = pw[j, 1]
+                c[row] = xp[j, 2] - (m3[0] * (mean[3 * j] - mbar[0]) + m3[1] * (mean[3 * j + 1] - mbar[1])
+                                     + m3[2] * (mean[3 * j + 2] - mbar[2]))
+                for k in range(r):
+                    mus[row, k] = (m3[0] * (u[3 * j, k] - ubar[0, k]) + m3[1] * (u[3 * j + 1, k] - ubar[1, k])
+                                   + m3[2] * (u[3 * j + 2, k] - ubar[2, k])) * sig[k]
+                row += 1
     g = mus.T @ mus
     for k in range(r):
         g[k, k] += 1.0 + prox
@@ -1219,6 +1262,42 @@ def _riemannian_pose_kernel(
     return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged
 
 
+@dataclass(frozen=True)
+class PriorRows:
+    """The learned prior as rows of the pose step's L1 objective (hybrid mode).
+
+    Attributes
+    ----------
+    target : ndarray, shape (12, 3)
+        The prior's pose in the lifter's normalised camera frame: ``x, y`` image positions (same
+        frame as the 2D input), ``z`` depth relative to the joints' mean depth.
+    weights : ndarray, shape (12, 2)
+        Per joint: weight of its two image-position rows and of its depth row (0 = no row).
+    limb_radii : ndarray, shape (8,), optional
+        Limb lengths (right-lower-leg units of the model) that replace the model's own in the
+        8 constraints ``||C_i y|| = limb_radii[i]`` (a person's own proportions); None keeps them.
+    """
+
+    target: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    limb_radii: NDArray[np.float64] | None = None
+
+    @staticmethod
+    def depth_row(projection: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``m3 = s r3`` of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row that maps a
+        model pose to depth in the same units (``r3 = r1 x r2``)."""
+        r1, r2 = projection[0], projection[1]
+        return np.ascontiguousarray(np.cross(r1, r2) / max(float(np.linalg.norm(r1)), 1e-300))
+
+    def depth_term(self, pose: NDArray[np.float64], projection: NDArray[np.float64]) -> float:
+        """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)."""
+        d = (pose - pose.mean(axis=0)) @ self.depth_row(projection)
+        return float(self.weights[:, 1] @ np.abs(self.target[:, 2] - d))
+
+
+_NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)), np.zeros(3))
+
+
 def pose_objective(
     resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64], theta: float,
     loss: Literal["l1", "l2"],
@@ -1235,7 +1314,7 @@ def _riemannian_pose_step(
     max_iter: int, tol: float, eta: float, eta_growth: float, eta_max: float,
     duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
     state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None, newton_tol: float,
-    alpha_prox: float,
+    alpha_prox: float, prior: PriorRows | None = None,
 ) -> PoseResult:
     """:func:`pose_step` with ``alpha_solver="riemannian"`` (limbs on, reduced lifting, onto limb
     map): one call of :func:`_riemannian_pose_kernel`."""
@@ -1246,9 +1325,17 @@ def _riemannian_pose_step(
     coords = model.limb_coordinates
     assert coords is not None
     z, n, s0, rad = coords
+    if prior is not None and prior.limb_radii is not None:
+        rad = np.ascontiguousarray(prior.limb_radii, dtype=np.float64)
     cmu24 = model.kernel_limbs[1]
-    if duals is None:
-        u1, u2 = np.zeros(2 * N_JOINTS), np.zeros(k)
+    if prior is None:
+        xp, pw, m3 = _NO_PRIOR
+    else:
+        xp, pw = prior.target, prior.weights
+        m3 = prior.depth_row(m0)
+    m = 2 * N_JOINTS + 2 * int(np.count_nonzero(pw[:, 0] > 0)) + int(np.count_nonzero(pw[:, 1] > 0))
+    if duals is None or duals[0].shape != (m,):
+        u1, u2 = np.zeros(m), np.zeros(k)
     else:
         u1 = np.asarray(duals[0], dtype=np.float64) / eta
         u2 = np.asarray(duals[1], dtype=np.float64) / eta
@@ -1258,7 +1345,7 @@ def _riemannian_pose_step(
         np.ascontiguousarray(translation, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64),
         model.mean, model.u, model.sig, vc, vt, model.components, model._limb_matrix, z, n, s0, rad, cu24_t,
         cmu24, alpha, u1, u2, float(th), bool(l1), float(eta), float(eta_growth), float(eta_max),
-        int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox))
+        int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox), xp, pw, m3)
     if state_out is not None:
         state_out.append((eta_end * u1, eta_end * u2))
     if not np.all(np.isfinite(best)):
@@ -1291,6 +1378,7 @@ def pose_step(
     state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
     newton_tol: float = 1e-9,
     alpha_prox: float = 1.0,
+    prior: PriorRows | None = None,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
 
@@ -1334,6 +1422,9 @@ def pose_step(
         of the Riemannian one (which stops at ``RIEMANNIAN_MAX_ITER`` steps first, as a rule).
     alpha_prox : float
         Proximal weight of the Riemannian alpha-step (``LifterOptions.alpha_prox``).
+    prior : PriorRows, optional
+        The hybrid mode's L1 prior term (:class:`PriorRows`), added to the objective; needs the
+        Riemannian path (limbs on, reduced lifting, onto limb map).
 
     Returns
     -------
@@ -1348,7 +1439,11 @@ def pose_step(
     if (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
             and model.limb_coordinates is not None):
         return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0, max_iter,
-                                     tol, eta, eta_growth, eta_max, duals, state_out, newton_tol, alpha_prox)
+                                     tol, eta, eta_growth, eta_max, duals, state_out, newton_tol, alpha_prox,
+                                     prior)
+    if prior is not None:
+        raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
+                                "lifting and bases whose limb map is onto (>= 24 basis directions)")
     wts = np.repeat(np.asarray(weights, dtype=np.float64), 2)  # (24,)
     # c = x - t - M mu, as a (24,) vector; A alpha = (M U) (S V^T alpha)
     u3 = model.u.reshape(N_JOINTS, 3, -1)

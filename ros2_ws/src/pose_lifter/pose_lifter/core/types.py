@@ -120,9 +120,15 @@ class LiftResult:
     n_starts : int
         Starts tried.
     start_index : int
-        Which start won (-1 = the warm start, -2 = its depth-mirrored copy).
+        Which start won (-1 = the warm start, -2 = the depth-mirrored copy of the best run,
+        -3 = the learned prior's pose (hybrid), -4 = the prior alone (learned mode); >= 0 the
+        index of a multi-start pose).
     weights : ndarray, shape (12,)
-        Per-joint weights used in the loss (0 = missing).
+        Per-joint weights used in the loss (0 = missing, or dropped as a confident outlier by
+        the hybrid mode's outlier pass).
+    prior_pose : ndarray, shape (12, 3), optional
+        The learned prior's pose for this frame (hybrid and learned modes): image positions in
+        input units and depths relative to the joints' mean depth, same units; None in paper mode.
     total_alternations : int
         Camera/pose alternations over all starts (the solve's work: a cold solve's screening
         alternation of every start plus the refined starts' further ones; a warm solve's
@@ -142,6 +148,7 @@ class LiftResult:
     start_index: int
     weights: NDArray[np.float64]
     total_alternations: int = 0
+    prior_pose: NDArray[np.float64] | None = None
 
     def warm_start(self) -> WarmStart:
         """The state to warm-start the next frame of the same person."""

@@ -1,0 +1,262 @@
+"""A learned 2D -> 3D pose prior: a small MLP from normalised 2D keypoints to all 12 joints in 3D.
+
+The network is data (VideoPose3D keeps the model definition apart from its weights): a ReLU
+multilayer perceptron whose weights, normalisation constants and per-joint uncertainty are one
+``.npz`` file, loaded with ``allow_pickle=False`` and validated before use. Inference is plain
+numpy (a few matrix products: ~20 us for one pose, batched offline).
+
+Input (:func:`normalise_2d`), per frame: the visible joints' 2D centred on their centroid ``c``
+and divided by their RMS distance ``r`` from it, missing joints set to 0, and the 12 visibility
+flags: 36 numbers. A causal temporal variant (``window > 1``) stacks the track's last ``window``
+frames (oldest first), each normalised with the *current* frame's ``c`` and ``r`` so the motion
+is kept; missing frames are all-missing.
+
+Output, shape (12, 3), in the same units: ``x, y`` in the input's normalised image frame (a
+visible joint's ``x, y`` are close to its input; a missing joint's are predicted), ``z`` the
+depth along the camera's optical axis (forward) relative to the joints' mean depth. The frame is
+the camera's optical frame (x right, y down, z forward), a proper rotation of the world.
+
+``abs_error`` (12, 3) is the mean absolute error of each output on held-out training-split
+frames: the scale ``b`` of a Laplace model of the prior's error, which the hybrid lifter uses to
+weight its L1 prior term (``1 / b``).
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InvalidInputError, PriorFileError
+from .skeleton import N_JOINTS
+
+__all__ = ["DEFAULT_PRIOR_PATH", "PosePrior", "normalise_2d", "prior_features"]
+
+#: The prior shipped with the package (``make prior``: tools/train_prior.py).
+DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "prior_mlp.npz"
+_FORMAT_VERSION: Final[int] = 1
+#: Loader caps: uncompressed bytes of the whole file, layers, units per layer, window.
+MAX_FILE_BYTES: Final[int] = 64 * 1024 * 1024
+MAX_LAYERS: Final[int] = 8
+MAX_WIDTH: Final[int] = 4096
+MAX_WINDOW: Final[int] = 64
+FRAME_DIM: Final[int] = 3 * N_JOINTS  # 24 coordinates + 12 visibility flags
+OUT_DIM: Final[int] = 3 * N_JOINTS
+
+
+def normalise_2d(points: NDArray[np.float64], visible: NDArray[np.bool_]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Centre and scale 2D keypoints on their visible joints.
+
+    Parameters
+    ----------
+    points : ndarray, shape (..., 12, 2)
+    visible : ndarray of bool, shape (..., 12)
+        At least 2 visible joints per frame, not all at one point.
+
+    Returns
+    -------
+    u : ndarray, shape (..., 12, 2)
+        ``(x - c) / r`` for visible joints, 0 for missing ones.
+    centre : ndarray, shape (..., 2)
+    radius : ndarray, shape (...)
+        RMS distance of the visible joints from ``centre``.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    vis = np.asarray(visible, dtype=bool)
+    vw = vis.astype(np.float64)
+    n = vw.sum(axis=-1)
+    if np.any(n < 2):
+        raise InvalidInputError("the prior needs at least 2 visible joints")
+    xz = np.where(vis[..., None], x, 0.0)
+    centre = np.einsum("...j,...ja->...a", vw, xz) / n[..., None]
+    d = np.where(vis[..., None], xz - centre[..., None, :], 0.0)
+    radius = np.sqrt(np.einsum("...ja,...ja->...", d, d) / n)
+    if not np.all(np.isfinite(radius)) or np.any(radius <= 1e-12):
+        raise InvalidInputError("the visible keypoints are (almost) all at one point")
+    return d / radius[..., None, None], centre, radius
+
+
+def prior_features(points: NDArray[np.float64], visible: NDArray[np.bool_], window: int = 1
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Network input of frames or windows.
+
+    Parameters
+    ----------
+    points : ndarray, shape (..., window, 12, 2) (or (..., 12, 2) when ``window == 1``)
+    visible : ndarray of bool, shape (..., window, 12) (or (..., 12))
+        The last frame of a window is the current one; it needs >= 2 visible joints. Joints
+        with non-finite coordinates count as missing.
+    window : int
+
+    Returns
+    -------
+    features : ndarray, shape (..., 36 * window)
+    centre : ndarray, shape (..., 2)
+    radius : ndarray, shape (...)
+        The current frame's normalisation (:func:`normalise_2d`).
+    """
+    x = np.asarray(points, dtype=np.float64)
+    vis = np.asarray(visible, dtype=bool) & np.all(np.isfinite(x), axis=-1)
+    if window == 1 and (x.ndim < 3 or x.shape[-3] != 1):
+        x, vis = x[..., None, :, :], vis[..., None, :]
+    if x.shape[-3:] != (window, N_JOINTS, 2) or vis.shape != x.shape[:-1]:
+        raise InvalidInputError(f"points must be (..., {window}, {N_JOINTS}, 2) with visibility "
+                                f"(..., {window}, {N_JOINTS}), got {x.shape} and {vis.shape}")
+    _, centre, radius = normalise_2d(x[..., -1, :, :], vis[..., -1, :])
+    xz = np.where(vis[..., None], x, 0.0)
+    u = np.where(vis[..., None], (xz - centre[..., None, None, :]) / radius[..., None, None, None], 0.0)
+    feats = np.concatenate([u.reshape(*u.shape[:-2], 2 * N_JOINTS), vis.astype(np.float64)], axis=-1)
+    return feats.reshape(*feats.shape[:-2], FRAME_DIM * window), centre, radius
+
+
+@dataclass(frozen=True)
+class PosePrior:
+    """A trained 2D -> 3D MLP (see the module docstring for its input and output).
+
+    Attributes
+    ----------
+    weights : tuple of ndarray
+        ``W_i``, shape ``(n_i, n_{i+1})``; ``n_0 = 36 * window``, last ``n = 36``.
+    biases : tuple of ndarray
+        ``b_i``, shape ``(n_{i+1},)``.
+    out_mean, out_scale : ndarray, shape (36,)
+        The network predicts ``(y - out_mean) / out_scale``.
+    abs_error : ndarray, shape (12, 3)
+        Mean absolute error per output on held-out frames (> 0).
+    window : int
+        Frames per input (1 = single frame; > 1 the causal temporal variant).
+    metadata : dict
+        Training data, augmentation, command, seed, validation figures.
+    """
+
+    weights: tuple[NDArray[np.float64], ...]
+    biases: tuple[NDArray[np.float64], ...]
+    out_mean: NDArray[np.float64]
+    out_scale: NDArray[np.float64]
+    abs_error: NDArray[np.float64]
+    window: int = 1
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.window, int) or not 1 <= self.window <= MAX_WINDOW:
+            raise PriorFileError(f"window must be an integer in [1, {MAX_WINDOW}], got {self.window!r}")
+        if len(self.weights) != len(self.biases) or not 1 <= len(self.weights) <= MAX_LAYERS:
+            raise PriorFileError(f"1..{MAX_LAYERS} layers with one bias each expected, got "
+                                 f"{len(self.weights)} weights and {len(self.biases)} biases")
+        n_in = FRAME_DIM * self.window
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            if w.ndim != 2 or w.shape[0] != n_in or b.shape != (w.shape[1],):
+                raise PriorFileError(f"layer {i}: weights {w.shape} / bias {b.shape} do not chain "
+                                     f"from {n_in} inputs")
+            if w.shape[1] > MAX_WIDTH:
+                raise PriorFileError(f"layer {i} has {w.shape[1]} units (at most {MAX_WIDTH})")
+            if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
+                raise PriorFileError(f"layer {i} has non-finite weights")
+            n_in = w.shape[1]
+        if n_in != OUT_DIM:
+            raise PriorFileError(f"the last layer must have {OUT_DIM} outputs, got {n_in}")
+        checks = (("out_mean", self.out_mean, (OUT_DIM,)), ("out_scale", self.out_scale, (OUT_DIM,)),
+                  ("abs_error", self.abs_error, (N_JOINTS, 3)))
+        for name, arr, shape in checks:
+            if arr.shape != shape or not np.all(np.isfinite(arr)):
+                raise PriorFileError(f"{name} must be finite with shape {shape}, got {arr.shape}")
+        if np.any(self.out_scale <= 0) or np.any(self.abs_error <= 0):
+            raise PriorFileError("out_scale and abs_error must be positive")
+
+    # ------------------------------------------------------------------ files
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> PosePrior:
+        """Load and validate a prior file (None: the packaged one).
+
+        Raises
+        ------
+        PriorFileError
+            Missing, unreadable, too large (uncompressed size read from the zip directory before
+            any array is loaded), missing members, wrong dtypes or shapes, non-finite values.
+        """
+        p = Path(path) if path is not None else DEFAULT_PRIOR_PATH
+        try:
+            with zipfile.ZipFile(p) as zf:
+                total = sum(i.file_size for i in zf.infolist())
+            if total > MAX_FILE_BYTES:
+                raise PriorFileError(f"{p}: {total} bytes uncompressed (at most {MAX_FILE_BYTES})")
+            with np.load(p, allow_pickle=False) as z:
+                names = set(z.files)
+                need = {"format_version", "n_layers", "window", "out_mean", "out_scale", "abs_error",
+                        "metadata"}
+                if not need <= names:
+                    raise PriorFileError(f"{p}: missing members {sorted(need - names)}")
+                version = int(z["format_version"])
+                if version != _FORMAT_VERSION:
+                    raise PriorFileError(f"{p}: format version {version}, expected {_FORMAT_VERSION}")
+                n = int(z["n_layers"])
+                if not 1 <= n <= MAX_LAYERS:
+                    raise PriorFileError(f"{p}: {n} layers (1..{MAX_LAYERS} allowed)")
+                arrays: dict[str, NDArray[np.float64]] = {}
+                for key in [*(f"w{i}" for i in range(n)), *(f"b{i}" for i in range(n)),
+                            "out_mean", "out_scale", "abs_error"]:
+                    if key not in names:
+                        raise PriorFileError(f"{p}: missing member {key!r}")
+                    a = z[key]
+                    if a.dtype.kind != "f":
+                        raise PriorFileError(f"{p}: {key} has dtype {a.dtype}, expected floats")
+                    arrays[key] = np.ascontiguousarray(a, dtype=np.float64)
+                meta_raw = z["metadata"]
+                if meta_raw.dtype.kind != "U" or meta_raw.ndim != 0:
+                    raise PriorFileError(f"{p}: metadata must be a JSON string")
+                meta = json.loads(str(meta_raw))
+                if not isinstance(meta, dict):
+                    raise PriorFileError(f"{p}: metadata must be a JSON object")
+                window = int(z["window"])
+        except PriorFileError:
+            raise
+        except (OSError, KeyError, ValueError, TypeError, zipfile.BadZipFile, EOFError) as exc:
+            raise PriorFileError(f"cannot read prior file {p}: {exc}") from exc
+        try:
+            return cls(tuple(arrays[f"w{i}"] for i in range(n)), tuple(arrays[f"b{i}"] for i in range(n)),
+                       arrays["out_mean"], arrays["out_scale"], arrays["abs_error"], window, meta)
+        except PriorFileError as exc:
+            raise PriorFileError(f"{p}: {exc}") from exc
+
+    def save(self, path: str | Path) -> None:
+        """Write the prior as an ``.npz`` (no pickled objects; weights stored as float32, which
+        moves the outputs by ~1e-6 of their scale, inference runs in float64)."""
+        arrays: dict[str, Any] = {f"w{i}": w.astype(np.float32) for i, w in enumerate(self.weights)}
+        arrays.update({f"b{i}": b.astype(np.float32) for i, b in enumerate(self.biases)})
+        np.savez_compressed(
+            path, format_version=np.int64(_FORMAT_VERSION), n_layers=np.int64(len(self.weights)),
+            window=np.int64(self.window), out_mean=self.out_mean, out_scale=self.out_scale,
+            abs_error=self.abs_error, metadata=np.array(json.dumps(self.metadata, sort_keys=True)), **arrays)
+
+    # ------------------------------------------------------------------ inference
+    def features(self, points: NDArray[np.float64], visible: NDArray[np.bool_]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:func:`prior_features` with this prior's window."""
+        return prior_features(points, visible, self.window)
+
+    def forward(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The network: ``relu`` hidden layers, linear output, de-standardised. Shape
+        (..., 36 * window) -> (..., 12, 3) normalised output."""
+        h = np.asarray(features, dtype=np.float64)
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = h @ w + b
+            if i < last:
+                np.maximum(h, 0.0, out=h)
+        y = h * self.out_scale + self.out_mean
+        return y.reshape(*y.shape[:-1], N_JOINTS, 3)
+
+    def predict(self, points: NDArray[np.float64], visible: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """3D poses in input units: ``x, y`` in the image (``c + r u``), ``z`` relative depth
+        (``r z``), shape (..., 12, 3) for input as in :meth:`features`."""
+        feats, centre, radius = self.features(points, visible)
+        y = self.forward(feats)
+        out = y * radius[..., None, None]
+        out[..., :2] += centre[..., None, :]
+        return out

@@ -1,0 +1,175 @@
+"""The per-track policy: one rule for how a tracked person's frames are lifted, used by the ROS node
+and by the offline lift alike (so a bag lifted offline gives what the node would publish).
+
+For each frame of a track (``track_id >= 0``; negative ids are untracked, every frame cold):
+
+* a stamp older than the track's last one by at most ``track_timeout`` is out of order: the frame
+  is refused (:class:`OutOfOrderFrameError`) and the track kept; older still means the input clock
+  jumped back (a looping bag): the track is forgotten and the frame lifted cold;
+* within ``track_timeout`` of the last frame the solve is warm-started from it (for speed, and in
+  hybrid mode the learned prior's pose still competes, ``LifterOptions.prior_screen``);
+* re-initialisation: when a warm solve's objective exceeds ``reinit_ratio`` times the median of the
+  track's last ``history`` objectives, the frame is also solved cold and the lower objective kept
+  (the fit has degraded: a wrong depth basin or a lost person);
+* a frame that cannot be lifted drops the track's warm start (the next frame starts cold);
+* per-track limb lengths (bones do not change within a person): the median of the learned prior's
+  limb proportions over the track's last ``limb_frames`` frames, once it has ``min_limb_frames``
+  of them, is passed to the lifter for its limb constraints (hybrid mode,
+  ``LifterOptions.prior_limbs``); temporal smoothness comes with the warm start
+  (``LifterOptions.temporal_weight``).
+
+Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import PoseLifterError
+from .lifter import Lifter
+from .types import LiftResult, WarmStart
+
+__all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
+
+
+#: Frames of a track whose prior limb proportions are kept, and how many are needed before the
+#: track's estimate replaces the bases' proportions.
+LIMB_FRAMES = 90
+MIN_LIMB_FRAMES = 10
+
+
+class OutOfOrderFrameError(PoseLifterError):
+    """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
+
+
+@dataclass
+class _Track:
+    warm: WarmStart | None
+    last_stamp_ns: int
+    objectives: deque[float] = field(default_factory=lambda: deque(maxlen=15))
+    limbs: deque[NDArray[np.float64]] = field(default_factory=lambda: deque(maxlen=LIMB_FRAMES))
+
+    def limb_proportions(self) -> NDArray[np.float64] | None:
+        if len(self.limbs) < MIN_LIMB_FRAMES:
+            return None
+        return np.asarray(np.median(np.stack(self.limbs), axis=0))
+
+
+@dataclass(frozen=True)
+class TrackedLift:
+    """One lifted frame of a track.
+
+    Attributes
+    ----------
+    result : LiftResult
+    warm_started : bool
+        Solved from the track's previous frame.
+    reinitialised : bool
+        The warm solve had degraded and a cold solve replaced it (its objective was lower).
+    """
+
+    result: LiftResult
+    warm_started: bool
+    reinitialised: bool
+
+
+class TrackPolicy:
+    """Per-track warm starts, re-initialisation and expiry around one :class:`Lifter`.
+
+    Parameters
+    ----------
+    lifter : Lifter
+    track_timeout : float
+        Seconds of input time after which a track's warm start is not used (and, in
+        :meth:`expire`, the track is forgotten).
+    warm_start : bool
+        False: every frame cold (the policy still refuses out-of-order frames).
+    reinit_ratio : float
+        A warm solve whose objective exceeds this times the track's recent median is redone cold
+        (``<= 0``: never).
+    """
+
+    def __init__(self, lifter: Lifter, track_timeout: float = 1.0, warm_start: bool = True,
+                 reinit_ratio: float = 2.0) -> None:
+        self._tracks: dict[int, _Track] = {}
+        self.configure(lifter, track_timeout, warm_start, reinit_ratio)
+
+    def configure(self, lifter: Lifter, track_timeout: float, warm_start: bool, reinit_ratio: float) -> None:
+        """Change the lifter or the settings; the tracks are kept (forgotten when ``warm_start``
+        is turned off)."""
+        self.lifter = lifter
+        self.track_timeout_ns = round(float(track_timeout) * 1e9)
+        self.warm_start = bool(warm_start)
+        self.reinit_ratio = float(reinit_ratio)
+        if not self.warm_start:
+            self._tracks.clear()
+
+    def __len__(self) -> int:
+        return len(self._tracks)
+
+    def clear(self) -> None:
+        """Forget every track (e.g. after a change of bases: old coefficients are meaningless)."""
+        self._tracks.clear()
+
+    def restore(self, track_id: int, warm: WarmStart | None, stamp_ns: int) -> None:
+        """Set a track's state (its warm start and last stamp), e.g. carried over from another
+        policy; its objective history starts empty."""
+        self._tracks[track_id] = _Track(warm, stamp_ns)
+
+    def expire(self, stamp_ns: int) -> None:
+        """Forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
+        stale = [t for t, s in self._tracks.items() if stamp_ns - s.last_stamp_ns > self.track_timeout_ns]
+        for t in stale:
+            del self._tracks[t]
+
+    def lift(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
+             confidence: NDArray[np.float64] | None = None) -> TrackedLift:
+        """Lift one frame of a track (model joints, as :meth:`Lifter.lift`).
+
+        Raises
+        ------
+        OutOfOrderFrameError
+            An out-of-order frame of a known track (the track is kept).
+        InvalidInputError, TooFewJointsError
+            From the lifter; the track's warm start is dropped.
+        """
+        track = self._tracks.get(track_id) if track_id >= 0 else None
+        warm: WarmStart | None = None
+        if track is not None:
+            age = stamp_ns - track.last_stamp_ns
+            if -self.track_timeout_ns <= age < 0:
+                raise OutOfOrderFrameError(
+                    f"track {track_id}: stamp {-age / 1e9:.3f} s older than its last frame")
+            if age < -self.track_timeout_ns:  # the input clock jumped back (e.g. a looping bag)
+                del self._tracks[track_id]
+                track = None
+            elif age <= self.track_timeout_ns and self.warm_start:
+                warm = track.warm
+        limbs = track.limb_proportions() if track is not None else None
+        try:
+            result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs)
+            reinit = False
+            if (warm is not None and track is not None and self.reinit_ratio > 0
+                    and len(track.objectives) >= 3):
+                ref = float(np.median(np.asarray(track.objectives)))
+                if result.objective > self.reinit_ratio * ref:
+                    cold = self.lifter.lift(points, confidence, warm=None, limb_proportions=limbs)
+                    if cold.objective < result.objective:
+                        result, reinit = cold, True
+        except PoseLifterError:
+            if track is not None:
+                track.warm = None
+            raise
+        if track_id >= 0:
+            if track is None:
+                track = self._tracks[track_id] = _Track(None, stamp_ns)
+            track.warm = result.warm_start()
+            track.last_stamp_ns = stamp_ns
+            track.objectives.append(float(result.objective))
+            if result.prior_pose is not None:
+                track.limbs.append(self.lifter.limb_proportions_of(result.prior_pose))
+        return TrackedLift(result, warm is not None, reinit)

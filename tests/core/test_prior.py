@@ -1,0 +1,242 @@
+"""The learned prior (core.prior), its training code and the hybrid mode's fusion (core.lifter)."""
+
+from __future__ import annotations
+
+import zipfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
+from pose_lifter.core.errors import InvalidInputError, OptionsError, PriorFileError
+from pose_lifter.core.prior import DEFAULT_PRIOR_PATH, PosePrior, prior_features
+from pose_lifter.core.synthetic import synthetic_poses
+from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
+from pose_lifter.views import film, scale_limbs, view_rotation
+
+#: Tolerances of this file, stated once.
+LIMB_TOL = 1e-6  # limb-length violation of a fused (hybrid) result, right-lower-leg units
+FLOAT32_TOL = 1e-4  # outputs of a saved prior (float32 weights) vs the in-memory one, relative
+
+
+@pytest.fixture(scope="module")
+def prior() -> PosePrior:
+    return PosePrior.load()
+
+
+@pytest.fixture(scope="module")
+def bases() -> PoseBases:
+    return PoseBases.load()
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def real_frames() -> tuple[np.ndarray, np.ndarray]:
+    """Real people (the committed bags' ground truth: CMU trials of the evaluation split, camera
+    frame, metres), 4 frames of each of 3 bags, seen weak-perspective: (pixels (12, 12, 2),
+    centred camera-frame truth (12, 12, 3))."""
+    from pose_lifter import messages
+    from pose_lifter.bags import read_messages
+    from pose_lifter.scenes import TOPIC_GROUND_TRUTH
+
+    truth = []
+    for name in ("walk_clean", "punch_clean", "run_orbit"):
+        msgs = [x.msg for x in read_messages(REPO / "bags" / f"{name}.mcap", [TOPIC_GROUND_TRUTH])]
+        truth += [messages.skeleton3d_to_joints(m.skeletons[0]) for m in msgs[5:45:10]]
+    cam = np.array(truth)
+    cam -= cam.mean(axis=1, keepdims=True)
+    return 160.0 * cam[..., :2] + 320.0, cam
+
+
+def _views(n: int, seed: int = 0, azimuth: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+    """Synthetic people filmed weak-perspective: (pixels (n, 12, 2), camera-frame truth (n, 12, 3))."""
+    poses = synthetic_poses(n, seed=seed)
+    rots = np.repeat(view_rotation(azimuth, 10.0)[None], n, axis=0)
+    pts, cam, _ = film(poses, rots, np.full(n, 4.0), np.zeros(n, dtype=bool))
+    return 800.0 * pts + 320.0, cam - cam.mean(axis=1, keepdims=True)
+
+
+def test_packaged_prior_loads_without_pickle_and_has_its_provenance(prior: PosePrior) -> None:
+    with np.load(DEFAULT_PRIOR_PATH, allow_pickle=False) as z:  # raises if anything needs pickle
+        assert all(z[k].dtype != object for k in z.files)
+    assert prior.window >= 1
+    assert "training_trials" in prior.metadata and "command" in prior.metadata
+    assert not {"02", "07", "08"} & {t.split("_")[0] for t in prior.metadata["training_trials"]}
+    assert "09_12" not in prior.metadata["training_trials"]
+
+
+def _write(path: Path, **arrays: object) -> Path:
+    np.savez(path, **arrays)  # type: ignore[arg-type]
+    return path
+
+
+@pytest.mark.parametrize("defect", ["missing", "shape", "nan", "object", "version", "not_zip", "big"])
+def test_a_bad_prior_file_is_refused_with_a_clear_error(prior: PosePrior, tmp_path: Path,
+                                                         defect: str) -> None:
+    good = tmp_path / "good.npz"
+    prior.save(good)
+    with np.load(good, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    path = tmp_path / f"{defect}.npz"
+    if defect == "missing":
+        del arrays["w1"]
+    elif defect == "shape":
+        arrays["w0"] = arrays["w0"][:-1]
+    elif defect == "nan":
+        arrays["b0"] = arrays["b0"].copy()
+        arrays["b0"][3] = np.nan
+    elif defect == "version":
+        arrays["format_version"] = np.int64(99)
+    if defect == "object":
+        arrays["metadata"] = np.array([{"a": 1}], dtype=object)
+        np.savez(path, **arrays)
+    elif defect == "not_zip":
+        path.write_bytes(b"not a zip file")
+    elif defect == "big":  # a zip whose members claim more than the cap uncompressed
+        with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("w0.npy", b"\0" * (65 * 1024 * 1024))
+    else:
+        np.savez(path, **arrays)
+    with pytest.raises(PriorFileError) as err:
+        PosePrior.load(path)
+    assert str(path) in str(err.value)
+    with pytest.raises(PriorFileError):
+        Lifter(options=LifterOptions(mode="hybrid", prior_file=str(path)))
+
+
+def test_save_load_round_trip_keeps_the_outputs(prior: PosePrior, tmp_path: Path) -> None:
+    x, _ = _views(5)
+    vis = np.ones((5, 12), dtype=bool)
+    p = tmp_path / "p.npz"
+    prior.save(p)
+    again = PosePrior.load(p)
+    a, b = prior.predict(x, vis), again.predict(x, vis)
+    assert np.allclose(a, b, rtol=FLOAT32_TOL, atol=FLOAT32_TOL * float(np.abs(a).max()))
+    assert again.metadata == prior.metadata
+
+
+def test_output_shape_and_finiteness_on_degenerate_input(prior: PosePrior) -> None:
+    x, _ = _views(4)
+    # batched, single and windowed shapes
+    assert prior.predict(x, np.ones((4, 12), dtype=bool)).shape == (4, 12, 3)
+    assert prior.predict(x[0], np.ones(12, dtype=bool)).shape == (12, 3)
+    # all but two joints missing (NaN coordinates count as missing): every joint still predicted
+    sparse = x[0].copy()
+    sparse[2:] = np.nan
+    out = prior.predict(sparse, np.ones(12, dtype=bool))
+    assert out.shape == (12, 3) and np.all(np.isfinite(out))
+    # missing joints' coordinates do not matter
+    vis = np.ones(12, dtype=bool)
+    vis[5] = False
+    moved = x[0].copy()
+    moved[5] += 1e6
+    assert np.array_equal(prior.predict(x[0], vis), prior.predict(moved, vis))
+    # the prediction follows the input's position and scale (normalised input)
+    shifted = prior.predict(2.0 * x[0] + 50.0, np.ones(12, dtype=bool))
+    base = prior.predict(x[0], np.ones(12, dtype=bool))
+    assert np.allclose(shifted[:, :2], 2.0 * base[:, :2] + 50.0, atol=1e-6)
+    assert np.allclose(shifted[:, 2], 2.0 * base[:, 2], atol=1e-6)
+    with pytest.raises(InvalidInputError):  # one visible joint
+        prior.predict(x[0], np.eye(12, dtype=bool)[0])
+    with pytest.raises(InvalidInputError):  # all at one point
+        prior.predict(np.ones((12, 2)), np.ones(12, dtype=bool))
+    feats, _, _ = prior_features(np.stack([x[:3]]), np.ones((1, 3, 12), dtype=bool), window=3)
+    assert feats.shape == (1, 108)
+
+
+def test_training_code_fits_a_tiny_prior_that_beats_the_flat_floor(tmp_path: Path) -> None:
+    from pose_lifter.prior_training import Augmentation, make_batch, train_prior
+
+    seqs = [synthetic_poses(300, seed=s, n_actions=2) for s in range(3)]
+    aug = Augmentation(p_outliers=0.0, p_missing=0.0, p_noise=0.0, limb_spread=0.0, elevation=(0.0, 0.0),
+                       roll_std=0.0)
+    kw = {"hidden": (64,), "samples_per_epoch": 3000, "seed": 1, "aug": aug, "log": None, "lr": 3e-3,
+          "lr_final": 1e-3}
+    pr = train_prior(seqs[:2], seqs[2:], epochs=20, **kw)  # type: ignore[arg-type]
+    again = train_prior(seqs[:2], seqs[2:], epochs=20, **kw)  # type: ignore[arg-type]
+    assert all(np.array_equal(a, b) for a, b in zip(pr.weights, again.weights, strict=True))  # seeded
+    test = make_batch(seqs[2:], 500, np.random.default_rng(9), aug)
+    depth = test.targets.reshape(-1, 12, 3)[..., 2]
+    flat_err = np.abs(depth).mean()  # zero depth
+    # measured 0.86 of the flat floor after 20 epochs (1.02 after 1): the training code learns depth
+    assert np.abs(pr.forward(test.features)[..., 2] - depth).mean() < 0.92 * flat_err
+    pr.save(tmp_path / "tiny.npz")
+    assert PosePrior.load(tmp_path / "tiny.npz").weights[0].shape == (36, 64)
+
+
+def test_scale_limbs_changes_each_limb_by_its_factor() -> None:
+    from pose_lifter.core.skeleton import limb_lengths
+
+    poses = synthetic_poses(3, seed=2)
+    f = np.linspace(0.8, 1.2, 8)
+    out = scale_limbs(poses, f)
+    assert np.allclose(limb_lengths(out), limb_lengths(poses) * f)
+    assert np.allclose(out[:, [0, 3, 6, 9]], poses[:, [0, 3, 6, 9]])  # roots stay
+
+
+# --------------------------------------------------------------------------- fusion
+
+
+def test_modes_are_selectable_and_validated(bases: PoseBases) -> None:
+    for mode in ("paper", "learned", "hybrid"):
+        assert Lifter(bases, LifterOptions(mode=mode)).options.mode == mode
+    with pytest.raises(OptionsError):
+        LifterOptions(mode="magic")
+    with pytest.raises(OptionsError):
+        Lifter(bases, LifterOptions(mode="hybrid", alpha_solver="admm"))
+
+
+def test_hybrid_meets_the_limb_constraints_and_beats_both_parts(
+        bases: PoseBases, real_frames: tuple[np.ndarray, np.ndarray]) -> None:
+    x, truth = real_frames
+    errs: dict[str, list[float]] = {"paper": [], "learned": [], "hybrid": []}
+    for mode in errs:
+        lifter = Lifter(bases, LifterOptions(mode=mode, n_starts=10))
+        for xi, ti in zip(x, truth, strict=True):
+            r = lifter.lift(xi)
+            errs[mode].append(float(p_mpjpe(r.pose_camera, ti)))
+            if mode != "learned":
+                assert r.limb_violation < LIMB_TOL
+            assert np.all(np.isfinite(r.pose_camera))
+    mean = {k: float(np.mean(v)) for k, v in errs.items()}
+    assert mean["hybrid"] < mean["paper"], mean
+    assert mean["hybrid"] < 1.1 * mean["learned"], mean
+
+
+def test_a_confident_outlier_is_dropped_and_does_not_drag_the_depth(bases: PoseBases) -> None:
+    x, truth = _views(8, seed=7)
+    lifter = Lifter(bases, LifterOptions(mode="hybrid"))
+    plain = Lifter(bases, LifterOptions(mode="hybrid", outlier_threshold=0.0))
+    leg = float(np.linalg.norm(x[0, 10] - x[0, 11]))
+    dropped, err_on, err_off = 0, [], []
+    for xi, ti in zip(x, truth, strict=True):
+        bad = xi.copy()
+        bad[2] += np.array([2.5, -1.5]) * max(leg, 40.0)  # the left wrist, confidence kept at 1
+        r = lifter.lift(bad)
+        dropped += int(r.weights[2] == 0.0)
+        assert r.limb_violation < LIMB_TOL
+        err_on.append(float(p_mpjpe(r.pose_camera, ti)))
+        err_off.append(float(p_mpjpe(plain.lift(bad).pose_camera, ti)))
+    assert dropped >= 6, dropped
+    assert np.mean(err_on) < np.mean(err_off)
+
+
+def test_the_tracker_leaves_a_wrong_depth_basin(bases: PoseBases) -> None:
+    """A track forced into the depth-mirrored basin (its warm start is the mirrored solution)
+    comes back to the image's basin: the prior's start competes on every warm frame."""
+    x, truth = _views(6, seed=11, azimuth=30.0)
+    lifter = Lifter(bases, LifterOptions(mode="hybrid", warm_flip=False))
+    first = lifter.lift(x[0])
+    mirrored = lifter._start_alpha(first.pose_camera * np.array([1.0, 1.0, -1.0]))
+    policy = TrackPolicy(lifter)
+    wrong = replace(first.warm_start(), alpha=mirrored)
+    policy.restore(0, wrong, 0)  # the track's state: the wrong basin
+    r = policy.lift(0, 33_000_000, x[1]).result
+    trapped = Lifter(bases, LifterOptions(mode="paper", warm_flip=False)).lift(x[1], warm=wrong)
+    assert p_mpjpe(r.pose_camera, truth[1]) < p_mpjpe(trapped.pose_camera, truth[1])
+    assert r.start_index == -3  # the prior's start won
+    with pytest.raises(OutOfOrderFrameError):
+        policy.lift(0, 10_000_000, x[2])

@@ -1,0 +1,261 @@
+"""Accuracy of the lifter's modes on the evaluation split (``make accuracy``).
+
+    .venv/bin/python tools/accuracy.py [--data ../shared/data/cmu] [--split eval|val]
+        [--frames 120] [--views 4] [--workers 2] [--conditions clean noise0.1 ...]
+        [--out out/accuracy] [--set NAME=VALUE ...]
+
+Tracks: every trial of the split (``eval``: subjects 02, 07, 08 and 09_12, never trained on;
+``val``: the training-split trials the prior was not fitted on, for tuning), at 30 Hz, at most
+``--frames`` frames each, each filmed from ``--views`` of the 32 cameras (8 azimuths x 2
+elevations (0 and 30 degrees) x weak perspective / perspective at 3 m; the views rotate over the
+trials so every camera is used), 640x480 pixels with an 800 px focal length.
+
+Conditions: clean; Gaussian 2D noise 0.05 / 0.1 / 0.2 right-lower-leg lengths; 20 % of joints
+displaced by 1-3 leg lengths with confidence kept at 1; 15 % of joints missing; limb lengths
+scaled per person (one factor per bone group, uniform +-20 %), clean 2D.
+
+Methods: ``flat`` (the 2D with zero depth) and ``mean-pose`` floors; ``paper`` (the paper's
+method, tracked as the node tracks: cold 30-start first frame, then warm + mirrored starts);
+``learned`` (the prior alone, per frame); ``hybrid`` tracked (default mode, the node's per-track
+policy :class:`pose_lifter.core.tracking.TrackPolicy`), and ``hybrid-1`` (every frame cold).
+
+Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
+joints' centroid, the prediction scaled by the subject's true right-lower-leg length, no
+rotation alignment) and jitter (mean acceleration error, mm per frame^2, on the MPJPE poses).
+Writes ``accuracy.json``, ``accuracy.md`` (the table) and ``accuracy.png`` to ``--out``.
+Deterministic (seeded corruption, one BLAS thread per worker).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import multiprocessing as mp
+import os
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from pose_lifter.core import Lifter, LifterOptions, PoseBases, TooFewJointsError, p_mpjpe
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.mocap import load_trial, split_trials
+from pose_lifter.scenes import corrupt_2d
+from pose_lifter.views import film, limb_scale_factors, scale_limbs, view_rotation
+
+CONDITIONS: dict[str, dict[str, float]] = {
+    "clean": {},
+    "noise0.05": {"noise": 0.05},
+    "noise0.1": {"noise": 0.1},
+    "noise0.2": {"noise": 0.2},
+    "outliers20": {"outliers": 0.2},
+    "missing15": {"missing": 0.15},
+    "proportions": {"limbs": 0.2},
+}
+METHODS = ("flat", "mean-pose", "paper", "learned", "hybrid", "hybrid-1")
+AZIMUTHS = tuple(range(0, 360, 45))
+ELEVATIONS = (0.0, 30.0)
+PROJECTIONS = ("weak", "perspective")
+FOCAL, CENTRE, DISTANCE = 800.0, np.array([320.0, 240.0]), 3.0
+CAMERAS = [(a, e, p) for p in PROJECTIONS for e in ELEVATIONS for a in AZIMUTHS]
+
+
+@dataclass(frozen=True)
+class Track:
+    name: str
+    world: NDArray[np.float64]  # (T, 12, 3) metres
+    camera: tuple[float, float, str]
+    seed: int
+
+
+def _parse(spec: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for s in spec:
+        k, v = s.split("=", 1)
+        out[k.strip()] = ast.literal_eval(v.strip())
+    return out
+
+
+_STATE: dict[str, Any] = {}
+
+
+def _init(settings: dict[str, Any], methods: tuple[str, ...]) -> None:
+    warnings.simplefilter("ignore")
+    bases = PoseBases.load()
+    lifters = {}
+    for m in methods:
+        if m in ("paper", "learned", "hybrid", "hybrid-1"):
+            mode = "hybrid" if m.startswith("hybrid") else m
+            lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings))
+            lifters[m].warm_up()
+    _STATE["lifters"] = lifters
+    _STATE["mean"] = bases.mean_pose
+
+
+def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
+    track, cond, methods = args
+    spec = CONDITIONS[cond]
+    rng = np.random.default_rng(track.seed)
+    world = track.world
+    if spec.get("limbs", 0.0) > 0:
+        world = scale_limbs(world, limb_scale_factors(1, spec["limbs"], rng)[0])
+    az, el, proj = track.camera
+    n = len(world)
+    rots = np.repeat(view_rotation(az, el)[None], n, axis=0)
+    pts, cam_pose, leg = film(world, rots, np.full(n, DISTANCE), np.full(n, proj == "perspective"))
+    px = FOCAL * pts + CENTRE
+    px, conf = corrupt_2d(px, FOCAL * leg, spec.get("noise", 0.0),
+                          spec.get("outliers", 0.0), spec.get("missing", 0.0), rng)
+    leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
+    truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
+    out: dict[str, Any] = {}
+    for m in methods:
+        t0 = time.perf_counter()
+        preds = np.full((n, 12, 3), np.nan)  # metres, camera frame, centred
+        if m == "flat":
+            flat = np.concatenate([truth_c[..., :2], np.zeros((n, 12, 1))], axis=-1)
+            preds[:] = flat
+        elif m == "mean-pose":  # the mean training pose, turned by the true body frame (an oracle)
+            preds[:] = np.einsum("jb,nba->nja", _STATE["mean"], body_frame(truth_c)) * leg_m[:, None, None]
+        else:
+            lifter: Lifter = _STATE["lifters"][m]
+            policy = TrackPolicy(lifter, track_timeout=1e9) if m == "hybrid" else None
+            warm = None
+            for i in range(n):
+                try:
+                    if policy is not None:
+                        r = policy.lift(0, i * 33_333_333, px[i], conf[i]).result
+                    else:
+                        r = lifter.lift(px[i], conf[i], warm=warm)
+                        warm = r.warm_start() if m == "paper" else None
+                except (TooFewJointsError, InvalidInputError):
+                    warm = None
+                    continue
+                preds[i] = r.pose_camera * leg_m[i]
+        ms = 1000.0 * (time.perf_counter() - t0) / n
+        ok = np.all(np.isfinite(preds), axis=(1, 2))
+        pm = np.full(n, np.nan)
+        pm[ok] = 1000.0 * np.asarray(p_mpjpe(preds[ok], truth_c[ok]))
+        mp_ = np.full(n, np.nan)
+        mp_[ok] = 1000.0 * np.linalg.norm(preds[ok] - truth_c[ok], axis=-1).mean(axis=-1)
+        acc = np.full(n, np.nan)
+        if n >= 3:
+            ap = preds[2:] - 2 * preds[1:-1] + preds[:-2]
+            at = truth_c[2:] - 2 * truth_c[1:-1] + truth_c[:-2]
+            acc[1:-1] = 1000.0 * np.linalg.norm(ap - at, axis=-1).mean(axis=-1)
+        out[m] = {"p_mpjpe": pm.tolist(), "mpjpe": mp_.tolist(), "jitter": acc.tolist(), "ms": ms}
+    return {"track": track.name, "cond": cond, "camera": track.camera, "n": n, "methods": out}
+
+
+def _tracks(split: str, data: str | None, frames: int, views: int) -> list[Track]:
+    if split == "eval":
+        ids = split_trials("eval", data)
+    else:  # the prior's held-out training-split trials (tuning)
+        from pose_lifter.core.prior import PosePrior
+        ids = list(PosePrior.load().metadata.get("validation_trials", []))
+    out = []
+    for k, t in enumerate(ids):
+        world = load_trial(t, data, step=4, max_frames=frames)
+        for v in range(views):
+            cam = CAMERAS[(k * views + v) % len(CAMERAS)]
+            out.append(Track(f"{t}@{cam[0]:.0f}/{cam[1]:.0f}/{cam[2]}", world, cam, 1000 * k + v))
+    return out
+
+
+def _nanmean(a: list[float]) -> float:
+    x = np.asarray(a, dtype=np.float64)
+    return float(np.nanmean(x)) if np.any(np.isfinite(x)) else float("nan")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=None)
+    ap.add_argument("--split", choices=("eval", "val"), default="eval")
+    ap.add_argument("--frames", type=int, default=120, help="frames per track at 30 Hz")
+    ap.add_argument("--views", type=int, default=4, help="cameras per trial (of 32)")
+    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(CONDITIONS))
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
+    ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    t0 = time.perf_counter()
+    tracks = _tracks(args.split, args.data, args.frames, args.views)
+    methods = tuple(args.methods)
+    jobs = [(t, c, methods) for c in args.conditions for t in tracks]
+    n_frames = sum(len(t.world) for t in tracks)
+    print(f"{args.split} split: {len(tracks)} tracks ({len(tracks) // max(args.views, 1)} trials x "
+          f"{args.views} views), {n_frames} frames per condition; {len(jobs)} jobs on {args.workers} workers",
+          flush=True)
+    settings = _parse(args.set)
+    if args.workers > 1:
+        with mp.get_context("fork").Pool(args.workers, _init, (settings, methods)) as pool:
+            results = list(pool.imap_unordered(_job, jobs, chunksize=1))
+    else:
+        _init(settings, methods)
+        results = [_job(j) for j in jobs]
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    for cond in args.conditions:
+        rows = [r for r in results if r["cond"] == cond]
+        table[cond] = {}
+        for m in methods:
+            vals = {k: _nanmean([v for r in rows for v in r["methods"][m][k]])
+                    for k in ("p_mpjpe", "mpjpe", "jitter")}
+            vals["ms"] = float(np.mean([r["methods"][m]["ms"] for r in rows]))
+            vals["lifted"] = float(np.mean([np.isfinite(r["methods"][m]["p_mpjpe"]).mean() for r in rows]))
+            table[cond][m] = vals
+    lines = [f"{args.split} split, {len(tracks)} tracks, {n_frames} frames per condition "
+             f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)", "",
+             "P-MPJPE / MPJPE / jitter (mm, mm, mm per frame^2):", "",
+             "| condition | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
+    for cond, row in table.items():
+        cells = [f"{row[m]['p_mpjpe']:.1f} / {row[m]['mpjpe']:.1f} / {row[m]['jitter']:.1f}" for m in methods]
+        lines.append(f"| {cond} | " + " | ".join(cells) + " |")
+    lines += ["", "ms per frame: " + ", ".join(
+        f"{m} {np.mean([table[c][m]['ms'] for c in table]):.2f}" for m in methods),
+        "frames lifted: " + ", ".join(f"{m} {100 * min(table[c][m]['lifted'] for c in table):.1f} %"
+                                      for m in methods),
+        f"wall time {time.perf_counter() - t0:.0f} s"]
+    text = "\n".join(lines)
+    print(text, flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "accuracy.md").write_text(text + "\n")
+    (args.out / "accuracy.json").write_text(json.dumps({"table": table, "settings": settings,
+                                                        "split": args.split}, indent=1))
+    _plot(table, methods, args.out / "accuracy.png")
+    return 0
+
+
+def _plot(table: dict[str, dict[str, dict[str, float]]], methods: tuple[str, ...], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    conds = list(table)
+    fig, ax = plt.subplots(figsize=(10, 4))
+    width = 0.8 / len(methods)
+    for i, m in enumerate(methods):
+        ax.bar(np.arange(len(conds)) + i * width, [table[c][m]["p_mpjpe"] for c in conds], width, label=m)
+    ax.set_xticks(np.arange(len(conds)) + 0.4 - width / 2, conds)
+    ax.set_ylabel("P-MPJPE (mm)")
+    ax.set_title("Evaluation split (subjects 02, 07, 08, 09_12), tracked at 30 Hz")
+    ax.legend(ncol=len(methods), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""Train the packaged learned prior (``make prior``) on the training split of the CMU data.
+
+    .venv/bin/python tools/train_prior.py [--data ../shared/data/cmu] [--epochs 40]
+        [--samples 100000] [--hidden 1024 1024] [--window 1] [--seed 0] [--out PATH]
+
+Training trials: :func:`pose_lifter.mocap.split_trials` ("train": subjects 01, 03, 05, 06 and
+09_01-09_11); every 8th of them (sorted, from the 8th) is held out for validation (the prior's
+per-joint uncertainty and the printed figure), and so are the action-recognition example's test
+trials, so that its figure with lifted 3D is on unseen motion. The evaluation split (02, 07, 08, 09_12) is
+never read. Frames at 60 Hz (``--step 2`` of the 120 Hz originals) for single frames, 30 Hz
+(step 4) for the temporal variant. Deterministic for a seed (one BLAS thread).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from pose_lifter.core.prior import DEFAULT_PRIOR_PATH
+from pose_lifter.mocap import load_trial, resolve_data_dir, split_trials
+from pose_lifter.prior_training import train_prior
+from threadpoolctl import threadpool_limits
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu)")
+    ap.add_argument("--epochs", type=int, default=30)
+    ap.add_argument("--samples", type=int, default=100_000, help="augmented samples per epoch")
+    ap.add_argument("--hidden", type=int, nargs="+", default=[768, 768])
+    ap.add_argument("--window", type=int, default=1, help="frames per input (> 1: causal temporal variant)")
+    ap.add_argument("--step", type=int, default=None,
+                    help="mocap frame step (default 2, or 4 with --window > 1)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=1, help="BLAS threads (1: deterministic)")
+    ap.add_argument("--out", type=Path, default=DEFAULT_PRIOR_PATH)
+    args = ap.parse_args()
+    step = args.step or (2 if args.window == 1 else 4)
+    warnings.simplefilter("ignore")
+    trials = split_trials("train", args.data)
+    # held out: every 8th training trial, and the action-recognition example's test trials
+    # (tools/action_recognition_eval.py: per class every third trial, the first 3 of them), so
+    # that example's figure with lifted 3D is on motion the prior has not seen
+    from action_recognition_eval import split as action_split
+    from action_recognition_eval import trials_by_class
+    action_test = {t for ts in trials_by_class(resolve_data_dir(args.data)).values()
+                   for t in action_split(ts)[1][:3]}
+    val_ids = sorted(set(trials[7::8]) | (action_test & set(trials)))
+    fit_ids = [t for t in trials if t not in val_ids]
+    fit = [load_trial(t, args.data, step=step) for t in fit_ids]
+    val = [load_trial(t, args.data, step=step) for t in val_ids]
+    print(f"training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames at step {step}), "
+          f"validation {val_ids} ({sum(len(s) for s in val)} frames)", flush=True)
+    t0 = time.perf_counter()
+    with threadpool_limits(args.threads):
+        prior = train_prior(fit, val, hidden=tuple(args.hidden), epochs=args.epochs,
+                            samples_per_epoch=args.samples, window=args.window, seed=args.seed,
+                            log=lambda s: print(s, flush=True))
+    meta = dict(prior.metadata)
+    meta.update({"command": "python tools/train_prior.py " + " ".join(sys.argv[1:]),
+                 "training_trials": fit_ids, "validation_trials": val_ids, "frame_step": step})
+    from dataclasses import replace
+    prior = replace(prior, metadata=meta)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    prior.save(args.out)
+    print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.2f} MB) in {time.perf_counter() - t0:.0f} s; "
+          f"validation P-MPJPE {meta['validation_p_mpjpe_mm']} mm; mean |error| per output "
+          f"{np.round(prior.abs_error.mean(axis=0), 4).tolist()} (x, y, z)")
+
+
+if __name__ == "__main__":
+    main()
