@@ -15,7 +15,7 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast lint demo bench bench-node experiments bases bags lock clean ros
+.PHONY: help venv test test-fast lint demo bench bench-node experiments bases bags prior accuracy lock clean ros
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
@@ -26,6 +26,8 @@ help:
 	@echo "make experiments the paper's experiments on CMU data -> out/experiments"
 	@echo "make bases       re-learn the packaged basis file from ../shared/data/cmu"
 	@echo "make bags        regenerate the committed bags from ../shared/data/cmu"
+	@echo "make prior       re-train the packaged learned prior (data/prior_mlp.npz, ~15 min)"
+	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy (~25 min)"
 
 $(VENV)/.stamp: requirements.lock $(PKG)/setup.py $(PKG)/setup.cfg
 	@test -x $(PY) || $(PY_BOOT) -m venv $(VENV)
@@ -67,6 +69,14 @@ bases: venv
 
 bags: venv
 	bash tools/make_bags.sh $(CMU_DATA)
+
+# the learned 2D->3D prior, trained on the training split (tools/train_prior.py: seed 0, one BLAS thread)
+prior: venv
+	$(PY) tools/train_prior.py --data $(CMU_DATA)
+
+# the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12)
+accuracy: venv
+	$(PY) tools/accuracy.py --data $(CMU_DATA) --out out/accuracy
 
 # ROS 2 build: colcon builds ros2_ws (pose_lifter_msgs + pose_lifter) against the ros-jazzy
 # wheels in the venv. CMAKE_PROJECT_INCLUDE works around the wheels' baked-in /opt/python

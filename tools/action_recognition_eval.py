@@ -14,8 +14,9 @@ scaled orthographic, optional Gaussian pixel noise) and classified three ways:
 
 * ``2d``      k-NN on normalised 2D keypoints, trained on projections of the training windows
               from 8 azimuths (the 2D baseline: no lifter);
-* ``3d-lift`` the 2D is lifted with the core Lifter (per-window sequence, warm-started), then
-              k-NN on view-normalised 3D (the lifter plugged in upstream, as in the ROS graph);
+* ``3d-lift/MODE`` the 2D is lifted with the core Lifter in each ``--modes`` mode (paper,
+              learned, hybrid; per-window sequence, warm-started), then k-NN on view-normalised
+              3D (the lifter plugged in upstream, as in the ROS graph);
 * ``3d-true`` k-NN on the ground-truth 3D (what a perfect lifter would give).
 
 The 3D model (trained on ground-truth windows) is what ``--model-out`` writes, for the node
@@ -111,6 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lifted-train", type=int, default=0,
                     help="also train a 3D model on this many lifted training windows per class")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--modes", nargs="+", default=["paper", "learned", "hybrid"],
+                    choices=["paper", "learned", "hybrid"], help="lifter modes compared")
     ap.add_argument("--json", default=None, help="write the results as JSON here")
     args = ap.parse_args(argv)
 
@@ -152,8 +155,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"train: {len(labels)} windows {dict(Counter(labels.tolist()))}; wrote {args.model_out}")
         return 0
 
-    lifter = Lifter(options=LifterOptions(n_starts=args.n_starts))
-    pred: dict[str, list[str]] = {"2d": [], "3d-lift": [], "3d-true": []}
+    lifters = {mode: Lifter(options=LifterOptions(mode=mode, n_starts=args.n_starts)) for mode in args.modes}
+    lifter = lifters[args.modes[-1]]
+    pred: dict[str, list[str]] = {"2d": [], **{f"3d-lift/{mode}": [] for mode in args.modes}, "3d-true": []}
     model_lifted = None
     if args.lifted_train > 0:
         # a 3D model trained on lifted training windows: it shares the lifter's bias (its bases
@@ -170,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         model_lifted.fit(np.stack(lw), np.asarray(ly))
         pred["3d-lift/lifted-train"] = []
     truth: list[str] = []
-    lift_err: list[float] = []
+    lift_err: dict[str, list[float]] = {mode: [] for mode in args.modes}
     per_trial: list[dict[str, object]] = []
     t0 = time.perf_counter()
     n_lifts = 0
@@ -179,13 +183,14 @@ def main(argv: list[str] | None = None) -> int:
         for window in w:
             rot = camera(float(rng.uniform(0.0, 360.0)))
             pts = film(window, rot, rng, args.noise_px)
-            lifted = lift_window(lifter, pts)
-            n_lifts += len(pts)
-            got = {"2d": model_2d.predict(pts[None])[0], "3d-lift": model_3d.predict(lifted[None])[0],
-                   "3d-true": model_3d.predict(window[None])[0]}
+            got = {"2d": model_2d.predict(pts[None])[0], "3d-true": model_3d.predict(window[None])[0]}
+            for mode, lf in lifters.items():
+                lifted = lift_window(lf, pts)
+                n_lifts += len(pts)
+                got[f"3d-lift/{mode}"] = model_3d.predict(lifted[None])[0]
+                lift_err[mode].append(float(np.mean(p_mpjpe(lifted, window))))
             if model_lifted is not None:
-                got["3d-lift/lifted-train"] = model_lifted.predict(lifted[None])[0]
-            lift_err.append(float(np.mean(p_mpjpe(lifted, window))))
+                got["3d-lift/lifted-train"] = model_lifted.predict(lift_window(lifter, pts)[None])[0]
             truth.append(cls)
             for k, v in got.items():
                 pred[k].append(str(v))
@@ -206,13 +211,15 @@ def main(argv: list[str] | None = None) -> int:
             k: {c: float(np.mean(np.asarray(v)[y == c] == c)) for c in CLASSES} for k, v in pred.items()},
         "trial_vote_accuracy": {k: float(np.mean([t[k] == t["class"] for t in per_trial])) for k in pred},
         "per_trial": per_trial,
-        "lift_seconds": lift_s, "lifts": n_lifts, "lifted_p_mpjpe_mm": 1e3 * float(np.mean(lift_err)),
+        "lift_seconds": lift_s, "lifts": n_lifts,
+        "lifted_p_mpjpe_mm": {mode: 1e3 * float(np.mean(v)) for mode, v in lift_err.items()},
         "lifted_train_windows_per_class": args.lifted_train,
     }
+    lift_err_mm = {mode: 1e3 * float(np.mean(v)) for mode, v in lift_err.items()}
     print(f"train: {len(labels)} windows {dict(Counter(labels.tolist()))}")
     print(f"test: {len(y)} windows from {len(per_trial)} unseen trials, random azimuth, "
           f"noise {args.noise_px} px; {n_lifts} lifts in {lift_s:.1f} s, "
-          f"lifted P-MPJPE {result['lifted_p_mpjpe_mm']:.0f} mm")
+          "lifted P-MPJPE " + ", ".join(f"{k} {v:.0f} mm" for k, v in lift_err_mm.items()))
     print(f"{'input':22s}{'window acc':>12s}{'trial vote acc':>16s}   per class")
     acc = result["window_accuracy"]
     votes_acc = result["trial_vote_accuracy"]

@@ -1,6 +1,6 @@
 """Errors of the committed bags at the tests' replay settings (bags/README.md, "Error bands").
 
-Usage: .venv/bin/python tools/bag_bands.py [--every 10] [--max-messages 4] [--starts 3]
+Usage: .venv/bin/python tools/bag_bands.py [--every 10] [--max-messages 4] [--starts 3] [--mode hybrid]
 
 Lifts frames 0, every, 2*every, ... of each bag in bags/ with warm starts per track and the
 packaged bases (``LifterOptions`` defaults otherwise) and prints a markdown table: P-MPJPE,
@@ -24,13 +24,14 @@ def main() -> None:
     ap.add_argument("--every", type=int, default=10)
     ap.add_argument("--max-messages", type=int, default=4)
     ap.add_argument("--starts", type=int, default=3)
+    ap.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid")
     args = ap.parse_args()
     bases = PoseBases.load()
     print("| bag | P-MPJPE mm | MPJPE mm | normalised | flat floor P-MPJPE | mean-pose floor P-MPJPE |")
     print("|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for bag in sorted((REPO / "bags").glob("*.mcap")):
-            lifter = Lifter(bases, LifterOptions(n_starts=args.starts))
+            lifter = Lifter(bases, LifterOptions(mode=args.mode, n_starts=args.starts))
             out = Path(tmp) / bag.name
             lift_bag(bag, out, lifter, every=args.every, max_messages=args.max_messages, progress=False)
             t = evaluate_bag(out, bases).table()

@@ -257,7 +257,8 @@ def reference_comparison(bases: PoseBases, tracks: list[Track], n_frames: int, n
     """
     print(f"\nfast vs cvxpy+Clarabel reference ({n_frames} frames, one start, "
           f"{n_alt} alternations; the reference runs the paper's inner ADM alpha-step):")
-    base = LifterOptions(n_starts=1, max_alternations=n_alt, alpha_solver="admm", warm_flip=False)
+    base = LifterOptions(mode="paper", n_starts=1, max_alternations=n_alt, alpha_solver="admm",
+                         warm_flip=False)
     ref_label = "reference (Clarabel Q-step, reference camera)"
     variants = {
         "fast, paper's inner ADM alpha-step": base,

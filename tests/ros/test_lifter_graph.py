@@ -390,8 +390,9 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     assert table["lifter"]["mpjpe_mm"] < TWO_PEOPLE_BAND[1]
     assert table["lifter"]["p_mpjpe_mm"] < table["mean_pose_floor"]["p_mpjpe_mm"]
 
-    # warm-started frames need fewer alternations (summed over the solve's starts: the work) than
-    # the same frames solved cold
-    it_warm = np.array([s.iterations for a in warm[1:] for s in a.skeletons.skeletons], dtype=float)
-    it_cold = np.array([s.iterations for a in cold[1:] for s in a.skeletons.skeletons], dtype=float)
-    assert it_warm.mean() < it_cold.mean(), (it_warm, it_cold)
+    # hybrid (default): every frame starts from the prior's pose, warm or cold, so warm starts
+    # save only the camera's initialisation; the tracked answers stay those of single frames
+    # within the bag's band (tracking no worse than single frames)
+    node_cold = np.array([m.skeleton3d_to_joints(s) for a in cold for s in a.skeletons.skeletons])
+    centred = [j - j.mean(axis=1, keepdims=True) for j in (node_joints, node_cold)]
+    assert np.mean(np.linalg.norm(centred[0] - centred[1], axis=-1)) < 0.05  # metres

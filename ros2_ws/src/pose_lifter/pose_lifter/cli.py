@@ -159,7 +159,7 @@ def _lifter(args: argparse.Namespace) -> Any:
 
     bases = PoseBases.load(args.bases)
     opts = LifterOptions(variant=args.variant, camera_solver=args.solver, pose_solver=args.solver,
-                         n_starts=args.starts)
+                         n_starts=args.starts, mode="paper" if args.solver == "cvxpy" else args.mode)
     lifter = Lifter(bases, opts)
     if args.solver == "admm":
         # compile (first run after an install, ~25 s) or load the solver kernels now, so that the
@@ -207,6 +207,9 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
                    help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference")
     p.add_argument("--starts", type=int, default=30, help="cold-start multi-start count (1 = mean pose)")
     p.add_argument("--no-warm-start", action="store_true", help="solve every frame cold")
+    p.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid",
+                   help="hybrid: the learned prior inside the paper's robust fit (default); paper: the "
+                        "paper's method alone (--solver cvxpy implies it); learned: the prior alone")
     p.add_argument("--leg-length", type=float, default=0.43,
                    help="right lower leg in metres, to make the lifted pose metric")
 

@@ -147,7 +147,12 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("prior_weight_z", "Hybrid: weight of the prior's depths in the L1 objective.", 0.0, 1000.0),
     _opt("outlier_threshold", "Hybrid: reprojection residual (leg lengths) above which a visible joint "
          "is dropped as a confident outlier and the prior re-run without it (0 = off).", 0.0, 1000.0),
-    _opt("prior_screen", "Hybrid: warm solves also try the prior's pose (one screening alternation)."),
+    _opt("hybrid_alternations", "Hybrid: alternations of each run at most.", 1, 1000),
+    _opt("outlier_passes", "Hybrid: outlier passes at most.", 1, 100),
+    _opt("temporal_weight", "Hybrid, tracked: weight of the previous frame's pose in the prior "
+         "target (scaled by the track's 2D noise).", 0.0, 1000.0),
+    _opt("prior_limbs", "Hybrid, tracked: limb constraints with the track's estimated proportions."),
+    _opt("warm_competes", "Hybrid: warm solves also start from the previous frame's pose (screened)."),
     ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame."),
     ParamSpec("track_timeout", 1.0, "Seconds (input stamps) after which an unseen track is forgotten.",
               0.0, 3600.0),

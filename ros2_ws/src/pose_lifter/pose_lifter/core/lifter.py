@@ -347,6 +347,8 @@ class Lifter:
         confidence: NDArray[np.float64] | None = None,
         warm: WarmStart | None = None,
         limb_proportions: NDArray[np.float64] | None = None,
+        data_weight: float = 1.0,
+        temporal_weight: float | None = None,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -365,6 +367,11 @@ class Lifter:
         limb_proportions : ndarray, shape (8,), optional
             Hybrid: the person's limb proportions (e.g. a track's estimate over its frames), used
             for the limb constraints with ``options.prior_limbs``.
+        data_weight : float
+            Hybrid: factor on the 2D term's weights, in (0, 1] (a track's estimate of its
+            detector's noise: :class:`pose_lifter.core.tracking.TrackPolicy`).
+        temporal_weight : float, optional
+            Hybrid with a warm start: replaces ``options.temporal_weight`` for this frame.
 
         Returns
         -------
@@ -387,8 +394,12 @@ class Lifter:
             cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
                           (warm.camera.translation - norm.centre) / norm.spread)
         if mode == "hybrid":
-            runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w, norm, warm, cam0,
-                                                                      limb_proportions)
+            if not 0.0 < data_weight <= 1.0:
+                raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
+            tw = self._options.temporal_weight if temporal_weight is None else float(temporal_weight)
+            runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w * data_weight, norm, warm,
+                                                                      cam0, limb_proportions, tw)
+            w = w / data_weight
         else:
             runs, total, n_starts = self._paper_runs(xn, w, warm, cam0)
             prior_pose = None
@@ -418,23 +429,26 @@ class Lifter:
         return runs, n_screened - len(runs) + sum(r.n_iter for _, r in runs), len(starts)
 
     def _mirrored_run(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: _Run,
-                      prior: PriorRows | None) -> _Run:
+                      prior: PriorRows | None, max_alternations: int | None = None) -> _Run:
         """The depth-mirrored copy of ``run`` as a start: screened by one alternation and continued
         when it already beats ``run`` (``warm_flip_screen``), or run to convergence."""
         mirrored = self._mirrored_alpha(run)
         if self._options.warm_flip_screen:
-            flip = self._run(xn, w, mirrored, None, max_alternations=1, prior=prior)
+            # hybrid: a short screening pose step, as for the paper's cold starts
+            short = None if prior is None else self._options.screen_pose_max_iter
+            flip = self._run(xn, w, mirrored, None, max_alternations=1, prior=prior, pose_max_iter=short)
             if flip.objective < run.objective:
-                flip = self._run(xn, w, flip.pose.alpha, None, start=flip, prior=prior)
+                flip = self._run(xn, w, flip.pose.alpha, None, max_alternations, start=flip, prior=prior)
             return flip
-        return self._run(xn, w, mirrored, None, prior=prior)
+        return self._run(xn, w, mirrored, None, max_alternations, prior=prior)
 
     def _prior_rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
                     limb_proportions: NDArray[np.float64] | None = None,
-                    previous: NDArray[np.float64] | None = None) -> tuple[PriorRows, NDArray[np.float64]]:
+                    previous: NDArray[np.float64] | None = None, temporal_weight: float = 0.0
+                    ) -> tuple[PriorRows, NDArray[np.float64]]:
         """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
         normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
-        same frame) by ``options.temporal_weight``; limb radii from ``limb_proportions`` (a
+        same frame) by ``temporal_weight``; limb radii from ``limb_proportions`` (a
         track's estimate, ``options.prior_limbs``). Returns the rows and the prior's pose in
         input units."""
         pose = self.prior.predict(x, w > 0)
@@ -443,9 +457,8 @@ class Lifter:
         target[:, 2] = pose[:, 2] / norm.spread
         if not np.all(np.isfinite(target)):
             raise InvalidInputError("the learned prior gave non-finite values for this input")
-        tw = self._options.temporal_weight
-        if previous is not None and tw > 0:
-            target = (target + tw * previous) / (1.0 + tw)
+        if previous is not None and temporal_weight > 0:
+            target = (target + temporal_weight * previous) / (1.0 + temporal_weight)
         rel = self._prior_relative_weights()
         o = self._options
         weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
@@ -482,7 +495,7 @@ class Lifter:
 
     def _hybrid_runs(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                      norm: _Normalisation, warm: WarmStart | None, cam0: Camera | None,
-                     limb_proportions: NDArray[np.float64] | None
+                     limb_proportions: NDArray[np.float64] | None, temporal_weight: float
                      ) -> tuple[list[tuple[int, _Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
         """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
         Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the
@@ -493,21 +506,21 @@ class Lifter:
             prev = self.model.pose(warm.alpha)
             previous = np.column_stack([cam0.project(prev),
                                         cam0.scale * (prev - prev.mean(axis=0)) @ cam0.rotation[2]])
-        prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous)
+        prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight)
         a_prior = self._start_alpha(prior.target)
-        runs: list[tuple[int, _Run]] = []
-        if warm is not None:
-            runs.append((-1, self._run(xn, w, warm.alpha, cam0, prior=prior)))
-            if o.prior_screen:
-                pr = self._run(xn, w, a_prior, None, max_alternations=1, prior=prior)
-                if pr.objective < runs[0][1].objective:
-                    pr = self._run(xn, w, pr.pose.alpha, None, start=pr, prior=prior)
-                runs.append((-3, pr))
-        else:
-            runs.append((-3, self._run(xn, w, a_prior, None, prior=prior)))
+        # every frame starts from the prior's pose (with the previous frame's camera when tracked):
+        # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
+        n_alt = o.hybrid_alternations
+        runs: list[tuple[int, _Run]] = [(-3, self._run(xn, w, a_prior, cam0, n_alt, prior=prior))]
+        if warm is not None and o.warm_competes:
+            wr = self._run(xn, w, warm.alpha, cam0, max_alternations=1, prior=prior,
+                           pose_max_iter=o.screen_pose_max_iter)
+            if wr.objective < runs[0][1].objective:
+                wr = self._run(xn, w, wr.pose.alpha, None, n_alt, start=wr, prior=prior)
+            runs.append((-1, wr))
         if o.warm_flip:
             best = min(runs, key=lambda r: r[1].objective)[1]
-            runs.append((-2, self._mirrored_run(xn, w, best, prior)))
+            runs.append((-2, self._mirrored_run(xn, w, best, prior, n_alt)))
         total = sum(r.n_iter for _, r in runs)
         n_starts = len(runs)
         for _ in range(o.outlier_passes if o.outlier_threshold > 0 else 0):
@@ -524,10 +537,10 @@ class Lifter:
                 break
             w = w.copy()
             w[out] = 0.0
-            prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous)
+            prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight)
             # continue the fit, and start again from the prior's new pose: the lower objective
-            cont = self._run(xn, w, run.pose.alpha, cam, prior=prior)
-            fresh = self._run(xn, w, self._start_alpha(prior.target), None, prior=prior)
+            cont = self._run(xn, w, run.pose.alpha, cam, n_alt, prior=prior)
+            fresh = self._run(xn, w, self._start_alpha(prior.target), None, n_alt, prior=prior)
             runs = [(idx, cont), (-3, fresh)]
             total += cont.n_iter + fresh.n_iter
         return runs, total, n_starts, w, prior_pose
