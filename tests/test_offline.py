@@ -10,6 +10,7 @@ import pytest
 from pose_lifter import bags, offline, scenes
 from pose_lifter import messages as m
 from pose_lifter.core.errors import TooFewJointsError
+from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.types import Camera, LiftResult, WarmStart
 
 
@@ -22,7 +23,10 @@ class EchoLifter:
         self.pose = np.random.default_rng(0).normal(size=(12, 3))
         self.pose -= self.pose.mean(axis=0)
 
-    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None) -> LiftResult:
+    options = LifterOptions(mode="paper")
+
+    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
+             **per_frame: Any) -> LiftResult:
         self.warm.append(warm)
         vis = confidence > 0
         if vis.sum() < 6:

@@ -467,6 +467,12 @@ class Lifter:
             radii = self.limb_radii(limb_proportions)
         return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
 
+    def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
+        """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
+        weighted RMS spread over the mean pose's (see the module docstring)."""
+        x = np.where((weights > 0)[:, None], np.asarray(points, dtype=np.float64), 0.0)
+        return self._normalise(x, np.asarray(weights, dtype=np.float64)).spread
+
     @staticmethod
     def limb_proportions_of(pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """A person's limb proportions from a 3D pose (12, 3): the 8 limb lengths with each

@@ -85,7 +85,7 @@ class _Track:
             return
         acc = np.linalg.norm(x[vis] - 2.0 * x1[vis] + x0[vis], axis=1) / np.sqrt(6.0)
         try:
-            spread = lifter._normalise(np.where(vis[:, None], x, 0.0), vis.astype(np.float64)).spread
+            spread = lifter.input_scale(x, vis.astype(np.float64))
         except PoseLifterError:
             return
         self.noise.append(float(np.median(acc)) / spread)
@@ -193,9 +193,10 @@ class TrackPolicy:
             elif age <= self.track_timeout_ns and self.warm_start:
                 warm = track.warm
         limbs = track.limb_proportions() if track is not None else None
-        if track is not None and warm is not None:  # a frame that follows the last one
+        hybrid = self.lifter.options.mode == "hybrid"
+        if hybrid and track is not None and warm is not None:  # a frame that follows the last one
             track.observe_noise(self.lifter, points, confidence, stamp_ns)
-        dw = track.data_weight() if track is not None and self.lifter.options.mode == "hybrid" else 1.0
+        dw = track.data_weight() if hybrid and track is not None else 1.0
         # smoothing only pays with noisy 2D (on clean input it is lag): scaled with the noise
         tw = self.lifter.options.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT)
         try:
