@@ -29,6 +29,7 @@ setup(
     entry_points={
         "console_scripts": [
             "lifter = pose_lifter.node:main",
+            "adapter = pose_lifter.adapter_node:main",
             "pose-lifter = pose_lifter.cli:main",
             "action_recognition = pose_lifter.examples.action_recognition:main",
         ],

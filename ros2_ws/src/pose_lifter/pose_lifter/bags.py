@@ -34,6 +34,7 @@ __all__ = [
     "msg_dir",
     "pose_lifter_typestore",
     "read_messages",
+    "register_msg_package",
 ]
 
 MSG_PACKAGE: Final[str] = "pose_lifter_msgs"
@@ -69,6 +70,29 @@ def pose_lifter_typestore() -> Any:
         types.update(get_types_from_msg((d / f"{name}.msg").read_text(), f"{MSG_PACKAGE}/msg/{name}"))
     store.register(types)
     return store
+
+
+def register_msg_package(store: Any, package: str, directory: str | Path) -> list[str]:
+    """Register every ``<directory>/*.msg`` as ``<package>/msg/<Name>`` in a rosbags typestore.
+
+    This is how another project's messages (``yolo_msgs``, ``hri_msgs``) are written to bags
+    without building them: from the text of their ``.msg`` files, as ours are.
+
+    Returns
+    -------
+    list of str
+        The registered type names.
+    """
+    from rosbags.typesys import get_types_from_msg
+
+    files = sorted(Path(directory).glob("*.msg"))
+    if not files:
+        raise BagError(f"no .msg files in {directory}")
+    types: dict[str, Any] = {}
+    for f in files:
+        types.update(get_types_from_msg(f.read_text(), f"{package}/msg/{f.stem}"))
+    store.register(types)
+    return [f"{package}/msg/{f.stem}" for f in files]
 
 
 _NUMPY_DTYPES: Final[dict[str, str]] = {
