@@ -29,11 +29,13 @@ __all__ = [
     "BagError",
     "BagMessage",
     "BagWriter",
+    "RawMessage",
     "bag_topics",
     "message_factory",
     "msg_dir",
     "pose_lifter_typestore",
     "read_messages",
+    "read_raw",
     "register_msg_package",
 ]
 
@@ -208,6 +210,13 @@ class BagWriter:
             raise BagError(f"message type {msgtype!r} is not in the typestore")
         self._connections[topic] = self._writer.add_connection(topic, msgtype, typestore=self.store)
 
+    def write_raw(self, raw: RawMessage) -> None:
+        """Copy one serialised message as it is (its type need not be in our typestore)."""
+        if raw.topic not in self._connections:
+            self._connections[raw.topic] = self._writer.add_connection(
+                raw.topic, raw.msgtype, msgdef=raw.msgdef, rihs01=raw.rihs01)
+        self._writer.write(self._connections[raw.topic], int(raw.stamp_ns), raw.data)
+
     def write(self, topic: str, stamp_ns: int, msg: Any, msgtype: str | None = None) -> None:
         """Serialise and write one message (the topic is added on first use)."""
         if topic not in self._connections:
@@ -238,6 +247,39 @@ class BagMessage:
     msgtype: str
     stamp_ns: int
     msg: Any
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One serialised (CDR) message of a bag, with what is needed to copy it to another bag."""
+
+    topic: str
+    msgtype: str
+    stamp_ns: int
+    data: bytes
+    msgdef: str
+    rihs01: str
+
+
+def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
+    """Serialised messages of a bag in time order, one at a time (nothing is deserialised).
+
+    Memory stays bounded whatever the bag size. The message definitions come from the bag
+    itself, so topics of any type (e.g. ``sensor_msgs/msg/Image``, ``yolo_msgs/...``) are read.
+    """
+    from rosbags.highlevel import AnyReader
+
+    p = _existing(path)
+    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+        wanted = set(topics) if topics is not None else None
+        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        meta = {}
+        for c in conns:
+            msgdef, _ = reader.typestore.generate_msgdef(c.msgtype, ros_version=2)
+            meta[c.id] = (msgdef, c.digest or reader.typestore.hash_rihs01(c.msgtype))
+        for conn, stamp, raw in reader.messages(connections=conns):
+            msgdef, rihs01 = meta[conn.id]
+            yield RawMessage(conn.topic, conn.msgtype, int(stamp), bytes(raw), msgdef, rihs01)
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:

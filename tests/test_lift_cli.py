@@ -1,0 +1,169 @@
+"""``pose-lifter lift`` on real-world-shaped bags: another topic name, yolo_ros input, kept
+topics, the node's params file, bounded memory on a bag with a large image topic, and one clear
+line (exit 2, no output file) for every bad input. Every MCAP written is checked with the
+independent ``mcap`` reader (tests/mcap_check.py)."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from detector_poses import coco17, model_xy
+from mcap_check import check_mcap
+from pose_lifter import bags, cli
+
+REPO = Path(__file__).resolve().parents[1]
+WALK = REPO / "bags" / "walk_clean.mcap"
+PARAMS = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
+THIRD_PARTY = REPO / "tests" / "ros" / "msgs"
+
+
+def renamed(src: Path, dst: Path, names: dict[str, str], extra: Any = None) -> Path:
+    """A copy of a bag with topics renamed (bytes untouched); ``extra(writer, raw)`` may add more."""
+    with bags.BagWriter(dst, compress=False) as w:
+        for raw in bags.read_raw(src):
+            w.write_raw(dataclasses.replace(raw, topic=names.get(raw.topic, raw.topic)))
+            if extra is not None:
+                extra(w, raw)
+    return dst
+
+
+def lift(*args: str) -> int:
+    return cli.main(["lift", *args, "--quiet", "--workers", "1"])
+
+
+def test_lift_topic_camera_info_topic_and_keep(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = renamed(WALK, tmp_path / "in.mcap", {"/keypoints_2d": "/detector/pose",
+                                                "/camera_info": "/cam/camera_info"})
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), "--topic", "/detector/pose", "--camera-info-topic",
+                "/cam/camera_info", "--keep", "/cam/camera_info", "--max-messages", "10") == 0
+    counts = check_mcap(out)
+    assert set(counts) == {"/cam/camera_info", "/skeletons_3d", "/skeleton_markers"}
+    assert counts["/skeletons_3d"] == 10
+    skels = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
+    z = np.array([[p.z for p in s.joints] for a in skels for s in a.skeletons])
+    assert np.all(np.abs(z.mean(axis=1) - 5.0) < 1.0)  # placed with the camera's focal length
+    assert "lifted 10 of 10 skeletons" in capsys.readouterr().out
+    # without --keep everything is copied (and the default topic does not exist here)
+    assert lift(str(bag), "--out", str(tmp_path / "all.mcap"), "--topic", "/detector/pose",
+                "--max-messages", "3") == 0
+    assert {"/detector/pose", "/cam/camera_info", "/ground_truth/skeletons_3d"} <= set(
+        check_mcap(tmp_path / "all.mcap"))
+
+
+def test_lift_yolo_detection_array_bag(tmp_path: Path) -> None:
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    bags.register_msg_package(store, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
+    f = {n: bags.message_factory(f"yolo_msgs/msg/{n}", store)
+         for n in ("DetectionArray", "Detection", "KeyPoint2D", "KeyPoint2DArray", "Point2D")}
+    header = bags.message_factory("std_msgs/msg/Header", store)
+    time = bags.message_factory("builtin_interfaces/msg/Time", store)
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with Writer(tmp_path / "yolo", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/yolo/detections", "yolo_msgs/msg/DetectionArray", typestore=store)
+        for i in range(5):
+            kp, conf = coco17(model_xy(30.0 + 3 * i))
+            data = [f["KeyPoint2D"](id=k + 1, point=f["Point2D"](x=float(x), y=float(y)), score=float(c))
+                    for k, ((x, y), c) in enumerate(zip(kp, conf, strict=True))]
+            msg = f["DetectionArray"](header=header(stamp=time(sec=1, nanosec=i * 10**8), frame_id="cam"),
+                                      detections=[f["Detection"](class_name="person", id="7",
+                                                                 keypoints=f["KeyPoint2DArray"](data=data))])
+            w.write(conn, 10**9 + i * 10**8, store.serialize_cdr(msg, "yolo_msgs/msg/DetectionArray"))
+    bag = next((tmp_path / "yolo").glob("*.mcap"))
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), "--topic", "/yolo/detections") == 0
+    counts = check_mcap(out)
+    assert counts["/yolo/detections"] == 5 and counts["/skeletons_3d"] == 5
+    answers = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
+    assert [s.track_id for a in answers for s in a.skeletons] == [7] * 5
+    assert sum(s.warm_started for a in answers for s in a.skeletons) == 4
+
+
+def test_params_file_sets_the_node_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = PARAMS.read_text().replace("warm_start: true", "warm_start: false")
+    (tmp_path / "p.yaml").write_text(text.replace("pose_lifter:\n", "/**:\n", 1))
+    out = tmp_path / "o.mcap"
+    assert lift(str(WALK), "--out", str(out), "--params-file", str(tmp_path / "p.yaml"),
+                "--max-messages", "4") == 0
+    assert "(0 warm-started" in capsys.readouterr().out
+    check_mcap(out)
+    (tmp_path / "bad.yaml").write_text(text.replace("theta: 0.1", "theta: -1.0"))
+    bad = str(tmp_path / "bad.yaml")
+    assert lift(str(WALK), "--out", str(tmp_path / "b.mcap"), "--params-file", bad) == 2
+    err = capsys.readouterr().err
+    assert "theta" in err and "Traceback" not in err and not (tmp_path / "b.mcap").exists()
+
+
+def bad_inputs(tmp: Path) -> list[tuple[list[str], str]]:
+    (tmp / "truncated.mcap").write_bytes(WALK.read_bytes()[:5000])
+    (tmp / "empty.mcap").write_bytes(b"")
+    (tmp / "exists.mcap").write_bytes(b"x")
+    (tmp / "adir.mcap").mkdir()
+    (tmp / "noparams.yaml").write_text("other_node:\n  ros__parameters:\n    theta: 1.0\n")
+    w, o = str(WALK), str(tmp / "o.mcap")
+    return [
+        ([str(tmp / "missing.mcap"), "--out", o], "bag not found"),
+        ([str(tmp / "truncated.mcap"), "--out", o], "cannot read"),
+        ([str(tmp / "empty.mcap"), "--out", o], "cannot read"),
+        ([w, "--out", str(tmp / "o.bag")], "must end in .mcap"),
+        ([w, "--out", str(tmp / "exists.mcap")], "exists already"),
+        ([w, "--out", str(tmp / "adir.mcap")], "is a directory"),
+        ([w, "--out", str(tmp / "nodir" / "o.mcap")], "does not exist"),
+        ([w, "--out", o, "--topic", "/nope"], "has no topic '/nope'"),
+        ([w, "--out", o, "--topic", "/ground_truth/skeletons_3d"], "lift takes"),
+        ([w, "--out", o, "--camera-info-topic", "/keypoints_2d"], "not sensor_msgs/msg/CameraInfo"),
+        ([w, "--out", o, "--keep", "/camera_info", "/images"], "to keep"),
+        ([w, "--out", o, "--params-file", str(tmp / "none.yaml")], "cannot read params file"),
+        ([w, "--out", o, "--params-file", str(tmp / "noparams.yaml")], "no /** / pose_lifter"),
+    ]
+
+
+def test_bad_inputs_one_line_exit_2_no_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for args, expected in bad_inputs(tmp_path):
+        assert lift(*args) == 2, args
+        err = capsys.readouterr().err
+        assert expected in err, (args, err)
+        assert err.count("\n") == 1 and err.startswith("pose-lifter lift: error: "), err
+        assert not (tmp_path / "o.mcap").exists() and not (tmp_path / "nodir").exists()
+    assert (tmp_path / "exists.mcap").read_bytes() == b"x"
+
+
+@pytest.mark.slow
+def test_streaming_memory_does_not_grow_with_a_large_image_topic(tmp_path: Path) -> None:
+    image = bags.message_factory("sensor_msgs/msg/Image")
+    pixels = np.frombuffer(np.random.default_rng(0).bytes(640 * 480 * 3), dtype=np.uint8)
+
+    def add_image(w: bags.BagWriter, raw: bags.RawMessage) -> None:
+        if raw.topic == "/keypoints_2d":
+            w.write("/camera/image_raw", raw.stamp_ns, image(height=480, width=640, encoding="rgb8",
+                                                             step=1920, data=pixels), "sensor_msgs/msg/Image")
+
+    big = renamed(WALK, tmp_path / "big.mcap", {}, add_image)
+    assert big.stat().st_size > 100e6  # 120 images of 0.9 MB
+
+    def peak_rss_mb(bag: Path, out: Path, *extra: str) -> float:
+        code = ("import resource, sys; from pose_lifter import cli; "
+                f"rc = cli.main(['lift', {str(bag)!r}, '--out', {str(out)!r}, '--quiet', '--workers', '1', "
+                f"*{list(extra)!r}]); "
+                "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024); sys.exit(rc)")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        return float(done.stdout.strip().splitlines()[-1])
+
+    small = peak_rss_mb(WALK, tmp_path / "small_out.mcap")
+    kept = peak_rss_mb(big, tmp_path / "big_out.mcap")
+    dropped = peak_rss_mb(big, tmp_path / "big_none.mcap", "--keep", "none")
+    print(f"peak RSS: small bag {small:.0f} MB, 110 MB image bag kept {kept:.0f} MB, "
+          f"dropped {dropped:.0f} MB")
+    assert kept - small < 30.0 and dropped - small < 15.0
+    assert check_mcap(tmp_path / "big_out.mcap")["/camera/image_raw"] == 120
+    assert "/camera/image_raw" not in check_mcap(tmp_path / "big_none.mcap")
