@@ -167,3 +167,57 @@ def test_streaming_memory_does_not_grow_with_a_large_image_topic(tmp_path: Path)
     assert kept - small < 30.0 and dropped - small < 15.0
     assert check_mcap(tmp_path / "big_out.mcap")["/camera/image_raw"] == 120
     assert "/camera/image_raw" not in check_mcap(tmp_path / "big_none.mcap")
+
+
+def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import csv
+    import json
+
+    from pose_lifter import messages as m
+
+    lifted = tmp_path / "l.mcap"
+    assert lift(str(REPO / "bags" / "two_people.mcap"), "--out", str(lifted), "--max-messages", "3",
+                "--keep", "none") == 0
+    truth = [(m.stamp_to_ns(a.header.stamp), s.track_id, m.skeleton3d_to_joints(s))
+             for a in (x.msg for x in bags.read_messages(lifted, ["/skeletons_3d"])) for s in a.skeletons]
+    assert len(truth) == 6
+    for fmt in ("csv", "npz", "json"):
+        assert cli.main(["export", str(lifted), "--out", str(tmp_path / f"e.{fmt}")]) == 0
+    data = np.load(tmp_path / "e.npz", allow_pickle=False)
+    assert data["joints"].shape == (6, 12, 3) and str(data["joint_names"][0]) == "left_shoulder"
+    with open(tmp_path / "e.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    frames = json.loads((tmp_path / "e.json").read_text())["frames"]
+    from_json = [(fr["stamp_ns"], s["track_id"], np.array(s["joints"]))
+                 for fr in frames for s in fr["skeletons"]]
+    assert len(rows) == 6 * 12
+    for i, (stamp, tid, joints) in enumerate(truth):
+        assert data["stamp_ns"][i] == stamp and data["track_id"][i] == tid
+        np.testing.assert_array_equal(data["joints"][i], joints)
+        assert from_json[i][:2] == (stamp, tid)
+        np.testing.assert_array_equal(from_json[i][2], joints)
+        xyz = [[float(r["x"]), float(r["y"]), float(r["z"])] for r in rows[12 * i:12 * i + 12]]
+        np.testing.assert_array_equal(np.array(xyz), joints)
+        assert int(rows[12 * i]["stamp_ns"]) == stamp and int(rows[12 * i]["track_id"]) == tid
+    capsys.readouterr()
+    for args, expected in [
+        ([str(lifted), "--out", str(tmp_path / "e.txt")], "must end in one of"),
+        ([str(lifted), "--out", str(tmp_path / "e.csv")], "exists already"),
+        ([str(WALK), "--out", str(tmp_path / "w.csv")], "has no topic '/skeletons_3d'"),
+        ([str(WALK), "--out", str(tmp_path / "w.csv"), "--topic", "/keypoints_2d"], "not pose_lifter_msgs"),
+        ([str(tmp_path / "nope.mcap"), "--out", str(tmp_path / "w.csv")], "bag not found"),
+    ]:
+        assert cli.main(["export", *args]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err
+        assert not (tmp_path / "w.csv").exists()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []  # no temp files
+
+
+def test_play_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for args, expected in [([str(WALK), "--topics", "/nope"], "has no topic(s) ['/nope']"),
+                           ([str(WALK), "--rate", "0"], "rate must be > 0"),
+                           ([str(tmp_path / "x.mcap")], "bag not found")]:
+        assert cli.main(["play", *args]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err

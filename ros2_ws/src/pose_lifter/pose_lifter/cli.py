@@ -1,4 +1,4 @@
-"""``pose-lifter``: offline commands (learn bases, make bags, lift bags, evaluate, demo).
+"""``pose-lifter``: offline commands (learn bases, make bags, lift, export, play, evaluate, demo).
 
 Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
 """
@@ -238,6 +238,24 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from .export import export_skeletons
+
+    n_msgs, n_skels = export_skeletons(args.bag, args.out, args.topic, args.overwrite)
+    print(f"{args.out}: {n_skels} skeletons of {n_msgs} messages of {args.topic}")
+    return 0
+
+
+def _cmd_play(args: argparse.Namespace) -> int:
+    from .play import play_bag
+
+    try:
+        play_bag(args.bag, args.topics, args.rate, args.wait)
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from .core.bases import PoseBases
     from .offline import evaluate_bag, format_evaluation
@@ -339,6 +357,21 @@ def build_parser() -> argparse.ArgumentParser:
                    "flags given with non-default values win")
     p.set_defaults(func=_cmd_lift,
                    lift_defaults={"variant": "full", "starts": 30, "leg_length": 0.43})
+
+    p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
+    p.add_argument("bag", help="a lifted .mcap")
+    p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
+    p.add_argument("--topic", default="/skeletons_3d", help="Skeleton3DArray topic (default /skeletons_3d)")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("play", help="publish a bag's topics into the live ROS graph at the bag's rate")
+    p.add_argument("bag", help="input .mcap")
+    p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
+    p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1: real time)")
+    p.add_argument("--wait", type=float, default=0.0,
+                   help="seconds to wait for a subscriber on every topic first (default 0)")
+    p.set_defaults(func=_cmd_play)
 
     p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
     p.add_argument("bag", help="a lifted .mcap")
