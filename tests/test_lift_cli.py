@@ -90,7 +90,7 @@ def test_lift_yolo_detection_array_bag(tmp_path: Path) -> None:
 
 def test_params_file_sets_the_node_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     text = PARAMS.read_text().replace("warm_start: true", "warm_start: false")
-    (tmp_path / "p.yaml").write_text(text.replace("pose_lifter:\n", "/**:\n", 1))
+    (tmp_path / "p.yaml").write_text(text.replace("/**:\n", "pose_lifter:\n", 1))  # the node-name key
     out = tmp_path / "o.mcap"
     assert lift(str(WALK), "--out", str(out), "--params-file", str(tmp_path / "p.yaml"),
                 "--max-messages", "4") == 0

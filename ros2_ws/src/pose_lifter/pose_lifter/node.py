@@ -47,7 +47,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
-from . import messages
+from . import diagnostics, messages
 from .core import Lifter, LifterOptions, PoseBases, PoseLifterError, WarmStart
 from .core._jit import HAVE_NUMBA
 from .core.errors import InvalidInputError, OptionsError
@@ -151,6 +151,12 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "are absurd: the skeleton is skipped.", 1.0, 1.0e9),
     ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
               read_only=True),
+    ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "
+              "empty one (RViz cannot show an empty frame)."),
+    ParamSpec("marker_lifetime", 1.0, "Seconds a skeleton marker stays on screen without an update "
+              "(0 = until deleted: markers outlive the node).", 0.0, 3600.0),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics updates (0 = none).", 0.0, 3600.0,
+              read_only=True),
 )
 _SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
 
@@ -160,7 +166,7 @@ _YAML_HEAD: Final[str] = """\
 #   python -m pose_lifter.node --params-yaml > config/lifter.yaml
 # and checked by tests/ros/test_lifter_graph.py (the node starts with it and reports these values).
 # Doubles are written with a decimal point (ROS parameters are typed).
-pose_lifter:
+/**:
   ros__parameters:
 """
 
@@ -214,6 +220,8 @@ class NodeSettings:
     publish_markers: bool
     max_skeletons: int
     max_coordinate: float
+    frame_id: str
+    marker_lifetime: float
 
 
 @dataclass
@@ -287,6 +295,8 @@ class LifterNode(Node):
             self._types.Skeleton3DArray, "skeletons_3d", reliable, qos_overriding_options=qos_override)
         self._pub_markers = self.create_publisher(
             self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
+        self._markers_cleared = False  # the first MarkerArray starts with DELETEALL
+        self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")))
         # camera_info first: when an image's camera_info and keypoints are both waiting, the
         # executor serves subscriptions in creation order, so the keypoints see that camera_info
         self._sub_camera_info = self.create_subscription(
@@ -320,6 +330,8 @@ class LifterNode(Node):
             publish_markers=bool(self._param("publish_markers")),
             max_skeletons=int(self._param("max_skeletons")),
             max_coordinate=float(self._param("max_coordinate")),
+            frame_id=str(self._param("frame_id")),
+            marker_lifetime=float(self._param("marker_lifetime")),
         )
 
     @staticmethod
@@ -378,6 +390,8 @@ class LifterNode(Node):
     def on_keypoints(self, msg: Any) -> None:
         """Lift one frame and publish its answer (always, even when every skeleton is skipped)."""
         received = time.perf_counter()
+        if not msg.header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
+            msg.header.frame_id = self._settings.frame_id
         stamp_ns = messages.stamp_to_ns(msg.header.stamp)
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
@@ -420,6 +434,7 @@ class LifterNode(Node):
         self._stats.warm += sum(1 for s in lifted if s.warm_started)
         self._stats.solve_times.extend(float(s.solve_time) for s in lifted)
         self._stats.latencies.append(time.perf_counter() - received)
+        self._diagnostics.frame(lifted, time.perf_counter() - received)
 
     def _lift_one(
         self, skel: Any, layout: Layout, stamp_ns: int, seen: set[int]
@@ -481,8 +496,11 @@ class LifterNode(Node):
         tracked = {t for t, _ in shown if t >= 0}
         untracked = sum(1 for t, _ in shown if t < 0)
         gone = sorted(self._shown_tracks - tracked)
-        markers = messages.skeleton_markers(header, shown, MARKER_NS, 0.0, self._types,
-                                            deleted_track_ids=gone)
+        markers = messages.skeleton_markers(header, shown, MARKER_NS, self._settings.marker_lifetime,
+                                            self._types, deleted_track_ids=gone)
+        if not self._markers_cleared:  # what an earlier run left on screen goes first
+            markers.markers[:0] = messages.delete_all_markers(header, MARKER_NS, self._types)
+            self._markers_cleared = True
         # untracked skeletons have ids -1, -2, ... by position: delete the positions now unused
         for position in range(untracked, self._shown_untracked):
             for kind in ("joints", "bones"):
@@ -498,6 +516,7 @@ class LifterNode(Node):
     def _warn_skip(self, kind: str, text: str) -> None:
         """Count a skipped input and warn (one call site, so one rate-limited warning stream)."""
         self._stats.skipped[kind] += 1
+        self._diagnostics.skipped(kind)
         self.get_logger().warning(f"{text} (this warning is rate-limited; counts in the stats line)",
                                   throttle_duration_sec=5.0)
 
