@@ -221,3 +221,43 @@ def test_play_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
         assert cli.main(["play", *args]) == 2
         err = capsys.readouterr().err
         assert expected in err and err.count("\n") == 1, err
+
+
+def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
+    """A bag written before Skeleton3D had ``observed`` / ``joint_weights``: its kept ground truth
+    is rebuilt in today's definition (one layout per type in the output, readable by both readers)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    old = get_typestore(Stores.ROS2_JAZZY)
+    texts = {n: (bags.msg_dir() / f"{n}.msg").read_text() for n in bags.MSG_NAMES}
+    texts["Skeleton3D"] = texts["Skeleton3D"].split("\n# Per joint (order of joint_names)")[0] + "\n"
+    assert "observed" not in texts["Skeleton3D"]
+    types: dict[str, Any] = {}
+    for n, text in texts.items():
+        types.update(get_types_from_msg(text, f"pose_lifter_msgs/msg/{n}"))
+    old.register(types)
+    gt = [x for x in bags.read_raw(WALK) if x.topic == "/ground_truth/skeletons_3d"][:3]
+    msgs = [bags.pose_lifter_typestore().deserialize_cdr(x.data, x.msgtype) for x in gt]
+    with Writer(tmp_path / "old", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {}
+        for x in bags.read_raw(WALK):
+            if x.topic == "/ground_truth/skeletons_3d":
+                continue
+            if x.topic not in conns:
+                conns[x.topic] = w.add_connection(x.topic, x.msgtype, msgdef=x.msgdef, rihs01=x.rihs01)
+            w.write(conns[x.topic], x.stamp_ns, x.data)
+        c = w.add_connection("/ground_truth/skeletons_3d", "pose_lifter_msgs/msg/Skeleton3DArray",
+                             typestore=old)
+        for x, msg in zip(gt, msgs, strict=True):
+            w.write(c, x.stamp_ns, old.serialize_cdr(bags.upgrade_message(msg, x.msgtype, old), x.msgtype))
+    bag = next((tmp_path / "old").glob("*.mcap"))
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), "--max-messages", "3") == 0
+    counts = check_mcap(out)
+    assert counts["/ground_truth/skeletons_3d"] == 3 and counts["/skeletons_3d"] == 3
+    back = [x.msg for x in bags.read_messages(out, ["/ground_truth/skeletons_3d"])]
+    for a, b in zip(back, msgs, strict=True):
+        assert len(a.skeletons[0].observed) == 0
+        np.testing.assert_array_equal([[p.x, p.y, p.z] for p in a.skeletons[0].joints],
+                                      [[p.x, p.y, p.z] for p in b.skeletons[0].joints])

@@ -37,6 +37,7 @@ __all__ = [
     "read_messages",
     "read_raw",
     "register_msg_package",
+    "upgrade_message",
 ]
 
 MSG_PACKAGE: Final[str] = "pose_lifter_msgs"
@@ -134,9 +135,22 @@ def _default_message(store: Any, msgtype: str, **fields: Any) -> Any:
     unknown = set(fields) - {name for name, _ in fielddefs}
     if unknown:
         raise TypeError(f"{msgtype} has no field(s) {sorted(unknown)}")
-    values = {name: fields[name] if name in fields else _default_value(store, desc)
+    values = {name: _coerce(fields[name], desc) if name in fields else _default_value(store, desc)
               for name, desc in fielddefs}
     return cls(**values)
+
+
+def _coerce(value: Any, desc: tuple[Any, Any]) -> Any:
+    """Lists for numeric array fields become the numpy arrays rosbags serialises (rclpy takes
+    lists, so code that builds messages for both can pass lists)."""
+    from rosbags.interfaces import Nodetype
+
+    kind, sub = desc
+    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and isinstance(value, list | tuple):
+        inner = sub[0]
+        if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
+            return np.asarray(value, dtype=_NUMPY_DTYPES[inner[1][0]])
+    return value
 
 
 def message_factory(msgtype: str, store: Any | None = None) -> Callable[..., Any]:
@@ -261,6 +275,19 @@ class RawMessage:
     rihs01: str
 
 
+def _definition(conn: Any) -> tuple[str, str]:
+    """(msgdef text, RIHS01 hash) of a connection, from the bag's own definition: a copy keeps the
+    layout its bytes were written with (an older bag's types may differ from ours)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    text = str(conn.msgdef.data)
+    if conn.digest and conn.digest.startswith("RIHS01_"):
+        return text, str(conn.digest)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(text, conn.msgtype))
+    return text, str(store.hash_rihs01(conn.msgtype))
+
+
 def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
     """Serialised messages of a bag in time order, one at a time (nothing is deserialised).
 
@@ -273,13 +300,40 @@ def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
     with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
         wanted = set(topics) if topics is not None else None
         conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
-        meta = {}
-        for c in conns:
-            msgdef, _ = reader.typestore.generate_msgdef(c.msgtype, ros_version=2)
-            meta[c.id] = (msgdef, c.digest or reader.typestore.hash_rihs01(c.msgtype))
+        ours = pose_lifter_typestore()
+        meta = {c.id: _definition(c) for c in conns}
+        # our own types written by an older pose_lifter_msgs (e.g. Skeleton3D before `observed`):
+        # upgraded to today's definition, so one output bag never holds two layouts of one type
+        stale = {c.id for c in conns if c.msgtype.startswith(f"{MSG_PACKAGE}/") and c.msgtype in ours.types
+                 and meta[c.id][1] != ours.hash_rihs01(c.msgtype)}
         for conn, stamp, raw in reader.messages(connections=conns):
             msgdef, rihs01 = meta[conn.id]
-            yield RawMessage(conn.topic, conn.msgtype, int(stamp), bytes(raw), msgdef, rihs01)
+            data = bytes(raw)
+            if conn.id in stale:
+                new = upgrade_message(reader.deserialize(raw, conn.msgtype), conn.msgtype, ours)
+                data = bytes(ours.serialize_cdr(new, conn.msgtype))
+                msgdef = ours.generate_msgdef(conn.msgtype, ros_version=2)[0]
+                rihs01 = ours.hash_rihs01(conn.msgtype)
+            yield RawMessage(conn.topic, conn.msgtype, int(stamp), data, msgdef, rihs01)
+
+
+def upgrade_message(msg: Any, msgtype: str, store: Any) -> Any:
+    """A message of an older definition of ``msgtype`` rebuilt in ``store``'s definition: fields
+    copied by name (nested messages too), fields it lacks get their ROS defaults."""
+    from rosbags.interfaces import Nodetype
+
+    _, fielddefs = store.fielddefs[msgtype]
+    values: dict[str, Any] = {}
+    for name, (kind, sub) in fielddefs:
+        if not hasattr(msg, name):
+            continue
+        value = getattr(msg, name)
+        if kind == Nodetype.NAME:
+            value = upgrade_message(value, sub, store)
+        elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and sub[0][0] == Nodetype.NAME:
+            value = [upgrade_message(v, sub[0][1], store) for v in value]
+        values[name] = value
+    return _default_message(store, msgtype, **values)
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:

@@ -320,7 +320,7 @@ def result_to_skeleton3d(
         solve_time=float(solve_time),
         warm_started=bool(warm_started),
         observed=[bool(w > 0) for w in np.asarray(result.weights, dtype=np.float64)],
-        joint_weights=np.asarray(result.weights, dtype=np.float32),
+        joint_weights=[float(w) for w in np.asarray(result.weights, dtype=np.float64)],
     )
 
 
