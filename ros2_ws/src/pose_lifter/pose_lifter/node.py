@@ -546,6 +546,13 @@ def main(args: list[str] | None = None) -> None:
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:
         print(params_yaml(), end="")
         return
+    if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:
+        # compile the solver kernels into this install's cache (make ros runs it after the build)
+        start = time.perf_counter()
+        Lifter(PoseBases.load()).warm_up()
+        print(f"pose_lifter: solver kernels {'compiled' if HAVE_NUMBA else 'not compiled (no numba)'} "
+              f"and cached in {time.perf_counter() - start:.1f} s")
+        return
     rclpy.init(args=args)
     node: LifterNode | None = None
     try:
