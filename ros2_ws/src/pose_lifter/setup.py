@@ -30,6 +30,7 @@ setup(
         "console_scripts": [
             "lifter = pose_lifter.node:main",
             "adapter = pose_lifter.adapter_node:main",
+            "lifter_lifecycle = pose_lifter.lifecycle_node:main",
             "pose-lifter = pose_lifter.cli:main",
             "action_recognition = pose_lifter.examples.action_recognition:main",
         ],

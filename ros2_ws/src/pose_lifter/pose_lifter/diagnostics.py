@@ -70,6 +70,13 @@ class LifterDiagnostics:
             self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self._timer = node.create_timer(period, self.publish)
 
+    def close(self) -> None:
+        """Destroy the timer and the publisher (a lifecycle node's cleanup)."""
+        if self._pub is not None:
+            self._node.destroy_timer(self._timer)
+            self._node.destroy_publisher(self._pub)
+            self._pub = None
+
     def _reset(self) -> None:
         self._window_start = time.monotonic()
         self._frames = 0

@@ -271,7 +271,17 @@ class LifterNode(Node):
         self._types = messages.rclpy_types()
         for spec in PARAMS:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        self._callbacks_added = False
+        if not self._deferred_start():  # the lifecycle node configures and activates on request
+            self.configure_lifter()
+            self.activate_lifter()
 
+    def _deferred_start(self) -> bool:
+        """False: the plain node starts lifting in its constructor (see lifecycle_node.py)."""
+        return False
+
+    def configure_lifter(self) -> None:
+        """Load the bases, build the solver (compile or load its kernels), create the publishers."""
         # Invalid start-up values are fatal with the core's message (there is nothing to run).
         self._bases = self._load_bases(self._param("bases_file"))
         options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
@@ -297,6 +307,15 @@ class LifterNode(Node):
             self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
         self._markers_cleared = False  # the first MarkerArray starts with DELETEALL
         self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")))
+        if not self._callbacks_added:
+            self.add_on_set_parameters_callback(self._validate_parameters)
+            self.add_post_set_parameters_callback(self._apply_parameters)
+            self._callbacks_added = True
+
+    def activate_lifter(self) -> None:
+        """Subscribe to the inputs (and start the statistics timer): lifting starts."""
+        qos_override = QoSOverridingOptions.with_default_policies()
+        options = self._lifter.options
         # camera_info first: when an image's camera_info and keypoints are both waiting, the
         # executor serves subscriptions in creation order, so the keypoints see that camera_info
         self._sub_camera_info = self.create_subscription(
@@ -305,9 +324,6 @@ class LifterNode(Node):
         self._sub_keypoints = self.create_subscription(
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
-
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
         period = float(self._param("stats_period"))
         self._stats_timer = self.create_timer(period, self._log_stats) if period > 0 else None
         self.get_logger().info(
@@ -315,6 +331,22 @@ class LifterNode(Node):
             f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
             f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}"
         )
+
+    def deactivate_lifter(self) -> None:
+        """Unsubscribe (the solver and the publishers stay: activating again is immediate)."""
+        for entity in (self._sub_keypoints, self._sub_camera_info):
+            self.destroy_subscription(entity)
+        if self._stats_timer is not None:
+            self.destroy_timer(self._stats_timer)
+            self._stats_timer = None
+        self._tracks.clear()
+
+    def cleanup_lifter(self) -> None:
+        """Destroy the publishers and the diagnostics (back to the state after the constructor)."""
+        self._diagnostics.close()
+        for pub in (self._pub_skeletons, self._pub_markers):
+            self.destroy_publisher(pub)
+        self._tracks.clear()
 
     # ------------------------------------------------------------------ parameters
 
