@@ -16,6 +16,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/viz", glob("viz/*.rviz") + glob("viz/*.json")),
     ],
     install_requires=["setuptools", "numpy", "scipy", "scikit-learn"],
     extras_require={"tools": ["rosbags", "tqdm", "matplotlib"], "reference": ["cvxpy", "clarabel", "scs"],
