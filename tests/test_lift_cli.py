@@ -201,7 +201,7 @@ def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.C
         assert int(rows[12 * i]["stamp_ns"]) == stamp and int(rows[12 * i]["track_id"]) == tid
     capsys.readouterr()
     for args, expected in [
-        ([str(lifted), "--out", str(tmp_path / "e.txt")], "must end in one of"),
+        ([str(lifted), "--out", str(tmp_path / "e.txt")], "must end in .csv or .npz or .json"),
         ([str(lifted), "--out", str(tmp_path / "e.csv")], "exists already"),
         ([str(WALK), "--out", str(tmp_path / "w.csv")], "has no topic '/skeletons_3d'"),
         ([str(WALK), "--out", str(tmp_path / "w.csv"), "--topic", "/keypoints_2d"], "not pose_lifter_msgs"),

@@ -21,15 +21,14 @@ from __future__ import annotations
 import importlib
 from typing import Any, Final
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from . import adapters, messages
 from .core.errors import InvalidInputError, PoseLifterError
 from .core.layouts import get_layout
+from .run import run_node
 
 __all__ = ["AdapterNode", "main"]
 
@@ -146,20 +145,7 @@ class AdapterNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter adapter``."""
-    rclpy.init(args=args)
-    node: AdapterNode | None = None
-    try:
-        node = AdapterNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except PoseLifterError as err:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {err}")
-        raise SystemExit(1) from None
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(AdapterNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

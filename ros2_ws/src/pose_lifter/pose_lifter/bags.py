@@ -31,6 +31,7 @@ __all__ = [
     "BagWriter",
     "RawMessage",
     "bag_topics",
+    "check_output",
     "message_factory",
     "msg_dir",
     "pose_lifter_typestore",
@@ -51,6 +52,21 @@ _SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[2] / MSG_PACKAGE
 
 class BagError(RuntimeError):
     """A bag cannot be read or written (missing file, missing topic, bad type)."""
+
+
+def check_output(path: str | Path, suffixes: tuple[str, ...], overwrite: bool = False) -> Path:
+    """Refuse an output path before any work: wrong suffix, a directory, an existing file
+    (without ``overwrite``), or a missing parent directory."""
+    out = Path(path)
+    if out.suffix not in suffixes:
+        raise BagError(f"output must end in {' or '.join(suffixes)}, got {out}")
+    if out.is_dir():
+        raise BagError(f"output {out} is a directory")
+    if out.exists() and not overwrite:
+        raise BagError(f"{out} exists already (pass --overwrite to replace it)")
+    if not out.parent.resolve().is_dir():
+        raise BagError(f"output directory {out.parent} does not exist")
+    return out
 
 
 def msg_dir() -> Path:

@@ -26,7 +26,7 @@ from typing import Any, Final
 import numpy as np
 
 from . import messages as m
-from .bags import BagError, bag_topics, read_messages
+from .bags import BagError, bag_topics, check_output, read_messages
 from .core.skeleton import JOINT_NAMES
 
 __all__ = ["FORMATS", "export_skeletons"]
@@ -96,15 +96,7 @@ def export_skeletons(bag: str | Path, out: str | Path, topic: str = "/skeletons_
         Unknown suffix, existing output (without ``overwrite``), missing directory, missing topic
         or wrong type.
     """
-    path = Path(out)
-    if path.suffix not in FORMATS:
-        raise BagError(f"output must end in one of {', '.join(FORMATS)}, got {path}")
-    if path.is_dir():
-        raise BagError(f"output {path} is a directory")
-    if path.exists() and not overwrite:
-        raise BagError(f"{path} exists already (pass --overwrite to replace it)")
-    if not path.parent.resolve().is_dir():
-        raise BagError(f"output directory {path.parent} does not exist")
+    path = check_output(out, FORMATS, overwrite)
     frames = _frames(bag, topic)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent.resolve())
     try:

@@ -18,12 +18,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from .core import PoseLifterError
 from .node import NODE_NAME, LifterNode
+from .run import run_node
 
 __all__ = ["LifecycleLifterNode", "main"]
 
@@ -76,21 +75,13 @@ class LifecycleLifterNode(LifterNode, LifecycleNode):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter lifter_lifecycle``."""
-    rclpy.init(args=args)
-    node: LifecycleLifterNode | None = None
-    try:
+
+    def make() -> LifecycleLifterNode:
         node = LifecycleLifterNode()
         node.get_logger().info("unconfigured: waiting for the configure transition")
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except PoseLifterError as err:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {err}")
-        raise SystemExit(1) from None
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        return node
+
+    run_node(make, NODE_NAME, args)
 
 
 if __name__ == "__main__":

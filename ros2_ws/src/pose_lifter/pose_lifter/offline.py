@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import messages as m
-from .bags import BagError, BagWriter, bag_topics, read_messages, read_raw
+from .bags import BagError, BagWriter, bag_topics, check_output, read_messages, read_raw
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, TooFewJointsError
 from .core.lifter import Lifter
@@ -299,15 +299,7 @@ def check_lift_inputs(
         has no parent directory; the input is missing or unreadable; ``topic`` is missing or not a
         liftable type; a kept topic is missing; ``camera_info_topic`` has another type.
     """
-    out = Path(out_path)
-    if out.suffix != ".mcap":
-        raise BagError(f"output must end in .mcap, got {out}")
-    if out.is_dir():
-        raise BagError(f"output {out} is a directory")
-    if out.exists() and not overwrite:
-        raise BagError(f"{out} exists already (pass overwrite=True / --overwrite to replace it)")
-    if not out.parent.resolve().is_dir():
-        raise BagError(f"output directory {out.parent} does not exist")
+    out = check_output(out_path, (".mcap",), overwrite)
     if Path(in_path).resolve() == out.resolve():
         raise BagError("the output would overwrite the input")
     try:
