@@ -134,3 +134,30 @@ def test_adapter_without_the_message_package_is_one_fatal_line(lifter_env: dict[
     bad = subprocess.run([str(ADAPTER_EXE), "--ros-args", "-p", "input_type:=openpose"], env=lifter_env,
                          capture_output=True, text=True, timeout=60, cwd=REPO)
     assert bad.returncode == 1 and "input_type must be one of" in bad.stderr + bad.stdout
+
+
+def test_hri_image_size_from_camera_info(graph: GraphClient, start_lifter: Any, start_adapter: Any) -> None:
+    _load_workspace_messages("hri_msgs")
+    from hri_msgs.msg import NormalizedPointOfInterest2D, Skeleton2D
+
+    graph.wait_for_lifter(start_lifter())
+    adapter = start_adapter("-p", "input_type:=hri", "-r", "camera_info:=/hri_cam/camera_info")
+    pub = graph.node.create_publisher(Skeleton2D, "/humans/bodies/c1/skeleton2d", 10)
+    info_pub = graph.node.create_publisher(graph.types.CameraInfo, "/hri_cam/camera_info", 10)
+    xy = model_xy()
+    k18, c18 = coco17_to("coco18", *coco17(xy))
+
+    def publish(i: int) -> None:
+        header = m.make_header(10**9 + i * 10**8, "hri_cam", graph.types)
+        info_pub.publish(m.camera_info(header, 1280, 960, 800.0, 800.0, 640.0, 480.0, graph.types))
+        msg = Skeleton2D(skeleton=[NormalizedPointOfInterest2D(x=float(x / 1280), y=float(y / 960),
+                                                               c=float(c))
+                                   for (x, y), c in zip(k18, c18, strict=True)])
+        msg.header = header
+        pub.publish(msg)
+
+    answer = answer_through(graph, publish, "hri_cam", adapter)
+    (skel,) = answer.skeletons
+    assert skel.reprojection_error < 10.0
+    # de-normalised with camera_info's 1280x960: the projection's origin sits on the person
+    assert np.linalg.norm(np.asarray(skel.camera.translation) - xy.mean(axis=0)) < 25.0
