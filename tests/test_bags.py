@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from mcap_check import check_mcap
 from pose_lifter import bags
 from pose_lifter import messages as m
 
@@ -41,6 +42,13 @@ def test_message_factory_rejects_unknown_fields() -> None:
         bags.message_factory("nope_msgs/msg/Nope")
 
 
+@pytest.mark.parametrize("name", sorted(p.stem for p in (REPO / "bags").glob("*.mcap")))
+def test_committed_bags_pass_the_independent_mcap_reader(name: str) -> None:
+    counts = check_mcap(REPO / "bags" / f"{name}.mcap")
+    assert set(counts) == {"/camera_info", "/keypoints_2d", "/ground_truth/skeletons_3d"}
+    assert len(set(counts.values())) == 1  # one of each per frame
+
+
 def test_write_read_roundtrip(tmp_path: Path) -> None:
     t = m.rosbags_types()
     path = tmp_path / "x.mcap"
@@ -52,6 +60,7 @@ def test_write_read_roundtrip(tmp_path: Path) -> None:
                 header, "coco17", [m.arrays_to_skeleton2d(kp + i, np.ones(17), 0, t)], t))
             w.write("/camera_info", 1_000 + i, m.camera_info(header, 640, 480, 500, 500, 320, 240, t))
     assert path.is_file() and not any(p.name.startswith(".bagwriter") for p in tmp_path.iterdir())
+    assert check_mcap(path) == {"/keypoints_2d": 3, "/camera_info": 3}
     assert bags.bag_topics(path) == {"/keypoints_2d": "pose_lifter_msgs/msg/Skeleton2DArray",
                                      "/camera_info": "sensor_msgs/msg/CameraInfo"}
     got = list(bags.read_messages(path, ["/keypoints_2d"]))

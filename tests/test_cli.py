@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap_check import check_mcap
 from pose_lifter import bags, cli, mocap, scenes
 from pose_lifter import messages as m
 from pose_lifter.core.bases import PoseBases
@@ -59,6 +60,7 @@ def test_make_bag_and_floors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     rc = cli.main(["make-bag", "07_05", "02_05", "--out", str(out), "--frames", "12", "--fps", "15",
                    "--noise", "0.05", "--missing", "0.1"])
     assert rc == 0
+    assert check_mcap(out) == {"/camera_info": 12, "/keypoints_2d": 12, "/ground_truth/skeletons_3d": 12}
     kp = [x.msg for x in bags.read_messages(out, ["/keypoints_2d"])]
     assert len(kp) == 12 and [s.track_id for s in kp[0].skeletons] == [0, 1]
     stamps = [m.stamp_to_ns(x.header.stamp) for x in kp]

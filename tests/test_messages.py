@@ -53,7 +53,7 @@ def test_skeleton2d_bad_input() -> None:
     conf = np.ones(17)
     msg = m.arrays_to_skeleton2d(kp, conf, 0, T)
     with pytest.raises(UnknownLayoutError):
-        m.skeleton2d_to_arrays(msg, "coco18")
+        m.skeleton2d_to_arrays(msg, "coco19")
     with pytest.raises(InvalidInputError):
         m.skeleton2d_to_arrays(msg, "body25")  # 17 keypoints for a 25-keypoint layout
     kp_nan = kp.copy()
@@ -110,6 +110,8 @@ def test_result_to_skeleton3d_fields_and_inverse() -> None:
     np.testing.assert_allclose(Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), rot, atol=1e-12)
     assert back.camera.scale == 80.0
     np.testing.assert_allclose(back.camera.translation, [300.0, 200.0])
+    assert list(back.observed) == [bool(w > 0) for w in res.weights]
+    np.testing.assert_allclose(back.joint_weights, res.weights, rtol=1e-6)
 
 
 def test_skeleton3d_to_joints_reorders_by_name() -> None:

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from mcap_check import check_mcap
 from pose_lifter import bags, offline, scenes
 from pose_lifter import messages as m
 from pose_lifter.core.errors import TooFewJointsError
@@ -56,6 +57,7 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     # lifts go chain by chain (track 0, then track 5): cold first frames, cold after the failure
     assert [w is None for w in lifter.warm] == [True] + [False] * 5 + [True, False, False, False, True, False]
     topics = bags.bag_topics(out)
+    assert check_mcap(out)["/skeletons_3d"] == 6  # the independent reader: summary, index, decoding
     assert topics["/skeletons_3d"] == "pose_lifter_msgs/msg/Skeleton3DArray"
     assert topics["/skeleton_markers"] == "visualization_msgs/msg/MarkerArray"
     assert {"/keypoints_2d", "/camera_info", "/ground_truth/skeletons_3d"} <= set(topics)

@@ -48,7 +48,7 @@ def test_layouts_pick_the_paper_joints() -> None:
     assert pts[0].tolist() == b25[5].tolist() and pts[9].tolist() == b25[9].tolist()
     assert get_layout("H36M17").model_indices[6] == 4
     with pytest.raises(UnknownLayoutError):
-        get_layout("coco18")
+        get_layout("coco19")
 
 
 def test_p_mpjpe_is_similarity_invariant_and_reflection_safe() -> None:

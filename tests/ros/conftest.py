@@ -40,7 +40,7 @@ def _require_build() -> None:
         pytest.fail(f"{LIFTER_EXE} is missing: run `make ros` first (make test does)")
 
 
-def _load_workspace_messages() -> None:
+def _load_workspace_messages(package: str = "pose_lifter_msgs") -> None:
     """Make ``pose_lifter_msgs`` importable in this (already running) test process.
 
     ``source install/setup.bash`` would do it, but it must happen before Python starts
@@ -49,19 +49,22 @@ def _load_workspace_messages() -> None:
     extension then finds them by soname), extend LD_LIBRARY_PATH for the libraries rcl
     resolves at run time, and append the message package to sys.path.
     """
+    import importlib
+
     try:
-        import pose_lifter_msgs.msg  # sourced workspace
+        importlib.import_module(f"{package}.msg")  # sourced workspace (or loaded already)
         return
     except ImportError:
         pass
-    lib = INSTALL / "pose_lifter_msgs" / "lib"
+    lib = INSTALL / package / "lib"
     os.environ["LD_LIBRARY_PATH"] = f"{lib}{os.pathsep}{os.environ.get('LD_LIBRARY_PATH', '')}"
     for kind in ("generator_c", "typesupport_fastrtps_c", "typesupport_introspection_c",
                  "typesupport_c", "generator_py"):
-        ctypes.CDLL(str(lib / f"libpose_lifter_msgs__rosidl_{kind}.so"), mode=ctypes.RTLD_GLOBAL)
+        ctypes.CDLL(str(lib / f"lib{package}__rosidl_{kind}.so"), mode=ctypes.RTLD_GLOBAL)
     site = lib / f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages"
-    sys.path.append(str(site))
-    import pose_lifter_msgs.msg  # noqa: F401
+    if str(site) not in sys.path:
+        sys.path.append(str(site))
+    importlib.import_module(f"{package}.msg")
 
 
 @pytest.fixture(scope="session")

@@ -72,7 +72,7 @@ def test_params_yaml_is_the_generated_one() -> None:
 def test_params_yaml_is_loaded_and_every_key_declared(start_lifter: Any, graph: GraphClient) -> None:
     lifter = start_lifter(params_file=PARAMS_YAML)
     graph.wait_for_lifter(lifter)
-    declared = yaml.safe_load(PARAMS_YAML.read_text())["pose_lifter"]["ros__parameters"]
+    declared = yaml.safe_load(PARAMS_YAML.read_text())["/**"]["ros__parameters"]
     reported = graph.get_parameters(*declared)
     assert reported == declared
 

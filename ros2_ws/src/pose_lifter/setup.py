@@ -16,6 +16,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/viz", glob("viz/*.rviz") + glob("viz/*.json")),
     ],
     install_requires=["setuptools", "numpy", "scipy", "scikit-learn"],
     extras_require={"tools": ["rosbags", "tqdm", "matplotlib"], "reference": ["cvxpy", "clarabel", "scs"],
@@ -29,6 +30,8 @@ setup(
     entry_points={
         "console_scripts": [
             "lifter = pose_lifter.node:main",
+            "adapter = pose_lifter.adapter_node:main",
+            "lifter_lifecycle = pose_lifter.lifecycle_node:main",
             "pose-lifter = pose_lifter.cli:main",
             "action_recognition = pose_lifter.examples.action_recognition:main",
         ],

@@ -29,11 +29,16 @@ __all__ = [
     "BagError",
     "BagMessage",
     "BagWriter",
+    "RawMessage",
     "bag_topics",
+    "check_output",
     "message_factory",
     "msg_dir",
     "pose_lifter_typestore",
     "read_messages",
+    "read_raw",
+    "register_msg_package",
+    "upgrade_message",
 ]
 
 MSG_PACKAGE: Final[str] = "pose_lifter_msgs"
@@ -47,6 +52,21 @@ _SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[2] / MSG_PACKAGE
 
 class BagError(RuntimeError):
     """A bag cannot be read or written (missing file, missing topic, bad type)."""
+
+
+def check_output(path: str | Path, suffixes: tuple[str, ...], overwrite: bool = False) -> Path:
+    """Refuse an output path before any work: wrong suffix, a directory, an existing file
+    (without ``overwrite``), or a missing parent directory."""
+    out = Path(path)
+    if out.suffix not in suffixes:
+        raise BagError(f"output must end in {' or '.join(suffixes)}, got {out}")
+    if out.is_dir():
+        raise BagError(f"output {out} is a directory")
+    if out.exists() and not overwrite:
+        raise BagError(f"{out} exists already (pass --overwrite to replace it)")
+    if not out.parent.resolve().is_dir():
+        raise BagError(f"output directory {out.parent} does not exist")
+    return out
 
 
 def msg_dir() -> Path:
@@ -69,6 +89,29 @@ def pose_lifter_typestore() -> Any:
         types.update(get_types_from_msg((d / f"{name}.msg").read_text(), f"{MSG_PACKAGE}/msg/{name}"))
     store.register(types)
     return store
+
+
+def register_msg_package(store: Any, package: str, directory: str | Path) -> list[str]:
+    """Register every ``<directory>/*.msg`` as ``<package>/msg/<Name>`` in a rosbags typestore.
+
+    This is how another project's messages (``yolo_msgs``, ``hri_msgs``) are written to bags
+    without building them: from the text of their ``.msg`` files, as ours are.
+
+    Returns
+    -------
+    list of str
+        The registered type names.
+    """
+    from rosbags.typesys import get_types_from_msg
+
+    files = sorted(Path(directory).glob("*.msg"))
+    if not files:
+        raise BagError(f"no .msg files in {directory}")
+    types: dict[str, Any] = {}
+    for f in files:
+        types.update(get_types_from_msg(f.read_text(), f"{package}/msg/{f.stem}"))
+    store.register(types)
+    return [f"{package}/msg/{f.stem}" for f in files]
 
 
 _NUMPY_DTYPES: Final[dict[str, str]] = {
@@ -108,9 +151,22 @@ def _default_message(store: Any, msgtype: str, **fields: Any) -> Any:
     unknown = set(fields) - {name for name, _ in fielddefs}
     if unknown:
         raise TypeError(f"{msgtype} has no field(s) {sorted(unknown)}")
-    values = {name: fields[name] if name in fields else _default_value(store, desc)
+    values = {name: _coerce(fields[name], desc) if name in fields else _default_value(store, desc)
               for name, desc in fielddefs}
     return cls(**values)
+
+
+def _coerce(value: Any, desc: tuple[Any, Any]) -> Any:
+    """Lists for numeric array fields become the numpy arrays rosbags serialises (rclpy takes
+    lists, so code that builds messages for both can pass lists)."""
+    from rosbags.interfaces import Nodetype
+
+    kind, sub = desc
+    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and isinstance(value, list | tuple):
+        inner = sub[0]
+        if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
+            return np.asarray(value, dtype=_NUMPY_DTYPES[inner[1][0]])
+    return value
 
 
 def message_factory(msgtype: str, store: Any | None = None) -> Callable[..., Any]:
@@ -184,6 +240,13 @@ class BagWriter:
             raise BagError(f"message type {msgtype!r} is not in the typestore")
         self._connections[topic] = self._writer.add_connection(topic, msgtype, typestore=self.store)
 
+    def write_raw(self, raw: RawMessage) -> None:
+        """Copy one serialised message as it is (its type need not be in our typestore)."""
+        if raw.topic not in self._connections:
+            self._connections[raw.topic] = self._writer.add_connection(
+                raw.topic, raw.msgtype, msgdef=raw.msgdef, rihs01=raw.rihs01)
+        self._writer.write(self._connections[raw.topic], int(raw.stamp_ns), raw.data)
+
     def write(self, topic: str, stamp_ns: int, msg: Any, msgtype: str | None = None) -> None:
         """Serialise and write one message (the topic is added on first use)."""
         if topic not in self._connections:
@@ -214,6 +277,79 @@ class BagMessage:
     msgtype: str
     stamp_ns: int
     msg: Any
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One serialised (CDR) message of a bag, with what is needed to copy it to another bag."""
+
+    topic: str
+    msgtype: str
+    stamp_ns: int
+    data: bytes
+    msgdef: str
+    rihs01: str
+
+
+def _definition(conn: Any) -> tuple[str, str]:
+    """(msgdef text, RIHS01 hash) of a connection, from the bag's own definition: a copy keeps the
+    layout its bytes were written with (an older bag's types may differ from ours)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    text = str(conn.msgdef.data)
+    if conn.digest and conn.digest.startswith("RIHS01_"):
+        return text, str(conn.digest)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(text, conn.msgtype))
+    return text, str(store.hash_rihs01(conn.msgtype))
+
+
+def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
+    """Serialised messages of a bag in time order, one at a time (nothing is deserialised).
+
+    Memory stays bounded whatever the bag size. The message definitions come from the bag
+    itself, so topics of any type (e.g. ``sensor_msgs/msg/Image``, ``yolo_msgs/...``) are read.
+    """
+    from rosbags.highlevel import AnyReader
+
+    p = _existing(path)
+    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+        wanted = set(topics) if topics is not None else None
+        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        ours = pose_lifter_typestore()
+        meta = {c.id: _definition(c) for c in conns}
+        # our own types written by an older pose_lifter_msgs (e.g. Skeleton3D before `observed`):
+        # upgraded to today's definition, so one output bag never holds two layouts of one type
+        stale = {c.id for c in conns if c.msgtype.startswith(f"{MSG_PACKAGE}/") and c.msgtype in ours.types
+                 and meta[c.id][1] != ours.hash_rihs01(c.msgtype)}
+        for conn, stamp, raw in reader.messages(connections=conns):
+            msgdef, rihs01 = meta[conn.id]
+            data = bytes(raw)
+            if conn.id in stale:
+                new = upgrade_message(reader.deserialize(raw, conn.msgtype), conn.msgtype, ours)
+                data = bytes(ours.serialize_cdr(new, conn.msgtype))
+                msgdef = ours.generate_msgdef(conn.msgtype, ros_version=2)[0]
+                rihs01 = ours.hash_rihs01(conn.msgtype)
+            yield RawMessage(conn.topic, conn.msgtype, int(stamp), data, msgdef, rihs01)
+
+
+def upgrade_message(msg: Any, msgtype: str, store: Any) -> Any:
+    """A message of an older definition of ``msgtype`` rebuilt in ``store``'s definition: fields
+    copied by name (nested messages too), fields it lacks get their ROS defaults."""
+    from rosbags.interfaces import Nodetype
+
+    _, fielddefs = store.fielddefs[msgtype]
+    values: dict[str, Any] = {}
+    for name, (kind, sub) in fielddefs:
+        if not hasattr(msg, name):
+            continue
+        value = getattr(msg, name)
+        if kind == Nodetype.NAME:
+            value = upgrade_message(value, sub, store)
+        elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and sub[0][0] == Nodetype.NAME:
+            value = [upgrade_message(v, sub[0][1], store) for v in value]
+        values[name] = value
+    return _default_message(store, msgtype, **values)
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:

@@ -1,4 +1,4 @@
-"""``pose-lifter``: offline commands (learn bases, make bags, lift bags, evaluate, demo).
+"""``pose-lifter``: offline commands (learn bases, make bags, lift, export, play, evaluate, demo).
 
 Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
 """
@@ -168,17 +168,96 @@ def _lifter(args: argparse.Namespace) -> Any:
     return lifter
 
 
-def _cmd_lift(args: argparse.Namespace) -> int:
-    from .offline import lift_bag
+def _keep_topics(values: Sequence[str] | None) -> list[str] | None:
+    """``--keep``: None / ``all`` = every input topic, ``none`` = none, else the topics named."""
+    if values is None or list(values) == ["all"]:
+        return None
+    if list(values) == ["none"]:
+        return []
+    return list(values)
 
-    summary, _ = lift_bag(args.input, args.out, _lifter(args), warm_start=not args.no_warm_start,
-                          leg_length_m=args.leg_length, every=args.every, max_messages=args.max_messages,
-                          progress=not args.quiet, overwrite=args.overwrite, workers=args.workers)
+
+def _cores() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
+                   ) -> tuple[Any, bool, float, float, dict[str, float]]:
+    """(lifter, warm_start, leg length, default distance, per-track policy settings) from the
+    flags and ``--params-file``.
+
+    The file gives the node's options; a flag given with a value other than its default wins.
+    """
+    if not args.params_file:
+        return _lifter(args), not args.no_warm_start, args.leg_length, 5.0, {}
+    from .core.bases import PoseBases
+    from .core.lifter import Lifter
+    from .core.options import LifterOptions
+    from .params import read_params_file
+
+    params = read_params_file(args.params_file)
+    options = dict(params.options)
+    if args.variant != parser_defaults["variant"]:
+        options["variant"] = args.variant
+    if args.starts != parser_defaults["starts"]:
+        options["n_starts"] = args.starts
+    if args.mode != parser_defaults["mode"] or args.solver == "cvxpy":
+        options["mode"] = "paper" if args.solver == "cvxpy" else args.mode
+    options.update(camera_solver=args.solver, pose_solver=args.solver)
+    lifter = Lifter(PoseBases.load(args.bases or params.bases_file), LifterOptions().replace(**options))
+    if args.solver == "admm":
+        lifter.warm_up()
+    warm = False if args.no_warm_start else (True if params.warm_start is None else params.warm_start)
+    leg = params.lower_leg_length
+    if leg is None or args.leg_length != parser_defaults["leg_length"]:
+        leg = args.leg_length
+    distance = 5.0 if params.default_distance is None else params.default_distance
+    if params.ignored:
+        print(f"pose-lifter lift: {args.params_file}: ignored offline: {', '.join(params.ignored)}",
+              file=sys.stderr)
+    policy = {k: v for k, v in (("track_timeout", params.track_timeout),
+                                ("reinit_ratio", params.reinit_ratio)) if v is not None}
+    return lifter, warm, leg, distance, policy
+
+
+def _cmd_lift(args: argparse.Namespace) -> int:
+    from .offline import check_lift_inputs, lift_bag
+
+    keep = _keep_topics(args.keep)
+    camera_info = args.camera_info_topic or None
+    # every check that needs no lifting first: bad input never costs a kernel compile
+    check_lift_inputs(args.input, args.out, args.topic, camera_info, keep, args.overwrite)
+    lifter, warm, leg, distance, policy = _lift_settings(args, args.lift_defaults)
+    summary, _ = lift_bag(args.input, args.out, lifter, warm_start=warm, leg_length_m=leg,
+                          default_distance_m=distance, every=args.every, max_messages=args.max_messages,
+                          progress=not args.quiet, overwrite=args.overwrite,
+                          workers=args.workers or _cores(), topic=args.topic,
+                          camera_info_topic=camera_info, keep=keep, **policy)
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     for f in summary.failures[:5]:
         print(f"  failed: {f}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from .export import export_skeletons
+
+    n_msgs, n_skels = export_skeletons(args.bag, args.out, args.topic, args.overwrite)
+    print(f"{args.out}: {n_skels} skeletons of {n_msgs} messages of {args.topic}")
+    return 0
+
+
+def _cmd_play(args: argparse.Namespace) -> int:
+    from .play import play_bag
+
+    try:
+        play_bag(args.bag, args.topics, args.rate, args.wait)
+    except KeyboardInterrupt:
+        return 130
     return 0
 
 
@@ -271,9 +350,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-messages", type=int, default=None, help="stop after N lifted messages")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true")
-    p.add_argument("--workers", type=int, default=1,
-                   help="processes lifting the tracks in parallel (results identical to 1)")
-    p.set_defaults(func=_cmd_lift)
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes lifting the tracks in parallel (results identical to 1; "
+                   "default: the cores available)")
+    p.add_argument("--topic", default="/keypoints_2d",
+                   help="keypoints: pose_lifter_msgs/Skeleton2DArray or yolo_msgs/DetectionArray "
+                   "(default /keypoints_2d)")
+    p.add_argument("--camera-info-topic", default="/camera_info",
+                   help="sensor_msgs/CameraInfo for the metric depth ('' = none; default /camera_info)")
+    p.add_argument("--keep", nargs="+", default=None, metavar="TOPIC",
+                   help="input topics copied to the output: 'all' (default), 'none', or topic names")
+    p.add_argument("--params-file", default=None,
+                   help="the node's params YAML (config/lifter.yaml): lift with the live node's options; "
+                   "flags given with non-default values win")
+    p.set_defaults(func=_cmd_lift,
+                   lift_defaults={"variant": "full", "starts": 30, "leg_length": 0.43})
+
+    p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
+    p.add_argument("bag", help="a lifted .mcap")
+    p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
+    p.add_argument("--topic", default="/skeletons_3d", help="Skeleton3DArray topic (default /skeletons_3d)")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("play", help="publish a bag's topics into the live ROS graph at the bag's rate")
+    p.add_argument("bag", help="input .mcap")
+    p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
+    p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1: real time)")
+    p.add_argument("--wait", type=float, default=0.0,
+                   help="seconds to wait for a subscriber on every topic first (default 0)")
+    p.set_defaults(func=_cmd_play)
 
     p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
     p.add_argument("bag", help="a lifted .mcap")

@@ -34,6 +34,7 @@ __all__ = [
     "arrays_to_skeleton2d",
     "camera_estimate",
     "camera_info",
+    "delete_all_markers",
     "delete_markers",
     "intrinsics_from_camera_info",
     "make_header",
@@ -78,6 +79,7 @@ _SPHERE_LIST: Final[int] = 7
 _LINE_LIST: Final[int] = 5
 _ADD: Final[int] = 0
 _DELETE: Final[int] = 2
+_DELETEALL: Final[int] = 3
 
 
 def rosbags_types(store: Any | None = None) -> SimpleNamespace:
@@ -317,6 +319,8 @@ def result_to_skeleton3d(
         converged=bool(result.converged),
         solve_time=float(solve_time),
         warm_started=bool(warm_started),
+        observed=[bool(w > 0) for w in np.asarray(result.weights, dtype=np.float64)],
+        joint_weights=[float(w) for w in np.asarray(result.weights, dtype=np.float64)],
     )
 
 
@@ -441,6 +445,13 @@ def delete_markers(header: Any, track_ids: Iterable[int], ns: str, types: Any) -
             out.append(types.Marker(header=header, ns=f"{ns}/{kind}", id=_marker_id(int(track_id), 0),
                                     action=_DELETE))
     return out
+
+
+def delete_all_markers(header: Any, ns: str, types: Any) -> list[Any]:
+    """DELETEALL markers for our namespaces (joints and bones): clears what an earlier run of the
+    node left on screen (markers with lifetime 0 outlive the node)."""
+    return [types.Marker(header=header, ns=f"{ns}/{kind}", id=0, action=_DELETEALL)
+            for kind in ("joints", "bones")]
 
 
 # --------------------------------------------------------------------------- camera info

@@ -47,7 +47,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
-from . import messages
+from . import diagnostics, messages
 from .core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from .core._jit import HAVE_NUMBA
 from .core.errors import InvalidInputError, OptionsError
@@ -168,6 +168,12 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "are absurd: the skeleton is skipped.", 1.0, 1.0e9),
     ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
               read_only=True),
+    ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "
+              "empty one (RViz cannot show an empty frame)."),
+    ParamSpec("marker_lifetime", 1.0, "Seconds a skeleton marker stays on screen without an update "
+              "(0 = until deleted: markers outlive the node).", 0.0, 3600.0),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics updates (0 = none).", 0.0, 3600.0,
+              read_only=True),
 )
 _SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
 
@@ -177,7 +183,7 @@ _YAML_HEAD: Final[str] = """\
 #   python -m pose_lifter.node --params-yaml > config/lifter.yaml
 # and checked by tests/ros/test_lifter_graph.py (the node starts with it and reports these values).
 # Doubles are written with a decimal point (ROS parameters are typed).
-pose_lifter:
+/**:
   ros__parameters:
 """
 
@@ -232,6 +238,8 @@ class NodeSettings:
     publish_markers: bool
     max_skeletons: int
     max_coordinate: float
+    frame_id: str
+    marker_lifetime: float
 
 
 @dataclass
@@ -265,7 +273,17 @@ class LifterNode(Node):
         self._types = messages.rclpy_types()
         for spec in PARAMS:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        self._callbacks_added = False
+        if not self._deferred_start():  # the lifecycle node configures and activates on request
+            self.configure_lifter()
+            self.activate_lifter()
 
+    def _deferred_start(self) -> bool:
+        """False: the plain node starts lifting in its constructor (see lifecycle_node.py)."""
+        return False
+
+    def configure_lifter(self) -> None:
+        """Load the bases, build the solver (compile or load its kernels), create the publishers."""
         # Invalid start-up values are fatal with the core's message (there is nothing to run).
         self._bases = self._load_bases(self._param("bases_file"))
         options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
@@ -289,6 +307,17 @@ class LifterNode(Node):
             self._types.Skeleton3DArray, "skeletons_3d", reliable, qos_overriding_options=qos_override)
         self._pub_markers = self.create_publisher(
             self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
+        self._markers_cleared = False  # the first MarkerArray starts with DELETEALL
+        self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")))
+        if not self._callbacks_added:
+            self.add_on_set_parameters_callback(self._validate_parameters)
+            self.add_post_set_parameters_callback(self._apply_parameters)
+            self._callbacks_added = True
+
+    def activate_lifter(self) -> None:
+        """Subscribe to the inputs (and start the statistics timer): lifting starts."""
+        qos_override = QoSOverridingOptions.with_default_policies()
+        options = self._lifter.options
         # camera_info first: when an image's camera_info and keypoints are both waiting, the
         # executor serves subscriptions in creation order, so the keypoints see that camera_info
         self._sub_camera_info = self.create_subscription(
@@ -297,9 +326,6 @@ class LifterNode(Node):
         self._sub_keypoints = self.create_subscription(
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
-
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
         period = float(self._param("stats_period"))
         self._stats_timer = self.create_timer(period, self._log_stats) if period > 0 else None
         self.get_logger().info(
@@ -307,6 +333,22 @@ class LifterNode(Node):
             f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
             f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}"
         )
+
+    def deactivate_lifter(self) -> None:
+        """Unsubscribe (the solver and the publishers stay: activating again is immediate)."""
+        for entity in (self._sub_keypoints, self._sub_camera_info):
+            self.destroy_subscription(entity)
+        if self._stats_timer is not None:
+            self.destroy_timer(self._stats_timer)
+            self._stats_timer = None
+        self._policy.clear()
+
+    def cleanup_lifter(self) -> None:
+        """Destroy the publishers and the diagnostics (back to the state after the constructor)."""
+        self._diagnostics.close()
+        for pub in (self._pub_skeletons, self._pub_markers):
+            self.destroy_publisher(pub)
+        self._policy.clear()
 
     # ------------------------------------------------------------------ parameters
 
@@ -323,6 +365,8 @@ class LifterNode(Node):
             publish_markers=bool(self._param("publish_markers")),
             max_skeletons=int(self._param("max_skeletons")),
             max_coordinate=float(self._param("max_coordinate")),
+            frame_id=str(self._param("frame_id")),
+            marker_lifetime=float(self._param("marker_lifetime")),
         )
 
     def _make_policy(self) -> TrackPolicy:
@@ -387,6 +431,8 @@ class LifterNode(Node):
     def on_keypoints(self, msg: Any) -> None:
         """Lift one frame and publish its answer (always, even when every skeleton is skipped)."""
         received = time.perf_counter()
+        if not msg.header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
+            msg.header.frame_id = self._settings.frame_id
         stamp_ns = messages.stamp_to_ns(msg.header.stamp)
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
@@ -429,6 +475,7 @@ class LifterNode(Node):
         self._stats.warm += sum(1 for s in lifted if s.warm_started)
         self._stats.solve_times.extend(float(s.solve_time) for s in lifted)
         self._stats.latencies.append(time.perf_counter() - received)
+        self._diagnostics.frame(lifted, time.perf_counter() - received)
 
     def _lift_one(
         self, skel: Any, layout: Layout, stamp_ns: int, seen: set[int]
@@ -473,8 +520,11 @@ class LifterNode(Node):
         tracked = {t for t, _ in shown if t >= 0}
         untracked = sum(1 for t, _ in shown if t < 0)
         gone = sorted(self._shown_tracks - tracked)
-        markers = messages.skeleton_markers(header, shown, MARKER_NS, 0.0, self._types,
-                                            deleted_track_ids=gone)
+        markers = messages.skeleton_markers(header, shown, MARKER_NS, self._settings.marker_lifetime,
+                                            self._types, deleted_track_ids=gone)
+        if not self._markers_cleared:  # what an earlier run left on screen goes first
+            markers.markers[:0] = messages.delete_all_markers(header, MARKER_NS, self._types)
+            self._markers_cleared = True
         # untracked skeletons have ids -1, -2, ... by position: delete the positions now unused
         for position in range(untracked, self._shown_untracked):
             for kind in ("joints", "bones"):
@@ -490,6 +540,7 @@ class LifterNode(Node):
     def _warn_skip(self, kind: str, text: str) -> None:
         """Count a skipped input and warn (one call site, so one rate-limited warning stream)."""
         self._stats.skipped[kind] += 1
+        self._diagnostics.skipped(kind)
         self.get_logger().warning(f"{text} (this warning is rate-limited; counts in the stats line)",
                                   throttle_duration_sec=5.0)
 
@@ -518,6 +569,13 @@ def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter lifter``."""
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:
         print(params_yaml(), end="")
+        return
+    if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:
+        # compile the solver kernels into this install's cache (make ros runs it after the build)
+        start = time.perf_counter()
+        Lifter(PoseBases.load()).warm_up()
+        print(f"pose_lifter: solver kernels {'compiled' if HAVE_NUMBA else 'not compiled (no numba)'} "
+              f"and cached in {time.perf_counter() - start:.1f} s")
         return
     rclpy.init(args=args)
     node: LifterNode | None = None

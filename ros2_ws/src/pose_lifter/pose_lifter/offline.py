@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import messages as m
-from .bags import BagError, BagWriter, read_messages
+from .bags import BagError, BagWriter, bag_topics, check_output, read_messages, read_raw
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
@@ -33,9 +33,11 @@ from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPI
 __all__ = [
     "DEFAULT_DISTANCE_M",
     "DEFAULT_LEG_LENGTH_M",
+    "LIFTABLE_TYPES",
     "Evaluation",
     "FrameLift",
     "LiftSummary",
+    "check_lift_inputs",
     "evaluate_bag",
     "format_evaluation",
     "lift_bag",
@@ -46,6 +48,8 @@ __all__ = [
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
 #: The node's default ``track_timeout`` (seconds of input time a warm start stays valid).
 DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
+#: The node's default ``reinit_ratio`` (a degraded warm solve is redone cold).
+DEFAULT_REINIT_RATIO: Final[float] = 2.0
 #: Depth of the pose centroid when no CameraInfo is available.
 DEFAULT_DISTANCE_M: Final[float] = 5.0
 _MARKER_NS: Final[str] = "pose_lifter"
@@ -155,12 +159,13 @@ def _chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, 
 
 
 def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default_distance_m: float,
-                track_timeout: float = DEFAULT_TRACK_TIMEOUT_S, warm_start: bool = True) -> list[_Done]:
+                track_timeout: float = DEFAULT_TRACK_TIMEOUT_S, warm_start: bool = True,
+                reinit_ratio: float = DEFAULT_REINIT_RATIO) -> list[_Done]:
     """Lift one chain in order through the node's per-track policy
     (:class:`pose_lifter.core.tracking.TrackPolicy`: warm starts within ``track_timeout``,
     re-initialisation, out-of-order frames refused, a failure starts over)."""
     out: list[_Done] = []
-    policy = TrackPolicy(lifter, track_timeout, warm_start)
+    policy = TrackPolicy(lifter, track_timeout, warm_start, reinit_ratio)
     for item in chain:
         try:
             if item.error is not None:
@@ -183,7 +188,8 @@ _WORKER: dict[str, Any] = {}
 
 
 def _worker_chain(chain: list[_Item]) -> list[_Done]:
-    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"])
+    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
+                       True, _WORKER["reinit"])
 
 
 def lift_messages(
@@ -198,6 +204,7 @@ def lift_messages(
     summary: LiftSummary | None = None,
     workers: int = 1,
     track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
+    reinit_ratio: float = DEFAULT_REINIT_RATIO,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order with per-track warm starts.
 
@@ -227,6 +234,8 @@ def lift_messages(
         Processes (fork) lifting the chains; 1 lifts in this process.
     track_timeout : float
         Seconds of input time a track's warm start stays valid (the node's ``track_timeout``).
+    reinit_ratio : float
+        The node's ``reinit_ratio`` (:class:`pose_lifter.core.tracking.TrackPolicy`).
     """
     from tqdm import tqdm
 
@@ -238,7 +247,8 @@ def lift_messages(
     bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
     if workers == 1 or len(chains) < 2:
         for chain in chains:
-            for d in _lift_chain(lifter, chain, leg_length_m, default_distance_m, track_timeout):
+            for d in _lift_chain(lifter, chain, leg_length_m, default_distance_m, track_timeout, True,
+                                 reinit_ratio):
                 done[id(d.item)] = d
                 bar.update(1)
     else:
@@ -246,7 +256,8 @@ def lift_messages(
         from concurrent.futures import ProcessPoolExecutor
 
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
-        _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout)
+        _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout,
+                       reinit=reinit_ratio)
         try:
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as ex:
                 for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):
@@ -283,6 +294,60 @@ def lift_messages(
     return out
 
 
+#: Message types ``lift_bag`` lifts: ours as they are, yolo_ros' through :mod:`pose_lifter.adapters`.
+LIFTABLE_TYPES: Final[tuple[str, ...]] = (_MSG_2D, "yolo_msgs/msg/DetectionArray")
+_MSG_CAMERA_INFO: Final[str] = "sensor_msgs/msg/CameraInfo"
+
+
+def check_lift_inputs(
+    in_path: str | Path,
+    out_path: str | Path,
+    topic: str = TOPIC_KEYPOINTS,
+    camera_info_topic: str | None = TOPIC_CAMERA_INFO,
+    keep: Sequence[str] | None = None,
+    overwrite: bool = False,
+) -> dict[str, str]:
+    """Everything :func:`lift_bag` can check before any work; returns the bag's topic -> type.
+
+    Raises
+    ------
+    BagError
+        ``out_path`` does not end in ``.mcap``, exists (without ``overwrite``), is a directory or
+        has no parent directory; the input is missing or unreadable; ``topic`` is missing or not a
+        liftable type; a kept topic is missing; ``camera_info_topic`` has another type.
+    """
+    out = check_output(out_path, (".mcap",), overwrite)
+    if Path(in_path).resolve() == out.resolve():
+        raise BagError("the output would overwrite the input")
+    try:
+        topics = bag_topics(in_path)
+    except BagError:
+        raise
+    except Exception as exc:  # rosbags' reader errors: a truncated, empty or foreign file
+        raise BagError(f"cannot read {in_path}: {exc}") from None
+    if topic not in topics:
+        raise BagError(f"{in_path} has no topic {topic!r}; its topics: {sorted(topics)}")
+    if topics[topic] not in LIFTABLE_TYPES:
+        raise BagError(f"topic {topic!r} is {topics[topic]}; lift takes {', '.join(LIFTABLE_TYPES)}")
+    if camera_info_topic and camera_info_topic in topics and topics[camera_info_topic] != _MSG_CAMERA_INFO:
+        raise BagError(f"camera-info topic {camera_info_topic!r} is {topics[camera_info_topic]}, "
+                       f"not {_MSG_CAMERA_INFO}")
+    missing = sorted(set(keep or ()) - set(topics))
+    if missing:
+        raise BagError(f"{in_path} has no topic(s) {missing} to keep; its topics: {sorted(topics)}")
+    return topics
+
+
+def _as_skeleton2d(msg: Any, msgtype: str, types: Any, track_ids: Any) -> Any:
+    """A Skeleton2DArray from a liftable message (yolo DetectionArray -> wang12 array)."""
+    if msgtype == _MSG_2D:
+        return msg
+    from . import adapters
+
+    people, _ = adapters.yolo_detections_to_people(msg, track_ids)
+    return adapters.people_to_skeleton2d_array(msg.header, people, types)
+
+
 def lift_bag(
     in_path: str | Path,
     out_path: str | Path,
@@ -296,12 +361,22 @@ def lift_bag(
     overwrite: bool = False,
     marker_lifetime: float = 0.0,
     workers: int = 1,
+    topic: str = TOPIC_KEYPOINTS,
+    camera_info_topic: str | None = TOPIC_CAMERA_INFO,
+    keep: Sequence[str] | None = None,
+    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
+    reinit_ratio: float = DEFAULT_REINIT_RATIO,
 ) -> tuple[LiftSummary, list[FrameLift]]:
-    """Lift every ``/keypoints_2d`` message of a bag into a new bag.
+    """Lift every message of ``topic`` of a bag into a new bag.
 
-    The output holds all input topics (same stamps) plus ``/skeletons_3d``
-    (``Skeleton3DArray``, camera optical frame, metres) and ``/skeleton_markers``
-    (``MarkerArray``: joints and bones per track, DELETE for vanished tracks).
+    The output holds the kept input topics (copied byte for byte, same stamps; all of them by
+    default) plus ``/skeletons_3d`` (``Skeleton3DArray``, camera optical frame, metres) and
+    ``/skeleton_markers`` (``MarkerArray``: joints and bones per track, DELETE for vanished
+    tracks). Everything checkable is checked before any work (:func:`check_lift_inputs`).
+
+    Memory: the bag is read twice, streaming: first only ``topic`` and ``camera_info_topic``
+    (deserialised, kept for the lifting), then every kept topic one message at a time, copied
+    as serialised bytes. Large topics (images) are never held.
 
     Parameters
     ----------
@@ -321,24 +396,37 @@ def lift_bag(
     workers : int
         Processes lifting the tracks in parallel (results identical to 1), see
         :func:`lift_messages`.
+    topic : str
+        The keypoints: ``pose_lifter_msgs/msg/Skeleton2DArray`` or ``yolo_msgs/msg/DetectionArray``.
+    camera_info_topic : str or None
+        ``sensor_msgs/msg/CameraInfo`` for the metric placement (None or absent: the default
+        distance).
+    keep : sequence of str, optional
+        Input topics copied to the output; None = all, ``[]`` = none.
     """
     if every < 1:
         raise ValueError("every must be >= 1")
-    if Path(out_path).exists() and not overwrite:  # fail before the (slow) lifting
-        raise BagError(f"{out_path} exists already (pass overwrite=True to replace it)")
+    topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, keep, overwrite)
+    from .adapters import TrackIds
+
     types = m.rosbags_types()
-    messages = list(read_messages(in_path))
-    kp_all = [(x.stamp_ns, x.msg) for x in messages if x.topic == TOPIC_KEYPOINTS]
+    ids = TrackIds()
+    wanted = [topic] + ([camera_info_topic] if camera_info_topic in topics else [])
+    kp_all: list[tuple[int, Any]] = []
+    infos: list[tuple[int, Any]] = []
+    for x in read_messages(in_path, wanted):
+        if x.topic == topic:
+            if max_messages is not None and len(kp_all) >= max_messages * every:
+                break
+            kp_all.append((x.stamp_ns, _as_skeleton2d(x.msg, x.msgtype, types, ids)))
+        else:
+            infos.append((x.stamp_ns, x.msg))
     if not kp_all:
-        raise InvalidInputError(f"{in_path} has no {TOPIC_KEYPOINTS} messages")
-    if max_messages is not None:
-        kp_all = kp_all[: max_messages * every]
-        last = kp_all[-1][0]
-        messages = [x for x in messages if x.stamp_ns <= last]
+        raise InvalidInputError(f"{in_path} has no {topic} messages")
+    last = kp_all[-1][0] if max_messages is not None else None
     to_lift = kp_all[::every]
-    infos = [(x.stamp_ns, x.msg) for x in messages if x.topic == TOPIC_CAMERA_INFO]
     summary = LiftSummary()
-    outputs: dict[int, tuple[Any, Any]] = {}
+    outputs: dict[int, tuple[Any, Any]] = {}  # index of the keypoint message -> its answers
     previous: set[int] = set()
 
     def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
@@ -349,17 +437,25 @@ def lift_bag(
         markers = m.skeleton_markers(msg.header, [(f.track_id, f.joints_m) for f in lifted], _MARKER_NS,
                                      marker_lifetime, types, deleted_track_ids=sorted(previous - now))
         previous = now
-        outputs[stamp] = (m.skeletons3d_array(msg.header, skels, types), markers)
+        outputs[len(outputs) * every] = (m.skeletons3d_array(msg.header, skels, types), markers)
 
     frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
-                           progress, record, summary, workers=workers)
+                           progress, record, summary, workers=workers, track_timeout=track_timeout,
+                           reinit_ratio=reinit_ratio)
+    kept = set(topics) if keep is None else set(keep)
+    index = 0
     with BagWriter(out_path, overwrite=overwrite) as w:
-        for x in messages:
-            w.write(x.topic, x.stamp_ns, x.msg, x.msgtype)
-            if x.topic == TOPIC_KEYPOINTS and x.stamp_ns in outputs:
-                skels, markers = outputs.pop(x.stamp_ns)
-                w.write(TOPIC_SKELETONS, x.stamp_ns, skels, _MSG_3D)
-                w.write(TOPIC_MARKERS, x.stamp_ns, markers, _MSG_MARKERS)
+        for raw in read_raw(in_path, kept | {topic}):
+            if last is not None and raw.stamp_ns > last:
+                break
+            if raw.topic in kept:
+                w.write_raw(raw)
+            if raw.topic == topic:
+                if index in outputs:
+                    skels, markers = outputs.pop(index)
+                    w.write(TOPIC_SKELETONS, raw.stamp_ns, skels, _MSG_3D)
+                    w.write(TOPIC_MARKERS, raw.stamp_ns, markers, _MSG_MARKERS)
+                index += 1
     return summary, frames
 
 

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from .errors import InvalidInputError, UnknownLayoutError
 from .skeleton import N_JOINTS
 
-__all__ = ["LAYOUTS", "Layout", "get_layout", "to_model_joints"]
+__all__ = ["ALIASES", "LAYOUTS", "Layout", "get_layout", "to_model_joints"]
 
 
 @dataclass(frozen=True)
@@ -43,15 +43,43 @@ LAYOUTS: Final[dict[str, Layout]] = {
     # OpenPose BODY_25: 2 r_sho, 3 r_elb, 4 r_wri, 5 l_sho, 6 l_elb, 7 l_wri, 9 r_hip,
     # 10 r_knee, 11 r_ank, 12 l_hip, 13 l_knee, 14 l_ank.
     "body25": Layout("body25", 25, (5, 6, 7, 2, 3, 4, 12, 13, 14, 9, 10, 11)),
+    # OpenPose COCO-18, also ROS4HRI / REP-155 ``hri_msgs/Skeleton2D``: 0 nose, 1 neck, 2 r_sho,
+    # 3 r_elb, 4 r_wri, 5 l_sho, 6 l_elb, 7 l_wri, 8 r_hip, 9 r_knee, 10 r_ank, 11 l_hip,
+    # 12 l_knee, 13 l_ank, 14-17 eyes and ears.
+    "coco18": Layout("coco18", 18, (5, 6, 7, 2, 3, 4, 11, 12, 13, 8, 9, 10)),
+    # Halpe-26 (AlphaPose, RTMPose body7/halpe): COCO-17 first, then 17 head, 18 neck, 19 hip,
+    # 20-25 feet.
+    "halpe26": Layout("halpe26", 26, (5, 7, 9, 6, 8, 10, 11, 13, 15, 12, 14, 16)),
+    # MediaPipe BlazePose 33: 11 l_sho, 12 r_sho, 13 l_elb, 14 r_elb, 15 l_wri, 16 r_wri,
+    # 23 l_hip, 24 r_hip, 25 l_knee, 26 r_knee, 27 l_ank, 28 r_ank.
+    "mediapipe33": Layout("mediapipe33", 33, (11, 13, 15, 12, 14, 16, 23, 25, 27, 24, 26, 28)),
+    # COCO-WholeBody 133 (RTMPose / MMPose wholebody): its body part is COCO-17 (0-16), then
+    # 6 feet, 68 face and 42 hand keypoints.
+    "coco_wholebody133": Layout("coco_wholebody133", 133, (5, 7, 9, 6, 8, 10, 11, 13, 15, 12, 14, 16)),
     # The paper's own 12 joints.
     "wang12": Layout("wang12", 12, tuple(range(N_JOINTS))),
 }
 
+#: Other names people use for the layouts above.
+ALIASES: Final[dict[str, str]] = {
+    "coco": "coco17",
+    "openpose18": "coco18",
+    "rep155": "coco18",
+    "hri": "coco18",
+    "openpose25": "body25",
+    "halpe": "halpe26",
+    "blazepose": "mediapipe33",
+    "mediapipe": "mediapipe33",
+    "wholebody": "coco_wholebody133",
+    "coco_wholebody": "coco_wholebody133",
+}
+
 
 def get_layout(name: str) -> Layout:
-    """Look up a layout by name (``coco17``, ``h36m17``, ``body25``, ``wang12``)."""
+    """Look up a layout by name or alias (``coco17``, ``coco18``, ``halpe26``, ``mediapipe33``, ...)."""
     try:
-        return LAYOUTS[name.strip().lower()]
+        key = name.strip().lower()
+        return LAYOUTS[ALIASES.get(key, key)]
     except (KeyError, AttributeError):
         raise UnknownLayoutError(
             f"unknown keypoint layout {name!r}; expected one of {sorted(LAYOUTS)}"

@@ -1,0 +1,110 @@
+"""``pose-lifter export``: the 3D skeletons of a bag as CSV, NPZ or JSON (no MCAP needed).
+
+One row per lifted skeleton, in bag order:
+
+- CSV: ``stamp_ns, frame_id, track_id, joint, x, y, z`` (one line per joint, metres) plus the
+  skeleton's ``reprojection_error`` and ``warm_started`` on each line;
+- NPZ (``numpy.load(f)``, no pickle): ``stamp_ns (N,)``, ``track_id (N,)``, ``joints (N, 12, 3)``,
+  ``joint_names (12,)``, ``frame_id (N,)``, ``reprojection_error (N,)``, ``objective (N,)``,
+  ``warm_started (N,)``;
+- JSON: ``{"joint_names": [...], "frames": [{"stamp_ns", "frame_id", "skeletons": [{"track_id",
+  "joints", "reprojection_error", "objective", "warm_started"}]}]}`` (one entry per message, also
+  the empty ones).
+
+The file is written next to its final name and renamed at the end: an error leaves nothing.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+
+from . import messages as m
+from .bags import BagError, bag_topics, check_output, read_messages
+from .core.skeleton import JOINT_NAMES
+
+__all__ = ["FORMATS", "export_skeletons"]
+
+FORMATS: Final[tuple[str, ...]] = (".csv", ".npz", ".json")
+_MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
+
+
+def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
+    topics = bag_topics(bag)
+    if topic not in topics:
+        raise BagError(f"{bag} has no topic {topic!r}; its topics: {sorted(topics)}")
+    if topics[topic] != _MSG_3D:
+        raise BagError(f"topic {topic!r} is {topics[topic]}, not {_MSG_3D}")
+    frames = []
+    for x in read_messages(bag, [topic]):
+        skels = [{
+            "track_id": int(s.track_id),
+            "joints": m.skeleton3d_to_joints(s).tolist(),
+            "reprojection_error": float(s.reprojection_error),
+            "objective": float(s.objective),
+            "warm_started": bool(s.warm_started),
+        } for s in x.msg.skeletons]
+        frames.append({"stamp_ns": m.stamp_to_ns(x.msg.header.stamp), "frame_id": str(x.msg.header.frame_id),
+                       "skeletons": skels})
+    return frames
+
+
+def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
+    rows = [(f, s) for f in frames for s in f["skeletons"]]
+    if path.suffix == ".json":
+        json.dump({"joint_names": list(JOINT_NAMES), "frames": frames}, handle)
+    elif path.suffix == ".csv":
+        w = csv.writer(handle)
+        w.writerow(["stamp_ns", "frame_id", "track_id", "joint", "x", "y", "z", "reprojection_error",
+                    "warm_started"])
+        for f, s in rows:
+            for name, (x, y, z) in zip(JOINT_NAMES, s["joints"], strict=True):
+                w.writerow([f["stamp_ns"], f["frame_id"], s["track_id"], name, repr(x), repr(y), repr(z),
+                            repr(s["reprojection_error"]), int(s["warm_started"])])
+    else:
+        np.savez_compressed(
+            handle,
+            stamp_ns=np.array([f["stamp_ns"] for f, _ in rows], dtype=np.int64),
+            track_id=np.array([s["track_id"] for _, s in rows], dtype=np.int64),
+            joints=np.array([s["joints"] for _, s in rows], dtype=np.float64).reshape(
+                len(rows), len(JOINT_NAMES), 3),
+            joint_names=np.array(JOINT_NAMES),
+            frame_id=np.array([f["frame_id"] for f, _ in rows], dtype=np.str_),
+            reprojection_error=np.array([s["reprojection_error"] for _, s in rows], dtype=np.float64),
+            objective=np.array([s["objective"] for _, s in rows], dtype=np.float64),
+            warm_started=np.array([s["warm_started"] for _, s in rows], dtype=bool),
+        )
+
+
+def export_skeletons(bag: str | Path, out: str | Path, topic: str = "/skeletons_3d",
+                     overwrite: bool = False) -> tuple[int, int]:
+    """Write the ``Skeleton3DArray`` messages of ``topic`` to ``out`` (format from its suffix).
+
+    Returns
+    -------
+    (messages, skeletons) : tuple of int
+
+    Raises
+    ------
+    BagError
+        Unknown suffix, existing output (without ``overwrite``), missing directory, missing topic
+        or wrong type.
+    """
+    path = check_output(out, FORMATS, overwrite)
+    frames = _frames(bag, topic)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent.resolve())
+    try:
+        with os.fdopen(fd, "wb" if path.suffix == ".npz" else "w", **({} if path.suffix == ".npz" else
+                                                                        {"newline": ""})) as handle:
+            _write(path, frames, handle)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return len(frames), sum(len(f["skeletons"]) for f in frames)

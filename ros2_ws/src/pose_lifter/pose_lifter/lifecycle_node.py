@@ -1,0 +1,88 @@
+"""``ros2 run pose_lifter lifter_lifecycle``: the lifter as a managed (lifecycle) node.
+
+The same node as ``lifter`` (:class:`pose_lifter.node.LifterNode`, same name, parameters and
+topics), driven by the standard ``rclpy.lifecycle`` transitions (``/pose_lifter/change_state``,
+``ros2 lifecycle set /pose_lifter configure``, a lifecycle manager such as nav2's):
+
+- **configure**: load the basis file, build the solver and compile or load its kernels, create
+  the publishers and ``/diagnostics`` (a bad parameter or basis file fails the transition with
+  the reason, and the node stays unconfigured);
+- **activate**: subscribe to ``keypoints_2d`` and ``camera_info``: lifting starts;
+- **deactivate**: unsubscribe (the solver stays loaded; activating again is immediate);
+- **cleanup**: destroy the publishers; **shutdown**: as cleanup, from any state.
+
+``ros2 run pose_lifter lifter`` (the plain node) does configure + activate in its constructor.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from .core import PoseLifterError
+from .node import NODE_NAME, LifterNode
+from .run import run_node
+
+__all__ = ["LifecycleLifterNode", "main"]
+
+
+class LifecycleLifterNode(LifterNode, LifecycleNode):
+    """:class:`LifterNode` whose start is split into lifecycle transitions (see the module doc)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        self._configured = False
+        self._active = False
+        super().__init__(**kwargs)
+
+    def _deferred_start(self) -> bool:
+        return True
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self.configure_lifter()
+        except (PoseLifterError, OSError, ValueError) as err:
+            self.get_logger().error(f"configure failed: {err}")
+            return TransitionCallbackReturn.FAILURE
+        self._configured = True
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.activate_lifter()
+        self._active = True
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.deactivate_lifter()
+        self._active = False
+        self.get_logger().info("deactivated: not lifting")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.cleanup_lifter()
+        self._configured = False
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self._active:
+            self.deactivate_lifter()
+            self._active = False
+        if self._configured:
+            self.cleanup_lifter()
+            self._configured = False
+        return TransitionCallbackReturn.SUCCESS
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run pose_lifter lifter_lifecycle``."""
+
+    def make() -> LifecycleLifterNode:
+        node = LifecycleLifterNode()
+        node.get_logger().info("unconfigured: waiting for the configure transition")
+        return node
+
+    run_node(make, NODE_NAME, args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,130 @@
+"""The installed ``lifter_lifecycle`` driven through its lifecycle transitions on the real graph:
+nothing subscribed before activate, lifting while active, nothing after deactivate, a bad basis
+file fails configure with the reason, and the plain ``lifter`` is unchanged (other tests)."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from .conftest import DISCOVERY_TIMEOUT, INSTALL, REPO, GraphClient, LifterProcess
+from .test_lifter_graph import CHEAP, good_frame
+
+pytestmark = pytest.mark.ros
+
+EXE = INSTALL / "pose_lifter" / "lib" / "pose_lifter" / "lifter_lifecycle"
+
+
+@pytest.fixture
+def managed(lifter_env: dict[str, str], tmp_path: Any) -> Iterator[Any]:
+    started: list[LifterProcess] = []
+
+    def start(*params: str) -> LifterProcess:
+        args = [str(EXE), "--ros-args"]
+        for p in (*[f"{k}:={v}" for k, v in CHEAP.items()], *params):
+            args += ["-p", p]
+        log = tmp_path / f"lifecycle{len(started)}.log"
+        with open(log, "wb") as f:
+            proc = subprocess.Popen(args, env=lifter_env, stdout=f, stderr=subprocess.STDOUT, cwd=REPO)
+        started.append(LifterProcess(proc, log))
+        return started[-1]
+
+    yield start
+    for handle in started:
+        was_alive = handle.alive()
+        code = handle.interrupt()
+        assert not was_alive or (code == 0 and "Traceback" not in handle.log()), handle.log()
+
+
+class Lifecycle:
+    """Client of /pose_lifter/change_state and /pose_lifter/get_state."""
+
+    def __init__(self, graph: GraphClient) -> None:
+        from lifecycle_msgs.srv import ChangeState, GetState
+
+        self.graph = graph
+        self.change = graph.node.create_client(ChangeState, "/pose_lifter/change_state")
+        self.get = graph.node.create_client(GetState, "/pose_lifter/get_state")
+        graph.spin_until(lambda: self.change.service_is_ready() and self.get.service_is_ready(),
+                         DISCOVERY_TIMEOUT, "the lifecycle services")
+
+    def state(self) -> str:
+        from lifecycle_msgs.srv import GetState
+
+        return str(self.graph._call(self.get, GetState.Request()).current_state.label)
+
+    def transition(self, label: str) -> bool:
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        ids = {"configure": Transition.TRANSITION_CONFIGURE, "activate": Transition.TRANSITION_ACTIVATE,
+               "deactivate": Transition.TRANSITION_DEACTIVATE, "cleanup": Transition.TRANSITION_CLEANUP,
+               "shutdown": Transition.TRANSITION_INACTIVE_SHUTDOWN}
+        req = ChangeState.Request()
+        req.transition.id = ids[label]
+        return bool(self.graph._call(self.change, req).success)
+
+
+def settle(graph: GraphClient, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        graph.executor.spin_once(timeout_sec=0.05)
+
+
+def test_lifecycle_transitions(graph: GraphClient, managed: Any) -> None:
+    proc = managed()
+    lc = Lifecycle(graph)
+    graph.lifter = proc
+    assert lc.state() == "unconfigured"
+    settle(graph, 1.0)
+    assert graph.pub_keypoints.get_subscription_count() == 0
+    assert graph.sub_skeletons.get_publisher_count() == 0
+
+    t0 = time.monotonic()
+    assert lc.transition("configure")
+    configure_s = time.monotonic() - t0
+    assert lc.state() == "inactive"
+    graph.spin_until(lambda: graph.sub_skeletons.get_publisher_count() > 0, DISCOVERY_TIMEOUT, "publishers")
+    settle(graph, 1.0)
+    assert graph.pub_keypoints.get_subscription_count() == 0  # configured, not subscribed
+    assert "solver ready in" in proc.log()
+
+    t0 = time.monotonic()
+    assert lc.transition("activate")
+    activate_s = time.monotonic() - t0
+    assert lc.state() == "active"
+    graph.wait_for_lifter(proc)  # subscribed and answering
+    answer = graph.send(good_frame(graph.types, 1))
+    assert len(answer.skeletons.skeletons) == 1
+    print(f"configure {configure_s:.2f} s, activate {activate_s:.3f} s")
+    assert activate_s < configure_s  # the work is in configure
+
+    assert lc.transition("deactivate")
+    assert lc.state() == "inactive"
+    graph.spin_until(lambda: graph.pub_keypoints.get_subscription_count() == 0, 10.0, "unsubscribing")
+    assert lc.transition("activate") and lc.state() == "active"
+    graph.skeletons.clear()
+    graph.markers.clear()
+    graph.wait_for_lifter(proc)
+    assert len(graph.send(good_frame(graph.types, 2)).skeletons.skeletons) == 1
+    assert lc.transition("deactivate") and lc.transition("cleanup")
+    assert lc.state() == "unconfigured"
+    graph.spin_until(lambda: graph.sub_skeletons.get_publisher_count() == 0, 10.0, "publishers gone")
+    assert lc.transition("configure") and lc.state() == "inactive"  # configure again after cleanup
+    assert lc.transition("shutdown") and lc.state() == "finalized"
+    assert proc.alive()
+
+
+def test_configure_with_a_bad_basis_file_fails_with_the_reason(graph: GraphClient, managed: Any,
+                                                               tmp_path: Any) -> None:
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a basis file")
+    proc = managed(f"bases_file:={bad}")
+    lc = Lifecycle(graph)
+    assert not lc.transition("configure")
+    assert lc.state() == "unconfigured" and proc.alive()
+    assert "configure failed:" in proc.log()

@@ -1,0 +1,263 @@
+"""``pose-lifter lift`` on real-world-shaped bags: another topic name, yolo_ros input, kept
+topics, the node's params file, bounded memory on a bag with a large image topic, and one clear
+line (exit 2, no output file) for every bad input. Every MCAP written is checked with the
+independent ``mcap`` reader (tests/mcap_check.py)."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from detector_poses import coco17, model_xy
+from mcap_check import check_mcap
+from pose_lifter import bags, cli
+
+REPO = Path(__file__).resolve().parents[1]
+WALK = REPO / "bags" / "walk_clean.mcap"
+PARAMS = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
+THIRD_PARTY = REPO / "tests" / "ros" / "msgs"
+
+
+def renamed(src: Path, dst: Path, names: dict[str, str], extra: Any = None) -> Path:
+    """A copy of a bag with topics renamed (bytes untouched); ``extra(writer, raw)`` may add more."""
+    with bags.BagWriter(dst, compress=False) as w:
+        for raw in bags.read_raw(src):
+            w.write_raw(dataclasses.replace(raw, topic=names.get(raw.topic, raw.topic)))
+            if extra is not None:
+                extra(w, raw)
+    return dst
+
+
+def lift(*args: str) -> int:
+    return cli.main(["lift", *args, "--quiet", "--workers", "1"])
+
+
+def test_lift_topic_camera_info_topic_and_keep(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = renamed(WALK, tmp_path / "in.mcap", {"/keypoints_2d": "/detector/pose",
+                                                "/camera_info": "/cam/camera_info"})
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), "--topic", "/detector/pose", "--camera-info-topic",
+                "/cam/camera_info", "--keep", "/cam/camera_info", "--max-messages", "10") == 0
+    counts = check_mcap(out)
+    assert set(counts) == {"/cam/camera_info", "/skeletons_3d", "/skeleton_markers"}
+    assert counts["/skeletons_3d"] == 10
+    skels = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
+    z = np.array([[p.z for p in s.joints] for a in skels for s in a.skeletons])
+    assert np.all(np.abs(z.mean(axis=1) - 5.0) < 1.0)  # placed with the camera's focal length
+    assert "lifted 10 of 10 skeletons" in capsys.readouterr().out
+    # without --keep everything is copied (and the default topic does not exist here)
+    assert lift(str(bag), "--out", str(tmp_path / "all.mcap"), "--topic", "/detector/pose",
+                "--max-messages", "3") == 0
+    assert {"/detector/pose", "/cam/camera_info", "/ground_truth/skeletons_3d"} <= set(
+        check_mcap(tmp_path / "all.mcap"))
+
+
+def test_lift_yolo_detection_array_bag(tmp_path: Path) -> None:
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    bags.register_msg_package(store, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
+    f = {n: bags.message_factory(f"yolo_msgs/msg/{n}", store)
+         for n in ("DetectionArray", "Detection", "KeyPoint2D", "KeyPoint2DArray", "Point2D")}
+    header = bags.message_factory("std_msgs/msg/Header", store)
+    time = bags.message_factory("builtin_interfaces/msg/Time", store)
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with Writer(tmp_path / "yolo", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/yolo/detections", "yolo_msgs/msg/DetectionArray", typestore=store)
+        for i in range(5):
+            kp, conf = coco17(model_xy(30.0 + 3 * i))
+            data = [f["KeyPoint2D"](id=k + 1, point=f["Point2D"](x=float(x), y=float(y)), score=float(c))
+                    for k, ((x, y), c) in enumerate(zip(kp, conf, strict=True))]
+            msg = f["DetectionArray"](header=header(stamp=time(sec=1, nanosec=i * 10**8), frame_id="cam"),
+                                      detections=[f["Detection"](class_name="person", id="7",
+                                                                 keypoints=f["KeyPoint2DArray"](data=data))])
+            w.write(conn, 10**9 + i * 10**8, store.serialize_cdr(msg, "yolo_msgs/msg/DetectionArray"))
+    bag = next((tmp_path / "yolo").glob("*.mcap"))
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), "--topic", "/yolo/detections") == 0
+    counts = check_mcap(out)
+    assert counts["/yolo/detections"] == 5 and counts["/skeletons_3d"] == 5
+    answers = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
+    assert [s.track_id for a in answers for s in a.skeletons] == [7] * 5
+    assert sum(s.warm_started for a in answers for s in a.skeletons) == 4
+
+
+def test_params_file_sets_the_node_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = PARAMS.read_text().replace("warm_start: true", "warm_start: false")
+    (tmp_path / "p.yaml").write_text(text.replace("/**:\n", "pose_lifter:\n", 1))  # the node-name key
+    out = tmp_path / "o.mcap"
+    assert lift(str(WALK), "--out", str(out), "--params-file", str(tmp_path / "p.yaml"),
+                "--max-messages", "4") == 0
+    assert "(0 warm-started" in capsys.readouterr().out
+    check_mcap(out)
+    (tmp_path / "bad.yaml").write_text(text.replace("theta: 0.1", "theta: -1.0"))
+    bad = str(tmp_path / "bad.yaml")
+    assert lift(str(WALK), "--out", str(tmp_path / "b.mcap"), "--params-file", bad) == 2
+    err = capsys.readouterr().err
+    assert "theta" in err and "Traceback" not in err and not (tmp_path / "b.mcap").exists()
+
+
+def bad_inputs(tmp: Path) -> list[tuple[list[str], str]]:
+    (tmp / "truncated.mcap").write_bytes(WALK.read_bytes()[:5000])
+    (tmp / "empty.mcap").write_bytes(b"")
+    (tmp / "exists.mcap").write_bytes(b"x")
+    (tmp / "adir.mcap").mkdir()
+    (tmp / "noparams.yaml").write_text("other_node:\n  ros__parameters:\n    theta: 1.0\n")
+    w, o = str(WALK), str(tmp / "o.mcap")
+    return [
+        ([str(tmp / "missing.mcap"), "--out", o], "bag not found"),
+        ([str(tmp / "truncated.mcap"), "--out", o], "cannot read"),
+        ([str(tmp / "empty.mcap"), "--out", o], "cannot read"),
+        ([w, "--out", str(tmp / "o.bag")], "must end in .mcap"),
+        ([w, "--out", str(tmp / "exists.mcap")], "exists already"),
+        ([w, "--out", str(tmp / "adir.mcap")], "is a directory"),
+        ([w, "--out", str(tmp / "nodir" / "o.mcap")], "does not exist"),
+        ([w, "--out", o, "--topic", "/nope"], "has no topic '/nope'"),
+        ([w, "--out", o, "--topic", "/ground_truth/skeletons_3d"], "lift takes"),
+        ([w, "--out", o, "--camera-info-topic", "/keypoints_2d"], "not sensor_msgs/msg/CameraInfo"),
+        ([w, "--out", o, "--keep", "/camera_info", "/images"], "to keep"),
+        ([w, "--out", o, "--params-file", str(tmp / "none.yaml")], "cannot read params file"),
+        ([w, "--out", o, "--params-file", str(tmp / "noparams.yaml")], "no /** / pose_lifter"),
+    ]
+
+
+def test_bad_inputs_one_line_exit_2_no_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for args, expected in bad_inputs(tmp_path):
+        assert lift(*args) == 2, args
+        err = capsys.readouterr().err
+        assert expected in err, (args, err)
+        assert err.count("\n") == 1 and err.startswith("pose-lifter lift: error: "), err
+        assert not (tmp_path / "o.mcap").exists() and not (tmp_path / "nodir").exists()
+    assert (tmp_path / "exists.mcap").read_bytes() == b"x"
+
+
+@pytest.mark.slow
+def test_streaming_memory_does_not_grow_with_a_large_image_topic(tmp_path: Path) -> None:
+    image = bags.message_factory("sensor_msgs/msg/Image")
+    pixels = np.frombuffer(np.random.default_rng(0).bytes(640 * 480 * 3), dtype=np.uint8)
+
+    def add_image(w: bags.BagWriter, raw: bags.RawMessage) -> None:
+        if raw.topic == "/keypoints_2d":
+            w.write("/camera/image_raw", raw.stamp_ns, image(height=480, width=640, encoding="rgb8",
+                                                             step=1920, data=pixels), "sensor_msgs/msg/Image")
+
+    big = renamed(WALK, tmp_path / "big.mcap", {}, add_image)
+    assert big.stat().st_size > 100e6  # 120 images of 0.9 MB
+
+    def peak_rss_mb(bag: Path, out: Path, *extra: str) -> float:
+        code = ("import resource, sys; from pose_lifter import cli; "
+                f"rc = cli.main(['lift', {str(bag)!r}, '--out', {str(out)!r}, '--quiet', '--workers', '1', "
+                f"*{list(extra)!r}]); "
+                "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024); sys.exit(rc)")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        return float(done.stdout.strip().splitlines()[-1])
+
+    small = peak_rss_mb(WALK, tmp_path / "small_out.mcap")
+    kept = peak_rss_mb(big, tmp_path / "big_out.mcap")
+    dropped = peak_rss_mb(big, tmp_path / "big_none.mcap", "--keep", "none")
+    print(f"peak RSS: small bag {small:.0f} MB, 110 MB image bag kept {kept:.0f} MB, "
+          f"dropped {dropped:.0f} MB")
+    assert kept - small < 30.0 and dropped - small < 15.0
+    assert check_mcap(tmp_path / "big_out.mcap")["/camera/image_raw"] == 120
+    assert "/camera/image_raw" not in check_mcap(tmp_path / "big_none.mcap")
+
+
+def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import csv
+    import json
+
+    from pose_lifter import messages as m
+
+    lifted = tmp_path / "l.mcap"
+    assert lift(str(REPO / "bags" / "two_people.mcap"), "--out", str(lifted), "--max-messages", "3",
+                "--keep", "none") == 0
+    truth = [(m.stamp_to_ns(a.header.stamp), s.track_id, m.skeleton3d_to_joints(s))
+             for a in (x.msg for x in bags.read_messages(lifted, ["/skeletons_3d"])) for s in a.skeletons]
+    assert len(truth) == 6
+    for fmt in ("csv", "npz", "json"):
+        assert cli.main(["export", str(lifted), "--out", str(tmp_path / f"e.{fmt}")]) == 0
+    data = np.load(tmp_path / "e.npz", allow_pickle=False)
+    assert data["joints"].shape == (6, 12, 3) and str(data["joint_names"][0]) == "left_shoulder"
+    with open(tmp_path / "e.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    frames = json.loads((tmp_path / "e.json").read_text())["frames"]
+    from_json = [(fr["stamp_ns"], s["track_id"], np.array(s["joints"]))
+                 for fr in frames for s in fr["skeletons"]]
+    assert len(rows) == 6 * 12
+    for i, (stamp, tid, joints) in enumerate(truth):
+        assert data["stamp_ns"][i] == stamp and data["track_id"][i] == tid
+        np.testing.assert_array_equal(data["joints"][i], joints)
+        assert from_json[i][:2] == (stamp, tid)
+        np.testing.assert_array_equal(from_json[i][2], joints)
+        xyz = [[float(r["x"]), float(r["y"]), float(r["z"])] for r in rows[12 * i:12 * i + 12]]
+        np.testing.assert_array_equal(np.array(xyz), joints)
+        assert int(rows[12 * i]["stamp_ns"]) == stamp and int(rows[12 * i]["track_id"]) == tid
+    capsys.readouterr()
+    for args, expected in [
+        ([str(lifted), "--out", str(tmp_path / "e.txt")], "must end in .csv or .npz or .json"),
+        ([str(lifted), "--out", str(tmp_path / "e.csv")], "exists already"),
+        ([str(WALK), "--out", str(tmp_path / "w.csv")], "has no topic '/skeletons_3d'"),
+        ([str(WALK), "--out", str(tmp_path / "w.csv"), "--topic", "/keypoints_2d"], "not pose_lifter_msgs"),
+        ([str(tmp_path / "nope.mcap"), "--out", str(tmp_path / "w.csv")], "bag not found"),
+    ]:
+        assert cli.main(["export", *args]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err
+        assert not (tmp_path / "w.csv").exists()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []  # no temp files
+
+
+def test_play_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for args, expected in [([str(WALK), "--topics", "/nope"], "has no topic(s) ['/nope']"),
+                           ([str(WALK), "--rate", "0"], "rate must be > 0"),
+                           ([str(tmp_path / "x.mcap")], "bag not found")]:
+        assert cli.main(["play", *args]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err
+
+
+def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
+    """A bag written before Skeleton3D had ``observed`` / ``joint_weights``: its kept ground truth
+    is rebuilt in today's definition (one layout per type in the output, readable by both readers)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    old = get_typestore(Stores.ROS2_JAZZY)
+    texts = {n: (bags.msg_dir() / f"{n}.msg").read_text() for n in bags.MSG_NAMES}
+    texts["Skeleton3D"] = texts["Skeleton3D"].split("\n# Per joint (order of joint_names)")[0] + "\n"
+    assert "observed" not in texts["Skeleton3D"]
+    types: dict[str, Any] = {}
+    for n, text in texts.items():
+        types.update(get_types_from_msg(text, f"pose_lifter_msgs/msg/{n}"))
+    old.register(types)
+    gt = [x for x in bags.read_raw(WALK) if x.topic == "/ground_truth/skeletons_3d"][:3]
+    msgs = [bags.pose_lifter_typestore().deserialize_cdr(x.data, x.msgtype) for x in gt]
+    with Writer(tmp_path / "old", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {}
+        for x in bags.read_raw(WALK):
+            if x.topic == "/ground_truth/skeletons_3d":
+                continue
+            if x.topic not in conns:
+                conns[x.topic] = w.add_connection(x.topic, x.msgtype, msgdef=x.msgdef, rihs01=x.rihs01)
+            w.write(conns[x.topic], x.stamp_ns, x.data)
+        c = w.add_connection("/ground_truth/skeletons_3d", "pose_lifter_msgs/msg/Skeleton3DArray",
+                             typestore=old)
+        for x, msg in zip(gt, msgs, strict=True):
+            w.write(c, x.stamp_ns, old.serialize_cdr(bags.upgrade_message(msg, x.msgtype, old), x.msgtype))
+    bag = next((tmp_path / "old").glob("*.mcap"))
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), "--max-messages", "3") == 0
+    counts = check_mcap(out)
+    assert counts["/ground_truth/skeletons_3d"] == 3 and counts["/skeletons_3d"] == 3
+    back = [x.msg for x in bags.read_messages(out, ["/ground_truth/skeletons_3d"])]
+    for a, b in zip(back, msgs, strict=True):
+        assert len(a.skeletons[0].observed) == 0
+        np.testing.assert_array_equal([[p.x, p.y, p.z] for p in a.skeletons[0].joints],
+                                      [[p.x, p.y, p.z] for p in b.skeletons[0].joints])
