@@ -364,7 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the node's params YAML (config/lifter.yaml): lift with the live node's options; "
                    "flags given with non-default values win")
     p.set_defaults(func=_cmd_lift,
-                   lift_defaults={"variant": "full", "starts": 30, "leg_length": 0.43})
+                   lift_defaults={"variant": "full", "starts": 30, "leg_length": 0.43, "mode": "hybrid"})
 
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted .mcap")
