@@ -348,7 +348,7 @@ class Lifter:
         warm: WarmStart | None = None,
         limb_proportions: NDArray[np.float64] | None = None,
         data_weight: float = 1.0,
-        temporal_weight: float | None = None,
+        temporal_weight: float = 0.0,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -362,16 +362,17 @@ class Lifter:
             Non-finite coordinates also count as missing.
         warm : WarmStart, optional
             Previous solution of the same person: a single start from it replaces the
-            multi-start. In hybrid mode its pose is also blended into the prior term's target
-            (``options.temporal_weight``: temporal smoothness).
+            multi-start (hybrid: its camera starts the prior's pose; see ``temporal_weight``).
         limb_proportions : ndarray, shape (8,), optional
             Hybrid: the person's limb proportions (e.g. a track's estimate over its frames), used
             for the limb constraints with ``options.prior_limbs``.
         data_weight : float
             Hybrid: factor on the 2D term's weights, in (0, 1] (a track's estimate of its
             detector's noise: :class:`pose_lifter.core.tracking.TrackPolicy`).
-        temporal_weight : float, optional
-            Hybrid with a warm start: replaces ``options.temporal_weight`` for this frame.
+        temporal_weight : float
+            Hybrid with a warm start: weight ``w`` of the warm start's pose in the prior term's
+            target ``(P + w Y) / (1 + w)`` (0: none; the per-track policy sets it from the
+            track's 2D noise, up to ``options.temporal_weight``).
 
         Returns
         -------
@@ -396,7 +397,9 @@ class Lifter:
         if mode == "hybrid":
             if not 0.0 < data_weight <= 1.0:
                 raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
-            tw = self._options.temporal_weight if temporal_weight is None else float(temporal_weight)
+            tw = float(temporal_weight)
+            if not 0.0 <= tw <= 1e3:
+                raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
             runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w * data_weight, norm, warm,
                                                                       cam0, limb_proportions, tw)
             w = w / data_weight

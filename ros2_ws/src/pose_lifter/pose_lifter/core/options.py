@@ -167,9 +167,10 @@ class LifterOptions:
         proportions, at the bases' overall size. (Per frame, the prior's own limb lengths were
         measured too noisy: 4 held-out training trials with 20 % outliers, 110 -> 123 mm.)
     temporal_weight : float
-        Hybrid with a warm start: the prior term's target is ``(P + w Y) / (1 + w)``, ``P`` the
-        prior's pose and ``Y`` the previous frame's (causal temporal smoothing; 0 = none). The
-        per-track policy scales it with the track's estimated 2D noise (none on clean input).
+        Hybrid, tracked (:class:`pose_lifter.core.tracking.TrackPolicy`): the largest weight ``w``
+        of the previous frame's pose ``Y`` in the prior term's target ``(P + w Y) / (1 + w)``
+        (causal temporal smoothing), reached with heavy 2D noise; the policy scales it with the
+        track's estimated noise (none on clean input: smoothing is then only lag).
     hybrid_alternations : int
         Hybrid: alternations of each run at most (``max_alternations`` is the paper's). The
         prior's start is close to the answer; measured on 6 held-out training-split tracks
