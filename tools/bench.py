@@ -1,9 +1,9 @@
 """Speed benchmark of the lifter on the committed bags (``make bench``).
 
-Prints, in one run:
+Prints, in one run, for the default hybrid mode and beside it the paper's method alone:
 
-* warm-started tracking latency per person-frame (the node's use: ``Lifter.lift(..., warm=
-  previous.warm_start())`` per track), median / p95 / max, with the mean objective and the
+* warm-started tracking latency per person-frame (the node's use: each track through the core's
+  per-track policy ``TrackPolicy``), median / p95 / max, with the mean objective and the
   P-MPJPE against the bags' ground truth (right-lower-leg units);
 * cold-start latency with the default multi-start (``n_starts`` k-means centres);
 * fast path vs the cvxpy+Clarabel reference path (``camera_solver=pose_solver="cvxpy"``: the
@@ -50,7 +50,8 @@ from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.skeleton import normalise_pose
-from pose_lifter.core.types import LiftResult, WarmStart
+from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.core.types import LiftResult
 from pose_lifter.scenes import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from threadpoolctl import threadpool_limits
 
@@ -109,23 +110,25 @@ def pct(a: Sequence[float], q: float) -> float:
 
 def lift_track(lifter: Lifter, tr: Track, warm_start: bool = True
                ) -> tuple[list[LiftResult | None], list[float], list[float], list[bool]]:
-    """Lift a track frame by frame (warm from the previous frame) like the node does."""
+    """Lift a track frame by frame at 30 Hz through the node's per-track policy
+    (:class:`pose_lifter.core.tracking.TrackPolicy`)."""
     results: list[LiftResult | None] = []
     wall: list[float] = []
     cpu: list[float] = []
     warmed: list[bool] = []
-    warm: WarmStart | None = None
-    for pts, conf in zip(tr.points, tr.confidence, strict=True):
+    policy = TrackPolicy(lifter, warm_start=warm_start)
+    for i, (pts, conf) in enumerate(zip(tr.points, tr.confidence, strict=True)):
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            res: LiftResult | None = lifter.lift(pts, conf, warm=warm if warm_start else None)
+            tracked = policy.lift(0, i * 33_333_333, pts, conf)  # 30 Hz
+            res: LiftResult | None = tracked.result
+            was_warm = tracked.warm_started
         except (InvalidInputError, TooFewJointsError):
-            res = None
+            res, was_warm = None, False
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
-        warmed.append(warm is not None and warm_start)
+        warmed.append(was_warm)
         results.append(res)
-        warm = res.warm_start() if res is not None else None
     return results, wall, cpu, warmed
 
 
@@ -161,8 +164,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     n_frames = sum(len(t.points) for t in tracks)
     print(f"bench: {len(a.bags)} bags, {len(tracks)} tracks, {n_frames} person-frames; BLAS threads 1; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cpus")
-    opts = LifterOptions()
-    print(f"options: defaults (n_starts={opts.n_starts}, n_refine={opts.n_refine}, "
+    modes = (("hybrid (default)", LifterOptions()), ("paper's method", LifterOptions(mode="paper")))
+    for label, opts in modes:
+        bench_options(label, opts, a, bases, tracks)
+
+    # 4. fast vs reference path on a few frames, same options apart from the solvers
+    if a.ref_frames > 0:
+        reference_comparison(bases, tracks, a.ref_frames, a.ref_alternations)
+
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    kb_c = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    print(f"\npeak RSS: {kb / 1024:.0f} MB (this process), {kb_c / 1024:.0f} MB (largest pool worker)")
+    return 0
+
+
+def bench_options(label: str, opts: LifterOptions, a: argparse.Namespace, bases: PoseBases,
+                  tracks: list[Track]) -> None:
+    """Sections 1-3 (tracking latency, cold starts, offline throughput) for one option set."""
+    print(f"\n=== {label}: mode={opts.mode} (n_starts={opts.n_starts}, n_refine={opts.n_refine}, "
           f"max_alternations={opts.max_alternations}, alpha_solver={opts.alpha_solver})")
 
     # 1. warm-started tracking (first frame of each track is cold and reported separately)
@@ -234,15 +253,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"  {a.workers} processes: {n_full / t_pool:8.1f} poses/s (incl. pool start-up; bounded by the "
           f"longest track, {longest} frames, whose warm-start chain is sequential), results identical to "
           f"one process: {same}")
-
-    # 4. fast vs reference path on a few frames, same options apart from the solvers
-    if a.ref_frames > 0:
-        reference_comparison(bases, tracks, a.ref_frames, a.ref_alternations)
-
-    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    kb_c = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    print(f"\npeak RSS: {kb / 1024:.0f} MB (this process), {kb_c / 1024:.0f} MB (largest pool worker)")
-    return 0
 
 
 def reference_comparison(bases: PoseBases, tracks: list[Track], n_frames: int, n_alt: int) -> None:
