@@ -28,7 +28,7 @@ setup(
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            "lifter = pose_lifter.node:main",
+            "lifter = pose_lifter._entry:lifter",
             "pose-lifter = pose_lifter.cli:main",
             "action_recognition = pose_lifter.examples.action_recognition:main",
         ],
