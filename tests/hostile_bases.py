@@ -108,4 +108,6 @@ HOSTILE: dict[str, tuple[Callable[[Path], Path], str]] = {
     "zip bomb (20,000 starts)": (_zip_bomb, "MAX_START_POSES"),
     "lying header (1.25 M starts)": (_lying_header, "MAX_START_POSES"),
     "inf in mean": (_variant(mean=np.full(36, np.inf)), "non-finite"),
+    "4 MB metadata": (_variant(metadata=np.array('{"a": "' + "x" * 1_000_000 + '"}')),
+                      "characters, more than"),
 }

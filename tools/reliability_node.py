@@ -286,7 +286,7 @@ def fuzz(args: argparse.Namespace) -> int:
         log = h.close()
     elapsed = time.monotonic() - started
     print(f"fuzz: {sum(sent.values())} malformed messages of {len(sent)} kinds in {elapsed:.0f} s, "
-          f"a good frame after every 3")
+          f"a good frame after every 3 (machine load average at the end {os.getloadavg()[0]:.2f})")
     print(f"{'kind':28s} {'sent':>6s}")
     for name in names:
         print(f"{name:28s} {sent[name]:6d}")
@@ -331,7 +331,7 @@ def soak(args: argparse.Namespace) -> int:
     n_people = max(len(f.skeletons) for f in frames)
     period = 1.0 / args.rate
     span = stamp_to_ns(frames[-1].header.stamp) - stamp_to_ns(frames[0].header.stamp) + round(period * 1e9)
-    samples: list[tuple[float, float, int, int]] = []  # (t, rss MB, published, answered)
+    samples: list[tuple[float, float, int, int, float]] = []  # (t, RSS MB, published, answered, load)
     sent: list[int] = []
     try:
         h.handshake()
@@ -340,7 +340,7 @@ def soak(args: argparse.Namespace) -> int:
         i = 0
         while (now := time.perf_counter() - start) < args.seconds and h.alive():
             if now >= next_sample:
-                samples.append((now, _rss_mb(h.proc.pid), len(sent), len(h.answers)))
+                samples.append((now, _rss_mb(h.proc.pid), len(sent), len(h.answers), os.getloadavg()[0]))
                 next_sample += args.sample_every
             target = i * period
             while (now := time.perf_counter() - start) < target:
@@ -359,16 +359,17 @@ def soak(args: argparse.Namespace) -> int:
             h.spin(0.05)
         alive = h.alive()
         if alive:
-            samples.append((time.perf_counter() - start, _rss_mb(h.proc.pid), len(sent), len(h.answers)))
+            samples.append((time.perf_counter() - start, _rss_mb(h.proc.pid), len(sent), len(h.answers),
+                            os.getloadavg()[0]))
     finally:
         log = h.close()
     answered = sum(1 for s in sent if s in h.answers)
     lifted = sum(len(h.answers[s].skeletons) for s in sent if s in h.answers)
     print(f"soak: {args.seconds:g} s at {args.rate:g} Hz, {n_people} people per frame, reliable input "
           f"(depth 20); RSS every {args.sample_every:g} s")
-    print(f"{'t (s)':>7s} {'RSS (MB)':>9s} {'published':>10s} {'answered':>9s}")
-    for t_s, r, p, a in samples:
-        print(f"{t_s:7.0f} {r:9.2f} {p:10d} {a:9d}")
+    print(f"{'t (s)':>7s} {'RSS (MB)':>9s} {'published':>10s} {'answered':>9s} {'load 1 min':>10s}")
+    for t_s, r, p, a, load in samples:
+        print(f"{t_s:7.0f} {r:9.2f} {p:10d} {a:9d} {load:10.2f}")
     base = samples[1][1] if len(samples) > 2 else (samples[0][1] if samples else float("nan"))
     growth = samples[-1][1] - base if samples else float("nan")
     rows = [

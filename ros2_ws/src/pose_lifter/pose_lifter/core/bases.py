@@ -29,6 +29,7 @@ __all__ = [
     "learn_classwise_pca_bases",
     "learn_pca_bases",
     "learn_sparse_bases",
+    "npz_member_shapes",
     "sparse_codes",
 ]
 
@@ -188,19 +189,39 @@ _MEMBERS: Final[dict[str, tuple[str, int]]] = {
 }
 
 
-def _check_npz_headers(path: Path) -> None:
-    """Check a basis ``.npz`` from its zip directory and ``.npy`` headers only (no data read)."""
+def npz_member_shapes(
+    path: Path, members: dict[str, tuple[str, int]], max_string_chars: int = MAX_METADATA_CHARS
+) -> dict[str, tuple[int, ...]]:
+    """Shapes of an ``.npz``'s members, from its zip directory and ``.npy`` headers only.
+
+    No array data is read, so a file whose headers announce gigabytes costs nothing; callers
+    check the shapes against their caps before ``np.load``. Reusable for any ``.npz`` model file.
+
+    Parameters
+    ----------
+    path : Path
+    members : dict
+        Exactly the members the file must hold: name (without ``.npy``) -> (allowed dtype kinds,
+        e.g. ``"f"`` or ``"U"``, number of dimensions).
+    max_string_chars : int
+        Longest string allowed in a ``"U"`` member.
+
+    Raises
+    ------
+    BasisFileError
+        Not a zip, other members, an object / structured / unexpected dtype, wrong dimensions.
+    """
     if not zipfile.is_zipfile(path):
         raise BasisFileError("not an .npz archive (PoseBases.save writes one)")
     with zipfile.ZipFile(path) as zf:
         names = {info.filename: info for info in zf.infolist()}
-        expected = {f"{m}.npy" for m in _MEMBERS}
+        expected = {f"{m}.npy" for m in members}
         if set(names) != expected:
             missing = sorted(expected - set(names))
             extra = sorted(set(names) - expected)
             raise BasisFileError(f"members must be {sorted(expected)}; missing {missing}, unexpected {extra}")
         shapes: dict[str, tuple[int, ...]] = {}
-        for member, (kinds, ndim) in _MEMBERS.items():
+        for member, (kinds, ndim) in members.items():
             with zf.open(f"{member}.npy") as f:
                 version = np.lib.format.read_magic(f)
                 if version == (1, 0):
@@ -214,9 +235,15 @@ def _check_npz_headers(path: Path) -> None:
             if len(shape) != ndim:
                 raise BasisFileError(f"{member} must have {ndim} dimensions, got shape {shape}")
             shapes[member] = tuple(int(n) for n in shape)
-            if member == "metadata" and dtype.itemsize // 4 > MAX_METADATA_CHARS:
-                raise BasisFileError(f"metadata of {dtype.itemsize // 4} characters, more than "
-                                     f"{MAX_METADATA_CHARS}")
+            if dtype.kind == "U" and dtype.itemsize // 4 > max_string_chars:
+                raise BasisFileError(f"{member} of {dtype.itemsize // 4} characters, more than "
+                                     f"{max_string_chars}")
+    return shapes
+
+
+def _check_npz_headers(path: Path) -> None:
+    """Check a basis ``.npz`` against the caps from its headers only (no data read)."""
+    shapes = npz_member_shapes(path, _MEMBERS)
     k = shapes["components"][1]
     if k > MAX_COMPONENTS:
         raise BasisFileError(f"{k} components, more than {MAX_COMPONENTS} (MAX_COMPONENTS)")
