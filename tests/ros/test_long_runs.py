@@ -4,6 +4,7 @@ frame, a non-finite value published, the node's death or RSS growth above the li
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -32,4 +33,5 @@ def test_short_fuzz(lifter_env: dict[str, str]) -> None:
 
 def test_short_soak(lifter_env: dict[str, str]) -> None:
     out = _run(lifter_env, "soak", "--seconds", "40", "--sample-every", "5")
-    assert "frames answered" in out and "1200/1200" in out  # 40 s x 30 Hz, every frame answered
+    (answered, published), = re.findall(r"frames answered\s+(\d+)/(\d+)", out)
+    assert answered == published and int(published) >= 1190, out  # 40 s x 30 Hz, every frame answered
