@@ -12,7 +12,7 @@ fuzz
     skeletons of that frame.
 soak
     Replays ``bags/five_people.mcap`` (5 people) at ``--rate`` Hz in real time, input QoS
-    overridden to reliable (depth 20) on both sides; every frame must be answered. The node's
+    overridden to reliable (``--depth``, default 20) on both sides; every frame must be answered. The node's
     RSS is sampled every 10 s.
 
 Both print a table and exit 1 on any lost good frame, any non-finite value published, the
@@ -48,7 +48,7 @@ RELIABLE_INPUT_YAML = """pose_lifter:
       /keypoints_2d:
         subscription:
           reliability: reliable
-          depth: 20
+          depth: {depth}
 """
 
 
@@ -71,7 +71,7 @@ def _finite(msg: Any) -> bool:
 class Harness:
     """The lifter process and this process's client node."""
 
-    def __init__(self, params: list[str], reliable_input: bool) -> None:
+    def __init__(self, params: list[str], reliable_input: bool, depth: int = 20) -> None:
         import rclpy
         from pose_lifter.messages import rclpy_types
         from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -86,7 +86,7 @@ class Harness:
         cmd = [str(LIFTER), "--ros-args", "-p", "stats_period:=10.0"]
         if reliable_input:
             qos = Path(tempfile.mkdtemp()) / "qos.yaml"
-            qos.write_text(RELIABLE_INPUT_YAML)
+            qos.write_text(RELIABLE_INPUT_YAML.format(depth=depth))
             cmd += ["--params-file", str(qos)]
         for p in params:
             cmd += ["-p", p]
@@ -98,7 +98,7 @@ class Harness:
         self.n_answers = 0
         self.n_markers = 0
         out_qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        in_qos = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE) if reliable_input \
+        in_qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE) if reliable_input \
             else qos_profile_sensor_data
         self.pub = self.node.create_publisher(self.t.Skeleton2DArray, "keypoints_2d", in_qos)
         self.pub_info = self.node.create_publisher(self.t.CameraInfo, "camera_info", qos_profile_sensor_data)
@@ -325,7 +325,7 @@ def soak(args: argparse.Namespace) -> int:
     from rclpy.serialization import deserialize_message
 
     store = pose_lifter_typestore()
-    h = Harness([], reliable_input=True)
+    h = Harness([], reliable_input=True, depth=args.depth)
     frames = [deserialize_message(bytes(store.serialize_cdr(x.msg, x.msgtype)), h.t.Skeleton2DArray)
               for x in read_messages(args.bag) if x.topic == TOPIC_KEYPOINTS]
     n_people = max(len(f.skeletons) for f in frames)
@@ -366,7 +366,7 @@ def soak(args: argparse.Namespace) -> int:
     answered = sum(1 for s in sent if s in h.answers)
     lifted = sum(len(h.answers[s].skeletons) for s in sent if s in h.answers)
     print(f"soak: {args.seconds:g} s at {args.rate:g} Hz, {n_people} people per frame, reliable input "
-          f"(depth 20); RSS every {args.sample_every:g} s")
+          f"(depth {args.depth}); RSS every {args.sample_every:g} s")
     print(f"{'t (s)':>7s} {'RSS (MB)':>9s} {'published':>10s} {'answered':>9s} {'load 1 min':>10s}")
     for t_s, r, p, a, load in samples:
         print(f"{t_s:7.0f} {r:9.2f} {p:10d} {a:9d} {load:10.2f}")
@@ -395,6 +395,8 @@ def main() -> int:
     s.add_argument("--bag", default=str(REPO / "bags" / "five_people.mcap"))
     s.add_argument("--sample-every", type=float, default=10.0, help="seconds between RSS samples")
     s.add_argument("--max-rss-growth", type=float, default=5.0, help="MB allowed")
+    s.add_argument("--depth", type=int, default=20,
+                   help="queue depth of the reliable input, both sides (the README's override: 20)")
     args = ap.parse_args()
     try:
         import rclpy  # noqa: F401
