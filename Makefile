@@ -15,7 +15,7 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast lint demo bench bench-node experiments bases bags prior accuracy lock clean ros
+.PHONY: help venv test test-fast lint demo bench bench-node fuzz soak experiments bases bags prior accuracy lock clean ros
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
@@ -23,6 +23,8 @@ help:
 	@echo "make ros         build ros2_ws (messages + node) with colcon"
 	@echo "make bench       speed: fast path vs cvxpy reference, side by side"
 	@echo "make bench-node  speed of the installed node at 30 Hz with 5 people"
+	@echo "make fuzz        10,000 malformed messages of 28 kinds into the installed node (~6 min)"
+	@echo "make soak        10 min at 30 Hz x 5 people, reliable input, RSS every 10 s"
 	@echo "make experiments the paper's experiments on CMU data -> out/experiments"
 	@echo "make bases       re-learn the packaged basis file from ../shared/data/cmu"
 	@echo "make bags        regenerate the committed bags from ../shared/data/cmu"
@@ -60,6 +62,14 @@ bench: venv ros
 # the installed node fed bags/five_people.mcap at 30 Hz (issue 5's live measurement)
 bench-node: venv ros
 	source ros2_ws/install/setup.bash && $(PY) tools/bench_node.py
+
+# issue 10's long runs against the installed node (tools/reliability_node.py; CI runs short
+# versions in tests/ros/test_long_runs.py). FUZZ_ARGS / SOAK_ARGS pass options through.
+fuzz: venv ros
+	source ros2_ws/install/setup.bash && $(PY) tools/reliability_node.py fuzz $(FUZZ_ARGS)
+
+soak: venv ros
+	source ros2_ws/install/setup.bash && $(PY) tools/reliability_node.py soak $(SOAK_ARGS)
 
 experiments: venv
 	$(PY) -m pose_lifter.cli experiments --data $(CMU_DATA) --out out/experiments

@@ -29,7 +29,7 @@ setup(
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            "lifter = pose_lifter.node:main",
+            "lifter = pose_lifter._entry:lifter",
             "adapter = pose_lifter.adapter_node:main",
             "lifter_lifecycle = pose_lifter.lifecycle_node:main",
             "pose-lifter = pose_lifter.cli:main",

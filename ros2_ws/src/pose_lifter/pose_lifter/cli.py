@@ -1,11 +1,19 @@
 """``pose-lifter``: offline commands (learn bases, make bags, lift, export, play, evaluate, demo).
 
 Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
+
+Exit codes: 0 success; 2 a usage error (an option out of range, a missing input file or data
+directory, an output that exists or is a directory) and every other library error; 1 a data
+error (a corrupt, truncated, empty or foreign bag, an invalid basis file, input with nothing to
+lift); 130 interrupted (Ctrl-C). Each failure prints one ``pose-lifter <cmd>: error: ...`` line
+and leaves no partial output file (set ``POSE_LIFTER_DEBUG=1`` for the traceback).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import shlex
 import sys
 import warnings
@@ -19,6 +27,47 @@ __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
 
 _ACK = ("The data used in this project was obtained from mocap.cs.cmu.edu. The database was "
         "created with funding from NSF EIA-0196217.")
+
+
+def _number(kind: type[int] | type[float], low: float | None = None, high: float | None = None,
+            low_open: bool = False) -> Any:
+    """An argparse ``type``: an int or a finite float in [low, high] (or (low, high] if low_open)."""
+    def parse(text: str) -> int | float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a{'n integer' if kind is int else ' number'}: {text!r}") \
+                from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if low is not None and (value <= low if low_open else value < low):
+            raise argparse.ArgumentTypeError(f"must be {'>' if low_open else '>='} {low:g}, got {text}")
+        if high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"must be <= {high:g}, got {text}")
+        return value
+    parse.__name__ = kind.__name__  # argparse names the type in its messages
+    return parse
+
+
+_POS_INT = _number(int, 1)
+_NONNEG = _number(float, 0.0)
+_POSITIVE = _number(float, 0.0, low_open=True)
+_FRACTION = _number(float, 0.0, 1.0)
+_FINITE = _number(float)
+
+
+def _out_is_a_directory(args: argparse.Namespace) -> bool:
+    """An output file path must not name a directory (it would be written inside it)."""
+    out = getattr(args, "out", None)
+    return args.cmd in ("lift", "make-bag", "learn-bases") and out is not None and Path(out).is_dir()
+
+
+#: Errors that mean the input data is bad (exit code 1); see the module doc.
+def _is_data_error(exc: BaseException) -> bool:
+    from .core.errors import BasisFileError, InvalidInputError
+
+    return (isinstance(exc, BasisFileError | InvalidInputError)
+            or type(exc).__module__.startswith("rosbags"))
 
 
 def _command_line(argv: Sequence[str] | None) -> str:
@@ -284,12 +333,13 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", default="full", help="paper variant: full (= L1WAWS) or L1NAWS, L2WANS, ...")
     p.add_argument("--solver", choices=("admm", "cvxpy"), default="admm",
                    help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference")
-    p.add_argument("--starts", type=int, default=30, help="cold-start multi-start count (1 = mean pose)")
+    p.add_argument("--starts", type=_number(int, 1, 10_000), default=30,
+                   help="cold-start multi-start count (1 = mean pose)")
     p.add_argument("--no-warm-start", action="store_true", help="solve every frame cold")
     p.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid",
                    help="hybrid: the learned prior inside the paper's robust fit (default); paper: the "
                         "paper's method alone (--solver cvxpy implies it); learned: the prior alone")
-    p.add_argument("--leg-length", type=float, default=0.43,
+    p.add_argument("--leg-length", type=_number(float, 0.05, 2.0), default=0.43,
                    help="right lower leg in metres, to make the lifted pose metric")
 
 
@@ -311,12 +361,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
                    "$POSE_LIFTER_CMU_DATA)")
     p.add_argument("--method", choices=("sparse", "pca", "classwise-pca"), default="sparse")
-    p.add_argument("--n-bases", type=int, default=None, help="default 200 (sparse), 30 (pca)")
-    p.add_argument("--sparsity", type=float, default=0.1, help="L1 weight of sparse learning")
-    p.add_argument("--n-per-class", type=int, default=6, help="classwise-pca components per class")
-    p.add_argument("--step", type=int, default=8, help="use every STEP-th 120 Hz frame (default 8: 15 Hz)")
-    p.add_argument("--starts", type=int, default=30, help="multi-start poses stored (k-means + mean)")
-    p.add_argument("--n-iter", type=int, default=2000, help="dictionary-learning iterations")
+    p.add_argument("--n-bases", type=_POS_INT, default=None, help="default 200 (sparse), 30 (pca)")
+    p.add_argument("--sparsity", type=_POSITIVE, default=0.1, help="L1 weight of sparse learning")
+    p.add_argument("--n-per-class", type=_POS_INT, default=6, help="classwise-pca components per class")
+    p.add_argument("--step", type=_POS_INT, default=8,
+                   help="use every STEP-th 120 Hz frame (default 8: 15 Hz)")
+    p.add_argument("--starts", type=_POS_INT, default=30, help="multi-start poses stored (k-means + mean)")
+    p.add_argument("--n-iter", type=_POS_INT, default=2000, help="dictionary-learning iterations")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output .npz")
     p.set_defaults(func=_cmd_learn_bases)
@@ -325,19 +376,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("trials", nargs="+", help="one trial id per person, e.g. 07_05 02_05")
     p.add_argument("--out", required=True, help="output .mcap")
     p.add_argument("--data", default=None, help="CMU data dir")
-    p.add_argument("--fps", type=float, default=30.0, help="frame rate (mocap is 120 Hz)")
-    p.add_argument("--start", type=float, default=0.0, help="seconds into each trial")
-    p.add_argument("--frames", type=int, default=None, help="number of frames (default: all)")
-    p.add_argument("--view-angle", type=float, default=0.0,
+    p.add_argument("--fps", type=_number(float, 0.0, 1000.0, low_open=True), default=30.0,
+                   help="frame rate (mocap is 120 Hz)")
+    p.add_argument("--start", type=_NONNEG, default=0.0, help="seconds into each trial")
+    p.add_argument("--frames", type=_POS_INT, default=None, help="number of frames (default: all)")
+    p.add_argument("--view-angle", type=_FINITE, default=0.0,
                    help="degrees about the vertical axis from the first person's initial facing "
                    "direction (0 = front, 90 = their left side, 180 = behind)")
-    p.add_argument("--orbit-speed", type=float, default=0.0, help="camera orbit, degrees per second")
-    p.add_argument("--distance", type=float, default=5.0, help="camera distance in metres")
+    p.add_argument("--orbit-speed", type=_FINITE, default=0.0, help="camera orbit, degrees per second")
+    p.add_argument("--distance", type=_POSITIVE, default=5.0, help="camera distance in metres")
     p.add_argument("--no-follow", action="store_true", help="static camera (default: slides with the people)")
-    p.add_argument("--spacing", type=float, default=1.4, help="metres between people")
-    p.add_argument("--noise", type=float, default=0.0, help="2D Gaussian noise std, right-lower-leg units")
-    p.add_argument("--outliers", type=float, default=0.0, help="fraction of joints displaced 1-3 legs")
-    p.add_argument("--missing", type=float, default=0.0, help="fraction of joints with confidence 0")
+    p.add_argument("--spacing", type=_NONNEG, default=1.4, help="metres between people")
+    p.add_argument("--noise", type=_NONNEG, default=0.0, help="2D Gaussian noise std, right-lower-leg units")
+    p.add_argument("--outliers", type=_FRACTION, default=0.0, help="fraction of joints displaced 1-3 legs")
+    p.add_argument("--missing", type=_FRACTION, default=0.0, help="fraction of joints with confidence 0")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_make_bag)
@@ -346,11 +398,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", help="input .mcap")
     p.add_argument("--out", required=True, help="output .mcap (input topics + /skeletons_3d + markers)")
     _add_lifter_options(p)
-    p.add_argument("--every", type=int, default=1, help="lift every N-th message only")
-    p.add_argument("--max-messages", type=int, default=None, help="stop after N lifted messages")
+    p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
+    p.add_argument("--max-messages", type=_POS_INT, default=None, help="stop after N lifted messages")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true")
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=_POS_INT, default=None,
                    help="processes lifting the tracks in parallel (results identical to 1; "
                    "default: the cores available)")
     p.add_argument("--topic", default="/keypoints_2d",
@@ -376,8 +428,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("play", help="publish a bag's topics into the live ROS graph at the bag's rate")
     p.add_argument("bag", help="input .mcap")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
-    p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1: real time)")
-    p.add_argument("--wait", type=float, default=0.0,
+    p.add_argument("--rate", type=_number(float, 1e-3, 1e3), default=1.0,
+                   help="speed factor (default 1: real time)")
+    p.add_argument("--wait", type=_number(float, 0.0, 3600.0), default=0.0,
                    help="seconds to wait for a subscriber on every topic first (default 0)")
     p.set_defaults(func=_cmd_play)
 
@@ -391,7 +444,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
     _add_lifter_options(p)
-    p.add_argument("--every", type=int, default=3, help="lift every N-th frame (default 3: 10 Hz)")
+    p.add_argument("--every", type=_POS_INT, default=3, help="lift every N-th frame (default 3: 10 Hz)")
     # a one-minute demo: 10 cold starts per person (the first frame), warm starts after that
     p.set_defaults(func=_cmd_demo, starts=10)
 
@@ -400,7 +453,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "$POSE_LIFTER_CMU_DATA)")
     p.add_argument("--out", default="out/experiments", help="output directory")
     p.add_argument("--quick", action="store_true", help="a tiny run (a couple of poses) for tests")
-    p.add_argument("--processes", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument("--processes", type=_POS_INT, default=2, help="worker processes (default 2)")
     p.set_defaults(func=_cmd_experiments)
     return parser
 
@@ -409,15 +462,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pose-lifter`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if _out_is_a_directory(args):
+        print(f"pose-lifter {args.cmd}: error: --out {args.out} is a directory; name the output file",
+              file=sys.stderr)
+        return 2
     args.command = _command_line(argv)
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        print(f"pose-lifter {args.cmd}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if os.environ.get("POSE_LIFTER_DEBUG"):
+            raise
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        if type(exc).__module__.startswith("rosbags") or not isinstance(exc, _LIBRARY_ERRORS):
+            text = f"{type(exc).__name__}: {text}"
+        print(f"pose-lifter {args.cmd}: error: {text[:2000]}", file=sys.stderr)
+        return 1 if _is_data_error(exc) else 2
+
+
+def _library_errors() -> tuple[type[BaseException], ...]:
     from .bags import BagError
     from .core.errors import PoseLifterError
 
-    try:
-        return int(args.func(args))
-    except (PoseLifterError, BagError, FileNotFoundError) as exc:
-        print(f"pose-lifter {args.cmd}: error: {exc}", file=sys.stderr)
-        return 2
+    return (PoseLifterError, BagError, OSError, ValueError)
+
+
+_LIBRARY_ERRORS: tuple[type[BaseException], ...] = _library_errors()
 
 
 if __name__ == "__main__":

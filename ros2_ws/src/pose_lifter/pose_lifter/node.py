@@ -24,13 +24,17 @@ with the core's reason.
 
 from __future__ import annotations
 
+import difflib
+import os
+import signal
 import sys
 import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from types import FrameType
+from typing import Any, Final, NoReturn
 
 import numpy as np
 import rclpy
@@ -41,16 +45,17 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.signals import SignalHandlerOptions
 
 from . import diagnostics, messages
 from .core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from .core._jit import HAVE_NUMBA
-from .core.errors import InvalidInputError, OptionsError
+from .core.errors import InvalidInputError
 from .core.layouts import Layout, get_layout
 from .core.tracking import OutOfOrderFrameError, TrackPolicy
 
@@ -58,6 +63,14 @@ __all__ = ["PARAMS", "LifterNode", "ParamSpec", "main", "params_yaml"]
 
 NODE_NAME: Final[str] = "pose_lifter"
 MARKER_NS: Final[str] = "pose_lifter"
+#: Seconds between two warnings of one kind (each kind is warned at least once per period).
+WARN_PERIOD: Final[float] = 5.0
+#: Characters of a warning at most (input-derived text is never logged whole).
+MAX_WARNING_CHARS: Final[int] = 300
+
+
+class StartupError(Exception):
+    """The node cannot start (bad parameter, basis file): one [FATAL] line and exit code 1."""
 
 
 class SkipSkeleton(Exception):
@@ -174,6 +187,13 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "(0 = until deleted: markers outlive the node).", 0.0, 3600.0),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics updates (0 = none).", 0.0, 3600.0,
               read_only=True),
+    # caps on what reaches an output or a log (issue 10): over-cap input is skipped with a warning
+    ParamSpec("max_frame_id_length", 256, "Input header.frame_id longer than this (characters): the frame "
+              "is skipped, unanswered (it would be copied into every output message).", 1, 65536),
+    ParamSpec("max_layout_length", 64, "Input layout names longer than this: the frame is skipped.", 1, 4096),
+    ParamSpec("max_keypoints", 512, "Skeletons with more keypoints than this are skipped.", 1, 100000),
+    ParamSpec("strict_parameters", False, "Refuse to start when a parameter given at start-up is not one "
+              "of the node's (a misspelt name); false: a warning.", read_only=True),
 )
 _SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
 
@@ -240,6 +260,10 @@ class NodeSettings:
     max_coordinate: float
     frame_id: str
     marker_lifetime: float
+    max_frame_id_length: int
+    max_layout_length: int
+    max_keypoints: int
+
 
 
 @dataclass
@@ -253,6 +277,7 @@ class FrameStats:
     latencies: list[float] = field(default_factory=list)
     solve_times: list[float] = field(default_factory=list)
     skipped: Counter[str] = field(default_factory=Counter)
+    clipped: int = 0  # skeletons lifted with confidences clipped into [0, 1]
 
 
 def _all_finite(*values: Any) -> bool:
@@ -273,6 +298,8 @@ class LifterNode(Node):
         self._types = messages.rclpy_types()
         for spec in PARAMS:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        self._last_warned: dict[str, float] = {}  # kind -> monotonic time of its last warning
+        self._check_unknown_parameters()
         self._callbacks_added = False
         if not self._deferred_start():  # the lifecycle node configures and activates on request
             self.configure_lifter()
@@ -292,7 +319,7 @@ class LifterNode(Node):
         # topics exist, so the first frame is not the one that pays for it
         kernels = "numba-compiled" if HAVE_NUMBA else "plain Python (pip install numba: ~3x faster)"
         self.get_logger().info(f"solver ready in {self._lifter.warm_up():.1f} s, {kernels} kernels")
-        self._pending: tuple[PoseBases, LifterOptions] | None = None
+        self._pending: tuple[PoseBases, Lifter] | None = None
         self._settings = self._read_settings()
 
         self._policy = self._make_policy()
@@ -367,6 +394,9 @@ class LifterNode(Node):
             max_coordinate=float(self._param("max_coordinate")),
             frame_id=str(self._param("frame_id")),
             marker_lifetime=float(self._param("marker_lifetime")),
+            max_frame_id_length=int(self._param("max_frame_id_length")),
+            max_layout_length=int(self._param("max_layout_length")),
+            max_keypoints=int(self._param("max_keypoints")),
         )
 
     def _make_policy(self) -> TrackPolicy:
@@ -395,24 +425,29 @@ class LifterNode(Node):
                 # not an error: the lifter uses the starts it has
                 self.get_logger().info(
                     f"n_starts={options.n_starts} but the bases carry {bases.start_alphas.shape[0]} starts")
-        except (OptionsError, PoseLifterError, OSError, ValueError) as err:
+            # built here, not in the post-set callback: whatever the new bases and options
+            # refuse (e.g. limb targets) is refused now, and the running solver stays as it was
+            lifter = (Lifter(bases, options) if bases is not self._lifter.bases
+                      or options != self._lifter.options else self._lifter)
+        except Exception as err:  # nothing may raise out of a parameter callback (it kills the node)
             self._pending = None
-            return SetParametersResult(successful=False, reason=str(err))
-        self._pending = (bases, options)
+            reason = str(err) if isinstance(err, PoseLifterError | OSError | ValueError) else repr(err)
+            self.get_logger().warning(f"parameter change refused: {reason[:1000]}")
+            return SetParametersResult(successful=False, reason=reason)
+        self._pending = (bases, lifter)
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
-        """Post-set callback: switch to what :meth:`_validate_parameters` built."""
+        """Post-set callback: switch to what :meth:`_validate_parameters` built (cannot fail)."""
         self._settings = self._read_settings()
         if self._pending is None:
             return
-        bases, options = self._pending
+        bases, lifter = self._pending
         self._pending = None
         if bases is not self._bases:
             self._bases = bases
             self._policy.clear()  # coefficients of other bases are meaningless
-        if bases is not self._lifter.bases or options != self._lifter.options:
-            self._lifter = Lifter(bases, options)
+        self._lifter = lifter
         st = self._settings
         self._policy.configure(self._lifter, st.track_timeout, st.warm_start, st.reinit_ratio)
         names = ", ".join(f"{p.name}={p.value!r}" for p in params if p.name in _SPECS)
@@ -431,6 +466,8 @@ class LifterNode(Node):
     def on_keypoints(self, msg: Any) -> None:
         """Lift one frame and publish its answer (always, even when every skeleton is skipped)."""
         received = time.perf_counter()
+        if self._over_cap(msg):
+            return
         if not msg.header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
             msg.header.frame_id = self._settings.frame_id
         stamp_ns = messages.stamp_to_ns(msg.header.stamp)
@@ -482,12 +519,16 @@ class LifterNode(Node):
     ) -> tuple[Any, NDArray[np.float64]]:
         """Lift one skeleton -> (``Skeleton3D``, metric joints (12, 3)); raise to skip it."""
         track_id = int(skel.track_id)
+        if len(skel.keypoints) > self._settings.max_keypoints:
+            raise SkipSkeleton("too many keypoints", f"track {track_id}: {len(skel.keypoints)} keypoints, "
+                               f"more than max_keypoints={self._settings.max_keypoints}")
         if track_id >= 0:
             if track_id in seen:
                 raise SkipSkeleton("duplicate track id",
                                    f"duplicate track id {track_id} in one frame: later copy skipped")
             seen.add(track_id)
         points, confidence = messages.skeleton2d_to_arrays(skel, layout.name)
+        confidence = self._clip_confidence(confidence, track_id)
         visible = confidence >= self._lifter.options.confidence_threshold
         if not np.any(visible):
             raise SkipSkeleton("no confident keypoints",
@@ -538,11 +579,60 @@ class LifterNode(Node):
     # ------------------------------------------------------------------ diagnostics
 
     def _warn_skip(self, kind: str, text: str) -> None:
-        """Count a skipped input and warn (one call site, so one rate-limited warning stream)."""
+        """Count a skipped input and warn, rate-limited per kind (each kind at least once a period)."""
         self._stats.skipped[kind] += 1
         self._diagnostics.skipped(kind)
-        self.get_logger().warning(f"{text} (this warning is rate-limited; counts in the stats line)",
-                                  throttle_duration_sec=5.0)
+        self._warn_kind(kind, text)
+
+    def _warn_kind(self, kind: str, text: str) -> None:
+        now = time.monotonic()
+        last = self._last_warned.get(kind)
+        if last is not None and now - last < WARN_PERIOD:
+            return
+        self._last_warned[kind] = now
+        self.get_logger().warning(f"{text[:MAX_WARNING_CHARS]} (warnings of this kind are rate-limited "
+                                  f"to one per {WARN_PERIOD:g} s; counts in the stats line)")
+
+    def _over_cap(self, msg: Any) -> bool:
+        """Skip (unanswered) a frame whose strings would be copied into outputs or logs."""
+        s = self._settings
+        n_frame, n_layout = len(msg.header.frame_id), len(msg.layout)
+        if n_frame > s.max_frame_id_length:
+            self._warn_skip("frame_id too long", f"frame skipped, unanswered: header.frame_id of {n_frame} "
+                            f"characters, more than max_frame_id_length={s.max_frame_id_length}")
+            return True
+        if n_layout > s.max_layout_length:
+            self._warn_skip("layout too long", f"frame skipped, unanswered: layout name of {n_layout} "
+                            f"characters, more than max_layout_length={s.max_layout_length}")
+            return True
+        return False
+
+    def _clip_confidence(self, confidence: NDArray[np.float64], track_id: int) -> NDArray[np.float64]:
+        """Confidences outside [0, 1] are clipped into it, with a warning (they weigh the solve)."""
+        outside = (confidence < 0.0) | (confidence > 1.0)
+        if not np.any(outside):
+            return confidence
+        self._stats.clipped += 1
+        worst = float(confidence[outside][np.argmax(np.abs(confidence[outside]))])
+        self._warn_kind("confidence outside [0, 1]", f"track {track_id}: {int(outside.sum())} confidences "
+                        f"outside [0, 1] (e.g. {worst:.3g}) clipped into it")
+        return np.clip(confidence, 0.0, 1.0)
+
+    def _check_unknown_parameters(self) -> None:
+        """Report start-up parameters that are not the node's (a misspelt name is otherwise ignored)."""
+        overrides = getattr(self, "_parameter_overrides", {})
+        unknown = sorted(n for n in overrides if n not in _SPECS and n != "use_sim_time"
+                         and not n.startswith("qos_overrides."))
+        if not unknown:
+            return
+        hints = []
+        for n in unknown:
+            close = difflib.get_close_matches(n, list(_SPECS), n=1)
+            hints.append(f"{n} (did you mean {close[0]}?)" if close else n)
+        text = f"unknown parameter{'s' if len(unknown) > 1 else ''}: {', '.join(hints)}"
+        if self._param("strict_parameters"):
+            raise StartupError(f"{text} (strict_parameters is true)")
+        self.get_logger().warning(f"{text}; ignored (strict_parameters:=true refuses them)")
 
     def _log_stats(self) -> None:
         s = self._stats
@@ -559,14 +649,58 @@ class LifterNode(Node):
                      f"max {lat.max():.1f} ms")
         if solve.size:  # per person-frame
             text += f", solve median {np.median(solve):.1f} ms p95 {np.percentile(solve, 95):.1f} ms"
+        if s.clipped:
+            text += f", confidences clipped in {s.clipped} skeletons"
         if s.skipped:
             text += ", skipped: " + ", ".join(f"{k} {n}" for k, n in sorted(s.skipped.items()))
         self.get_logger().info(text)
         self._stats = FrameStats()
 
 
+def _one_line(err: BaseException) -> str:
+    """An exception as one log line: its text (or type), whitespace collapsed, at most 1000 chars."""
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text[:1000]
+
+
+class _Signals:
+    """SIGINT / SIGTERM: during start-up (loading, the first kernel compile: ~25 s) they exit at
+    once; while running they stop the spin loop after the current callback, so a frame in
+    progress is finished and published (nothing is torn down under a running solve)."""
+
+    def __init__(self) -> None:
+        self.running = False
+        self.stop = False
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._handle)
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.stop = True
+        if not self.running:
+            # Nothing runs yet, so nothing is lost: exit at once with code 0. (A KeyboardInterrupt
+            # is not enough: numba's first compile runs ctypes callbacks that swallow it, or
+            # leave llvmlite half torn down with tracebacks; numba writes cache files atomically.)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
+
+
+def _fatal(text: str) -> NoReturn:
+    """One ``[FATAL]`` line, then exit code 1."""
+    try:
+        rclpy.logging.get_logger(NODE_NAME).fatal(text)
+    except Exception:  # logging not initialised (rclpy.init itself failed)
+        print(f"[FATAL] [{NODE_NAME}]: {text}", file=sys.stderr, flush=True)
+    raise SystemExit(1)
+
+
 def main(args: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run pose_lifter lifter``."""
+    """Entry point of ``ros2 run pose_lifter lifter``.
+
+    Exit codes: 0 after SIGINT / SIGTERM (in any phase, within a frame's solve time), 1 when the
+    node cannot start (bad parameter value or type, unknown parameter with strict_parameters,
+    bad basis file, bad ROS arguments), with one ``[FATAL]`` line giving the reason.
+    """
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:
         print(params_yaml(), end="")
         return
@@ -577,20 +711,23 @@ def main(args: list[str] | None = None) -> None:
         print(f"pose_lifter: solver kernels {'compiled' if HAVE_NUMBA else 'not compiled (no numba)'} "
               f"and cached in {time.perf_counter() - start:.1f} s")
         return
-    rclpy.init(args=args)
+    signals = _Signals()
     node: LifterNode | None = None
     try:
-        node = LifterNode()
-        rclpy.spin(node)
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            node = LifterNode()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return
+        except Exception as err:  # bad start-up parameters or basis file: say why, exit 1
+            _fatal(f"cannot start: {_one_line(err)}")
+        signals.running = True
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not signals.stop and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except PoseLifterError as err:  # bad start-up parameters or basis file: say why, exit 1
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"cannot start: {err}")
-        raise SystemExit(1) from None
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a signal arrived while the node was still starting: rcl calls fail, exit quietly
     finally:
         if node is not None:
             node.destroy_node()

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import signal
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -187,6 +189,19 @@ def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default
 _WORKER: dict[str, Any] = {}
 
 
+def _worker_init() -> None:
+    """Ctrl-C ends a worker silently (the parent reports it once), not with a traceback each."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _stop_workers(ex: Any) -> None:
+    """Terminate a ProcessPoolExecutor's processes and drop its queued work."""
+    processes = getattr(ex, "_processes", None) or {}  # pid -> Process (no public accessor)
+    for proc in list(processes.values()):
+        proc.terminate()
+    ex.shutdown(wait=True, cancel_futures=True)
+
+
 def _worker_chain(chain: list[_Item]) -> list[_Done]:
     return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
                        True, _WORKER["reinit"])
@@ -258,12 +273,20 @@ def lift_messages(
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
         _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout,
                        reinit=reinit_ratio)
+        # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
+        n_proc = min(workers, len(chains), os.cpu_count() or 1)
         try:
-            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as ex:
+            ex = ProcessPoolExecutor(n_proc, mp_context=multiprocessing.get_context("fork"),
+                                     initializer=_worker_init)
+            try:
                 for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):
                     for item, d in zip(chain, outcome, strict=True):  # items come back as copies
                         done[id(item)] = dataclasses.replace(d, item=item)
                         bar.update(1)
+            except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
+                _stop_workers(ex)
+                raise
+            ex.shutdown()
         finally:
             _WORKER.clear()
     bar.close()

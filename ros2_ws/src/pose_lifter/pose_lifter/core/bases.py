@@ -9,6 +9,7 @@ Poses are normalised with :func:`pose_lifter.core.skeleton.normalise_pose` first
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -21,16 +22,28 @@ from .skeleton import N_JOINTS, limb_lengths
 
 __all__ = [
     "DEFAULT_BASES_PATH",
+    "MAX_COMPONENTS",
+    "MAX_METADATA_CHARS",
+    "MAX_START_POSES",
     "PoseBases",
     "learn_classwise_pca_bases",
     "learn_pca_bases",
     "learn_sparse_bases",
+    "npz_member_shapes",
     "sparse_codes",
 ]
 
 #: The basis file shipped with the package (see tools/learn_default_bases.sh).
 DEFAULT_BASES_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "bases_sparse200.npz"
 _FORMAT_VERSION: Final[int] = 1
+#: Caps of a basis file, checked in the ``.npy`` headers before any data is read (a 2 MB
+#: ``.npz`` can otherwise expand to gigabytes): multi-start coefficient rows, bases ``k``, and
+#: characters of the JSON metadata. The packaged file has 30 starts, k = 200, 800 characters.
+MAX_START_POSES: Final[int] = 10_000
+MAX_COMPONENTS: Final[int] = 5_000
+MAX_METADATA_CHARS: Final[int] = 1_000_000
+#: Column norm below which a basis vector is degenerate (the learned ones have norm 1).
+_MIN_COMPONENT_NORM: Final[float] = 1e-9
 
 
 @dataclass
@@ -79,6 +92,18 @@ class PoseBases:
                           ("start_alphas", self.start_alphas)):
             if not np.all(np.isfinite(arr)):
                 raise BasisFileError(f"{name} has non-finite values")
+        if self.n_bases < 1:
+            raise BasisFileError("components must have at least one basis (k >= 1), got k = 0")
+        if self.start_alphas.shape[0] < 1:
+            raise BasisFileError("start_alphas must have at least one start (row 0: the mean pose)")
+        if not np.all(np.isfinite(self.limb_proportions)) or not np.all(self.limb_proportions > 0):
+            raise BasisFileError("limb_proportions must be 8 finite positive lengths, got "
+                                 f"{np.array2string(self.limb_proportions, precision=3)}")
+        norms = np.linalg.norm(self.components, axis=0)
+        if np.any(norms < _MIN_COMPONENT_NORM):
+            bad = np.flatnonzero(norms < _MIN_COMPONENT_NORM)
+            raise BasisFileError(f"{bad.size} of {self.n_bases} components are (almost) zero vectors "
+                                 f"(first: column {int(bad[0])})")
 
     @property
     def n_bases(self) -> int:
@@ -117,13 +142,28 @@ class PoseBases:
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> PoseBases:
-        """Read a basis file; ``None`` loads the packaged default."""
+        """Read and completely validate a basis file; ``None`` loads the packaged default.
+
+        The file must be an ``.npz`` with exactly the members :meth:`save` writes. Member
+        dtypes and shapes, and the caps :data:`MAX_START_POSES`, :data:`MAX_COMPONENTS` and
+        :data:`MAX_METADATA_CHARS`, are checked in the ``.npy`` headers before any data is
+        read; then the values (finite, positive limb proportions, non-zero components, at least
+        one start). Nothing is unpickled.
+
+        Raises
+        ------
+        BasisFileError
+            For every problem, with the reason (never another exception type).
+        """
         p = Path(path) if path is not None else DEFAULT_BASES_PATH
         if not p.is_file():
             raise BasisFileError(f"basis file not found: {p}")
         try:
+            _check_npz_headers(p)
             with np.load(p, allow_pickle=False) as z:
-                meta = json.loads(str(z["metadata"]))
+                meta = json.loads(str(z["metadata"][()]))
+                if not isinstance(meta, dict):
+                    raise BasisFileError(f"metadata must be a JSON object, got {type(meta).__name__}")
                 return cls(
                     mean=z["mean"],
                     components=z["components"],
@@ -132,8 +172,90 @@ class PoseBases:
                     limb_proportions=z["limb_proportions"],
                     metadata=meta,
                 )
-        except (KeyError, ValueError, OSError) as exc:
+        except BasisFileError as exc:
+            raise BasisFileError(f"bad basis file {p}: {exc}") from None
+        except (KeyError, ValueError, OSError, EOFError, TypeError, zipfile.BadZipFile,
+                RuntimeError, MemoryError) as exc:
             raise BasisFileError(f"cannot read basis file {p}: {exc}") from exc
+
+
+#: Members of a basis file: name -> (dtype kinds allowed, number of dimensions).
+_MEMBERS: Final[dict[str, tuple[str, int]]] = {
+    "mean": ("f", 1),
+    "components": ("f", 2),
+    "start_alphas": ("f", 2),
+    "limb_proportions": ("f", 1),
+    "metadata": ("U", 0),
+}
+
+
+def npz_member_shapes(
+    path: Path, members: dict[str, tuple[str, int]], max_string_chars: int = MAX_METADATA_CHARS
+) -> dict[str, tuple[int, ...]]:
+    """Shapes of an ``.npz``'s members, from its zip directory and ``.npy`` headers only.
+
+    No array data is read, so a file whose headers announce gigabytes costs nothing; callers
+    check the shapes against their caps before ``np.load``. Reusable for any ``.npz`` model file.
+
+    Parameters
+    ----------
+    path : Path
+    members : dict
+        Exactly the members the file must hold: name (without ``.npy``) -> (allowed dtype kinds,
+        e.g. ``"f"`` or ``"U"``, number of dimensions).
+    max_string_chars : int
+        Longest string allowed in a ``"U"`` member.
+
+    Raises
+    ------
+    BasisFileError
+        Not a zip, other members, an object / structured / unexpected dtype, wrong dimensions.
+    """
+    if not zipfile.is_zipfile(path):
+        raise BasisFileError("not an .npz archive (PoseBases.save writes one)")
+    with zipfile.ZipFile(path) as zf:
+        names = {info.filename: info for info in zf.infolist()}
+        expected = {f"{m}.npy" for m in members}
+        if set(names) != expected:
+            missing = sorted(expected - set(names))
+            extra = sorted(set(names) - expected)
+            raise BasisFileError(f"members must be {sorted(expected)}; missing {missing}, unexpected {extra}")
+        shapes: dict[str, tuple[int, ...]] = {}
+        for member, (kinds, ndim) in members.items():
+            with zf.open(f"{member}.npy") as f:
+                version = np.lib.format.read_magic(f)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+                elif version == (2, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+                else:
+                    raise BasisFileError(f"{member}: unsupported .npy format version {version}")
+            if dtype.kind not in kinds or dtype.hasobject or dtype.fields is not None:
+                raise BasisFileError(f"{member} must be of dtype kind {kinds!r}, got {dtype}")
+            if len(shape) != ndim:
+                raise BasisFileError(f"{member} must have {ndim} dimensions, got shape {shape}")
+            shapes[member] = tuple(int(n) for n in shape)
+            if dtype.kind == "U" and dtype.itemsize // 4 > max_string_chars:
+                raise BasisFileError(f"{member} of {dtype.itemsize // 4} characters, more than "
+                                     f"{max_string_chars}")
+    return shapes
+
+
+def _check_npz_headers(path: Path) -> None:
+    """Check a basis ``.npz`` against the caps from its headers only (no data read)."""
+    shapes = npz_member_shapes(path, _MEMBERS)
+    k = shapes["components"][1]
+    if k > MAX_COMPONENTS:
+        raise BasisFileError(f"{k} components, more than {MAX_COMPONENTS} (MAX_COMPONENTS)")
+    n_starts = shapes["start_alphas"][0]
+    if n_starts > MAX_START_POSES:
+        raise BasisFileError(f"{n_starts} start poses, more than {MAX_START_POSES} (MAX_START_POSES)")
+    if shapes["start_alphas"][1] != k:
+        raise BasisFileError(f"start_alphas has {shapes['start_alphas'][1]} columns for {k} components")
+    d = 3 * N_JOINTS
+    if shapes["mean"] != (d,) or shapes["components"][0] != d or shapes["limb_proportions"] != (8,):
+        raise BasisFileError(f"shapes must be mean ({d},), components ({d}, k), limb_proportions (8,); got "
+                             f"{shapes['mean']}, {shapes['components']}, {shapes['limb_proportions']}")
 
 
 def _as_training_matrix(poses: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -1,0 +1,97 @@
+"""Careless command lines and broken bags (issue 10): one ``pose-lifter <cmd>: error:`` line, the
+documented exit code (2 usage, 1 data, 130 interrupted), no traceback and no output file."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from pose_lifter import cli
+
+REPO = Path(__file__).resolve().parents[1]
+BAG = REPO / "bags" / "two_people.mcap"
+FIVE = REPO / "bags" / "five_people.mcap"
+
+
+def _broken(tmp_path: Path, kind: str) -> Path:
+    p = tmp_path / f"{kind}.mcap"
+    if kind == "truncated":
+        p.write_bytes(BAG.read_bytes()[:20_000])
+    elif kind == "random":
+        p.write_bytes(os.urandom(5000))
+    else:
+        p.write_bytes(b"")
+    return p
+
+
+@pytest.mark.parametrize("kind", ["truncated", "random", "empty"])
+def test_broken_bag_is_a_data_error(kind: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out.mcap"
+    assert cli.main(["lift", str(_broken(tmp_path, kind)), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("pose-lifter lift: error: AnyReaderError"), err
+    assert not out.exists() and list(tmp_path.glob(".bagwriter-*")) == []
+
+
+@pytest.mark.parametrize("option", ["--workers=0", "--workers=-1", "--every=0", "--max-messages=0",
+                                    "--leg-length=-1", "--leg-length=nan", "--starts=0", "--workers=x"])
+def test_out_of_range_option_is_a_usage_error(option: str, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out.mcap"
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["lift", str(BAG), "--out", str(out), option])
+    assert exc.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith("pose-lifter lift: error: argument " + option.split("=")[0]), last
+    assert not out.exists()
+
+
+def test_out_naming_a_directory_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["lift", str(BAG), "--out", str(tmp_path), "--overwrite"]) == 2
+    assert "is a directory" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_basis_file_is_a_data_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    empty = tmp_path / "empty.npz"
+    empty.write_bytes(b"")
+    assert cli.main(["lift", str(BAG), "--out", str(tmp_path / "o.mcap"), "--bases", str(empty)]) == 1
+    assert "not an .npz" in capsys.readouterr().err
+    assert not (tmp_path / "o.mcap").exists()
+
+
+def test_workers_are_capped_by_tracks_and_cores(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from concurrent import futures
+
+    sizes: list[int] = []
+    real = futures.ProcessPoolExecutor
+
+    class Counting(real):  # type: ignore[misc, valid-type]
+        def __init__(self, n: int, *args: object, **kwargs: object) -> None:
+            sizes.append(n)
+            super().__init__(n, *args, **kwargs)
+
+    monkeypatch.setattr(futures, "ProcessPoolExecutor", Counting)
+    out = tmp_path / "o.mcap"
+    assert cli.main(["lift", str(FIVE), "--out", str(out), "--workers", "1000", "--max-messages", "2",
+                     "--starts", "1", "--quiet"]) == 0
+    assert sizes == [min(5, os.cpu_count() or 1)] and out.is_file()
+
+
+def test_ctrl_c_exits_130_with_one_line(tmp_path: Path) -> None:
+    out = tmp_path / "o.mcap"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "pose_lifter.cli", "lift", str(FIVE), "--out", str(out),
+                             "--workers", "2", "--solver", "cvxpy", "--quiet"],
+                            stderr=subprocess.PIPE, text=True, env=env)
+    time.sleep(5.0)  # reading, then lifting in two workers (the slow reference solver)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["pose-lifter lift: interrupted"], err
+    assert not out.exists() and list(tmp_path.glob(".bagwriter-*")) == []
