@@ -103,7 +103,8 @@ def test_params_file_sets_the_node_options(tmp_path: Path, capsys: pytest.Captur
     assert "theta" in err and "Traceback" not in err and not (tmp_path / "b.mcap").exists()
 
 
-def bad_inputs(tmp: Path) -> list[tuple[list[str], str]]:
+def bad_inputs(tmp: Path) -> list[tuple[list[str], str, int]]:
+    """(arguments, expected text, exit code): 2 usage errors, 1 data errors (unreadable bags)."""
     (tmp / "truncated.mcap").write_bytes(WALK.read_bytes()[:5000])
     (tmp / "empty.mcap").write_bytes(b"")
     (tmp / "exists.mcap").write_bytes(b"x")
@@ -111,25 +112,25 @@ def bad_inputs(tmp: Path) -> list[tuple[list[str], str]]:
     (tmp / "noparams.yaml").write_text("other_node:\n  ros__parameters:\n    theta: 1.0\n")
     w, o = str(WALK), str(tmp / "o.mcap")
     return [
-        ([str(tmp / "missing.mcap"), "--out", o], "bag not found"),
-        ([str(tmp / "truncated.mcap"), "--out", o], "cannot read"),
-        ([str(tmp / "empty.mcap"), "--out", o], "cannot read"),
-        ([w, "--out", str(tmp / "o.bag")], "must end in .mcap"),
-        ([w, "--out", str(tmp / "exists.mcap")], "exists already"),
-        ([w, "--out", str(tmp / "adir.mcap")], "is a directory"),
-        ([w, "--out", str(tmp / "nodir" / "o.mcap")], "does not exist"),
-        ([w, "--out", o, "--topic", "/nope"], "has no topic '/nope'"),
-        ([w, "--out", o, "--topic", "/ground_truth/skeletons_3d"], "lift takes"),
-        ([w, "--out", o, "--camera-info-topic", "/keypoints_2d"], "not sensor_msgs/msg/CameraInfo"),
-        ([w, "--out", o, "--keep", "/camera_info", "/images"], "to keep"),
-        ([w, "--out", o, "--params-file", str(tmp / "none.yaml")], "cannot read params file"),
-        ([w, "--out", o, "--params-file", str(tmp / "noparams.yaml")], "no /** / pose_lifter"),
+        ([str(tmp / "missing.mcap"), "--out", o], "bag not found", 2),
+        ([str(tmp / "truncated.mcap"), "--out", o], "cannot read", 1),
+        ([str(tmp / "empty.mcap"), "--out", o], "cannot read", 1),
+        ([w, "--out", str(tmp / "o.bag")], "must end in .mcap", 2),
+        ([w, "--out", str(tmp / "exists.mcap")], "exists already", 2),
+        ([w, "--out", str(tmp / "adir.mcap")], "is a directory", 2),
+        ([w, "--out", str(tmp / "nodir" / "o.mcap")], "does not exist", 2),
+        ([w, "--out", o, "--topic", "/nope"], "has no topic '/nope'", 2),
+        ([w, "--out", o, "--topic", "/ground_truth/skeletons_3d"], "lift takes", 2),
+        ([w, "--out", o, "--camera-info-topic", "/keypoints_2d"], "not sensor_msgs/msg/CameraInfo", 2),
+        ([w, "--out", o, "--keep", "/camera_info", "/images"], "to keep", 2),
+        ([w, "--out", o, "--params-file", str(tmp / "none.yaml")], "cannot read params file", 2),
+        ([w, "--out", o, "--params-file", str(tmp / "noparams.yaml")], "no /** / pose_lifter", 2),
     ]
 
 
-def test_bad_inputs_one_line_exit_2_no_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    for args, expected in bad_inputs(tmp_path):
-        assert lift(*args) == 2, args
+def test_bad_inputs_one_line_exit_code_no_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for args, expected, code in bad_inputs(tmp_path):
+        assert lift(*args) == code, args
         err = capsys.readouterr().err
         assert expected in err, (args, err)
         assert err.count("\n") == 1 and err.startswith("pose-lifter lift: error: "), err

@@ -54,6 +54,10 @@ class BagError(RuntimeError):
     """A bag cannot be read or written (missing file, missing topic, bad type)."""
 
 
+class BagReadError(BagError):
+    """A bag file exists but its content cannot be read (truncated, empty, not a bag)."""
+
+
 def check_output(path: str | Path, suffixes: tuple[str, ...], overwrite: bool = False) -> Path:
     """Refuse an output path before any work: wrong suffix, a directory, an existing file
     (without ``overwrite``), or a missing parent directory."""

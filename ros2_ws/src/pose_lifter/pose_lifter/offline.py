@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import messages as m
-from .bags import BagError, BagWriter, bag_topics, check_output, read_messages, read_raw
+from .bags import BagError, BagReadError, BagWriter, bag_topics, check_output, read_messages, read_raw
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
@@ -347,7 +347,7 @@ def check_lift_inputs(
     except BagError:
         raise
     except Exception as exc:  # rosbags' reader errors: a truncated, empty or foreign file
-        raise BagError(f"cannot read {in_path}: {exc}") from None
+        raise BagReadError(f"cannot read {in_path}: {exc}") from None
     if topic not in topics:
         raise BagError(f"{in_path} has no topic {topic!r}; its topics: {sorted(topics)}")
     if topics[topic] not in LIFTABLE_TYPES:
