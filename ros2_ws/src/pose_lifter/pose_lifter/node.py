@@ -161,6 +161,7 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("outlier_threshold", "Hybrid: reprojection residual (leg lengths) above which a visible joint "
          "is dropped as a confident outlier and the prior re-run without it (0 = off).", 0.0, 1000.0),
     _opt("hybrid_alternations", "Hybrid: alternations of each run at most.", 1, 1000),
+    _opt("hybrid_flip_warm", "Hybrid: also score the depth-mirrored hypothesis on warm frames."),
     _opt("outlier_passes", "Hybrid: outlier passes at most.", 1, 100),
     _opt("temporal_weight", "Hybrid, tracked: weight of the previous frame's pose in the prior "
          "target (scaled by the track's 2D noise).", 0.0, 1000.0),

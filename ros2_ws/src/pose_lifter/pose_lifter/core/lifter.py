@@ -527,7 +527,7 @@ class Lifter:
             if wr.objective < runs[0][1].objective:
                 wr = self._run(xn, w, wr.pose.alpha, None, n_alt, start=wr, prior=prior)
             runs.append((-1, wr))
-        if o.warm_flip:
+        if o.warm_flip and (warm is None or o.hybrid_flip_warm):
             best = min(runs, key=lambda r: r[1].objective)[1]
             runs.append((-2, self._mirrored_run(xn, w, best, prior, n_alt)))
         total = sum(r.n_iter for _, r in runs)
