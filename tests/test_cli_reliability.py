@@ -83,13 +83,31 @@ def test_workers_are_capped_by_tracks_and_cores(tmp_path: Path, monkeypatch: pyt
     assert sizes == [min(5, os.cpu_count() or 1)] and out.is_file()
 
 
+def _children(pid: int) -> list[int]:
+    """Process ids whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
 def test_ctrl_c_exits_130_with_one_line(tmp_path: Path) -> None:
     out = tmp_path / "o.mcap"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen([sys.executable, "-m", "pose_lifter.cli", "lift", str(FIVE), "--out", str(out),
                              "--workers", "2", "--solver", "cvxpy", "--quiet"],
                             stderr=subprocess.PIPE, text=True, env=env)
-    time.sleep(5.0)  # reading, then lifting in two workers (the slow reference solver)
+    # interrupt while lifting: once the two workers are forked (the slow reference solver),
+    # however long the imports and the reading take on a loaded machine
+    deadline = time.monotonic() + 120.0
+    while time.monotonic() < deadline and proc.poll() is None and not _children(proc.pid):
+        time.sleep(0.1)
+    time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err

@@ -476,7 +476,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if os.environ.get("POSE_LIFTER_DEBUG"):
             raise
         text = " ".join(str(exc).split()) or type(exc).__name__
-        if type(exc).__module__.startswith("rosbags") or not isinstance(exc, _LIBRARY_ERRORS):
+        if type(exc).__module__.startswith("rosbags") or not isinstance(exc, _library_errors()):
             text = f"{type(exc).__name__}: {text}"
         print(f"pose-lifter {args.cmd}: error: {text[:2000]}", file=sys.stderr)
         return 1 if _is_data_error(exc) else 2
@@ -488,8 +488,6 @@ def _library_errors() -> tuple[type[BaseException], ...]:
 
     return (PoseLifterError, BagError, OSError, ValueError)
 
-
-_LIBRARY_ERRORS: tuple[type[BaseException], ...] = _library_errors()
 
 
 if __name__ == "__main__":
