@@ -65,6 +65,13 @@ from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
 __all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter"]
 
+#: Relative cut-off of the bases' singular values in the minimum-norm coefficients of a start
+#: pose (:func:`_mirror_kernel`, a pseudo-inverse): the packaged bases' smallest singular value is
+#: 2.5e-7 of the largest (the next 2.6e-2); dividing by it gave the prior's poses (not in the
+#: bases' span) coefficients with ||alpha||_1 ~ 2e5: their pose was right but ``theta ||alpha||_1``
+#: dominated the objective. It also moves the paper's mirrored warm start slightly.
+PINV_RCOND = 1e-3
+
 #: The hybrid outlier pass flags a joint only beyond this many times the median disagreement of
 #: the frame's visible joints as well as beyond ``outlier_threshold`` (under heavy Gaussian noise
 #: every joint disagrees a little: the median sets the scale).
@@ -112,6 +119,8 @@ def _mirror_kernel(pose: NDArray[np.float64], rot: NDArray[np.float64], mean: ND
     for i in range(3 * n):
         body[i] -= mean[i]
     for j in range(sig.size):
+        if sig[j] <= PINV_RCOND * sig[0]:  # the pseudo-inverse: (numerically) null directions add nothing
+            continue
         c = 0.0
         for i in range(3 * n):
             c += u[i, j] * body[i]
