@@ -24,11 +24,14 @@ with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_err
 step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
 :class:`.pose.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
 paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
-Starts: the prior's pose (cold), or the warm start plus the prior's pose screened by one
-alternation (``prior_screen``); the depth-mirrored hypothesis is scored as in ``"paper"``. Then an
-outlier pass: visible joints whose reprojection residual exceeds ``outlier_threshold`` (and 3
-times the median) get weight 0, the prior is re-run without them and the fit continued from its
-solution, so a confidently wrong detection does not drag the depth.
+Starts: every frame starts from the prior's pose (with the warm start's camera when tracked; the
+warm pose competes only with ``warm_competes``), ``hybrid_alternations`` alternations per run;
+the depth-mirrored hypothesis is scored on cold solves (and warm ones with ``hybrid_flip_warm``).
+Then up to ``outlier_passes`` outlier passes: visible joints farther than ``outlier_threshold``
+(and ``OUTLIER_MEDIAN_FACTOR`` times the frame's median) from the fit's projection or from the
+prior's image position get weight 0, the prior is re-run without them and the fit is continued
+and restarted from the prior's new pose (the lower objective kept), so a confidently wrong
+detection does not drag the depth.
 
 Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
 and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances

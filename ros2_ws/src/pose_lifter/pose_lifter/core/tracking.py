@@ -6,17 +6,19 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
 * a stamp older than the track's last one by at most ``track_timeout`` is out of order: the frame
   is refused (:class:`OutOfOrderFrameError`) and the track kept; older still means the input clock
   jumped back (a looping bag): the track is forgotten and the frame lifted cold;
-* within ``track_timeout`` of the last frame the solve is warm-started from it (for speed, and in
-  hybrid mode the learned prior's pose still competes, ``LifterOptions.prior_screen``);
+* within ``track_timeout`` of the last frame the solve is warm-started from it (paper mode: its
+  pose and camera; hybrid mode: its camera, the prior's pose starting every frame);
 * re-initialisation: when a warm solve's objective exceeds ``reinit_ratio`` times the median of the
-  track's last ``history`` objectives, the frame is also solved cold and the lower objective kept
+  track's last 15 objectives, the frame is also solved cold and the lower objective kept
   (the fit has degraded: a wrong depth basin or a lost person);
 * a frame that cannot be lifted drops the track's warm start (the next frame starts cold);
 * per-track limb lengths (bones do not change within a person): the median of the learned prior's
-  limb proportions over the track's last ``limb_frames`` frames, once it has ``min_limb_frames``
+  limb proportions over the track's last LIMB_FRAMES frames, once it has MIN_LIMB_FRAMES
   of them, is passed to the lifter for its limb constraints (hybrid mode,
-  ``LifterOptions.prior_limbs``); temporal smoothness comes with the warm start
-  (``LifterOptions.temporal_weight``).
+  ``LifterOptions.prior_limbs``, off by default);
+* hybrid mode: the track's 2D noise (NOISE_FRAMES) weights the 2D term down and blends the
+  previous frame's pose into the prior's target (temporal smoothness, up to
+  ``LifterOptions.temporal_weight``).
 
 Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
 """
