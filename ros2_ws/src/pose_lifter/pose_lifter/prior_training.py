@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 
 from .core.metrics import p_mpjpe
 from .core.prior import PosePrior, prior_features
-from .core.skeleton import N_JOINTS
+from .core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from .scenes import corrupt_2d
-from .views import film, limb_scale_factors, scale_limbs, view_rotation
+from .views import limb_scale_factors, scale_limbs, view_rotation
 
 __all__ = ["Augmentation", "TrainingBatch", "make_batch", "train_prior"]
 
@@ -96,7 +96,8 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     cam = np.einsum("nab,nwjb->nwja", rots, rel)
     depth = np.where(persp[:, None, None], cam[..., 2] + dist[:, None, None], dist[:, None, None])
     pts = cam[..., :2] / np.maximum(depth, 0.05)[..., None]
-    _, _, leg = film(cur[:, -1], rots, dist, persp)
+    knee, ankle = LIMBS[RIGHT_LOWER_LEG]  # the noise unit: the leg at the centroid's depth
+    leg = np.linalg.norm(cur[:, -1, knee] - cur[:, -1, ankle], axis=-1) / dist
     vis = np.ones((n, window, N_JOINTS), dtype=bool)
     for lo in range(0, n, aug.chunk):
         hi = min(lo + aug.chunk, n)
