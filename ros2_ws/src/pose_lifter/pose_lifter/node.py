@@ -165,6 +165,10 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("outlier_passes", "Hybrid: outlier passes at most.", 1, 100),
     _opt("temporal_weight", "Hybrid, tracked: weight of the previous frame's pose in the prior "
          "target (scaled by the track's 2D noise).", 0.0, 1000.0),
+    _opt("missing_temporal_weight", "Hybrid, tracked: weight of the previous frame's pose in the prior "
+         "target of a joint missing on this frame (0 = as the others).", 0.0, 1000.0),
+    _opt("outlier_gate", "Hybrid, tracked: a joint farther than this (leg lengths) from where the track "
+         "puts it is missing for that frame (0 = off).", 0.0, 1000.0),
     _opt("prior_limbs", "Hybrid, tracked: limb constraints with the track's estimated proportions."),
     _opt("warm_competes", "Hybrid: warm solves also start from the previous frame's pose (screened)."),
     ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame."),

@@ -31,7 +31,9 @@ Then up to ``outlier_passes`` outlier passes: visible joints farther than ``outl
 (and ``OUTLIER_MEDIAN_FACTOR`` times the frame's median) from the fit's projection or from the
 prior's image position get weight 0, the prior is re-run without them and the fit is continued
 and restarted from the prior's new pose (the lower objective kept), so a confidently wrong
-detection does not drag the depth.
+detection does not drag the depth. Tracked frames come screened by the per-track policy
+(:mod:`.tracking`: a joint that jumped is missing; a missing joint's prior target takes the previous
+frame's pose, ``temporal_weight`` per joint).
 
 Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
 and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
@@ -360,7 +362,7 @@ class Lifter:
         warm: WarmStart | None = None,
         limb_proportions: NDArray[np.float64] | None = None,
         data_weight: float = 1.0,
-        temporal_weight: float = 0.0,
+        temporal_weight: float | NDArray[np.float64] = 0.0,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -381,10 +383,12 @@ class Lifter:
         data_weight : float
             Hybrid: factor on the 2D term's weights, in (0, 1] (a track's estimate of its
             detector's noise: :class:`pose_lifter.core.tracking.TrackPolicy`).
-        temporal_weight : float
-            Hybrid with a warm start: weight ``w`` of the warm start's pose in the prior term's
-            target ``(P + w Y) / (1 + w)`` (0: none; the per-track policy sets it from the
-            track's 2D noise, up to ``options.temporal_weight``).
+        temporal_weight : float or ndarray, shape (12,)
+            Hybrid with a warm start: weight ``w`` (per joint, or one for all) of the warm start's
+            pose ``Y`` in the prior term's target ``(P + w Y) / (1 + w)``, ``Y``'s image positions
+            moved by the median motion of the visible joints since it (0: none; the per-track
+            policy sets it from the track's 2D noise, up to ``options.temporal_weight``, and to
+            ``options.missing_temporal_weight`` for joints missing in this frame).
 
         Returns
         -------
@@ -409,8 +413,8 @@ class Lifter:
         if mode == "hybrid":
             if not 0.0 < data_weight <= 1.0:
                 raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
-            tw = float(temporal_weight)
-            if not 0.0 <= tw <= 1e3:
+            tw = np.broadcast_to(np.asarray(temporal_weight, dtype=np.float64), (N_JOINTS,)).copy()
+            if not np.all((tw >= 0.0) & (tw <= 1e3)):
                 raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
             runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w * data_weight, norm, warm,
                                                                       cam0, limb_proportions, tw)
@@ -459,7 +463,8 @@ class Lifter:
 
     def _prior_rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
                     limb_proportions: NDArray[np.float64] | None = None,
-                    previous: NDArray[np.float64] | None = None, temporal_weight: float = 0.0
+                    previous: NDArray[np.float64] | None = None,
+                    temporal_weight: NDArray[np.float64] | None = None
                     ) -> tuple[PriorRows, NDArray[np.float64]]:
         """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
         normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
@@ -472,8 +477,13 @@ class Lifter:
         target[:, 2] = pose[:, 2] / norm.spread
         if not np.all(np.isfinite(target)):
             raise InvalidInputError("the learned prior gave non-finite values for this input")
-        if previous is not None and temporal_weight > 0:
-            target = (target + temporal_weight * previous) / (1.0 + temporal_weight)
+        if previous is not None and temporal_weight is not None and np.any(temporal_weight > 0):
+            prev = previous.copy()
+            vis = w > 0
+            # the person's image motion since the previous frame (the median over visible joints)
+            prev[:, :2] += np.median(target[vis, :2] - prev[vis, :2], axis=0)
+            tw = temporal_weight[:, None]
+            target = (target + tw * prev) / (1.0 + tw)
         rel = self._prior_relative_weights()
         o = self._options
         weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
@@ -516,7 +526,7 @@ class Lifter:
 
     def _hybrid_runs(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                      norm: _Normalisation, warm: WarmStart | None, cam0: Camera | None,
-                     limb_proportions: NDArray[np.float64] | None, temporal_weight: float
+                     limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64]
                      ) -> tuple[list[tuple[int, _Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
         """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
         Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the

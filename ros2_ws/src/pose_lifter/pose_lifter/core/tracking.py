@@ -18,7 +18,16 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   ``LifterOptions.prior_limbs``, off by default);
 * hybrid mode: the track's 2D noise (NOISE_FRAMES) weights the 2D term down and blends the
   previous frame's pose into the prior's target (temporal smoothness, up to
-  ``LifterOptions.temporal_weight``).
+  ``LifterOptions.temporal_weight``);
+* hybrid mode, temporal outlier gate (``LifterOptions.outlier_gate``): a visible joint farther than
+  ``outlier_gate`` leg lengths from where the track's last frame had it (relative to the median
+  motion of the joints) is treated as missing for this frame, before the prior sees it (a
+  detection that jumped; a person's joints move far less in one frame); such a joint, like any
+  missing one, takes the previous frame's pose into its prior target with
+  ``LifterOptions.missing_temporal_weight`` (the track carries it over). Not when it would
+  leave fewer than ``min_visible_joints`` or gate more than GATE_MAX_FRACTION of the visible
+  joints (the prediction, not the detector, is then wrong), and a joint is gated on at most
+  GATE_MAX_FRAMES frames in a row (so the track re-acquires a joint it lost).
 
 Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
 """
@@ -53,6 +62,14 @@ NOISE_MIN_WEIGHT = 0.25
 #: track's estimate replaces the bases' proportions.
 LIMB_FRAMES = 90
 MIN_LIMB_FRAMES = 10
+#: The temporal outlier gate (``LifterOptions.outlier_gate``) leaves a frame alone when it would
+#: gate more than this fraction of its visible joints, and gates one joint on at most
+#: GATE_MAX_FRAMES consecutive frames.
+GATE_MAX_FRACTION = 0.5
+GATE_NOISE_FACTOR = 5.0
+GATE_MAX_FRAMES = 3
+#: ... and only when the track's last fit is at most this old (input stamps).
+GATE_MAX_AGE_NS = 250_000_000
 
 
 class OutOfOrderFrameError(PoseLifterError):
@@ -68,6 +85,40 @@ class _Track:
     noise: deque[float] = field(default_factory=lambda: deque(maxlen=NOISE_FRAMES))
     history: deque[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = field(
         default_factory=lambda: deque(maxlen=2))
+    #: (stamp, the fit's projection of all 12 joints (12, 2) in input units, pixels per leg length)
+    fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
+    gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
+
+    def gate(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None, stamp_ns: int,
+             limit: float, threshold: float, min_visible: int) -> NDArray[np.bool_] | None:
+        """The visible joints farther than ``limit`` leg lengths (or GATE_NOISE_FACTOR times the
+        track's noise) from where the last frame had them (its detection when the lift used it,
+        else the fit's projection), after removing the median motion of the visible joints; None
+        when nothing is gated (see GATE_MAX_FRACTION). A constant-velocity prediction was
+        measured worse: the fits' jitter doubles in it (7 % of good joints beyond 0.8 leg on
+        held-out tracks with 20 % outliers, against 2 % for the last position)."""
+        if not self.fits:
+            return None
+        t1, p1, scale = self.fits[-1]
+        if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
+            return None
+        x = np.asarray(points, dtype=np.float64)
+        vis = np.all(np.isfinite(x), axis=1)
+        if confidence is not None:
+            vis &= np.asarray(confidence, dtype=np.float64) >= threshold
+        if not np.any(vis):
+            return None
+        d = np.where(vis[:, None], x, 0.0) - p1
+        d -= np.median(d[vis], axis=0)  # the person's (or the camera's) motion since the last fit
+        dist = np.linalg.norm(d, axis=1) / max(scale, 1e-12)
+        limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())  # noisy 2D: its own scale
+        out = vis & (dist > limit) & (self.gated < GATE_MAX_FRAMES)
+        n_out, n_vis = int(np.count_nonzero(out)), int(np.count_nonzero(vis))
+        if n_out == 0 or n_vis - n_out < min_visible or n_out > GATE_MAX_FRACTION * n_vis:
+            self.gated[:] = 0
+            return None
+        self.gated = np.where(out, self.gated + 1, 0)
+        return np.asarray(out, dtype=bool)
 
     def observe_noise(self, lifter: Lifter, points: NDArray[np.float64],
                       confidence: NDArray[np.float64] | None, stamp_ns: int) -> None:
@@ -92,10 +143,16 @@ class _Track:
             return
         self.noise.append(float(np.median(acc)) / spread)
 
+    def noise_level(self) -> float:
+        """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
+        if len(self.noise) < NOISE_MIN_FRAMES:
+            return 0.0
+        return float(np.median(np.asarray(self.noise)))
+
     def data_weight(self) -> float:
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 1.0
-        level = float(np.median(np.asarray(self.noise)))
+        level = self.noise_level()
         return float(np.clip(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT, 1.0))
 
     def limb_proportions(self) -> NDArray[np.float64] | None:
@@ -196,11 +253,26 @@ class TrackPolicy:
                 warm = track.warm
         limbs = track.limb_proportions() if track is not None else None
         hybrid = self.lifter.options.mode == "hybrid"
+        opts = self.lifter.options
+        gated = None
+        if hybrid and track is not None and warm is not None and opts.outlier_gate > 0:
+            gated = track.gate(points, confidence, stamp_ns, opts.outlier_gate,
+                               opts.confidence_threshold, opts.min_visible_joints)
+            if gated is not None:  # a gated joint is missing for this frame
+                confidence = np.where(gated, 0.0, np.ones(12) if confidence is None
+                                      else np.asarray(confidence, dtype=np.float64))
         if hybrid and track is not None and warm is not None:  # a frame that follows the last one
             track.observe_noise(self.lifter, points, confidence, stamp_ns)
         dw = track.data_weight() if hybrid and track is not None else 1.0
         # smoothing only pays with noisy 2D (on clean input it is lag): scaled with the noise
-        tw = self.lifter.options.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT)
+        tw = np.full(12, self.lifter.options.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT))
+        if warm is not None and opts.missing_temporal_weight > 0:
+            # a joint the detector lost on this frame is carried over from the track's last pose
+            x = np.asarray(points, dtype=np.float64)
+            seen = np.all(np.isfinite(x), axis=1) if x.shape == (12, 2) else np.ones(12, dtype=bool)
+            if confidence is not None and np.shape(confidence) == (12,):
+                seen &= np.asarray(confidence, dtype=np.float64) >= opts.confidence_threshold
+            tw = np.where(seen, tw, np.maximum(tw, opts.missing_temporal_weight))
         try:
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
                                       temporal_weight=tw)
@@ -227,4 +299,9 @@ class TrackPolicy:
                 track.limbs.append(self.lifter.limb_proportions_of(result.prior_pose))
             track.history.append((stamp_ns, np.array(points, dtype=np.float64),
                                   result.weights > 0))
+            cam = result.camera
+            # where each joint was: its detection when the lift used it, else the fit's projection
+            used = (result.weights > 0)[:, None]
+            track.fits.append((stamp_ns, np.where(used, np.asarray(points, dtype=np.float64),
+                                                  cam.project(result.pose)), float(cam.scale)))
         return TrackedLift(result, warm is not None, reinit)
