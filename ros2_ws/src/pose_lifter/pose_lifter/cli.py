@@ -5,8 +5,9 @@ Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
 Exit codes: 0 success; 2 a usage error (an option out of range, a missing input file or data
 directory, an output that exists or is a directory) and every other library error; 1 a data
 error (a corrupt, truncated, empty or foreign bag, an invalid basis file, input with nothing to
-lift); 130 interrupted (Ctrl-C). Each failure prints one ``pose-lifter <cmd>: error: ...`` line
-and leaves no partial output file (set ``POSE_LIFTER_DEBUG=1`` for the traceback).
+lift, a solve that diverged on the input); 130 interrupted (Ctrl-C). Each failure prints one
+``pose-lifter <cmd>: error: ...`` line and leaves no partial output file (set
+``POSE_LIFTER_DEBUG=1`` for the traceback).
 """
 
 from __future__ import annotations
@@ -64,10 +65,9 @@ def _out_is_a_directory(args: argparse.Namespace) -> bool:
 
 #: Errors that mean the input data is bad (exit code 1); see the module doc.
 def _is_data_error(exc: BaseException) -> bool:
-    from .bags import BagReadError
-    from .core.errors import BasisFileError, InvalidInputError
+    from .core.errors import BagReadError, BasisFileError, InvalidInputError, SolverError
 
-    return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError)
+    return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError | SolverError)
             or type(exc).__module__.startswith("rosbags"))
 
 
@@ -483,10 +483,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _library_errors() -> tuple[type[BaseException], ...]:
-    from .bags import BagError
-    from .core.errors import PoseLifterError
+    from .core.errors import PoseLifterError  # BagError, SolverError, ... are PoseLifterErrors
 
-    return (PoseLifterError, BagError, OSError, ValueError)
+    return (PoseLifterError, OSError, ValueError)
 
 
 

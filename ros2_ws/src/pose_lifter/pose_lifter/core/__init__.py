@@ -6,6 +6,7 @@ from .errors import (
     InvalidInputError,
     OptionsError,
     PoseLifterError,
+    SolverError,
     TooFewJointsError,
     UnknownLayoutError,
 )
@@ -33,6 +34,7 @@ __all__ = [
     "PoseBases",
     "PoseLifterError",
     "PoseResult",
+    "SolverError",
     "TooFewJointsError",
     "UnknownLayoutError",
     "Variant",

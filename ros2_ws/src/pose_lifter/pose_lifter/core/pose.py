@@ -66,7 +66,7 @@ from scipy.linalg.lapack import dpotrf as _dpotrf
 
 from ._jit import HAVE_NUMBA, njit
 from .bases import PoseBases
-from .errors import InvalidInputError
+from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import Variant
 from .skeleton import N_JOINTS, limb_selectors
 from .types import PoseResult
@@ -1349,7 +1349,7 @@ def _riemannian_pose_step(
     if state_out is not None:
         state_out.append((eta_end * u1, eta_end * u2))
     if not np.all(np.isfinite(best)):
-        raise InvalidInputError("pose step diverged (non-finite coefficients)")
+        raise SolverError("pose step diverged (non-finite coefficients)")
     return PoseResult(best, y.reshape(N_JOINTS, 3), float(obj), float(viol), int(it), bool(converged))
 
 
@@ -1430,6 +1430,13 @@ def pose_step(
     -------
     PoseResult
         The iterate with the lowest objective among the feasible ones visited.
+
+    Raises
+    ------
+    InvalidInputError
+        ``alpha0`` of the wrong shape, or a prior term without the Riemannian path.
+    SolverError
+        The ADM diverged (non-finite coefficients).
     """
     loss = variant.loss
     th = float(theta) if variant.sparsity else 0.0
@@ -1438,9 +1445,10 @@ def pose_step(
     k = model.n_bases
     if (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
             and model.limb_coordinates is not None):
-        return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0, max_iter,
-                                     tol, eta, eta_growth, eta_max, duals, state_out, newton_tol, alpha_prox,
-                                     prior)
+        with diverged_as_solver_error("pose step"):
+            return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0,
+                                         max_iter, tol, eta, eta_growth, eta_max, duals, state_out,
+                                         newton_tol, alpha_prox, prior)
     if prior is not None:
         raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
                                 "lifting and bases whose limb map is onto (>= 24 basis directions)")
@@ -1550,6 +1558,6 @@ def pose_step(
         best_alpha = alpha
         best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
     if not np.all(np.isfinite(best_alpha)):
-        raise InvalidInputError("pose step diverged (non-finite coefficients)")
+        raise SolverError("pose step diverged (non-finite coefficients)")
     viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
     return PoseResult(best_alpha, model.pose(best_alpha), best_obj, viol, it, converged)

@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bases import PoseBases
-from .errors import InvalidInputError, TooFewJointsError
+from .errors import InvalidInputError, OptionsError, TooFewJointsError
 from .skeleton import N_JOINTS, limb_lengths, limb_selectors
 from .types import Camera, LiftResult, WarmStart
 
@@ -88,12 +88,12 @@ class RamakrishnaOptions:
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_bases, int) or self.max_bases < 1:
-            raise InvalidInputError(f"max_bases must be a positive integer, got {self.max_bases!r}")
+            raise OptionsError(f"max_bases must be a positive integer, got {self.max_bases!r}")
         if self.limb_constraint not in ("sum", "sum_squared"):
-            raise InvalidInputError(
+            raise OptionsError(
                 f"limb_constraint must be 'sum' or 'sum_squared', got {self.limb_constraint!r}")
         if not 3 <= int(self.min_visible_joints) <= N_JOINTS:
-            raise InvalidInputError("min_visible_joints must be in [3, 12]")
+            raise OptionsError("min_visible_joints must be in [3, 12]")
 
 
 def _fit_camera_ls(
@@ -299,7 +299,7 @@ def ramakrishna_lift(
     opts = options if options is not None else RamakrishnaOptions()
     cap = int(max_bases) if max_bases is not None else opts.max_bases
     if cap < 1:
-        raise InvalidInputError("max_bases must be >= 1")
+        raise OptionsError("max_bases must be >= 1")
     x_in = np.asarray(points_2d, dtype=np.float64)
     if x_in.shape != (N_JOINTS, 2):
         raise InvalidInputError(f"points_2d must have shape ({N_JOINTS}, 2), got {x_in.shape}")
