@@ -284,9 +284,10 @@ def _weighted_median_jit(values: NDArray[np.float64], weights: NDArray[np.float6
 def _camera_finish(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64],
                    m: NDArray[np.float64], l1: bool
                    ) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
-    """From the ADM's scaled-orthographic ``M`` (2, 3): the rotation (3, 3) and scale of
-    :meth:`Camera.from_projection`, the optimal translation for ``M`` (weighted median per axis
-    for L1, weighted mean for L2) and the objective ``sum_j w_j rho(x_j - M y_j - t)``."""
+    """From the ADM's scaled-orthographic ``M`` (2, 3): the nearest ``scale * R[:2]`` (with
+    ``M = U diag(s) V^T``: ``R[:2] = U V^T``, ``scale = mean(s)``, ``R[2] = R[0] x R[1]``), the
+    optimal translation for it (weighted median per axis for L1, weighted mean for L2) and the
+    objective ``sum_j w_j rho(x_j - M0 y_j - t)``."""
     u, sv, vt = np.linalg.svd(m, full_matrices=False)
     r2 = u @ vt
     scale = 0.5 * (sv[0] + sv[1])
