@@ -323,7 +323,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
-    return int(run_demo(args))
+    return int(run_demo(args, lambda: _lifter(args)))
 
 
 # --------------------------------------------------------------------------- parser
