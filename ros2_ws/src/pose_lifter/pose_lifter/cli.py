@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
+
 __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
 
 _ACK = ("The data used in this project was obtained from mocap.cs.cmu.edu. The database was "
@@ -241,7 +243,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     The file gives the node's options; a flag given with a value other than its default wins.
     """
     if not args.params_file:
-        return _lifter(args), not args.no_warm_start, args.leg_length, 5.0, {}
+        return _lifter(args), not args.no_warm_start, args.leg_length, DEFAULT_DISTANCE_M, {}
     from .core.bases import PoseBases
     from .core.lifter import Lifter
     from .core.options import LifterOptions
@@ -263,7 +265,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     leg = params.lower_leg_length
     if leg is None or args.leg_length != parser_defaults["leg_length"]:
         leg = args.leg_length
-    distance = 5.0 if params.default_distance is None else params.default_distance
+    distance = DEFAULT_DISTANCE_M if params.default_distance is None else params.default_distance
     if params.ignored:
         print(f"pose-lifter lift: {args.params_file}: ignored offline: {', '.join(params.ignored)}",
               file=sys.stderr)
@@ -340,7 +342,7 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid",
                    help="hybrid: the learned prior inside the paper's robust fit (default); paper: the "
                         "paper's method alone (--solver cvxpy implies it); learned: the prior alone")
-    p.add_argument("--leg-length", type=_number(float, 0.05, 2.0), default=0.43,
+    p.add_argument("--leg-length", type=_number(float, *LEG_LENGTH_RANGE_M), default=DEFAULT_LEG_LENGTH_M,
                    help="right lower leg in metres, to make the lifted pose metric")
 
 
@@ -417,7 +419,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the node's params YAML (config/lifter.yaml): lift with the live node's options; "
                    "flags given with non-default values win")
     p.set_defaults(func=_cmd_lift,
-                   lift_defaults={"variant": "full", "starts": 30, "leg_length": 0.43, "mode": "hybrid"})
+                   lift_defaults={"variant": "full", "starts": 30, "leg_length": DEFAULT_LEG_LENGTH_M,
+                                  "mode": "hybrid"})
 
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted .mcap")

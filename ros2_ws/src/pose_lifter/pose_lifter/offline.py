@@ -30,6 +30,7 @@ from .core.lifter import Lifter
 from .core.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
 from .core.skeleton import N_JOINTS
 from .core.tracking import TrackPolicy
+from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_MARKERS, TOPIC_SKELETONS
 
 __all__ = [
@@ -46,14 +47,10 @@ __all__ = [
     "lift_messages",
 ]
 
-#: Right lower leg (knee-ankle) in metres used to make lifted poses metric (CMU adults: 0.41-0.44).
-DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
 #: The node's default ``track_timeout`` (seconds of input time a warm start stays valid).
 DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: The node's default ``reinit_ratio`` (a degraded warm solve is redone cold).
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
-#: Depth of the pose centroid when no CameraInfo is available.
-DEFAULT_DISTANCE_M: Final[float] = 5.0
 _MARKER_NS: Final[str] = "pose_lifter"
 _MSG_2D: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
 _MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
