@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter"
 
@@ -86,3 +90,22 @@ def test_the_core_never_imports_the_ros_shell() -> None:
     for name, deps in graph.items():
         if name.startswith("pose_lifter.core"):
             assert all(d.startswith("pose_lifter.core") for d in deps), (name, deps)
+
+
+def test_the_error_tree_and_the_bag_reader_load_without_the_solver() -> None:
+    code = ("import sys, pose_lifter.bags, pose_lifter.core.errors; "
+            "print(sorted(m for m in ('numba', 'scipy', 'pose_lifter.core.lifter') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_every_public_core_name_resolves_lazily() -> None:
+    import pose_lifter.core as core
+    from pose_lifter.core.lifter import Lifter
+
+    assert core.Lifter is Lifter
+    for name in core.__all__:
+        assert getattr(core, name) is not None
+    assert set(core.__all__) <= set(dir(core))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        _ = core.nope  # type: ignore[attr-defined]
