@@ -10,7 +10,7 @@ import pytest
 from mcap_check import check_mcap
 from pose_lifter import bags, offline, scenes
 from pose_lifter import messages as m
-from pose_lifter.core.errors import TooFewJointsError
+from pose_lifter.core.errors import SolverError, TooFewJointsError
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.types import Camera, LiftResult, WarmStart
 
@@ -79,6 +79,26 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     assert [len(a) for a in mk[:3]] == [4, 4, 4]
     assert [(k.id, k.action) for k in mk[3]] == [(0, 0), (0, 0), (5, 2), (5, 2)]
     assert len(frames) == 11
+
+
+class DivergingLifter(EchoLifter):
+    """:class:`EchoLifter` whose third solve diverges."""
+
+    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
+             **per_frame: Any) -> LiftResult:
+        if len(self.warm) == 2:
+            self.warm.append(warm)
+            raise SolverError("pose step diverged (non-finite coefficients)")
+        return super().lift(points, confidence, warm, **per_frame)
+
+
+def test_a_diverged_solve_is_one_failed_skeleton_and_the_track_restarts_cold(tmp_path: Path) -> None:
+    path, _ = make_input(tmp_path)
+    lifter: Any = DivergingLifter()
+    summary, _ = offline.lift_bag(path, tmp_path / "out.mcap", lifter, progress=False)
+    assert (summary.n_lifted, summary.n_failed) == (10, 2)
+    assert any("pose step diverged" in f for f in summary.failures)
+    assert lifter.warm[3] is None  # the frame after the diverged one starts cold
 
 
 def test_lift_bag_every_and_max(tmp_path: Path) -> None:

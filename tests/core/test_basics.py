@@ -12,11 +12,13 @@ from pose_lifter.core import (
     learn_pca_bases,
     mpjpe,
     normalise_pose,
+    normalised_error,
     p_mpjpe,
     procrustes_align,
     to_model_joints,
 )
 from pose_lifter.core.camera import camera_step, weighted_median
+from pose_lifter.core.metrics import similarity_normalised_error
 from pose_lifter.core.skeleton import LIMBS, body_frame, limb_lengths
 from pose_lifter.core.types import Camera
 from scipy.spatial.transform import Rotation
@@ -60,6 +62,26 @@ def test_p_mpjpe_is_similarity_invariant_and_reflection_safe() -> None:
     assert p_mpjpe(mirrored, g) > 0.05
     assert np.linalg.det(np.linalg.svd(procrustes_align(mirrored, g))[2]) != 0
     assert mpjpe(g + 1.0, g) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_the_normalised_errors_share_one_reflection_safe_procrustes() -> None:
+    g = _pose(3)
+    r = Rotation.from_euler("xyz", [-40, 25, 110], degrees=True).as_matrix()
+    noise = 0.05 * np.random.default_rng(3).normal(size=(12, 3))
+    pred = 2.0 * (g + noise) @ r.T + 3.0
+    # similarity-aligned, in the truth's leg units: blind to the scale, rotation and shift
+    expected = np.linalg.norm(procrustes_align(g + noise, g) - g) / limb_lengths(g)[7]
+    assert similarity_normalised_error(pred, g) == pytest.approx(expected, rel=1e-9)
+    assert similarity_normalised_error(3.0 * pred, 2.0 * g) == pytest.approx(expected, rel=1e-9)
+    # the paper's criterion (own leg = 1, rotation only) is blind to the rotation and shift too
+    own = normalised_error(g + noise, g)
+    assert normalised_error(pred, g) == pytest.approx(own, rel=1e-9)
+    # neither aligns a mirror image
+    mirrored = g * np.array([-1.0, 1.0, 1.0])
+    assert similarity_normalised_error(mirrored, g) > 0.05 and normalised_error(mirrored, g) > 0.05
+    # batched like the per-pose metrics
+    batch = similarity_normalised_error(np.stack([pred, mirrored]), np.stack([g, g]))
+    assert batch.shape == (2,) and batch[0] == pytest.approx(expected, rel=1e-9)
 
 
 def test_weighted_median_minimises_weighted_l1() -> None:

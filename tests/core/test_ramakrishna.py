@@ -7,7 +7,7 @@ import pytest
 from numpy.typing import NDArray
 from pose_lifter.core import ramakrishna as rk
 from pose_lifter.core.bases import PoseBases, learn_classwise_pca_bases
-from pose_lifter.core.errors import InvalidInputError, TooFewJointsError
+from pose_lifter.core.errors import InvalidInputError, OptionsError, TooFewJointsError
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.skeleton import limb_lengths
 from pose_lifter.core.types import Camera
@@ -120,7 +120,7 @@ def test_bad_input(bases: PoseBases) -> None:
         rk.ramakrishna_lift(x, None, bases)  # all joints at one point
     with pytest.raises(InvalidInputError):
         rk.ramakrishna_lift(np.full((12, 2), np.nan), None, bases)
-    with pytest.raises(InvalidInputError):
+    with pytest.raises(OptionsError):
         rk.RamakrishnaOptions(limb_constraint="each")  # type: ignore[arg-type]
 
 

@@ -23,11 +23,14 @@ from typing import Any, Final
 
 import numpy as np
 
+from .core.errors import BagError, BagReadError
+
 __all__ = [
     "MSG_NAMES",
     "MSG_PACKAGE",
     "BagError",
     "BagMessage",
+    "BagReadError",
     "BagWriter",
     "RawMessage",
     "bag_topics",
@@ -48,14 +51,6 @@ MSG_NAMES: Final[tuple[str, ...]] = (
 )
 _PACKAGE_MSG_DIR: Final[Path] = Path(__file__).resolve().parent / "msg"
 _SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[2] / MSG_PACKAGE / "msg"
-
-
-class BagError(RuntimeError):
-    """A bag cannot be read or written (missing file, missing topic, bad type)."""
-
-
-class BagReadError(BagError):
-    """A bag file exists but its content cannot be read (truncated, empty, not a bag)."""
 
 
 def check_output(path: str | Path, suffixes: tuple[str, ...], overwrite: bool = False) -> Path:

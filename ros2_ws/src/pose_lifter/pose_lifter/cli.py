@@ -5,8 +5,9 @@ Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
 Exit codes: 0 success; 2 a usage error (an option out of range, a missing input file or data
 directory, an output that exists or is a directory) and every other library error; 1 a data
 error (a corrupt, truncated, empty or foreign bag, an invalid basis file, input with nothing to
-lift); 130 interrupted (Ctrl-C). Each failure prints one ``pose-lifter <cmd>: error: ...`` line
-and leaves no partial output file (set ``POSE_LIFTER_DEBUG=1`` for the traceback).
+lift, a solve that diverged on the input); 130 interrupted (Ctrl-C). Each failure prints one
+``pose-lifter <cmd>: error: ...`` line and leaves no partial output file (set
+``POSE_LIFTER_DEBUG=1`` for the traceback).
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 
 __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
 
@@ -64,10 +67,9 @@ def _out_is_a_directory(args: argparse.Namespace) -> bool:
 
 #: Errors that mean the input data is bad (exit code 1); see the module doc.
 def _is_data_error(exc: BaseException) -> bool:
-    from .bags import BagReadError
-    from .core.errors import BasisFileError, InvalidInputError
+    from .core.errors import BagReadError, BasisFileError, InvalidInputError, SolverError
 
-    return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError)
+    return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError | SolverError)
             or type(exc).__module__.startswith("rosbags"))
 
 
@@ -241,7 +243,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     The file gives the node's options; a flag given with a value other than its default wins.
     """
     if not args.params_file:
-        return _lifter(args), not args.no_warm_start, args.leg_length, 5.0, {}
+        return _lifter(args), not args.no_warm_start, args.leg_length, DEFAULT_DISTANCE_M, {}
     from .core.bases import PoseBases
     from .core.lifter import Lifter
     from .core.options import LifterOptions
@@ -263,7 +265,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     leg = params.lower_leg_length
     if leg is None or args.leg_length != parser_defaults["leg_length"]:
         leg = args.leg_length
-    distance = 5.0 if params.default_distance is None else params.default_distance
+    distance = DEFAULT_DISTANCE_M if params.default_distance is None else params.default_distance
     if params.ignored:
         print(f"pose-lifter lift: {args.params_file}: ignored offline: {', '.join(params.ignored)}",
               file=sys.stderr)
@@ -323,7 +325,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
-    return int(run_demo(args))
+    return int(run_demo(args, lambda: _lifter(args)))
 
 
 # --------------------------------------------------------------------------- parser
@@ -340,7 +342,7 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid",
                    help="hybrid: the learned prior inside the paper's robust fit (default); paper: the "
                         "paper's method alone (--solver cvxpy implies it); learned: the prior alone")
-    p.add_argument("--leg-length", type=_number(float, 0.05, 2.0), default=0.43,
+    p.add_argument("--leg-length", type=_number(float, *LEG_LENGTH_RANGE_M), default=DEFAULT_LEG_LENGTH_M,
                    help="right lower leg in metres, to make the lifted pose metric")
 
 
@@ -417,7 +419,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the node's params YAML (config/lifter.yaml): lift with the live node's options; "
                    "flags given with non-default values win")
     p.set_defaults(func=_cmd_lift,
-                   lift_defaults={"variant": "full", "starts": 30, "leg_length": 0.43, "mode": "hybrid"})
+                   lift_defaults={"variant": "full", "starts": 30, "leg_length": DEFAULT_LEG_LENGTH_M,
+                                  "mode": "hybrid"})
 
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted .mcap")
@@ -483,10 +486,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _library_errors() -> tuple[type[BaseException], ...]:
-    from .bags import BagError
-    from .core.errors import PoseLifterError
+    from .core.errors import PoseLifterError  # BagError, SolverError, ... are PoseLifterErrors
 
-    return (PoseLifterError, BagError, OSError, ValueError)
+    return (PoseLifterError, OSError, ValueError)
 
 
 

@@ -7,13 +7,17 @@ skeletons and the ground truth in the camera frame (right).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .core.skeleton import BONES_FOR_DRAWING
+
+if TYPE_CHECKING:
+    from .core.lifter import Lifter
 
 __all__ = ["DEFAULT_DEMO_BAG", "find_demo_bag", "plot_frames", "run_demo"]
 
@@ -109,18 +113,22 @@ def plot_frames(
     plt.close(fig)
 
 
-def run_demo(args: argparse.Namespace) -> int:
-    """Lift the demo bag, print the error table, write ``OUT/demo.mcap`` and ``OUT/demo.png``."""
+def run_demo(args: argparse.Namespace, make_lifter: Callable[[], Lifter]) -> int:
+    """Lift the demo bag, print the error table, write ``OUT/demo.mcap`` and ``OUT/demo.png``.
+
+    ``args`` holds the ``pose-lifter demo`` flags (``bag``, ``out``, ``no_warm_start``,
+    ``leg_length``, ``every``); ``make_lifter()`` builds the lifter once the bag is found (the
+    CLI's, from the same flags: a kernel compile is not wasted on a missing bag).
+    """
     from . import messages as m
     from .bags import read_messages
-    from .cli import _lifter
     from .offline import evaluate_bag, format_evaluation, lift_bag
     from .scenes import TOPIC_GROUND_TRUTH
 
     bag = Path(args.bag) if args.bag else find_demo_bag()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    lifter = _lifter(args)
+    lifter = make_lifter()
     summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=not args.no_warm_start,
                                leg_length_m=args.leg_length, every=args.every, overwrite=True)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "

@@ -213,7 +213,8 @@ def place_in_camera(
     focal length is known: ``Z = f * leg_length_m / scale`` (``f`` = mean of ``fx, fy``), and
     the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
     ``Y = (t_y - c_y) Z / f_y``. Without camera intrinsics the centroid is put at
-    ``(0, 0, default_distance_m)``.
+    ``(0, 0, default_distance_m)``. The node's, the offline lift's and the CLI's defaults are
+    :mod:`pose_lifter.placement`'s.
 
     Parameters
     ----------

@@ -27,9 +27,10 @@ from .bags import BagError, BagReadError, BagWriter, bag_topics, check_output, r
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
-from .core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
-from .core.skeleton import N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
+from .core.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
+from .core.skeleton import N_JOINTS
 from .core.tracking import TrackPolicy
+from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_MARKERS, TOPIC_SKELETONS
 
 __all__ = [
@@ -46,14 +47,10 @@ __all__ = [
     "lift_messages",
 ]
 
-#: Right lower leg (knee-ankle) in metres used to make lifted poses metric (CMU adults: 0.41-0.44).
-DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
 #: The node's default ``track_timeout`` (seconds of input time a warm start stays valid).
 DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: The node's default ``reinit_ratio`` (a degraded warm solve is redone cold).
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
-#: Depth of the pose centroid when no CameraInfo is available.
-DEFAULT_DISTANCE_M: Final[float] = 5.0
 _MARKER_NS: Final[str] = "pose_lifter"
 _MSG_2D: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
 _MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
@@ -545,14 +542,6 @@ def _median(a: NDArray[np.float64]) -> float | None:
     return float(np.median(a)) if a.size else None
 
 
-def _aligned_normalised(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``||similarity-aligned pred - gt||_2`` over the 36-vector, in units of the truth's right
-    lower leg (the floors' version of the paper's criterion: their own legs are meaningless)."""
-    aligned = procrustes_align(pred, gt)
-    leg = limb_lengths(gt)[..., RIGHT_LOWER_LEG]
-    return np.asarray(np.linalg.norm((aligned - gt).reshape(*gt.shape[:-2], -1), axis=-1) / leg)
-
-
 def _flat(points: NDArray[np.float64], confidence: NDArray[np.float64]) -> NDArray[np.float64]:
     """2D input with zero depth; missing joints at the centroid of the visible ones."""
     pts = np.array(points, dtype=np.float64, copy=True)
@@ -614,9 +603,9 @@ def evaluate_bag(path: str | Path, bases: PoseBases | None = None) -> Evaluation
         mpjpe_mm=per_pose(mpjpe, pred, truth, 1e3), p_mpjpe_mm=per_pose(p_mpjpe, pred, truth, 1e3),
         normalised=per_pose(normalised_error, pred, truth),
         flat_p_mpjpe_mm=per_pose(p_mpjpe, flat, ftruth, 1e3),
-        flat_normalised=per_pose(_aligned_normalised, flat, ftruth),
+        flat_normalised=per_pose(similarity_normalised_error, flat, ftruth),
         mean_pose_p_mpjpe_mm=per_pose(p_mpjpe, meanp, ftruth, 1e3),
-        mean_pose_normalised=per_pose(_aligned_normalised, meanp, ftruth),
+        mean_pose_normalised=per_pose(similarity_normalised_error, meanp, ftruth),
         track_ids=np.array([k[1] for k in keys], dtype=np.int64),
     )
 

@@ -1,20 +1,70 @@
-"""pose_lifter.core: the method of Wang et al. (CVPR 2014) in numpy/scipy; never imports rclpy."""
+"""pose_lifter.core: the method of Wang et al. (CVPR 2014) in numpy/scipy; never imports rclpy.
 
-from .bases import PoseBases, learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
-from .errors import (
-    BasisFileError,
-    InvalidInputError,
-    OptionsError,
-    PoseLifterError,
-    TooFewJointsError,
-    UnknownLayoutError,
-)
-from .layouts import LAYOUTS, get_layout, to_model_joints
-from .lifter import Lifter
-from .metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
-from .options import VARIANTS, LifterOptions, Variant, get_variant
-from .skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
-from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
+Importing the package is cheap: each name of ``__all__`` is imported from its module on first use
+(PEP 562), so ``from pose_lifter.core.errors import PoseLifterError`` (the bag reader, the CLI's
+error handling) does not load the solver's numba and scipy.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .bases import PoseBases, learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
+    from .errors import (
+        BasisFileError,
+        InvalidInputError,
+        OptionsError,
+        PoseLifterError,
+        SolverError,
+        TooFewJointsError,
+        UnknownLayoutError,
+    )
+    from .layouts import LAYOUTS, get_layout, to_model_joints
+    from .lifter import Lifter
+    from .metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
+    from .options import VARIANTS, LifterOptions, Variant, get_variant
+    from .skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
+    from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
+
+#: Public name -> the module of this package that defines it.
+_MODULE_OF: dict[str, str] = {
+    "PoseBases": "bases",
+    "learn_classwise_pca_bases": "bases",
+    "learn_pca_bases": "bases",
+    "learn_sparse_bases": "bases",
+    "BasisFileError": "errors",
+    "InvalidInputError": "errors",
+    "OptionsError": "errors",
+    "PoseLifterError": "errors",
+    "SolverError": "errors",
+    "TooFewJointsError": "errors",
+    "UnknownLayoutError": "errors",
+    "LAYOUTS": "layouts",
+    "get_layout": "layouts",
+    "to_model_joints": "layouts",
+    "Lifter": "lifter",
+    "mpjpe": "metrics",
+    "normalised_error": "metrics",
+    "p_mpjpe": "metrics",
+    "per_joint_error": "metrics",
+    "procrustes_align": "metrics",
+    "LifterOptions": "options",
+    "VARIANTS": "options",
+    "Variant": "options",
+    "get_variant": "options",
+    "JOINT_NAMES": "skeleton",
+    "LIMBS": "skeleton",
+    "LIMB_NAMES": "skeleton",
+    "limb_lengths": "skeleton",
+    "normalise_pose": "skeleton",
+    "Camera": "types",
+    "CameraResult": "types",
+    "LiftResult": "types",
+    "PoseResult": "types",
+    "WarmStart": "types",
+}
 
 __all__ = [
     "JOINT_NAMES",
@@ -33,6 +83,7 @@ __all__ = [
     "PoseBases",
     "PoseLifterError",
     "PoseResult",
+    "SolverError",
     "TooFewJointsError",
     "UnknownLayoutError",
     "Variant",
@@ -51,3 +102,16 @@ __all__ = [
     "procrustes_align",
     "to_model_joints",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # once loaded, a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

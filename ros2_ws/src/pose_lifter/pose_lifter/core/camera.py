@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._jit import njit
-from .errors import InvalidInputError
+from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .types import Camera, CameraResult
 
 __all__ = ["camera_admm", "camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
@@ -54,7 +54,7 @@ def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
     """
     n = np.ascontiguousarray(n, dtype=np.float64)
     if n.shape != (2, 3):
-        raise ValueError(f"expected a (2, 3) matrix, got shape {n.shape}")
+        raise InvalidInputError(f"expected a (2, 3) matrix, got shape {n.shape}")
     return _project_so(n)
 
 
@@ -145,6 +145,13 @@ def camera_step(
     -------
     CameraResult
         The camera, ``objective = sum_j w_j rho(x_j - M0 y_j - t)``, iterations, converged.
+
+    Raises
+    ------
+    InvalidInputError
+        Shapes, non-finite inputs or fewer than 3 positive weights.
+    SolverError
+        The ADM diverged (non-finite camera) on valid input.
     """
     return camera_admm(points, pose, weights, loss, init, max_iter, tol, tau)[0]
 
@@ -199,10 +206,11 @@ def _camera_admm_checked(
     else:
         u1 = np.array(duals[0], dtype=np.float64)
         u2 = np.array(duals[1], dtype=np.float64)
-    rot, scale, t, obj, it, converged, ok = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1", int(max_iter),
-                                                          float(tol), float(tau))
+    with diverged_as_solver_error("camera step"):
+        rot, scale, t, obj, it, converged, ok = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1",
+                                                              int(max_iter), float(tol), float(tau))
     if not ok:
-        raise InvalidInputError("camera step diverged (non-finite camera); check the inputs")
+        raise SolverError("camera step diverged (non-finite camera); check the inputs")
     return CameraResult(Camera(rot, scale, t), obj, it, converged), (u1, u2)
 
 
@@ -276,9 +284,10 @@ def _weighted_median_jit(values: NDArray[np.float64], weights: NDArray[np.float6
 def _camera_finish(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64],
                    m: NDArray[np.float64], l1: bool
                    ) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float]:
-    """From the ADM's scaled-orthographic ``M`` (2, 3): the rotation (3, 3) and scale of
-    :meth:`Camera.from_projection`, the optimal translation for ``M`` (weighted median per axis
-    for L1, weighted mean for L2) and the objective ``sum_j w_j rho(x_j - M y_j - t)``."""
+    """From the ADM's scaled-orthographic ``M`` (2, 3): the nearest ``scale * R[:2]`` (with
+    ``M = U diag(s) V^T``: ``R[:2] = U V^T``, ``scale = mean(s)``, ``R[2] = R[0] x R[1]``), the
+    optimal translation for it (weighted median per axis for L1, weighted mean for L2) and the
+    objective ``sum_j w_j rho(x_j - M0 y_j - t)``."""
     u, sv, vt = np.linalg.svd(m, full_matrices=False)
     r2 = u @ vt
     scale = 0.5 * (sv[0] + sv[1])

@@ -1,18 +1,42 @@
-"""Typed errors of the pose_lifter core.
+"""Typed errors of pose_lifter: one tree under :class:`PoseLifterError`.
 
-Every input the solvers cannot use raises one of these, never a NaN result.
+Every input the solvers cannot use raises one of these, never a NaN result::
+
+    PoseLifterError
+        InvalidInputError (ValueError)    bad input arrays
+            TooFewJointsError             too few visible joints for a solve
+        UnknownLayoutError (KeyError)     a keypoint layout name
+        OptionsError (ValueError)         a solver option out of range or of the wrong type
+        BasisFileError (OSError)          a basis file
+        PriorFileError (OSError)          a learned-prior weights file
+        SolverError (RuntimeError)        a solve diverged (non-finite result) on valid input
+        BagError (RuntimeError)           a bag cannot be read or written
+            BagReadError                  a bag's content is unreadable
+
+Other modules add their own leaves (``mocap.MocapDataError``, ``reference.ReferenceSolverError``
+under :class:`SolverError`, ``tracking.OutOfOrderFrameError``, ``adapter_node.AdapterError``),
+so ``except PoseLifterError`` catches every error the package raises on purpose.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
 __all__ = [
+    "BagError",
+    "BagReadError",
     "BasisFileError",
     "InvalidInputError",
     "OptionsError",
     "PoseLifterError",
     "PriorFileError",
+    "SolverError",
     "TooFewJointsError",
     "UnknownLayoutError",
+    "diverged_as_solver_error",
 ]
 
 
@@ -45,3 +69,25 @@ class PriorFileError(PoseLifterError, OSError):
 
 class OptionsError(PoseLifterError, ValueError):
     """A solver option is out of range or of the wrong type."""
+
+
+class SolverError(PoseLifterError, RuntimeError):
+    """A solve diverged (non-finite iterates or result) although its input passed the checks."""
+
+
+class BagError(PoseLifterError, RuntimeError):
+    """A bag cannot be read or written (missing file, missing topic, bad type)."""
+
+
+class BagReadError(BagError):
+    """A bag file exists but its content cannot be read (truncated, empty, not a bag)."""
+
+
+@contextmanager
+def diverged_as_solver_error(step: str) -> Iterator[None]:
+    """Re-raise numpy's ``LinAlgError`` (a kernel met an infinite or NaN matrix: the iterates
+    diverged) as :class:`SolverError` naming ``step``."""
+    try:
+        yield
+    except np.linalg.LinAlgError as exc:
+        raise SolverError(f"{step} diverged ({exc})") from exc

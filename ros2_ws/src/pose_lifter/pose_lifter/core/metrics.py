@@ -12,7 +12,14 @@ from numpy.typing import NDArray
 from .errors import InvalidInputError
 from .skeleton import RIGHT_LOWER_LEG, limb_lengths
 
-__all__ = ["mpjpe", "normalised_error", "p_mpjpe", "per_joint_error", "procrustes_align"]
+__all__ = [
+    "mpjpe",
+    "normalised_error",
+    "p_mpjpe",
+    "per_joint_error",
+    "procrustes_align",
+    "similarity_normalised_error",
+]
 
 
 def per_joint_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -38,6 +45,22 @@ def mpjpe(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.floa
     return np.asarray(per_joint_error(p, g).mean(axis=-1))
 
 
+def _procrustes_rotation(p0: NDArray[np.float64], g0: NDArray[np.float64]
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The proper rotation ``R`` minimising ``||p0 R - g0||_F`` for centred poses ``(..., J, 3)``
+    (Kabsch; reflection-safe: the smallest singular direction is flipped when ``det < 0``), and
+    the singular values of ``p0^T g0`` with that flip applied (their sum is ``tr(R^T p0^T g0)``)."""
+    h = np.swapaxes(p0, -1, -2) @ g0  # (..., 3, 3)
+    u, s, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(u @ vt))
+    d = np.where(d == 0, 1.0, d)
+    s = s.copy()
+    s[..., -1] *= d
+    u = u.copy()
+    u[..., :, -1] *= d[..., None]
+    return u @ vt, s
+
+
 def procrustes_align(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
     """Similarity transform (rotation, scale, translation) of ``pred`` onto ``gt``.
 
@@ -59,15 +82,7 @@ def procrustes_align(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDAr
     mu_g = g.mean(axis=-2, keepdims=True)
     p0 = p - mu_p
     g0 = g - mu_g
-    h = np.swapaxes(p0, -1, -2) @ g0  # (..., 3, 3)
-    u, s, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(u @ vt))
-    d = np.where(d == 0, 1.0, d)
-    s = s.copy()
-    s[..., -1] *= d
-    u = u.copy()
-    u[..., :, -1] *= d[..., None]
-    rot = u @ vt  # p0 @ rot ~ g0
+    rot, s = _procrustes_rotation(p0, g0)  # p0 @ rot ~ g0
     norm_p = np.sum(p0**2, axis=(-2, -1))
     scale = np.sum(s, axis=-1) / np.where(norm_p > 0, norm_p, 1.0)
     return np.asarray(scale[..., None, None] * (p0 @ rot) + mu_g)
@@ -98,11 +113,19 @@ def normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDAr
                          "(estimate scaled by its own leg) is undefined for it")
     p = p / leg[..., None, None]
     g = g / limb_lengths(g)[..., RIGHT_LOWER_LEG][..., None, None]
-    h = np.swapaxes(p, -1, -2) @ g
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(u @ vt))
-    d = np.where(d == 0, 1.0, d)
-    u = u.copy()
-    u[..., :, -1] *= d[..., None]
-    aligned = p @ (u @ vt)
-    return np.asarray(np.linalg.norm((aligned - g).reshape(*g.shape[:-2], -1), axis=-1))
+    aligned = p @ _procrustes_rotation(p, g)[0]
+    return _stacked_norm(aligned - g)
+
+
+def similarity_normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``||procrustes_align(pred, gt) - gt||_2`` over the stacked 3n-vector, in units of the
+    truth's right lower leg, shape ``(...)``: the paper's criterion for estimates whose own leg
+    means nothing (the floors of :func:`pose_lifter.offline.evaluate_bag`: flat 2D, mean pose)."""
+    g = np.asarray(gt, dtype=np.float64)
+    leg = limb_lengths(g)[..., RIGHT_LOWER_LEG]
+    return np.asarray(_stacked_norm(procrustes_align(pred, g) - g) / leg)
+
+
+def _stacked_norm(diff: NDArray[np.float64]) -> NDArray[np.float64]:
+    """2-norm of each pose's stacked ``(J * 3)``-vector, shape ``(...)``."""
+    return np.asarray(np.linalg.norm(diff.reshape(*diff.shape[:-2], -1), axis=-1))

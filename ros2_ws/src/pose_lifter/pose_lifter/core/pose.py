@@ -42,12 +42,11 @@ term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM).
 Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
 numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
 importable and run as the same Python code otherwise. The two agree to round-off, not bit for
-bit: the kernels' products are loops and their small inverses LAPACK calls that numba and numpy
-make differently (an earlier version that matched numpy's calls and summation order,
-:func:`_sum_jit`, was bit-identical; the loops are what made it fast). On ``walk_clean`` the first
-frame's objective agrees to ~1e-12 and tracked frames then drift apart (0.4832 vs 0.4740 on the
-third): the warm-started solves are chaotic in round-off (a last-bit change grows ~10x per
-tracked frame), as between machines with different BLAS builds.
+bit: the kernels' products are loops and their small inverses and sums LAPACK calls and
+reductions that numba and numpy make differently. On ``walk_clean`` the first frame's objective
+agrees to ~1e-12 and tracked frames then drift apart (0.4832 vs 0.4740 on the third): the
+warm-started solves are chaotic in round-off (a last-bit change grows ~10x per tracked frame), as
+between machines with different BLAS builds.
 """
 
 from __future__ import annotations
@@ -66,7 +65,7 @@ from scipy.linalg.lapack import dpotrf as _dpotrf
 
 from ._jit import HAVE_NUMBA, njit
 from .bases import PoseBases
-from .errors import InvalidInputError
+from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import Variant
 from .skeleton import N_JOINTS, limb_selectors
 from .types import PoseResult
@@ -430,30 +429,15 @@ def newton_alpha(
     return _Lifted(restore_feasibility(cons, z), it, converged)
 
 
-def newton_reduced(
-    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
-    max_iter: int = NEWTON_MAX_ITER, tol: float = 1e-9,
-) -> NDArray[np.float64]:
-    """Direct local solver of the reduced alpha-step, constraints evaluated in joint space.
-
-    Minimises ``s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i`` (i = 1..8), the
-    same problem as :func:`newton_alpha` on ``model.reduced`` (tested equal), by SQP with the
-    exact Lagrangian Hessian (``2 G`` where that is not positive definite on the tangent space
-    of the constraints) from a Gauss-Newton projection of ``s0``; steps are halved until the
-    merit ``f + rho ||g||_1`` decreases. Shapes: gmat (r, r), lin (r,), s0 (r,).
-    """
-    return _newton_reduced(gmat, lin, model, s0, max_iter, tol)[0]
-
-
 def riemannian_alpha(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
     max_iter: int = 100, tol: float = 1e-10,
 ) -> tuple[NDArray[np.float64], int, bool]:
     """The reduced alpha-step ``min s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i``
-    (the problem of :func:`newton_reduced`) by Riemannian Newton in limb coordinates: the free
-    directions eliminated in closed form (:func:`_sphere_setup`), then :func:`_sphere_newton` on
-    the product of the 8 limb spheres from the limb vectors of ``s0``. Shapes: gmat (r, r)
-    positive definite, lin (r,), s0 (r,). Returns ``(s, iterations, converged)``.
+    (the problem of :func:`newton_alpha` on ``model.reduced``) by Riemannian Newton in limb
+    coordinates: the free directions eliminated in closed form (:func:`_sphere_setup`), then
+    :func:`_sphere_newton` on the product of the 8 limb spheres from the limb vectors of ``s0``.
+    Shapes: gmat (r, r) positive definite, lin (r,), s0 (r,). Returns ``(s, iterations, converged)``.
 
     Raises
     ------
@@ -471,22 +455,6 @@ def riemannian_alpha(
     lv, it, conv = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ np.asarray(s0, dtype=np.float64), rad,
                                   int(max_iter), float(tol))
     return sz + s1 @ lv + s2 @ h, int(it), bool(conv)
-
-
-# The module flags below are read at call time by the Python wrappers and passed to the kernels
-# as arguments (a compiled kernel would freeze a global's value at compile time, and numba's
-# on-disk cache would keep it).
-#: SQP Newton/Gauss-Newton switch: test the positive definiteness of the augmented Hessian
-#: ``H + c J^T J`` (True) or of ``H`` itself.
-AUGMENTED_PD_TEST = True
-#: Start each SQP alpha-step from the previous ADM iteration's multipliers. Off: measured on 3 bags
-#: x 30 tracked frames, SQP iterations unchanged (~9.6 per call, most calls end at the cap with
-#: line-search steps of 1/32-1/4: the l1 merit's Maratos effect), objectives mixed (0.703/1.467 ->
-#: 0.713/1.396), and the walk_clean band replay went from 57 to 82 mm P-MPJPE. (Also measured, not
-#: kept: an augmented-Lagrangian merit instead of the l1 one: 6-7 SQP iterations per call and
-#: warm frames 70 -> 49 ms, but objectives 0.713/1.396/0.496 -> 0.779/1.498/0.552 on the three bags.)
-WARM_MULTIPLIERS = False
-SECOND_ORDER_CORRECTION = False  # measured: faster SQP, but more pose-step local-minimum test misses
 
 
 _EYE8 = 1e-14 * np.eye(8)
@@ -531,85 +499,10 @@ def _pos_def_jit(a: NDArray[np.float64]) -> bool:
     return True
 
 
-@njit
-def _block_sum(a: NDArray[np.float64], lo: int, n: int) -> float:
-    """numpy's sum of ``a[lo:lo+n]``, ``n <= 128``: sequential below 8 terms, else 8 partial
-    sums combined as a tree, then the remainder."""
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += a[i]
-        return float(res)
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    i = 8
-    while i < n - n % 8:
-        r0 += a[lo + i]
-        r1 += a[lo + i + 1]
-        r2 += a[lo + i + 2]
-        r3 += a[lo + i + 3]
-        r4 += a[lo + i + 4]
-        r5 += a[lo + i + 5]
-        r6 += a[lo + i + 6]
-        r7 += a[lo + i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return float(res)
-
-
-@njit
-def _sum_jit(a: NDArray[np.float64]) -> float:
-    """``np.sum`` of a contiguous 1-d array, bit for bit: numpy starts from 0 and sums pairwise
-    (halves rounded down to multiples of 8 until blocks of <= 128, see :func:`_block_sum`);
-    numba's ``np.sum`` sums sequentially, which differs in the last bits, and the warm-started
-    solves amplify those (see the module docstring). The recursion is unrolled with an explicit
-    stack (numba's cache cannot reload recursive functions)."""
-    n = a.size
-    if n <= 128:
-        return 0.0 + _block_sum(a, 0, n)
-    los = np.empty(64, dtype=np.int64)  # depth <= log2(n), far below 64
-    lens = np.empty(64, dtype=np.int64)
-    stage = np.zeros(64, dtype=np.int64)
-    vals = np.empty(64)
-    top, nv = 0, 0
-    los[0], lens[0] = 0, n
-    while top >= 0:
-        lo, m = los[top], lens[top]
-        if m <= 128:
-            vals[nv] = _block_sum(a, lo, m)
-            nv += 1
-            top -= 1
-            continue
-        half = m // 2
-        half -= half % 8
-        if stage[top] == 0:  # left half
-            stage[top] = 1
-            top += 1
-            los[top], lens[top], stage[top] = lo, half, 0
-        elif stage[top] == 1:  # right half
-            stage[top] = 2
-            top += 1
-            los[top], lens[top], stage[top] = lo + half, m - half, 0
-        else:  # both done
-            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
-            nv -= 1
-            top -= 1
-    return 0.0 + float(vals[0])
-
-
-def _sum_numpy(a: NDArray[np.float64]) -> float:
-    """``np.sum`` (the plain-Python path of :func:`_sum_jit`)."""
-    return float(np.sum(a))
-
-
-# the compiled kernels call LAPACK through numba and sum in numpy's order; without numba they run
-# as plain Python and call scipy's LAPACK and numpy's sum directly
+# the compiled kernels call LAPACK through numba; without numba they run as plain Python and call
+# scipy's LAPACK directly
 _solve = _solve_jit if HAVE_NUMBA else _solve_lapack
 _pos_def = _pos_def_jit if HAVE_NUMBA else _pos_def_lapack
-_sum = _sum_jit if HAVE_NUMBA else _sum_numpy
 
 
 @njit
@@ -644,10 +537,13 @@ def _project_limbs(s: NDArray[np.float64], n: int, cu24: NDArray[np.float64], cm
 def _newton_kernel(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], cu24: NDArray[np.float64],
     cmu24: NDArray[np.float64], hc: NDArray[np.float64], lsq: NDArray[np.float64],
-    s0: NDArray[np.float64], nu0: NDArray[np.float64], max_iter: int, tol: float,
-    augmented_pd_test: bool, second_order_correction: bool, eye8: NDArray[np.float64],
+    s0: NDArray[np.float64], nu0: NDArray[np.float64], max_iter: int, tol: float, eye8: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
-    """The SQP of :func:`_newton_reduced` on plain arrays (compiled by numba when available)."""
+    """SQP of the reduced alpha-step ``min s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 =
+    L_i`` with the exact Lagrangian Hessian (Gauss-Newton ``2 G`` where that is not positive
+    definite on the constraints' tangent space) from a Gauss-Newton projection of ``s0``; steps
+    halved until the merit ``f + rho ||g||_1`` decreases (the same problem as
+    :func:`newton_alpha` on ``model.reduced``). Returns ``(s, multipliers (8,), iterations)``."""
     r = s0.size
     s = _project_limbs(s0.copy(), 30, cu24, cmu24, lsq, eye8)
     nu = nu0.copy()
@@ -671,11 +567,8 @@ def _newton_kernel(
         # constraints (the second-order sufficient condition), else Gauss-Newton (2 G). Tested
         # by a Cholesky of the augmented Hessian H + c J^T J (positive definite for a large c
         # iff the reduced Hessian is); the KKT step is the same with H or H + c J^T J.
-        if augmented_pd_test:
-            jtj = jac.T @ jac
-            test = hess + (10.0 * float(np.abs(hess).max()) / max(float(np.abs(jtj).max()), 1e-300)) * jtj
-        else:
-            test = hess
+        jtj = jac.T @ jac
+        test = hess + (10.0 * float(np.abs(hess).max()) / max(float(np.abs(jtj).max()), 1e-300)) * jtj
         if not _pos_def(test):
             hess = g2
         kmat[:r, :r] = hess
@@ -687,7 +580,7 @@ def _newton_kernel(
         ds, nu_new = sol[:r], sol[r:]
         rho = max(rho, 2.0 * float(np.abs(nu_new).max()))
         q0 = float(s @ gs - 2.0 * lin @ s)
-        f0 = q0 + rho * _sum(np.abs(g))
+        f0 = q0 + rho * np.sum(np.abs(g))
         a = 1.0
         cand = s + ds
         gc, lvc = _limbs(cand, cu24, cmu24, lsq)
@@ -696,20 +589,8 @@ def _newton_kernel(
         q1 = float(grad @ ds)
         q2 = float(ds @ gmat @ ds)
         dlv = lvc - lv
-        if second_order_correction and float(cand @ gmat @ cand - 2.0 * lin @ cand) + rho * _sum(
-                np.abs(gc)) > f0 + 1e-12:
-            # second-order correction (against the Maratos effect: the l1 merit rejecting a
-            # good full step because of the constraints' curvature): one min-norm step back
-            # towards the constraint manifold from s + ds, tried before any step halving
-            jc = _limb_jacobian(lvc, cu24)
-            soc = cand - jc.T @ _solve(jc @ jc.T + eye8, gc)
-            gs2, _ = _limbs(soc, cu24, cmu24, lsq)
-            if float(soc @ gmat @ soc - 2.0 * lin @ soc) + rho * _sum(np.abs(gs2)) <= f0 + 1e-12:
-                s = soc
-                nu = nu_new
-                continue
         while a > 1e-4:
-            if q0 + a * (q1 + a * q2) + rho * _sum(np.abs(gc)) <= f0 + 1e-12:
+            if q0 + a * (q1 + a * q2) + rho * np.sum(np.abs(gc)) <= f0 + 1e-12:
                 break
             a *= 0.5
             lva = lv + a * dlv
@@ -928,35 +809,19 @@ def _sphere_setup(g: NDArray[np.float64], z: NDArray[np.float64], n: NDArray[np.
     return 0.5 * (q + q.T), z.T - gzn @ k1, z - n @ (k1 @ gz), n @ k1
 
 
-def _newton_reduced(
-    gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
-    max_iter: int = NEWTON_MAX_ITER, tol: float = 1e-9, nu0: NDArray[np.float64] | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
-    """:func:`newton_reduced` returning ``(s, multipliers (8,), SQP iterations)``; ``nu0``
-    warm-starts the multipliers (e.g. from the previous ADM iteration's alpha-step)."""
-    s, nu, it = _newton_kernel(
-        np.ascontiguousarray(gmat, dtype=np.float64), np.ascontiguousarray(lin, dtype=np.float64),
-        *model.kernel_limbs, np.ascontiguousarray(s0, dtype=np.float64),
-        np.zeros(8) if nu0 is None else np.ascontiguousarray(nu0, dtype=np.float64),
-        int(max_iter), float(tol), bool(AUGMENTED_PD_TEST), bool(SECOND_ORDER_CORRECTION), _EYE8,
-    )
-    return s, nu, int(it)
-
-
 @njit
 def _newton_alpha_kernel(
     d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64], mus: NDArray[np.float64],
     v: NDArray[np.float64], g_red: NDArray[np.float64], cu24: NDArray[np.float64],
-    cmu24: NDArray[np.float64], hc: NDArray[np.float64], lsq: NDArray[np.float64], nu0: NDArray[np.float64],
-    max_iter: int, tol: float, augmented_pd_test: bool, second_order_correction: bool,
+    cmu24: NDArray[np.float64], hc: NDArray[np.float64], lsq: NDArray[np.float64], max_iter: int, tol: float,
     eye8: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The reduced Newton alpha-step of :func:`pose_step` (limbs on): ``(alpha, multipliers)``."""
+) -> NDArray[np.float64]:
+    """The reduced Newton alpha-step of :func:`pose_step` (limbs on), multipliers from zero (warm
+    multipliers from the previous ADM iteration were measured no better)."""
     vtd2 = v.T @ d2
     lin = mus.T @ d1 + vtd2
-    s, nu, _ = _newton_kernel(g_red, lin, cu24, cmu24, hc, lsq, v.T @ alpha, nu0, max_iter, tol,
-                              augmented_pd_test, second_order_correction, eye8)
-    return d2 - v @ vtd2 + v @ s, nu
+    s, _, _ = _newton_kernel(g_red, lin, cu24, cmu24, hc, lsq, v.T @ alpha, np.zeros(8), max_iter, tol, eye8)
+    return d2 - v @ vtd2 + v @ s
 
 
 @njit
@@ -1014,8 +879,8 @@ def _riemannian_alpha_kernel(
 def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64],
                theta: float, l1: bool) -> float:
     """:func:`pose_objective` on plain arrays (``l1`` False: squared loss)."""
-    data = _sum(wts * np.abs(resid)) if l1 else _sum(wts * resid * resid)
-    return float(data + theta * _sum(np.abs(alpha)))
+    data = np.sum(wts * np.abs(resid)) if l1 else np.sum(wts * resid * resid)
+    return float(data + theta * np.sum(np.abs(alpha)))
 
 
 @njit
@@ -1349,7 +1214,7 @@ def _riemannian_pose_step(
     if state_out is not None:
         state_out.append((eta_end * u1, eta_end * u2))
     if not np.all(np.isfinite(best)):
-        raise InvalidInputError("pose step diverged (non-finite coefficients)")
+        raise SolverError("pose step diverged (non-finite coefficients)")
     return PoseResult(best, y.reshape(N_JOINTS, 3), float(obj), float(viol), int(it), bool(converged))
 
 
@@ -1430,6 +1295,13 @@ def pose_step(
     -------
     PoseResult
         The iterate with the lowest objective among the feasible ones visited.
+
+    Raises
+    ------
+    InvalidInputError
+        ``alpha0`` of the wrong shape, or a prior term without the Riemannian path.
+    SolverError
+        The ADM diverged (non-finite coefficients).
     """
     loss = variant.loss
     th = float(theta) if variant.sparsity else 0.0
@@ -1438,9 +1310,10 @@ def pose_step(
     k = model.n_bases
     if (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
             and model.limb_coordinates is not None):
-        return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0, max_iter,
-                                     tol, eta, eta_growth, eta_max, duals, state_out, newton_tol, alpha_prox,
-                                     prior)
+        with diverged_as_solver_error("pose step"):
+            return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0,
+                                         max_iter, tol, eta, eta_growth, eta_max, duals, state_out,
+                                         newton_tol, alpha_prox, prior)
     if prior is not None:
         raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
                                 "lifting and bases whose limb map is onto (>= 24 basis directions)")
@@ -1465,7 +1338,6 @@ def pose_step(
     cons = model.full if full else model.reduced
     if alpha_solver == "riemannian":  # not applicable here (limbs off, full lifting or a limb map
         alpha_solver = "newton"        # that is not onto): the SQP solves the same problem
-    nu_prev: list[NDArray[np.float64] | None] = [None]
 
     def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
                      ) -> NDArray[np.float64]:
@@ -1481,13 +1353,8 @@ def pose_step(
             z0 = np.append(alpha, 1.0)
         else:
             if alpha_solver == "newton" and variant.limbs:
-                alpha_new, nu = _newton_alpha_kernel(
-                    d1, d2, alpha, mus, v, g_red, *model.kernel_limbs,
-                    nu_prev[0] if WARM_MULTIPLIERS and nu_prev[0] is not None else np.zeros(8),
-                    NEWTON_MAX_ITER, float(newton_tol), bool(AUGMENTED_PD_TEST),
-                    bool(SECOND_ORDER_CORRECTION), _EYE8)
-                nu_prev[0] = nu
-                return alpha_new
+                return _newton_alpha_kernel(d1, d2, alpha, mus, v, g_red, *model.kernel_limbs,
+                                            NEWTON_MAX_ITER, float(newton_tol), _EYE8)
             vtd2 = v.T @ d2
             lin = mus.T @ d1 + vtd2
             if not variant.limbs:
@@ -1550,6 +1417,6 @@ def pose_step(
         best_alpha = alpha
         best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
     if not np.all(np.isfinite(best_alpha)):
-        raise InvalidInputError("pose step diverged (non-finite coefficients)")
+        raise SolverError("pose step diverged (non-finite coefficients)")
     viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
     return PoseResult(best_alpha, model.pose(best_alpha), best_obj, viol, it, converged)

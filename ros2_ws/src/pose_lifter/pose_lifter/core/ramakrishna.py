@@ -47,9 +47,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bases import PoseBases
-from .errors import InvalidInputError, TooFewJointsError
+from .errors import InvalidInputError, OptionsError, TooFewJointsError
 from .skeleton import N_JOINTS, limb_lengths, limb_selectors
 from .types import Camera, LiftResult, WarmStart
+from .validation import check_keypoint_sequence, check_keypoints
 
 __all__ = ["RamakrishnaLifter", "RamakrishnaOptions", "limb_sum_residual", "ramakrishna_lift"]
 
@@ -88,12 +89,12 @@ class RamakrishnaOptions:
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_bases, int) or self.max_bases < 1:
-            raise InvalidInputError(f"max_bases must be a positive integer, got {self.max_bases!r}")
+            raise OptionsError(f"max_bases must be a positive integer, got {self.max_bases!r}")
         if self.limb_constraint not in ("sum", "sum_squared"):
-            raise InvalidInputError(
+            raise OptionsError(
                 f"limb_constraint must be 'sum' or 'sum_squared', got {self.limb_constraint!r}")
         if not 3 <= int(self.min_visible_joints) <= N_JOINTS:
-            raise InvalidInputError("min_visible_joints must be in [3, 12]")
+            raise OptionsError("min_visible_joints must be in [3, 12]")
 
 
 def _fit_camera_ls(
@@ -299,18 +300,8 @@ def ramakrishna_lift(
     opts = options if options is not None else RamakrishnaOptions()
     cap = int(max_bases) if max_bases is not None else opts.max_bases
     if cap < 1:
-        raise InvalidInputError("max_bases must be >= 1")
-    x_in = np.asarray(points_2d, dtype=np.float64)
-    if x_in.shape != (N_JOINTS, 2):
-        raise InvalidInputError(f"points_2d must have shape ({N_JOINTS}, 2), got {x_in.shape}")
-    if confidence is None:
-        conf = np.ones(N_JOINTS)
-    else:
-        conf = np.asarray(confidence, dtype=np.float64)
-        if conf.shape != (N_JOINTS,):
-            raise InvalidInputError(f"confidence must have shape ({N_JOINTS},), got {conf.shape}")
-        if not np.all(np.isfinite(conf)):
-            raise InvalidInputError("confidence has non-finite values")
+        raise OptionsError("max_bases must be >= 1")
+    x_in, conf = check_keypoints(points_2d, confidence)
     w = (conf >= opts.confidence_threshold).astype(np.float64)
     if not np.all(np.isfinite(x_in[w > 0])):
         raise InvalidInputError("points_2d has non-finite values at visible joints")
@@ -453,10 +444,5 @@ class RamakrishnaLifter:
     def lift_many(self, points_2d: NDArray[np.float64], confidence: NDArray[np.float64] | None = None,
                   warm_start: bool = True) -> Sequence[LiftResult]:
         """Lift frames (T, 12, 2) independently (``warm_start`` is ignored)."""
-        pts = np.asarray(points_2d, dtype=np.float64)
-        if pts.ndim != 3 or pts.shape[1:] != (N_JOINTS, 2):
-            raise InvalidInputError(f"points_2d must have shape (T, {N_JOINTS}, 2), got {pts.shape}")
-        conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
-        if conf is not None and conf.shape != pts.shape[:2]:
-            raise InvalidInputError(f"confidence must have shape {pts.shape[:2]}, got {conf.shape}")
+        pts, conf = check_keypoint_sequence(points_2d, confidence)
         return [self.lift(pts[i], None if conf is None else conf[i]) for i in range(pts.shape[0])]

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
-from .errors import InvalidInputError, PoseLifterError
+from .errors import InvalidInputError, SolverError
 from .skeleton import limb_selectors
 from .types import Camera
 
@@ -106,7 +106,7 @@ TOLERANCES: Final[dict[str, float]] = {
 }
 
 
-class ReferenceSolverError(PoseLifterError, RuntimeError):
+class ReferenceSolverError(SolverError):
     """A reference solver did not reach an optimal (or optimal-inaccurate) status."""
 
 

@@ -38,18 +38,6 @@ class Camera:
         """Project a pose (12, 3) -> (12, 2)."""
         return np.asarray(pose @ self.projection.T + self.translation)
 
-    @staticmethod
-    def from_projection(m0: NDArray[np.float64], translation: NDArray[np.float64]) -> Camera:
-        """Nearest scaled-orthographic camera to a 2x3 matrix (Frobenius norm).
-
-        With ``m0 = U diag(s) V^T`` the nearest ``s_bar * R2`` is ``mean(s) * U V^T``;
-        the third row of the rotation is ``r1 x r2``.
-        """
-        u, s, vt = np.linalg.svd(np.asarray(m0, dtype=np.float64), full_matrices=False)
-        r2 = u @ vt
-        r3 = np.cross(r2[0], r2[1])
-        return Camera(np.vstack([r2, r3]), float(s.mean()), np.asarray(translation, dtype=np.float64).copy())
-
 
 @dataclass(frozen=True)
 class CameraResult:

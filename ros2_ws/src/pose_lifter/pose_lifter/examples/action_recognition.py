@@ -19,15 +19,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
 from .. import messages
 from ..core.errors import PoseLifterError
+from ..run import run_node
 from .actions import ActionClassifier, PoseHistory
 
 __all__ = ["ActionRecognitionNode", "main"]
@@ -86,24 +85,7 @@ class ActionRecognitionNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter action_recognition``."""
-    rclpy.init(args=args)
-    node: ActionRecognitionNode | None = None
-    try:
-        node = ActionRecognitionNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except PoseLifterError as err:
-        rclpy.logging.get_logger("action_recognition").fatal(f"cannot start: {err}")
-        raise SystemExit(1) from None
-    except Exception:
-        if rclpy.ok():
-            raise
-        # a signal arrived while the node was still starting: rcl calls fail, exit quietly
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(ActionRecognitionNode, "action_recognition", args)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,80 @@
+"""One error tree: bad input, bad options and a diverged solve are told apart, all PoseLifterErrors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pose_lifter import bags, cli
+from pose_lifter.core import Lifter, camera, pose
+from pose_lifter.core import ramakrishna as rk
+from pose_lifter.core import reference as ref
+from pose_lifter.core.errors import (
+    BagError,
+    BagReadError,
+    InvalidInputError,
+    OptionsError,
+    PoseLifterError,
+    SolverError,
+)
+from pose_lifter.core.options import get_variant
+
+
+@pytest.fixture(scope="module")
+def lifter() -> Lifter:
+    return Lifter()
+
+
+def test_bag_errors_join_the_tree_and_stay_importable_from_bags() -> None:
+    assert bags.BagError is BagError and bags.BagReadError is BagReadError
+    assert issubclass(BagError, PoseLifterError) and issubclass(BagReadError, BagError)
+    assert issubclass(BagError, RuntimeError)  # what it was before joining
+    with pytest.raises(PoseLifterError, match="bag not found"):
+        bags.bag_topics("/nonexistent/x.mcap")
+
+
+def test_solver_errors_are_not_input_errors() -> None:
+    assert issubclass(SolverError, PoseLifterError)
+    assert not issubclass(SolverError, InvalidInputError)
+    assert issubclass(ref.ReferenceSolverError, SolverError)
+
+
+def test_a_diverged_camera_step_is_a_solver_error() -> None:
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(12, 2)), rng.normal(size=(12, 3))
+    camera.camera_step(x, 1e100 * y, np.ones(12))  # large but fine
+    with pytest.raises(SolverError, match="camera step diverged"):
+        camera.camera_step(x, 1e160 * y, np.ones(12))  # finite input, its normal equations overflow
+
+
+@pytest.mark.parametrize("solver", ["riemannian", "newton"])
+def test_a_diverged_pose_step_is_a_solver_error(lifter: Lifter, solver: str) -> None:
+    x = np.random.default_rng(0).normal(size=(12, 2))
+    m0 = np.hstack([np.eye(2), np.zeros((2, 1))])
+    args = (np.zeros(2), np.ones(12), lifter.model, get_variant("full"), 0.1, lifter.bases.start_alphas[0])
+    assert np.isfinite(pose.pose_step(x, 1e100 * m0, *args, alpha_solver=solver, max_iter=5).objective)
+    with pytest.raises(SolverError, match="pose step diverged"), np.errstate(over="ignore", invalid="ignore"):
+        pose.pose_step(x, 1e200 * m0, *args, alpha_solver=solver, max_iter=5)
+
+
+def test_a_malformed_projection_is_invalid_input() -> None:
+    with pytest.raises(InvalidInputError, match=r"\(2, 3\)"):
+        camera.project_scaled_orthographic(np.eye(3))
+    with pytest.raises(ValueError):  # InvalidInputError still is one
+        camera.project_scaled_orthographic(np.eye(3))
+
+
+@pytest.mark.parametrize("bad", [{"max_bases": 0}, {"limb_constraint": "each"}, {"min_visible_joints": 2}])
+def test_bad_ramakrishna_options_are_options_errors(bad: dict[str, object]) -> None:
+    with pytest.raises(OptionsError):
+        rk.RamakrishnaOptions(**bad)  # type: ignore[arg-type]
+
+
+def test_a_bad_ramakrishna_basis_cap_is_an_options_error(lifter: Lifter) -> None:
+    with pytest.raises(OptionsError, match="max_bases"):
+        rk.ramakrishna_lift(np.zeros((12, 2)), None, lifter.bases, max_bases=0)
+
+
+def test_the_cli_reports_a_diverged_solve_as_a_data_error() -> None:
+    assert cli._is_data_error(SolverError("pose step diverged"))
+    assert isinstance(SolverError("x"), cli._library_errors())
+    assert isinstance(BagError("x"), cli._library_errors()) and not cli._is_data_error(BagError("x"))

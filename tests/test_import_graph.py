@@ -1,0 +1,111 @@
+"""The package's modules import one another without cycles (function-level imports included)."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter"
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for f in PACKAGE.rglob("*.py"):
+        parts = ("pose_lifter", *f.relative_to(PACKAGE).with_suffix("").parts)
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = f
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the package modules it imports anywhere in its file."""
+    mods = _modules()
+    graph: dict[str, set[str]] = {}
+    for name, f in mods.items():
+        pkg = name if f.name == "__init__.py" else name.rsplit(".", 1)[0]
+        deps: set[str] = set()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
+                    mod = ".".join([*base, node.module] if node.module else base)
+                else:
+                    mod = node.module or ""
+                deps.update(c for c in [mod, *(f"{mod}.{a.name}" for a in node.names)] if c in mods)
+            elif isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names if a.name in mods)
+        deps.discard(name)
+        graph[name] = deps
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_cycle_finder_finds_a_cycle() -> None:
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_module_of_the_package_imports_itself_through_others() -> None:
+    graph = import_graph()
+    assert "pose_lifter.cli" in graph and "pose_lifter.core.lifter" in graph["pose_lifter.offline"]
+    assert cycles(graph) == []
+
+
+def test_the_core_never_imports_the_ros_shell() -> None:
+    graph = import_graph()
+    for name, deps in graph.items():
+        if name.startswith("pose_lifter.core"):
+            assert all(d.startswith("pose_lifter.core") for d in deps), (name, deps)
+
+
+def test_the_error_tree_and_the_bag_reader_load_without_the_solver() -> None:
+    code = ("import sys, pose_lifter.bags, pose_lifter.core.errors; "
+            "print(sorted(m for m in ('numba', 'scipy', 'pose_lifter.core.lifter') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_every_public_core_name_resolves_lazily() -> None:
+    import pose_lifter.core as core
+    from pose_lifter.core.lifter import Lifter
+
+    assert core.Lifter is Lifter
+    for name in core.__all__:
+        assert getattr(core, name) is not None
+    assert set(core.__all__) <= set(dir(core))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        _ = core.nope  # type: ignore[attr-defined]

@@ -1,0 +1,278 @@
+"""A stable hash of what the solver computes, to prove that a refactor changes no result.
+
+Usage::
+
+    .venv/bin/python tools/lift_hash.py [--bags bags/*.mcap] [--max-messages N] [--starts N] [-v]
+
+Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals``), and a total:
+
+* ``lifts paper`` / ``lifts hybrid``: every committed bag lifted offline the way ``pose-lifter
+  lift`` does (:func:`pose_lifter.offline.lift_messages`: per-track warm starts through the
+  node's per-track policy, metric placement from ``/camera_info``), in ``mode="paper"`` and
+  ``mode="hybrid"``. Per lifted skeleton (in message and track order): stamp, track id,
+  warm-started flag, the metric joints, the model-frame pose, the coefficients, the camera
+  (rotation, scale, translation), the objective, reprojection error, limb violation and the
+  alternation counts. Failed skeletons enter with their error message.
+* ``metrics``: the lifted metric joints of both modes against the bags' ground truth (matched
+  by stamp and track id): :func:`~pose_lifter.core.metrics.mpjpe`, ``p_mpjpe``,
+  ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
+  :func:`pose_lifter.offline.evaluate_bag` on each input bag.
+* ``pose_step``: a few :func:`pose_lifter.core.pose.pose_step` calls recorded while lifting the
+  first bag in each mode (every ``--record-every``-th call, up to ``--record`` per mode),
+  replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
+  ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
+  their objectives, limb violations, iteration counts and coefficients.
+
+Run it before a refactor and after it: the lines must be identical. The results depend on the
+machine's BLAS and on numba (printed in the header); compare runs on one machine and install.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import glob
+import hashlib
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+from numpy.typing import NDArray
+from pose_lifter import messages as m
+from pose_lifter.bags import read_messages
+from pose_lifter.core import lifter as lifter_module
+from pose_lifter.core import pose as pose_module
+from pose_lifter.core._jit import HAVE_NUMBA
+from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.errors import PoseLifterError
+from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
+from pose_lifter.core.options import LifterOptions, get_variant
+from pose_lifter.core.types import LiftResult
+from pose_lifter.offline import FrameLift, LiftSummary, evaluate_bag, lift_messages
+from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+
+REPO = Path(__file__).resolve().parents[1]
+MODES = ("paper", "hybrid")
+
+
+class Digest:
+    """sha256 over rounded float64 values, integers and strings, fed in a fixed order."""
+
+    def __init__(self, decimals: int) -> None:
+        self._h = hashlib.sha256()
+        self._decimals = decimals
+        self.n_values = 0
+
+    def floats(self, *values: Any) -> None:
+        for v in values:
+            a = np.round(np.asarray(v, dtype=np.float64), self._decimals) + 0.0  # -0.0 -> 0.0
+            self._h.update(str(a.shape).encode())
+            self._h.update(np.ascontiguousarray(a).tobytes())
+            self.n_values += a.size
+
+    def ints(self, *values: int) -> None:
+        self._h.update(np.asarray(values, dtype=np.int64).tobytes())
+        self.n_values += len(values)
+
+    def text(self, s: str) -> None:
+        self._h.update(s.encode() + b"\0")
+
+    def hexdigest(self) -> str:
+        return self._h.hexdigest()
+
+
+@dataclass
+class Recorder:
+    """Wraps the lifter's ``pose_step`` and keeps a copy of every ``every``-th call's arguments."""
+
+    every: int
+    limit: int
+    calls: list[tuple[tuple[Any, ...], dict[str, Any]]] = field(default_factory=list)
+    n_seen: int = 0
+
+    def wrap(self, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def recorded(*args: Any, **kwargs: Any) -> Any:
+            if self.n_seen % self.every == 0 and len(self.calls) < self.limit:
+                model = args[4]  # PoseModel: shared, not copied (it is read-only data)
+                kept = {k: v for k, v in kwargs.items() if k not in ("state_out", "qstep_fn")}
+                self.calls.append((tuple(a if a is model else copy.deepcopy(a) for a in args),
+                                   copy.deepcopy(kept)))
+            self.n_seen += 1
+            return fn(*args, **kwargs)
+
+        return recorded
+
+
+def _keypoints(bag: Path) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
+    kps: list[tuple[int, Any]] = []
+    infos: list[tuple[int, Any]] = []
+    for x in read_messages(bag, [TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO]):
+        (kps if x.topic == TOPIC_KEYPOINTS else infos).append((x.stamp_ns, x.msg))
+    return kps, infos
+
+
+def _hash_result(d: Digest, f: FrameLift, r: LiftResult) -> None:
+    d.ints(f.stamp_ns, f.track_id, int(f.warm_started), r.n_iter, r.total_alternations, r.n_starts,
+           r.start_index, int(r.converged))
+    d.floats(f.joints_m, r.pose, r.alpha, r.camera.rotation, r.camera.scale, r.camera.translation,
+             r.objective, r.reprojection_error, r.limb_violation, r.weights)
+
+
+def lift_bags(bags: Iterable[Path], mode: str, bases: PoseBases, starts: int | None,
+              max_messages: int | None, d: Digest, recorder: Recorder | None, verbose: bool
+              ) -> dict[Path, list[FrameLift]]:
+    """Lift every bag in ``mode`` into ``d``; record pose-step calls of the first bag. Returns the
+    lifted skeletons of each bag."""
+    frames: dict[Path, list[FrameLift]] = {}
+    original = lifter_module.pose_step
+    for i, bag in enumerate(bags):
+        opts = LifterOptions(mode=mode)
+        lifter = Lifter(bases, opts if starts is None else opts.replace(n_starts=starts))
+        kps, infos = _keypoints(bag)
+        if max_messages is not None:
+            kps = kps[:max_messages]
+        summary = LiftSummary()
+
+        def on_frame(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
+            for f, r in zip(lifted, results, strict=True):
+                _hash_result(d, f, r)
+
+        d.text(f"{bag.name} {mode}")
+        if recorder is not None and i == 0:
+            lifter_module.pose_step = recorder.wrap(original)  # type: ignore[assignment]
+        try:
+            t0 = time.perf_counter()
+            frames[bag] = lift_messages(kps, infos, lifter, warm_start=True, on_frame=on_frame,
+                                        summary=summary)
+        finally:
+            lifter_module.pose_step = original  # type: ignore[assignment]
+        for failure in summary.failures:
+            d.text(failure)
+        d.ints(summary.n_skeletons, summary.n_lifted, summary.n_failed, summary.n_warm)
+        if verbose:
+            print(f"  {mode:6s} {bag.name:22s} {summary.n_lifted:4d} lifted, {summary.n_failed} failed, "
+                  f"{time.perf_counter() - t0:6.1f} s", file=sys.stderr, flush=True)
+    return frames
+
+
+def hash_metrics(lifted: dict[str, dict[Path, list[FrameLift]]], d: Digest) -> int:
+    """Errors of the lifted skeletons against the ground truth, and the input bags' floors, into
+    ``d``; returns the number of matched skeletons."""
+    n = 0
+    bags = sorted({bag for per_bag in lifted.values() for bag in per_bag})
+    for bag in bags:
+        truth: dict[tuple[int, int], NDArray[np.float64]] = {}
+        for x in read_messages(bag, [TOPIC_GROUND_TRUTH]):
+            s = m.stamp_to_ns(x.msg.header.stamp)
+            for sk in x.msg.skeletons:
+                truth[(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
+        for mode, per_bag in lifted.items():
+            pairs = [(f.joints_m, truth[(f.stamp_ns, f.track_id)]) for f in per_bag.get(bag, [])
+                     if (f.stamp_ns, f.track_id) in truth]
+            d.text(f"{bag.name} {mode} {len(pairs)}")
+            if not pairs:
+                continue
+            pred = np.array([p for p, _ in pairs])
+            gt = np.array([g for _, g in pairs])
+            d.floats(mpjpe(pred, gt), p_mpjpe(pred, gt), normalised_error(pred, gt),
+                     procrustes_align(pred, gt))
+            n += len(pairs)
+        ev = evaluate_bag(bag)  # an input bag: the floors only
+        d.floats(ev.flat_p_mpjpe_mm, ev.flat_normalised, ev.mean_pose_p_mpjpe_mm, ev.mean_pose_normalised)
+    return n
+
+
+def _solver_settings(kwargs: dict[str, Any]) -> list[tuple[str, dict[str, Any], bool]]:
+    """(name, keyword overrides, drop the limb constraints) of each replay of one recorded call."""
+    out: list[tuple[str, dict[str, Any], bool]] = [("recorded", {}, False)]
+    plain = {"prior": None}
+    out.append(("riemannian, no prior", {**plain, "alpha_solver": "riemannian"}, False))
+    out.append(("newton", {**plain, "alpha_solver": "newton"}, False))
+    out.append(("admm", {**plain, "alpha_solver": "admm", "max_iter": min(10, kwargs["max_iter"])}, False))
+    out.append(("admm full", {**plain, "alpha_solver": "admm", "alpha_step": "full", "max_iter": 3,
+                              "inner_max_iter": 20}, False))
+    out.append(("newton full", {**plain, "alpha_solver": "newton", "alpha_step": "full", "max_iter": 3},
+                False))
+    out.append(("no limbs", {**plain, "alpha_solver": "newton"}, True))
+    return out
+
+
+def replay_pose_steps(calls: list[tuple[tuple[Any, ...], dict[str, Any]]], d: Digest, verbose: bool) -> int:
+    """Replay each recorded call with every solver setting into ``d``; returns the number of solves."""
+    n = 0
+    for j, (args, kwargs) in enumerate(calls):
+        for name, over, no_limbs in _solver_settings(kwargs):
+            a = [*copy.deepcopy(args[:4]), args[4], *copy.deepcopy(args[5:])]
+            if no_limbs:
+                v = a[5]
+                a[5] = get_variant(f"{v.loss.upper()}NA{'WS' if v.sparsity else 'NS'}")
+            kw = {**copy.deepcopy(kwargs), **over}
+            d.text(f"call {j} {name}")
+            try:
+                res = pose_module.pose_step(*a, **kw)
+            except PoseLifterError as exc:
+                d.text(f"{type(exc).__name__}: {exc}")
+                continue
+            d.ints(res.n_iter, int(res.converged))
+            d.floats(res.objective, res.limb_violation, res.alpha)
+            n += 1
+            if verbose:
+                print(f"  call {j:2d} {name:20s} objective {res.objective:.12f} after {res.n_iter} "
+                      "iterations", file=sys.stderr)
+    return n
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    ap.add_argument("--bags", nargs="*", default=sorted(glob.glob(str(REPO / "bags" / "*.mcap"))))
+    ap.add_argument("--max-messages", type=int, default=None, help="lift only the first N messages of a bag")
+    ap.add_argument("--starts", type=int, default=None,
+                    help="n_starts of the cold solves (default: the LifterOptions default)")
+    ap.add_argument("--decimals", type=int, default=9, help="round to 10**-decimals before hashing")
+    ap.add_argument("--record", type=int, default=6, help="pose_step calls recorded per mode")
+    ap.add_argument("--record-every", type=int, default=25, help="record every N-th pose_step call")
+    ap.add_argument("-v", "--verbose", action="store_true", help="per-bag times and per-call objectives")
+    args = ap.parse_args(argv)
+    bags = [Path(b) for b in args.bags]
+    if not bags:
+        ap.error("no bags")
+    bases = PoseBases.load()
+    Lifter(bases, LifterOptions(mode="hybrid")).warm_up()  # compile or load the kernels first
+    starts = LifterOptions().n_starts if args.starts is None else args.starts
+    print(f"lift_hash: {len(bags)} bags ({', '.join(b.stem for b in bags)}), starts {starts}, "
+          f"max messages {args.max_messages}, rounded to 1e-{args.decimals}; numba {HAVE_NUMBA}, "
+          f"numpy {np.__version__}")
+    total = Digest(args.decimals)
+    calls: list[tuple[tuple[Any, ...], dict[str, Any]]] = []
+    lifted: dict[str, dict[Path, list[FrameLift]]] = {}
+    for mode in MODES:
+        d = Digest(args.decimals)
+        rec = Recorder(args.record_every, args.record)
+        lifted[mode] = lift_bags(bags, mode, bases, args.starts, args.max_messages, d, rec, args.verbose)
+        calls.extend(rec.calls)
+        n = sum(len(f) for f in lifted[mode].values())
+        print(f"lifts {mode:7s} {d.hexdigest()}  ({n} skeletons, {d.n_values} values)", flush=True)
+        total.text(d.hexdigest())
+    d = Digest(args.decimals)
+    n = hash_metrics(lifted, d)
+    print(f"metrics       {d.hexdigest()}  ({n} matched skeletons)", flush=True)
+    total.text(d.hexdigest())
+    d = Digest(args.decimals)
+    n = replay_pose_steps(calls, d, args.verbose)
+    print(f"pose_step     {d.hexdigest()}  ({len(calls)} recorded calls, {n} solves)")
+    total.text(d.hexdigest())
+    print(f"total         {total.hexdigest()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
