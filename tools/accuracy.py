@@ -46,8 +46,8 @@ from numpy.typing import NDArray
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from pose_lifter.core import Lifter, LifterOptions, PoseBases, TooFewJointsError, p_mpjpe
-from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
+from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap import load_trial, split_trials
@@ -139,7 +139,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     else:
                         r = lifter.lift(px[i], conf[i], warm=warm)
                         warm = r.warm_start() if m == "paper" else None
-                except (TooFewJointsError, InvalidInputError):
+                except PoseLifterError:
                     warm = None
                     continue
                 preds[i] = r.pose_camera * leg_m[i]

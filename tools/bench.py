@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from pose_lifter import messages as m
 from pose_lifter.bags import read_messages
 from pose_lifter.core.bases import PoseBases
-from pose_lifter.core.errors import InvalidInputError, TooFewJointsError
+from pose_lifter.core.errors import InvalidInputError, PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.options import LifterOptions
@@ -123,7 +123,7 @@ def lift_track(lifter: Lifter, tr: Track, warm_start: bool = True
             tracked = policy.lift(0, i * 33_333_333, pts, conf)  # 30 Hz
             res: LiftResult | None = tracked.result
             was_warm = tracked.warm_started
-        except (InvalidInputError, TooFewJointsError):
+        except PoseLifterError:
             res, was_warm = None, False
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
@@ -213,7 +213,7 @@ def bench_options(label: str, opts: LifterOptions, a: argparse.Namespace, bases:
         t0, c0 = time.perf_counter(), time.process_time()
         try:
             lf.lift(tr.points[i], tr.confidence[i])
-        except (InvalidInputError, TooFewJointsError):
+        except PoseLifterError:
             continue
         wall_k.append(1e3 * (time.perf_counter() - t0))
         cpu_k.append(1e3 * (time.process_time() - c0))

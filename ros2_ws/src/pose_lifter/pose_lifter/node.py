@@ -52,7 +52,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.signals import SignalHandlerOptions
 
-from . import diagnostics, messages
+from . import diagnostics, messages, placement
 from .core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from .core._jit import HAVE_NUMBA
 from .core.errors import InvalidInputError
@@ -176,10 +176,11 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               0.0, 3600.0),
     ParamSpec("reinit_ratio", 2.0, "A warm solve whose objective exceeds this times the track's recent "
               "median is redone cold (0 = never).", 0.0, 1000.0),
-    ParamSpec("lower_leg_length", 0.43, "Right lower-leg (knee-ankle) length in metres: the metric scale.",
-              0.05, 2.0),
-    ParamSpec("default_distance", 5.0, "Depth of the skeleton centroid in metres when no camera_info "
-              "has been received.", 0.01, 1000.0),
+    ParamSpec("lower_leg_length", placement.DEFAULT_LEG_LENGTH_M,
+              "Right lower-leg (knee-ankle) length in metres: the metric scale.",
+              *placement.LEG_LENGTH_RANGE_M),
+    ParamSpec("default_distance", placement.DEFAULT_DISTANCE_M, "Depth of the skeleton centroid in metres "
+              "when no camera_info has been received.", 0.01, 1000.0),
     ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
     ParamSpec("max_skeletons", 64, "Skeletons lifted per frame at most; the rest are skipped.", 1, 10000),
     ParamSpec("max_coordinate", 1.0e5, "Keypoints farther than this from the image origin (pixels) "

@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 from ._jit import njit
 from .bases import PoseBases
 from .camera import _camera_admm_checked
-from .errors import InvalidInputError, OptionsError, TooFewJointsError
+from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
 from .options import LifterOptions
 from .pose import LiftedConstraints, PoseModel, PriorRows, QStepFn, pose_step
 from .prior import PosePrior
@@ -67,6 +67,7 @@ from .skeleton import (
     normalise_pose_flat,
 )
 from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
+from .validation import check_keypoints
 
 __all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter"]
 
@@ -155,7 +156,6 @@ class Lifter:
         self._prior_rel: NDArray[np.float64] | None = None
         self._model: PoseModel | None = None
         self._model_key: str | None = None
-        self._camera_qp: QStepFn | None = None
         mp = self.bases.mean_pose
         self._mean_spread = float(np.sqrt(np.mean(np.sum((mp[:, :2] - mp[:, :2].mean(0)) ** 2, axis=1))))
         self._build()
@@ -222,17 +222,7 @@ class Lifter:
     # ------------------------------------------------------------------ helpers
     def _weights(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        x = np.asarray(points, dtype=np.float64)
-        if x.shape != (N_JOINTS, 2):
-            raise InvalidInputError(f"points_2d must have shape ({N_JOINTS}, 2), got {x.shape}")
-        if confidence is None:
-            conf = np.ones(N_JOINTS)
-        else:
-            conf = np.asarray(confidence, dtype=np.float64)
-            if conf.shape != (N_JOINTS,):
-                raise InvalidInputError(f"confidence must have shape ({N_JOINTS},), got {conf.shape}")
-            if not np.all(np.isfinite(conf)):
-                raise InvalidInputError("confidence has non-finite values")
+        x, conf = check_keypoints(points, confidence)
         w = np.where(conf >= self._options.confidence_threshold, np.clip(conf, 0.0, 1.0), 0.0)
         # a joint with non-finite coordinates is missing, whatever its confidence
         bad = ~np.all(np.isfinite(x), axis=1)
@@ -628,7 +618,7 @@ class Lifter:
         )
         for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
             if not np.all(np.isfinite(arr)):
-                raise InvalidInputError("the solve produced non-finite values for this input")
+                raise SolverError("the solve produced non-finite values for this input")
         return result
 
     def lift_many(
