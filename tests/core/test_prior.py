@@ -291,3 +291,19 @@ def test_a_missing_joint_is_carried_over_by_the_track(
         res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w)), x, conf)
         errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in frames]))
     assert errs[0] < 0.97 * errs[1], errs
+
+
+def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
+    """The node's per-frame features (a fast path) and a batch of one give the same pose."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x = rng.normal(size=(12, 2)) * 50.0 + 300.0
+        vis = rng.random(12) > 0.3
+        vis[:2] = True
+        x[~vis] = np.nan if rng.random() < 0.5 else 0.0
+        one, batch = prior_features(x, vis), prior_features(x[None, None], vis[None, None])
+        for a, b in zip(one, batch, strict=True):
+            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=1e-12)
+        # float32 layers: a matrix-vector and a matrix-matrix product round differently
+        np.testing.assert_allclose(prior.predict(x, vis), prior.predict(x[None, None], vis[None, None])[0],
+                                   rtol=FLOAT32_TOL, atol=FLOAT32_TOL)
