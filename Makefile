@@ -86,7 +86,7 @@ prior: venv
 
 # the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12)
 accuracy: venv
-	$(PY) tools/accuracy.py --data $(CMU_DATA) --out out/accuracy
+	$(PY) tools/accuracy.py --data $(CMU_DATA) --frames 90 --views 4 --workers 2 --out out/accuracy
 
 # ROS 2 build: colcon builds ros2_ws (pose_lifter_msgs + pose_lifter) against the ros-jazzy
 # wheels in the venv. CMAKE_PROJECT_INCLUDE works around the wheels' baked-in /opt/python

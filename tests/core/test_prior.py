@@ -307,3 +307,33 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         # float32 layers: a matrix-vector and a matrix-matrix product round differently
         np.testing.assert_allclose(prior.predict(x, vis), prior.predict(x[None, None], vis[None, None])[0],
                                    rtol=FLOAT32_TOL, atol=FLOAT32_TOL)
+
+
+def test_a_temporal_prior_sees_the_tracks_past_frames(
+        bases: PoseBases, real_frames: tuple[np.ndarray, np.ndarray]) -> None:
+    """A window-2 prior (random weights: the plumbing, not the accuracy) gets the previous frame
+    from the lift's ``past``; no past means the current frame repeated; the per-track policy
+    hands over only evenly spaced frames."""
+    from pose_lifter.core.tracking import _Track
+
+    rng = np.random.default_rng(0)
+    net = PosePrior((rng.normal(size=(72, 16)) * 0.3, rng.normal(size=(16, 36)) * 0.3),
+                    (np.zeros(16), np.zeros(36)), np.zeros(36), np.ones(36), np.ones((12, 3)), window=2)
+    lifter = Lifter(bases, LifterOptions(mode="learned"), prior=net)
+    x = real_frames[0]
+    vis = np.ones(12, dtype=bool)
+    now = lifter.lift(x[1]).prior_pose
+    assert now is not None
+    same = lifter.lift(x[1], past=(x[1][None], vis[None])).prior_pose
+    moved = lifter.lift(x[1], past=(x[0][None], vis[None])).prior_pose
+    np.testing.assert_allclose(same, now, rtol=0, atol=1e-9)
+    assert moved is not None and np.abs(moved - now).max() > 1e-3
+    with pytest.raises(InvalidInputError):
+        lifter.lift(x[1], past=(x[0], vis))
+    track = _Track(None, 0)
+    for stamp in (0, 100, 133, 166):  # a gap, then 33 ms steps
+        track.history.append((stamp, np.full((12, 2), float(stamp)), np.ones(12, dtype=bool)))
+    past = track.past(199, 5)
+    assert past is not None
+    assert past[0][:, 0, 0].tolist() == [100.0, 133.0, 166.0]
+    assert track.past(166, 5) is None  # not after the last frame

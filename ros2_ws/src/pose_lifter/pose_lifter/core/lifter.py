@@ -353,6 +353,7 @@ class Lifter:
         limb_proportions: NDArray[np.float64] | None = None,
         data_weight: float = 1.0,
         temporal_weight: float | NDArray[np.float64] = 0.0,
+        past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -379,6 +380,11 @@ class Lifter:
             moved by the median motion of the visible joints since it (0: none; the per-track
             policy sets it from the track's 2D noise, up to ``options.temporal_weight``, and to
             ``options.missing_temporal_weight`` for joints missing in this frame).
+        past : (ndarray (k, 12, 2), ndarray of bool (k, 12)), optional
+            The track's previous frames (oldest first, evenly spaced up to this one) and which of
+            their joints were used: the input of a temporal prior (``PosePrior.window > 1``;
+            missing history is padded with the oldest frame given, or this one). Ignored by a
+            single-frame prior.
 
         Returns
         -------
@@ -391,8 +397,14 @@ class Lifter:
         x, w = self._weights(points_2d, confidence)
         norm = self._normalise(x, w)
         mode = self._options.mode
+        if past is not None:
+            pp, pv = np.asarray(past[0], dtype=np.float64), np.asarray(past[1], dtype=bool)
+            if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
+                raise InvalidInputError(f"past must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), got "
+                                        f"{pp.shape} and {pv.shape}")
+            past = (pp, pv & np.all(np.isfinite(pp), axis=-1))
         if mode == "learned":
-            return self._lift_learned(x, w, norm)
+            return self._lift_learned(x, w, norm, past)
         xn = (x - norm.centre) / norm.spread
         cam0: Camera | None = None
         if warm is not None:
@@ -407,7 +419,7 @@ class Lifter:
             if not np.all((tw >= 0.0) & (tw <= 1e3)):
                 raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
             runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w * data_weight, norm, warm,
-                                                                      cam0, limb_proportions, tw)
+                                                                      cam0, limb_proportions, tw, past)
             w = w / data_weight
         else:
             runs, total, n_starts = self._paper_runs(xn, w, warm, cam0)
@@ -454,14 +466,15 @@ class Lifter:
     def _prior_rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
                     limb_proportions: NDArray[np.float64] | None = None,
                     previous: NDArray[np.float64] | None = None,
-                    temporal_weight: NDArray[np.float64] | None = None
+                    temporal_weight: NDArray[np.float64] | None = None,
+                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
                     ) -> tuple[PriorRows, NDArray[np.float64]]:
         """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
         normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
         same frame) by ``temporal_weight``; limb radii from ``limb_proportions`` (a
         track's estimate, ``options.prior_limbs``). Returns the rows and the prior's pose in
         input units."""
-        pose = self.prior.predict(x, w > 0)
+        pose = self._predict_prior(x, w > 0, past)
         target = np.empty((N_JOINTS, 3))
         target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
         target[:, 2] = pose[:, 2] / norm.spread
@@ -481,6 +494,26 @@ class Lifter:
         if o.prior_limbs and limb_proportions is not None:
             radii = self.limb_radii(limb_proportions)
         return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
+
+    def _predict_prior(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
+                       past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None) -> NDArray[np.float64]:
+        """The prior's pose (12, 3) in input units for this frame; a temporal prior gets the
+        lift's ``past`` frames before it (padded with the oldest one given, or this frame)."""
+        prior = self.prior
+        if prior.window == 1:
+            return prior.predict(x, visible)
+        k = prior.window - 1
+        pts = np.empty((prior.window, N_JOINTS, 2))
+        vis = np.empty((prior.window, N_JOINTS), dtype=bool)
+        n_past = 0 if past is None else len(past[0])
+        for i in range(k):
+            j = max(n_past - k + i, 0)
+            if past is not None and n_past > 0:
+                pts[i], vis[i] = past[0][j], past[1][j]
+            else:
+                pts[i], vis[i] = x, visible
+        pts[k], vis[k] = x, visible
+        return prior.predict(np.where(vis[..., None], pts, 0.0), vis)
 
     def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
         """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
@@ -516,7 +549,8 @@ class Lifter:
 
     def _hybrid_runs(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                      norm: _Normalisation, warm: WarmStart | None, cam0: Camera | None,
-                     limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64]
+                     limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64],
+                     past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
                      ) -> tuple[list[tuple[int, _Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
         """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
         Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the
@@ -527,7 +561,7 @@ class Lifter:
             prev = self.model.pose(warm.alpha)
             previous = np.column_stack([cam0.project(prev),
                                         cam0.scale * (prev - prev.mean(axis=0)) @ cam0.rotation[2]])
-        prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight)
+        prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight, past)
         a_prior = self._start_alpha(prior.target)
         # every frame starts from the prior's pose (with the previous frame's camera when tracked):
         # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
@@ -558,7 +592,8 @@ class Lifter:
                 break
             w = w.copy()
             w[out] = 0.0
-            prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight)
+            prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight,
+                                                 past)
             # continue the fit, and start again from the prior's new pose: the lower objective
             cont = self._run(xn, w, run.pose.alpha, cam, n_alt, prior=prior)
             fresh = self._run(xn, w, self._start_alpha(prior.target), None, n_alt, prior=prior)
@@ -566,13 +601,13 @@ class Lifter:
             total += cont.n_iter + fresh.n_iter
         return runs, total, n_starts, w, prior_pose
 
-    def _lift_learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation
-                      ) -> LiftResult:
+    def _lift_learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
+                      past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> LiftResult:
         """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
         own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
         positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
         error of the visible joints in the normalised units."""
-        pose_in = self.prior.predict(x, w > 0)
+        pose_in = self._predict_prior(x, w > 0, past)
         centred = pose_in - pose_in.mean(axis=0)
         flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
         if not ok or not np.all(np.isfinite(flat)):

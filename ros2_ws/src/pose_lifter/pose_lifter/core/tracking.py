@@ -61,6 +61,9 @@ NOISE_MIN_WEIGHT = 0.25
 #: Frames of a track whose prior limb proportions are kept, and how many are needed before the
 #: track's estimate replaces the bases' proportions.
 LIMB_FRAMES = 90
+#: Past frames a track keeps: the input of a temporal prior (``PosePrior.window - 1`` of them) and
+#: the last two for the noise estimate.
+MAX_PAST = 8
 MIN_LIMB_FRAMES = 10
 #: The temporal outlier gate (``LifterOptions.outlier_gate``) leaves a frame alone when it would
 #: gate more than this fraction of its visible joints, and gates one joint on at most
@@ -84,7 +87,7 @@ class _Track:
     limbs: deque[NDArray[np.float64]] = field(default_factory=lambda: deque(maxlen=LIMB_FRAMES))
     noise: deque[float] = field(default_factory=lambda: deque(maxlen=NOISE_FRAMES))
     history: deque[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = field(
-        default_factory=lambda: deque(maxlen=2))
+        default_factory=lambda: deque(maxlen=MAX_PAST))
     #: (stamp, the fit's projection of all 12 joints (12, 2) in input units, pixels per leg length)
     fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
     gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
@@ -126,7 +129,7 @@ class _Track:
         one are evenly spaced in time."""
         if len(self.history) < 2:
             return
-        (t0, x0, v0), (t1, x1, v1) = self.history
+        (t0, x0, v0), (t1, x1, v1) = self.history[-2], self.history[-1]
         d1, d2 = t1 - t0, stamp_ns - t1
         if d1 <= 0 or d2 <= 0 or abs(d2 - d1) > 0.2 * d1:
             return
@@ -142,6 +145,26 @@ class _Track:
         except PoseLifterError:
             return
         self.noise.append(float(np.median(acc)) / spread)
+
+    def past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The last ``frames`` frames (oldest first, as ``(points (k, 12, 2), used (k, 12))``) that
+        are evenly spaced up to ``stamp_ns`` (within 20 %), or None."""
+        if frames <= 0 or not self.history:
+            return None
+        step = stamp_ns - self.history[-1][0]
+        if step <= 0:
+            return None
+        kept: list[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = []
+        later = stamp_ns
+        for entry in reversed(self.history):
+            if len(kept) == frames or abs((later - entry[0]) - step) > 0.2 * step:
+                break
+            kept.append(entry)
+            later = entry[0]
+        if not kept:
+            return None
+        kept.reverse()
+        return np.stack([k[1] for k in kept]), np.stack([k[2] for k in kept])
 
     def noise_level(self) -> float:
         """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
@@ -253,6 +276,7 @@ class TrackPolicy:
                 warm = track.warm
         limbs = track.limb_proportions() if track is not None else None
         hybrid = self.lifter.options.mode == "hybrid"
+        hybrid_or_learned = self.lifter.options.mode != "paper"
         opts = self.lifter.options
         gated = None
         if hybrid and track is not None and warm is not None and opts.outlier_gate > 0:
@@ -274,15 +298,18 @@ class TrackPolicy:
                 seen &= np.asarray(confidence, dtype=np.float64) >= opts.confidence_threshold
             tw = np.where(seen, tw, np.maximum(tw, opts.missing_temporal_weight))
         try:
+            past = None
+            if track is not None and warm is not None:
+                past = track.past(stamp_ns, self.lifter.prior.window - 1) if hybrid_or_learned else None
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
-                                      temporal_weight=tw)
+                                      temporal_weight=tw, past=past)
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
                 ref = float(np.median(np.asarray(track.objectives)))
                 if result.objective > self.reinit_ratio * ref:
                     cold = self.lifter.lift(points, confidence, warm=None, limb_proportions=limbs,
-                                            data_weight=dw, temporal_weight=tw)
+                                            data_weight=dw, temporal_weight=tw, past=past)
                     if cold.objective < result.objective:
                         result, reinit = cold, True
         except PoseLifterError:
