@@ -463,6 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pose-lifter`` console script."""
+    from .core._threads import one_blas_thread
+
+    one_blas_thread()  # small matrices: BLAS threads only contend (worker processes inherit it)
     parser = build_parser()
     args = parser.parse_args(argv)
     if _out_is_a_directory(args):

@@ -710,6 +710,9 @@ def main(args: list[str] | None = None) -> None:
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:
         print(params_yaml(), end="")
         return
+    from .core._threads import one_blas_thread
+
+    one_blas_thread()  # the solver's matrices are small: BLAS threads only contend
     if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:
         # compile the solver kernels into this install's cache (make ros runs it after the build)
         start = time.perf_counter()
