@@ -111,12 +111,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--neighbors", type=int, default=5)
     ap.add_argument("--lifted-train", type=int, default=0,
                     help="also train a 3D model on this many lifted training windows per class")
+    ap.add_argument("--model-input", choices=["true", "lifted"], default="true",
+                    help="--model-out writes the 3D model trained on true 3D or on the lifted training "
+                         "windows (needs --lifted-train; what the node sees downstream of the lifter)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--modes", nargs="+", default=["paper", "learned", "hybrid"],
                     choices=["paper", "learned", "hybrid"], help="lifter modes compared")
     ap.add_argument("--json", default=None, help="write the results as JSON here")
     args = ap.parse_args(argv)
 
+    if args.model_input == "lifted" and (args.lifted_train <= 0 or args.test_windows <= 0):
+        ap.error("--model-input lifted needs --lifted-train > 0 and --test-windows > 0")
     data = resolve_data_dir(args.data)
     rng = np.random.default_rng(args.seed)
     step = round(120.0 / FPS)
@@ -170,7 +175,9 @@ def main(argv: list[str] | None = None) -> int:
                 rot = camera(float(rng_train.uniform(0.0, 360.0)))
                 lw.append(lift_window(lifter, film(train_windows[i], rot, rng_train, args.noise_px)))
                 ly.append(cls)
-        model_lifted = ActionClassifier("3d", WINDOW, STEP_S, args.neighbors)
+        model_lifted = ActionClassifier("3d", WINDOW, STEP_S, args.neighbors, metadata={
+            "classes": list(CLASSES), "fps": FPS, "trained_on": f"lifted ({args.modes[-1]} mode)",
+            "command": " ".join(["tools/action_recognition_eval.py", *(argv or sys.argv[1:])])})
         model_lifted.fit(np.stack(lw), np.asarray(ly))
         pred["3d-lift/lifted-train"] = []
     truth: list[str] = []
@@ -229,8 +236,13 @@ def main(argv: list[str] | None = None) -> int:
         cls_txt = " ".join(f"{c}={per_cls[k][c]:.2f}" for c in CLASSES)
         print(f"{k:22s}{acc[k]:12.3f}{votes_acc[k]:16.3f}   {cls_txt}")
     if args.model_out:
-        model_3d.save(args.model_out)
-        print(f"wrote {args.model_out}")
+        if args.model_input == "lifted":
+            if model_lifted is None:
+                ap.error("--model-input lifted needs --lifted-train > 0")
+            model_lifted.save(args.model_out)
+        else:
+            model_3d.save(args.model_out)
+        print(f"wrote {args.model_out} ({args.model_input} 3D)")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(result, indent=2))

@@ -160,6 +160,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("prior_weight_z", "Hybrid: weight of the prior's depths in the L1 objective.", 0.0, 1000.0),
     _opt("outlier_threshold", "Hybrid: reprojection residual (leg lengths) above which a visible joint "
          "is dropped as a confident outlier and the prior re-run without it (0 = off).", 0.0, 1000.0),
+    _opt("outlier_threshold_gated", "Hybrid: outlier_threshold on tracked frames the outlier gate screened.",
+         0.0, 1000.0),
     _opt("hybrid_alternations", "Hybrid: alternations of each run at most.", 1, 1000),
     _opt("hybrid_flip_warm", "Hybrid: also score the depth-mirrored hypothesis on warm frames."),
     _opt("outlier_passes", "Hybrid: outlier passes at most.", 1, 100),

@@ -354,6 +354,7 @@ class Lifter:
         data_weight: float = 1.0,
         temporal_weight: float | NDArray[np.float64] = 0.0,
         past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
+        gated: bool = False,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -385,6 +386,10 @@ class Lifter:
             their joints were used: the input of a temporal prior (``PosePrior.window > 1``;
             missing history is padded with the oldest frame given, or this one). Ignored by a
             single-frame prior.
+        gated : bool
+            Hybrid: the frame was screened by the per-track outlier gate
+            (:class:`pose_lifter.core.tracking.TrackPolicy`); the outlier pass then uses
+            ``options.outlier_threshold_gated`` instead of ``options.outlier_threshold``.
 
         Returns
         -------
@@ -419,7 +424,8 @@ class Lifter:
             if not np.all((tw >= 0.0) & (tw <= 1e3)):
                 raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
             runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w * data_weight, norm, warm,
-                                                                      cam0, limb_proportions, tw, past)
+                                                                      cam0, limb_proportions, tw, past,
+                                                                      gated)
             w = w / data_weight
         else:
             runs, total, n_starts = self._paper_runs(xn, w, warm, cam0)
@@ -550,7 +556,7 @@ class Lifter:
     def _hybrid_runs(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                      norm: _Normalisation, warm: WarmStart | None, cam0: Camera | None,
                      limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64],
-                     past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+                     past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None, gated: bool = False
                      ) -> tuple[list[tuple[int, _Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
         """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
         Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the
@@ -578,7 +584,8 @@ class Lifter:
             runs.append((-2, self._mirrored_run(xn, w, best, prior, n_alt)))
         total = sum(r.n_iter for _, r in runs)
         n_starts = len(runs)
-        for _ in range(o.outlier_passes if o.outlier_threshold > 0 else 0):
+        threshold = o.outlier_threshold_gated if gated else o.outlier_threshold
+        for _ in range(o.outlier_passes if threshold > 0 else 0):
             idx, run = min(runs, key=lambda r: r[1].objective)
             cam = run.camera.camera
             # a joint disagrees with the image when it is far from the fit's projection or from
@@ -586,7 +593,7 @@ class Lifter:
             resid = np.maximum(np.linalg.norm(xn - cam.project(run.pose.pose), axis=1),
                                np.linalg.norm(xn - prior.target[:, :2], axis=1))
             vis = w > 0
-            limit = max(o.outlier_threshold, OUTLIER_MEDIAN_FACTOR * float(np.median(resid[vis])))
+            limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(np.median(resid[vis])))
             out = vis & (resid > limit)
             if not np.any(out) or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
                 break

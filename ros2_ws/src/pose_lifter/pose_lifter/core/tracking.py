@@ -279,7 +279,9 @@ class TrackPolicy:
         hybrid_or_learned = self.lifter.options.mode != "paper"
         opts = self.lifter.options
         gated = None
-        if hybrid and track is not None and warm is not None and opts.outlier_gate > 0:
+        screened = hybrid and track is not None and warm is not None and opts.outlier_gate > 0
+        if screened:
+            assert track is not None
             gated = track.gate(points, confidence, stamp_ns, opts.outlier_gate,
                                opts.confidence_threshold, opts.min_visible_joints)
             if gated is not None:  # a gated joint is missing for this frame
@@ -302,14 +304,14 @@ class TrackPolicy:
             if track is not None and warm is not None:
                 past = track.past(stamp_ns, self.lifter.prior.window - 1) if hybrid_or_learned else None
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
-                                      temporal_weight=tw, past=past)
+                                      temporal_weight=tw, past=past, gated=screened)
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
                 ref = float(np.median(np.asarray(track.objectives)))
                 if result.objective > self.reinit_ratio * ref:
                     cold = self.lifter.lift(points, confidence, warm=None, limb_proportions=limbs,
-                                            data_weight=dw, temporal_weight=tw, past=past)
+                                            data_weight=dw, temporal_weight=tw, past=past, gated=screened)
                     if cold.objective < result.objective:
                         result, reinit = cold, True
         except PoseLifterError:
