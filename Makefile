@@ -15,7 +15,7 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast lint demo bench bench-node fuzz soak experiments bases bags prior accuracy lock clean ros
+.PHONY: help venv test test-fast lint demo bench bench-node fuzz soak experiments bases bags prior prior-temporal accuracy lock clean ros
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
@@ -29,6 +29,7 @@ help:
 	@echo "make bases       re-learn the packaged basis file from ../shared/data/cmu"
 	@echo "make bags        regenerate the committed bags from ../shared/data/cmu"
 	@echo "make prior       re-train the packaged learned prior (data/prior_mlp.npz, ~15 min)"
+	@echo "make prior-temporal  re-train its causal temporal variant (data/prior_mlp_w4.npz, ~15-40 min)"
 	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy (~25 min)"
 
 $(VENV)/.stamp: requirements.lock $(PKG)/setup.py $(PKG)/setup.cfg
@@ -83,6 +84,10 @@ bags: venv
 # the learned 2D->3D prior, trained on the training split (tools/train_prior.py: seed 0, one BLAS thread)
 prior: venv
 	$(PY) tools/train_prior.py --data $(CMU_DATA)
+
+# the causal temporal variant (the track's last 4 frames at 30 Hz) used on tracked frames
+prior-temporal: venv
+	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 4 --out $(PKG)/pose_lifter/data/prior_mlp_w4.npz
 
 # the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12)
 accuracy: venv

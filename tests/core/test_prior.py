@@ -288,7 +288,8 @@ def test_a_missing_joint_is_carried_over_by_the_track(
     frames = range(10, 25)
     errs = []
     for w in (3.0, 0.0):
-        res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w)), x, conf)
+        # the single-frame prior: the carry-over alone (the temporal prior sees the past frames too)
+        res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w, temporal_prior=False)), x, conf)
         errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in frames]))
     assert errs[0] < 0.97 * errs[1], errs
 
@@ -319,7 +320,7 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     rng = np.random.default_rng(0)
     net = PosePrior((rng.normal(size=(72, 16)) * 0.3, rng.normal(size=(16, 36)) * 0.3),
                     (np.zeros(16), np.zeros(36)), np.zeros(36), np.ones(36), np.ones((12, 3)), window=2)
-    lifter = Lifter(bases, LifterOptions(mode="learned"), prior=net)
+    lifter = Lifter(bases, LifterOptions(mode="learned", temporal_prior=False), prior=net)
     x = real_frames[0]
     vis = np.ones(12, dtype=bool)
     now = lifter.lift(x[1]).prior_pose
@@ -337,3 +338,24 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     assert past is not None
     assert past[0][:, 0, 0].tolist() == [100.0, 133.0, 166.0]
     assert track.past(166, 5) is None  # not after the last frame
+
+
+def test_the_packaged_temporal_prior_is_used_on_tracked_frames(
+        bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
+    """The packaged causal temporal prior (4 frames, training split only) loads without pickle;
+    a track's frames after the first are lifted with it, and on a real walker it is closer to the
+    truth than the single-frame prior."""
+    from pose_lifter.core.prior import DEFAULT_TEMPORAL_PRIOR_PATH
+
+    temporal = PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH)
+    assert temporal.window == 4
+    assert not set(temporal.metadata["training_trials"]) & {"02_01", "07_01", "08_01", "09_12"}
+    x, truth = walk_track
+    errs = []
+    for on in (True, False):
+        res = _track(Lifter(bases, LifterOptions(temporal_prior=on)), x)
+        errs.append(np.mean([p_mpjpe(r.pose_camera, t) for r, t in zip(res[1:], truth[1:], strict=True)]))
+        if on:  # the first frame has no past: the single-frame prior, the same as without
+            off0 = Lifter(bases, LifterOptions(temporal_prior=False)).lift(x[0])
+            np.testing.assert_allclose(res[0].pose_camera, off0.pose_camera, atol=1e-9)
+    assert errs[0] < errs[1], errs

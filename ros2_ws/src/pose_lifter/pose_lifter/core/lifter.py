@@ -57,7 +57,7 @@ from .camera import _camera_admm_checked
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
 from .options import LifterOptions
 from .pose import LiftedConstraints, PoseModel, PriorRows, QStepFn, pose_step
-from .prior import PosePrior
+from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
 from .skeleton import (
     ANTHROPOMETRIC_PROPORTIONS,
     N_JOINTS,
@@ -145,15 +145,20 @@ class Lifter:
     bases : PoseBases or None
         None loads the packaged default basis file.
     options : LifterOptions or None
+    prior, temporal_prior : PosePrior or None
+        The learned priors (None: loaded from ``options.prior_file`` /
+        ``options.temporal_prior_file`` on first use).
     """
 
     def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None,
-                 prior: PosePrior | None = None) -> None:
+                 prior: PosePrior | None = None, temporal_prior: PosePrior | None = None) -> None:
         self.bases = bases if bases is not None else PoseBases.load()
         self._options = options if options is not None else LifterOptions()
         self._prior: PosePrior | None = prior
         self._prior_key: str | None = None if prior is None else self._options.prior_file
-        self._prior_rel: NDArray[np.float64] | None = None
+        self._temporal: PosePrior | None = temporal_prior
+        self._temporal_key: str | None = None if temporal_prior is None else self._options.temporal_prior_file
+        self._prior_rel: dict[int, NDArray[np.float64]] = {}
         self._model: PoseModel | None = None
         self._model_key: str | None = None
         mp = self.bases.mean_pose
@@ -177,18 +182,28 @@ class Lifter:
         if self._prior is None or self._prior_key != self._options.prior_file:
             self._prior = PosePrior.load(self._options.prior_file or None)
             self._prior_key = self._options.prior_file
-            self._prior_rel = None
         return self._prior
 
-    def _prior_relative_weights(self) -> NDArray[np.float64]:
-        """(12, 2): per joint, the inverse of the prior's error relative to its mean, for the
+    @property
+    def temporal_prior(self) -> PosePrior | None:
+        """The causal temporal prior used on tracked frames (``options.temporal_prior``; loaded from
+        ``options.temporal_prior_file`` on first use), or None when it is off."""
+        if not self._options.temporal_prior:
+            return None
+        if self._temporal is None or self._temporal_key != self._options.temporal_prior_file:
+            self._temporal = PosePrior.load(self._options.temporal_prior_file or DEFAULT_TEMPORAL_PRIOR_PATH)
+            self._temporal_key = self._options.temporal_prior_file
+        return self._temporal
+
+    def _prior_relative_weights(self, prior: PosePrior) -> NDArray[np.float64]:
+        """(12, 2): per joint, the inverse of ``prior``'s error relative to its mean, for the
         image-position rows (x and y averaged) and the depth row."""
-        prior = self.prior
-        if self._prior_rel is None:
+        rel = self._prior_rel.get(id(prior))
+        if rel is None:
             e = prior.abs_error
             exy = e[:, :2].mean(axis=1)
-            self._prior_rel = np.column_stack([exy.mean() / exy, e[:, 2].mean() / e[:, 2]])
-        return self._prior_rel
+            rel = self._prior_rel[id(prior)] = np.column_stack([exy.mean() / exy, e[:, 2].mean() / e[:, 2]])
+        return rel
 
     @property
     def model(self) -> PoseModel:
@@ -204,7 +219,7 @@ class Lifter:
             self._model_key = key
         self._qstep_fn: QStepFn | None = None
         if self._options.mode != "paper":
-            _ = self.prior  # load (and validate) the prior now, not on the first frame
+            _ = self.prior, self.temporal_prior  # load (and validate) the priors now, not on the first frame
             if self._options.mode == "hybrid" and (self._options.alpha_solver != "riemannian"
                                                    or not self._options.method.limbs
                                                    or self.model.limb_coordinates is None):
@@ -480,7 +495,7 @@ class Lifter:
         same frame) by ``temporal_weight``; limb radii from ``limb_proportions`` (a
         track's estimate, ``options.prior_limbs``). Returns the rows and the prior's pose in
         input units."""
-        pose = self._predict_prior(x, w > 0, past)
+        pose, used = self._predict_prior(x, w > 0, past)
         target = np.empty((N_JOINTS, 3))
         target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
         target[:, 2] = pose[:, 2] / norm.spread
@@ -493,7 +508,7 @@ class Lifter:
             prev[:, :2] += np.median(target[vis, :2] - prev[vis, :2], axis=0)
             tw = temporal_weight[:, None]
             target = (target + tw * prev) / (1.0 + tw)
-        rel = self._prior_relative_weights()
+        rel = self._prior_relative_weights(used)
         o = self._options
         weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
         radii = None
@@ -502,12 +517,17 @@ class Lifter:
         return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
 
     def _predict_prior(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
-                       past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None) -> NDArray[np.float64]:
-        """The prior's pose (12, 3) in input units for this frame; a temporal prior gets the
-        lift's ``past`` frames before it (padded with the oldest one given, or this frame)."""
+                       past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
+                       ) -> tuple[NDArray[np.float64], PosePrior]:
+        """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
+        temporal prior when the lift has ``past`` frames (padded to its window with the oldest
+        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated)."""
         prior = self.prior
+        temporal = self.temporal_prior
+        if past is not None and len(past[0]) > 0 and temporal is not None:
+            prior = temporal
         if prior.window == 1:
-            return prior.predict(x, visible)
+            return prior.predict(x, visible), prior
         k = prior.window - 1
         pts = np.empty((prior.window, N_JOINTS, 2))
         vis = np.empty((prior.window, N_JOINTS), dtype=bool)
@@ -519,7 +539,7 @@ class Lifter:
             else:
                 pts[i], vis[i] = x, visible
         pts[k], vis[k] = x, visible
-        return prior.predict(np.where(vis[..., None], pts, 0.0), vis)
+        return prior.predict(np.where(vis[..., None], pts, 0.0), vis), prior
 
     def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
         """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
@@ -614,7 +634,7 @@ class Lifter:
         own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
         positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
         error of the visible joints in the normalised units."""
-        pose_in = self._predict_prior(x, w > 0, past)
+        pose_in, _ = self._predict_prior(x, w > 0, past)
         centred = pose_in - pose_in.mean(axis=0)
         flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
         if not ok or not np.all(np.isfinite(flat)):

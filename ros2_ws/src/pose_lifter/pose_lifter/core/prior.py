@@ -35,10 +35,13 @@ from numpy.typing import NDArray
 from .errors import InvalidInputError, PriorFileError
 from .skeleton import N_JOINTS
 
-__all__ = ["DEFAULT_PRIOR_PATH", "PosePrior", "normalise_2d", "prior_features"]
+__all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "normalise_2d", "prior_features"]
 
 #: The prior shipped with the package (``make prior``: tools/train_prior.py).
 DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "prior_mlp.npz"
+#: The causal temporal variant (a window of the track's last 4 frames at 30 Hz, no look-ahead):
+#: ``make prior-temporal``.
+DEFAULT_TEMPORAL_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w4.npz")
 _FORMAT_VERSION: Final[int] = 1
 #: Loader caps: uncompressed bytes of the whole file, layers, units per layer, window.
 MAX_FILE_BYTES: Final[int] = 64 * 1024 * 1024

@@ -302,7 +302,9 @@ class TrackPolicy:
         try:
             past = None
             if track is not None and warm is not None:
-                past = track.past(stamp_ns, self.lifter.prior.window - 1) if hybrid_or_learned else None
+                if hybrid_or_learned:
+                    temporal = self.lifter.temporal_prior
+                    past = track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
                                       temporal_weight=tw, past=past, gated=screened)
             reinit = False
