@@ -253,6 +253,16 @@ class BagWriter:
         conn = self._connections[topic]
         self._writer.write(conn, int(stamp_ns), self.store.serialize_cdr(msg, conn.msgtype))
 
+    def write_cdr(self, topic: str, stamp_ns: int, data: bytes, msgtype: str) -> None:
+        """Write one message already serialised (CDR, e.g. by :mod:`pose_lifter.cdr`) as a
+        ``msgtype`` of our typestore (the topic is added on first use)."""
+        if topic not in self._connections:
+            self.add_topic(topic, msgtype)
+        conn = self._connections[topic]
+        if conn.msgtype != msgtype:
+            raise BagError(f"topic {topic} is {conn.msgtype}, not {msgtype}")
+        self._writer.write(conn, int(stamp_ns), data)
+
     def close(self, discard: bool = False) -> None:
         """Finish the file (or throw it away with ``discard``)."""
         try:

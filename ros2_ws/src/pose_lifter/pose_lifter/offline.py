@@ -22,8 +22,18 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from . import cdr
 from . import messages as m
-from .bags import BagError, BagReadError, BagWriter, bag_topics, check_output, read_messages, read_raw
+from .bags import (
+    BagError,
+    BagReadError,
+    BagWriter,
+    bag_topics,
+    check_output,
+    pose_lifter_typestore,
+    read_messages,
+    read_raw,
+)
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
@@ -53,8 +63,8 @@ DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
 _MARKER_NS: Final[str] = "pose_lifter"
 _MSG_2D: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
-_MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
-_MSG_MARKERS: Final[str] = "visualization_msgs/msg/MarkerArray"
+_MSG_3D: Final[str] = cdr.SKELETON3D_ARRAY
+_MSG_MARKERS: Final[str] = cdr.MARKER_ARRAY
 
 
 @dataclass
@@ -429,6 +439,7 @@ def lift_bag(
     topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, keep, overwrite)
     from .adapters import TrackIds
 
+    cdr.check_definitions(pose_lifter_typestore())
     types = m.rosbags_types()
     ids = TrackIds()
     wanted = [topic] + ([camera_info_topic] if camera_info_topic in topics else [])
@@ -446,18 +457,21 @@ def lift_bag(
     last = kp_all[-1][0] if max_messages is not None else None
     to_lift = kp_all[::every]
     summary = LiftSummary()
-    outputs: dict[int, tuple[Any, Any]] = {}  # index of the keypoint message -> its answers
+    outputs: dict[int, tuple[bytes, bytes]] = {}  # index of the keypoint message -> its answers (CDR)
     previous: set[int] = set()
 
     def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
+        # serialised here, straight from the arrays: the bytes of the node's builders
+        # (messages.result_to_skeleton3d / skeleton_markers) through rosbags, see pose_lifter.cdr
         nonlocal previous
-        skels = [m.result_to_skeleton3d(r, f.track_id, f.joints_m, types, f.solve_time, f.warm_started)
-                 for f, r in zip(lifted, results, strict=True)]
+        frame = cdr.SkeletonFrame.from_results([f.track_id for f in lifted], [f.joints_m for f in lifted],
+                                               results, [f.solve_time for f in lifted],
+                                               [f.warm_started for f in lifted])
         now = {f.track_id for f in lifted if f.track_id >= 0}
-        markers = m.skeleton_markers(msg.header, [(f.track_id, f.joints_m) for f in lifted], _MARKER_NS,
-                                     marker_lifetime, types, deleted_track_ids=sorted(previous - now))
+        markers = cdr.marker_array_cdr(msg.header, frame.track_ids.tolist(), frame.joints_m, _MARKER_NS,
+                                       marker_lifetime, deleted_track_ids=sorted(previous - now))
         previous = now
-        outputs[len(outputs) * every] = (m.skeletons3d_array(msg.header, skels, types), markers)
+        outputs[len(outputs) * every] = (cdr.skeleton3d_array_cdr(msg.header, frame), markers)
 
     frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
                            progress, record, summary, workers=workers, track_timeout=track_timeout,
@@ -473,8 +487,8 @@ def lift_bag(
             if raw.topic == topic:
                 if index in outputs:
                     skels, markers = outputs.pop(index)
-                    w.write(TOPIC_SKELETONS, raw.stamp_ns, skels, _MSG_3D)
-                    w.write(TOPIC_MARKERS, raw.stamp_ns, markers, _MSG_MARKERS)
+                    w.write_cdr(TOPIC_SKELETONS, raw.stamp_ns, skels, _MSG_3D)
+                    w.write_cdr(TOPIC_MARKERS, raw.stamp_ns, markers, _MSG_MARKERS)
                 index += 1
     return summary, frames
 
