@@ -9,7 +9,7 @@ errors with two floors that any lifter must beat (see ``shared/notes/method-pitf
 
 from __future__ import annotations
 
-import dataclasses
+import gc
 import json
 import os
 import signal
@@ -209,9 +209,17 @@ def _stop_workers(ex: Any) -> None:
     ex.shutdown(wait=True, cancel_futures=True)
 
 
-def _worker_chain(chain: list[_Item]) -> list[_Done]:
-    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
+#: What a worker sends back per item: (result, joints_m, warm_started, solve_time, failure).
+_Outcome = tuple[Any, NDArray[np.float64] | None, bool, float, str | None]
+
+
+def _worker_chain(index: int) -> list[_Outcome]:
+    """Lift chain ``index`` of the chains the worker inherited (fork): the chain's items are not
+    pickled to the worker, and only the outcomes come back (the parent holds the items)."""
+    chain = _WORKER["chains"][index]
+    done = _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
                        True, _WORKER["reinit"])
+    return [(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done]
 
 
 def lift_messages(
@@ -279,16 +287,19 @@ def lift_messages(
 
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
         _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout,
-                       reinit=reinit_ratio)
+                       reinit=reinit_ratio, chains=order)
         # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
         n_proc = min(workers, len(chains), os.cpu_count() or 1)
+        # the workers inherit every object of this process (the bag's messages too): frozen, the
+        # garbage collector of a worker does not walk them, so their pages are not copied
+        gc.freeze()
         try:
             ex = ProcessPoolExecutor(n_proc, mp_context=multiprocessing.get_context("fork"),
                                      initializer=_worker_init)
             try:
-                for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):
-                    for item, d in zip(chain, outcome, strict=True):  # items come back as copies
-                        done[id(item)] = dataclasses.replace(d, item=item)
+                for chain, outcomes in zip(order, ex.map(_worker_chain, range(len(order))), strict=True):
+                    for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
+                        done[id(item)] = _Done(item, res, joints, warm, dt, failure)
                         bar.update(1)
             except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
                 _stop_workers(ex)
@@ -296,6 +307,7 @@ def lift_messages(
             ex.shutdown()
         finally:
             _WORKER.clear()
+            gc.unfreeze()
     bar.close()
 
     out: list[FrameLift] = []
