@@ -323,3 +323,101 @@ def test_reference_is_what_the_previous_factory_built() -> None:
     b = types.Marker(ns="x", id=3, action=2)
     assert store.serialize_cdr(a, "visualization_msgs/msg/Marker") == \
         store.serialize_cdr(b, "visualization_msgs/msg/Marker")
+
+
+def _decoded_and_deserialised(bag: Path) -> list[tuple[Any, Any]]:
+    store = bags.pose_lifter_typestore()
+    return [(cdr.decode_skeleton2d_array(r.data), store.deserialize_cdr(r.data, r.msgtype))
+            for r in bags.read_raw(bag, ["/keypoints_2d"])]
+
+
+def _same_input(decoded: Any, msg: Any) -> None:
+    head = (decoded.header.stamp.sec, decoded.header.stamp.nanosec, decoded.header.frame_id, decoded.layout)
+    assert head == (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id, msg.layout)
+    assert [s.track_id for s in decoded.skeletons] == [s.track_id for s in msg.skeletons]
+    for d, s in zip(decoded.skeletons, msg.skeletons, strict=True):
+        want = np.array([[k.x, k.y, k.confidence] for k in s.keypoints], dtype=np.float64).reshape(-1, 3)
+        assert d.xyc.dtype == np.float64 and np.array_equal(d.xyc, want, equal_nan=True)
+        try:
+            expected: Any = m.skeleton2d_to_arrays(s, msg.layout)
+        except Exception as exc:  # the same refusal both ways
+            with pytest.raises(type(exc)):
+                m.skeleton2d_to_arrays(d, decoded.layout)
+            continue
+        got = m.skeleton2d_to_arrays(d, decoded.layout)
+        for a, b in zip(got, expected, strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("bag", sorted(p.name for p in BAGS.glob("*.mcap")))
+def test_decoded_keypoints_equal_rosbags_on_every_committed_bag(bag: str) -> None:
+    pairs = _decoded_and_deserialised(BAGS / bag)
+    assert pairs
+    for decoded, msg in pairs:
+        assert decoded is not None
+        _same_input(decoded, msg)
+
+
+def test_decoder_on_awkward_input_agrees_or_hands_over_to_rosbags() -> None:
+    store = bags.pose_lifter_typestore()
+    types = m.rosbags_types(store)
+    rng = np.random.default_rng(5)
+
+    def serialised(frame_id: str, layout: str, skeletons: list[Any]) -> bytes:
+        arr = m.skeleton2d_array(m.make_header(7_000_000_123, frame_id, types), layout, skeletons, types)
+        return bytes(store.serialize_cdr(arr, cdr.SKELETON2D_ARRAY))
+
+    kp = rng.normal(300, 50, size=(17, 2))
+    kp[3] = np.nan  # non-finite coordinates (missing with confidence 0, refused when visible)
+    conf = rng.uniform(size=17).astype(np.float32).astype(np.float64)
+    conf[3] = 0.0
+    visible_nan = conf.copy()
+    visible_nan[3] = 0.9
+    cases = [
+        serialised("", "coco17", []),
+        serialised("kamera_ü", "coco17", [m.arrays_to_skeleton2d(kp, conf, -1, types)]),
+        serialised("a", "coco17", [m.arrays_to_skeleton2d(kp, conf, 2**40, types),
+                                   m.arrays_to_skeleton2d(kp[:5], conf[:5], 1, types),  # wrong length
+                                   m.arrays_to_skeleton2d(kp[:0], conf[:0], 2, types),  # no keypoints
+                                   m.arrays_to_skeleton2d(kp, visible_nan, 3, types)]),
+        serialised("abc", "wang12", [m.arrays_to_skeleton2d(kp[:12], conf[:12], 0, types)]),
+    ]
+    for data in cases:
+        decoded = cdr.decode_skeleton2d_array(data)
+        assert decoded is not None
+        _same_input(decoded, store.deserialize_cdr(data, cdr.SKELETON2D_ARRAY))
+    good = cases[2]
+    assert cdr.decode_skeleton2d_array(good[:-1]) is None  # truncated
+    assert cdr.decode_skeleton2d_array(good[:40]) is None
+    assert cdr.decode_skeleton2d_array(good + bytes(8)) is None  # trailing bytes
+    assert cdr.decode_skeleton2d_array(b"\x00\x00" + good[2:]) is None  # big endian: rosbags reads it
+    assert cdr.decode_skeleton2d_array(b"") is None
+
+
+def test_read_messages_decodes_only_our_definition(tmp_path: Path) -> None:
+    """The fast decoder is used for a bag with today's Skeleton2DArray definition, rosbags for
+    a bag whose definition differs (the messages are read as before either way)."""
+    fast = {cdr.SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}
+    msgs = list(bags.read_messages(BAGS / "two_people.mcap", ["/keypoints_2d"], decoders=fast))
+    assert all(isinstance(x.msg, cdr.DecodedSkeleton2DArray) for x in msgs)
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    old = get_typestore(Stores.ROS2_JAZZY)
+    d = bags.msg_dir()
+    for name in bags.MSG_NAMES:
+        text = (d / f"{name}.msg").read_text().replace("float32 confidence", "float64 confidence")
+        old.register(get_types_from_msg(text, f"{bags.MSG_PACKAGE}/msg/{name}"))
+    path = tmp_path / "old.mcap"
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with Writer(tmp_path / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/keypoints_2d", cdr.SKELETON2D_ARRAY, typestore=old)
+        types = m.rosbags_types(old)
+        kp = np.arange(34, dtype=np.float64).reshape(17, 2)
+        msg = m.skeleton2d_array(m.make_header(5, "f", types), "coco17",
+                                 [m.arrays_to_skeleton2d(kp, np.full(17, 0.3), 4, types)], types)
+        w.write(conn, 5, old.serialize_cdr(msg, cdr.SKELETON2D_ARRAY))
+    next((tmp_path / "bag").glob("*.mcap")).rename(path)
+    (x,) = bags.read_messages(path, ["/keypoints_2d"], decoders=fast)
+    assert not isinstance(x.msg, cdr.DecodedSkeleton2DArray)
+    assert x.msg.skeletons[0].keypoints[0].confidence == 0.3  # float64 in that definition

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -377,7 +377,11 @@ def _existing(path: str | Path) -> Path:
     return p
 
 
-def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+def read_messages(
+    path: str | Path,
+    topics: Iterable[str] | None = None,
+    decoders: Mapping[str, Callable[[bytes], Any | None]] | None = None,
+) -> Iterator[BagMessage]:
     """Deserialised messages of a bag (MCAP file or rosbag2 directory), in time order.
 
     Parameters
@@ -385,6 +389,10 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iter
     path : str or Path
     topics : iterable of str, optional
         Only these topics (all when None).
+    decoders : mapping of message type -> callable, optional
+        Faster decoders for some of our types (e.g. :func:`pose_lifter.cdr.decode_skeleton2d_array`):
+        used on a ROS 2 bag whose definition of the type is ours; a decoder returning None hands
+        the message to rosbags.
     """
     from rosbags.highlevel import AnyReader
 
@@ -396,5 +404,14 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iter
             missing = wanted - {c.topic for c in conns}
             if missing:
                 raise BagError(f"{p} has no topic(s) {sorted(missing)}")
+        fast: dict[int, Callable[[bytes], Any | None]] = {}
+        if decoders and reader.is2:
+            ours = pose_lifter_typestore()
+            fast = {c.id: decoders[c.msgtype] for c in conns if c.msgtype in decoders
+                    and reader.typestore.hash_rihs01(c.msgtype) == ours.hash_rihs01(c.msgtype)}
         for conn, stamp, raw in reader.messages(connections=conns):
-            yield BagMessage(conn.topic, conn.msgtype, int(stamp), reader.deserialize(raw, conn.msgtype))
+            decode = fast.get(conn.id)
+            msg = decode(raw) if decode is not None else None
+            if msg is None:
+                msg = reader.deserialize(raw, conn.msgtype)
+            yield BagMessage(conn.topic, conn.msgtype, int(stamp), msg)

@@ -1,4 +1,5 @@
-"""The offline lift's two output messages encoded to CDR straight from arrays.
+"""The offline lift's messages in CDR straight from and to arrays: its input
+(``Skeleton2DArray``, :func:`decode_skeleton2d_array`) and its two outputs.
 
 :func:`pose_lifter.offline.lift_bag` writes one ``Skeleton3DArray`` (``/skeletons_3d``) and one
 ``MarkerArray`` (``/skeleton_markers``) per keypoint message. Building them as rosbags message
@@ -17,6 +18,11 @@ lifts, with the rosbags defaults of :func:`pose_lifter.bags.message_factory` (a 
 unset orientation is all zeros); ``tests/test_cdr.py`` checks it byte for byte, and
 :func:`check_definitions` refuses a typestore whose definitions of the two types differ from the
 ones this module was written for.
+
+The input side: rosbags deserialises a 36-person ``Skeleton2DArray`` into 36 x 17
+``Keypoint2D`` objects that :func:`pose_lifter.messages.skeleton2d_to_arrays` then reads one
+attribute at a time; :func:`decode_skeleton2d_array` reads each skeleton's keypoints as one
+(K, 3) array (``xyc``) instead, and ``skeleton2d_to_arrays`` takes it from there.
 
 CDR here is what rosbags writes for ROS 2: little endian, a 4-byte encapsulation header, each
 primitive aligned to its size (counted from the end of the header), strings and sequence
@@ -39,18 +45,26 @@ from .messages import marker_id, quaternions_xyzw, track_color
 
 __all__ = [
     "MARKER_ARRAY",
+    "SKELETON2D_ARRAY",
     "SKELETON3D_ARRAY",
+    "DecodedHeader",
+    "DecodedSkeleton2D",
+    "DecodedSkeleton2DArray",
+    "DecodedStamp",
     "SkeletonFrame",
     "check_definitions",
+    "decode_skeleton2d_array",
     "marker_array_cdr",
     "skeleton3d_array_cdr",
 ]
 
+SKELETON2D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
 SKELETON3D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
 MARKER_ARRAY: Final[str] = "visualization_msgs/msg/MarkerArray"
 
 #: RIHS01 hashes of the definitions this module encodes (``typestore.hash_rihs01``).
 _DEFINITIONS: Final[dict[str, str]] = {
+    SKELETON2D_ARRAY: "RIHS01_9a9e20ea43808ca6e731cf1c13e2c7bc885bb847d487eaf55c5976ed8a473513",
     SKELETON3D_ARRAY: "RIHS01_e5b204b9880e70721ebabf10f0fc3db447a3154177cd013f0d6b47d7227ae3e4",
     MARKER_ARRAY: "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf",
 }
@@ -327,3 +341,105 @@ def marker_array_cdr(
         for kind in (ns_joints, ns_bones):
             _marker(w, hb, kind, (mid, 0, _DELETE), zero_pose, zero_color, None)
     return bytes(w.buf)
+
+
+# --------------------------------------------------------------------------- input
+
+
+@dataclass(frozen=True)
+class DecodedStamp:
+    """``builtin_interfaces/Time``."""
+
+    sec: int
+    nanosec: int
+
+
+@dataclass(frozen=True)
+class DecodedHeader:
+    """``std_msgs/Header``."""
+
+    stamp: DecodedStamp
+    frame_id: str
+
+
+@dataclass(frozen=True)
+class DecodedSkeleton2D:
+    """A ``Skeleton2D`` whose keypoints are one array: ``xyc[k] = (x, y, confidence)``
+    (confidence float32 on the wire, here float64 of the same value)."""
+
+    track_id: int
+    xyc: NDArray[np.float64]
+
+    @property
+    def keypoints(self) -> list[Any]:
+        """The keypoints as ``Keypoint2D``-like objects (``x``, ``y``, ``confidence``), for
+        duck-typed readers that do not know ``xyc``."""
+        from types import SimpleNamespace
+
+        return [SimpleNamespace(x=float(x), y=float(y), confidence=float(c)) for x, y, c in self.xyc]
+
+
+@dataclass(frozen=True)
+class DecodedSkeleton2DArray:
+    """A ``Skeleton2DArray`` (``header``, ``layout``, ``skeletons``) from
+    :func:`decode_skeleton2d_array`."""
+
+    header: DecodedHeader
+    layout: str
+    skeletons: list[DecodedSkeleton2D]
+
+
+#: One Keypoint2D in a sequence: x, y (float64), confidence (float32), 4 bytes to the next x.
+_KEYPOINT: Final = np.dtype({"names": ["x", "y", "c"], "formats": ["<f8", "<f8", "<f4"],
+                             "offsets": [0, 8, 16], "itemsize": 24})
+
+
+def decode_skeleton2d_array(data: bytes | memoryview) -> DecodedSkeleton2DArray | None:
+    """A serialised ``pose_lifter_msgs/Skeleton2DArray`` (little-endian CDR, today's
+    definition) as arrays; None for anything else (big endian, another encapsulation, a
+    malformed or truncated message, trailing bytes): the caller then deserialises it with rosbags,
+    which reads or refuses it as it always did."""
+    raw = bytes(data)
+    if len(raw) < 4 or raw[:2] != b"\x00\x01":
+        return None
+    buf = raw + bytes(8)  # the last keypoint's 4 bytes of padding may lie past the end
+    end = len(raw)
+    try:
+        pos = 4
+
+        def string(pos: int) -> tuple[str, int]:
+            pos = 4 + ((pos - 4 + 3) & -4)
+            (n,) = _U32.unpack_from(buf, pos)
+            if n < 1 or pos + 4 + n > end:
+                raise ValueError("bad string")
+            return buf[pos + 4:pos + 3 + n].decode(), pos + 4 + n
+
+        sec, nanosec = _STAMP.unpack_from(buf, pos)
+        frame_id, pos = string(pos + 8)
+        layout, pos = string(pos)
+        pos = 4 + ((pos - 4 + 3) & -4)
+        (count,) = _U32.unpack_from(buf, pos)
+        pos += 4
+        skeletons = []
+        for _ in range(count):
+            pos = 4 + ((pos - 4 + 7) & -8)
+            (track_id,) = _I64.unpack_from(buf, pos)
+            (k,) = _U32.unpack_from(buf, pos + 8)
+            pos += 12
+            if k:
+                pos = 4 + ((pos - 4 + 7) & -8)
+                if pos + 24 * k - 4 > end:
+                    return None
+                kp = np.frombuffer(buf, dtype=_KEYPOINT, count=k, offset=pos)
+                pos += 24 * k - 4
+                xyc = np.empty((k, 3))
+                xyc[:, 0], xyc[:, 1], xyc[:, 2] = kp["x"], kp["y"], kp["c"]
+            else:
+                xyc = np.zeros((0, 3))
+            skeletons.append(DecodedSkeleton2D(int(track_id), xyc))
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    if pos > end or pos + 3 < end:  # as rosbags: at most 3 bytes of padding after the end
+        return None
+    return DecodedSkeleton2DArray(DecodedHeader(DecodedStamp(int(sec), int(nanosec)), frame_id), layout,
+                                  skeletons)

@@ -137,7 +137,8 @@ def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], N
     Parameters
     ----------
     skel : Skeleton2D-like
-        Has ``keypoints``, each with ``x``, ``y``, ``confidence``.
+        Has ``keypoints``, each with ``x``, ``y``, ``confidence`` (or ``xyc``, the keypoints as
+        one (K, 3) array, as :class:`pose_lifter.cdr.DecodedSkeleton2D` has).
     layout : str
         The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``).
 
@@ -155,9 +156,13 @@ def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], N
         Wrong number of keypoints for the layout, or non-finite values.
     """
     lay = get_layout(layout)
-    kps = list(skel.keypoints)
-    xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
-    conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
+    xyc = getattr(skel, "xyc", None)  # pose_lifter.cdr.DecodedSkeleton2D: the keypoints as one array
+    if xyc is not None:
+        xy, conf = xyc[:, :2], xyc[:, 2]
+    else:
+        kps = list(skel.keypoints)
+        xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
+        conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
     points, confidence = to_model_joints(xy, conf, lay)
     if not np.all(np.isfinite(confidence)):
         raise InvalidInputError("keypoint confidences must be finite")

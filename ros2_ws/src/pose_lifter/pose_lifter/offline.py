@@ -62,7 +62,7 @@ DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: The node's default ``reinit_ratio`` (a degraded warm solve is redone cold).
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
 _MARKER_NS: Final[str] = "pose_lifter"
-_MSG_2D: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
+_MSG_2D: Final[str] = cdr.SKELETON2D_ARRAY
 _MSG_3D: Final[str] = cdr.SKELETON3D_ARRAY
 _MSG_MARKERS: Final[str] = cdr.MARKER_ARRAY
 
@@ -457,7 +457,7 @@ def lift_bag(
     wanted = [topic] + ([camera_info_topic] if camera_info_topic in topics else [])
     kp_all: list[tuple[int, Any]] = []
     infos: list[tuple[int, Any]] = []
-    for x in read_messages(in_path, wanted):
+    for x in read_messages(in_path, wanted, decoders={_MSG_2D: cdr.decode_skeleton2d_array}):
         if x.topic == topic:
             if max_messages is not None and len(kp_all) >= max_messages * every:
                 break
