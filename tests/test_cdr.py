@@ -14,7 +14,6 @@ import colorsys
 import inspect
 import itertools
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -313,16 +312,30 @@ def test_check_definitions_refuses_another_skeleton3d_layout(tmp_path: Path) -> 
         cdr.check_definitions(store)
 
 
-def test_reference_is_what_the_previous_factory_built() -> None:
-    """The reference's field-by-field construction agrees with today's ``message_factory`` on a
-    message with nested defaults (guards the reference itself)."""
+def test_message_factory_builds_what_the_previous_factory_built() -> None:
+    """``bags.message_factory`` (field plans read once per type) against the reference's
+    field-by-field construction: every type of ``messages.MESSAGE_TYPES`` with no fields and
+    with list-valued numeric fields; defaults are fresh objects; an unknown field is refused."""
     store = bags.pose_lifter_typestore()
     ref = _Reference(store)
-    types = SimpleNamespace(Marker=bags.message_factory("visualization_msgs/msg/Marker", store))
-    a = ref.msg("visualization_msgs/msg/Marker", ns="x", id=3, action=2)
-    b = types.Marker(ns="x", id=3, action=2)
-    assert store.serialize_cdr(a, "visualization_msgs/msg/Marker") == \
-        store.serialize_cdr(b, "visualization_msgs/msg/Marker")
+    for name in m.MESSAGE_TYPES.values():
+        make = bags.message_factory(name, store)
+        assert store.serialize_cdr(make(), name) == store.serialize_cdr(ref.msg(name), name)
+    fields: dict[str, Any] = {"projection": [1.0, 2, 3, 4, 5, 6], "scale": 2.0, "translation": (7.0, 8.0)}
+    a = bags.message_factory("pose_lifter_msgs/msg/CameraEstimate", store)(**fields)
+    assert a.projection.dtype == np.float64 and isinstance(a.translation, np.ndarray)
+    assert store.serialize_cdr(a, "pose_lifter_msgs/msg/CameraEstimate") == \
+        store.serialize_cdr(ref.msg("pose_lifter_msgs/msg/CameraEstimate", **fields),
+                            "pose_lifter_msgs/msg/CameraEstimate")
+    marker = bags.message_factory("visualization_msgs/msg/Marker", store)
+    one, two = marker(ns="x", id=3, action=2), marker(ns="x", id=3, action=2)
+    assert store.serialize_cdr(one, "visualization_msgs/msg/Marker") == \
+        store.serialize_cdr(ref.msg("visualization_msgs/msg/Marker", ns="x", id=3, action=2),
+                            "visualization_msgs/msg/Marker")
+    assert one.header is not two.header and one.texture.data is not two.texture.data
+    assert one.points is not two.points
+    with pytest.raises(TypeError, match="nosuch"):
+        marker(ns="x", nosuch=1)
 
 
 def _decoded_and_deserialised(bag: Path) -> list[tuple[Any, Any]]:

@@ -120,59 +120,89 @@ _NUMPY_DTYPES: Final[dict[str, str]] = {
 }
 
 
-def _default_value(store: Any, desc: tuple[Any, Any]) -> Any:
+#: A field of a message plan: (name, default maker, numpy dtype a list/tuple value becomes or None).
+_Field = tuple[str, Callable[[], Any], str | None]
+
+
+def _default_maker(store: Any, desc: tuple[Any, Any]) -> Callable[[], Any]:
+    """A callable returning a fresh ROS default for a field (nothing mutable is shared)."""
     from rosbags.interfaces import Nodetype
 
     kind, sub = desc
     if kind == Nodetype.BASE:
         typ = sub[0]
-        if typ == "string" or typ == "wstring":
-            return ""
-        if typ == "bool":
-            return False
-        if typ.startswith("float"):
-            return 0.0
-        return 0
+        value: Any = "" if typ in ("string", "wstring") else False if typ == "bool" else \
+            0.0 if typ.startswith("float") else 0
+        return lambda: value
     if kind == Nodetype.NAME:
-        return _default_message(store, sub)
+        return _plan(store, sub)[1]
     inner, size = sub
     if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
-        n = size if kind == Nodetype.ARRAY else 0
-        return np.zeros(n, dtype=_NUMPY_DTYPES[inner[1][0]])
+        n, dtype = (size if kind == Nodetype.ARRAY else 0), _NUMPY_DTYPES[inner[1][0]]
+        return lambda: np.zeros(n, dtype=dtype)
     if kind == Nodetype.ARRAY:
-        return [_default_value(store, inner) for _ in range(size)]
-    return []
+        element = _default_maker(store, inner)
+        return lambda: [element() for _ in range(size)]
+    return list
+
+
+def _plan(store: Any, msgtype: str) -> tuple[list[_Field], Callable[..., Any]]:
+    """The fields of ``msgtype`` with their default makers and coercions, and a constructor
+    filling every field with its default; built once per (typestore, type)."""
+    key = (id(store), msgtype)
+    plan = _PLANS.get(key)
+    if plan is None:
+        from rosbags.interfaces import Nodetype
+
+        cls = store.types[msgtype]
+        fields: list[_Field] = []
+        for name, desc in store.fielddefs[msgtype][1]:
+            kind, sub = desc
+            numeric = (kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and sub[0][0] == Nodetype.BASE
+                       and sub[0][1][0] in _NUMPY_DTYPES)
+            dtype = _NUMPY_DTYPES[sub[0][1][0]] if numeric else None
+            fields.append((name, _default_maker(store, desc), dtype))
+
+        def default() -> Any:
+            return cls(**{name: make() for name, make, _ in fields})
+
+        plan = _PLANS[key] = (fields, default)
+        _STORES[id(store)] = store  # keeps id(store) from being reused while its plans exist
+    return plan
+
+
+_PLANS: dict[tuple[int, str], tuple[list[_Field], Callable[..., Any]]] = {}
+_STORES: dict[int, Any] = {}
 
 
 def _default_message(store: Any, msgtype: str, **fields: Any) -> Any:
-    cls = store.types[msgtype]
-    _, fielddefs = store.fielddefs[msgtype]
-    unknown = set(fields) - {name for name, _ in fielddefs}
-    if unknown:
-        raise TypeError(f"{msgtype} has no field(s) {sorted(unknown)}")
-    values = {name: _coerce(fields[name], desc) if name in fields else _default_value(store, desc)
-              for name, desc in fielddefs}
-    return cls(**values)
-
-
-def _coerce(value: Any, desc: tuple[Any, Any]) -> Any:
-    """Lists for numeric array fields become the numpy arrays rosbags serialises (rclpy takes
-    lists, so code that builds messages for both can pass lists)."""
-    from rosbags.interfaces import Nodetype
-
-    kind, sub = desc
-    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and isinstance(value, list | tuple):
-        inner = sub[0]
-        if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
-            return np.asarray(value, dtype=_NUMPY_DTYPES[inner[1][0]])
-    return value
+    """A ``msgtype`` of ``store`` with ``fields`` set and every other field at its ROS default;
+    lists and tuples for numeric array fields become the numpy arrays rosbags serialises (rclpy
+    takes lists, so code that builds messages for both can pass lists)."""
+    plan, default = _plan(store, msgtype)
+    if not fields:
+        return default()
+    values: dict[str, Any] = {}
+    for name, make, dtype in plan:
+        if name in fields:
+            value = fields[name]
+            if dtype is not None and isinstance(value, list | tuple):
+                value = np.asarray(value, dtype=dtype)
+            values[name] = value
+        else:
+            values[name] = make()
+    if len(fields) != sum(name in fields for name, _, _ in plan):
+        unknown = sorted(set(fields) - {name for name, _, _ in plan})
+        raise TypeError(f"{msgtype} has no field(s) {unknown}")
+    return store.types[msgtype](**values)
 
 
 def message_factory(msgtype: str, store: Any | None = None) -> Callable[..., Any]:
     """A constructor for a rosbags message class that fills omitted fields with defaults.
 
     rosbags message classes are dataclasses without defaults; rclpy classes have defaults.
-    The factory makes both usable the same way: ``factory(x=1.0, y=2.0)``.
+    The factory makes both usable the same way: ``factory(x=1.0, y=2.0)``. The field
+    definitions are read once per type (not on every call).
     """
     st = store if store is not None else pose_lifter_typestore()
     if msgtype not in st.types:
