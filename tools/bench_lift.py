@@ -7,9 +7,10 @@
 Runs the installed ``pose-lifter`` of this virtualenv with ``PYTHONPATH`` pointing at the
 ``before`` checkout's package (its code, this environment) and at this checkout's, alternating
 before/after in every repetition so that a loaded machine hurts both alike; prints the median
-wall time and poses/s per (mode, workers) and code. ``--workers 0`` is the default (the cores).
-The first run of a checkout compiles its solver kernels (~40 s): do one warm-up run first
-(``--reps`` counts the timed ones after it).
+wall time, poses/s and CPU seconds (user + system of the command and its workers: less
+sensitive to other jobs than wall time) per (mode, workers) and code. ``--workers 0`` is the
+default (the cores). The first run of a checkout compiles its solver kernels (~40 s): one
+untimed run of each checkout comes first (``--no-warm-up`` skips it).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -26,18 +28,21 @@ from pathlib import Path
 PACKAGE = Path("ros2_ws/src/pose_lifter")
 
 
-def run(package: Path, bag: str, mode: str, workers: int) -> tuple[float, int]:
-    """(wall seconds, poses lifted) of one ``pose-lifter lift`` of ``bag``."""
+def run(package: Path, bag: str, mode: str, workers: int) -> tuple[float, float, int]:
+    """(wall seconds, CPU seconds, poses lifted) of one ``pose-lifter lift`` of ``bag``."""
     cmd = [str(Path(sys.executable).parent / "pose-lifter"), "lift", bag, "--out", "/tmp/bench_lift.mcap",
            "--overwrite", "--quiet", "--mode", mode]
     if workers:
         cmd += ["--workers", str(workers)]
     env = dict(os.environ, PYTHONPATH=str(package), OMP_NUM_THREADS="1")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     out = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     match = re.search(r"lifted (\d+) of", out)
-    return wall, int(match.group(1)) if match else 0
+    return wall, cpu, int(match.group(1)) if match else 0
 
 
 def main() -> int:
@@ -53,21 +58,24 @@ def main() -> int:
     codes = {"before": args.before / PACKAGE, "after": args.after / PACKAGE}
     if not args.no_warm_up:
         for package in codes.values():
-            run(package, args.bag, args.modes[0], 1)
-    print(f"{'mode':8s} {'workers':>7s} {'code':6s} {'median s':>9s} {'poses/s':>8s}  runs (s)", flush=True)
+            run(package, args.bag, args.modes[0], 1)  # compiles the checkout's kernels if needed
+    print(f"{'mode':8s} {'workers':>7s} {'code':6s} {'median s':>9s} {'poses/s':>8s} {'CPU s':>7s}  runs (s)",
+          flush=True)
     for mode in args.modes:
         for workers in args.workers:
             times: dict[str, list[float]] = {k: [] for k in codes}
+            cpus: dict[str, list[float]] = {k: [] for k in codes}
             poses = 0
             for _ in range(args.reps):
                 for key, package in codes.items():
-                    wall, poses = run(package, args.bag, mode, workers)
+                    wall, cpu, poses = run(package, args.bag, mode, workers)
                     times[key].append(wall)
+                    cpus[key].append(cpu)
             for key in codes:
                 med = statistics.median(times[key])
                 runs = " ".join(f"{t:.2f}" for t in times[key])
-                print(f"{mode:8s} {workers or 'default':>7} {key:6s} {med:9.2f} {poses / med:8.0f}  {runs}",
-                      flush=True)
+                print(f"{mode:8s} {workers or 'default':>7} {key:6s} {med:9.2f} {poses / med:8.0f} "
+                      f"{statistics.median(cpus[key]):7.2f}  {runs}", flush=True)
     return 0
 
 
