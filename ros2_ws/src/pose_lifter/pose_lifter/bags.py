@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -120,59 +120,89 @@ _NUMPY_DTYPES: Final[dict[str, str]] = {
 }
 
 
-def _default_value(store: Any, desc: tuple[Any, Any]) -> Any:
+#: A field of a message plan: (name, default maker, numpy dtype a list/tuple value becomes or None).
+_Field = tuple[str, Callable[[], Any], str | None]
+
+
+def _default_maker(store: Any, desc: tuple[Any, Any]) -> Callable[[], Any]:
+    """A callable returning a fresh ROS default for a field (nothing mutable is shared)."""
     from rosbags.interfaces import Nodetype
 
     kind, sub = desc
     if kind == Nodetype.BASE:
         typ = sub[0]
-        if typ == "string" or typ == "wstring":
-            return ""
-        if typ == "bool":
-            return False
-        if typ.startswith("float"):
-            return 0.0
-        return 0
+        value: Any = "" if typ in ("string", "wstring") else False if typ == "bool" else \
+            0.0 if typ.startswith("float") else 0
+        return lambda: value
     if kind == Nodetype.NAME:
-        return _default_message(store, sub)
+        return _plan(store, sub)[1]
     inner, size = sub
     if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
-        n = size if kind == Nodetype.ARRAY else 0
-        return np.zeros(n, dtype=_NUMPY_DTYPES[inner[1][0]])
+        n, dtype = (size if kind == Nodetype.ARRAY else 0), _NUMPY_DTYPES[inner[1][0]]
+        return lambda: np.zeros(n, dtype=dtype)
     if kind == Nodetype.ARRAY:
-        return [_default_value(store, inner) for _ in range(size)]
-    return []
+        element = _default_maker(store, inner)
+        return lambda: [element() for _ in range(size)]
+    return list
+
+
+def _plan(store: Any, msgtype: str) -> tuple[list[_Field], Callable[..., Any]]:
+    """The fields of ``msgtype`` with their default makers and coercions, and a constructor
+    filling every field with its default; built once per (typestore, type)."""
+    key = (id(store), msgtype)
+    plan = _PLANS.get(key)
+    if plan is None:
+        from rosbags.interfaces import Nodetype
+
+        cls = store.types[msgtype]
+        fields: list[_Field] = []
+        for name, desc in store.fielddefs[msgtype][1]:
+            kind, sub = desc
+            numeric = (kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and sub[0][0] == Nodetype.BASE
+                       and sub[0][1][0] in _NUMPY_DTYPES)
+            dtype = _NUMPY_DTYPES[sub[0][1][0]] if numeric else None
+            fields.append((name, _default_maker(store, desc), dtype))
+
+        def default() -> Any:
+            return cls(**{name: make() for name, make, _ in fields})
+
+        plan = _PLANS[key] = (fields, default)
+        _STORES[id(store)] = store  # keeps id(store) from being reused while its plans exist
+    return plan
+
+
+_PLANS: dict[tuple[int, str], tuple[list[_Field], Callable[..., Any]]] = {}
+_STORES: dict[int, Any] = {}
 
 
 def _default_message(store: Any, msgtype: str, **fields: Any) -> Any:
-    cls = store.types[msgtype]
-    _, fielddefs = store.fielddefs[msgtype]
-    unknown = set(fields) - {name for name, _ in fielddefs}
-    if unknown:
-        raise TypeError(f"{msgtype} has no field(s) {sorted(unknown)}")
-    values = {name: _coerce(fields[name], desc) if name in fields else _default_value(store, desc)
-              for name, desc in fielddefs}
-    return cls(**values)
-
-
-def _coerce(value: Any, desc: tuple[Any, Any]) -> Any:
-    """Lists for numeric array fields become the numpy arrays rosbags serialises (rclpy takes
-    lists, so code that builds messages for both can pass lists)."""
-    from rosbags.interfaces import Nodetype
-
-    kind, sub = desc
-    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE) and isinstance(value, list | tuple):
-        inner = sub[0]
-        if inner[0] == Nodetype.BASE and inner[1][0] in _NUMPY_DTYPES:
-            return np.asarray(value, dtype=_NUMPY_DTYPES[inner[1][0]])
-    return value
+    """A ``msgtype`` of ``store`` with ``fields`` set and every other field at its ROS default;
+    lists and tuples for numeric array fields become the numpy arrays rosbags serialises (rclpy
+    takes lists, so code that builds messages for both can pass lists)."""
+    plan, default = _plan(store, msgtype)
+    if not fields:
+        return default()
+    values: dict[str, Any] = {}
+    for name, make, dtype in plan:
+        if name in fields:
+            value = fields[name]
+            if dtype is not None and isinstance(value, list | tuple):
+                value = np.asarray(value, dtype=dtype)
+            values[name] = value
+        else:
+            values[name] = make()
+    if len(fields) != sum(name in fields for name, _, _ in plan):
+        unknown = sorted(set(fields) - {name for name, _, _ in plan})
+        raise TypeError(f"{msgtype} has no field(s) {unknown}")
+    return store.types[msgtype](**values)
 
 
 def message_factory(msgtype: str, store: Any | None = None) -> Callable[..., Any]:
     """A constructor for a rosbags message class that fills omitted fields with defaults.
 
     rosbags message classes are dataclasses without defaults; rclpy classes have defaults.
-    The factory makes both usable the same way: ``factory(x=1.0, y=2.0)``.
+    The factory makes both usable the same way: ``factory(x=1.0, y=2.0)``. The field
+    definitions are read once per type (not on every call).
     """
     st = store if store is not None else pose_lifter_typestore()
     if msgtype not in st.types:
@@ -252,6 +282,16 @@ class BagWriter:
             self.add_topic(topic, msgtype or str(msg.__msgtype__))
         conn = self._connections[topic]
         self._writer.write(conn, int(stamp_ns), self.store.serialize_cdr(msg, conn.msgtype))
+
+    def write_cdr(self, topic: str, stamp_ns: int, data: bytes, msgtype: str) -> None:
+        """Write one message already serialised (CDR, e.g. by :mod:`pose_lifter.cdr`) as a
+        ``msgtype`` of our typestore (the topic is added on first use)."""
+        if topic not in self._connections:
+            self.add_topic(topic, msgtype)
+        conn = self._connections[topic]
+        if conn.msgtype != msgtype:
+            raise BagError(f"topic {topic} is {conn.msgtype}, not {msgtype}")
+        self._writer.write(conn, int(stamp_ns), data)
 
     def close(self, discard: bool = False) -> None:
         """Finish the file (or throw it away with ``discard``)."""
@@ -367,7 +407,11 @@ def _existing(path: str | Path) -> Path:
     return p
 
 
-def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+def read_messages(
+    path: str | Path,
+    topics: Iterable[str] | None = None,
+    decoders: Mapping[str, Callable[[bytes], Any | None]] | None = None,
+) -> Iterator[BagMessage]:
     """Deserialised messages of a bag (MCAP file or rosbag2 directory), in time order.
 
     Parameters
@@ -375,6 +419,10 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iter
     path : str or Path
     topics : iterable of str, optional
         Only these topics (all when None).
+    decoders : mapping of message type -> callable, optional
+        Faster decoders for some of our types (e.g. :func:`pose_lifter.cdr.decode_skeleton2d_array`):
+        used on a ROS 2 bag whose definition of the type is ours; a decoder returning None hands
+        the message to rosbags.
     """
     from rosbags.highlevel import AnyReader
 
@@ -386,5 +434,14 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iter
             missing = wanted - {c.topic for c in conns}
             if missing:
                 raise BagError(f"{p} has no topic(s) {sorted(missing)}")
+        fast: dict[int, Callable[[bytes], Any | None]] = {}
+        if decoders and reader.is2:
+            ours = pose_lifter_typestore()
+            fast = {c.id: decoders[c.msgtype] for c in conns if c.msgtype in decoders
+                    and reader.typestore.hash_rihs01(c.msgtype) == ours.hash_rihs01(c.msgtype)}
         for conn, stamp, raw in reader.messages(connections=conns):
-            yield BagMessage(conn.topic, conn.msgtype, int(stamp), reader.deserialize(raw, conn.msgtype))
+            decode = fast.get(conn.id)
+            msg = decode(raw) if decode is not None else None
+            if msg is None:
+                msg = reader.deserialize(raw, conn.msgtype)
+            yield BagMessage(conn.topic, conn.msgtype, int(stamp), msg)

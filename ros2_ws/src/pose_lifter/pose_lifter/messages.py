@@ -38,8 +38,10 @@ __all__ = [
     "delete_markers",
     "intrinsics_from_camera_info",
     "make_header",
+    "marker_id",
     "ns_to_stamp",
     "place_in_camera",
+    "quaternions_xyzw",
     "rclpy_types",
     "result_to_skeleton3d",
     "rosbags_types",
@@ -135,7 +137,8 @@ def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], N
     Parameters
     ----------
     skel : Skeleton2D-like
-        Has ``keypoints``, each with ``x``, ``y``, ``confidence``.
+        Has ``keypoints``, each with ``x``, ``y``, ``confidence`` (or ``xyc``, the keypoints as
+        one (K, 3) array, as :class:`pose_lifter.cdr.DecodedSkeleton2D` has).
     layout : str
         The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``).
 
@@ -153,9 +156,13 @@ def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], N
         Wrong number of keypoints for the layout, or non-finite values.
     """
     lay = get_layout(layout)
-    kps = list(skel.keypoints)
-    xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
-    conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
+    xyc = getattr(skel, "xyc", None)  # pose_lifter.cdr.DecodedSkeleton2D: the keypoints as one array
+    if xyc is not None:
+        xy, conf = xyc[:, :2], xyc[:, 2]
+    else:
+        kps = list(skel.keypoints)
+        xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
+        conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
     points, confidence = to_model_joints(xy, conf, lay)
     if not np.all(np.isfinite(confidence)):
         raise InvalidInputError("keypoint confidences must be finite")
@@ -263,16 +270,56 @@ def place_in_camera(
     return np.asarray(local + centroid)
 
 
-def _quaternion_xyzw(rotation: NDArray[np.float64]) -> NDArray[np.float64]:
-    from scipy.spatial.transform import Rotation
+def quaternions_xyzw(rotations: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Unit quaternions (x, y, z, w) of rotation matrices, shape (..., 3, 3) -> (..., 4).
 
-    return np.asarray(Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_quat())
+    The numbers of ``scipy.spatial.transform.Rotation.from_matrix(r).as_quat()`` bit for bit
+    (scipy 1.17's algorithm, checked against it in ``tests/test_cdr.py``), without importing
+    ``scipy.spatial`` (0.3 s) and without its per-call overhead (~0.2 ms): a matrix that is not
+    orthogonal to 1e-12 is replaced by the nearest rotation (``U @ Vt`` of its SVD), then
+    Shepperd's method picks the largest of the diagonal and the trace, and the result is
+    normalised.
+
+    Raises
+    ------
+    ValueError
+        A matrix with a non-positive determinant (as scipy).
+    """
+    m = np.array(rotations, dtype=np.float64)
+    shape = m.shape[:-2]
+    if m.shape[-2:] != (3, 3):
+        raise ValueError(f"rotation matrices must be (..., 3, 3), got {m.shape}")
+    m = m.reshape(-1, 3, 3)
+    if np.any(np.linalg.det(m) <= 0):
+        raise ValueError("non-positive determinant (left-handed or null frame) in a rotation matrix")
+    orthogonal = np.all(np.isclose(m @ np.swapaxes(m, -1, -2), np.eye(3), atol=1e-12), axis=(-2, -1))
+    if not np.all(orthogonal):
+        u, _, vt = np.linalg.svd(m[~orthogonal], full_matrices=False)
+        m[~orthogonal] = u @ vt
+    trace = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    choice = np.argmax(np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], trace], axis=-1), axis=-1)
+    q = np.empty((len(m), 4))
+    for i in range(3):  # the largest diagonal element is m[i, i]
+        sel = choice == i
+        j, k = (i + 1) % 3, (i + 2) % 3
+        ms = m[sel]
+        q[sel, i] = 1 - trace[sel] + 2 * ms[:, i, i]
+        q[sel, j] = ms[:, j, i] + ms[:, i, j]
+        q[sel, k] = ms[:, k, i] + ms[:, i, k]
+        q[sel, 3] = ms[:, k, j] - ms[:, j, k]
+    sel = choice == 3  # the trace is the largest
+    ms = m[sel]
+    q[sel, 0] = ms[:, 2, 1] - ms[:, 1, 2]
+    q[sel, 1] = ms[:, 0, 2] - ms[:, 2, 0]
+    q[sel, 2] = ms[:, 1, 0] - ms[:, 0, 1]
+    q[sel, 3] = 1 + trace[sel]
+    return np.asarray(q / np.linalg.norm(q, axis=-1, keepdims=True)).reshape(*shape, 4)
 
 
 def camera_estimate(result: LiftResult, types: Any) -> Any:
     """``CameraEstimate`` of a lift (projection row-major, scale, body->camera rotation, translation)."""
     cam = result.camera
-    q = _quaternion_xyzw(cam.rotation)
+    q = quaternions_xyzw(cam.rotation)
     return types.CameraEstimate(
         projection=np.asarray(cam.projection, dtype=np.float64).reshape(6).copy(),
         scale=float(cam.scale),
@@ -370,7 +417,7 @@ def track_color(track_id: int) -> tuple[float, float, float]:
     return (r, g, b)
 
 
-def _marker_id(track_id: int, position: int) -> int:
+def marker_id(track_id: int, position: int) -> int:
     """int32 marker id: the track id, or ``-1 - position`` for untracked skeletons."""
     if track_id >= 0:
         return int(track_id) % (2**31 - 1)
@@ -413,7 +460,7 @@ def skeleton_markers(
     markers: list[Any] = []
     untracked = 0
     for track_id, joints in tracks:
-        mid = _marker_id(int(track_id), untracked)
+        mid = marker_id(int(track_id), untracked)
         if track_id < 0:
             untracked += 1
         pts = _points(joints, types)
@@ -443,7 +490,7 @@ def delete_markers(header: Any, track_ids: Iterable[int], ns: str, types: Any) -
         if track_id < 0:
             continue
         for kind in ("joints", "bones"):
-            out.append(types.Marker(header=header, ns=f"{ns}/{kind}", id=_marker_id(int(track_id), 0),
+            out.append(types.Marker(header=header, ns=f"{ns}/{kind}", id=marker_id(int(track_id), 0),
                                     action=_DELETE))
     return out
 

@@ -9,7 +9,7 @@ errors with two floors that any lifter must beat (see ``shared/notes/method-pitf
 
 from __future__ import annotations
 
-import dataclasses
+import gc
 import json
 import os
 import signal
@@ -22,8 +22,18 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from . import cdr
 from . import messages as m
-from .bags import BagError, BagReadError, BagWriter, bag_topics, check_output, read_messages, read_raw
+from .bags import (
+    BagError,
+    BagReadError,
+    BagWriter,
+    bag_topics,
+    check_output,
+    pose_lifter_typestore,
+    read_messages,
+    read_raw,
+)
 from .core.bases import PoseBases
 from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
@@ -52,9 +62,9 @@ DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: The node's default ``reinit_ratio`` (a degraded warm solve is redone cold).
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
 _MARKER_NS: Final[str] = "pose_lifter"
-_MSG_2D: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
-_MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
-_MSG_MARKERS: Final[str] = "visualization_msgs/msg/MarkerArray"
+_MSG_2D: Final[str] = cdr.SKELETON2D_ARRAY
+_MSG_3D: Final[str] = cdr.SKELETON3D_ARRAY
+_MSG_MARKERS: Final[str] = cdr.MARKER_ARRAY
 
 
 @dataclass
@@ -199,9 +209,17 @@ def _stop_workers(ex: Any) -> None:
     ex.shutdown(wait=True, cancel_futures=True)
 
 
-def _worker_chain(chain: list[_Item]) -> list[_Done]:
-    return _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
+#: What a worker sends back per item: (result, joints_m, warm_started, solve_time, failure).
+_Outcome = tuple[Any, NDArray[np.float64] | None, bool, float, str | None]
+
+
+def _worker_chain(index: int) -> list[_Outcome]:
+    """Lift chain ``index`` of the chains the worker inherited (fork): the chain's items are not
+    pickled to the worker, and only the outcomes come back (the parent holds the items)."""
+    chain = _WORKER["chains"][index]
+    done = _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
                        True, _WORKER["reinit"])
+    return [(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done]
 
 
 def lift_messages(
@@ -269,16 +287,19 @@ def lift_messages(
 
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
         _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout,
-                       reinit=reinit_ratio)
+                       reinit=reinit_ratio, chains=order)
         # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
         n_proc = min(workers, len(chains), os.cpu_count() or 1)
+        # the workers inherit every object of this process (the bag's messages too): frozen, the
+        # garbage collector of a worker does not walk them, so their pages are not copied
+        gc.freeze()
         try:
             ex = ProcessPoolExecutor(n_proc, mp_context=multiprocessing.get_context("fork"),
                                      initializer=_worker_init)
             try:
-                for chain, outcome in zip(order, ex.map(_worker_chain, order), strict=True):
-                    for item, d in zip(chain, outcome, strict=True):  # items come back as copies
-                        done[id(item)] = dataclasses.replace(d, item=item)
+                for chain, outcomes in zip(order, ex.map(_worker_chain, range(len(order))), strict=True):
+                    for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
+                        done[id(item)] = _Done(item, res, joints, warm, dt, failure)
                         bar.update(1)
             except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
                 _stop_workers(ex)
@@ -286,6 +307,7 @@ def lift_messages(
             ex.shutdown()
         finally:
             _WORKER.clear()
+            gc.unfreeze()
     bar.close()
 
     out: list[FrameLift] = []
@@ -429,12 +451,13 @@ def lift_bag(
     topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, keep, overwrite)
     from .adapters import TrackIds
 
+    cdr.check_definitions(pose_lifter_typestore())
     types = m.rosbags_types()
     ids = TrackIds()
     wanted = [topic] + ([camera_info_topic] if camera_info_topic in topics else [])
     kp_all: list[tuple[int, Any]] = []
     infos: list[tuple[int, Any]] = []
-    for x in read_messages(in_path, wanted):
+    for x in read_messages(in_path, wanted, decoders={_MSG_2D: cdr.decode_skeleton2d_array}):
         if x.topic == topic:
             if max_messages is not None and len(kp_all) >= max_messages * every:
                 break
@@ -446,18 +469,21 @@ def lift_bag(
     last = kp_all[-1][0] if max_messages is not None else None
     to_lift = kp_all[::every]
     summary = LiftSummary()
-    outputs: dict[int, tuple[Any, Any]] = {}  # index of the keypoint message -> its answers
+    outputs: dict[int, tuple[bytes, bytes]] = {}  # index of the keypoint message -> its answers (CDR)
     previous: set[int] = set()
 
     def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
+        # serialised here, straight from the arrays: the bytes of the node's builders
+        # (messages.result_to_skeleton3d / skeleton_markers) through rosbags, see pose_lifter.cdr
         nonlocal previous
-        skels = [m.result_to_skeleton3d(r, f.track_id, f.joints_m, types, f.solve_time, f.warm_started)
-                 for f, r in zip(lifted, results, strict=True)]
+        frame = cdr.SkeletonFrame.from_results([f.track_id for f in lifted], [f.joints_m for f in lifted],
+                                               results, [f.solve_time for f in lifted],
+                                               [f.warm_started for f in lifted])
         now = {f.track_id for f in lifted if f.track_id >= 0}
-        markers = m.skeleton_markers(msg.header, [(f.track_id, f.joints_m) for f in lifted], _MARKER_NS,
-                                     marker_lifetime, types, deleted_track_ids=sorted(previous - now))
+        markers = cdr.marker_array_cdr(msg.header, frame.track_ids.tolist(), frame.joints_m, _MARKER_NS,
+                                       marker_lifetime, deleted_track_ids=sorted(previous - now))
         previous = now
-        outputs[len(outputs) * every] = (m.skeletons3d_array(msg.header, skels, types), markers)
+        outputs[len(outputs) * every] = (cdr.skeleton3d_array_cdr(msg.header, frame), markers)
 
     frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
                            progress, record, summary, workers=workers, track_timeout=track_timeout,
@@ -473,8 +499,8 @@ def lift_bag(
             if raw.topic == topic:
                 if index in outputs:
                     skels, markers = outputs.pop(index)
-                    w.write(TOPIC_SKELETONS, raw.stamp_ns, skels, _MSG_3D)
-                    w.write(TOPIC_MARKERS, raw.stamp_ns, markers, _MSG_MARKERS)
+                    w.write_cdr(TOPIC_SKELETONS, raw.stamp_ns, skels, _MSG_3D)
+                    w.write_cdr(TOPIC_MARKERS, raw.stamp_ns, markers, _MSG_MARKERS)
                 index += 1
     return summary, frames
 
