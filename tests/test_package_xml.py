@@ -11,8 +11,9 @@ PKG = Path(__file__).resolve().parents[1] / "ros2_ws" / "src" / "pose_lifter"
 #: What the installed executables (lifter, lifter_lifecycle, adapter) run.
 NODE_MODULES = ["node.py", "lifecycle_node.py", "adapter_node.py", "adapters.py", "messages.py",
                 "diagnostics.py", *(f"core/{p.name}" for p in (PKG / "pose_lifter" / "core").glob("*.py"))]
-#: Imported only by offline functions the node never calls (basis learning), or optional.
-OPTIONAL = {"sklearn"}
+#: Imported only by offline functions the node never calls (basis learning), or optional
+#: (threadpoolctl: without it the node runs, with BLAS's own thread count; core/_threads.py).
+OPTIONAL = {"sklearn", "threadpoolctl"}
 KEYS = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml"}
 
 
