@@ -359,3 +359,17 @@ def test_the_packaged_temporal_prior_is_used_on_tracked_frames(
             off0 = Lifter(bases, LifterOptions(temporal_prior=False)).lift(x[0])
             np.testing.assert_allclose(res[0].pose_camera, off0.pose_camera, atol=1e-9)
     assert errs[0] < errs[1], errs
+
+
+def test_a_malformed_tracked_frame_is_refused_with_the_lifters_error(
+        bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
+    """The gate and the carry-over run before the lifter's checks: a wrong shape on a warm frame
+    must still be the lifter's InvalidInputError, and the track goes on."""
+    x, _ = walk_track
+    policy = TrackPolicy(Lifter(bases))
+    policy.lift(0, 0, x[0])
+    with pytest.raises(InvalidInputError):
+        policy.lift(0, 33_333_333, x[1][:11])
+    with pytest.raises(InvalidInputError):
+        policy.lift(0, 66_666_666, x[2], np.ones(11))
+    assert policy.lift(0, 99_999_999, x[3]).result.limb_violation < LIMB_TOL

@@ -88,7 +88,8 @@ class _Track:
     noise: deque[float] = field(default_factory=lambda: deque(maxlen=NOISE_FRAMES))
     history: deque[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = field(
         default_factory=lambda: deque(maxlen=MAX_PAST))
-    #: (stamp, the fit's projection of all 12 joints (12, 2) in input units, pixels per leg length)
+    #: (stamp, where each joint was (12, 2): its detection when the lift used it, else the fit's
+    #: projection, in input units; the camera's scale, input units per model unit)
     fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
     gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
 
@@ -106,9 +107,12 @@ class _Track:
         if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
             return None
         x = np.asarray(points, dtype=np.float64)
+        conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+        if x.shape != (12, 2) or (conf is not None and conf.shape != (12,)):
+            return None  # the lifter refuses the frame with the reason
         vis = np.all(np.isfinite(x), axis=1)
-        if confidence is not None:
-            vis &= np.asarray(confidence, dtype=np.float64) >= threshold
+        if conf is not None:
+            vis &= conf >= threshold
         if not np.any(vis):
             return None
         d = np.where(vis[:, None], x, 0.0) - p1
