@@ -158,7 +158,7 @@ class Lifter:
         self._prior_key: str | None = None if prior is None else self._options.prior_file
         self._temporal: PosePrior | None = temporal_prior
         self._temporal_key: str | None = None if temporal_prior is None else self._options.temporal_prior_file
-        self._prior_rel: dict[int, NDArray[np.float64]] = {}
+        self._prior_rel: dict[int, tuple[PosePrior, NDArray[np.float64]]] = {}
         self._model: PoseModel | None = None
         self._model_key: str | None = None
         mp = self.bases.mean_pose
@@ -198,12 +198,13 @@ class Lifter:
     def _prior_relative_weights(self, prior: PosePrior) -> NDArray[np.float64]:
         """(12, 2): per joint, the inverse of ``prior``'s error relative to its mean, for the
         image-position rows (x and y averaged) and the depth row."""
-        rel = self._prior_rel.get(id(prior))
-        if rel is None:
+        entry = self._prior_rel.get(id(prior))
+        if entry is None or entry[0] is not prior:  # (an id can be reused after a reload)
             e = prior.abs_error
             exy = e[:, :2].mean(axis=1)
-            rel = self._prior_rel[id(prior)] = np.column_stack([exy.mean() / exy, e[:, 2].mean() / e[:, 2]])
-        return rel
+            entry = self._prior_rel[id(prior)] = (prior, np.column_stack([exy.mean() / exy,
+                                                                          e[:, 2].mean() / e[:, 2]]))
+        return entry[1]
 
     @property
     def model(self) -> PoseModel:
