@@ -75,6 +75,18 @@ GATE_MAX_FRAMES = 3
 GATE_MAX_AGE_NS = 250_000_000
 
 
+def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
+             threshold: float) -> NDArray[np.bool_] | None:
+    """(12,): the joints with finite coordinates and confidence >= ``threshold`` (the lifter's
+    rule), or None when the shapes are wrong."""
+    x = np.asarray(points, dtype=np.float64)
+    conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+    if x.shape != (12, 2) or (conf is not None and conf.shape != (12,)):
+        return None
+    vis = np.all(np.isfinite(x), axis=1)
+    return np.asarray(vis if conf is None else vis & (conf >= threshold), dtype=bool)
+
+
 class OutOfOrderFrameError(PoseLifterError):
     """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
 
@@ -93,8 +105,8 @@ class _Track:
     fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
     gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
 
-    def gate(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None, stamp_ns: int,
-             limit: float, threshold: float, min_visible: int) -> NDArray[np.bool_] | None:
+    def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], stamp_ns: int, limit: float,
+             min_visible: int) -> NDArray[np.bool_] | None:
         """The visible joints farther than ``limit`` leg lengths (or GATE_NOISE_FACTOR times the
         track's noise) from where the last frame had them (its detection when the lift used it,
         else the fit's projection), after removing the median motion of the visible joints; None
@@ -106,16 +118,9 @@ class _Track:
         t1, p1, scale = self.fits[-1]
         if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
             return None
-        x = np.asarray(points, dtype=np.float64)
-        conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
-        if x.shape != (12, 2) or (conf is not None and conf.shape != (12,)):
-            return None  # the lifter refuses the frame with the reason
-        vis = np.all(np.isfinite(x), axis=1)
-        if conf is not None:
-            vis &= conf >= threshold
         if not np.any(vis):
             return None
-        d = np.where(vis[:, None], x, 0.0) - p1
+        d = np.where(vis[:, None], np.asarray(points, dtype=np.float64), 0.0) - p1
         d -= np.median(d[vis], axis=0)  # the person's (or the camera's) motion since the last fit
         dist = np.linalg.norm(d, axis=1) / max(scale, 1e-12)
         limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())  # noisy 2D: its own scale
@@ -127,8 +132,8 @@ class _Track:
         self.gated = np.where(out, self.gated + 1, 0)
         return np.asarray(out, dtype=bool)
 
-    def observe_noise(self, lifter: Lifter, points: NDArray[np.float64],
-                      confidence: NDArray[np.float64] | None, stamp_ns: int) -> None:
+    def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
+                      stamp_ns: int) -> None:
         """Add this frame's 2D acceleration (see NOISE_FRAMES) when the last two frames and this
         one are evenly spaced in time."""
         if len(self.history) < 2:
@@ -138,9 +143,7 @@ class _Track:
         if d1 <= 0 or d2 <= 0 or abs(d2 - d1) > 0.2 * d1:
             return
         x = np.asarray(points, dtype=np.float64)
-        vis = v0 & v1 & np.all(np.isfinite(x), axis=1)
-        if confidence is not None:
-            vis &= np.asarray(confidence) >= lifter.options.confidence_threshold
+        vis = v0 & v1 & visible
         if np.count_nonzero(vis) < 3:
             return
         acc = np.linalg.norm(x[vis] - 2.0 * x1[vis] + x0[vis], axis=1) / np.sqrt(6.0)
@@ -279,36 +282,33 @@ class TrackPolicy:
             elif age <= self.track_timeout_ns and self.warm_start:
                 warm = track.warm
         limbs = track.limb_proportions() if track is not None else None
-        hybrid = self.lifter.options.mode == "hybrid"
-        hybrid_or_learned = self.lifter.options.mode != "paper"
         opts = self.lifter.options
-        gated = None
-        screened = hybrid and track is not None and warm is not None and opts.outlier_gate > 0
+        hybrid = opts.mode == "hybrid"
+        # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
+        vis = _visible(points, confidence, opts.confidence_threshold)
+        follows = hybrid and track is not None and warm is not None and vis is not None
+        screened = follows and opts.outlier_gate > 0
         if screened:
-            assert track is not None
-            gated = track.gate(points, confidence, stamp_ns, opts.outlier_gate,
-                               opts.confidence_threshold, opts.min_visible_joints)
+            assert track is not None and vis is not None
+            gated = track.gate(points, vis, stamp_ns, opts.outlier_gate, opts.min_visible_joints)
             if gated is not None:  # a gated joint is missing for this frame
                 confidence = np.where(gated, 0.0, np.ones(12) if confidence is None
                                       else np.asarray(confidence, dtype=np.float64))
-        if hybrid and track is not None and warm is not None:  # a frame that follows the last one
-            track.observe_noise(self.lifter, points, confidence, stamp_ns)
+                vis = vis & ~gated
+        if follows:  # a frame that follows the last one
+            assert track is not None and vis is not None
+            track.observe_noise(self.lifter, points, vis, stamp_ns)
         dw = track.data_weight() if hybrid and track is not None else 1.0
         # smoothing only pays with noisy 2D (on clean input it is lag): scaled with the noise
-        tw = np.full(12, self.lifter.options.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT))
-        if warm is not None and opts.missing_temporal_weight > 0:
+        tw = np.full(12, opts.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT))
+        if warm is not None and vis is not None and opts.missing_temporal_weight > 0:
             # a joint the detector lost on this frame is carried over from the track's last pose
-            x = np.asarray(points, dtype=np.float64)
-            seen = np.all(np.isfinite(x), axis=1) if x.shape == (12, 2) else np.ones(12, dtype=bool)
-            if confidence is not None and np.shape(confidence) == (12,):
-                seen &= np.asarray(confidence, dtype=np.float64) >= opts.confidence_threshold
-            tw = np.where(seen, tw, np.maximum(tw, opts.missing_temporal_weight))
+            tw = np.where(vis, tw, np.maximum(tw, opts.missing_temporal_weight))
         try:
             past = None
-            if track is not None and warm is not None:
-                if hybrid_or_learned:
-                    temporal = self.lifter.temporal_prior
-                    past = track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
+            if track is not None and warm is not None and opts.mode != "paper":
+                temporal = self.lifter.temporal_prior
+                past = track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
                                       temporal_weight=tw, past=past, gated=screened)
             reinit = False
