@@ -47,6 +47,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
+from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.tracking import TrackPolicy
@@ -90,17 +91,17 @@ def _parse(spec: list[str]) -> dict[str, Any]:
 _STATE: dict[str, Any] = {}
 
 
-def _init(settings: dict[str, Any], methods: tuple[str, ...]) -> None:
+def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | None = None) -> None:
     warnings.simplefilter("ignore")
-    bases = PoseBases.load()
     lifters = {}
     for m in methods:
         if m in ("paper", "learned", "hybrid", "hybrid-1"):
             mode = "hybrid" if m.startswith("hybrid") else m
+            bases = PoseBases.load(bases_file or default_bases_path(mode))
             lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings))
             lifters[m].warm_up()
     _STATE["lifters"] = lifters
-    _STATE["mean"] = bases.mean_pose
+    _STATE["mean"] = PoseBases.load().mean_pose  # the mean-pose floor: the paper's bases, as before
 
 
 def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
@@ -188,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(CONDITIONS))
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
+    ap.add_argument("--bases", default=None, help="basis file (default: the packaged one)")
     ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
@@ -201,10 +203,10 @@ def main(argv: list[str] | None = None) -> int:
           flush=True)
     settings = _parse(args.set)
     if args.workers > 1:
-        with mp.get_context("fork").Pool(args.workers, _init, (settings, methods)) as pool:
+        with mp.get_context("fork").Pool(args.workers, _init, (settings, methods, args.bases)) as pool:
             results = list(pool.imap_unordered(_job, jobs, chunksize=1))
     else:
-        _init(settings, methods)
+        _init(settings, methods, args.bases)
         results = [_job(j) for j in jobs]
     table: dict[str, dict[str, dict[str, float]]] = {}
     for cond in args.conditions:

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pose_lifter import messages as m
 from pose_lifter.bags import read_messages
-from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import InvalidInputError, PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import p_mpjpe
@@ -166,7 +166,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cpus")
     modes = (("hybrid (default)", LifterOptions()), ("paper's method", LifterOptions(mode="paper")))
     for label, opts in modes:
-        bench_options(label, opts, a, bases, tracks)
+        bench_options(label, opts, a, PoseBases.load(default_bases_path(opts.mode)), tracks)
 
     # 4. fast vs reference path on a few frames, same options apart from the solvers
     if a.ref_frames > 0:

@@ -51,7 +51,7 @@ from pose_lifter.bags import read_messages
 from pose_lifter.core import lifter as lifter_module
 from pose_lifter.core import pose as pose_module
 from pose_lifter.core._jit import HAVE_NUMBA
-from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
@@ -127,16 +127,17 @@ def _hash_result(d: Digest, f: FrameLift, r: LiftResult) -> None:
              r.objective, r.reprojection_error, r.limb_violation, r.weights)
 
 
-def lift_bags(bags: Iterable[Path], mode: str, bases: PoseBases, starts: int | None,
+def lift_bags(bags: Iterable[Path], mode: str, bases: PoseBases | None, starts: int | None,
               max_messages: int | None, d: Digest, recorder: Recorder | None, verbose: bool
               ) -> dict[Path, list[FrameLift]]:
-    """Lift every bag in ``mode`` into ``d``; record pose-step calls of the first bag. Returns the
-    lifted skeletons of each bag."""
+    """Lift every bag in ``mode`` into ``d`` (``bases`` None: the mode's packaged bases); record
+    pose-step calls of the first bag. Returns the lifted skeletons of each bag."""
     frames: dict[Path, list[FrameLift]] = {}
     original = lifter_module.pose_step
     for i, bag in enumerate(bags):
         opts = LifterOptions(mode=mode)
-        lifter = Lifter(bases, opts if starts is None else opts.replace(n_starts=starts))
+        lifter = Lifter(bases if bases is not None else PoseBases.load(default_bases_path(mode)),
+                        opts if starts is None else opts.replace(n_starts=starts))
         kps, infos = _keypoints(bag)
         if max_messages is not None:
             kps = kps[:max_messages]
@@ -245,8 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     bags = [Path(b) for b in args.bags]
     if not bags:
         ap.error("no bags")
-    bases = PoseBases.load()
-    Lifter(bases, LifterOptions(mode="hybrid")).warm_up()  # compile or load the kernels first
+    Lifter(None, LifterOptions(mode="hybrid")).warm_up()  # compile or load the kernels first
     starts = LifterOptions().n_starts if args.starts is None else args.starts
     print(f"lift_hash: {len(bags)} bags ({', '.join(b.stem for b in bags)}), starts {starts}, "
           f"max messages {args.max_messages}, rounded to 1e-{args.decimals}; numba {HAVE_NUMBA}, "
@@ -257,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
     for mode in MODES:
         d = Digest(args.decimals)
         rec = Recorder(args.record_every, args.record)
-        lifted[mode] = lift_bags(bags, mode, bases, args.starts, args.max_messages, d, rec, args.verbose)
+        lifted[mode] = lift_bags(bags, mode, None, args.starts, args.max_messages, d, rec, args.verbose)
         calls.extend(rec.calls)
         n = sum(len(f) for f in lifted[mode].values())
         print(f"lifts {mode:7s} {d.hexdigest()}  ({n} skeletons, {d.n_values} values)", flush=True)

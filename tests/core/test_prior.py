@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, p_mpjpe
+from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError, OptionsError, PriorFileError
 from pose_lifter.core.prior import DEFAULT_PRIOR_PATH, PosePrior, prior_features
 from pose_lifter.core.synthetic import synthetic_poses
@@ -373,3 +374,49 @@ def test_a_malformed_tracked_frame_is_refused_with_the_lifters_error(
     with pytest.raises(InvalidInputError):
         policy.lift(0, 66_666_666, x[2], np.ones(11))
     assert policy.lift(0, 99_999_999, x[3]).result.limb_violation < LIMB_TOL
+
+
+def test_the_track_learns_a_persons_limb_proportions(walk_track: tuple[np.ndarray, np.ndarray]) -> None:
+    """A real walker made long-shinned and short-armed: with ``prior_limbs`` the track's estimate
+    (median of the prior's limbs, calibrated) moves toward the person's proportions from the
+    bases', and the fit's limbs take it. (What it gains in 3D is measured by tools/accuracy.py's
+    ``proportions`` condition: on one 1 s track it is within the noise.)"""
+    _, truth = walk_track
+    factors = np.array([1.0, 0.85, 1.0, 0.85, 1.0, 1.2, 1.0, 1.2])  # forearms -15 %, shins +20 %
+    person = scale_limbs(truth, factors)
+    x = 160.0 * person[..., :2] + 320.0
+    bases = PoseBases.load(default_bases_path("hybrid"))
+    own = Lifter(bases, LifterOptions(mode="hybrid", prior_limbs=True))
+    fixed = Lifter(bases, LifterOptions(mode="hybrid", prior_limbs=False))
+    policy = TrackPolicy(own)
+    got = [policy.lift(0, i * 33_333_333, x[i]).result for i in range(len(x))]
+    est = policy._tracks[0].limb_proportions()
+    assert est is not None
+
+    def shape(p: np.ndarray) -> np.ndarray:  # (8,) limbs -> 4 log-proportions, size removed
+        q = np.asarray(p)
+        g = np.log(0.5 * (q[[0, 1, 4, 5]] + q[[2, 3, 6, 7]]))
+        return g - g.mean()
+
+    true = shape(Lifter.limb_proportions_of(person[0]))
+    assert np.linalg.norm(shape(est) - true) < 0.8 * np.linalg.norm(shape(bases.limb_proportions) - true)
+    # the fit's limbs follow the estimate (the constraint radii), not the bases' proportions
+    fitted = shape(Lifter.limb_proportions_of(got[-1].pose))
+    assert np.allclose(fitted, shape(est), atol=1e-3)
+    # ... and without prior_limbs they keep the bases' proportions
+    plain = shape(Lifter.limb_proportions_of(_track(fixed, x)[-1].pose))
+    assert np.allclose(plain, shape(bases.limb_proportions), atol=1e-3)
+
+
+def test_the_hybrid_mode_has_its_own_packaged_bases() -> None:
+    """Hybrid's bases: the prior's training trials (never the evaluation split, never 135_06),
+    limbs varied; the paper's mode keeps the paper's (subject 01 playground)."""
+    paper = Lifter(options=LifterOptions(mode="paper")).bases.metadata
+    hybrid = Lifter(options=LifterOptions(mode="hybrid")).bases.metadata
+    assert paper.get("split", "paper") == "paper"
+    assert {t.split("_")[0] for t in paper["training_trials"]} == {"01"}
+    assert hybrid["split"] == "prior" and hybrid["limb_spread"] == pytest.approx(0.2)
+    trained = set(hybrid["training_trials"])
+    assert trained == set(PosePrior.load().metadata["training_trials"])
+    assert not {t for t in trained if t.split("_")[0] in ("02", "07", "08")} | ({"09_12", "135_06"} & trained)
+    assert not trained & set(PosePrior.load().metadata["validation_trials"])

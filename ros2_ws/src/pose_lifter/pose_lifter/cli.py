@@ -84,13 +84,22 @@ def _command_line(argv: Sequence[str] | None) -> str:
 def learn_bases(
     method: str = "sparse", n_bases: int | None = None, data_dir: str | Path | None = None, step: int = 8,
     sparsity: float = 0.1, n_starts: int = 30, n_per_class: int = 6, seed: int = 0, n_iter: int = 2000,
-    command: str = "",
+    command: str = "", split: str = "paper", limb_spread: float = 0.0,
 ) -> Any:
-    """Learn bases from the paper's training split (MANIFEST ``paper_split == train``).
+    """Learn bases from the CMU trials of ``split``.
+
+    ``split="paper"``: the paper's training split (MANIFEST ``paper_split == train``, subject
+    01's playground), for the paper's mode and experiments. ``split="prior"``: the trials the
+    packaged learned prior was fitted on (its metadata ``training_trials``: the training split
+    minus the prior's validation trials, so tuning on those stays held out), for the hybrid mode.
 
     Every ``step``-th frame of the 120 Hz trials is used (8 -> 15 Hz: consecutive frames are
-    nearly identical), normalised with :func:`pose_lifter.core.skeleton.normalise_pose`.
-    Class-wise PCA uses the trials as classes (each CMU playground trial is one activity mix).
+    nearly identical). With ``limb_spread`` > 0 every frame's limbs are first scaled by factors
+    drawn per frame (:func:`pose_lifter.views.limb_scale_factors`, upper arm, forearm, thigh and
+    shin uniform in ``1 +- limb_spread``, both sides alike; seeded by ``seed``), so the bases
+    represent people of other proportions than the CMU subjects. Then every pose is normalised
+    with :func:`pose_lifter.core.skeleton.normalise_pose`. Class-wise PCA uses the trials as
+    classes.
 
     Returns
     -------
@@ -101,14 +110,34 @@ def learn_bases(
     from .core.skeleton import normalise_pose
 
     d = mocap.resolve_data_dir(data_dir)
-    trials = sorted({t.trial for t in mocap.read_manifest(d) if t.paper_split == "train"})
+    if split == "paper":
+        trials = sorted({t.trial for t in mocap.read_manifest(d) if t.paper_split == "train"})
+    elif split == "prior":
+        from .core.prior import PosePrior
+
+        trials = sorted(str(t) for t in PosePrior.load().metadata.get("training_trials", []))
+        held_out = set(mocap.split_trials("eval", d)) | {"135_06"}
+        if held_out & set(trials):  # a prior file trained on held-out motion must not spread
+            raise mocap.MocapDataError(
+                f"the prior's training trials include held-out {sorted(held_out & set(trials))}")
+    else:
+        raise ValueError(f"split must be 'paper' or 'prior', got {split!r}")
     if not trials:
-        raise mocap.MocapDataError(f"no paper_split=train trials in {d / 'MANIFEST.csv'}")
-    clips = [normalise_pose(mocap.load_trial(t, d, step=step)) for t in trials]
+        raise mocap.MocapDataError(f"no training trials for split {split!r} in {d}")
+    rng = np.random.default_rng(seed)
+    clips = []
+    for t in trials:
+        world = mocap.load_trial(t, d, step=step)
+        if limb_spread > 0:
+            from .views import limb_scale_factors, scale_limbs
+
+            world = scale_limbs(world, limb_scale_factors(len(world), limb_spread, rng))
+        clips.append(normalise_pose(world))
     poses = np.concatenate(clips)
     labels = np.concatenate([np.full(len(c), t) for c, t in zip(clips, trials, strict=True)])
     meta = {
         "command": command, "training_trials": trials, "frame_step": step, "source_fps": 120,
+        "split": split, "limb_spread": limb_spread,
         "data": "CMU Graphics Lab Motion Capture Database, " + _ACK,
         "normalisation": "pose_lifter.core.skeleton.normalise_pose (centroid, body frame, "
                          "right lower leg = 1)",
@@ -132,7 +161,7 @@ def _cmd_learn_bases(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     bases = learn_bases(args.method, args.n_bases, args.data, args.step, args.sparsity, args.starts,
-                        args.n_per_class, args.seed, args.n_iter, args.command)
+                        args.n_per_class, args.seed, args.n_iter, args.command, args.split, args.limb_spread)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     bases.save(out)
@@ -209,10 +238,9 @@ def _lifter(args: argparse.Namespace) -> Any:
     from .core.lifter import Lifter
     from .core.options import LifterOptions
 
-    bases = PoseBases.load(args.bases)
     opts = LifterOptions(variant=args.variant, camera_solver=args.solver, pose_solver=args.solver,
                          n_starts=args.starts, mode="paper" if args.solver == "cvxpy" else args.mode)
-    lifter = Lifter(bases, opts)
+    lifter = Lifter(PoseBases.load(args.bases) if args.bases else None, opts)  # None: the mode's bases
     if args.solver == "admm":
         # compile (first run after an install, ~25 s) or load the solver kernels now, so that the
         # per-skeleton times reported are solve times (the reference path has no kernels)
@@ -258,7 +286,8 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     if args.mode != parser_defaults["mode"] or args.solver == "cvxpy":
         options["mode"] = "paper" if args.solver == "cvxpy" else args.mode
     options.update(camera_solver=args.solver, pose_solver=args.solver)
-    lifter = Lifter(PoseBases.load(args.bases or params.bases_file), LifterOptions().replace(**options))
+    path = args.bases or params.bases_file
+    lifter = Lifter(PoseBases.load(path) if path else None, LifterOptions().replace(**options))
     if args.solver == "admm":
         lifter.warm_up()
     warm = False if args.no_warm_start else (True if params.warm_start is None else params.warm_start)
@@ -332,7 +361,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _add_lifter_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bases", default=None, help="basis file (.npz); default: the packaged sparse bases")
+    p.add_argument("--bases", default=None, help="basis file (.npz); default: the packaged bases of --mode "
+                   "(paper: subject 01 playground; hybrid: the training split, varied limb proportions)")
     p.add_argument("--variant", default="full", help="paper variant: full (= L1WAWS) or L1NAWS, L2WANS, ...")
     p.add_argument("--solver", choices=("admm", "cvxpy"), default="admm",
                    help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference")
@@ -371,6 +401,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use every STEP-th 120 Hz frame (default 8: 15 Hz)")
     p.add_argument("--starts", type=_POS_INT, default=30, help="multi-start poses stored (k-means + mean)")
     p.add_argument("--n-iter", type=_POS_INT, default=2000, help="dictionary-learning iterations")
+    p.add_argument("--split", choices=("paper", "prior"), default="paper",
+                   help="paper: subject 01 playground (the paper's protocol); prior: the trials the "
+                        "packaged learned prior was trained on (the product's hybrid bases)")
+    p.add_argument("--limb-spread", type=_FRACTION, default=0.0,
+                   help="scale each frame's limbs by up to +-this fraction first (other proportions)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output .npz")
     p.set_defaults(func=_cmd_learn_bases)

@@ -55,6 +55,7 @@ from rclpy.signals import SignalHandlerOptions
 from . import diagnostics, messages, placement
 from .core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from .core._jit import HAVE_NUMBA
+from .core.bases import default_bases_path
 from .core.errors import InvalidInputError
 from .core.layouts import Layout, get_layout
 from .core.tracking import OutOfOrderFrameError, TrackPolicy
@@ -128,7 +129,8 @@ def _opt(name: str, description: str, low: float | None = None, high: float | No
 
 #: Every parameter of the node, in the order of ``config/lifter.yaml``.
 PARAMS: Final[tuple[ParamSpec, ...]] = (
-    ParamSpec("bases_file", "", "Pose basis file (.npz, PoseBases.save); empty = the packaged default."),
+    ParamSpec("bases_file", "", "Pose basis file (.npz, PoseBases.save); empty = the packaged bases of "
+              "the mode (paper: subject 01 playground; hybrid: training split, varied proportions)."),
     _opt("variant", "Paper variant: 'full' (= L1WAWS) or L1WAWS, L1WANS, ..., L2NANS."),
     _opt("theta", "Weight of ||alpha||_1 (sparsity), right-lower-leg units.", 0.0, 100.0),
     _opt("max_alternations", "Camera/pose alternations per solve.", 1, 1000),
@@ -157,7 +159,7 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("prior_file", "Learned prior weights (.npz, PosePrior.save); empty = the packaged default."),
     _opt("temporal_prior", "Hybrid/learned, tracked: frames that follow a track's previous ones use the "
          "causal temporal prior (last 4 frames, trained at 30 Hz)."),
-    _opt("temporal_prior_file", "Temporal prior weights (.npz); empty = the packaged default."),
+    _opt("temporal_prior_file", "Temporal prior weights (.npz); empty = the packaged bases of the mode."),
     _opt("prior_weight_xy", "Hybrid: weight of the prior's image positions in the L1 objective.",
          0.0, 1000.0),
     _opt("prior_weight_z", "Hybrid: weight of the prior's depths in the L1 objective.", 0.0, 1000.0),
@@ -323,8 +325,8 @@ class LifterNode(Node):
     def configure_lifter(self) -> None:
         """Load the bases, build the solver (compile or load its kernels), create the publishers."""
         # Invalid start-up values are fatal with the core's message (there is nothing to run).
-        self._bases = self._load_bases(self._param("bases_file"))
         options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
+        self._bases = self._load_bases(self._param("bases_file"), options.mode)
         self._lifter = Lifter(self._bases, options)
         # compile (first start after an install: ~25 s) or load the solver kernels before the
         # topics exist, so the first frame is not the one that pays for it
@@ -417,8 +419,9 @@ class LifterNode(Node):
         return TrackPolicy(self._lifter, st.track_timeout, st.warm_start, st.reinit_ratio)
 
     @staticmethod
-    def _load_bases(path: str) -> PoseBases:
-        return PoseBases.load(Path(path).expanduser() if path else None)
+    def _load_bases(path: str, mode: str) -> PoseBases:
+        """``bases_file``, or the packaged bases of ``mode`` when it is empty."""
+        return PoseBases.load(Path(path).expanduser() if path else default_bases_path(mode))
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """On-set callback: build the new options (and bases) or refuse with the reason."""
@@ -427,11 +430,13 @@ class LifterNode(Node):
             return SetParametersResult(successful=True)
         try:
             bases = self._bases
-            for p in ours:
-                if p.name == "bases_file":
-                    bases = self._load_bases(str(p.value))
             changes = {p.name: p.value for p in ours if _SPECS[p.name].option}
             options = self._lifter.options.replace(**changes) if changes else self._lifter.options
+            new_file = next((str(p.value) for p in ours if p.name == "bases_file"), None)
+            path = self._param("bases_file") if new_file is None else new_file
+            if new_file is not None or (not path and options.mode != self._lifter.options.mode):
+                # a new file, or the packaged bases of another mode
+                bases = self._load_bases(path, options.mode)
             if options.n_starts > bases.start_alphas.shape[0]:
                 # not an error: the lifter uses the starts it has
                 self.get_logger().info(
@@ -721,7 +726,7 @@ def main(args: list[str] | None = None) -> None:
     if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:
         # compile the solver kernels into this install's cache (make ros runs it after the build)
         start = time.perf_counter()
-        Lifter(PoseBases.load()).warm_up()
+        Lifter().warm_up()
         print(f"pose_lifter: solver kernels {'compiled' if HAVE_NUMBA else 'not compiled (no numba)'} "
               f"and cached in {time.perf_counter() - start:.1f} s")
         return

@@ -22,10 +22,12 @@ from .skeleton import N_JOINTS, limb_lengths
 
 __all__ = [
     "DEFAULT_BASES_PATH",
+    "HYBRID_BASES_PATH",
     "MAX_COMPONENTS",
     "MAX_METADATA_CHARS",
     "MAX_START_POSES",
     "PoseBases",
+    "default_bases_path",
     "learn_classwise_pca_bases",
     "learn_pca_bases",
     "learn_sparse_bases",
@@ -33,8 +35,20 @@ __all__ = [
     "sparse_codes",
 ]
 
-#: The basis file shipped with the package (see tools/learn_default_bases.sh).
+#: The basis file shipped with the package for the paper's mode and experiments: the paper's
+#: protocol, subject 01's playground trials (see tools/learn_default_bases.sh).
 DEFAULT_BASES_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "bases_sparse200.npz"
+#: The basis file of the product's hybrid and learned modes: the same learning on the trials the
+#: learned prior was fitted on (the training split minus the prior's validation trials), every
+#: frame's limbs scaled by up to +-20 % first, so the bases represent people of other
+#: proportions (tools/learn_default_bases.sh).
+HYBRID_BASES_PATH: Final[Path] = DEFAULT_BASES_PATH.with_name("bases_hybrid_sparse200.npz")
+
+
+def default_bases_path(mode: str) -> Path:
+    """The packaged basis file of a lifter mode: ``"paper"`` -> :data:`DEFAULT_BASES_PATH`, the
+    others (``"hybrid"``, ``"learned"``) -> :data:`HYBRID_BASES_PATH`."""
+    return DEFAULT_BASES_PATH if mode == "paper" else HYBRID_BASES_PATH
 _FORMAT_VERSION: Final[int] = 1
 #: Caps of a basis file, checked in the ``.npy`` headers before any data is read (a 2 MB
 #: ``.npz`` can otherwise expand to gigabytes): multi-start coefficient rows, bases ``k``, and

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._jit import njit
-from .bases import PoseBases
+from .bases import PoseBases, default_bases_path
 from .camera import _camera_admm_checked
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
 from .options import LifterOptions
@@ -143,7 +143,8 @@ class Lifter:
     Parameters
     ----------
     bases : PoseBases or None
-        None loads the packaged default basis file.
+        None loads the packaged basis file of ``options.mode``
+        (:func:`pose_lifter.core.bases.default_bases_path`).
     options : LifterOptions or None
     prior, temporal_prior : PosePrior or None
         The learned priors (None: loaded from ``options.prior_file`` /
@@ -152,8 +153,8 @@ class Lifter:
 
     def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None,
                  prior: PosePrior | None = None, temporal_prior: PosePrior | None = None) -> None:
-        self.bases = bases if bases is not None else PoseBases.load()
         self._options = options if options is not None else LifterOptions()
+        self.bases = bases if bases is not None else PoseBases.load(default_bases_path(self._options.mode))
         self._prior: PosePrior | None = prior
         self._prior_key: str | None = None if prior is None else self._options.prior_file
         self._temporal: PosePrior | None = temporal_prior

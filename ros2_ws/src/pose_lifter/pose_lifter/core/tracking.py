@@ -15,7 +15,7 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
 * per-track limb lengths (bones do not change within a person): the median of the learned prior's
   limb proportions over the track's last LIMB_FRAMES frames, once it has MIN_LIMB_FRAMES
   of them, is passed to the lifter for its limb constraints (hybrid mode,
-  ``LifterOptions.prior_limbs``, off by default);
+  ``LifterOptions.prior_limbs``, on by default), after :data:`LIMB_CALIBRATION`;
 * hybrid mode: the track's 2D noise (NOISE_FRAMES) weights the 2D term down and blends the
   previous frame's pose into the prior's target (temporal smoothness, up to
   ``LifterOptions.temporal_weight``);
@@ -65,6 +65,13 @@ LIMB_FRAMES = 90
 #: the last two for the noise estimate.
 MAX_PAST = 8
 MIN_LIMB_FRAMES = 10
+#: The prior's limb estimate is biased: the MLP shortens the forearm, whose direction it is least
+#: sure of (a regression to the mean of directions shortens a limb). Per bone group (upper arm,
+#: forearm, thigh, shin), the person's log-proportions (mean over the groups removed) are
+#: ``slope * estimate + offset``: least squares over held-out training-split tracks whose limbs
+#: were scaled by up to +-20 % (``tools/limb_calibration.py``, which prints these).
+LIMB_CALIBRATION: tuple[NDArray[np.float64], NDArray[np.float64]] = (
+    np.array([0.89, 0.78, 1.13, 0.99]), np.array([-0.014, -0.058, -0.062, -0.027]))
 #: The temporal outlier gate (``LifterOptions.outlier_gate``) leaves a frame alone when it would
 #: gate more than this fraction of its visible joints, and gates one joint on at most
 #: GATE_MAX_FRAMES consecutive frames.
@@ -188,7 +195,18 @@ class _Track:
     def limb_proportions(self) -> NDArray[np.float64] | None:
         if len(self.limbs) < MIN_LIMB_FRAMES:
             return None
-        return np.asarray(np.median(np.stack(self.limbs), axis=0))
+        return calibrated_limb_proportions(np.median(np.stack(self.limbs), axis=0))
+
+
+def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The track's limb proportions (8,) from the median of the prior's (8,), corrected by
+    :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
+    e = np.asarray(estimate, dtype=np.float64)
+    g = np.log(np.maximum(e[[0, 1, 4, 5]], 1e-12))
+    m = g.mean()
+    slope, offset = LIMB_CALIBRATION
+    out = np.exp(m + slope * (g - m) + offset)
+    return np.asarray(out[[0, 1, 0, 1, 2, 3, 2, 3]])
 
 
 @dataclass(frozen=True)
