@@ -290,9 +290,42 @@ def test_a_missing_joint_is_carried_over_by_the_track(
     errs = []
     for w in (3.0, 0.0):
         # the single-frame prior: the carry-over alone (the temporal prior sees the past frames too)
-        res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w, temporal_prior=False)), x, conf)
+        res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w, temporal_prior=False,
+                                                 fill_missing_frames=0)), x, conf)
         errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in frames]))
     assert errs[0] < 0.97 * errs[1], errs
+
+
+def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
+        bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch) -> None:
+    x, truth = walk_track
+    conf = np.ones(x.shape[:2])
+    lost = [10, 11, 16, 17, 22, 23]
+    conf[np.ix_(lost, [2, 8])] = 0.0  # the left wrist and ankle lost for 2 frames, 3 times
+    conf[5:15, 5] = 0.0  # the right wrist lost for 10 frames: filled on its first 3 only
+    seen: list[np.ndarray | None] = []
+    lift = Lifter.lift
+
+    def spy(self: Lifter, *args: object, **kwargs: object) -> LiftResult:
+        f = kwargs.get("fill")
+        seen.append(None if f is None else np.asarray(f[1]).copy())  # type: ignore[index]
+        return lift(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    errs = []
+    for n in (3, 0):
+        opts = LifterOptions(fill_missing_frames=n, missing_temporal_weight=0.0)
+        if n:
+            monkeypatch.setattr(Lifter, "lift", spy)
+        res = _track(Lifter(bases, opts), x, conf)
+        monkeypatch.setattr(Lifter, "lift", lift)
+        errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in lost]))
+    assert errs[0] < 0.97 * errs[1], errs
+    assert seen[0] is None  # the first frame has no track to predict from
+    allowed = np.array([m is not None and bool(m[5]) for m in seen])
+    assert allowed[5:8].all() and not allowed[8:15].any()  # 3 frames, then it is left missing
+    assert np.all([m is not None and m[2] for i, m in enumerate(seen) if i in lost])
+    with pytest.raises(InvalidInputError, match="fill"):
+        Lifter(bases).lift(x[0], fill=(np.zeros((11, 2)), np.ones(12, dtype=bool)))
 
 
 def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:

@@ -176,6 +176,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
          "target of a joint missing on this frame (0 = as the others).", 0.0, 1000.0),
     _opt("outlier_gate", "Hybrid, tracked: a joint farther than this (leg lengths) from where the track "
          "puts it is missing for that frame (0 = off).", 0.0, 1000.0),
+    _opt("fill_missing_frames", "Hybrid, tracked: a joint missing for at most this many frames in a row "
+         "is given to the learned prior where the track predicts it (0 = off).", 0, 1000),
     _opt("prior_limbs", "Hybrid, tracked: limb constraints with the track's estimated proportions."),
     _opt("warm_competes", "Hybrid: warm solves also start from the previous frame's pose (screened)."),
     ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame."),

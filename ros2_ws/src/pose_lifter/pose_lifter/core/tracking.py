@@ -111,6 +111,8 @@ class _Track:
     #: projection, in input units; the camera's scale, input units per model unit)
     fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
     gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
+    #: consecutive frames each joint was not used by the lift, up to the last one
+    unused: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
 
     def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], stamp_ns: int, limit: float,
              min_visible: int) -> NDArray[np.bool_] | None:
@@ -120,15 +122,11 @@ class _Track:
         when nothing is gated (see GATE_MAX_FRACTION). A constant-velocity prediction was
         measured worse: the fits' jitter doubles in it (7 % of good joints beyond 0.8 leg on
         held-out tracks with 20 % outliers, against 2 % for the last position)."""
-        if not self.fits:
+        predicted = self.predict(points, vis, stamp_ns)
+        if predicted is None:
             return None
-        t1, p1, scale = self.fits[-1]
-        if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
-            return None
-        if not np.any(vis):
-            return None
-        d = np.where(vis[:, None], np.asarray(points, dtype=np.float64), 0.0) - p1
-        d -= np.median(d[vis], axis=0)  # the person's (or the camera's) motion since the last fit
+        scale = self.fits[-1][2]
+        d = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted) - predicted
         dist = np.linalg.norm(d, axis=1) / max(scale, 1e-12)
         limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())  # noisy 2D: its own scale
         out = vis & (dist > limit) & (self.gated < GATE_MAX_FRAMES)
@@ -138,6 +136,20 @@ class _Track:
             return None
         self.gated = np.where(out, self.gated + 1, 0)
         return np.asarray(out, dtype=bool)
+
+    def predict(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
+                stamp_ns: int) -> NDArray[np.float64] | None:
+        """Where each joint (12, 2) should be on this frame: where the last frame had it (its
+        detection when the lift used it, else the fit's projection) moved by the median motion of
+        this frame's visible joints since (the person's or the camera's). None without a last
+        frame at most GATE_MAX_AGE_NS old, or without a visible joint."""
+        if not self.fits or not np.any(vis):
+            return None
+        t1, p1, _ = self.fits[-1]
+        if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
+            return None
+        d = np.asarray(points, dtype=np.float64)[vis] - p1[vis]
+        return np.asarray(p1 + np.median(d, axis=0))
 
     def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
                       stamp_ns: int) -> None:
@@ -327,15 +339,22 @@ class TrackPolicy:
             if track is not None and warm is not None and opts.mode != "paper":
                 temporal = self.lifter.temporal_prior
                 past = track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
+            fill = None
+            if follows and opts.fill_missing_frames > 0:
+                assert track is not None and vis is not None
+                predicted = track.predict(points, vis, stamp_ns)
+                if predicted is not None:
+                    fill = (predicted, track.unused < opts.fill_missing_frames)
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
-                                      temporal_weight=tw, past=past, gated=screened)
+                                      temporal_weight=tw, past=past, gated=screened, fill=fill)
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
                 ref = float(np.median(np.asarray(track.objectives)))
                 if result.objective > self.reinit_ratio * ref:
                     cold = self.lifter.lift(points, confidence, warm=None, limb_proportions=limbs,
-                                            data_weight=dw, temporal_weight=tw, past=past, gated=screened)
+                                            data_weight=dw, temporal_weight=tw, past=past, gated=screened,
+                                            fill=fill)
                     if cold.objective < result.objective:
                         result, reinit = cold, True
         except PoseLifterError:
@@ -347,6 +366,7 @@ class TrackPolicy:
                 track = self._tracks[track_id] = _Track(None, stamp_ns)
             track.warm = result.warm_start()
             track.last_stamp_ns = stamp_ns
+            track.unused = np.where(result.weights > 0, 0, track.unused + 1)
             track.objectives.append(float(result.objective))
             if result.prior_pose is not None:
                 track.limbs.append(self.lifter.limb_proportions_of(result.prior_pose))
