@@ -100,6 +100,11 @@ def test_depth_weight_scales_the_body_forward_axis_and_round_trips(tmp_path: obj
     back = ActionClassifier.load(path)
     assert back.depth_weight == 0.25
     np.testing.assert_allclose(back.features(w), clf.features(w))
+    assert clf.features_ is not None and back.features_ is not None
+    with np.load(path) as z:
+        assert z["features"].dtype == np.int8
+        step = float(z["feature_scale"])
+    assert step < 0.03 and np.abs(back.features_ - clf.features_).max() <= 0.5 * step + 1e-12
 
 
 def test_load_rejects_files_that_are_not_action_models(tmp_path: object) -> None:
@@ -118,6 +123,7 @@ def test_load_rejects_files_that_are_not_action_models(tmp_path: object) -> None
         "kind": {"features": ok, "labels": labels, "settings": json.dumps({**settings, "kind": "x"})},
         "weight": {"features": ok, "labels": labels,
                    "settings": json.dumps({**settings, "depth_weight": 2.0})},
+        "int8_no_scale": {"features": ok.astype(np.int8), "labels": labels, "settings": json.dumps(settings)},
         "pickled": {"features": ok, "labels": labels, "settings": np.array([settings], dtype=object)},
     }
     for name, arrays in bad.items():

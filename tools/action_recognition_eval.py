@@ -224,6 +224,12 @@ def test_windows_of(clips: list[NDArray[np.float64]], per_class: int) -> list[tu
             for e in np.linspace(0, avail[i] - 1, q).round().astype(int)]
 
 
+def paired_se(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> float:
+    """Standard error of the accuracy difference of two classifiers on the same windows (n,)."""
+    d = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
+    return float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("nan")
+
+
 def binomial_se(p: float, n: int) -> float:
     """Standard error of an accuracy ``p`` measured on ``n`` windows (binomial; windows of one
     trial are correlated, so this is a lower bound)."""
@@ -366,6 +372,8 @@ def main(argv: list[str] | None = None) -> int:
     votes_acc = {k: float(np.mean([t[k] == t["class"] for t in per_trial])) for k in pred}
     per_cls = {k: {c: float(np.mean(np.asarray(v)[y == c] == c)) for c in CLASSES} for k, v in pred.items()}
     lift_err_mm = {mode: 1e3 * float(np.mean(v)) for mode, v in lift_err.items()}
+    right = {k: np.asarray(v) == y for k, v in pred.items()}
+    vs_2d = {k: (acc[k] - acc["2d"], paired_se(right[k], right["2d"])) for k in pred if k != "2d"}
     result: dict[str, object] = {
         "command": command, "classes": list(CLASSES), "train_windows": len(labels),
         "train_windows_per_class": dict(Counter(labels.tolist())),
@@ -375,6 +383,7 @@ def main(argv: list[str] | None = None) -> int:
         "neighbors_2d": args.neighbors_2d, "depth_weight": args.depth_weight, "seed": args.seed,
         "window_accuracy": acc,
         "window_accuracy_se": {k: binomial_se(v, len(y)) for k, v in acc.items()},
+        "minus_2d": {k: {"difference": d, "paired_se": se} for k, (d, se) in vs_2d.items()},
         "per_class_window_accuracy": per_cls,
         "trial_vote_accuracy": votes_acc,
         "per_trial": per_trial,
@@ -387,10 +396,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"test: {len(y)} windows from {len(per_trial)} unseen trials, random azimuth, noise "
           f"{args.noise_px} px, --lift {args.lift} (lead-in {args.lead_in} s); lifted in {lift_s:.0f} s, "
           "lifted P-MPJPE " + ", ".join(f"{k} {v:.1f} mm" for k, v in lift_err_mm.items()))
-    print(f"{'input':22s}{'window acc':>16s}{'trial vote acc':>16s}   per class")
+    print(f"{'input':22s}{'window acc':>16s}{'minus 2d':>18s}{'trial vote acc':>16s}   per class")
     for k in pred:
         cls_txt = " ".join(f"{c}={per_cls[k][c]:.2f}" for c in CLASSES)
-        print(f"{k:22s}{acc[k]:9.3f} +-{binomial_se(acc[k], len(y)):.3f}{votes_acc[k]:16.3f}   {cls_txt}")
+        diff = f"{vs_2d[k][0]:+9.3f} +-{vs_2d[k][1]:.3f}" if k in vs_2d else " " * 16
+        se = binomial_se(acc[k], len(y))
+        print(f"{k:22s}{acc[k]:9.3f} +-{se:.3f}  {diff}{votes_acc[k]:16.3f}   {cls_txt}")
     if args.model_out:
         chosen = model_lifted if args.model_input == "lifted" else model_3d
         assert chosen is not None
