@@ -78,3 +78,55 @@ def test_pose_history_assembles_windows_at_the_model_step_from_any_rate() -> Non
     for i in (0, 1, 3):  # a gap: no pose near t - 0.2 s
         sparse.add(i * 100_000_000, poses[i])
     assert sparse.window_at(3 * 100_000_000) is None
+
+
+def test_depth_weight_scales_the_body_forward_axis_and_round_trips(tmp_path: object) -> None:
+    from pathlib import Path
+
+    w = windows(2, 5, True)
+    full = pose_window_features(w).reshape(2, 4, 12, 3)
+    part = pose_window_features(w, depth_weight=0.25).reshape(2, 4, 12, 3)
+    np.testing.assert_allclose(part[..., :2], full[..., :2], atol=1e-12)
+    np.testing.assert_allclose(part[..., 2], 0.25 * full[..., 2], atol=1e-12)
+    assert np.abs(full[..., 2]).max() > 0.05  # the test poses do have depth
+    with pytest.raises(InvalidInputError):
+        pose_window_features(w, depth_weight=1.5)
+    train = np.concatenate([windows(20, 1, False), windows(20, 2, True)])
+    labels = np.array(["stand"] * 20 + ["wave"] * 20)
+    clf = ActionClassifier("3d", window=4, step_s=0.1, n_neighbors=3, depth_weight=0.25).fit(train, labels)
+    np.testing.assert_allclose(clf.features(w), pose_window_features(w, 0.25).reshape(2, -1))
+    path = Path(str(tmp_path)) / "model.npz"
+    clf.save(path)
+    back = ActionClassifier.load(path)
+    assert back.depth_weight == 0.25
+    np.testing.assert_allclose(back.features(w), clf.features(w))
+    assert clf.features_ is not None and back.features_ is not None
+    with np.load(path) as z:
+        assert z["features"].dtype == np.int8
+        step = float(z["feature_scale"])
+    assert step < 0.03 and np.abs(back.features_ - clf.features_).max() <= 0.5 * step + 1e-12
+
+
+def test_load_rejects_files_that_are_not_action_models(tmp_path: object) -> None:
+    import json
+    from pathlib import Path
+
+    d = Path(str(tmp_path))
+    settings = {"kind": "3d", "window": 4, "step_s": 0.1, "n_neighbors": 3}
+    ok = np.zeros((5, 4 * 36), np.float16)
+    np.savez(d / "good.npz", features=ok, labels=np.array(["a"] * 5), settings=json.dumps(settings))
+    assert ActionClassifier.load(d / "good.npz").depth_weight == 1.0  # files without it: all axes alike
+    labels = np.array(["a"] * 5)
+    bad = {
+        "no_labels": {"features": ok, "settings": json.dumps(settings)},
+        "wrong_dim": {"features": ok[:, :100], "labels": labels, "settings": json.dumps(settings)},
+        "kind": {"features": ok, "labels": labels, "settings": json.dumps({**settings, "kind": "x"})},
+        "weight": {"features": ok, "labels": labels,
+                   "settings": json.dumps({**settings, "depth_weight": 2.0})},
+        "int8_no_scale": {"features": ok.astype(np.int8), "labels": labels, "settings": json.dumps(settings)},
+        "pickled": {"features": ok, "labels": labels, "settings": np.array([settings], dtype=object)},
+    }
+    for name, arrays in bad.items():
+        np.savez(d / f"{name}.npz", **arrays)  # type: ignore[arg-type]
+        with pytest.raises(InvalidInputError):
+            ActionClassifier.load(d / f"{name}.npz")

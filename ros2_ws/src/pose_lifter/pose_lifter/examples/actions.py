@@ -3,7 +3,9 @@
 A window is ``W`` poses ``step_s`` seconds apart, newest last. Features:
 
 * 3D: every pose view-normalised (:func:`pose_lifter.core.normalise_pose`: centred, body frame,
-  right lower leg = 1), so the camera's viewpoint and the person's size and heading drop out.
+  right lower leg = 1), so the camera's viewpoint and the person's size and heading drop out;
+  the body frame's forward coordinate can be down-weighted (``depth_weight``): a lifted pose's
+  errors are mostly in depth, which for a person facing the camera is the body's forward axis.
 * 2D (the baseline without the lifter): every pose's 2D keypoints centred on their centroid and
   divided by their RMS spread; the viewpoint stays in the features.
 
@@ -38,13 +40,15 @@ DEFAULT_MODEL_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data
 FeatureKind = Literal["3d", "2d"]
 
 
-def pose_window_features(poses: NDArray[np.float64]) -> NDArray[np.float64]:
+def pose_window_features(poses: NDArray[np.float64], depth_weight: float = 1.0) -> NDArray[np.float64]:
     """View-normalised 3D features of pose windows.
 
     Parameters
     ----------
     poses : ndarray, shape (..., W, 12, 3)
         Any unit and frame (metres in the camera frame, mocap world frame, ...).
+    depth_weight : float
+        Factor on the body frame's forward (z) coordinate, in [0, 1] (1: all axes alike).
 
     Returns
     -------
@@ -53,7 +57,9 @@ def pose_window_features(poses: NDArray[np.float64]) -> NDArray[np.float64]:
     arr = np.asarray(poses, dtype=np.float64)
     if arr.ndim < 3 or arr.shape[-2:] != (N_JOINTS, 3):
         raise InvalidInputError(f"pose windows must be (..., W, {N_JOINTS}, 3), got {arr.shape}")
-    norm = normalise_pose(arr)
+    if not 0.0 <= depth_weight <= 1.0:
+        raise InvalidInputError(f"depth_weight must be in [0, 1], got {depth_weight}")
+    norm = normalise_pose(arr) * np.array([1.0, 1.0, depth_weight])
     return np.asarray(norm.reshape(*arr.shape[:-3], -1))
 
 
@@ -91,6 +97,10 @@ class ActionClassifier:
     step_s : float
         Seconds between the poses of a window.
     n_neighbors : int
+    depth_weight : float
+        "3d" only: see :func:`pose_window_features`.
+    metadata : dict
+        Saved with the model (provenance: the command, what it was trained on).
 
     Attributes
     ----------
@@ -103,6 +113,7 @@ class ActionClassifier:
     window: int = 4
     step_s: float = 0.1
     n_neighbors: int = 5
+    depth_weight: float = 1.0
     metadata: dict[str, Any] = field(default_factory=dict)
     features_: NDArray[np.float64] | None = None
     labels_: NDArray[np.str_] | None = None
@@ -117,7 +128,9 @@ class ActionClassifier:
         arr = np.asarray(windows, dtype=np.float64)
         if arr.ndim < 3 or arr.shape[-3] != self.window:
             raise InvalidInputError(f"windows must hold {self.window} poses, got shape {arr.shape}")
-        return pose_window_features(arr) if self.kind == "3d" else keypoint_window_features(arr)
+        if self.kind == "3d":
+            return pose_window_features(arr, self.depth_weight)
+        return keypoint_window_features(arr)
 
     def fit(self, windows: NDArray[np.float64], labels: NDArray[Any]) -> ActionClassifier:
         """Store the training windows' features (n, W, 12, 3|2) and labels (n,)."""
@@ -150,26 +163,54 @@ class ActionClassifier:
         return self.window * N_JOINTS * (3 if self.kind == "3d" else 2)
 
     def save(self, path: str | Path) -> None:
-        """Write an ``.npz`` (features as float16: unit-scale features, small file; labels, settings)."""
+        """Write an ``.npz``: the features quantised to int8 (``features * feature_scale``; unit-scale
+        features: a step of max|feature| / 127, ~2 % of a lower leg; a small file), labels and settings."""
         if self.features_ is None or self.labels_ is None:
             raise InvalidInputError("the classifier is not fitted")
+        scale = max(float(np.abs(self.features_).max()), 1e-12) / 127.0
         settings = {"kind": self.kind, "window": self.window, "step_s": self.step_s,
-                    "n_neighbors": self.n_neighbors, "metadata": self.metadata}
-        np.savez_compressed(Path(path), features=self.features_.astype(np.float16),
+                    "n_neighbors": self.n_neighbors, "depth_weight": self.depth_weight,
+                    "metadata": self.metadata}
+        quantised = np.round(self.features_ / scale).astype(np.int8)
+        np.savez_compressed(Path(path), features=quantised, feature_scale=np.float64(scale),
                             labels=self.labels_, settings=json.dumps(settings))
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> ActionClassifier:
-        """Read a model written by :meth:`save` (default: the packaged one)."""
+        """Read a model written by :meth:`save` (default: the packaged one).
+
+        Raises
+        ------
+        InvalidInputError
+            A missing file, or one that is not such a model (missing arrays or settings, an
+            unknown kind, features that do not match the settings' window).
+        """
         p = Path(path) if path is not None else DEFAULT_MODEL_PATH
         if not p.is_file():
             raise InvalidInputError(f"action model not found: {p} (tools/action_recognition_eval.py "
                                     "writes one)")
-        with np.load(p, allow_pickle=False) as z:
-            settings = json.loads(str(z["settings"]))
-            clf = cls(kind=settings["kind"], window=int(settings["window"]), step_s=float(settings["step_s"]),
-                      n_neighbors=int(settings["n_neighbors"]), metadata=dict(settings.get("metadata", {})))
-            return clf.fit_features(z["features"].astype(np.float64), z["labels"])
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                settings = json.loads(str(z["settings"]))
+                features, labels = z["features"], z["labels"]
+                if features.dtype == np.int8:  # quantised (older files: float16)
+                    features = features * float(z["feature_scale"])
+                features = features.astype(np.float64)
+            kind = settings["kind"]
+            if kind not in ("3d", "2d"):
+                raise InvalidInputError(f"{p}: unknown feature kind {kind!r}")
+            clf = cls(kind=kind, window=int(settings["window"]), step_s=float(settings["step_s"]),
+                      n_neighbors=int(settings["n_neighbors"]),
+                      depth_weight=float(settings.get("depth_weight", 1.0)),
+                      metadata=dict(settings.get("metadata", {})))
+        except (KeyError, TypeError, ValueError, OSError) as exc:
+            raise InvalidInputError(f"{p}: not an action model ({exc})") from exc
+        if not (clf.window > 0 and clf.step_s > 0 and clf.n_neighbors > 0 and 0.0 <= clf.depth_weight <= 1.0):
+            raise InvalidInputError(f"{p}: invalid settings {settings}")
+        if features.ndim != 2 or features.shape[1] != clf.features_dim or not np.all(np.isfinite(features)):
+            raise InvalidInputError(f"{p}: features of shape {features.shape}, "
+                                    f"expected finite (n, {clf.features_dim})")
+        return clf.fit_features(features, labels)
 
 
 @dataclass
