@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._fast import median_rows
 from ._jit import njit
 from .bases import PoseBases, default_bases_path
 from .camera import _camera_admm_checked
@@ -529,7 +530,7 @@ class Lifter:
             prev = previous.copy()
             vis = w > 0
             # the person's image motion since the previous frame (the median over visible joints)
-            prev[:, :2] += np.median(target[vis, :2] - prev[vis, :2], axis=0)
+            prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
             tw = temporal_weight[:, None]
             target = (target + tw * prev) / (1.0 + tw)
         rel = self._prior_relative_weights(used)
@@ -639,7 +640,7 @@ class Lifter:
             resid = np.maximum(np.linalg.norm(xn - cam.project(run.pose.pose), axis=1),
                                np.linalg.norm(xn - prior.target[:, :2], axis=1))
             vis = w > 0
-            limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(np.median(resid[vis])))
+            limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
             out = vis & (resid > limit)
             if not np.any(out) or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
                 break

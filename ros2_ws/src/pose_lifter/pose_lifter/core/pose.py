@@ -1151,8 +1151,10 @@ class PriorRows:
     def depth_row(projection: NDArray[np.float64]) -> NDArray[np.float64]:
         """``m3 = s r3`` of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row that maps a
         model pose to depth in the same units (``r3 = r1 x r2``)."""
-        r1, r2 = projection[0], projection[1]
-        return np.ascontiguousarray(np.cross(r1, r2) / max(float(np.linalg.norm(r1)), 1e-300))
+        a, b = projection[0], projection[1]
+        # r1 x r2 written out (np.cross costs ~60 us in argument handling; same arithmetic)
+        cross = np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+        return cross / max(float(np.sqrt(a @ a)), 1e-300)
 
     def depth_term(self, pose: NDArray[np.float64], projection: NDArray[np.float64]) -> float:
         """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)."""

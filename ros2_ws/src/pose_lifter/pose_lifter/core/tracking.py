@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ._fast import median_rows
 from .errors import PoseLifterError
 from .lifter import Lifter
 from .types import LiftResult, WarmStart
@@ -114,15 +115,14 @@ class _Track:
     #: consecutive frames each joint was not used by the lift, up to the last one
     unused: NDArray[np.int64] = field(default_factory=lambda: np.zeros(12, dtype=np.int64))
 
-    def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], stamp_ns: int, limit: float,
-             min_visible: int) -> NDArray[np.bool_] | None:
+    def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64] | None,
+             limit: float, min_visible: int) -> NDArray[np.bool_] | None:
         """The visible joints farther than ``limit`` leg lengths (or GATE_NOISE_FACTOR times the
         track's noise) from where the last frame had them (its detection when the lift used it,
         else the fit's projection), after removing the median motion of the visible joints; None
         when nothing is gated (see GATE_MAX_FRACTION). A constant-velocity prediction was
         measured worse: the fits' jitter doubles in it (7 % of good joints beyond 0.8 leg on
         held-out tracks with 20 % outliers, against 2 % for the last position)."""
-        predicted = self.predict(points, vis, stamp_ns)
         if predicted is None:
             return None
         scale = self.fits[-1][2]
@@ -148,8 +148,7 @@ class _Track:
         t1, p1, _ = self.fits[-1]
         if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
             return None
-        d = np.asarray(points, dtype=np.float64)[vis] - p1[vis]
-        return np.asarray(p1 + np.median(d, axis=0))
+        return np.asarray(p1 + median_rows(np.asarray(points, dtype=np.float64)[vis] - p1[vis]))
 
     def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
                       stamp_ns: int) -> None:
@@ -170,7 +169,7 @@ class _Track:
             spread = lifter.input_scale(x, vis.astype(np.float64))
         except PoseLifterError:
             return
-        self.noise.append(float(np.median(acc)) / spread)
+        self.noise.append(float(median_rows(acc)) / spread)
 
     def past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
         """The last ``frames`` frames (oldest first, as ``(points (k, 12, 2), used (k, 12))``) that
@@ -196,7 +195,7 @@ class _Track:
         """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 0.0
-        return float(np.median(np.asarray(self.noise)))
+        return float(median_rows(np.asarray(self.noise)))
 
     def data_weight(self) -> float:
         if len(self.noise) < NOISE_MIN_FRAMES:
@@ -207,7 +206,7 @@ class _Track:
     def limb_proportions(self) -> NDArray[np.float64] | None:
         if len(self.limbs) < MIN_LIMB_FRAMES:
             return None
-        return calibrated_limb_proportions(np.median(np.stack(self.limbs), axis=0))
+        return calibrated_limb_proportions(median_rows(np.stack(self.limbs)))
 
 
 def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -318,13 +317,19 @@ class TrackPolicy:
         vis = _visible(points, confidence, opts.confidence_threshold)
         follows = hybrid and track is not None and warm is not None and vis is not None
         screened = follows and opts.outlier_gate > 0
+        # where the track puts each joint on this frame (the gate's and the fill's reference)
+        predicted = None
+        if follows:
+            assert track is not None and vis is not None
+            predicted = track.predict(points, vis, stamp_ns)
         if screened:
             assert track is not None and vis is not None
-            gated = track.gate(points, vis, stamp_ns, opts.outlier_gate, opts.min_visible_joints)
+            gated = track.gate(points, vis, predicted, opts.outlier_gate, opts.min_visible_joints)
             if gated is not None:  # a gated joint is missing for this frame
                 confidence = np.where(gated, 0.0, np.ones(12) if confidence is None
                                       else np.asarray(confidence, dtype=np.float64))
                 vis = vis & ~gated
+                predicted = track.predict(points, vis, stamp_ns)  # the motion of the joints kept
         if follows:  # a frame that follows the last one
             assert track is not None and vis is not None
             track.observe_noise(self.lifter, points, vis, stamp_ns)
@@ -340,17 +345,15 @@ class TrackPolicy:
                 temporal = self.lifter.temporal_prior
                 past = track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
             fill = None
-            if follows and opts.fill_missing_frames > 0:
-                assert track is not None and vis is not None
-                predicted = track.predict(points, vis, stamp_ns)
-                if predicted is not None:
-                    fill = (predicted, track.unused < opts.fill_missing_frames)
+            if predicted is not None and opts.fill_missing_frames > 0:
+                assert track is not None
+                fill = (predicted, track.unused < opts.fill_missing_frames)
             result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
                                       temporal_weight=tw, past=past, gated=screened, fill=fill)
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
-                ref = float(np.median(np.asarray(track.objectives)))
+                ref = float(median_rows(np.asarray(track.objectives)))
                 if result.objective > self.reinit_ratio * ref:
                     cold = self.lifter.lift(points, confidence, warm=None, limb_proportions=limbs,
                                             data_weight=dw, temporal_weight=tw, past=past, gated=screened,

@@ -1,0 +1,25 @@
+"""core._fast: the per-frame helpers return exactly what their numpy originals do."""
+
+from __future__ import annotations
+
+import numpy as np
+from pose_lifter.core._fast import median_rows
+from pose_lifter.core.pose import PriorRows
+
+
+def test_median_rows_is_numpys_median_along_the_first_axis() -> None:
+    rng = np.random.default_rng(0)
+    for n in range(1, 40):
+        for shape in ((n,), (n, 2), (n, 8)):
+            a = rng.normal(size=shape)
+            assert np.array_equal(median_rows(a), np.median(a, axis=0)), shape
+    ties = np.array([[1.0, 2.0], [1.0, 2.0], [3.0, -1.0], [3.0, 5.0]])
+    assert np.array_equal(median_rows(ties), [2.0, 2.0])
+
+
+def test_depth_row_is_the_scaled_cross_product() -> None:
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        m = rng.normal(size=(2, 3))
+        expected = np.cross(m[0], m[1]) / np.linalg.norm(m[0])
+        assert np.allclose(PriorRows.depth_row(m), expected, rtol=0, atol=1e-15)
