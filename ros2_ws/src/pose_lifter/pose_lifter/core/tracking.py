@@ -104,7 +104,10 @@ class _Track:
     warm: WarmStart | None
     last_stamp_ns: int
     objectives: deque[float] = field(default_factory=lambda: deque(maxlen=15))
-    limbs: deque[NDArray[np.float64]] = field(default_factory=lambda: deque(maxlen=LIMB_FRAMES))
+    #: the prior's limb proportions of the track's last LIMB_FRAMES frames (a ring of rows: the
+    #: median needs no order) and how many frames have been added
+    limbs: NDArray[np.float64] = field(default_factory=lambda: np.zeros((LIMB_FRAMES, 8)))
+    n_limbs: int = 0
     noise: deque[float] = field(default_factory=lambda: deque(maxlen=NOISE_FRAMES))
     history: deque[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = field(
         default_factory=lambda: deque(maxlen=MAX_PAST))
@@ -204,9 +207,13 @@ class _Track:
         return float(np.clip(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT, 1.0))
 
     def limb_proportions(self) -> NDArray[np.float64] | None:
-        if len(self.limbs) < MIN_LIMB_FRAMES:
+        if self.n_limbs < MIN_LIMB_FRAMES:
             return None
-        return calibrated_limb_proportions(median_rows(np.stack(self.limbs)))
+        return calibrated_limb_proportions(median_rows(self.limbs[: min(self.n_limbs, LIMB_FRAMES)]))
+
+    def add_limbs(self, proportions: NDArray[np.float64]) -> None:
+        self.limbs[self.n_limbs % LIMB_FRAMES] = proportions
+        self.n_limbs += 1
 
 
 def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -372,7 +379,7 @@ class TrackPolicy:
             track.unused = np.where(result.weights > 0, 0, track.unused + 1)
             track.objectives.append(float(result.objective))
             if result.prior_pose is not None:
-                track.limbs.append(self.lifter.limb_proportions_of(result.prior_pose))
+                track.add_limbs(self.lifter.limb_proportions_of(result.prior_pose))
             track.history.append((stamp_ns, np.array(points, dtype=np.float64),
                                   result.weights > 0))
             cam = result.camera
