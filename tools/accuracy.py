@@ -2,7 +2,8 @@
 
     .venv/bin/python tools/accuracy.py [--data ../shared/data/cmu] [--split eval|val]
         [--frames 120] [--views 4] [--workers 2] [--conditions clean noise0.1 ...]
-        [--out out/accuracy] [--set NAME=VALUE ...]
+        [--out out/accuracy] [--set NAME=VALUE ...] [--bases PATH]
+    .venv/bin/python tools/accuracy.py --merge RUN1/accuracy.json RUN2/accuracy.json --out DIR
 
 Tracks: every trial of the split (``eval``: subjects 02, 07, 08 and 09_12, never trained on;
 ``val``: the training-split trials the prior was not fitted on, for tuning), at 30 Hz, at most
@@ -189,9 +190,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(CONDITIONS))
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
-    ap.add_argument("--bases", default=None, help="basis file (default: the packaged one)")
+    ap.add_argument("--bases", default=None, help="basis file (default: each mode's packaged one)")
+    ap.add_argument("--merge", type=Path, nargs="+", default=None,
+                    help="no lifting: join these runs' accuracy.json into one table in --out")
     ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args.merge, args.out)
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
     tracks = _tracks(args.split, args.data, args.frames, args.views)
@@ -218,9 +223,17 @@ def main(argv: list[str] | None = None) -> int:
             vals["ms"] = float(np.mean([r["methods"][m]["ms"] for r in rows]))
             vals["lifted"] = float(np.mean([np.isfinite(r["methods"][m]["p_mpjpe"]).mean() for r in rows]))
             table[cond][m] = vals
-    lines = [f"{args.split} split, {len(tracks)} tracks, {n_frames} frames per condition "
-             f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)", "",
-             "P-MPJPE / MPJPE / jitter (mm, mm, mm per frame^2):", "",
+    header = (f"{args.split} split, {len(tracks)} tracks, {n_frames} frames per condition "
+              f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)")
+    _write(table, methods, header, f"wall time {time.perf_counter() - t0:.0f} s", args.out,
+           {"table": table, "settings": settings, "split": args.split})
+    return 0
+
+
+def _write(table: dict[str, dict[str, dict[str, float]]], methods: tuple[str, ...], header: str, footer: str,
+           out: Path, record: dict[str, Any]) -> None:
+    """Print the table and write ``accuracy.md``, ``accuracy.json`` (``record``) and ``accuracy.png``."""
+    lines = [header, "", "P-MPJPE / MPJPE / jitter (mm, mm, mm per frame^2):", "",
              "| condition | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
     for cond, row in table.items():
         cells = [f"{row[m]['p_mpjpe']:.1f} / {row[m]['mpjpe']:.1f} / {row[m]['jitter']:.1f}" for m in methods]
@@ -228,15 +241,40 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["", "ms per frame: " + ", ".join(
         f"{m} {np.mean([table[c][m]['ms'] for c in table]):.2f}" for m in methods),
         "frames lifted: " + ", ".join(f"{m} {100 * min(table[c][m]['lifted'] for c in table):.1f} %"
-                                      for m in methods),
-        f"wall time {time.perf_counter() - t0:.0f} s"]
+                                      for m in methods), footer]
     text = "\n".join(lines)
     print(text, flush=True)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "accuracy.md").write_text(text + "\n")
-    (args.out / "accuracy.json").write_text(json.dumps({"table": table, "settings": settings,
-                                                        "split": args.split}, indent=1))
-    _plot(table, methods, args.out / "accuracy.png")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "accuracy.md").write_text(text + "\n")
+    (out / "accuracy.json").write_text(json.dumps(record, indent=1))
+    _plot(table, methods, out / "accuracy.png")
+
+
+def merge(paths: list[Path], out: Path) -> int:
+    """``--merge``: one table from several runs' ``accuracy.json`` (same split and conditions; a
+    method in a later file replaces the same method of an earlier one), written to ``out``."""
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    sources: dict[str, str] = {}
+    splits = set()
+    for p in paths:
+        rec = json.loads(p.read_text())
+        splits.add(rec.get("split"))
+        for cond, row in rec["table"].items():
+            table.setdefault(cond, {}).update(row)
+            for m in row:
+                sources[m] = str(p)
+    if len(splits) != 1:
+        raise SystemExit(f"--merge: runs of different splits {sorted(map(str, splits))}")
+    methods = tuple(m for m in METHODS if m in sources)
+    if any(set(methods) - set(row) for row in table.values()):
+        raise SystemExit("--merge: a method lacks some of the conditions")
+    by_file: dict[str, list[str]] = {}
+    for m in methods:
+        by_file.setdefault(sources[m], []).append(m)
+    parts = "; ".join(f"{', '.join(ms)} from `{f}`" for f, ms in by_file.items())
+    header = (f"{splits.pop()} split; merged runs (inputs are seeded per track, so every column sees "
+              f"the same corrupted 2D): {parts}")
+    _write(table, methods, header, "", out, {"table": table, "merged_from": by_file})
     return 0
 
 
