@@ -168,6 +168,7 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("outlier_threshold_gated", "Hybrid: outlier_threshold on tracked frames the outlier gate screened.",
          0.0, 1000.0),
     _opt("hybrid_alternations", "Hybrid: alternations of each run at most.", 1, 1000),
+    _opt("hybrid_pose_max_iter", "Hybrid: pose-step ADM iterations at most per alternation.", 1, 100000),
     _opt("hybrid_flip_warm", "Hybrid: also score the depth-mirrored hypothesis on warm frames."),
     _opt("outlier_passes", "Hybrid: outlier passes at most.", 1, 100),
     _opt("temporal_weight", "Hybrid, tracked: weight of the previous frame's pose in the prior "

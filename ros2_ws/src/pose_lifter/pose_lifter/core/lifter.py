@@ -291,7 +291,9 @@ class Lifter:
         out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
         res = pose_step(
             xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
-            max_iter=o.pose_max_iter if max_iter is None else max_iter, tol=o.pose_tol, eta=o.eta,
+            max_iter=max_iter if max_iter is not None else (o.pose_max_iter if prior is None
+                                                             else o.hybrid_pose_max_iter),
+            tol=o.pose_tol, eta=o.eta,
             eta_growth=o.eta_growth, delta=o.delta,
             inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
             alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
