@@ -342,6 +342,12 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         # float32 layers: a matrix-vector and a matrix-matrix product round differently
         np.testing.assert_allclose(prior.predict(x, vis), prior.predict(x[None, None], vis[None, None])[0],
                                    rtol=FLOAT32_TOL, atol=FLOAT32_TOL)
+        # ... and a tracked person's window (W, 12, 2), its last frame the current one
+        xw = np.concatenate([rng.normal(size=(3, 12, 2)) * 50.0 + 300.0, x[None]])
+        vw = np.concatenate([rng.random((3, 12)) > 0.3, vis[None]])
+        one, batch = prior_features(xw, vw, 4), prior_features(xw[None], vw[None], 4)
+        for a, b in zip(one, batch, strict=True):
+            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=1e-12)
 
 
 def test_a_temporal_prior_sees_the_tracks_past_frames(

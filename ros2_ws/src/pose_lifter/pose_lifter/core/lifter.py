@@ -261,15 +261,23 @@ class Lifter:
             raise InvalidInputError("the visible keypoints are (almost) all at one point")
         return _Normalisation(centre, spread / self._mean_spread)
 
-    def _camera(self, xn: NDArray[np.float64], pose: NDArray[np.float64], w: NDArray[np.float64],
-                init: Camera | None, state: dict[str, Any] | None = None,
-                prior: PriorRows | None = None) -> CameraResult:
-        o = self._options
+    @staticmethod
+    def _camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+        """The camera step's 2D points and weights for a run: with a prior term, the prior's
+        image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
+        stacked twice, the returned flag). Built once per run, not per alternation."""
         if prior is not None and np.any(prior.weights[:, 0] > 0):
-            # the prior's image positions are further (pose joint, 2D point) pairs of the L1 fit
-            xn = np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]]))
-            pose = np.ascontiguousarray(np.vstack([pose, pose]))
-            w = np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]]))
+            return (np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]])),
+                    np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]])), True)
+        return xn, w, False
+
+    def _camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
+                init: Camera | None, state: dict[str, Any] | None = None) -> CameraResult:
+        o = self._options
+        xn, w, doubled = data
+        if doubled:
+            pose = np.concatenate([pose, pose])
         if o.camera_solver == "cvxpy":
             from .reference import reference_camera
 
@@ -312,6 +320,7 @@ class Lifter:
         one alternation to the next (``options.warm_duals``)."""
         o = self._options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
+        data = self._camera_data(xn, w, prior)
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
             it0 = start.n_iter
@@ -319,14 +328,14 @@ class Lifter:
         else:
             state = {}
             alpha = alpha0
-            cam = self._camera(xn, self.model.pose(alpha), w, cam0, state, prior)
+            cam = self._camera(data, self.model.pose(alpha), cam0, state)
             best, prev, it0 = None, np.inf, 0
         converged = False
         it = it0
         for it in range(it0 + 1, n_alt + 1):
             pres = self._pose(xn, cam.camera, w, alpha, state, pose_max_iter, prior)
             alpha = pres.alpha
-            cam = self._camera(xn, pres.pose, w, cam.camera, state, prior)
+            cam = self._camera(data, pres.pose, cam.camera, state)
             th = o.theta if o.method.sparsity else 0.0
             obj = cam.objective + th * float(np.sum(np.abs(alpha)))
             if prior is not None:

@@ -108,6 +108,8 @@ def prior_features(points: NDArray[np.float64], visible: NDArray[np.bool_], wind
     vis = np.asarray(visible, dtype=bool) & np.all(np.isfinite(x), axis=-1)
     if window == 1 and x.shape == (N_JOINTS, 2) and vis.shape == (N_JOINTS,):
         return _frame_features(x, vis)
+    if window > 1 and x.shape == (window, N_JOINTS, 2) and vis.shape == (window, N_JOINTS):
+        return _window_features(x, vis)
     if window == 1 and (x.ndim < 3 or x.shape[-3] != 1):
         x, vis = x[..., None, :, :], vis[..., None, :]
     if x.shape[-3:] != (window, N_JOINTS, 2) or vis.shape != x.shape[:-1]:
@@ -138,6 +140,20 @@ def _frame_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
     u[vis] = d / radius
     feats[2 * N_JOINTS:] = vis
     return feats, centre, np.asarray(radius)
+
+
+def _window_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`prior_features` of one window (W, 12, 2) with its visibility (W, 12) (finite where
+    visible), normalised by its last frame as :func:`_frame_features` does: the same values in a
+    few numpy calls (the per-frame path of a tracked person)."""
+    last, centre, radius = _frame_features(x[-1], vis[-1])
+    feats = np.zeros((len(x), FRAME_DIM))
+    u = feats[:, : 2 * N_JOINTS].reshape(len(x), N_JOINTS, 2)
+    u[vis] = (x[vis] - centre) / radius
+    feats[:, 2 * N_JOINTS:] = vis
+    feats[-1] = last
+    return feats.reshape(FRAME_DIM * len(x)), centre, radius
 
 
 @dataclass(frozen=True)
