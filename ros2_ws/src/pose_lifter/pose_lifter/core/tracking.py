@@ -24,7 +24,9 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   motion of the joints) is treated as missing for this frame, before the prior sees it (a
   detection that jumped; a person's joints move far less in one frame); such a joint, like any
   missing one, takes the previous frame's pose into its prior target with
-  ``LifterOptions.missing_temporal_weight`` (the track carries it over). Not when it would
+  ``LifterOptions.missing_temporal_weight`` (the track carries it over) and, when the track used
+  it on one of its last ``LifterOptions.fill_missing_frames`` frames, enters the learned prior's
+  input where the track predicts it (:meth:`_Track.predict`; the 2D fit still ignores it). Not when it would
   leave fewer than ``min_visible_joints`` or gate more than GATE_MAX_FRACTION of the visible
   joints (the prediction, not the detector, is then wrong), and a joint is gated on at most
   GATE_MAX_FRAMES frames in a row (so the track re-acquires a joint it lost).
