@@ -326,6 +326,18 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     assert np.all([m is not None and m[2] for i, m in enumerate(seen) if i in lost])
     with pytest.raises(InvalidInputError, match="fill"):
         Lifter(bases).lift(x[0], fill=(np.zeros((11, 2)), np.ones(12, dtype=bool)))
+    # no fill while the track's fit is being lost (its last objective far above its median)
+    policy = TrackPolicy(Lifter(bases))
+    for i in range(5):
+        policy.lift(0, i * 33_333_333, x[i])
+    seen.clear()
+    monkeypatch.setattr(Lifter, "lift", spy)
+    policy.lift(0, 5 * 33_333_333, x[5], conf[10])
+    assert seen[-1] is not None
+    policy._tracks[0].objectives.append(1e6)
+    policy.lift(0, 6 * 33_333_333, x[6], conf[10])
+    assert seen[-1] is None
+    monkeypatch.setattr(Lifter, "lift", lift)
 
 
 def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
