@@ -214,7 +214,8 @@ class LifterOptions:
         on 36 held-out training-split tracks (0 -> 3): 20 % outliers 62.3 -> 59.2 mm, 15 %
         missing 56.5 -> 54.6, noise 0.1 59.1 -> 59.1, clean 49.0 -> 49.7 (one dance track whose
         fit was already lost, 150-250 mm, where the gate fires on fast real motion and the fill
-        holds the stale position). 1 / 2 / 5: outliers 60.2 / 59.5 / 58.6.
+        holds the stale position; since guarded: no fill while the track's fit is being lost,
+        ``tracking.FILL_MAX_OBJECTIVE_RATIO``). 1 / 2 / 5: outliers 60.2 / 59.5 / 58.6.
     hybrid_alternations : int
         Hybrid: alternations of each run at most (``max_alternations`` is the paper's). The
         prior's start is close to the answer; measured on 6 held-out training-split tracks
