@@ -396,3 +396,13 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     node_cold = np.array([m.skeleton3d_to_joints(s) for a in cold for s in a.skeletons.skeletons])
     centred = [j - j.mean(axis=1, keepdims=True) for j in (node_joints, node_cold)]
     assert np.mean(np.linalg.norm(centred[0] - centred[1], axis=-1)) < 0.05  # metres
+
+    # switched live to the paper's mode, the node takes the paper's packaged bases (bases_file is
+    # empty) and forgets its tracks: it answers as the offline paper-mode lift does
+    assert all(r.successful for r in graph.set_parameters(mode="paper", warm_start=True))
+    paper = replay(BAG_FRAMES)
+    paper_lifter = Lifter(None, LifterOptions(mode="paper", n_starts=N_STARTS))
+    offline_paper = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],
+                                  [(x.stamp_ns, x.msg) for x in camera_infos], paper_lifter, warm_start=True)
+    node_paper = np.array([m.skeleton3d_to_joints(s) for a in paper for s in a.skeletons.skeletons])
+    np.testing.assert_allclose(node_paper, np.array([f.joints_m for f in offline_paper]), atol=1e-6)

@@ -159,7 +159,7 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     _opt("prior_file", "Learned prior weights (.npz, PosePrior.save); empty = the packaged default."),
     _opt("temporal_prior", "Hybrid/learned, tracked: frames that follow a track's previous ones use the "
          "causal temporal prior (last 4 frames, trained at 30 Hz)."),
-    _opt("temporal_prior_file", "Temporal prior weights (.npz); empty = the packaged bases of the mode."),
+    _opt("temporal_prior_file", "Temporal prior weights (.npz); empty = the packaged default."),
     _opt("prior_weight_xy", "Hybrid: weight of the prior's image positions in the L1 objective.",
          0.0, 1000.0),
     _opt("prior_weight_z", "Hybrid: weight of the prior's depths in the L1 objective.", 0.0, 1000.0),
