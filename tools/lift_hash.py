@@ -127,16 +127,16 @@ def _hash_result(d: Digest, f: FrameLift, r: LiftResult) -> None:
              r.objective, r.reprojection_error, r.limb_violation, r.weights)
 
 
-def lift_bags(bags: Iterable[Path], mode: str, bases: PoseBases | None, starts: int | None,
+def lift_bags(bags: Iterable[Path], mode: str, starts: int | None,
               max_messages: int | None, d: Digest, recorder: Recorder | None, verbose: bool
               ) -> dict[Path, list[FrameLift]]:
-    """Lift every bag in ``mode`` into ``d`` (``bases`` None: the mode's packaged bases); record
-    pose-step calls of the first bag. Returns the lifted skeletons of each bag."""
+    """Lift every bag in ``mode`` (with the mode's packaged bases) into ``d``; record pose-step
+    calls of the first bag. Returns the lifted skeletons of each bag."""
     frames: dict[Path, list[FrameLift]] = {}
     original = lifter_module.pose_step
     for i, bag in enumerate(bags):
         opts = LifterOptions(mode=mode)
-        lifter = Lifter(bases if bases is not None else PoseBases.load(default_bases_path(mode)),
+        lifter = Lifter(PoseBases.load(default_bases_path(mode)),
                         opts if starts is None else opts.replace(n_starts=starts))
         kps, infos = _keypoints(bag)
         if max_messages is not None:
@@ -257,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
     for mode in MODES:
         d = Digest(args.decimals)
         rec = Recorder(args.record_every, args.record)
-        lifted[mode] = lift_bags(bags, mode, None, args.starts, args.max_messages, d, rec, args.verbose)
+        lifted[mode] = lift_bags(bags, mode, args.starts, args.max_messages, d, rec, args.verbose)
         calls.extend(rec.calls)
         n = sum(len(f) for f in lifted[mode].values())
         print(f"lifts {mode:7s} {d.hexdigest()}  ({n} skeletons, {d.n_values} values)", flush=True)

@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy
 from pose_lifter.core import Lifter, LifterOptions
 from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.skeleton import LEFT_LIMBS, RIGHT_LIMBS
 from pose_lifter.core.tracking import TrackPolicy, calibrated_limb_proportions
 from pose_lifter.views import film, limb_scale_factors, scale_limbs, view_rotation
 
@@ -37,7 +38,7 @@ GROUPS = ("upper arm", "forearm", "thigh", "shin")
 def _groups(props: NDArray[np.float64]) -> NDArray[np.float64]:
     """Log-proportions of the 4 bone groups (left/right averaged), mean removed: (..., 4)."""
     p = np.asarray(props, dtype=np.float64)
-    g = np.log(0.5 * (p[..., [0, 1, 4, 5]] + p[..., [2, 3, 6, 7]]))
+    g = np.log(0.5 * (p[..., list(LEFT_LIMBS)] + p[..., list(RIGHT_LIMBS)]))
     return np.asarray(g - g.mean(axis=-1, keepdims=True))
 
 

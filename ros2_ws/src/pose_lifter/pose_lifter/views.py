@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from .core.skeleton import LIMB_GROUPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from .scenes import look_at
 
 __all__ = ["film", "limb_scale_factors", "scale_limbs", "view_rotation"]
@@ -70,7 +70,7 @@ def film(poses: NDArray[np.float64], rotations: NDArray[np.float64], distance: N
 
 
 #: Bone groups scaled together (both sides): upper arm, forearm, thigh, shin -> LIMBS rows.
-_GROUPS = ((0, 2), (1, 3), (4, 6), (5, 7))
+_GROUPS = LIMB_GROUPS
 
 
 def limb_scale_factors(n: int, spread: float, rng: np.random.Generator) -> NDArray[np.float64]:

@@ -61,7 +61,10 @@ from .pose import LiftedConstraints, PoseModel, PriorRows, QStepFn, pose_step
 from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
 from .skeleton import (
     ANTHROPOMETRIC_PROPORTIONS,
+    LEFT_LIMBS,
+    LIMB_GROUP_OF,
     N_JOINTS,
+    RIGHT_LIMBS,
     RIGHT_LOWER_LEG,
     body_frame,
     limb_lengths,
@@ -590,8 +593,8 @@ class Lifter:
         left/right pair averaged (bones are symmetric; it halves the noise of an estimate),
         shape (8,), in the pose's units."""
         lengths = limb_lengths(pose)
-        pairs = 0.5 * (lengths[[0, 1, 4, 5]] + lengths[[2, 3, 6, 7]])
-        return np.asarray(pairs[[0, 1, 0, 1, 2, 3, 2, 3]])
+        pairs = 0.5 * (lengths[list(LEFT_LIMBS)] + lengths[list(RIGHT_LIMBS)])
+        return np.asarray(pairs[list(LIMB_GROUP_OF)])
 
     def limb_radii(self, proportions: NDArray[np.float64]) -> NDArray[np.float64] | None:
         """Limb-constraint radii (8,) with the ratios of ``proportions`` and the geometric-mean

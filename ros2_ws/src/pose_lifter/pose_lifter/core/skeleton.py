@@ -22,9 +22,13 @@ __all__ = [
     "JOINTS_LEFT",
     "JOINTS_RIGHT",
     "JOINT_NAMES",
+    "LEFT_LIMBS",
     "LIMBS",
+    "LIMB_GROUPS",
+    "LIMB_GROUP_OF",
     "LIMB_NAMES",
     "N_JOINTS",
+    "RIGHT_LIMBS",
     "RIGHT_LOWER_LEG",
     "body_frame",
     "limb_lengths",
@@ -62,6 +66,13 @@ LIMBS: Final[tuple[tuple[int, int], ...]] = (
     (9, 10),  # right upper leg
     (10, 11),  # right lower leg
 )
+#: The 8 limbs as 4 bone groups (upper arm, forearm, thigh, shin), each its (left, right) indices
+#: into LIMBS; LEFT_LIMBS / RIGHT_LIMBS their columns and LIMB_GROUP_OF[i] the group of limb i.
+LIMB_GROUPS: Final[tuple[tuple[int, int], ...]] = ((0, 2), (1, 3), (4, 6), (5, 7))
+LEFT_LIMBS: Final[tuple[int, ...]] = tuple(left for left, _ in LIMB_GROUPS)
+RIGHT_LIMBS: Final[tuple[int, ...]] = tuple(right for _, right in LIMB_GROUPS)
+LIMB_GROUP_OF: Final[tuple[int, ...]] = tuple(
+    next(k for k, g in enumerate(LIMB_GROUPS) if i in g) for i in range(len(LIMBS)))
 LIMB_NAMES: Final[tuple[str, ...]] = (
     "left_upper_arm",
     "left_lower_arm",

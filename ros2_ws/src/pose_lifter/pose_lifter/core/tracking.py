@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from ._fast import median_rows
 from .errors import PoseLifterError
 from .lifter import Lifter
+from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF
 from .types import LiftResult, WarmStart
 
 __all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
@@ -236,11 +237,11 @@ def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.flo
     """The track's limb proportions (8,) from the median of the prior's (8,), corrected by
     :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
     e = np.asarray(estimate, dtype=np.float64)
-    g = np.log(np.maximum(e[[0, 1, 4, 5]], 1e-12))
+    g = np.log(np.maximum(e[list(LEFT_LIMBS)], 1e-12))
     m = g.mean()
     slope, offset = LIMB_CALIBRATION
     out = np.exp(m + slope * (g - m) + offset)
-    return np.asarray(out[[0, 1, 0, 1, 2, 3, 2, 3]])
+    return np.asarray(out[list(LIMB_GROUP_OF)])
 
 
 @dataclass(frozen=True)
