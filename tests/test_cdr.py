@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from pose_lifter import bags, cdr, offline, scenes
 from pose_lifter import messages as m
+from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
-from pose_lifter.core.types import Camera, LiftResult
 from rosbags.interfaces import Nodetype
 from scipy.spatial.transform import Rotation
 

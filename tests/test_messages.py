@@ -8,8 +8,8 @@ from pose_lifter import messages as m
 from pose_lifter.bags import pose_lifter_typestore
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
 from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
-from pose_lifter.core.types import Camera, LiftResult
 from scipy.spatial.transform import Rotation
 
 T = m.rosbags_types()

@@ -12,7 +12,7 @@ from pose_lifter import bags, offline, scenes
 from pose_lifter import messages as m
 from pose_lifter.core.errors import SolverError, TooFewJointsError
 from pose_lifter.core.options import LifterOptions
-from pose_lifter.core.types import Camera, LiftResult, WarmStart
+from pose_lifter.core.results import Camera, LiftResult, WarmStart
 
 
 class EchoLifter:

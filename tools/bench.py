@@ -49,9 +49,9 @@ from pose_lifter.core.errors import InvalidInputError, PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.options import LifterOptions
+from pose_lifter.core.results import LiftResult
 from pose_lifter.core.skeleton import normalise_pose
 from pose_lifter.core.tracking import TrackPolicy
-from pose_lifter.core.types import LiftResult
 from pose_lifter.scenes import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from threadpoolctl import threadpool_limits
 

@@ -17,7 +17,7 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   by stamp and track id): :func:`~pose_lifter.core.metrics.mpjpe`, ``p_mpjpe``,
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
   :func:`pose_lifter.offline.evaluate_bag` on each input bag.
-* ``pose_step``: a few :func:`pose_lifter.core.pose.pose_step` calls recorded while lifting the
+* ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
   first bag in each mode (every ``--record-every``-th call, up to ``--record`` per mode),
   replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
   ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
@@ -49,14 +49,14 @@ from numpy.typing import NDArray
 from pose_lifter import messages as m
 from pose_lifter.bags import read_messages
 from pose_lifter.core import lifter as lifter_module
-from pose_lifter.core import pose as pose_module
+from pose_lifter.core import pose_step as pose_module
 from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
 from pose_lifter.core.options import LifterOptions, get_variant
-from pose_lifter.core.types import LiftResult
+from pose_lifter.core.results import LiftResult
 from pose_lifter.offline import FrameLift, LiftSummary, evaluate_bag, lift_messages
 from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 

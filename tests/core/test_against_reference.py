@@ -14,21 +14,17 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
+from pose_lifter.core.alpha.lifted_admm import lifted_alpha_admm, qstep, restore_feasibility
+from pose_lifter.core.alpha.sphere_newton import riemannian_alpha
+from pose_lifter.core.alpha.sqp import newton_alpha
 from pose_lifter.core.bases import PoseBases, learn_pca_bases
 from pose_lifter.core.camera import camera_step
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.options import VARIANTS, LifterOptions, Variant
-from pose_lifter.core.pose import (
-    PoseModel,
-    lifted_alpha_admm,
-    newton_alpha,
-    pose_step,
-    qstep,
-    restore_feasibility,
-    riemannian_alpha,
-)
+from pose_lifter.core.pose_model import PoseModel
+from pose_lifter.core.pose_step import pose_step
+from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import limb_selectors
-from pose_lifter.core.types import Camera
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
 

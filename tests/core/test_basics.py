@@ -19,8 +19,8 @@ from pose_lifter.core import (
 )
 from pose_lifter.core.camera import camera_step, weighted_median
 from pose_lifter.core.metrics import similarity_normalised_error
+from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import LIMBS, body_frame, limb_lengths
-from pose_lifter.core.types import Camera
 from scipy.spatial.transform import Rotation
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pose_lifter import bags, cli
-from pose_lifter.core import Lifter, camera, pose
+from pose_lifter.core import Lifter, camera
+from pose_lifter.core.pose_step import pose_step
 from pose_lifter.core import ramakrishna as rk
 from pose_lifter.core import reference as ref
 from pose_lifter.core.errors import (
@@ -51,9 +52,9 @@ def test_a_diverged_pose_step_is_a_solver_error(lifter: Lifter, solver: str) -> 
     x = np.random.default_rng(0).normal(size=(12, 2))
     m0 = np.hstack([np.eye(2), np.zeros((2, 1))])
     args = (np.zeros(2), np.ones(12), lifter.model, get_variant("full"), 0.1, lifter.bases.start_alphas[0])
-    assert np.isfinite(pose.pose_step(x, 1e100 * m0, *args, alpha_solver=solver, max_iter=5).objective)
+    assert np.isfinite(pose_step(x, 1e100 * m0, *args, alpha_solver=solver, max_iter=5).objective)
     with pytest.raises(SolverError, match="pose step diverged"), np.errstate(over="ignore", invalid="ignore"):
-        pose.pose_step(x, 1e200 * m0, *args, alpha_solver=solver, max_iter=5)
+        pose_step(x, 1e200 * m0, *args, alpha_solver=solver, max_iter=5)
 
 
 def test_a_malformed_projection_is_invalid_input() -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from pose_lifter.core._fast import median_rows
-from pose_lifter.core.pose import PriorRows
+from pose_lifter.core.pose_step import PriorRows
 
 
 def test_median_rows_is_numpys_median_along_the_first_axis() -> None:

@@ -23,7 +23,8 @@ from pose_lifter.core import (
     limb_lengths,
     p_mpjpe,
 )
-from pose_lifter.core.pose import PoseModel, restore_feasibility
+from pose_lifter.core.alpha.lifted_admm import restore_feasibility
+from pose_lifter.core.pose_model import PoseModel
 from scipy.spatial.transform import Rotation
 
 LIMB_TOL = 1e-6

@@ -9,8 +9,8 @@ from pose_lifter.core import ramakrishna as rk
 from pose_lifter.core.bases import PoseBases, learn_classwise_pca_bases
 from pose_lifter.core.errors import InvalidInputError, OptionsError, TooFewJointsError
 from pose_lifter.core.metrics import p_mpjpe
+from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import limb_lengths
-from pose_lifter.core.types import Camera
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses

@@ -7,8 +7,8 @@ import pytest
 from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
 from pose_lifter.core.bases import PoseBases, learn_pca_bases
+from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import limb_lengths, limb_selectors
-from pose_lifter.core.types import Camera
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
 

@@ -52,7 +52,7 @@ def test_weighted_median_minimises_weighted_l1_with_ties_and_zero_weights() -> N
 
 
 def test_cholesky_solve_solves_or_refuses() -> None:
-    from pose_lifter.core.pose import _cholesky_solve
+    from pose_lifter.core._linalg import _cholesky_solve
 
     rng = np.random.default_rng(2)
     for _ in range(200):

@@ -266,7 +266,7 @@ def _lift_task(task: dict[str, Any]) -> NDArray[np.float64]:
         return np.asarray(ramakrishna_lift(x, conf, _W["classwise"]).pose)
     if method.startswith("GT camera"):
         from .core.options import get_variant
-        from .core.pose import pose_step
+        from .core.pose_step import pose_step
 
         lf = _lifter("L1WAWS", 1, 1)
         o = lf.options
@@ -664,7 +664,7 @@ def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "o
         f"90 = profile); {solver}")
     md5, agg5 = _lift_output(
         out, "exp5_camera", by_exp["exp5_camera"], ["method"], "5. Camera estimation (Fig. 8)",
-        f"{cfg.n_camera} poses at random yaw. GT camera: the pose step alone (core.pose.pose_step, "
+        f"{cfg.n_camera} poses at random yaw. GT camera: the pose step alone (core.pose_step.pose_step, "
         f"{sparse.n_bases} bases, L1WAWS, mean-pose start, up to 100 ADM iterations) with the true camera; "
         f"estimated: the full alternation (L1WAWS, screened to {cfg.n_refine} starts).")
 

@@ -26,8 +26,8 @@ from numpy.typing import NDArray
 
 from .core.errors import InvalidInputError
 from .core.layouts import get_layout, to_model_joints
+from .core.results import LiftResult
 from .core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
-from .core.types import LiftResult
 
 __all__ = [
     "MESSAGE_TYPES",

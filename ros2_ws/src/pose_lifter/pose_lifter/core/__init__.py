@@ -25,8 +25,8 @@ if TYPE_CHECKING:
     from .lifter import Lifter
     from .metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
     from .options import VARIANTS, LifterOptions, Variant, get_variant
+    from .results import Camera, CameraResult, LiftResult, PoseResult, WarmStart
     from .skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
-    from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 
 #: Public name -> the module of this package that defines it.
 _MODULE_OF: dict[str, str] = {
@@ -59,11 +59,11 @@ _MODULE_OF: dict[str, str] = {
     "LIMB_NAMES": "skeleton",
     "limb_lengths": "skeleton",
     "normalise_pose": "skeleton",
-    "Camera": "types",
-    "CameraResult": "types",
-    "LiftResult": "types",
-    "PoseResult": "types",
-    "WarmStart": "types",
+    "Camera": "results",
+    "CameraResult": "results",
+    "LiftResult": "results",
+    "PoseResult": "results",
+    "WarmStart": "results",
 }
 
 __all__ = [

@@ -2,7 +2,7 @@
 
 ``njit(f)`` is ``numba.njit(cache=True)(f)`` when numba is importable and ``f`` unchanged
 otherwise: the same kernel runs compiled (fast) or as plain Python (same results up to round-off,
-slower; see ``core/pose.py``).
+slower; see ``core/pose_step.py``).
 Compiled kernels are cached in ``__pycache__`` (or numba's user cache dir when that is not
 writable); the first compilation of all kernels takes ~25 s of CPU, a cached load ~0.5 s.
 """

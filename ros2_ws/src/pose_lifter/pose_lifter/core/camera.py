@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from ._jit import njit
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
-from .types import Camera, CameraResult
+from .results import Camera, CameraResult
 
 __all__ = ["camera_admm", "camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
 

@@ -22,7 +22,7 @@ where ``P`` (12, 3) is the prior's pose for this image (its image positions and 
 missing joints included) and ``p_j = prior_weight_xy / e_j,xy``, ``q_j = prior_weight_z / e_j,z``
 with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_error``). The pose
 step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
-:class:`.pose.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
+:class:`.pose_step.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
 paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
 Starts: every frame starts from the prior's pose (with the warm start's camera when tracked; the
 warm pose competes only with ``warm_competes``), ``hybrid_alternations`` alternations per run;
@@ -53,12 +53,15 @@ from numpy.typing import NDArray
 
 from ._fast import median_rows
 from ._jit import njit
+from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases, default_bases_path
 from .camera import _camera_admm_checked
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
 from .options import LifterOptions
-from .pose import LiftedConstraints, PoseModel, PriorRows, QStepFn, pose_step
+from .pose_model import LiftedConstraints, PoseModel
+from .pose_step import PriorRows, pose_step
 from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
+from .results import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 from .skeleton import (
     ANTHROPOMETRIC_PROPORTIONS,
     LEFT_LIMBS,
@@ -70,7 +73,6 @@ from .skeleton import (
     limb_lengths,
     normalise_pose_flat,
 )
-from .types import Camera, CameraResult, LiftResult, PoseResult, WarmStart
 from .validation import check_keypoints
 
 __all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter"]

@@ -120,7 +120,7 @@ class LifterOptions:
     alpha_solver : {"riemannian", "newton", "admm"}
         Solver of the alpha-step (the limb-constrained least squares inside the pose ADM):
         ``"riemannian"`` (default) Riemannian Newton on the product of the 8 limb spheres, one
-        step per pose-ADM iteration (``pose.RIEMANNIAN_MAX_ITER``), with the proximal term
+        step per pose-ADM iteration (``alpha.sphere_newton.RIEMANNIAN_MAX_ITER``), with the proximal term
         ``alpha_prox``; ``"newton"`` an SQP on the same problem
         in the reduced coordinates; ``"admm"`` the paper's rank-1 lifted inner ADM.
         ``"riemannian"`` needs the limb map of the bases to be onto (>= 24 independent basis

@@ -48,8 +48,8 @@ from numpy.typing import NDArray
 
 from .bases import PoseBases
 from .errors import InvalidInputError, OptionsError, TooFewJointsError
+from .results import Camera, LiftResult, WarmStart
 from .skeleton import N_JOINTS, limb_lengths, limb_selectors
-from .types import Camera, LiftResult, WarmStart
 from .validation import check_keypoint_sequence, check_keypoints
 
 __all__ = ["RamakrishnaLifter", "RamakrishnaOptions", "limb_sum_residual", "ramakrishna_lift"]

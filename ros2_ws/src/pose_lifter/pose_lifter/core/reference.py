@@ -1,6 +1,6 @@
 """Independent reference solvers for every subproblem of the method (the paper used CVX).
 
-Each function here solves one subproblem of the fast path (``camera.py``, ``pose.py``) by a
+Each function here solves one subproblem of the fast path (``camera.py``, ``pose_step.py``) by a
 different route, so the two can check each other:
 
 * convex problems are written in cvxpy and solved by Clarabel (LPs and QPs) or SCS (the SDP
@@ -32,8 +32,8 @@ from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
 from .errors import InvalidInputError, SolverError
+from .results import Camera
 from .skeleton import limb_selectors
-from .types import Camera
 
 __all__ = [
     "TOLERANCES",

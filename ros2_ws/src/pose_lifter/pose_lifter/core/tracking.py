@@ -45,8 +45,8 @@ from numpy.typing import NDArray
 from ._fast import median_rows
 from .errors import PoseLifterError
 from .lifter import Lifter
+from .results import LiftResult, WarmStart
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF
-from .types import LiftResult, WarmStart
 
 __all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
 

@@ -1,0 +1,267 @@
+"""The pose ADM's compiled pieces: its splitting, dual and penalty updates, and the whole pose
+step with the Riemannian alpha-step fused into one kernel (checked against the one Python loop of
+:func:`pose_lifter.core.pose_step.pose_step`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._jit import njit
+from ._linalg import _axpy_rows
+from .alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
+
+
+@njit
+def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64],
+               theta: float, l1: bool) -> float:
+    """:func:`pose_objective` on plain arrays (``l1`` False: squared loss)."""
+    data = np.sum(wts * np.abs(resid)) if l1 else np.sum(wts * resid * resid)
+    return float(data + theta * np.sum(np.abs(alpha)))
+
+
+@njit
+def _adm_split(
+    c: NDArray[np.float64], ax: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    alpha: NDArray[np.float64], wts: NDArray[np.float64], eta: float, th: float, l1: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """gamma- and beta-steps of the pose ADM: ``(gamma, beta, d1, d2)`` of the module docstring
+    (``ax = A alpha``; ``th = 0``: no sparsity)."""
+    vg = c - ax + u1
+    if l1:
+        gamma = np.sign(vg) * np.maximum(np.abs(vg) - wts / eta, 0.0)
+    else:
+        gamma = eta * vg / (2.0 * wts + eta)
+    vb = alpha + u2
+    beta = np.sign(vb) * np.maximum(np.abs(vb) - th / eta, 0.0) if th > 0 else vb
+    return gamma, beta, c - gamma + u1, beta - u2
+
+
+@njit
+def _grow_penalty(eta: float, eta_growth: float, eta_max: float, u1: NDArray[np.float64],
+                  u2: NDArray[np.float64]) -> float:
+    """The pose ADM's penalty schedule: ``eta <- min(eta * eta_growth, eta_max)``, with the
+    scaled multipliers ``u1``, ``u2`` rescaled in place so the unscaled ones are unchanged."""
+    if eta_growth != 1.0 and eta < eta_max:
+        eta_new = min(eta * eta_growth, eta_max)
+        u1 *= eta / eta_new
+        u2 *= eta / eta_new
+        return eta_new
+    return eta
+
+
+@njit
+def _adm_dual_update(
+    c: NDArray[np.float64], gamma: NDArray[np.float64], alpha: NDArray[np.float64],
+    beta: NDArray[np.float64], beta_prev: NDArray[np.float64], ax_prev: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64], mus: NDArray[np.float64], v: NDArray[np.float64],
+    wts: NDArray[np.float64], th: float, l1: bool, scale_c: float,
+) -> tuple[NDArray[np.float64], float, float, float]:
+    """After the alpha-step of the pose ADM: ``u1``, ``u2`` updated in place; returns ``A alpha``,
+    the objective and the relative primal and dual residuals."""
+    ax = mus @ (v.T @ alpha)
+    r1 = c - ax - gamma
+    r2 = alpha - beta
+    u1 += r1
+    u2 += r2
+    obj = _objective(c - ax, wts, alpha, th, l1)
+    an = max(1.0, math.sqrt(float(alpha @ alpha)))
+    primal = max(math.sqrt(float(r1 @ r1)) / scale_c, math.sqrt(float(r2 @ r2)) / an)
+    dax = ax - ax_prev
+    dbeta = beta - beta_prev
+    dual = max(math.sqrt(float(dax @ dax)) / scale_c, math.sqrt(float(dbeta @ dbeta)) / an)
+    return ax, obj, primal, dual
+
+
+@njit
+def _riemannian_adm_kernel(
+    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], vc: NDArray[np.float64],
+    vt: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64],
+    s1: NDArray[np.float64], s2: NDArray[np.float64], s0: NDArray[np.float64], cu24_t: NDArray[np.float64],
+    cmu24: NDArray[np.float64],
+    rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    best_obj: float, eta: float, eta_growth: float, eta_max: float, th: float, l1: bool, max_iter: int,
+    tol: float, alpha_max_iter: int, alpha_tol: float, prox: float, scale_c: float,
+) -> tuple[NDArray[np.float64], float, float, int, bool]:
+    """The pose ADM loop of :func:`pose_step` with the Riemannian alpha-step, in one kernel (the
+    Python loop's updates; ``V^T alpha`` is carried instead of recomputed). ``u1``, ``u2``
+    (scaled multipliers) are updated in place. ``vc = V`` (k, r), ``vt = V^T`` (r, k) and
+    ``cu24_t = (C U S)^T`` (r, 24) come C-contiguous (``PoseModel.riemannian_arrays``). Returns
+    ``(best alpha, best objective, final eta, iterations, converged)``; ``best_obj`` is the
+    objective of ``alpha0`` if feasible, else ``inf``."""
+    m = c.size
+    k = alpha0.size
+    alpha = alpha0.copy()
+    best_alpha = alpha.copy()
+    beta = alpha.copy()
+    beta_prev = np.empty(k)
+    gamma = np.empty(m)
+    d1 = np.empty(m)
+    d2 = np.empty(k)
+    sk = vt @ alpha
+    ax = mus @ sk
+    converged = False
+    it = 0
+    # the vector updates are written as loops (fused, no temporaries): the same arithmetic as
+    # _adm_split / _adm_dual_update, summed sequentially
+    ax_prev = np.empty(m)
+    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
+    mus_t = np.ascontiguousarray(mus.T)
+    rmat_t = np.ascontiguousarray(rmat.T)
+    s1_t = np.ascontiguousarray(s1.T)
+    s2_t = np.ascontiguousarray(s2.T)
+    for it in range(1, max_iter + 1):
+        beta, beta_prev = beta_prev, beta
+        for i in range(m):  # gamma-step (prox of the data term)
+            vg = c[i] - ax[i] + u1[i]
+            if l1:
+                gi = math.copysign(max(abs(vg) - wts[i] / eta, 0.0), vg)
+            else:
+                gi = eta * vg / (2.0 * wts[i] + eta)
+            gamma[i] = gi
+            d1[i] = c[i] - gi + u1[i]
+        for i in range(k):  # beta-step (prox of theta ||.||_1)
+            vb = alpha[i] + u2[i]
+            bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
+            beta[i] = bi
+            d2[i] = bi - u2[i]
+        _riemannian_alpha_kernel(d1, d2, sk, mus, vc, vt, gs0, q, rmat_t, s1_t, s2_t, s0, cu24_t, cmu24, rad,
+                                 alpha_max_iter, alpha_tol, prox, alpha, sk)
+        ax, ax_prev = ax_prev, ax
+        ax[:] = 0.0
+        _axpy_rows(mus_t, sk, ax)
+        r1sq, dsq, data = 0.0, 0.0, 0.0
+        for i in range(m):
+            e = c[i] - ax[i]
+            data += wts[i] * (abs(e) if l1 else e * e)
+            r = e - gamma[i]
+            u1[i] += r
+            r1sq += r * r
+            dsq += (ax[i] - ax_prev[i]) ** 2
+        r2sq, asq, anorm1, dbsq = 0.0, 0.0, 0.0, 0.0
+        for i in range(k):
+            a = alpha[i]
+            r = a - beta[i]
+            u2[i] += r
+            r2sq += r * r
+            asq += a * a
+            anorm1 += abs(a)
+            dbsq += (beta[i] - beta_prev[i]) ** 2
+        obj = data + th * anorm1
+        an = max(1.0, math.sqrt(asq))
+        primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
+        dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
+        eta = _grow_penalty(eta, eta_growth, eta_max, u1, u2)
+        if obj < best_obj:
+            best_obj = obj
+            best_alpha[:] = alpha
+        if primal < tol and dual < tol:
+            converged = True
+            break
+    if not math.isfinite(best_obj):
+        best_alpha = alpha
+    return best_alpha, best_obj, eta, it, converged
+
+
+@njit
+def _limb_violation_jit(y: NDArray[np.float64], limb_matrix: NDArray[np.float64], rad: NDArray[np.float64]
+                        ) -> float:
+    """:meth:`PoseModel.limb_violation` of the pose ``y`` (36,)."""
+    lv = limb_matrix @ y
+    out = 0.0
+    for i in range(8):
+        n = math.sqrt(lv[3 * i] ** 2 + lv[3 * i + 1] ** 2 + lv[3 * i + 2] ** 2)
+        out = max(out, abs(n - rad[i]))
+    return out
+
+
+@njit
+def _riemannian_pose_kernel(
+    x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
+    mean: NDArray[np.float64], u: NDArray[np.float64], sig: NDArray[np.float64], vc: NDArray[np.float64],
+    vt: NDArray[np.float64], comps: NDArray[np.float64], limb_matrix: NDArray[np.float64],
+    z: NDArray[np.float64], n: NDArray[np.float64], s0: NDArray[np.float64], rad: NDArray[np.float64],
+    cu24_t: NDArray[np.float64], cmu24: NDArray[np.float64], alpha0: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64],
+    th: float, l1: bool, eta: float, eta_growth: float, eta_max: float, max_iter: int, tol: float,
+    alpha_max_iter: int, alpha_tol: float, prox: float,
+    xp: NDArray[np.float64], pw: NDArray[np.float64], m3: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool]:
+    """:func:`pose_step` with the Riemannian alpha-step, set-up included: ``c = x - t - M mu``,
+    ``M U S``, the limb-coordinate quadratic (:func:`_sphere_setup`), then
+    :func:`_riemannian_adm_kernel`. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,), alpha0 (k,),
+    u1 (m,), u2 (k,) (scaled multipliers, updated in place; ``m`` = 24 + the prior rows below).
+
+    Prior rows (the hybrid mode's L1 prior term, :class:`pose_lifter.core.lifter.Lifter`): for
+    each joint ``j`` with ``pw[j, 0] > 0`` two rows ``pw[j, 0] |xp[j, a] - t_a - M_a y_j|`` (the
+    prior's image position, a = x, y), and with ``pw[j, 1] > 0`` one row
+    ``pw[j, 1] |xp[j, 2] - m3 (y_j - mean_i y_i)|`` (its depth relative to the joints' mean;
+    ``m3`` = scale times the camera's third rotation row). ``pw`` all zero: the paper's problem.
+    Returns ``(alpha, objective, limb violation, pose (36,), final eta, iterations,
+    converged)``."""
+    r = sig.size
+    nj = x.shape[0]
+    n_xy = 0
+    n_z = 0
+    for j in range(nj):
+        n_xy += 1 if pw[j, 0] > 0.0 else 0
+        n_z += 1 if pw[j, 1] > 0.0 else 0
+    m = 2 * nj + 2 * n_xy + n_z
+    wts = np.empty(m)
+    c = np.empty(m)
+    mus = np.empty((m, r))
+    for j in range(nj):
+        for a in range(2):
+            wts[2 * j + a] = w[j]
+            c[2 * j + a] = x[j, a] - t[a] - (m0[a, 0] * mean[3 * j] + m0[a, 1] * mean[3 * j + 1]
+                                             + m0[a, 2] * mean[3 * j + 2])
+            for k in range(r):
+                mus[2 * j + a, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
+                                     + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+    row = 2 * nj
+    for j in range(nj):  # the prior's image positions: rows like the data rows
+        if pw[j, 0] > 0.0:
+            for a in range(2):
+                wts[row] = pw[j, 0]
+                c[row] = xp[j, a] - t[a] - (m0[a, 0] * mean[3 * j] + m0[a, 1] * mean[3 * j + 1]
+                                            + m0[a, 2] * mean[3 * j + 2])
+                for k in range(r):
+                    mus[row, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
+                                   + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+                row += 1
+    if n_z > 0:  # the prior's relative depths: m3 (y_j - mean_i y_i)
+        ubar = np.zeros((3, r))
+        mbar = np.zeros(3)
+        for j in range(nj):
+            for a in range(3):
+                mbar[a] += mean[3 * j + a] / nj
+                for k in range(r):
+                    ubar[a, k] += u[3 * j + a, k] / nj
+        for j in range(nj):
+            if pw[j, 1] > 0.0:
+                wts[row] = pw[j, 1]
+                c[row] = xp[j, 2] - (m3[0] * (mean[3 * j] - mbar[0]) + m3[1] * (mean[3 * j + 1] - mbar[1])
+                                     + m3[2] * (mean[3 * j + 2] - mbar[2]))
+                for k in range(r):
+                    mus[row, k] = (m3[0] * (u[3 * j, k] - ubar[0, k]) + m3[1] * (u[3 * j + 1, k] - ubar[1, k])
+                                   + m3[2] * (u[3 * j + 2, k] - ubar[2, k])) * sig[k]
+                row += 1
+    g = mus.T @ mus
+    for k in range(r):
+        g[k, k] += 1.0 + prox
+    q, rmat, s1, s2 = _sphere_setup(g, z, n)
+    gs0 = g @ s0
+    best_obj = np.inf
+    if _limb_violation_jit(mean + comps @ alpha0, limb_matrix, rad) < 1e-6:
+        best_obj = _objective(c - mus @ (vt @ alpha0), wts, alpha0, th, l1)
+    scale_c = max(1.0, math.sqrt(float(c @ c)))
+    best_alpha, best_obj, eta, it, converged = _riemannian_adm_kernel(
+        c, wts, mus, vc, vt, gs0, q, rmat, s1, s2, s0, cu24_t, cmu24, rad, alpha0, u1, u2, best_obj, eta,
+        eta_growth, eta_max, th, l1, max_iter, tol, alpha_max_iter, alpha_tol, prox, scale_c)
+    if not math.isfinite(best_obj):
+        best_obj = _objective(c - mus @ (vt @ best_alpha), wts, best_alpha, th, l1)
+    y = mean + comps @ best_alpha
+    return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged
+

@@ -1,0 +1,366 @@
+"""Pose step (paper eq. 4 and appendix A): robust sparse coefficients under limb constraints.
+
+Problem, for a fixed camera ``M0`` (2x3) and translation ``t``::
+
+    minimise_alpha  sum_j w_j rho(x_j - t - M0 y_j) + theta ||alpha||_1
+    subject to      ||C_i y||^2 = L_i,  i = 1..8,      y = mu + B alpha
+
+(``rho = |.|`` per coordinate for L1, squared for L2; ``w_j`` per-joint weights, 0 = missing).
+
+ADM of the appendix (scaled form, penalty ``eta``), with ``gamma = c - A alpha`` and
+``beta = alpha`` where ``c = x - t - M mu`` and ``A = M B``::
+
+    gamma <- prox_{rho_w / eta}(c - A alpha + u1)          (soft-threshold)
+    beta  <- soft(alpha + u2, theta / eta)                  (skipped without sparsity)
+    alpha <- argmin ||A alpha - d1||^2 + ||alpha - d2||^2   s.t. limb constraints
+             with d1 = c - gamma + u1, d2 = beta - u2
+    u1 <- u1 + c - A alpha - gamma;   u2 <- u2 + alpha - beta
+
+The alpha-step is the paper's rank-1 lifted problem ``min z^T W z  s.t.  z^T Omega_i z = 0``
+with ``z = [.; 1]``, solved by the inner ADM (Q-step in closed form by projection onto the
+affine set ``{tr(Omega_i Q) = 0, Q[-1,-1] = 1}``; P-step = the paper's lemma, top eigenpair).
+Two exactly equivalent liftings (``alpha_step``):
+
+* ``"full"``: ``z = [alpha; 1]`` of size ``k + 1`` (the paper's).
+* ``"reduced"``: with the thin SVD ``B = U S V^T`` (rank ``r <= 33`` for centred poses), any
+  alpha splits into ``V s`` (``s = V^T alpha``) plus a part in the null space of ``B``; the
+  latter only enters ``||alpha - d2||^2`` and is set to its optimum ``(I - V V^T) d2`` in
+  closed form, leaving ``min ||M U S s - d1||^2 + ||s - V^T d2||^2`` s.t.
+  ``||C_i (mu + U S s)||^2 = L_i``, lifted with ``z = [s; 1]`` of size ``r + 1``. Same
+  minimisers, same conditioning as the paper's lifting, a 34x34 instead of a 201x201 matrix.
+
+After the inner ADM, a few Gauss-Newton projection steps restore the limb constraints to
+``1e-10`` (the ADM meets them only to its tolerance). ``alpha_solver="newton"`` replaces the
+inner ADM by a direct local solver of the same problem (SQP / Newton on the KKT system), and
+``alpha_solver="riemannian"`` (the default) by Riemannian Newton on the product of the 8 limb
+spheres (:func:`_sphere_newton`): in the reduced coordinates the limb vectors ``l = C mu + C U S
+s`` are an onto linear image of ``s`` (``PoseModel.limb_coordinates``), so ``s = s0 + Z l + N t``
+with ``t`` free, eliminated in closed form (:func:`_sphere_setup`), and the constraints are
+``||l_i|| = sqrt(L_i)``. Inside the ADM it takes one Newton step per iteration with the proximal
+term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM).
+
+Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
+numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
+importable and run as the same Python code otherwise. The two agree to round-off, not bit for
+bit: the kernels' products are loops and their small inverses and sums LAPACK calls and
+reductions that numba and numpy make differently. On ``walk_clean`` the first frame's objective
+agrees to ~1e-12 and tracked frames then drift apart (0.4832 vs 0.4740 on the third): the
+warm-started solves are chaotic in round-off (a last-bit change grows ~10x per tracked frame), as
+between machines with different BLAS builds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._linalg import _EYE8
+from .alpha.lifted_admm import QStepFn, lifted_alpha_admm, restore_feasibility
+from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
+from .alpha.sqp import NEWTON_MAX_ITER, _newton_alpha_kernel, newton_alpha
+from .errors import InvalidInputError, SolverError, diverged_as_solver_error
+from .options import Variant
+from .pose_kernel import _adm_dual_update, _adm_split, _grow_penalty, _objective, _riemannian_pose_kernel
+from .pose_model import PoseModel
+from .results import PoseResult
+from .skeleton import N_JOINTS
+
+
+@dataclass(frozen=True)
+class PriorRows:
+    """The learned prior as rows of the pose step's L1 objective (hybrid mode).
+
+    Attributes
+    ----------
+    target : ndarray, shape (12, 3)
+        The prior's pose in the lifter's normalised camera frame: ``x, y`` image positions (same
+        frame as the 2D input), ``z`` depth relative to the joints' mean depth.
+    weights : ndarray, shape (12, 2)
+        Per joint: weight of its two image-position rows and of its depth row (0 = no row).
+    limb_radii : ndarray, shape (8,), optional
+        Limb lengths (right-lower-leg units of the model) that replace the model's own in the
+        8 constraints ``||C_i y|| = limb_radii[i]`` (a person's own proportions); None keeps them.
+    """
+
+    target: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    limb_radii: NDArray[np.float64] | None = None
+
+    @staticmethod
+    def depth_row(projection: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``m3 = s r3`` of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row that maps a
+        model pose to depth in the same units (``r3 = r1 x r2``)."""
+        a, b = projection[0], projection[1]
+        # r1 x r2 written out (np.cross costs ~60 us in argument handling; same arithmetic)
+        cross = np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+        return cross / max(float(np.sqrt(a @ a)), 1e-300)
+
+    def depth_term(self, pose: NDArray[np.float64], projection: NDArray[np.float64]) -> float:
+        """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)."""
+        d = (pose - pose.mean(axis=0)) @ self.depth_row(projection)
+        return float(self.weights[:, 1] @ np.abs(self.target[:, 2] - d))
+
+
+_NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)), np.zeros(3))
+
+
+def pose_objective(
+    resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64], theta: float,
+    loss: Literal["l1", "l2"],
+) -> float:
+    """``sum w rho(resid) + theta ||alpha||_1`` (resid, wts: shape (2n,))."""
+    return _objective(np.ascontiguousarray(resid, dtype=np.float64),
+                      np.ascontiguousarray(wts, dtype=np.float64),
+                      np.ascontiguousarray(alpha, dtype=np.float64), float(theta), loss == "l1")
+
+
+def _riemannian_pose_step(
+    x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
+    weights: NDArray[np.float64], model: PoseModel, l1: bool, th: float, alpha0: NDArray[np.float64],
+    max_iter: int, tol: float, eta: float, eta_growth: float, eta_max: float,
+    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None, newton_tol: float,
+    alpha_prox: float, prior: PriorRows | None = None,
+) -> PoseResult:
+    """:func:`pose_step` with ``alpha_solver="riemannian"`` (limbs on, reduced lifting, onto limb
+    map): one call of :func:`_riemannian_pose_kernel`."""
+    k = model.n_bases
+    alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
+    if alpha.shape != (k,):
+        raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
+    coords = model.limb_coordinates
+    assert coords is not None
+    z, n, s0, rad = coords
+    if prior is not None and prior.limb_radii is not None:
+        rad = np.ascontiguousarray(prior.limb_radii, dtype=np.float64)
+    cmu24 = model.kernel_limbs[1]
+    if prior is None:
+        xp, pw, m3 = _NO_PRIOR
+    else:
+        xp, pw = prior.target, prior.weights
+        m3 = prior.depth_row(m0)
+    m = 2 * N_JOINTS + 2 * int(np.count_nonzero(pw[:, 0] > 0)) + int(np.count_nonzero(pw[:, 1] > 0))
+    if duals is None or duals[0].shape != (m,):
+        u1, u2 = np.zeros(m), np.zeros(k)
+    else:
+        u1 = np.asarray(duals[0], dtype=np.float64) / eta
+        u2 = np.asarray(duals[1], dtype=np.float64) / eta
+    vc, vt, cu24_t = model.riemannian_arrays
+    best, obj, viol, y, eta_end, it, converged = _riemannian_pose_kernel(
+        np.ascontiguousarray(x), np.ascontiguousarray(m0),
+        np.ascontiguousarray(translation, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64),
+        model.mean, model.u, model.sig, vc, vt, model.components, model._limb_matrix, z, n, s0, rad, cu24_t,
+        cmu24, alpha, u1, u2, float(th), bool(l1), float(eta), float(eta_growth), float(eta_max),
+        int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox), xp, pw, m3)
+    if state_out is not None:
+        state_out.append((eta_end * u1, eta_end * u2))
+    if not np.all(np.isfinite(best)):
+        raise SolverError("pose step diverged (non-finite coefficients)")
+    return PoseResult(best, y.reshape(N_JOINTS, 3), float(obj), float(viol), int(it), bool(converged))
+
+
+def pose_step(
+    points: NDArray[np.float64],
+    projection: NDArray[np.float64],
+    translation: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    model: PoseModel,
+    variant: Variant,
+    theta: float,
+    alpha0: NDArray[np.float64],
+    *,
+    max_iter: int = 100,
+    tol: float = 1e-4,
+    eta: float = 1.0,
+    eta_growth: float = 1.0,
+    eta_max: float = 1e3,
+    delta: float = 1.0,
+    inner_max_iter: int = 60,
+    inner_tol: float = 1e-6,
+    alpha_step: str = "reduced",
+    alpha_solver: str = "admm",
+    qstep_fn: QStepFn | None = None,
+    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
+    newton_tol: float = 1e-9,
+    alpha_prox: float = 1.0,
+    prior: PriorRows | None = None,
+) -> PoseResult:
+    """Solve the pose problem of the module docstring for a fixed camera by ADM.
+
+    Parameters
+    ----------
+    points : ndarray, shape (12, 2)
+    projection : ndarray, shape (2, 3)
+        ``M0``.
+    translation : ndarray, shape (2,)
+    weights : ndarray, shape (12,)
+    model : PoseModel
+    variant : Variant
+        Loss, limbs on/off, sparsity on/off.
+    theta : float
+        Sparsity weight (ignored without sparsity).
+    alpha0 : ndarray, shape (k,)
+        Start (warm start: the previous alternation's or frame's coefficients).
+    max_iter, tol : int, float
+        Outer ADM cap; stop when primal and dual residuals, relative, are below ``tol``.
+    eta, delta : float
+        Outer and inner penalties.
+    eta_growth, eta_max : float
+        The outer penalty is multiplied by ``eta_growth`` every iteration up to ``eta_max``
+        (the paper's ``eta_k``; increasing penalties as in LADMAP [liu2013linearized]);
+        the scaled multipliers are rescaled with it.
+    inner_max_iter, inner_tol : int, float
+        Inner ADM cap and tolerance.
+    alpha_step : {"reduced", "full"}
+    alpha_solver : {"admm", "newton", "riemannian"}
+        ``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map
+        (``model.limb_coordinates``); otherwise ``"newton"`` is used.
+    qstep_fn : callable, optional
+        Replaces the closed-form Q-step (the cvxpy reference path).
+    duals : (ndarray (24,), ndarray (k,)), optional
+        Warm start of the (unscaled) ADM multipliers of ``gamma = c - A alpha`` and
+        ``beta = alpha``, e.g. from the previous alternation (default zeros).
+    state_out : list, optional
+        If given, the final unscaled multipliers are appended to it (for the next warm start).
+    newton_tol : float
+        Relative KKT tolerance of the reduced Newton alpha-step (``alpha_solver="newton"``) and
+        of the Riemannian one (which stops at ``RIEMANNIAN_MAX_ITER`` steps first, as a rule).
+    alpha_prox : float
+        Proximal weight of the Riemannian alpha-step (``LifterOptions.alpha_prox``).
+    prior : PriorRows, optional
+        The hybrid mode's L1 prior term (:class:`PriorRows`), added to the objective; needs the
+        Riemannian path (limbs on, reduced lifting, onto limb map).
+
+    Returns
+    -------
+    PoseResult
+        The iterate with the lowest objective among the feasible ones visited.
+
+    Raises
+    ------
+    InvalidInputError
+        ``alpha0`` of the wrong shape, or a prior term without the Riemannian path.
+    SolverError
+        The ADM diverged (non-finite coefficients).
+    """
+    loss = variant.loss
+    th = float(theta) if variant.sparsity else 0.0
+    x = np.asarray(points, dtype=np.float64)
+    m0 = np.asarray(projection, dtype=np.float64)
+    k = model.n_bases
+    if (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
+            and model.limb_coordinates is not None):
+        with diverged_as_solver_error("pose step"):
+            return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0,
+                                         max_iter, tol, eta, eta_growth, eta_max, duals, state_out,
+                                         newton_tol, alpha_prox, prior)
+    if prior is not None:
+        raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
+                                "lifting and bases whose limb map is onto (>= 24 basis directions)")
+    wts = np.repeat(np.asarray(weights, dtype=np.float64), 2)  # (24,)
+    # c = x - t - M mu, as a (24,) vector; A alpha = (M U) (S V^T alpha)
+    u3 = model.u.reshape(N_JOINTS, 3, -1)
+    mu_proj = model.mean.reshape(N_JOINTS, 3) @ m0.T
+    c = (x - translation - mu_proj).reshape(-1)
+    sig, v = model.sig, model.v
+    mus = np.einsum("ab,jbr->jar", m0, u3).reshape(2 * N_JOINTS, -1) * sig  # (24, r) = M U S
+
+    def a_times(alpha: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(mus @ (v.T @ alpha))
+
+    full = alpha_step == "full"
+    if full:
+        a_full = np.einsum("ab,jbk->jak", m0, model.components.reshape(N_JOINTS, 3, k)).reshape(
+            2 * N_JOINTS, k
+        )
+        g_full = a_full.T @ a_full + np.eye(k)
+    g_red = mus.T @ mus + np.eye(sig.size)
+    cons = model.full if full else model.reduced
+    if alpha_solver == "riemannian":  # not applicable here (limbs off, full lifting or a limb map
+        alpha_solver = "newton"        # that is not onto): the SQP solves the same problem
+
+    def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
+                     ) -> NDArray[np.float64]:
+        if full:
+            lin = a_full.T @ d1 + d2
+            if not variant.limbs:
+                return np.asarray(np.linalg.solve(g_full, lin))
+            wmat = np.zeros((k + 1, k + 1))
+            wmat[:k, :k] = g_full
+            wmat[:k, k] = -lin
+            wmat[k, :k] = -lin
+            wmat[k, k] = float(d1 @ d1 + d2 @ d2)
+            z0 = np.append(alpha, 1.0)
+        else:
+            if alpha_solver == "newton" and variant.limbs:
+                return _newton_alpha_kernel(d1, d2, alpha, mus, v, g_red, *model.kernel_limbs,
+                                            NEWTON_MAX_ITER, float(newton_tol), _EYE8)
+            vtd2 = v.T @ d2
+            lin = mus.T @ d1 + vtd2
+            if not variant.limbs:
+                s = np.linalg.solve(g_red, lin)
+                return np.asarray(d2 - v @ vtd2 + v @ s)
+            r = sig.size
+            wmat = np.zeros((r + 1, r + 1))
+            wmat[:r, :r] = g_red
+            wmat[:r, r] = -lin
+            wmat[r, :r] = -lin
+            wmat[r, r] = float(d1 @ d1 + vtd2 @ vtd2)
+            z0 = np.append(v.T @ alpha, 1.0)
+        if alpha_solver == "newton":  # the full lifting (the reduced one returned above)
+            z = newton_alpha(wmat, cons, z0).z
+        else:
+            z = lifted_alpha_admm(wmat, cons, z0, delta, inner_max_iter, inner_tol, qstep_fn).z
+            z = restore_feasibility(cons, z)
+        if full:
+            return np.asarray(z[:-1])
+        vtd2 = v.T @ d2
+        return np.asarray(d2 - v @ vtd2 + v @ z[:-1])
+
+    alpha = np.asarray(alpha0, dtype=np.float64).copy()
+    if alpha.shape != (k,):
+        raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
+    feas_tol = 1e-6
+
+    best_alpha = alpha.copy()
+    best_obj = np.inf
+    if not variant.limbs or model.limb_violation(alpha) < feas_tol:
+        best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
+    if duals is None:
+        u1 = np.zeros_like(c)
+        u2 = np.zeros(k)
+    else:
+        u1 = np.asarray(duals[0], dtype=np.float64) / eta
+        u2 = np.asarray(duals[1], dtype=np.float64) / eta
+    beta = alpha.copy()
+    converged = False
+    it = 0
+    scale_c = max(1.0, float(np.linalg.norm(c)))
+    l1 = loss == "l1"
+    ax = a_times(alpha)
+    for it in range(1, max_iter + 1):
+        beta_prev, ax_prev = beta, ax
+        gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, float(eta), th, l1)
+        alpha = alpha_update(d1, d2, alpha)
+        ax, obj, primal, dual = _adm_dual_update(c, gamma, alpha, beta, beta_prev, ax_prev, u1, u2, mus, v,
+                                                 wts, th, l1, scale_c)
+        eta = _grow_penalty(float(eta), float(eta_growth), float(eta_max), u1, u2)
+        if obj < best_obj:
+            best_obj, best_alpha = obj, alpha.copy()
+        if primal < tol and dual < tol:
+            converged = True
+            break
+    if state_out is not None:
+        state_out.append((eta * u1, eta * u2))
+    if not np.isfinite(best_obj):
+        # no feasible iterate (cannot happen with restore_feasibility unless it failed)
+        best_alpha = alpha
+        best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
+    if not np.all(np.isfinite(best_alpha)):
+        raise SolverError("pose step diverged (non-finite coefficients)")
+    viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
+    return PoseResult(best_alpha, model.pose(best_alpha), best_obj, viol, it, converged)
