@@ -165,7 +165,7 @@ def test_alpha_step_admm_feasible_and_above_sdp_bound(
 ) -> None:
     w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
     cons = model.full
-    z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).z)
+    z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).x)
     _, lower = ref.reference_alpha_sdp(w_mat, cons.omegas)
     assert z[-1] == 1.0
     assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
@@ -189,7 +189,7 @@ def test_alpha_step_admm_is_a_local_minimum(bases: PoseBases, model: PoseModel, 
     for case in range(8):
         w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
         cons = model.full
-        z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).z)
+        z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).x)
         f_fast = float(z @ w_mat @ z)
         _, f_polished = ref.reference_alpha_local(w_mat, cons.omegas, z)
         gaps.append((f_fast - TOL["alpha_step_objective_abs"]) / f_polished - 1.0)
@@ -207,7 +207,7 @@ def test_alpha_step_newton_not_worse_than_local_reference(
 ) -> None:
     w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
     cons = model.full
-    z = newton_alpha(w_mat, cons, z0).z
+    z = newton_alpha(w_mat, cons, z0).x
     _, f_local = ref.reference_alpha_local(w_mat, cons.omegas, z0)
     assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
     bound = f_local * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
@@ -237,7 +237,8 @@ def test_alpha_step_riemannian_is_feasible_local_minimum(
     # point SLSQP (started there, same lifted problem) cannot improve beyond the tolerance.
     model = wide_model
     gmat, lin, s0 = _reduced_alpha_problem(model, test_poses[case], case)
-    s, n_iter, converged = riemannian_alpha(gmat, lin, model, s0)
+    res = riemannian_alpha(gmat, lin, model, s0)
+    s, n_iter, converged = res.x, res.n_iter, res.converged
     assert converged and n_iter < 100
     cons = model.reduced
     r = s.size

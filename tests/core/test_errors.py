@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from pose_lifter import bags, cli
 from pose_lifter.core import Lifter, camera
-from pose_lifter.core.pose_step import pose_step
 from pose_lifter.core import ramakrishna as rk
 from pose_lifter.core import reference as ref
 from pose_lifter.core.errors import (
@@ -18,6 +17,7 @@ from pose_lifter.core.errors import (
     SolverError,
 )
 from pose_lifter.core.options import get_variant
+from pose_lifter.core.pose_step import pose_step
 
 
 @pytest.fixture(scope="module")

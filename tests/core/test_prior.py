@@ -11,6 +11,7 @@ import pytest
 from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError, OptionsError, PriorFileError
+from pose_lifter.core.lifter import TrackContext
 from pose_lifter.core.prior import DEFAULT_PRIOR_PATH, PosePrior, prior_features
 from pose_lifter.core.synthetic import synthetic_poses
 from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
@@ -307,8 +308,9 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     lift = Lifter.lift
 
     def spy(self: Lifter, *args: object, **kwargs: object) -> LiftResult:
-        f = kwargs.get("fill")
-        seen.append(None if f is None else np.asarray(f[1]).copy())  # type: ignore[index]
+        track = kwargs.get("track")
+        f = None if track is None else track.fill  # type: ignore[attr-defined]
+        seen.append(None if f is None else np.asarray(f[1]).copy())
         return lift(self, *args, **kwargs)  # type: ignore[arg-type]
 
     errs = []
@@ -325,7 +327,7 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     assert allowed[5:8].all() and not allowed[8:15].any()  # 3 frames, then it is left missing
     assert np.all([m is not None and m[2] for i, m in enumerate(seen) if i in lost])
     with pytest.raises(InvalidInputError, match="fill"):
-        Lifter(bases).lift(x[0], fill=(np.zeros((11, 2)), np.ones(12, dtype=bool)))
+        Lifter(bases).lift(x[0], track=TrackContext(fill=(np.zeros((11, 2)), np.ones(12, dtype=bool))))
     # no fill while the track's fit is being lost (its last objective far above its median)
     policy = TrackPolicy(Lifter(bases))
     for i in range(5):
@@ -377,12 +379,12 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     vis = np.ones(12, dtype=bool)
     now = lifter.lift(x[1]).prior_pose
     assert now is not None
-    same = lifter.lift(x[1], past=(x[1][None], vis[None])).prior_pose
-    moved = lifter.lift(x[1], past=(x[0][None], vis[None])).prior_pose
+    same = lifter.lift(x[1], track=TrackContext(past=(x[1][None], vis[None]))).prior_pose
+    moved = lifter.lift(x[1], track=TrackContext(past=(x[0][None], vis[None]))).prior_pose
     np.testing.assert_allclose(same, now, rtol=0, atol=1e-9)
     assert moved is not None and np.abs(moved - now).max() > 1e-3
     with pytest.raises(InvalidInputError):
-        lifter.lift(x[1], past=(x[0], vis))
+        lifter.lift(x[1], track=TrackContext(past=(x[0], vis)))
     track = _Track(None, 0)
     for stamp in (0, 100, 133, 166):  # a gap, then 33 ms steps
         track.history.append((stamp, np.full((12, 2), float(stamp)), np.ones(12, dtype=bool)))

@@ -39,9 +39,9 @@ from numpy.typing import NDArray
 
 from ._jit import njit
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
-from .results import Camera, CameraResult
+from .results import Camera, CameraResult, Duals
 
-__all__ = ["camera_admm", "camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
+__all__ = ["camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
 
 
 def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -120,6 +120,7 @@ def camera_step(
     max_iter: int = 100,
     tol: float = 1e-5,
     tau: float = 1.0,
+    duals: Duals | None = None,
 ) -> CameraResult:
     """Robust scaled-orthographic camera for a fixed 3D pose (see module docstring).
 
@@ -140,11 +141,15 @@ def camera_step(
         below ``tol``.
     tau : float
         ADM penalty (constant).
+    duals : Duals, optional
+        Warm start of the scaled multipliers ``(U1 (n, 2), U2 (2, 3))``, e.g. the previous camera
+        step's of the same solve (``LifterOptions.warm_duals``; default zeros).
 
     Returns
     -------
     CameraResult
-        The camera, ``objective = sum_j w_j rho(x_j - M0 y_j - t)``, iterations, converged.
+        The camera, ``objective = sum_j w_j rho(x_j - M0 y_j - t)``, iterations, converged, and
+        the final multipliers.
 
     Raises
     ------
@@ -153,41 +158,20 @@ def camera_step(
     SolverError
         The ADM diverged (non-finite camera) on valid input.
     """
-    return camera_admm(points, pose, weights, loss, init, max_iter, tol, tau)[0]
-
-
-def camera_admm(
-    points: NDArray[np.float64],
-    pose: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    loss: Literal["l1", "l2"] = "l1",
-    init: Camera | None = None,
-    max_iter: int = 100,
-    tol: float = 1e-5,
-    tau: float = 1.0,
-    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-) -> tuple[CameraResult, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """:func:`camera_step` with a warm start of the scaled duals ``(U1 (n, 2), U2 (2, 3))``.
-
-    The lifter passes the duals of the previous camera step of the same solve (the pose
-    changed a little since): primal and dual variables of the ADM are then both near their
-    fixed point and the same stopping rule is met in fewer iterations. Returns the result
-    and the final duals.
-    """
     x = np.ascontiguousarray(points, dtype=np.float64)
     y = np.ascontiguousarray(pose, dtype=np.float64)
     w = np.ascontiguousarray(weights, dtype=np.float64)
     _check(x, y, w)
-    return _camera_admm_checked(x, y, w, loss, init, max_iter, tol, tau, duals)
+    return camera_step_trusted(x, y, w, loss, init, max_iter, tol, tau, duals)
 
 
-def _camera_admm_checked(
+def camera_step_trusted(
     x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], loss: Literal["l1", "l2"],
-    init: Camera | None, max_iter: int, tol: float, tau: float,
-    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
-) -> tuple[CameraResult, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """:func:`camera_admm` on inputs already checked (C-contiguous float64, finite, shapes as
-    documented, >= 3 positive weights): the lifter's per-alternation call."""
+    init: Camera | None, max_iter: int, tol: float, tau: float, duals: Duals | None = None,
+) -> CameraResult:
+    """:func:`camera_step` on inputs already checked (C-contiguous float64, finite, shapes as
+    documented, >= 3 positive weights): the lifter's per-alternation call (its inputs are checked
+    once per lift)."""
     n = x.shape[0]
     if init is None:
         ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)
@@ -204,14 +188,15 @@ def _camera_admm_checked(
         u1 = np.zeros((n, 2))
         u2 = np.zeros((2, 3))
     else:
-        u1 = np.array(duals[0], dtype=np.float64)
-        u2 = np.array(duals[1], dtype=np.float64)
+        u1 = np.array(duals.data, dtype=np.float64)
+        u2 = np.array(duals.coupling, dtype=np.float64)
     with diverged_as_solver_error("camera step"):
         rot, scale, t, obj, it, converged, ok = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1",
                                                               int(max_iter), float(tol), float(tau))
     if not ok:
         raise SolverError("camera step diverged (non-finite camera); check the inputs")
-    return CameraResult(Camera(rot, scale, t), obj, it, converged), (u1, u2)
+    return CameraResult(objective=obj, n_iter=it, converged=converged, camera=Camera(rot, scale, t),
+                        duals=Duals(u1, u2))
 
 
 @njit
@@ -334,7 +319,7 @@ def _camera_kernel(
     thr: NDArray[np.float64], l2fac: NDArray[np.float64], m: NDArray[np.float64], t: NDArray[np.float64],
     u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int, tol: float, scale_x: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int, bool]:
-    """The ADM iterations of :func:`camera_admm` on plain arrays (compiled by numba when
+    """The ADM iterations of :func:`camera_step` on plain arrays (compiled by numba when
     available): ``(M, U1, U2, iterations, converged)``; ``u1``, ``u2`` are updated in place.
     Written as loops over the (n, 2) arrays: at these sizes array expressions cost more in
     temporaries than in arithmetic."""

@@ -46,7 +46,6 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,13 +54,13 @@ from ._fast import median_rows
 from ._jit import njit
 from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases, default_bases_path
-from .camera import _camera_admm_checked
+from .camera import camera_step_trusted
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
 from .options import LifterOptions
 from .pose_model import LiftedConstraints, PoseModel
 from .pose_step import PriorRows, pose_step
 from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
-from .results import Camera, CameraResult, LiftResult, PoseResult, WarmStart
+from .results import Alternation, Camera, CameraResult, LiftResult, PoseResult, SolveInfo, WarmStart
 from .skeleton import (
     ANTHROPOMETRIC_PROPORTIONS,
     LEFT_LIMBS,
@@ -75,7 +74,7 @@ from .skeleton import (
 )
 from .validation import check_keypoints
 
-__all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter"]
+__all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter", "TrackContext"]
 
 #: Relative cut-off of the bases' singular values in the minimum-norm coefficients of a start
 #: pose (:func:`_mirror_kernel`, a pseudo-inverse): the packaged bases' smallest singular value is
@@ -98,13 +97,61 @@ class _Normalisation:
 
 
 @dataclass(frozen=True)
+class TrackContext:
+    """What a track knows about this frame of its person (:class:`pose_lifter.core.tracking.TrackPolicy`
+    fills it; every field is optional). Used by the hybrid mode; the learned mode reads ``past``.
+
+    Attributes
+    ----------
+    limb_proportions : ndarray, shape (8,), optional
+        The person's limb proportions (the track's estimate over its frames), used for the limb
+        constraints with ``options.prior_limbs``.
+    data_weight : float
+        Factor on the 2D term's weights, in (0, 1] (the track's estimate of its detector's noise).
+    temporal_weight : float or ndarray, shape (12,)
+        With a warm start: weight ``w`` (per joint, or one for all) of the warm start's pose ``Y``
+        in the prior term's target ``(P + w Y) / (1 + w)``, ``Y``'s image positions moved by the
+        median motion of the visible joints since it (0: none; the policy sets it from the track's
+        2D noise, up to ``options.temporal_weight``, and to ``options.missing_temporal_weight`` for
+        joints missing in this frame).
+    past : (ndarray (k, 12, 2), ndarray of bool (k, 12)), optional
+        The track's previous frames (oldest first, evenly spaced up to this one) and which of
+        their joints were used: the input of a temporal prior (``PosePrior.window > 1``; missing
+        history is padded with the oldest frame given, or this one). Ignored by a single-frame
+        prior.
+    gated : bool
+        The frame was screened by the per-track outlier gate; the outlier pass then uses
+        ``options.outlier_threshold_gated`` instead of ``options.outlier_threshold``.
+    fill : (ndarray (12, 2), ndarray of bool (12,)), optional
+        Predicted image positions of the joints (input units) and which of them may stand in for
+        a joint this frame lacks (missing: low confidence or non-finite) in the learned prior's
+        input; the 2D fit still ignores such a joint. A joint the outlier pass flags is not
+        filled: it disagreed with the fit or the prior on this frame (filled or not, the held-out
+        figures agreed within 0.2 mm).
+    """
+
+    limb_proportions: NDArray[np.float64] | None = None
+    data_weight: float = 1.0
+    temporal_weight: float | NDArray[np.float64] = 0.0
+    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+    gated: bool = False
+    fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+
+
+_NO_TRACK = TrackContext()
+
+
+@dataclass(frozen=True)
 class _Run:
+    """A run of alternations from one start: its best alternation's steps and objective, the ADM
+    multipliers it ended with (``options.warm_duals``) and its alternations' history."""
+
     pose: PoseResult
     camera: CameraResult
     objective: float
     n_iter: int
     converged: bool
-    state: dict[str, Any]
+    history: tuple[Alternation, ...] = ()
 
 
 @njit
@@ -278,7 +325,7 @@ class Lifter:
         return xn, w, False
 
     def _camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
-                init: Camera | None, state: dict[str, Any] | None = None) -> CameraResult:
+                init: Camera | None, last: CameraResult | None = None) -> CameraResult:
         o = self._options
         xn, w, doubled = data
         if doubled:
@@ -288,21 +335,17 @@ class Lifter:
 
             cam, obj = reference_camera(xn, pose, w, o.method.loss,
                                         rotation_init=None if init is None else init.rotation)
-            return CameraResult(cam, float(obj), 1, True)
-        duals = state.get("camera") if state is not None and o.warm_duals else None
+            return CameraResult(objective=float(obj), n_iter=1, converged=True, camera=cam)
+        duals = last.duals if last is not None and o.warm_duals else None
         # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
-        res, duals_out = _camera_admm_checked(xn, pose, w, o.method.loss, init, o.camera_max_iter,
-                                              o.camera_tol, o.tau, duals)
-        if state is not None:
-            state["camera"] = duals_out
-        return res
+        return camera_step_trusted(xn, pose, w, o.method.loss, init, o.camera_max_iter, o.camera_tol, o.tau,
+                                   duals)
 
     def _pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
-              alpha0: NDArray[np.float64], state: dict[str, Any] | None = None,
+              alpha0: NDArray[np.float64], last: PoseResult | None = None,
               max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
         o = self._options
-        out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
-        res = pose_step(
+        return pose_step(
             xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
             max_iter=max_iter if max_iter is not None else (o.pose_max_iter if prior is None
                                                              else o.hybrid_pose_max_iter),
@@ -310,50 +353,48 @@ class Lifter:
             eta_growth=o.eta_growth, delta=o.delta,
             inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
             alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
-            duals=state.get("pose") if state is not None and o.warm_duals else None, state_out=out,
+            duals=last.duals if last is not None and o.warm_duals else None,
             newton_tol=o.newton_tol, alpha_prox=o.alpha_prox, prior=prior,
         )
-        if state is not None:
-            state["pose"] = out[0]
-        return res
 
     def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
              cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None,
              pose_max_iter: int | None = None, prior: PriorRows | None = None) -> _Run:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
-        continue a previous run ``start``. The ADM multipliers of both steps are carried from
-        one alternation to the next (``options.warm_duals``)."""
+        continue a previous run ``start``. With ``options.warm_duals`` the ADM multipliers of both
+        steps are carried from one alternation to the next. The run keeps its lowest-objective
+        alternation (the hybrid objective adds the prior's depth rows to the camera step's)."""
         o = self._options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         data = self._camera_data(xn, w, prior)
+        last_pose: PoseResult | None
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
-            it0 = start.n_iter
-            state = dict(start.state)
+            it0, last_pose, history = start.n_iter, start.pose, list(start.history)
         else:
-            state = {}
             alpha = alpha0
-            cam = self._camera(data, self.model.pose(alpha), cam0, state)
-            best, prev, it0 = None, np.inf, 0
+            cam = self._camera(data, self.model.pose(alpha), cam0)
+            best, prev, it0, last_pose, history = None, np.inf, 0, None, []
         converged = False
         it = it0
+        th = o.theta if o.method.sparsity else 0.0
         for it in range(it0 + 1, n_alt + 1):
-            pres = self._pose(xn, cam.camera, w, alpha, state, pose_max_iter, prior)
-            alpha = pres.alpha
-            cam = self._camera(data, pres.pose, cam.camera, state)
-            th = o.theta if o.method.sparsity else 0.0
+            pres = self._pose(xn, cam.camera, w, alpha, last_pose, pose_max_iter, prior)
+            alpha, last_pose = pres.alpha, pres
+            cam = self._camera(data, pres.pose, cam.camera, cam)
             obj = cam.objective + th * float(np.sum(np.abs(alpha)))
             if prior is not None:
                 obj += prior.depth_term(pres.pose, cam.camera.projection)
-            pres = PoseResult(pres.alpha, pres.pose, obj, pres.limb_violation, pres.n_iter, pres.converged)
+            history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),
+                                       SolveInfo(pres.objective, pres.n_iter, pres.converged)))
             if best is None or obj < best.objective:
-                best = _Run(pres, cam, obj, it, False, dict(state))
+                best = _Run(pres, cam, obj, it, False, tuple(history))
             if prev - obj <= o.alternation_tol * max(abs(prev), 1e-12) and np.isfinite(prev):
                 converged = True
                 break
             prev = obj
         assert best is not None
-        return _Run(best.pose, best.camera, best.objective, it, converged, best.state)
+        return _Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
 
     def _mirrored_alpha(self, run: _Run) -> NDArray[np.float64]:
         """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),
@@ -384,12 +425,7 @@ class Lifter:
         points_2d: NDArray[np.float64],
         confidence: NDArray[np.float64] | None = None,
         warm: WarmStart | None = None,
-        limb_proportions: NDArray[np.float64] | None = None,
-        data_weight: float = 1.0,
-        temporal_weight: float | NDArray[np.float64] = 0.0,
-        past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
-        gated: bool = False,
-        fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
+        track: TrackContext | None = None,
     ) -> LiftResult:
         """Lift one skeleton.
 
@@ -403,35 +439,11 @@ class Lifter:
             Non-finite coordinates also count as missing.
         warm : WarmStart, optional
             Previous solution of the same person: a single start from it replaces the
-            multi-start (hybrid: its camera starts the prior's pose; see ``temporal_weight``).
-        limb_proportions : ndarray, shape (8,), optional
-            Hybrid: the person's limb proportions (e.g. a track's estimate over its frames), used
-            for the limb constraints with ``options.prior_limbs``.
-        data_weight : float
-            Hybrid: factor on the 2D term's weights, in (0, 1] (a track's estimate of its
-            detector's noise: :class:`pose_lifter.core.tracking.TrackPolicy`).
-        temporal_weight : float or ndarray, shape (12,)
-            Hybrid with a warm start: weight ``w`` (per joint, or one for all) of the warm start's
-            pose ``Y`` in the prior term's target ``(P + w Y) / (1 + w)``, ``Y``'s image positions
-            moved by the median motion of the visible joints since it (0: none; the per-track
-            policy sets it from the track's 2D noise, up to ``options.temporal_weight``, and to
-            ``options.missing_temporal_weight`` for joints missing in this frame).
-        past : (ndarray (k, 12, 2), ndarray of bool (k, 12)), optional
-            The track's previous frames (oldest first, evenly spaced up to this one) and which of
-            their joints were used: the input of a temporal prior (``PosePrior.window > 1``;
-            missing history is padded with the oldest frame given, or this one). Ignored by a
-            single-frame prior.
-        gated : bool
-            Hybrid: the frame was screened by the per-track outlier gate
-            (:class:`pose_lifter.core.tracking.TrackPolicy`); the outlier pass then uses
-            ``options.outlier_threshold_gated`` instead of ``options.outlier_threshold``.
-        fill : (ndarray (12, 2), ndarray of bool (12,)), optional
-            Hybrid: predicted image positions of the joints (input units) and which of them may
-            stand in for a joint this frame lacks (missing: low confidence or non-finite) in the
-            learned prior's input; the 2D fit still ignores such a joint (the per-track policy
-            predicts where the track last had it, moved by the visible joints' motion). A joint
-            the outlier pass flags is not filled: it disagreed with the fit or the prior on this
-            frame (filled or not, the held-out figures agreed within 0.2 mm).
+            multi-start (hybrid: its camera starts the prior's pose; see
+            ``TrackContext.temporal_weight``).
+        track : TrackContext, optional
+            What the person's track knows of this frame (hybrid and learned modes; the per-track
+            policy, :class:`pose_lifter.core.tracking.TrackPolicy`, fills it).
 
         Returns
         -------
@@ -440,7 +452,13 @@ class Lifter:
         Raises
         ------
         InvalidInputError, TooFewJointsError
+            Bad input (shapes, too few visible joints, a bad ``track`` field).
+        SolverError
+            The solve diverged on valid input.
         """
+        tc = _NO_TRACK if track is None else track
+        limb_proportions, data_weight = tc.limb_proportions, tc.data_weight
+        temporal_weight, past, gated, fill = tc.temporal_weight, tc.past, tc.gated, tc.fill
         x, w = self._weights(points_2d, confidence)
         norm = self._normalise(x, w)
         mode = self._options.mode
@@ -721,6 +739,7 @@ class Lifter:
             weights=w,
             total_alternations=total,
             prior_pose=prior_pose,
+            history=run.history,
         )
         for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
             if not np.all(np.isfinite(arr)):

@@ -84,13 +84,13 @@ def _riemannian_adm_kernel(
     rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
     best_obj: float, eta: float, eta_growth: float, eta_max: float, th: float, l1: bool, max_iter: int,
     tol: float, alpha_max_iter: int, alpha_tol: float, prox: float, scale_c: float,
-) -> tuple[NDArray[np.float64], float, float, int, bool]:
+) -> tuple[NDArray[np.float64], float, float, int, bool, int]:
     """The pose ADM loop of :func:`pose_step` with the Riemannian alpha-step, in one kernel (the
     Python loop's updates; ``V^T alpha`` is carried instead of recomputed). ``u1``, ``u2``
     (scaled multipliers) are updated in place. ``vc = V`` (k, r), ``vt = V^T`` (r, k) and
     ``cu24_t = (C U S)^T`` (r, 24) come C-contiguous (``PoseModel.riemannian_arrays``). Returns
-    ``(best alpha, best objective, final eta, iterations, converged)``; ``best_obj`` is the
-    objective of ``alpha0`` if feasible, else ``inf``."""
+    ``(best alpha, best objective, final eta, iterations, converged, alpha-step iterations)``;
+    ``best_obj`` is the objective of ``alpha0`` if feasible, else ``inf``."""
     m = c.size
     k = alpha0.size
     alpha = alpha0.copy()
@@ -104,6 +104,7 @@ def _riemannian_adm_kernel(
     ax = mus @ sk
     converged = False
     it = 0
+    alpha_it = 0
     # the vector updates are written as loops (fused, no temporaries): the same arithmetic as
     # _adm_split / _adm_dual_update, summed sequentially
     ax_prev = np.empty(m)
@@ -127,8 +128,8 @@ def _riemannian_adm_kernel(
             bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
             beta[i] = bi
             d2[i] = bi - u2[i]
-        _riemannian_alpha_kernel(d1, d2, sk, mus, vc, vt, gs0, q, rmat_t, s1_t, s2_t, s0, cu24_t, cmu24, rad,
-                                 alpha_max_iter, alpha_tol, prox, alpha, sk)
+        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, vc, vt, gs0, q, rmat_t, s1_t, s2_t, s0, cu24_t,
+                                             cmu24, rad, alpha_max_iter, alpha_tol, prox, alpha, sk)
         ax, ax_prev = ax_prev, ax
         ax[:] = 0.0
         _axpy_rows(mus_t, sk, ax)
@@ -162,7 +163,7 @@ def _riemannian_adm_kernel(
             break
     if not math.isfinite(best_obj):
         best_alpha = alpha
-    return best_alpha, best_obj, eta, it, converged
+    return best_alpha, best_obj, eta, it, converged, alpha_it
 
 
 @njit
@@ -188,7 +189,7 @@ def _riemannian_pose_kernel(
     th: float, l1: bool, eta: float, eta_growth: float, eta_max: float, max_iter: int, tol: float,
     alpha_max_iter: int, alpha_tol: float, prox: float,
     xp: NDArray[np.float64], pw: NDArray[np.float64], m3: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool]:
+) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool, int]:
     """:func:`pose_step` with the Riemannian alpha-step, set-up included: ``c = x - t - M mu``,
     ``M U S``, the limb-coordinate quadratic (:func:`_sphere_setup`), then
     :func:`_riemannian_adm_kernel`. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,), alpha0 (k,),
@@ -199,8 +200,8 @@ def _riemannian_pose_kernel(
     prior's image position, a = x, y), and with ``pw[j, 1] > 0`` one row
     ``pw[j, 1] |xp[j, 2] - m3 (y_j - mean_i y_i)|`` (its depth relative to the joints' mean;
     ``m3`` = scale times the camera's third rotation row). ``pw`` all zero: the paper's problem.
-    Returns ``(alpha, objective, limb violation, pose (36,), final eta, iterations,
-    converged)``."""
+    Returns ``(alpha, objective, limb violation, pose (36,), final eta, iterations, converged,
+    alpha-step iterations)``."""
     r = sig.size
     nj = x.shape[0]
     n_xy = 0
@@ -257,11 +258,11 @@ def _riemannian_pose_kernel(
     if _limb_violation_jit(mean + comps @ alpha0, limb_matrix, rad) < 1e-6:
         best_obj = _objective(c - mus @ (vt @ alpha0), wts, alpha0, th, l1)
     scale_c = max(1.0, math.sqrt(float(c @ c)))
-    best_alpha, best_obj, eta, it, converged = _riemannian_adm_kernel(
+    best_alpha, best_obj, eta, it, converged, alpha_it = _riemannian_adm_kernel(
         c, wts, mus, vc, vt, gs0, q, rmat, s1, s2, s0, cu24_t, cmu24, rad, alpha0, u1, u2, best_obj, eta,
         eta_growth, eta_max, th, l1, max_iter, tol, alpha_max_iter, alpha_tol, prox, scale_c)
     if not math.isfinite(best_obj):
         best_obj = _objective(c - mus @ (vt @ best_alpha), wts, best_alpha, th, l1)
     y = mean + comps @ best_alpha
-    return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged
+    return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged, alpha_it
 

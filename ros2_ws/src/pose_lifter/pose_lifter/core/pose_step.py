@@ -57,15 +57,15 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ._linalg import _EYE8
-from .alpha.lifted_admm import QStepFn, lifted_alpha_admm, restore_feasibility
-from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
-from .alpha.sqp import NEWTON_MAX_ITER, _newton_alpha_kernel, newton_alpha
+from .alpha.base import AlphaStep, Coordinates, LiftedStep, UnconstrainedStep
+from .alpha.lifted_admm import QStepFn
+from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER, SphereNewtonStep
+from .alpha.sqp import ReducedSQPStep
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import Variant
 from .pose_kernel import _adm_dual_update, _adm_split, _grow_penalty, _objective, _riemannian_pose_kernel
 from .pose_model import PoseModel
-from .results import PoseResult
+from .results import Duals, PoseResult
 from .skeleton import N_JOINTS
 
 
@@ -117,49 +117,80 @@ def pose_objective(
                       np.ascontiguousarray(alpha, dtype=np.float64), float(theta), loss == "l1")
 
 
-def _riemannian_pose_step(
+def _fused_riemannian(
     x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
-    weights: NDArray[np.float64], model: PoseModel, l1: bool, th: float, alpha0: NDArray[np.float64],
-    max_iter: int, tol: float, eta: float, eta_growth: float, eta_max: float,
-    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
-    state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None, newton_tol: float,
-    alpha_prox: float, prior: PriorRows | None = None,
+    weights: NDArray[np.float64], model: PoseModel, l1: bool, th: float, alpha: NDArray[np.float64],
+    max_iter: int, tol: float, eta: float, eta_growth: float, eta_max: float, duals: Duals | None,
+    newton_tol: float, alpha_prox: float, prior: PriorRows | None,
 ) -> PoseResult:
-    """:func:`pose_step` with ``alpha_solver="riemannian"`` (limbs on, reduced lifting, onto limb
-    map): one call of :func:`_riemannian_pose_kernel`."""
-    k = model.n_bases
-    alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
-    if alpha.shape != (k,):
-        raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
+    """:func:`pose_step` with the Riemannian alpha-step as one call of the fused kernel
+    :func:`pose_lifter.core.pose_kernel._riemannian_pose_kernel` (set-up included)."""
     coords = model.limb_coordinates
     assert coords is not None
     z, n, s0, rad = coords
     if prior is not None and prior.limb_radii is not None:
         rad = np.ascontiguousarray(prior.limb_radii, dtype=np.float64)
-    cmu24 = model.kernel_limbs[1]
     if prior is None:
         xp, pw, m3 = _NO_PRIOR
     else:
         xp, pw = prior.target, prior.weights
         m3 = prior.depth_row(m0)
-    m = 2 * N_JOINTS + 2 * int(np.count_nonzero(pw[:, 0] > 0)) + int(np.count_nonzero(pw[:, 1] > 0))
-    if duals is None or duals[0].shape != (m,):
-        u1, u2 = np.zeros(m), np.zeros(k)
-    else:
-        u1 = np.asarray(duals[0], dtype=np.float64) / eta
-        u2 = np.asarray(duals[1], dtype=np.float64) / eta
+    u1, u2 = _scaled_duals(duals, _n_rows(prior), model.n_bases, eta)
     vc, vt, cu24_t = model.riemannian_arrays
-    best, obj, viol, y, eta_end, it, converged = _riemannian_pose_kernel(
+    best, obj, viol, y, eta_end, it, converged, alpha_it = _riemannian_pose_kernel(
         np.ascontiguousarray(x), np.ascontiguousarray(m0),
         np.ascontiguousarray(translation, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64),
         model.mean, model.u, model.sig, vc, vt, model.components, model._limb_matrix, z, n, s0, rad, cu24_t,
-        cmu24, alpha, u1, u2, float(th), bool(l1), float(eta), float(eta_growth), float(eta_max),
-        int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox), xp, pw, m3)
-    if state_out is not None:
-        state_out.append((eta_end * u1, eta_end * u2))
+        model.kernel_limbs[1], alpha, u1, u2, float(th), bool(l1), float(eta), float(eta_growth),
+        float(eta_max), int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox),
+        xp, pw, m3)
     if not np.all(np.isfinite(best)):
         raise SolverError("pose step diverged (non-finite coefficients)")
-    return PoseResult(best, y.reshape(N_JOINTS, 3), float(obj), float(viol), int(it), bool(converged))
+    return PoseResult(objective=float(obj), n_iter=int(it), converged=bool(converged), alpha=best,
+                      pose=y.reshape(N_JOINTS, 3), limb_violation=float(viol), alpha_iter=int(alpha_it),
+                      duals=Duals(eta_end * u1, eta_end * u2))
+
+
+def _n_rows(prior: PriorRows | None) -> int:
+    """Rows of the pose step's L1 objective: 2 per joint, plus the prior's (2 per image position,
+    1 per depth)."""
+    if prior is None:
+        return 2 * N_JOINTS
+    pw = prior.weights
+    return 2 * N_JOINTS + 2 * int(np.count_nonzero(pw[:, 0] > 0)) + int(np.count_nonzero(pw[:, 1] > 0))
+
+
+def _scaled_duals(duals: Duals | None, m: int, k: int, eta: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The scaled multipliers ``u1`` (m,), ``u2`` (k,) the ADM starts from (zeros without a warm
+    start of the right size)."""
+    if duals is None or duals.data.shape != (m,):
+        return np.zeros(m), np.zeros(k)
+    return np.asarray(duals.data, dtype=np.float64) / eta, np.asarray(duals.coupling, dtype=np.float64) / eta
+
+
+def _rows(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
+          weights: NDArray[np.float64], model: PoseModel, prior: PriorRows | None
+          ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The L1 rows of the pose objective ``sum_i wts_i rho(c_i - (M U S s)_i)``: ``c`` (m,), ``wts``
+    (m,) and ``mus = M U S`` (m, r) (``s = V^T alpha``): 2 per joint, then the prior's rows in the
+    fused kernel's order (:func:`pose_lifter.core.pose_kernel._riemannian_pose_kernel`)."""
+    u3 = model.u.reshape(N_JOINTS, 3, -1)
+    mean3 = model.mean.reshape(N_JOINTS, 3)
+    c = (x - translation - mean3 @ m0.T).reshape(-1)
+    mus = np.einsum("ab,jbr->jar", m0, u3).reshape(2 * N_JOINTS, -1) * model.sig  # (24, r)
+    wts = np.repeat(np.asarray(weights, dtype=np.float64), 2)
+    if prior is None:
+        return c, wts, mus
+    xy = prior.weights[:, 0] > 0
+    z = prior.weights[:, 1] > 0
+    m3 = prior.depth_row(m0)
+    c_xy = (prior.target[:, :2] - translation - mean3 @ m0.T)[xy].reshape(-1)
+    mus_xy = mus.reshape(N_JOINTS, 2, -1)[xy].reshape(-1, mus.shape[1])
+    c_z = prior.target[z, 2] - (mean3[z] - mean3.mean(axis=0)) @ m3
+    mus_z = np.einsum("a,jar->jr", m3, (u3 - u3.mean(axis=0))[z]) * model.sig
+    wts_all = np.concatenate([wts, np.repeat(prior.weights[xy, 0], 2), prior.weights[z, 1]])
+    return np.concatenate([c, c_xy, c_z]), wts_all, np.vstack([mus, mus_xy, mus_z])
 
 
 def pose_step(
@@ -181,15 +212,19 @@ def pose_step(
     inner_max_iter: int = 60,
     inner_tol: float = 1e-6,
     alpha_step: str = "reduced",
-    alpha_solver: str = "admm",
+    alpha_solver: str = "riemannian",
     qstep_fn: QStepFn | None = None,
-    duals: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-    state_out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
+    duals: Duals | None = None,
     newton_tol: float = 1e-9,
     alpha_prox: float = 1.0,
     prior: PriorRows | None = None,
+    fused: bool = True,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
+
+    One outer ADM loop over an alpha-step solver (:class:`pose_lifter.core.alpha.base.AlphaStep`);
+    with the Riemannian alpha-step (``fused``) the same loop runs as one compiled kernel
+    (:mod:`pose_lifter.core.pose_kernel`), checked against this loop in the tests.
 
     Parameters
     ----------
@@ -216,16 +251,14 @@ def pose_step(
     inner_max_iter, inner_tol : int, float
         Inner ADM cap and tolerance.
     alpha_step : {"reduced", "full"}
-    alpha_solver : {"admm", "newton", "riemannian"}
+    alpha_solver : {"riemannian", "newton", "admm"}
         ``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map
         (``model.limb_coordinates``); otherwise ``"newton"`` is used.
     qstep_fn : callable, optional
         Replaces the closed-form Q-step (the cvxpy reference path).
-    duals : (ndarray (24,), ndarray (k,)), optional
-        Warm start of the (unscaled) ADM multipliers of ``gamma = c - A alpha`` and
-        ``beta = alpha``, e.g. from the previous alternation (default zeros).
-    state_out : list, optional
-        If given, the final unscaled multipliers are appended to it (for the next warm start).
+    duals : Duals, optional
+        Warm start of the unscaled ADM multipliers of ``gamma = c - A alpha`` and ``beta = alpha``,
+        e.g. the previous alternation's ``PoseResult.duals`` (default zeros).
     newton_tol : float
         Relative KKT tolerance of the reduced Newton alpha-step (``alpha_solver="newton"``) and
         of the Riemannian one (which stops at ``RIEMANNIAN_MAX_ITER`` steps first, as a rule).
@@ -234,11 +267,14 @@ def pose_step(
     prior : PriorRows, optional
         The hybrid mode's L1 prior term (:class:`PriorRows`), added to the objective; needs the
         Riemannian path (limbs on, reduced lifting, onto limb map).
+    fused : bool
+        Riemannian path: run the compiled kernel (False: the Python loop, the kernel's reference).
 
     Returns
     -------
     PoseResult
-        The iterate with the lowest objective among the feasible ones visited.
+        The iterate with the lowest objective among the feasible ones visited, with the final
+        multipliers.
 
     Raises
     ------
@@ -248,104 +284,83 @@ def pose_step(
         The ADM diverged (non-finite coefficients).
     """
     loss = variant.loss
+    l1 = loss == "l1"
     th = float(theta) if variant.sparsity else 0.0
     x = np.asarray(points, dtype=np.float64)
     m0 = np.asarray(projection, dtype=np.float64)
     k = model.n_bases
-    if (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
-            and model.limb_coordinates is not None):
-        with diverged_as_solver_error("pose step"):
-            return _riemannian_pose_step(x, m0, translation, weights, model, loss == "l1", th, alpha0,
-                                         max_iter, tol, eta, eta_growth, eta_max, duals, state_out,
-                                         newton_tol, alpha_prox, prior)
-    if prior is not None:
-        raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
-                                "lifting and bases whose limb map is onto (>= 24 basis directions)")
-    wts = np.repeat(np.asarray(weights, dtype=np.float64), 2)  # (24,)
-    # c = x - t - M mu, as a (24,) vector; A alpha = (M U) (S V^T alpha)
-    u3 = model.u.reshape(N_JOINTS, 3, -1)
-    mu_proj = model.mean.reshape(N_JOINTS, 3) @ m0.T
-    c = (x - translation - mu_proj).reshape(-1)
-    sig, v = model.sig, model.v
-    mus = np.einsum("ab,jbr->jar", m0, u3).reshape(2 * N_JOINTS, -1) * sig  # (24, r) = M U S
-
-    def a_times(alpha: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(mus @ (v.T @ alpha))
-
-    full = alpha_step == "full"
-    if full:
-        a_full = np.einsum("ab,jbk->jak", m0, model.components.reshape(N_JOINTS, 3, k)).reshape(
-            2 * N_JOINTS, k
-        )
-        g_full = a_full.T @ a_full + np.eye(k)
-    g_red = mus.T @ mus + np.eye(sig.size)
-    cons = model.full if full else model.reduced
-    if alpha_solver == "riemannian":  # not applicable here (limbs off, full lifting or a limb map
-        alpha_solver = "newton"        # that is not onto): the SQP solves the same problem
-
-    def alpha_update(d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
-                     ) -> NDArray[np.float64]:
-        if full:
-            lin = a_full.T @ d1 + d2
-            if not variant.limbs:
-                return np.asarray(np.linalg.solve(g_full, lin))
-            wmat = np.zeros((k + 1, k + 1))
-            wmat[:k, :k] = g_full
-            wmat[:k, k] = -lin
-            wmat[k, :k] = -lin
-            wmat[k, k] = float(d1 @ d1 + d2 @ d2)
-            z0 = np.append(alpha, 1.0)
-        else:
-            if alpha_solver == "newton" and variant.limbs:
-                return _newton_alpha_kernel(d1, d2, alpha, mus, v, g_red, *model.kernel_limbs,
-                                            NEWTON_MAX_ITER, float(newton_tol), _EYE8)
-            vtd2 = v.T @ d2
-            lin = mus.T @ d1 + vtd2
-            if not variant.limbs:
-                s = np.linalg.solve(g_red, lin)
-                return np.asarray(d2 - v @ vtd2 + v @ s)
-            r = sig.size
-            wmat = np.zeros((r + 1, r + 1))
-            wmat[:r, :r] = g_red
-            wmat[:r, r] = -lin
-            wmat[r, :r] = -lin
-            wmat[r, r] = float(d1 @ d1 + vtd2 @ vtd2)
-            z0 = np.append(v.T @ alpha, 1.0)
-        if alpha_solver == "newton":  # the full lifting (the reduced one returned above)
-            z = newton_alpha(wmat, cons, z0).z
-        else:
-            z = lifted_alpha_admm(wmat, cons, z0, delta, inner_max_iter, inner_tol, qstep_fn).z
-            z = restore_feasibility(cons, z)
-        if full:
-            return np.asarray(z[:-1])
-        vtd2 = v.T @ d2
-        return np.asarray(d2 - v @ vtd2 + v @ z[:-1])
-
-    alpha = np.asarray(alpha0, dtype=np.float64).copy()
+    alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
     if alpha.shape != (k,):
         raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
-    feas_tol = 1e-6
+    riemannian = (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
+                  and model.limb_coordinates is not None)
+    if prior is not None and not riemannian:
+        raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
+                                "lifting and bases whose limb map is onto (>= 24 basis directions)")
+    with diverged_as_solver_error("pose step"):
+        if riemannian and fused:
+            return _fused_riemannian(x, m0, translation, weights, model, l1, th, alpha, max_iter, tol, eta,
+                                     eta_growth, eta_max, duals, newton_tol, alpha_prox, prior)
+        c, wts, mus = _rows(x, m0, np.asarray(translation, dtype=np.float64), weights, model, prior)
+        # "riemannian" where it does not apply (limbs off, the full lifting or a limb map that is not
+        # onto): the SQP solves the same problem
+        solver = "newton" if alpha_solver == "riemannian" and not riemannian else alpha_solver
+        step = _alpha_step(model, variant, m0, mus, alpha, alpha_step, solver, delta, inner_max_iter,
+                           inner_tol, qstep_fn, newton_tol, alpha_prox, prior)
+        return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, tol, eta, eta_growth,
+                    eta_max, duals)
 
+
+def _alpha_step(model: PoseModel, variant: Variant, m0: NDArray[np.float64], mus: NDArray[np.float64],
+                alpha0: NDArray[np.float64], alpha_step: str, solver: str, delta: float, inner_max_iter: int,
+                inner_tol: float, qstep_fn: QStepFn | None, newton_tol: float, alpha_prox: float,
+                prior: PriorRows | None) -> AlphaStep:
+    """The alpha-step solver of one pose step (see :func:`pose_step`)."""
+    if solver == "riemannian":
+        radii = model.limb_coordinates[3] if model.limb_coordinates is not None else None
+        if prior is not None and prior.limb_radii is not None:
+            radii = prior.limb_radii
+        assert radii is not None
+        return SphereNewtonStep(model, mus, radii, alpha0, newton_tol, alpha_prox)
+    if alpha_step == "full":
+        k = model.n_bases
+        a_full = np.einsum("ab,jbk->jak", m0, model.components.reshape(N_JOINTS, 3, k))
+        coords, cons = Coordinates(a_full.reshape(2 * N_JOINTS, k), None), model.full
+    else:
+        if solver == "newton" and variant.limbs:
+            return ReducedSQPStep(model, mus, newton_tol)
+        coords, cons = Coordinates(mus, model.v), model.reduced
+    if not variant.limbs:
+        return UnconstrainedStep(coords)
+    return LiftedStep(coords, cons, "newton" if solver == "newton" else "admm", delta, inner_max_iter,
+                      inner_tol, qstep_fn)
+
+
+def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], model: PoseModel,
+         variant: Variant, th: float, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int, tol: float,
+         eta: float, eta_growth: float, eta_max: float, duals: Duals | None) -> PoseResult:
+    """The outer pose ADM of the module docstring on the rows ``(c, wts, mus)`` (see :func:`_rows`)
+    with the alpha-step ``step``."""
+    l1 = variant.loss == "l1"
+    v = model.v
+    k = model.n_bases
+    feas_tol = 1e-6
     best_alpha = alpha.copy()
     best_obj = np.inf
     if not variant.limbs or model.limb_violation(alpha) < feas_tol:
-        best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
-    if duals is None:
-        u1 = np.zeros_like(c)
-        u2 = np.zeros(k)
-    else:
-        u1 = np.asarray(duals[0], dtype=np.float64) / eta
-        u2 = np.asarray(duals[1], dtype=np.float64) / eta
+        best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
+    u1, u2 = _scaled_duals(duals, c.size, k, eta)
     beta = alpha.copy()
     converged = False
     it = 0
+    alpha_it = 0
     scale_c = max(1.0, float(np.linalg.norm(c)))
-    l1 = loss == "l1"
-    ax = a_times(alpha)
+    ax = mus @ (v.T @ alpha)
     for it in range(1, max_iter + 1):
         beta_prev, ax_prev = beta, ax
         gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, float(eta), th, l1)
-        alpha = alpha_update(d1, d2, alpha)
+        alpha, n = step(d1, d2, alpha)
+        alpha_it += n
         ax, obj, primal, dual = _adm_dual_update(c, gamma, alpha, beta, beta_prev, ax_prev, u1, u2, mus, v,
                                                  wts, th, l1, scale_c)
         eta = _grow_penalty(float(eta), float(eta_growth), float(eta_max), u1, u2)
@@ -354,13 +369,13 @@ def pose_step(
         if primal < tol and dual < tol:
             converged = True
             break
-    if state_out is not None:
-        state_out.append((eta * u1, eta * u2))
     if not np.isfinite(best_obj):
         # no feasible iterate (cannot happen with restore_feasibility unless it failed)
         best_alpha = alpha
-        best_obj = pose_objective(c - a_times(alpha), wts, alpha, th, loss)
+        best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
     if not np.all(np.isfinite(best_alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
     viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
-    return PoseResult(best_alpha, model.pose(best_alpha), best_obj, viol, it, converged)
+    return PoseResult(objective=float(best_obj), n_iter=it, converged=converged, alpha=best_alpha,
+                      pose=model.pose(best_alpha), limb_violation=viol, alpha_iter=alpha_it,
+                      duals=Duals(eta * u1, eta * u2))

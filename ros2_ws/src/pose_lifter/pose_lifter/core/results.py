@@ -1,4 +1,10 @@
-"""Result and state types shared by the solver steps and the lifter."""
+"""Result and state types shared by the solver steps and the lifter.
+
+Every solver result is a :class:`SolveInfo` (``objective``, ``n_iter``, ``converged``, the same
+meaning everywhere: the objective the solver minimised at the point it returns, its iterations,
+and whether its stopping rule was met before its iteration cap); ADM multipliers carried from one
+step to the next are :class:`Duals`.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Camera", "CameraResult", "LiftResult", "PoseResult", "WarmStart"]
+__all__ = ["AlphaResult", "Alternation", "Camera", "CameraResult", "Duals", "LiftResult", "PoseResult",
+           "SolveInfo", "WarmStart"]
 
 
 @dataclass(frozen=True)
@@ -40,38 +47,91 @@ class Camera:
 
 
 @dataclass(frozen=True)
-class CameraResult:
-    """Output of the camera step: the camera, its objective and diagnostics."""
+class SolveInfo:
+    """How a solver ended: the base of every solver result.
 
-    camera: Camera
+    Attributes
+    ----------
+    objective : float
+        The objective the solver minimises, at the returned point.
+    n_iter : int
+        Iterations run (<= the solver's cap).
+    converged : bool
+        The stopping rule was met (False: the iteration cap was reached, or a line search failed).
+    """
+
     objective: float
     n_iter: int
     converged: bool
 
 
 @dataclass(frozen=True)
-class PoseResult:
-    """Output of the pose step.
+class Duals:
+    """Unscaled ADM multipliers of a step, to warm-start the next step of the same solve.
+
+    Attributes
+    ----------
+    data : ndarray
+        Of the data split (camera step: ``E = X - M Y - t``, shape (n, 2); pose step:
+        ``gamma = c - A alpha``, shape (m,)).
+    coupling : ndarray
+        Of the coupling constraint (camera step: ``M = scale R[:2]``, shape (2, 3); pose step:
+        ``beta = alpha``, shape (k,)).
+    """
+
+    data: NDArray[np.float64]
+    coupling: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CameraResult(SolveInfo):
+    """Output of the camera step: the camera (``objective`` its weighted loss) and the final ADM
+    multipliers (None from the reference solver)."""
+
+    camera: Camera
+    duals: Duals | None = None
+
+
+@dataclass(frozen=True)
+class AlphaResult(SolveInfo):
+    """Output of an alpha-step solver: ``x`` is ``z = [s; 1]`` of a lifted problem (``objective`` =
+    ``z^T W z``) or the reduced coordinates ``s`` (``objective`` = ``s^T G s - 2 lin^T s``)."""
+
+    x: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PoseResult(SolveInfo):
+    """Output of the pose step (``objective`` = ``loss + theta ||alpha||_1`` + the prior's rows, at
+    ``alpha``).
 
     Attributes
     ----------
     alpha : ndarray, shape (k,)
     pose : ndarray, shape (12, 3)
         ``mean + B alpha`` in the model frame.
-    objective : float
-        ``loss + theta ||alpha||_1`` at ``alpha``.
     limb_violation : float
         ``max_i | ||C_i y|| - sqrt(L_i) |`` (0 when the variant has no limb constraints).
-    n_iter : int
-    converged : bool
+    alpha_iter : int
+        Iterations of the alpha-step solver, summed over the ADM's iterations.
+    duals : Duals, optional
+        The final unscaled multipliers (for a warm start of the next pose step).
     """
 
     alpha: NDArray[np.float64]
     pose: NDArray[np.float64]
-    objective: float
     limb_violation: float
-    n_iter: int
-    converged: bool
+    alpha_iter: int = 0
+    duals: Duals | None = None
+
+
+@dataclass(frozen=True)
+class Alternation:
+    """One camera/pose alternation of a run: the run's objective after it and how each step ended."""
+
+    objective: float
+    camera: SolveInfo
+    pose: SolveInfo
 
 
 @dataclass(frozen=True)
@@ -121,6 +181,9 @@ class LiftResult:
         Camera/pose alternations over all starts (the solve's work: a cold solve's screening
         alternation of every start plus the refined starts' further ones; a warm solve's
         warm and mirrored runs).
+    history : tuple of Alternation
+        The kept run's alternations in order (objective, and each step's convergence); empty in
+        learned mode.
     """
 
     pose: NDArray[np.float64]
@@ -137,6 +200,7 @@ class LiftResult:
     weights: NDArray[np.float64]
     total_alternations: int = 0
     prior_pose: NDArray[np.float64] | None = None
+    history: tuple[Alternation, ...] = ()
 
     def warm_start(self) -> WarmStart:
         """The state to warm-start the next frame of the same person."""

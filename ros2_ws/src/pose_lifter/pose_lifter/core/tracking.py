@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from ._fast import median_rows
 from .errors import PoseLifterError
-from .lifter import Lifter
+from .lifter import Lifter, TrackContext
 from .results import LiftResult, WarmStart
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF
 
@@ -373,16 +373,14 @@ class TrackPolicy:
                 assert track is not None
                 if track.fit_is_sound():
                     fill = (predicted, track.unused < opts.fill_missing_frames)
-            result = self.lifter.lift(points, confidence, warm=warm, limb_proportions=limbs, data_weight=dw,
-                                      temporal_weight=tw, past=past, gated=screened, fill=fill)
+            context = TrackContext(limbs, dw, tw, past, screened, fill)
+            result = self.lifter.lift(points, confidence, warm=warm, track=context)
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
                 ref = float(median_rows(np.asarray(track.objectives)))
                 if result.objective > self.reinit_ratio * ref:
-                    cold = self.lifter.lift(points, confidence, warm=None, limb_proportions=limbs,
-                                            data_weight=dw, temporal_weight=tw, past=past, gated=screened,
-                                            fill=fill)
+                    cold = self.lifter.lift(points, confidence, warm=None, track=context)
                     if cold.objective < result.objective:
                         result, reinit = cold, True
         except PoseLifterError:

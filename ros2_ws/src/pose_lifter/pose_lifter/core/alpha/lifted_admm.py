@@ -5,13 +5,13 @@ constraints."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
 from ..pose_model import LiftedConstraints
+from ..results import AlphaResult
 
 QStepFn = Callable[
     [NDArray[np.float64], "LiftedConstraints", NDArray[np.float64], NDArray[np.float64], float],
@@ -48,17 +48,10 @@ def top_eigenpair(s: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
     return float(vals[0]), vecs[:, 0]
 
 
-@dataclass(frozen=True)
-class _Lifted:
-    z: NDArray[np.float64]
-    n_iter: int
-    converged: bool
-
-
 def lifted_alpha_admm(
     w: NDArray[np.float64], cons: LiftedConstraints, z0: NDArray[np.float64], delta: float = 1.0,
     max_iter: int = 60, tol: float = 1e-6, qstep_fn: QStepFn | None = None,
-) -> _Lifted:
+) -> AlphaResult:
     """Inner ADM of the appendix for ``min tr(W Q)`` s.t. the limb constraints, ``Q = P``,
     ``P`` PSD of rank <= 1.
 
@@ -66,7 +59,8 @@ def lifted_alpha_admm(
     (reset for every alpha-subproblem; see the pitfalls note §2). Penalty ``delta`` constant.
     Stops when ``||Q - P||_F`` and the change of ``P`` are below ``tol * max(1, ||P||_F)``.
 
-    Returns the rank-1 factor ``z`` of ``P`` scaled to ``z[-1] = 1``.
+    Returns the rank-1 factor ``z`` of ``P`` scaled to ``z[-1] = 1`` (``x``; ``objective`` =
+    ``z^T W z``).
     """
     step = qstep if qstep_fn is None else qstep_fn
     p = np.outer(z0, z0)
@@ -91,7 +85,7 @@ def lifted_alpha_admm(
         if r_primal < tol and r_change < tol:
             converged = True
             break
-    return _Lifted(z, it, converged)
+    return AlphaResult(objective=float(z @ w @ z), n_iter=it, converged=converged, x=z)
 
 
 def restore_feasibility(
@@ -109,3 +103,14 @@ def restore_feasibility(
     return z
 
 
+
+
+def lifted_quadratic(g: NDArray[np.float64], lin: NDArray[np.float64], const: float) -> NDArray[np.float64]:
+    """``W`` (n + 1, n + 1) with ``z^T W z = s^T G s - 2 lin^T s + const`` for ``z = [s; 1]``."""
+    n = g.shape[0]
+    wmat = np.zeros((n + 1, n + 1))
+    wmat[:n, :n] = g
+    wmat[:n, n] = -lin
+    wmat[n, :n] = -lin
+    wmat[n, n] = const
+    return wmat

@@ -12,6 +12,7 @@ from .._jit import njit
 from .._linalg import _axpy_rows, _cholesky_solve
 from ..errors import InvalidInputError
 from ..pose_model import PoseModel
+from ..results import AlphaResult
 
 #: Iteration cap of each Riemannian Newton alpha-step inside the pose ADM (an inexact, proximal
 #: ADM). Measured on 190 recorded warm lifts of 5 committed bags, pose_max_iter 30: 1, 2, 3 Newton
@@ -24,12 +25,13 @@ RIEMANNIAN_MAX_ITER = 1
 def riemannian_alpha(
     gmat: NDArray[np.float64], lin: NDArray[np.float64], model: PoseModel, s0: NDArray[np.float64],
     max_iter: int = 100, tol: float = 1e-10,
-) -> tuple[NDArray[np.float64], int, bool]:
+) -> AlphaResult:
     """The reduced alpha-step ``min s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i``
     (the problem of :func:`newton_alpha` on ``model.reduced``) by Riemannian Newton in limb
     coordinates: the free directions eliminated in closed form (:func:`_sphere_setup`), then
     :func:`_sphere_newton` on the product of the 8 limb spheres from the limb vectors of ``s0``.
-    Shapes: gmat (r, r) positive definite, lin (r,), s0 (r,). Returns ``(s, iterations, converged)``.
+    Shapes: gmat (r, r) positive definite, lin (r,), s0 (r,). Returns ``s`` (``x``) with its
+    objective ``s^T G s - 2 lin^T s``.
 
     Raises
     ------
@@ -46,7 +48,9 @@ def riemannian_alpha(
     cu24, cmu24 = model.kernel_limbs[:2]
     lv, it, conv = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ np.asarray(s0, dtype=np.float64), rad,
                                   int(max_iter), float(tol))
-    return sz + s1 @ lv + s2 @ h, int(it), bool(conv)
+    s = sz + s1 @ lv + s2 @ h
+    lin = np.asarray(lin, dtype=np.float64)
+    return AlphaResult(objective=float(s @ g @ s - 2.0 * lin @ s), n_iter=int(it), converged=bool(conv), x=s)
 
 
 
@@ -267,3 +271,39 @@ def _riemannian_alpha_kernel(
     return it
 
 
+
+
+class SphereNewtonStep:
+    """The alpha-step protocol (:class:`pose_lifter.core.alpha.base.AlphaStep`) by
+    :func:`_riemannian_alpha_kernel` for one pose step, in Python around the kernel: the pose
+    ADM's loop that the fused kernel (:func:`pose_lifter.core.pose_kernel._riemannian_pose_kernel`)
+    is checked against. ``mus = M U S`` (m, r); ``radii`` (8,) the limb lengths. It carries
+    ``s = V^T alpha`` from call to call as the fused kernel does."""
+
+    def __init__(self, model: PoseModel, mus: NDArray[np.float64], radii: NDArray[np.float64],
+                 alpha0: NDArray[np.float64], tol: float, prox: float) -> None:
+        coords = model.limb_coordinates
+        if coords is None:
+            raise InvalidInputError("the bases' limb map is not onto (fewer than 24 independent directions)")
+        z, n, self._s0, _ = coords
+        self._rad = np.ascontiguousarray(radii, dtype=np.float64)
+        self._mus = np.ascontiguousarray(mus)
+        self._vc, self._vt, self._cu24_t = model.riemannian_arrays
+        self._cmu24 = model.kernel_limbs[1]
+        g = self._mus.T @ self._mus + (1.0 + prox) * np.eye(model.sig.size)
+        q, rmat, s1, s2 = _sphere_setup(g, z, n)
+        self._q = q
+        self._rmat_t, self._s1_t, self._s2_t = (np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
+                                               np.ascontiguousarray(s2.T))
+        self._gs0 = g @ self._s0
+        self._tol, self._prox = float(tol), float(prox)
+        self._sk = self._vt @ alpha0
+
+    def __call__(self, d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], int]:
+        out = np.empty(self._vc.shape[0])
+        it = _riemannian_alpha_kernel(np.ascontiguousarray(d1), np.ascontiguousarray(d2), self._sk, self._mus,
+                                      self._vc, self._vt, self._gs0, self._q, self._rmat_t, self._s1_t,
+                                      self._s2_t, self._s0, self._cu24_t, self._cmu24, self._rad,
+                                      RIEMANNIAN_MAX_ITER, self._tol, self._prox, out, self._sk)
+        return out, int(it)

@@ -9,9 +9,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._jit import njit
-from .._linalg import _pos_def, _solve
-from ..pose_model import LiftedConstraints
-from .lifted_admm import _Lifted, restore_feasibility
+from .._linalg import _EYE8, _pos_def, _solve
+from ..pose_model import LiftedConstraints, PoseModel
+from ..results import AlphaResult
+from .lifted_admm import restore_feasibility
 
 #: SQP iteration cap of each Newton alpha-step.
 NEWTON_MAX_ITER = 10
@@ -20,7 +21,7 @@ NEWTON_MAX_ITER = 10
 def newton_alpha(
     w: NDArray[np.float64], cons: LiftedConstraints, z0: NDArray[np.float64], max_iter: int = 30,
     tol: float = 1e-10,
-) -> _Lifted:
+) -> AlphaResult:
     """Direct local solver of ``min z^T W z`` s.t. ``z^T Omega_i z = 0``, ``z[-1] = 1``.
 
     SQP with the exact Hessian of the Lagrangian (Newton on the KKT system), started from a
@@ -70,7 +71,8 @@ def newton_alpha(
             a *= 0.5
         z[:-1] += a * dz
         nu = nu_new
-    return _Lifted(restore_feasibility(cons, z), it, converged)
+    z = restore_feasibility(cons, z)
+    return AlphaResult(objective=float(z @ w @ z), n_iter=it, converged=converged, x=z)
 
 
 
@@ -178,12 +180,27 @@ def _newton_alpha_kernel(
     v: NDArray[np.float64], g_red: NDArray[np.float64], cu24: NDArray[np.float64],
     cmu24: NDArray[np.float64], hc: NDArray[np.float64], lsq: NDArray[np.float64], max_iter: int, tol: float,
     eye8: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """The reduced Newton alpha-step of :func:`pose_step` (limbs on), multipliers from zero (warm
-    multipliers from the previous ADM iteration were measured no better)."""
+) -> tuple[NDArray[np.float64], int]:
+    """The reduced Newton alpha-step of the pose ADM (limbs on), multipliers from zero (warm
+    multipliers from the previous ADM iteration were measured no better). Returns ``(alpha,
+    SQP iterations)``."""
     vtd2 = v.T @ d2
     lin = mus.T @ d1 + vtd2
-    s, _, _ = _newton_kernel(g_red, lin, cu24, cmu24, hc, lsq, v.T @ alpha, np.zeros(8), max_iter, tol, eye8)
-    return d2 - v @ vtd2 + v @ s
+    s, _, it = _newton_kernel(g_red, lin, cu24, cmu24, hc, lsq, v.T @ alpha, np.zeros(8), max_iter, tol, eye8)
+    return d2 - v @ vtd2 + v @ s, it
 
 
+class ReducedSQPStep:
+    """The alpha-step protocol (:class:`pose_lifter.core.alpha.base.AlphaStep`) by the compiled SQP
+    in the reduced coordinates ``s = V^T alpha``, for one pose step (``mus = M U S`` (m, r))."""
+
+    def __init__(self, model: PoseModel, mus: NDArray[np.float64], tol: float) -> None:
+        self._model, self._mus, self._tol = model, mus, float(tol)
+        self._g = mus.T @ mus + np.eye(model.sig.size)
+
+    def __call__(self, d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], int]:
+        m = self._model
+        a, it = _newton_alpha_kernel(d1, d2, alpha, self._mus, m.v, self._g, *m.kernel_limbs, NEWTON_MAX_ITER,
+                                     self._tol, _EYE8)
+        return a, int(it)

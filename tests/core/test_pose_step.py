@@ -1,0 +1,101 @@
+"""The pose step's one ADM loop: the fused Riemannian kernel against the Python loop over the
+alpha-step protocol, the solver results' common shape, and the lifter's per-alternation history."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from pose_lifter.core.bases import PoseBases, default_bases_path
+from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.options import LifterOptions, get_variant
+from pose_lifter.core.pose_model import PoseModel
+from pose_lifter.core.pose_step import PriorRows, pose_step
+from pose_lifter.core.results import SolveInfo
+from scipy.spatial.transform import Rotation
+
+#: The fused kernel and the Python loop do the same arithmetic in another order (loops against
+#: numpy's vector operations): they agree to round-off, grown by the nonconvex ADM's iterations.
+FUSED_VS_LOOP_RTOL = 1e-7
+
+Arr = NDArray[np.float64]
+
+
+@pytest.fixture(scope="module")
+def model() -> PoseModel:
+    bases = PoseBases.load(default_bases_path("hybrid"))
+    return PoseModel.build(bases, bases.limb_proportions)
+
+
+def _problem(model: PoseModel, seed: int) -> tuple[Arr, Arr, Arr, Arr, Arr]:
+    """2D of a random in-model pose seen by a random camera, with noise and two missing joints:
+    (points (12, 2), projection (2, 3), translation (2,), weights (12,), the true pose (12, 3))."""
+    rng = np.random.default_rng(seed)
+    alpha = np.zeros(model.n_bases)
+    alpha[rng.choice(model.n_bases, 6, replace=False)] = rng.normal(0.0, 0.3, 6)
+    pose = model.pose(alpha)
+    rot = Rotation.from_euler("yx", [rng.uniform(-np.pi, np.pi), rng.uniform(-0.3, 0.3)]).as_matrix()
+    m0 = 1.3 * rot[:2]
+    t = rng.normal(0.0, 0.2, 2)
+    x = pose @ m0.T + t + rng.normal(0.0, 0.02, (12, 2))
+    w = np.ones(12)
+    w[rng.choice(12, 2, replace=False)] = 0.0
+    return x, m0, t, w, pose
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("with_prior", [False, True])
+def test_fused_kernel_is_the_python_loop(model: PoseModel, seed: int, with_prior: bool) -> None:
+    x, m0, t, w, pose = _problem(model, seed)
+    prior = None
+    if with_prior:
+        rng = np.random.default_rng(100 + seed)
+        target = np.column_stack([pose @ m0.T + t, (pose - pose.mean(0)) @ PriorRows.depth_row(m0)])
+        target += rng.normal(0.0, 0.05, target.shape)
+        weights = np.column_stack([np.full(12, 0.6), np.full(12, 0.4)])
+        weights[3, 0] = 0.0  # a joint without image-position rows, another without a depth row
+        weights[7, 1] = 0.0
+        radii = np.sqrt(model.limb_sq) * rng.uniform(0.9, 1.1, 8)  # a person's own proportions
+        prior = PriorRows(target, weights, radii)
+    args = (x, m0, t, w, model, get_variant("full"), 0.1, np.zeros(model.n_bases))
+    kw = dict(max_iter=15, tol=1e-12, eta=0.3, eta_growth=1.1, alpha_solver="riemannian", prior=prior)
+    fused = pose_step(*args, **kw)  # type: ignore[arg-type]
+    loop = pose_step(*args, **kw, fused=False)  # type: ignore[arg-type]
+    assert fused.n_iter == loop.n_iter == 15 and not fused.converged and not loop.converged
+    assert fused.alpha_iter == loop.alpha_iter > 0
+    assert loop.objective == pytest.approx(fused.objective, rel=FUSED_VS_LOOP_RTOL)
+    scale = np.abs(fused.alpha).max()
+    assert np.abs(loop.alpha - fused.alpha).max() <= FUSED_VS_LOOP_RTOL * scale
+    assert fused.duals is not None and loop.duals is not None
+    assert fused.duals.data.shape == loop.duals.data.shape == (24 + (2 * 11 + 11 if with_prior else 0),)
+    dual_scale = np.abs(fused.duals.data).max()
+    assert np.abs(loop.duals.data - fused.duals.data).max() <= FUSED_VS_LOOP_RTOL * dual_scale
+    # the loop is not the kernel by accident: a different alpha-solver gives another answer
+    other = pose_step(*args, **{**kw, "alpha_solver": "newton", "prior": None})  # type: ignore[arg-type]
+    if not with_prior:
+        assert abs(other.objective - fused.objective) > 1e-6 * fused.objective
+
+
+def test_every_solver_result_reports_convergence_alike(model: PoseModel) -> None:
+    x, m0, t, w, _ = _problem(model, 7)
+    args = (x, m0, t, w, model, get_variant("full"), 0.1, np.zeros(model.n_bases))
+    for solver in ("riemannian", "newton", "admm"):
+        res = pose_step(*args, max_iter=200, tol=1e-5, alpha_solver=solver)  # type: ignore[arg-type]
+        assert isinstance(res, SolveInfo) and res.n_iter <= 200 and res.alpha_iter >= res.n_iter
+        assert res.converged == (res.n_iter < 200), solver
+
+
+def test_lift_result_carries_the_alternations(model: PoseModel) -> None:
+    x, _, _, _, _ = _problem(model, 3)
+    for mode in ("paper", "hybrid"):
+        lifter = Lifter(None, LifterOptions(mode=mode, n_starts=3))
+        res = lifter.lift(100.0 * x + 300.0)
+        assert len(res.history) == res.n_iter >= 1, mode
+        objectives = [a.objective for a in res.history]
+        assert res.objective == pytest.approx(min(objectives), rel=1e-12)
+        for a in res.history:
+            assert isinstance(a.camera, SolveInfo) and isinstance(a.pose, SolveInfo)
+            assert a.camera.n_iter >= 1 and a.pose.n_iter >= 1
+        # the run stops when an alternation no longer lowers the objective enough, or at the cap
+        cap = lifter.options.max_alternations if mode == "paper" else lifter.options.hybrid_alternations
+        assert res.converged or res.n_iter == cap
