@@ -48,8 +48,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pose_lifter import messages as m
 from pose_lifter.bags import read_messages
-from pose_lifter.core import lifter as lifter_module
 from pose_lifter.core import pose_step as pose_module
+from pose_lifter.core import runs as lifter_module
 from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PoseLifterError
@@ -103,7 +103,7 @@ class Recorder:
         def recorded(*args: Any, **kwargs: Any) -> Any:
             if self.n_seen % self.every == 0 and len(self.calls) < self.limit:
                 model = args[4]  # PoseModel: shared, not copied (it is read-only data)
-                kept = {k: v for k, v in kwargs.items() if k not in ("state_out", "qstep_fn")}
+                kept = {k: v for k, v in kwargs.items() if k != "qstep_fn"}
                 self.calls.append((tuple(a if a is model else copy.deepcopy(a) for a in args),
                                    copy.deepcopy(kept)))
             self.n_seen += 1

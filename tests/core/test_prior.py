@@ -233,7 +233,7 @@ def test_the_tracker_leaves_a_wrong_depth_basin(
     x, truth = real_frames  # frames 0-3: one walker, 1/3 s apart
     lifter = Lifter(bases, LifterOptions(mode="hybrid", warm_flip=False))
     first = lifter.lift(x[0])
-    mirrored = lifter._start_alpha(first.pose_camera * np.array([1.0, 1.0, -1.0]))
+    mirrored = lifter.runs.start_alpha(first.pose_camera * np.array([1.0, 1.0, -1.0]))
     policy = TrackPolicy(lifter)
     wrong = replace(first.warm_start(), alpha=mirrored)
     policy.restore(0, wrong, 0)  # the track's state: the wrong basin
@@ -479,7 +479,7 @@ def test_the_hybrid_pose_step_has_its_own_iteration_cap(
         bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch) -> None:
     """``hybrid_pose_max_iter`` caps the hybrid runs' pose steps; the paper's mode keeps
     ``pose_max_iter`` (its results stay the paper's)."""
-    from pose_lifter.core import lifter as lifter_module
+    from pose_lifter.core import runs as lifter_module
 
     caps: list[int] = []
     step = lifter_module.pose_step

@@ -70,7 +70,8 @@ def test_cholesky_solve_solves_or_refuses() -> None:
 def test_mirrored_start_kernel_equals_normalise_pose() -> None:
     # the compiled single-pose normalise_pose_flat (in the lifter's mirrored warm start) must stay
     # the same computation as the vectorised normalise_pose
-    from pose_lifter.core.lifter import PINV_RCOND, Lifter, _mirror_kernel
+    from pose_lifter.core.lifter import Lifter
+    from pose_lifter.core.runs import PINV_RCOND, _mirror_kernel
     from pose_lifter.core.skeleton import normalise_pose, normalise_pose_flat
     from scipy.spatial.transform import Rotation
 

@@ -38,11 +38,15 @@ frame's pose, ``temporal_weight`` per joint).
 Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
 and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
 mean the same at any image size. Results are mapped back to input units.
+
+Where it lives: this module checks the input once, normalises it, picks the starts and maps the
+winner back (one output check); a run of alternations is :mod:`.runs`, the hybrid and learned
+modes' prior terms, starts and outlier pass are :mod:`.hybrid`, the steps :mod:`.camera` and
+:mod:`.pose_step`.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -50,50 +54,28 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ._fast import median_rows
-from ._jit import njit
 from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases, default_bases_path
-from .camera import camera_step_trusted
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
+from .hybrid import hybrid_runs, lift_learned
 from .options import LifterOptions
 from .pose_model import LiftedConstraints, PoseModel
-from .pose_step import PriorRows, pose_step
 from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
-from .results import Alternation, Camera, CameraResult, LiftResult, PoseResult, SolveInfo, WarmStart
+from .results import Camera, LiftResult, Normalisation, WarmStart
+from .runs import Run, Runs
 from .skeleton import (
     ANTHROPOMETRIC_PROPORTIONS,
     LEFT_LIMBS,
     LIMB_GROUP_OF,
     N_JOINTS,
     RIGHT_LIMBS,
-    RIGHT_LOWER_LEG,
-    body_frame,
     limb_lengths,
-    normalise_pose_flat,
 )
 from .validation import check_keypoints
 
-__all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter", "TrackContext"]
-
-#: Relative cut-off of the bases' singular values in the minimum-norm coefficients of a start
-#: pose (:func:`_mirror_kernel`, a pseudo-inverse): the packaged bases' smallest singular value is
-#: 2.5e-7 of the largest (the next 2.6e-2); dividing by it gave the prior's poses (not in the
-#: bases' span) coefficients with ||alpha||_1 ~ 2e5: their pose was right but ``theta ||alpha||_1``
-#: dominated the objective. It also moves the paper's mirrored warm start slightly.
-PINV_RCOND = 1e-3
-
-#: The hybrid outlier pass flags a joint only beyond this many times the median disagreement of
-#: the frame's visible joints as well as beyond ``outlier_threshold`` (under heavy Gaussian noise
-#: every joint disagrees a little: the median sets the scale).
-OUTLIER_MEDIAN_FACTOR = 3.0
+__all__ = ["Lifter", "TrackContext"]
 
 
-
-@dataclass(frozen=True)
-class _Normalisation:
-    centre: NDArray[np.float64]
-    spread: float
 
 
 @dataclass(frozen=True)
@@ -141,55 +123,6 @@ class TrackContext:
 _NO_TRACK = TrackContext()
 
 
-@dataclass(frozen=True)
-class _Run:
-    """A run of alternations from one start: its best alternation's steps and objective, the ADM
-    multipliers it ended with (``options.warm_duals``) and its alternations' history."""
-
-    pose: PoseResult
-    camera: CameraResult
-    objective: float
-    n_iter: int
-    converged: bool
-    history: tuple[Alternation, ...] = ()
-
-
-@njit
-def _mirror_kernel(pose: NDArray[np.float64], rot: NDArray[np.float64], mean: NDArray[np.float64],
-                   u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64], flip: bool = True
-                   ) -> tuple[NDArray[np.float64], bool]:
-    """``V ((U^T (normalise_pose(mirror(pose)) - mu)) / S)`` for one pose (12, 3): the pose in
-    the camera frame (``rot`` (3, 3)) with its depth reflected, normalised into its own body
-    frame (:func:`normalise_pose_flat`), then minimum-norm coefficients through the bases' SVD.
-    ``flip`` False: the pose as it is (the hybrid mode's start from the prior's pose).
-    Returns ``(alpha (k,), ok)``; ``ok`` is False for a degenerate leg or body frame."""
-    n = pose.shape[0]
-    cp = np.empty((n, 3))
-    for j in range(n):
-        for a in range(3):
-            cp[j, a] = pose[j, 0] * rot[a, 0] + pose[j, 1] * rot[a, 1] + pose[j, 2] * rot[a, 2]
-        if flip:
-            cp[j, 2] = -cp[j, 2]
-    body, ok = normalise_pose_flat(cp)
-    k = v.shape[0]
-    alpha = np.zeros(k)
-    if not ok:
-        return alpha, False
-    for i in range(3 * n):
-        body[i] -= mean[i]
-    for j in range(sig.size):
-        if sig[j] <= PINV_RCOND * sig[0]:  # the pseudo-inverse: (numerically) null directions add nothing
-            continue
-        c = 0.0
-        for i in range(3 * n):
-            c += u[i, j] * body[i]
-        c /= sig[j]
-        ok = ok and math.isfinite(c)
-        for i in range(k):
-            alpha[i] += v[i, j] * c
-    return alpha, ok
-
-
 class Lifter:
     """Lift 2D keypoints (12 model joints) to a 3D pose and a weak-perspective camera.
 
@@ -212,7 +145,6 @@ class Lifter:
         self._prior_key: str | None = None if prior is None else self._options.prior_file
         self._temporal: PosePrior | None = temporal_prior
         self._temporal_key: str | None = None if temporal_prior is None else self._options.temporal_prior_file
-        self._prior_rel: dict[int, tuple[PosePrior, NDArray[np.float64]]] = {}
         self._model: PoseModel | None = None
         self._model_key: str | None = None
         mp = self.bases.mean_pose
@@ -249,17 +181,6 @@ class Lifter:
             self._temporal_key = self._options.temporal_prior_file
         return self._temporal
 
-    def _prior_relative_weights(self, prior: PosePrior) -> NDArray[np.float64]:
-        """(12, 2): per joint, the inverse of ``prior``'s error relative to its mean, for the
-        image-position rows (x and y averaged) and the depth row."""
-        entry = self._prior_rel.get(id(prior))
-        if entry is None or entry[0] is not prior:  # (an id can be reused after a reload)
-            e = prior.abs_error
-            exy = e[:, :2].mean(axis=1)
-            entry = self._prior_rel[id(prior)] = (prior, np.column_stack([exy.mean() / exy,
-                                                                          e[:, 2].mean() / e[:, 2]]))
-        return entry[1]
-
     @property
     def model(self) -> PoseModel:
         """Precomputed pose-step data of the current bases and limb targets."""
@@ -288,6 +209,12 @@ class Lifter:
                 return np.asarray(reference_qstep(w, cons.omegas, p, g, delta))
 
             self._qstep_fn = _q
+        self._runs = Runs(self.model, self._options, self._qstep_fn)
+
+    @property
+    def runs(self) -> Runs:
+        """The alternation runs of the current model and options."""
+        return self._runs
 
     # ------------------------------------------------------------------ helpers
     def _weights(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None
@@ -306,106 +233,12 @@ class Lifter:
         x = np.where(bad[:, None], 0.0, x)
         return x, w
 
-    def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> _Normalisation:
+    def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> Normalisation:
         centre = w @ x / w.sum()
         spread = float(np.sqrt(w @ np.sum((x - centre) ** 2, axis=1) / w.sum()))
         if not np.isfinite(spread) or spread <= 1e-9 * max(1.0, float(np.abs(centre).max())):
             raise InvalidInputError("the visible keypoints are (almost) all at one point")
-        return _Normalisation(centre, spread / self._mean_spread)
-
-    @staticmethod
-    def _camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
-                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
-        """The camera step's 2D points and weights for a run: with a prior term, the prior's
-        image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
-        stacked twice, the returned flag). Built once per run, not per alternation."""
-        if prior is not None and np.any(prior.weights[:, 0] > 0):
-            return (np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]])),
-                    np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]])), True)
-        return xn, w, False
-
-    def _camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
-                init: Camera | None, last: CameraResult | None = None) -> CameraResult:
-        o = self._options
-        xn, w, doubled = data
-        if doubled:
-            pose = np.concatenate([pose, pose])
-        if o.camera_solver == "cvxpy":
-            from .reference import reference_camera
-
-            cam, obj = reference_camera(xn, pose, w, o.method.loss,
-                                        rotation_init=None if init is None else init.rotation)
-            return CameraResult(objective=float(obj), n_iter=1, converged=True, camera=cam)
-        duals = last.duals if last is not None and o.warm_duals else None
-        # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
-        return camera_step_trusted(xn, pose, w, o.method.loss, init, o.camera_max_iter, o.camera_tol, o.tau,
-                                   duals)
-
-    def _pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
-              alpha0: NDArray[np.float64], last: PoseResult | None = None,
-              max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
-        o = self._options
-        return pose_step(
-            xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
-            max_iter=max_iter if max_iter is not None else (o.pose_max_iter if prior is None
-                                                             else o.hybrid_pose_max_iter),
-            tol=o.pose_tol, eta=o.eta,
-            eta_growth=o.eta_growth, delta=o.delta,
-            inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
-            alpha_solver=o.alpha_solver, qstep_fn=self._qstep_fn,
-            duals=last.duals if last is not None and o.warm_duals else None,
-            newton_tol=o.newton_tol, alpha_prox=o.alpha_prox, prior=prior,
-        )
-
-    def _run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
-             cam0: Camera | None, max_alternations: int | None = None, start: _Run | None = None,
-             pose_max_iter: int | None = None, prior: PriorRows | None = None) -> _Run:
-        """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
-        continue a previous run ``start``. With ``options.warm_duals`` the ADM multipliers of both
-        steps are carried from one alternation to the next. The run keeps its lowest-objective
-        alternation (the hybrid objective adds the prior's depth rows to the camera step's)."""
-        o = self._options
-        n_alt = o.max_alternations if max_alternations is None else max_alternations
-        data = self._camera_data(xn, w, prior)
-        last_pose: PoseResult | None
-        if start is not None:
-            alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
-            it0, last_pose, history = start.n_iter, start.pose, list(start.history)
-        else:
-            alpha = alpha0
-            cam = self._camera(data, self.model.pose(alpha), cam0)
-            best, prev, it0, last_pose, history = None, np.inf, 0, None, []
-        converged = False
-        it = it0
-        th = o.theta if o.method.sparsity else 0.0
-        for it in range(it0 + 1, n_alt + 1):
-            pres = self._pose(xn, cam.camera, w, alpha, last_pose, pose_max_iter, prior)
-            alpha, last_pose = pres.alpha, pres
-            cam = self._camera(data, pres.pose, cam.camera, cam)
-            obj = cam.objective + th * float(np.sum(np.abs(alpha)))
-            if prior is not None:
-                obj += prior.depth_term(pres.pose, cam.camera.projection)
-            history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),
-                                       SolveInfo(pres.objective, pres.n_iter, pres.converged)))
-            if best is None or obj < best.objective:
-                best = _Run(pres, cam, obj, it, False, tuple(history))
-            if prev - obj <= o.alternation_tol * max(abs(prev), 1e-12) and np.isfinite(prev):
-                converged = True
-                break
-            prev = obj
-        assert best is not None
-        return _Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
-
-    def _mirrored_alpha(self, run: _Run) -> NDArray[np.float64]:
-        """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),
-        re-expressed in its own body frame (:func:`normalise_pose`); minimum-norm coefficients
-        through the bases' SVD."""
-        m = self.model
-        alpha, ok = _mirror_kernel(np.ascontiguousarray(run.pose.pose), run.camera.camera.rotation, m.mean,
-                                   m.u, m.sig, m.v)
-        if not ok:
-            raise InvalidInputError("a pose has a degenerate right lower leg")
-        return alpha
+        return Normalisation(centre, spread / self._mean_spread)
 
     # ------------------------------------------------------------------ public
     def warm_up(self) -> float:
@@ -476,7 +309,7 @@ class Lifter:
             # only for the joints this frame lacks: one the outlier pass flags stays missing
             fill = (fp, fv & np.all(np.isfinite(fp), axis=-1) & ~(w > 0))
         if mode == "learned":
-            return self._lift_learned(x, w, norm, past)
+            return lift_learned(self, x, w, norm, past)
         xn = (x - norm.centre) / norm.spread
         cam0: Camera | None = None
         if warm is not None:
@@ -490,9 +323,8 @@ class Lifter:
             tw = np.broadcast_to(np.asarray(temporal_weight, dtype=np.float64), (N_JOINTS,)).copy()
             if not np.all((tw >= 0.0) & (tw <= 1e3)):
                 raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
-            runs, total, n_starts, w, prior_pose = self._hybrid_runs(x, xn, w * data_weight, norm, warm,
-                                                                      cam0, limb_proportions, tw, past,
-                                                                      gated, fill)
+            runs, total, n_starts, w, prior_pose = hybrid_runs(
+                self, x, xn, w * data_weight, norm, warm, cam0, limb_proportions, tw, past, gated, fill)
             w = w / data_weight
         else:
             runs, total, n_starts = self._paper_runs(xn, w, warm, cam0)
@@ -501,105 +333,26 @@ class Lifter:
         return self._result(x, w, norm, idx, run, n_starts, total, prior_pose)
 
     def _paper_runs(self, xn: NDArray[np.float64], w: NDArray[np.float64], warm: WarmStart | None,
-                    cam0: Camera | None) -> tuple[list[tuple[int, _Run]], int, int]:
+                    cam0: Camera | None) -> tuple[list[tuple[int, Run]], int, int]:
         """The paper's starts: the warm start and its mirrored copy, or the screened multi-start.
         Returns ``(runs as (start index, run), total alternations, starts tried)``."""
         if warm is not None:
-            runs = [(-1, self._run(xn, w, warm.alpha, cam0))]
+            runs = [(-1, self._runs.run(xn, w, warm.alpha, cam0))]
             if self._options.warm_flip:
-                runs.append((-2, self._mirrored_run(xn, w, runs[0][1], None)))
+                runs.append((-2, self._runs.mirrored_run(xn, w, runs[0][1], None)))
             return runs, sum(r.n_iter for _, r in runs), len(runs)
         starts = self.bases.with_starts(self._options.n_starts)
         # a short first pose step only when it screens (some starts are then dropped)
         screen = self._options.screen_pose_max_iter if len(starts) > self._options.n_refine else None
-        runs = [(i, self._run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
+        runs = [(i, self._runs.run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
                 for i, a in enumerate(starts)]
         n_screened = len(runs)
         if len(runs) > 1:  # screen: continue only the most promising starts
             runs.sort(key=lambda r: r[1].objective)
             runs = runs[: self._options.n_refine]
-        runs = [(i, self._run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
+        runs = [(i, self._runs.run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
         # a continued run's n_iter counts its screening alternation too
         return runs, n_screened - len(runs) + sum(r.n_iter for _, r in runs), len(starts)
-
-    def _mirrored_run(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: _Run,
-                      prior: PriorRows | None, max_alternations: int | None = None) -> _Run:
-        """The depth-mirrored copy of ``run`` as a start: screened by one alternation and continued
-        when it already beats ``run`` (``warm_flip_screen``), or run to convergence."""
-        mirrored = self._mirrored_alpha(run)
-        if self._options.warm_flip_screen:
-            # hybrid: a short screening pose step, as for the paper's cold starts
-            short = None if prior is None else self._options.screen_pose_max_iter
-            flip = self._run(xn, w, mirrored, None, max_alternations=1, prior=prior, pose_max_iter=short)
-            if flip.objective < run.objective:
-                flip = self._run(xn, w, flip.pose.alpha, None, max_alternations, start=flip, prior=prior)
-            return flip
-        return self._run(xn, w, mirrored, None, max_alternations, prior=prior)
-
-    def _prior_rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
-                    limb_proportions: NDArray[np.float64] | None = None,
-                    previous: NDArray[np.float64] | None = None,
-                    temporal_weight: NDArray[np.float64] | None = None,
-                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
-                    fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
-                    ) -> tuple[PriorRows, NDArray[np.float64]]:
-        """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
-        normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
-        same frame) by ``temporal_weight``; limb radii from ``limb_proportions`` (a
-        track's estimate, ``options.prior_limbs``). Returns the rows and the prior's pose in
-        input units. Joints without weight take ``fill``'s position where it allows (see
-        :meth:`lift`) in the prior's input."""
-        vis = w > 0
-        if fill is not None:
-            add = fill[1] & ~vis
-            if np.any(add):
-                x = np.where(add[:, None], fill[0], x)
-                vis = vis | add
-        pose, used = self._predict_prior(x, vis, past)
-        target = np.empty((N_JOINTS, 3))
-        target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
-        target[:, 2] = pose[:, 2] / norm.spread
-        if not np.all(np.isfinite(target)):
-            raise InvalidInputError("the learned prior gave non-finite values for this input")
-        if previous is not None and temporal_weight is not None and np.any(temporal_weight > 0):
-            prev = previous.copy()
-            vis = w > 0
-            # the person's image motion since the previous frame (the median over visible joints)
-            prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
-            tw = temporal_weight[:, None]
-            target = (target + tw * prev) / (1.0 + tw)
-        rel = self._prior_relative_weights(used)
-        o = self._options
-        weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
-        radii = None
-        if o.prior_limbs and limb_proportions is not None:
-            radii = self.limb_radii(limb_proportions)
-        return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
-
-    def _predict_prior(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
-                       past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
-                       ) -> tuple[NDArray[np.float64], PosePrior]:
-        """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
-        temporal prior when the lift has ``past`` frames (padded to its window with the oldest
-        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated)."""
-        prior = self.prior
-        temporal = self.temporal_prior
-        if past is not None and len(past[0]) > 0 and temporal is not None:
-            prior = temporal
-        if prior.window == 1:
-            return prior.predict(x, visible), prior
-        k = prior.window - 1
-        pts = np.empty((prior.window, N_JOINTS, 2))
-        vis = np.empty((prior.window, N_JOINTS), dtype=bool)
-        n_past = 0 if past is None else len(past[0])
-        for i in range(k):
-            j = max(n_past - k + i, 0)
-            if past is not None and n_past > 0:
-                pts[i], vis[i] = past[0][j], past[1][j]
-            else:
-                pts[i], vis[i] = x, visible
-        pts[k], vis[k] = x, visible
-        return prior.predict(np.where(vis[..., None], pts, 0.0), vis), prior
 
     def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
         """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
@@ -626,97 +379,8 @@ class Lifter:
         own = np.sqrt(self.model.limb_sq)
         return np.ascontiguousarray(p * np.exp(np.mean(np.log(own)) - np.mean(np.log(p))))
 
-    def _start_alpha(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Minimum-norm coefficients of a camera-frame pose (12, 3) in its own body frame (zeros,
-        the mean pose, for a degenerate pose)."""
-        m = self.model
-        alpha, ok = _mirror_kernel(np.ascontiguousarray(pose), np.eye(3), m.mean, m.u, m.sig, m.v, False)
-        return alpha if ok else np.zeros(self.bases.n_bases)
-
-    def _hybrid_runs(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
-                     norm: _Normalisation, warm: WarmStart | None, cam0: Camera | None,
-                     limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64],
-                     past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None, gated: bool = False,
-                     fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
-                     ) -> tuple[list[tuple[int, _Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
-        """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
-        Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the
-        prior's pose in input units)``."""
-        o = self._options
-        previous = None
-        if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
-            prev = self.model.pose(warm.alpha)
-            previous = np.column_stack([cam0.project(prev),
-                                        cam0.scale * (prev - prev.mean(axis=0)) @ cam0.rotation[2]])
-        prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight, past,
-                                             fill)
-        a_prior = self._start_alpha(prior.target)
-        # every frame starts from the prior's pose (with the previous frame's camera when tracked):
-        # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
-        n_alt = o.hybrid_alternations
-        runs: list[tuple[int, _Run]] = [(-3, self._run(xn, w, a_prior, cam0, n_alt, prior=prior))]
-        if warm is not None and o.warm_competes:
-            wr = self._run(xn, w, warm.alpha, cam0, max_alternations=1, prior=prior,
-                           pose_max_iter=o.screen_pose_max_iter)
-            if wr.objective < runs[0][1].objective:
-                wr = self._run(xn, w, wr.pose.alpha, None, n_alt, start=wr, prior=prior)
-            runs.append((-1, wr))
-        if o.warm_flip and (warm is None or o.hybrid_flip_warm):
-            best = min(runs, key=lambda r: r[1].objective)[1]
-            runs.append((-2, self._mirrored_run(xn, w, best, prior, n_alt)))
-        total = sum(r.n_iter for _, r in runs)
-        n_starts = len(runs)
-        threshold = o.outlier_threshold_gated if gated else o.outlier_threshold
-        for _ in range(o.outlier_passes if threshold > 0 else 0):
-            idx, run = min(runs, key=lambda r: r[1].objective)
-            cam = run.camera.camera
-            # a joint disagrees with the image when it is far from the fit's projection or from
-            # the prior's image position (the prior is trained with confident outliers)
-            resid = np.maximum(np.linalg.norm(xn - cam.project(run.pose.pose), axis=1),
-                               np.linalg.norm(xn - prior.target[:, :2], axis=1))
-            vis = w > 0
-            limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
-            out = vis & (resid > limit)
-            if not np.any(out) or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
-                break
-            w = w.copy()
-            w[out] = 0.0
-            prior, prior_pose = self._prior_rows(x, w, norm, limb_proportions, previous, temporal_weight,
-                                                 past, fill)
-            # continue the fit, and start again from the prior's new pose: the lower objective
-            cont = self._run(xn, w, run.pose.alpha, cam, n_alt, prior=prior)
-            fresh = self._run(xn, w, self._start_alpha(prior.target), None, n_alt, prior=prior)
-            runs = [(idx, cont), (-3, fresh)]
-            total += cont.n_iter + fresh.n_iter
-        return runs, total, n_starts, w, prior_pose
-
-    def _lift_learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation,
-                      past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> LiftResult:
-        """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
-        own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
-        positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
-        error of the visible joints in the normalised units."""
-        pose_in, _ = self._predict_prior(x, w > 0, past)
-        centred = pose_in - pose_in.mean(axis=0)
-        flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
-        if not ok or not np.all(np.isfinite(flat)):
-            raise InvalidInputError("the learned prior gave a degenerate pose for this input")
-        body = flat.reshape(N_JOINTS, 3)
-        rot = body_frame(centred)
-        leg = float(limb_lengths(centred)[RIGHT_LOWER_LEG])
-        cam = Camera(np.ascontiguousarray(rot.T), leg, pose_in[:, :2].mean(axis=0))
-        reproj = np.linalg.norm(x - cam.project(body), axis=1)
-        vis = w > 0
-        alpha = self._start_alpha(centred)
-        lv = np.abs(limb_lengths(body) - np.sqrt(self.model.limb_sq))
-        return LiftResult(
-            pose=body, pose_camera=body @ cam.rotation.T, camera=cam, alpha=alpha,
-            objective=float(w @ np.abs(x - cam.project(body)).sum(axis=1)) / norm.spread,
-            reprojection_error=float(reproj[vis].mean()), limb_violation=float(lv.max()), n_iter=0,
-            converged=True, n_starts=1, start_index=-4, weights=w, total_alternations=0, prior_pose=pose_in)
-
-    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: _Normalisation, idx: int,
-                run: _Run, n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
+    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, idx: int,
+                run: Run, n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
         """The winning run mapped back to input units, checked finite."""
         cam_n = run.camera.camera
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)

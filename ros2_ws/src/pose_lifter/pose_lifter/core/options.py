@@ -163,7 +163,7 @@ class LifterOptions:
     outlier_threshold : float
         Hybrid: a visible joint whose distance from the fit's projection or from the prior's
         image position exceeds this (in the normalised units, about right-lower-leg lengths) and
-        ``lifter.OUTLIER_MEDIAN_FACTOR`` times the frame's median distance is treated as a
+        ``hybrid.OUTLIER_MEDIAN_FACTOR`` times the frame's median distance is treated as a
         confident outlier: its 2D is dropped, the prior re-run without it, and the fit both
         continued and restarted from the prior's new pose (the lower objective kept). 0 disables
         the outlier pass. Frames the per-track gate screened use ``outlier_threshold_gated``.

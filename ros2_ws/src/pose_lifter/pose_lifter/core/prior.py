@@ -23,6 +23,7 @@ weight its L1 prior term (``1 / b``).
 
 from __future__ import annotations
 
+import functools
 import json
 import zipfile
 from dataclasses import dataclass, field
@@ -282,6 +283,14 @@ class PosePrior:
             abs_error=self.abs_error, metadata=np.array(json.dumps(self.metadata, sort_keys=True)), **arrays)
 
     # ------------------------------------------------------------------ inference
+    @functools.cached_property
+    def relative_weights(self) -> NDArray[np.float64]:
+        """(12, 2): per joint, the inverse of the error relative to its mean, for the hybrid
+        objective's image-position rows (x and y averaged) and depth row."""
+        e = self.abs_error
+        exy = e[:, :2].mean(axis=1)
+        return np.column_stack([exy.mean() / exy, e[:, 2].mean() / e[:, 2]])
+
     def features(self, points: NDArray[np.float64], visible: NDArray[np.bool_]
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """:func:`prior_features` with this prior's window."""

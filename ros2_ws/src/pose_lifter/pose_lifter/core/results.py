@@ -13,8 +13,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["AlphaResult", "Alternation", "Camera", "CameraResult", "Duals", "LiftResult", "PoseResult",
-           "SolveInfo", "WarmStart"]
+__all__ = [
+    "AlphaResult",
+    "Alternation",
+    "Camera",
+    "CameraResult",
+    "Duals",
+    "LiftResult",
+    "Normalisation",
+    "PoseResult",
+    "SolveInfo",
+    "WarmStart",
+]
 
 
 @dataclass(frozen=True)
@@ -132,6 +142,15 @@ class Alternation:
     objective: float
     camera: SolveInfo
     pose: SolveInfo
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """The lifter's 2D normalisation of one frame: ``xn = (x - centre) / spread`` (``centre`` (2,) in
+    input units; ``spread``: input units per normalised unit)."""
+
+    centre: NDArray[np.float64]
+    spread: float
 
 
 @dataclass(frozen=True)

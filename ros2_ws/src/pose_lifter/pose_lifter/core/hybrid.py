@@ -1,0 +1,197 @@
+"""The hybrid and learned modes of the lifter: the learned prior's pose as L1 rows of the paper's
+objective, the hybrid starts, mirrored hypothesis and outlier pass, and the prior alone.
+
+The hybrid objective (see :mod:`pose_lifter.core.lifter`) adds to the paper's
+``sum_j p_j |P_j,xy - M0 y_j - t|_1 + sum_j q_j |P_j,z - m3 (y_j - mean_i y_i)|_1`` where ``P``
+(12, 3) is the prior's pose for this image (:class:`pose_lifter.core.pose_step.PriorRows`).
+Functions of a :class:`pose_lifter.core.lifter.Lifter` (its options, priors, model and runs).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._fast import median_rows
+from .errors import InvalidInputError
+from .options import LifterOptions
+from .pose_model import PoseModel
+from .pose_step import PriorRows
+from .prior import PosePrior
+from .results import Camera, LiftResult, Normalisation, WarmStart
+from .runs import Run, Runs
+from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
+
+__all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter", "hybrid_runs", "lift_learned", "predict_prior", "prior_rows"]
+
+
+class Lifter(Protocol):
+    """What these functions use of a :class:`pose_lifter.core.lifter.Lifter`."""
+
+    @property
+    def options(self) -> LifterOptions: ...
+    @property
+    def prior(self) -> PosePrior: ...
+    @property
+    def temporal_prior(self) -> PosePrior | None: ...
+    @property
+    def model(self) -> PoseModel: ...
+    @property
+    def runs(self) -> Runs: ...
+    def limb_radii(self, proportions: NDArray[np.float64]) -> NDArray[np.float64] | None: ...
+
+#: The hybrid outlier pass flags a joint only beyond this many times the median disagreement of
+#: the frame's visible joints as well as beyond ``outlier_threshold`` (under heavy Gaussian noise
+#: every joint disagrees a little: the median sets the scale).
+OUTLIER_MEDIAN_FACTOR = 3.0
+
+
+def prior_rows(lifter: Lifter, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
+                limb_proportions: NDArray[np.float64] | None = None,
+                previous: NDArray[np.float64] | None = None,
+                temporal_weight: NDArray[np.float64] | None = None,
+                past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
+                fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+                ) -> tuple[PriorRows, NDArray[np.float64]]:
+    """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
+    normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
+    same frame) by ``temporal_weight``; limb radii from ``limb_proportions`` (a
+    track's estimate, ``options.prior_limbs``). Returns the rows and the prior's pose in
+    input units. Joints without weight take ``fill``'s position where it allows (see
+    :meth:`lift`) in the prior's input."""
+    vis = w > 0
+    if fill is not None:
+        add = fill[1] & ~vis
+        if np.any(add):
+            x = np.where(add[:, None], fill[0], x)
+            vis = vis | add
+    pose, used = predict_prior(lifter, x, vis, past)
+    target = np.empty((N_JOINTS, 3))
+    target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
+    target[:, 2] = pose[:, 2] / norm.spread
+    if not np.all(np.isfinite(target)):
+        raise InvalidInputError("the learned prior gave non-finite values for this input")
+    if previous is not None and temporal_weight is not None and np.any(temporal_weight > 0):
+        prev = previous.copy()
+        vis = w > 0
+        # the person's image motion since the previous frame (the median over visible joints)
+        prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
+        tw = temporal_weight[:, None]
+        target = (target + tw * prev) / (1.0 + tw)
+    rel = used.relative_weights
+    o = lifter.options
+    weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
+    radii = None
+    if o.prior_limbs and limb_proportions is not None:
+        radii = lifter.limb_radii(limb_proportions)
+    return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
+
+def predict_prior(lifter: Lifter, x: NDArray[np.float64], visible: NDArray[np.bool_],
+                   past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
+                   ) -> tuple[NDArray[np.float64], PosePrior]:
+    """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
+    temporal prior when the lift has ``past`` frames (padded to its window with the oldest
+    one given), else ``prior`` (a windowed ``prior`` gets this frame repeated)."""
+    prior = lifter.prior
+    temporal = lifter.temporal_prior
+    if past is not None and len(past[0]) > 0 and temporal is not None:
+        prior = temporal
+    if prior.window == 1:
+        return prior.predict(x, visible), prior
+    k = prior.window - 1
+    pts = np.empty((prior.window, N_JOINTS, 2))
+    vis = np.empty((prior.window, N_JOINTS), dtype=bool)
+    n_past = 0 if past is None else len(past[0])
+    for i in range(k):
+        j = max(n_past - k + i, 0)
+        if past is not None and n_past > 0:
+            pts[i], vis[i] = past[0][j], past[1][j]
+        else:
+            pts[i], vis[i] = x, visible
+    pts[k], vis[k] = x, visible
+    return prior.predict(np.where(vis[..., None], pts, 0.0), vis), prior
+
+def hybrid_runs(lifter: Lifter, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
+                 norm: Normalisation, warm: WarmStart | None, cam0: Camera | None,
+                 limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64],
+                 past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None, gated: bool = False,
+                 fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+                 ) -> tuple[list[tuple[int, Run]], int, int, NDArray[np.float64], NDArray[np.float64]]:
+    """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring).
+    Returns ``(runs, total alternations, starts tried, weights after the outlier pass, the
+    prior's pose in input units)``."""
+    o = lifter.options
+    previous = None
+    if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
+        prev = lifter.model.pose(warm.alpha)
+        previous = np.column_stack([cam0.project(prev),
+                                    cam0.scale * (prev - prev.mean(axis=0)) @ cam0.rotation[2]])
+    prior, prior_pose = prior_rows(lifter, x, w, norm, limb_proportions, previous, temporal_weight, past,
+                                         fill)
+    a_prior = lifter.runs.start_alpha(prior.target)
+    # every frame starts from the prior's pose (with the previous frame's camera when tracked):
+    # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
+    n_alt = o.hybrid_alternations
+    runs: list[tuple[int, Run]] = [(-3, lifter.runs.run(xn, w, a_prior, cam0, n_alt, prior=prior))]
+    if warm is not None and o.warm_competes:
+        wr = lifter.runs.run(xn, w, warm.alpha, cam0, max_alternations=1, prior=prior,
+                       pose_max_iter=o.screen_pose_max_iter)
+        if wr.objective < runs[0][1].objective:
+            wr = lifter.runs.run(xn, w, wr.pose.alpha, None, n_alt, start=wr, prior=prior)
+        runs.append((-1, wr))
+    if o.warm_flip and (warm is None or o.hybrid_flip_warm):
+        best = min(runs, key=lambda r: r[1].objective)[1]
+        runs.append((-2, lifter.runs.mirrored_run(xn, w, best, prior, n_alt)))
+    total = sum(r.n_iter for _, r in runs)
+    n_starts = len(runs)
+    threshold = o.outlier_threshold_gated if gated else o.outlier_threshold
+    for _ in range(o.outlier_passes if threshold > 0 else 0):
+        idx, run = min(runs, key=lambda r: r[1].objective)
+        cam = run.camera.camera
+        # a joint disagrees with the image when it is far from the fit's projection or from
+        # the prior's image position (the prior is trained with confident outliers)
+        resid = np.maximum(np.linalg.norm(xn - cam.project(run.pose.pose), axis=1),
+                           np.linalg.norm(xn - prior.target[:, :2], axis=1))
+        vis = w > 0
+        limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
+        out = vis & (resid > limit)
+        if not np.any(out) or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
+            break
+        w = w.copy()
+        w[out] = 0.0
+        prior, prior_pose = prior_rows(lifter, x, w, norm, limb_proportions, previous, temporal_weight,
+                                             past, fill)
+        # continue the fit, and start again from the prior's new pose: the lower objective
+        cont = lifter.runs.run(xn, w, run.pose.alpha, cam, n_alt, prior=prior)
+        fresh = lifter.runs.run(xn, w, lifter.runs.start_alpha(prior.target), None, n_alt, prior=prior)
+        runs = [(idx, cont), (-3, fresh)]
+        total += cont.n_iter + fresh.n_iter
+    return runs, total, n_starts, w, prior_pose
+
+def lift_learned(lifter: Lifter, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
+                  past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> LiftResult:
+    """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
+    own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
+    positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
+    error of the visible joints in the normalised units."""
+    pose_in, _ = predict_prior(lifter, x, w > 0, past)
+    centred = pose_in - pose_in.mean(axis=0)
+    flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
+    if not ok or not np.all(np.isfinite(flat)):
+        raise InvalidInputError("the learned prior gave a degenerate pose for this input")
+    body = flat.reshape(N_JOINTS, 3)
+    rot = body_frame(centred)
+    leg = float(limb_lengths(centred)[RIGHT_LOWER_LEG])
+    cam = Camera(np.ascontiguousarray(rot.T), leg, pose_in[:, :2].mean(axis=0))
+    reproj = np.linalg.norm(x - cam.project(body), axis=1)
+    vis = w > 0
+    alpha = lifter.runs.start_alpha(centred)
+    lv = np.abs(limb_lengths(body) - np.sqrt(lifter.model.limb_sq))
+    return LiftResult(
+        pose=body, pose_camera=body @ cam.rotation.T, camera=cam, alpha=alpha,
+        objective=float(w @ np.abs(x - cam.project(body)).sum(axis=1)) / norm.spread,
+        reprojection_error=float(reproj[vis].mean()), limb_violation=float(lv.max()), n_iter=0,
+        converged=True, n_starts=1, start_index=-4, weights=w, total_alternations=0, prior_pose=pose_in)
+
