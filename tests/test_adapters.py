@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import tolerances as tol
 from detector_poses import coco17, coco17_to, model_xy
 from pose_lifter import adapters, bags
 from pose_lifter import messages as m
@@ -153,7 +154,7 @@ def test_mediapipe_tasks_and_legacy_results() -> None:
     legacy = from_mediapipe(SimpleNamespace(pose_landmarks=SimpleNamespace(landmark=lms)), (640, 480))
     assert len(tasks) == 2 and len(legacy) == 1
     for p in (*tasks, *legacy):
-        np.testing.assert_allclose(p.points, xy, atol=1e-9)
+        np.testing.assert_allclose(p.points, xy, atol=tol.ROUND_OFF_ACCUMULATED)
     assert from_mediapipe(SimpleNamespace(pose_landmarks=None), (640, 480)) == []
 
 

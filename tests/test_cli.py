@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tolerances as tol
 from mcap_check import check_mcap
 from pose_lifter import bags, cli, mocap, scenes
 from pose_lifter import messages as m
@@ -51,7 +52,7 @@ def test_learn_bases_pca(tmp_path: Path) -> None:
     # normalised training data: the mean pose has a unit right lower leg (roughly)
     assert b.limb_proportions[7] == pytest.approx(1.0)
     # PCA bases are orthonormal
-    np.testing.assert_allclose(b.components.T @ b.components, np.eye(12), atol=1e-9)
+    np.testing.assert_allclose(b.components.T @ b.components, np.eye(12), atol=tol.ROUND_OFF_ACCUMULATED)
 
 
 @needs_data
@@ -71,7 +72,7 @@ def test_make_bag_and_floors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     source = mocap.load_trial("07_05", DATA, step=8, max_frames=12)
     d_truth = np.linalg.norm(truth[:, :, None] - truth[:, None], axis=-1)
     d_source = np.linalg.norm(source[:, :, None] - source[:, None], axis=-1)
-    np.testing.assert_allclose(d_truth, d_source, atol=1e-9)
+    np.testing.assert_allclose(d_truth, d_source, atol=tol.ROUND_OFF_ACCUMULATED)
     capsys.readouterr()
     assert cli.main(["evaluate", str(out), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
@@ -109,9 +110,9 @@ def test_evaluate_matches_by_stamp_and_track(tmp_path: Path) -> None:
     ev = evaluate_bag(out)
     assert (ev.n_ground_truth, ev.n_estimates, ev.n_matched) == (10, 8, 8)
     # a translated copy of the truth: every centred error is 0
-    np.testing.assert_allclose(ev.mpjpe_mm, 0, atol=1e-9)
-    np.testing.assert_allclose(ev.p_mpjpe_mm, 0, atol=1e-9)
-    np.testing.assert_allclose(ev.normalised, 0, atol=1e-9)
+    np.testing.assert_allclose(ev.mpjpe_mm, 0, atol=tol.ROUND_OFF_ACCUMULATED)
+    np.testing.assert_allclose(ev.p_mpjpe_mm, 0, atol=tol.ROUND_OFF_ACCUMULATED)
+    np.testing.assert_allclose(ev.normalised, 0, atol=tol.ROUND_OFF_ACCUMULATED)
     assert sorted(set(ev.track_ids.tolist())) == [3, 8]
 
 

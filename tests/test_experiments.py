@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tolerances as tol
 from pose_lifter import cli, mocap
 from pose_lifter.core.skeleton import body_frame
 from pose_lifter.experiments import action_class, camera_rotation, project
@@ -22,10 +23,10 @@ needs_data = pytest.mark.skipif(DATA is None, reason="CMU data not found (../sha
 @pytest.mark.parametrize("yaw", [0.0, 37.0, 90.0, 180.0, 271.0])
 def test_camera_is_a_proper_rotation_to_a_y_down_frame(yaw: float) -> None:
     r = camera_rotation(yaw)
-    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=tol.ROUND_OFF)
     assert np.linalg.det(r) == pytest.approx(1.0)  # never a mirror
     # body y (up) maps to image y down, whatever the yaw
-    np.testing.assert_allclose(r @ [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(r @ [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], atol=tol.ROUND_OFF)
 
 
 def test_frontal_view_keeps_chirality() -> None:
@@ -39,7 +40,7 @@ def test_frontal_view_keeps_chirality() -> None:
     pose[[10, 11]] = pose[9] - [0, 1, 0], pose[9] - [0, 2, 0]
     pose[[1, 2]] = pose[0] - [0, 1, 0], pose[0] - [0, 2, 0]
     pose[[4, 5]] = pose[3] - [0, 1, 0], pose[3] - [0, 2, 0]
-    np.testing.assert_allclose(body_frame(pose), np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(body_frame(pose), np.eye(3), atol=tol.ROUND_OFF)
     x = project(pose, 0.0)
     # yaw 0: the optical axis is body -z, so the camera faces the person's front and the
     # person's left hip appears on the image's right (a mirror would put it on the left)

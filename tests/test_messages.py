@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import tolerances as tol
 from pose_lifter import messages as m
 from pose_lifter.bags import pose_lifter_typestore
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
@@ -44,7 +45,7 @@ def test_skeleton2d_roundtrip_selects_model_joints() -> None:
     pts, c = m.skeleton2d_to_arrays(back.skeletons[0], back.layout)
     idx = list(get_layout("coco17").model_indices)
     np.testing.assert_allclose(pts, kp[idx])
-    np.testing.assert_allclose(c, conf[idx].astype(np.float32), rtol=1e-6)  # float32 on the wire
+    np.testing.assert_allclose(c, conf[idx].astype(np.float32), rtol=tol.FLOAT32_REL)  # float32 on the wire
     assert back.skeletons[0].track_id == 4
 
 
@@ -80,14 +81,14 @@ def test_place_in_camera_recovers_metric_position() -> None:
     t = np.array([fx * centroid[0] / centroid[2] + cx, fy * centroid[1] / centroid[2] + cy])
     res = fake_result(rot, f * leg / centroid[2], t)
     joints = m.place_in_camera(res, leg, (fx, fy), (cx, cy), default_distance_m=3.0)
-    np.testing.assert_allclose(joints.mean(axis=0), centroid, atol=1e-12)
-    np.testing.assert_allclose(joints - joints.mean(axis=0), res.pose_camera * leg, atol=1e-12)
+    np.testing.assert_allclose(joints.mean(axis=0), centroid, atol=tol.ROUND_OFF)
+    np.testing.assert_allclose(joints - joints.mean(axis=0), res.pose_camera * leg, atol=tol.ROUND_OFF)
     # no principal point: on the optical axis at the same depth
     np.testing.assert_allclose(m.place_in_camera(res, leg, (fx, fy), None, 3.0).mean(axis=0), [0, 0, 5.0],
-                               atol=1e-12)
+                               atol=tol.ROUND_OFF)
     # no camera info: the default distance
     np.testing.assert_allclose(m.place_in_camera(res, leg, None, None, 3.0).mean(axis=0), [0, 0, 3.0],
-                               atol=1e-12)
+                               atol=tol.ROUND_OFF)
     with pytest.raises(InvalidInputError):
         m.place_in_camera(res, -1.0, None, None, 3.0)
     with pytest.raises(InvalidInputError):
@@ -107,11 +108,11 @@ def test_result_to_skeleton3d_fields_and_inverse() -> None:
     np.testing.assert_allclose(m.skeleton3d_to_joints(back), joints)
     np.testing.assert_allclose(np.asarray(back.camera.projection).reshape(2, 3), 80.0 * rot[:2])
     q = back.camera.orientation
-    np.testing.assert_allclose(Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), rot, atol=1e-12)
+    np.testing.assert_allclose(Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), rot, atol=tol.ROUND_OFF)
     assert back.camera.scale == 80.0
     np.testing.assert_allclose(back.camera.translation, [300.0, 200.0])
     assert list(back.observed) == [bool(w > 0) for w in res.weights]
-    np.testing.assert_allclose(back.joint_weights, res.weights, rtol=1e-6)
+    np.testing.assert_allclose(back.joint_weights, res.weights, rtol=tol.FLOAT32_REL)
 
 
 def test_skeleton3d_to_joints_reorders_by_name() -> None:
@@ -146,7 +147,7 @@ def test_skeleton_markers() -> None:
     # ids and colours are stable across calls
     again = m.skeleton_markers(header, [(5, j1)], "people", 0.5, T)
     assert again.markers[0].id == 5
-    assert again.markers[0].color.g == pytest.approx(mk[2].color.g, rel=1e-6)
+    assert again.markers[0].color.g == pytest.approx(mk[2].color.g, rel=tol.FLOAT32_REL)
 
 
 def test_camera_info_roundtrip() -> None:

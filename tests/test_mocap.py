@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tolerances as tol
 from pose_lifter import mocap
 from pose_lifter.core.skeleton import limb_lengths
 
@@ -71,11 +72,11 @@ Frame Time: 0.5
     bvh = mocap.parse_bvh(p)
     assert bvh.names == ["A", "B", "C"] and bvh.parents == [-1, 0, 1] and bvh.frame_time == 0.5
     pos = mocap.bvh_positions(bvh, ["A", "B", "C"])
-    np.testing.assert_allclose(pos[0], [[0, 0, 0], [1, 0, 0], [1, 1, 0]], atol=1e-12)
+    np.testing.assert_allclose(pos[0], [[0, 0, 0], [1, 0, 0], [1, 1, 0]], atol=tol.ROUND_OFF)
     # frame 1: root at (1,2,3) turned 90 deg about z: B at root + (0,1,0). B's channels
     # Z=90, X=90 mean Rz @ Rx (X acts first): C's offset (0,1,0) -> (0,0,1) -> unchanged by
     # the two z turns, so C = B + (0,0,1). The reversed order would give B + (0,-1,0).
-    np.testing.assert_allclose(pos[1], [[1, 2, 3], [1, 3, 3], [1, 3, 4]], atol=1e-12)
+    np.testing.assert_allclose(pos[1], [[1, 2, 3], [1, 3, 3], [1, 3, 4]], atol=tol.ROUND_OFF)
 
 
 @needs_data
@@ -99,7 +100,7 @@ def test_readme_check_numbers(trial: str, fmt: str, frames: int, a: float, b: fl
     assert x.shape == (frames, 12, 3)
     lengths = limb_lengths(x)
     np.testing.assert_allclose(lengths[0, [0, 1, 4, 5]], [a, b, c, d], atol=0.0006)
-    assert np.ptp(lengths, axis=0).max() < 1e-9  # rigid bones
+    assert np.ptp(lengths, axis=0).max() < tol.ROUND_OFF_ACCUMULATED  # rigid bones
     # Y-up: ankles below hips below shoulders, feet near the floor
     assert np.all(x[:, [8, 11], 1].mean(axis=1) < x[:, [6, 9], 1].mean(axis=1))
     assert np.all(x[:, [6, 9], 1].mean(axis=1) < x[:, [0, 3], 1].mean(axis=1))
@@ -110,16 +111,16 @@ def test_amc_and_bvh_agree_to_micrometres() -> None:
     amc = mocap.load_amc(DATA / "asf_amc" / "07_01.amc")
     bvh = mocap.load_bvh(DATA / "bvh" / "07" / "07_01.bvh")
     assert amc.shape == bvh.shape == (316, 12, 3)
-    assert np.abs(amc - bvh).max() < 2e-5
+    assert np.abs(amc - bvh).max() < tol.MOCAP_FORMAT_AGREEMENT
     # the thorax trap: without the vector the upper body sits ~12 cm too low
     low = mocap.load_bvh(DATA / "bvh" / "07" / "07_01.bvh", thorax=np.zeros(3), max_frames=50)
     drop = (amc[:50, :6] - low[:, :6])[..., 1]
     assert 0.10 < np.median(drop) < 0.13
-    np.testing.assert_allclose(low[:, 6:], amc[:50, 6:], atol=2e-5)  # legs unaffected
+    np.testing.assert_allclose(low[:, 6:], amc[:50, 6:], atol=tol.MOCAP_FORMAT_AGREEMENT)  # legs unaffected
     # the table value equals the ASF's thorax (the default reads the .asf)
     table = mocap.load_bvh(DATA / "bvh" / "07" / "07_01.bvh",
                            thorax=np.array(mocap.THORAX_VECTORS["07"]), max_frames=50)
-    np.testing.assert_allclose(table, amc[:50], atol=2e-5)
+    np.testing.assert_allclose(table, amc[:50], atol=tol.MOCAP_FORMAT_AGREEMENT)
 
 
 @needs_data

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import tolerances as tol
 from mcap_check import check_mcap
 from pose_lifter import bags, offline, scenes
 from pose_lifter import messages as m
@@ -71,7 +72,7 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     # metric placement: depth = f * leg / scale = 800 * 0.5 / 100, centroid under the 2D mean
     j = m.skeleton3d_to_joints(est[0].msg.skeletons[0])
     assert j.mean(axis=0)[2] == pytest.approx(4.0)
-    np.testing.assert_allclose(j - j.mean(axis=0), lifter.pose * 0.5, atol=1e-12)
+    np.testing.assert_allclose(j - j.mean(axis=0), lifter.pose * 0.5, atol=tol.ROUND_OFF)
     u = 800 * j.mean(axis=0)[0] / 4.0 + 320
     assert u == pytest.approx(sc.points_2d[0, 0].mean(axis=0)[0])
     # markers: two per person; the vanished track gets DELETE markers

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tolerances as tol
 from pose_lifter import bags, scenes
 from pose_lifter import messages as m
 from pose_lifter.core.errors import InvalidInputError
@@ -28,10 +29,10 @@ def standing_person(facing_yaw_deg: float = 0.0) -> np.ndarray:
 
 def test_look_at_is_a_proper_rotation_with_y_down() -> None:
     rot = scenes.look_at(np.array([0.0, 1.0, 5.0]), np.array([0.0, 1.0, 0.0]))
-    np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=tol.ROUND_OFF)
     assert np.linalg.det(rot) == pytest.approx(1.0)
-    np.testing.assert_allclose(rot @ np.array([0.0, 1.0, 0.0]), [0, -1, 0], atol=1e-12)  # up -> -y
-    np.testing.assert_allclose(rot @ np.array([0.0, 0.0, -1.0]), [0, 0, 1], atol=1e-12)  # forward
+    np.testing.assert_allclose(rot @ np.array([0.0, 1.0, 0.0]), [0, -1, 0], atol=tol.ROUND_OFF)  # up -> -y
+    np.testing.assert_allclose(rot @ np.array([0.0, 0.0, -1.0]), [0, 0, 1], atol=tol.ROUND_OFF)  # forward
     with pytest.raises(InvalidInputError):
         scenes.look_at(np.zeros(3), np.array([0.0, 1.0, 0.0]))
 
@@ -58,11 +59,11 @@ def test_projection_and_distance() -> None:
     clip = np.repeat(standing_person()[None], 2, axis=0)
     sc = scenes.build_scene([clip], scenes.SceneOptions(distance=5.0))
     cam = sc.joints_camera[0, 0]
-    assert cam.mean(axis=0)[2] == pytest.approx(5.0, abs=1e-9)
+    assert cam.mean(axis=0)[2] == pytest.approx(5.0, abs=tol.ROUND_OFF_ACCUMULATED)
     np.testing.assert_allclose(sc.clean_2d[0, 0, :, 0], 800 * cam[:, 0] / cam[:, 2] + 320)
     np.testing.assert_allclose(sc.clean_2d[0, 0, :, 1], 800 * cam[:, 1] / cam[:, 2] + 240)
     # bones keep their metric lengths (a rigid placement)
-    np.testing.assert_allclose(limb_lengths(cam), limb_lengths(clip[0]), atol=1e-12)
+    np.testing.assert_allclose(limb_lengths(cam), limb_lengths(clip[0]), atol=tol.ROUND_OFF)
 
 
 def test_orbit_and_two_people() -> None:
@@ -75,7 +76,7 @@ def test_orbit_and_two_people() -> None:
     assert np.degrees(np.arccos((np.trace(turn) - 1) / 2)) == pytest.approx(90.0, abs=1e-6)
     # people 1.5 m apart across the first frame
     gap = sc.joints_camera[1, 0].mean(axis=0) - sc.joints_camera[0, 0].mean(axis=0)
-    np.testing.assert_allclose(gap, [1.5, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(gap, [1.5, 0, 0], atol=tol.ROUND_OFF_ACCUMULATED)
     assert np.all(np.abs(np.diff(sc.stamps_ns) - 1e9 / 30) <= 1)  # ns rounding
     assert sc.stamps_ns[30] - sc.stamps_ns[0] == 1_000_000_000
 
@@ -91,7 +92,8 @@ def test_corrupt_2d_rates() -> None:
     assert np.mean(conf == 0) == pytest.approx(0.2, abs=0.01)
     far = (moved > 0) & (conf > 0)
     assert np.mean(far) == pytest.approx(0.1 * 0.8, abs=0.01)
-    assert moved[far].min() >= 50.0 - 1e-9 and moved[far].max() <= 150.0 + 1e-9
+    assert moved[far].min() >= 50.0 - tol.ROUND_OFF_ACCUMULATED
+    assert moved[far].max() <= 150.0 + tol.ROUND_OFF_ACCUMULATED
 
 
 def test_to_coco17_and_bag(tmp_path: Path) -> None:

@@ -1,6 +1,6 @@
 """Each fast step of the solver against its independent reference (pose_lifter.core.reference).
 
-Tolerances come from ``reference.TOLERANCES``; problems are small and in normalised units
+Tolerances come from ``tests/tolerances.py``; problems are small and in normalised units
 (right lower leg = 1, camera scale ~1), as the lifter poses them. Nonconvex steps are
 compared one-sidedly: the fast step must not be worse than a local reference started from
 the same point (or the same basin).
@@ -12,6 +12,7 @@ import inspect
 
 import numpy as np
 import pytest
+import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
 from pose_lifter.core.alpha.lifted_admm import lifted_alpha_admm, qstep, restore_feasibility
@@ -29,7 +30,6 @@ from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
 
 pytest.importorskip("cvxpy")
-TOL = ref.TOLERANCES
 Arr = NDArray[np.float64]
 
 
@@ -85,16 +85,17 @@ def _check_camera(x: Arr, y: Arr, w: Arr, loss: str, case: int, **kwargs: float)
     if (case, loss) not in _CAMERA_REFERENCES:  # shared by the two camera tests
         _CAMERA_REFERENCES[case, loss] = ref.reference_camera(x, y, w, loss, n_restarts=6, seed=case)
     c_ref, f_ref = _CAMERA_REFERENCES[case, loss]
-    bound = f_ref * (1 + TOL["camera_objective_rel"]) + TOL["camera_objective_abs"]
+    bound = f_ref * (1 + tol.CAMERA_OBJECTIVE_REL) + tol.CAMERA_OBJECTIVE_ABS
     # cold (the step's own least-squares start) and from the reference's rotation basin
     for init in (None, c_ref):
         res = camera_step(x, y, w, loss, init=init, **kwargs)  # type: ignore[arg-type]
-        assert res.objective == pytest.approx(ref.camera_objective(x, y, w, res.camera, loss), rel=1e-12)
+        assert res.objective == pytest.approx(ref.camera_objective(x, y, w, res.camera, loss),
+                                              rel=tol.ROUND_OFF)
         assert res.objective <= bound, (init is None, res.objective, f_ref)
-        assert np.linalg.norm(res.camera.rotation[:2] - c_ref.rotation[:2]) <= TOL["camera_rotation"]
+        assert np.linalg.norm(res.camera.rotation[:2] - c_ref.rotation[:2]) <= tol.CAMERA_ROTATION
         # for its own rotation, (s, t) are optimal too (exact LP/QP with Clarabel)
         _, _, f_given = ref.reference_camera_given_rotation(x, y, w, res.camera.rotation, loss)
-        assert res.objective <= f_given * (1 + TOL["camera_objective_rel"]) + TOL["camera_objective_abs"]
+        assert res.objective <= f_given * (1 + tol.CAMERA_OBJECTIVE_REL) + tol.CAMERA_OBJECTIVE_ABS
 
 
 @pytest.mark.parametrize("loss", ["l1", "l2"])
@@ -134,7 +135,7 @@ def test_qstep_matches_reference(model: PoseModel, lifting: str, delta: float) -
     w_mat, p_mat, g_mat = (a + a.T for a in rng.normal(size=(3, d, d)))
     q_fast = qstep(w_mat, cons, p_mat, g_mat, delta)
     q_ref = ref.reference_qstep(w_mat, cons.omegas, p_mat, g_mat, delta)
-    assert np.max(np.abs(q_fast - q_ref)) <= TOL["qstep_solution"]
+    assert np.max(np.abs(q_fast - q_ref)) <= tol.QSTEP_SOLUTION
 
 
 # ------------------------------------------------------------------------------ alpha-step
@@ -168,8 +169,8 @@ def test_alpha_step_admm_feasible_and_above_sdp_bound(
     z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).x)
     _, lower = ref.reference_alpha_sdp(w_mat, cons.omegas)
     assert z[-1] == 1.0
-    assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
-    assert float(z @ w_mat @ z) >= lower - TOL["sdp_bound_rel"] * (1 + abs(lower))
+    assert np.max(np.abs(cons.violation(z))) <= tol.FEASIBILITY
+    assert float(z @ w_mat @ z) >= lower - tol.SDP_BOUND_REL * (1 + abs(lower))
 
 
 #: How far above the SLSQP polish of its own output the paper's inner ADM may end: on most of
@@ -192,8 +193,8 @@ def test_alpha_step_admm_is_a_local_minimum(bases: PoseBases, model: PoseModel, 
         z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).x)
         f_fast = float(z @ w_mat @ z)
         _, f_polished = ref.reference_alpha_local(w_mat, cons.omegas, z)
-        gaps.append((f_fast - TOL["alpha_step_objective_abs"]) / f_polished - 1.0)
-    assert sum(g <= TOL["alpha_step_objective_rel"] for g in gaps) >= ADMM_CASES_WITHIN_TOL, gaps
+        gaps.append((f_fast - tol.ALPHA_STEP_OBJECTIVE_ABS) / f_polished - 1.0)
+    assert sum(g <= tol.ALPHA_STEP_OBJECTIVE_REL for g in gaps) >= ADMM_CASES_WITHIN_TOL, gaps
     assert max(gaps) <= ADMM_MAX_GAP, gaps
 
 
@@ -209,8 +210,8 @@ def test_alpha_step_newton_not_worse_than_local_reference(
     cons = model.full
     z = newton_alpha(w_mat, cons, z0).x
     _, f_local = ref.reference_alpha_local(w_mat, cons.omegas, z0)
-    assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
-    bound = f_local * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+    assert np.max(np.abs(cons.violation(z))) <= tol.FEASIBILITY
+    bound = f_local * (1 + tol.ALPHA_STEP_OBJECTIVE_REL) + tol.ALPHA_STEP_OBJECTIVE_ABS
     assert float(z @ w_mat @ z) <= bound
 
 
@@ -247,10 +248,10 @@ def test_alpha_step_riemannian_is_feasible_local_minimum(
     w_mat[:r, r] = w_mat[r, :r] = -lin
     w_mat[r, r] = lin @ np.linalg.solve(gmat, lin)  # the constant making z^T W z >= 0
     z = np.append(s, 1.0)
-    assert np.max(np.abs(cons.violation(z))) <= TOL["feasibility"]
+    assert np.max(np.abs(cons.violation(z))) <= tol.FEASIBILITY
     f_fast = float(z @ w_mat @ z)
     _, f_polished = ref.reference_alpha_local(w_mat, cons.omegas, z)
-    assert f_fast <= f_polished * (1 + TOL["alpha_step_objective_rel"]) + TOL["alpha_step_objective_abs"]
+    assert f_fast <= f_polished * (1 + tol.ALPHA_STEP_OBJECTIVE_REL) + tol.ALPHA_STEP_OBJECTIVE_ABS
 
 
 def test_riemannian_limb_coordinates_are_exact(wide_model: PoseModel) -> None:
@@ -259,9 +260,9 @@ def test_riemannian_limb_coordinates_are_exact(wide_model: PoseModel) -> None:
     assert coords is not None
     z, n, s0, rad = coords
     cu24, cmu24 = model.kernel_limbs[:2]
-    assert np.abs(cu24 @ z - np.eye(24)).max() < 1e-12  # l = C mu + C U S s is onto ...
-    assert np.abs(cu24 @ n).max() < 1e-12  # ... and N spans the rest
-    assert np.abs(cmu24 + cu24 @ s0).max() < 1e-12
+    assert np.abs(cu24 @ z - np.eye(24)).max() < tol.ROUND_OFF  # l = C mu + C U S s is onto ...
+    assert np.abs(cu24 @ n).max() < tol.ROUND_OFF  # ... and N spans the rest
+    assert np.abs(cmu24 + cu24 @ s0).max() < tol.ROUND_OFF
     assert np.linalg.matrix_rank(np.hstack([z, n])) == model.sig.size
     assert np.allclose(rad**2, model.limb_sq, rtol=1e-14, atol=0)
 
@@ -324,10 +325,10 @@ def _check_convex_pose(
                     **kwargs)  # type: ignore[arg-type]
     a_ref, f_ref = ref.reference_pose_convex(x, cam, bases.mean, bases.components, w, theta, var.loss)
     f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
-    assert res.objective == pytest.approx(f_fast, rel=1e-9)
-    assert abs(f_fast - f_ref) <= TOL["pose_objective_rel"] * (1 + f_ref), (f_fast, f_ref)
+    assert res.objective == pytest.approx(f_fast, rel=tol.ROUND_OFF_ACCUMULATED)
+    assert abs(f_fast - f_ref) <= tol.POSE_OBJECTIVE_REL * (1 + f_ref), (f_fast, f_ref)
     if check_alpha and name == "L2NAWS":  # strictly convex here: the minimiser is unique
-        assert np.max(np.abs(res.alpha - a_ref)) <= TOL["pose_alpha"]
+        assert np.max(np.abs(res.alpha - a_ref)) <= tol.POSE_ALPHA
 
 
 @pytest.mark.parametrize("name", ["L1NAWS", "L1NANS", "L2NAWS", "L2NANS"])
@@ -370,14 +371,14 @@ def test_limb_pose_step_is_feasible_local_minimum(
         res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
                         **_pose_kwargs())  # type: ignore[arg-type]
         f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
-        assert res.objective == pytest.approx(f_fast, rel=1e-9)
+        assert res.objective == pytest.approx(f_fast, rel=tol.ROUND_OFF_ACCUMULATED)
         y = bases.mean + bases.components @ res.alpha
         lengths_sq = np.sum((limb_selectors() @ y) ** 2, axis=1)
-        assert np.max(np.abs(lengths_sq - model.limb_sq)) <= TOL["limb_violation"]
+        assert np.max(np.abs(lengths_sq - model.limb_sq)) <= tol.POSE_STEP_LIMB_VIOLATION
         _, f_polished = ref.reference_pose_limbs_local(
             x, cam, bases.mean, bases.components, w, theta, var.loss, model.limb_sq, res.alpha)
-        gaps.append((f_fast - TOL["alpha_step_objective_abs"]) / f_polished - 1.0)
-    assert max(gaps) <= TOL["alpha_step_objective_rel"], gaps
+        gaps.append((f_fast - tol.ALPHA_STEP_OBJECTIVE_ABS) / f_polished - 1.0)
+    assert max(gaps) <= tol.ALPHA_STEP_OBJECTIVE_REL, gaps
 
 
 _BEST_LOCAL: dict[tuple[str, int], float] = {}
@@ -442,7 +443,7 @@ def test_limb_pose_step_close_to_best_local_reference(
         res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(bases.n_bases),
                         **kw)  # type: ignore[arg-type]
         ratios.append(res.objective / _best_local_reference(bases, model, test_poses, name, case))
-    assert np.median(ratios) <= TOL["nonconvex_median_ratio"], ratios
+    assert np.median(ratios) <= tol.NONCONVEX_MEDIAN_RATIO, ratios
     assert np.max(ratios) <= ADMM_POSE_MAX_RATIO, ratios
 
 
@@ -462,10 +463,10 @@ def test_riemannian_pose_step_close_to_best_local_reference(
         kw = {**_pose_kwargs(), "alpha_solver": "riemannian"}
         res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(k),
                         **kw)  # type: ignore[arg-type]
-        assert model.limb_violation(res.alpha) <= TOL["limb_violation"]
+        assert model.limb_violation(res.alpha) <= tol.POSE_STEP_LIMB_VIOLATION
         newton = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(k),
                            **{**kw, "alpha_solver": "newton"})  # type: ignore[arg-type]
         starts = [np.zeros(k), np.random.default_rng(300 + case).normal(size=k), res.alpha, newton.alpha]
         ratios.append(res.objective / _best_local_value(model, x, cam, w, var, starts))
-    assert np.median(ratios) <= TOL["nonconvex_median_ratio"], ratios
-    assert np.max(ratios) <= TOL["nonconvex_max_ratio"], ratios
+    assert np.median(ratios) <= tol.NONCONVEX_MEDIAN_RATIO, ratios
+    assert np.max(ratios) <= tol.NONCONVEX_MAX_RATIO, ratios

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from pose_lifter import bags, cli
 from pose_lifter.core import Lifter, camera
-from pose_lifter.core import ramakrishna as rk
 from pose_lifter.core import reference as ref
+from pose_lifter.core.baselines import ramakrishna as rk
 from pose_lifter.core.errors import (
     BagError,
     BagReadError,

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tolerances as tol
 from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError, OptionsError, PriorFileError
@@ -18,8 +19,8 @@ from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
 from pose_lifter.views import film, scale_limbs, view_rotation
 
 #: Tolerances of this file, stated once.
-LIMB_TOL = 1e-6  # limb-length violation of a fused (hybrid) result, right-lower-leg units
-FLOAT32_TOL = 1e-4  # outputs of a saved prior (float32 weights) vs the in-memory one, relative
+LIMB_TOL = tol.LIFT_LIMB_VIOLATION  # limb-length violation of a fused (hybrid) result, right-lower-leg units
+FLOAT32_TOL = tol.PRIOR_FLOAT32_REL  # a saved prior (float32 weights) vs the in-memory one, relative
 
 
 @pytest.fixture(scope="module")
@@ -352,7 +353,7 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         x[~vis] = np.nan if rng.random() < 0.5 else 0.0
         one, batch = prior_features(x, vis), prior_features(x[None, None], vis[None, None])
         for a, b in zip(one, batch, strict=True):
-            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=1e-12)
+            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
         # float32 layers: a matrix-vector and a matrix-matrix product round differently
         np.testing.assert_allclose(prior.predict(x, vis), prior.predict(x[None, None], vis[None, None])[0],
                                    rtol=FLOAT32_TOL, atol=FLOAT32_TOL)
@@ -361,7 +362,7 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         vw = np.concatenate([rng.random((3, 12)) > 0.3, vis[None]])
         one, batch = prior_features(xw, vw, 4), prior_features(xw[None], vw[None], 4)
         for a, b in zip(one, batch, strict=True):
-            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=1e-12)
+            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
 
 
 def test_a_temporal_prior_sees_the_tracks_past_frames(
@@ -381,7 +382,7 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     assert now is not None
     same = lifter.lift(x[1], track=TrackContext(past=(x[1][None], vis[None]))).prior_pose
     moved = lifter.lift(x[1], track=TrackContext(past=(x[0][None], vis[None]))).prior_pose
-    np.testing.assert_allclose(same, now, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(same, now, rtol=0, atol=tol.ROUND_OFF_ACCUMULATED)
     assert moved is not None and np.abs(moved - now).max() > 1e-3
     with pytest.raises(InvalidInputError):
         lifter.lift(x[1], track=TrackContext(past=(x[0], vis)))
@@ -411,7 +412,7 @@ def test_the_packaged_temporal_prior_is_used_on_tracked_frames(
         errs.append(np.mean([p_mpjpe(r.pose_camera, t) for r, t in zip(res[1:], truth[1:], strict=True)]))
         if on:  # the first frame has no past: the single-frame prior, the same as without
             off0 = Lifter(bases, LifterOptions(temporal_prior=False)).lift(x[0])
-            np.testing.assert_allclose(res[0].pose_camera, off0.pose_camera, atol=1e-9)
+            np.testing.assert_allclose(res[0].pose_camera, off0.pose_camera, atol=tol.ROUND_OFF_ACCUMULATED)
     assert errs[0] < errs[1], errs
 
 

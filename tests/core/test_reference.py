@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
 from pose_lifter.core.bases import PoseBases, learn_pca_bases
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.reference import camera as ref_camera
+from pose_lifter.core.reference import pose as ref_pose
 from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import limb_lengths, limb_selectors
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
-
-TOL = ref.TOLERANCES
 
 pytest.importorskip("cvxpy")
 
@@ -56,11 +58,11 @@ def test_camera_given_rotation_matches_exact_inner(loss: str) -> None:
         w[rng.integers(12)] = 0.0
         rot = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix()
         s, t, f = ref.reference_camera_given_rotation(x, y, w, rot, loss)
-        inner = ref._inner_l1_exact if loss == "l1" else ref._inner_l2_exact
+        inner = ref_camera._inner_l1_exact if loss == "l1" else ref_camera._inner_l2_exact
         _, _, f2 = inner(x, y @ rot[:2].T, w)
         assert s >= 0
         assert abs(f - f2) <= 1e-7 * (1 + f2)
-        assert f == pytest.approx(ref.camera_objective(x, y, w, Camera(rot, s, t), loss), abs=1e-12)
+        assert f == pytest.approx(ref.camera_objective(x, y, w, Camera(rot, s, t), loss), abs=tol.ROUND_OFF)
 
 
 @pytest.mark.parametrize("loss", ["l1", "l2"])
@@ -74,12 +76,12 @@ def test_camera_recovered_from_noise_free_data(loss: str) -> None:
         w[[2, 7]] = 0.0  # missing joints: free to be anything
         x[[2, 7]] += 50.0
         est, f = ref.reference_camera(x, y, w, loss, n_restarts=6, seed=3)
-        assert f <= TOL["recovery"]
-        assert _rot_dist(est.rotation, cam.rotation) <= TOL["recovery"]
-        assert est.scale == pytest.approx(cam.scale, abs=TOL["recovery"])
-        np.testing.assert_allclose(est.translation, cam.translation, atol=TOL["recovery"])
-        np.testing.assert_allclose(est.rotation @ est.rotation.T, np.eye(3), atol=1e-12)
-        assert np.linalg.det(est.rotation) == pytest.approx(1.0, abs=1e-12)
+        assert f <= tol.RECOVERY
+        assert _rot_dist(est.rotation, cam.rotation) <= tol.RECOVERY
+        assert est.scale == pytest.approx(cam.scale, abs=tol.RECOVERY)
+        np.testing.assert_allclose(est.translation, cam.translation, atol=tol.RECOVERY)
+        np.testing.assert_allclose(est.rotation @ est.rotation.T, np.eye(3), atol=tol.ROUND_OFF)
+        assert np.linalg.det(est.rotation) == pytest.approx(1.0, abs=tol.ROUND_OFF)
 
 
 def test_camera_l1_with_outliers_not_worse_than_truth_and_close_to_it() -> None:
@@ -90,7 +92,7 @@ def test_camera_l1_with_outliers_not_worse_than_truth_and_close_to_it() -> None:
     x[[4, 9]] += np.array([[3.0, -2.0], [-2.5, 4.0]])  # gross outliers on 2 of 12 joints
     w = np.ones(12)
     est, f = ref.reference_camera(x, y, w, "l1", n_restarts=6, seed=0)
-    assert f <= ref.camera_objective(x, y, w, cam, "l1") + TOL["camera_objective_abs"]
+    assert f <= ref.camera_objective(x, y, w, cam, "l1") + tol.CAMERA_OBJECTIVE_ABS
     # L1 is robust: the outliers hardly move the estimate; L2 is pulled away
     assert _rot_dist(est.rotation, cam.rotation) < 0.05
     est2, _ = ref.reference_camera(x, y, w, "l2", n_restarts=6, seed=0)
@@ -99,11 +101,11 @@ def test_camera_l1_with_outliers_not_worse_than_truth_and_close_to_it() -> None:
 
 def test_camera_rejects_bad_input() -> None:
     x, y = np.zeros((12, 2)), np.zeros((12, 3))
-    with pytest.raises(ref.InvalidInputError):
+    with pytest.raises(InvalidInputError):
         ref.reference_camera(x, y, np.ones(12), "l3")
-    with pytest.raises(ref.InvalidInputError):
+    with pytest.raises(InvalidInputError):
         ref.reference_camera(x, y, np.r_[np.ones(2), np.zeros(10)], "l1")
-    with pytest.raises(ref.InvalidInputError):
+    with pytest.raises(InvalidInputError):
         ref.reference_camera(x[:5], y, np.ones(12), "l1")
 
 
@@ -124,17 +126,17 @@ def test_qstep_kkt(bases: PoseBases, delta: float) -> None:
     m1 = omegas.shape[1]
     w_mat, p_mat, g_mat = (rng.normal(size=(m1, m1)) for _ in range(3))  # deliberately non-symmetric
     q = ref.reference_qstep(w_mat, omegas, p_mat, g_mat, delta)
-    np.testing.assert_allclose(q, q.T, atol=1e-12)
+    np.testing.assert_allclose(q, q.T, atol=tol.ROUND_OFF)
     scale = 1.0 + float(np.abs(omegas).max())
-    assert abs(q[-1, -1] - 1.0) <= TOL["kkt"]
-    assert np.max(np.abs(np.einsum("cij,ij->c", omegas, q))) <= TOL["kkt"] * scale * (1 + np.abs(q).max())
+    assert abs(q[-1, -1] - 1.0) <= tol.KKT
+    assert np.max(np.abs(np.einsum("cij,ij->c", omegas, q))) <= tol.KKT * scale * (1 + np.abs(q).max())
     grad = _sym(w_mat) + _sym(g_mat) + delta * (q - _sym(p_mat))
     e = np.zeros((m1, m1))
     e[-1, -1] = 1.0
     basis = np.stack([*(_sym(o).reshape(-1) for o in omegas), e.reshape(-1)], axis=1)
     coef, *_ = np.linalg.lstsq(basis, -grad.reshape(-1), rcond=None)
     resid = grad.reshape(-1) + basis @ coef
-    assert np.linalg.norm(resid) <= TOL["kkt"] * (1 + np.linalg.norm(grad))
+    assert np.linalg.norm(resid) <= tol.KKT * (1 + np.linalg.norm(grad))
     # and it beats feasible perturbations (directions in the null space of the constraints)
     def obj(qq: Arr) -> float:
         d = qq - p_mat
@@ -145,7 +147,7 @@ def test_qstep_kkt(bases: PoseBases, delta: float) -> None:
     for _ in range(5):
         d = (null.T @ rng.normal(size=null.shape[0])).reshape(m1, m1)
         d = _sym(d)
-        assert obj(q + 1e-3 * d) >= obj(q) - 1e-9
+        assert obj(q + 1e-3 * d) >= obj(q) - tol.ROUND_OFF_ACCUMULATED
 
 
 # ----------------------------------------------------------------------------- alpha-step
@@ -173,15 +175,15 @@ def test_omegas_encode_limb_lengths(bases: PoseBases) -> None:
     z = np.append(alpha, 1.0)
     c = limb_selectors()
     direct = np.sum((c @ y.reshape(-1)) ** 2, axis=1) - target
-    np.testing.assert_allclose(np.einsum("i,cij,j->c", z, om, z), direct, atol=1e-10)
+    np.testing.assert_allclose(np.einsum("i,cij,j->c", z, om, z), direct, atol=tol.ROUND_OFF_LONG)
 
 
 @pytest.mark.parametrize("seed", [5, 6])
 def test_alpha_sdp_is_lower_bound_of_local_solutions(bases: PoseBases, seed: int) -> None:
     w_mat, omegas, z_feasible = _alpha_problem(bases, seed)
     q, lb = ref.reference_alpha_sdp(w_mat, omegas)
-    assert np.linalg.eigvalsh(q).min() >= -1e-6 * np.abs(q).max()
-    assert q[-1, -1] == pytest.approx(1.0, abs=1e-6)
+    assert np.linalg.eigvalsh(q).min() >= -tol.SCS_ACCURACY * np.abs(q).max()
+    assert q[-1, -1] == pytest.approx(1.0, abs=tol.SCS_ACCURACY)
     share = ref.top_eigenvalue_share(q)
     assert 0.0 < share <= 1.0
     rng = np.random.default_rng(seed)
@@ -190,11 +192,11 @@ def test_alpha_sdp_is_lower_bound_of_local_solutions(bases: PoseBases, seed: int
     for z0 in starts:
         z, f = ref.reference_alpha_local(w_mat, omegas, z0)
         assert z[-1] == 1.0
-        assert np.max(np.abs(np.einsum("i,cij,j->c", z, omegas, z))) <= TOL["feasibility"]
-        assert f == pytest.approx(float(z @ w_mat @ z), rel=1e-12)
-        assert lb <= f + TOL["sdp_bound_rel"] * (1 + abs(f))
+        assert np.max(np.abs(np.einsum("i,cij,j->c", z, omegas, z))) <= tol.FEASIBILITY
+        assert f == pytest.approx(float(z @ w_mat @ z), rel=tol.ROUND_OFF)
+        assert lb <= f + tol.SDP_BOUND_REL * (1 + abs(f))
         # local optimality: not worse than the feasible start
-        assert z0 is not z_feasible or f <= float(z0 @ w_mat @ z0) + 1e-9
+        assert z0 is not z_feasible or f <= float(z0 @ w_mat @ z0) + tol.ROUND_OFF_ACCUMULATED
 
 
 def test_top_eigenvalue_share() -> None:
@@ -230,7 +232,7 @@ def test_pose_convex_l2_subgradient_condition(bases: PoseBases) -> None:
     x = cam.project(y) + 0.05 * rng.normal(size=(12, 2))
     w, theta = np.ones(12), 0.3
     alpha, _ = ref.reference_pose_convex(x, cam, bases.mean, bases.components, w, theta, "l2")
-    a_mat, b_vec, w2 = ref._pose_linear_map(x, cam, bases.mean, bases.components, w)
+    a_mat, b_vec, w2 = ref_pose._pose_linear_map(x, cam, bases.mean, bases.components, w)
     g = 2.0 * a_mat.T @ (w2 * (a_mat @ alpha - b_vec))
     active = np.abs(alpha) > 1e-7
     assert np.any(~active)  # theta large enough to zero some coefficients
@@ -245,7 +247,7 @@ def test_pose_convex_recovers_noise_free_pose(bases: PoseBases, loss: str) -> No
     cam = _random_camera(rng)
     x = cam.project(y)
     alpha, f = ref.reference_pose_convex(x, cam, bases.mean, bases.components, np.ones(12), 0.0, loss)
-    assert f <= TOL["recovery"]
+    assert f <= tol.RECOVERY
     np.testing.assert_allclose(alpha, alpha_true, atol=1e-5)
 
 
@@ -264,8 +266,8 @@ def test_pose_limbs_local_feasible_and_not_worse_than_truth(bases: PoseBases, lo
             x, cam, bases.mean, bases.components, w, theta, loss, lsq, alpha0)
         yy = bases.mean + bases.components @ alpha
         viol = np.max(np.abs(np.sum((c @ yy) ** 2, axis=1) - lsq))
-        assert viol <= TOL["feasibility"]
+        assert viol <= tol.FEASIBILITY
         if alpha0 is alpha_true:  # a feasible start: the local solver can only improve it
-            assert f <= f_true + 1e-9
+            assert f <= f_true + tol.ROUND_OFF_ACCUMULATED
         # and the result is close to the truth (data nearly noise-free)
         assert np.max(np.abs(yy - y.reshape(-1))) < 0.1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core.camera import project_scaled_orthographic
 
@@ -23,7 +24,8 @@ def test_closed_form_scaled_orthographic_projection_equals_the_svd() -> None:
         got = project_scaled_orthographic(n)
         ref = _svd_projection(n)
         # the nearest point is unique unless n is exactly rank 1; compare distances then too
-        assert np.linalg.norm(got - n) <= np.linalg.norm(ref - n) * (1 + 1e-9) + 1e-12
+        assert (np.linalg.norm(got - n)
+                <= np.linalg.norm(ref - n) * (1 + tol.ROUND_OFF_ACCUMULATED) + tol.ROUND_OFF)
         if np.linalg.svd(n, compute_uv=False)[1] > 1e-6 * np.linalg.norm(n):
             np.testing.assert_allclose(got, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
         # always a scaled orthographic matrix
@@ -48,7 +50,7 @@ def test_weighted_median_minimises_weighted_l1_with_ties_and_zero_weights() -> N
         # the weighted-L1 objective is piecewise linear with kinks at the values: its minimum is
         # attained at one of them
         best = min(float(np.sum(w * np.abs(v - c))) for c in v)
-        assert float(np.sum(w * np.abs(v - m))) <= best + 1e-12
+        assert float(np.sum(w * np.abs(v - m))) <= best + tol.ROUND_OFF
 
 
 def test_cholesky_solve_solves_or_refuses() -> None:
@@ -85,13 +87,13 @@ def test_mirrored_start_kernel_equals_normalise_pose() -> None:
         cam[:, 2] *= -1.0
         flat, ok_flat = normalise_pose_flat(np.ascontiguousarray(cam))
         assert ok and ok_flat
-        np.testing.assert_allclose(flat, normalise_pose(cam).reshape(-1), atol=1e-12)
+        np.testing.assert_allclose(flat, normalise_pose(cam).reshape(-1), atol=tol.ROUND_OFF)
         keep = m.sig > PINV_RCOND * m.sig[0]  # the pseudo-inverse's cut-off
         proj = m.u.T @ (normalise_pose(cam).reshape(-1) - m.mean)
         coef = np.where(keep, proj, 0.0) / np.where(keep, m.sig, 1.0)
         want = m.v @ coef
         # 1/sig reaches ~40 for the smallest kept singular value: compare in pose space too
-        np.testing.assert_allclose(m.pose(got), m.pose(want), atol=1e-9)
+        np.testing.assert_allclose(m.pose(got), m.pose(want), atol=tol.ROUND_OFF_ACCUMULATED)
         np.testing.assert_allclose(got, want, atol=1e-6 * np.abs(want).max())
     flat = np.zeros((12, 3))  # degenerate: no body frame, no leg
     assert not _mirror_kernel(flat, np.eye(3), m.mean, m.u, m.sig, m.v)[1]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pose_lifter.core import Lifter
-from pose_lifter.core import ramakrishna as rk
+from pose_lifter.core.baselines import ramakrishna as rk
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.validation import check_keypoint_sequence, check_keypoints
 

@@ -261,7 +261,7 @@ def _lift_task(task: dict[str, Any]) -> NDArray[np.float64]:
     method = task["method"]
     x, conf = task["x"], task.get("conf")
     if method == "Ramakrishna":
-        from .core.ramakrishna import ramakrishna_lift
+        from .core.baselines.ramakrishna import ramakrishna_lift
 
         return np.asarray(ramakrishna_lift(x, conf, _W["classwise"]).pose)
     if method.startswith("GT camera"):

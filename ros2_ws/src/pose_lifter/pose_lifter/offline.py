@@ -591,15 +591,12 @@ def evaluate_bag(path: str | Path, bases: PoseBases | None = None) -> Evaluation
     gt: dict[tuple[int, int], NDArray[np.float64]] = {}
     est: dict[tuple[int, int], NDArray[np.float64]] = {}
     inp: dict[tuple[int, int], tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+    joints_of = {TOPIC_GROUND_TRUTH: gt, TOPIC_SKELETONS: est}  # the 3D topics: (stamp, track) -> joints
     for x in read_messages(path):
-        if x.topic == TOPIC_GROUND_TRUTH:
+        if x.topic in joints_of:
             s = m.stamp_to_ns(x.msg.header.stamp)
             for sk in x.msg.skeletons:
-                gt[(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
-        elif x.topic == TOPIC_SKELETONS:
-            s = m.stamp_to_ns(x.msg.header.stamp)
-            for sk in x.msg.skeletons:
-                est[(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
+                joints_of[x.topic][(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
         elif x.topic == TOPIC_KEYPOINTS:
             s = m.stamp_to_ns(x.msg.header.stamp)
             for sk in x.msg.skeletons:

@@ -46,11 +46,11 @@ from typing import Final, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .bases import PoseBases
-from .errors import InvalidInputError, OptionsError, TooFewJointsError
-from .results import Camera, LiftResult, WarmStart
-from .skeleton import N_JOINTS, limb_lengths, limb_selectors
-from .validation import check_keypoint_sequence, check_keypoints
+from ..bases import PoseBases
+from ..errors import InvalidInputError, OptionsError, TooFewJointsError
+from ..results import Camera, LiftResult, WarmStart
+from ..skeleton import N_JOINTS, limb_lengths, limb_selectors
+from ..validation import check_keypoint_sequence, check_keypoints
 
 __all__ = ["RamakrishnaLifter", "RamakrishnaOptions", "limb_sum_residual", "ramakrishna_lift"]
 
