@@ -55,7 +55,7 @@ from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
-from pose_lifter.core.options import LifterOptions, get_variant
+from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import LiftResult
 from pose_lifter.offline import FrameLift, LiftSummary, evaluate_bag, lift_messages
 from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
@@ -192,31 +192,37 @@ def hash_metrics(lifted: dict[str, dict[Path, list[FrameLift]]], d: Digest) -> i
     return n
 
 
-def _solver_settings(kwargs: dict[str, Any]) -> list[tuple[str, dict[str, Any], bool]]:
-    """(name, keyword overrides, drop the limb constraints) of each replay of one recorded call."""
-    out: list[tuple[str, dict[str, Any], bool]] = [("recorded", {}, False)]
+def _solver_settings(kwargs: dict[str, Any]) -> list[tuple[str, dict[str, Any], dict[str, Any], bool]]:
+    """(name, option overrides, keyword overrides, drop the limb constraints) of each replay of one
+    recorded call."""
     plain = {"prior": None}
-    out.append(("riemannian, no prior", {**plain, "alpha_solver": "riemannian"}, False))
-    out.append(("newton", {**plain, "alpha_solver": "newton"}, False))
-    out.append(("admm", {**plain, "alpha_solver": "admm", "max_iter": min(10, kwargs["max_iter"])}, False))
-    out.append(("admm full", {**plain, "alpha_solver": "admm", "alpha_step": "full", "max_iter": 3,
-                              "inner_max_iter": 20}, False))
-    out.append(("newton full", {**plain, "alpha_solver": "newton", "alpha_step": "full", "max_iter": 3},
-                False))
-    out.append(("no limbs", {**plain, "alpha_solver": "newton"}, True))
-    return out
+    cap = kwargs["max_iter"]
+    return [
+        ("recorded", {}, {}, False),
+        ("riemannian, no prior", {"alpha_solver": "riemannian"}, plain, False),
+        ("newton", {"alpha_solver": "newton"}, plain, False),
+        ("admm", {"alpha_solver": "admm"}, {**plain, "max_iter": min(10, cap)}, False),
+        ("admm full", {"alpha_solver": "admm", "alpha_step": "full", "inner_max_iter": 20},
+         {**plain, "max_iter": 3}, False),
+        ("newton full", {"alpha_solver": "newton", "alpha_step": "full"}, {**plain, "max_iter": 3}, False),
+        ("no limbs", {"alpha_solver": "newton"}, plain, True),
+    ]
 
 
 def replay_pose_steps(calls: list[tuple[tuple[Any, ...], dict[str, Any]]], d: Digest, verbose: bool) -> int:
-    """Replay each recorded call with every solver setting into ``d``; returns the number of solves."""
+    """Replay each recorded call with every solver setting into ``d``; returns the number of solves.
+    A recorded call is ``pose_step(points, projection, translation, weights, model, alpha0,
+    options, **kwargs)``."""
     n = 0
     for j, (args, kwargs) in enumerate(calls):
-        for name, over, no_limbs in _solver_settings(kwargs):
+        for name, opt_over, kw_over, no_limbs in _solver_settings(kwargs):
             a = [*copy.deepcopy(args[:4]), args[4], *copy.deepcopy(args[5:])]
+            opts = a[6]
             if no_limbs:
-                v = a[5]
-                a[5] = get_variant(f"{v.loss.upper()}NA{'WS' if v.sparsity else 'NS'}")
-            kw = {**copy.deepcopy(kwargs), **over}
+                v = opts.method
+                opt_over = {**opt_over, "variant": f"{v.loss.upper()}NA{'WS' if v.sparsity else 'NS'}"}
+            a[6] = opts.replace(**opt_over)
+            kw = {**copy.deepcopy(kwargs), **kw_over}
             d.text(f"call {j} {name}")
             try:
                 res = pose_module.pose_step(*a, **kw)

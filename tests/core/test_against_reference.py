@@ -8,8 +8,6 @@ the same point (or the same basin).
 
 from __future__ import annotations
 
-import inspect
-
 import numpy as np
 import pytest
 import tolerances as tol
@@ -81,14 +79,14 @@ def _camera_problem(test_poses: Arr, case: int) -> tuple[Arr, Arr, Arr]:
 _CAMERA_REFERENCES: dict[tuple[int, str], tuple[Camera, float]] = {}
 
 
-def _check_camera(x: Arr, y: Arr, w: Arr, loss: str, case: int, **kwargs: float) -> None:
+def _check_camera(x: Arr, y: Arr, w: Arr, loss: str, case: int, **options: float) -> None:
     if (case, loss) not in _CAMERA_REFERENCES:  # shared by the two camera tests
         _CAMERA_REFERENCES[case, loss] = ref.reference_camera(x, y, w, loss, n_restarts=6, seed=case)
     c_ref, f_ref = _CAMERA_REFERENCES[case, loss]
     bound = f_ref * (1 + tol.CAMERA_OBJECTIVE_REL) + tol.CAMERA_OBJECTIVE_ABS
     # cold (the step's own least-squares start) and from the reference's rotation basin
     for init in (None, c_ref):
-        res = camera_step(x, y, w, loss, init=init, **kwargs)  # type: ignore[arg-type]
+        res = camera_step(x, y, w, LifterOptions(variant=f"{loss.upper()}WAWS", **options), init)  # type: ignore[arg-type]
         assert res.objective == pytest.approx(ref.camera_objective(x, y, w, res.camera, loss),
                                               rel=tol.ROUND_OFF)
         assert res.objective <= bound, (init is None, res.objective, f_ref)
@@ -103,7 +101,7 @@ def _check_camera(x: Arr, y: Arr, w: Arr, loss: str, case: int, **kwargs: float)
 def test_camera_step_converges_to_reference(test_poses: Arr, loss: str, case: int) -> None:
     # The ADM itself: run to convergence with a penalty that suits normalised units.
     x, y, w = _camera_problem(test_poses, case)
-    _check_camera(x, y, w, loss, case, max_iter=3000, tol=1e-9, tau=10.0)
+    _check_camera(x, y, w, loss, case, camera_max_iter=3000, camera_tol=1e-9, tau=10.0)
 
 
 _CAMERA_DEFAULT_GAP = pytest.mark.xfail(strict=True, reason=(
@@ -118,9 +116,8 @@ _CAMERA_DEFAULT_GAP = pytest.mark.xfail(strict=True, reason=(
     *(pytest.param("l2", c) for c in range(5)),
 ])
 def test_camera_step_with_default_options_matches_reference(test_poses: Arr, loss: str, case: int) -> None:
-    opts = LifterOptions()
     x, y, w = _camera_problem(test_poses, case)
-    _check_camera(x, y, w, loss, case, max_iter=opts.camera_max_iter, tol=opts.camera_tol, tau=opts.tau)
+    _check_camera(x, y, w, loss, case)  # the camera settings of LifterOptions()
 
 
 # ---------------------------------------------------------------------------------- Q-step
@@ -276,26 +273,14 @@ def test_riemannian_falls_back_to_newton_without_onto_limb_map(
         riemannian_alpha(np.eye(model.sig.size), np.zeros(model.sig.size), model, np.zeros(model.sig.size))
     cam = _camera(0)
     x = cam.project(test_poses[0])
-    kw = {**_pose_kwargs(), "alpha_solver": "riemannian"}
-    a = pose_step(x, cam.projection, cam.translation, np.ones(12), model, VARIANTS["L1WAWS"], 0.05,
-                  np.zeros(small.n_bases), **kw)  # type: ignore[arg-type]
-    b = pose_step(x, cam.projection, cam.translation, np.ones(12), model, VARIANTS["L1WAWS"], 0.05,
-                  np.zeros(small.n_bases), **{**kw, "alpha_solver": "newton"})  # type: ignore[arg-type]
+    opts = LifterOptions(variant="L1WAWS", theta=0.05, alpha_solver="riemannian")
+    a = pose_step(x, cam.projection, cam.translation, np.ones(12), model, np.zeros(small.n_bases), opts)
+    b = pose_step(x, cam.projection, cam.translation, np.ones(12), model, np.zeros(small.n_bases),
+                  opts.replace(alpha_solver="newton"))
     assert np.array_equal(a.alpha, b.alpha) and a.objective == b.objective
 
 
 # ------------------------------------------------------------------------------- pose step
-
-
-def _pose_kwargs() -> dict[str, object]:
-    """The pose-step settings the lifter uses by default (``LifterOptions()``)."""
-    opts = LifterOptions()
-    names = {"max_iter": "pose_max_iter", "tol": "pose_tol", "eta": "eta", "eta_growth": "eta_growth",
-             "delta": "delta", "inner_max_iter": "inner_max_iter", "inner_tol": "inner_tol",
-             "alpha_step": "alpha_step", "alpha_solver": "alpha_solver", "alpha_prox": "alpha_prox",
-             "newton_tol": "newton_tol"}
-    accepted = inspect.signature(pose_step).parameters
-    return {k: getattr(opts, v) for k, v in names.items() if k in accepted and hasattr(opts, v)}
 
 
 def _pose_problem(test_poses: Arr, case: int) -> tuple[Arr, Camera, Arr]:
@@ -316,13 +301,13 @@ _POSE_DEFAULT_GAP = pytest.mark.xfail(strict=True, reason=(
 
 def _check_convex_pose(
     bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int, check_alpha: bool,
-    **kwargs: float,
+    **options: float,
 ) -> None:
     var = VARIANTS[name]
     theta = 0.05 if var.sparsity else 0.0
     x, cam, w = _pose_problem(test_poses, case)
-    res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
-                    **kwargs)  # type: ignore[arg-type]
+    opts = LifterOptions(variant=name, theta=theta, **options)  # type: ignore[arg-type]
+    res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases), opts)
     a_ref, f_ref = ref.reference_pose_convex(x, cam, bases.mean, bases.components, w, theta, var.loss)
     f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
     assert res.objective == pytest.approx(f_fast, rel=tol.ROUND_OFF_ACCUMULATED)
@@ -337,7 +322,9 @@ def test_convex_pose_step_converges_to_reference(
     bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
 ) -> None:
     # the ADM run to convergence reaches the convex optimum
-    _check_convex_pose(bases, model, test_poses, name, case, True, max_iter=5000, tol=1e-9)
+    # run to convergence (the pose_step keyword defaults the test was written with: eta 1, constant)
+    _check_convex_pose(bases, model, test_poses, name, case, True, pose_max_iter=5000, pose_tol=1e-9, eta=1.0,
+                       eta_growth=1.0)
 
 
 @pytest.mark.parametrize("name", [
@@ -348,7 +335,7 @@ def test_convex_pose_step_with_default_options_matches_reference(
     bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
 ) -> None:
     # objective only: at the default stopping tolerance alpha itself is ~3e-3 off for L2NAWS
-    _check_convex_pose(bases, model, test_poses, name, case, False, **_pose_kwargs())  # type: ignore[arg-type]
+    _check_convex_pose(bases, model, test_poses, name, case, False)  # LifterOptions()' pose settings
 
 
 _L1_NOT_LOCAL_MIN = pytest.mark.xfail(strict=True, reason=(
@@ -368,8 +355,8 @@ def test_limb_pose_step_is_feasible_local_minimum(
     gaps = []
     for case in range(6):
         x, cam, w = _pose_problem(test_poses, case)
-        res = pose_step(x, cam.projection, cam.translation, w, model, var, theta, np.zeros(bases.n_bases),
-                        **_pose_kwargs())  # type: ignore[arg-type]
+        res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases),
+                        LifterOptions(variant=name, theta=theta))
         f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
         assert res.objective == pytest.approx(f_fast, rel=tol.ROUND_OFF_ACCUMULATED)
         y = bases.mean + bases.components @ res.alpha
@@ -395,9 +382,9 @@ def _best_local_reference(
         rng = np.random.default_rng(300 + case)
         starts = [np.zeros(bases.n_bases), rng.normal(size=bases.n_bases)]
         for solver in ("admm", "newton"):
-            kw = {**_pose_kwargs(), "alpha_solver": solver}
-            starts.append(pose_step(x, cam.projection, cam.translation, w, model, var, 0.05,
-                                    np.zeros(bases.n_bases), **kw).alpha)  # type: ignore[arg-type]
+            opts = LifterOptions(variant=name, theta=0.05, alpha_solver=solver)  # type: ignore[arg-type]
+            starts.append(pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases),
+                                    opts).alpha)
         _BEST_LOCAL[name, case] = _best_local_value(model, x, cam, w, var, starts)
     return _BEST_LOCAL[name, case]
 
@@ -435,13 +422,11 @@ def test_limb_pose_step_close_to_best_local_reference(
 ) -> None:
     # Nonconvex, so judged over 4 problems: the ratio of the fast objective to the best
     # local minimum found by SLSQP from several starts, median and worst case.
-    var = VARIANTS[name]
     ratios = []
     for case in range(4):
         x, cam, w = _pose_problem(test_poses, case)
-        kw = {**_pose_kwargs(), "alpha_solver": solver}
-        res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(bases.n_bases),
-                        **kw)  # type: ignore[arg-type]
+        opts = LifterOptions(variant=name, theta=0.05, alpha_solver=solver)  # type: ignore[arg-type]
+        res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases), opts)
         ratios.append(res.objective / _best_local_reference(bases, model, test_poses, name, case))
     assert np.median(ratios) <= tol.NONCONVEX_MEDIAN_RATIO, ratios
     assert np.max(ratios) <= ADMM_POSE_MAX_RATIO, ratios
@@ -460,12 +445,11 @@ def test_riemannian_pose_step_close_to_best_local_reference(
     ratios = []
     for case in range(4):
         x, cam, w = _pose_problem(test_poses, case)
-        kw = {**_pose_kwargs(), "alpha_solver": "riemannian"}
-        res = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(k),
-                        **kw)  # type: ignore[arg-type]
+        opts = LifterOptions(variant=name, theta=0.05, alpha_solver="riemannian")
+        res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(k), opts)
         assert model.limb_violation(res.alpha) <= tol.POSE_STEP_LIMB_VIOLATION
-        newton = pose_step(x, cam.projection, cam.translation, w, model, var, 0.05, np.zeros(k),
-                           **{**kw, "alpha_solver": "newton"})  # type: ignore[arg-type]
+        newton = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(k),
+                           opts.replace(alpha_solver="newton"))
         starts = [np.zeros(k), np.random.default_rng(300 + case).normal(size=k), res.alpha, newton.alpha]
         ratios.append(res.objective / _best_local_value(model, x, cam, w, var, starts))
     assert np.median(ratios) <= tol.NONCONVEX_MEDIAN_RATIO, ratios

@@ -20,6 +20,7 @@ from pose_lifter.core import (
 )
 from pose_lifter.core.camera import camera_step, weighted_median
 from pose_lifter.core.metrics import similarity_normalised_error
+from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import LIMBS, body_frame, limb_lengths
 from scipy.spatial.transform import Rotation
@@ -102,7 +103,7 @@ def test_camera_step_recovers_a_camera_despite_two_outliers() -> None:
     cam = Camera(rot, 1.7, np.array([0.3, -0.2]))
     x = cam.project(y)
     x[[1, 8]] += rng.normal(scale=3.0, size=(2, 2))
-    res = camera_step(x, y, np.ones(12), "l1", max_iter=500, tol=1e-8)
+    res = camera_step(x, y, np.ones(12), LifterOptions(camera_max_iter=500, camera_tol=1e-8, tau=1.0))
     assert res.converged
     assert np.allclose(res.camera.projection, cam.projection, atol=1e-4)
     assert np.allclose(res.camera.translation, cam.translation, atol=1e-4)

@@ -16,7 +16,7 @@ from pose_lifter.core.errors import (
     PoseLifterError,
     SolverError,
 )
-from pose_lifter.core.options import get_variant
+from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_step import pose_step
 
 
@@ -51,10 +51,11 @@ def test_a_diverged_camera_step_is_a_solver_error() -> None:
 def test_a_diverged_pose_step_is_a_solver_error(lifter: Lifter, solver: str) -> None:
     x = np.random.default_rng(0).normal(size=(12, 2))
     m0 = np.hstack([np.eye(2), np.zeros((2, 1))])
-    args = (np.zeros(2), np.ones(12), lifter.model, get_variant("full"), 0.1, lifter.bases.start_alphas[0])
-    assert np.isfinite(pose_step(x, 1e100 * m0, *args, alpha_solver=solver, max_iter=5).objective)
+    args = (np.zeros(2), np.ones(12), lifter.model, lifter.bases.start_alphas[0],
+            LifterOptions(alpha_solver=solver))  # type: ignore[arg-type]
+    assert np.isfinite(pose_step(x, 1e100 * m0, *args, max_iter=5).objective)
     with pytest.raises(SolverError, match="pose step diverged"), np.errstate(over="ignore", invalid="ignore"):
-        pose_step(x, 1e200 * m0, *args, alpha_solver=solver, max_iter=5)
+        pose_step(x, 1e200 * m0, *args, max_iter=5)
 
 
 def test_a_malformed_projection_is_invalid_input() -> None:

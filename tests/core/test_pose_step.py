@@ -8,7 +8,7 @@ import pytest
 from numpy.typing import NDArray
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.options import LifterOptions, get_variant
+from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_model import PoseModel
 from pose_lifter.core.pose_step import PriorRows, pose_step
 from pose_lifter.core.results import SolveInfo
@@ -57,10 +57,10 @@ def test_fused_kernel_is_the_python_loop(model: PoseModel, seed: int, with_prior
         weights[7, 1] = 0.0
         radii = np.sqrt(model.limb_sq) * rng.uniform(0.9, 1.1, 8)  # a person's own proportions
         prior = PriorRows(target, weights, radii)
-    args = (x, m0, t, w, model, get_variant("full"), 0.1, np.zeros(model.n_bases))
-    kw = dict(max_iter=15, tol=1e-12, eta=0.3, eta_growth=1.1, alpha_solver="riemannian", prior=prior)
-    fused = pose_step(*args, **kw)  # type: ignore[arg-type]
-    loop = pose_step(*args, **kw, fused=False)  # type: ignore[arg-type]
+    opts = LifterOptions(theta=0.1, pose_tol=1e-12, alpha_solver="riemannian")
+    args = (x, m0, t, w, model, np.zeros(model.n_bases), opts)
+    fused = pose_step(*args, max_iter=15, prior=prior)
+    loop = pose_step(*args, max_iter=15, prior=prior, fused=False)
     assert fused.n_iter == loop.n_iter == 15 and not fused.converged and not loop.converged
     assert fused.alpha_iter == loop.alpha_iter > 0
     assert loop.objective == pytest.approx(fused.objective, rel=FUSED_VS_LOOP_RTOL)
@@ -71,16 +71,17 @@ def test_fused_kernel_is_the_python_loop(model: PoseModel, seed: int, with_prior
     dual_scale = np.abs(fused.duals.data).max()
     assert np.abs(loop.duals.data - fused.duals.data).max() <= FUSED_VS_LOOP_RTOL * dual_scale
     # the loop is not the kernel by accident: a different alpha-solver gives another answer
-    other = pose_step(*args, **{**kw, "alpha_solver": "newton", "prior": None})  # type: ignore[arg-type]
+    other = pose_step(x, m0, t, w, model, np.zeros(model.n_bases), opts.replace(alpha_solver="newton"),
+                      max_iter=15)
     if not with_prior:
         assert abs(other.objective - fused.objective) > 1e-6 * fused.objective
 
 
 def test_every_solver_result_reports_convergence_alike(model: PoseModel) -> None:
     x, m0, t, w, _ = _problem(model, 7)
-    args = (x, m0, t, w, model, get_variant("full"), 0.1, np.zeros(model.n_bases))
     for solver in ("riemannian", "newton", "admm"):
-        res = pose_step(*args, max_iter=200, tol=1e-5, alpha_solver=solver)  # type: ignore[arg-type]
+        opts = LifterOptions(pose_tol=1e-5, alpha_solver=solver)  # type: ignore[arg-type]
+        res = pose_step(x, m0, t, w, model, np.zeros(model.n_bases), opts, max_iter=200)
         assert isinstance(res, SolveInfo) and res.n_iter <= 200 and res.alpha_iter >= res.n_iter
         assert res.converged == (res.n_iter < 200), solver
 

@@ -265,20 +265,14 @@ def _lift_task(task: dict[str, Any]) -> NDArray[np.float64]:
 
         return np.asarray(ramakrishna_lift(x, conf, _W["classwise"]).pose)
     if method.startswith("GT camera"):
-        from .core.options import get_variant
         from .core.pose_step import pose_step
 
         lf = _lifter("L1WAWS", 1, 1)
-        o = lf.options
+        o = lf.options.replace(variant="L1WAWS")
         best = None
         for alpha0 in _W["sparse"].with_starts(task["starts"]):
-            res = pose_step(
-                x, task["rotation"][:2], np.zeros(2), np.ones(12), lf.model, get_variant("L1WAWS"), o.theta,
-                alpha0, max_iter=5 * o.pose_max_iter, tol=o.pose_tol, eta=o.eta,
-                eta_growth=o.eta_growth, delta=o.delta, inner_max_iter=o.inner_max_iter,
-                inner_tol=o.inner_tol, alpha_step=o.alpha_step, alpha_solver=o.alpha_solver,
-                newton_tol=o.newton_tol, alpha_prox=o.alpha_prox,
-            )
+            res = pose_step(x, task["rotation"][:2], np.zeros(2), np.ones(12), lf.model, alpha0, o,
+                            max_iter=5 * o.pose_max_iter)
             if best is None or res.objective < best.objective:
                 best = res
         assert best is not None

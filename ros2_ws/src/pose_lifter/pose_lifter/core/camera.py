@@ -39,7 +39,10 @@ from numpy.typing import NDArray
 
 from ._jit import njit
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
+from .options import LifterOptions
 from .results import Camera, CameraResult, Duals
+
+_DEFAULTS = LifterOptions()
 
 __all__ = ["camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
 
@@ -115,11 +118,8 @@ def camera_step(
     points: NDArray[np.float64],
     pose: NDArray[np.float64],
     weights: NDArray[np.float64],
-    loss: Literal["l1", "l2"] = "l1",
+    options: LifterOptions | None = None,
     init: Camera | None = None,
-    max_iter: int = 100,
-    tol: float = 1e-5,
-    tau: float = 1.0,
     duals: Duals | None = None,
 ) -> CameraResult:
     """Robust scaled-orthographic camera for a fixed 3D pose (see module docstring).
@@ -130,17 +130,14 @@ def camera_step(
     pose : ndarray, shape (n, 3)
     weights : ndarray, shape (n,)
         ``>= 0``; at least 3 positive.
-    loss : {"l1", "l2"}
+    options : LifterOptions, optional
+        The settings (default ``LifterOptions()``): the loss of ``variant`` (L1 or L2),
+        ``camera_max_iter`` (iteration cap), ``camera_tol`` (stop when the relative primal
+        residuals and the relative change of ``M`` are all below it) and ``tau`` (the ADM's
+        constant penalty).
     init : Camera, optional
         Warm start; without it the weighted least-squares affine fit projected onto the
         scaled-orthographic set.
-    max_iter : int
-        Iteration cap.
-    tol : float
-        Stop when the relative primal residuals and the relative change of ``M`` are all
-        below ``tol``.
-    tau : float
-        ADM penalty (constant).
     duals : Duals, optional
         Warm start of the scaled multipliers ``(U1 (n, 2), U2 (2, 3))``, e.g. the previous camera
         step's of the same solve (``LifterOptions.warm_duals``; default zeros).
@@ -162,16 +159,17 @@ def camera_step(
     y = np.ascontiguousarray(pose, dtype=np.float64)
     w = np.ascontiguousarray(weights, dtype=np.float64)
     _check(x, y, w)
-    return camera_step_trusted(x, y, w, loss, init, max_iter, tol, tau, duals)
+    return camera_step_trusted(x, y, w, _DEFAULTS if options is None else options, init, duals)
 
 
 def camera_step_trusted(
-    x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], loss: Literal["l1", "l2"],
-    init: Camera | None, max_iter: int, tol: float, tau: float, duals: Duals | None = None,
+    x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], options: LifterOptions,
+    init: Camera | None = None, duals: Duals | None = None,
 ) -> CameraResult:
     """:func:`camera_step` on inputs already checked (C-contiguous float64, finite, shapes as
     documented, >= 3 positive weights): the lifter's per-alternation call (its inputs are checked
     once per lift)."""
+    loss, max_iter, tol, tau = options.method.loss, options.camera_max_iter, options.camera_tol, options.tau
     n = x.shape[0]
     if init is None:
         ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)

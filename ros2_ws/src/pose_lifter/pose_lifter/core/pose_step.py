@@ -62,7 +62,7 @@ from .alpha.lifted_admm import QStepFn
 from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER, SphereNewtonStep
 from .alpha.sqp import ReducedSQPStep
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
-from .options import Variant
+from .options import LifterOptions, Variant
 from .pose_kernel import _adm_dual_update, _adm_split, _grow_penalty, _objective, _riemannian_pose_kernel
 from .pose_model import PoseModel
 from .results import Duals, PoseResult
@@ -105,6 +105,7 @@ class PriorRows:
 
 
 _NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)), np.zeros(3))
+_DEFAULTS = LifterOptions()
 
 
 def pose_objective(
@@ -193,31 +194,23 @@ def _rows(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[
     return np.concatenate([c, c_xy, c_z]), wts_all, np.vstack([mus, mus_xy, mus_z])
 
 
+#: Cap of the pose ADM's growing penalty ``eta`` (``LifterOptions.eta_growth``).
+ETA_MAX = 1e3
+
+
 def pose_step(
     points: NDArray[np.float64],
     projection: NDArray[np.float64],
     translation: NDArray[np.float64],
     weights: NDArray[np.float64],
     model: PoseModel,
-    variant: Variant,
-    theta: float,
     alpha0: NDArray[np.float64],
+    options: LifterOptions | None = None,
     *,
-    max_iter: int = 100,
-    tol: float = 1e-4,
-    eta: float = 1.0,
-    eta_growth: float = 1.0,
-    eta_max: float = 1e3,
-    delta: float = 1.0,
-    inner_max_iter: int = 60,
-    inner_tol: float = 1e-6,
-    alpha_step: str = "reduced",
-    alpha_solver: str = "riemannian",
-    qstep_fn: QStepFn | None = None,
-    duals: Duals | None = None,
-    newton_tol: float = 1e-9,
-    alpha_prox: float = 1.0,
+    max_iter: int | None = None,
     prior: PriorRows | None = None,
+    duals: Duals | None = None,
+    qstep_fn: QStepFn | None = None,
     fused: bool = True,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
@@ -234,39 +227,28 @@ def pose_step(
     translation : ndarray, shape (2,)
     weights : ndarray, shape (12,)
     model : PoseModel
-    variant : Variant
-        Loss, limbs on/off, sparsity on/off.
-    theta : float
-        Sparsity weight (ignored without sparsity).
     alpha0 : ndarray, shape (k,)
         Start (warm start: the previous alternation's or frame's coefficients).
-    max_iter, tol : int, float
-        Outer ADM cap; stop when primal and dual residuals, relative, are below ``tol``.
-    eta, delta : float
-        Outer and inner penalties.
-    eta_growth, eta_max : float
-        The outer penalty is multiplied by ``eta_growth`` every iteration up to ``eta_max``
-        (the paper's ``eta_k``; increasing penalties as in LADMAP [liu2013linearized]);
-        the scaled multipliers are rescaled with it.
-    inner_max_iter, inner_tol : int, float
-        Inner ADM cap and tolerance.
-    alpha_step : {"reduced", "full"}
-    alpha_solver : {"riemannian", "newton", "admm"}
-        ``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map
-        (``model.limb_coordinates``); otherwise ``"newton"`` is used.
-    qstep_fn : callable, optional
-        Replaces the closed-form Q-step (the cvxpy reference path).
-    duals : Duals, optional
-        Warm start of the unscaled ADM multipliers of ``gamma = c - A alpha`` and ``beta = alpha``,
-        e.g. the previous alternation's ``PoseResult.duals`` (default zeros).
-    newton_tol : float
-        Relative KKT tolerance of the reduced Newton alpha-step (``alpha_solver="newton"``) and
-        of the Riemannian one (which stops at ``RIEMANNIAN_MAX_ITER`` steps first, as a rule).
-    alpha_prox : float
-        Proximal weight of the Riemannian alpha-step (``LifterOptions.alpha_prox``).
+    options : LifterOptions, optional
+        The settings (default ``LifterOptions()``): ``variant`` (loss, limbs, sparsity), ``theta``;
+        the outer ADM's ``pose_max_iter``, ``pose_tol`` (stop when the relative primal and dual
+        residuals are below it), ``eta`` and ``eta_growth`` (the penalty grows by this factor every
+        iteration up to :data:`ETA_MAX`, the paper's ``eta_k``, as in LADMAP [liu2013linearized];
+        the scaled multipliers are rescaled with it); the alpha-step's ``alpha_step``,
+        ``alpha_solver`` (``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map,
+        ``model.limb_coordinates``; otherwise ``"newton"`` is used), ``alpha_prox``, ``newton_tol``,
+        and the inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
+    max_iter : int, optional
+        Outer ADM cap instead of ``options.pose_max_iter`` (the hybrid mode's and the screening
+        runs' caps).
     prior : PriorRows, optional
         The hybrid mode's L1 prior term (:class:`PriorRows`), added to the objective; needs the
         Riemannian path (limbs on, reduced lifting, onto limb map).
+    duals : Duals, optional
+        Warm start of the unscaled ADM multipliers of ``gamma = c - A alpha`` and ``beta = alpha``,
+        e.g. the previous alternation's ``PoseResult.duals`` (default zeros).
+    qstep_fn : callable, optional
+        Replaces the closed-form Q-step (the cvxpy reference path).
     fused : bool
         Riemannian path: run the compiled kernel (False: the Python loop, the kernel's reference).
 
@@ -283,6 +265,14 @@ def pose_step(
     SolverError
         The ADM diverged (non-finite coefficients).
     """
+    o = _DEFAULTS if options is None else options
+    variant = o.method
+    theta, eta, eta_growth, eta_max, tol = o.theta, o.eta, o.eta_growth, ETA_MAX, o.pose_tol
+    alpha_step, alpha_solver = o.alpha_step, o.alpha_solver
+    alpha_prox, newton_tol = o.alpha_prox, o.newton_tol
+    delta, inner_max_iter, inner_tol = o.delta, o.inner_max_iter, o.inner_tol
+    if max_iter is None:
+        max_iter = o.pose_max_iter
     loss = variant.loss
     l1 = loss == "l1"
     th = float(theta) if variant.sparsity else 0.0

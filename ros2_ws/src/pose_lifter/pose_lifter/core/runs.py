@@ -123,24 +123,17 @@ class Runs:
             return CameraResult(objective=float(obj), n_iter=1, converged=True, camera=cam)
         duals = last.duals if last is not None and o.warm_duals else None
         # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
-        return camera_step_trusted(xn, pose, w, o.method.loss, init, o.camera_max_iter, o.camera_tol, o.tau,
-                                   duals)
+        return camera_step_trusted(xn, pose, w, o, init, duals)
 
     def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
               alpha0: NDArray[np.float64], last: PoseResult | None = None,
               max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
         o = self.options
-        return pose_step(
-            xn, cam.projection, cam.translation, w, self.model, o.method, o.theta, alpha0,
-            max_iter=max_iter if max_iter is not None else (o.pose_max_iter if prior is None
-                                                             else o.hybrid_pose_max_iter),
-            tol=o.pose_tol, eta=o.eta,
-            eta_growth=o.eta_growth, delta=o.delta,
-            inner_max_iter=o.inner_max_iter, inner_tol=o.inner_tol, alpha_step=o.alpha_step,
-            alpha_solver=o.alpha_solver, qstep_fn=self.qstep_fn,
-            duals=last.duals if last is not None and o.warm_duals else None,
-            newton_tol=o.newton_tol, alpha_prox=o.alpha_prox, prior=prior,
-        )
+        if max_iter is None:
+            max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
+        return pose_step(xn, cam.projection, cam.translation, w, self.model, alpha0, o, max_iter=max_iter,
+                         prior=prior, duals=last.duals if last is not None and o.warm_duals else None,
+                         qstep_fn=self.qstep_fn)
 
     def run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
              cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
