@@ -61,7 +61,7 @@ def good_frame(t: Any, i: int, track_id: int = 0, yaw_deg: float = 30.0) -> Any:
 
 
 def test_params_yaml_is_the_generated_one() -> None:
-    from pose_lifter.node import params_yaml
+    from pose_lifter.params import params_yaml
 
     source = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
     assert source.read_text() == params_yaml(), (
@@ -149,7 +149,7 @@ def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: 
     assert not r.successful
     # nothing of the refused changes stuck
     names = ("alternation_tol", "variant", "limb_proportions", "bases_file", "n_starts")
-    from pose_lifter.node import PARAMS
+    from pose_lifter.params import PARAMS
 
     defaults = {p.name: p.default for p in PARAMS}
     assert graph.get_parameters(*names) == {**{n: defaults[n] for n in names}, "n_starts": 3}

@@ -133,6 +133,17 @@ class OptionMeta:
         return (f"{'(' if self.open_low else '['}{self.low:g}, "
                 f"{self.high:g}{')' if self.open_high else ']'}")
 
+    def constraint_text(self) -> str:
+        """What the range or choices cannot say by themselves (``""`` when nothing): open bounds,
+        the choices, a length limit (the node's ``additional_constraints``)."""
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        if self.open_low or self.open_high:
+            return f"in {self.range_text()}: an open bound itself is refused"
+        if self.max_length is not None:
+            return f"at most {self.max_length} characters"
+        return ""
+
     def accepts(self, value: float) -> bool:
         """Whether a number lies in the range (NaN never does)."""
         v = float(value)
