@@ -36,6 +36,7 @@ __all__ = [
     "camera_info",
     "delete_all_markers",
     "delete_markers",
+    "delete_untracked_markers",
     "intrinsics_from_camera_info",
     "joint_points",
     "make_header",
@@ -515,6 +516,13 @@ def delete_markers(header: Any, track_ids: Iterable[int], ns: str, types: Any) -
             out.append(types.Marker(header=header, ns=f"{ns}/{kind}", id=marker_id(int(track_id), 0),
                                     action=_DELETE))
     return out
+
+
+def delete_untracked_markers(header: Any, positions: Iterable[int], ns: str, types: Any) -> list[Any]:
+    """DELETE markers (joints and bones) for untracked skeletons' positions no longer used (their
+    ids are ``-1 - position``, :func:`marker_id`)."""
+    return [types.Marker(header=header, ns=f"{ns}/{kind}", id=marker_id(-1, position), action=_DELETE)
+            for position in positions for kind in ("joints", "bones")]
 
 
 def delete_all_markers(header: Any, ns: str, types: Any) -> list[Any]:

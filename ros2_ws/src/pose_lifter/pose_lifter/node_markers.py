@@ -46,10 +46,8 @@ class MarkerBook:
             markers.markers[:0] = messages.delete_all_markers(header, self._ns, t)
             self._cleared = True
         # untracked skeletons have ids -1, -2, ... by position: delete the positions now unused
-        for position in range(untracked, self._untracked):
-            for kind in ("joints", "bones"):
-                markers.markers.append(t.Marker(header=header, ns=f"{self._ns}/{kind}", id=-1 - position,
-                                                action=t.Marker.DELETE))
+        markers.markers.extend(messages.delete_untracked_markers(header, range(untracked, self._untracked),
+                                                                 self._ns, t))
         self._tracks = tracked
         self._untracked = untracked
         return markers
