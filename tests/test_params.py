@@ -4,6 +4,7 @@ metadata, config/lifter.yaml is written from it, and an offline read knows every
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import yaml
@@ -62,3 +63,14 @@ def test_node_settings_read_every_field_with_its_type() -> None:
     for f in dataclasses.fields(NodeSettings):
         value = getattr(settings, f.name)
         assert value == values[f.name] and type(value).__name__ == f.type, f.name
+
+
+def test_the_readme_lists_every_parameter_and_the_experiment_toggles() -> None:
+    text = (REPO / "README.md").read_text()
+    section = text[text.index("Parameters (all declared with ranges"):text.index("The YAML is keyed `/**:`")]
+    listed = set(re.findall(r"`([a-z_0-9]+)`", section))
+    assert listed & set(OPTION_META) - set(SPECS) <= {"alpha_step", "warm_duals"}  # named as not parameters
+    assert set(SPECS) <= listed
+    toggles = section[section.index("experiment toggles kept as parameters ("):]
+    toggles = toggles[:toggles.index(";")]
+    assert set(re.findall(r"`([a-z_0-9]+)`", toggles)) == {p.name for p in PARAMS if p.experiment}
