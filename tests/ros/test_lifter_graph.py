@@ -62,7 +62,7 @@ def good_frame(t: Any, i: int, track_id: int = 0, yaw_deg: float = 30.0) -> Any:
 
 
 def test_params_yaml_is_the_generated_one() -> None:
-    from pose_lifter.node import params_yaml
+    from pose_lifter.params import params_yaml
 
     source = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
     assert source.read_text() == params_yaml(), (
@@ -76,6 +76,56 @@ def test_params_yaml_is_loaded_and_every_key_declared(start_lifter: Any, graph: 
     declared = yaml.safe_load(PARAMS_YAML.read_text())["/**"]["ros__parameters"]
     reported = graph.get_parameters(*declared)
     assert reported == declared
+
+
+def test_declared_descriptors_are_the_option_metadata(start_lifter: Any, graph: GraphClient) -> None:
+    """Every option parameter is declared with its LifterOptions field's doc, range and choices,
+    and the live node refuses just outside each range and takes the closed bounds."""
+    import dataclasses
+    import math
+
+    from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
+    from rcl_interfaces.msg import ParameterType
+    from rcl_interfaces.srv import DescribeParameters
+
+    lifter = start_lifter()
+    graph.wait_for_lifter(lifter)
+    client = graph.node.create_client(DescribeParameters, f"{graph.lifter_name}/describe_parameters")
+    graph.spin_until(client.service_is_ready, 30.0, "describe_parameters")
+    names = list(NODE_OPTIONS)
+    described = graph._call(client, DescribeParameters.Request(names=names)).descriptors
+    defaults = {f.name: f.default for f in dataclasses.fields(LifterOptions)}
+    ros_type = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+                float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
+    for name, d in zip(names, described, strict=True):
+        meta, kind = OPTION_META[name], type(defaults[name])
+        assert (d.name, d.type, d.read_only) == (name, ros_type[kind], False), name
+        assert d.description == meta.doc and d.additional_constraints == meta.constraint_text(), name
+        ints = [(r.from_value, r.to_value, r.step) for r in d.integer_range]
+        floats = [(r.from_value, r.to_value) for r in d.floating_point_range]
+        assert ints == ([(meta.low, meta.high, 1)] if kind is int else []), name
+        assert floats == ([(meta.low, meta.high)] if kind is float else []), name
+    assert graph.get_parameters(*names) == {n: defaults[n] for n in names}
+
+    for name in names:
+        meta, kind = OPTION_META[name], type(defaults[name])
+        if kind not in (int, float):
+            continue
+        assert meta.low is not None and meta.high is not None
+        if kind is int:
+            below, above = int(meta.low) - 1, int(meta.high) + 1
+        else:
+            below, above = math.nextafter(meta.low, -math.inf), math.nextafter(meta.high, math.inf)
+        for value in (below, above):
+            (r,) = graph.set_parameters(**{name: value})
+            assert not r.successful, (name, value)
+        for value, refused in ((meta.low, meta.open_low), (meta.high, meta.open_high)):
+            (r,) = graph.set_parameters(**{name: kind(value)})
+            assert r.successful is not refused, (name, value, r.reason)
+        (r,) = graph.set_parameters(**{name: defaults[name]})
+        assert r.successful, (name, r.reason)
+    assert graph.get_parameters(*names) == {n: defaults[n] for n in names}
+    assert lifter.alive()
 
 
 def test_qos_sensor_data_input_reliable_outputs_and_overrides(start_lifter: Any, graph: GraphClient,
@@ -150,7 +200,7 @@ def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: 
     assert not r.successful
     # nothing of the refused changes stuck
     names = ("alternation_tol", "variant", "limb_proportions", "bases_file", "n_starts")
-    from pose_lifter.node import PARAMS
+    from pose_lifter.params import PARAMS
 
     defaults = {p.name: p.default for p in PARAMS}
     assert graph.get_parameters(*names) == {**{n: defaults[n] for n in names}, "n_starts": 3}

@@ -36,7 +36,9 @@ __all__ = [
     "camera_info",
     "delete_all_markers",
     "delete_markers",
+    "delete_untracked_markers",
     "intrinsics_from_camera_info",
+    "joint_points",
     "make_header",
     "marker_id",
     "ns_to_stamp",
@@ -50,6 +52,7 @@ __all__ = [
     "skeleton3d_from_joints",
     "skeleton3d_to_joints",
     "skeleton_markers",
+    "skeleton_markers_from_points",
     "skeletons3d_array",
     "stamp_to_ns",
     "track_color",
@@ -221,7 +224,8 @@ def place_in_camera(
     the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
     ``Y = (t_y - c_y) Z / f_y``. Without camera intrinsics the centroid is put at
     ``(0, 0, default_distance_m)``. The node's, the offline lift's and the CLI's defaults are
-    :mod:`pose_lifter.placement`'s.
+    :mod:`pose_lifter.placement`'s. The lift is trusted to be finite (the core checks it); the
+    node checks what it publishes once, after this.
 
     Parameters
     ----------
@@ -245,8 +249,8 @@ def place_in_camera(
     if not np.isfinite(leg_length_m) or leg_length_m <= 0:
         raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
     pose = np.asarray(result.pose_camera, dtype=np.float64)
-    if pose.shape != (N_JOINTS, 3) or not np.all(np.isfinite(pose)):
-        raise InvalidInputError(f"pose_camera must be a finite ({N_JOINTS}, 3) array")
+    if pose.shape != (N_JOINTS, 3):
+        raise InvalidInputError(f"pose_camera must be a ({N_JOINTS}, 3) array")
     local = (pose - pose.mean(axis=0)) * float(leg_length_m)
     if focal is None:
         if not np.isfinite(default_distance_m) or default_distance_m <= 0:
@@ -328,7 +332,9 @@ def camera_estimate(result: LiftResult, types: Any) -> Any:
     )
 
 
-def _points(joints_m: NDArray[np.float64], types: Any) -> list[Any]:
+def joint_points(joints_m: NDArray[np.float64], types: Any) -> list[Any]:
+    """The 12 ``geometry_msgs/Point`` of metric joints (12, 3): a ``Skeleton3D``'s ``joints``,
+    and the points of its markers (:func:`skeleton_markers_from_points`)."""
     j = np.asarray(joints_m, dtype=np.float64)
     if j.shape != (N_JOINTS, 3):
         raise InvalidInputError(f"joints must be ({N_JOINTS}, 3), got {j.shape}")
@@ -359,7 +365,7 @@ def result_to_skeleton3d(
     return types.Skeleton3D(
         track_id=int(track_id),
         joint_names=list(JOINT_NAMES),
-        joints=_points(joints_m, types),
+        joints=joint_points(joints_m, types),
         camera=camera_estimate(result, types),
         objective=float(result.objective),
         reprojection_error=float(result.reprojection_error),
@@ -375,7 +381,7 @@ def result_to_skeleton3d(
 def skeleton3d_from_joints(track_id: int, joints_m: NDArray[np.float64], types: Any) -> Any:
     """A ``Skeleton3D`` carrying only joints (ground truth); the solver fields stay default."""
     return types.Skeleton3D(
-        track_id=int(track_id), joint_names=list(JOINT_NAMES), joints=_points(joints_m, types),
+        track_id=int(track_id), joint_names=list(JOINT_NAMES), joints=joint_points(joints_m, types),
         converged=True,
     )
 
@@ -440,6 +446,22 @@ def skeleton_markers(
     joint_diameter: float = 0.05,
     line_width: float = 0.02,
 ) -> Any:
+    """``MarkerArray`` of metric joints: :func:`skeleton_markers_from_points` with ``tracks`` of
+    (track_id, joints (12, 3) metres)."""
+    return skeleton_markers_from_points(header, ((t, joint_points(j, types)) for t, j in tracks), ns,
+                                        lifetime, types, deleted_track_ids, joint_diameter, line_width)
+
+
+def skeleton_markers_from_points(
+    header: Any,
+    tracks: Iterable[tuple[int, Sequence[Any]]],
+    ns: str,
+    lifetime: float,
+    types: Any,
+    deleted_track_ids: Iterable[int] = (),
+    joint_diameter: float = 0.05,
+    line_width: float = 0.02,
+) -> Any:
     """``MarkerArray``: per track a SPHERE_LIST of joints (namespace ``{ns}/joints``) and a
     LINE_LIST of bones (``{ns}/bones``, :data:`BONES_FOR_DRAWING`), both with id = track id
     (untracked skeletons get ids -1, -2, ... by position), coloured per track.
@@ -448,7 +470,9 @@ def skeleton_markers(
     ----------
     header : Header
         Frame of the joints (camera optical frame) and stamp.
-    tracks : iterable of (track_id, joints (12, 3) metres)
+    tracks : iterable of (track_id, points)
+        ``points``: the 12 ``geometry_msgs/Point`` of a skeleton (:func:`joint_points`; the node
+        passes its ``Skeleton3D``'s ``joints``, built once for both messages).
     ns : str
         Marker namespace prefix.
     lifetime : float
@@ -459,11 +483,10 @@ def skeleton_markers(
     """
     markers: list[Any] = []
     untracked = 0
-    for track_id, joints in tracks:
+    for track_id, pts in tracks:
         mid = marker_id(int(track_id), untracked)
         if track_id < 0:
             untracked += 1
-        pts = _points(joints, types)
         r, g, b = track_color(int(track_id))
         common = {
             "header": header, "id": mid, "action": _ADD,
@@ -472,7 +495,7 @@ def skeleton_markers(
             "lifetime": _duration(lifetime, types), "frame_locked": False,
         }
         markers.append(types.Marker(
-            ns=f"{ns}/joints", type=_SPHERE_LIST, points=pts,
+            ns=f"{ns}/joints", type=_SPHERE_LIST, points=list(pts),
             scale=types.Vector3(x=joint_diameter, y=joint_diameter, z=joint_diameter), **common,
         ))
         markers.append(types.Marker(
@@ -493,6 +516,13 @@ def delete_markers(header: Any, track_ids: Iterable[int], ns: str, types: Any) -
             out.append(types.Marker(header=header, ns=f"{ns}/{kind}", id=marker_id(int(track_id), 0),
                                     action=_DELETE))
     return out
+
+
+def delete_untracked_markers(header: Any, positions: Iterable[int], ns: str, types: Any) -> list[Any]:
+    """DELETE markers (joints and bones) for untracked skeletons' positions no longer used (their
+    ids are ``-1 - position``, :func:`marker_id`)."""
+    return [types.Marker(header=header, ns=f"{ns}/{kind}", id=marker_id(-1, position), action=_DELETE)
+            for position in positions for kind in ("joints", "bones")]
 
 
 def delete_all_markers(header: Any, ns: str, types: Any) -> list[Any]:

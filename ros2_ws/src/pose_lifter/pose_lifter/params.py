@@ -1,28 +1,251 @@
-"""The node's parameters YAML, read without ROS, so an offline lift uses a live run's options.
+"""The node's parameters in one table: their declarations, ``config/lifter.yaml``, and reading
+that file offline.
+
+:data:`PARAMS` is every parameter of the lifter node. The solver options among them are
+:class:`~pose_lifter.core.options.LifterOptions` fields and take their default, description and
+range from the field's metadata (:data:`~pose_lifter.core.options.OPTION_META`), so the node
+and the core accept the same values; the node's own settings (:class:`NodeSettings`) are
+declared here. :func:`params_yaml` writes ``config/lifter.yaml`` from the table
+(``python -m pose_lifter.node --params-yaml``).
 
 ``pose-lifter lift BAG --out OUT --params-file config/lifter.yaml`` reads the same file as
-``ros2 run pose_lifter lifter --ros-args --params-file config/lifter.yaml``: the section of the
-node (``/**``, ``pose_lifter`` or ``/pose_lifter``, each with ``ros__parameters``) is merged in
-that order, like rcl does for a node named ``pose_lifter``.
+``ros2 run pose_lifter lifter --ros-args --params-file config/lifter.yaml``
+(:func:`read_params_file`): the section of the node (``/**``, ``pose_lifter`` or
+``/pose_lifter``, each with ``ros__parameters``) is merged in that order, like rcl does for a
+node named ``pose_lifter``.
+
+Nothing here imports ROS (the descriptors' message classes are imported when one is built), so
+the offline CLI reads parameter files without a ROS install.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Final
 
+from . import placement
 from .core.errors import OptionsError
-from .core.options import LifterOptions
+from .core.options import NODE_OPTIONS, OPTION_META, LifterOptions
 
-__all__ = ["NODE_ONLY", "OfflineParams", "read_params_file"]
+__all__ = [
+    "NODE_ONLY",
+    "PARAMS",
+    "SPECS",
+    "NodeSettings",
+    "OfflineParams",
+    "ParamSpec",
+    "params_yaml",
+    "read_params_file",
+    "unknown_parameters",
+]
 
-#: Node parameters that have no meaning offline (accepted and ignored).
-NODE_ONLY: Final[frozenset[str]] = frozenset({
-    "publish_markers", "max_skeletons", "max_coordinate", "stats_period", "qos_overrides",
-    "frame_id", "marker_lifetime", "use_sim_time",
-})
-_SECTIONS: Final[tuple[str, ...]] = ("/**", "pose_lifter", "/pose_lifter")
+
+@dataclasses.dataclass(frozen=True)
+class ParamSpec:
+    """A node parameter: default, description and range.
+
+    Attributes
+    ----------
+    name : str
+    default : bool, int, float or str
+        Its type is the parameter's ROS type.
+    description : str
+    low, high : float or None
+        The descriptor's (closed) range of a number parameter.
+    constraints : str
+        What the range cannot say (the descriptor's ``additional_constraints``): open bounds,
+        choices.
+    option : bool
+        A :class:`LifterOptions` field: live changes are validated by ``LifterOptions.replace``.
+    experiment : bool
+        An experiment toggle of the options (:data:`~pose_lifter.core.options.EXPERIMENT_OPTIONS`).
+    read_only : bool
+        Set at start-up only.
+    offline : bool
+        A node setting an offline lift reads from a params file too (:func:`read_params_file`).
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    constraints: str = ""
+    option: bool = False
+    experiment: bool = False
+    read_only: bool = False
+    offline: bool = False
+
+    @classmethod
+    def from_option(cls, name: str) -> ParamSpec:
+        """The parameter of the :class:`LifterOptions` field ``name``, from its metadata."""
+        meta = OPTION_META[name]
+        default = next(f.default for f in dataclasses.fields(LifterOptions) if f.name == name)
+        return cls(name, default, meta.doc, meta.low, meta.high, meta.constraint_text(), option=True,
+                   experiment=meta.experiment)
+
+    def range_text(self) -> str:
+        """``"[0, 1]"``, ``"(0, 1)"``, ... (``""`` without a range)."""
+        if self.option:
+            return OPTION_META[self.name].range_text()
+        return "" if self.low is None or self.high is None else f"[{self.low:g}, {self.high:g}]"
+
+    def descriptor(self) -> Any:
+        """The ``rcl_interfaces/ParameterDescriptor`` the node declares it with."""
+        from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+        d = ParameterDescriptor(name=self.name, description=self.description, read_only=self.read_only,
+                                additional_constraints=self.constraints)
+        if self.low is None or self.high is None or isinstance(self.default, bool):
+            return d
+        if isinstance(self.default, int):
+            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=1)]
+        elif isinstance(self.default, float):
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)]
+        return d
+
+
+#: Every parameter of the node, in the order of ``config/lifter.yaml``: the bases, the solver
+#: options (:data:`~pose_lifter.core.options.NODE_OPTIONS`), then the node's own settings.
+PARAMS: Final[tuple[ParamSpec, ...]] = (
+    ParamSpec("bases_file", "", "Pose basis file (.npz, PoseBases.save); empty = the packaged bases of "
+              "the mode (paper: subject 01 playground; hybrid: training split, varied proportions).",
+              offline=True),
+    *(ParamSpec.from_option(name) for name in NODE_OPTIONS),
+    ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame.", offline=True),
+    ParamSpec("track_timeout", 1.0, "Seconds (input stamps) after which an unseen track is forgotten.",
+              0.0, 3600.0, offline=True),
+    ParamSpec("reinit_ratio", 2.0, "A warm solve whose objective exceeds this times the track's recent "
+              "median is redone cold (0 = never).", 0.0, 1000.0, offline=True),
+    ParamSpec("lower_leg_length", placement.DEFAULT_LEG_LENGTH_M,
+              "Right lower-leg (knee-ankle) length in metres: the metric scale.",
+              *placement.LEG_LENGTH_RANGE_M, offline=True),
+    ParamSpec("default_distance", placement.DEFAULT_DISTANCE_M, "Depth of the skeleton centroid in metres "
+              "when no camera_info has been received.", 0.01, 1000.0, offline=True),
+    ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
+    ParamSpec("max_skeletons", 64, "Skeletons lifted per frame at most; the rest are skipped.", 1, 10000),
+    ParamSpec("max_coordinate", 1.0e5, "Keypoints farther than this from the image origin (pixels) "
+              "are absurd: the skeleton is skipped.", 1.0, 1.0e9),
+    ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
+              read_only=True),
+    ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "
+              "empty one (RViz cannot show an empty frame)."),
+    ParamSpec("marker_lifetime", 1.0, "Seconds a skeleton marker stays on screen without an update "
+              "(0 = until deleted: markers outlive the node).", 0.0, 3600.0),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics updates (0 = none).", 0.0, 3600.0,
+              read_only=True),
+    # caps on what reaches an output or a log (issue 10): over-cap input is skipped with a warning
+    ParamSpec("max_frame_id_length", 256, "Input header.frame_id longer than this (characters): the frame "
+              "is skipped, unanswered (it would be copied into every output message).", 1, 65536),
+    ParamSpec("max_layout_length", 64, "Input layout names longer than this: the frame is skipped.", 1, 4096),
+    ParamSpec("max_keypoints", 512, "Skeletons with more keypoints than this are skipped.", 1, 100000),
+    ParamSpec("strict_parameters", False, "Refuse to start when a parameter given at start-up is not one "
+              "of the node's (a misspelt name); false: a warning.", read_only=True),
+)
+#: :data:`PARAMS` by name.
+SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
+#: Node parameters that have no meaning offline (accepted and ignored by :func:`read_params_file`).
+NODE_ONLY: Final[frozenset[str]] = frozenset(
+    {p.name for p in PARAMS if not p.option and not p.offline} | {"qos_overrides", "use_sim_time"})
+
+
+@dataclasses.dataclass(frozen=True)
+class NodeSettings:
+    """The node's own parameters (not solver options), read once per change, not per frame."""
+
+    warm_start: bool
+    track_timeout: float
+    reinit_ratio: float
+    lower_leg_length: float
+    default_distance: float
+    publish_markers: bool
+    max_skeletons: int
+    max_coordinate: float
+    frame_id: str
+    marker_lifetime: float
+    max_frame_id_length: int
+    max_layout_length: int
+    max_keypoints: int
+
+    @classmethod
+    def read(cls, get: Callable[[str], Any]) -> NodeSettings:
+        """From the node's current parameter values (``get(name)``), converted to each field's type."""
+        kinds = {"bool": bool, "int": int, "float": float, "str": str}
+        return cls(**{f.name: kinds[str(f.type)](get(f.name)) for f in dataclasses.fields(cls)})
+
+
+def unknown_parameters(names: Iterable[str]) -> str:
+    """The warning for start-up parameters that are not the node's (a misspelt name is otherwise
+    ignored), with the closest declared name of each; ``""`` when every name is known."""
+    unknown = sorted(n for n in names if n not in SPECS and n != "use_sim_time"
+                     and not n.startswith("qos_overrides."))
+    if not unknown:
+        return ""
+    hints = []
+    for n in unknown:
+        close = difflib.get_close_matches(n, list(SPECS), n=1)
+        hints.append(f"{n} (did you mean {close[0]}?)" if close else n)
+    return f"unknown parameter{'s' if len(unknown) > 1 else ''}: {', '.join(hints)}"
+
+
+# --------------------------------------------------------------------------- config/lifter.yaml
+
+_YAML_HEAD: Final[str] = """\
+# Parameters of the pose_lifter node (ros2 run pose_lifter lifter --ros-args --params-file <this>).
+# Generated from pose_lifter.params.PARAMS (the node's declared defaults; the solver options'
+# descriptions and ranges are LifterOptions' field metadata) by
+#   python -m pose_lifter.node --params-yaml > config/lifter.yaml
+# and checked by tests/ros/test_lifter_graph.py (the node starts with it and reports these values).
+# Doubles are written with a decimal point (ROS parameters are typed). Ranges: [a, b] includes
+# the bounds, (a, b) refuses them.
+/**:
+  ros__parameters:
+"""
+
+_YAML_TAIL: Final[str] = """\
+    # QoS of the topics can be overridden at start-up (QoSOverridingOptions), e.g. a reliable
+    # input with a deeper queue for a detector that publishes reliably:
+    # qos_overrides:
+    #   /keypoints_2d:
+    #     subscription:
+    #       reliability: reliable
+    #       depth: 20
+"""
+
+
+def _yaml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, float):
+        text = repr(value)
+        if "e" in text and "." not in text.split("e")[0]:
+            mantissa, exponent = text.split("e")
+            text = f"{mantissa}.0e{exponent}"
+        return text
+    return str(value)
+
+
+def params_yaml() -> str:
+    """``config/lifter.yaml``: every parameter with its default, description and range."""
+    lines = [_YAML_HEAD]
+    for p in PARAMS:
+        note = " ".join(t for t in (p.description, p.range_text()) if t)
+        if p.experiment:
+            note += " (experiment toggle)"
+        if p.read_only:
+            note += " (read-only: set at start-up)"
+        lines.append(f"    # {note}\n    {p.name}: {_yaml_value(p.default)}\n")
+    lines.append(_YAML_TAIL)
+    return "".join(lines)
+
+
+# --------------------------------------------------------------------------- offline
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +275,9 @@ class OfflineParams:
     reinit_ratio: float | None = None
 
 
+_SECTIONS: Final[tuple[str, ...]] = ("/**", "pose_lifter", "/pose_lifter")
+
+
 def read_params_file(path: str | Path) -> OfflineParams:
     """Read a node params YAML (see the module doc).
 
@@ -78,15 +304,13 @@ def read_params_file(path: str | Path) -> OfflineParams:
             found = True
     if not found:
         raise OptionsError(f"params file {p} has no {' / '.join(_SECTIONS)} section with ros__parameters")
-    fields = {f.name for f in dataclasses.fields(LifterOptions)}
-    options = {k: v for k, v in merged.items() if k in fields}
+    options = {k: v for k, v in merged.items() if k in OPTION_META}
     try:
         LifterOptions().replace(**options)  # refuse now, with the core's reason
     except OptionsError as exc:
         raise OptionsError(f"params file {p}: {exc}") from None
-    own = {"bases_file", "warm_start", "lower_leg_length", "default_distance", "track_timeout",
-           "reinit_ratio"}
-    ignored = tuple(sorted(k for k in merged if k not in fields and k not in own and k not in NODE_ONLY))
+    own = {s.name for s in PARAMS if s.offline}
+    ignored = tuple(sorted(k for k in merged if k not in OPTION_META and k not in own and k not in NODE_ONLY))
 
     def get(name: str, kind: type) -> Any:
         if name not in merged:

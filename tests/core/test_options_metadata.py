@@ -1,0 +1,136 @@
+"""LifterOptions' per-field metadata is the one table its validation follows (issue 12)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import typing
+from typing import Any
+
+import pytest
+from pose_lifter.core.errors import OptionsError
+from pose_lifter.core.options import (
+    EXPERIMENT_OPTIONS,
+    NODE_OPTIONS,
+    OPTION_META,
+    LifterOptions,
+    OptionMeta,
+)
+
+FIELDS = {f.name: f for f in dataclasses.fields(LifterOptions)}
+NUMBERS = [n for n, f in FIELDS.items() if type(f.default) in (int, float)]
+
+
+def accepted(name: str, value: Any) -> bool:
+    try:
+        LifterOptions().replace(**{name: value})
+    except OptionsError:
+        return False
+    return True
+
+
+def outside(meta: OptionMeta, kind: type) -> tuple[Any, Any]:
+    """The values just below ``low`` and just above ``high``."""
+    assert meta.low is not None and meta.high is not None
+    if kind is int:
+        return int(meta.low) - 1, int(meta.high) + 1
+    return math.nextafter(meta.low, -math.inf), math.nextafter(meta.high, math.inf)
+
+
+def test_every_field_has_metadata_and_its_default_is_valid() -> None:
+    assert list(OPTION_META) == list(FIELDS)
+    for name, f in FIELDS.items():
+        meta = f.metadata["option"]
+        assert meta is OPTION_META[name] and meta.doc and "\n" not in meta.doc, name
+        kind = type(f.default)
+        if kind in (int, float):
+            assert meta.low is not None and meta.high is not None, name
+            assert meta.accepts(f.default), name
+        else:
+            assert meta.low is None and meta.high is None, name
+    LifterOptions().validate()
+
+
+@pytest.mark.parametrize("name", NUMBERS)
+def test_numbers_refuse_just_outside_the_range_and_take_the_closed_bounds(name: str) -> None:
+    meta, kind = OPTION_META[name], type(FIELDS[name].default)
+    assert meta.low is not None and meta.high is not None
+    below, above = outside(meta, kind)
+    assert not accepted(name, below) and not accepted(name, above)
+    assert accepted(name, kind(meta.low)) is not meta.open_low
+    assert accepted(name, kind(meta.high)) is not meta.open_high
+    inner = (meta.low + meta.high) / 2
+    assert accepted(name, int(inner) if kind is int else inner)
+    assert not accepted(name, True)  # a bool is not a number here
+    assert not accepted(name, "1")
+    if kind is float:
+        assert not accepted(name, math.nan) and not accepted(name, math.inf)
+        assert accepted(name, int(meta.high)) is not meta.open_high  # ints pass as floats (YAML)
+    else:
+        assert not accepted(name, float(meta.low + 1))  # an int field takes no float
+    with pytest.raises(OptionsError, match=f"{name} must be an? [a-z]+ in {re.escape(meta.range_text())}"):
+        LifterOptions().replace(**{name: above})
+
+
+def test_the_tolerances_are_open_intervals() -> None:
+    for name in ("alternation_tol", "pose_tol", "inner_tol", "camera_tol", "newton_tol"):
+        meta = OPTION_META[name]
+        assert (meta.low, meta.high, meta.open_low, meta.open_high) == (0.0, 1.0, True, True), name
+        assert meta.range_text() == "(0, 1)"
+        assert "open bound" in meta.constraint_text()
+
+
+def test_choices_are_the_literal_types_and_nothing_else_passes() -> None:
+    hints = typing.get_type_hints(LifterOptions)
+    literal = {n for n, h in hints.items() if typing.get_origin(h) is typing.Literal}
+    assert literal == {"mode", "alpha_solver", "alpha_step", "camera_solver", "pose_solver",
+                       "limb_proportions"}
+    for name in literal:
+        meta = OPTION_META[name]
+        assert meta.choices == typing.get_args(hints[name]), name
+        assert FIELDS[name].default == meta.choices[0]
+        for choice in meta.choices:
+            assert accepted(name, choice), (name, choice)
+        assert not accepted(name, "nope") and not accepted(name, meta.choices[0].upper())
+        assert meta.constraint_text() == "one of " + ", ".join(meta.choices)
+
+
+def test_variant_names_are_case_insensitive() -> None:
+    assert accepted("variant", "l2nans") and accepted("variant", "FULL")
+    assert not accepted("variant", "L3XXXX") and not accepted("variant", 1)
+
+
+def test_bools_and_paths() -> None:
+    for name, f in FIELDS.items():
+        if type(f.default) is bool:
+            assert accepted(name, True) and accepted(name, False), name
+            assert not accepted(name, 1) and not accepted(name, "true"), name
+    for name in ("prior_file", "temporal_prior_file"):
+        meta = OPTION_META[name]
+        assert meta.max_length == 4096
+        assert accepted(name, "x" * 4096) and not accepted(name, "x" * 4097) and not accepted(name, None)
+
+
+def test_experiment_toggles_stand_apart_from_the_user_options() -> None:
+    for name in ("warm_duals", "alpha_step", "camera_solver", "pose_solver", "newton_tol", "inner_max_iter",
+                 "inner_tol", "eta", "delta", "tau", "eta_growth"):
+        assert name in EXPERIMENT_OPTIONS, name
+    assert "theta" not in EXPERIMENT_OPTIONS and "mode" not in EXPERIMENT_OPTIONS
+    # an option a user may set is a node parameter: only experiment toggles stay off the node
+    assert all(OPTION_META[n].experiment for n in FIELDS if n not in NODE_OPTIONS)
+    docstring = LifterOptions.__doc__ or ""
+    experiments = docstring[docstring.index("Experiment toggles"):docstring.index("Notes")]
+    users = docstring[docstring.index("User options"):docstring.index("Experiment toggles")]
+    for name in FIELDS:  # the class docstring lists each field in its group
+        assert (f"``{name}" in experiments) is (name in EXPERIMENT_OPTIONS), name
+        assert (f"``{name}``" in users) is (name not in EXPERIMENT_OPTIONS), name
+
+
+def test_replace_keeps_refusing_unknown_names_and_bad_types() -> None:
+    with pytest.raises(OptionsError, match="unknown option"):
+        LifterOptions().replace(no_such_option=1)
+    with pytest.raises(OptionsError, match="theta must be a number in \\[0, 1e\\+06\\]"):
+        LifterOptions().replace(theta=-1.0)
+    with pytest.raises(OptionsError, match="n_starts must be an integer in \\[1, 100000\\]"):
+        LifterOptions(n_starts=0)

@@ -1,0 +1,141 @@
+"""The lifter node's parts that need no ROS graph: input checks, the one output check, warning
+throttle, marker bookkeeping and the statistics line (rosbags message types stand in for rclpy's)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from pose_lifter import messages as m
+from pose_lifter.bags import pose_lifter_typestore
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.types import Camera, LiftResult
+from pose_lifter.node_checks import (
+    SkipSkeleton,
+    WarningThrottle,
+    check_output,
+    frame_over_cap,
+    skeleton_input,
+)
+from pose_lifter.node_markers import MarkerBook
+from pose_lifter.node_stats import FrameStats
+from pose_lifter.params import PARAMS, NodeSettings
+
+T = m.rosbags_types()
+SETTINGS = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__)
+COCO = get_layout("coco17")
+
+
+def skeleton(track_id: int = 0, scale: float = 1.0, confidence: float = 0.9, k: int = 17) -> Any:
+    rng = np.random.default_rng(track_id + 10)
+    return m.arrays_to_skeleton2d(rng.uniform(100, 400, (k, 2)) * scale, np.full(k, confidence), track_id, T)
+
+
+def lift_result(scale: float = 80.0) -> LiftResult:
+    pose = np.random.default_rng(0).normal(size=(12, 3))
+    return LiftResult(pose=pose, pose_camera=pose, camera=Camera(np.eye(3), scale, np.array([300.0, 200.0])),
+                      alpha=np.zeros(5), objective=1.5, reprojection_error=2.5, limb_violation=0.0, n_iter=7,
+                      converged=True, n_starts=3, start_index=1, weights=np.ones(12), total_alternations=19)
+
+
+def test_skeleton_input_takes_a_good_skeleton_and_skips_each_bad_kind() -> None:
+    seen: set[int] = set()
+    warnings: list[str] = []
+    inp = skeleton_input(skeleton(3), COCO, SETTINGS, 0.1, seen, warnings.append)
+    assert inp.track_id == 3 and inp.points.shape == (12, 2) and seen == {3} and warnings == []
+    cases = [  # (skeleton, kind)
+        (skeleton(3), "duplicate track id"),
+        (skeleton(4, k=SETTINGS.max_keypoints + 1), "too many keypoints"),
+        (skeleton(5, confidence=0.05), "no confident keypoints"),
+        (skeleton(6, scale=1e5), "absurd coordinates"),
+    ]
+    for skel, kind in cases:
+        with pytest.raises(SkipSkeleton) as err:
+            skeleton_input(skel, COCO, SETTINGS, 0.1, seen, warnings.append)
+        assert err.value.kind == kind
+    with pytest.raises(InvalidInputError):  # wrong keypoint count for the layout
+        skeleton_input(skeleton(7, k=10), COCO, SETTINGS, 0.1, seen, warnings.append)
+    # untracked skeletons (-1) may repeat
+    for _ in range(2):
+        skeleton_input(skeleton(-1), COCO, SETTINGS, 0.1, seen, warnings.append)
+
+
+def test_clipped_confidences_are_reported_even_when_the_skeleton_is_then_skipped() -> None:
+    warnings: list[str] = []
+    inp = skeleton_input(skeleton(1, confidence=1.5), COCO, SETTINGS, 0.1, set(), warnings.append)
+    assert np.all(inp.confidence == 1.0) and len(warnings) == 1 and "clipped" in warnings[0]
+    with pytest.raises(SkipSkeleton, match="beyond"):
+        skeleton_input(skeleton(2, scale=1e5, confidence=-0.5), COCO, SETTINGS, 0.0, set(), warnings.append)
+    assert len(warnings) == 2 and "-0.5" in warnings[1]
+
+
+def test_one_output_check_covers_what_is_published() -> None:
+    good = lift_result()
+    joints = m.place_in_camera(good, 0.43, None, None, 5.0)
+    check_output(0, good, joints)
+    bad_joints = joints.copy()
+    bad_joints[3, 1] = np.nan
+    with pytest.raises(SkipSkeleton, match="non-finite") as err:
+        check_output(0, good, bad_joints)
+    assert err.value.kind == "non-finite result"
+    for bad in (lift_result(scale=np.inf), LiftResult(**{**good.__dict__, "objective": np.nan})):
+        with pytest.raises(SkipSkeleton):
+            check_output(0, bad, joints)
+
+
+def test_frames_over_a_cap_are_refused_with_the_cap_named() -> None:
+    frame = T.Skeleton2DArray(header=m.make_header(1, "x" * 257, T), layout="coco17", skeletons=[])
+    kind, text = frame_over_cap(frame, SETTINGS) or ("", "")
+    assert kind == "frame_id too long" and "max_frame_id_length=256" in text
+    frame = T.Skeleton2DArray(header=m.make_header(1, "cam", T), layout="y" * 65, skeletons=[])
+    assert (frame_over_cap(frame, SETTINGS) or ("",))[0] == "layout too long"
+    frame = T.Skeleton2DArray(header=m.make_header(1, "cam", T), layout="coco17", skeletons=[])
+    assert frame_over_cap(frame, SETTINGS) is None
+
+
+def test_warnings_are_rate_limited_per_kind() -> None:
+    lines: list[str] = []
+    throttle = WarningThrottle(lines.append, period=60.0)
+    throttle.warn("a", "first " + "x" * 1000)
+    throttle.warn("a", "second")
+    throttle.warn("b", "other kind")
+    assert len(lines) == 2 and lines[0].startswith("first") and "other kind" in lines[1]
+    assert len(lines[0]) < 400  # input-derived text is cut
+    WarningThrottle(lines.append, period=0.0).warn("a", "again")
+    assert lines[-1].startswith("again")
+
+
+def test_marker_book_shares_the_skeleton_points_and_deletes_what_is_gone() -> None:
+    store = pose_lifter_typestore()
+    header = m.make_header(5, "cam", T)
+    j = [np.full((12, 3), float(i)) for i in range(3)]
+    skels = [m.result_to_skeleton3d(lift_result(), tid, joints, T) for tid, joints in zip((4, 9, -1), j,
+                                                                                          strict=True)]
+    book = MarkerBook("ns", T)
+    first = book.update(header, [(s.track_id, s.joints) for s in skels], 1.0)
+    # the same bytes as markers built from the joint arrays, after the first message's DELETEALLs
+    from_arrays = m.skeleton_markers(header, [(4, j[0]), (9, j[1]), (-1, j[2])], "ns", 1.0, T)
+    assert [x.action for x in first.markers[:2]] == [3, 3]
+    kind = "visualization_msgs/msg/MarkerArray"
+    assert (bytes(store.serialize_cdr(T.MarkerArray(markers=first.markers[2:]), kind))
+            == bytes(store.serialize_cdr(from_arrays, kind)))
+    assert all(p is q for p, q in zip(first.markers[2].points, skels[0].joints, strict=True))  # not rebuilt
+    second = book.update(header, [(9, skels[1].joints)], 1.0)
+    assert [(x.ns, x.id, x.action) for x in second.markers[2:]] == [
+        ("ns/joints", 4, 2), ("ns/bones", 4, 2), ("ns/joints", -1, 2), ("ns/bones", -1, 2)]
+    assert len(book.update(header, [(9, skels[1].joints)], 1.0).markers) == 2  # nothing more to delete
+
+
+def test_stats_line() -> None:
+    stats = FrameStats()
+    assert stats.line() == ""
+    skel = m.result_to_skeleton3d(lift_result(), 0, np.zeros((12, 3)), T, solve_time=0.004, warm_started=True)
+    stats.frame([skel, skel], 0.010)
+    stats.skipped["duplicate track id"] += 2
+    stats.clipped = 1
+    line = stats.line()
+    assert line.startswith("1 frames (") and "2 skeletons (2 warm)" in line and "solve median 4.0 ms" in line
+    assert "latency median 10.0 ms" in line and line.endswith("skipped: duplicate track id 2")
+    assert "confidences clipped in 1 skeletons" in line
