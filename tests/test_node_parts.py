@@ -11,7 +11,7 @@ from pose_lifter import messages as m
 from pose_lifter.bags import pose_lifter_typestore
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import get_layout
-from pose_lifter.core.types import Camera, LiftResult
+from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.node_checks import (
     SkipSkeleton,
     WarningThrottle,

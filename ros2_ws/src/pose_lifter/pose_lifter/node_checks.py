@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from . import messages
 from .core.layouts import Layout
-from .core.types import LiftResult
+from .core.results import LiftResult
 from .params import NodeSettings
 
 __all__ = [
