@@ -3,25 +3,25 @@ changes no published message.
 
 Usage (ROS sourced: ``source ros2_ws/install/setup.bash``)::
 
-    .venv/bin/python tools/node_outputs.py dump OUT.pkl [--src DIR] [--frames 40]
-    .venv/bin/python tools/node_outputs.py compare A.pkl B.pkl
+    .venv/bin/python tools/node_outputs.py dump OUT.json [--src DIR] [--frames 40]
+    .venv/bin/python tools/node_outputs.py compare A.json B.json
 
 ``dump`` runs :class:`pose_lifter.node.LifterNode` in-process (``--src``: the directory that holds
 the ``pose_lifter`` package to import, e.g. an old commit's ``ros2_ws/src/pose_lifter`` from
 ``git archive``), feeds it the first ``--frames`` keypoint frames (and the camera_info) of every
-committed bag in ``mode`` hybrid and paper through its callbacks, and pickles every
-``Skeleton3DArray`` and ``MarkerArray`` it publishes (``solve_time`` zeroed: a timing).
-``compare`` walks two dumps field by field, floats by bit pattern (-0.0 is not 0.0), and prints
-the first differences. (The serialised CDR bytes are no proof: rclpy leaves the alignment
-padding uninitialised, so two runs of one build differ there.)
+committed bag in ``mode`` hybrid and paper through its callbacks, and writes every
+``Skeleton3DArray`` and ``MarkerArray`` it publishes as JSON, field by field, floats as exact hex
+strings (``solve_time`` zeroed: a timing). ``compare`` walks two dumps field by field, floats by
+bit pattern (-0.0 is not 0.0), prints the first differences and the largest float difference.
+(The serialised CDR bytes are no proof: rclpy leaves the alignment padding uninitialised, so two
+runs of one build differ there.)
 """
 
 from __future__ import annotations
 
 import argparse
 import glob
-import pickle
-import struct
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -67,47 +67,58 @@ def dump(out: Path, src: Path | None, frames: int) -> None:
     for _, kind, msg in published:
         for skel in msg.skeletons if kind == "Skeleton3DArray" else ():
             skel.solve_time = 0.0
-    out.write_bytes(pickle.dumps(published))
+    out.write_text(json.dumps([(w, k, _plain(m)) for w, k, m in published]))
     print(f"{len(published)} messages -> {out}")
     rclpy.shutdown()
 
 
-def _first_difference(a: Any, b: Any, path: str) -> str | None:
-    if hasattr(a, "get_fields_and_field_types"):
-        for name in a.get_fields_and_field_types():
-            found = _first_difference(getattr(a, name), getattr(b, name), f"{path}.{name}")
-            if found:
-                return found
-        return None
-    if isinstance(a, list | tuple) or type(a).__name__ in ("array", "ndarray"):
-        a, b = list(a), list(b)
+def _plain(x: Any) -> Any:
+    """A message as JSON data: fields as a dict, sequences as lists, floats as ``float.hex``."""
+    if hasattr(x, "get_fields_and_field_types"):
+        return {name: _plain(getattr(x, name)) for name in x.get_fields_and_field_types()}
+    if isinstance(x, list | tuple) or type(x).__name__ in ("array", "ndarray"):
+        return [_plain(v) for v in x]
+    if isinstance(x, float) or type(x).__name__.startswith("float"):
+        return {"f": float(x).hex()}
+    return x.decode("latin-1") if isinstance(x, bytes) else x
+
+
+def _first_difference(a: Any, b: Any, path: str, largest: list[float]) -> str | None:
+    if isinstance(a, dict) and set(a) == {"f"}:  # a float, by bit pattern
+        fa, fb = float.fromhex(a["f"]), float.fromhex(b["f"])
+        largest[0] = max(largest[0], abs(fa - fb))
+        return None if a == b else f"{path}: {fa!r} vs {fb!r}"
+    if isinstance(a, dict):
+        first = None
+        for name in a:
+            found = _first_difference(a[name], b[name], f"{path}.{name}", largest)
+            first = first or found
+        return first
+    if isinstance(a, list):
         if len(a) != len(b):
             return f"{path}: {len(a)} items vs {len(b)}"
+        first = None
         for i, (x, y) in enumerate(zip(a, b, strict=True)):
-            found = _first_difference(x, y, f"{path}[{i}]")
-            if found:
-                return found
-        return None
-    if isinstance(a, float) or type(a).__name__.startswith("float"):
-        same = struct.pack("<d", float(a)) == struct.pack("<d", float(b))
-    else:
-        same = type(a) is type(b) and a == b
-    return None if same else f"{path}: {a!r} vs {b!r}"
+            found = _first_difference(x, y, f"{path}[{i}]", largest)
+            first = first or found
+        return first
+    return None if type(a) is type(b) and a == b else f"{path}: {a!r} vs {b!r}"
 
 
 def compare(a_path: Path, b_path: Path) -> int:
-    a, b = pickle.loads(a_path.read_bytes()), pickle.loads(b_path.read_bytes())
+    a, b = json.loads(a_path.read_text()), json.loads(b_path.read_text())
     differences = 0
+    largest = [0.0]
     if [(w, k) for w, k, _ in a] != [(w, k) for w, k, _ in b]:
         print("the two dumps hold different message sequences")
         return 1
     for (where, kind, x), (_, _, y) in zip(a, b, strict=True):
-        found = _first_difference(x, y, kind)
+        found = _first_difference(x, y, kind, largest)
         if found:
             differences += 1
             if differences <= 10:
                 print(f"{where}: {found}")
-    print(f"{len(a)} messages, {differences} differ")
+    print(f"{len(a)} messages, {differences} differ; largest float difference {largest[0]:.3g}")
     return 1 if differences else 0
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .core.errors import InvalidInputError
-from .core.layouts import get_layout, to_model_joints
+from .core.layouts import Layout, get_layout, to_model_joints
 from .core.results import LiftResult
 from .core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 
@@ -131,7 +131,7 @@ def make_header(stamp_ns: int, frame_id: str, types: Any) -> Any:
 # --------------------------------------------------------------------------- 2D
 
 
-def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The paper's 12 joints of a ``Skeleton2D``.
 
     Keypoints whose confidence is 0 (missing) may carry non-finite coordinates; they are
@@ -142,8 +142,9 @@ def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], N
     skel : Skeleton2D-like
         Has ``keypoints``, each with ``x``, ``y``, ``confidence`` (or ``xyc``, the keypoints as
         one (K, 3) array, as :class:`pose_lifter.cdr.DecodedSkeleton2D` has).
-    layout : str
-        The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``).
+    layout : str or Layout
+        The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``, ...), by name
+        or as the :class:`~pose_lifter.core.layouts.Layout` a frame looked up once.
 
     Returns
     -------
@@ -158,7 +159,7 @@ def skeleton2d_to_arrays(skel: Any, layout: str) -> tuple[NDArray[np.float64], N
     InvalidInputError
         Wrong number of keypoints for the layout, or non-finite values.
     """
-    lay = get_layout(layout)
+    lay = layout if isinstance(layout, Layout) else get_layout(layout)
     xyc = getattr(skel, "xyc", None)  # pose_lifter.cdr.DecodedSkeleton2D: the keypoints as one array
     if xyc is not None:
         xy, conf = xyc[:, :2], xyc[:, 2]
@@ -230,7 +231,8 @@ def place_in_camera(
     Parameters
     ----------
     result : LiftResult
-        ``pose_camera`` (12, 3) in the camera frame; ``camera.scale`` in pixels per leg unit;
+        ``pose_camera`` (12, 3) in the camera frame, centred on the joints' mean (as the core
+        returns it: the centroid is placed, not recomputed); ``camera.scale`` in pixels per leg unit;
         ``camera.translation`` (2,) the image position of the pose centroid (pixels).
     leg_length_m : float
         Length of the right lower leg in metres (> 0).
@@ -251,7 +253,7 @@ def place_in_camera(
     pose = np.asarray(result.pose_camera, dtype=np.float64)
     if pose.shape != (N_JOINTS, 3):
         raise InvalidInputError(f"pose_camera must be a ({N_JOINTS}, 3) array")
-    local = (pose - pose.mean(axis=0)) * float(leg_length_m)
+    local = pose * float(leg_length_m)  # the core's pose_camera is centred on the joints' mean
     if focal is None:
         if not np.isfinite(default_distance_m) or default_distance_m <= 0:
             raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")

@@ -131,7 +131,7 @@ def skeleton_input(skel: Any, layout: Layout, settings: NodeSettings, confidence
             raise SkipSkeleton("duplicate track id",
                                f"duplicate track id {track_id} in one frame: later copy skipped")
         seen.add(track_id)
-    points, confidence = messages.skeleton2d_to_arrays(skel, layout.name)
+    points, confidence = messages.skeleton2d_to_arrays(skel, layout)
     outside = (confidence < 0.0) | (confidence > 1.0)
     if np.any(outside):  # they weigh the solve: clipped into [0, 1], with a warning
         worst = float(confidence[outside][np.argmax(np.abs(confidence[outside]))])
