@@ -24,10 +24,11 @@ from .results import Camera, LiftResult, Normalisation, WarmStart
 from .runs import Run, Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
 
-__all__ = ["OUTLIER_MEDIAN_FACTOR", "Lifter", "hybrid_runs", "lift_learned", "predict_prior", "prior_rows"]
+__all__ = ["OUTLIER_MEDIAN_FACTOR", "LifterParts", "hybrid_runs", "lift_learned", "predict_prior",
+           "prior_rows"]
 
 
-class Lifter(Protocol):
+class LifterParts(Protocol):
     """What these functions use of a :class:`pose_lifter.core.lifter.Lifter`."""
 
     @property
@@ -48,7 +49,7 @@ class Lifter(Protocol):
 OUTLIER_MEDIAN_FACTOR = 3.0
 
 
-def prior_rows(lifter: Lifter, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
+def prior_rows(lifter: LifterParts, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
                 limb_proportions: NDArray[np.float64] | None = None,
                 previous: NDArray[np.float64] | None = None,
                 temporal_weight: NDArray[np.float64] | None = None,
@@ -88,7 +89,7 @@ def prior_rows(lifter: Lifter, x: NDArray[np.float64], w: NDArray[np.float64], n
         radii = lifter.limb_radii(limb_proportions)
     return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
 
-def predict_prior(lifter: Lifter, x: NDArray[np.float64], visible: NDArray[np.bool_],
+def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[np.bool_],
                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
                    ) -> tuple[NDArray[np.float64], PosePrior]:
     """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
@@ -113,7 +114,7 @@ def predict_prior(lifter: Lifter, x: NDArray[np.float64], visible: NDArray[np.bo
     pts[k], vis[k] = x, visible
     return prior.predict(np.where(vis[..., None], pts, 0.0), vis), prior
 
-def hybrid_runs(lifter: Lifter, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
+def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                  norm: Normalisation, warm: WarmStart | None, cam0: Camera | None,
                  limb_proportions: NDArray[np.float64] | None, temporal_weight: NDArray[np.float64],
                  past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None, gated: bool = False,
@@ -170,7 +171,7 @@ def hybrid_runs(lifter: Lifter, x: NDArray[np.float64], xn: NDArray[np.float64],
         total += cont.n_iter + fresh.n_iter
     return runs, total, n_starts, w, prior_pose
 
-def lift_learned(lifter: Lifter, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
+def lift_learned(lifter: LifterParts, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
                   past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> LiftResult:
     """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
     own body frame (right lower leg = 1) with the camera that maps it onto the prior's image

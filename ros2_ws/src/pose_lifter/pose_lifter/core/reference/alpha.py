@@ -1,4 +1,4 @@
-"""References for the alpha-step of the pose step (``core/pose.py``): in the paper's lifted form
+"""References for the alpha-step of the pose step (``core/alpha/``): in the paper's lifted form
 ``min z^T W z`` s.t. ``z^T Omega_i z = 0`` (the limb constraints, :func:`limb_omegas`) and
 ``z[-1] = 1``, with ``z = [alpha; 1]``.
 

@@ -1,4 +1,4 @@
-"""References for the pose step (``core/pose.py``): the basis coefficients ``alpha`` of
+"""References for the pose step (``core/pose_step.py``): the basis coefficients ``alpha`` of
 ``y = mu + B alpha`` for a fixed camera, minimising
 ``sum_j w_j loss(x_j - (M0 y_j + t)) + theta ||alpha||_1`` (:func:`pose_objective`).
 
