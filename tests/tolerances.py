@@ -38,6 +38,12 @@ LIFT_LIMB_VIOLATION: Final[float] = 1e-6
 #: Two solves of one problem posed two equivalent ways (the image scaled and shifted): pose
 #: (normalised units) and camera scale (relative).
 SOLVE_REPEAT: Final[float] = 1e-6
+#: The pose step's fused compiled kernel against the Python ADM loop it fuses (same arithmetic in
+#: another order: loops against numpy's vector operations), grown by 15 iterations of the
+#: nonconvex ADM: objective and coefficients, relative (worst of 24 problems: 3e-10) ...
+FUSED_VS_LOOP_REL: Final[float] = 1e-8
+#: ... and the final multipliers, relative to the largest (worst of 24 problems: 2.6e-7).
+FUSED_VS_LOOP_DUALS_REL: Final[float] = 1e-6
 #: SCS (first-order) at eps 1e-9 on the SDP relaxation: its solution's PSD-ness (relative to
 #: max |Q|) and its equality constraints (absolute).
 SCS_ACCURACY: Final[float] = 1e-6
