@@ -22,10 +22,10 @@ if TYPE_CHECKING:
         UnknownLayoutError,
     )
     from .layouts import LAYOUTS, get_layout, to_model_joints
-    from .lifter import Lifter
+    from .lifter import Lifter, TrackContext
     from .metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
     from .options import VARIANTS, LifterOptions, Variant, get_variant
-    from .results import Camera, CameraResult, LiftResult, PoseResult, WarmStart
+    from .results import Camera, CameraResult, LiftResult, PoseResult, SolveInfo, WarmStart
     from .skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
 
 #: Public name -> the module of this package that defines it.
@@ -45,6 +45,7 @@ _MODULE_OF: dict[str, str] = {
     "get_layout": "layouts",
     "to_model_joints": "layouts",
     "Lifter": "lifter",
+    "TrackContext": "lifter",
     "mpjpe": "metrics",
     "normalised_error": "metrics",
     "p_mpjpe": "metrics",
@@ -63,6 +64,7 @@ _MODULE_OF: dict[str, str] = {
     "CameraResult": "results",
     "LiftResult": "results",
     "PoseResult": "results",
+    "SolveInfo": "results",
     "WarmStart": "results",
 }
 
@@ -83,8 +85,10 @@ __all__ = [
     "PoseBases",
     "PoseLifterError",
     "PoseResult",
+    "SolveInfo",
     "SolverError",
     "TooFewJointsError",
+    "TrackContext",
     "UnknownLayoutError",
     "Variant",
     "WarmStart",
