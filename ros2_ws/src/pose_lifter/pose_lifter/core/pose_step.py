@@ -33,11 +33,17 @@ After the inner ADM, a few Gauss-Newton projection steps restore the limb constr
 ``1e-10`` (the ADM meets them only to its tolerance). ``alpha_solver="newton"`` replaces the
 inner ADM by a direct local solver of the same problem (SQP / Newton on the KKT system), and
 ``alpha_solver="riemannian"`` (the default) by Riemannian Newton on the product of the 8 limb
-spheres (:func:`_sphere_newton`): in the reduced coordinates the limb vectors ``l = C mu + C U S
+spheres (:mod:`.alpha.sphere_newton`): in the reduced coordinates the limb vectors ``l = C mu + C U S
 s`` are an onto linear image of ``s`` (``PoseModel.limb_coordinates``), so ``s = s0 + Z l + N t``
-with ``t`` free, eliminated in closed form (:func:`_sphere_setup`), and the constraints are
+with ``t`` free, eliminated in closed form, and the constraints are
 ``||l_i|| = sqrt(L_i)``. Inside the ADM it takes one Newton step per iteration with the proximal
 term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM).
+
+Where: this module holds the one outer ADM loop (:func:`_adm`) over an alpha-step solver
+(:class:`.alpha.base.AlphaStep`: :mod:`.alpha.lifted_admm`, :mod:`.alpha.sqp`,
+:mod:`.alpha.sphere_newton`); :mod:`.pose_kernel` holds the same loop with the Riemannian
+alpha-step fused into one compiled kernel (the default path, ``fused=True``), checked against
+the loop in ``tests/core/test_pose_step.py``.
 
 Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
 numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
