@@ -110,6 +110,8 @@ class Runs:
                         and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
                         and model.limb_coordinates is not None and not o.warm_duals)
         self._no_prior = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)))
+        #: the model's arrays as the kernel takes them (made on the first fused run)
+        self._kernel_model: tuple[NDArray[np.float64], ...] | None = None
         #: the kernel's settings before and after the pose step's cap (which varies per run)
         self._settings = (
             (float(o.alternation_tol), float(o.theta if o.method.sparsity else 0.0), o.method.loss == "l1",
@@ -123,7 +125,7 @@ class Runs:
         """The camera step's 2D points and weights for a run: with a prior term, the prior's
         image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
         stacked twice, the returned flag). Built once per run, not per alternation."""
-        if prior is not None and np.any(prior.weights[:, 0] > 0):
+        if prior is not None and (prior.weights[:, 0] > 0).any():
             return (np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]])),
                     np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]])), True)
         return xn, w, False
@@ -203,9 +205,13 @@ class Runs:
         steps, objective, best alternation and stopping rule; the steps' results carry no
         multipliers)."""
         o, m = self.options, self.model
-        coords = m.limb_coordinates
-        assert coords is not None
-        z, nmat, s0, rad = coords
+        if self._kernel_model is None:
+            coords = m.limb_coordinates
+            assert coords is not None
+            vc, vt, cu24_t = m.riemannian_arrays
+            self._kernel_model = (m.mean, m.u, m.sig, vc, vt, m.components, m._limb_matrix, coords[0],
+                                  coords[1], coords[2], coords[3], cu24_t, m.kernel_limbs[1])
+        mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t, cmu24 = self._kernel_model
         if prior is None:
             xp, pw = self._no_prior
             max_iter = o.pose_max_iter if pose_max_iter is None else pose_max_iter
@@ -228,14 +234,13 @@ class Runs:
             else:
                 m_init, t_init = cam0.projection, cam0.translation
             best0, prev0, it0 = np.inf, np.inf, 0
-        vc, vt, cu24_t = m.riemannian_arrays
         alt_tol, th, l1, eta, eta_growth = self._settings[0]
         pose_tol, newton_tol, prox, cam_max_iter, cam_tol, tau = self._settings[1]
         with diverged_as_solver_error("run"):
             (status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f,
              b_i) = _run_kernel(
-                xn, w, cx, cw, doubled, m.mean, m.u, m.sig, vc, vt, m.components, m._limb_matrix, z, nmat, s0,
-                rad, cu24_t, m.kernel_limbs[1], xp, pw, prior is not None,
+                xn, w, cx, cw, doubled, mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t,
+                cmu24, xp, pw, prior is not None,
                 np.ascontiguousarray(alpha, dtype=np.float64), y0,
                 np.ascontiguousarray(m_init, dtype=np.float64),
                 np.ascontiguousarray(t_init, dtype=np.float64),
