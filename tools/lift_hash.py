@@ -18,7 +18,9 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
   :func:`pose_lifter.offline.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
-  first bag in each mode (every ``--record-every``-th call, up to ``--record`` per mode),
+  first bag in each mode through ``Runs.run``'s Python loop (the default fused run kernel calls no
+  Python ``pose_step``; the loop gives its results to the bit, ``tests/core/test_run_kernel.py``)
+  (every ``--record-every``-th call, up to ``--record`` per mode),
   replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
   ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
   their objectives, limb violations, iteration counts and coefficients.
@@ -149,7 +151,16 @@ def lift_bags(bags: Iterable[Path], mode: str, starts: int | None,
 
         d.text(f"{bag.name} {mode}")
         if recorder is not None and i == 0:
+            # the fused run kernel calls no Python pose_step: the calls are recorded from a lift
+            # of this bag through the Python loop (Runs.fused False, the same results to the bit),
+            # not hashed; the hashed lift below is the default (fused) path's
+            ref = Lifter(lifter.bases, lifter.options)
+            ref.runs.fused = False
             lifter_module.pose_step = recorder.wrap(original)  # type: ignore[assignment]
+            try:
+                lift_messages(kps, infos, ref, warm_start=True)
+            finally:
+                lifter_module.pose_step = original  # type: ignore[assignment]
         try:
             t0 = time.perf_counter()
             frames[bag] = lift_messages(kps, infos, lifter, warm_start=True, on_frame=on_frame,

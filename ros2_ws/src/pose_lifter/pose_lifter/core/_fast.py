@@ -6,7 +6,19 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["median_rows"]
+__all__ = ["mean_rows", "median_rows", "row_norms"]
+
+
+def mean_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a.mean(axis=0)`` of a small float (n, d) array, n >= 1 (~1 us less a call): the same
+    reduction (row by row) divided by ``n``."""
+    return np.asarray(np.add.reduce(a, axis=0) / a.shape[0])
+
+
+def row_norms(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``np.linalg.norm(a, axis=1)`` of a small real (n, d) array (~1 us less a call): numpy's own
+    special case, ``sqrt`` of the row sums of ``a * a``."""
+    return np.asarray(np.sqrt(np.add.reduce(a * a, axis=1)))
 
 
 def median_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -44,7 +44,8 @@ from .results import Camera, CameraResult, Duals
 
 _DEFAULTS = LifterOptions()
 
-__all__ = ["camera_objective", "camera_step", "project_scaled_orthographic", "weighted_median"]
+__all__ = ["camera_objective", "camera_step", "initial_camera", "project_scaled_orthographic",
+           "weighted_median"]
 
 
 def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -172,13 +173,7 @@ def camera_step_trusted(
     loss, max_iter, tol, tau = options.method.loss, options.camera_max_iter, options.camera_tol, options.tau
     n = x.shape[0]
     if init is None:
-        ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)
-        sw = np.sqrt(w)[:, None]
-        sol, *_ = np.linalg.lstsq(sw * ya, sw * x, rcond=None)  # (4, 2)
-        m = project_scaled_orthographic(sol[:3].T)
-        if not np.isfinite(m).all() or np.linalg.norm(m) < 1e-12:
-            m = np.hstack([np.eye(2), np.zeros((2, 1))])
-        t = np.asarray(w @ (x - y @ m.T) / w.sum())  # the L2-optimal translation for this M
+        m, t = initial_camera(x, y, w)
     else:
         m = np.ascontiguousarray(init.projection, dtype=np.float64)
         t = np.array(init.translation, dtype=np.float64)
@@ -195,6 +190,22 @@ def camera_step_trusted(
         raise SolverError("camera step diverged (non-finite camera); check the inputs")
     return CameraResult(objective=obj, n_iter=it, converged=converged, camera=Camera(rot, scale, t),
                         duals=Duals(u1, u2))
+
+
+def initial_camera(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The camera step's cold start ``(M (2, 3), t (2,))`` for points ``x`` (n, 2), pose ``y``
+    (n, 3), weights ``w`` (n,): the weighted least-squares affine fit projected onto the
+    scaled-orthographic set (``[I 0]`` when that degenerates) and the L2-optimal ``t`` for it."""
+    n = x.shape[0]
+    ya = np.hstack([y, np.ones((n, 1))])  # (n, 4)
+    sw = np.sqrt(w)[:, None]
+    sol, *_ = np.linalg.lstsq(sw * ya, sw * x, rcond=None)  # (4, 2)
+    m = project_scaled_orthographic(sol[:3].T)
+    if not np.isfinite(m).all() or np.linalg.norm(m) < 1e-12:
+        m = np.hstack([np.eye(2), np.zeros((2, 1))])
+    t = np.asarray(w @ (x - y @ m.T) / w.sum())  # the L2-optimal translation for this M
+    return m, t
 
 
 @njit

@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ._fast import median_rows
+from ._fast import mean_rows, median_rows, row_norms
 from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
@@ -65,16 +65,16 @@ def prior_rows(lifter: LifterParts, x: NDArray[np.float64], w: NDArray[np.float6
     vis = w > 0
     if fill is not None:
         add = fill[1] & ~vis
-        if np.any(add):
+        if add.any():
             x = np.where(add[:, None], fill[0], x)
             vis = vis | add
     pose, used = predict_prior(lifter, x, vis, past)
     target = np.empty((N_JOINTS, 3))
     target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
     target[:, 2] = pose[:, 2] / norm.spread
-    if not np.all(np.isfinite(target)):
+    if not np.isfinite(target).all():
         raise InvalidInputError("the learned prior gave non-finite values for this input")
-    if previous is not None and temporal_weight is not None and np.any(temporal_weight > 0):
+    if previous is not None and temporal_weight is not None and (temporal_weight > 0).any():
         prev = previous.copy()
         vis = w > 0
         # the person's image motion since the previous frame (the median over visible joints)
@@ -128,7 +128,7 @@ def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.floa
     if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
         prev = lifter.model.pose(warm.alpha)
         previous = np.column_stack([cam0.project(prev),
-                                    cam0.scale * (prev - prev.mean(axis=0)) @ cam0.rotation[2]])
+                                    cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]])
     prior, prior_pose = prior_rows(lifter, x, w, norm, limb_proportions, previous, temporal_weight, past,
                                          fill)
     a_prior = lifter.runs.start_alpha(prior.target)
@@ -153,12 +153,11 @@ def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.floa
         cam = run.camera.camera
         # a joint disagrees with the image when it is far from the fit's projection or from
         # the prior's image position (the prior is trained with confident outliers)
-        resid = np.maximum(np.linalg.norm(xn - cam.project(run.pose.pose), axis=1),
-                           np.linalg.norm(xn - prior.target[:, :2], axis=1))
+        resid = np.maximum(row_norms(xn - cam.project(run.pose.pose)), row_norms(xn - prior.target[:, :2]))
         vis = w > 0
         limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
         out = vis & (resid > limit)
-        if not np.any(out) or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
+        if not out.any() or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
             break
         w = w.copy()
         w[out] = 0.0

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ._fast import mean_rows, row_norms
 from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases, default_bases_path
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
@@ -300,14 +301,14 @@ class Lifter:
             if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
                 raise InvalidInputError(f"past must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), got "
                                         f"{pp.shape} and {pv.shape}")
-            past = (pp, pv & np.all(np.isfinite(pp), axis=-1))
+            past = (pp, pv & np.isfinite(pp).all(axis=-1))
         if fill is not None:
             fp, fv = np.asarray(fill[0], dtype=np.float64), np.asarray(fill[1], dtype=bool)
             if fp.shape != (N_JOINTS, 2) or fv.shape != (N_JOINTS,):
                 raise InvalidInputError(f"fill must be (({N_JOINTS}, 2), ({N_JOINTS},)), got {fp.shape} "
                                         f"and {fv.shape}")
             # only for the joints this frame lacks: one the outlier pass flags stays missing
-            fill = (fp, fv & np.all(np.isfinite(fp), axis=-1) & ~(w > 0))
+            fill = (fp, fv & np.isfinite(fp).all(axis=-1) & ~(w > 0))
         if mode == "learned":
             return lift_learned(self, x, w, norm, past)
         xn = (x - norm.centre) / norm.spread
@@ -321,7 +322,7 @@ class Lifter:
             if not 0.0 < data_weight <= 1.0:
                 raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
             tw = np.broadcast_to(np.asarray(temporal_weight, dtype=np.float64), (N_JOINTS,)).copy()
-            if not np.all((tw >= 0.0) & (tw <= 1e3)):
+            if not ((tw >= 0.0) & (tw <= 1e3)).all():
                 raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
             runs, total, n_starts, w, prior_pose = hybrid_runs(
                 self, x, xn, w * data_weight, norm, warm, cam0, limb_proportions, tw, past, gated, fill)
@@ -374,7 +375,7 @@ class Lifter:
         size of the model's own limbs (so the person keeps the bases' scale); None when the
         proportions are unusable (non-finite or not positive)."""
         p = np.asarray(proportions, dtype=np.float64)
-        if p.shape != (8,) or not np.all(np.isfinite(p)) or np.any(p <= 0):
+        if p.shape != (8,) or not np.isfinite(p).all() or (p <= 0).any():
             return None
         own = np.sqrt(self.model.limb_sq)
         return np.ascontiguousarray(p * np.exp(np.mean(np.log(own)) - np.mean(np.log(p))))
@@ -385,8 +386,8 @@ class Lifter:
         cam_n = run.camera.camera
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
         pose = run.pose.pose
-        pose_c = pose - pose.mean(axis=0)
-        reproj = np.linalg.norm(x - cam.project(pose), axis=1)
+        pose_c = pose - mean_rows(pose)
+        reproj = row_norms(x - cam.project(pose))
         vis = w > 0
         result = LiftResult(
             pose=pose,
@@ -406,7 +407,7 @@ class Lifter:
             history=run.history,
         )
         for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
-            if not np.all(np.isfinite(arr)):
+            if not np.isfinite(arr).all():
                 raise SolverError("the solve produced non-finite values for this input")
         return result
 

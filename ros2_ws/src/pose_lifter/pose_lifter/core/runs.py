@@ -18,13 +18,15 @@ from numpy.typing import NDArray
 
 from ._jit import njit
 from .alpha.lifted_admm import QStepFn
-from .camera import camera_step_trusted
-from .errors import InvalidInputError
+from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
+from .camera import camera_step_trusted, initial_camera
+from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions
 from .pose_model import PoseModel
-from .pose_step import PriorRows, pose_step
+from .pose_step import ETA_MAX, PriorRows, pose_step
 from .results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
-from .skeleton import normalise_pose_flat
+from .run_kernel import CAMERA_DIVERGED, OK, _run_kernel
+from .skeleton import N_JOINTS, normalise_pose_flat
 
 __all__ = ["PINV_RCOND", "Run", "Runs"]
 
@@ -34,6 +36,11 @@ __all__ = ["PINV_RCOND", "Run", "Runs"]
 #: bases' span) coefficients with ||alpha||_1 ~ 2e5: their pose was right but ``theta ||alpha||_1``
 #: dominated the objective. It also moves the paper's mirrored warm start slightly.
 PINV_RCOND = 1e-3
+
+
+#: The module's own pose step: :meth:`Runs.run` fuses only while ``pose_step`` is this one (a test's
+#: or a tool's replacement, e.g. a recorder of its calls, is called by the Python loop).
+_POSE_STEP = pose_step
 
 
 @dataclass(frozen=True)
@@ -93,10 +100,29 @@ class Runs:
     options : LifterOptions
     qstep_fn : callable, optional
         The cvxpy reference Q-step (``options.pose_solver == "cvxpy"``).
+    fused : bool
+        Run the alternations as one compiled kernel (:mod:`pose_lifter.core.run_kernel`) where it
+        applies (:attr:`fusable`); False: the Python loop of :meth:`run`, its reference.
     """
 
-    def __init__(self, model: PoseModel, options: LifterOptions, qstep_fn: QStepFn | None = None) -> None:
-        self.model, self.options, self.qstep_fn = model, options, qstep_fn
+    def __init__(self, model: PoseModel, options: LifterOptions, qstep_fn: QStepFn | None = None,
+                 fused: bool = True) -> None:
+        self.model, self.options, self.qstep_fn, self.fused = model, options, qstep_fn, fused
+        o = options
+        #: the fused kernel's path: both steps' ADMs, the Riemannian alpha-step (on the reduced
+        #: lifting with an onto limb map) and no multipliers carried between steps
+        self.fusable = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
+                        and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
+                        and model.limb_coordinates is not None and not o.warm_duals)
+        self._no_prior = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)))
+        #: the model's arrays as the kernel takes them (made on the first fused run)
+        self._kernel_model: tuple[NDArray[np.float64], ...] | None = None
+        #: the kernel's settings before and after the pose step's cap (which varies per run)
+        self._settings = (
+            (float(o.alternation_tol), float(o.theta if o.method.sparsity else 0.0), o.method.loss == "l1",
+             float(o.eta), float(o.eta_growth)),
+            (float(o.pose_tol), float(o.newton_tol), float(o.alpha_prox), int(o.camera_max_iter),
+             float(o.camera_tol), float(o.tau)))
 
     @staticmethod
     def camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
@@ -104,7 +130,7 @@ class Runs:
         """The camera step's 2D points and weights for a run: with a prior term, the prior's
         image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
         stacked twice, the returned flag). Built once per run, not per alternation."""
-        if prior is not None and np.any(prior.weights[:, 0] > 0):
+        if prior is not None and (prior.weights[:, 0] > 0).any():
             return (np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]])),
                     np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]])), True)
         return xn, w, False
@@ -145,6 +171,8 @@ class Runs:
         o = self.options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         data = self.camera_data(xn, w, prior)
+        if self.fused and self.fusable and pose_step is _POSE_STEP:  # a replaced pose_step (a spy) is called
+            return self._run_fused(xn, w, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
         last_pose: PoseResult | None
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
@@ -173,6 +201,76 @@ class Runs:
             prev = obj
         assert best is not None
         return Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
+
+    def _run_fused(self, xn: NDArray[np.float64], w: NDArray[np.float64],
+                   data: tuple[NDArray[np.float64], NDArray[np.float64], bool], alpha0: NDArray[np.float64],
+                   cam0: Camera | None, n_alt: int, start: Run | None, pose_max_iter: int | None,
+                   prior: PriorRows | None) -> Run:
+        """:meth:`run` as one call of :func:`pose_lifter.core.run_kernel._run_kernel` (the same
+        steps, objective, best alternation and stopping rule; the steps' results carry no
+        multipliers)."""
+        o, m = self.options, self.model
+        if self._kernel_model is None:
+            coords = m.limb_coordinates
+            assert coords is not None
+            vc, vt, cu24_t = m.riemannian_arrays
+            self._kernel_model = (m.mean, m.u, m.sig, vc, vt, m.components, m._limb_matrix, coords[0],
+                                  coords[1], coords[2], coords[3], cu24_t, m.kernel_limbs[1])
+        mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t, cmu24 = self._kernel_model
+        if prior is None:
+            xp, pw = self._no_prior
+            max_iter = o.pose_max_iter if pose_max_iter is None else pose_max_iter
+        else:
+            xp, pw = prior.target, prior.weights
+            if prior.limb_radii is not None:
+                rad = prior.limb_radii
+            max_iter = o.hybrid_pose_max_iter if pose_max_iter is None else pose_max_iter
+        cx, cw, doubled = data
+        if start is not None:
+            cam = start.camera.camera
+            alpha, y0 = start.pose.alpha, m.mean
+            m_init, t_init = cam.projection, cam.translation
+            best0, prev0, it0 = start.objective, start.objective, start.n_iter
+        else:
+            alpha, y0 = alpha0, m.mean + m.components @ alpha0
+            if cam0 is None:
+                y = y0.reshape(N_JOINTS, 3)
+                m_init, t_init = initial_camera(cx, np.concatenate([y, y]) if doubled else y, cw)
+            else:
+                m_init, t_init = cam0.projection, cam0.translation
+            best0, prev0, it0 = np.inf, np.inf, 0
+        alt_tol, th, l1, eta, eta_growth = self._settings[0]
+        pose_tol, newton_tol, prox, cam_max_iter, cam_tol, tau = self._settings[1]
+        with diverged_as_solver_error("run"):
+            (status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f,
+             b_i) = _run_kernel(
+                xn, w, cx, cw, doubled, mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t,
+                cmu24, xp, pw, prior is not None,
+                np.ascontiguousarray(alpha, dtype=np.float64), y0,
+                np.ascontiguousarray(m_init, dtype=np.float64),
+                np.ascontiguousarray(t_init, dtype=np.float64),
+                start is not None, float(best0), float(prev0), int(it0), int(n_alt), alt_tol, th, l1, eta,
+                eta_growth, ETA_MAX, int(max_iter), pose_tol, RIEMANNIAN_MAX_ITER, newton_tol, prox,
+                cam_max_iter, cam_tol, tau)
+        if status != OK:
+            raise SolverError("camera step diverged (non-finite camera); check the inputs"
+                              if status == CAMERA_DIVERGED
+                              else "pose step diverged (non-finite coefficients)")
+        history = [] if start is None else list(start.history)
+        for (obj, cobj, pobj), (cit, cconv, pit, pconv) in zip(objs[:done].tolist(), counts[:done].tolist(),
+                                                              strict=True):
+            history.append(Alternation(obj, SolveInfo(cobj, cit, bool(cconv)),
+                                       SolveInfo(pobj, pit, bool(pconv))))
+        if b_idx < 0:
+            assert start is not None
+            return Run(start.pose, start.camera, start.objective, it, converged, tuple(history))
+        pobj, viol, cobj, scale = b_f.tolist()
+        pit, pconv, ait, cit, cconv = b_i.tolist()
+        pres = PoseResult(objective=pobj, n_iter=pit, converged=bool(pconv), alpha=b_alpha,
+                          pose=b_y.reshape(N_JOINTS, 3), limb_violation=viol, alpha_iter=ait)
+        cres = CameraResult(objective=cobj, n_iter=cit, converged=bool(cconv),
+                            camera=Camera(b_rot, scale, b_t))
+        return Run(pres, cres, float(b_obj), it, converged, tuple(history))
 
     def mirrored_alpha(self, run: Run) -> NDArray[np.float64]:
         """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),

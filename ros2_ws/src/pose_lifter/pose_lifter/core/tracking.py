@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ._fast import median_rows
+from ._fast import median_rows, row_norms
 from .errors import PoseLifterError
 from .lifter import Lifter, TrackContext
 from .results import LiftResult, WarmStart
@@ -100,7 +100,7 @@ def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None
     conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
     if x.shape != (12, 2) or (conf is not None and conf.shape != (12,)):
         return None
-    vis = np.all(np.isfinite(x), axis=1)
+    vis = np.isfinite(x).all(axis=1)
     return np.asarray(vis if conf is None else vis & (conf >= threshold), dtype=bool)
 
 
@@ -139,7 +139,7 @@ class _Track:
             return None
         scale = self.fits[-1][2]
         d = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted) - predicted
-        dist = np.linalg.norm(d, axis=1) / max(scale, 1e-12)
+        dist = row_norms(d) / max(scale, 1e-12)
         limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())  # noisy 2D: its own scale
         out = vis & (dist > limit) & (self.gated < GATE_MAX_FRAMES)
         n_out, n_vis = int(np.count_nonzero(out)), int(np.count_nonzero(vis))
@@ -155,7 +155,7 @@ class _Track:
         detection when the lift used it, else the fit's projection) moved by the median motion of
         this frame's visible joints since (the person's or the camera's). None without a last
         frame at most GATE_MAX_AGE_NS old, or without a visible joint."""
-        if not self.fits or not np.any(vis):
+        if not self.fits or not vis.any():
             return None
         t1, p1, _ = self.fits[-1]
         if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
@@ -184,7 +184,7 @@ class _Track:
         vis = v0 & v1 & visible
         if np.count_nonzero(vis) < 3:
             return
-        acc = np.linalg.norm(x[vis] - 2.0 * x1[vis] + x0[vis], axis=1) / np.sqrt(6.0)
+        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / np.sqrt(6.0)
         try:
             spread = lifter.input_scale(x, vis.astype(np.float64))
         except PoseLifterError:

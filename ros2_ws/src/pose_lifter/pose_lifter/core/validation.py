@@ -47,7 +47,7 @@ def check_keypoints(points_2d: ArrayLike, confidence: ArrayLike | None
     conf = np.asarray(confidence, dtype=np.float64)
     if conf.shape != (N_JOINTS,):
         raise InvalidInputError(f"confidence must have shape ({N_JOINTS},), got {conf.shape}")
-    if not np.all(np.isfinite(conf)):
+    if not np.isfinite(conf).all():
         raise InvalidInputError("confidence has non-finite values")
     return x, conf
 
