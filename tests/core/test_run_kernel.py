@@ -119,23 +119,3 @@ def test_the_kernels_sums_are_numpys() -> None:
         assert np.abs(_depth_row(m0) - PriorRows.depth_row(m0)).max() <= tol.ROUND_OFF
         assert _depth_term(y.reshape(-1), m0, xp, pw) == pytest.approx(PriorRows(xp, pw).depth_term(y, m0),
                                                                        rel=tol.ROUND_OFF)
-
-
-def test_a_replaced_pose_step_is_called(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A spy on ``runs.pose_step`` (as tests and tools/lift_hash.py use) sees the pose steps: the
-    run falls back to the Python loop, with the same result."""
-    from pose_lifter.core import runs as runs_module
-
-    lifter = Lifter(None, LifterOptions())
-    x = 100.0 * lifter.bases.mean_pose[:, [2, 1]] * np.array([1.0, -1.0]) + 300.0
-    fused = lifter.lift(x)
-    calls: list[int] = []
-    step = runs_module.pose_step
-
-    def spy(*args: Any, **kwargs: Any) -> Any:
-        calls.append(1)
-        return step(*args, **kwargs)
-
-    monkeypatch.setattr(runs_module, "pose_step", spy)
-    looped = lifter.lift(x)
-    assert calls and looped.objective == pytest.approx(fused.objective, rel=tol.FUSED_RUN_REL)

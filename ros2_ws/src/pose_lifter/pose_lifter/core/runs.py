@@ -38,11 +38,6 @@ __all__ = ["PINV_RCOND", "Run", "Runs"]
 PINV_RCOND = 1e-3
 
 
-#: The module's own pose step: :meth:`Runs.run` fuses only while ``pose_step`` is this one (a test's
-#: or a tool's replacement, e.g. a recorder of its calls, is called by the Python loop).
-_POSE_STEP = pose_step
-
-
 @dataclass(frozen=True)
 class Run:
     """A run of alternations from one start: its best alternation's steps and objective, the ADM
@@ -171,7 +166,7 @@ class Runs:
         o = self.options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         data = self.camera_data(xn, w, prior)
-        if self.fused and self.fusable and pose_step is _POSE_STEP:  # a replaced pose_step (a spy) is called
+        if self.fused and self.fusable:
             return self._run_fused(xn, w, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
         last_pose: PoseResult | None
         if start is not None:
