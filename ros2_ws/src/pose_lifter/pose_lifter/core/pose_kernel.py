@@ -179,6 +179,17 @@ def _limb_violation_jit(y: NDArray[np.float64], limb_matrix: NDArray[np.float64]
 
 
 @njit
+def _n_rows(pw: NDArray[np.float64]) -> int:
+    """Rows of the pose step's L1 objective for the prior weights ``pw`` (12, 2): 2 per joint, 2 per
+    prior image position (``pw[j, 0] > 0``) and 1 per prior depth (``pw[j, 1] > 0``)."""
+    nj: int = pw.shape[0]
+    m: int = 2 * nj
+    for j in range(nj):
+        m += (2 if pw[j, 0] > 0.0 else 0) + (1 if pw[j, 1] > 0.0 else 0)
+    return m
+
+
+@njit
 def _riemannian_pose_kernel(
     x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
     mean: NDArray[np.float64], u: NDArray[np.float64], sig: NDArray[np.float64], vc: NDArray[np.float64],
@@ -204,12 +215,7 @@ def _riemannian_pose_kernel(
     alpha-step iterations)``."""
     r = sig.size
     nj = x.shape[0]
-    n_xy = 0
-    n_z = 0
-    for j in range(nj):
-        n_xy += 1 if pw[j, 0] > 0.0 else 0
-        n_z += 1 if pw[j, 1] > 0.0 else 0
-    m = 2 * nj + 2 * n_xy + n_z
+    m = _n_rows(pw)
     wts = np.empty(m)
     c = np.empty(m)
     mus = np.empty((m, r))
@@ -232,7 +238,7 @@ def _riemannian_pose_kernel(
                     mus[row, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
                                    + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
                 row += 1
-    if n_z > 0:  # the prior's relative depths: m3 (y_j - mean_i y_i)
+    if (pw[:, 1] > 0.0).any():  # the prior's relative depths: m3 (y_j - mean_i y_i)
         ubar = np.zeros((3, r))
         mbar = np.zeros(3)
         for j in range(nj):

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from ._fma import fma
 from ._jit import njit
 from .camera import _camera_solve
-from .pose_kernel import _riemannian_pose_kernel
+from .pose_kernel import _n_rows, _riemannian_pose_kernel
 
 __all__ = ["CAMERA_DIVERGED", "OK", "POSE_DIVERGED"]
 
@@ -203,12 +203,7 @@ def _run_kernel(
     """
     k = alpha0.size
     nj = xn.shape[0]
-    n_xy = 0
-    n_z = 0
-    for j in range(nj):
-        n_xy += 1 if pw[j, 0] > 0.0 else 0
-        n_z += 1 if pw[j, 1] > 0.0 else 0
-    n_rows = 2 * nj + 2 * n_xy + n_z  # the pose step's L1 rows (its multipliers' size)
+    n_rows = _n_rows(pw)  # the pose step's L1 rows (its multipliers' size)
     nc = cx.shape[0]
     objs = np.zeros((max(n_alt - it0, 0), 3))
     counts = np.zeros((max(n_alt - it0, 0), 4), dtype=np.int64)
