@@ -110,7 +110,9 @@ class PriorRows:
         return float(self.weights[:, 1] @ np.abs(self.target[:, 2] - d))
 
 
-_NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)), np.zeros(3))
+#: The compiled pose kernel's prior operands without a prior: target (12, 3), weights (12, 2) and
+#: depth row (3,), all zero (no prior rows).
+NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)), np.zeros(3))
 _DEFAULTS = LifterOptions()
 
 
@@ -138,7 +140,7 @@ def _fused_riemannian(
     if prior is not None and prior.limb_radii is not None:
         rad = np.ascontiguousarray(prior.limb_radii, dtype=np.float64)
     if prior is None:
-        xp, pw, m3 = _NO_PRIOR
+        xp, pw, m3 = NO_PRIOR
     else:
         xp, pw = prior.target, prior.weights
         m3 = prior.depth_row(m0)

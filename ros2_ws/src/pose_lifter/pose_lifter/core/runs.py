@@ -23,7 +23,7 @@ from .camera import camera_step_trusted, initial_camera
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions
 from .pose_model import PoseModel
-from .pose_step import ETA_MAX, PriorRows, pose_step
+from .pose_step import ETA_MAX, NO_PRIOR, PriorRows, pose_step
 from .results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
 from .run_kernel import CAMERA_DIVERGED, OK, _run_kernel
 from .skeleton import N_JOINTS, normalise_pose_flat
@@ -109,7 +109,6 @@ class Runs:
         self.fusable = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
                         and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
                         and model.limb_coordinates is not None and not o.warm_duals)
-        self._no_prior = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)))
         #: the model's arrays as the kernel takes them (made on the first fused run)
         self._kernel_model: tuple[NDArray[np.float64], ...] | None = None
         #: the kernel's settings before and after the pose step's cap (which varies per run)
@@ -132,6 +131,9 @@ class Runs:
 
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
                 init: Camera | None, last: CameraResult | None = None) -> CameraResult:
+        """One camera step of a run on its :meth:`camera_data` for ``pose`` (12, 3) (stacked twice
+        with a prior term), from ``init`` (None: the step's own least-squares start), with the
+        previous step's multipliers ``last.duals`` when ``options.warm_duals``."""
         o = self.options
         xn, w, doubled = data
         if doubled:
@@ -149,6 +151,9 @@ class Runs:
     def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
               alpha0: NDArray[np.float64], last: PoseResult | None = None,
               max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
+        """One pose step of a run for the camera ``cam`` on the normalised 2D ``xn`` (12, 2) and
+        weights ``w`` (12,), from ``alpha0`` (k,); ``max_iter`` None: the mode's cap
+        (``pose_max_iter``, or ``hybrid_pose_max_iter`` with a prior term)."""
         o = self.options
         if max_iter is None:
             max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
@@ -213,7 +218,7 @@ class Runs:
                                   coords[1], coords[2], coords[3], cu24_t, m.kernel_limbs[1])
         mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t, cmu24 = self._kernel_model
         if prior is None:
-            xp, pw = self._no_prior
+            xp, pw = NO_PRIOR[0], NO_PRIOR[1]
             max_iter = o.pose_max_iter if pose_max_iter is None else pose_max_iter
         else:
             xp, pw = prior.target, prior.weights
