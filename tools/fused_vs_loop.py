@@ -32,8 +32,8 @@ from lift_hash import _machine  # noqa: E402  (tools/ is on sys.path when run as
 from pose_lifter.core.bases import PoseBases, default_bases_path  # noqa: E402
 from pose_lifter.core.options import LifterOptions  # noqa: E402
 from pose_lifter.core.pose_model import PoseModel  # noqa: E402
-from pose_lifter.core.pose_step import PriorRows, pose_step  # noqa: E402
-from test_pose_step import _problem  # noqa: E402
+from pose_lifter.core.pose_step import pose_step  # noqa: E402
+from test_pose_step import _prior_rows, _problem  # noqa: E402
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -53,14 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     for seed in range(args.problems):
         for with_prior in (False, True):
             x, m0, t, w, pose = _problem(model, seed)
-            prior = None
-            if with_prior:
-                rng = np.random.default_rng(100 + seed)
-                target = np.column_stack([pose @ m0.T + t, (pose - pose.mean(0)) @ PriorRows.depth_row(m0)])
-                target += rng.normal(0.0, 0.05, target.shape)
-                weights = np.column_stack([np.full(12, 0.6), np.full(12, 0.4)])
-                weights[3, 0] = weights[7, 1] = 0.0
-                prior = PriorRows(target, weights, np.sqrt(model.limb_sq) * rng.uniform(0.9, 1.1, 8))
+            prior = _prior_rows(model, seed, pose, m0, t) if with_prior else None
             start = np.zeros(model.n_bases)
             state = None
             for k in range(15):

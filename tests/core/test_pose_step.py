@@ -40,20 +40,24 @@ def _problem(model: PoseModel, seed: int) -> tuple[Arr, Arr, Arr, Arr, Arr]:
     return x, m0, t, w, pose
 
 
+def _prior_rows(model: PoseModel, seed: int, pose: Arr, m0: Arr, t: Arr) -> PriorRows:
+    """Prior rows for a :func:`_problem`: its true pose's image positions and depths with noise,
+    a joint without image-position rows, another without a depth row, and a person's own limb
+    lengths (the model's within +-10 %)."""
+    rng = np.random.default_rng(100 + seed)
+    target = np.column_stack([pose @ m0.T + t, (pose - pose.mean(0)) @ PriorRows.depth_row(m0)])
+    target += rng.normal(0.0, 0.05, target.shape)
+    weights = np.column_stack([np.full(12, 0.6), np.full(12, 0.4)])
+    weights[3, 0] = 0.0
+    weights[7, 1] = 0.0
+    return PriorRows(target, weights, np.sqrt(model.limb_sq) * rng.uniform(0.9, 1.1, 8))
+
+
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("with_prior", [False, True])
 def test_fused_kernel_is_the_python_loop(model: PoseModel, seed: int, with_prior: bool) -> None:
     x, m0, t, w, pose = _problem(model, seed)
-    prior = None
-    if with_prior:
-        rng = np.random.default_rng(100 + seed)
-        target = np.column_stack([pose @ m0.T + t, (pose - pose.mean(0)) @ PriorRows.depth_row(m0)])
-        target += rng.normal(0.0, 0.05, target.shape)
-        weights = np.column_stack([np.full(12, 0.6), np.full(12, 0.4)])
-        weights[3, 0] = 0.0  # a joint without image-position rows, another without a depth row
-        weights[7, 1] = 0.0
-        radii = np.sqrt(model.limb_sq) * rng.uniform(0.9, 1.1, 8)  # a person's own proportions
-        prior = PriorRows(target, weights, radii)
+    prior = _prior_rows(model, seed, pose, m0, t) if with_prior else None
     opts = LifterOptions(theta=0.1, pose_tol=1e-12, alpha_solver="riemannian")
     args = (x, m0, t, w, model, np.zeros(model.n_bases), opts)
     # one ADM iteration at a time, both ways from the same input: the start, then the loop's own
