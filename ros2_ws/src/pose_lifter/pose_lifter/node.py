@@ -352,6 +352,7 @@ def main(args: list[str] | None = None) -> None:
         return
     signals = PhasedSignals()
     node: LifterNode | None = None
+    executor: SingleThreadedExecutor | None = None
     try:
         try:
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -368,6 +369,8 @@ def main(args: list[str] | None = None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if executor is not None:  # its guard conditions go before the context they belong to
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
