@@ -37,8 +37,8 @@ from pose_lifter.prior_training import train_prior
 from pose_lifter.views import limb_scale_factors, scale_limbs
 
 
-
-def train(args: argparse.Namespace, fit_ids: list[str], val_ids: list[str], command: str, window: int) -> None:
+def train(args: argparse.Namespace, fit_ids: list[str], val_ids: list[str], command: str,
+          window: int) -> None:
     """Train and save the fold prior of ``window`` frames (1: ``prior.npz``, 4: ``prior_w4.npz``)."""
     step, name = (2, "prior.npz") if window == 1 else (4, "prior_w4.npz")
     t0 = time.perf_counter()
