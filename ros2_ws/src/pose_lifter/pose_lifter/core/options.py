@@ -212,7 +212,8 @@ class LifterOptions:
     ``correction_smoothing=0.7``, ``disturbed_smoothing_gain=0.55``: the published pose's mean 3D
     acceleration error on unseen motion 17.1 -> 8.8 mm/frame^2 clean and 60.5 -> 28.7 with 20 %
     outliers at the same P-MPJPE (0.4: 22.2, but +4.4 mm with outliers on the evaluation split).
-    ``image_limbs`` off: measured only on one cross-action fold so far.
+    ``image_limbs`` off: -1.2 mm on a cross-action fold (dance), +0.5 mm clean on the evaluation
+    split.
     """
 
     variant: str = field(default="full", metadata=_meta(

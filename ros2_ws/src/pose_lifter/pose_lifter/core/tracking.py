@@ -554,11 +554,11 @@ class TrackPolicy:
             return None
         if not follows or track.smoother is None:
             track.smoother = _Smoother()
-        disturbance = max(float(np.mean(np.asarray(track.unused_share))),
-                          NOISE_DISTURBANCE * (1.0 - data_weight))
+        shares = track.unused_share
+        disturbance = max(sum(shares) / len(shares), NOISE_DISTURBANCE * (1.0 - data_weight))
         gain = 1.0 - min(1.0, disturbance / DISTURBANCE_FULL) * (1.0 - opts.disturbed_smoothing_gain)
         out = track.smoother.update(result.pose_camera, prior, opts.correction_smoothing, gain)
-        if not np.isfinite(out).all():
+        if not np.isfinite(out).all():  # ndarray.all: no numpy wrapper on the per-frame path
             track.smoother = None
             return None
         rot = result.camera.rotation
