@@ -356,10 +356,9 @@ def _cmd_lift_collection(args: argparse.Namespace) -> int:
         raise BagError(f"a collection is lifted into a directory: --out {out} names a .mcap file")
     jobs = plan_jobs(args.input, out)  # every input found before any work
     settings = _lift_settings(args, args.lift_defaults)
-    lifter = None if args.scheduler else settings.build_lifter()
     summary = lift_collection(args.input, out, settings, workers=args.workers or _cores(),
                               scheduler=args.scheduler, overwrite=args.overwrite, progress=not args.quiet,
-                              lifter=lifter, jobs=jobs)
+                              jobs=jobs)
     print(format_summary(summary))
     return 1 if summary.failed else 0
 

@@ -166,7 +166,8 @@ def expand_inputs(inputs: Sequence[str], exclude: str | Path | None = None) -> t
     """The ``.mcap`` files named by ``inputs`` (files, directories searched recursively, glob
     patterns with ``**``), sorted and without duplicates, and the directory their outputs'
     relative paths start from (the common directory of the directories named and of the other
-    files' parents). Files under ``exclude`` (the output directory) are left out.
+    files' parents). Files that directories and patterns find under ``exclude`` (the output
+    directory: an earlier run's outputs) are left out.
 
     Raises
     ------
@@ -180,7 +181,8 @@ def expand_inputs(inputs: Sequence[str], exclude: str | Path | None = None) -> t
         p = Path(text)
         if is_pattern(text) and not p.exists():
             matched = [Path(x) for x in glob.glob(text, recursive=True)]
-            found = [x for x in matched if x.is_file() and x.suffix == ".mcap"]
+            found = [x for x in matched if x.is_file() and x.suffix == ".mcap"
+                     and (skip is None or not x.resolve().is_relative_to(skip))]
             if not found:
                 raise BagError(f"no .mcap file matches {text!r}")
             files += found
@@ -198,8 +200,7 @@ def expand_inputs(inputs: Sequence[str], exclude: str | Path | None = None) -> t
             roots.append(p.resolve().parent)
         else:
             raise BagError(f"bag not found: {p}")
-    resolved = sorted({f.resolve() for f in files
-                       if skip is None or not f.resolve().is_relative_to(skip)})
+    resolved = sorted({f.resolve() for f in files})
     if not resolved:
         raise BagError("no .mcap input")
     root = Path(os.path.commonpath([str(r) for r in roots]))
@@ -501,7 +502,8 @@ def lift_collection(
     progress : bool
         One tqdm bar over the bags (poses and poses/s beside it).
     lifter : Lifter, optional
-        The lifter of ``settings``, when the caller has built it already (local runs only).
+        The lifter of ``settings``, when the caller has built it already (local runs only;
+        otherwise it is built, its kernels loaded, only when a bag is left to lift).
     jobs : iterable of BagJob, optional
         Planned already (:func:`plan_jobs`); then ``inputs`` is not read.
 
