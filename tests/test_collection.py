@@ -7,7 +7,6 @@ import shutil
 from pathlib import Path
 
 import pytest
-
 from lift_compare import assert_same_lift
 from pose_lifter import bags, cli
 from pose_lifter.collection import ERRORS_NAME, MANIFEST_NAME, expand_inputs, plan_jobs
@@ -57,7 +56,7 @@ def test_inputs_files_directories_globs_and_the_output_directory_left_out(tmp_pa
     assert sorted(j.rel for j in jobs) == ["punch.mcap", "robot_b/two.mcap", "walk.mcap"]
     with pytest.raises(BagError, match="bag not found"):
         expand_inputs([str(src / "nope.mcap")])
-    with pytest.raises(BagError, match="no .mcap file matches"):
+    with pytest.raises(BagError, match=r"no \.mcap file matches"):
         expand_inputs([str(src / "*.bag")])
     with pytest.raises(BagError, match="would overwrite"):
         plan_jobs([str(src / "walk.mcap"), str(src / "punch.mcap")], src)
@@ -78,7 +77,8 @@ def test_collection_keeps_the_layout_and_equals_one_bag_at_a_time(tmp_path: Path
     entries = manifest(out)
     assert entries["robot_b/two.mcap"]["poses"] == 12 and entries["walk.mcap"]["status"] == "done"
     # several bags are never written into one file
-    assert cli.main(["lift", str(src / "walk.mcap"), str(src / "punch.mcap"), "--out", str(tmp_path / "x.mcap")]) == 2
+    two = [str(src / "walk.mcap"), str(src / "punch.mcap")]
+    assert cli.main(["lift", *two, "--out", str(tmp_path / "x.mcap")]) == 2
     assert "names a .mcap file" in capsys.readouterr().err and not (tmp_path / "x.mcap").exists()
 
 
@@ -121,7 +121,8 @@ def test_a_resumed_run_skips_what_is_done_and_redoes_what_changed(tmp_path: Path
     assert "3 bags: 3 lifted, 0 skipped" in capsys.readouterr().out
     assert manifest(out)["robot_b/two.mcap"]["poses"] == 8
     # --overwrite: every bag again with the same settings
-    assert cli.main(["lift", str(src), "--out", str(out), "--max-messages", "4", "--quiet", "--overwrite"]) == 0
+    again = ["lift", str(src), "--out", str(out), "--max-messages", "4", "--quiet", "--overwrite"]
+    assert cli.main(again) == 0
     assert "3 bags: 3 lifted, 0 skipped" in capsys.readouterr().out
     # an output deleted by hand is lifted again
     (out / "punch.mcap").unlink()
@@ -161,3 +162,20 @@ def test_a_stopped_run_leaves_no_partial_output_and_resumes(workers: str, tmp_pa
     assert cli.main(["lift", str(src), "--out", str(out), "--workers", workers, *FAST]) == 0
     assert f"{3 - len(done)} lifted, {len(done)} skipped" in capsys.readouterr().out
     assert list(outputs(out)) == ["punch.mcap", "robot_b/two.mcap", "walk.mcap"]
+
+
+def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, pose_lifter.cli, pose_lifter.collection; "
+            "print(sorted(m for m in ('dask', 'distributed', 'numba', 'pose_lifter.core.lifter') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+    from pose_lifter import offline
+    from pose_lifter.collection import LiftSettings
+
+    s = LiftSettings()
+    assert (s.track_timeout, s.reinit_ratio) == (offline.DEFAULT_TRACK_TIMEOUT_S, offline.DEFAULT_REINIT_RATIO)
+    assert s.digest() == LiftSettings().digest() != LiftSettings(every=2).digest()

@@ -303,10 +303,11 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) ->
     if params.ignored:
         print(f"pose-lifter lift: {args.params_file}: ignored offline: {', '.join(params.ignored)}",
               file=sys.stderr)
-    policy = {k: v for k, v in (("track_timeout", params.track_timeout),
-                                ("reinit_ratio", params.reinit_ratio)) if v is not None}
+    defaults = LiftSettings()
+    timeout = defaults.track_timeout if params.track_timeout is None else params.track_timeout
+    reinit = defaults.reinit_ratio if params.reinit_ratio is None else params.reinit_ratio
     return LiftSettings(options=full, bases=str(path) if path else None, warm_start=warm, leg_length_m=leg,
-                        default_distance_m=distance, **common, **policy)
+                        default_distance_m=distance, track_timeout=timeout, reinit_ratio=reinit, **common)
 
 
 def _is_collection(args: argparse.Namespace) -> bool:

@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from .core.errors import BagError
+from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 
 __all__ = [
     "ERRORS_NAME",
@@ -106,14 +107,14 @@ class LiftSettings:
     options: dict[str, Any] = field(default_factory=dict)
     bases: str | None = None
     warm_start: bool = True
-    leg_length_m: float = 0.43
-    default_distance_m: float = 5.0
+    leg_length_m: float = DEFAULT_LEG_LENGTH_M
+    default_distance_m: float = DEFAULT_DISTANCE_M
     every: int = 1
     max_messages: int | None = None
     topic: str = "/keypoints_2d"
     camera_info_topic: str | None = "/camera_info"
     keep: list[str] | None = None
-    track_timeout: float = 1.0
+    track_timeout: float = 1.0  # the node's defaults (offline.DEFAULT_TRACK_TIMEOUT_S, ...)
     reinit_ratio: float = 2.0
     marker_lifetime: float = 0.0
 
@@ -279,7 +280,7 @@ class Manifest:
 
     def record(self, outcome: BagOutcome, digest: str, settings: LiftSettings, version: str) -> None:
         self.data["settings"].setdefault(digest, {"version": version, "settings": settings.to_json()})
-        entry = {
+        entry: dict[str, Any] = {
             "status": "done" if outcome.ok else "failed", "input": outcome.job.input,
             "input_sha256": outcome.input_sha256, "input_size": outcome.job.size,
             "input_mtime_ns": outcome.job.mtime_ns, "settings": digest, "version": version,
@@ -426,16 +427,17 @@ def _run_dask(jobs: list[BagJob], settings: LiftSettings, digest: str, address: 
               on_done: Callable[[BagOutcome], None]) -> None:
     """The Dask executor: one task per bag on the cluster at ``address``."""
     try:
-        from distributed import Client, as_completed
+        import distributed
     except ImportError:
         raise BagError("--scheduler needs dask.distributed: pip install 'pose_lifter[cluster]'") from None
     order = sorted(jobs, key=lambda j: j.size, reverse=True)
-    with Client(address, timeout="30s") as client:
+    dd: Any = distributed  # untyped
+    with dd.Client(address, timeout="30s") as client:
         futures = [client.submit(_dask_job, j, settings, digest, pure=False,
                                  key=f"pose-lifter-{hashlib.sha1(j.output.encode()).hexdigest()[:16]}")
                    for j in order]
         try:
-            for fut in as_completed(futures):
+            for fut in dd.as_completed(futures):
                 on_done(fut.result())
         except BaseException:
             client.cancel(futures)
