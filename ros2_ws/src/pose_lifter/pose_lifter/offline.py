@@ -237,16 +237,17 @@ def _columns(done: list[_Done]) -> tuple[list[tuple[bool, float, str | None, int
     ok = [d for d in done if d.failure is None and d.result is not None and d.joints_m is not None]
     row = {id(d): i for i, d in enumerate(ok)}
     items = [(d.warm_started, d.solve_time, d.failure, row.get(id(d), -1)) for d in done]
-    cams = [d.result.camera for d in ok]
+    res: list[Any] = [d.result for d in ok]
+    cams = [r.camera for r in res]
     cols: dict[str, NDArray[Any]] = {
         "rotation": np.array([c.rotation for c in cams], dtype=np.float64).reshape(-1, 3, 3),
         "scale": np.array([c.scale for c in cams], dtype=np.float64),
         "translation": np.array([c.translation for c in cams], dtype=np.float64).reshape(-1, 2),
-        "objective": np.array([d.result.objective for d in ok], dtype=np.float64),
-        "reprojection_error": np.array([d.result.reprojection_error for d in ok], dtype=np.float64),
-        "total_alternations": np.array([d.result.total_alternations for d in ok], dtype=np.int64),
-        "converged": np.array([d.result.converged for d in ok], dtype=bool),
-        "weights": np.array([d.result.weights for d in ok], dtype=np.float64).reshape(-1, N_JOINTS),
+        "objective": np.array([r.objective for r in res], dtype=np.float64),
+        "reprojection_error": np.array([r.reprojection_error for r in res], dtype=np.float64),
+        "total_alternations": np.array([r.total_alternations for r in res], dtype=np.int64),
+        "converged": np.array([r.converged for r in res], dtype=bool),
+        "weights": np.array([r.weights for r in res], dtype=np.float64).reshape(-1, N_JOINTS),
         "joints_m": np.array([d.joints_m for d in ok], dtype=np.float64).reshape(-1, N_JOINTS, 3),
     }
     return items, cols
