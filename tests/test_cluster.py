@@ -29,7 +29,7 @@ def test_the_dask_path_equals_the_local_path_on_three_bags(tmp_path: Path,
     assert cli.main(["lift", str(src), "--out", str(local), "--workers", "1", *FAST]) == 0
     # two worker processes, one thread each: a scheduler of its own and workers that import
     # pose_lifter themselves (spawned, not forked from this process)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                   scheduler_port=0) as cluster:
         assert cli.main(["lift", str(src), "--out", str(remote), "--scheduler", cluster.scheduler_address,
                          *FAST]) == 0

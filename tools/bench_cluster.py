@@ -50,7 +50,7 @@ def main() -> int:
     print(f"{'workers':>7s} {'path':6s} {'s':>7s} {'poses':>7s} {'poses/s':>8s}  load", flush=True)
     for w in args.workers:
         with distributed.LocalCluster(n_workers=w, threads_per_worker=1, processes=True,
-                                      dashboard_address=None) as cluster, \
+                                      dashboard_address=":0") as cluster, \
                 distributed.Client(cluster.scheduler_address) as client:
             client.gather(client.map(noop, range(20), pure=False))  # connections up
             t0 = time.perf_counter()
