@@ -177,5 +177,6 @@ def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() 
     from pose_lifter.collection import LiftSettings
 
     s = LiftSettings()
-    assert (s.track_timeout, s.reinit_ratio) == (offline.DEFAULT_TRACK_TIMEOUT_S, offline.DEFAULT_REINIT_RATIO)
+    assert s.track_timeout == offline.DEFAULT_TRACK_TIMEOUT_S
+    assert s.reinit_ratio == offline.DEFAULT_REINIT_RATIO
     assert s.digest() == LiftSettings().digest() != LiftSettings(every=2).digest()
