@@ -20,7 +20,9 @@ setup(
     ],
     install_requires=["setuptools", "numpy", "scipy", "scikit-learn"],
     extras_require={"tools": ["rosbags", "tqdm", "matplotlib"], "reference": ["cvxpy", "clarabel", "scs"],
-                    "fast": ["numba"]},
+                    "fast": ["numba"],
+                    # pose-lifter lift --scheduler: a collection of bags on a Dask cluster
+                    "cluster": ["rosbags", "tqdm", "dask", "distributed"]},
     zip_safe=False,
     maintainer="pose_lifter maintainers",
     maintainer_email="pose-lifter@example.com",

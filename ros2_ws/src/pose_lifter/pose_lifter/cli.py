@@ -62,6 +62,8 @@ _FINITE = _number(float)
 def _out_is_a_directory(args: argparse.Namespace) -> bool:
     """An output file path must not name a directory (it would be written inside it)."""
     out = getattr(args, "out", None)
+    if args.cmd == "lift" and _is_collection(args):
+        return False
     return args.cmd in ("lift", "make-bag", "learn-bases") and out is not None and Path(out).is_dir()
 
 
@@ -263,18 +265,23 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
-                   ) -> tuple[Any, bool, float, float, dict[str, float]]:
-    """(lifter, warm_start, leg length, default distance, per-track policy settings) from the
-    flags and ``--params-file``.
+def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) -> Any:
+    """The :class:`pose_lifter.collection.LiftSettings` of the flags and ``--params-file``.
 
     The file gives the node's options; a flag given with a value other than its default wins.
     """
-    if not args.params_file:
-        return _lifter(args), not args.no_warm_start, args.leg_length, DEFAULT_DISTANCE_M, {}
-    from .core.bases import PoseBases
-    from .core.lifter import Lifter
+    from .collection import LiftSettings
     from .core.options import LifterOptions
+
+    keep = _keep_topics(args.keep)
+    common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
+                                  camera_info_topic=args.camera_info_topic or None, keep=keep)
+    if not args.params_file:
+        options = {"variant": args.variant, "camera_solver": args.solver, "pose_solver": args.solver,
+                   "n_starts": args.starts, "mode": "paper" if args.solver == "cvxpy" else args.mode}
+        full = LiftSettings.options_of(LifterOptions().replace(**options))
+        return LiftSettings(options=full, bases=args.bases, warm_start=not args.no_warm_start,
+                            leg_length_m=args.leg_length, default_distance_m=DEFAULT_DISTANCE_M, **common)
     from .params import read_params_file
 
     params = read_params_file(args.params_file)
@@ -286,10 +293,8 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     if args.mode != parser_defaults["mode"] or args.solver == "cvxpy":
         options["mode"] = "paper" if args.solver == "cvxpy" else args.mode
     options.update(camera_solver=args.solver, pose_solver=args.solver)
+    full = LiftSettings.options_of(LifterOptions().replace(**options))
     path = args.bases or params.bases_file
-    lifter = Lifter(PoseBases.load(path) if path else None, LifterOptions().replace(**options))
-    if args.solver == "admm":
-        lifter.warm_up()
     warm = False if args.no_warm_start else (True if params.warm_start is None else params.warm_start)
     leg = params.lower_leg_length
     if leg is None or args.leg_length != parser_defaults["leg_length"]:
@@ -298,30 +303,65 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]
     if params.ignored:
         print(f"pose-lifter lift: {args.params_file}: ignored offline: {', '.join(params.ignored)}",
               file=sys.stderr)
-    policy = {k: v for k, v in (("track_timeout", params.track_timeout),
-                                ("reinit_ratio", params.reinit_ratio)) if v is not None}
-    return lifter, warm, leg, distance, policy
+    defaults = LiftSettings()
+    timeout = defaults.track_timeout if params.track_timeout is None else params.track_timeout
+    reinit = defaults.reinit_ratio if params.reinit_ratio is None else params.reinit_ratio
+    return LiftSettings(options=full, bases=str(path) if path else None, warm_start=warm, leg_length_m=leg,
+                        default_distance_m=distance, track_timeout=timeout, reinit_ratio=reinit, **common)
+
+
+def _is_collection(args: argparse.Namespace) -> bool:
+    """Several inputs, a directory or a glob pattern: a collection, lifted into a directory."""
+    from .collection import is_pattern
+
+    inputs = list(args.input)
+    return len(inputs) > 1 or any(Path(i).is_dir() or (is_pattern(i) and not Path(i).exists())
+                                  for i in inputs)
 
 
 def _cmd_lift(args: argparse.Namespace) -> int:
+    if _is_collection(args):
+        return _cmd_lift_collection(args)
+    if args.scheduler:
+        raise ValueError("--scheduler lifts a collection: name several bags, a directory or a glob, "
+                         "and --out a directory")
     from .offline import check_lift_inputs, lift_bag
 
+    (bag,) = args.input
     keep = _keep_topics(args.keep)
     camera_info = args.camera_info_topic or None
     # every check that needs no lifting first: bad input never costs a kernel compile
-    check_lift_inputs(args.input, args.out, args.topic, camera_info, keep, args.overwrite)
-    lifter, warm, leg, distance, policy = _lift_settings(args, args.lift_defaults)
-    summary, _ = lift_bag(args.input, args.out, lifter, warm_start=warm, leg_length_m=leg,
-                          default_distance_m=distance, every=args.every, max_messages=args.max_messages,
+    check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
+    s = _lift_settings(args, args.lift_defaults)
+    lifter = s.build_lifter()
+    summary, _ = lift_bag(bag, args.out, lifter, warm_start=s.warm_start, leg_length_m=s.leg_length_m,
+                          default_distance_m=s.default_distance_m, every=s.every, max_messages=s.max_messages,
                           progress=not args.quiet, overwrite=args.overwrite,
-                          workers=args.workers or _cores(), topic=args.topic,
-                          camera_info_topic=camera_info, keep=keep, **policy)
+                          workers=args.workers or _cores(), topic=s.topic,
+                          camera_info_topic=s.camera_info_topic, keep=s.keep, track_timeout=s.track_timeout,
+                          reinit_ratio=s.reinit_ratio)
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     for f in summary.failures[:5]:
         print(f"  failed: {f}")
     return 0
+
+
+def _cmd_lift_collection(args: argparse.Namespace) -> int:
+    from .collection import format_summary, lift_collection, plan_jobs
+    from .core.errors import BagError
+
+    out = Path(args.out)
+    if out.suffix == ".mcap" and not out.is_dir():
+        raise BagError(f"a collection is lifted into a directory: --out {out} names a .mcap file")
+    jobs = plan_jobs(args.input, out)  # every input found before any work
+    settings = _lift_settings(args, args.lift_defaults)
+    summary = lift_collection(args.input, out, settings, workers=args.workers or _cores(),
+                              scheduler=args.scheduler, overwrite=args.overwrite, progress=not args.quiet,
+                              jobs=jobs)
+    print(format_summary(summary))
+    return 1 if summary.failed else 0
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
@@ -443,17 +483,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_make_bag)
 
-    p = sub.add_parser("lift", help="lift every /keypoints_2d message of a bag")
-    p.add_argument("input", help="input .mcap")
-    p.add_argument("--out", required=True, help="output .mcap (input topics + /skeletons_3d + markers)")
+    p = sub.add_parser("lift", help="lift every /keypoints_2d message of a bag, or of a collection of bags")
+    p.add_argument("input", nargs="+",
+                   help="input .mcap; or several, directories (searched recursively) and glob patterns "
+                   "(a collection, lifted into the directory --out)")
+    p.add_argument("--out", required=True,
+                   help="output .mcap (input topics + /skeletons_3d + markers); for a collection a "
+                   "directory: one output per input with the inputs' relative layout, a manifest "
+                   "(pose_lifter_manifest.json) that lets a stopped run resume")
     _add_lifter_options(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
     p.add_argument("--max-messages", type=_POS_INT, default=None, help="stop after N lifted messages")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the output; for a collection: lift again the bags already done")
     p.add_argument("--workers", type=_POS_INT, default=None,
-                   help="processes lifting the tracks in parallel (results identical to 1; "
-                   "default: the cores available)")
+                   help="processes lifting the tracks (one bag) or the bags (a collection) in parallel "
+                   "(results identical to 1; default: the cores available)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="lift a collection on a Dask distributed cluster (e.g. tcp://host:8786; needs "
+                   "the 'cluster' extra): one task per bag; inputs and outputs on a file system every "
+                   "worker sees under the same paths")
     p.add_argument("--topic", default="/keypoints_2d",
                    help="keypoints: pose_lifter_msgs/Skeleton2DArray or yolo_msgs/DetectionArray "
                    "(default /keypoints_2d)")

@@ -50,6 +50,7 @@ __all__ = [
     "Evaluation",
     "FrameLift",
     "LiftSummary",
+    "MessageFields",
     "check_lift_inputs",
     "evaluate_bag",
     "format_evaluation",
@@ -213,12 +214,72 @@ def _stop_workers(ex: Any) -> None:
 _Outcome = tuple[Any, NDArray[np.float64] | None, bool, float, str | None]
 
 
-def _worker_chain(index: int) -> list[_Outcome]:
+@dataclass(frozen=True)
+class MessageFields:
+    """The part of a ``LiftResult`` that the output messages carry
+    (:meth:`pose_lifter.cdr.SkeletonFrame.from_results`): what a worker of :func:`lift_bag` sends
+    back instead of the whole result (its history, prior pose, ...), as columns of a chain
+    (:func:`_columns`)."""
+
+    camera: Any
+    objective: float
+    reprojection_error: float
+    total_alternations: int
+    converged: bool
+    weights: NDArray[np.float64]
+
+
+
+def _columns(done: list[_Done]) -> tuple[list[tuple[bool, float, str | None, int]],
+                                        dict[str, NDArray[Any]]]:
+    """A chain's outcomes as a few arrays (one pickle each, not one object tree per pose): per
+    item (warm_started, solve_time, failure, row of its lift or -1), and the rows' message fields."""
+    ok = [d for d in done if d.failure is None and d.result is not None and d.joints_m is not None]
+    row = {id(d): i for i, d in enumerate(ok)}
+    items = [(d.warm_started, d.solve_time, d.failure, row.get(id(d), -1)) for d in done]
+    res: list[Any] = [d.result for d in ok]
+    cams = [r.camera for r in res]
+    cols: dict[str, NDArray[Any]] = {
+        "rotation": np.array([c.rotation for c in cams], dtype=np.float64).reshape(-1, 3, 3),
+        "scale": np.array([c.scale for c in cams], dtype=np.float64),
+        "translation": np.array([c.translation for c in cams], dtype=np.float64).reshape(-1, 2),
+        "objective": np.array([r.objective for r in res], dtype=np.float64),
+        "reprojection_error": np.array([r.reprojection_error for r in res], dtype=np.float64),
+        "total_alternations": np.array([r.total_alternations for r in res], dtype=np.int64),
+        "converged": np.array([r.converged for r in res], dtype=bool),
+        "weights": np.array([r.weights for r in res], dtype=np.float64).reshape(-1, N_JOINTS),
+        "joints_m": np.array([d.joints_m for d in ok], dtype=np.float64).reshape(-1, N_JOINTS, 3),
+    }
+    return items, cols
+
+
+def _from_columns(chain: list[_Item], items: list[tuple[bool, float, str | None, int]],
+                  cols: dict[str, NDArray[Any]]) -> list[_Done]:
+    """The :class:`_Done` s of a chain from :func:`_columns` (results as :class:`MessageFields`)."""
+    from .core.results import Camera
+
+    out = []
+    for item, (warm, dt, failure, i) in zip(chain, items, strict=True):
+        if i < 0:
+            out.append(_Done(item, None, None, warm, dt, failure))
+            continue
+        cam = Camera(cols["rotation"][i], float(cols["scale"][i]), cols["translation"][i])
+        fields = MessageFields(cam, float(cols["objective"][i]), float(cols["reprojection_error"][i]),
+                               int(cols["total_alternations"][i]), bool(cols["converged"][i]),
+                               cols["weights"][i])
+        out.append(_Done(item, fields, cols["joints_m"][i], warm, dt, None))
+    return out
+
+
+def _worker_chain(index: int) -> Any:
     """Lift chain ``index`` of the chains the worker inherited (fork): the chain's items are not
-    pickled to the worker, and only the outcomes come back (the parent holds the items)."""
+    pickled to the worker, and only the outcomes come back (the parent holds the items): whole
+    results, or only their message fields as columns (:func:`_columns`)."""
     chain = _WORKER["chains"][index]
     done = _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
                        True, _WORKER["reinit"])
+    if _WORKER["slim"]:
+        return _columns(done)
     return [(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done]
 
 
@@ -235,6 +296,7 @@ def lift_messages(
     workers: int = 1,
     track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
     reinit_ratio: float = DEFAULT_REINIT_RATIO,
+    message_fields_only: bool = False,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order with per-track warm starts.
 
@@ -266,6 +328,9 @@ def lift_messages(
         Seconds of input time a track's warm start stays valid (the node's ``track_timeout``).
     reinit_ratio : float
         The node's ``reinit_ratio`` (:class:`pose_lifter.core.tracking.TrackPolicy`).
+    message_fields_only : bool
+        With ``workers > 1``, ``on_frame`` gets :class:`MessageFields` (what the output messages
+        carry) in place of whole ``LiftResult`` s: less to send back from the workers.
     """
     from tqdm import tqdm
 
@@ -287,7 +352,7 @@ def lift_messages(
 
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
         _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout,
-                       reinit=reinit_ratio, chains=order)
+                       reinit=reinit_ratio, chains=order, slim=message_fields_only)
         # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
         n_proc = min(workers, len(chains), os.cpu_count() or 1)
         # the workers inherit every object of this process (the bag's messages too): frozen, the
@@ -298,6 +363,11 @@ def lift_messages(
                                      initializer=_worker_init)
             try:
                 for chain, outcomes in zip(order, ex.map(_worker_chain, range(len(order))), strict=True):
+                    if message_fields_only:
+                        for d in _from_columns(chain, *outcomes):
+                            done[id(d.item)] = d
+                        bar.update(len(chain))
+                        continue
                     for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
                         done[id(item)] = _Done(item, res, joints, warm, dt, failure)
                         bar.update(1)
@@ -487,7 +557,7 @@ def lift_bag(
 
     frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
                            progress, record, summary, workers=workers, track_timeout=track_timeout,
-                           reinit_ratio=reinit_ratio)
+                           reinit_ratio=reinit_ratio, message_fields_only=True)
     kept = set(topics) if keep is None else set(keep)
     index = 0
     with BagWriter(out_path, overwrite=overwrite) as w:

@@ -1,0 +1,595 @@
+"""Lift a collection of bags: several inputs, one output directory, resumable, local or on Dask.
+
+``pose-lifter lift A.mcap B.mcap DIR/ 'runs/**/*.mcap' --out OUT/`` lifts every ``.mcap`` file
+named, found under a directory (recursively) or matched by a glob into ``OUT`` with the inputs'
+relative layout (paths relative to the inputs' common directory). Each bag is one task:
+
+- **locally** (the default) on one process pool started once for the collection (fork: the
+  lifter is built and its kernels loaded once in the parent, the workers inherit it); a bag is
+  lifted serially inside its worker, so bags overlap one another (one reads or writes while the
+  other solves). A collection of one bag is lifted by :func:`pose_lifter.offline.lift_bag` with
+  its tracks spread over the workers instead.
+- **on a Dask cluster** (``--scheduler ADDRESS``, the ``cluster`` extra: ``dask.distributed``):
+  one task per bag through a ``distributed.Client``; every worker builds the lifter from the
+  same :class:`LiftSettings` once per process. Inputs and outputs must be paths that every
+  worker reads and writes under the same names (a shared file system); the outputs are written
+  by the workers, the manifest by this process.
+
+A bag's output appears under its final name only when complete (:class:`pose_lifter.bags.BagWriter`
+writes into a hidden ``.bagwriter-*`` directory beside it and renames the finished file), so a
+stopped run leaves only whole outputs. After each bag the manifest ``pose_lifter_manifest.json``
+in ``OUT`` is rewritten (atomically: a temporary file renamed over it): per output, the input's
+SHA-256, size and mtime, the digest of the settings, the package version and the counts. A bag
+whose entry matches (same settings digest, same version, the output present, the input unchanged:
+same size and mtime, or else the same SHA-256) is skipped; ``overwrite`` lifts it again. A bag
+that fails (a damaged file, no keypoints, ...) is recorded as failed and the rest are lifted; its
+error and traceback go to ``pose_lifter_errors.txt`` in ``OUT``. One run per output directory at
+a time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import hashlib
+import json
+import os
+import shutil
+import signal
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, Final
+
+from .core.errors import BagError
+from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+
+__all__ = [
+    "ERRORS_NAME",
+    "MANIFEST_NAME",
+    "BagJob",
+    "BagOutcome",
+    "CollectionSummary",
+    "LiftSettings",
+    "expand_inputs",
+    "format_summary",
+    "is_pattern",
+    "lift_collection",
+    "plan_jobs",
+]
+
+MANIFEST_NAME: Final[str] = "pose_lifter_manifest.json"
+ERRORS_NAME: Final[str] = "pose_lifter_errors.txt"
+MANIFEST_FORMAT: Final[int] = 1
+_GLOB_CHARS: Final[frozenset[str]] = frozenset("*?[")
+
+
+def is_pattern(text: str) -> bool:
+    """``text`` holds a glob wildcard (``*``, ``?``, ``[``)."""
+    return any(c in text for c in _GLOB_CHARS)
+
+
+def package_version() -> str:
+    """The installed distribution's version (the source tree's ``__version__`` when not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from . import __version__
+
+    try:
+        return version("pose_lifter")
+    except PackageNotFoundError:
+        return __version__
+
+
+def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+# --------------------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True)
+class LiftSettings:
+    """Everything that decides a lifted bag's content: the lifter's options and files, the
+    per-track policy and the output's shape. Picklable (it is what a Dask worker receives) and
+    JSON-able (its digest keys the manifest)."""
+
+    options: dict[str, Any] = field(default_factory=dict)
+    bases: str | None = None
+    warm_start: bool = True
+    leg_length_m: float = DEFAULT_LEG_LENGTH_M
+    default_distance_m: float = DEFAULT_DISTANCE_M
+    every: int = 1
+    max_messages: int | None = None
+    topic: str = "/keypoints_2d"
+    camera_info_topic: str | None = "/camera_info"
+    keep: list[str] | None = None
+    track_timeout: float = 1.0  # the node's defaults (offline.DEFAULT_TRACK_TIMEOUT_S, ...)
+    reinit_ratio: float = 2.0
+    marker_lifetime: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as JSON-ready values (options sorted by name)."""
+        d = dataclasses.asdict(self)
+        d["options"] = {k: _jsonable(v) for k, v in sorted(self.options.items())}
+        return d
+
+    def digest(self) -> str:
+        """SHA-256 over the settings, the package version and the bytes of the files they name
+        (bases, prior files): a changed file or package changes the digest."""
+        files = [self.bases, self.options.get("prior_file"), self.options.get("temporal_prior_file")]
+        named = {str(f): file_sha256(f) for f in files if f and Path(str(f)).is_file()}
+        text = json.dumps({"settings": self.to_json(), "version": package_version(), "files": named},
+                          sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def build_lifter(self) -> Any:
+        """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up)."""
+        from .core.bases import PoseBases
+        from .core.lifter import Lifter
+        from .core.options import LifterOptions
+
+        opts = LifterOptions().replace(**self.options)
+        lifter = Lifter(PoseBases.load(self.bases) if self.bases else None, opts)
+        if opts.camera_solver == "admm" and opts.pose_solver == "admm":
+            lifter.warm_up()
+        return lifter
+
+    @staticmethod
+    def options_of(options: Any) -> dict[str, Any]:
+        """A :class:`pose_lifter.core.options.LifterOptions` as the ``options`` of
+        :class:`LiftSettings` (every field)."""
+        return {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, tuple | list):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, float | int | str | bool) or v is None:
+        return v
+    return repr(v)
+
+
+# --------------------------------------------------------------------------- inputs -> jobs
+
+
+def expand_inputs(inputs: Sequence[str], exclude: str | Path | None = None) -> tuple[list[Path], Path]:
+    """The ``.mcap`` files named by ``inputs`` (files, directories searched recursively, glob
+    patterns with ``**``), sorted and without duplicates, and the directory their outputs'
+    relative paths start from (the common directory of the directories named and of the other
+    files' parents). Files that directories and patterns find under ``exclude`` (the output
+    directory: an earlier run's outputs) are left out.
+
+    Raises
+    ------
+    BagError
+        An input that does not exist, a pattern matching nothing, or no ``.mcap`` file at all.
+    """
+    skip = Path(exclude).resolve() if exclude is not None else None
+    files: list[Path] = []
+    roots: list[Path] = []
+    for text in inputs:
+        p = Path(text)
+        if is_pattern(text) and not p.exists():
+            matched = [Path(x) for x in glob.glob(text, recursive=True)]
+            found = [x for x in matched if x.is_file() and x.suffix == ".mcap"
+                     and (skip is None or not x.resolve().is_relative_to(skip))]
+            if not found:
+                raise BagError(f"no .mcap file matches {text!r}")
+            files += found
+            roots += [x.resolve().parent for x in found]
+        elif p.is_dir():
+            found = sorted(x for x in p.rglob("*.mcap") if x.is_file())
+            if skip is not None:
+                found = [x for x in found if not x.resolve().is_relative_to(skip)]
+            if not found:
+                raise BagError(f"no .mcap file under {p}")
+            files += found
+            roots.append(p.resolve())
+        elif p.is_file():
+            files.append(p)
+            roots.append(p.resolve().parent)
+        else:
+            raise BagError(f"bag not found: {p}")
+    resolved = sorted({f.resolve() for f in files})
+    if not resolved:
+        raise BagError("no .mcap input")
+    root = Path(os.path.commonpath([str(r) for r in roots]))
+    return resolved, root
+
+
+@dataclass(frozen=True)
+class BagJob:
+    """One bag of a collection: absolute input and output paths and the manifest key."""
+
+    input: str
+    output: str
+    rel: str
+    size: int
+    mtime_ns: int
+
+
+def plan_jobs(inputs: Sequence[str], out_dir: str | Path) -> list[BagJob]:
+    """One :class:`BagJob` per input ``.mcap`` (see :func:`expand_inputs`), its output at the
+    same relative path under ``out_dir``; refuses an output that would replace its input."""
+    out = Path(out_dir).resolve()
+    files, root = expand_inputs(inputs, exclude=out)
+    jobs = []
+    for f in files:
+        rel = f.relative_to(root)
+        target = out / rel
+        if target == f:
+            raise BagError(f"the output of {f} would overwrite it: choose another --out")
+        st = f.stat()
+        jobs.append(BagJob(str(f), str(target), rel.as_posix(), st.st_size, st.st_mtime_ns))
+    return jobs
+
+
+# --------------------------------------------------------------------------- manifest
+
+
+class Manifest:
+    """``pose_lifter_manifest.json``: what each output was lifted from and with.
+
+    Format (JSON)::
+
+        {"format": 1,
+         "settings": {DIGEST: {"version": "0.1.0", "settings": {...LiftSettings...}}},
+         "bags": {"rel/path.mcap": {"status": "done" | "failed", "input": "/abs/in.mcap",
+                  "input_sha256": HEX, "input_size": N, "input_mtime_ns": N, "settings": DIGEST,
+                  "version": "0.1.0", "messages": N, "skeletons": N, "poses": N,
+                  "failed_skeletons": N, "seconds": S, "worker": "host:pid", "finished": ISO,
+                  "error": TEXT (failed only)}}}
+    """
+
+    def __init__(self, out_dir: str | Path) -> None:
+        self.path = Path(out_dir) / MANIFEST_NAME
+        self.data: dict[str, Any] = {"format": MANIFEST_FORMAT, "settings": {}, "bags": {}}
+        if self.path.is_file():
+            try:
+                loaded = json.loads(self.path.read_text())
+            except (OSError, ValueError) as exc:
+                raise BagError(f"cannot read the manifest {self.path}: {exc}") from None
+            if not isinstance(loaded, dict) or loaded.get("format") != MANIFEST_FORMAT:
+                raise BagError(f"{self.path} is not a pose_lifter manifest of format {MANIFEST_FORMAT}")
+            self.data = loaded
+
+    def is_done(self, job: BagJob, digest: str, version: str) -> bool:
+        """The job's output is there, lifted with these settings from this very input."""
+        e = self.data["bags"].get(job.rel)
+        if not e or e.get("status") != "done" or e.get("settings") != digest or e.get("version") != version:
+            return False
+        if not Path(job.output).is_file() or e.get("input") != job.input:
+            return False
+        if e.get("input_size") == job.size and e.get("input_mtime_ns") == job.mtime_ns:
+            return True
+        return bool(e.get("input_size") == job.size and e.get("input_sha256") == file_sha256(job.input))
+
+    def forget(self, rel: str) -> None:
+        self.data["bags"].pop(rel, None)
+
+    def record(self, outcome: BagOutcome, digest: str, settings: LiftSettings, version: str) -> None:
+        self.data["settings"].setdefault(digest, {"version": version, "settings": settings.to_json()})
+        entry: dict[str, Any] = {
+            "status": "done" if outcome.ok else "failed", "input": outcome.job.input,
+            "input_sha256": outcome.input_sha256, "input_size": outcome.job.size,
+            "input_mtime_ns": outcome.job.mtime_ns, "settings": digest, "version": version,
+            "messages": outcome.n_messages, "skeletons": outcome.n_skeletons, "poses": outcome.n_lifted,
+            "failed_skeletons": outcome.n_failed, "seconds": round(outcome.seconds, 3),
+            "worker": outcome.worker, "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        if not outcome.ok:
+            entry["error"] = outcome.error
+        self.data["bags"][outcome.job.rel] = entry
+        used = {e.get("settings") for e in self.data["bags"].values()}
+        self.data["settings"] = {k: v for k, v in self.data["settings"].items() if k in used}
+
+    def save(self) -> None:
+        """Write atomically: a temporary file beside it, renamed over it."""
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(self.data, indent=1, sort_keys=True))
+        os.replace(tmp, self.path)
+
+
+# --------------------------------------------------------------------------- one bag
+
+
+@dataclass
+class BagOutcome:
+    """What lifting one bag gave (sent back from the worker that lifted it)."""
+
+    job: BagJob
+    ok: bool
+    n_messages: int = 0
+    n_skeletons: int = 0
+    n_lifted: int = 0
+    n_failed: int = 0
+    seconds: float = 0.0
+    input_sha256: str = ""
+    worker: str = ""
+    error: str | None = None
+    traceback: str | None = None
+    failures: list[str] = field(default_factory=list)
+
+
+def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1) -> BagOutcome:
+    """Lift one bag of a collection; any error becomes a failed :class:`BagOutcome` (the output
+    then does not exist: nothing half-written is left under its name)."""
+    from .offline import lift_bag
+
+    t0 = time.perf_counter()
+    worker = f"{os.uname().nodename}:{os.getpid()}"
+    try:
+        sha = file_sha256(job.input)
+        Path(job.output).parent.mkdir(parents=True, exist_ok=True)
+        summary, _ = lift_bag(
+            job.input, job.output, lifter, warm_start=settings.warm_start, leg_length_m=settings.leg_length_m,
+            default_distance_m=settings.default_distance_m, every=settings.every,
+            max_messages=settings.max_messages, progress=False, overwrite=True,
+            marker_lifetime=settings.marker_lifetime, workers=workers, topic=settings.topic,
+            camera_info_topic=settings.camera_info_topic, keep=settings.keep,
+            track_timeout=settings.track_timeout, reinit_ratio=settings.reinit_ratio)
+    except Exception as exc:  # one bag's failure never stops the collection
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        if not isinstance(exc, BagError | OSError | ValueError) or type(exc).__module__.startswith("rosbags"):
+            text = f"{type(exc).__name__}: {text}"
+        return BagOutcome(job, False, seconds=time.perf_counter() - t0, worker=worker, error=text[:2000],
+                          traceback=traceback.format_exc())
+    return BagOutcome(job, True, summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed,
+                      time.perf_counter() - t0, sha, worker, failures=summary.failures[:5])
+
+
+# --------------------------------------------------------------------------- executors
+
+#: The lifter and settings the local pool's workers inherit (fork).
+_POOL: dict[str, Any] = {}
+
+
+def _pool_init() -> None:
+    """Ctrl-C ends a worker silently (the parent reports it); SIGTERM (the parent stopping the
+    pool) unwinds it, so that the bag it was writing is discarded."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+    def stop(signum: int, frame: Any) -> None:
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, stop)
+
+
+def _pool_job(job: BagJob) -> BagOutcome:
+    return lift_one(job, _POOL["settings"], _POOL["lifter"])
+
+
+def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter: Any | None,
+               on_done: Callable[[BagOutcome], None]) -> None:
+    """The local executor: one bag -> its tracks over ``workers`` processes; several bags -> one
+    pool of ``min(workers, bags)`` processes started once, a bag per task, largest first."""
+    lft = lifter if lifter is not None else settings.build_lifter()
+    if len(jobs) == 1 or workers == 1:
+        for job in jobs:
+            on_done(lift_one(job, settings, lft, workers if len(jobs) == 1 else 1))
+        return
+    import gc
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    order = sorted(jobs, key=lambda j: j.size, reverse=True)  # largest first: a short tail
+    _POOL.update(settings=settings, lifter=lft)
+    gc.freeze()  # the workers' garbage collectors do not walk (and so copy) the parent's objects
+    try:
+        ex = ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("fork"),
+                                 initializer=_pool_init)
+        try:
+            pending = {ex.submit(_pool_job, j) for j in order}
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    on_done(fut.result())
+        except BaseException:
+            from .offline import _stop_workers
+
+            _stop_workers(ex)
+            raise
+        ex.shutdown()
+    finally:
+        _POOL.clear()
+        gc.unfreeze()
+
+
+_DASK_LOCAL = threading.local()
+
+
+def _dask_job(job: BagJob, settings: LiftSettings, digest: str) -> BagOutcome:
+    """A bag on a Dask worker: the lifter is built once per worker thread and settings digest."""
+    from .core._threads import one_blas_thread
+
+    cache = getattr(_DASK_LOCAL, "lifters", None)
+    if cache is None:
+        one_blas_thread()
+        cache = _DASK_LOCAL.lifters = {}
+    if digest not in cache:
+        cache.clear()
+        cache[digest] = settings.build_lifter()
+    return lift_one(job, settings, cache[digest])
+
+
+def _run_dask(jobs: list[BagJob], settings: LiftSettings, digest: str, address: str,
+              on_done: Callable[[BagOutcome], None]) -> None:
+    """The Dask executor: one task per bag on the cluster at ``address``."""
+    try:
+        import distributed
+    except ImportError:
+        raise BagError("--scheduler needs dask.distributed: pip install 'pose_lifter[cluster]'") from None
+    order = sorted(jobs, key=lambda j: j.size, reverse=True)
+    dd: Any = distributed  # untyped
+    with dd.Client(address, timeout="30s") as client:
+        futures = [client.submit(_dask_job, j, settings, digest, pure=False,
+                                 key=f"pose-lifter-{hashlib.sha1(j.output.encode()).hexdigest()[:16]}")
+                   for j in order]
+        try:
+            for fut in dd.as_completed(futures):
+                on_done(fut.result())
+        except BaseException:
+            client.cancel(futures)
+            raise
+
+
+# --------------------------------------------------------------------------- the collection
+
+
+@dataclass
+class CollectionSummary:
+    """What :func:`lift_collection` did."""
+
+    out_dir: Path
+    n_bags: int = 0
+    n_lifted: int = 0
+    n_skipped: int = 0
+    failed: list[BagOutcome] = field(default_factory=list)
+    n_poses: int = 0
+    n_failed_skeletons: int = 0
+    seconds: float = 0.0
+    errors_file: Path | None = None
+
+    @property
+    def poses_per_s(self) -> float:
+        return self.n_poses / self.seconds if self.seconds > 0 else 0.0
+
+
+def _sweep_partial(out_dir: Path) -> None:
+    """Remove the hidden temporary directories a stopped writer left in ``out_dir`` (this run
+    owns the directory: one run per output directory at a time)."""
+    for d in out_dir.rglob(".bagwriter-*"):
+        if d.is_dir():
+            shutil.rmtree(d, ignore_errors=True)
+
+
+def lift_collection(
+    inputs: Sequence[str],
+    out_dir: str | Path,
+    settings: LiftSettings,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    lifter: Any | None = None,
+    jobs: Iterable[BagJob] | None = None,
+) -> CollectionSummary:
+    """Lift the bags named by ``inputs`` into ``out_dir`` (see the module doc).
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Files, directories and glob patterns (:func:`expand_inputs`).
+    out_dir : path
+        Created if missing; holds the outputs, the manifest and the error file.
+    settings : LiftSettings
+    workers : int
+        Local processes (ignored with ``scheduler``).
+    scheduler : str, optional
+        A Dask scheduler's address (``tcp://host:8786``): the bags are lifted on its workers.
+    overwrite : bool
+        Lift every bag again, even those the manifest has as done with these settings.
+    progress : bool
+        One tqdm bar over the bags (poses and poses/s beside it).
+    lifter : Lifter, optional
+        The lifter of ``settings``, when the caller has built it already (local runs only;
+        otherwise it is built, its kernels loaded, only when a bag is left to lift).
+    jobs : iterable of BagJob, optional
+        Planned already (:func:`plan_jobs`); then ``inputs`` is not read.
+
+    Returns
+    -------
+    CollectionSummary
+    """
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise BagError(f"--out {out} is a file; a collection is lifted into a directory")
+    planned = list(jobs) if jobs is not None else plan_jobs(inputs, out)
+    out.mkdir(parents=True, exist_ok=True)
+    _sweep_partial(out)
+    manifest = Manifest(out)
+    version = package_version()
+    digest = settings.digest()
+    summary = CollectionSummary(out, n_bags=len(planned))
+    todo = []
+    for job in planned:
+        if not overwrite and manifest.is_done(job, digest, version):
+            summary.n_skipped += 1
+        else:
+            manifest.forget(job.rel)
+            todo.append(job)
+    manifest.save()
+    errors_path = out / ERRORS_NAME
+    bar = tqdm(total=len(todo), desc="bags", unit="bag", disable=not progress, file=sys.stderr)
+
+    def on_done(o: BagOutcome) -> None:
+        manifest.record(o, digest, settings, version)
+        manifest.save()
+        if o.ok:
+            summary.n_lifted += 1
+            summary.n_poses += o.n_lifted
+            summary.n_failed_skeletons += o.n_failed
+        else:
+            summary.failed.append(o)
+            _write_errors(errors_path, summary.failed)
+        bar.update(1)
+        rate = summary.n_poses / max(1e-9, time.perf_counter() - t0)
+        bar.set_postfix_str(f"{summary.n_poses} poses, {rate:.0f}/s, {len(summary.failed)} failed")
+
+    try:
+        if todo:
+            if scheduler:
+                _run_dask(todo, settings, digest, scheduler, on_done)
+            else:
+                _run_local(todo, settings, workers, lifter, on_done)
+    except BaseException:
+        if not scheduler:
+            _sweep_partial(out)  # the local workers are stopped: their temporary files are orphans
+        raise
+    finally:
+        bar.close()
+    if not summary.failed and errors_path.exists():
+        errors_path.unlink()
+    summary.errors_file = errors_path if summary.failed else None
+    summary.seconds = time.perf_counter() - t0
+    return summary
+
+
+def _write_errors(path: Path, failed: list[BagOutcome]) -> None:
+    blocks = [f"== {o.job.input}\n{o.error}\n\n{o.traceback or ''}" for o in failed]
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text("\n".join(blocks))
+    os.replace(tmp, path)
+
+
+def format_summary(s: CollectionSummary) -> str:
+    """The collection's summary lines: bags, poses, failed skeletons, poses/s, errors."""
+    lines = [
+        f"{s.out_dir}: {s.n_bags} bags: {s.n_lifted} lifted, {s.n_skipped} skipped (done already), "
+        f"{len(s.failed)} failed",
+        f"  {s.n_poses} poses lifted, {s.n_failed_skeletons} skeletons failed, {s.seconds:.1f} s, "
+        f"{s.poses_per_s:.0f} poses/s",
+    ]
+    for o in s.failed[:10]:
+        lines.append(f"  failed: {o.job.input}: {o.error}")
+    if len(s.failed) > 10:
+        lines.append(f"  ... and {len(s.failed) - 10} more")
+    if s.errors_file is not None:
+        lines.append(f"  errors and tracebacks: {s.errors_file}")
+    lines.append(f"  manifest: {s.out_dir / MANIFEST_NAME}")
+    return "\n".join(lines)

@@ -1,0 +1,145 @@
+"""Whole-command wall time of lifting a collection of bags: one ``pose-lifter lift DIR --out OUT``
+(this checkout) against one ``pose-lifter lift BAG --out FILE`` per bag (the ``before`` checkout,
+which lifts one bag per command), side by side, alternating in every repetition.
+
+    git -C /work/main worktree add --detach /work/scratch/before <commit>
+    OMP_NUM_THREADS=1 .venv/bin/python tools/bench_collection.py many36.mcap --copies 20 \\
+        --before /work/scratch/before --work /work/scratch/coll [--reps 1] [--workers 0]
+
+The collection is ``--copies`` hard links of ``BAG`` (distinct files to the lifter). Prints, per
+code and repetition, the wall time, poses/s (poses lifted over the whole wall time: imports,
+kernel loading, pools, reading, writing) and the CPU seconds of the commands and their workers,
+the machine's load average around each run, and the start-up: a run that lifts one message of
+two small committed bags (imports + kernel loading + pool + two tiny outputs). ``--single`` also
+times both codes on ``BAG`` alone (``lift BAG --out FILE``). ``--cores 1`` pins every command to
+one core (``taskset``): the throughput of one worker, for the scaling table of docs/collections.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PACKAGE = Path("ros2_ws/src/pose_lifter")
+REPO = Path(__file__).resolve().parents[1]
+SMALL = [REPO / "bags" / "walk_clean.mcap", REPO / "bags" / "punch_clean.mcap"]
+
+
+def pose_lifter(package: Path, args: list[str], cores: int) -> tuple[float, float, str]:
+    """(wall s, CPU s of the command and its children, stdout) of one ``pose-lifter`` command."""
+    cmd = [str(Path(sys.executable).parent / "pose-lifter"), *args]
+    if cores:
+        cmd = ["taskset", "-c", ",".join(str(c) for c in range(cores)), *cmd]
+    env = dict(os.environ, PYTHONPATH=str(package), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, done.stdout
+
+
+def poses_of(stdout: str) -> int:
+    """Poses lifted, from a one-bag line (``lifted N of``) or a collection summary (``N poses``)."""
+    single = [int(x) for x in re.findall(r"lifted (\d+) of", stdout)]
+    many = [int(x) for x in re.findall(r"(\d+) poses lifted", stdout)]
+    return sum(single) + sum(many)
+
+
+def load() -> str:
+    return f"{os.getloadavg()[0]:.1f}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("bag")
+    ap.add_argument("--before", required=True, type=Path, help="a checkout of the code before the change")
+    ap.add_argument("--after", type=Path, default=REPO, help="this checkout (default)")
+    ap.add_argument("--work", type=Path, required=True, help="scratch directory (inputs and outputs)")
+    ap.add_argument("--copies", type=int, default=20)
+    ap.add_argument("--reps", type=int, default=1)
+    ap.add_argument("--workers", type=int, default=0, help="--workers of the commands (0: their default)")
+    ap.add_argument("--cores", type=int, default=0, help="pin the commands to this many cores (0: all)")
+    ap.add_argument("--single", action="store_true", help="also time lift BAG --out FILE alone")
+    ap.add_argument("--skip-before", action="store_true", help="time this checkout only")
+    args = ap.parse_args()
+    codes = {"before": args.before / PACKAGE, "after": args.after / PACKAGE}
+    if args.skip_before:
+        del codes["before"]
+    src = args.work / "campaign"
+    shutil.rmtree(src, ignore_errors=True)
+    src.mkdir(parents=True)
+    for i in range(args.copies):
+        os.link(args.bag, src / f"bag_{i:02d}.mcap")
+    extra = ["--quiet", "--overwrite"] + (["--workers", str(args.workers)] if args.workers else [])
+
+    def collection(key: str) -> tuple[float, float, int]:
+        out = args.work / f"out_{key}"
+        if key == "after":
+            run = ["lift", str(src), "--out", str(out), *extra]
+            wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
+            return wall, cpu, poses_of(stdout)
+        out.mkdir(parents=True, exist_ok=True)
+        walls, cpus, poses = 0.0, 0.0, 0
+        for bag in sorted(src.glob("*.mcap")):
+            run = ["lift", str(bag), "--out", str(out / bag.name), *extra]
+            wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
+            walls, cpus, poses = walls + wall, cpus + cpu, poses + poses_of(stdout)
+        return walls, cpus, poses
+
+    def startup(key: str) -> float:
+        base = ["--max-messages", "1", *extra]
+        if key == "after":
+            run = ["lift", *map(str, SMALL), "--out", str(args.work / "start"), *base]
+            return pose_lifter(codes[key], run, args.cores)[0]
+        return sum(pose_lifter(codes[key], ["lift", str(b), "--out", str(args.work / f"start_{b.name}"),
+                                            *base], args.cores)[0] for b in SMALL)
+
+    def single(key: str) -> tuple[float, float, int]:
+        run = ["lift", args.bag, "--out", str(args.work / "single.mcap"), *extra]
+        wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
+        return wall, cpu, poses_of(stdout)
+
+    for key in codes:  # untimed: compiles each checkout's kernels when its cache is cold
+        startup(key)
+    print(f"collection: {args.copies} x {args.bag}; cores {args.cores or os.cpu_count()}, "
+          f"--workers {args.workers or 'default'}; load average {load()} at the start", flush=True)
+    print(f"{'what':11s} {'code':6s} {'rep':>3s} {'wall s':>8s} {'poses':>7s} {'poses/s':>8s} "
+          f"{'CPU s':>7s}  load", flush=True)
+    rows: dict[tuple[str, str], list[float]] = {}
+    for rep in range(args.reps):
+        for what, fn in (("start-up", None), ("single", single if args.single else None),
+                         ("collection", collection)):
+            if what == "single" and fn is None:
+                continue
+            for key in codes:
+                if what == "start-up":
+                    wall = startup(key)
+                    print(f"{what:11s} {key:6s} {rep:3d} {wall:8.2f} {'':>7s} {'':>8s} {'':>7s}  {load()}",
+                          flush=True)
+                    rows.setdefault((what, key), []).append(wall)
+                    continue
+                assert fn is not None
+                wall, cpu, poses = fn(key)
+                rows.setdefault((what, key), []).append(poses / wall)
+                print(f"{what:11s} {key:6s} {rep:3d} {wall:8.2f} {poses:7d} {poses / wall:8.0f} {cpu:7.1f}  "
+                      f"{load()}", flush=True)
+    print("medians: " + "; ".join(f"{w} {k} {statistics.median(v):.2f}"
+                                  + (" s" if w == "start-up" else " poses/s") for (w, k), v in rows.items()),
+          flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
