@@ -48,12 +48,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import accuracy as acc  # noqa: E402  (tools/accuracy.py: the conditions, the tracked lift)
-from pose_lifter.core.bases import PoseBases, default_bases_path  # noqa: E402
-from pose_lifter.core.prior import PosePrior  # noqa: E402
-from pose_lifter.core.errors import PriorFileError  # noqa: E402
-from pose_lifter.mocap import load_trial, trials_by_action  # noqa: E402
-from pose_lifter.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual  # noqa: E402
+import accuracy as acc
+from pose_lifter.core.bases import PoseBases, default_bases_path
+from pose_lifter.core.errors import PriorFileError
+from pose_lifter.core.prior import PosePrior
+from pose_lifter.mocap import load_trial, trials_by_action
+from pose_lifter.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 
 DEFAULT_CONDITIONS = ("clean", "noise0.1", "outliers20", "missing15", "lrswap", "lowercut", "close", "above")
 METHODS = ("flat", "learned", "hybrid")
@@ -91,7 +91,10 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     print(f"[{cls}] training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames), "
           f"validation {len(val_ids)} trials", flush=True)
     aug = AUGMENTATIONS[args.augment]
-    log = (lambda s: print(f"[{cls}] {s}", flush=True))
+
+    def log(s: str) -> None:
+        print(f"[{cls}] {s}", flush=True)
+
     t0 = time.perf_counter()
     if args.model == "residual":
         prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks, dropout=args.dropout,
@@ -179,7 +182,8 @@ def render(record: dict[str, Any]) -> str:
         lines.append("")
     if "hybrid" in methods:
         lines += ["jitter (mean acceleration error, mm per frame^2), hybrid, mean over classes: " + ", ".join(
-            f"{k} {np.mean([folds[c]['table'][k]['hybrid']['jitter'] for c in classes]):.1f}" for k in conds), ""]
+            f"{k} {np.mean([folds[c]['table'][k]['hybrid']['jitter'] for c in classes]):.1f}"
+            for k in conds), ""]
     return "\n".join(lines)
 
 
@@ -205,7 +209,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
     ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
-    ap.add_argument("--train-only", action="store_true", help="train (or reuse) the folds' priors, no lifting")
+    ap.add_argument("--train-only", action="store_true",
+                    help="train (or reuse) the folds' priors, no lifting")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
                     help="no training or lifting: join runs' cross_action.json (same settings) into --out")
     ap.add_argument("--out", type=Path, default=Path("out/cross_action"))
@@ -223,8 +228,9 @@ def main(argv: list[str] | None = None) -> int:
     folds_dir = args.folds or args.out / "folds"
     bases_path = Path(args.bases) if args.bases else default_bases_path("hybrid")
     bases_trials = set(PoseBases.load(bases_path).metadata.get("training_trials", []))
+    command = " ".join(sys.argv[1:] if argv is None else argv)
     record: dict[str, Any] = {
-        "header": (f"Cross-action folds (`tools/cross_action.py {' '.join(argv if argv is not None else sys.argv[1:])}`): "
+        "header": (f"Cross-action folds (`tools/cross_action.py {command}`): "
                    f"training {json.dumps(fold_training(args))}; bases `{bases_path.name}`"),
         "methods": list(args.methods), "conditions": list(args.conditions), "folds": {}}
     for cls in classes:
@@ -244,7 +250,8 @@ def main(argv: list[str] | None = None) -> int:
             "train_seconds": round(te - tf, 1), "lift_seconds": round(time.perf_counter() - te, 1)}
         row = ", ".join(f"{k} " + "/".join(f"{table[k][m]['p_mpjpe']:.1f}" for m in args.methods)
                         for k in args.conditions)
-        print(f"[{cls}] P-MPJPE ({'/'.join(args.methods)}): {row}; {time.perf_counter() - te:.0f} s", flush=True)
+        print(f"[{cls}] P-MPJPE ({'/'.join(args.methods)}): {row}; {time.perf_counter() - te:.0f} s",
+              flush=True)
         _write(record, args.out, quiet=True)
     if args.train_only:
         return 0

@@ -31,8 +31,8 @@ from numpy.typing import NDArray
 from .core.metrics import p_mpjpe
 from .core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
 from .core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
-from .scenes import corrupt_2d
 from .pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
+from .scenes import corrupt_2d
 from .views import limb_scale_factors, scale_limbs, view_rotations
 
 __all__ = ["GENERALISE", "Augmentation", "TrainingBatch", "augment_poses", "make_batch", "train_prior",
@@ -331,7 +331,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
             loss = torch.mean((net(x[idx]) - y[idx]) ** 2)
             loss.backward()
             opt.step()
-            total += float(loss) * batch_size
+            total += float(loss.detach()) * batch_size
         loss_val = total / max(1, (len(x) // batch_size) * batch_size)
         if log is not None and (ep % 5 == 4 or ep == epochs - 1):
             mm, _ = _evaluate(_fold_residual(stem, body, head, out_mean, out_scale, window), val)

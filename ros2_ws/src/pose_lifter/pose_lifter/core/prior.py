@@ -3,9 +3,10 @@
 The network is data (VideoPose3D keeps the model definition apart from its weights): a ReLU
 multilayer perceptron, plain or with residual blocks (Martinez et al. 2017: an input layer,
 ``blocks`` blocks ``h + relu(relu(h W_a + b_a) W_b + b_b)``, a linear output layer; the
-training's batch normalisation folded into the linear layers), whose weights, normalisation constants and per-joint uncertainty are one
-``.npz`` file, loaded with ``allow_pickle=False`` and validated before use. Inference is plain
-numpy (a few matrix products: ~20 us for one pose, batched offline).
+training's batch normalisation folded into the linear layers), whose weights, normalisation
+constants and per-joint uncertainty are one ``.npz`` file, loaded with ``allow_pickle=False`` and
+validated before use. Inference is plain numpy (a few matrix products: ~20-150 us for one pose,
+batched offline).
 
 Input (:func:`normalise_2d`), per frame: the visible joints' 2D centred on their centroid ``c``
 and divided by their RMS distance ``r`` from it, missing joints set to 0, and the 12 visibility
@@ -267,7 +268,8 @@ class PosePrior:
                         raise PriorFileError(f"{p}: blocks must be an integer")
                     blocks = int(blocks_raw)
                     if not 1 <= blocks <= (MAX_LAYERS - 2) // 2:
-                        raise PriorFileError(f"{p}: {blocks} residual blocks (1..{(MAX_LAYERS - 2) // 2} allowed)")
+                        raise PriorFileError(
+                            f"{p}: {blocks} residual blocks (1..{(MAX_LAYERS - 2) // 2} allowed)")
                 n = int(z["n_layers"])
                 if not 1 <= n <= MAX_LAYERS:
                     raise PriorFileError(f"{p}: {n} layers (1..{MAX_LAYERS} allowed)")
@@ -332,7 +334,7 @@ class PosePrior:
         The layers run in float32 (the file's precision): a single pose reads the weights
         (2.4 MB for 2 x 768) once, and float32 halves that memory traffic (measured 287 -> 130 us
         a pose); outputs move by ~1e-6 of their scale against float64."""
-        h = np.asarray(features, dtype=np.float32)
+        h: NDArray[Any] = np.asarray(features, dtype=np.float32)
         layers = self._layers32
         if self.blocks == 0:
             last = len(layers) - 1
