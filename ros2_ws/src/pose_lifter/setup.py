@@ -20,7 +20,9 @@ setup(
     ],
     install_requires=["setuptools", "numpy", "scipy", "scikit-learn"],
     extras_require={"tools": ["rosbags", "tqdm", "matplotlib"], "reference": ["cvxpy", "clarabel", "scs"],
-                    "fast": ["numba"]},
+                    "fast": ["numba"],
+                    # training of the learned prior (tools/train_prior.py, tools/cross_action.py)
+                    "train": ["torch==2.13.0"]},
     zip_safe=False,
     maintainer="pose_lifter maintainers",
     maintainer_email="pose-lifter@example.com",
