@@ -64,12 +64,20 @@ class Augmentation:
     turn_root_deg: float = 40.0
     turn_end_deg: float = 30.0
     p_turn_limb: float = 0.5
+    #: the lower body out of the image: knees and ankles missing (and the hips too on a third of
+    #: those samples), every frame of the window
+    p_lower_cut: float = 0.0
 
 
 #: The augmentation that generalises past the training motions (the cross-action folds,
 #: ``tools/cross_action.py``): mirrored people, limb transplants and turned limbs on top of the
 #: views and corruptions.
-GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0.5)
+GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0.5, p_lower_cut=0.1)
+
+
+#: Knees and ankles; hips (:data:`pose_lifter.core.skeleton.JOINT_NAMES`).
+_LOWER_LEGS = [7, 8, 10, 11]
+_HIPS = [6, 9]
 
 
 @dataclass(frozen=True)
@@ -127,6 +135,11 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
         pts[lo:hi] = noisy
         if miss > 0:
             vis[lo:hi] = rng.random(sub.shape[:3]) >= miss
+    if aug.p_lower_cut > 0:
+        cut = rng.random(n) < aug.p_lower_cut
+        hips = cut & (rng.random(n) < 1.0 / 3.0)
+        vis[np.ix_(cut, np.arange(window), _LOWER_LEGS)] = False
+        vis[np.ix_(hips, np.arange(window), _HIPS)] = False
     # keep at least min_visible joints in the current frame
     short = vis[:, -1].sum(axis=1) < aug.min_visible
     vis[short, -1] = True
