@@ -64,7 +64,8 @@ def fold_training(args: argparse.Namespace) -> dict[str, Any]:
     """The training settings a fold's prior is identified by (a saved fold is reused only when
     its metadata hold the same)."""
     spec: dict[str, Any] = {"model": args.model, "augment": args.augment, "epochs": args.epochs,
-                            "samples_per_epoch": args.samples, "seed": args.seed, "frame_step": args.step}
+                            "samples_per_epoch": args.samples, "seed": args.seed, "frame_step": args.step,
+                            "augmentation": dict(AUGMENTATIONS[args.augment].__dict__)}
     if args.model == "residual":
         spec.update(width=args.width, blocks=args.blocks, dropout=args.dropout)
     else:

@@ -37,7 +37,7 @@ from threadpoolctl import threadpool_limits
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu)")
-    ap.add_argument("--epochs", type=int, default=24)
+    ap.add_argument("--epochs", type=int, default=12)
     ap.add_argument("--samples", type=int, default=100_000, help="augmented samples per epoch")
     ap.add_argument("--model", choices=("residual", "mlp"), default="residual")
     ap.add_argument("--augment", choices=("generalise", "views"), default="generalise")

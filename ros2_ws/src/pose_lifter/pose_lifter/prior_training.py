@@ -346,7 +346,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
             opt.step()
             total += float(loss.detach()) * batch_size
         loss_val = total / max(1, (len(x) // batch_size) * batch_size)
-        if log is not None and (ep % 5 == 4 or ep == epochs - 1):
+        if log is not None:
             mm, _ = _evaluate(_fold_residual(stem, body, head, out_mean, out_scale, window), val)
             log(f"epoch {ep + 1}/{epochs}: loss {loss_val:.4f}, validation P-MPJPE {mm:.1f} mm, "
                 f"{time.perf_counter() - t0:.0f} s")
