@@ -117,10 +117,20 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
     _STATE["mean"] = PoseBases.load().mean_pose  # the mean-pose floor: the paper's bases, as before
 
 
-def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
-    track, cond, methods = args
-    spec = CONDITIONS[cond]
-    rng = np.random.default_rng(track.seed)
+def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The 2D a detector gives of ``track`` under condition ``spec`` (:data:`CONDITIONS`).
+
+    Returns
+    -------
+    px : ndarray, shape (T, 12, 2)
+        Pixels (0 where missing).
+    conf : ndarray, shape (T, 12)
+    world : ndarray, shape (T, 12, 3)
+        The filmed person (limbs scaled when the condition says so), metres.
+    cam_pose : ndarray, shape (T, 12, 3)
+        The centred pose in the camera frame, metres.
+    """
     world = track.world
     if spec.get("limbs", 0.0) > 0:
         world = scale_limbs(world, limb_scale_factors(1, spec["limbs"], rng)[0])
@@ -143,6 +153,14 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
     if spec.get("cut", 0.0) > 0:  # the lower body out of the image
         px[:, [7, 8, 10, 11]] = 0.0
         conf[:, [7, 8, 10, 11]] = 0.0
+    return px, conf, world, cam_pose
+
+
+def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
+    track, cond, methods = args
+    rng = np.random.default_rng(track.seed)
+    px, conf, world, cam_pose = film_track(track, CONDITIONS[cond], rng)
+    n = len(world)
     leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
     truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
     out: dict[str, Any] = {}
