@@ -55,7 +55,8 @@ def test_a_close_camera_is_in_perspective_and_a_high_one_looks_down(acc: ModuleT
     assert spread(near) > 1.4 * spread(far)  # 3 m -> 2 m
     # perspective: the image is not the weak-perspective image of the same camera-frame pose
     weak = acc.FOCAL * cam_near[..., :2] / 2.0
-    assert np.abs((near - near.mean(axis=1, keepdims=True)) - (weak - weak.mean(axis=1, keepdims=True))).max() > 1.0
+    centred = near - near.mean(axis=1, keepdims=True)
+    assert np.abs(centred - (weak - weak.mean(axis=1, keepdims=True))).max() > 1.0
     _, _, _, cam_above = acc.film_track(track, acc.CONDITIONS["above"], np.random.default_rng(0))
     # seen from 50 degrees above, the person's up direction (hips -> shoulders) leans 50 degrees
     # towards the camera (negative depth) compared with a level camera
