@@ -75,7 +75,7 @@ def fold_training(args: argparse.Namespace) -> dict[str, Any]:
 
 def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path) -> PosePrior:
     """Train (or reuse) the prior of the fold without class ``cls``, saved to ``path``."""
-    spec = fold_training(args)
+    spec = json.loads(json.dumps(fold_training(args)))  # as the file's metadata hold it
     if path.is_file():
         try:
             old = PosePrior.load(path)
