@@ -77,7 +77,7 @@ CONDITIONS: dict[str, dict[str, float]] = {
 #: Left/right joint pairs of the arms and the legs (the 2D labels a detector swaps).
 _ARMS = ((0, 3), (1, 4), (2, 5))
 _LEGS = ((6, 9), (7, 10), (8, 11))
-METHODS = ("flat", "mean-pose", "paper", "learned", "hybrid", "hybrid-1")
+METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "hybrid", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
 ELEVATIONS = (0.0, 30.0)
 PROJECTIONS = ("weak", "perspective")
@@ -108,8 +108,8 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
     warnings.simplefilter("ignore")
     lifters = {}
     for m in methods:
-        if m in ("paper", "learned", "hybrid", "hybrid-1"):
-            mode = "hybrid" if m.startswith("hybrid") else m
+        if m in ("paper", "learned", "learned-t", "hybrid", "hybrid-1"):
+            mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
             lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings))
             lifters[m].warm_up()
@@ -136,7 +136,7 @@ def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
         world = scale_limbs(world, limb_scale_factors(1, spec["limbs"], rng)[0])
     az, el, proj = track.camera
     el = spec.get("elevation", el)
-    dist = spec.get("distance", DISTANCE)
+    dist = spec.get("distance", _STATE.get("distance", DISTANCE))  # --distance, a condition's own
     if "distance" in spec:
         proj = "perspective"
     n = len(world)
@@ -174,7 +174,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             preds[:] = np.einsum("jb,nba->nja", _STATE["mean"], body_frame(truth_c)) * leg_m[:, None, None]
         else:
             lifter: Lifter = _STATE["lifters"][m]
-            policy = TrackPolicy(lifter, track_timeout=1e9) if m == "hybrid" else None
+            policy = TrackPolicy(lifter, track_timeout=1e9) if m in ("hybrid", "learned-t") else None
             warm = None
             for i in range(n):
                 try:
@@ -202,17 +202,21 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
     return {"track": track.name, "cond": cond, "camera": track.camera, "n": n, "methods": out}
 
 
-def _tracks(split: str, data: str | None, frames: int, views: int) -> list[Track]:
-    if split == "eval":
+def _tracks(split: str, data: str | None, frames: int, views: int, trials: list[str] | None = None,
+            cameras: list[tuple[float, float, str]] | None = None) -> list[Track]:
+    if trials:
+        ids = trials
+    elif split == "eval":
         ids = split_trials("eval", data)
     else:  # the prior's held-out training-split trials (tuning)
         from pose_lifter.core.prior import PosePrior
         ids = list(PosePrior.load().metadata.get("validation_trials", []))
+    cams = cameras or CAMERAS
     out = []
     for k, t in enumerate(ids):
         world = load_trial(t, data, step=4, max_frames=frames)
         for v in range(views):
-            cam = CAMERAS[(k * views + v) % len(CAMERAS)]
+            cam = cams[(k * views + v) % len(cams)]
             out.append(Track(f"{t}@{cam[0]:.0f}/{cam[1]:.0f}/{cam[2]}", world, cam, 1000 * k + v))
     return out
 
@@ -233,6 +237,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
     ap.add_argument("--bases", default=None, help="basis file (default: each mode's packaged one)")
+    ap.add_argument("--trials", nargs="+", default=None,
+                    help="these trials instead of the split's (e.g. a cross-action fold's class)")
+    ap.add_argument("--action", default=None,
+                    help="the trials of this MANIFEST action class instead of the split's")
+    ap.add_argument("--max-trials", type=int, default=None, help="at most this many of the trials")
+    ap.add_argument("--distance", type=float, default=DISTANCE, help="camera distance (m)")
+    ap.add_argument("--azimuths", type=float, nargs="+", default=None,
+                    help="only these azimuths (degrees, elevation 0, --projection): cameras rotate over them")
+    ap.add_argument("--projection", choices=PROJECTIONS, default="perspective",
+                    help="the projection of the --azimuths cameras")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
                     help="no lifting: join these runs' accuracy.json into one table in --out")
     ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
@@ -241,7 +255,16 @@ def main(argv: list[str] | None = None) -> int:
         return merge(args.merge, args.out)
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
-    tracks = _tracks(args.split, args.data, args.frames, args.views)
+    trials = args.trials
+    if args.action:
+        from pose_lifter.mocap import read_manifest
+        known = set(split_trials("train", args.data)) | set(split_trials("eval", args.data))
+        trials = sorted({t.trial for t in read_manifest(args.data)
+                         if t.action == args.action and t.trial in known})  # of the two splits only
+    if trials and args.max_trials:
+        trials = trials[:: max(1, len(trials) // args.max_trials)][: args.max_trials]
+    cameras = [(a, 0.0, args.projection) for a in args.azimuths] if args.azimuths else None
+    tracks = _tracks(args.split, args.data, args.frames, args.views, trials, cameras)
     methods = tuple(args.methods)
     jobs = [(t, c, methods) for c in args.conditions for t in tracks]
     n_frames = sum(len(t.world) for t in tracks)
@@ -249,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{args.views} views), {n_frames} frames per condition; {len(jobs)} jobs on {args.workers} workers",
           flush=True)
     settings = _parse(args.set)
+    _STATE["distance"] = args.distance
     if args.workers > 1:
         with mp.get_context("fork").Pool(args.workers, _init, (settings, methods, args.bases)) as pool:
             results = list(pool.imap_unordered(_job, jobs, chunksize=1))
@@ -268,7 +292,8 @@ def main(argv: list[str] | None = None) -> int:
     header = (f"{args.split} split, {len(tracks)} tracks, {n_frames} frames per condition "
               f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)")
     _write(table, methods, header, f"wall time {time.perf_counter() - t0:.0f} s", args.out,
-           {"table": table, "settings": settings, "split": args.split})
+           {"table": table, "settings": settings, "split": args.split if not trials else "trials",
+            "trials": trials, "distance": args.distance, "cameras": cameras})
     return 0
 
 

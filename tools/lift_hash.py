@@ -19,14 +19,17 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   :func:`pose_lifter.offline.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
   first bag in each mode through ``Runs.run``'s Python loop (the default fused run kernel calls no
-  Python ``pose_step``; the loop gives its results to the bit, ``tests/core/test_run_kernel.py``)
+  Python ``pose_step``; the loop performs the same operations, ``tests/core/test_run_kernel.py``)
   (every ``--record-every``-th call, up to ``--record`` per mode),
   replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
   ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
   their objectives, limb violations, iteration counts and coefficients.
 
-Run it before a refactor and after it: the lines must be identical. The results depend on the
-machine's BLAS and on numba (printed in the header); compare runs on one machine and install.
+Run it before a refactor and after it, on one machine and install: the lines must be identical.
+It is a before/after tool, not a reference: the tracked solves are chaotic in round-off (a
+last-bit change grows by about 10x per warm-started frame), so the hash depends on the CPU, the
+BLAS kernel OpenBLAS picks (``OPENBLAS_CORETYPE``) and numba's target (printed in the header). A
+hash that differs on another machine is not a regression; compare two checkouts on the same one.
 """
 
 from __future__ import annotations
@@ -249,6 +252,20 @@ def replay_pose_steps(calls: list[tuple[tuple[Any, ...], dict[str, Any]]], d: Di
     return n
 
 
+def _machine() -> str:
+    """What the hash depends on besides the code: numpy, its BLAS kernel, numba and its target."""
+    from threadpoolctl import threadpool_info
+
+    blas = ", ".join(f"{i.get('internal_api')} {i.get('architecture')}" for i in threadpool_info()
+                     if i.get("user_api") == "blas")
+    numba = "off"
+    if HAVE_NUMBA:
+        from numba.core import config
+
+        numba = f"{config.CPU_NAME or 'host'} target"
+    return f"numpy {np.__version__} (BLAS {blas or 'unknown'}), numba {numba}"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     ap.add_argument("--bags", nargs="*", default=sorted(glob.glob(str(REPO / "bags" / "*.mcap"))))
@@ -266,8 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     Lifter(None, LifterOptions(mode="hybrid")).warm_up()  # compile or load the kernels first
     starts = LifterOptions().n_starts if args.starts is None else args.starts
     print(f"lift_hash: {len(bags)} bags ({', '.join(b.stem for b in bags)}), starts {starts}, "
-          f"max messages {args.max_messages}, rounded to 1e-{args.decimals}; numba {HAVE_NUMBA}, "
-          f"numpy {np.__version__}")
+          f"max messages {args.max_messages}, rounded to 1e-{args.decimals}; {_machine()}")
     total = Digest(args.decimals)
     calls: list[tuple[tuple[Any, ...], dict[str, Any]]] = []
     lifted: dict[str, dict[Path, list[FrameLift]]] = {}

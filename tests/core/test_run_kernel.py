@@ -1,6 +1,12 @@
 """The fused run kernel (core/run_kernel.py) against the Python alternation loop of ``Runs.run``
 it replaces: every run of tracked lifts (new, warm, continued, screening and mirrored runs, with
-and without the prior's rows) replayed both ways; and the sums it writes out against numpy's."""
+and without the prior's rows) replayed both ways; and the objective's terms, which both paths
+call, against their formulas written with numpy.
+
+The two paths call the same compiled steps and the same compiled objective terms, so they perform
+the same floating-point operations on any CPU and BLAS: what the replay checks is the kernel's
+control flow (which alternation is kept, when a run stops, how a continued run resumes), which a
+changed sign, bound or index breaks by far more than FUSED_RUN_REL."""
 
 from __future__ import annotations
 
@@ -12,8 +18,8 @@ import pytest
 import tolerances as tol
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.options import LifterOptions
+from pose_lifter.core.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.pose_step import PriorRows
-from pose_lifter.core.run_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.runs import Run, Runs
 from pose_lifter.offline import lift_messages
 
@@ -108,7 +114,9 @@ def test_the_reference_paths_do_not_fuse() -> None:
         assert not Runs(lifter.model, opts).fusable
 
 
-def test_the_kernels_sums_are_numpys() -> None:
+def test_the_objective_terms_are_their_formulas() -> None:
+    """``||a||_1``, the depth row ``s r1 x r2`` and the prior's depth rows, compiled, against the
+    same formulas in numpy (another summation order: ROUND_OFF relative)."""
     rng = np.random.default_rng(3)
     for n in (0, 5, 8, 13, 128, 129, 200, 1000):
         a = rng.normal(size=n)
@@ -116,6 +124,8 @@ def test_the_kernels_sums_are_numpys() -> None:
     for _ in range(50):
         m0 = rng.normal(size=(2, 3))
         y, xp, pw = rng.normal(size=(12, 3)), rng.normal(size=(12, 3)), rng.uniform(size=(12, 2))
-        assert np.abs(_depth_row(m0) - PriorRows.depth_row(m0)).max() <= tol.ROUND_OFF
-        assert _depth_term(y.reshape(-1), m0, xp, pw) == pytest.approx(PriorRows(xp, pw).depth_term(y, m0),
-                                                                       rel=tol.ROUND_OFF)
+        m3 = np.cross(m0[0], m0[1]) / np.linalg.norm(m0[0])
+        assert np.abs(_depth_row(m0) - m3).max() <= tol.ROUND_OFF * np.abs(m3).max()
+        expected = float(pw[:, 1] @ np.abs(xp[:, 2] - (y - y.mean(axis=0)) @ m3))
+        assert _depth_term(y.reshape(-1), m0, xp, pw) == pytest.approx(expected, rel=tol.ROUND_OFF)
+        assert PriorRows(xp, pw).depth_term(y, m0) == _depth_term(y.reshape(-1), m0, xp, pw)

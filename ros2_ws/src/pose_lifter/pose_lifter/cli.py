@@ -383,6 +383,17 @@ def _cmd_experiments(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_warm_up(args: argparse.Namespace) -> int:
+    from .core._jit import HAVE_NUMBA
+    from .core.lifter import KERNEL_MODES, compile_kernels
+
+    seconds = compile_kernels()
+    state = "compiled or loaded" if HAVE_NUMBA else "not compiled (numba is not installed)"
+    print(f"pose-lifter warm-up: solver kernels of the {' and '.join(KERNEL_MODES)} modes {state} "
+          f"in {seconds:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``pose-lifter`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -493,6 +504,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="a tiny run (a couple of poses) for tests")
     p.add_argument("--processes", type=_POS_INT, default=2, help="worker processes (default 2)")
     p.set_defaults(func=_cmd_experiments)
+
+    p = sub.add_parser("warm-up", help="compile the solver kernels into the package's cache (make venv does)")
+    p.set_defaults(func=_cmd_warm_up)
     return parser
 
 

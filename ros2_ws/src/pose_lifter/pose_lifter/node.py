@@ -51,6 +51,7 @@ from .core._jit import HAVE_NUMBA
 from .core.bases import default_bases_path
 from .core.errors import InvalidInputError
 from .core.layouts import Layout, get_layout
+from .core.lifter import compile_kernels
 from .core.tracking import OutOfOrderFrameError, TrackPolicy
 from .node_checks import SkipSkeleton, WarningThrottle, check_output, frame_over_cap, skeleton_input
 from .node_markers import MarkerBook
@@ -345,13 +346,13 @@ def main(args: list[str] | None = None) -> None:
     one_blas_thread()  # the solver's matrices are small: BLAS threads only contend
     if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:
         # compile the solver kernels into this install's cache (make ros runs it after the build)
-        start = time.perf_counter()
-        Lifter().warm_up()
+        seconds = compile_kernels()
         print(f"pose_lifter: solver kernels {'compiled' if HAVE_NUMBA else 'not compiled (no numba)'} "
-              f"and cached in {time.perf_counter() - start:.1f} s")
+              f"and cached in {seconds:.1f} s")
         return
     signals = PhasedSignals()
     node: LifterNode | None = None
+    executor: SingleThreadedExecutor | None = None
     try:
         try:
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -368,6 +369,8 @@ def main(args: list[str] | None = None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if executor is not None:  # its guard conditions go before the context they belong to
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -15,6 +15,56 @@ from .alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
 
 
 @njit
+def _sum_abs(a: NDArray[np.float64]) -> float:
+    """``||a||_1`` of an (n,) array, summed in order. The one implementation of the sparsity term
+    ``||alpha||_1`` of a run's objective: the fused run and the Python loop both call it, so the
+    two evaluate the objective with the same operations on every machine."""
+    res = 0.0
+    for i in range(a.size):
+        res += abs(a[i])
+    return res
+
+
+@njit
+def _depth_row(m0: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``m3 = s r3 = s r1 x r2`` (3,) of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row
+    that maps a model pose to depth in the image's units (``||m1|| = s``). The one implementation
+    of :meth:`pose_lifter.core.pose_step.PriorRows.depth_row`."""
+    a0, a1, a2 = m0[0, 0], m0[0, 1], m0[0, 2]
+    b0, b1, b2 = m0[1, 0], m0[1, 1], m0[1, 2]
+    nrm = max(math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), 1e-300)
+    out = np.empty(3)
+    out[0] = (a1 * b2 - a2 * b1) / nrm
+    out[1] = (a2 * b0 - a0 * b2) / nrm
+    out[2] = (a0 * b1 - a1 * b0) / nrm
+    return out
+
+
+@njit
+def _depth_term(y: NDArray[np.float64], m0: NDArray[np.float64], xp: NDArray[np.float64],
+                pw: NDArray[np.float64]) -> float:
+    """The prior's depth rows of the objective, ``sum_j pw[j, 1] |xp[j, 2] - m3 (y_j - mean_l y_l)|``,
+    for the flat pose ``y`` (3n,), ``M0`` (2, 3) (``m3``: :func:`_depth_row`), the prior's target
+    ``xp`` (n, 3) and weights ``pw`` (n, 2). The one implementation of
+    :meth:`pose_lifter.core.pose_step.PriorRows.depth_term`."""
+    nj = xp.shape[0]
+    m3 = _depth_row(m0)
+    c0, c1, c2 = 0.0, 0.0, 0.0
+    for j in range(nj):
+        c0 += y[3 * j]
+        c1 += y[3 * j + 1]
+        c2 += y[3 * j + 2]
+    c0 /= nj
+    c1 /= nj
+    c2 /= nj
+    res = 0.0
+    for j in range(nj):
+        d = (y[3 * j] - c0) * m3[0] + (y[3 * j + 1] - c1) * m3[1] + (y[3 * j + 2] - c2) * m3[2]
+        res += pw[j, 1] * abs(xp[j, 2] - d)
+    return res
+
+
+@njit
 def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64],
                theta: float, l1: bool) -> float:
     """:func:`pose_objective` on plain arrays (``l1`` False: squared loss)."""

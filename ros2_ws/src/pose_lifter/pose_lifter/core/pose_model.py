@@ -182,10 +182,12 @@ class PoseModel:
         """``(mu + B alpha)`` as (12, 3)."""
         return np.asarray((self.mean + self.components @ alpha).reshape(N_JOINTS, 3))
 
-    def limb_violation(self, alpha: NDArray[np.float64]) -> float:
-        """``max_i | ||C_i y|| - sqrt(L_i) |`` for ``y = mu + B alpha``."""
+    def limb_violation(self, alpha: NDArray[np.float64], radii: NDArray[np.float64] | None = None) -> float:
+        """``max_i | ||C_i y|| - r_i |`` for ``y = mu + B alpha``, with the limb lengths ``r`` (8,)
+        in use (default the model's, ``sqrt(L_i)``; a prior's per-person ``limb_radii``)."""
         lv = (self._limb_matrix @ (self.mean + self.components @ alpha)).reshape(8, 3)
-        return float(np.max(np.abs(np.sqrt(np.sum(lv * lv, axis=1)) - np.sqrt(self.limb_sq))))
+        r = np.sqrt(self.limb_sq) if radii is None else radii
+        return float(np.max(np.abs(np.sqrt(np.sum(lv * lv, axis=1)) - r)))
 
     @functools.cached_property
     def riemannian_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:

@@ -69,7 +69,15 @@ from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER, SphereNewtonStep
 from .alpha.sqp import ReducedSQPStep
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions, Variant
-from .pose_kernel import _adm_dual_update, _adm_split, _grow_penalty, _objective, _riemannian_pose_kernel
+from .pose_kernel import (
+    _adm_dual_update,
+    _adm_split,
+    _depth_row,
+    _depth_term,
+    _grow_penalty,
+    _objective,
+    _riemannian_pose_kernel,
+)
 from .pose_model import PoseModel
 from .results import Duals, PoseResult
 from .skeleton import N_JOINTS
@@ -98,16 +106,17 @@ class PriorRows:
     @staticmethod
     def depth_row(projection: NDArray[np.float64]) -> NDArray[np.float64]:
         """``m3 = s r3`` of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row that maps a
-        model pose to depth in the same units (``r3 = r1 x r2``)."""
-        a, b = projection[0], projection[1]
-        # r1 x r2 written out (np.cross costs ~60 us in argument handling; same arithmetic)
-        cross = np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-        return cross / max(float(np.sqrt(a @ a)), 1e-300)
+        model pose to depth in the same units (``r3 = r1 x r2``;
+        :func:`pose_lifter.core.pose_kernel._depth_row`)."""
+        return _depth_row(np.ascontiguousarray(projection, dtype=np.float64))
 
     def depth_term(self, pose: NDArray[np.float64], projection: NDArray[np.float64]) -> float:
-        """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)."""
-        d = (pose - pose.mean(axis=0)) @ self.depth_row(projection)
-        return float(self.weights[:, 1] @ np.abs(self.target[:, 2] - d))
+        """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)
+        (:func:`pose_lifter.core.pose_kernel._depth_term`, the fused run's own)."""
+        return float(_depth_term(np.ascontiguousarray(pose, dtype=np.float64).reshape(-1),
+                                 np.ascontiguousarray(projection, dtype=np.float64),
+                                 np.ascontiguousarray(self.target, dtype=np.float64),
+                                 np.ascontiguousarray(self.weights, dtype=np.float64)))
 
 
 #: The compiled pose kernel's prior operands without a prior: target (12, 3), weights (12, 2) and
@@ -305,8 +314,9 @@ def pose_step(
         solver = "newton" if alpha_solver == "riemannian" and not riemannian else alpha_solver
         step = _alpha_step(model, variant, m0, mus, alpha, alpha_step, solver, delta, inner_max_iter,
                            inner_tol, qstep_fn, newton_tol, alpha_prox, prior)
+        radii = None if prior is None else prior.limb_radii
         return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, tol, eta, eta_growth,
-                    eta_max, duals)
+                    eta_max, duals, radii)
 
 
 def _alpha_step(model: PoseModel, variant: Variant, m0: NDArray[np.float64], mus: NDArray[np.float64],
@@ -336,16 +346,18 @@ def _alpha_step(model: PoseModel, variant: Variant, m0: NDArray[np.float64], mus
 
 def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], model: PoseModel,
          variant: Variant, th: float, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int, tol: float,
-         eta: float, eta_growth: float, eta_max: float, duals: Duals | None) -> PoseResult:
+         eta: float, eta_growth: float, eta_max: float, duals: Duals | None,
+         radii: NDArray[np.float64] | None = None) -> PoseResult:
     """The outer pose ADM of the module docstring on the rows ``(c, wts, mus)`` (see :func:`_rows`)
-    with the alpha-step ``step``."""
+    with the alpha-step ``step``; feasibility (the start's, the result's limb violation) against
+    the limb lengths ``radii`` (8,) the step constrains (None: the model's)."""
     l1 = variant.loss == "l1"
     v = model.v
     k = model.n_bases
     feas_tol = 1e-6
     best_alpha = alpha.copy()
     best_obj = np.inf
-    if not variant.limbs or model.limb_violation(alpha) < feas_tol:
+    if not variant.limbs or model.limb_violation(alpha, radii) < feas_tol:
         best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
     u1, u2 = _scaled_duals(duals, c.size, k, eta)
     beta = alpha.copy()
@@ -373,7 +385,7 @@ def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float
         best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
     if not np.all(np.isfinite(best_alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
-    viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
+    viol = model.limb_violation(best_alpha, radii) if variant.limbs else 0.0
     return PoseResult(objective=float(best_obj), n_iter=it, converged=converged, alpha=best_alpha,
                       pose=model.pose(best_alpha), limb_violation=viol, alpha_iter=alpha_it,
                       duals=Duals(eta * u1, eta * u2))

@@ -16,8 +16,11 @@ pose, stacked twice then); it keeps the lowest-``F`` alternation and stops when
 
 Applies with ``camera_solver == pose_solver == "admm"``, the Riemannian alpha-step and
 ``warm_duals`` off (every step starts its multipliers at zero; the kernel keeps none). The
-Python loop stays the reference: the two agree to round-off (the objective's sums are written
-as loops here, numpy's are pairwise or BLAS calls; :data:`tests.tolerances.FUSED_RUN_REL`).
+Python loop stays the reference. Both evaluate every term with the same compiled functions (the
+steps, and the objective's ``||alpha||_1`` and depth rows: :func:`pose_lifter.core.pose_kernel._sum_abs`,
+:func:`~pose_lifter.core.pose_kernel._depth_term`), so on any machine they perform the same
+floating-point operations; ``tests/core/test_run_kernel.py`` checks the kernel's control flow
+(best alternation, stopping rule, continued runs) against the loop's.
 """
 
 from __future__ import annotations
@@ -27,122 +30,14 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from ._fma import fma
 from ._jit import njit
 from .camera import _camera_solve
-from .pose_kernel import _n_rows, _riemannian_pose_kernel
+from .pose_kernel import _depth_row, _depth_term, _n_rows, _riemannian_pose_kernel, _sum_abs
 
 __all__ = ["CAMERA_DIVERGED", "OK", "POSE_DIVERGED"]
 
 #: Status codes of :func:`_run_kernel`.
 OK, CAMERA_DIVERGED, POSE_DIVERGED = 0, 1, 2
-
-
-@njit
-def _block_sum_abs(a: NDArray[np.float64], lo: int, n: int) -> float:
-    """``sum |a[lo:lo + n]|`` for ``n <= 128`` in numpy's order: below 8 in turn, else 8 lanes
-    summed pairwise, then the remainder in turn."""
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += abs(a[i])
-        return res
-    r0, r1, r2, r3 = abs(a[lo]), abs(a[lo + 1]), abs(a[lo + 2]), abs(a[lo + 3])
-    r4, r5, r6, r7 = abs(a[lo + 4]), abs(a[lo + 5]), abs(a[lo + 6]), abs(a[lo + 7])
-    i = 8
-    while i < n - n % 8:
-        r0 += abs(a[lo + i])
-        r1 += abs(a[lo + i + 1])
-        r2 += abs(a[lo + i + 2])
-        r3 += abs(a[lo + i + 3])
-        r4 += abs(a[lo + i + 4])
-        r5 += abs(a[lo + i + 5])
-        r6 += abs(a[lo + i + 6])
-        r7 += abs(a[lo + i + 7])
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += abs(a[lo + i])
-        i += 1
-    return float(res)
-
-
-@njit
-def _sum_abs(a: NDArray[np.float64]) -> float:
-    """``np.sum(np.abs(a))`` of a contiguous (n,) array to the bit: numpy's pairwise summation
-    (blocks of up to 128, :func:`_block_sum_abs`, halves above: ``n2 = n // 2`` rounded down to a
-    multiple of 8), evaluated with explicit stacks (numba cannot cache a recursive kernel)."""
-    task_lo = np.empty(192, dtype=np.int64)
-    task_n = np.empty(192, dtype=np.int64)  # -1: add the top two values
-    vals = np.empty(96)
-    nt, nv = 1, 0
-    task_lo[0], task_n[0] = 0, a.size
-    while nt > 0:
-        nt -= 1
-        lo, n = task_lo[nt], task_n[nt]
-        if n < 0:
-            nv -= 1
-            vals[nv - 1] = vals[nv - 1] + vals[nv]
-        elif n <= 128:
-            vals[nv] = _block_sum_abs(a, lo, n)
-            nv += 1
-        else:
-            n2 = n // 2
-            n2 -= n2 % 8
-            task_lo[nt], task_n[nt] = 0, -1  # then add them
-            task_lo[nt + 1], task_n[nt + 1] = lo + n2, n - n2  # then the right half
-            task_lo[nt + 2], task_n[nt + 2] = lo, n2  # the left half first
-            nt += 3
-    out: float = vals[0]
-    return out
-
-
-@njit
-def _depth_row(m0: NDArray[np.float64]) -> NDArray[np.float64]:
-    """:meth:`pose_lifter.core.pose_step.PriorRows.depth_row`: ``m3 = s r1 x r2`` (3,) of
-    ``M0 = s [r1; r2]`` (2, 3); ``||m1||^2`` summed as numpy's ``ddot`` does (fused multiply-adds
-    in order)."""
-    a0, a1, a2 = m0[0, 0], m0[0, 1], m0[0, 2]
-    b0, b1, b2 = m0[1, 0], m0[1, 1], m0[1, 2]
-    nrm = max(math.sqrt(fma(a2, a2, fma(a1, a1, a0 * a0))), 1e-300)
-    out = np.empty(3)
-    out[0] = (a1 * b2 - a2 * b1) / nrm
-    out[1] = (a2 * b0 - a0 * b2) / nrm
-    out[2] = (a0 * b1 - a1 * b0) / nrm
-    return out
-
-
-@njit
-def _depth_term(y: NDArray[np.float64], m0: NDArray[np.float64], xp: NDArray[np.float64],
-                pw: NDArray[np.float64]) -> float:
-    """:meth:`pose_lifter.core.pose_step.PriorRows.depth_term`: ``sum_j pw[j, 1] |xp[j, 2] -
-    m3 (y_j - mean_l y_l)|`` for the pose ``y`` (36,) and ``M0`` (2, 3), summed in the order of
-    numpy's calls (the mean row by row; ``dgemv``'s fused multiply-adds; the strided ``ddot``'s
-    two accumulators of pairs). 12 joints."""
-    nj = xp.shape[0]
-    m3 = _depth_row(m0)
-    c0, c1, c2 = 0.0, 0.0, 0.0
-    for j in range(nj):
-        c0 += y[3 * j]
-        c1 += y[3 * j + 1]
-        c2 += y[3 * j + 2]
-    c0 /= nj
-    c1 /= nj
-    c2 /= nj
-    e = np.empty(nj)
-    for j in range(nj):
-        d = fma(y[3 * j + 2] - c2, m3[2], fma(y[3 * j] - c0, m3[0], (y[3 * j + 1] - c1) * m3[1]))
-        e[j] = abs(xp[j, 2] - d)
-    t1, t2 = 0.0, 0.0
-    i = 0
-    while i < nj - nj % 4:
-        t1 += pw[i, 1] * e[i] + pw[i + 2, 1] * e[i + 2]
-        t2 += pw[i + 1, 1] * e[i + 1] + pw[i + 3, 1] * e[i + 3]
-        i += 4
-    while i < nj:
-        t1 += pw[i, 1] * e[i]
-        i += 1
-    return t1 + t2
 
 
 @njit

@@ -22,6 +22,7 @@ from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
 from .camera import camera_step_trusted, initial_camera
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions
+from .pose_kernel import _sum_abs
 from .pose_model import PoseModel
 from .pose_step import ETA_MAX, NO_PRIOR, PriorRows, pose_step
 from .results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
@@ -188,7 +189,7 @@ class Runs:
             pres = self.pose(xn, cam.camera, w, alpha, last_pose, pose_max_iter, prior)
             alpha, last_pose = pres.alpha, pres
             cam = self.camera(data, pres.pose, cam.camera, cam)
-            obj = cam.objective + th * float(np.sum(np.abs(alpha)))
+            obj = cam.objective + th * _sum_abs(alpha)  # the fused run's own sum
             if prior is not None:
                 obj += prior.depth_term(pres.pose, cam.camera.projection)
             history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),
