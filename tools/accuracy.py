@@ -13,7 +13,11 @@ trials so every camera is used), 640x480 pixels with an 800 px focal length.
 
 Conditions: clean; Gaussian 2D noise 0.05 / 0.1 / 0.2 right-lower-leg lengths; 20 % of joints
 displaced by 1-3 leg lengths with confidence kept at 1; 15 % of joints missing; limb lengths
-scaled per person (one factor per bone group, uniform +-20 %), clean 2D.
+scaled per person (one factor per bone group, uniform +-20 %), clean 2D. Faults of real detectors
+and cameras (clean 2D otherwise): ``lrswap`` (on 10 % of frames each the arms' and, independently,
+the legs' left/right labels swapped, confidence kept), ``lowercut`` (the lower body out of the
+image: knees and ankles missing on every frame), ``close`` (a perspective camera at 2 m), ``above``
+(the camera 50 degrees above the person, looking down).
 
 Methods: ``flat`` (the 2D with zero depth) and ``mean-pose`` floors; ``paper`` (the paper's
 method, tracked as the node tracks: cold 30-start first frame, then warm + mirrored starts);
@@ -64,7 +68,15 @@ CONDITIONS: dict[str, dict[str, float]] = {
     "outliers20": {"outliers": 0.2},
     "missing15": {"missing": 0.15},
     "proportions": {"limbs": 0.2},
+    # faults of real detectors and cameras
+    "lrswap": {"swap": 0.1},
+    "lowercut": {"cut": 1.0},
+    "close": {"distance": 2.0},
+    "above": {"elevation": 50.0},
 }
+#: Left/right joint pairs of the arms and the legs (the 2D labels a detector swaps).
+_ARMS = ((0, 3), (1, 4), (2, 5))
+_LEGS = ((6, 9), (7, 10), (8, 11))
 METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "hybrid", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
 ELEVATIONS = (0.0, 30.0)
@@ -105,21 +117,50 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
     _STATE["mean"] = PoseBases.load().mean_pose  # the mean-pose floor: the paper's bases, as before
 
 
-def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
-    track, cond, methods = args
-    spec = CONDITIONS[cond]
-    rng = np.random.default_rng(track.seed)
+def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The 2D a detector gives of ``track`` under condition ``spec`` (:data:`CONDITIONS`).
+
+    Returns
+    -------
+    px : ndarray, shape (T, 12, 2)
+        Pixels (0 where missing).
+    conf : ndarray, shape (T, 12)
+    world : ndarray, shape (T, 12, 3)
+        The filmed person (limbs scaled when the condition says so), metres.
+    cam_pose : ndarray, shape (T, 12, 3)
+        The centred pose in the camera frame, metres.
+    """
     world = track.world
     if spec.get("limbs", 0.0) > 0:
         world = scale_limbs(world, limb_scale_factors(1, spec["limbs"], rng)[0])
     az, el, proj = track.camera
+    el = spec.get("elevation", el)
+    dist = spec.get("distance", _STATE.get("distance", DISTANCE))  # --distance, a condition's own
+    if "distance" in spec:
+        proj = "perspective"
     n = len(world)
     rots = np.repeat(view_rotation(az, el)[None], n, axis=0)
-    dist = _STATE.get("distance", DISTANCE)
     pts, cam_pose, leg = film(world, rots, np.full(n, dist), np.full(n, proj == "perspective"))
     px = FOCAL * pts + CENTRE
     px, conf = corrupt_2d(px, FOCAL * leg, spec.get("noise", 0.0),
                           spec.get("outliers", 0.0), spec.get("missing", 0.0), rng)
+    if spec.get("swap", 0.0) > 0:  # a detector's left/right label swaps (arms, legs apart)
+        for pairs in (_ARMS, _LEGS):
+            hit = rng.random(n) < spec["swap"]
+            a, b = [p[0] for p in pairs], [p[1] for p in pairs]
+            px[np.ix_(hit, a + b)] = px[np.ix_(hit, b + a)]
+    if spec.get("cut", 0.0) > 0:  # the lower body out of the image
+        px[:, [7, 8, 10, 11]] = 0.0
+        conf[:, [7, 8, 10, 11]] = 0.0
+    return px, conf, world, cam_pose
+
+
+def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
+    track, cond, methods = args
+    rng = np.random.default_rng(track.seed)
+    px, conf, world, cam_pose = film_track(track, CONDITIONS[cond], rng)
+    n = len(world)
     leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
     truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
     out: dict[str, Any] = {}

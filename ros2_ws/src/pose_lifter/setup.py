@@ -22,7 +22,9 @@ setup(
     extras_require={"tools": ["rosbags", "tqdm", "matplotlib"], "reference": ["cvxpy", "clarabel", "scs"],
                     "fast": ["numba"],
                     # pose-lifter lift --scheduler: a collection of bags on a Dask cluster
-                    "cluster": ["rosbags", "tqdm", "dask", "distributed"]},
+                    "cluster": ["rosbags", "tqdm", "dask", "distributed"],
+                    # training of the learned prior (tools/train_prior.py, tools/cross_action.py)
+                    "train": ["torch==2.13.0"]},
     zip_safe=False,
     maintainer="pose_lifter maintainers",
     maintainer_email="pose-lifter@example.com",

@@ -66,6 +66,7 @@ __all__ = [
     "read_manifest",
     "resolve_data_dir",
     "split_trials",
+    "trials_by_action",
 ]
 
 #: Metres per CMU length unit.
@@ -186,17 +187,30 @@ TRAINING_SUBJECTS: Final[tuple[str, ...]] = ("01", "03", "05", "06", "09")
 
 
 def split_trials(split: str, data_dir: str | Path | None = None) -> list[str]:
-    """Trial ids of ``split`` (``"train"`` or ``"eval"``), sorted, each once.
+    """Trial ids of ``split`` (``"train"``, ``"eval"`` or ``"all"``), sorted, each once.
 
     ``"train"`` is every trial of :data:`TRAINING_SUBJECTS` except :data:`EVALUATION_TRIALS`;
-    ``"eval"`` is every trial of :data:`EVALUATION_SUBJECTS` plus :data:`EVALUATION_TRIALS`.
+    ``"eval"`` is every trial of :data:`EVALUATION_SUBJECTS` plus :data:`EVALUATION_TRIALS`;
+    ``"all"`` both (every trial the project may use: the cross-action folds' pool).
     """
     ids = sorted({t.trial for t in read_manifest(data_dir)})
     if split == "train":
         return [t for t in ids if t.split("_")[0] in TRAINING_SUBJECTS and t not in EVALUATION_TRIALS]
     if split == "eval":
         return [t for t in ids if t.split("_")[0] in EVALUATION_SUBJECTS or t in EVALUATION_TRIALS]
-    raise ValueError(f"split must be 'train' or 'eval', got {split!r}")
+    if split == "all":
+        return sorted(set(split_trials("train", data_dir)) | set(split_trials("eval", data_dir)))
+    raise ValueError(f"split must be 'train', 'eval' or 'all', got {split!r}")
+
+
+def trials_by_action(data_dir: str | Path | None = None) -> dict[str, list[str]]:
+    """The usable trials (``split_trials("all")``) by their manifest ``action`` class, sorted."""
+    usable = set(split_trials("all", data_dir))
+    out: dict[str, set[str]] = {}
+    for t in read_manifest(data_dir):
+        if t.trial in usable:
+            out.setdefault(t.action, set()).add(t.trial)
+    return {a: sorted(ts) for a, ts in sorted(out.items())}
 
 
 # --------------------------------------------------------------------------- rotations

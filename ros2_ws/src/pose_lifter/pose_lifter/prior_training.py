@@ -22,18 +22,21 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .core.metrics import p_mpjpe
-from .core.prior import PosePrior, prior_features
+from .core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
 from .core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from .pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from .scenes import corrupt_2d
-from .views import limb_scale_factors, scale_limbs, view_rotation
+from .views import limb_scale_factors, scale_limbs, view_rotations
 
-__all__ = ["Augmentation", "TrainingBatch", "make_batch", "train_prior"]
+__all__ = ["GENERALISE", "Augmentation", "TrainingBatch", "augment_poses", "make_batch", "train_prior",
+           "train_prior_residual"]
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,28 @@ class Augmentation:
     outliers_max: float = 0.25
     min_visible: int = 6
     chunk: int = 64
+    #: pose augmentations (:mod:`pose_lifter.pose_augment`), per sample (a window shares them):
+    #: the mirrored person, arms or legs of another frame, limbs turned about their joints
+    p_mirror: float = 0.0
+    p_transplant: float = 0.0
+    p_turn: float = 0.0
+    turn_root_deg: float = 40.0
+    turn_end_deg: float = 30.0
+    p_turn_limb: float = 0.5
+    #: the lower body out of the image: knees and ankles missing (and the hips too on a third of
+    #: those samples), every frame of the window
+    p_lower_cut: float = 0.0
+
+
+#: The augmentation that generalises past the training motions (the cross-action folds,
+#: ``tools/cross_action.py``): mirrored people, limb transplants and turned limbs on top of the
+#: views and corruptions.
+GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0.5, p_lower_cut=0.1)
+
+
+#: Knees and ankles; hips (:data:`pose_lifter.core.skeleton.JOINT_NAMES`).
+_LOWER_LEGS = [7, 8, 10, 11]
+_HIPS = [6, 9]
 
 
 @dataclass(frozen=True)
@@ -81,12 +106,13 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     for i, s in enumerate(seq_idx):
         f = rng.integers(0, lens[s] - window + 1)
         frames[i] = sequences[s][f:f + window]
+    frames = augment_poses(frames, sequences, prob, rng, aug)
     factors = limb_scale_factors(n, aug.limb_spread, rng)
     frames = scale_limbs(frames.reshape(n * window, N_JOINTS, 3), np.repeat(factors, window, axis=0))
     az = rng.uniform(0.0, 360.0, n)
     el = rng.uniform(*aug.elevation, n)
     ro = np.clip(rng.normal(0.0, aug.roll_std, n), -3 * aug.roll_std, 3 * aug.roll_std)
-    rots = np.stack([view_rotation(a, e, r) for a, e, r in zip(az, el, ro, strict=True)])
+    rots = view_rotations(az, el, ro)
     dist = rng.uniform(*aug.distance, n)
     persp = rng.random(n) < aug.p_perspective
     # the window's frames share a camera; each is centred on the current frame's centroid
@@ -109,6 +135,11 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
         pts[lo:hi] = noisy
         if miss > 0:
             vis[lo:hi] = rng.random(sub.shape[:3]) >= miss
+    if aug.p_lower_cut > 0:
+        cut = rng.random(n) < aug.p_lower_cut
+        hips = cut & (rng.random(n) < 1.0 / 3.0)
+        vis[np.ix_(cut, np.arange(window), _LOWER_LEGS)] = False
+        vis[np.ix_(hips, np.arange(window), _HIPS)] = False
     # keep at least min_visible joints in the current frame
     short = vis[:, -1].sum(axis=1) < aug.min_visible
     vis[short, -1] = True
@@ -119,6 +150,46 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     tgt[..., :2] = (cur_cam[..., :2] / dist[:, None, None] - centre[:, None, :]) / radius[:, None, None]
     tgt[..., 2] = cur_cam[..., 2] / dist[:, None] / radius[:, None]
     return TrainingBatch(feats, tgt.reshape(n, 3 * N_JOINTS), cur_cam, scale)
+
+
+def augment_poses(frames: NDArray[np.float64], sequences: Sequence[NDArray[np.float64]],
+                  prob: NDArray[np.float64], rng: np.random.Generator, aug: Augmentation
+                  ) -> NDArray[np.float64]:
+    """The pose augmentations of ``aug`` on sampled windows ``frames`` (N, W, 12, 3): mirrored
+    (``p_mirror``), both arms or both legs from a random window of ``sequences`` (drawn with
+    weights ``prob``, ``p_transplant``), limbs turned (``p_turn``); the frames of a window
+    share each change. No random numbers are drawn for an augmentation whose probability is 0."""
+    n, window = frames.shape[:2]
+    out = frames
+    if aug.p_mirror > 0:
+        m = rng.random(n) < aug.p_mirror
+        out = np.where(m[:, None, None, None], mirror_poses(out), out)
+    if aug.p_transplant > 0:
+        t = rng.random(n) < aug.p_transplant
+        rows = np.flatnonzero(t)
+        if len(rows):
+            lens = np.array([len(s) for s in sequences])
+            donors = np.empty((len(rows), window, N_JOINTS, 3))
+            for i, s in enumerate(rng.choice(len(sequences), size=len(rows), p=prob / prob.sum())):
+                f = rng.integers(0, lens[s] - window + 1)
+                donors[i] = sequences[s][f:f + window]
+            legs = rng.random(len(rows)) < 0.5
+            limbs = np.zeros((len(rows), 4), dtype=bool)
+            limbs[:, :2] = ~legs[:, None]
+            limbs[:, 2:] = legs[:, None]
+            moved = transplant_limbs(out[rows].reshape(-1, N_JOINTS, 3), donors.reshape(-1, N_JOINTS, 3),
+                                     np.repeat(limbs, window, axis=0))
+            out = out.copy()
+            out[rows] = moved.reshape(len(rows), window, N_JOINTS, 3)
+    if aug.p_turn > 0:
+        u = np.flatnonzero(rng.random(n) < aug.p_turn)
+        if len(u):
+            root, end = random_turns(len(u), aug.turn_root_deg, aug.turn_end_deg, aug.p_turn_limb, rng)
+            moved = turn_limbs(out[u].reshape(-1, N_JOINTS, 3), np.repeat(root, window, axis=0),
+                               np.repeat(end, window, axis=0))
+            out = out.copy()
+            out[u] = moved.reshape(len(u), window, N_JOINTS, 3)
+    return out
 
 
 def _evaluate(prior: PosePrior, batch: TrainingBatch) -> tuple[float, NDArray[np.float64]]:
@@ -195,3 +266,118 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
             "l2": l2, "batch_size": batch_size, "augmentation": aug.__dict__,
             "train_seconds": round(time.perf_counter() - t0, 1)}
     return PosePrior(prior.weights, prior.biases, out_mean, out_scale, np.maximum(err, 1e-6), window, meta)
+
+
+def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArray[np.float64]], *,
+                         width: int = 512, blocks: int = 2, dropout: float = 0.25, epochs: int = 30,
+                         samples_per_epoch: int = 100_000, lr: float = 1e-3, lr_final: float = 5e-5,
+                         batch_size: int = 256, weight_decay: float = 1e-5, window: int = 1, seed: int = 0,
+                         aug: Augmentation = Augmentation(), log: Callable[[str], None] | None = print
+                         ) -> PosePrior:
+    """Fit a residual prior (Martinez et al. 2017) in PyTorch (the optional extra ``train``).
+
+    The network: ``Linear -> BatchNorm -> ReLU -> Dropout`` to ``width`` units, ``blocks``
+    residual blocks of two such layers (their output added to their input), a linear output.
+    Minimises the mean squared error of the standardised outputs ``mean ||(y - m)/s - f(x)||^2``
+    with Adam (decoupled weight decay ``weight_decay``, step size decayed geometrically from
+    ``lr`` to ``lr_final`` over the epochs) on freshly augmented samples of ``train`` per epoch
+    (as :func:`train_prior`). The batch normalisation (running statistics) is folded into the
+    linear layers of the returned :class:`PosePrior`, which runs in numpy. Deterministic for a
+    seed on one thread (``torch.set_num_threads(1)``).
+
+    Parameters
+    ----------
+    train, validation : sequences of ndarray, shape (F, 12, 3)
+    width, blocks, dropout : network size and dropout probability during training
+    epochs, samples_per_epoch, lr, lr_final, batch_size, weight_decay, window, seed, aug
+        As in :func:`train_prior`.
+
+    Returns
+    -------
+    PosePrior
+    """
+    import torch
+    from torch import nn
+
+    torch.set_num_threads(1)
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug, window)
+    first = make_batch(train, samples_per_epoch, rng, aug, window)
+    out_mean = first.targets.mean(axis=0)
+    out_scale = first.targets.std(axis=0) + 1e-6
+    n_in = FRAME_DIM * window
+
+    def layer(a: int, b: int) -> list[nn.Module]:
+        return [nn.Linear(a, b), nn.BatchNorm1d(b), nn.ReLU(), nn.Dropout(dropout)]
+
+    stem = nn.Sequential(*layer(n_in, width))
+    body = nn.ModuleList([nn.Sequential(*layer(width, width), *layer(width, width)) for _ in range(blocks)])
+    head = nn.Linear(width, OUT_DIM)
+    modules = nn.ModuleList([stem, body, head])
+
+    def net(x: torch.Tensor) -> torch.Tensor:
+        h = stem(x)
+        for blk in body:
+            h = h + blk(h)
+        return head(h)
+
+    opt = torch.optim.AdamW(modules.parameters(), lr=lr, weight_decay=weight_decay)
+    decay = (lr_final / lr) ** (1.0 / max(1, epochs - 1))
+    gen = torch.Generator().manual_seed(seed)
+    t0 = time.perf_counter()
+    batch = first
+    loss_val = float("nan")
+    for ep in range(epochs):
+        if ep > 0:
+            batch = make_batch(train, samples_per_epoch, rng, aug, window)
+        for g in opt.param_groups:
+            g["lr"] = lr * decay ** ep
+        x = torch.from_numpy(batch.features.astype(np.float32))
+        y = torch.from_numpy(((batch.targets - out_mean) / out_scale).astype(np.float32))
+        modules.train()
+        order = torch.randperm(len(x), generator=gen)
+        total = 0.0
+        for lo in range(0, len(x) - batch_size + 1, batch_size):
+            idx = order[lo:lo + batch_size]
+            opt.zero_grad(set_to_none=True)
+            loss = torch.mean((net(x[idx]) - y[idx]) ** 2)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * batch_size
+        loss_val = total / max(1, (len(x) // batch_size) * batch_size)
+        if log is not None:
+            mm, _ = _evaluate(_fold_residual(stem, body, head, out_mean, out_scale, window), val)
+            log(f"epoch {ep + 1}/{epochs}: loss {loss_val:.4f}, validation P-MPJPE {mm:.1f} mm, "
+                f"{time.perf_counter() - t0:.0f} s")
+    prior = _fold_residual(stem, body, head, out_mean, out_scale, window)
+    mm, err = _evaluate(prior, val)
+    meta = {"validation_p_mpjpe_mm": round(mm, 2), "model": "residual", "width": width, "blocks": blocks,
+            "dropout": dropout, "epochs": epochs, "samples_per_epoch": samples_per_epoch, "seed": seed,
+            "lr": lr, "lr_final": lr_final, "weight_decay": weight_decay, "batch_size": batch_size,
+            "augmentation": aug.__dict__, "final_loss": round(loss_val, 5),
+            "train_seconds": round(time.perf_counter() - t0, 1), "torch": torch.__version__}
+    return replace(prior, abs_error=np.maximum(err, 1e-6), metadata=meta)
+
+
+def _fold_residual(stem: Any, body: Any, head: Any, out_mean: NDArray[np.float64],
+                   out_scale: NDArray[np.float64], window: int) -> PosePrior:
+    """The trained torch modules (eval mode: dropout off, batch norm by its running statistics)
+    as a numpy :class:`PosePrior`: each ``Linear -> BatchNorm`` becomes one linear layer
+    ``W' = W s``, ``b' = (b - mu) s + beta`` with ``s = gamma / sqrt(var + eps)``."""
+    import torch
+
+    def fold(lin: Any, bn: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        w = lin.weight.detach().double().numpy().T
+        b = lin.bias.detach().double().numpy()
+        s = (bn.weight.detach().double() / torch.sqrt(bn.running_var.double() + bn.eps)).numpy()
+        mu = bn.running_mean.detach().double().numpy()
+        return w * s, (b - mu) * s + bn.bias.detach().double().numpy()
+
+    layers = [fold(stem[0], stem[1])]
+    for blk in body:
+        layers += [fold(blk[0], blk[1]), fold(blk[4], blk[5])]
+    layers.append((head.weight.detach().double().numpy().T, head.bias.detach().double().numpy()))
+    return PosePrior(tuple(np.ascontiguousarray(w) for w, _ in layers),
+                     tuple(np.ascontiguousarray(b) for _, b in layers),
+                     out_mean, out_scale, np.ones((N_JOINTS, 3)), window, {}, len(body))

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from .core.skeleton import LIMB_GROUPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from .scenes import look_at
 
-__all__ = ["film", "limb_scale_factors", "scale_limbs", "view_rotation"]
+__all__ = ["film", "limb_scale_factors", "scale_limbs", "view_rotation", "view_rotations"]
 
 
 def view_rotation(azimuth_deg: float, elevation_deg: float, roll_deg: float = 0.0
@@ -28,6 +28,24 @@ def view_rotation(azimuth_deg: float, elevation_deg: float, roll_deg: float = 0.
     rot = look_at(cam, np.zeros(3))
     c, s = np.cos(ro), np.sin(ro)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ rot
+
+
+def view_rotations(azimuth_deg: NDArray[np.float64], elevation_deg: NDArray[np.float64],
+                   roll_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`view_rotation` of many cameras at once (arrays of shape (N,)): shape (N, 3, 3), the
+    same rotations to rounding (elevations within (-90, 90) degrees)."""
+    az, el, ro = (np.radians(np.asarray(a, dtype=np.float64)) for a in (azimuth_deg, elevation_deg, roll_deg))
+    z = -np.stack([np.sin(az) * np.cos(el), np.sin(el), np.cos(az) * np.cos(el)], axis=-1)
+    z /= np.linalg.norm(z, axis=-1, keepdims=True)
+    up = np.array([0.0, 1.0, 0.0])
+    y = -(up - z[:, 1:2] * z)
+    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    x = np.cross(y, z)
+    rot = np.stack([x, y, z], axis=-2)
+    c, s = np.cos(ro), np.sin(ro)
+    roll = np.zeros((len(az), 3, 3))
+    roll[:, 0, 0], roll[:, 0, 1], roll[:, 1, 0], roll[:, 1, 1], roll[:, 2, 2] = c, -s, s, c, 1.0
+    return np.einsum("nab,nbc->nac", roll, rot)
 
 
 def film(poses: NDArray[np.float64], rotations: NDArray[np.float64], distance: NDArray[np.float64],

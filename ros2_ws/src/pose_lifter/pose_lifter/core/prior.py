@@ -1,9 +1,12 @@
 """A learned 2D -> 3D pose prior: a small MLP from normalised 2D keypoints to all 12 joints in 3D.
 
 The network is data (VideoPose3D keeps the model definition apart from its weights): a ReLU
-multilayer perceptron whose weights, normalisation constants and per-joint uncertainty are one
-``.npz`` file, loaded with ``allow_pickle=False`` and validated before use. Inference is plain
-numpy (a few matrix products: ~20 us for one pose, batched offline).
+multilayer perceptron, plain or with residual blocks (Martinez et al. 2017: an input layer,
+``blocks`` blocks ``h + relu(relu(h W_a + b_a) W_b + b_b)``, a linear output layer; the
+training's batch normalisation folded into the linear layers), whose weights, normalisation
+constants and per-joint uncertainty are one ``.npz`` file, loaded with ``allow_pickle=False`` and
+validated before use. Inference is plain numpy (a few matrix products: ~20-150 us for one pose,
+batched offline).
 
 Input (:func:`normalise_2d`), per frame: the visible joints' 2D centred on their centroid ``c``
 and divided by their RMS distance ``r`` from it, missing joints set to 0, and the 12 visibility
@@ -44,6 +47,8 @@ DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data
 #: ``make prior-temporal``.
 DEFAULT_TEMPORAL_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w4.npz")
 _FORMAT_VERSION: Final[int] = 1
+#: Format of a prior with residual blocks (adds the member ``blocks``).
+_FORMAT_VERSION_RESIDUAL: Final[int] = 2
 #: Loader caps: uncompressed bytes of the whole file, layers, units per layer, window.
 MAX_FILE_BYTES: Final[int] = 64 * 1024 * 1024
 MAX_LAYERS: Final[int] = 8
@@ -173,6 +178,9 @@ class PosePrior:
         Mean absolute error per output on held-out frames (> 0).
     window : int
         Frames per input (1 = single frame; > 1 the causal temporal variant).
+    blocks : int
+        Residual blocks (0: a plain MLP). With ``blocks = k`` there are ``2 k + 2`` layers: the
+        input layer, two square layers per block, the output layer.
     metadata : dict
         Training data, augmentation, command, seed, validation figures.
     """
@@ -184,6 +192,7 @@ class PosePrior:
     abs_error: NDArray[np.float64]
     window: int = 1
     metadata: dict[str, Any] = field(default_factory=dict)
+    blocks: int = 0
     #: float32 copies of the weights and biases, for inference (see :meth:`forward`)
     _layers32: tuple[tuple[NDArray[np.float32], NDArray[np.float32]], ...] = field(
         init=False, repr=False, compare=False, default=())
@@ -194,6 +203,10 @@ class PosePrior:
         if len(self.weights) != len(self.biases) or not 1 <= len(self.weights) <= MAX_LAYERS:
             raise PriorFileError(f"1..{MAX_LAYERS} layers with one bias each expected, got "
                                  f"{len(self.weights)} weights and {len(self.biases)} biases")
+        if not isinstance(self.blocks, int) or self.blocks < 0 or (
+                self.blocks > 0 and len(self.weights) != 2 * self.blocks + 2):
+            raise PriorFileError(f"{self.blocks!r} residual blocks need {2 * self.blocks + 2} layers, "
+                                 f"got {len(self.weights)}")
         n_in = FRAME_DIM * self.window
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             if w.ndim != 2 or w.shape[0] != n_in or b.shape != (w.shape[1],):
@@ -203,6 +216,8 @@ class PosePrior:
                 raise PriorFileError(f"layer {i} has {w.shape[1]} units (at most {MAX_WIDTH})")
             if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
                 raise PriorFileError(f"layer {i} has non-finite weights")
+            if self.blocks > 0 and 0 < i <= 2 * self.blocks and w.shape[0] != w.shape[1]:
+                raise PriorFileError(f"layer {i} of a residual block must be square, got {w.shape}")
             n_in = w.shape[1]
         if n_in != OUT_DIM:
             raise PriorFileError(f"the last layer must have {OUT_DIM} outputs, got {n_in}")
@@ -241,8 +256,20 @@ class PosePrior:
                 if not need <= names:
                     raise PriorFileError(f"{p}: missing members {sorted(need - names)}")
                 version = int(z["format_version"])
-                if version != _FORMAT_VERSION:
-                    raise PriorFileError(f"{p}: format version {version}, expected {_FORMAT_VERSION}")
+                if version not in (_FORMAT_VERSION, _FORMAT_VERSION_RESIDUAL):
+                    raise PriorFileError(f"{p}: format version {version}, expected {_FORMAT_VERSION} "
+                                         f"or {_FORMAT_VERSION_RESIDUAL}")
+                blocks = 0
+                if version == _FORMAT_VERSION_RESIDUAL:
+                    if "blocks" not in names:
+                        raise PriorFileError(f"{p}: missing member 'blocks'")
+                    blocks_raw = z["blocks"]
+                    if blocks_raw.dtype.kind not in "iu" or blocks_raw.ndim != 0:
+                        raise PriorFileError(f"{p}: blocks must be an integer")
+                    blocks = int(blocks_raw)
+                    if not 1 <= blocks <= (MAX_LAYERS - 2) // 2:
+                        raise PriorFileError(
+                            f"{p}: {blocks} residual blocks (1..{(MAX_LAYERS - 2) // 2} allowed)")
                 n = int(z["n_layers"])
                 if not 1 <= n <= MAX_LAYERS:
                     raise PriorFileError(f"{p}: {n} layers (1..{MAX_LAYERS} allowed)")
@@ -268,7 +295,7 @@ class PosePrior:
             raise PriorFileError(f"cannot read prior file {p}: {exc}") from exc
         try:
             return cls(tuple(arrays[f"w{i}"] for i in range(n)), tuple(arrays[f"b{i}"] for i in range(n)),
-                       arrays["out_mean"], arrays["out_scale"], arrays["abs_error"], window, meta)
+                       arrays["out_mean"], arrays["out_scale"], arrays["abs_error"], window, meta, blocks)
         except PriorFileError as exc:
             raise PriorFileError(f"{p}: {exc}") from exc
 
@@ -277,8 +304,11 @@ class PosePrior:
         moves the outputs by ~1e-6 of their scale, inference runs in float64)."""
         arrays: dict[str, Any] = {f"w{i}": w.astype(np.float32) for i, w in enumerate(self.weights)}
         arrays.update({f"b{i}": b.astype(np.float32) for i, b in enumerate(self.biases)})
+        if self.blocks > 0:
+            arrays["blocks"] = np.int64(self.blocks)
+        version = _FORMAT_VERSION_RESIDUAL if self.blocks > 0 else _FORMAT_VERSION
         np.savez_compressed(
-            path, format_version=np.int64(_FORMAT_VERSION), n_layers=np.int64(len(self.weights)),
+            path, format_version=np.int64(version), n_layers=np.int64(len(self.weights)),
             window=np.int64(self.window), out_mean=self.out_mean, out_scale=self.out_scale,
             abs_error=self.abs_error, metadata=np.array(json.dumps(self.metadata, sort_keys=True)), **arrays)
 
@@ -297,18 +327,32 @@ class PosePrior:
         return prior_features(points, visible, self.window)
 
     def forward(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The network: ``relu`` hidden layers, linear output, de-standardised. Shape
-        (..., 36 * window) -> (..., 12, 3) normalised output.
+        """The network: ``relu`` hidden layers (the residual blocks' outputs added to their
+        inputs), linear output, de-standardised. Shape (..., 36 * window) -> (..., 12, 3)
+        normalised output.
 
         The layers run in float32 (the file's precision): a single pose reads the weights
         (2.4 MB for 2 x 768) once, and float32 halves that memory traffic (measured 287 -> 130 us
         a pose); outputs move by ~1e-6 of their scale against float64."""
-        h = np.asarray(features, dtype=np.float32)
-        last = len(self._layers32) - 1
-        for i, (w, b) in enumerate(self._layers32):
-            h = h @ w + b
-            if i < last:
-                np.maximum(h, 0.0, out=h)
+        h: NDArray[Any] = np.asarray(features, dtype=np.float32)
+        layers = self._layers32
+        if self.blocks == 0:
+            last = len(layers) - 1
+            for i, (w, b) in enumerate(layers):
+                h = h @ w + b
+                if i < last:
+                    np.maximum(h, 0.0, out=h)
+        else:
+            h = h @ layers[0][0] + layers[0][1]
+            np.maximum(h, 0.0, out=h)
+            for k in range(self.blocks):
+                (wa, ba), (wb, bb) = layers[1 + 2 * k], layers[2 + 2 * k]
+                a = h @ wa + ba
+                np.maximum(a, 0.0, out=a)
+                a = a @ wb + bb
+                np.maximum(a, 0.0, out=a)
+                h = h + a
+            h = h @ layers[-1][0] + layers[-1][1]
         y = h.astype(np.float64) * self.out_scale + self.out_mean
         return y.reshape(*y.shape[:-1], N_JOINTS, 3)
 

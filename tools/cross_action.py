@@ -1,0 +1,274 @@
+"""Accuracy on motion the prior has never seen: leave-one-class-out over the motion classes of the
+CMU manifest (``make cross-action``).
+
+    .venv/bin/python tools/cross_action.py [--data ../shared/data/cmu] [--classes walk run ...]
+        [--model residual|mlp] [--augment generalise|views] [--epochs 8] [--samples 50000]
+        [--width 512] [--blocks 2] [--hidden 768 768] [--frames 90] [--views 2] [--segments 8]
+        [--conditions clean noise0.1 ...] [--methods flat learned hybrid] [--workers 1]
+        [--folds DIR] [--out out/cross_action]
+    .venv/bin/python tools/cross_action.py --merge RUN1/cross_action.json RUN2/... --out DIR
+
+Folds: for each motion class C of ``MANIFEST.csv`` among the usable trials
+(:func:`pose_lifter.mocap.trials_by_action`: walk, run, jump, punch, dance, basketball,
+playground, other; a class whose only trial is reserved has no fold), a prior is trained on every
+usable trial *not* of class C (every 8th of them, sorted, held out of the fit for its validation
+figure and per-joint uncertainty), seeded, at the fixed budget given, and saved as
+``DIR/<C>.npz`` (reused when its metadata match the requested training). Class C is then lifted
+as ``tools/accuracy.py`` lifts the evaluation split: tracks at 30 Hz of at most ``--frames``
+frames (``--segments`` segments spread over C's trials, each filmed from ``--views`` of
+accuracy.py's 32 cameras), the conditions of accuracy.py (clean, noise, confident outliers,
+missing joints, and the detector / camera faults: left/right swaps, the lower body out of the
+image, a camera at 2 m, a camera 50 degrees above). Methods: ``flat`` (the 2D with zero depth),
+``learned`` (the fold's prior alone) and ``hybrid`` (the default mode tracked by
+:class:`pose_lifter.core.tracking.TrackPolicy`, with the fold's prior as its single-frame prior and
+the temporal prior off: the packaged temporal prior has seen every class).
+
+The hybrid's pose bases are the packaged ``bases_hybrid_sparse200.npz`` (or ``--bases``); their
+training trials are read from the file and each fold's row says whether they include class C.
+
+Prints per class and the mean over classes (each class weighs the same); writes
+``cross_action.json`` and ``cross_action.md`` to ``--out``. Deterministic (seeded training on one
+thread, seeded corruption).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import accuracy as acc
+from pose_lifter.core.bases import PoseBases, default_bases_path
+from pose_lifter.core.errors import PriorFileError
+from pose_lifter.core.prior import PosePrior
+from pose_lifter.mocap import load_trial, trials_by_action
+from pose_lifter.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
+
+DEFAULT_CONDITIONS = ("clean", "noise0.1", "outliers20", "missing15", "lrswap", "lowercut", "close", "above")
+METHODS = ("flat", "learned", "hybrid")
+AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
+
+
+def fold_training(args: argparse.Namespace) -> dict[str, Any]:
+    """The training settings a fold's prior is identified by (a saved fold is reused only when
+    its metadata hold the same)."""
+    spec: dict[str, Any] = {"model": args.model, "augment": args.augment, "epochs": args.epochs,
+                            "samples_per_epoch": args.samples, "seed": args.seed, "frame_step": args.step,
+                            "augmentation": dict(AUGMENTATIONS[args.augment].__dict__)}
+    if args.model == "residual":
+        spec.update(width=args.width, blocks=args.blocks, dropout=args.dropout)
+    else:
+        spec.update(hidden=list(args.hidden))
+    return spec
+
+
+def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path) -> PosePrior:
+    """Train (or reuse) the prior of the fold without class ``cls``, saved to ``path``."""
+    spec = json.loads(json.dumps(fold_training(args)))  # as the file's metadata hold it
+    if path.is_file():
+        try:
+            old = PosePrior.load(path)
+            if old.metadata.get("fold_training") == spec and old.metadata.get("held_out_class") == cls:
+                print(f"[{cls}] reusing {path}", flush=True)
+                return old
+        except PriorFileError:
+            pass
+    trials = sorted(t for c, ts in pool.items() if c != cls for t in ts)
+    val_ids = trials[7::8]
+    fit_ids = [t for t in trials if t not in val_ids]
+    fit = [load_trial(t, args.data, step=args.step) for t in fit_ids]
+    val = [load_trial(t, args.data, step=args.step) for t in val_ids]
+    print(f"[{cls}] training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames), "
+          f"validation {len(val_ids)} trials", flush=True)
+    aug = AUGMENTATIONS[args.augment]
+
+    def log(s: str) -> None:
+        print(f"[{cls}] {s}", flush=True)
+
+    t0 = time.perf_counter()
+    if args.model == "residual":
+        prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks, dropout=args.dropout,
+                                     epochs=args.epochs, samples_per_epoch=args.samples, seed=args.seed,
+                                     aug=aug, log=log)
+    else:
+        prior = train_prior(fit, val, hidden=tuple(args.hidden), epochs=args.epochs,
+                            samples_per_epoch=args.samples, seed=args.seed, aug=aug, log=log)
+    meta = dict(prior.metadata)
+    meta.update({"held_out_class": cls, "fold_training": spec, "training_trials": fit_ids,
+                 "validation_trials": val_ids, "frame_step": args.step,
+                 "command": "python tools/cross_action.py " + " ".join(sys.argv[1:]),
+                 "wall_seconds": round(time.perf_counter() - t0, 1)})
+    from dataclasses import replace
+    prior = replace(prior, metadata=meta)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    prior.save(path)
+    print(f"[{cls}] wrote {path} in {time.perf_counter() - t0:.0f} s", flush=True)
+    return prior
+
+
+def class_tracks(trials: list[str], args: argparse.Namespace) -> list[acc.Track]:
+    """``--segments`` segments of at most ``--frames`` frames at 30 Hz, spread evenly over the
+    non-overlapping segments of ``trials``, each filmed from ``--views`` cameras."""
+    segs = []
+    for t in trials:
+        world = load_trial(t, args.data, step=4)
+        for lo in range(0, max(1, len(world) - 29), args.frames):
+            part = world[lo:lo + args.frames]
+            if len(part) >= 30:
+                segs.append((f"{t}[{lo}]", part))
+    pick = np.unique(np.round(np.linspace(0, len(segs) - 1, min(args.segments, len(segs)))).astype(int))
+    out = []
+    for k, i in enumerate(pick):
+        name, world = segs[i]
+        for v in range(args.views):
+            cam = acc.CAMERAS[(k * args.views + v) % len(acc.CAMERAS)]
+            out.append(acc.Track(f"{name}@{cam[0]:.0f}/{cam[1]:.0f}/{cam[2]}", world, cam, 1000 * k + v))
+    return out
+
+
+def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Namespace
+                  ) -> dict[str, dict[str, dict[str, float]]]:
+    """Per condition and method: mean P-MPJPE, MPJPE, jitter over the frames of ``tracks``."""
+    settings = {"prior_file": str(prior_path), "temporal_prior": False}
+    methods = tuple(args.methods)
+    jobs = [(t, c, methods) for c in args.conditions for t in tracks]
+    if args.workers > 1:
+        import multiprocessing as mp
+        with mp.get_context("fork").Pool(args.workers, acc._init, (settings, methods, args.bases)) as pool:
+            results = list(pool.imap_unordered(acc._job, jobs, chunksize=1))
+    else:
+        acc._init(settings, methods, args.bases)
+        results = [acc._job(j) for j in jobs]
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    for cond in args.conditions:
+        rows = [r for r in results if r["cond"] == cond]
+        table[cond] = {m: {k: acc._nanmean([v for r in rows for v in r["methods"][m][k]])
+                           for k in ("p_mpjpe", "mpjpe", "jitter")} for m in methods}
+        for m in methods:
+            table[cond][m]["lifted"] = float(np.mean([np.isfinite(r["methods"][m]["p_mpjpe"]).mean()
+                                                      for r in rows]))
+    return table
+
+
+def render(record: dict[str, Any]) -> str:
+    """The markdown tables of a run: per condition, P-MPJPE per class and method, and the mean."""
+    folds = record["folds"]
+    classes = list(folds)
+    methods = record["methods"]
+    conds = record["conditions"]
+    lines = [record["header"], "",
+             "P-MPJPE (mm) of each class, lifted by models that never saw it (the fold's prior); "
+             "`bases saw C`: the hybrid's pose bases were learned on trials of the class.", ""]
+    for m in methods:
+        lines += [f"**{m}**", "", "| class | bases saw C | frames | " + " | ".join(conds) + " |",
+                  "|---|---|---|" + "---|" * len(conds)]
+        for c in classes:
+            f = folds[c]
+            cells = [f"{f['table'][k][m]['p_mpjpe']:.1f}" for k in conds]
+            lines.append(f"| {c} | {'yes' if f['bases_saw_class'] else 'no'} | {f['frames']} | "
+                         + " | ".join(cells) + " |")
+        mean = [np.mean([folds[c]["table"][k][m]["p_mpjpe"] for c in classes]) for k in conds]
+        lines.append("| **mean over classes** | | | " + " | ".join(f"**{v:.1f}**" for v in mean) + " |")
+        lines.append("")
+    if "hybrid" in methods:
+        lines += ["jitter (mean acceleration error, mm per frame^2), hybrid, mean over classes: " + ", ".join(
+            f"{k} {np.mean([folds[c]['table'][k]['hybrid']['jitter'] for c in classes]):.1f}"
+            for k in conds), ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=None)
+    ap.add_argument("--classes", nargs="+", default=None, help="default: every class with usable trials")
+    ap.add_argument("--model", choices=("residual", "mlp"), default="residual")
+    ap.add_argument("--augment", choices=tuple(AUGMENTATIONS), default="generalise")
+    ap.add_argument("--epochs", type=int, default=8)
+    ap.add_argument("--samples", type=int, default=50_000, help="augmented samples per epoch")
+    ap.add_argument("--width", type=int, default=512, help="residual: units per layer")
+    ap.add_argument("--blocks", type=int, default=2, help="residual: blocks")
+    ap.add_argument("--dropout", type=float, default=0.25, help="residual: dropout")
+    ap.add_argument("--hidden", type=int, nargs="+", default=[768, 768], help="mlp: hidden widths")
+    ap.add_argument("--step", type=int, default=2, help="mocap frame step of the training (2: 60 Hz)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--frames", type=int, default=90)
+    ap.add_argument("--views", type=int, default=2)
+    ap.add_argument("--segments", type=int, default=8)
+    ap.add_argument("--conditions", nargs="+", default=list(DEFAULT_CONDITIONS), choices=list(acc.CONDITIONS))
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
+    ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
+    ap.add_argument("--train-only", action="store_true",
+                    help="train (or reuse) the folds' priors, no lifting")
+    ap.add_argument("--merge", type=Path, nargs="+", default=None,
+                    help="no training or lifting: join runs' cross_action.json (same settings) into --out")
+    ap.add_argument("--out", type=Path, default=Path("out/cross_action"))
+    args = ap.parse_args(argv)
+    if args.merge:
+        recs = [json.loads(p.read_text()) for p in args.merge]
+        record = dict(recs[0])
+        record["folds"] = {c: f for r in recs for c, f in r["folds"].items()}
+        record["header"] = recs[0]["header"] + " (merged: " + ", ".join(str(p) for p in args.merge) + ")"
+        return _write(record, args.out)
+    warnings.simplefilter("ignore")
+    t0 = time.perf_counter()
+    pool = trials_by_action(args.data)
+    classes = args.classes or list(pool)
+    folds_dir = args.folds or args.out / "folds"
+    bases_path = Path(args.bases) if args.bases else default_bases_path("hybrid")
+    bases_trials = set(PoseBases.load(bases_path).metadata.get("training_trials", []))
+    command = " ".join(sys.argv[1:] if argv is None else argv)
+    record: dict[str, Any] = {
+        "header": (f"Cross-action folds (`tools/cross_action.py {command}`): "
+                   f"training {json.dumps(fold_training(args))}; bases `{bases_path.name}`"),
+        "methods": list(args.methods), "conditions": list(args.conditions), "folds": {}}
+    for cls in classes:
+        if cls not in pool:
+            raise SystemExit(f"no usable trials of class {cls!r} (classes: {sorted(pool)})")
+        path = folds_dir / f"{cls}.npz"
+        tf = time.perf_counter()
+        train_fold(cls, pool, args, path)
+        if args.train_only:
+            continue
+        tracks = class_tracks(pool[cls], args)
+        te = time.perf_counter()
+        table = evaluate_fold(tracks, path, args)
+        record["folds"][cls] = {
+            "trials": pool[cls], "tracks": len(tracks), "frames": sum(len(t.world) for t in tracks),
+            "bases_saw_class": bool(set(pool[cls]) & bases_trials), "prior": str(path), "table": table,
+            "train_seconds": round(te - tf, 1), "lift_seconds": round(time.perf_counter() - te, 1)}
+        row = ", ".join(f"{k} " + "/".join(f"{table[k][m]['p_mpjpe']:.1f}" for m in args.methods)
+                        for k in args.conditions)
+        print(f"[{cls}] P-MPJPE ({'/'.join(args.methods)}): {row}; {time.perf_counter() - te:.0f} s",
+              flush=True)
+        _write(record, args.out, quiet=True)
+    if args.train_only:
+        return 0
+    record["wall_seconds"] = round(time.perf_counter() - t0, 1)
+    return _write(record, args.out)
+
+
+def _write(record: dict[str, Any], out: Path, quiet: bool = False) -> int:
+    text = render(record)
+    if not quiet:
+        print(text, flush=True)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "cross_action.json").write_text(json.dumps(record, indent=1))
+    (out / "cross_action.md").write_text(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
