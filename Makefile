@@ -134,9 +134,11 @@ ros: venv
 clean:
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log out
 
-# the training-only library of the learned prior (the optional extra `train`: PyTorch CPU)
+# the training-only library of the learned prior (the optional extra `train`: PyTorch). pip, not uv:
+# pip also looks in PIP_FIND_LINKS, where these machines keep the CPU build of torch 2.13.0 (uv would
+# fetch the CUDA build from the index, about 4 GB)
 train-deps: venv
-	$(PY) -c "import torch" 2>/dev/null || $(UV) pip install --system-certs -q -p $(PY) 'torch==2.13.0'
+	$(PY) -c "import torch" 2>/dev/null || $(PY) -m pip install -q 'torch==2.13.0'
 
 # accuracy on motion never trained on: per motion class of the manifest, a prior trained without it
 # (tools/cross_action.py; docs/cross_action.md)
