@@ -2,26 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 from pose_lifter.core.synthetic import synthetic_poses
-
-REPO = Path(__file__).resolve().parents[1]
+from tool_modules import load_tool
 
 
 @pytest.fixture(scope="module")
 def acc() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("accuracy_tool", REPO / "tools" / "accuracy.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["accuracy_tool"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("accuracy", "accuracy_tool")
 
 
 def _track(acc: ModuleType, camera: tuple[float, float, str] = (45.0, 0.0, "weak")) -> object:

@@ -2,26 +2,20 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
+from tool_modules import load_tool
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def lift_hash() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("lift_hash", REPO / "tools" / "lift_hash.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["lift_hash"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("lift_hash")
 
 
 def _digest(mod: ModuleType, *values: float) -> str:
