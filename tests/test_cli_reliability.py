@@ -99,9 +99,12 @@ def _children(pid: int) -> list[int]:
 def test_ctrl_c_exits_130_with_one_line(tmp_path: Path) -> None:
     out = tmp_path / "o.mcap"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    # SIGINT at its default in the child whatever this process inherited: a shell ignores it in
+    # background jobs, and Python then never raises KeyboardInterrupt (the lift would run on)
     proc = subprocess.Popen([sys.executable, "-m", "pose_lifter.cli", "lift", str(FIVE), "--out", str(out),
                              "--workers", "2", "--solver", "cvxpy", "--quiet"],
-                            stderr=subprocess.PIPE, text=True, env=env)
+                            stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # interrupt while lifting: once the two workers are forked (the slow reference solver),
     # however long the imports and the reading take on a loaded machine
     deadline = time.monotonic() + 120.0
