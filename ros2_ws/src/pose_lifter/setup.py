@@ -36,7 +36,7 @@ setup(
             "lifter = pose_lifter._entry:lifter",
             "adapter = pose_lifter.adapter_node:main",
             "lifter_lifecycle = pose_lifter.lifecycle_node:main",
-            "pose-lifter = pose_lifter.cli:run",
+            "pose-lifter = pose_lifter.cli:main",
             "action_recognition = pose_lifter.examples.action_recognition:main",
         ],
     },

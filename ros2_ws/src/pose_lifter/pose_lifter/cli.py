@@ -594,17 +594,5 @@ def _library_errors() -> tuple[type[BaseException], ...]:
 
 
 
-def run() -> None:
-    """The ``pose-lifter`` console script: :func:`main`, and after a Ctrl-C (exit code 130, every
-    output already cleaned up on the way out) an immediate exit: the interpreter's own exit would
-    join the worker pool's manager thread again, which can wait on a worker that was terminated."""
-    code = main()
-    if code == 130:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(130)
-    sys.exit(code)
-
-
 if __name__ == "__main__":
-    run()
+    sys.exit(main())
