@@ -54,7 +54,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap import load_trial, split_trials
 from pose_lifter.scenes import corrupt_2d
@@ -75,8 +75,8 @@ CONDITIONS: dict[str, dict[str, float]] = {
     "above": {"elevation": 50.0},
 }
 #: Left/right joint pairs of the arms and the legs (the 2D labels a detector swaps).
-_ARMS = ((0, 3), (1, 4), (2, 5))
-_LEGS = ((6, 9), (7, 10), (8, 11))
+_ARMS = tuple(zip(JOINTS_LEFT[:3], JOINTS_RIGHT[:3], strict=True))
+_LEGS = tuple(zip(JOINTS_LEFT[3:], JOINTS_RIGHT[3:], strict=True))
 METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "hybrid", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
 ELEVATIONS = (0.0, 30.0)

@@ -23,12 +23,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from .core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS, body_frame
+from .core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, N_JOINTS, body_frame
 
 __all__ = ["CHAINS", "MIRROR_INDEX", "mirror_poses", "random_turns", "transplant_limbs", "turn_limbs"]
 
 #: The four limbs as (root, middle, end) joints: left arm, right arm, left leg, right leg.
-CHAINS: Final[tuple[tuple[int, int, int], ...]] = ((0, 1, 2), (3, 4, 5), (6, 7, 8), (9, 10, 11))
+CHAINS: Final[tuple[tuple[int, int, int], ...]] = tuple(
+    (LIMBS[2 * i][0], LIMBS[2 * i][1], LIMBS[2 * i + 1][1]) for i in range(len(LIMBS) // 2))
 #: Joint order of the mirrored person: each joint's left/right counterpart.
 MIRROR_INDEX: Final[tuple[int, ...]] = tuple(
     {**dict(zip(JOINTS_LEFT, JOINTS_RIGHT, strict=True)),
