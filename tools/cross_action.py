@@ -183,7 +183,8 @@ def render(record: dict[str, Any]) -> str:
         lines.append("")
     for m in ("hybrid", "hybrid-offline"):
         if m in methods:
-            lines += [f"jitter (mean acceleration error, mm per frame^2), {m}, mean over classes: " + ", ".join(
+            head = f"jitter (mean acceleration error, mm per frame^2), {m}, mean over classes: "
+            lines += [head + ", ".join(
                 f"{k} {np.mean([folds[c]['table'][k][m]['jitter'] for c in classes]):.1f}"
                 for k in conds), ""]
     return "\n".join(lines)
