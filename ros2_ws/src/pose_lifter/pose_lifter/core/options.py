@@ -182,7 +182,7 @@ class LifterOptions:
     ``prior_weight_xy``, ``prior_weight_z``, ``outlier_threshold``, ``outlier_threshold_gated``,
     ``outlier_passes``, ``prior_limbs``, ``temporal_weight``, ``outlier_gate``,
     ``missing_temporal_weight``, ``fill_missing_frames``, ``hybrid_alternations``,
-    ``hybrid_pose_max_iter``, ``image_limbs``, ``correction_smoothing``,
+    ``hybrid_pose_max_iter``, ``image_limbs``, ``prior_flip``, ``correction_smoothing``,
     ``disturbed_smoothing_gain``.
 
     Experiment toggles (:data:`EXPERIMENT_OPTIONS`: solver internals and measured-off
@@ -325,6 +325,9 @@ class LifterOptions:
     image_limbs: bool = field(default=False, metadata=_meta(
         "Hybrid, tracked: the track's limb proportions also from its image limb lengths over the "
         "fit's scale (their upper quantile over frames), with prior_limbs."))
+    prior_flip: bool = field(default=False, metadata=_meta(
+        "Hybrid and learned: the prior's pose is the mean of its answers for the 2D and for the "
+        "mirrored 2D (mirrored back): test-time flip averaging."))
     correction_smoothing: float = field(default=0.7, metadata=_meta(
         "Hybrid, tracked: the published pose is the prior's plus the fit's correction of it, "
         "averaged over frames with this factor (causal, exponential; 0 = the fit as it is).",

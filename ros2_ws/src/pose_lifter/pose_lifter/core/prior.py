@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InvalidInputError, PriorFileError
-from .skeleton import N_JOINTS
+from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
 __all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "normalise_2d", "prior_features"]
 
@@ -160,6 +160,30 @@ def _window_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
     feats[:, 2 * N_JOINTS:] = vis
     feats[-1] = last
     return feats.reshape(FRAME_DIM * len(x)), centre, radius
+
+
+#: Joint order of the mirror image: left and right swapped (``_MIRROR[j]`` is ``j``'s counterpart).
+_MIRROR: Final[NDArray[np.intp]] = np.arange(N_JOINTS)
+_MIRROR[list(JOINTS_LEFT)] = JOINTS_RIGHT
+_MIRROR[list(JOINTS_RIGHT)] = JOINTS_LEFT
+
+
+def mirror_features(features: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Network input (..., 36 * window) of the mirrored image: each frame's normalised ``x``
+    negated, left and right joints (coordinates and visibility flags) swapped."""
+    f = np.asarray(features, dtype=np.float64)
+    frames = f.reshape(*f.shape[:-1], -1, FRAME_DIM)
+    u = frames[..., : 2 * N_JOINTS].reshape(*frames.shape[:-1], N_JOINTS, 2)[..., _MIRROR, :]
+    u = u * np.array([-1.0, 1.0])
+    vis = frames[..., 2 * N_JOINTS:][..., _MIRROR]
+    out = np.concatenate([u.reshape(*frames.shape[:-1], 2 * N_JOINTS), vis], axis=-1)
+    return out.reshape(f.shape)
+
+
+def mirror_pose(pose: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A pose (..., 12, 3) in the camera frame mirrored left-right: ``x`` negated, left and right
+    joints swapped (its own inverse)."""
+    return np.asarray(pose)[..., _MIRROR, :] * np.array([-1.0, 1.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -356,11 +380,22 @@ class PosePrior:
         y = h.astype(np.float64) * self.out_scale + self.out_mean
         return y.reshape(*y.shape[:-1], N_JOINTS, 3)
 
-    def predict(self, points: NDArray[np.float64], visible: NDArray[np.bool_]) -> NDArray[np.float64]:
+    def predict(self, points: NDArray[np.float64], visible: NDArray[np.bool_], flip: bool = False
+                ) -> NDArray[np.float64]:
         """3D poses in input units: ``x, y`` in the image (``c + r u``), ``z`` relative depth
-        (``r z``), shape (..., 12, 3) for input as in :meth:`features`."""
+        (``r z``), shape (..., 12, 3) for input as in :meth:`features`.
+
+        With ``flip`` the prediction is the mean of the network's answer for the input and its
+        answer for the mirrored input (the image flipped left-right, left and right joints
+        swapped), mirrored back (test-time flip averaging): a person and their mirror image are
+        equally likely, so the two answers' errors are partly independent. Both go through the
+        network as one batch of two (the cost of one pose: the weights are read once)."""
         feats, centre, radius = self.features(points, visible)
-        y = self.forward(feats)
+        if flip:
+            y = self.forward(np.stack([feats, mirror_features(feats)], axis=-2))
+            y = 0.5 * (y[..., 0, :, :] + mirror_pose(y[..., 1, :, :]))
+        else:
+            y = self.forward(feats)
         out = y * radius[..., None, None]
         out[..., :2] += centre[..., None, :]
         return out
