@@ -166,6 +166,7 @@ def _window_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
 _MIRROR: Final[NDArray[np.intp]] = np.arange(N_JOINTS)
 _MIRROR[list(JOINTS_LEFT)] = JOINTS_RIGHT
 _MIRROR[list(JOINTS_RIGHT)] = JOINTS_LEFT
+_FLIP_X: Final[NDArray[np.float64]] = np.array([-1.0, 1.0, 1.0])
 
 
 def mirror_features(features: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -183,7 +184,8 @@ def mirror_features(features: NDArray[np.float64]) -> NDArray[np.float64]:
 def mirror_pose(pose: NDArray[np.float64]) -> NDArray[np.float64]:
     """A pose (..., 12, 3) in the camera frame mirrored left-right: ``x`` negated, left and right
     joints swapped (its own inverse)."""
-    return np.asarray(pose)[..., _MIRROR, :] * np.array([-1.0, 1.0, 1.0])
+    out: NDArray[np.float64] = np.asarray(pose, dtype=np.float64)[..., _MIRROR, :] * _FLIP_X
+    return out
 
 
 @dataclass(frozen=True)
