@@ -203,3 +203,16 @@ def test_the_trained_residual_prior_runs_in_numpy_as_in_torch() -> None:
     want = (y * pr.out_scale + pr.out_mean).reshape(-1, 12, 3)
     np.testing.assert_allclose(pr.forward(x), want, rtol=1e-4, atol=1e-4 * float(np.abs(want).max()))
     assert pr.blocks == 1 and len(LIMBS) == 8
+
+
+def test_train_prior_overrides_one_augmentation_field_and_refuses_unknown_ones() -> None:
+    from tool_modules import load_tool
+
+    tp = load_tool("train_prior")
+    aug = tp.augmentation("generalise", ["p_transplant=0", "turn_root_deg = 20"])
+    assert aug.p_transplant == 0.0 and aug.turn_root_deg == 20.0
+    assert aug.p_mirror == GENERALISE.p_mirror and aug.p_lower_cut == GENERALISE.p_lower_cut
+    assert tp.augmentation("views", []) == Augmentation()
+    for bad in (["p_nothing=1"], ["p_mirror=x"]):
+        with pytest.raises(ValueError):
+            tp.augmentation("generalise", bad)

@@ -1,20 +1,22 @@
 """Train the packaged learned priors (``make prior``, ``make prior-temporal``) on the training split.
 
     .venv/bin/python tools/train_prior.py [--data ../shared/data/cmu] [--model residual|mlp]
-        [--augment generalise|views] [--epochs 24] [--samples 100000] [--width 512] [--blocks 2]
-        [--dropout 0.25] [--hidden 768 768] [--holdout every8|action] [--window 1] [--seed 0]
-        [--out PATH]
+        [--augment generalise|views] [--aug NAME=VALUE ...] [--epochs 24] [--samples 100000]
+        [--width 512] [--blocks 2] [--dropout 0.25] [--hidden 768 768] [--holdout every8|action]
+        [--window 1] [--seed 0] [--out PATH]
 
-The defaults give the packaged ``data/prior_mlp.npz`` (``make prior``); ``--window 4 --out
-.../data/prior_mlp_w4.npz`` its causal temporal variant (``make prior-temporal``): a residual MLP
+The defaults give the packaged ``data/prior_mlp.npz`` (``make prior``): a residual MLP
 (:func:`pose_lifter.prior_training.train_prior_residual`: 512 units, 2 residual blocks, dropout
 0.25, PyTorch, the optional extra ``train``) trained on 24 epochs x 100 000 freshly augmented
 samples with the augmentation ``GENERALISE`` (random views and detector corruptions, mirrored
 people, arms or legs transplanted from another frame, limbs turned about their joints, the lower
-body out of the image on 10 % of samples), seed 0. Each took 19-24 min on one thread of the loaded
-2-core machine (the two ran side by side). ``--model mlp --augment views --epochs 30`` is the
-earlier recipe (scikit-learn MLP 2 x 768, views and corruptions only); the cross-action folds
-(``tools/cross_action.py``, docs/cross_action.md) chose the residual model and ``GENERALISE``.
+body out of the image on 10 % of samples), seed 0. ``--window 4 --dropout 0.05 --out
+.../data/prior_mlp_w4.npz`` gives its causal temporal variant (``make prior-temporal``; with
+dropout 0.25 the temporal variant gained almost nothing from the past frames on held-out runs).
+Each took 19-22 min on one thread of the loaded 2-core machine. ``--model mlp --augment views
+--epochs 30`` is the earlier recipe (scikit-learn MLP 2 x 768, views and corruptions only); the
+cross-action folds (``tools/cross_action.py``, docs/cross_action.md) chose the residual model and
+``GENERALISE``; ``--aug NAME=VALUE`` changes one field of the augmentation.
 
 Training trials: :func:`pose_lifter.mocap.split_trials` ("train": subjects 01, 03, 05, 06 and
 09_01-09_11). Held out of the fit: the action-recognition example's test trials (so that its
@@ -31,9 +33,11 @@ the command, the training and validation trials and every setting.
 from __future__ import annotations
 
 import argparse
+import ast
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +47,28 @@ from pose_lifter.prior_training import GENERALISE, Augmentation, train_prior, tr
 from threadpoolctl import threadpool_limits
 
 
+def augmentation(base: str, overrides: list[str]) -> Augmentation:
+    """The augmentation ``base`` (``"generalise"``: ``GENERALISE``, ``"views"``: views and
+    corruptions only) with ``NAME=VALUE`` overrides of its fields (Python literals).
+
+    Raises
+    ------
+    ValueError
+        An unknown field or a value that does not parse.
+    """
+    aug = GENERALISE if base == "generalise" else Augmentation()
+    for item in overrides:
+        key, _, value = (part.strip() for part in item.partition("="))
+        if key not in Augmentation.__dataclass_fields__:
+            raise ValueError(f"--aug {item}: no Augmentation field {key!r}")
+        try:
+            parsed = ast.literal_eval(value)
+        except (ValueError, SyntaxError) as exc:
+            raise ValueError(f"--aug {item}: {value!r} is not a literal") from exc
+        aug = replace(aug, **{key: type(getattr(aug, key))(parsed)})
+    return aug
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu)")
@@ -50,6 +76,8 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=100_000, help="augmented samples per epoch")
     ap.add_argument("--model", choices=("residual", "mlp"), default="residual")
     ap.add_argument("--augment", choices=("generalise", "views"), default="generalise")
+    ap.add_argument("--aug", action="append", default=[], metavar="NAME=VALUE",
+                    help="override one Augmentation field of --augment, e.g. p_transplant=0")
     ap.add_argument("--holdout", choices=("action", "every8"), default="every8",
                     help="trials held out of the fit: the action example's test trials (and every 8th)")
     ap.add_argument("--hidden", type=int, nargs="+", default=[768, 768], help="mlp: hidden widths")
@@ -81,7 +109,10 @@ def main() -> None:
     print(f"training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames at step {step}), "
           f"validation {val_ids} ({sum(len(s) for s in val)} frames)", flush=True)
     t0 = time.perf_counter()
-    aug = GENERALISE if args.augment == "generalise" else Augmentation()
+    try:
+        aug = augmentation(args.augment, args.aug)
+    except ValueError as exc:
+        ap.error(str(exc))
     with threadpool_limits(args.threads):
         if args.model == "residual":
             prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks,
@@ -95,7 +126,6 @@ def main() -> None:
     meta = dict(prior.metadata)
     meta.update({"command": "python tools/train_prior.py " + " ".join(sys.argv[1:]),
                  "training_trials": fit_ids, "validation_trials": val_ids, "frame_step": step})
-    from dataclasses import replace
     prior = replace(prior, metadata=meta)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     prior.save(args.out)
