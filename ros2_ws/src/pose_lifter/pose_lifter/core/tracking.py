@@ -91,13 +91,14 @@ IMAGE_LIMB_QUANTILE = 0.9
 IMAGE_LIMB_MIN_FRAMES = 30
 IMAGE_LIMB_WEIGHT = 1.0
 IMAGE_LIMB_EVERY = 10
-#: The prior's limb estimate is biased: the MLP shortens the forearm, whose direction it is least
-#: sure of (a regression to the mean of directions shortens a limb). Per bone group (upper arm,
-#: forearm, thigh, shin), the person's log-proportions (mean over the groups removed) are
+#: The prior's limb estimate is biased (a regression to the mean: the packaged priors under-state
+#: how much a person's thighs and shins differ from the mean, slopes > 1). Per bone group (upper
+#: arm, forearm, thigh, shin), the person's log-proportions (mean over the groups removed) are
 #: ``slope * estimate + offset``: least squares over held-out training-split tracks whose limbs
-#: were scaled by up to +-20 % (``tools/limb_calibration.py``, which prints these).
+#: were scaled by up to +-20 % (``tools/limb_calibration.py``, which prints these; fitted to the
+#: packaged priors: re-run it when they change).
 LIMB_CALIBRATION: tuple[NDArray[np.float64], NDArray[np.float64]] = (
-    np.array([0.89, 0.78, 1.13, 0.99]), np.array([-0.014, -0.058, -0.062, -0.027]))
+    np.array([0.86, 0.9, 1.25, 1.22]), np.array([-0.012, 0.015, -0.103, -0.107]))
 #: The temporal outlier gate (``LifterOptions.outlier_gate``) leaves a frame alone when it would
 #: gate more than this fraction of its visible joints, and gates one joint on at most
 #: GATE_MAX_FRAMES consecutive frames.
