@@ -428,9 +428,9 @@ def test_the_temporal_prior_never_reads_a_future_frame(
     windows: list[tuple[np.ndarray, np.ndarray]] = []
 
     class Spy(PosePrior):
-        def predict(self, points: np.ndarray, visible: np.ndarray) -> np.ndarray:
+        def predict(self, points: np.ndarray, visible: np.ndarray, flip: bool = False) -> np.ndarray:
             windows.append((np.array(points), np.array(visible)))
-            return super().predict(points, visible)
+            return super().predict(points, visible, flip)
 
     spy = Spy(temporal.weights, temporal.biases, temporal.out_mean, temporal.out_scale,
               temporal.abs_error, temporal.window, temporal.metadata, temporal.blocks)
