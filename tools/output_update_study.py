@@ -7,10 +7,14 @@ films them) and score causal output rules on the recording, without lifting agai
     .venv/bin/python tools/output_update_study.py score rec.npz
 
 ``record`` lifts every track with the options given and ``measurement_update`` off, and keeps per
-frame the published (smoothed) pose, the fit's own pose, the prior's pose, the camera, the 2D, the
-weights the lift used and the track's noise estimate, plus the learned prior alone. ``score``
-applies :func:`pose_lifter.core.measurement.measurement_update` with a few settings to the
-recording (the update is output-only, so the fits do not change) and prints P-MPJPE, MPJPE and the
+frame the published pose, the fit's own pose, the prior's pose, the 2D, the weights the lift used
+and the track's 2D noise, plus the learned prior alone (``--set measurement_update=...`` is
+ignored). ``score`` replays on the recording, without lifting again (the smoothing and the update
+are output-only: the fits do not change): the output smoothing restarted on a re-initialised frame
+(as before) and carried over it (now), the measurement update
+(:class:`pose_lifter.core.measurement.MeasurementUpdate`, as :class:`TrackPolicy` runs it; with
+``--variant depth=...,gate=...`` other settings too), and ``pose-lifter lift``'s centred
+smoothing of the fit's own poses and of the published ones; it prints P-MPJPE, MPJPE and the
 acceleration error (mm, mm/frame^2) per condition, as ``tools/accuracy.py`` computes them.
 """
 
@@ -44,8 +48,7 @@ FIELDS = ("truth", "leg", "pub", "fit", "prior", "learned", "centre", "scale", "
 def record(args: argparse.Namespace) -> int:
     warnings.simplefilter("ignore")
     settings = acc._parse(args.set)
-    if "measurement_update" in LifterOptions.__dataclass_fields__:
-        settings.setdefault("measurement_update", False)  # the recording keeps the pose before it
+    settings["measurement_update"] = False  # the recording keeps the pose before it
     opts = LifterOptions().replace(**settings)
     bases = PoseBases.load(args.bases or default_bases_path("hybrid"))
     hybrid = Lifter(bases, opts)
@@ -55,13 +58,14 @@ def record(args: argparse.Namespace) -> int:
     if args.action:
         from pose_lifter.mocap import read_manifest, split_trials
         known = set(split_trials("train", args.data)) | set(split_trials("eval", args.data))
-        trials = sorted({t.trial for t in read_manifest(args.data) if t.action == args.action and t.trial in known})
+        trials = sorted({t.trial for t in read_manifest(args.data)
+                         if t.action == args.action and t.trial in known})
     cameras = [(a, 0.0, "perspective") for a in args.azimuths] if args.azimuths else None
     tracks = acc._tracks(args.split, args.data, args.frames, args.views, trials, cameras)
     acc._STATE["distance"] = args.distance
     out: dict[str, list[Any]] = {}
     for cond in args.conditions:
-        rows: dict[str, list[Any]] = {k: [] for k in FIELDS}
+        rows: dict[str, list[Any]] = {k: [] for k in (*FIELDS, "noise_now")}
         for k, track in enumerate(tracks):
             rng = np.random.default_rng(track.seed)
             px, conf, world, cam_pose = acc.film_track(track, acc.CONDITIONS[cond], rng)
@@ -74,7 +78,8 @@ def record(args: argparse.Namespace) -> int:
                 row: dict[str, Any] = {"truth": truth[i], "leg": leg[i], "px": px[i], "conf": conf[i],
                                        "pub": nan3, "fit": nan3, "prior": nan3, "learned": nan3,
                                        "centre": np.full(2, np.nan), "scale": np.nan,
-                                       "weights": np.zeros(12), "noise": 0.0, "follows": False, "ok": False,
+                                       "weights": np.zeros(12), "noise": 0.0, "noise_now": 0.0,
+                                       "follows": False, "ok": False,
                                        "track": k}
                 try:
                     lr = learned.lift(px[i], conf[i])
@@ -84,7 +89,7 @@ def record(args: argparse.Namespace) -> int:
                 try:
                     tl = policy.lift(0, i * 33_333_333, px[i], conf[i])
                 except PoseLifterError:
-                    for f in FIELDS:
+                    for f in rows:
                         rows[f].append(row[f])
                     continue
                 r = tl.result
@@ -94,10 +99,11 @@ def record(args: argparse.Namespace) -> int:
                            else r.pose_camera, prior=nan3 if prior is None else prior,
                            centre=r.camera.project(r.pose).mean(axis=0), scale=float(r.camera.scale),
                            weights=r.weights, noise=st.noise_level(),
+                           noise_now=float(np.median(np.asarray(st.noise))) if st.noise else 0.0,
                            follows=tl.warm_started and not tl.reinitialised, ok=True)
-                for f in FIELDS:
+                for f in rows:
                     rows[f].append(row[f])
-        for f in FIELDS:
+        for f in (*FIELDS, "noise_now"):
             out[f"{cond}/{f}"] = np.asarray(rows[f])
         print(f"{cond}: {len(rows['ok'])} frames", flush=True)
     np.savez_compressed(args.out, conditions=np.array(args.conditions), **out)
@@ -125,63 +131,42 @@ def metrics(pred: NDArray[np.float64], truth: NDArray[np.float64], leg: NDArray[
     return pm, mp, 1000 * float(np.mean(accs))
 
 
-def replay(d: dict[str, NDArray[Any]], k: float = 1.0, sigma: float = 0.0, gate: float = 1e9,
-           depth: str = "keep", base: str = "pub", noise_c: float = 1.0, soft: float = 0.0) -> NDArray[np.float64]:
-    """The output rule on every recorded frame (stateless per frame)."""
-    pose = d[base].copy()
-    obs = (d["px"] - d["centre"][:, None, :]) / d["scale"][:, None, None]
-    used = (d["weights"] > 0) & d["ok"][:, None]
-    r = obs - pose[..., :2]
-    rn = np.linalg.norm(r, axis=-1)
-    # the gain: the fit's xy uncertainty sigma (model units) against the track's 2D noise
-    nz = noise_c * d["noise"][:, None]
-    gain = np.full(rn.shape, k)
-    if sigma > 0:
-        gain = k * sigma**2 / (sigma**2 + nz**2)
-    if soft > 0:
-        gain = gain * np.clip((gate + soft - rn) / soft, 0.0, 1.0)
-    else:
-        gain = np.where(rn > gate, 0.0, gain)
-    gain = np.where(used, gain, 0.0)
-    new = pose.copy()
-    new[..., :2] += gain[..., None] * np.nan_to_num(r)
-    if depth == "bones":
-        from pose_lifter.core.skeleton import LIMBS
-        for a, b in LIMBS:  # parent a, child b, in chain order
-            L = np.linalg.norm(pose[:, b] - pose[:, a], axis=-1)
-            dxy = np.linalg.norm(new[:, b, :2] - new[:, a, :2], axis=-1)
-            dz0 = pose[:, b, 2] - pose[:, a, 2]
-            dz = np.sign(dz0) * np.sqrt(np.maximum(L**2 - dxy**2, 0.0))
-            new[:, b, 2] = new[:, a, 2] + dz
-    return new - new.mean(axis=1, keepdims=True)
+def early_noise(d: dict[str, NDArray[Any]], lifter: Lifter) -> NDArray[np.float64]:
+    """Per frame the track's 2D noise as the output update reads it (the median of its frames'
+    2D accelerations so far, ``_Track.observe_noise``; 0 before the first), from the recorded 2D
+    and the joints each frame's lift used (recordings before ``noise_now`` was kept)."""
+    out = np.zeros(len(d["px"]))
+    samples: list[float] = []
+    for i in range(len(out)):
+        if i == 0 or d["track"][i] != d["track"][i - 1]:
+            samples = []
+        if i >= 2 and d["track"][i - 2] == d["track"][i]:
+            v = (d["weights"][i - 2] > 0) & (d["weights"][i - 1] > 0) & (d["weights"][i] > 0)
+            if v.sum() >= 3:
+                x0, x1, x = d["px"][i - 2], d["px"][i - 1], d["px"][i]
+                a = np.linalg.norm(x[v] - 2 * x1[v] + x0[v], axis=1) / np.sqrt(6.0)
+                try:
+                    sample = float(np.median(a)) / lifter.input_scale(x, v.astype(float))
+                    samples = [*samples, sample][-30:]
+                except PoseLifterError:
+                    pass
+        out[i] = float(np.median(samples)) if samples else 0.0
+    return out
 
 
-def replay_state(d: dict[str, NDArray[Any]], drift: float = 0.05, base: Any = "pub", noise_c: float = 1.0,
-                 rel: float = 0.0, keep: bool = False, **kw: Any) -> NDArray[np.float64]:
-    """The stateful rule (core.measurement.MeasurementUpdate), track by track."""
-    from pose_lifter.core import measurement as mm
+def replay_update(d: dict[str, NDArray[Any]], base: NDArray[np.float64], noise: NDArray[np.float64],
+                  depth: float = 0.5, gate: float = 0.3) -> NDArray[np.float64]:
+    """:class:`pose_lifter.core.measurement.MeasurementUpdate` on ``base`` (the published poses
+    before it) track by track, as ``TrackPolicy`` runs it: a new state on a track's first frame
+    and after a frame that could not be lifted; no update before the track's first noise sample."""
     from pose_lifter.core.measurement import MeasurementUpdate
-    for key in ("SPAN_MIN_FRAMES", "SPAN_EVERY"):
-        if key.lower() in kw:
-            setattr(mm, key, kw.pop(key.lower()))
-    pose = d[base] if isinstance(base, str) else base
-    out = pose.copy()
-    state = None
-    prev_track = -1
-    sig = np.full(12, drift)
-    if rel:
-        from pose_lifter.core.prior import PosePrior
-        e = PosePrior.load(REL_PRIOR).abs_error[:, :2].mean(axis=1)
-        sig = drift * (e / e.mean()) ** rel
-    for i in range(len(pose)):
-        if d["track"][i] != prev_track or (not d["follows"][i] and not keep) or (i > 0 and not d["ok"][i - 1]):
+    out = base.copy()
+    state = MeasurementUpdate()
+    for i in range(len(out)):
+        if i == 0 or d["track"][i] != d["track"][i - 1] or not d["ok"][i - 1]:
             state = MeasurementUpdate()
-            prev_track = d["track"][i]
-        if not d["ok"][i]:
-            continue
-        assert state is not None
-        out[i] = state.update(pose[i], d["px"][i], d["weights"][i] > 0, noise_c * float(d["noise"][i]), sig,
-                              **kw)
+        if d["ok"][i] and noise[i] > 0:
+            out[i] = state.update(base[i], d["px"][i], d["weights"][i] > 0, float(noise[i]), depth, gate)
     return out
 
 
@@ -203,9 +188,10 @@ def replay_smoother(d: dict[str, NDArray[Any]], b: float = 0.7, low: float = 0.5
         if not d["ok"][i]:
             sm = None
             continue
-        shares = (shares + [float(np.count_nonzero(d["weights"][i] <= 0)) / 12.0])[-tr.DISTURBANCE_FRAMES:]
+        shares = [*shares, float(np.count_nonzero(d["weights"][i] <= 0)) / 12.0][-tr.DISTURBANCE_FRAMES:]
         noise = float(d["noise"][i])
-        dw = 1.0 if noise <= 0 else float(np.clip(tr.NOISE_REFERENCE / max(noise, 1e-12), tr.NOISE_MIN_WEIGHT, 1.0))
+        dw = 1.0 if noise <= 0 else float(np.clip(tr.NOISE_REFERENCE / max(noise, 1e-12),
+                                                  tr.NOISE_MIN_WEIGHT, 1.0))
         prior = d["prior"][i]
         if not np.isfinite(prior).all():
             sm = None
@@ -218,30 +204,40 @@ def replay_smoother(d: dict[str, NDArray[Any]], b: float = 0.7, low: float = 0.5
     return out
 
 
-REL_PRIOR: str | None = None
-
-
 def score(args: argparse.Namespace) -> int:
+    """Print P-MPJPE / MPJPE / acceleration error per condition for the output rules."""
+    from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
     data = np.load(args.recording)
-    variants: dict[str, dict[str, Any]] = {"published": {}}
-    for spec in args.variant:
-        variants[spec] = acc._parse(spec.split(","))
+    lifter = Lifter()
+    extra = [acc._parse(v.split(",")) for v in args.variant]
     for cond in data["conditions"]:
         d = {f: data[f"{cond}/{f}"] for f in FIELDS}
-        print(f"{cond} ({len(d['ok'])} frames)")
-        pm, mp, ac = metrics(d["learned"], d["truth"], d["leg"], d["track"])
-        print(f"  {'learned':40s} {pm:6.1f} {mp:6.1f} {ac:6.1f}")
-        pm, mp, ac = metrics(d["fit"], d["truth"], d["leg"], d["track"])
-        print(f"  {'fit (unsmoothed)':40s} {pm:6.1f} {mp:6.1f} {ac:6.1f}")
-        for name, kw in variants.items():
-            pred = d["pub"].copy()
-            kw = dict(kw)
-            if kw.pop("state", False):
-                pred = replay_state(d, **kw)
-            elif kw:
-                pred = replay(d, **kw)
-            pm, mp, ac = metrics(pred, d["truth"], d["leg"], d["track"])
-            print(f"  {name:40s} {pm:6.1f} {mp:6.1f} {ac:6.1f}")
+        key = f"{cond}/noise_now"
+        noise = data[key] if key in data else early_noise(d, lifter)
+        rows: list[tuple[str, NDArray[np.float64]]] = [("learned (the prior alone)", d["learned"]),
+                                                       ("fit (its own pose)", d["fit"])]
+        restart = replay_smoother(d, keep=False)
+        kept = replay_smoother(d, keep=True)
+        rows += [("smoothed, restarted on a re-initialised frame", restart),
+                 ("smoothed, carried over (published, update off)", kept),
+                 ("+ measurement update (default)", replay_update(d, kept, noise))]
+        for kw in extra:
+            name = "+ update " + ",".join(f"{k}={v}" for k, v in kw.items())
+            rows.append((name, replay_update(d, kept, noise, **kw)))
+        stamps = np.arange(len(d["ok"]), dtype=np.int64) * 33_333_333
+        for name, seq in (("offline: centred(fit)", d["fit"]), ("offline: centred(published)", rows[4][1])):
+            sm = np.full_like(seq, np.nan)
+            for t in np.unique(d["track"]):
+                sel = np.flatnonzero(d["track"] == t)
+                ok = np.isfinite(seq[sel]).all(axis=(1, 2))
+                sm[sel] = centred_smoothing(np.nan_to_num(seq[sel]), stamps[sel], ok,
+                                            OFFLINE_SMOOTHING_S, 1.0)
+                sm[sel[~ok]] = np.nan
+            rows.append((name, sm))
+        print(f"{cond} ({len(d['ok'])} frames): P-MPJPE / MPJPE mm, acceleration error mm/frame^2")
+        for name, seq in rows:
+            pm, mp, ac = metrics(seq, d["truth"], d["leg"], d["track"])
+            print(f"  {name:52s} {pm:6.1f} {mp:6.1f} {ac:6.1f}", flush=True)
     return 0
 
 
@@ -263,7 +259,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--bases", default=None)
     s = sub.add_parser("score")
     s.add_argument("recording", type=Path)
-    s.add_argument("--variant", action="append", default=[], help="k=v,k=v: replay() keywords")
+    s.add_argument("--variant", action="append", default=[],
+                   help="depth=...,gate=...: the update with other settings too")
     args = ap.parse_args(argv)
     return record(args) if args.cmd == "record" else score(args)
 

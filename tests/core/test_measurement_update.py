@@ -5,6 +5,7 @@ causal and output-only."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -19,19 +20,23 @@ REPO = Path(__file__).resolve().parents[2]
 OFF = {"measurement_update": False}
 
 
-@pytest.fixture(scope="module")
-def walker() -> tuple[np.ndarray, np.ndarray]:
-    """One real walker (bags/walk_clean.mcap's ground truth, CMU 07_05, an evaluation-split
-    trial), 90 frames at 30 Hz, weak perspective: (pixels (90, 12, 2), centred camera-frame
-    truth in metres (90, 12, 3))."""
+def _person(bag: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ground truth of a committed bag's person, ``frames`` frames at 30 Hz, weak
+    perspective: (pixels (frames, 12, 2), centred camera-frame truth in metres (frames, 12, 3))."""
     from pose_lifter import messages
     from pose_lifter.bags import read_messages
     from pose_lifter.scenes import TOPIC_GROUND_TRUTH
 
-    msgs = [x.msg for x in read_messages(REPO / "bags" / "walk_clean.mcap", [TOPIC_GROUND_TRUTH])]
-    cam = np.array([messages.skeleton3d_to_joints(m.skeletons[0]) for m in msgs[:90]])
+    msgs = [x.msg for x in read_messages(REPO / "bags" / f"{bag}.mcap", [TOPIC_GROUND_TRUTH])]
+    cam = np.array([messages.skeleton3d_to_joints(m.skeletons[0]) for m in msgs[:frames]])
     cam -= cam.mean(axis=1, keepdims=True)
     return 160.0 * cam[..., :2] + 320.0, cam
+
+
+@pytest.fixture(scope="module")
+def walker() -> tuple[np.ndarray, np.ndarray]:
+    """A real walker (bags/walk_clean.mcap, CMU 07_05, an evaluation-split trial), 90 frames."""
+    return _person("walk_clean", 90)
 
 
 def _track(options: LifterOptions, x: np.ndarray, conf: np.ndarray | None = None) -> list[TrackedLift]:
@@ -74,16 +79,17 @@ def test_a_joint_moves_to_where_the_2d_puts_it() -> None:
     pose = truth.copy()
     pose[2, :2] += [0.2, 0.1]
     pose -= pose.mean(axis=0)
-    out = _run(MeasurementUpdate(), pose, points, 1, depth=0.0)
+    out = _run(MeasurementUpdate(), pose, points, 1, noise=0.0, depth=0.0)
     # compare shapes: both centred on the other joints
     keep = np.arange(12) != 2
 
     def rel(p: np.ndarray) -> np.ndarray:
         return p[:, :2] - p[keep, :2].mean(axis=0)
 
-    assert np.linalg.norm(rel(out)[2] - rel(truth)[2]) < 0.02
     assert np.linalg.norm(rel(pose)[2] - rel(truth)[2]) > 0.2
-    np.testing.assert_allclose(rel(out)[keep], rel(truth)[keep], atol=0.02)
+    # (the wrong wrist is in the least-squares alignment of the 2D: a few hundredths)
+    assert np.linalg.norm(rel(out)[2] - rel(truth)[2]) < 0.05
+    np.testing.assert_allclose(rel(out)[keep], rel(truth)[keep], atol=0.05)
 
 
 def test_a_limbs_depth_follows_its_foreshortening() -> None:
@@ -148,7 +154,7 @@ def test_a_joint_the_lift_did_not_use_keeps_its_place() -> None:
 def test_noisy_2d_moves_the_pose_less() -> None:
     assert kalman_gain(1e-4, 0.0) == 1.0
     gains = [kalman_gain(1e-4, r * r) for r in (0.003, 0.03, 0.1, 0.3)]
-    assert gains[0] > 0.9 and all(a > b for a, b in zip(gains, gains[1:], strict=False))
+    assert gains[0] > 0.9 and all(a > b for a, b in itertools.pairwise(gains))
     assert gains[2] < 0.15
     truth = _pose()
     points = 100.0 * truth[:, :2] + 320.0
@@ -188,12 +194,17 @@ def test_the_update_feeds_nothing_back_into_the_fit(walker: tuple[np.ndarray, np
     assert not np.allclose(on[10].result.pose_camera, off[10].result.pose_camera)
 
 
-def test_the_update_brings_a_clean_track_closer(walker: tuple[np.ndarray, np.ndarray]) -> None:
-    """On a clean track the published pose is closer to the truth with the update than without,
-    and a track with 20 % confident outliers is not made worse."""
-    x, truth = walker
+def test_the_update_brings_a_clean_track_closer() -> None:
+    """A punch (bags/punch_clean.mcap, CMU 02_05, never trained on), where the fit stays off the
+    2D: the published pose is much closer to the truth with the update (measured 62.9 against
+    76.4 mm over 90 frames)."""
+    x, truth = _person("punch_clean", 90)
     on, off = _p_mpjpe(_track(LifterOptions(), x), truth), _p_mpjpe(_track(LifterOptions(**OFF), x), truth)
-    assert on < off - 0.5, (on, off)
+    assert on < off - 5.0, (on, off)
+
+
+def test_outliers_do_not_make_the_update_worse(walker: tuple[np.ndarray, np.ndarray]) -> None:
+    x, truth = walker
     leg_px = 160.0 * limb_lengths(truth)[:, RIGHT_LOWER_LEG]
     bad, conf = corrupt_2d(x, leg_px, 0.0, 0.2, 0.0, np.random.default_rng(3))
     on = _p_mpjpe(_track(LifterOptions(), bad, conf), truth)
@@ -202,17 +213,22 @@ def test_the_update_brings_a_clean_track_closer(walker: tuple[np.ndarray, np.nda
 
 
 def test_limb_lengths_come_from_the_image() -> None:
-    """The track's limb lengths are the upper quantile of each limb's aligned image length,
-    left and right averaged."""
+    """The track's limb lengths are an upper quantile of each limb's aligned image length, left
+    and right averaged: forearms and shins turning in and out of the image plane (shorter in the
+    image on most frames) are estimated near their full length."""
     truth = _pose()
+    truth[2] = truth[1] + [0.0, 0.9, 0.0]  # both forearms in the image plane, 0.9 and 1.0 long
+    truth[5] = truth[4] + [0.0, 1.0, 0.0]
     update = MeasurementUpdate()
     rng = np.random.default_rng(0)
-    for _ in range(20):  # the limbs turn in and out of the image plane: the longest is the length
+    for i in range(40):
         p = truth.copy()
-        p[:, :2] *= rng.uniform(0.7, 1.0, size=(12, 1))
+        for a, b in ((1, 2), (4, 5), (7, 8), (10, 11)):  # foreshortened by up to a half
+            p[b] = p[a] + (truth[b] - truth[a]) * (1.0 if i % 8 == 0 else rng.uniform(0.5, 1.0))
         update.update(truth, 100.0 * p[:, :2] + 320.0, np.ones(12, dtype=bool), 0.003, 0.5, 10.0)
     est = update.limb_lengths()
     assert est is not None
-    image = np.array([np.linalg.norm(truth[b, :2] - truth[a, :2]) for a, b in LIMBS])
-    pairs = 0.5 * (image[[0, 1, 4, 5]] + image[[2, 3, 6, 7]])[[0, 1, 0, 1, 2, 3, 2, 3]]
-    assert np.all(est <= 1.02 * pairs) and np.all(est > 0.8 * pairs)
+    full = np.array([np.linalg.norm(truth[b, :2] - truth[a, :2]) for a, b in LIMBS])
+    pairs = (0.5 * (full[[0, 1, 4, 5]] + full[[2, 3, 6, 7]]))[[0, 1, 0, 1, 2, 3, 2, 3]]
+    np.testing.assert_allclose(est, pairs, rtol=0.1)
+    assert est[1] > 0.9 * 0.95 and est[7] > 0.9
