@@ -113,6 +113,9 @@ def test_a_limbs_depth_follows_its_foreshortening() -> None:
     assert want < -0.5
     assert dz_out < dz_pose - 0.2  # deeper towards the camera, not away from it
     assert abs(dz_out - want) < abs(dz_pose - want)
+    # measurement_depth 0.5: between the pose's depth step and the image's
+    half = _run(MeasurementUpdate(), pose, points, 20, depth=0.5)
+    assert want + 0.05 < half[2, 2] - half[1, 2] < dz_pose - 0.05
 
 
 def test_a_joint_far_from_the_pose_is_gated_and_held() -> None:

@@ -43,16 +43,16 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from ._fast import mean_rows, median_rows
+from ._jit import njit
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, N_JOINTS, RIGHT_LIMBS
 
-__all__ = ["MeasurementUpdate", "kalman_gain"]
+__all__ = ["MeasurementUpdate", "compile_kernels", "kalman_gain"]
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
 #: The limbs whose parent joint is a shoulder or hip, then those whose parent is one of theirs.
-_STAGES = (np.array([i for i, (a, _) in enumerate(LIMBS) if a not in LIMB_B]),
-           np.array([i for i, (a, _) in enumerate(LIMBS) if a in LIMB_B]))
+_ORDER = np.array([i for i, (a, _) in enumerate(LIMBS) if a not in LIMB_B]
+                  + [i for i, (a, _) in enumerate(LIMBS) if a in LIMB_B])
 #: Change per frame (model units) of the fit's x, y error, for the gain of step 3.
 DRIFT = 0.01
 #: The gate is at least this many times the track's 2D noise (noisy 2D: its own scale).
@@ -98,23 +98,184 @@ def _column_quantiles(rows: NDArray[np.float64], q: float) -> NDArray[np.float64
     return np.where(count >= max(SPAN_MIN_FRAMES // 2, 1), out, np.nan)
 
 
-def _align(points: NDArray[np.float64], xy: NDArray[np.float64], use: NDArray[np.bool_]
-           ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]] | None:
-    """Least squares ``xy ~ s (points - pc) + qc`` over the joints ``use``: ``(s, pc, qc)`` (the
-    two centroids), or None with fewer than 3 joints or a degenerate fit."""
-    if np.count_nonzero(use) < 3:
-        return None
-    p, q = points[use], xy[use]
-    pc, qc = mean_rows(p), mean_rows(q)
-    pp = p - pc
-    den = float((pp * pp).sum())
-    s = float((pp * (q - qc)).sum()) / den if den > 0 else 0.0
-    if not s > 0:
-        return None
-    return s, pc, qc
-
-
 _LEFT, _RIGHT, _GROUP = np.array(LEFT_LIMBS), np.array(RIGHT_LIMBS), np.array(LIMB_GROUP_OF)
+_NO_LIMBS = np.empty(0)
+
+
+@njit
+def _align_kernel(points: NDArray[np.float64], xy: NDArray[np.float64], use: NDArray[np.bool_],
+                  out: NDArray[np.float64]) -> bool:
+    """Least squares ``xy ~ s (points - pc) + qc`` over the joints ``use``; ``out`` = (s, pc_x,
+    pc_y, qc_x, qc_y) (the two centroids). False with fewer than 3 joints or a degenerate fit."""
+    n = 0
+    pcx = pcy = qcx = qcy = 0.0
+    for j in range(N_JOINTS):
+        if use[j]:
+            n += 1
+            pcx += points[j, 0]
+            pcy += points[j, 1]
+            qcx += xy[j, 0]
+            qcy += xy[j, 1]
+    if n < 3:
+        return False
+    pcx /= n
+    pcy /= n
+    qcx /= n
+    qcy /= n
+    den = 0.0
+    num = 0.0
+    for j in range(N_JOINTS):
+        if use[j]:
+            px, py = points[j, 0] - pcx, points[j, 1] - pcy
+            den += px * px + py * py
+            num += px * (xy[j, 0] - qcx) + py * (xy[j, 1] - qcy)
+    if not den > 0.0 or not num > 0.0:
+        return False
+    out[0], out[1], out[2], out[3], out[4] = num / den, pcx, pcy, qcx, qcy
+    return True
+
+
+@njit
+def _xy_kernel(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+               gate: float, k: float, offset: NDArray[np.float64], state: NDArray[np.float64],
+               prev_points: NDArray[np.float64], prev_updated: NDArray[np.bool_],
+               last: NDArray[np.float64], last2: NDArray[np.float64], span_row: NDArray[np.float64],
+               out: NDArray[np.float64], ok: NDArray[np.bool_]) -> bool:
+    """Steps 1-3 of the module docstring: ``out`` (12, 3) = ``pose`` with x, y moved by the new
+    ``offset``; ``ok`` the joints updated; ``span_row`` (8,) this frame's aligned limb lengths (NaN
+    where not both updated). ``state`` = (log scale, centre x, centre y, frames with a centre,
+    published frames before this one). Returns whether anything was updated (a span row made)."""
+    al = np.empty(5)
+    n_used = 0
+    for j in range(N_JOINTS):
+        ok[j] = False
+        n_used += used[j]
+    aligned = _align_kernel(points, pose[:, :2], used, al)
+    if aligned:
+        n_ok = 0
+        for j in range(N_JOINTS):
+            if used[j]:
+                rx = al[0] * (points[j, 0] - al[1]) + al[3] - pose[j, 0]
+                ry = al[0] * (points[j, 1] - al[2]) + al[4] - pose[j, 1]
+                ok[j] = rx * rx + ry * ry <= gate * gate
+                n_ok += ok[j]
+        if n_ok < n_used:
+            aligned = _align_kernel(points, pose[:, :2], ok, al)
+            if not aligned:
+                for j in range(N_JOINTS):
+                    ok[j] = False
+    any_ok = False
+    for j in range(N_JOINTS):
+        any_ok = any_ok or ok[j]
+    # where a joint that is not updated goes: where the track predicts it
+    held = np.empty((N_JOINTS, 2))
+    for j in range(N_JOINTS):
+        for c in range(2):
+            predicted = pose[j, c] + offset[j, c]
+            if state[4] >= 1:
+                predicted = last[j, c]
+                if state[4] >= 2:
+                    predicted += HOLD_VELOCITY * (last[j, c] - last2[j, c])
+            held[j, c] = HOLD * (predicted - pose[j, c])
+    if aligned and any_ok:
+        ls = math.log(al[0])
+        if state[3] > 0:
+            ls = SCALE_SMOOTHING * state[0] + (1.0 - SCALE_SMOOTHING) * ls
+        state[0] = ls
+        scale = math.exp(ls)
+        cx = al[1] - al[3] / scale  # the image point at the pose's origin
+        cy = al[2] - al[4] / scale
+        if state[3] > 0:
+            n_both = 0
+            for j in range(N_JOINTS):
+                n_both += ok[j] and prev_updated[j]
+            if n_both >= 3:
+                mx = np.empty(n_both)
+                my = np.empty(n_both)
+                i = 0
+                for j in range(N_JOINTS):
+                    if ok[j] and prev_updated[j]:
+                        mx[i] = points[j, 0] - prev_points[j, 0]
+                        my[i] = points[j, 1] - prev_points[j, 1]
+                        i += 1
+                cx = SHIFT_SMOOTHING * (state[1] + np.median(mx)) + (1.0 - SHIFT_SMOOTHING) * cx
+                cy = SHIFT_SMOOTHING * (state[2] + np.median(my)) + (1.0 - SHIFT_SMOOTHING) * cy
+        state[1], state[2], state[3] = cx, cy, state[3] + 1
+        obs = np.empty((N_JOINTS, 2))
+        for j in range(N_JOINTS):
+            obs[j, 0] = scale * (points[j, 0] - cx)
+            obs[j, 1] = scale * (points[j, 1] - cy)
+            prev_points[j, 0], prev_points[j, 1] = points[j, 0], points[j, 1]
+            prev_updated[j] = ok[j]
+            for c in range(2):
+                if ok[j]:
+                    offset[j, c] += k * (obs[j, c] - pose[j, c] - offset[j, c])
+                else:
+                    offset[j, c] = held[j, c]
+        for i in range(LIMB_A.shape[0]):
+            a, b = LIMB_A[i], LIMB_B[i]
+            if ok[a] and ok[b]:
+                dx, dy = obs[b, 0] - obs[a, 0], obs[b, 1] - obs[a, 1]
+                span_row[i] = math.sqrt(dx * dx + dy * dy)
+            else:
+                span_row[i] = np.nan
+    else:
+        for j in range(N_JOINTS):
+            offset[j, 0], offset[j, 1] = held[j, 0], held[j, 1]
+    for j in range(N_JOINTS):
+        out[j, 0] = pose[j, 0] + offset[j, 0]
+        out[j, 1] = pose[j, 1] + offset[j, 1]
+        out[j, 2] = pose[j, 2]
+    return aligned and any_ok
+
+
+@njit
+def _depth_kernel(pose: NDArray[np.float64], out: NDArray[np.float64], ok: NDArray[np.bool_],
+                  limbs: NDArray[np.float64], beta: float, gain: float, depth_offset: NDArray[np.float64],
+                  level: NDArray[np.float64], velocity: NDArray[np.float64], state: NDArray[np.float64]
+                  ) -> None:
+    """Steps 4-5: ``out``'s depths (in place, centred after); ``limbs`` (8,) or empty (no depth
+    step); the alpha-beta filter's ``level`` and ``velocity`` start when ``state[5]`` is 0."""
+    prev = depth_offset.copy()
+    for j in range(N_JOINTS):
+        depth_offset[j] = HOLD * prev[j]
+    if limbs.shape[0] > 0:
+        z = np.empty(N_JOINTS)
+        for j in range(N_JOINTS):
+            z[j] = pose[j, 2] + depth_offset[j]
+        for i in _ORDER:  # the upper limbs, then the lower ones from their new depths
+            a, b = LIMB_A[i], LIMB_B[i]
+            if not (ok[a] and ok[b]):
+                continue
+            dz = pose[b, 2] - pose[a, 2]
+            dx, dy = out[b, 0] - out[a, 0], out[b, 1] - out[a, 1]
+            mag = math.sqrt(max(limbs[i] * limbs[i] - dx * dx - dy * dy, 0.0))
+            want = z[a] + (1.0 - beta) * dz + beta * (mag if dz >= 0 else -mag)
+            depth_offset[b] = DEPTH_SMOOTHING * prev[b] + (1.0 - DEPTH_SMOOTHING) * (want - pose[b, 2])
+            z[b] = pose[b, 2] + depth_offset[b]
+    mean = np.zeros(3)
+    for j in range(N_JOINTS):
+        out[j, 2] = pose[j, 2] + depth_offset[j]
+        for c in range(3):
+            mean[c] += out[j, c] / N_JOINTS
+    for j in range(N_JOINTS):
+        for c in range(3):
+            out[j, c] -= mean[c]
+    h = gain * gain / (2.0 - gain)
+    zmean = 0.0
+    for j in range(N_JOINTS):
+        if state[5] == 0:
+            level[j] = out[j, 2]
+            velocity[j] = 0.0
+        else:
+            predicted = level[j] + velocity[j]
+            resid = out[j, 2] - predicted
+            level[j] = predicted + gain * resid
+            velocity[j] += h * resid
+        zmean += level[j] / N_JOINTS
+    state[5] = 1
+    for j in range(N_JOINTS):
+        out[j, 2] = level[j] - zmean
 
 
 class MeasurementUpdate:
@@ -127,14 +288,16 @@ class MeasurementUpdate:
         self.n_spans = 0
         self.limbs: NDArray[np.float64] | None = None
         self.limbs_at = -SPAN_EVERY
-        self.log_scale: float | None = None
-        self.centre: NDArray[np.float64] | None = None
-        self.prev_points: NDArray[np.float64] | None = None
+        #: log scale, centre x, centre y, frames with a centre, frames published, depth filter on
+        self.state = np.zeros(6)
+        self.prev_points = np.zeros((N_JOINTS, 2))
         self.prev_updated = np.zeros(N_JOINTS, dtype=bool)
-        self.depth_level: NDArray[np.float64] | None = None
+        self.depth_level = np.zeros(N_JOINTS)
         self.depth_velocity = np.zeros(N_JOINTS)
-        self.last: NDArray[np.float64] | None = None
-        self.last2: NDArray[np.float64] | None = None
+        self.last = np.zeros((N_JOINTS, 3))
+        self.last2 = np.zeros((N_JOINTS, 3))
+        self._row = np.empty(len(LIMBS))
+        self._ok = np.zeros(N_JOINTS, dtype=bool)
 
     def limb_lengths(self) -> NDArray[np.float64] | None:
         """The track's limb lengths from the image (8,; left and right averaged; model units), or
@@ -167,80 +330,40 @@ class MeasurementUpdate:
         gate : float
             ``measurement_gate`` (leg lengths).
         """
-        pose = np.asarray(pose, dtype=np.float64)
-        points = np.asarray(points, dtype=np.float64)
-        xy = pose[:, :2]
-        gate = max(gate, GATE_NOISE_FACTOR * noise)
+        pose = np.ascontiguousarray(pose, dtype=np.float64)
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        used = np.ascontiguousarray(used, dtype=np.bool_)
         k = kalman_gain(DRIFT * DRIFT, noise * noise)
-        al = _align(points, xy, used)
-        ok = np.zeros(N_JOINTS, dtype=bool)
-        if al is not None:
-            r = al[0] * (points - al[1]) + al[2] - xy
-            ok = used & ((r * r).sum(axis=1) <= gate * gate)
-            if np.count_nonzero(ok) < np.count_nonzero(used):
-                al = _align(points, xy, ok)
-                if al is None:
-                    ok[:] = False
-        # where a joint that is not updated goes: where the track predicts it
-        predicted = xy + self.offset
-        if self.last is not None:
-            predicted = self.last[:, :2]
-            if self.last2 is not None:
-                predicted = predicted + HOLD_VELOCITY * (self.last[:, :2] - self.last2[:, :2])
-        held = HOLD * (predicted - xy)
-        if al is not None and ok.any():
-            s, pc, qc = al
-            ls = math.log(s)
-            if self.log_scale is not None:
-                ls = SCALE_SMOOTHING * self.log_scale + (1.0 - SCALE_SMOOTHING) * ls
-            self.log_scale = ls
-            scale = math.exp(ls)
-            centre = pc - qc / scale  # the image point at the pose's origin
-            if self.centre is not None and self.prev_points is not None:
-                both = ok & self.prev_updated
-                if np.count_nonzero(both) >= 3:
-                    moved = self.centre + median_rows(points[both] - self.prev_points[both])
-                    centre = SHIFT_SMOOTHING * moved + (1.0 - SHIFT_SMOOTHING) * centre
-            self.centre = centre
-            self.prev_points, self.prev_updated = points.copy(), ok.copy()
-            obs = scale * (points - centre)
-            step = self.offset + k * (obs - xy - self.offset)
-            self.offset = np.where(ok[:, None], step, held)
-            span_ok = ok[LIMB_A] & ok[LIMB_B]
-            d = obs[LIMB_B] - obs[LIMB_A]
-            self.spans[self.n_spans % SPAN_FRAMES] = np.where(span_ok, np.sqrt((d * d).sum(axis=1)), np.nan)
+        out = np.empty((N_JOINTS, 3))
+        ok = self._ok
+        if _xy_kernel(pose, points, used, max(gate, GATE_NOISE_FACTOR * noise), k, self.offset, self.state,
+                      self.prev_points, self.prev_updated, self.last, self.last2, self._row, out, ok):
+            self.spans[self.n_spans % SPAN_FRAMES] = self._row
             self.n_spans += 1
-        else:
-            self.offset = held
-        out = pose.copy()
-        out[:, :2] += self.offset
         limbs = self.limb_lengths() if depth > 0 else None
-        prev_depth = self.depth_offset
-        depth_offset = HOLD * prev_depth
-        if limbs is not None:
-            beta = depth * k
-            z = pose[:, 2] + depth_offset
-            for stage in _STAGES:  # the upper limbs, then the lower ones from their new depths
-                a, b = LIMB_A[stage], LIMB_B[stage]
-                dz = pose[b, 2] - pose[a, 2]
-                dxy = out[b, :2] - out[a, :2]
-                mag = np.sqrt(np.maximum(limbs[stage] ** 2 - (dxy * dxy).sum(axis=1), 0.0))
-                want = z[a] + (1.0 - beta) * dz + beta * np.where(dz >= 0, mag, -mag)
-                step = DEPTH_SMOOTHING * prev_depth[b] + (1.0 - DEPTH_SMOOTHING) * (want - pose[b, 2])
-                depth_offset[b] = np.where(ok[a] & ok[b], step, depth_offset[b])
-                z[b] = pose[b, 2] + depth_offset[b]
-        self.depth_offset = depth_offset
-        out[:, 2] += depth_offset
-        out -= mean_rows(out)
-        gain = 1.0 - (1.0 - DEPTH_GAIN) * k
-        if self.depth_level is None:
-            self.depth_level = out[:, 2].copy()
-        else:
-            predicted_z = self.depth_level + self.depth_velocity
-            resid = out[:, 2] - predicted_z
-            self.depth_level = predicted_z + gain * resid
-            self.depth_velocity = self.depth_velocity + (gain * gain / (2.0 - gain)) * resid
-        out[:, 2] = self.depth_level
-        out -= mean_rows(out)
+        _depth_kernel(pose, out, ok, _NO_LIMBS if limbs is None else limbs, depth * k,
+                      1.0 - (1.0 - DEPTH_GAIN) * k, self.depth_offset, self.depth_level,
+                      self.depth_velocity, self.state)
         self.last2, self.last = self.last, out
+        self.state[4] += 1
         return out
+
+
+
+_COMPILED = False
+
+
+def compile_kernels() -> None:
+    """Compile this module's kernels (numba, ``core._jit``) or load them from their cache, once
+    per process: one update of a still pose (a track's first frame would otherwise pay for it)."""
+    global _COMPILED
+    if _COMPILED:
+        return
+    update = MeasurementUpdate()
+    pose = np.zeros((N_JOINTS, 3))
+    pose[:, 0] = np.arange(N_JOINTS) % 3
+    pose[:, 1] = np.arange(N_JOINTS) // 3
+    pose -= pose.mean(axis=0)
+    for _ in range(SPAN_MIN_FRAMES + 1):
+        update.update(pose, 100.0 * pose[:, :2], np.ones(N_JOINTS, dtype=bool), 0.01, 0.5, 0.3)
+    _COMPILED = True

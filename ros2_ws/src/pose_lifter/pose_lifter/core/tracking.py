@@ -55,6 +55,7 @@ from ._fast import mean_rows, median_rows, row_norms
 from .errors import PoseLifterError
 from .lifter import Lifter, TrackContext
 from .measurement import MeasurementUpdate
+from .measurement import compile_kernels as compile_measurement_kernels
 from .results import LiftResult, WarmStart
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, RIGHT_LIMBS
 
@@ -412,6 +413,7 @@ class TrackPolicy:
                  reinit_ratio: float = 2.0) -> None:
         self._tracks: dict[int, _Track] = {}
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
+        compile_measurement_kernels()  # now, not on a track's first frame
 
     def configure(self, lifter: Lifter, track_timeout: float, warm_start: bool, reinit_ratio: float) -> None:
         """Change the lifter or the settings; the tracks are kept (forgotten when ``warm_start``
