@@ -192,7 +192,10 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     if policy is not None:
                         t = policy.lift(0, int(stamps[i]), px[i], conf[i])
                         r = t.result
-                        own = r.pose_camera if t.fit_pose_camera is None else t.fit_pose_camera
+                        # what pose-lifter lift smooths: the fit's own pose, or the published
+                        # one with the measurement update (pose_lifter.offline._lift_chain)
+                        own = (r.pose_camera if t.fit_pose_camera is None or lifter.options.measurement_update
+                               else t.fit_pose_camera)
                         fit[i] = own * leg_m[i]
                     else:
                         r = lifter.lift(px[i], conf[i], warm=warm)

@@ -14,7 +14,7 @@ from pose_lifter.core.tracking import TrackedLift, TrackPolicy
 from pose_lifter.scenes import corrupt_2d
 
 REPO = Path(__file__).resolve().parents[2]
-OFF = {"correction_smoothing": 0.0, "disturbed_smoothing_gain": 1.0}
+OFF = {"correction_smoothing": 0.0, "disturbed_smoothing_gain": 1.0, "measurement_update": False}
 
 
 @pytest.fixture(scope="module")

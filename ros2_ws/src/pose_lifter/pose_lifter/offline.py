@@ -194,7 +194,9 @@ def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default
             fits.append(None)
             continue
         out.append(_Done(item, res, joints, tracked.warm_started, dt, None))
-        fits.append(tracked.fit_pose_camera)
+        # the centred smoothing starts from the fit's own pose; with the measurement update, from
+        # the published one (which has read each frame's 2D; docs/tuning.md)
+        fits.append(None if lifter.options.measurement_update else tracked.fit_pose_camera)
     if smoothing_s > 0:
         return _smooth_chain(out, fits, leg_length_m, default_distance_m, smoothing_s, track_timeout)
     return out
@@ -204,8 +206,9 @@ def _smooth_chain(done: list[_Done], fits: list[NDArray[np.float64] | None], leg
                   default_distance_m: float, smoothing_s: float, gap_s: float) -> list[_Done]:
     """A lifted chain with its metric joints smoothed by a centred Gaussian window of
     ``smoothing_s`` seconds (:func:`pose_lifter.core.smoothing.centred_smoothing`, segments split at
-    gaps over ``gap_s``), from the fit's own poses (``fits[i]``; None: the result's pose is the
-    fit's): the causal output smoothing of the live node is replaced, not compounded. Each
+    gaps over ``gap_s``), from the fit's own poses (``fits[i]``; None: from the result's pose, the
+    fit's or, with ``measurement_update``, the published one): without the update the causal
+    output smoothing of the live node is replaced, not compounded. Each
     result's ``pose`` and ``pose_camera`` become the smoothed pose (camera and the rest kept)."""
     rows = [i for i, d in enumerate(done) if d.result is not None and d.joints_m is not None]
     if len(rows) < 2:

@@ -183,7 +183,8 @@ class LifterOptions:
     ``outlier_passes``, ``prior_limbs``, ``temporal_weight``, ``outlier_gate``,
     ``missing_temporal_weight``, ``fill_missing_frames``, ``hybrid_alternations``,
     ``hybrid_pose_max_iter``, ``image_limbs``, ``prior_flip``, ``correction_smoothing``,
-    ``disturbed_smoothing_gain``.
+    ``disturbed_smoothing_gain``, ``measurement_update``, ``measurement_depth``,
+    ``measurement_gate``.
 
     Experiment toggles (:data:`EXPERIMENT_OPTIONS`: solver internals and measured-off
     alternatives, for experiments and benchmarks): not node parameters: ``eta``, ``eta_growth``,
@@ -338,6 +339,17 @@ class LifterOptions:
     disturbed_smoothing_gain: float = field(default=0.55, metadata=_meta(
         "Hybrid, tracked: gain of the alpha-beta filter on the prior's part of the published "
         "pose when a track is disturbed (unused joints, 2D noise); 1 = no filter.", 0.05, 1.0))
+    measurement_update: bool = field(default=True, metadata=_meta(
+        "Hybrid, tracked: the published pose's joints go where the observed 2D puts them (per "
+        "joint, weighted by the track's 2D noise; joints the lift did not use or beyond "
+        "measurement_gate keep the pose's), and each limb's depth toward its image foreshortening "
+        "(measurement_depth). Output only."))
+    measurement_depth: float = field(default=0.5, metadata=_meta(
+        "Hybrid, tracked, with measurement_update: weight of the depth a limb's image length gives "
+        "(its length from the track's image) against the fit's (0 = the fit's).", 0.0, 1.0))
+    measurement_gate: float = field(default=0.3, metadata=_meta(
+        "Hybrid, tracked, with measurement_update: a used joint farther than this (leg lengths) "
+        "from the smoothed pose is not moved to its 2D on that frame.", 0.0, _WEIGHT))
     warm_competes: bool = field(default=False, metadata=_meta(
         "Hybrid: warm solves also start from the previous frame's pose (screened).",
         experiment=True))

@@ -54,6 +54,8 @@ from numpy.typing import NDArray
 from ._fast import mean_rows, median_rows, row_norms
 from .errors import PoseLifterError
 from .lifter import Lifter, TrackContext
+from .measurement import MeasurementUpdate
+from .measurement import compile_kernels as compile_measurement_kernels
 from .results import LiftResult, WarmStart
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, RIGHT_LIMBS
 
@@ -168,6 +170,7 @@ class _Track:
     #: the fraction of joints the lift did not use, per frame (the output smoothing's disturbance)
     unused_share: deque[float] = field(default_factory=lambda: deque(maxlen=DISTURBANCE_FRAMES))
     smoother: _Smoother | None = None
+    measurement: MeasurementUpdate | None = None
 
     def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64] | None,
              limit: float, min_visible: int) -> NDArray[np.bool_] | None:
@@ -411,6 +414,7 @@ class TrackPolicy:
                  reinit_ratio: float = 2.0) -> None:
         self._tracks: dict[int, _Track] = {}
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
+        compile_measurement_kernels()  # now, not on a track's first frame
 
     def configure(self, lifter: Lifter, track_timeout: float, warm_start: bool, reinit_ratio: float) -> None:
         """Change the lifter or the settings; the tracks are kept (forgotten when ``warm_start``
@@ -535,10 +539,34 @@ class TrackPolicy:
             if hybrid and opts.image_limbs:
                 track.add_spans(points, result.weights > 0, float(cam.scale))
             if hybrid:
-                smoothed = self._smooth(track, result, warm is not None and not reinit, dw)
-                if smoothed is not None:
-                    return TrackedLift(smoothed, warm is not None, reinit, result.pose_camera)
+                # the output's state carries over a re-initialised frame (its jump is smoothed)
+                published = self._smooth(track, result, warm is not None, dw)
+                updated = self._measure(track, published or result, points, warm is not None)
+                out = updated if updated is not None else published
+                if out is not None:
+                    return TrackedLift(out, warm is not None, reinit, result.pose_camera)
         return TrackedLift(result, warm is not None, reinit)
+
+    def _measure(self, track: _Track, result: LiftResult, points: NDArray[np.float64], follows: bool
+                 ) -> LiftResult | None:
+        """``result`` (the fit, smoothed) with its pose replaced by the measurement update's (see
+        :mod:`.measurement`), or None when it is off or the track has no 2D noise estimate yet."""
+        opts = self.lifter.options
+        if not opts.measurement_update:
+            track.measurement = None
+            return None
+        if not follows or track.measurement is None:
+            track.measurement = MeasurementUpdate()
+        if not track.noise:  # its first two frames: how far to trust the 2D is not known yet
+            return None
+        noise = float(median_rows(np.asarray(track.noise)))
+        out = track.measurement.update(result.pose_camera, points, result.weights > 0, noise,
+                                       opts.measurement_depth, opts.measurement_gate)
+        if not np.isfinite(out).all():
+            track.measurement = None
+            return None
+        pose = out @ result.camera.rotation + mean_rows(result.pose)
+        return replace(result, pose=np.ascontiguousarray(pose), pose_camera=np.ascontiguousarray(out))
 
     def _smooth(self, track: _Track, result: LiftResult, follows: bool, data_weight: float
                 ) -> LiftResult | None:
