@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -363,6 +364,32 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         one, batch = prior_features(xw, vw, 4), prior_features(xw[None], vw[None], 4)
         for a, b in zip(one, batch, strict=True):
             np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
+
+
+def test_the_compiled_features_are_the_numpy_ones_to_the_bit() -> None:
+    """The per-frame path's compiled features (prior._features_kernel) and their numpy reference
+    (prior._window_features, _frame_features) agree exactly, errors included."""
+    from pose_lifter.core import prior as prior_module
+
+    rng = np.random.default_rng(4)
+    for trial in range(300):
+        w = int(rng.integers(1, 6))
+        x = rng.normal(size=(w, 12, 2)) * 10.0 ** rng.uniform(-2, 3) + rng.uniform(-1e3, 1e3)
+        vis = rng.random((w, 12)) > rng.uniform(0.0, 0.9)
+        x[rng.random((w, 12, 2)) < 0.05] = np.nan
+        if trial % 50 == 0:
+            x[-1] = 7.0  # all at one point
+        ref_vis = vis & np.isfinite(x).all(axis=-1)
+        try:
+            ref = (prior_module._frame_features(x[0], ref_vis[0]) if w == 1
+                   else prior_module._window_features(x, ref_vis))
+        except InvalidInputError as exc:
+            with pytest.raises(InvalidInputError, match=re.escape(str(exc))):
+                prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
+            continue
+        got = prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
+        for a, b in zip(got, ref, strict=True):
+            assert np.shape(a) == np.shape(b) and np.array_equal(a, b), trial
 
 
 def test_a_temporal_prior_sees_the_tracks_past_frames(

@@ -104,15 +104,15 @@ def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[
     k = prior.window - 1
     pts = np.empty((prior.window, N_JOINTS, 2))
     vis = np.empty((prior.window, N_JOINTS), dtype=bool)
-    n_past = 0 if past is None else len(past[0])
-    for i in range(k):
-        j = max(n_past - k + i, 0)
-        if past is not None and n_past > 0:
-            pts[i], vis[i] = past[0][j], past[1][j]
-        else:
-            pts[i], vis[i] = x, visible
+    if past is not None and len(past[0]) > 0:
+        n_past = len(past[0])
+        rows = [max(n_past - k + i, 0) for i in range(k)]
+        pts[:k], vis[:k] = past[0][rows], past[1][rows]
+    else:
+        pts[:k], vis[:k] = x, visible
     pts[k], vis[k] = x, visible
-    return prior.predict(np.where(vis[..., None], pts, 0.0), vis), prior
+    # the prior reads only the visible joints (missing ones are zeros of its input)
+    return prior.predict(pts, vis), prior
 
 def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                  norm: Normalisation, warm: WarmStart | None, cam0: Camera | None,
