@@ -81,13 +81,24 @@ def prior_rows(lifter: LifterParts, x: NDArray[np.float64], w: NDArray[np.float6
         prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
         tw = temporal_weight[:, None]
         target = (target + tw * prev) / (1.0 + tw)
-    rel = used.relative_weights
     o = lifter.options
-    weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
+    weights = _prior_weights(used, o.prior_weight_xy, o.prior_weight_z)
     radii = None
     if o.prior_limbs and limb_proportions is not None:
         radii = lifter.limb_radii(limb_proportions)
-    return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
+    return PriorRows(np.ascontiguousarray(target), weights, radii), pose
+
+
+def _prior_weights(prior: PosePrior, weight_xy: float, weight_z: float) -> NDArray[np.float64]:
+    """The prior rows' weights (12, 2): ``weight_xy`` and ``weight_z`` times the prior's
+    :attr:`PosePrior.relative_weights` (kept on the prior per pair of weights: the same for every
+    frame; the kernels only read them)."""
+    key = (weight_xy, weight_z)
+    cache = prior.row_weights
+    if key not in cache:
+        rel = prior.relative_weights
+        cache[key] = np.ascontiguousarray(np.column_stack([weight_xy * rel[:, 0], weight_z * rel[:, 1]]))
+    return cache[key]
 
 def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[np.bool_],
                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
@@ -127,8 +138,9 @@ def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.floa
     previous = None
     if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
         prev = lifter.model.pose(warm.alpha)
-        previous = np.column_stack([cam0.project(prev),
-                                    cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]])
+        previous = np.empty((N_JOINTS, 3))
+        previous[:, :2] = cam0.project(prev)
+        previous[:, 2] = cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]
     prior, prior_pose = prior_rows(lifter, x, w, norm, limb_proportions, previous, temporal_weight, past,
                                          fill)
     a_prior = lifter.runs.start_alpha(prior.target)

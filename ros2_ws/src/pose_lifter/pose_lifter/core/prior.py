@@ -267,6 +267,10 @@ class PosePrior:
     #: float32 copies of the weights and biases, for inference (see :meth:`forward`)
     _layers32: tuple[tuple[NDArray[np.float32], NDArray[np.float32]], ...] = field(
         init=False, repr=False, compare=False, default=())
+    #: the hybrid lifter's prior-row weights (12, 2) per (xy, z) weight pair
+    #: (:func:`pose_lifter.core.hybrid.prior_rows`; computed once, read only)
+    row_weights: dict[tuple[float, float], NDArray[np.float64]] = field(
+        init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.window, int) or not 1 <= self.window <= MAX_WINDOW:

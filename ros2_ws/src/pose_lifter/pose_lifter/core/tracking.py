@@ -59,6 +59,9 @@ from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, RIGHT_LIMBS
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
+_LEFT_LIMBS = np.array(LEFT_LIMBS)
+_RIGHT_LIMBS = np.array(RIGHT_LIMBS)
+_GROUP_OF = np.array(LIMB_GROUP_OF)
 
 __all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
 
@@ -167,6 +170,19 @@ class _Track:
     #: the fraction of joints the lift did not use, per frame (the output smoothing's disturbance)
     unused_share: deque[float] = field(default_factory=lambda: deque(maxlen=DISTURBANCE_FRAMES))
     smoother: _Smoother | None = None
+    #: the medians of ``noise`` and ``objectives`` while they are unchanged (None: not computed)
+    _noise_median: float | None = None
+    _objective_median: float | None = None
+
+    def add_objective(self, objective: float) -> None:
+        self.objectives.append(objective)
+        self._objective_median = None
+
+    def objective_median(self) -> float:
+        """The median of the track's last objectives (at least one)."""
+        if self._objective_median is None:
+            self._objective_median = float(median_rows(np.asarray(self.objectives)))
+        return self._objective_median
 
     def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64] | None,
              limit: float, min_visible: int) -> NDArray[np.bool_] | None:
@@ -208,8 +224,7 @@ class _Track:
         of the track's last ones (the fit is losing the person: its positions are no prediction)."""
         if len(self.objectives) < 3:
             return True
-        median = float(median_rows(np.asarray(self.objectives)))
-        return self.objectives[-1] <= FILL_MAX_OBJECTIVE_RATIO * median
+        return self.objectives[-1] <= FILL_MAX_OBJECTIVE_RATIO * self.objective_median()
 
     def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
                       stamp_ns: int) -> None:
@@ -231,6 +246,7 @@ class _Track:
         except PoseLifterError:
             return
         self.noise.append(float(median_rows(acc)) / spread)
+        self._noise_median = None
 
     def past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
         """The last ``frames`` frames (oldest first, as ``(points (k, 12, 2), used (k, 12))``) that
@@ -256,7 +272,9 @@ class _Track:
         """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 0.0
-        return float(median_rows(np.asarray(self.noise)))
+        if self._noise_median is None:
+            self._noise_median = float(median_rows(np.asarray(self.noise)))
+        return self._noise_median
 
     def data_weight(self) -> float:
         if len(self.noise) < NOISE_MIN_FRAMES:
@@ -292,8 +310,8 @@ class _Track:
             if (ok.sum(axis=0) < IMAGE_LIMB_MIN_FRAMES // 2).any():
                 return None
             est = np.array([np.quantile(rows[ok[:, i], i], IMAGE_LIMB_QUANTILE) for i in range(8)])
-            pairs = 0.5 * (est[list(LEFT_LIMBS)] + est[list(RIGHT_LIMBS)])
-            out = pairs[list(LIMB_GROUP_OF)]
+            pairs = 0.5 * (est[_LEFT_LIMBS] + est[_RIGHT_LIMBS])
+            out = pairs[_GROUP_OF]
             self.span_estimate = out if np.isfinite(out).all() and (out > 0).all() else None
         return self.span_estimate
 
@@ -361,11 +379,11 @@ def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.flo
     """The track's limb proportions (8,) from the median of the prior's (8,), corrected by
     :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
     e = np.asarray(estimate, dtype=np.float64)
-    g = np.log(np.maximum(e[list(LEFT_LIMBS)], 1e-12))
+    g = np.log(np.maximum(e[_LEFT_LIMBS], 1e-12))
     m = g.mean()
     slope, offset = LIMB_CALIBRATION
     out = np.exp(m + slope * (g - m) + offset)
-    return np.asarray(out[list(LIMB_GROUP_OF)])
+    return np.asarray(out[_GROUP_OF])
 
 
 @dataclass(frozen=True)
@@ -506,8 +524,7 @@ class TrackPolicy:
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
-                ref = float(median_rows(np.asarray(track.objectives)))
-                if result.objective > self.reinit_ratio * ref:
+                if result.objective > self.reinit_ratio * track.objective_median():
                     cold = self.lifter.lift(points, confidence, warm=None, track=context)
                     if cold.objective < result.objective:
                         result, reinit = cold, True
@@ -520,19 +537,19 @@ class TrackPolicy:
                 track = self._tracks[track_id] = _Track(None, stamp_ns)
             track.warm = result.warm_start()
             track.last_stamp_ns = stamp_ns
-            track.unused = np.where(result.weights > 0, 0, track.unused + 1)
-            track.objectives.append(float(result.objective))
+            used = result.weights > 0
+            track.unused = np.where(used, 0, track.unused + 1)
+            track.add_objective(float(result.objective))
             if result.prior_pose is not None:
                 track.add_limbs(self.lifter.limb_proportions_of(result.prior_pose))
-            track.history.append((stamp_ns, np.array(points, dtype=np.float64),
-                                  result.weights > 0))
+            x = np.array(points, dtype=np.float64)  # the track's own copy
+            track.history.append((stamp_ns, x, used))
             cam = result.camera
             # where each joint was: its detection when the lift used it, else the fit's projection
-            used = (result.weights > 0)[:, None]
-            track.fits.append((stamp_ns, np.where(used, np.asarray(points, dtype=np.float64),
-                                                  cam.project(result.pose)), float(cam.scale)))
+            track.fits.append((stamp_ns, np.where(used[:, None], x, cam.project(result.pose)),
+                               float(cam.scale)))
             if hybrid and opts.image_limbs:
-                track.add_spans(points, result.weights > 0, float(cam.scale))
+                track.add_spans(x, used, float(cam.scale))
             if hybrid:
                 smoothed = self._smooth(track, result, warm is not None and not reinit, dw)
                 if smoothed is not None:
