@@ -392,6 +392,33 @@ def test_the_compiled_features_are_the_numpy_ones_to_the_bit() -> None:
             assert np.shape(a) == np.shape(b) and np.array_equal(a, b), trial
 
 
+def test_the_compiled_prior_target_is_the_numpy_one_to_the_bit() -> None:
+    """hybrid._target_kernel against the numpy lines it replaced (prior_rows' target and its blend
+    with the previous frame's pose)."""
+    from pose_lifter.core._fast import median_rows
+    from pose_lifter.core.hybrid import _target_kernel
+
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        pose = rng.normal(size=(12, 3)) * 80.0 + rng.uniform(-500, 500)
+        centre, spread = rng.uniform(-500, 500, size=2), float(rng.uniform(1.0, 300.0))
+        previous = rng.normal(size=(12, 3))
+        tw = np.where(rng.random(12) < 0.5, 0.0, rng.uniform(0.0, 3.0, size=12)) * (trial % 7 != 0)
+        vis = rng.random(12) > rng.uniform(0.0, 0.8)
+        vis[trial % 12] = True
+        target = np.empty((12, 3))
+        target[:, :2] = (pose[:, :2] - centre) / spread
+        target[:, 2] = pose[:, 2] / spread
+        if (tw > 0).any():
+            prev = previous.copy()
+            prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
+            target = (target + tw[:, None] * prev) / (1.0 + tw[:, None])
+        got, status = _target_kernel(pose, centre, spread, previous, tw, vis, True)
+        assert status == 0 and np.array_equal(got, target), trial
+    pose[3, 2] = np.inf
+    assert _target_kernel(pose, centre, spread, previous, tw, vis, False)[1] == 1
+
+
 def test_a_temporal_prior_sees_the_tracks_past_frames(
         bases: PoseBases, real_frames: tuple[np.ndarray, np.ndarray]) -> None:
     """A window-2 prior (random weights: the plumbing, not the accuracy) gets the previous frame

@@ -392,7 +392,8 @@ class Lifter:
         p = np.asarray(proportions, dtype=np.float64)
         if p.shape != (8,) or not np.isfinite(p).all() or (p <= 0).any():
             return None
-        return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.mean(np.log(p))))
+        lp = np.log(p)
+        return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))  # np.mean
 
     def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, idx: int,
                 run: Run, n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:

@@ -45,8 +45,10 @@ Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by 
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,6 +64,7 @@ LIMB_B = np.array([b for _, b in LIMBS])
 _LEFT_LIMBS = np.array(LEFT_LIMBS)
 _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
+_SQRT6 = math.sqrt(6.0)
 
 __all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
 
@@ -136,8 +139,8 @@ def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None
     conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
     if x.shape != (12, 2) or (conf is not None and conf.shape != (12,)):
         return None
-    vis = np.isfinite(x).all(axis=1)
-    return np.asarray(vis if conf is None else vis & (conf >= threshold), dtype=bool)
+    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=1))
+    return vis if conf is None else vis & (conf >= threshold)
 
 
 class OutOfOrderFrameError(PoseLifterError):
@@ -240,7 +243,7 @@ class _Track:
         vis = v0 & v1 & visible
         if np.count_nonzero(vis) < 3:
             return
-        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / np.sqrt(6.0)
+        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / _SQRT6
         try:
             spread = lifter.input_scale(x, vis.astype(np.float64))
         except PoseLifterError:
@@ -266,7 +269,7 @@ class _Track:
         if not kept:
             return None
         kept.reverse()
-        return np.stack([k[1] for k in kept]), np.stack([k[2] for k in kept])
+        return np.array([k[1] for k in kept]), np.array([k[2] for k in kept])
 
     def noise_level(self) -> float:
         """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
@@ -480,8 +483,8 @@ class TrackPolicy:
                 track = None
             elif age <= self.track_timeout_ns and self.warm_start:
                 warm = track.warm
-        limbs = track.limb_proportions(self.lifter.options.image_limbs) if track is not None else None
         opts = self.lifter.options
+        limbs = track.limb_proportions(opts.image_limbs) if track is not None else None
         hybrid = opts.mode == "hybrid"
         # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
         vis = _visible(points, confidence, opts.confidence_threshold)
