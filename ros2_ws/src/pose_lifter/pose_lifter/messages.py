@@ -169,13 +169,14 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
         xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
         conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
     points, confidence = to_model_joints(xy, conf, lay)
-    if not np.all(np.isfinite(confidence)):
+    if not np.isfinite(confidence).all():
         raise InvalidInputError("keypoint confidences must be finite")
-    bad = ~np.all(np.isfinite(points), axis=1)
-    if np.any(bad & (confidence > 0)):
-        names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
-        raise InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}")
-    points[bad] = 0.0
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        if (bad & (confidence > 0)).any():
+            names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
+            raise InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}")
+        points[bad] = 0.0
     return points, confidence
 
 
