@@ -33,7 +33,8 @@ def row_norms(a: NDArray[np.float64]) -> NDArray[np.float64]:
 def median_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """``np.median(a, axis=0)`` of a small (n,) or (n, d) array, n >= 1 (~30 us less a call): the
     same values, the middle row of the sorted columns or the mean of the two middle ones."""
-    s = np.sort(a, axis=0)
+    s = a.copy()
+    s.sort(axis=0)  # np.sort(a, axis=0) without its wrapper
     m = len(s) // 2
     return np.asarray(s[m] if len(s) % 2 else (s[m - 1] + s[m]) / 2.0)
 

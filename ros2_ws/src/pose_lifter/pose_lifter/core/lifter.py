@@ -402,15 +402,14 @@ class Lifter:
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
         pose = run.pose.pose
         pose_c = pose - mean_rows(pose)
-        reproj = row_norms(x - cam.project(pose))
-        vis = w > 0
+        reproj = row_norms(x - cam.project(pose))[w > 0]
         result = LiftResult(
             pose=pose,
             pose_camera=pose_c @ cam.rotation.T,
             camera=cam,
             alpha=run.pose.alpha,
             objective=run.objective,
-            reprojection_error=float(reproj[vis].mean()),
+            reprojection_error=float(np.add.reduce(reproj) / reproj.size),  # reproj.mean()
             limb_violation=run.pose.limb_violation,
             n_iter=run.n_iter,
             converged=run.converged,

@@ -279,8 +279,9 @@ class Runs:
         re-expressed in its own body frame (:func:`normalise_pose`); minimum-norm coefficients
         through the bases' SVD."""
         m = self.model
+        # flip passed, not defaulted: the signature start_alpha compiles (one cached kernel to load)
         alpha, ok = _mirror_kernel(np.ascontiguousarray(run.pose.pose), run.camera.camera.rotation, m.mean,
-                                   m.u, m.sig, m.v)
+                                   m.u, m.sig, m.v, True)
         if not ok:
             raise InvalidInputError("a pose has a degenerate right lower leg")
         return alpha
