@@ -283,7 +283,7 @@ class _Track:
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 1.0
         level = self.noise_level()
-        return float(np.clip(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT, 1.0))
+        return min(max(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT), 1.0)  # np.clip
 
     def limb_proportions(self, image: bool = False) -> NDArray[np.float64] | None:
         """The track's limb proportions (8,): the calibrated median of the prior's, and with
@@ -383,7 +383,7 @@ def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.flo
     :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
     e = np.asarray(estimate, dtype=np.float64)
     g = np.log(np.maximum(e[_LEFT_LIMBS], 1e-12))
-    m = g.mean()
+    m = np.add.reduce(g) / g.size  # g.mean()
     slope, offset = LIMB_CALIBRATION
     out = np.exp(m + slope * (g - m) + offset)
     return np.asarray(out[_GROUP_OF])
