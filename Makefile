@@ -15,7 +15,7 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast test-fp2 lint demo bench bench-node fuzz soak experiments bases bags prior prior-temporal accuracy lock clean ros cross-action train-deps prior-generalise
+.PHONY: help venv test test-fast test-fp2 lint demo bench bench-node fuzz soak experiments bases bags prior prior-temporal accuracy lock clean ros cross-action train-deps
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
@@ -28,10 +28,9 @@ help:
 	@echo "make experiments the paper's experiments on CMU data -> out/experiments"
 	@echo "make bases       re-learn the packaged basis file from ../shared/data/cmu"
 	@echo "make bags        regenerate the committed bags from ../shared/data/cmu"
-	@echo "make prior       re-train the packaged learned prior (data/prior_mlp.npz, ~15 min)"
-	@echo "make prior-generalise  the residual prior of the cross-action recipe -> out/ (~35 min loaded)"
+	@echo "make prior       re-train the packaged learned prior (data/prior_mlp.npz, PyTorch, ~20 min loaded)"
 	@echo "make cross-action  leave-one-class-out accuracy on unseen motion -> out/cross_action (~1 h)"
-	@echo "make prior-temporal  re-train its causal temporal variant (data/prior_mlp_w4.npz, ~15-40 min)"
+	@echo "make prior-temporal  re-train its causal temporal variant (data/prior_mlp_w4.npz, ~25 min loaded)"
 	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy (~25 min)"
 
 $(VENV)/.stamp: requirements.lock $(PKG)/setup.py $(PKG)/setup.cfg
@@ -103,12 +102,13 @@ bases: venv
 bags: venv
 	bash tools/make_bags.sh $(CMU_DATA)
 
-# the learned 2D->3D prior, trained on the training split (tools/train_prior.py: seed 0, one BLAS thread)
-prior: venv
+# the learned 2D->3D prior, trained on the training split (tools/train_prior.py defaults: residual
+# MLP, the augmentation GENERALISE, 24 x 100k samples, seed 0, one thread; PyTorch for training only)
+prior: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA)
 
 # the causal temporal variant (the track's last 4 frames at 30 Hz) used on tracked frames
-prior-temporal: venv
+prior-temporal: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 4 --out $(PKG)/pose_lifter/data/prior_mlp_w4.npz
 
 # the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12)
@@ -145,9 +145,3 @@ train-deps: venv
 cross-action: venv train-deps
 	$(PY) tools/cross_action.py --data $(CMU_DATA) --epochs 6 --samples 40000 --frames 60 --segments 6 \
 	  --views 2 --out out/cross_action
-
-# the residual prior of the cross-action folds' recipe on the training split (not packaged: alone it
-# is 3.8 mm worse than data/prior_mlp.npz on the evaluation split, docs/cross_action.md)
-prior-generalise: venv train-deps
-	$(PY) tools/train_prior.py --data $(CMU_DATA) --model residual --augment generalise --holdout action \
-	  --epochs 12 --out out/prior_generalise.npz

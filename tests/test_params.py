@@ -65,8 +65,8 @@ def test_node_settings_read_every_field_with_its_type() -> None:
         assert value == values[f.name] and type(value).__name__ == f.type, f.name
 
 
-def test_the_readme_lists_every_parameter_and_the_experiment_toggles() -> None:
-    text = (REPO / "README.md").read_text()
+def test_the_node_docs_list_every_parameter_and_the_experiment_toggles() -> None:
+    text = (REPO / "docs" / "node.md").read_text()
     section = text[text.index("Parameters (all declared with ranges"):text.index("The YAML is keyed `/**:`")]
     listed = set(re.findall(r"`([a-z_0-9]+)`", section))
     assert listed & set(OPTION_META) - set(SPECS) <= {"alpha_step", "warm_duals"}  # named as not parameters

@@ -22,7 +22,9 @@ image: knees and ankles missing on every frame), ``close`` (a perspective camera
 Methods: ``flat`` (the 2D with zero depth) and ``mean-pose`` floors; ``paper`` (the paper's
 method, tracked as the node tracks: cold 30-start first frame, then warm + mirrored starts);
 ``learned`` (the prior alone, per frame); ``hybrid`` tracked (default mode, the node's per-track
-policy :class:`pose_lifter.core.tracking.TrackPolicy`), and ``hybrid-1`` (every frame cold).
+policy :class:`pose_lifter.core.tracking.TrackPolicy`), ``hybrid-offline`` (the same tracks as
+``pose-lifter lift`` gives them: the fit's poses smoothed by the centred window of
+:mod:`pose_lifter.core.smoothing`) and ``hybrid-1`` (every frame cold).
 
 Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
 joints' centroid, the prediction scaled by the subject's true right-lower-leg length, no
@@ -55,6 +57,7 @@ from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap import load_trial, split_trials
 from pose_lifter.scenes import corrupt_2d
@@ -77,7 +80,7 @@ CONDITIONS: dict[str, dict[str, float]] = {
 #: Left/right joint pairs of the arms and the legs (the 2D labels a detector swaps).
 _ARMS = tuple(zip(JOINTS_LEFT[:3], JOINTS_RIGHT[:3], strict=True))
 _LEGS = tuple(zip(JOINTS_LEFT[3:], JOINTS_RIGHT[3:], strict=True))
-METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "hybrid", "hybrid-1")
+METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "hybrid", "hybrid-offline", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
 ELEVATIONS = (0.0, 30.0)
 PROJECTIONS = ("weak", "perspective")
@@ -108,7 +111,7 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
     warnings.simplefilter("ignore")
     lifters = {}
     for m in methods:
-        if m in ("paper", "learned", "learned-t", "hybrid", "hybrid-1"):
+        if m in ("paper", "learned", "learned-t", "hybrid", "hybrid-offline", "hybrid-1"):
             mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
             lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings))
@@ -164,22 +167,33 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
     leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
     truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
     out: dict[str, Any] = {}
+    fits: dict[str, NDArray[np.float64]] = {}  # a tracked run's own fit poses (before its smoothing)
+    stamps = np.arange(n, dtype=np.int64) * 33_333_333
     for m in methods:
         t0 = time.perf_counter()
         preds = np.full((n, 12, 3), np.nan)  # metres, camera frame, centred
-        if m == "flat":
+        if m == "hybrid-offline" and "hybrid" in fits:  # pose-lifter lift: the same run, smoothed centred
+            ok = np.all(np.isfinite(fits["hybrid"]), axis=(1, 2))
+            preds[:] = centred_smoothing(np.nan_to_num(fits["hybrid"]), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
+            preds[~ok] = np.nan
+        elif m == "flat":
             flat = np.concatenate([truth_c[..., :2], np.zeros((n, 12, 1))], axis=-1)
             preds[:] = flat
         elif m == "mean-pose":  # the mean training pose, turned by the true body frame (an oracle)
             preds[:] = np.einsum("jb,nba->nja", _STATE["mean"], body_frame(truth_c)) * leg_m[:, None, None]
         else:
             lifter: Lifter = _STATE["lifters"][m]
-            policy = TrackPolicy(lifter, track_timeout=1e9) if m in ("hybrid", "learned-t") else None
+            tracked = m in ("hybrid", "hybrid-offline", "learned-t")
+            policy = TrackPolicy(lifter, track_timeout=1e9) if tracked else None
+            fit = np.full((n, 12, 3), np.nan)
             warm = None
             for i in range(n):
                 try:
                     if policy is not None:
-                        r = policy.lift(0, i * 33_333_333, px[i], conf[i]).result
+                        t = policy.lift(0, int(stamps[i]), px[i], conf[i])
+                        r = t.result
+                        own = r.pose_camera if t.fit_pose_camera is None else t.fit_pose_camera
+                        fit[i] = own * leg_m[i]
                     else:
                         r = lifter.lift(px[i], conf[i], warm=warm)
                         warm = r.warm_start() if m == "paper" else None
@@ -187,6 +201,12 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     warm = None
                     continue
                 preds[i] = r.pose_camera * leg_m[i]
+            if m in ("hybrid", "hybrid-offline"):
+                fits["hybrid"] = fit
+            if m == "hybrid-offline":
+                ok = np.all(np.isfinite(fit), axis=(1, 2))
+                preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
+                preds[~ok] = np.nan
         ms = 1000.0 * (time.perf_counter() - t0) / n
         ok = np.all(np.isfinite(preds), axis=(1, 2))
         pm = np.full(n, np.nan)

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .core.smoothing import OFFLINE_SMOOTHING_S
 from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 
 __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
@@ -275,7 +276,8 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) ->
 
     keep = _keep_topics(args.keep)
     common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
-                                  camera_info_topic=args.camera_info_topic or None, keep=keep)
+                                  camera_info_topic=args.camera_info_topic or None, keep=keep,
+                                  smoothing_s=args.smoothing)
     if not args.params_file:
         options = {"variant": args.variant, "camera_solver": args.solver, "pose_solver": args.solver,
                    "n_starts": args.starts, "mode": "paper" if args.solver == "cvxpy" else args.mode}
@@ -339,7 +341,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
                           progress=not args.quiet, overwrite=args.overwrite,
                           workers=args.workers or _cores(), topic=s.topic,
                           camera_info_topic=s.camera_info_topic, keep=s.keep, track_timeout=s.track_timeout,
-                          reinit_ratio=s.reinit_ratio)
+                          reinit_ratio=s.reinit_ratio, smoothing_s=s.smoothing_s)
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
@@ -494,6 +496,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_lifter_options(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
     p.add_argument("--max-messages", type=_POS_INT, default=None, help="stop after N lifted messages")
+    p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
+                   metavar="SECONDS",
+                   help="each track's poses smoothed by a centred Gaussian window of this standard "
+                   "deviation, past and future frames alike (offline only; default "
+                   f"{OFFLINE_SMOOTHING_S}); 0: the live node's causal poses, message for message")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the output; for a collection: lift again the bags already done")

@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from .core.errors import BagError
+from .core.smoothing import OFFLINE_SMOOTHING_S
 from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 
 __all__ = [
@@ -116,6 +117,7 @@ class LiftSettings:
     keep: list[str] | None = None
     track_timeout: float = 1.0  # the node's defaults (offline.DEFAULT_TRACK_TIMEOUT_S, ...)
     reinit_ratio: float = 2.0
+    smoothing_s: float = OFFLINE_SMOOTHING_S  # centred, offline only (0: the node's causal poses)
     marker_lifetime: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
@@ -338,7 +340,8 @@ def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1)
             max_messages=settings.max_messages, progress=False, overwrite=True,
             marker_lifetime=settings.marker_lifetime, workers=workers, topic=settings.topic,
             camera_info_topic=settings.camera_info_topic, keep=settings.keep,
-            track_timeout=settings.track_timeout, reinit_ratio=settings.reinit_ratio)
+            track_timeout=settings.track_timeout, reinit_ratio=settings.reinit_ratio,
+            smoothing_s=settings.smoothing_s)
     except Exception as exc:  # one bag's failure never stops the collection
         text = " ".join(str(exc).split()) or type(exc).__name__
         if not isinstance(exc, BagError | OSError | ValueError) or type(exc).__module__.startswith("rosbags"):

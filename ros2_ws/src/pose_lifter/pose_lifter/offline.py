@@ -15,7 +15,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -39,6 +39,7 @@ from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
 from .core.lifter import Lifter
 from .core.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
 from .core.skeleton import N_JOINTS
+from .core.smoothing import centred_smoothing
 from .core.tracking import TrackPolicy
 from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_MARKERS, TOPIC_SKELETONS
@@ -170,11 +171,13 @@ def _chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, 
 
 def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default_distance_m: float,
                 track_timeout: float = DEFAULT_TRACK_TIMEOUT_S, warm_start: bool = True,
-                reinit_ratio: float = DEFAULT_REINIT_RATIO) -> list[_Done]:
+                reinit_ratio: float = DEFAULT_REINIT_RATIO, smoothing_s: float = 0.0) -> list[_Done]:
     """Lift one chain in order through the node's per-track policy
     (:class:`pose_lifter.core.tracking.TrackPolicy`: warm starts within ``track_timeout``,
-    re-initialisation, out-of-order frames refused, a failure starts over)."""
+    re-initialisation, out-of-order frames refused, a failure starts over); with
+    ``smoothing_s > 0`` the chain's poses are then smoothed centred (:func:`_smooth_chain`)."""
     out: list[_Done] = []
+    fits: list[NDArray[np.float64] | None] = []  # the fit's own pose_camera per outcome
     policy = TrackPolicy(lifter, track_timeout, warm_start, reinit_ratio)
     for item in chain:
         try:
@@ -188,8 +191,40 @@ def _lift_chain(lifter: Lifter, chain: list[_Item], leg_length_m: float, default
             joints = m.place_in_camera(res, leg_length_m, item.focal, item.centre, default_distance_m)
         except PoseLifterError as exc:
             out.append(_Done(item, None, None, False, 0.0, str(exc)))
+            fits.append(None)
             continue
         out.append(_Done(item, res, joints, tracked.warm_started, dt, None))
+        fits.append(tracked.fit_pose_camera)
+    if smoothing_s > 0:
+        return _smooth_chain(out, fits, leg_length_m, default_distance_m, smoothing_s, track_timeout)
+    return out
+
+
+def _smooth_chain(done: list[_Done], fits: list[NDArray[np.float64] | None], leg_length_m: float,
+                  default_distance_m: float, smoothing_s: float, gap_s: float) -> list[_Done]:
+    """A lifted chain with its metric joints smoothed by a centred Gaussian window of
+    ``smoothing_s`` seconds (:func:`pose_lifter.core.smoothing.centred_smoothing`, segments split at
+    gaps over ``gap_s``), from the fit's own poses (``fits[i]``; None: the result's pose is the
+    fit's): the causal output smoothing of the live node is replaced, not compounded. Each
+    result's ``pose`` and ``pose_camera`` become the smoothed pose (camera and the rest kept)."""
+    rows = [i for i, d in enumerate(done) if d.result is not None and d.joints_m is not None]
+    if len(rows) < 2:
+        return done
+    placed = np.empty((len(rows), N_JOINTS, 3))
+    for r, i in enumerate(rows):
+        d, fit = done[i], fits[i]
+        res = d.result if fit is None else replace(d.result, pose_camera=fit)
+        placed[r] = m.place_in_camera(res, leg_length_m, d.item.focal, d.item.centre, default_distance_m)
+    stamps = np.array([done[i].item.stamp_ns for i in rows], dtype=np.int64)
+    smooth = centred_smoothing(placed, stamps, np.ones(len(rows), dtype=bool), smoothing_s, gap_s)
+    out = list(done)
+    for r, i in enumerate(rows):
+        d = done[i]
+        pose_camera = (smooth[r] - smooth[r].mean(axis=0)) / leg_length_m
+        # the body-frame pose with the same camera: pose_camera = (pose - mean) @ R^T
+        pose = pose_camera @ d.result.camera.rotation + d.result.pose.mean(axis=0)
+        res = replace(d.result, pose=pose, pose_camera=pose_camera)
+        out[i] = _Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None)
     return out
 
 
@@ -277,7 +312,7 @@ def _worker_chain(index: int) -> Any:
     results, or only their message fields as columns (:func:`_columns`)."""
     chain = _WORKER["chains"][index]
     done = _lift_chain(_WORKER["lifter"], chain, _WORKER["leg"], _WORKER["distance"], _WORKER["timeout"],
-                       True, _WORKER["reinit"])
+                       True, _WORKER["reinit"], _WORKER["smoothing"])
     if _WORKER["slim"]:
         return _columns(done)
     return [(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done]
@@ -297,6 +332,7 @@ def lift_messages(
     track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
     reinit_ratio: float = DEFAULT_REINIT_RATIO,
     message_fields_only: bool = False,
+    smoothing_s: float = 0.0,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order with per-track warm starts.
 
@@ -331,6 +367,11 @@ def lift_messages(
     message_fields_only : bool
         With ``workers > 1``, ``on_frame`` gets :class:`MessageFields` (what the output messages
         carry) in place of whole ``LiftResult`` s: less to send back from the workers.
+    smoothing_s : float
+        0 (default): each track's poses are the node's, causal. ``> 0``: each track's poses are
+        smoothed with a centred Gaussian window of this standard deviation in seconds, past and
+        future frames alike (:mod:`pose_lifter.core.smoothing`; ``pose-lifter lift``'s default is
+        :data:`~pose_lifter.core.smoothing.OFFLINE_SMOOTHING_S`).
     """
     from tqdm import tqdm
 
@@ -343,7 +384,7 @@ def lift_messages(
     if workers == 1 or len(chains) < 2:
         for chain in chains:
             for d in _lift_chain(lifter, chain, leg_length_m, default_distance_m, track_timeout, True,
-                                 reinit_ratio):
+                                 reinit_ratio, smoothing_s):
                 done[id(d.item)] = d
                 bar.update(1)
     else:
@@ -352,7 +393,7 @@ def lift_messages(
 
         order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
         _WORKER.update(lifter=lifter, leg=leg_length_m, distance=default_distance_m, timeout=track_timeout,
-                       reinit=reinit_ratio, chains=order, slim=message_fields_only)
+                       reinit=reinit_ratio, smoothing=smoothing_s, chains=order, slim=message_fields_only)
         # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
         n_proc = min(workers, len(chains), os.cpu_count() or 1)
         # the workers inherit every object of this process (the bag's messages too): frozen, the
@@ -478,6 +519,7 @@ def lift_bag(
     keep: Sequence[str] | None = None,
     track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
     reinit_ratio: float = DEFAULT_REINIT_RATIO,
+    smoothing_s: float = 0.0,
 ) -> tuple[LiftSummary, list[FrameLift]]:
     """Lift every message of ``topic`` of a bag into a new bag.
 
@@ -515,6 +557,8 @@ def lift_bag(
         distance).
     keep : sequence of str, optional
         Input topics copied to the output; None = all, ``[]`` = none.
+    track_timeout, reinit_ratio, smoothing_s : float
+        See :func:`lift_messages` (``smoothing_s`` 0: the node's causal poses).
     """
     if every < 1:
         raise ValueError("every must be >= 1")
@@ -557,7 +601,7 @@ def lift_bag(
 
     frames = lift_messages(to_lift, infos, lifter, warm_start, leg_length_m, default_distance_m,
                            progress, record, summary, workers=workers, track_timeout=track_timeout,
-                           reinit_ratio=reinit_ratio, message_fields_only=True)
+                           reinit_ratio=reinit_ratio, message_fields_only=True, smoothing_s=smoothing_s)
     kept = set(topics) if keep is None else set(keep)
     index = 0
     with BagWriter(out_path, overwrite=overwrite) as w:

@@ -10,11 +10,17 @@ every sample with a fresh random view and person (augmentation):
   visibility 0) and confident outliers (up to 25 % of joints displaced by 1-3 leg lengths,
   visibility kept at 1) (:func:`pose_lifter.scenes.corrupt_2d`).
 
-Model: scikit-learn's ``MLPRegressor`` (ReLU, Adam, squared loss on standardised targets),
-trained epoch by epoch with ``partial_fit`` on freshly augmented samples, the step size decayed
-geometrically. Its weights are copied into a :class:`PosePrior` (pure-numpy inference). The
+Pose augmentations on top (:data:`GENERALISE`, the packaged priors' recipe): mirrored people,
+arms or legs transplanted from another frame, limbs turned about their joints, and the lower body
+out of the image (:mod:`pose_lifter.pose_augment`).
+
+Models: :func:`train_prior_residual` (the packaged priors: a residual MLP, Martinez et al. 2017,
+in PyTorch, the optional extra ``train``; batch normalisation folded into the linear layers) and
+:func:`train_prior` (scikit-learn's ``MLPRegressor``: ReLU, Adam, squared loss on standardised
+targets, ``partial_fit`` epoch by epoch). Both train on freshly augmented samples each epoch, the
+step size decayed geometrically, and return a :class:`PosePrior` (pure-numpy inference). The
 per-output mean absolute error on held-out training-split trials is the prior's uncertainty.
-Deterministic for a seed (one BLAS thread).
+Deterministic for a seed (one BLAS / torch thread).
 """
 
 from __future__ import annotations

@@ -172,7 +172,7 @@ def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[
     if past is not None and len(past[0]) > 0 and temporal is not None:
         prior = temporal
     if prior.window == 1:
-        return prior.predict(x, visible), prior
+        return prior.predict(x, visible, lifter.options.prior_flip), prior
     k = prior.window - 1
     pts = np.empty((prior.window, N_JOINTS, 2))
     vis = np.empty((prior.window, N_JOINTS), dtype=bool)
@@ -184,7 +184,7 @@ def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[
         pts[:k], vis[:k] = x, visible
     pts[k], vis[k] = x, visible
     # the prior reads only the visible joints (missing ones are zeros of its input)
-    return prior.predict(pts, vis), prior
+    return prior.predict(pts, vis, lifter.options.prior_flip), prior
 
 def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                  norm: Normalisation, warm: WarmStart | None, cam0: Camera | None,

@@ -182,7 +182,7 @@ class LifterOptions:
     ``prior_weight_xy``, ``prior_weight_z``, ``outlier_threshold``, ``outlier_threshold_gated``,
     ``outlier_passes``, ``prior_limbs``, ``temporal_weight``, ``outlier_gate``,
     ``missing_temporal_weight``, ``fill_missing_frames``, ``hybrid_alternations``,
-    ``hybrid_pose_max_iter``, ``image_limbs``, ``correction_smoothing``,
+    ``hybrid_pose_max_iter``, ``image_limbs``, ``prior_flip``, ``correction_smoothing``,
     ``disturbed_smoothing_gain``.
 
     Experiment toggles (:data:`EXPERIMENT_OPTIONS`: solver internals and measured-off
@@ -213,7 +213,10 @@ class LifterOptions:
     acceleration error on unseen motion 17.1 -> 8.8 mm/frame^2 clean and 60.5 -> 28.7 with 20 %
     outliers at the same P-MPJPE (0.4: 22.2, but +4.4 mm with outliers on the evaluation split).
     ``image_limbs`` off: -1.2 mm on a cross-action fold (dance), +0.5 mm clean on the evaluation
-    split.
+    split. ``prior_flip`` on: hybrid P-MPJPE on the evaluation split (``tools/accuracy.py --split
+    eval --frames 45 --views 1 --methods learned hybrid --set prior_flip=...``) clean 49.4 -> 47.7,
+    outliers20 59.8 -> 58.6, noise0.1 59.4 -> 57.8 mm; the prior alone 51.7 -> 50.1 clean; on the
+    dance fold (its prior, temporal prior off) hybrid 97.0 -> 96.2 clean, 104.6 -> 102.8 outliers20.
     """
 
     variant: str = field(default="full", metadata=_meta(
@@ -325,6 +328,9 @@ class LifterOptions:
     image_limbs: bool = field(default=False, metadata=_meta(
         "Hybrid, tracked: the track's limb proportions also from its image limb lengths over the "
         "fit's scale (their upper quantile over frames), with prior_limbs."))
+    prior_flip: bool = field(default=True, metadata=_meta(
+        "Hybrid and learned: the prior's pose is the mean of its answers for the 2D and for the "
+        "mirrored 2D (mirrored back): test-time flip averaging."))
     correction_smoothing: float = field(default=0.7, metadata=_meta(
         "Hybrid, tracked: the published pose is the prior's plus the fit's correction of it, "
         "averaged over frames with this factor (causal, exponential; 0 = the fit as it is).",
