@@ -2,14 +2,16 @@
 
 Usage::
 
-    .venv/bin/python tools/lift_hash.py [--bags bags/*.mcap] [--max-messages N] [--starts N] [-v]
+    .venv/bin/python tools/lift_hash.py [--bags bags/*.mcap] [--max-messages N] [--starts N]
+        [--modes paper hybrid learned] [-v]
 
 Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals``), and a total:
 
 * ``lifts paper`` / ``lifts hybrid``: every committed bag lifted offline the way ``pose-lifter
   lift`` does (:func:`pose_lifter.offline.lift_messages`: per-track warm starts through the
   node's per-track policy, metric placement from ``/camera_info``), in ``mode="paper"`` and
-  ``mode="hybrid"``. Per lifted skeleton (in message and track order): stamp, track id,
+  ``mode="hybrid"`` (``--modes``: ``learned`` can be added, or lifted alone; either changes the
+  total). Per lifted skeleton (in message and track order): stamp, track id,
   warm-started flag, the metric joints, the model-frame pose, the coefficients, the camera
   (rotation, scale, translation), the objective, reprojection error, limb violation and the
   alternation counts. Failed skeletons enter with their error message.
@@ -275,6 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--decimals", type=int, default=9, help="round to 10**-decimals before hashing")
     ap.add_argument("--record", type=int, default=6, help="pose_step calls recorded per mode")
     ap.add_argument("--record-every", type=int, default=25, help="record every N-th pose_step call")
+    ap.add_argument("--modes", nargs="+", default=list(MODES), choices=["paper", "hybrid", "learned"],
+                    help="the modes lifted (default paper and hybrid: the total the before/after comparisons "
+                         "quote; learned adds its own section and changes the total)")
     ap.add_argument("-v", "--verbose", action="store_true", help="per-bag times and per-call objectives")
     args = ap.parse_args(argv)
     bags = [Path(b) for b in args.bags]
@@ -287,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     total = Digest(args.decimals)
     calls: list[tuple[tuple[Any, ...], dict[str, Any]]] = []
     lifted: dict[str, dict[Path, list[FrameLift]]] = {}
-    for mode in MODES:
+    for mode in args.modes:
         d = Digest(args.decimals)
         rec = Recorder(args.record_every, args.record)
         lifted[mode] = lift_bags(bags, mode, args.starts, args.max_messages, d, rec, args.verbose)

@@ -6,7 +6,10 @@
 Wraps the functions of the offline path with timers (cumulative seconds, nested phases overlap:
 ``lift_messages`` holds ``_chains``, ``_lift_chain`` and the message building) and prints one
 ``PHASES`` line on stderr at exit. ``_lift_chain`` is the per-track solve (the core's time) in
-one process; with workers it runs in the children and is not seen here.
+one process; with workers it runs in the children and is not seen here. Inside it, ``run_kernel``
+(the compiled alternations, :func:`pose_lifter.core.run_kernel._run_kernel`) and
+``prior_forward`` (the learned prior's network, :meth:`pose_lifter.core.prior.PosePrior.forward`);
+the rest of ``_lift_chain`` is the Python around them (tracking, the lifter's set-up, results).
 """
 
 from __future__ import annotations
@@ -49,6 +52,14 @@ def main() -> int:
     wrap(off, "check_lift_inputs")
     wrap(off, "_chains")
     wrap(off, "_lift_chain")
+    try:
+        import pose_lifter.core.runs as runs
+        from pose_lifter.core.prior import PosePrior
+    except ImportError:  # an older layout
+        pass
+    else:
+        wrap(runs, "_run_kernel", "run_kernel")
+        wrap(PosePrior, "forward", "prior_forward")
     wrap(off, "lift_messages")
     wrap(bags.BagWriter, "write", "BagWriter.write")
     wrap(bags.BagWriter, "write_cdr", "BagWriter.write_cdr")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -366,6 +367,59 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         one, batch = prior_features(xw, vw, 4), prior_features(xw[None], vw[None], 4)
         for a, b in zip(one, batch, strict=True):
             np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
+
+
+def test_the_compiled_features_are_the_numpy_ones_to_the_bit() -> None:
+    """The per-frame path's compiled features (prior._features_kernel) and their numpy reference
+    (prior._window_features, _frame_features) agree exactly, errors included."""
+    from pose_lifter.core import prior as prior_module
+
+    rng = np.random.default_rng(4)
+    for trial in range(300):
+        w = int(rng.integers(1, 6))
+        x = rng.normal(size=(w, 12, 2)) * 10.0 ** rng.uniform(-2, 3) + rng.uniform(-1e3, 1e3)
+        vis = rng.random((w, 12)) > rng.uniform(0.0, 0.9)
+        x[rng.random((w, 12, 2)) < 0.05] = np.nan
+        if trial % 50 == 0:
+            x[-1] = 7.0  # all at one point
+        ref_vis = vis & np.isfinite(x).all(axis=-1)
+        try:
+            ref = (prior_module._frame_features(x[0], ref_vis[0]) if w == 1
+                   else prior_module._window_features(x, ref_vis))
+        except InvalidInputError as exc:
+            with pytest.raises(InvalidInputError, match=re.escape(str(exc))):
+                prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
+            continue
+        got = prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
+        for a, b in zip(got, ref, strict=True):
+            assert np.shape(a) == np.shape(b) and np.array_equal(a, b), trial
+
+
+def test_the_compiled_prior_target_is_the_numpy_one_to_the_bit() -> None:
+    """hybrid._target_kernel against the numpy lines it replaced (prior_rows' target and its blend
+    with the previous frame's pose)."""
+    from pose_lifter.core._fast import median_rows
+    from pose_lifter.core.hybrid import _target_kernel
+
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        pose = rng.normal(size=(12, 3)) * 80.0 + rng.uniform(-500, 500)
+        centre, spread = rng.uniform(-500, 500, size=2), float(rng.uniform(1.0, 300.0))
+        previous = rng.normal(size=(12, 3))
+        tw = np.where(rng.random(12) < 0.5, 0.0, rng.uniform(0.0, 3.0, size=12)) * (trial % 7 != 0)
+        vis = rng.random(12) > rng.uniform(0.0, 0.8)
+        vis[trial % 12] = True
+        target = np.empty((12, 3))
+        target[:, :2] = (pose[:, :2] - centre) / spread
+        target[:, 2] = pose[:, 2] / spread
+        if (tw > 0).any():
+            prev = previous.copy()
+            prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
+            target = (target + tw[:, None] * prev) / (1.0 + tw[:, None])
+        got, status = _target_kernel(pose, centre, spread, previous, tw, vis, True)
+        assert status == 0 and np.array_equal(got, target), trial
+    pose[3, 2] = np.inf
+    assert _target_kernel(pose, centre, spread, previous, tw, vis, False)[1] == 1
 
 
 def test_a_temporal_prior_sees_the_tracks_past_frames(

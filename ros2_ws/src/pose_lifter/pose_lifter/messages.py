@@ -17,6 +17,7 @@ Frames: 3D joints are in the camera optical frame (x right, y down, z forward), 
 from __future__ import annotations
 
 import colorsys
+import math
 from collections.abc import Iterable, Sequence
 from types import SimpleNamespace
 from typing import Any, Final
@@ -168,13 +169,14 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
         xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
         conf = np.array([float(k.confidence) for k in kps], dtype=np.float64)
     points, confidence = to_model_joints(xy, conf, lay)
-    if not np.all(np.isfinite(confidence)):
+    if not np.isfinite(confidence).all():
         raise InvalidInputError("keypoint confidences must be finite")
-    bad = ~np.all(np.isfinite(points), axis=1)
-    if np.any(bad & (confidence > 0)):
-        names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
-        raise InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}")
-    points[bad] = 0.0
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        if (bad & (confidence > 0)).any():
+            names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
+            raise InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}")
+        points[bad] = 0.0
     return points, confidence
 
 
@@ -248,22 +250,22 @@ def place_in_camera(
     ndarray, shape (12, 3)
         Metres.
     """
-    if not np.isfinite(leg_length_m) or leg_length_m <= 0:
+    if not math.isfinite(leg_length_m) or leg_length_m <= 0:
         raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
     pose = np.asarray(result.pose_camera, dtype=np.float64)
     if pose.shape != (N_JOINTS, 3):
         raise InvalidInputError(f"pose_camera must be a ({N_JOINTS}, 3) array")
     local = pose * float(leg_length_m)  # the core's pose_camera is centred on the joints' mean
     if focal is None:
-        if not np.isfinite(default_distance_m) or default_distance_m <= 0:
+        if not math.isfinite(default_distance_m) or default_distance_m <= 0:
             raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")
         centroid = np.array([0.0, 0.0, float(default_distance_m)])
     else:
         fx, fy = (float(focal[0]), float(focal[1]))
         scale = float(result.camera.scale)
-        if not (fx > 0 and fy > 0 and np.isfinite(fx) and np.isfinite(fy)):
+        if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)):
             raise InvalidInputError(f"focal lengths must be > 0, got {focal!r}")
-        if not np.isfinite(scale) or scale <= 0:
+        if not math.isfinite(scale) or scale <= 0:
             raise InvalidInputError(f"camera scale must be > 0, got {scale!r}")
         z = 0.5 * (fx + fy) * float(leg_length_m) / scale
         t = np.asarray(result.camera.translation, dtype=np.float64)

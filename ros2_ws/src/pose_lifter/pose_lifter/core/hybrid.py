@@ -9,12 +9,14 @@ Functions of a :class:`pose_lifter.core.lifter.Lifter` (its options, priors, mod
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._fast import mean_rows, median_rows, row_norms
+from ._jit import njit
 from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
@@ -69,25 +71,95 @@ def prior_rows(lifter: LifterParts, x: NDArray[np.float64], w: NDArray[np.float6
             x = np.where(add[:, None], fill[0], x)
             vis = vis | add
     pose, used = predict_prior(lifter, x, vis, past)
-    target = np.empty((N_JOINTS, 3))
-    target[:, :2] = (pose[:, :2] - norm.centre) / norm.spread
-    target[:, 2] = pose[:, 2] / norm.spread
-    if not np.isfinite(target).all():
+    blend = previous is not None and temporal_weight is not None
+    target, status = _target_kernel(
+        pose, norm.centre, float(norm.spread), _NO_POSE if previous is None else previous,
+        _NO_WEIGHTS if temporal_weight is None else np.ascontiguousarray(temporal_weight, dtype=np.float64),
+        w > 0, blend)
+    if status == _NOT_FINITE:
         raise InvalidInputError("the learned prior gave non-finite values for this input")
-    if previous is not None and temporal_weight is not None and (temporal_weight > 0).any():
-        prev = previous.copy()
-        vis = w > 0
-        # the person's image motion since the previous frame (the median over visible joints)
-        prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
-        tw = temporal_weight[:, None]
-        target = (target + tw * prev) / (1.0 + tw)
-    rel = used.relative_weights
+    if status == _NO_JOINT:
+        raise IndexError("no visible joint to blend the previous frame's pose by")
     o = lifter.options
-    weights = np.column_stack([o.prior_weight_xy * rel[:, 0], o.prior_weight_z * rel[:, 1]])
+    weights = _prior_weights(used, o.prior_weight_xy, o.prior_weight_z)
     radii = None
     if o.prior_limbs and limb_proportions is not None:
         radii = lifter.limb_radii(limb_proportions)
-    return PriorRows(np.ascontiguousarray(target), np.ascontiguousarray(weights), radii), pose
+    return PriorRows(np.ascontiguousarray(target), weights, radii), pose
+
+
+_NO_POSE = np.zeros((N_JOINTS, 3))
+_NO_WEIGHTS = np.zeros(N_JOINTS)
+#: Status codes of :func:`_target_kernel`.
+_OK, _NOT_FINITE, _NO_JOINT = 0, 1, 2
+
+
+@njit
+def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], spread: float,
+                   previous: NDArray[np.float64], temporal_weight: NDArray[np.float64],
+                   visible: NDArray[np.bool_], blend: bool) -> tuple[NDArray[np.float64], int]:
+    """The prior rows' target (12, 3) of :func:`prior_rows`: the prior's ``pose`` (12, 3, input
+    units) in the normalised frame (``(x - centre) / spread``, depth ``/ spread``), and with
+    ``blend`` the previous frame's pose ``P`` (12, 3, same frame), its image positions moved by
+    the median over the ``visible`` joints of the target's minus its own (numpy's median: the
+    middle of the sorted values, or the mean of the two middle ones), blended in by
+    ``temporal_weight`` ``t`` (12,) as ``(target + t P) / (1 + t)`` (when some ``t > 0``):
+    numpy's operations of the code it replaces, one by one. Returns ``(target, status)``:
+    :data:`_NOT_FINITE` for a non-finite prior pose, :data:`_NO_JOINT` for a blend without a
+    visible joint."""
+    nj = pose.shape[0]
+    target = np.empty((nj, 3))
+    for j in range(nj):
+        target[j, 0] = (pose[j, 0] - centre[0]) / spread
+        target[j, 1] = (pose[j, 1] - centre[1]) / spread
+        target[j, 2] = pose[j, 2] / spread
+    for j in range(nj):
+        for a in range(3):
+            if not math.isfinite(target[j, a]):
+                return target, _NOT_FINITE
+    if not blend:
+        return target, _OK
+    weighted = False
+    for j in range(nj):
+        weighted = weighted or temporal_weight[j] > 0
+    if not weighted:
+        return target, _OK
+    n = 0
+    for j in range(nj):
+        n += visible[j]
+    if n == 0:
+        return target, _NO_JOINT
+    d0 = np.empty(n)
+    d1 = np.empty(n)
+    k = 0
+    for j in range(nj):
+        if visible[j]:
+            d0[k] = target[j, 0] - previous[j, 0]
+            d1[k] = target[j, 1] - previous[j, 1]
+            k += 1
+    d0.sort()
+    d1.sort()
+    m = n // 2
+    m0 = d0[m] if n % 2 else (d0[m - 1] + d0[m]) / 2.0
+    m1 = d1[m] if n % 2 else (d1[m - 1] + d1[m]) / 2.0
+    for j in range(nj):
+        t = temporal_weight[j]
+        target[j, 0] = (target[j, 0] + t * (previous[j, 0] + m0)) / (1.0 + t)
+        target[j, 1] = (target[j, 1] + t * (previous[j, 1] + m1)) / (1.0 + t)
+        target[j, 2] = (target[j, 2] + t * previous[j, 2]) / (1.0 + t)
+    return target, _OK
+
+
+def _prior_weights(prior: PosePrior, weight_xy: float, weight_z: float) -> NDArray[np.float64]:
+    """The prior rows' weights (12, 2): ``weight_xy`` and ``weight_z`` times the prior's
+    :attr:`PosePrior.relative_weights` (kept on the prior per pair of weights: the same for every
+    frame; the kernels only read them)."""
+    key = (weight_xy, weight_z)
+    cache = prior.row_weights
+    if key not in cache:
+        rel = prior.relative_weights
+        cache[key] = np.ascontiguousarray(np.column_stack([weight_xy * rel[:, 0], weight_z * rel[:, 1]]))
+    return cache[key]
 
 def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[np.bool_],
                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
@@ -104,15 +176,15 @@ def predict_prior(lifter: LifterParts, x: NDArray[np.float64], visible: NDArray[
     k = prior.window - 1
     pts = np.empty((prior.window, N_JOINTS, 2))
     vis = np.empty((prior.window, N_JOINTS), dtype=bool)
-    n_past = 0 if past is None else len(past[0])
-    for i in range(k):
-        j = max(n_past - k + i, 0)
-        if past is not None and n_past > 0:
-            pts[i], vis[i] = past[0][j], past[1][j]
-        else:
-            pts[i], vis[i] = x, visible
+    if past is not None and len(past[0]) > 0:
+        n_past = len(past[0])
+        rows = [max(n_past - k + i, 0) for i in range(k)]
+        pts[:k], vis[:k] = past[0][rows], past[1][rows]
+    else:
+        pts[:k], vis[:k] = x, visible
     pts[k], vis[k] = x, visible
-    return prior.predict(np.where(vis[..., None], pts, 0.0), vis, lifter.options.prior_flip), prior
+    # the prior reads only the visible joints (missing ones are zeros of its input)
+    return prior.predict(pts, vis, lifter.options.prior_flip), prior
 
 def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                  norm: Normalisation, warm: WarmStart | None, cam0: Camera | None,
@@ -127,8 +199,9 @@ def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.floa
     previous = None
     if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
         prev = lifter.model.pose(warm.alpha)
-        previous = np.column_stack([cam0.project(prev),
-                                    cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]])
+        previous = np.empty((N_JOINTS, 3))
+        previous[:, :2] = cam0.project(prev)
+        previous[:, 2] = cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]
     prior, prior_pose = prior_rows(lifter, x, w, norm, limb_proportions, previous, temporal_weight, past,
                                          fill)
     a_prior = lifter.runs.start_alpha(prior.target)

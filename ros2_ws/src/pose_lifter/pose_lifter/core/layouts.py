@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Final
 
@@ -31,6 +32,11 @@ class Layout:
     name: str
     n_keypoints: int
     model_indices: tuple[int, ...]
+
+    @functools.cached_property
+    def index_array(self) -> NDArray[np.intp]:
+        """``model_indices`` as an index array (12,)."""
+        return np.asarray(self.model_indices, dtype=np.intp)
 
 
 LAYOUTS: Final[dict[str, Layout]] = {
@@ -118,5 +124,5 @@ def to_model_joints(
             raise InvalidInputError(
                 f"layout {lay.name!r} needs {lay.n_keypoints} confidences, got shape {conf.shape}"
             )
-    idx = np.asarray(lay.model_indices)
-    return kp[idx].copy(), conf[idx].copy()
+    idx = lay.index_array
+    return kp[idx], conf[idx]  # integer indexing: copies

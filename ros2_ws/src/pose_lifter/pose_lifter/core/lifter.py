@@ -47,6 +47,7 @@ modes' prior terms, starts and outlier pass are :mod:`.hybrid`, the steps :mod:`
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -79,6 +80,9 @@ __all__ = ["KERNEL_MODES", "Lifter", "TrackContext", "compile_kernels"]
 #: The modes whose default paths :func:`compile_kernels` runs: between them, every compiled kernel
 #: a default lift calls (``learned`` calls none of its own).
 KERNEL_MODES: tuple[Mode, ...] = ("hybrid", "paper")
+_LEFT_LIMBS = np.array(LEFT_LIMBS)
+_RIGHT_LIMBS = np.array(RIGHT_LIMBS)
+_GROUP_OF = np.array(LIMB_GROUP_OF)
 
 
 
@@ -198,6 +202,8 @@ class Lifter:
             props = self.bases.limb_proportions if key == "bases" else ANTHROPOMETRIC_PROPORTIONS
             self._model = PoseModel.build(self.bases, props)
             self._model_key = key
+            #: the mean log length of the model's own limbs (:meth:`limb_radii`)
+            self._log_limb_mean = float(np.mean(np.log(np.sqrt(self._model.limb_sq))))
         self._qstep_fn: QStepFn | None = None
         if self._options.mode != "paper":
             _ = self.prior, self.temporal_prior  # load (and validate) the priors now, not on the first frame
@@ -228,20 +234,23 @@ class Lifter:
         w = np.where(conf >= self._options.confidence_threshold, np.clip(conf, 0.0, 1.0), 0.0)
         # a joint with non-finite coordinates is missing, whatever its confidence
         bad = ~np.all(np.isfinite(x), axis=1)
-        w[bad] = 0.0
+        has_bad = bool(bad.any())
+        if has_bad:
+            w[bad] = 0.0
         n_vis = int(np.count_nonzero(w > 0))
         if n_vis < self._options.min_visible_joints:
             raise TooFewJointsError(
                 f"{n_vis} joints visible (confidence >= {self._options.confidence_threshold}); "
                 f"at least {self._options.min_visible_joints} needed"
             )
-        x = np.where(bad[:, None], 0.0, x)
-        return x, w
+        return (np.where(bad[:, None], 0.0, x) if has_bad else x), w
 
     def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> Normalisation:
-        centre = w @ x / w.sum()
-        spread = float(np.sqrt(w @ np.sum((x - centre) ** 2, axis=1) / w.sum()))
-        if not np.isfinite(spread) or spread <= 1e-9 * max(1.0, float(np.abs(centre).max())):
+        total = np.add.reduce(w)  # w.sum()
+        centre = w @ x / total
+        d = x - centre
+        spread = math.sqrt(w @ np.add.reduce(d * d, axis=1) / total)
+        if not math.isfinite(spread) or spread <= 1e-9 * max(1.0, abs(centre[0]), abs(centre[1])):
             raise InvalidInputError("the visible keypoints are (almost) all at one point")
         return Normalisation(centre, spread / self._mean_spread)
 
@@ -325,7 +334,9 @@ class Lifter:
         if mode == "hybrid":
             if not 0.0 < data_weight <= 1.0:
                 raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
-            tw = np.broadcast_to(np.asarray(temporal_weight, dtype=np.float64), (N_JOINTS,)).copy()
+            tw = np.array(temporal_weight, dtype=np.float64)
+            if tw.shape != (N_JOINTS,):
+                tw = np.broadcast_to(tw, (N_JOINTS,)).copy()
             if not ((tw >= 0.0) & (tw <= 1e3)).all():
                 raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
             runs, total, n_starts, w, prior_pose = hybrid_runs(
@@ -371,8 +382,8 @@ class Lifter:
         left/right pair averaged (bones are symmetric; it halves the noise of an estimate),
         shape (8,), in the pose's units."""
         lengths = limb_lengths(pose)
-        pairs = 0.5 * (lengths[list(LEFT_LIMBS)] + lengths[list(RIGHT_LIMBS)])
-        return np.asarray(pairs[list(LIMB_GROUP_OF)])
+        pairs = 0.5 * (lengths[_LEFT_LIMBS] + lengths[_RIGHT_LIMBS])
+        return np.asarray(pairs[_GROUP_OF])
 
     def limb_radii(self, proportions: NDArray[np.float64]) -> NDArray[np.float64] | None:
         """Limb-constraint radii (8,) with the ratios of ``proportions`` and the geometric-mean
@@ -381,8 +392,8 @@ class Lifter:
         p = np.asarray(proportions, dtype=np.float64)
         if p.shape != (8,) or not np.isfinite(p).all() or (p <= 0).any():
             return None
-        own = np.sqrt(self.model.limb_sq)
-        return np.ascontiguousarray(p * np.exp(np.mean(np.log(own)) - np.mean(np.log(p))))
+        lp = np.log(p)
+        return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))  # np.mean
 
     def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, idx: int,
                 run: Run, n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
@@ -391,15 +402,14 @@ class Lifter:
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
         pose = run.pose.pose
         pose_c = pose - mean_rows(pose)
-        reproj = row_norms(x - cam.project(pose))
-        vis = w > 0
+        reproj = row_norms(x - cam.project(pose))[w > 0]
         result = LiftResult(
             pose=pose,
             pose_camera=pose_c @ cam.rotation.T,
             camera=cam,
             alpha=run.pose.alpha,
             objective=run.objective,
-            reprojection_error=float(reproj[vis].mean()),
+            reprojection_error=float(np.add.reduce(reproj) / reproj.size),  # reproj.mean()
             limb_violation=run.pose.limb_violation,
             n_iter=run.n_iter,
             converged=run.converged,

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +38,8 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from ._fast import pairwise_sum
+from ._jit import njit
 from .errors import InvalidInputError, PriorFileError
 from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
@@ -112,11 +115,12 @@ def prior_features(points: NDArray[np.float64], visible: NDArray[np.bool_], wind
         The current frame's normalisation (:func:`normalise_2d`).
     """
     x = np.asarray(points, dtype=np.float64)
-    vis = np.asarray(visible, dtype=bool) & np.all(np.isfinite(x), axis=-1)
+    vis = np.asarray(visible, dtype=bool)
     if window == 1 and x.shape == (N_JOINTS, 2) and vis.shape == (N_JOINTS,):
-        return _frame_features(x, vis)
+        return _compiled_features(x[None], vis[None])
     if window > 1 and x.shape == (window, N_JOINTS, 2) and vis.shape == (window, N_JOINTS):
-        return _window_features(x, vis)
+        return _compiled_features(x, vis)
+    vis = vis & np.all(np.isfinite(x), axis=-1)
     if window == 1 and (x.ndim < 3 or x.shape[-3] != 1):
         x, vis = x[..., None, :, :], vis[..., None, :]
     if x.shape[-3:] != (window, N_JOINTS, 2) or vis.shape != x.shape[:-1]:
@@ -146,6 +150,73 @@ def _frame_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
     u = feats[: 2 * N_JOINTS].reshape(N_JOINTS, 2)
     u[vis] = d / radius
     feats[2 * N_JOINTS:] = vis
+    return feats, centre, np.asarray(radius)
+
+
+@njit
+def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_]
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
+    """:func:`_window_features` of a window (W, 12, 2) (C-contiguous; W = 1: one frame) with its
+    visibility (W, 12), joints with non-finite coordinates missing: numpy's operations in numpy's
+    order (the centre the visible joints' sum row by row over their count, as ``mean(axis=0)``;
+    the radius's sum of squares numpy's :func:`pairwise_sum`). Returns ``(features (36 W,),
+    centre (2,), radius, visible joints of the last frame)``; the features are zero where
+    :func:`_window_features` raises (fewer than 2 visible joints, a radius not finite or
+    <= 1e-12)."""
+    w = x.shape[0]
+    nj = x.shape[1]
+    vis = np.empty((w, nj), dtype=np.bool_)
+    for f in range(w):
+        for j in range(nj):
+            vis[f, j] = visible[f, j] and math.isfinite(x[f, j, 0]) and math.isfinite(x[f, j, 1])
+    last = w - 1
+    n = 0
+    c0 = 0.0
+    c1 = 0.0
+    for j in range(nj):
+        if vis[last, j]:
+            n += 1
+            c0 += x[last, j, 0]
+            c1 += x[last, j, 1]
+    feats = np.zeros(w * 3 * nj)
+    centre = np.empty(2)
+    if n < 2:
+        return feats, centre, 0.0, n
+    c0 /= n
+    c1 /= n
+    centre[0], centre[1] = c0, c1
+    sq = np.empty(2 * n)
+    k = 0
+    for j in range(nj):
+        if vis[last, j]:
+            d0 = x[last, j, 0] - c0
+            d1 = x[last, j, 1] - c1
+            sq[k], sq[k + 1] = d0 * d0, d1 * d1
+            k += 2
+    radius = math.sqrt(pairwise_sum(sq) / n)
+    if not (math.isfinite(radius) and radius > 1e-12):
+        return feats, centre, radius, n
+    for f in range(w):
+        base = f * 3 * nj
+        for j in range(nj):
+            if vis[f, j]:
+                feats[base + 2 * j] = (x[f, j, 0] - c0) / radius
+                feats[base + 2 * j + 1] = (x[f, j, 1] - c1) / radius
+                feats[base + 2 * nj + j] = 1.0
+    return feats, centre, radius, n
+
+
+def _compiled_features(x: NDArray[np.float64], visible: NDArray[np.bool_]
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`prior_features` of one window (W, 12, 2) and its visibility (W, 12) (W = 1: a frame,
+    its features (36,)) by :func:`_features_kernel`: the values of :func:`_window_features`
+    (:func:`_frame_features`), the per-frame path of the lifter."""
+    feats, centre, radius, n = _features_kernel(np.ascontiguousarray(x, dtype=np.float64),
+                                                np.ascontiguousarray(visible, dtype=np.bool_))
+    if n < 2:
+        raise InvalidInputError("the prior needs at least 2 visible joints")
+    if not (math.isfinite(radius) and radius > 1e-12):
+        raise InvalidInputError("the visible keypoints are (almost) all at one point")
     return feats, centre, np.asarray(radius)
 
 
@@ -223,6 +294,10 @@ class PosePrior:
     #: float32 copies of the weights and biases, for inference (see :meth:`forward`)
     _layers32: tuple[tuple[NDArray[np.float32], NDArray[np.float32]], ...] = field(
         init=False, repr=False, compare=False, default=())
+    #: the hybrid lifter's prior-row weights (12, 2) per (xy, z) weight pair
+    #: (:func:`pose_lifter.core.hybrid.prior_rows`; computed once, read only)
+    row_weights: dict[tuple[float, float], NDArray[np.float64]] = field(
+        init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.window, int) or not 1 <= self.window <= MAX_WINDOW:

@@ -37,6 +37,7 @@ __all__ = ["PINV_RCOND", "Run", "Runs"]
 #: bases' span) coefficients with ||alpha||_1 ~ 2e5: their pose was right but ``theta ||alpha||_1``
 #: dominated the objective. It also moves the paper's mirrored warm start slightly.
 PINV_RCOND = 1e-3
+_EYE3 = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -126,8 +127,8 @@ class Runs:
         image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
         stacked twice, the returned flag). Built once per run, not per alternation."""
         if prior is not None and (prior.weights[:, 0] > 0).any():
-            return (np.ascontiguousarray(np.vstack([xn, prior.target[:, :2]])),
-                    np.ascontiguousarray(np.concatenate([w, prior.weights[:, 0]])), True)
+            return (np.ascontiguousarray(np.concatenate([xn, prior.target[:, :2]])),
+                    np.concatenate([w, prior.weights[:, 0]]), True)
         return xn, w, False
 
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
@@ -278,8 +279,9 @@ class Runs:
         re-expressed in its own body frame (:func:`normalise_pose`); minimum-norm coefficients
         through the bases' SVD."""
         m = self.model
+        # flip passed, not defaulted: the signature start_alpha compiles (one cached kernel to load)
         alpha, ok = _mirror_kernel(np.ascontiguousarray(run.pose.pose), run.camera.camera.rotation, m.mean,
-                                   m.u, m.sig, m.v)
+                                   m.u, m.sig, m.v, True)
         if not ok:
             raise InvalidInputError("a pose has a degenerate right lower leg")
         return alpha
@@ -304,5 +306,5 @@ class Runs:
         """Minimum-norm coefficients of a camera-frame pose (12, 3) in its own body frame (zeros,
         the mean pose, for a degenerate pose)."""
         m = self.model
-        alpha, ok = _mirror_kernel(np.ascontiguousarray(pose), np.eye(3), m.mean, m.u, m.sig, m.v, False)
+        alpha, ok = _mirror_kernel(np.ascontiguousarray(pose), _EYE3, m.mean, m.u, m.sig, m.v, False)
         return alpha if ok else np.zeros(self.model.n_bases)

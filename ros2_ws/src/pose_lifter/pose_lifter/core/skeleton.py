@@ -100,6 +100,11 @@ ANTHROPOMETRIC_PROPORTIONS: Final[NDArray[np.float64]] = np.array(
 BONES_FOR_DRAWING: Final[tuple[tuple[int, int], ...]] = (*LIMBS, (0, 3), (6, 9), (0, 6), (3, 9))
 
 
+#: The limbs' first and second joints (:func:`limb_lengths`).
+_LIMB_A = np.array([a for a, _ in LIMBS])
+_LIMB_B = np.array([b for _, b in LIMBS])
+
+
 def _check_pose(pose: NDArray[np.float64]) -> NDArray[np.float64]:
     arr = np.asarray(pose, dtype=np.float64)
     if arr.shape[-2:] != (N_JOINTS, 3):
@@ -119,9 +124,8 @@ def limb_lengths(pose: NDArray[np.float64]) -> NDArray[np.float64]:
     ndarray, shape (..., 8)
     """
     arr = _check_pose(pose)
-    a = np.array([i for i, _ in LIMBS])
-    b = np.array([j for _, j in LIMBS])
-    return np.asarray(np.linalg.norm(arr[..., a, :] - arr[..., b, :], axis=-1))
+    d = arr[..., _LIMB_A, :] - arr[..., _LIMB_B, :]
+    return np.asarray(np.sqrt(np.add.reduce(d * d, axis=-1)))  # np.linalg.norm(d, axis=-1)
 
 
 def limb_selectors() -> NDArray[np.float64]:

@@ -45,8 +45,10 @@ Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by 
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,6 +63,10 @@ from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, RIGHT_LIMBS
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
+_LEFT_LIMBS = np.array(LEFT_LIMBS)
+_RIGHT_LIMBS = np.array(RIGHT_LIMBS)
+_GROUP_OF = np.array(LIMB_GROUP_OF)
+_SQRT6 = math.sqrt(6.0)
 
 __all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
 
@@ -136,8 +142,8 @@ def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None
     conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
     if x.shape != (12, 2) or (conf is not None and conf.shape != (12,)):
         return None
-    vis = np.isfinite(x).all(axis=1)
-    return np.asarray(vis if conf is None else vis & (conf >= threshold), dtype=bool)
+    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=1))
+    return vis if conf is None else vis & (conf >= threshold)
 
 
 class OutOfOrderFrameError(PoseLifterError):
@@ -171,6 +177,19 @@ class _Track:
     unused_share: deque[float] = field(default_factory=lambda: deque(maxlen=DISTURBANCE_FRAMES))
     smoother: _Smoother | None = None
     measurement: MeasurementUpdate | None = None
+    #: the medians of ``noise`` and ``objectives`` while they are unchanged (None: not computed)
+    _noise_median: float | None = None
+    _objective_median: float | None = None
+
+    def add_objective(self, objective: float) -> None:
+        self.objectives.append(objective)
+        self._objective_median = None
+
+    def objective_median(self) -> float:
+        """The median of the track's last objectives (at least one)."""
+        if self._objective_median is None:
+            self._objective_median = float(median_rows(np.asarray(self.objectives)))
+        return self._objective_median
 
     def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64] | None,
              limit: float, min_visible: int) -> NDArray[np.bool_] | None:
@@ -212,8 +231,7 @@ class _Track:
         of the track's last ones (the fit is losing the person: its positions are no prediction)."""
         if len(self.objectives) < 3:
             return True
-        median = float(median_rows(np.asarray(self.objectives)))
-        return self.objectives[-1] <= FILL_MAX_OBJECTIVE_RATIO * median
+        return self.objectives[-1] <= FILL_MAX_OBJECTIVE_RATIO * self.objective_median()
 
     def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
                       stamp_ns: int) -> None:
@@ -229,12 +247,13 @@ class _Track:
         vis = v0 & v1 & visible
         if np.count_nonzero(vis) < 3:
             return
-        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / np.sqrt(6.0)
+        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / _SQRT6
         try:
             spread = lifter.input_scale(x, vis.astype(np.float64))
         except PoseLifterError:
             return
         self.noise.append(float(median_rows(acc)) / spread)
+        self._noise_median = None
 
     def past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
         """The last ``frames`` frames (oldest first, as ``(points (k, 12, 2), used (k, 12))``) that
@@ -254,19 +273,25 @@ class _Track:
         if not kept:
             return None
         kept.reverse()
-        return np.stack([k[1] for k in kept]), np.stack([k[2] for k in kept])
+        return np.array([k[1] for k in kept]), np.array([k[2] for k in kept])
 
     def noise_level(self) -> float:
         """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 0.0
-        return float(median_rows(np.asarray(self.noise)))
+        return self.noise_median()
+
+    def noise_median(self) -> float:
+        """The median of the track's last 2D noise estimates (at least one)."""
+        if self._noise_median is None:
+            self._noise_median = float(median_rows(np.asarray(self.noise)))
+        return self._noise_median
 
     def data_weight(self) -> float:
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 1.0
         level = self.noise_level()
-        return float(np.clip(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT, 1.0))
+        return min(max(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT), 1.0)  # np.clip
 
     def limb_proportions(self, image: bool = False) -> NDArray[np.float64] | None:
         """The track's limb proportions (8,): the calibrated median of the prior's, and with
@@ -296,8 +321,8 @@ class _Track:
             if (ok.sum(axis=0) < IMAGE_LIMB_MIN_FRAMES // 2).any():
                 return None
             est = np.array([np.quantile(rows[ok[:, i], i], IMAGE_LIMB_QUANTILE) for i in range(8)])
-            pairs = 0.5 * (est[list(LEFT_LIMBS)] + est[list(RIGHT_LIMBS)])
-            out = pairs[list(LIMB_GROUP_OF)]
+            pairs = 0.5 * (est[_LEFT_LIMBS] + est[_RIGHT_LIMBS])
+            out = pairs[_GROUP_OF]
             self.span_estimate = out if np.isfinite(out).all() and (out > 0).all() else None
         return self.span_estimate
 
@@ -365,11 +390,11 @@ def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.flo
     """The track's limb proportions (8,) from the median of the prior's (8,), corrected by
     :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
     e = np.asarray(estimate, dtype=np.float64)
-    g = np.log(np.maximum(e[list(LEFT_LIMBS)], 1e-12))
-    m = g.mean()
+    g = np.log(np.maximum(e[_LEFT_LIMBS], 1e-12))
+    m = np.add.reduce(g) / g.size  # g.mean()
     slope, offset = LIMB_CALIBRATION
     out = np.exp(m + slope * (g - m) + offset)
-    return np.asarray(out[list(LIMB_GROUP_OF)])
+    return np.asarray(out[_GROUP_OF])
 
 
 @dataclass(frozen=True)
@@ -467,8 +492,8 @@ class TrackPolicy:
                 track = None
             elif age <= self.track_timeout_ns and self.warm_start:
                 warm = track.warm
-        limbs = track.limb_proportions(self.lifter.options.image_limbs) if track is not None else None
         opts = self.lifter.options
+        limbs = track.limb_proportions(opts.image_limbs) if track is not None else None
         hybrid = opts.mode == "hybrid"
         # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
         vis = _visible(points, confidence, opts.confidence_threshold)
@@ -511,8 +536,7 @@ class TrackPolicy:
             reinit = False
             if (warm is not None and track is not None and self.reinit_ratio > 0
                     and len(track.objectives) >= 3):
-                ref = float(median_rows(np.asarray(track.objectives)))
-                if result.objective > self.reinit_ratio * ref:
+                if result.objective > self.reinit_ratio * track.objective_median():
                     cold = self.lifter.lift(points, confidence, warm=None, track=context)
                     if cold.objective < result.objective:
                         result, reinit = cold, True
@@ -525,19 +549,19 @@ class TrackPolicy:
                 track = self._tracks[track_id] = _Track(None, stamp_ns)
             track.warm = result.warm_start()
             track.last_stamp_ns = stamp_ns
-            track.unused = np.where(result.weights > 0, 0, track.unused + 1)
-            track.objectives.append(float(result.objective))
+            used = result.weights > 0
+            track.unused = np.where(used, 0, track.unused + 1)
+            track.add_objective(float(result.objective))
             if result.prior_pose is not None:
                 track.add_limbs(self.lifter.limb_proportions_of(result.prior_pose))
-            track.history.append((stamp_ns, np.array(points, dtype=np.float64),
-                                  result.weights > 0))
+            x = np.array(points, dtype=np.float64)  # the track's own copy
+            track.history.append((stamp_ns, x, used))
             cam = result.camera
             # where each joint was: its detection when the lift used it, else the fit's projection
-            used = (result.weights > 0)[:, None]
-            track.fits.append((stamp_ns, np.where(used, np.asarray(points, dtype=np.float64),
-                                                  cam.project(result.pose)), float(cam.scale)))
+            track.fits.append((stamp_ns, np.where(used[:, None], x, cam.project(result.pose)),
+                               float(cam.scale)))
             if hybrid and opts.image_limbs:
-                track.add_spans(points, result.weights > 0, float(cam.scale))
+                track.add_spans(x, used, float(cam.scale))
             if hybrid:
                 # the output's state carries over a re-initialised frame (its jump is smoothed)
                 published = self._smooth(track, result, warm is not None, dw)
@@ -559,7 +583,7 @@ class TrackPolicy:
             track.measurement = MeasurementUpdate()
         if not track.noise:  # its first two frames: how far to trust the 2D is not known yet
             return None
-        noise = float(median_rows(np.asarray(track.noise)))
+        noise = track.noise_median()
         out = track.measurement.update(result.pose_camera, points, result.weights > 0, noise,
                                        opts.measurement_depth, opts.measurement_gate)
         if not np.isfinite(out).all():
