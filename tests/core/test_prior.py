@@ -320,7 +320,10 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
 
     errs = []
     for n in (3, 0):
-        opts = LifterOptions(fill_missing_frames=n, missing_temporal_weight=0.0)
+        # the fill's effect on the fit alone: the output's measurement update holds a lost joint
+        # where the track had it, which takes part of the same error off both runs (ratio with it
+        # on: 0.955-0.964; off: 0.914-0.929, measured under both floating-point set-ups)
+        opts = LifterOptions(fill_missing_frames=n, missing_temporal_weight=0.0, measurement_update=False)
         if n:
             monkeypatch.setattr(Lifter, "lift", spy)
         res = _track(Lifter(bases, opts), x, conf)
@@ -369,9 +372,12 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
             np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
 
 
-def test_the_compiled_features_are_the_numpy_ones_to_the_bit() -> None:
+def test_the_compiled_features_are_the_numpy_ones() -> None:
     """The per-frame path's compiled features (prior._features_kernel) and their numpy reference
-    (prior._window_features, _frame_features) agree exactly, errors included."""
+    (prior._window_features, _frame_features) agree, errors included. The kernel repeats numpy's
+    operations in numpy's order (0 difference measured on every trial here); the bound is
+    round-off, so that a compiler's choices on another CPU cannot fail it and a changed operation
+    still does."""
     from pose_lifter.core import prior as prior_module
 
     rng = np.random.default_rng(4)
@@ -392,12 +398,13 @@ def test_the_compiled_features_are_the_numpy_ones_to_the_bit() -> None:
             continue
         got = prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
         for a, b in zip(got, ref, strict=True):
-            assert np.shape(a) == np.shape(b) and np.array_equal(a, b), trial
+            assert np.shape(a) == np.shape(b), trial
+            assert np.allclose(a, b, rtol=tol.ROUND_OFF_LONG, atol=tol.ROUND_OFF), trial
 
 
-def test_the_compiled_prior_target_is_the_numpy_one_to_the_bit() -> None:
+def test_the_compiled_prior_target_is_the_numpy_one() -> None:
     """hybrid._target_kernel against the numpy lines it replaced (prior_rows' target and its blend
-    with the previous frame's pose)."""
+    with the previous frame's pose), to round-off (0 measured here)."""
     from pose_lifter.core._fast import median_rows
     from pose_lifter.core.hybrid import _target_kernel
 
@@ -417,7 +424,7 @@ def test_the_compiled_prior_target_is_the_numpy_one_to_the_bit() -> None:
             prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
             target = (target + tw[:, None] * prev) / (1.0 + tw[:, None])
         got, status = _target_kernel(pose, centre, spread, previous, tw, vis, True)
-        assert status == 0 and np.array_equal(got, target), trial
+        assert status == 0 and np.allclose(got, target, rtol=tol.ROUND_OFF_LONG, atol=tol.ROUND_OFF), trial
     pose[3, 2] = np.inf
     assert _target_kernel(pose, centre, spread, previous, tw, vis, False)[1] == 1
 
