@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pose_lifter import bags
+from pose_lifter.offline import bags
 
 #: Fields that measure the run, not the result: the wall time of each skeleton's solve.
 RUN_FIELDS = frozenset({"solve_time"})

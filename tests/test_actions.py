@@ -1,4 +1,4 @@
-"""The downstream example's model (pose_lifter.examples.actions): features, k-NN, pose history."""
+"""The downstream example's model (pose_lifter.mocap.actions): features, k-NN, pose history."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import tolerances as tol
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.examples.actions import (
+from pose_lifter.mocap.actions import (
     ActionClassifier,
     PoseHistory,
     keypoint_window_features,

@@ -1,5 +1,5 @@
 """Detector inputs: the layouts, the core converters (pose_lifter.core.detectors) and the ROS
-message adapters (pose_lifter.adapters) on messages of the real yolo_msgs / hri_msgs
+message adapters (pose_lifter.messages.adapters) on messages of the real yolo_msgs / hri_msgs
 definitions (tests/ros/msgs, registered with rosbags from their text and written to a bag)."""
 
 from __future__ import annotations
@@ -12,8 +12,6 @@ import numpy as np
 import pytest
 import tolerances as tol
 from detector_poses import coco17, coco17_to, model_xy
-from pose_lifter import adapters, bags
-from pose_lifter import messages as m
 from pose_lifter.core import Lifter, PoseBases
 from pose_lifter.core.detectors import (
     Person2D,
@@ -29,6 +27,9 @@ from pose_lifter.core.detectors import (
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
 from pose_lifter.core.layouts import ALIASES, LAYOUTS, get_layout, to_model_joints
 from pose_lifter.core.skeleton import N_JOINTS
+from pose_lifter.messages import adapters
+from pose_lifter.messages import convert as m
+from pose_lifter.offline import bags
 
 REPO = Path(__file__).resolve().parents[1]
 THIRD_PARTY = REPO / "tests" / "ros" / "msgs"

@@ -1,4 +1,4 @@
-"""pose_lifter.bags: typestore from the .msg files, MCAP write/read round trips."""
+"""pose_lifter.offline.bags: typestore from the .msg files, MCAP write/read round trips."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 from mcap_check import check_mcap
-from pose_lifter import bags
-from pose_lifter import messages as m
+from pose_lifter.messages import convert as m
+from pose_lifter.offline import bags
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCE_MSG = REPO / "ros2_ws" / "src" / "pose_lifter_msgs" / "msg"
@@ -92,7 +92,7 @@ BANDS: dict[str, tuple[float, float]] = {
 
 def replay(name: str, tmp_path: Path) -> tuple[Any, Any]:
     from pose_lifter.core import Lifter, LifterOptions, PoseBases
-    from pose_lifter.offline import evaluate_bag, lift_bag
+    from pose_lifter.offline.lift import evaluate_bag, lift_bag
 
     bases = PoseBases.load()
     lifter = Lifter(bases, LifterOptions(n_starts=REPLAY["n_starts"]))

@@ -1,11 +1,11 @@
-"""pose_lifter.cdr: the offline lift's outputs, encoded straight from arrays, are the bytes that
+"""pose_lifter.messages.cdr: the offline lift's outputs, encoded straight from arrays, are the bytes that
 rosbags gives for the messages the previous code built.
 
 The reference (``_Reference`` below) is the message building of ``lift_bag`` as it was before
-``pose_lifter.cdr`` (commit 2a5a7f0): rosbags message classes filled field by field from the
+``pose_lifter.messages.cdr`` (commit 2a5a7f0): rosbags message classes filled field by field from the
 typestore's field definitions, orientations from ``scipy.spatial.transform.Rotation``, then
 ``typestore.serialize_cdr``. It is kept here verbatim in behaviour, independent of
-``pose_lifter.messages`` and ``pose_lifter.bags.message_factory`` (both may change).
+``pose_lifter.messages.convert`` and ``pose_lifter.offline.bags.message_factory`` (both may change).
 """
 
 from __future__ import annotations
@@ -18,10 +18,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pose_lifter import bags, cdr, offline, scenes
-from pose_lifter import messages as m
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
+from pose_lifter.messages import cdr
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap import scenes
+from pose_lifter.offline import bags
+from pose_lifter.offline import lift as offline
 from rosbags.interfaces import Nodetype
 from scipy.spatial.transform import Rotation
 

@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 import tolerances as tol
 from mcap_check import check_mcap
-from pose_lifter import bags, cli, mocap, scenes
-from pose_lifter import messages as m
+from pose_lifter import cli
 from pose_lifter.core.bases import PoseBases
-from pose_lifter.offline import evaluate_bag
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap import cmu as mocap
+from pose_lifter.mocap import scenes
+from pose_lifter.offline import bags
+from pose_lifter.offline.lift import evaluate_bag
 from scipy.spatial.transform import Rotation
 
 try:
@@ -125,7 +128,7 @@ def test_evaluate_rotation_counts_in_mpjpe_only(tmp_path: Path) -> None:
 
 
 def test_demo_plot_writes_png(tmp_path: Path) -> None:
-    from pose_lifter.demo import find_demo_bag, plot_frames
+    from pose_lifter.offline.demo import find_demo_bag, plot_frames
 
     bag = find_demo_bag()
     frames: dict[int, dict[int, dict[str, np.ndarray]]] = {}

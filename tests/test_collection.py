@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 from lift_compare import assert_same_lift
-from pose_lifter import bags, cli
-from pose_lifter.collection import ERRORS_NAME, MANIFEST_NAME, expand_inputs, plan_jobs
+from pose_lifter import cli
 from pose_lifter.core.errors import BagError
+from pose_lifter.offline import bags
+from pose_lifter.offline.collection import ERRORS_NAME, MANIFEST_NAME, expand_inputs, plan_jobs
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
@@ -168,13 +169,13 @@ def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() 
     import subprocess
     import sys
 
-    code = ("import sys, pose_lifter.cli, pose_lifter.collection; "
+    code = ("import sys, pose_lifter.cli, pose_lifter.offline.collection; "
             "print(sorted(m for m in ('dask', 'distributed', 'numba', 'pose_lifter.core.lifter') "
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
-    from pose_lifter import offline
-    from pose_lifter.collection import LiftSettings
+    from pose_lifter.offline import lift as offline
+    from pose_lifter.offline.collection import LiftSettings
 
     s = LiftSettings()
     assert s.track_timeout == offline.DEFAULT_TRACK_TIMEOUT_S

@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter import cli, mocap
+from pose_lifter import cli
 from pose_lifter.core.skeleton import body_frame
-from pose_lifter.experiments import action_class, camera_rotation, project
+from pose_lifter.mocap import cmu as mocap
+from pose_lifter.mocap.experiments import action_class, camera_rotation, project
 
 try:
     DATA = mocap.resolve_data_dir()

@@ -81,7 +81,7 @@ def test_the_cycle_finder_finds_a_cycle() -> None:
 
 def test_no_module_of_the_package_imports_itself_through_others() -> None:
     graph = import_graph()
-    assert "pose_lifter.cli" in graph and "pose_lifter.core.lifter" in graph["pose_lifter.offline"]
+    assert "pose_lifter.cli" in graph and "pose_lifter.core.lifter" in graph["pose_lifter.offline.lift"]
     assert cycles(graph) == []
 
 
@@ -93,7 +93,7 @@ def test_the_core_never_imports_the_ros_shell() -> None:
 
 
 def test_the_error_tree_and_the_bag_reader_load_without_the_solver() -> None:
-    code = ("import sys, pose_lifter.bags, pose_lifter.core.errors; "
+    code = ("import sys, pose_lifter.offline.bags, pose_lifter.core.errors; "
             "print(sorted(m for m in ('numba', 'scipy', 'pose_lifter.core.lifter') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
@@ -109,3 +109,25 @@ def test_every_public_core_name_resolves_lazily() -> None:
     assert set(core.__all__) <= set(dir(core))
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         _ = core.nope  # type: ignore[attr-defined]
+
+
+def _external_roots(path: Path) -> set[str]:
+    """The top-level names of everything ``path`` imports (function-level imports included)."""
+    roots: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            roots |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            roots.add(node.module.split(".")[0])
+    return roots
+
+
+def test_rclpy_is_imported_only_under_ros() -> None:
+    mods = _modules()
+    ros = {name for name, f in mods.items() if "rclpy" in _external_roots(f)}
+    assert "pose_lifter.ros.node" in ros  # the check reads imports at all
+    assert all(name.startswith("pose_lifter.ros.") for name in ros), sorted(ros)
+    # and the rest of the package never imports the ROS shell
+    for name, deps in import_graph().items():
+        if not name.startswith(("pose_lifter.ros", "pose_lifter.cli")):
+            assert not any(d.startswith("pose_lifter.ros") for d in deps), (name, deps)

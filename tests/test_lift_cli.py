@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from detector_poses import coco17, model_xy
 from mcap_check import check_mcap
-from pose_lifter import bags, cli
+from pose_lifter import cli
+from pose_lifter.offline import bags
 
 REPO = Path(__file__).resolve().parents[1]
 WALK = REPO / "bags" / "walk_clean.mcap"
@@ -174,7 +175,7 @@ def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.C
     import csv
     import json
 
-    from pose_lifter import messages as m
+    from pose_lifter.messages import convert as m
 
     lifted = tmp_path / "l.mcap"
     assert lift(str(REPO / "bags" / "two_people.mcap"), "--out", str(lifted), "--max-messages", "3",

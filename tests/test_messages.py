@@ -1,16 +1,16 @@
-"""pose_lifter.messages with rosbags message classes (CDR round trips through our typestore)."""
+"""pose_lifter.messages.convert with rosbags message classes (CDR round trips through our typestore)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter import messages as m
-from pose_lifter.bags import pose_lifter_typestore
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
+from pose_lifter.messages import convert as m
+from pose_lifter.offline.bags import pose_lifter_typestore
 from scipy.spatial.transform import Rotation
 
 T = m.rosbags_types()

@@ -1,4 +1,4 @@
-"""pose_lifter.mocap against the check numbers of shared/data/README.md (real CMU data)."""
+"""pose_lifter.mocap.cmu against the check numbers of shared/data/README.md (real CMU data)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter import mocap
 from pose_lifter.core.skeleton import limb_lengths
+from pose_lifter.mocap import cmu as mocap
 
 try:
     DATA = mocap.resolve_data_dir()

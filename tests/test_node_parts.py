@@ -7,21 +7,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pose_lifter import messages as m
-from pose_lifter.bags import pose_lifter_typestore
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.results import Camera, LiftResult
-from pose_lifter.node_checks import (
-    SkipSkeleton,
-    WarningThrottle,
-    check_output,
-    frame_over_cap,
-    skeleton_input,
-)
-from pose_lifter.node_markers import MarkerBook
-from pose_lifter.node_stats import FrameStats
-from pose_lifter.params import PARAMS, NodeSettings
+from pose_lifter.messages import convert as m
+from pose_lifter.offline.bags import pose_lifter_typestore
+from pose_lifter.ros.checks import SkipSkeleton, WarningThrottle, check_output, frame_over_cap, skeleton_input
+from pose_lifter.ros.markers import MarkerBook
+from pose_lifter.ros.params import PARAMS, NodeSettings
+from pose_lifter.ros.stats import FrameStats
 
 T = m.rosbags_types()
 SETTINGS = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__)

@@ -1,4 +1,4 @@
-"""pose_lifter.offline.lift_bag plumbing with a stand-in lifter (the real one: test_bags.py)."""
+"""pose_lifter.offline.lift.lift_bag plumbing with a stand-in lifter (the real one: test_bags.py)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 import tolerances as tol
 from mcap_check import check_mcap
-from pose_lifter import bags, offline, scenes
-from pose_lifter import messages as m
 from pose_lifter.core.errors import SolverError, TooFewJointsError
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap import scenes
+from pose_lifter.offline import bags
+from pose_lifter.offline import lift as offline
 
 
 class EchoLifter:

@@ -9,8 +9,10 @@ from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "ros2_ws" / "src" / "pose_lifter"
 #: What the installed executables (lifter, lifter_lifecycle, adapter) run.
-NODE_MODULES = ["node.py", "lifecycle_node.py", "adapter_node.py", "adapters.py", "messages.py",
-                "diagnostics.py", *(f"core/{p.name}" for p in (PKG / "pose_lifter" / "core").glob("*.py"))]
+NODE_MODULES = [*(f"ros/{p.name}" for p in (PKG / "pose_lifter" / "ros").glob("*.py")
+                  if p.name not in ("play.py", "action_recognition.py")),
+                "messages/adapters.py", "messages/convert.py",
+                *(f"core/{p.name}" for p in (PKG / "pose_lifter" / "core").glob("*.py"))]
 #: Imported only by offline functions the node never calls (basis learning), or optional
 #: (threadpoolctl: without it the node runs, with BLAS's own thread count; core/_threads.py).
 OPTIONAL = {"sklearn", "threadpoolctl"}

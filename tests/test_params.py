@@ -1,4 +1,4 @@
-"""The node's parameter table (pose_lifter.params): option parameters come from the options'
+"""The node's parameter table (pose_lifter.ros.params): option parameters come from the options'
 metadata, config/lifter.yaml is written from it, and an offline read knows every node name."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import yaml
 from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
-from pose_lifter.params import NODE_ONLY, PARAMS, SPECS, NodeSettings, params_yaml, read_params_file
+from pose_lifter.ros.params import NODE_ONLY, PARAMS, SPECS, NodeSettings, params_yaml, read_params_file
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
@@ -46,7 +46,7 @@ def test_the_yaml_states_each_range_and_default() -> None:
 
 def test_the_committed_yaml_is_the_generated_one() -> None:
     assert CONFIG.read_text() == params_yaml(), (
-        "config/lifter.yaml is stale: python -m pose_lifter.node --params-yaml > config/lifter.yaml")
+        "config/lifter.yaml is stale: python -m pose_lifter.ros.node --params-yaml > config/lifter.yaml")
 
 
 def test_offline_read_of_the_node_yaml_ignores_no_node_parameter() -> None:

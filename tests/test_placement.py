@@ -7,8 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from pose_lifter import cli, offline, placement
-from pose_lifter.params import read_params_file
+from pose_lifter import cli
+from pose_lifter.core import placement
+from pose_lifter.offline import lift as offline
+from pose_lifter.ros.params import read_params_file
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -30,7 +32,7 @@ def test_the_node_params_file_states_the_same_defaults() -> None:
 
 
 def test_the_placement_module_loads_nothing_else() -> None:
-    code = ("import sys, pose_lifter.placement; "
+    code = ("import sys, pose_lifter.core.placement; "
             "print(sorted(m for m in sys.modules if m.startswith(('pose_lifter.', 'numpy'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "['pose_lifter.placement']"
+    assert out.strip() == "['pose_lifter.core.placement']"

@@ -12,8 +12,8 @@ from pose_lifter.core.errors import PriorFileError
 from pose_lifter.core.prior import PosePrior
 from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, body_frame, limb_lengths
 from pose_lifter.core.synthetic import synthetic_poses
-from pose_lifter.pose_augment import CHAINS, mirror_poses, random_turns, transplant_limbs, turn_limbs
-from pose_lifter.prior_training import GENERALISE, Augmentation, augment_poses, make_batch
+from pose_lifter.mocap.pose_augment import CHAINS, mirror_poses, random_turns, transplant_limbs, turn_limbs
+from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, augment_poses, make_batch
 
 EXACT = 1e-12  # metres: rotations and re-scaled unit vectors, round-off only
 
@@ -172,7 +172,7 @@ def test_the_trained_residual_prior_runs_in_numpy_as_in_torch() -> None:
     """Batch normalisation folded into the linear layers: the numpy prior equals the torch
     network in evaluation mode; seeded training repeats exactly."""
     torch = pytest.importorskip("torch")
-    from pose_lifter import prior_training as pt
+    from pose_lifter.mocap import prior_training as pt
 
     seqs = [synthetic_poses(200, seed=s, n_actions=2) for s in range(3)]
     captured: dict[str, object] = {}

@@ -1,4 +1,4 @@
-"""pose_lifter.scenes: virtual camera geometry, detector-like corruption, bag contents."""
+"""pose_lifter.mocap.scenes: virtual camera geometry, detector-like corruption, bag contents."""
 
 from __future__ import annotations
 
@@ -7,11 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter import bags, scenes
-from pose_lifter import messages as m
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.skeleton import limb_lengths
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap import scenes
+from pose_lifter.offline import bags
 
 
 def standing_person(facing_yaw_deg: float = 0.0) -> np.ndarray:

@@ -8,7 +8,8 @@ import re
 from pathlib import Path
 
 import yaml
-from pose_lifter import bags, scenes
+from pose_lifter.mocap import scenes
+from pose_lifter.offline import bags
 
 VIZ = Path(__file__).resolve().parents[1] / "ros2_ws" / "src" / "pose_lifter" / "viz"
 

@@ -59,9 +59,9 @@ from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
-from pose_lifter.mocap import load_trial, split_trials
-from pose_lifter.scenes import corrupt_2d
-from pose_lifter.views import film, limb_scale_factors, scale_limbs, view_rotation
+from pose_lifter.mocap.cmu import load_trial, split_trials
+from pose_lifter.mocap.scenes import corrupt_2d
+from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
 CONDITIONS: dict[str, dict[str, float]] = {
     "clean": {},
@@ -193,7 +193,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                         t = policy.lift(0, int(stamps[i]), px[i], conf[i])
                         r = t.result
                         # what pose-lifter lift smooths: the fit's own pose, or the published
-                        # one with the measurement update (pose_lifter.offline._lift_chain)
+                        # one with the measurement update (pose_lifter.offline.lift._lift_chain)
                         own = (r.pose_camera if t.fit_pose_camera is None or lifter.options.measurement_update
                                else t.fit_pose_camera)
                         fit[i] = own * leg_m[i]
@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     trials = args.trials
     if args.action:
-        from pose_lifter.mocap import read_manifest
+        from pose_lifter.mocap.cmu import read_manifest
         known = set(split_trials("train", args.data)) | set(split_trials("eval", args.data))
         trials = sorted({t.trial for t in read_manifest(args.data)
                          if t.action == args.action and t.trial in known})  # of the two splits only

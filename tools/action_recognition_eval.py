@@ -52,8 +52,8 @@ from numpy.typing import NDArray
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.tracking import TrackPolicy
-from pose_lifter.examples.actions import ActionClassifier
-from pose_lifter.mocap import load_trial, read_manifest, resolve_data_dir
+from pose_lifter.mocap.actions import ActionClassifier
+from pose_lifter.mocap.cmu import load_trial, read_manifest, resolve_data_dir
 
 CLASSES = ("walk", "run", "dance", "basketball", "playground")
 FPS = 30.0  # mocap 120 Hz subsampled by 4

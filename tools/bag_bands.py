@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases
-from pose_lifter.offline import evaluate_bag, lift_bag
+from pose_lifter.offline.lift import evaluate_bag, lift_bag
 
 REPO = Path(__file__).resolve().parents[1]
 

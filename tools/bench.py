@@ -42,8 +42,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 from numpy.typing import NDArray
-from pose_lifter import messages as m
-from pose_lifter.bags import read_messages
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import InvalidInputError, PoseLifterError
 from pose_lifter.core.lifter import Lifter
@@ -52,7 +50,9 @@ from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.skeleton import normalise_pose
 from pose_lifter.core.tracking import TrackPolicy
-from pose_lifter.scenes import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from pose_lifter.offline.bags import read_messages
 from threadpoolctl import threadpool_limits
 
 REPO = Path(__file__).resolve().parents[1]
@@ -132,7 +132,7 @@ def lift_track(lifter: Lifter, tr: Track, warm_start: bool = True
     return results, wall, cpu, warmed
 
 
-#: The lifter of the pool workers, inherited through fork (as in pose_lifter.offline).
+#: The lifter of the pool workers, inherited through fork (as in pose_lifter.offline.lift).
 _POOL: dict[str, Lifter] = {}
 
 

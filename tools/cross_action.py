@@ -9,7 +9,7 @@ CMU manifest (``make cross-action``).
     .venv/bin/python tools/cross_action.py --merge RUN1/cross_action.json RUN2/... --out DIR
 
 Folds: for each motion class C of ``MANIFEST.csv`` among the usable trials
-(:func:`pose_lifter.mocap.trials_by_action`: walk, run, jump, punch, dance, basketball,
+(:func:`pose_lifter.mocap.cmu.trials_by_action`: walk, run, jump, punch, dance, basketball,
 playground, other; a class whose only trial is reserved has no fold), a prior is trained on every
 usable trial *not* of class C (every 8th of them, sorted, held out of the fit for its validation
 figure and per-joint uncertainty), seeded, at the fixed budget given, and saved as
@@ -52,8 +52,8 @@ import accuracy as acc
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PriorFileError
 from pose_lifter.core.prior import PosePrior
-from pose_lifter.mocap import load_trial, trials_by_action
-from pose_lifter.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
+from pose_lifter.mocap.cmu import load_trial, trials_by_action
+from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 
 DEFAULT_CONDITIONS = ("clean", "noise0.1", "outliers20", "missing15", "lrswap", "lowercut", "close", "above")
 METHODS = ("flat", "learned", "hybrid", "hybrid-offline")

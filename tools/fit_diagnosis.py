@@ -46,9 +46,9 @@ from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.metrics import procrustes_align
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, limb_lengths, normalise_pose_flat
 from pose_lifter.core.tracking import TrackPolicy
-from pose_lifter.mocap import load_trial
-from pose_lifter.scenes import corrupt_2d
-from pose_lifter.views import film, view_rotation
+from pose_lifter.mocap.cmu import load_trial
+from pose_lifter.mocap.scenes import corrupt_2d
+from pose_lifter.mocap.views import film, view_rotation
 
 CAPTURE: dict[str, Any] = {}
 

@@ -32,9 +32,9 @@ import numpy as np
 from pose_lifter.core.bases import learn_sparse_bases
 from pose_lifter.core.prior import PosePrior
 from pose_lifter.core.skeleton import normalise_pose
-from pose_lifter.mocap import load_trial, read_manifest
-from pose_lifter.prior_training import train_prior
-from pose_lifter.views import limb_scale_factors, scale_limbs
+from pose_lifter.mocap.cmu import load_trial, read_manifest
+from pose_lifter.mocap.prior_training import train_prior
+from pose_lifter.mocap.views import limb_scale_factors, scale_limbs
 
 
 def train(args: argparse.Namespace, fit_ids: list[str], val_ids: list[str], command: str,

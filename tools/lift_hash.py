@@ -8,7 +8,7 @@ Usage::
 Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals``), and a total:
 
 * ``lifts paper`` / ``lifts hybrid``: every committed bag lifted offline the way ``pose-lifter
-  lift`` does (:func:`pose_lifter.offline.lift_messages`: per-track warm starts through the
+  lift`` does (:func:`pose_lifter.offline.lift.lift_messages`: per-track warm starts through the
   node's per-track policy, metric placement from ``/camera_info``), in ``mode="paper"`` and
   ``mode="hybrid"`` (``--modes``: ``learned`` can be added, or lifted alone; either changes the
   total). Per lifted skeleton (in message and track order): stamp, track id,
@@ -18,7 +18,7 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
 * ``metrics``: the lifted metric joints of both modes against the bags' ground truth (matched
   by stamp and track id): :func:`~pose_lifter.core.metrics.mpjpe`, ``p_mpjpe``,
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
-  :func:`pose_lifter.offline.evaluate_bag` on each input bag.
+  :func:`pose_lifter.offline.lift.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
   first bag in each mode through ``Runs.run``'s Python loop (the default fused run kernel calls no
   Python ``pose_step``; the loop performs the same operations, ``tests/core/test_run_kernel.py``)
@@ -53,8 +53,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 from numpy.typing import NDArray
-from pose_lifter import messages as m
-from pose_lifter.bags import read_messages
 from pose_lifter.core import pose_step as pose_module
 from pose_lifter.core import runs as lifter_module
 from pose_lifter.core._jit import HAVE_NUMBA
@@ -64,8 +62,10 @@ from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import LiftResult
-from pose_lifter.offline import FrameLift, LiftSummary, evaluate_bag, lift_messages
-from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from pose_lifter.offline.bags import read_messages
+from pose_lifter.offline.lift import FrameLift, LiftSummary, evaluate_bag, lift_messages
 
 REPO = Path(__file__).resolve().parents[1]
 MODES = ("paper", "hybrid")

@@ -41,10 +41,10 @@ def wrap(owner: Any, name: str, key: str | None = None) -> None:
 
 
 def main() -> int:
-    import pose_lifter.bags as bags
     import pose_lifter.cli as cli
-    import pose_lifter.messages as m
-    import pose_lifter.offline as off
+    import pose_lifter.messages.convert as m
+    import pose_lifter.offline.bags as bags
+    import pose_lifter.offline.lift as off
     from pose_lifter.core.lifter import Lifter
 
     acc["import"] = time.perf_counter() - T0
@@ -68,8 +68,8 @@ def main() -> int:
     for n in ("result_to_skeleton3d", "skeleton_markers"):
         wrap(m, n)
     try:
-        import pose_lifter.cdr as c
-    except ImportError:  # before pose_lifter.cdr
+        import pose_lifter.messages.cdr as c
+    except ImportError:  # before pose_lifter.messages.cdr
         pass
     else:
         wrap(c.SkeletonFrame, "from_results", "SkeletonFrame.from_results")

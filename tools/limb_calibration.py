@@ -30,7 +30,7 @@ from pose_lifter.core import Lifter, LifterOptions
 from pose_lifter.core.bases import PoseBases
 from pose_lifter.core.skeleton import LEFT_LIMBS, RIGHT_LIMBS
 from pose_lifter.core.tracking import TrackPolicy, calibrated_limb_proportions
-from pose_lifter.views import film, limb_scale_factors, scale_limbs, view_rotation
+from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
 GROUPS = ("upper arm", "forearm", "thigh", "shin")
 

@@ -6,7 +6,7 @@ Usage (ROS sourced: ``source ros2_ws/install/setup.bash``)::
     .venv/bin/python tools/node_outputs.py dump OUT.json [--src DIR] [--frames 40]
     .venv/bin/python tools/node_outputs.py compare A.json B.json
 
-``dump`` runs :class:`pose_lifter.node.LifterNode` in-process (``--src``: the directory that holds
+``dump`` runs :class:`pose_lifter.ros.node.LifterNode` in-process (``--src``: the directory that holds
 the ``pose_lifter`` package to import, e.g. an old commit's ``ros2_ws/src/pose_lifter`` from
 ``git archive``), feeds it the first ``--frames`` keypoint frames (and the camera_info) of every
 committed bag in ``mode`` hybrid and paper through its callbacks, and writes every
@@ -33,9 +33,9 @@ def dump(out: Path, src: Path | None, frames: int) -> None:
     if src is not None:
         sys.path.insert(0, str(src))
     import rclpy
-    from pose_lifter import bags
-    from pose_lifter.messages import rclpy_types
-    from pose_lifter.node import LifterNode
+    from pose_lifter.messages.convert import rclpy_types
+    from pose_lifter.offline import bags
+    from pose_lifter.ros.node import LifterNode
     from rclpy.parameter import Parameter
     from rclpy.serialization import deserialize_message
 

@@ -57,7 +57,7 @@ def record(args: argparse.Namespace) -> int:
     learned = Lifter(bases, opts.replace(mode="learned"))
     trials = args.trials
     if args.action:
-        from pose_lifter.mocap import read_manifest, split_trials
+        from pose_lifter.mocap.cmu import read_manifest, split_trials
         known = set(split_trials("train", args.data)) | set(split_trials("eval", args.data))
         trials = sorted({t.trial for t in read_manifest(args.data)
                          if t.action == args.action and t.trial in known})

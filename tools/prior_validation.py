@@ -6,7 +6,7 @@
 The trials are the first prior's ``validation_trials`` (metadata; tools/train_prior.py holds them
 out of the fit: every 8th training trial and the action example's test trials), at 60 Hz for a
 single-frame prior and 30 Hz (the node's rate) for a temporal one; the priors must share a window.
-Each trial is re-filmed from random views as in training (:func:`pose_lifter.prior_training.make_batch`
+Each trial is re-filmed from random views as in training (:func:`pose_lifter.mocap.prior_training.make_batch`
 with the views-only augmentation, the same samples for every prior): ``views`` with its detector
 corruptions, ``views clean`` without noise, missing joints or outliers, then per trial (clean).
 Prints P-MPJPE in mm (similarity-aligned per sample).
@@ -19,8 +19,8 @@ import warnings
 
 import numpy as np
 from pose_lifter.core.prior import PosePrior
-from pose_lifter.mocap import load_trial
-from pose_lifter.prior_training import Augmentation, _evaluate, make_batch
+from pose_lifter.mocap.cmu import load_trial
+from pose_lifter.mocap.prior_training import Augmentation, _evaluate, make_batch
 from threadpoolctl import threadpool_limits
 
 

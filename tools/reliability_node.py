@@ -73,7 +73,7 @@ class Harness:
 
     def __init__(self, params: list[str], reliable_input: bool, depth: int = 20) -> None:
         import rclpy
-        from pose_lifter.messages import rclpy_types
+        from pose_lifter.messages.convert import rclpy_types
         from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
         self.t = rclpy_types()
@@ -106,7 +106,7 @@ class Harness:
         self.node.create_subscription(self.t.MarkerArray, "skeleton_markers", self._on_markers, out_qos)
 
     def _on_answer(self, msg: Any) -> None:
-        from pose_lifter.messages import stamp_to_ns
+        from pose_lifter.messages.convert import stamp_to_ns
 
         self.n_answers += 1
         if not _finite(msg):
@@ -131,7 +131,7 @@ class Harness:
         return self.proc.poll() is None
 
     def handshake(self) -> None:
-        from pose_lifter.messages import make_header
+        from pose_lifter.messages.convert import make_header
 
         deadline = time.monotonic() + 120.0
         probe = 1
@@ -171,7 +171,7 @@ class Harness:
 def _kinds(t: Any) -> dict[str, Callable[[int], Any]]:
     """Malformed messages by kind: each builds one from a stamp (ns)."""
     from pose_lifter.core.layouts import get_layout
-    from pose_lifter.messages import arrays_to_skeleton2d, camera_info, make_header
+    from pose_lifter.messages.convert import arrays_to_skeleton2d, camera_info, make_header
 
     rng = np.random.default_rng(0)
     idx = list(get_layout("coco17").model_indices)
@@ -239,7 +239,7 @@ def _kinds(t: Any) -> dict[str, Callable[[int], Any]]:
 
 def fuzz(args: argparse.Namespace) -> int:
     from pose_lifter.core.layouts import get_layout
-    from pose_lifter.messages import arrays_to_skeleton2d, make_header
+    from pose_lifter.messages.convert import arrays_to_skeleton2d, make_header
 
     h = Harness(["n_starts:=1", "max_alternations:=5"], reliable_input=False)
     t = h.t
@@ -319,9 +319,9 @@ def _verdict(rows: list[tuple[str, str, bool]]) -> int:
 # --------------------------------------------------------------------------- soak
 
 def soak(args: argparse.Namespace) -> int:
-    from pose_lifter.bags import pose_lifter_typestore, read_messages
-    from pose_lifter.messages import ns_to_stamp, stamp_to_ns
-    from pose_lifter.scenes import TOPIC_KEYPOINTS
+    from pose_lifter.messages.convert import ns_to_stamp, stamp_to_ns
+    from pose_lifter.mocap.scenes import TOPIC_KEYPOINTS
+    from pose_lifter.offline.bags import pose_lifter_typestore, read_messages
     from rclpy.serialization import deserialize_message
 
     store = pose_lifter_typestore()

@@ -6,7 +6,7 @@
         [--window 1] [--seed 0] [--out PATH]
 
 The defaults give the packaged ``data/prior_mlp.npz`` (``make prior``): a residual MLP
-(:func:`pose_lifter.prior_training.train_prior_residual`: 512 units, 2 residual blocks, dropout
+(:func:`pose_lifter.mocap.prior_training.train_prior_residual`: 512 units, 2 residual blocks, dropout
 0.25, PyTorch, the optional extra ``train``) trained on 24 epochs x 100 000 freshly augmented
 samples with the augmentation ``GENERALISE`` (random views and detector corruptions, mirrored
 people, arms or legs transplanted from another frame, limbs turned about their joints, the lower
@@ -18,7 +18,7 @@ Each took 19-22 min on one thread of the loaded 2-core machine. ``--model mlp --
 cross-action folds (``tools/cross_action.py``, docs/cross_action.md) chose the residual model and
 ``GENERALISE``; ``--aug NAME=VALUE`` changes one field of the augmentation.
 
-Training trials: :func:`pose_lifter.mocap.split_trials` ("train": subjects 01, 03, 05, 06 and
+Training trials: :func:`pose_lifter.mocap.cmu.split_trials` ("train": subjects 01, 03, 05, 06 and
 09_01-09_11). Held out of the fit: the action-recognition example's test trials (so that its
 figure with lifted 3D is on unseen motion) and, with ``--holdout every8`` (default), every 8th
 training trial (sorted, from the 8th); they give the validation figure and the prior's per-joint
@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 from pose_lifter.core.prior import DEFAULT_PRIOR_PATH
-from pose_lifter.mocap import load_trial, resolve_data_dir, split_trials
-from pose_lifter.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
+from pose_lifter.mocap.cmu import load_trial, resolve_data_dir, split_trials
+from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 from threadpoolctl import threadpool_limits
 
 

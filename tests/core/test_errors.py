@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pose_lifter import bags, cli
+from pose_lifter import cli
 from pose_lifter.core import Lifter, camera
 from pose_lifter.core import reference as ref
 from pose_lifter.core.baselines import ramakrishna as rk
@@ -18,6 +18,7 @@ from pose_lifter.core.errors import (
 )
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_step import pose_step
+from pose_lifter.offline import bags
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
 from pose_lifter.core.measurement import MeasurementUpdate, kalman_gain
 from pose_lifter.core.skeleton import LIMBS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.tracking import TrackedLift, TrackPolicy
-from pose_lifter.scenes import corrupt_2d
+from pose_lifter.mocap.scenes import corrupt_2d
 
 REPO = Path(__file__).resolve().parents[2]
 OFF = {"measurement_update": False}
@@ -23,9 +23,9 @@ OFF = {"measurement_update": False}
 def _person(bag: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
     """The ground truth of a committed bag's person, ``frames`` frames at 30 Hz, weak
     perspective: (pixels (frames, 12, 2), centred camera-frame truth in metres (frames, 12, 3))."""
-    from pose_lifter import messages
-    from pose_lifter.bags import read_messages
-    from pose_lifter.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages import convert as messages
+    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.offline.bags import read_messages
 
     msgs = [x.msg for x in read_messages(REPO / "bags" / f"{bag}.mcap", [TOPIC_GROUND_TRUTH])]
     cam = np.array([messages.skeleton3d_to_joints(m.skeletons[0]) for m in msgs[:frames]])

@@ -11,7 +11,7 @@ import pytest
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.tracking import TrackedLift, TrackPolicy
-from pose_lifter.scenes import corrupt_2d
+from pose_lifter.mocap.scenes import corrupt_2d
 
 REPO = Path(__file__).resolve().parents[2]
 OFF = {"correction_smoothing": 0.0, "disturbed_smoothing_gain": 1.0, "measurement_update": False}
@@ -22,9 +22,9 @@ def walker() -> tuple[np.ndarray, np.ndarray]:
     """One real walker (bags/walk_clean.mcap's ground truth, CMU 07_05, an evaluation-split
     trial), 90 consecutive frames at 30 Hz, weak perspective: (pixels (90, 12, 2), centred
     camera-frame truth in metres (90, 12, 3))."""
-    from pose_lifter import messages
-    from pose_lifter.bags import read_messages
-    from pose_lifter.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages import convert as messages
+    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.offline.bags import read_messages
 
     msgs = [x.msg for x in read_messages(REPO / "bags" / "walk_clean.mcap", [TOPIC_GROUND_TRUTH])]
     cam = np.array([messages.skeleton3d_to_joints(m.skeletons[0]) for m in msgs[:90]])
@@ -104,7 +104,7 @@ def test_image_limbs_read_a_persons_proportions_off_the_image(walker: tuple[np.n
     """A walker whose forearms are 25 % shorter and thighs 15 % longer: the track's estimate
     from its image limb lengths (``image_limbs``) is closer to the person's proportions than the
     bases' proportions are, and the limb constraints then take it."""
-    from pose_lifter.views import scale_limbs
+    from pose_lifter.mocap.views import scale_limbs
 
     _, truth = walker
     person = scale_limbs(truth, np.array([1.0, 0.75, 1.0, 0.75, 1.15, 1.0, 1.15, 1.0]))

@@ -17,7 +17,7 @@ from pose_lifter.core.lifter import TrackContext
 from pose_lifter.core.prior import DEFAULT_PRIOR_PATH, PosePrior, prior_features
 from pose_lifter.core.synthetic import synthetic_poses
 from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
-from pose_lifter.views import film, scale_limbs, view_rotation
+from pose_lifter.mocap.views import film, scale_limbs, view_rotation
 
 #: Tolerances of this file, stated once.
 LIMB_TOL = tol.LIFT_LIMB_VIOLATION  # limb-length violation of a fused (hybrid) result, right-lower-leg units
@@ -42,9 +42,9 @@ def real_frames() -> tuple[np.ndarray, np.ndarray]:
     """Real people (the committed bags' ground truth: CMU trials of the evaluation split, camera
     frame, metres), 4 frames of each of 3 bags, seen weak-perspective: (pixels (12, 12, 2),
     centred camera-frame truth (12, 12, 3))."""
-    from pose_lifter import messages
-    from pose_lifter.bags import read_messages
-    from pose_lifter.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages import convert as messages
+    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.offline.bags import read_messages
 
     truth = []
     for name in ("walk_clean", "punch_clean", "run_orbit"):
@@ -152,7 +152,7 @@ def test_output_shape_and_finiteness_on_degenerate_input(prior: PosePrior) -> No
 
 
 def test_training_code_fits_a_tiny_prior_that_beats_the_flat_floor(tmp_path: Path) -> None:
-    from pose_lifter.prior_training import Augmentation, make_batch, train_prior
+    from pose_lifter.mocap.prior_training import Augmentation, make_batch, train_prior
 
     seqs = [synthetic_poses(300, seed=s, n_actions=2) for s in range(3)]
     aug = Augmentation(p_outliers=0.0, p_missing=0.0, p_noise=0.0, limb_spread=0.0, elevation=(0.0, 0.0),
@@ -251,9 +251,9 @@ def test_the_tracker_leaves_a_wrong_depth_basin(
 def walk_track() -> tuple[np.ndarray, np.ndarray]:
     """One real walker (bags/walk_clean.mcap's ground truth), 30 consecutive frames at 30 Hz,
     weak perspective: (pixels (30, 12, 2), centred camera-frame truth (30, 12, 3))."""
-    from pose_lifter import messages
-    from pose_lifter.bags import read_messages
-    from pose_lifter.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages import convert as messages
+    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.offline.bags import read_messages
 
     msgs = [x.msg for x in read_messages(REPO / "bags" / "walk_clean.mcap", [TOPIC_GROUND_TRUTH])]
     cam = np.array([messages.skeleton3d_to_joints(m.skeletons[0]) for m in msgs[5:35]])

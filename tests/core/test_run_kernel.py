@@ -21,7 +21,7 @@ from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.pose_step import PriorRows
 from pose_lifter.core.runs import Run, Runs
-from pose_lifter.offline import lift_messages
+from pose_lifter.offline.lift import lift_messages
 
 REPO = Path(__file__).resolve().parents[2]
 Call = tuple[tuple[Any, ...], dict[str, Any]]
@@ -29,7 +29,7 @@ Call = tuple[tuple[Any, ...], dict[str, Any]]
 
 def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[Call]]:
     """The ``Runs.run`` calls of a tracked lift of a bag's first messages (through the loop)."""
-    from pose_lifter.bags import read_messages
+    from pose_lifter.offline.bags import read_messages
 
     kps, infos = [], []
     for x in read_messages(REPO / "bags" / bag, None):

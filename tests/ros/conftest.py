@@ -236,7 +236,7 @@ class GraphClient:
         matched this writer (the writer-side match that ``ready`` sees can come first, and a
         frame published in between is dropped by design). The handshake's answers are discarded.
         """
-        from pose_lifter.messages import make_header, stamp_to_ns
+        from pose_lifter.messages.convert import make_header, stamp_to_ns
 
         deadline = time.monotonic() + DISCOVERY_TIMEOUT
         for i in itertools.count(1):
@@ -270,7 +270,7 @@ class GraphClient:
         Frames are sent in lock step (the next only after the answer), as a detector at the
         lifter's rate would; the answer is matched by header stamp and frame id.
         """
-        from pose_lifter.messages import stamp_to_ns
+        from pose_lifter.messages.convert import stamp_to_ns
 
         header = frame.header if not isinstance(frame, bytes) else None
         n_sk, n_mk = len(self.skeletons), len(self.markers)
@@ -312,7 +312,7 @@ class GraphClient:
 def graph(rclpy_context: Any) -> Iterator[GraphClient]:
     """A client node in the test process (its own executor on the test Context)."""
     import rclpy
-    from pose_lifter.messages import rclpy_types
+    from pose_lifter.messages.convert import rclpy_types
     from rclpy.executors import SingleThreadedExecutor
 
     node = rclpy.create_node(f"lifter_test_{os.getpid()}", context=rclpy_context)

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 from detector_poses import coco17, coco17_to, model_xy
-from pose_lifter import messages as m
-from pose_lifter.adapters import TrackIds
+from pose_lifter.messages import convert as m
+from pose_lifter.messages.adapters import TrackIds
 
 from .conftest import DISCOVERY_TIMEOUT, INSTALL, REPO, GraphClient, LifterProcess, _load_workspace_messages
 

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import tolerances as tol
 import yaml
-from pose_lifter import messages as m
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.messages import convert as m
 from scipy.spatial.transform import Rotation
 
 from .conftest import PARAMS_YAML, REPO, SHUTDOWN_TIMEOUT, GraphClient, all_finite
@@ -62,11 +62,11 @@ def good_frame(t: Any, i: int, track_id: int = 0, yaw_deg: float = 30.0) -> Any:
 
 
 def test_params_yaml_is_the_generated_one() -> None:
-    from pose_lifter.params import params_yaml
+    from pose_lifter.ros.params import params_yaml
 
     source = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
     assert source.read_text() == params_yaml(), (
-        "config/lifter.yaml is stale: python -m pose_lifter.node --params-yaml > config/lifter.yaml")
+        "config/lifter.yaml is stale: python -m pose_lifter.ros.node --params-yaml > config/lifter.yaml")
     assert PARAMS_YAML.read_text() == source.read_text(), "the installed copy is stale: make ros"
 
 
@@ -200,7 +200,7 @@ def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: 
     assert not r.successful
     # nothing of the refused changes stuck
     names = ("alternation_tol", "variant", "limb_proportions", "bases_file", "n_starts")
-    from pose_lifter.params import PARAMS
+    from pose_lifter.ros.params import PARAMS
 
     defaults = {p.name: p.default for p in PARAMS}
     assert graph.get_parameters(*names) == {**{n: defaults[n] for n in names}, "n_starts": 3}
@@ -346,8 +346,8 @@ N_STARTS = 3
 
 
 def _to_rosbags(msg: Any, msgtype: str) -> Any:
-    """An rclpy message as a rosbags one (CDR round trip), to write it with pose_lifter.bags."""
-    from pose_lifter.bags import pose_lifter_typestore
+    """An rclpy message as a rosbags one (CDR round trip), to write it with pose_lifter.offline.bags."""
+    from pose_lifter.offline.bags import pose_lifter_typestore
     from rclpy.serialization import serialize_message
 
     return pose_lifter_typestore().deserialize_cdr(bytes(serialize_message(msg)), msgtype)
@@ -356,10 +356,10 @@ def _to_rosbags(msg: Any, msgtype: str) -> Any:
 def test_bag_replay_answers_every_frame_like_the_offline_lift(
     start_lifter: Any, graph: GraphClient, tmp_path: Any
 ) -> None:
-    from pose_lifter.bags import BagWriter, pose_lifter_typestore, read_messages
     from pose_lifter.core import Lifter, LifterOptions
-    from pose_lifter.offline import evaluate_bag, lift_messages
-    from pose_lifter.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+    from pose_lifter.mocap.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+    from pose_lifter.offline.bags import BagWriter, pose_lifter_typestore, read_messages
+    from pose_lifter.offline.lift import evaluate_bag, lift_messages
 
     store = pose_lifter_typestore()
     recorded = list(read_messages(BAG))

@@ -8,8 +8,8 @@ import time
 from typing import Any
 
 import pytest
-from pose_lifter import bags
-from pose_lifter import messages as m
+from pose_lifter.messages import convert as m
+from pose_lifter.offline import bags
 
 from .conftest import REPO, GraphClient
 

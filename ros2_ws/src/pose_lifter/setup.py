@@ -33,11 +33,11 @@ setup(
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            "lifter = pose_lifter._entry:lifter",
-            "adapter = pose_lifter.adapter_node:main",
-            "lifter_lifecycle = pose_lifter.lifecycle_node:main",
+            "lifter = pose_lifter.ros.entry:lifter",
+            "adapter = pose_lifter.ros.adapter_node:main",
+            "lifter_lifecycle = pose_lifter.ros.lifecycle:main",
             "pose-lifter = pose_lifter.cli:main",
-            "action_recognition = pose_lifter.examples.action_recognition:main",
+            "action_recognition = pose_lifter.ros.action_recognition:main",
         ],
     },
 )

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .core.smoothing import OFFLINE_SMOOTHING_S
-from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
+from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
+from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
 
 __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
 
@@ -71,7 +71,7 @@ def _out_is_a_directory(args: argparse.Namespace) -> bool:
 
 #: Errors that mean the input data is bad (exit code 1); see the module doc.
 def _is_data_error(exc: BaseException) -> bool:
-    from .core.errors import BagReadError, BasisFileError, InvalidInputError, SolverError
+    from pose_lifter.core.errors import BagReadError, BasisFileError, InvalidInputError, SolverError
 
     return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError | SolverError)
             or type(exc).__module__.startswith("rosbags"))
@@ -99,7 +99,7 @@ def learn_bases(
 
     Every ``step``-th frame of the 120 Hz trials is used (8 -> 15 Hz: consecutive frames are
     nearly identical). With ``limb_spread`` > 0 every frame's limbs are first scaled by factors
-    drawn per frame (:func:`pose_lifter.views.limb_scale_factors`, upper arm, forearm, thigh and
+    drawn per frame (:func:`pose_lifter.mocap.views.limb_scale_factors`, upper arm, forearm, thigh and
     shin uniform in ``1 +- limb_spread``, both sides alike; seeded by ``seed``), so the bases
     represent people of other proportions than the CMU subjects. Then every pose is normalised
     with :func:`pose_lifter.core.skeleton.normalise_pose`. Class-wise PCA uses the trials as
@@ -109,15 +109,15 @@ def learn_bases(
     -------
     PoseBases
     """
-    from . import mocap
-    from .core.bases import learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
-    from .core.skeleton import normalise_pose
+    from pose_lifter.core.bases import learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
+    from pose_lifter.core.skeleton import normalise_pose
+    from pose_lifter.mocap import cmu as mocap
 
     d = mocap.resolve_data_dir(data_dir)
     if split == "paper":
         trials = sorted({t.trial for t in mocap.read_manifest(d) if t.paper_split == "train"})
     elif split == "prior":
-        from .core.prior import PosePrior
+        from pose_lifter.core.prior import PosePrior
 
         trials = sorted(str(t) for t in PosePrior.load().metadata.get("training_trials", []))
         outside = set(trials) - set(mocap.split_trials("train", d))
@@ -133,7 +133,7 @@ def learn_bases(
     for t in trials:
         world = mocap.load_trial(t, d, step=step)
         if limb_spread > 0:
-            from .views import limb_scale_factors, scale_limbs
+            from pose_lifter.mocap.views import limb_scale_factors, scale_limbs
 
             world = scale_limbs(world, limb_scale_factors(len(world), limb_spread, rng))
         clips.append(normalise_pose(world))
@@ -196,13 +196,14 @@ def make_bag(
     frames : int, optional
         Output frames (default: as many as the shortest trial allows).
     **scene
-        Other :class:`pose_lifter.scenes.SceneOptions` fields.
+        Other :class:`pose_lifter.mocap.scenes.SceneOptions` fields.
 
     Returns
     -------
     Scene
     """
-    from . import mocap, scenes
+    from pose_lifter.mocap import cmu as mocap
+    from pose_lifter.mocap import scenes
 
     d = mocap.resolve_data_dir(data_dir)
     opts = scenes.SceneOptions(fps=fps, **scene)
@@ -238,9 +239,9 @@ def _cmd_make_bag(args: argparse.Namespace) -> int:
 
 
 def _lifter(args: argparse.Namespace) -> Any:
-    from .core.bases import PoseBases
-    from .core.lifter import Lifter
-    from .core.options import LifterOptions
+    from pose_lifter.core.bases import PoseBases
+    from pose_lifter.core.lifter import Lifter
+    from pose_lifter.core.options import LifterOptions
 
     opts = LifterOptions(variant=args.variant, camera_solver=args.solver, pose_solver=args.solver,
                          n_starts=args.starts, mode="paper" if args.solver == "cvxpy" else args.mode)
@@ -268,12 +269,12 @@ def _cores() -> int:
 
 
 def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) -> Any:
-    """The :class:`pose_lifter.collection.LiftSettings` of the flags and ``--params-file``.
+    """The :class:`pose_lifter.offline.collection.LiftSettings` of the flags and ``--params-file``.
 
     The file gives the node's options; a flag given with a value other than its default wins.
     """
-    from .collection import LiftSettings
-    from .core.options import LifterOptions
+    from pose_lifter.core.options import LifterOptions
+    from pose_lifter.offline.collection import LiftSettings
 
     keep = _keep_topics(args.keep)
     common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
@@ -285,7 +286,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) ->
         full = LiftSettings.options_of(LifterOptions().replace(**options))
         return LiftSettings(options=full, bases=args.bases, warm_start=not args.no_warm_start,
                             leg_length_m=args.leg_length, default_distance_m=DEFAULT_DISTANCE_M, **common)
-    from .params import read_params_file
+    from pose_lifter.ros.params import read_params_file
 
     params = read_params_file(args.params_file)
     options = dict(params.options)
@@ -315,7 +316,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) ->
 
 def _is_collection(args: argparse.Namespace) -> bool:
     """Several inputs, a directory or a glob pattern: a collection, lifted into a directory."""
-    from .collection import is_pattern
+    from pose_lifter.offline.collection import is_pattern
 
     inputs = list(args.input)
     return len(inputs) > 1 or any(Path(i).is_dir() or (is_pattern(i) and not Path(i).exists())
@@ -328,7 +329,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     if args.scheduler:
         raise ValueError("--scheduler lifts a collection: name several bags, a directory or a glob, "
                          "and --out a directory")
-    from .offline import check_lift_inputs, lift_bag
+    from pose_lifter.offline.lift import check_lift_inputs, lift_bag
 
     (bag,) = args.input
     keep = _keep_topics(args.keep)
@@ -352,8 +353,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
 
 
 def _cmd_lift_collection(args: argparse.Namespace) -> int:
-    from .collection import format_summary, lift_collection, plan_jobs
-    from .core.errors import BagError
+    from pose_lifter.core.errors import BagError
+    from pose_lifter.offline.collection import format_summary, lift_collection, plan_jobs
 
     out = Path(args.out)
     if out.suffix == ".mcap" and not out.is_dir():
@@ -368,7 +369,7 @@ def _cmd_lift_collection(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from .export import export_skeletons
+    from pose_lifter.offline.export import export_skeletons
 
     n_msgs, n_skels = export_skeletons(args.bag, args.out, args.topic, args.overwrite)
     print(f"{args.out}: {n_skels} skeletons of {n_msgs} messages of {args.topic}")
@@ -376,7 +377,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
-    from .play import play_bag
+    from pose_lifter.ros.play import play_bag
 
     try:
         play_bag(args.bag, args.topics, args.rate, args.wait)
@@ -386,8 +387,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .core.bases import PoseBases
-    from .offline import evaluate_bag, format_evaluation
+    from pose_lifter.core.bases import PoseBases
+    from pose_lifter.offline.lift import evaluate_bag, format_evaluation
 
     ev = evaluate_bag(args.bag, PoseBases.load(args.bases))
     print(format_evaluation(ev, as_json=args.json))
@@ -395,7 +396,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from .demo import run_demo
+    from pose_lifter.offline.demo import run_demo
 
     return int(run_demo(args, lambda: _lifter(args)))
 
@@ -420,15 +421,15 @@ def _add_lifter_options(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_experiments(args: argparse.Namespace) -> int:
-    from .experiments import run_experiments
+    from pose_lifter.mocap.experiments import run_experiments
 
     run_experiments(args.data, args.out, quick=args.quick, processes=args.processes, command=args.command)
     return 0
 
 
 def _cmd_warm_up(args: argparse.Namespace) -> int:
-    from .core._jit import HAVE_NUMBA
-    from .core.lifter import KERNEL_MODES, compile_kernels
+    from pose_lifter.core._jit import HAVE_NUMBA
+    from pose_lifter.core.lifter import KERNEL_MODES, compile_kernels
 
     seconds = compile_kernels()
     state = "compiled or loaded" if HAVE_NUMBA else "not compiled (numba is not installed)"
@@ -582,7 +583,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    from .core._threads import one_blas_thread
+    from pose_lifter.core._threads import one_blas_thread
 
     one_blas_thread()  # small matrices: BLAS threads only contend (worker processes inherit it)
     parser = build_parser()
@@ -608,7 +609,7 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 def _library_errors() -> tuple[type[BaseException], ...]:
-    from .core.errors import PoseLifterError  # BagError, SolverError, ... are PoseLifterErrors
+    from pose_lifter.core.errors import PoseLifterError
 
     return (PoseLifterError, OSError, ValueError)
 

@@ -3,7 +3,7 @@
 Every converter returns :class:`Person2D` objects: the model joints in the order of
 :data:`pose_lifter.core.skeleton.JOINT_NAMES`, in image pixels, with a confidence per joint
 (0 = missing) and a track id (-1 = untracked). They are what :meth:`pose_lifter.core.Lifter.lift`
-takes, and what the ROS adapter (:mod:`pose_lifter.adapters`) publishes as a ``wang12``
+takes, and what the ROS adapter (:mod:`pose_lifter.messages.adapters`) publishes as a ``wang12``
 ``Skeleton2DArray``.
 
 Three shapes cover the detectors people run:

@@ -3,7 +3,7 @@
 Every :class:`LifterOptions` field carries its metadata (:class:`OptionMeta`: a one-line doc,
 its range or choices, whether it is a node parameter and whether it is an experiment toggle).
 From that one table come :meth:`LifterOptions.validate`, the node's parameter descriptors
-and ``config/lifter.yaml`` (:mod:`pose_lifter.params`), so a range cannot differ between the
+and ``config/lifter.yaml`` (:mod:`pose_lifter.ros.params`), so a range cannot differ between the
 core and the node. The node also validates every live parameter change through
 :meth:`LifterOptions.replace`.
 """

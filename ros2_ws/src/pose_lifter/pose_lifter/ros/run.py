@@ -1,5 +1,5 @@
 """Running one node until Ctrl-C / SIGTERM: the shared ``main`` of the executables, and the
-lifter's phased signal handling and one-line fatal errors (:func:`pose_lifter.node.main`)."""
+lifter's phased signal handling and one-line fatal errors (:func:`pose_lifter.ros.node.main`)."""
 
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def run_node(make: Callable[[], Any], name: str, args: list[str] | None = None) 
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from .core import PoseLifterError
+    from pose_lifter.core import PoseLifterError
 
     rclpy.init(args=args)
     node: Any = None

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from .core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, N_JOINTS, body_frame
+from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, N_JOINTS, body_frame
 
 __all__ = ["CHAINS", "MIRROR_INDEX", "mirror_poses", "random_turns", "transplant_limbs", "turn_limbs"]
 

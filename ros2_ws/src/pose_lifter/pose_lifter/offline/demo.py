@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.skeleton import BONES_FOR_DRAWING
+from pose_lifter.core.skeleton import BONES_FOR_DRAWING
 
 if TYPE_CHECKING:
-    from .core.lifter import Lifter
+    from pose_lifter.core.lifter import Lifter
 
 __all__ = ["DEFAULT_DEMO_BAG", "find_demo_bag", "plot_frames", "run_demo"]
 
@@ -27,7 +27,7 @@ DEFAULT_DEMO_BAG: Final[str] = "two_people.mcap"
 
 def find_demo_bag(name: str = DEFAULT_DEMO_BAG) -> Path:
     """The committed bag ``bags/<name>`` of the source tree (or ``./bags/<name>``)."""
-    for root in (Path(__file__).resolve().parents[4], Path.cwd()):
+    for root in (Path(__file__).resolve().parents[5], Path.cwd()):
         p = root / "bags" / name
         if p.is_file():
             return p
@@ -62,7 +62,7 @@ def plot_frames(
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    from .messages import track_color
+    from pose_lifter.messages.convert import track_color
 
     n = len(frames)
     fig = plt.figure(figsize=(9.0, 3.6 * n))
@@ -120,10 +120,10 @@ def run_demo(args: argparse.Namespace, make_lifter: Callable[[], Lifter]) -> int
     ``leg_length``, ``every``); ``make_lifter()`` builds the lifter once the bag is found (the
     CLI's, from the same flags: a kernel compile is not wasted on a missing bag).
     """
-    from . import messages as m
-    from .bags import read_messages
-    from .offline import evaluate_bag, format_evaluation, lift_bag
-    from .scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages import convert as m
+    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.offline.bags import read_messages
+    from pose_lifter.offline.lift import evaluate_bag, format_evaluation, lift_bag
 
     bag = Path(args.bag) if args.bag else find_demo_bag()
     out = Path(args.out)

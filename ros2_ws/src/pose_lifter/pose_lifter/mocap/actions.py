@@ -23,8 +23,8 @@ from typing import Any, Final, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core.errors import InvalidInputError
-from ..core.skeleton import N_JOINTS, normalise_pose
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.skeleton import N_JOINTS, normalise_pose
 
 __all__ = [
     "DEFAULT_MODEL_PATH",

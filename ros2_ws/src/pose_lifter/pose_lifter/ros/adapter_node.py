@@ -25,10 +25,11 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
-from . import adapters, messages
-from .core.errors import InvalidInputError, PoseLifterError
-from .core.layouts import get_layout
-from .run import run_node
+from pose_lifter.core.errors import InvalidInputError, PoseLifterError
+from pose_lifter.core.layouts import get_layout
+from pose_lifter.messages import adapters
+from pose_lifter.messages import convert as messages
+from pose_lifter.ros.run import run_node
 
 __all__ = ["AdapterNode", "main"]
 

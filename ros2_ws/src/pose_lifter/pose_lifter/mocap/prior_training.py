@@ -1,18 +1,18 @@
 """Training of the learned 2D -> 3D prior (:class:`pose_lifter.core.prior.PosePrior`).
 
-Data: mocap poses of the training split (:func:`pose_lifter.mocap.split_trials`), re-filmed for
+Data: mocap poses of the training split (:func:`pose_lifter.mocap.cmu.split_trials`), re-filmed for
 every sample with a fresh random view and person (augmentation):
 
 * azimuth uniform in [0, 360) degrees, elevation uniform in [-30, 45], camera roll N(0, 5);
 * perspective at 2.5-10 m (half the samples) or weak perspective;
-* limb lengths changed per person by up to +-20 % (:func:`pose_lifter.views.scale_limbs`);
+* limb lengths changed per person by up to +-20 % (:func:`pose_lifter.mocap.views.scale_limbs`);
 * Gaussian 2D noise (std up to 0.15 right-lower-leg lengths), missing joints (up to 20 %,
   visibility 0) and confident outliers (up to 25 % of joints displaced by 1-3 leg lengths,
-  visibility kept at 1) (:func:`pose_lifter.scenes.corrupt_2d`).
+  visibility kept at 1) (:func:`pose_lifter.mocap.scenes.corrupt_2d`).
 
 Pose augmentations on top (:data:`GENERALISE`, the packaged priors' recipe): mirrored people,
 arms or legs transplanted from another frame, limbs turned about their joints, and the lower body
-out of the image (:mod:`pose_lifter.pose_augment`).
+out of the image (:mod:`pose_lifter.mocap.pose_augment`).
 
 Models: :func:`train_prior_residual` (the packaged priors: a residual MLP, Martinez et al. 2017,
 in PyTorch, the optional extra ``train``; batch normalisation folded into the linear layers) and
@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.metrics import p_mpjpe
-from .core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
-from .core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
-from .pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
-from .scenes import corrupt_2d
-from .views import limb_scale_factors, scale_limbs, view_rotations
+from pose_lifter.core.metrics import p_mpjpe
+from pose_lifter.core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
+from pose_lifter.core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
+from pose_lifter.mocap.scenes import corrupt_2d
+from pose_lifter.mocap.views import limb_scale_factors, scale_limbs, view_rotations
 
 __all__ = ["GENERALISE", "Augmentation", "TrainingBatch", "augment_poses", "make_batch", "train_prior",
            "train_prior_residual"]
@@ -62,7 +62,7 @@ class Augmentation:
     outliers_max: float = 0.25
     min_visible: int = 6
     chunk: int = 64
-    #: pose augmentations (:mod:`pose_lifter.pose_augment`), per sample (a window shares them):
+    #: pose augmentations (:mod:`pose_lifter.mocap.pose_augment`), per sample (a window shares them):
     #: the mirrored person, arms or legs of another frame, limbs turned about their joints
     p_mirror: float = 0.0
     p_transplant: float = 0.0

@@ -1,6 +1,6 @@
 """``ros2 run pose_lifter lifter_lifecycle``: the lifter as a managed (lifecycle) node.
 
-The same node as ``lifter`` (:class:`pose_lifter.node.LifterNode`, same name, parameters and
+The same node as ``lifter`` (:class:`pose_lifter.ros.node.LifterNode`, same name, parameters and
 topics), driven by the standard ``rclpy.lifecycle`` transitions (``/pose_lifter/change_state``,
 ``ros2 lifecycle set /pose_lifter configure``, a lifecycle manager such as nav2's):
 
@@ -20,9 +20,9 @@ from typing import Any
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
-from .core import PoseLifterError
-from .node import NODE_NAME, LifterNode
-from .run import run_node
+from pose_lifter.core import PoseLifterError
+from pose_lifter.ros.node import NODE_NAME, LifterNode
+from pose_lifter.ros.run import run_node
 
 __all__ = ["LifecycleLifterNode", "main"]
 

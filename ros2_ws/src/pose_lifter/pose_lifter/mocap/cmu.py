@@ -38,7 +38,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.errors import PoseLifterError
+from pose_lifter.core.errors import PoseLifterError
 
 __all__ = [
     "AMC_BONES",
@@ -103,7 +103,7 @@ class MocapDataError(PoseLifterError, FileNotFoundError):
 
 def default_data_dir() -> Path:
     """``../shared/data/cmu`` relative to the repository (or to the working directory)."""
-    repo = Path(__file__).resolve().parents[4]
+    repo = Path(__file__).resolve().parents[5]
     candidate = repo.parent / "shared" / "data" / "cmu"
     if candidate.is_dir():
         return candidate

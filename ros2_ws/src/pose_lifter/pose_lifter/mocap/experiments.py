@@ -171,8 +171,8 @@ class _Data:
 
 
 def _load_data(data_dir: str | Path | None, cfg: ExperimentConfig, n_bank: int) -> _Data:
-    from . import mocap
-    from .core.skeleton import limb_lengths, normalise_pose
+    from pose_lifter.core.skeleton import limb_lengths, normalise_pose
+    from pose_lifter.mocap import cmu as mocap
 
     d = mocap.resolve_data_dir(data_dir)
     rows = mocap.read_manifest(d)
@@ -225,7 +225,7 @@ def _init_worker(sparse: Any, classwise: Any, train: NDArray[np.float64], labels
 
 
 def _lifter(variant: str, n_starts: int, n_refine: int) -> Any:
-    from .core import Lifter, LifterOptions
+    from pose_lifter.core import Lifter, LifterOptions
 
     key = (variant, n_starts, n_refine)
     if key not in _W["lifters"]:
@@ -235,7 +235,7 @@ def _lifter(variant: str, n_starts: int, n_refine: int) -> Any:
 
 
 def _errors(pred: NDArray[np.float64], gt: NDArray[np.float64], leg_mm: float) -> tuple[float, float]:
-    from .core.metrics import normalised_error, p_mpjpe
+    from pose_lifter.core.metrics import normalised_error, p_mpjpe
 
     return float(normalised_error(pred, gt)), float(leg_mm * p_mpjpe(pred, gt))
 
@@ -261,11 +261,11 @@ def _lift_task(task: dict[str, Any]) -> NDArray[np.float64]:
     method = task["method"]
     x, conf = task["x"], task.get("conf")
     if method == "Ramakrishna":
-        from .core.baselines.ramakrishna import ramakrishna_lift
+        from pose_lifter.core.baselines.ramakrishna import ramakrishna_lift
 
         return np.asarray(ramakrishna_lift(x, conf, _W["classwise"]).pose)
     if method.startswith("GT camera"):
-        from .core.pose_step import pose_step
+        from pose_lifter.core.pose_step import pose_step
 
         lf = _lifter("L1WAWS", 1, 1)
         o = lf.options.replace(variant="L1WAWS")
@@ -282,7 +282,12 @@ def _lift_task(task: dict[str, Any]) -> NDArray[np.float64]:
 
 
 def _bases_task(task: dict[str, Any]) -> dict[str, Any]:
-    from .core.bases import learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases, sparse_codes
+    from pose_lifter.core.bases import (
+        learn_classwise_pca_bases,
+        learn_pca_bases,
+        learn_sparse_bases,
+        sparse_codes,
+    )
 
     train, y = _W["train"], _W["test_rec"]
     method, k = task["method"], int(task["k"])
@@ -310,8 +315,8 @@ def _bases_task(task: dict[str, Any]) -> dict[str, Any]:
 
 def _lift_tasks(data: _Data, cfg: ExperimentConfig) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """All lift tasks of experiments 2-5, plus the floor rows (computed here, cheap)."""
-    from .core.errors import InvalidInputError
-    from .core.metrics import normalised_error, p_mpjpe
+    from pose_lifter.core.errors import InvalidInputError
+    from pose_lifter.core.metrics import normalised_error, p_mpjpe
 
     rng = np.random.default_rng(cfg.seed + 1)
     mean_pose = _W_main["sparse"].mean_pose
@@ -588,8 +593,8 @@ def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "o
     """
     from tqdm import tqdm
 
-    from .core import PoseBases
-    from .core.bases import learn_classwise_pca_bases
+    from pose_lifter.core import PoseBases
+    from pose_lifter.core.bases import learn_classwise_pca_bases
 
     cfg = config or (QUICK if quick else FULL)
     out = Path(out_dir)

@@ -25,10 +25,10 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.errors import InvalidInputError
-from .core.layouts import Layout, get_layout, to_model_joints
-from .core.results import LiftResult
-from .core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.layouts import Layout, get_layout, to_model_joints
+from pose_lifter.core.results import LiftResult
+from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 
 __all__ = [
     "MESSAGE_TYPES",
@@ -89,11 +89,11 @@ _DELETEALL: Final[int] = 3
 
 
 def rosbags_types(store: Any | None = None) -> SimpleNamespace:
-    """The ``types`` namespace from a rosbags typestore (default: ours, see :mod:`pose_lifter.bags`).
+    """The ``types`` namespace from a rosbags typestore (default: ours, see :mod:`pose_lifter.offline.bags`).
 
     Each attribute is a factory that fills omitted fields with ROS defaults, like rclpy classes.
     """
-    from .bags import message_factory, pose_lifter_typestore
+    from pose_lifter.offline.bags import message_factory, pose_lifter_typestore
 
     st = store if store is not None else pose_lifter_typestore()
     return SimpleNamespace(**{attr: message_factory(name, st) for attr, name in MESSAGE_TYPES.items()})
@@ -142,7 +142,7 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
     ----------
     skel : Skeleton2D-like
         Has ``keypoints``, each with ``x``, ``y``, ``confidence`` (or ``xyc``, the keypoints as
-        one (K, 3) array, as :class:`pose_lifter.cdr.DecodedSkeleton2D` has).
+        one (K, 3) array, as :class:`pose_lifter.messages.cdr.DecodedSkeleton2D` has).
     layout : str or Layout
         The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``, ...), by name
         or as the :class:`~pose_lifter.core.layouts.Layout` a frame looked up once.
@@ -161,7 +161,7 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
         Wrong number of keypoints for the layout, or non-finite values.
     """
     lay = layout if isinstance(layout, Layout) else get_layout(layout)
-    xyc = getattr(skel, "xyc", None)  # pose_lifter.cdr.DecodedSkeleton2D: the keypoints as one array
+    xyc = getattr(skel, "xyc", None)  # pose_lifter.messages.cdr.DecodedSkeleton2D: the keypoints as one array
     if xyc is not None:
         xy, conf = xyc[:, :2], xyc[:, 2]
     else:
@@ -227,7 +227,7 @@ def place_in_camera(
     the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
     ``Y = (t_y - c_y) Z / f_y``. Without camera intrinsics the centroid is put at
     ``(0, 0, default_distance_m)``. The node's, the offline lift's and the CLI's defaults are
-    :mod:`pose_lifter.placement`'s. The lift is trusted to be finite (the core checks it); the
+    :mod:`pose_lifter.core.placement`'s. The lift is trusted to be finite (the core checks it); the
     node checks what it publishes once, after this.
 
     Parameters

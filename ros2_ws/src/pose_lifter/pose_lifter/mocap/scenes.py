@@ -19,9 +19,9 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.errors import InvalidInputError
-from .core.layouts import get_layout
-from .core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 
 __all__ = [
     "CAMERA_FRAME",
@@ -324,8 +324,8 @@ def to_coco17(points: NDArray[np.float64], confidence: NDArray[np.float64]
 def write_scene_bag(scene: Scene, path: str | Path, overwrite: bool = False) -> None:
     """Write a scene as an MCAP bag: ``/keypoints_2d`` (coco17 pixels),
     ``/ground_truth/skeletons_3d`` (camera optical frame, metres) and ``/camera_info``."""
-    from . import messages as m
-    from .bags import BagWriter
+    from pose_lifter.messages import convert as m
+    from pose_lifter.offline.bags import BagWriter
 
     types = m.rosbags_types()
     with BagWriter(path, overwrite=overwrite) as w:

@@ -6,7 +6,7 @@ that file offline.
 range from the field's metadata (:data:`~pose_lifter.core.options.OPTION_META`), so the node
 and the core accept the same values; the node's own settings (:class:`NodeSettings`) are
 declared here. :func:`params_yaml` writes ``config/lifter.yaml`` from the table
-(``python -m pose_lifter.node --params-yaml``).
+(``python -m pose_lifter.ros.node --params-yaml``).
 
 ``pose-lifter lift BAG --out OUT --params-file config/lifter.yaml`` reads the same file as
 ``ros2 run pose_lifter lifter --ros-args --params-file config/lifter.yaml``
@@ -26,9 +26,9 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Final
 
-from . import placement
-from .core.errors import OptionsError
-from .core.options import NODE_OPTIONS, OPTION_META, LifterOptions
+from pose_lifter.core import placement
+from pose_lifter.core.errors import OptionsError
+from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
 
 __all__ = [
     "NODE_ONLY",
@@ -196,9 +196,9 @@ def unknown_parameters(names: Iterable[str]) -> str:
 
 _YAML_HEAD: Final[str] = """\
 # Parameters of the pose_lifter node (ros2 run pose_lifter lifter --ros-args --params-file <this>).
-# Generated from pose_lifter.params.PARAMS (the node's declared defaults; the solver options'
+# Generated from pose_lifter.ros.params.PARAMS (the node's declared defaults; the solver options'
 # descriptions and ranges are LifterOptions' field metadata) by
-#   python -m pose_lifter.node --params-yaml > config/lifter.yaml
+#   python -m pose_lifter.ros.node --params-yaml > config/lifter.yaml
 # and checked by tests/ros/test_lifter_graph.py (the node starts with it and reports these values).
 # Doubles are written with a decimal point (ROS parameters are typed). Ranges: [a, b] includes
 # the bounds, (a, b) refuses them.

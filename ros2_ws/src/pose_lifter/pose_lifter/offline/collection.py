@@ -7,7 +7,7 @@ relative layout (paths relative to the inputs' common directory). Each bag is on
 - **locally** (the default) on one process pool started once for the collection (fork: the
   lifter is built and its kernels loaded once in the parent, the workers inherit it); a bag is
   lifted serially inside its worker, so bags overlap one another (one reads or writes while the
-  other solves). A collection of one bag is lifted by :func:`pose_lifter.offline.lift_bag` with
+  other solves). A collection of one bag is lifted by :func:`pose_lifter.offline.lift.lift_bag` with
   its tracks spread over the workers instead.
 - **on a Dask cluster** (``--scheduler ADDRESS``, the ``cluster`` extra: ``dask.distributed``):
   one task per bag through a ``distributed.Client``; every worker builds the lifter from the
@@ -15,7 +15,7 @@ relative layout (paths relative to the inputs' common directory). Each bag is on
   worker reads and writes under the same names (a shared file system); the outputs are written
   by the workers, the manifest by this process.
 
-A bag's output appears under its final name only when complete (:class:`pose_lifter.bags.BagWriter`
+A bag's output appears under its final name only when complete (:class:`pose_lifter.offline.bags.BagWriter`
 writes into a hidden ``.bagwriter-*`` directory beside it and renames the finished file), so a
 stopped run leaves only whole outputs. After each bag the manifest ``pose_lifter_manifest.json``
 in ``OUT`` is rewritten (atomically: a temporary file renamed over it): per output, the input's
@@ -46,9 +46,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from .core.errors import BagError
-from .core.smoothing import OFFLINE_SMOOTHING_S
-from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+from pose_lifter.core.errors import BagError
+from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
 
 __all__ = [
     "ERRORS_NAME",
@@ -79,7 +79,7 @@ def package_version() -> str:
     """The installed distribution's version (the source tree's ``__version__`` when not installed)."""
     from importlib.metadata import PackageNotFoundError, version
 
-    from . import __version__
+    from pose_lifter import __version__
 
     try:
         return version("pose_lifter")
@@ -137,9 +137,9 @@ class LiftSettings:
 
     def build_lifter(self) -> Any:
         """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up)."""
-        from .core.bases import PoseBases
-        from .core.lifter import Lifter
-        from .core.options import LifterOptions
+        from pose_lifter.core.bases import PoseBases
+        from pose_lifter.core.lifter import Lifter
+        from pose_lifter.core.options import LifterOptions
 
         opts = LifterOptions().replace(**self.options)
         lifter = Lifter(PoseBases.load(self.bases) if self.bases else None, opts)
@@ -327,7 +327,7 @@ class BagOutcome:
 def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1) -> BagOutcome:
     """Lift one bag of a collection; any error becomes a failed :class:`BagOutcome` (the output
     then does not exist: nothing half-written is left under its name)."""
-    from .offline import lift_bag
+    from pose_lifter.offline.lift import lift_bag
 
     t0 = time.perf_counter()
     worker = f"{os.uname().nodename}:{os.getpid()}"
@@ -399,7 +399,7 @@ def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter:
                 for fut in finished:
                     on_done(fut.result())
         except BaseException:
-            from .offline import _stop_workers
+            from pose_lifter.offline.lift import _stop_workers
 
             _stop_workers(ex)
             raise
@@ -414,7 +414,7 @@ _DASK_LOCAL = threading.local()
 
 def _dask_job(job: BagJob, settings: LiftSettings, digest: str) -> BagOutcome:
     """A bag on a Dask worker: the lifter is built once per worker thread and settings digest."""
-    from .core._threads import one_blas_thread
+    from pose_lifter.core._threads import one_blas_thread
 
     cache = getattr(_DASK_LOCAL, "lifters", None)
     if cache is None:

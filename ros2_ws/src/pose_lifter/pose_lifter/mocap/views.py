@@ -1,7 +1,7 @@
 """Virtual views of mocap poses: cameras at an azimuth / elevation / roll, weak-perspective or
 perspective projection, per-person limb-length changes. Shared by the prior's training
-(:mod:`pose_lifter.prior_training`) and the accuracy evaluation (``tools/accuracy.py``) so both
-film people the same way; :func:`pose_lifter.scenes.corrupt_2d` adds detector-like errors.
+(:mod:`pose_lifter.mocap.prior_training`) and the accuracy evaluation (``tools/accuracy.py``) so both
+film people the same way; :func:`pose_lifter.mocap.scenes.corrupt_2d` adds detector-like errors.
 
 Units: poses in metres, world Y-up; 2D in "focal units" (focal length 1, principal point 0),
 which any pixel camera reaches by an affine map that the lifter's normalisation removes.
@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.skeleton import LIMB_GROUPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
-from .scenes import look_at
+from pose_lifter.core.skeleton import LIMB_GROUPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from pose_lifter.mocap.scenes import look_at
 
 __all__ = ["film", "limb_scale_factors", "scale_limbs", "view_rotation", "view_rotations"]
 

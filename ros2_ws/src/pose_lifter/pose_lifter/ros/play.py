@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .bags import BagError, bag_topics, read_raw
+from pose_lifter.offline.bags import BagError, bag_topics, read_raw
 
 __all__ = ["message_class", "play_bag"]
 

@@ -22,9 +22,24 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from . import cdr
-from . import messages as m
-from .bags import (
+from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
+from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
+from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+from pose_lifter.core.skeleton import N_JOINTS
+from pose_lifter.core.smoothing import centred_smoothing
+from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.messages import cdr
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap.scenes import (
+    TOPIC_CAMERA_INFO,
+    TOPIC_GROUND_TRUTH,
+    TOPIC_KEYPOINTS,
+    TOPIC_MARKERS,
+    TOPIC_SKELETONS,
+)
+from pose_lifter.offline.bags import (
     BagError,
     BagReadError,
     BagWriter,
@@ -34,15 +49,6 @@ from .bags import (
     read_messages,
     read_raw,
 )
-from .core.bases import PoseBases
-from .core.errors import InvalidInputError, PoseLifterError, TooFewJointsError
-from .core.lifter import Lifter
-from .core.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
-from .core.skeleton import N_JOINTS
-from .core.smoothing import centred_smoothing
-from .core.tracking import TrackPolicy
-from .placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
-from .scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_MARKERS, TOPIC_SKELETONS
 
 __all__ = [
     "DEFAULT_DISTANCE_M",
@@ -255,7 +261,7 @@ _Outcome = tuple[Any, NDArray[np.float64] | None, bool, float, str | None]
 @dataclass(frozen=True)
 class MessageFields:
     """The part of a ``LiftResult`` that the output messages carry
-    (:meth:`pose_lifter.cdr.SkeletonFrame.from_results`): what a worker of :func:`lift_bag` sends
+    (:meth:`pose_lifter.messages.cdr.SkeletonFrame.from_results`): what a worker of :func:`lift_bag` sends
     back instead of the whole result (its history, prior pose, ...), as columns of a chain
     (:func:`_columns`)."""
 
@@ -294,7 +300,7 @@ def _columns(done: list[_Done]) -> tuple[list[tuple[bool, float, str | None, int
 def _from_columns(chain: list[_Item], items: list[tuple[bool, float, str | None, int]],
                   cols: dict[str, NDArray[Any]]) -> list[_Done]:
     """The :class:`_Done` s of a chain from :func:`_columns` (results as :class:`MessageFields`)."""
-    from .core.results import Camera
+    from pose_lifter.core.results import Camera
 
     out = []
     for item, (warm, dt, failure, i) in zip(chain, items, strict=True):
@@ -352,7 +358,7 @@ def lift_messages(
     warm_start : bool
         Start each tracked person (track_id >= 0) from its previous frame's solution.
     leg_length_m, default_distance_m : float
-        See :func:`pose_lifter.messages.place_in_camera`.
+        See :func:`pose_lifter.messages.convert.place_in_camera`.
     progress : bool
         Show a tqdm progress bar (skeletons).
     on_frame : callable, optional
@@ -450,7 +456,7 @@ def lift_messages(
     return out
 
 
-#: Message types ``lift_bag`` lifts: ours as they are, yolo_ros' through :mod:`pose_lifter.adapters`.
+#: Message types ``lift_bag`` lifts: ours as they are, yolo_ros' through :mod:`pose_lifter.messages.adapters`.
 LIFTABLE_TYPES: Final[tuple[str, ...]] = (_MSG_2D, "yolo_msgs/msg/DetectionArray")
 _MSG_CAMERA_INFO: Final[str] = "sensor_msgs/msg/CameraInfo"
 
@@ -498,7 +504,7 @@ def _as_skeleton2d(msg: Any, msgtype: str, types: Any, track_ids: Any) -> Any:
     """A Skeleton2DArray from a liftable message (yolo DetectionArray -> wang12 array)."""
     if msgtype == _MSG_2D:
         return msg
-    from . import adapters
+    from pose_lifter.messages import adapters
 
     people, _ = adapters.yolo_detections_to_people(msg, track_ids)
     return adapters.people_to_skeleton2d_array(msg.header, people, types)
@@ -566,7 +572,7 @@ def lift_bag(
     if every < 1:
         raise ValueError("every must be >= 1")
     topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, keep, overwrite)
-    from .adapters import TrackIds
+    from pose_lifter.messages.adapters import TrackIds
 
     cdr.check_definitions(pose_lifter_typestore())
     types = m.rosbags_types()
@@ -591,7 +597,7 @@ def lift_bag(
 
     def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
         # serialised here, straight from the arrays: the bytes of the node's builders
-        # (messages.result_to_skeleton3d / skeleton_markers) through rosbags, see pose_lifter.cdr
+        # (messages.result_to_skeleton3d / skeleton_markers) through rosbags, see pose_lifter.messages.cdr
         nonlocal previous
         frame = cdr.SkeletonFrame.from_results([f.track_id for f in lifted], [f.joints_m for f in lifted],
                                                results, [f.solve_time for f in lifted],

@@ -21,11 +21,11 @@ that cannot be lifted (bad input or a failed solve) is left out of it with one r
 warning; the other skeletons of the frame are still published, and a frame with no liftable
 skeleton is answered with an empty array. Nothing non-finite is ever published.
 
-Parameters (one table, :data:`pose_lifter.params.PARAMS`, the solver options' ranges from the
+Parameters (one table, :data:`pose_lifter.ros.params.PARAMS`, the solver options' ranges from the
 core's option metadata; see ``config/lifter.yaml``) are validated on every live change by the
 same :class:`~pose_lifter.core.LifterOptions` the core uses; a bad value is refused with the
-core's reason. Input checks and warnings: :mod:`pose_lifter.node_checks`; statistics:
-:mod:`pose_lifter.node_stats`.
+core's reason. Input checks and warnings: :mod:`pose_lifter.ros.checks`; statistics:
+:mod:`pose_lifter.ros.stats`.
 """
 
 from __future__ import annotations
@@ -45,19 +45,20 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.signals import SignalHandlerOptions
 
-from . import diagnostics, messages
-from .core import Lifter, LifterOptions, PoseBases, PoseLifterError
-from .core._jit import HAVE_NUMBA
-from .core.bases import default_bases_path
-from .core.errors import InvalidInputError
-from .core.layouts import Layout, get_layout
-from .core.lifter import compile_kernels
-from .core.tracking import OutOfOrderFrameError, TrackPolicy
-from .node_checks import SkipSkeleton, WarningThrottle, check_output, frame_over_cap, skeleton_input
-from .node_markers import MarkerBook
-from .node_stats import FrameStats
-from .params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
-from .run import PhasedSignals, fatal, one_line
+from pose_lifter.core import Lifter, LifterOptions, PoseBases, PoseLifterError
+from pose_lifter.core._jit import HAVE_NUMBA
+from pose_lifter.core.bases import default_bases_path
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.layouts import Layout, get_layout
+from pose_lifter.core.lifter import compile_kernels
+from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
+from pose_lifter.messages import convert as messages
+from pose_lifter.ros import diagnostics
+from pose_lifter.ros.checks import SkipSkeleton, WarningThrottle, check_output, frame_over_cap, skeleton_input
+from pose_lifter.ros.markers import MarkerBook
+from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
+from pose_lifter.ros.run import PhasedSignals, fatal, one_line
+from pose_lifter.ros.stats import FrameStats
 
 __all__ = ["NODE_NAME", "LifterNode", "StartupError", "main"]
 
@@ -341,7 +342,7 @@ def main(args: list[str] | None = None) -> None:
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:  # config/lifter.yaml
         print(params_yaml(), end="")
         return
-    from .core._threads import one_blas_thread
+    from pose_lifter.core._threads import one_blas_thread
 
     one_blas_thread()  # the solver's matrices are small: BLAS threads only contend
     if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:

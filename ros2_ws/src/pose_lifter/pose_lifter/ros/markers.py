@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from . import messages
+from pose_lifter.messages import convert as messages
 
 __all__ = ["MarkerBook"]
 

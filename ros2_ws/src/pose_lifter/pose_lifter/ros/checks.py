@@ -16,10 +16,10 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from . import messages
-from .core.layouts import Layout
-from .core.results import LiftResult
-from .params import NodeSettings
+from pose_lifter.core.layouts import Layout
+from pose_lifter.core.results import LiftResult
+from pose_lifter.messages import convert as messages
+from pose_lifter.ros.params import NodeSettings
 
 __all__ = [
     "MAX_WARNING_CHARS",

@@ -25,9 +25,9 @@ from typing import Any, Final
 
 import numpy as np
 
-from . import messages as m
-from .bags import BagError, bag_topics, check_output, read_messages
-from .core.skeleton import JOINT_NAMES
+from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.messages import convert as m
+from pose_lifter.offline.bags import BagError, bag_topics, check_output, read_messages
 
 __all__ = ["FORMATS", "export_skeletons"]
 

@@ -9,7 +9,7 @@ Two ROS detector ecosystems publish 2D skeletons in their own messages:
   OpenPose-COCO points *normalised* to [0, 1] (``x``, ``y``, ``c``), the person in the topic name.
 
 The functions here read those fields by name, so they serve rclpy messages (the ``adapter``
-node, :mod:`pose_lifter.adapter_node`) and rosbags messages (bags, tests) alike, and give a
+node, :mod:`pose_lifter.ros.adapter_node`) and rosbags messages (bags, tests) alike, and give a
 ``wang12`` ``Skeleton2DArray`` (the paper's 12 joints, pixels) that the lifter takes as it is.
 """
 
@@ -21,9 +21,9 @@ from typing import Any, Final
 
 import numpy as np
 
-from .core.detectors import Person2D, sparse_to_model
-from .core.errors import InvalidInputError
-from .core.layouts import get_layout
+from pose_lifter.core.detectors import Person2D, sparse_to_model
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.layouts import get_layout
 
 __all__ = [
     "HRI_SKELETON_TOPIC",
@@ -129,7 +129,7 @@ def hri_skeleton_to_person(msg: Any, image_size: tuple[float, float], track_id: 
     InvalidInputError
         Not 18 points, non-finite values, or a bad image size.
     """
-    from .core.detectors import dense_to_model
+    from pose_lifter.core.detectors import dense_to_model
 
     pts = list(msg.skeleton)
     xy = np.array([[float(p.x), float(p.y)] for p in pts], dtype=np.float64).reshape(len(pts), 2)

@@ -1,7 +1,7 @@
 """The offline lift's messages in CDR straight from and to arrays: its input
 (``Skeleton2DArray``, :func:`decode_skeleton2d_array`) and its two outputs.
 
-:func:`pose_lifter.offline.lift_bag` writes one ``Skeleton3DArray`` (``/skeletons_3d``) and one
+:func:`pose_lifter.offline.lift.lift_bag` writes one ``Skeleton3DArray`` (``/skeletons_3d``) and one
 ``MarkerArray`` (``/skeleton_markers``) per keypoint message. Building them as rosbags message
 objects (``Skeleton3D``, 12 ``Point`` and a ``CameraEstimate`` per skeleton, two ``Marker`` with
 their sub-messages per track) and serialising those costs ~30 ms per 36-person message, more
@@ -12,15 +12,16 @@ packed and the constant parts (joint names, a marker's empty texture and mesh fi
 encoded once.
 
 The bytes are those ``typestore.serialize_cdr`` gives for the messages that
-:func:`pose_lifter.messages.result_to_skeleton3d`, :func:`~pose_lifter.messages.skeletons3d_array`
-and :func:`~pose_lifter.messages.skeleton_markers` build (the node's builders) from the same
-lifts, with the rosbags defaults of :func:`pose_lifter.bags.message_factory` (a DELETE marker's
+:func:`pose_lifter.messages.convert.result_to_skeleton3d`,
+:func:`~pose_lifter.messages.convert.skeletons3d_array`
+and :func:`~pose_lifter.messages.convert.skeleton_markers` build (the node's builders) from the same
+lifts, with the rosbags defaults of :func:`pose_lifter.offline.bags.message_factory` (a DELETE marker's
 unset orientation is all zeros); ``tests/test_cdr.py`` checks it byte for byte, and
 :func:`check_definitions` refuses a typestore whose definitions of the two types differ from the
 ones this module was written for.
 
 The input side: rosbags deserialises a 36-person ``Skeleton2DArray`` into 36 x 17
-``Keypoint2D`` objects that :func:`pose_lifter.messages.skeleton2d_to_arrays` then reads one
+``Keypoint2D`` objects that :func:`pose_lifter.messages.convert.skeleton2d_to_arrays` then reads one
 attribute at a time; :func:`decode_skeleton2d_array` reads each skeleton's keypoints as one
 (K, 3) array (``xyc``) instead, and ``skeleton2d_to_arrays`` takes it from there.
 
@@ -40,8 +41,8 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
-from .messages import marker_id, quaternions_xyzw, track_color
+from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
+from pose_lifter.messages.convert import marker_id, quaternions_xyzw, track_color
 
 __all__ = [
     "MARKER_ARRAY",
@@ -163,8 +164,9 @@ def check_definitions(store: Any) -> None:
     for name, expected in _DEFINITIONS.items():
         got = str(store.hash_rihs01(name))
         if got != expected:
-            raise RuntimeError(f"pose_lifter.cdr encodes {name} as {expected}, the typestore has {got}: "
-                               "update pose_lifter/cdr.py (tests/test_cdr.py shows the difference)")
+            raise RuntimeError(f"pose_lifter.messages.cdr encodes {name} as {expected}, the typestore has "
+                               f"{got}: "
+                               "update pose_lifter/messages/cdr.py (tests/test_cdr.py shows the difference)")
 
 
 @dataclass(frozen=True)
@@ -172,7 +174,7 @@ class SkeletonFrame:
     """The lifted skeletons of one message, as arrays (``n`` skeletons), in message order.
 
     Fields are those of ``pose_lifter_msgs/Skeleton3D`` as
-    :func:`pose_lifter.messages.result_to_skeleton3d` fills them.
+    :func:`pose_lifter.messages.convert.result_to_skeleton3d` fills them.
     """
 
     track_ids: NDArray[np.int64]
@@ -196,7 +198,7 @@ class SkeletonFrame:
         """From the lifts of one message (``LiftResult``-like: ``camera``, ``objective``,
         ``reprojection_error``, ``total_alternations``, ``converged``, ``weights``) and their
         metric joints; the orientations of all of them in one
-        :func:`pose_lifter.messages.quaternions_xyzw` call."""
+        :func:`pose_lifter.messages.convert.quaternions_xyzw` call."""
         n = len(results)
         if not (len(track_ids) == len(joints_m) == len(solve_times) == len(warm_started) == n):
             raise ValueError("one track id, joints array, solve time and warm flag per result")
@@ -312,7 +314,7 @@ def marker_array_cdr(
     line_width: float = 0.02,
 ) -> bytes:
     """A serialised ``visualization_msgs/MarkerArray``: the bytes of
-    :func:`pose_lifter.messages.skeleton_markers` (same arguments; ``joints_m`` is (n, 12, 3)
+    :func:`pose_lifter.messages.convert.skeleton_markers` (same arguments; ``joints_m`` is (n, 12, 3)
     for the ``n`` track ids) as rosbags serialises it."""
     joints = np.asarray(joints_m, dtype="<f8").reshape(len(track_ids), N_JOINTS, 3)
     deleted = [int(t) for t in deleted_track_ids if t >= 0]

@@ -1,6 +1,6 @@
 """Defaults of the metric placement of a lifted pose, shared by the node, the offline lift and the CLI.
 
-A lifted pose is in units of its right lower leg; :func:`pose_lifter.messages.place_in_camera`
+A lifted pose is in units of its right lower leg; :func:`pose_lifter.messages.convert.place_in_camera`
 makes it metric with a leg length and puts its centroid at the depth the camera scale gives, or
 at a default distance when no camera intrinsics are known. This module imports nothing, so the
 CLI's parser can read the defaults without loading the solver.

@@ -23,7 +23,7 @@ from typing import Any, Final
 
 import numpy as np
 
-from .core.errors import BagError, BagReadError
+from pose_lifter.core.errors import BagError, BagReadError
 
 __all__ = [
     "MSG_NAMES",
@@ -49,8 +49,8 @@ MSG_PACKAGE: Final[str] = "pose_lifter_msgs"
 MSG_NAMES: Final[tuple[str, ...]] = (
     "Keypoint2D", "Skeleton2D", "Skeleton2DArray", "CameraEstimate", "Skeleton3D", "Skeleton3DArray",
 )
-_PACKAGE_MSG_DIR: Final[Path] = Path(__file__).resolve().parent / "msg"
-_SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[2] / MSG_PACKAGE / "msg"
+_PACKAGE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[1] / "msg"
+_SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[3] / MSG_PACKAGE / "msg"
 
 
 def check_output(path: str | Path, suffixes: tuple[str, ...], overwrite: bool = False) -> Path:
@@ -284,7 +284,7 @@ class BagWriter:
         self._writer.write(conn, int(stamp_ns), self.store.serialize_cdr(msg, conn.msgtype))
 
     def write_cdr(self, topic: str, stamp_ns: int, data: bytes, msgtype: str) -> None:
-        """Write one message already serialised (CDR, e.g. by :mod:`pose_lifter.cdr`) as a
+        """Write one message already serialised (CDR, e.g. by :mod:`pose_lifter.messages.cdr`) as a
         ``msgtype`` of our typestore (the topic is added on first use)."""
         if topic not in self._connections:
             self.add_topic(topic, msgtype)
@@ -420,7 +420,7 @@ def read_messages(
     topics : iterable of str, optional
         Only these topics (all when None).
     decoders : mapping of message type -> callable, optional
-        Faster decoders for some of our types (e.g. :func:`pose_lifter.cdr.decode_skeleton2d_array`):
+        Faster decoders for some of our types (e.g. :func:`pose_lifter.messages.cdr.decode_skeleton2d_array`):
         used on a ROS 2 bag whose definition of the type is ours; a decoder returning None hands
         the message to rosbags.
     """

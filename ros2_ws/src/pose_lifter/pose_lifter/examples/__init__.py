@@ -1,1 +1,0 @@
-"""Examples of using the lifter downstream (action recognition on ``skeletons_3d``)."""

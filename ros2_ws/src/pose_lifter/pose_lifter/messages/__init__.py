@@ -1,0 +1,1 @@
+"""Wire formats, no I/O: conversion between arrays and messages, CDR, detector adapters."""

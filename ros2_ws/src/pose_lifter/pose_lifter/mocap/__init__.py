@@ -1,0 +1,1 @@
+"""Motion capture: the CMU loaders, views and scenes, prior training, experiments and the action example."""
