@@ -71,7 +71,8 @@ def _out_is_a_directory(args: argparse.Namespace) -> bool:
 
 #: Errors that mean the input data is bad (exit code 1); see the module doc.
 def _is_data_error(exc: BaseException) -> bool:
-    from pose_lifter.core.errors import BagReadError, BasisFileError, InvalidInputError, SolverError
+    from pose_lifter.core.errors import BasisFileError, InvalidInputError, SolverError
+    from pose_lifter.offline.bags import BagReadError
 
     return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError | SolverError)
             or type(exc).__module__.startswith("rosbags"))
@@ -338,12 +339,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
     s = _lift_settings(args, args.lift_defaults)
     lifter = s.build_lifter()
-    summary, _ = lift_bag(bag, args.out, lifter, warm_start=s.warm_start, leg_length_m=s.leg_length_m,
-                          default_distance_m=s.default_distance_m, every=s.every, max_messages=s.max_messages,
-                          progress=not args.quiet, overwrite=args.overwrite,
-                          workers=args.workers or _cores(), topic=s.topic,
-                          camera_info_topic=s.camera_info_topic, keep=s.keep, track_timeout=s.track_timeout,
-                          reinit_ratio=s.reinit_ratio, smoothing_s=s.smoothing_s)
+    summary, _ = lift_bag(bag, args.out, lifter, s, progress=not args.quiet, overwrite=args.overwrite,
+                          workers=args.workers or _cores())
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
@@ -353,7 +350,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
 
 
 def _cmd_lift_collection(args: argparse.Namespace) -> int:
-    from pose_lifter.core.errors import BagError
+    from pose_lifter.offline.bags import BagError
     from pose_lifter.offline.collection import format_summary, lift_collection, plan_jobs
 
     out = Path(args.out)
@@ -388,7 +385,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from pose_lifter.core.bases import PoseBases
-    from pose_lifter.offline.lift import evaluate_bag, format_evaluation
+    from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
 
     ev = evaluate_bag(args.bag, PoseBases.load(args.bases))
     print(format_evaluation(ev, as_json=args.json))

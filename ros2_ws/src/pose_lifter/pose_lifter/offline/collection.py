@@ -46,9 +46,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from pose_lifter.core.errors import BagError
 from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
+from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+from pose_lifter.offline.bags import BagError
 
 __all__ = [
     "ERRORS_NAME",
@@ -112,11 +114,11 @@ class LiftSettings:
     default_distance_m: float = DEFAULT_DISTANCE_M
     every: int = 1
     max_messages: int | None = None
-    topic: str = "/keypoints_2d"
-    camera_info_topic: str | None = "/camera_info"
+    topic: str = TOPIC_KEYPOINTS
+    camera_info_topic: str | None = TOPIC_CAMERA_INFO
     keep: list[str] | None = None
-    track_timeout: float = 1.0  # the node's defaults (offline.DEFAULT_TRACK_TIMEOUT_S, ...)
-    reinit_ratio: float = 2.0
+    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S
+    reinit_ratio: float = DEFAULT_REINIT_RATIO
     smoothing_s: float = OFFLINE_SMOOTHING_S  # centred, offline only (0: the node's causal poses)
     marker_lifetime: float = 0.0
 
@@ -334,14 +336,8 @@ def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1)
     try:
         sha = file_sha256(job.input)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
-        summary, _ = lift_bag(
-            job.input, job.output, lifter, warm_start=settings.warm_start, leg_length_m=settings.leg_length_m,
-            default_distance_m=settings.default_distance_m, every=settings.every,
-            max_messages=settings.max_messages, progress=False, overwrite=True,
-            marker_lifetime=settings.marker_lifetime, workers=workers, topic=settings.topic,
-            camera_info_topic=settings.camera_info_topic, keep=settings.keep,
-            track_timeout=settings.track_timeout, reinit_ratio=settings.reinit_ratio,
-            smoothing_s=settings.smoothing_s)
+        summary, _ = lift_bag(job.input, job.output, lifter, settings, progress=False, overwrite=True,
+                              workers=workers)
     except Exception as exc:  # one bag's failure never stops the collection
         text = " ".join(str(exc).split()) or type(exc).__name__
         if not isinstance(exc, BagError | OSError | ValueError) or type(exc).__module__.startswith("rosbags"):
@@ -399,9 +395,9 @@ def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter:
                 for fut in finished:
                     on_done(fut.result())
         except BaseException:
-            from pose_lifter.offline.lift import _stop_workers
+            from pose_lifter.offline.chains import stop_workers
 
-            _stop_workers(ex)
+            stop_workers(ex)
             raise
         ex.shutdown()
     finally:
