@@ -93,9 +93,9 @@ BANDS: dict[str, tuple[float, float]] = {
 
 def replay(name: str, tmp_path: Path) -> tuple[Any, Any]:
     from pose_lifter.core import Lifter, LifterOptions, PoseBases
-    from pose_lifter.offline.collection import LiftSettings
     from pose_lifter.offline.evaluate import evaluate_bag
     from pose_lifter.offline.lift import lift_bag
+    from pose_lifter.offline.settings import LiftSettings
 
     bases = PoseBases.load()
     lifter = Lifter(bases, LifterOptions(n_starts=REPLAY["n_starts"]))

@@ -25,7 +25,7 @@ from pose_lifter.messages import convert as m
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline import lift as offline
-from pose_lifter.offline.collection import LiftSettings
+from pose_lifter.offline.settings import LiftSettings
 from rosbags.interfaces import Nodetype
 from scipy.spatial.transform import Rotation
 

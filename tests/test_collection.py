@@ -176,7 +176,7 @@ def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() 
     assert out.strip() == "[]"
     from pose_lifter.core import track_defaults
     from pose_lifter.messages.frame import FrameSettings
-    from pose_lifter.offline.collection import LiftSettings
+    from pose_lifter.offline.settings import LiftSettings
 
     s = LiftSettings()
     assert s.track_timeout == track_defaults.DEFAULT_TRACK_TIMEOUT_S == FrameSettings().track_timeout

@@ -16,7 +16,7 @@ from pose_lifter.messages import convert as m
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline import lift as offline
-from pose_lifter.offline.collection import LiftSettings
+from pose_lifter.offline.settings import LiftSettings
 
 #: The node's causal poses (no centred smoothing).
 NODE = LiftSettings(smoothing_s=0.0)

@@ -10,8 +10,8 @@ import pytest
 from pose_lifter import cli
 from pose_lifter.core import placement
 from pose_lifter.messages.frame import FrameSettings
-from pose_lifter.offline.collection import LiftSettings
 from pose_lifter.offline.lift import frame_settings
+from pose_lifter.offline.settings import LiftSettings
 from pose_lifter.ros.params import SPECS, read_params_file
 
 REPO = Path(__file__).resolve().parents[1]

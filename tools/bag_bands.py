@@ -14,9 +14,9 @@ import tempfile
 from pathlib import Path
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases
-from pose_lifter.offline.collection import LiftSettings
 from pose_lifter.offline.evaluate import evaluate_bag
 from pose_lifter.offline.lift import lift_bag
+from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -65,9 +65,9 @@ from pose_lifter.core.results import LiftResult
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
-from pose_lifter.offline.collection import LiftSettings
 from pose_lifter.offline.evaluate import evaluate_bag
 from pose_lifter.offline.lift import FrameLift, LiftSummary, lift_messages
+from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[1]
 #: Warm starts per track, the node's causal poses (no centred smoothing).

@@ -21,8 +21,8 @@ from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.pose_step import PriorRows
 from pose_lifter.core.runs import Run, Runs
-from pose_lifter.offline.collection import LiftSettings
 from pose_lifter.offline.lift import lift_messages
+from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[2]
 Call = tuple[tuple[Any, ...], dict[str, Any]]

@@ -23,8 +23,8 @@ from pose_lifter.messages.frame import (
 )
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
 from pose_lifter.offline import bags
-from pose_lifter.offline.collection import LiftSettings
 from pose_lifter.offline.lift import FrameLift, LiftSummary, frame_settings, lift_messages
+from pose_lifter.offline.settings import LiftSettings
 from pose_lifter.ros.params import PARAMS, NodeSettings
 
 REPO = Path(__file__).resolve().parents[2]

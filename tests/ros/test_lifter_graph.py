@@ -360,9 +360,9 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
     from pose_lifter.messages.typestore import pose_lifter_typestore
     from pose_lifter.offline.bags import BagWriter, read_messages
-    from pose_lifter.offline.collection import LiftSettings
     from pose_lifter.offline.evaluate import evaluate_bag
     from pose_lifter.offline.lift import lift_messages
+    from pose_lifter.offline.settings import LiftSettings
 
     store = pose_lifter_typestore()
     recorded = list(read_messages(BAG))

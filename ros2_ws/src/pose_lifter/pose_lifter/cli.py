@@ -27,6 +27,7 @@ import numpy as np
 
 from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
+from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
 
 __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
 
@@ -510,11 +511,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lift a collection on a Dask distributed cluster (e.g. tcp://host:8786; needs "
                    "the 'cluster' extra): one task per bag; inputs and outputs on a file system every "
                    "worker sees under the same paths")
-    p.add_argument("--topic", default="/keypoints_2d",
+    p.add_argument("--topic", default=TOPIC_KEYPOINTS,
                    help="keypoints: pose_lifter_msgs/Skeleton2DArray or yolo_msgs/DetectionArray "
-                   "(default /keypoints_2d)")
-    p.add_argument("--camera-info-topic", default="/camera_info",
-                   help="sensor_msgs/CameraInfo for the metric depth ('' = none; default /camera_info)")
+                   f"(default {TOPIC_KEYPOINTS})")
+    p.add_argument("--camera-info-topic", default=TOPIC_CAMERA_INFO,
+                   help="sensor_msgs/CameraInfo for the metric depth "
+                   f"('' = none; default {TOPIC_CAMERA_INFO})")
     p.add_argument("--keep", nargs="+", default=None, metavar="TOPIC",
                    help="input topics copied to the output: 'all' (default), 'none', or topic names")
     p.add_argument("--params-file", default=None,
@@ -527,7 +529,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted .mcap")
     p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
-    p.add_argument("--topic", default="/skeletons_3d", help="Skeleton3DArray topic (default /skeletons_3d)")
+    p.add_argument("--topic", default=TOPIC_SKELETONS,
+                   help=f"Skeleton3DArray topic (default {TOPIC_SKELETONS})")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_export)
 

@@ -123,9 +123,9 @@ def run_demo(args: argparse.Namespace, make_lifter: Callable[[], Lifter]) -> int
     from pose_lifter.messages import convert as m
     from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
-    from pose_lifter.offline.collection import LiftSettings
     from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
     from pose_lifter.offline.lift import lift_bag
+    from pose_lifter.offline.settings import LiftSettings
 
     bag = Path(args.bag) if args.bag else find_demo_bag()
     out = Path(args.out)

@@ -12,7 +12,7 @@ topics. Where it differs, on purpose:
 * the input header is copied unchanged (the node's ``frame_id`` parameter fills an empty one);
 * the caps are the node's defaults (a params file's caps are node parameters, not read);
 * ``smoothing_s > 0`` smooths each track's poses with past and future frames
-  (:func:`smooth_chain`; 0 gives the node's causal poses).
+  (:func:`pose_lifter.offline.chains.smooth_chain`; 0 gives the node's causal poses).
 
 The lifted bag is evaluated by :mod:`pose_lifter.offline.evaluate`.
 """
@@ -54,7 +54,7 @@ from pose_lifter.offline.bags import (
     read_raw,
 )
 from pose_lifter.offline.chains import ChainWork, Done, MessageFields, lift_chain, lift_parallel, split_chains
-from pose_lifter.offline.collection import LiftSettings
+from pose_lifter.offline.settings import LiftSettings
 
 __all__ = [
     "LIFTABLE_TYPES",
