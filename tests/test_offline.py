@@ -170,3 +170,17 @@ def test_centred_smoothing_changes_only_the_poses_and_takes_the_jitter_out(tmp_p
         acc = [np.linalg.norm(np.diff(np.array(j), 2, axis=0), axis=-1).mean() for j in per_track.values()]
         jitter[name] = float(np.mean(acc))
     assert jitter["smooth"] < 0.7 * jitter["causal"], jitter
+
+
+def test_the_camera_timeline_takes_the_latest_usable_camera_info_as_the_node_would() -> None:
+    from pose_lifter.offline.chains import CameraTimeline
+
+    t = m.rosbags_types()
+
+    def info(f: float) -> Any:
+        return m.camera_info(m.make_header(0, "cam", t), 640, 480, f, f, 320.0, 240.0, t)
+
+    cameras = CameraTimeline([(10, info(500.0)), (20, info(-1.0)), (30, info(700.0))])
+    assert cameras.at(5) == cameras.at(10) == cameras.at(25) == ((500.0, 500.0), (320.0, 240.0))
+    assert cameras.at(30)[0] == (700.0, 700.0)  # type: ignore[index]
+    assert CameraTimeline([(10, info(0.0))]).at(10) is None  # none usable: the default distance

@@ -10,6 +10,7 @@ node's one pipeline over the whole bag.
 
 from __future__ import annotations
 
+import bisect
 import gc
 import os
 import signal
@@ -37,11 +38,11 @@ from pose_lifter.messages.frame import (
 )
 
 __all__ = [
+    "CameraTimeline",
     "ChainWork",
     "Done",
     "Item",
     "MessageFields",
-    "intrinsics_at",
     "lift_chain",
     "lift_parallel",
     "smooth_chain",
@@ -50,18 +51,32 @@ __all__ = [
 ]
 
 
-def intrinsics_at(camera_infos: list[tuple[int, Any]], stamp: int) -> Intrinsics:
-    """Intrinsics of the latest usable CameraInfo at or before ``stamp`` (else the first usable
-    one); a CameraInfo the node would ignore (bad intrinsics) is ignored."""
-    chosen: Intrinsics = None
-    for s, info in camera_infos:
-        if s > stamp and chosen is not None:
-            break
-        try:
-            chosen = m.intrinsics_from_camera_info(info)
-        except (InvalidInputError, ValueError, TypeError):
-            continue
-    return chosen
+class CameraTimeline:
+    """The usable intrinsics of a bag's CameraInfo messages, by stamp: a CameraInfo the node
+    would ignore (bad intrinsics) is left out.
+
+    Parameters
+    ----------
+    camera_infos : list of (stamp_ns, CameraInfo), time-ordered
+    """
+
+    def __init__(self, camera_infos: list[tuple[int, Any]]) -> None:
+        self._stamps: list[int] = []
+        self._intrinsics: list[Intrinsics] = []
+        for stamp, info in camera_infos:
+            try:
+                intrinsics = m.intrinsics_from_camera_info(info)
+            except (InvalidInputError, ValueError, TypeError):
+                continue
+            self._stamps.append(stamp)
+            self._intrinsics.append(intrinsics)
+
+    def at(self, stamp: int) -> Intrinsics:
+        """The latest usable intrinsics at or before ``stamp`` (before the first: the first; none
+        at all: None, the default distance)."""
+        if not self._intrinsics:
+            return None
+        return self._intrinsics[max(0, bisect.bisect_right(self._stamps, stamp) - 1)]
 
 
 @dataclass(frozen=True)
@@ -99,12 +114,13 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     independent chains: one per track id (in message order), one per untracked skeleton.
     Returns (chains, per message its items or refusals in input order, the checked frames)."""
     checked = [pipeline.check(msg) for _, msg in keypoint_msgs]
+    cameras = CameraTimeline(camera_infos)
     per_track: dict[int, list[Item]] = {}
     chains: list[list[Item]] = []
     per_msg: list[list[Item | SkipSkeleton]] = []
     for i, ((stamp, _), frame) in enumerate(zip(keypoint_msgs, checked, strict=True)):
         row: list[Item | SkipSkeleton] = []
-        intrinsics = intrinsics_at(camera_infos, stamp) if frame.skeletons else None
+        intrinsics = cameras.at(stamp) if frame.skeletons else None
         for x in frame.skeletons:
             if isinstance(x, SkipSkeleton):
                 row.append(x)
