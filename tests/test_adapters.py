@@ -27,7 +27,7 @@ from pose_lifter.core.detectors import (
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
 from pose_lifter.core.layouts import ALIASES, LAYOUTS, get_layout, to_model_joints
 from pose_lifter.core.skeleton import N_JOINTS
-from pose_lifter.messages import adapters
+from pose_lifter.messages import adapters, typestore
 from pose_lifter.messages import convert as m
 from pose_lifter.offline import bags
 
@@ -185,20 +185,20 @@ def store() -> Any:
 
     st = get_typestore(Stores.ROS2_JAZZY)
     for pkg in ("pose_lifter_msgs",):
-        bags.register_msg_package(st, pkg, bags.msg_dir())
-    names = bags.register_msg_package(st, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
+        typestore.register_msg_package(st, pkg, typestore.msg_dir())
+    names = typestore.register_msg_package(st, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
     assert "yolo_msgs/msg/DetectionArray" in names
-    bags.register_msg_package(st, "hri_msgs", THIRD_PARTY / "hri_msgs" / "msg")
+    typestore.register_msg_package(st, "hri_msgs", THIRD_PARTY / "hri_msgs" / "msg")
     return st
 
 
 def yolo_array(store: Any, people: list[tuple[str, np.ndarray, np.ndarray]], stamp_ns: int = 10**9,
                threshold: float = 0.5) -> Any:
     """A DetectionArray as yolo_node.py builds it: keypoints above threshold, ids kp_id + 1."""
-    f = {n: bags.message_factory(f"yolo_msgs/msg/{n}", store)
+    f = {n: typestore.message_factory(f"yolo_msgs/msg/{n}", store)
          for n in ("DetectionArray", "Detection", "KeyPoint2D", "KeyPoint2DArray", "Point2D")}
-    header = bags.message_factory("std_msgs/msg/Header", store)
-    time = bags.message_factory("builtin_interfaces/msg/Time", store)
+    header = typestore.message_factory("std_msgs/msg/Header", store)
+    time = typestore.message_factory("builtin_interfaces/msg/Time", store)
     dets = []
     for tid, kp, conf in people:
         data = [f["KeyPoint2D"](id=i + 1, point=f["Point2D"](x=float(x), y=float(y)), score=float(c))
@@ -212,8 +212,8 @@ def yolo_array(store: Any, people: list[tuple[str, np.ndarray, np.ndarray]], sta
 
 
 def hri_skeleton(store: Any, kp18: np.ndarray, c18: np.ndarray, size: tuple[int, int]) -> Any:
-    poi = bags.message_factory("hri_msgs/msg/NormalizedPointOfInterest2D", store)
-    make = bags.message_factory("hri_msgs/msg/Skeleton2D", store)
+    poi = typestore.message_factory("hri_msgs/msg/NormalizedPointOfInterest2D", store)
+    make = typestore.message_factory("hri_msgs/msg/Skeleton2D", store)
     return make(skeleton=[poi(x=float(x / size[0]), y=float(y / size[1]), c=float(c))
                           for (x, y), c in zip(kp18, c18, strict=True)])
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from mcap_check import check_mcap
 from pose_lifter.messages import convert as m
+from pose_lifter.messages import typestore
 from pose_lifter.offline import bags
 
 REPO = Path(__file__).resolve().parents[1]
@@ -18,7 +19,7 @@ PACKAGE_MSG = REPO / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter" / "msg"
 
 def test_packaged_msg_copies_equal_the_originals() -> None:
     originals = sorted(p.name for p in SOURCE_MSG.glob("*.msg"))
-    assert originals == sorted(f"{n}.msg" for n in bags.MSG_NAMES)
+    assert originals == sorted(f"{n}.msg" for n in typestore.MSG_NAMES)
     for name in originals:
         assert (PACKAGE_MSG / name).read_text() == (SOURCE_MSG / name).read_text(), (
             f"{name}: run `cp {SOURCE_MSG}/*.msg {PACKAGE_MSG}/`"
@@ -26,20 +27,20 @@ def test_packaged_msg_copies_equal_the_originals() -> None:
 
 
 def test_typestore_has_our_types() -> None:
-    store = bags.pose_lifter_typestore()
-    for name in bags.MSG_NAMES:
+    store = typestore.pose_lifter_typestore()
+    for name in typestore.MSG_NAMES:
         assert f"pose_lifter_msgs/msg/{name}" in store.types
     names = [f[0] for f in store.fielddefs["pose_lifter_msgs/msg/Skeleton3D"][1]]
     assert names[:4] == ["track_id", "joint_names", "joints", "camera"]
 
 
 def test_message_factory_rejects_unknown_fields() -> None:
-    make = bags.message_factory("geometry_msgs/msg/Point")
+    make = typestore.message_factory("geometry_msgs/msg/Point")
     assert make(x=1.0).y == 0.0
     with pytest.raises(TypeError):
         make(w=1.0)
-    with pytest.raises(bags.BagError):
-        bags.message_factory("nope_msgs/msg/Nope")
+    with pytest.raises(typestore.TypestoreError, match="not in the typestore"):
+        typestore.message_factory("nope_msgs/msg/Nope")
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in (REPO / "bags").glob("*.mcap")))
@@ -92,13 +93,15 @@ BANDS: dict[str, tuple[float, float]] = {
 
 def replay(name: str, tmp_path: Path) -> tuple[Any, Any]:
     from pose_lifter.core import Lifter, LifterOptions, PoseBases
-    from pose_lifter.offline.lift import evaluate_bag, lift_bag
+    from pose_lifter.offline.evaluate import evaluate_bag
+    from pose_lifter.offline.lift import lift_bag
+    from pose_lifter.offline.settings import LiftSettings
 
     bases = PoseBases.load()
     lifter = Lifter(bases, LifterOptions(n_starts=REPLAY["n_starts"]))
     out = tmp_path / f"{name}.mcap"
-    summary, _ = lift_bag(BAGS / f"{name}.mcap", out, lifter, every=REPLAY["every"],
-                          max_messages=REPLAY["max_messages"], progress=False)
+    settings = LiftSettings(every=REPLAY["every"], max_messages=REPLAY["max_messages"], smoothing_s=0.0)
+    summary, _ = lift_bag(BAGS / f"{name}.mcap", out, lifter, settings, progress=False)
     return summary, evaluate_bag(out, bases)
 
 

@@ -5,7 +5,7 @@ The reference (``_Reference`` below) is the message building of ``lift_bag`` as 
 ``pose_lifter.messages.cdr`` (commit 2a5a7f0): rosbags message classes filled field by field from the
 typestore's field definitions, orientations from ``scipy.spatial.transform.Rotation``, then
 ``typestore.serialize_cdr``. It is kept here verbatim in behaviour, independent of
-``pose_lifter.messages.convert`` and ``pose_lifter.offline.bags.message_factory`` (both may change).
+``pose_lifter.messages.convert`` and ``pose_lifter.offline.typestore.message_factory`` (both may change).
 """
 
 from __future__ import annotations
@@ -20,11 +20,12 @@ import numpy as np
 import pytest
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
-from pose_lifter.messages import cdr
+from pose_lifter.messages import cdr, typestore
 from pose_lifter.messages import convert as m
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline import lift as offline
+from pose_lifter.offline.settings import LiftSettings
 from rosbags.interfaces import Nodetype
 from scipy.spatial.transform import Rotation
 
@@ -134,7 +135,7 @@ class _Reference:
 
 def _reference_outputs(monkeypatch: pytest.MonkeyPatch, lifetime: float) -> list[tuple[bytes, bytes]]:
     """Make ``lift_bag`` hand every message's lifts to the reference too; returns its bytes."""
-    ref = _Reference(bags.pose_lifter_typestore())
+    ref = _Reference(typestore.pose_lifter_typestore())
     expected: list[tuple[bytes, bytes]] = []
     previous: set[int] = set()
     original = offline.lift_messages
@@ -166,7 +167,7 @@ def _written(path: Path) -> list[tuple[bytes, bytes]]:
 
 def _first_difference(a: bytes, b: bytes, msgtype: str) -> str:
     """Where two serialised messages differ, as a field path (for a readable failure)."""
-    store = bags.pose_lifter_typestore()
+    store = typestore.pose_lifter_typestore()
 
     def walk(x: Any, y: Any, path: str) -> str | None:
         if hasattr(x, "__dataclass_fields__"):
@@ -204,7 +205,7 @@ def test_lift_bag_writes_the_reference_bytes_on_a_committed_bag(
     expected = _reference_outputs(monkeypatch, 0.0)
     out = tmp_path / "out.mcap"
     summary, _ = offline.lift_bag(BAGS / bag, out, Lifter(PoseBases.load(), LifterOptions()),
-                                  progress=False, max_messages=40)
+                                  LiftSettings(max_messages=40, smoothing_s=0.0), progress=False)
     assert summary.n_lifted == n_lifted and len(expected) == 40
     _assert_same(_written(out), expected)
     if bag == "punch_outliers.mcap":
@@ -232,7 +233,8 @@ def test_lift_bag_writes_the_reference_bytes_with_vanishing_and_untracked_people
     expected = _reference_outputs(monkeypatch, 0.25)
     out = tmp_path / "out.mcap"
     summary, _ = offline.lift_bag(path, out, Lifter(PoseBases.load(), LifterOptions(mode="learned")),
-                                  progress=False, marker_lifetime=0.25, workers=2)
+                                  LiftSettings(marker_lifetime=0.25, smoothing_s=0.0), progress=False,
+                                  workers=2)
     assert (summary.n_lifted, summary.n_failed) == (22, 2)
     _assert_same(_written(out), expected)
     actions = [[(k.id, k.action) for k in x.msg.markers]
@@ -255,7 +257,7 @@ def test_encoders_equal_the_node_builders_for_every_alignment(frame_id: str) -> 
     ``skeleton_markers``) through rosbags: the frame id's length shifts every later field's
     alignment, so each length modulo 8 is a different layout."""
     rng = np.random.default_rng(len(frame_id))
-    store = bags.pose_lifter_typestore()
+    store = typestore.pose_lifter_typestore()
     types = m.rosbags_types(store)
     header = m.make_header(1_234_567_890_123, frame_id, types)
     track_ids = [3, -1, 7, -1, 2**31 + 5, 0]
@@ -303,34 +305,34 @@ def test_quaternions_are_scipys_bit_for_bit() -> None:
 def test_check_definitions_refuses_another_skeleton3d_layout(tmp_path: Path) -> None:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    cdr.check_definitions(bags.pose_lifter_typestore())
+    cdr.check_definitions(typestore.pose_lifter_typestore())
     store = get_typestore(Stores.ROS2_JAZZY)
-    d = bags.msg_dir()
-    for name in bags.MSG_NAMES:
+    d = typestore.msg_dir()
+    for name in typestore.MSG_NAMES:
         text = (d / f"{name}.msg").read_text()
         if name == "Skeleton3D":
             text += "\nfloat64 confidence\n"
-        store.register(get_types_from_msg(text, f"{bags.MSG_PACKAGE}/msg/{name}"))
+        store.register(get_types_from_msg(text, f"{typestore.MSG_PACKAGE}/msg/{name}"))
     with pytest.raises(RuntimeError, match="Skeleton3DArray"):
         cdr.check_definitions(store)
 
 
 def test_message_factory_builds_what_the_previous_factory_built() -> None:
-    """``bags.message_factory`` (field plans read once per type) against the reference's
+    """``typestore.message_factory`` (field plans read once per type) against the reference's
     field-by-field construction: every type of ``messages.MESSAGE_TYPES`` with no fields and
     with list-valued numeric fields; defaults are fresh objects; an unknown field is refused."""
-    store = bags.pose_lifter_typestore()
+    store = typestore.pose_lifter_typestore()
     ref = _Reference(store)
     for name in m.MESSAGE_TYPES.values():
-        make = bags.message_factory(name, store)
+        make = typestore.message_factory(name, store)
         assert store.serialize_cdr(make(), name) == store.serialize_cdr(ref.msg(name), name)
     fields: dict[str, Any] = {"projection": [1.0, 2, 3, 4, 5, 6], "scale": 2.0, "translation": (7.0, 8.0)}
-    a = bags.message_factory("pose_lifter_msgs/msg/CameraEstimate", store)(**fields)
+    a = typestore.message_factory("pose_lifter_msgs/msg/CameraEstimate", store)(**fields)
     assert a.projection.dtype == np.float64 and isinstance(a.translation, np.ndarray)
     assert store.serialize_cdr(a, "pose_lifter_msgs/msg/CameraEstimate") == \
         store.serialize_cdr(ref.msg("pose_lifter_msgs/msg/CameraEstimate", **fields),
                             "pose_lifter_msgs/msg/CameraEstimate")
-    marker = bags.message_factory("visualization_msgs/msg/Marker", store)
+    marker = typestore.message_factory("visualization_msgs/msg/Marker", store)
     one, two = marker(ns="x", id=3, action=2), marker(ns="x", id=3, action=2)
     assert store.serialize_cdr(one, "visualization_msgs/msg/Marker") == \
         store.serialize_cdr(ref.msg("visualization_msgs/msg/Marker", ns="x", id=3, action=2),
@@ -342,7 +344,7 @@ def test_message_factory_builds_what_the_previous_factory_built() -> None:
 
 
 def _decoded_and_deserialised(bag: Path) -> list[tuple[Any, Any]]:
-    store = bags.pose_lifter_typestore()
+    store = typestore.pose_lifter_typestore()
     return [(cdr.decode_skeleton2d_array(r.data), store.deserialize_cdr(r.data, r.msgtype))
             for r in bags.read_raw(bag, ["/keypoints_2d"])]
 
@@ -375,7 +377,7 @@ def test_decoded_keypoints_equal_rosbags_on_every_committed_bag(bag: str) -> Non
 
 
 def test_decoder_on_awkward_input_agrees_or_hands_over_to_rosbags() -> None:
-    store = bags.pose_lifter_typestore()
+    store = typestore.pose_lifter_typestore()
     types = m.rosbags_types(store)
     rng = np.random.default_rng(5)
 
@@ -419,10 +421,10 @@ def test_read_messages_decodes_only_our_definition(tmp_path: Path) -> None:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     old = get_typestore(Stores.ROS2_JAZZY)
-    d = bags.msg_dir()
-    for name in bags.MSG_NAMES:
+    d = typestore.msg_dir()
+    for name in typestore.MSG_NAMES:
         text = (d / f"{name}.msg").read_text().replace("float32 confidence", "float64 confidence")
-        old.register(get_types_from_msg(text, f"{bags.MSG_PACKAGE}/msg/{name}"))
+        old.register(get_types_from_msg(text, f"{typestore.MSG_PACKAGE}/msg/{name}"))
     path = tmp_path / "old.mcap"
     from rosbags.rosbag2 import StoragePlugin, Writer
 

@@ -15,7 +15,7 @@ from pose_lifter.messages import convert as m
 from pose_lifter.mocap import cmu as mocap
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
-from pose_lifter.offline.lift import evaluate_bag
+from pose_lifter.offline.evaluate import evaluate_bag
 from scipy.spatial.transform import Rotation
 
 try:

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from lift_compare import assert_same_lift
 from pose_lifter import cli
-from pose_lifter.core.errors import BagError
 from pose_lifter.offline import bags
+from pose_lifter.offline.bags import BagError
 from pose_lifter.offline.collection import ERRORS_NAME, MANIFEST_NAME, expand_inputs, plan_jobs
 
 REPO = Path(__file__).resolve().parents[1]
@@ -174,10 +174,11 @@ def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() 
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
-    from pose_lifter.offline import lift as offline
-    from pose_lifter.offline.collection import LiftSettings
+    from pose_lifter.core import track_defaults
+    from pose_lifter.messages.frame import FrameSettings
+    from pose_lifter.offline.settings import LiftSettings
 
     s = LiftSettings()
-    assert s.track_timeout == offline.DEFAULT_TRACK_TIMEOUT_S
-    assert s.reinit_ratio == offline.DEFAULT_REINIT_RATIO
+    assert s.track_timeout == track_defaults.DEFAULT_TRACK_TIMEOUT_S == FrameSettings().track_timeout
+    assert s.reinit_ratio == track_defaults.DEFAULT_REINIT_RATIO == FrameSettings().reinit_ratio
     assert s.digest() == LiftSettings().digest() != LiftSettings(every=2).digest()

@@ -16,6 +16,7 @@ import pytest
 from detector_poses import coco17, model_xy
 from mcap_check import check_mcap
 from pose_lifter import cli
+from pose_lifter.messages import typestore
 from pose_lifter.offline import bags
 
 REPO = Path(__file__).resolve().parents[1]
@@ -62,11 +63,11 @@ def test_lift_yolo_detection_array_bag(tmp_path: Path) -> None:
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    bags.register_msg_package(store, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
-    f = {n: bags.message_factory(f"yolo_msgs/msg/{n}", store)
+    typestore.register_msg_package(store, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
+    f = {n: typestore.message_factory(f"yolo_msgs/msg/{n}", store)
          for n in ("DetectionArray", "Detection", "KeyPoint2D", "KeyPoint2DArray", "Point2D")}
-    header = bags.message_factory("std_msgs/msg/Header", store)
-    time = bags.message_factory("builtin_interfaces/msg/Time", store)
+    header = typestore.message_factory("std_msgs/msg/Header", store)
+    time = typestore.message_factory("builtin_interfaces/msg/Time", store)
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     with Writer(tmp_path / "yolo", version=9, storage_plugin=StoragePlugin.MCAP) as w:
@@ -141,7 +142,7 @@ def test_bad_inputs_one_line_exit_code_no_output(tmp_path: Path, capsys: pytest.
 
 @pytest.mark.slow
 def test_streaming_memory_does_not_grow_with_a_large_image_topic(tmp_path: Path) -> None:
-    image = bags.message_factory("sensor_msgs/msg/Image")
+    image = typestore.message_factory("sensor_msgs/msg/Image")
     pixels = np.frombuffer(np.random.default_rng(0).bytes(640 * 480 * 3), dtype=np.uint8)
 
     def add_image(w: bags.BagWriter, raw: bags.RawMessage) -> None:
@@ -232,7 +233,7 @@ def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     old = get_typestore(Stores.ROS2_JAZZY)
-    texts = {n: (bags.msg_dir() / f"{n}.msg").read_text() for n in bags.MSG_NAMES}
+    texts = {n: (typestore.msg_dir() / f"{n}.msg").read_text() for n in typestore.MSG_NAMES}
     texts["Skeleton3D"] = texts["Skeleton3D"].split("\n# Per joint (order of joint_names)")[0] + "\n"
     assert "observed" not in texts["Skeleton3D"]
     types: dict[str, Any] = {}
@@ -240,7 +241,7 @@ def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
         types.update(get_types_from_msg(text, f"pose_lifter_msgs/msg/{n}"))
     old.register(types)
     gt = [x for x in bags.read_raw(WALK) if x.topic == "/ground_truth/skeletons_3d"][:3]
-    msgs = [bags.pose_lifter_typestore().deserialize_cdr(x.data, x.msgtype) for x in gt]
+    msgs = [typestore.pose_lifter_typestore().deserialize_cdr(x.data, x.msgtype) for x in gt]
     with Writer(tmp_path / "old", version=9, storage_plugin=StoragePlugin.MCAP) as w:
         conns = {}
         for x in bags.read_raw(WALK):
@@ -252,7 +253,8 @@ def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
         c = w.add_connection("/ground_truth/skeletons_3d", "pose_lifter_msgs/msg/Skeleton3DArray",
                              typestore=old)
         for x, msg in zip(gt, msgs, strict=True):
-            w.write(c, x.stamp_ns, old.serialize_cdr(bags.upgrade_message(msg, x.msgtype, old), x.msgtype))
+            upgraded = typestore.upgrade_message(msg, x.msgtype, old)
+            w.write(c, x.stamp_ns, old.serialize_cdr(upgraded, x.msgtype))
     bag = next((tmp_path / "old").glob("*.mcap"))
     out = tmp_path / "out.mcap"
     assert lift(str(bag), "--out", str(out), "--max-messages", "3") == 0

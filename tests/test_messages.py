@@ -7,10 +7,11 @@ import pytest
 import tolerances as tol
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
 from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
 from pose_lifter.messages import convert as m
-from pose_lifter.offline.bags import pose_lifter_typestore
+from pose_lifter.messages.typestore import pose_lifter_typestore
 from scipy.spatial.transform import Rotation
 
 T = m.rosbags_types()
@@ -80,19 +81,19 @@ def test_place_in_camera_recovers_metric_position() -> None:
     f = 0.5 * (fx + fy)
     t = np.array([fx * centroid[0] / centroid[2] + cx, fy * centroid[1] / centroid[2] + cy])
     res = fake_result(rot, f * leg / centroid[2], t)
-    joints = m.place_in_camera(res, leg, (fx, fy), (cx, cy), default_distance_m=3.0)
+    joints = place_in_camera(res, leg, (fx, fy), (cx, cy), default_distance_m=3.0)
     np.testing.assert_allclose(joints.mean(axis=0), centroid, atol=tol.ROUND_OFF)
     np.testing.assert_allclose(joints - joints.mean(axis=0), res.pose_camera * leg, atol=tol.ROUND_OFF)
     # no principal point: on the optical axis at the same depth
-    np.testing.assert_allclose(m.place_in_camera(res, leg, (fx, fy), None, 3.0).mean(axis=0), [0, 0, 5.0],
+    np.testing.assert_allclose(place_in_camera(res, leg, (fx, fy), None, 3.0).mean(axis=0), [0, 0, 5.0],
                                atol=tol.ROUND_OFF)
     # no camera info: the default distance
-    np.testing.assert_allclose(m.place_in_camera(res, leg, None, None, 3.0).mean(axis=0), [0, 0, 3.0],
+    np.testing.assert_allclose(place_in_camera(res, leg, None, None, 3.0).mean(axis=0), [0, 0, 3.0],
                                atol=tol.ROUND_OFF)
     with pytest.raises(InvalidInputError):
-        m.place_in_camera(res, -1.0, None, None, 3.0)
+        place_in_camera(res, -1.0, None, None, 3.0)
     with pytest.raises(InvalidInputError):
-        m.place_in_camera(fake_result(rot, 0.0, t), leg, (fx, fy), (cx, cy), 3.0)
+        place_in_camera(fake_result(rot, 0.0, t), leg, (fx, fy), (cx, cy), 3.0)
 
 
 def test_result_to_skeleton3d_fields_and_inverse() -> None:

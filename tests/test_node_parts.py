@@ -1,5 +1,6 @@
-"""The lifter node's parts that need no ROS graph: input checks, the one output check, warning
-throttle, marker bookkeeping and the statistics line (rosbags message types stand in for rclpy's)."""
+"""The lifter node's parts that need no ROS graph: the frame pipeline's input checks and its one
+output check, warning throttle, marker bookkeeping and the statistics line (rosbags message types
+stand in for rclpy's)."""
 
 from __future__ import annotations
 
@@ -9,16 +10,18 @@ import numpy as np
 import pytest
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.messages import convert as m
-from pose_lifter.offline.bags import pose_lifter_typestore
-from pose_lifter.ros.checks import SkipSkeleton, WarningThrottle, check_output, frame_over_cap, skeleton_input
+from pose_lifter.messages.frame import SkipSkeleton, check_output, frame_over_cap, skeleton_input
+from pose_lifter.messages.typestore import pose_lifter_typestore
+from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, NodeSettings
 from pose_lifter.ros.stats import FrameStats
 
 T = m.rosbags_types()
-SETTINGS = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__)
+SETTINGS = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__).frame
 COCO = get_layout("coco17")
 
 
@@ -67,7 +70,7 @@ def test_clipped_confidences_are_reported_even_when_the_skeleton_is_then_skipped
 
 def test_one_output_check_covers_what_is_published() -> None:
     good = lift_result()
-    joints = m.place_in_camera(good, 0.43, None, None, 5.0)
+    joints = place_in_camera(good, 0.43, None, None, 5.0)
     check_output(0, good, joints)
     bad_joints = joints.copy()
     bad_joints[3, 1] = np.nan
@@ -81,10 +84,11 @@ def test_one_output_check_covers_what_is_published() -> None:
 
 def test_frames_over_a_cap_are_refused_with_the_cap_named() -> None:
     frame = T.Skeleton2DArray(header=m.make_header(1, "x" * 257, T), layout="coco17", skeletons=[])
-    kind, text = frame_over_cap(frame, SETTINGS) or ("", "")
-    assert kind == "frame_id too long" and "max_frame_id_length=256" in text
+    skip = frame_over_cap(frame, SETTINGS)
+    assert skip is not None and skip.kind == "frame_id too long" and "max_frame_id_length=256" in str(skip)
     frame = T.Skeleton2DArray(header=m.make_header(1, "cam", T), layout="y" * 65, skeletons=[])
-    assert (frame_over_cap(frame, SETTINGS) or ("",))[0] == "layout too long"
+    skip = frame_over_cap(frame, SETTINGS)
+    assert skip is not None and skip.kind == "layout too long"
     frame = T.Skeleton2DArray(header=m.make_header(1, "cam", T), layout="coco17", skeletons=[])
     assert frame_over_cap(frame, SETTINGS) is None
 

@@ -16,6 +16,10 @@ from pose_lifter.messages import convert as m
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline import lift as offline
+from pose_lifter.offline.settings import LiftSettings
+
+#: The node's causal poses (no centred smoothing).
+NODE = LiftSettings(smoothing_s=0.0)
 
 
 class EchoLifter:
@@ -53,7 +57,8 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     path, sc = make_input(tmp_path)
     lifter: Any = EchoLifter()
     out = tmp_path / "out.mcap"
-    summary, frames = offline.lift_bag(path, out, lifter, progress=False, leg_length_m=0.5)
+    summary, frames = offline.lift_bag(path, out, lifter, LiftSettings(leg_length_m=0.5, smoothing_s=0.0),
+                                        progress=False)
     assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
     # warm starts: from the second frame of each track on, restarted after the gap of track 5
     assert summary.n_warm == 11 - 3
@@ -98,7 +103,7 @@ class DivergingLifter(EchoLifter):
 def test_a_diverged_solve_is_one_failed_skeleton_and_the_track_restarts_cold(tmp_path: Path) -> None:
     path, _ = make_input(tmp_path)
     lifter: Any = DivergingLifter()
-    summary, _ = offline.lift_bag(path, tmp_path / "out.mcap", lifter, progress=False)
+    summary, _ = offline.lift_bag(path, tmp_path / "out.mcap", lifter, NODE, progress=False)
     assert (summary.n_lifted, summary.n_failed) == (10, 2)
     assert any("pose step diverged" in f for f in summary.failures)
     assert lifter.warm[3] is None  # the frame after the diverged one starts cold
@@ -107,13 +112,14 @@ def test_a_diverged_solve_is_one_failed_skeleton_and_the_track_restarts_cold(tmp
 def test_lift_bag_every_and_max(tmp_path: Path) -> None:
     path, _ = make_input(tmp_path)
     out = tmp_path / "out.mcap"
-    summary, _ = offline.lift_bag(path, out, EchoLifter(), every=2, max_messages=2, progress=False)  # type: ignore[arg-type]
+    settings = LiftSettings(every=2, max_messages=2, smoothing_s=0.0)
+    summary, _ = offline.lift_bag(path, out, EchoLifter(), settings, progress=False)  # type: ignore[arg-type]
     assert summary.n_messages == 2
     kp = list(bags.read_messages(out, ["/keypoints_2d"]))
     est = list(bags.read_messages(out, ["/skeletons_3d"]))
     assert len(kp) == 4 and [x.stamp_ns for x in est] == [kp[0].stamp_ns, kp[2].stamp_ns]
     with pytest.raises(bags.BagError):
-        offline.lift_bag(path, out, EchoLifter(), progress=False)  # type: ignore[arg-type]
+        offline.lift_bag(path, out, EchoLifter(), NODE, progress=False)  # type: ignore[arg-type]
 
 
 def test_workers_lift_tracks_in_parallel_with_identical_results(tmp_path: Path) -> None:
@@ -123,8 +129,9 @@ def test_workers_lift_tracks_in_parallel_with_identical_results(tmp_path: Path) 
     lifter = Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=2))
     runs = []
     for workers in (1, 2):
-        summary, frames = offline.lift_bag(bag, tmp_path / f"w{workers}.mcap", lifter, max_messages=3,
-                                           progress=False, workers=workers)
+        summary, frames = offline.lift_bag(bag, tmp_path / f"w{workers}.mcap", lifter,
+                                           LiftSettings(max_messages=3, smoothing_s=0.0), progress=False,
+                                           workers=workers)
         assert (summary.n_lifted, summary.n_warm, summary.n_failed) == (15, 10, 0)
         runs.append(frames)
     one, two = runs
@@ -146,8 +153,8 @@ def test_centred_smoothing_changes_only_the_poses_and_takes_the_jitter_out(tmp_p
     lifter = Lifter(options=LifterOptions())  # hybrid, its packaged bases
     runs = {}
     for s in (0.0, OFFLINE_SMOOTHING_S):
-        _, frames = offline.lift_bag(bag, tmp_path / f"s{s}.mcap", lifter, max_messages=45, progress=False,
-                                     smoothing_s=s)
+        _, frames = offline.lift_bag(bag, tmp_path / f"s{s}.mcap", lifter,
+                                     LiftSettings(max_messages=45, smoothing_s=s), progress=False)
         runs[s] = frames
     causal, smooth = runs[0.0], runs[OFFLINE_SMOOTHING_S]
     assert [(f.stamp_ns, f.track_id) for f in causal] == [(f.stamp_ns, f.track_id) for f in smooth]
@@ -163,3 +170,17 @@ def test_centred_smoothing_changes_only_the_poses_and_takes_the_jitter_out(tmp_p
         acc = [np.linalg.norm(np.diff(np.array(j), 2, axis=0), axis=-1).mean() for j in per_track.values()]
         jitter[name] = float(np.mean(acc))
     assert jitter["smooth"] < 0.7 * jitter["causal"], jitter
+
+
+def test_the_camera_timeline_takes_the_latest_usable_camera_info_as_the_node_would() -> None:
+    from pose_lifter.offline.chains import CameraTimeline
+
+    t = m.rosbags_types()
+
+    def info(f: float) -> Any:
+        return m.camera_info(m.make_header(0, "cam", t), 640, 480, f, f, 320.0, 240.0, t)
+
+    cameras = CameraTimeline([(10, info(500.0)), (20, info(-1.0)), (30, info(700.0))])
+    assert cameras.at(5) == cameras.at(10) == cameras.at(25) == ((500.0, 500.0), (320.0, 240.0))
+    assert cameras.at(30)[0] == (700.0, 700.0)  # type: ignore[index]
+    assert CameraTimeline([(10, info(0.0))]).at(10) is None  # none usable: the default distance

@@ -60,8 +60,10 @@ def test_offline_read_of_the_node_yaml_ignores_no_node_parameter() -> None:
 def test_node_settings_read_every_field_with_its_type() -> None:
     values = {p.name: p.default for p in PARAMS}
     settings = NodeSettings.read(values.__getitem__)
-    for f in dataclasses.fields(NodeSettings):
-        value = getattr(settings, f.name)
+    read = [(settings.frame, f) for f in dataclasses.fields(settings.frame)]
+    read += [(settings, f) for f in dataclasses.fields(NodeSettings) if f.name != "frame"]
+    for owner, f in read:
+        value = getattr(owner, f.name)
         assert value == values[f.name] and type(value).__name__ == f.type, f.name
 
 

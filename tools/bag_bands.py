@@ -14,7 +14,9 @@ import tempfile
 from pathlib import Path
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases
-from pose_lifter.offline.lift import evaluate_bag, lift_bag
+from pose_lifter.offline.evaluate import evaluate_bag
+from pose_lifter.offline.lift import lift_bag
+from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -33,7 +35,8 @@ def main() -> None:
         for bag in sorted((REPO / "bags").glob("*.mcap")):
             lifter = Lifter(None, LifterOptions(mode=args.mode, n_starts=args.starts))  # the mode's bases
             out = Path(tmp) / bag.name
-            lift_bag(bag, out, lifter, every=args.every, max_messages=args.max_messages, progress=False)
+            settings = LiftSettings(every=args.every, max_messages=args.max_messages, smoothing_s=0.0)
+            lift_bag(bag, out, lifter, settings, progress=False)
             t = evaluate_bag(out, bases).table()
             print(f"| `{bag.stem}` | {t['lifter']['p_mpjpe_mm']:.0f} | {t['lifter']['mpjpe_mm']:.0f} | "
                   f"{t['lifter']['normalised']:.2f} | {t['flat_floor']['p_mpjpe_mm']:.0f} | "

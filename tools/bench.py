@@ -51,7 +51,7 @@ from pose_lifter.core.results import LiftResult
 from pose_lifter.core.skeleton import normalise_pose
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.messages import convert as m
-from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from pose_lifter.messages.names import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
 from threadpoolctl import threadpool_limits
 

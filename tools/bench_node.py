@@ -76,8 +76,9 @@ def main() -> None:
     except ImportError as err:
         sys.exit(f"{err}: run `make ros` and `source ros2_ws/install/setup.bash` (make bench-node does)")
     from pose_lifter.messages.convert import make_header, ns_to_stamp, rclpy_types, stamp_to_ns
-    from pose_lifter.mocap.scenes import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
-    from pose_lifter.offline.bags import pose_lifter_typestore, read_messages
+    from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+    from pose_lifter.messages.typestore import pose_lifter_typestore
+    from pose_lifter.offline.bags import read_messages
 
     store = pose_lifter_typestore()
     types = rclpy_types()

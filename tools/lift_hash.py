@@ -63,11 +63,15 @@ from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procruste
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import LiftResult
 from pose_lifter.messages import convert as m
-from pose_lifter.mocap.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
-from pose_lifter.offline.lift import FrameLift, LiftSummary, evaluate_bag, lift_messages
+from pose_lifter.offline.evaluate import evaluate_bag
+from pose_lifter.offline.lift import FrameLift, LiftSummary, lift_messages
+from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[1]
+#: Warm starts per track, the node's causal poses (no centred smoothing).
+NODE = LiftSettings(smoothing_s=0.0)
 MODES = ("paper", "hybrid")
 
 
@@ -163,13 +167,12 @@ def lift_bags(bags: Iterable[Path], mode: str, starts: int | None,
             ref.runs.fused = False
             lifter_module.pose_step = recorder.wrap(original)  # type: ignore[assignment]
             try:
-                lift_messages(kps, infos, ref, warm_start=True)
+                lift_messages(kps, infos, ref, NODE)
             finally:
                 lifter_module.pose_step = original  # type: ignore[assignment]
         try:
             t0 = time.perf_counter()
-            frames[bag] = lift_messages(kps, infos, lifter, warm_start=True, on_frame=on_frame,
-                                        summary=summary)
+            frames[bag] = lift_messages(kps, infos, lifter, NODE, on_frame=on_frame, summary=summary)
         finally:
             lifter_module.pose_step = original  # type: ignore[assignment]
         for failure in summary.failures:

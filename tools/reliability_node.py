@@ -320,8 +320,9 @@ def _verdict(rows: list[tuple[str, str, bool]]) -> int:
 
 def soak(args: argparse.Namespace) -> int:
     from pose_lifter.messages.convert import ns_to_stamp, stamp_to_ns
-    from pose_lifter.mocap.scenes import TOPIC_KEYPOINTS
-    from pose_lifter.offline.bags import pose_lifter_typestore, read_messages
+    from pose_lifter.messages.names import TOPIC_KEYPOINTS
+    from pose_lifter.messages.typestore import pose_lifter_typestore
+    from pose_lifter.offline.bags import read_messages
     from rclpy.serialization import deserialize_message
 
     store = pose_lifter_typestore()

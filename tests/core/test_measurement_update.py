@@ -24,7 +24,7 @@ def _person(bag: str, frames: int) -> tuple[np.ndarray, np.ndarray]:
     """The ground truth of a committed bag's person, ``frames`` frames at 30 Hz, weak
     perspective: (pixels (frames, 12, 2), centred camera-frame truth in metres (frames, 12, 3))."""
     from pose_lifter.messages import convert as messages
-    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
 
     msgs = [x.msg for x in read_messages(REPO / "bags" / f"{bag}.mcap", [TOPIC_GROUND_TRUTH])]

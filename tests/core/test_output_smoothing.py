@@ -23,7 +23,7 @@ def walker() -> tuple[np.ndarray, np.ndarray]:
     trial), 90 consecutive frames at 30 Hz, weak perspective: (pixels (90, 12, 2), centred
     camera-frame truth in metres (90, 12, 3))."""
     from pose_lifter.messages import convert as messages
-    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
 
     msgs = [x.msg for x in read_messages(REPO / "bags" / "walk_clean.mcap", [TOPIC_GROUND_TRUTH])]

@@ -43,7 +43,7 @@ def real_frames() -> tuple[np.ndarray, np.ndarray]:
     frame, metres), 4 frames of each of 3 bags, seen weak-perspective: (pixels (12, 12, 2),
     centred camera-frame truth (12, 12, 3))."""
     from pose_lifter.messages import convert as messages
-    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
 
     truth = []
@@ -252,7 +252,7 @@ def walk_track() -> tuple[np.ndarray, np.ndarray]:
     """One real walker (bags/walk_clean.mcap's ground truth), 30 consecutive frames at 30 Hz,
     weak perspective: (pixels (30, 12, 2), centred camera-frame truth (30, 12, 3))."""
     from pose_lifter.messages import convert as messages
-    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
 
     msgs = [x.msg for x in read_messages(REPO / "bags" / "walk_clean.mcap", [TOPIC_GROUND_TRUTH])]

@@ -22,6 +22,7 @@ from pose_lifter.core.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.pose_step import PriorRows
 from pose_lifter.core.runs import Run, Runs
 from pose_lifter.offline.lift import lift_messages
+from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[2]
 Call = tuple[tuple[Any, ...], dict[str, Any]]
@@ -47,7 +48,7 @@ def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[C
         return original(*args, **kwargs)
 
     lifter.runs.run = recorded  # type: ignore[method-assign]
-    lift_messages(kps[:n_messages], infos, lifter, warm_start=True)
+    lift_messages(kps[:n_messages], infos, lifter, LiftSettings(smoothing_s=0.0))
     return lifter, calls
 
 

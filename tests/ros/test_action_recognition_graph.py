@@ -22,7 +22,8 @@ BAG = REPO / "bags" / "walk_clean.mcap"
 def test_action_recognition_classifies_tracks_from_skeletons_3d(
     lifter_env: dict[str, str], graph: GraphClient, tmp_path: Any
 ) -> None:
-    from pose_lifter.offline.bags import pose_lifter_typestore, read_messages
+    from pose_lifter.messages.typestore import pose_lifter_typestore
+    from pose_lifter.offline.bags import read_messages
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import String
 

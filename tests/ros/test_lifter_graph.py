@@ -347,7 +347,7 @@ N_STARTS = 3
 
 def _to_rosbags(msg: Any, msgtype: str) -> Any:
     """An rclpy message as a rosbags one (CDR round trip), to write it with pose_lifter.offline.bags."""
-    from pose_lifter.offline.bags import pose_lifter_typestore
+    from pose_lifter.messages.typestore import pose_lifter_typestore
     from rclpy.serialization import serialize_message
 
     return pose_lifter_typestore().deserialize_cdr(bytes(serialize_message(msg)), msgtype)
@@ -357,9 +357,12 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     start_lifter: Any, graph: GraphClient, tmp_path: Any
 ) -> None:
     from pose_lifter.core import Lifter, LifterOptions
-    from pose_lifter.mocap.scenes import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
-    from pose_lifter.offline.bags import BagWriter, pose_lifter_typestore, read_messages
-    from pose_lifter.offline.lift import evaluate_bag, lift_messages
+    from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
+    from pose_lifter.messages.typestore import pose_lifter_typestore
+    from pose_lifter.offline.bags import BagWriter, read_messages
+    from pose_lifter.offline.evaluate import evaluate_bag
+    from pose_lifter.offline.lift import lift_messages
+    from pose_lifter.offline.settings import LiftSettings
 
     store = pose_lifter_typestore()
     recorded = list(read_messages(BAG))
@@ -420,7 +423,7 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     # the node computes what the offline lift computes (same options and bases, same warm starts)
     offline = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],
                             [(x.stamp_ns, x.msg) for x in camera_infos],
-                            Lifter(None, LifterOptions(n_starts=N_STARTS)), warm_start=True)
+                            Lifter(None, LifterOptions(n_starts=N_STARTS)), LiftSettings(smoothing_s=0.0))
     node_joints = np.array([m.skeleton3d_to_joints(s) for a in warm for s in a.skeletons.skeletons])
     np.testing.assert_allclose(node_joints, np.array([f.joints_m for f in offline]), atol=1e-6)
 
@@ -454,6 +457,7 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     paper = replay(BAG_FRAMES)
     paper_lifter = Lifter(None, LifterOptions(mode="paper", n_starts=N_STARTS))
     offline_paper = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],
-                                  [(x.stamp_ns, x.msg) for x in camera_infos], paper_lifter, warm_start=True)
+                                  [(x.stamp_ns, x.msg) for x in camera_infos], paper_lifter,
+                                  LiftSettings(smoothing_s=0.0))
     node_paper = np.array([m.skeleton3d_to_joints(s) for a in paper for s in a.skeletons.skeletons])
     np.testing.assert_allclose(node_paper, np.array([f.joints_m for f in offline_paper]), atol=1e-6)

@@ -27,6 +27,7 @@ import numpy as np
 
 from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
+from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
 
 __all__ = ["build_parser", "learn_bases", "main", "make_bag"]
 
@@ -71,7 +72,8 @@ def _out_is_a_directory(args: argparse.Namespace) -> bool:
 
 #: Errors that mean the input data is bad (exit code 1); see the module doc.
 def _is_data_error(exc: BaseException) -> bool:
-    from pose_lifter.core.errors import BagReadError, BasisFileError, InvalidInputError, SolverError
+    from pose_lifter.core.errors import BasisFileError, InvalidInputError, SolverError
+    from pose_lifter.offline.bags import BagReadError
 
     return (isinstance(exc, BasisFileError | InvalidInputError | BagReadError | SolverError)
             or type(exc).__module__.startswith("rosbags"))
@@ -338,12 +340,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
     s = _lift_settings(args, args.lift_defaults)
     lifter = s.build_lifter()
-    summary, _ = lift_bag(bag, args.out, lifter, warm_start=s.warm_start, leg_length_m=s.leg_length_m,
-                          default_distance_m=s.default_distance_m, every=s.every, max_messages=s.max_messages,
-                          progress=not args.quiet, overwrite=args.overwrite,
-                          workers=args.workers or _cores(), topic=s.topic,
-                          camera_info_topic=s.camera_info_topic, keep=s.keep, track_timeout=s.track_timeout,
-                          reinit_ratio=s.reinit_ratio, smoothing_s=s.smoothing_s)
+    summary, _ = lift_bag(bag, args.out, lifter, s, progress=not args.quiet, overwrite=args.overwrite,
+                          workers=args.workers or _cores())
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
@@ -353,7 +351,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
 
 
 def _cmd_lift_collection(args: argparse.Namespace) -> int:
-    from pose_lifter.core.errors import BagError
+    from pose_lifter.offline.bags import BagError
     from pose_lifter.offline.collection import format_summary, lift_collection, plan_jobs
 
     out = Path(args.out)
@@ -388,7 +386,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from pose_lifter.core.bases import PoseBases
-    from pose_lifter.offline.lift import evaluate_bag, format_evaluation
+    from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
 
     ev = evaluate_bag(args.bag, PoseBases.load(args.bases))
     print(format_evaluation(ev, as_json=args.json))
@@ -513,11 +511,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lift a collection on a Dask distributed cluster (e.g. tcp://host:8786; needs "
                    "the 'cluster' extra): one task per bag; inputs and outputs on a file system every "
                    "worker sees under the same paths")
-    p.add_argument("--topic", default="/keypoints_2d",
+    p.add_argument("--topic", default=TOPIC_KEYPOINTS,
                    help="keypoints: pose_lifter_msgs/Skeleton2DArray or yolo_msgs/DetectionArray "
-                   "(default /keypoints_2d)")
-    p.add_argument("--camera-info-topic", default="/camera_info",
-                   help="sensor_msgs/CameraInfo for the metric depth ('' = none; default /camera_info)")
+                   f"(default {TOPIC_KEYPOINTS})")
+    p.add_argument("--camera-info-topic", default=TOPIC_CAMERA_INFO,
+                   help="sensor_msgs/CameraInfo for the metric depth "
+                   f"('' = none; default {TOPIC_CAMERA_INFO})")
     p.add_argument("--keep", nargs="+", default=None, metavar="TOPIC",
                    help="input topics copied to the output: 'all' (default), 'none', or topic names")
     p.add_argument("--params-file", default=None,
@@ -530,7 +529,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted .mcap")
     p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
-    p.add_argument("--topic", default="/skeletons_3d", help="Skeleton3DArray topic (default /skeletons_3d)")
+    p.add_argument("--topic", default=TOPIC_SKELETONS,
+                   help=f"Skeleton3DArray topic (default {TOPIC_SKELETONS})")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_export)
 

@@ -10,11 +10,10 @@ Every input the solvers cannot use raises one of these, never a NaN result::
         BasisFileError (OSError)          a basis file
         PriorFileError (OSError)          a learned-prior weights file
         SolverError (RuntimeError)        a solve diverged (non-finite result) on valid input
-        BagError (RuntimeError)           a bag cannot be read or written
-            BagReadError                  a bag's content is unreadable
 
 Other modules add their own leaves (``mocap.MocapDataError``, ``reference.ReferenceSolverError``
-under :class:`SolverError`, ``tracking.OutOfOrderFrameError``, ``adapter_node.AdapterError``),
+under :class:`SolverError`, ``tracking.OutOfOrderFrameError``, ``adapter_node.AdapterError``,
+``offline.bags.BagError`` and its ``BagReadError``, ``messages.typestore.TypestoreError``),
 so ``except PoseLifterError`` catches every error the package raises on purpose.
 """
 
@@ -26,8 +25,6 @@ from contextlib import contextmanager
 import numpy as np
 
 __all__ = [
-    "BagError",
-    "BagReadError",
     "BasisFileError",
     "InvalidInputError",
     "OptionsError",
@@ -73,14 +70,6 @@ class OptionsError(PoseLifterError, ValueError):
 
 class SolverError(PoseLifterError, RuntimeError):
     """A solve diverged (non-finite iterates or result) although its input passed the checks."""
-
-
-class BagError(PoseLifterError, RuntimeError):
-    """A bag cannot be read or written (missing file, missing topic, bad type)."""
-
-
-class BagReadError(BagError):
-    """A bag file exists but its content cannot be read (truncated, empty, not a bag)."""
 
 
 @contextmanager

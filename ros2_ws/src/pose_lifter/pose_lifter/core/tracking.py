@@ -60,6 +60,7 @@ from .measurement import MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
 from .results import LiftResult, WarmStart
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, RIGHT_LIMBS
+from .track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
@@ -68,7 +69,8 @@ _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
 _SQRT6 = math.sqrt(6.0)
 
-__all__ = ["OutOfOrderFrameError", "TrackPolicy", "TrackedLift"]
+__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "OutOfOrderFrameError", "TrackPolicy",
+           "TrackedLift"]
 
 
 #: Detector noise: per frame, the median over joints of the 2D input's acceleration
@@ -435,8 +437,8 @@ class TrackPolicy:
         (``<= 0``: never).
     """
 
-    def __init__(self, lifter: Lifter, track_timeout: float = 1.0, warm_start: bool = True,
-                 reinit_ratio: float = 2.0) -> None:
+    def __init__(self, lifter: Lifter, track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
+                 warm_start: bool = True, reinit_ratio: float = DEFAULT_REINIT_RATIO) -> None:
         self._tracks: dict[int, _Track] = {}
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame

@@ -24,6 +24,7 @@ import numpy as np
 from pose_lifter.core.detectors import Person2D, sparse_to_model
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import get_layout
+from pose_lifter.messages.names import YOLO_DETECTION_ARRAY
 
 __all__ = [
     "HRI_SKELETON_TOPIC",
@@ -37,7 +38,7 @@ __all__ = [
 
 #: ``input_type`` -> full ROS message type of the adapter's input.
 INPUT_TYPES: Final[dict[str, str]] = {
-    "yolo": "yolo_msgs/msg/DetectionArray",
+    "yolo": YOLO_DETECTION_ARRAY,
     "hri": "hri_msgs/msg/Skeleton2D",
 }
 #: REP-155 topic of one body's 2D skeleton; group 1 is the body id.

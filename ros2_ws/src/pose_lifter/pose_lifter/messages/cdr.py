@@ -15,7 +15,7 @@ The bytes are those ``typestore.serialize_cdr`` gives for the messages that
 :func:`pose_lifter.messages.convert.result_to_skeleton3d`,
 :func:`~pose_lifter.messages.convert.skeletons3d_array`
 and :func:`~pose_lifter.messages.convert.skeleton_markers` build (the node's builders) from the same
-lifts, with the rosbags defaults of :func:`pose_lifter.offline.bags.message_factory` (a DELETE marker's
+lifts, with the rosbags defaults of :func:`pose_lifter.messages.typestore.message_factory` (a DELETE marker's
 unset orientation is all zeros); ``tests/test_cdr.py`` checks it byte for byte, and
 :func:`check_definitions` refuses a typestore whose definitions of the two types differ from the
 ones this module was written for.
@@ -43,11 +43,9 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 from pose_lifter.messages.convert import marker_id, quaternions_xyzw, track_color
+from pose_lifter.messages.names import MARKER_ARRAY, SKELETON2D_ARRAY, SKELETON3D_ARRAY
 
 __all__ = [
-    "MARKER_ARRAY",
-    "SKELETON2D_ARRAY",
-    "SKELETON3D_ARRAY",
     "DecodedHeader",
     "DecodedSkeleton2D",
     "DecodedSkeleton2DArray",
@@ -58,10 +56,6 @@ __all__ = [
     "marker_array_cdr",
     "skeleton3d_array_cdr",
 ]
-
-SKELETON2D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
-SKELETON3D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
-MARKER_ARRAY: Final[str] = "visualization_msgs/msg/MarkerArray"
 
 #: RIHS01 hashes of the definitions this module encodes (``typestore.hash_rihs01``).
 _DEFINITIONS: Final[dict[str, str]] = {

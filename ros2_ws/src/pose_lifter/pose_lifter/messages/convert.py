@@ -17,7 +17,6 @@ Frames: 3D joints are in the camera optical frame (x right, y down, z forward), 
 from __future__ import annotations
 
 import colorsys
-import math
 from collections.abc import Iterable, Sequence
 from types import SimpleNamespace
 from typing import Any, Final
@@ -29,6 +28,7 @@ from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import Layout, get_layout, to_model_joints
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
+from pose_lifter.messages import names
 
 __all__ = [
     "MESSAGE_TYPES",
@@ -43,7 +43,6 @@ __all__ = [
     "make_header",
     "marker_id",
     "ns_to_stamp",
-    "place_in_camera",
     "quaternions_xyzw",
     "rclpy_types",
     "result_to_skeleton3d",
@@ -63,10 +62,10 @@ __all__ = [
 MESSAGE_TYPES: Final[dict[str, str]] = {
     "Keypoint2D": "pose_lifter_msgs/msg/Keypoint2D",
     "Skeleton2D": "pose_lifter_msgs/msg/Skeleton2D",
-    "Skeleton2DArray": "pose_lifter_msgs/msg/Skeleton2DArray",
+    "Skeleton2DArray": names.SKELETON2D_ARRAY,
     "CameraEstimate": "pose_lifter_msgs/msg/CameraEstimate",
     "Skeleton3D": "pose_lifter_msgs/msg/Skeleton3D",
-    "Skeleton3DArray": "pose_lifter_msgs/msg/Skeleton3DArray",
+    "Skeleton3DArray": names.SKELETON3D_ARRAY,
     "Point": "geometry_msgs/msg/Point",
     "Quaternion": "geometry_msgs/msg/Quaternion",
     "Pose": "geometry_msgs/msg/Pose",
@@ -76,8 +75,8 @@ MESSAGE_TYPES: Final[dict[str, str]] = {
     "Time": "builtin_interfaces/msg/Time",
     "Duration": "builtin_interfaces/msg/Duration",
     "Marker": "visualization_msgs/msg/Marker",
-    "MarkerArray": "visualization_msgs/msg/MarkerArray",
-    "CameraInfo": "sensor_msgs/msg/CameraInfo",
+    "MarkerArray": names.MARKER_ARRAY,
+    "CameraInfo": names.CAMERA_INFO,
 }
 
 # visualization_msgs/Marker constants (fixed by the message definition)
@@ -89,11 +88,12 @@ _DELETEALL: Final[int] = 3
 
 
 def rosbags_types(store: Any | None = None) -> SimpleNamespace:
-    """The ``types`` namespace from a rosbags typestore (default: ours, see :mod:`pose_lifter.offline.bags`).
+    """The ``types`` namespace from a rosbags typestore (default: ours,
+    :mod:`pose_lifter.messages.typestore`).
 
     Each attribute is a factory that fills omitted fields with ROS defaults, like rclpy classes.
     """
-    from pose_lifter.offline.bags import message_factory, pose_lifter_typestore
+    from pose_lifter.messages.typestore import message_factory, pose_lifter_typestore
 
     st = store if store is not None else pose_lifter_typestore()
     return SimpleNamespace(**{attr: message_factory(name, st) for attr, name in MESSAGE_TYPES.items()})
@@ -212,72 +212,6 @@ def skeleton2d_array(header: Any, layout: str, skeletons: Sequence[Any], types: 
 # --------------------------------------------------------------------------- 3D
 
 
-def place_in_camera(
-    result: LiftResult,
-    leg_length_m: float,
-    focal: tuple[float, float] | None,
-    principal_point: tuple[float, float] | None,
-    default_distance_m: float,
-) -> NDArray[np.float64]:
-    """Metric 3D joints in the camera optical frame (x right, y down, z forward).
-
-    The lifted pose is centred and in right-lower-leg units; it becomes metric with
-    ``leg_length_m``. The weak-perspective scale fixes the depth of the centroid when the
-    focal length is known: ``Z = f * leg_length_m / scale`` (``f`` = mean of ``fx, fy``), and
-    the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
-    ``Y = (t_y - c_y) Z / f_y``. Without camera intrinsics the centroid is put at
-    ``(0, 0, default_distance_m)``. The node's, the offline lift's and the CLI's defaults are
-    :mod:`pose_lifter.core.placement`'s. The lift is trusted to be finite (the core checks it); the
-    node checks what it publishes once, after this.
-
-    Parameters
-    ----------
-    result : LiftResult
-        ``pose_camera`` (12, 3) in the camera frame, centred on the joints' mean (as the core
-        returns it: the centroid is placed, not recomputed); ``camera.scale`` in pixels per leg unit;
-        ``camera.translation`` (2,) the image position of the pose centroid (pixels).
-    leg_length_m : float
-        Length of the right lower leg in metres (> 0).
-    focal : (fx, fy) or None
-        Pixels.
-    principal_point : (cx, cy) or None
-        Pixels; None with a focal length puts the centroid on the optical axis.
-    default_distance_m : float
-        Centroid depth when ``focal`` is None (> 0).
-
-    Returns
-    -------
-    ndarray, shape (12, 3)
-        Metres.
-    """
-    if not math.isfinite(leg_length_m) or leg_length_m <= 0:
-        raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
-    pose = np.asarray(result.pose_camera, dtype=np.float64)
-    if pose.shape != (N_JOINTS, 3):
-        raise InvalidInputError(f"pose_camera must be a ({N_JOINTS}, 3) array")
-    local = pose * float(leg_length_m)  # the core's pose_camera is centred on the joints' mean
-    if focal is None:
-        if not math.isfinite(default_distance_m) or default_distance_m <= 0:
-            raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")
-        centroid = np.array([0.0, 0.0, float(default_distance_m)])
-    else:
-        fx, fy = (float(focal[0]), float(focal[1]))
-        scale = float(result.camera.scale)
-        if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)):
-            raise InvalidInputError(f"focal lengths must be > 0, got {focal!r}")
-        if not math.isfinite(scale) or scale <= 0:
-            raise InvalidInputError(f"camera scale must be > 0, got {scale!r}")
-        z = 0.5 * (fx + fy) * float(leg_length_m) / scale
-        t = np.asarray(result.camera.translation, dtype=np.float64)
-        if principal_point is None:
-            x = y = 0.0
-        else:
-            x = (float(t[0]) - float(principal_point[0])) * z / fx
-            y = (float(t[1]) - float(principal_point[1])) * z / fy
-        centroid = np.array([x, y, z])
-    return np.asarray(local + centroid)
-
-
 def quaternions_xyzw(rotations: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit quaternions (x, y, z, w) of rotation matrices, shape (..., 3, 3) -> (..., 4).
 
@@ -353,7 +287,8 @@ def result_to_skeleton3d(
     solve_time: float = 0.0,
     warm_started: bool = False,
 ) -> Any:
-    """A ``Skeleton3D`` from a lift and its metric joints (see :func:`place_in_camera`).
+    """A ``Skeleton3D`` from a lift and its metric joints
+    (see :func:`pose_lifter.core.placement.place_in_camera`).
 
     Parameters
     ----------

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.messages import names
 
 __all__ = [
     "CAMERA_FRAME",
@@ -29,11 +30,6 @@ __all__ = [
     "IMAGE_HEIGHT",
     "IMAGE_WIDTH",
     "PRINCIPAL_POINT",
-    "TOPIC_CAMERA_INFO",
-    "TOPIC_GROUND_TRUTH",
-    "TOPIC_KEYPOINTS",
-    "TOPIC_MARKERS",
-    "TOPIC_SKELETONS",
     "Scene",
     "SceneOptions",
     "build_scene",
@@ -51,11 +47,6 @@ FOCAL_PX: Final[float] = 800.0
 #: Principal point (cx, cy), pixels.
 PRINCIPAL_POINT: Final[tuple[float, float]] = (320.0, 240.0)
 CAMERA_FRAME: Final[str] = "virtual_camera_optical_frame"
-TOPIC_KEYPOINTS: Final[str] = "/keypoints_2d"
-TOPIC_GROUND_TRUTH: Final[str] = "/ground_truth/skeletons_3d"
-TOPIC_CAMERA_INFO: Final[str] = "/camera_info"
-TOPIC_SKELETONS: Final[str] = "/skeletons_3d"
-TOPIC_MARKERS: Final[str] = "/skeleton_markers"
 _UP: Final[NDArray[np.float64]] = np.array([0.0, 1.0, 0.0])
 _START_NS: Final[int] = 1_000_000_000
 
@@ -336,10 +327,10 @@ def write_scene_bag(scene: Scene, path: str | Path, overwrite: bool = False) -> 
                 kp, cf = to_coco17(scene.points_2d[pi, ti], scene.confidence[pi, ti])
                 skels2d.append(m.arrays_to_skeleton2d(kp, cf, tid, types))
                 skels3d.append(m.skeleton3d_from_joints(tid, scene.joints_camera[pi, ti], types))
-            w.write(TOPIC_CAMERA_INFO, int(stamp), m.camera_info(
+            w.write(names.TOPIC_CAMERA_INFO, int(stamp), m.camera_info(
                 header, IMAGE_WIDTH, IMAGE_HEIGHT, FOCAL_PX, FOCAL_PX, *PRINCIPAL_POINT, types),
-                "sensor_msgs/msg/CameraInfo")
-            w.write(TOPIC_KEYPOINTS, int(stamp), m.skeleton2d_array(header, "coco17", skels2d, types),
-                    "pose_lifter_msgs/msg/Skeleton2DArray")
-            w.write(TOPIC_GROUND_TRUTH, int(stamp), m.skeletons3d_array(header, skels3d, types),
-                    "pose_lifter_msgs/msg/Skeleton3DArray")
+                names.CAMERA_INFO)
+            w.write(names.TOPIC_KEYPOINTS, int(stamp), m.skeleton2d_array(header, "coco17", skels2d, types),
+                    names.SKELETON2D_ARRAY)
+            w.write(names.TOPIC_GROUND_TRUTH, int(stamp), m.skeletons3d_array(header, skels3d, types),
+                    names.SKELETON3D_ARRAY)

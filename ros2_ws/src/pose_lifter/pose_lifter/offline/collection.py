@@ -29,7 +29,6 @@ a time.
 
 from __future__ import annotations
 
-import dataclasses
 import glob
 import hashlib
 import json
@@ -46,9 +45,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from pose_lifter.core.errors import BagError
-from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
-from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
+from pose_lifter.offline.bags import BagError
+from pose_lifter.offline.settings import LiftSettings, file_sha256, package_version
 
 __all__ = [
     "ERRORS_NAME",
@@ -73,93 +71,6 @@ _GLOB_CHARS: Final[frozenset[str]] = frozenset("*?[")
 def is_pattern(text: str) -> bool:
     """``text`` holds a glob wildcard (``*``, ``?``, ``[``)."""
     return any(c in text for c in _GLOB_CHARS)
-
-
-def package_version() -> str:
-    """The installed distribution's version (the source tree's ``__version__`` when not installed)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    from pose_lifter import __version__
-
-    try:
-        return version("pose_lifter")
-    except PackageNotFoundError:
-        return __version__
-
-
-def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
-    """SHA-256 of a file's bytes (hex), read in 1 MiB chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
-
-
-# --------------------------------------------------------------------------- settings
-
-
-@dataclass(frozen=True)
-class LiftSettings:
-    """Everything that decides a lifted bag's content: the lifter's options and files, the
-    per-track policy and the output's shape. Picklable (it is what a Dask worker receives) and
-    JSON-able (its digest keys the manifest)."""
-
-    options: dict[str, Any] = field(default_factory=dict)
-    bases: str | None = None
-    warm_start: bool = True
-    leg_length_m: float = DEFAULT_LEG_LENGTH_M
-    default_distance_m: float = DEFAULT_DISTANCE_M
-    every: int = 1
-    max_messages: int | None = None
-    topic: str = "/keypoints_2d"
-    camera_info_topic: str | None = "/camera_info"
-    keep: list[str] | None = None
-    track_timeout: float = 1.0  # the node's defaults (offline.DEFAULT_TRACK_TIMEOUT_S, ...)
-    reinit_ratio: float = 2.0
-    smoothing_s: float = OFFLINE_SMOOTHING_S  # centred, offline only (0: the node's causal poses)
-    marker_lifetime: float = 0.0
-
-    def to_json(self) -> dict[str, Any]:
-        """The settings as JSON-ready values (options sorted by name)."""
-        d = dataclasses.asdict(self)
-        d["options"] = {k: _jsonable(v) for k, v in sorted(self.options.items())}
-        return d
-
-    def digest(self) -> str:
-        """SHA-256 over the settings, the package version and the bytes of the files they name
-        (bases, prior files): a changed file or package changes the digest."""
-        files = [self.bases, self.options.get("prior_file"), self.options.get("temporal_prior_file")]
-        named = {str(f): file_sha256(f) for f in files if f and Path(str(f)).is_file()}
-        text = json.dumps({"settings": self.to_json(), "version": package_version(), "files": named},
-                          sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()
-
-    def build_lifter(self) -> Any:
-        """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up)."""
-        from pose_lifter.core.bases import PoseBases
-        from pose_lifter.core.lifter import Lifter
-        from pose_lifter.core.options import LifterOptions
-
-        opts = LifterOptions().replace(**self.options)
-        lifter = Lifter(PoseBases.load(self.bases) if self.bases else None, opts)
-        if opts.camera_solver == "admm" and opts.pose_solver == "admm":
-            lifter.warm_up()
-        return lifter
-
-    @staticmethod
-    def options_of(options: Any) -> dict[str, Any]:
-        """A :class:`pose_lifter.core.options.LifterOptions` as the ``options`` of
-        :class:`LiftSettings` (every field)."""
-        return {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, tuple | list):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, float | int | str | bool) or v is None:
-        return v
-    return repr(v)
 
 
 # --------------------------------------------------------------------------- inputs -> jobs
@@ -334,14 +245,8 @@ def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1)
     try:
         sha = file_sha256(job.input)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
-        summary, _ = lift_bag(
-            job.input, job.output, lifter, warm_start=settings.warm_start, leg_length_m=settings.leg_length_m,
-            default_distance_m=settings.default_distance_m, every=settings.every,
-            max_messages=settings.max_messages, progress=False, overwrite=True,
-            marker_lifetime=settings.marker_lifetime, workers=workers, topic=settings.topic,
-            camera_info_topic=settings.camera_info_topic, keep=settings.keep,
-            track_timeout=settings.track_timeout, reinit_ratio=settings.reinit_ratio,
-            smoothing_s=settings.smoothing_s)
+        summary, _ = lift_bag(job.input, job.output, lifter, settings, progress=False, overwrite=True,
+                              workers=workers)
     except Exception as exc:  # one bag's failure never stops the collection
         text = " ".join(str(exc).split()) or type(exc).__name__
         if not isinstance(exc, BagError | OSError | ValueError) or type(exc).__module__.startswith("rosbags"):
@@ -399,9 +304,9 @@ def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter:
                 for fut in finished:
                     on_done(fut.result())
         except BaseException:
-            from pose_lifter.offline.lift import _stop_workers
+            from pose_lifter.offline.chains import stop_workers
 
-            _stop_workers(ex)
+            stop_workers(ex)
             raise
         ex.shutdown()
     finally:

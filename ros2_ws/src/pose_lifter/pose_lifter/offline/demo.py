@@ -121,16 +121,19 @@ def run_demo(args: argparse.Namespace, make_lifter: Callable[[], Lifter]) -> int
     CLI's, from the same flags: a kernel compile is not wasted on a missing bag).
     """
     from pose_lifter.messages import convert as m
-    from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
+    from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
-    from pose_lifter.offline.lift import evaluate_bag, format_evaluation, lift_bag
+    from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
+    from pose_lifter.offline.lift import lift_bag
+    from pose_lifter.offline.settings import LiftSettings
 
     bag = Path(args.bag) if args.bag else find_demo_bag()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lifter = make_lifter()
-    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=not args.no_warm_start,
-                               leg_length_m=args.leg_length, every=args.every, overwrite=True)
+    settings = LiftSettings(warm_start=not args.no_warm_start, leg_length_m=args.leg_length, every=args.every,
+                            smoothing_s=0.0)
+    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, settings, overwrite=True)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     ev = evaluate_bag(out / "demo.mcap", lifter.bases)

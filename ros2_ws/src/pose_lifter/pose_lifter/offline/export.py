@@ -27,20 +27,20 @@ import numpy as np
 
 from pose_lifter.core.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.names import SKELETON3D_ARRAY, TOPIC_SKELETONS
 from pose_lifter.offline.bags import BagError, bag_topics, check_output, read_messages
 
 __all__ = ["FORMATS", "export_skeletons"]
 
 FORMATS: Final[tuple[str, ...]] = (".csv", ".npz", ".json")
-_MSG_3D: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
 
 
 def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
     topics = bag_topics(bag)
     if topic not in topics:
         raise BagError(f"{bag} has no topic {topic!r}; its topics: {sorted(topics)}")
-    if topics[topic] != _MSG_3D:
-        raise BagError(f"topic {topic!r} is {topics[topic]}, not {_MSG_3D}")
+    if topics[topic] != SKELETON3D_ARRAY:
+        raise BagError(f"topic {topic!r} is {topics[topic]}, not {SKELETON3D_ARRAY}")
     frames = []
     for x in read_messages(bag, [topic]):
         skels = [{
@@ -82,7 +82,7 @@ def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
         )
 
 
-def export_skeletons(bag: str | Path, out: str | Path, topic: str = "/skeletons_3d",
+def export_skeletons(bag: str | Path, out: str | Path, topic: str = TOPIC_SKELETONS,
                      overwrite: bool = False) -> tuple[int, int]:
     """Write the ``Skeleton3DArray`` messages of ``topic`` to ``out`` (format from its suffix).
 

@@ -3,15 +3,15 @@
 One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
 
 1. ``keypoints_2d`` (``pose_lifter_msgs/Skeleton2DArray``, sensor-data QoS) arrives.
-2. Each skeleton is converted to the paper's 12 joints and checked against the caps
-   (:func:`node_checks.skeleton_input`), and lifted by the core's per-track policy
-   (:class:`~pose_lifter.core.tracking.TrackPolicy` over :class:`~pose_lifter.core.Lifter`):
-   warm-started from the same track's previous solution when there is one, cold (multi-start)
-   otherwise.
-3. The lift is placed in the camera optical frame in metres (:func:`messages.place_in_camera`:
-   depth from the weak-perspective scale and ``camera_info``'s focal length, or a parameter
-   distance without ``camera_info``), checked finite once (:func:`node_checks.check_output`)
-   and made a ``Skeleton3D`` (:func:`messages.result_to_skeleton3d`).
+2. The frame pipeline (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's
+   too) checks the frame and each skeleton against the caps and converts it to the paper's 12
+   joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.tracking.TrackPolicy`
+   over :class:`~pose_lifter.core.Lifter`): warm-started from the same track's previous solution
+   when there is one, cold (multi-start) otherwise, places it in the camera optical frame in
+   metres (:func:`~pose_lifter.core.placement.place_in_camera`: depth from the weak-perspective
+   scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
+   checks it finite once.
+3. Each lifted skeleton becomes a ``Skeleton3D`` (:func:`messages.result_to_skeleton3d`).
 4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
    frame), then ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
    :class:`node_markers.MarkerBook`), whose points are the ``Skeleton3D``'s own.
@@ -24,7 +24,8 @@ skeleton is answered with an empty array. Nothing non-finite is ever published.
 Parameters (one table, :data:`pose_lifter.ros.params.PARAMS`, the solver options' ranges from the
 core's option metadata; see ``config/lifter.yaml``) are validated on every live change by the
 same :class:`~pose_lifter.core.LifterOptions` the core uses; a bad value is refused with the
-core's reason. Input checks and warnings: :mod:`pose_lifter.ros.checks`; statistics:
+core's reason. Input checks: :mod:`pose_lifter.messages.frame`; warnings:
+:mod:`pose_lifter.ros.checks`; statistics:
 :mod:`pose_lifter.ros.stats`.
 """
 
@@ -32,7 +33,6 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -49,12 +49,11 @@ from pose_lifter.core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.layouts import Layout, get_layout
 from pose_lifter.core.lifter import compile_kernels
-from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
 from pose_lifter.messages import convert as messages
+from pose_lifter.messages.frame import FramePipeline, SkipSkeleton
 from pose_lifter.ros import diagnostics
-from pose_lifter.ros.checks import SkipSkeleton, WarningThrottle, check_output, frame_over_cap, skeleton_input
+from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
 from pose_lifter.ros.run import PhasedSignals, fatal, one_line
@@ -111,7 +110,7 @@ class LifterNode(Node):
         self._pending: tuple[PoseBases, Lifter] | None = None
         self._settings = self._read_settings()
 
-        self._policy = self._make_policy()
+        self._pipeline = FramePipeline(self._lifter, self._settings.frame)
         self._markers = MarkerBook(MARKER_NS, self._types)
         self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
         self._stats = FrameStats()
@@ -155,14 +154,14 @@ class LifterNode(Node):
         if self._stats_timer is not None:
             self.destroy_timer(self._stats_timer)
             self._stats_timer = None
-        self._policy.clear()
+        self._pipeline.policy.clear()
 
     def cleanup_lifter(self) -> None:
         """Destroy the publishers and the diagnostics (back to the state after the constructor)."""
         self._diagnostics.close()
         for pub in (self._pub_skeletons, self._pub_markers):
             self.destroy_publisher(pub)
-        self._policy.clear()
+        self._pipeline.policy.clear()
 
     # ------------------------------------------------------------------ parameters
 
@@ -171,12 +170,6 @@ class LifterNode(Node):
 
     def _read_settings(self) -> NodeSettings:
         return NodeSettings.read(self._param)
-
-    def _make_policy(self) -> TrackPolicy:
-        """The core's per-track policy (warm starts, re-initialisation, expiry) with the
-        current lifter and settings."""
-        st = self._settings
-        return TrackPolicy(self._lifter, st.track_timeout, st.warm_start, st.reinit_ratio)
 
     @staticmethod
     def _load_bases(path: str, mode: str) -> PoseBases:
@@ -222,10 +215,9 @@ class LifterNode(Node):
         self._pending = None
         if bases is not self._bases:
             self._bases = bases
-            self._policy.clear()  # coefficients of other bases are meaningless
+            self._pipeline.policy.clear()  # coefficients of other bases are meaningless
         self._lifter = lifter
-        st = self._settings
-        self._policy.configure(self._lifter, st.track_timeout, st.warm_start, st.reinit_ratio)
+        self._pipeline.configure(self._lifter, self._settings.frame)
         names = ", ".join(f"{p.name}={p.value!r}" for p in params if p.name in SPECS)
         if names:
             self.get_logger().info(f"parameters changed: {names}")
@@ -242,9 +234,10 @@ class LifterNode(Node):
     def on_keypoints(self, msg: Any) -> None:
         """Lift one frame and publish its answer (always, even when every skeleton is skipped)."""
         received = time.perf_counter()
-        over_cap = frame_over_cap(msg, self._settings)
-        if over_cap is not None:  # skipped, unanswered
-            self._warn_skip(*over_cap)
+        checked = self._pipeline.check(msg, self._on_clipped)
+        for skip in checked.skipped:
+            self._warn_skip(skip.kind, str(skip))
+        if not checked.answered:  # over a cap: skipped, unanswered
             return
         if not msg.header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
             msg.header.frame_id = self._settings.frame_id
@@ -252,31 +245,17 @@ class LifterNode(Node):
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
         lifted: list[Any] = []
-        try:
-            layout = get_layout(str(msg.layout))
-            skeletons: Sequence[Any] = msg.skeletons
-            limit = self._settings.max_skeletons
-            if len(skeletons) > limit:
-                self._warn_skip("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
-                                f"lifting the first {limit} (max_skeletons)")
-                skeletons = skeletons[:limit]
-            seen: set[int] = set()
-            for skel in skeletons:
-                try:
-                    lifted.append(self._lift_one(skel, layout, stamp_ns, seen))
-                except SkipSkeleton as err:
-                    self._warn_skip(err.kind, f"skeleton skipped: {err}")
-                    continue
-                except PoseLifterError as err:
-                    self._warn_skip(type(err).__name__, f"skeleton skipped: {err}")
-                    continue
-                except Exception as err:  # a solver bug must not cost the other skeletons
-                    self._warn_skip("unexpected", f"skeleton skipped after an unexpected error: {err!r}")
-        except PoseLifterError as err:  # e.g. unknown layout: the whole frame is unusable
-            self._warn_skip(type(err).__name__, f"frame skipped: {err}")
-        except Exception as err:  # never let one frame kill the node
-            self._warn_skip("unexpected", f"frame skipped after an unexpected error: {err!r}")
-        self._policy.expire(stamp_ns)
+        for out in self._pipeline.frame(checked, stamp_ns, self._intrinsics):
+            try:
+                if isinstance(out, SkipSkeleton):
+                    raise out
+                lifted.append(messages.result_to_skeleton3d(
+                    out.result, out.track_id, out.joints_m, self._types, solve_time=out.solve_time,
+                    warm_started=out.warm_started))
+            except SkipSkeleton as err:
+                self._warn_skip(err.kind, f"skeleton skipped: {err}")
+            except Exception as err:  # never let one skeleton kill the node
+                self._warn_skip("unexpected", f"skeleton skipped after an unexpected error: {err!r}")
 
         self._pub_skeletons.publish(messages.skeletons3d_array(msg.header, lifted, self._types))
         if self._settings.publish_markers:  # the Skeleton3Ds' own points, not rebuilt
@@ -284,24 +263,6 @@ class LifterNode(Node):
             self._pub_markers.publish(self._markers.update(msg.header, shown, self._settings.marker_lifetime))
         self._stats.frame(lifted, time.perf_counter() - received)
         self._diagnostics.frame(lifted, time.perf_counter() - received)
-
-    def _lift_one(self, skel: Any, layout: Layout, stamp_ns: int, seen: set[int]) -> Any:
-        """Lift one skeleton -> its ``Skeleton3D``; raise to skip it."""
-        inp = skeleton_input(skel, layout, self._settings, self._lifter.options.confidence_threshold, seen,
-                             self._on_clipped)
-        start = time.perf_counter()
-        try:
-            tracked = self._policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence)
-        except OutOfOrderFrameError as err:
-            raise SkipSkeleton("out-of-order stamp", str(err)) from err
-        solve_time = time.perf_counter() - start
-        result = tracked.result
-        focal, centre = self._intrinsics if self._intrinsics is not None else (None, None)
-        joints = messages.place_in_camera(result, self._settings.lower_leg_length, focal, centre,
-                                          self._settings.default_distance)
-        check_output(inp.track_id, result, joints)
-        return messages.result_to_skeleton3d(result, inp.track_id, joints, self._types,
-                                             solve_time=solve_time, warm_started=tracked.warm_started)
 
     # ------------------------------------------------------------------ diagnostics
 

@@ -26,9 +26,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Final
 
-from pose_lifter.core import placement
 from pose_lifter.core.errors import OptionsError
 from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
+from pose_lifter.core.placement import LEG_LENGTH_RANGE_M
+from pose_lifter.messages.frame import FrameSettings
 
 __all__ = [
     "NODE_ONLY",
@@ -109,27 +110,31 @@ class ParamSpec:
         return d
 
 
+_FRAME: Final[FrameSettings] = FrameSettings()
+
 #: Every parameter of the node, in the order of ``config/lifter.yaml``: the bases, the solver
-#: options (:data:`~pose_lifter.core.options.NODE_OPTIONS`), then the node's own settings.
+#: options (:data:`~pose_lifter.core.options.NODE_OPTIONS`), then the node's own settings (the
+#: frame pipeline's, :class:`~pose_lifter.messages.frame.FrameSettings`, take their defaults from it).
 PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("bases_file", "", "Pose basis file (.npz, PoseBases.save); empty = the packaged bases of "
               "the mode (paper: subject 01 playground; hybrid: training split, varied proportions).",
               offline=True),
     *(ParamSpec.from_option(name) for name in NODE_OPTIONS),
-    ParamSpec("warm_start", True, "Start each tracked person's solve from its previous frame.", offline=True),
-    ParamSpec("track_timeout", 1.0, "Seconds (input stamps) after which an unseen track is forgotten.",
-              0.0, 3600.0, offline=True),
-    ParamSpec("reinit_ratio", 2.0, "A warm solve whose objective exceeds this times the track's recent "
-              "median is redone cold (0 = never).", 0.0, 1000.0, offline=True),
-    ParamSpec("lower_leg_length", placement.DEFAULT_LEG_LENGTH_M,
-              "Right lower-leg (knee-ankle) length in metres: the metric scale.",
-              *placement.LEG_LENGTH_RANGE_M, offline=True),
-    ParamSpec("default_distance", placement.DEFAULT_DISTANCE_M, "Depth of the skeleton centroid in metres "
+    ParamSpec("warm_start", _FRAME.warm_start, "Start each tracked person's solve from its previous frame.",
+              offline=True),
+    ParamSpec("track_timeout", _FRAME.track_timeout, "Seconds (input stamps) after which an unseen track is "
+              "forgotten.", 0.0, 3600.0, offline=True),
+    ParamSpec("reinit_ratio", _FRAME.reinit_ratio, "A warm solve whose objective exceeds this times the "
+              "track's recent median is redone cold (0 = never).", 0.0, 1000.0, offline=True),
+    ParamSpec("lower_leg_length", _FRAME.lower_leg_length, "Right lower-leg (knee-ankle) length in metres: "
+              "the metric scale.", *LEG_LENGTH_RANGE_M, offline=True),
+    ParamSpec("default_distance", _FRAME.default_distance, "Depth of the skeleton centroid in metres "
               "when no camera_info has been received.", 0.01, 1000.0, offline=True),
     ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
-    ParamSpec("max_skeletons", 64, "Skeletons lifted per frame at most; the rest are skipped.", 1, 10000),
-    ParamSpec("max_coordinate", 1.0e5, "Keypoints farther than this from the image origin (pixels) "
-              "are absurd: the skeleton is skipped.", 1.0, 1.0e9),
+    ParamSpec("max_skeletons", _FRAME.max_skeletons, "Skeletons lifted per frame at most; the rest are "
+              "skipped.", 1, 10000),
+    ParamSpec("max_coordinate", _FRAME.max_coordinate, "Keypoints farther than this from the image origin "
+              "(pixels) are absurd: the skeleton is skipped.", 1.0, 1.0e9),
     ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
               read_only=True),
     ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "
@@ -138,11 +143,14 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "(0 = until deleted: markers outlive the node).", 0.0, 3600.0),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics updates (0 = none).", 0.0, 3600.0,
               read_only=True),
-    # caps on what reaches an output or a log (issue 10): over-cap input is skipped with a warning
-    ParamSpec("max_frame_id_length", 256, "Input header.frame_id longer than this (characters): the frame "
-              "is skipped, unanswered (it would be copied into every output message).", 1, 65536),
-    ParamSpec("max_layout_length", 64, "Input layout names longer than this: the frame is skipped.", 1, 4096),
-    ParamSpec("max_keypoints", 512, "Skeletons with more keypoints than this are skipped.", 1, 100000),
+    # caps on what reaches an output or a log: over-cap input is skipped with a warning
+    ParamSpec("max_frame_id_length", _FRAME.max_frame_id_length, "Input header.frame_id longer than this "
+              "(characters): the frame is skipped, unanswered (it would be copied into every output "
+              "message).", 1, 65536),
+    ParamSpec("max_layout_length", _FRAME.max_layout_length, "Input layout names longer than this: the frame "
+              "is skipped.", 1, 4096),
+    ParamSpec("max_keypoints", _FRAME.max_keypoints, "Skeletons with more keypoints than this are skipped.",
+              1, 100000),
     ParamSpec("strict_parameters", False, "Refuse to start when a parameter given at start-up is not one "
               "of the node's (a misspelt name); false: a warning.", read_only=True),
 )
@@ -155,27 +163,28 @@ NODE_ONLY: Final[frozenset[str]] = frozenset(
 
 @dataclasses.dataclass(frozen=True)
 class NodeSettings:
-    """The node's own parameters (not solver options), read once per change, not per frame."""
+    """The node's own parameters (not solver options), read once per change, not per frame.
 
-    warm_start: bool
-    track_timeout: float
-    reinit_ratio: float
-    lower_leg_length: float
-    default_distance: float
+    Attributes
+    ----------
+    frame : FrameSettings
+        The frame pipeline's (:mod:`pose_lifter.messages.frame`: the per-track policy, the
+        placement, the input caps).
+    publish_markers : bool
+    frame_id : str
+    marker_lifetime : float
+    """
+
+    frame: FrameSettings
     publish_markers: bool
-    max_skeletons: int
-    max_coordinate: float
     frame_id: str
     marker_lifetime: float
-    max_frame_id_length: int
-    max_layout_length: int
-    max_keypoints: int
 
     @classmethod
     def read(cls, get: Callable[[str], Any]) -> NodeSettings:
         """From the node's current parameter values (``get(name)``), converted to each field's type."""
-        kinds = {"bool": bool, "int": int, "float": float, "str": str}
-        return cls(**{f.name: kinds[str(f.type)](get(f.name)) for f in dataclasses.fields(cls)})
+        return cls(FrameSettings.read(get), bool(get("publish_markers")), str(get("frame_id")),
+                   float(get("marker_lifetime")))
 
 
 def unknown_parameters(names: Iterable[str]) -> str:

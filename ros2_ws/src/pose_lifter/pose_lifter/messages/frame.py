@@ -1,0 +1,382 @@
+"""The per-skeleton pipeline, once: checks -> per-track policy -> metric placement.
+
+The node (:mod:`pose_lifter.ros.node`) and the offline lift (:mod:`pose_lifter.offline.lift`)
+lift a ``Skeleton2DArray`` through this module and nothing else, so a bag lifted offline is
+what the node publishes for it. One frame:
+
+1. :meth:`FramePipeline.check` (stateless): a frame whose ``header.frame_id`` or ``layout``
+   is over its cap is skipped unanswered (:attr:`CheckedFrame.answered` False: no output, no
+   expiry); an unknown layout skips the whole frame (answered, empty); beyond
+   ``max_skeletons`` the rest of the frame is skipped; each skeleton is checked by
+   :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
+   [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
+2. :meth:`FramePipeline.lift` per checked skeleton: the core's
+   :class:`~pose_lifter.core.tracking.TrackPolicy` (warm starts, re-initialisation,
+   out-of-order stamps refused), then :func:`~pose_lifter.core.placement.place_in_camera`
+   and :func:`check_output` (nothing non-finite leaves).
+3. :meth:`FramePipeline.end_frame`: tracks unseen for ``track_timeout`` are forgotten.
+
+Every refusal is a :class:`SkipSkeleton` with a short kind (the node counts and warns them; the
+offline lift counts them as failures). No rclpy, no file I/O: messages are read by attribute
+name (rclpy and rosbags classes alike). :meth:`FramePipeline.frame` runs the three steps on one
+frame; the offline lift runs step 1 for the whole bag and step 2 per track, in parallel, with
+step 3 per track at the same stamps (see :func:`expiry_stamps`): the outputs are the same.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose_lifter.core.errors import PoseLifterError
+from pose_lifter.core.layouts import Layout, get_layout
+from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera
+from pose_lifter.core.results import LiftResult
+from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
+from pose_lifter.messages.convert import skeleton2d_to_arrays
+
+__all__ = [
+    "CheckedFrame",
+    "FramePipeline",
+    "FrameSettings",
+    "Intrinsics",
+    "LiftedSkeleton",
+    "SkeletonInput",
+    "SkipSkeleton",
+    "check_output",
+    "expiry_stamps",
+    "frame_over_cap",
+    "skeleton_input",
+]
+
+#: Camera intrinsics ((fx, fy), (cx, cy)) in pixels, or None (the default distance).
+Intrinsics = tuple[tuple[float, float], tuple[float, float]] | None
+
+_NO_CLIP: Final[Callable[[str], Any]] = lambda text: None  # noqa: E731
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    """The pipeline's settings: node parameters of the same names (their defaults are these).
+
+    Attributes
+    ----------
+    warm_start, track_timeout, reinit_ratio
+        The per-track policy (:class:`~pose_lifter.core.tracking.TrackPolicy`).
+    lower_leg_length, default_distance : float
+        Metres, the placement (:func:`~pose_lifter.core.placement.place_in_camera`).
+    max_skeletons, max_coordinate, max_frame_id_length, max_layout_length, max_keypoints
+        Caps on the input (see the module doc).
+    """
+
+    warm_start: bool = True
+    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S
+    reinit_ratio: float = DEFAULT_REINIT_RATIO
+    lower_leg_length: float = DEFAULT_LEG_LENGTH_M
+    default_distance: float = DEFAULT_DISTANCE_M
+    max_skeletons: int = 64
+    max_coordinate: float = 1.0e5
+    max_frame_id_length: int = 256
+    max_layout_length: int = 64
+    max_keypoints: int = 512
+
+    @classmethod
+    def read(cls, get: Callable[[str], Any]) -> FrameSettings:
+        """From parameter values (``get(name)``), converted to each field's type."""
+        kinds = {"bool": bool, "int": int, "float": float, "str": str}
+        return cls(**{f.name: kinds[str(f.type)](get(f.name)) for f in fields(cls)})
+
+
+class SkipSkeleton(Exception):
+    """A skeleton (or a whole frame) is left out of the answer.
+
+    Parameters
+    ----------
+    kind : str
+        Short category, counted in the node's statistics line (e.g. ``"duplicate track id"``).
+    text : str
+        Why (input-derived text: logged cut, see :mod:`pose_lifter.ros.checks`).
+    track_id : int, optional
+        The skeleton's track id (None for a whole frame).
+    """
+
+    def __init__(self, kind: str, text: str, track_id: int | None = None) -> None:
+        super().__init__(text)
+        self.kind = kind
+        self.track_id = track_id
+
+
+@dataclass(frozen=True)
+class SkeletonInput:
+    """One skeleton, checked and ready to lift.
+
+    Attributes
+    ----------
+    track_id : int
+    points : ndarray, shape (12, 2)
+        Pixels (missing joints 0).
+    confidence : ndarray, shape (12,)
+        Clipped into [0, 1].
+    """
+
+    track_id: int
+    points: NDArray[np.float64]
+    confidence: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LiftedSkeleton:
+    """One lifted skeleton: the lift, its metric joints and how it was solved.
+
+    Attributes
+    ----------
+    input : SkeletonInput
+    result : LiftResult
+        In model units (``pose_camera`` in the camera frame, centred).
+    joints_m : ndarray, shape (12, 3)
+        Metres, camera optical frame (finite).
+    warm_started : bool
+    solve_time : float
+        Seconds of the policy's solve.
+    fit_pose_camera : ndarray, shape (12, 3), optional
+        The fit's own ``pose_camera`` when the track's output smoothing replaced the result's
+        (:class:`~pose_lifter.core.tracking.TrackedLift`), else None.
+    """
+
+    input: SkeletonInput
+    result: LiftResult
+    joints_m: NDArray[np.float64]
+    warm_started: bool
+    solve_time: float
+    fit_pose_camera: NDArray[np.float64] | None = None
+
+    @property
+    def track_id(self) -> int:
+        return self.input.track_id
+
+
+@dataclass(frozen=True)
+class CheckedFrame:
+    """One frame after :meth:`FramePipeline.check`.
+
+    Attributes
+    ----------
+    answered : bool
+        False: the frame is over a cap and skipped unanswered (no output, no expiry).
+    skeletons : tuple of SkeletonInput or SkipSkeleton
+        Per input skeleton (up to ``max_skeletons``), in order: ready to lift, or why not.
+    skipped : tuple of SkipSkeleton
+        Refusals of the frame itself (over a cap, unknown layout, too many skeletons).
+    n_left_out : int
+        Skeletons of the frame not in ``skeletons`` (unknown layout, beyond ``max_skeletons``).
+    """
+
+    answered: bool
+    skeletons: tuple[SkeletonInput | SkipSkeleton, ...] = ()
+    skipped: tuple[SkipSkeleton, ...] = ()
+    n_left_out: int = 0
+
+
+def frame_over_cap(msg: Any, settings: FrameSettings) -> SkipSkeleton | None:
+    """The refusal of a frame whose strings would be copied into outputs or logs beyond the caps
+    (the frame is then skipped, unanswered); None when it is within them."""
+    n_frame, n_layout = len(msg.header.frame_id), len(msg.layout)
+    if n_frame > settings.max_frame_id_length:
+        return SkipSkeleton("frame_id too long", f"frame skipped, unanswered: header.frame_id of {n_frame} "
+                            f"characters, more than max_frame_id_length={settings.max_frame_id_length}")
+    if n_layout > settings.max_layout_length:
+        return SkipSkeleton("layout too long", f"frame skipped, unanswered: layout name of {n_layout} "
+                            f"characters, more than max_layout_length={settings.max_layout_length}")
+    return None
+
+
+def skeleton_input(skel: Any, layout: Layout, settings: FrameSettings, confidence_threshold: float,
+                   seen: set[int], on_clipped: Callable[[str], Any] = _NO_CLIP) -> SkeletonInput:
+    """The paper's 12 joints of one ``Skeleton2D`` of a frame, or :class:`SkipSkeleton`.
+
+    Refused: more keypoints than ``max_keypoints``, a track id already in ``seen`` (this
+    frame's; the skeleton's id is added), no keypoint at or above ``confidence_threshold``,
+    visible keypoints beyond ``max_coordinate`` pixels; malformed keypoints raise the
+    :class:`~pose_lifter.core.errors.InvalidInputError` of
+    :func:`~pose_lifter.messages.convert.skeleton2d_to_arrays`. Confidences outside [0, 1] are
+    clipped into it and ``on_clipped(warning)`` is called (before the checks that follow may skip
+    the skeleton).
+    """
+    track_id = int(skel.track_id)
+    xyc = getattr(skel, "xyc", None)  # a decoded bag message: the keypoints as one array
+    n_keypoints = len(xyc) if xyc is not None else len(skel.keypoints)
+    if n_keypoints > settings.max_keypoints:
+        raise SkipSkeleton("too many keypoints", f"track {track_id}: {n_keypoints} keypoints, "
+                           f"more than max_keypoints={settings.max_keypoints}", track_id)
+    if track_id >= 0:
+        if track_id in seen:
+            raise SkipSkeleton("duplicate track id",
+                               f"duplicate track id {track_id} in one frame: later copy skipped", track_id)
+        seen.add(track_id)
+    points, confidence = skeleton2d_to_arrays(skel, layout)
+    outside = (confidence < 0.0) | (confidence > 1.0)
+    if np.any(outside):  # they weigh the solve: clipped into [0, 1], with a warning
+        worst = float(confidence[outside][np.argmax(np.abs(confidence[outside]))])
+        on_clipped(f"track {track_id}: {int(outside.sum())} confidences outside [0, 1] "
+                   f"(e.g. {worst:.3g}) clipped into it")
+        confidence = np.clip(confidence, 0.0, 1.0)
+    visible = confidence >= confidence_threshold
+    if not np.any(visible):
+        raise SkipSkeleton("no confident keypoints",
+                           f"track {track_id}: no keypoint above the confidence threshold", track_id)
+    limit = settings.max_coordinate
+    if np.max(np.abs(points[visible])) > limit:
+        raise SkipSkeleton("absurd coordinates",
+                           f"track {track_id}: keypoints beyond {limit:g} px (max_coordinate)", track_id)
+    return SkeletonInput(track_id, points, confidence)
+
+
+def check_output(track_id: int, result: LiftResult, joints_m: NDArray[np.float64]) -> None:
+    """The one check of what leaves the pipeline: the metric joints and the lift's camera,
+    objective and reprojection error must be finite, else :class:`SkipSkeleton`."""
+    cam = result.camera
+    values: Sequence[Any] = (joints_m, cam.rotation, cam.scale, cam.translation, result.objective,
+                             result.reprojection_error)
+    if not all(bool(np.all(np.isfinite(np.asarray(v, dtype=np.float64)))) for v in values):
+        raise SkipSkeleton("non-finite result", f"track {track_id}: the solve returned non-finite values",
+                           track_id)
+
+
+def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
+    """``err`` as a :class:`SkipSkeleton`: the core's errors by their type name, anything else
+    as ``"unexpected"`` (a bug must not cost the other skeletons of a frame)."""
+    if isinstance(err, SkipSkeleton):
+        return err
+    if isinstance(err, OutOfOrderFrameError):
+        return SkipSkeleton("out-of-order stamp", str(err), track_id)
+    if isinstance(err, PoseLifterError):
+        return SkipSkeleton(type(err).__name__, str(err), track_id)
+    return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
+
+
+def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:
+    """For one track lifted apart from the others (its own :class:`FramePipeline`), the stamp to
+    expire at before each of its frames, so that it is forgotten exactly when a pipeline lifting
+    every frame would have forgotten it.
+
+    Parameters
+    ----------
+    frame_stamps : sequence of int or None
+        Every frame's stamp in order (None: a frame skipped unanswered, which expires nothing).
+    track_frames : sequence of int
+        Increasing indices into ``frame_stamps`` of the track's frames.
+
+    Returns
+    -------
+    list of int or None
+        Per track frame: the latest stamp among the frames from the track's previous frame
+        (inclusive) to this one (exclusive), None for its first frame. Expiring at that stamp is
+        expiring at each of them (only the track's last stamp, unchanged in between, is compared).
+    """
+    out: list[int | None] = []
+    prev: int | None = None
+    for j in track_frames:
+        if prev is None:
+            out.append(None)
+        else:
+            between = [s for s in frame_stamps[prev:j] if s is not None]
+            out.append(max(between) if between else None)
+        prev = j
+    return out
+
+
+class FramePipeline:
+    """Checks, the per-track policy and the placement around one :class:`Lifter`.
+
+    Parameters
+    ----------
+    lifter : Lifter
+    settings : FrameSettings
+    """
+
+    def __init__(self, lifter: Lifter, settings: FrameSettings = FrameSettings()) -> None:
+        self.settings = settings
+        self.policy = TrackPolicy(lifter, settings.track_timeout, settings.warm_start, settings.reinit_ratio)
+
+    @property
+    def lifter(self) -> Lifter:
+        return self.policy.lifter
+
+    def configure(self, lifter: Lifter, settings: FrameSettings) -> None:
+        """Change the lifter or the settings; the tracks are kept (see :meth:`TrackPolicy.configure`)."""
+        self.settings = settings
+        self.policy.configure(lifter, settings.track_timeout, settings.warm_start, settings.reinit_ratio)
+
+    def check(self, msg: Any, on_clipped: Callable[[str], Any] = _NO_CLIP) -> CheckedFrame:
+        """Step 1 of a ``Skeleton2DArray`` (see the module doc); never raises for bad input."""
+        st = self.settings
+        over_cap = frame_over_cap(msg, st)
+        if over_cap is not None:
+            return CheckedFrame(False, skipped=(over_cap,))
+        skeletons: Sequence[Any] = msg.skeletons
+        try:
+            layout = get_layout(str(msg.layout))
+        except Exception as err:  # e.g. an unknown layout: the whole frame is unusable
+            skip = _refusal(err, None)
+            skip = SkipSkeleton(skip.kind, f"frame skipped: {skip}")
+            return CheckedFrame(True, skipped=(skip,), n_left_out=len(skeletons))
+        skipped: tuple[SkipSkeleton, ...] = ()
+        n_left_out = max(0, len(skeletons) - st.max_skeletons)
+        if n_left_out:
+            skipped = (SkipSkeleton("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
+                                    f"lifting the first {st.max_skeletons} (max_skeletons)"),)
+            skeletons = skeletons[:st.max_skeletons]
+        threshold = self.lifter.options.confidence_threshold
+        seen: set[int] = set()
+        out: list[SkeletonInput | SkipSkeleton] = []
+        for skel in skeletons:
+            try:
+                out.append(skeleton_input(skel, layout, st, threshold, seen, on_clipped))
+            except Exception as err:
+                track_id = getattr(err, "track_id", None)
+                if track_id is None:
+                    try:
+                        track_id = int(skel.track_id)
+                    except Exception:
+                        track_id = None
+                out.append(_refusal(err, track_id))
+        return CheckedFrame(True, tuple(out), skipped, n_left_out)
+
+    def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
+             ) -> LiftedSkeleton | SkipSkeleton:
+        """Step 2 for one checked skeleton: lifted and placed, or why not (never raises for bad
+        input or a failed solve)."""
+        try:
+            start = time.perf_counter()
+            tracked = self.policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence)
+            solve_time = time.perf_counter() - start
+            result = tracked.result
+            focal, centre = intrinsics if intrinsics is not None else (None, None)
+            joints = place_in_camera(result, self.settings.lower_leg_length, focal, centre,
+                                     self.settings.default_distance)
+            check_output(inp.track_id, result, joints)
+        except Exception as err:
+            return _refusal(err, inp.track_id)
+        return LiftedSkeleton(inp, result, joints, tracked.warm_started, solve_time, tracked.fit_pose_camera)
+
+    def end_frame(self, stamp_ns: int) -> None:
+        """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
+        self.policy.expire(stamp_ns)
+
+    def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics
+              ) -> list[LiftedSkeleton | SkipSkeleton]:
+        """Steps 2 and 3 of a checked frame: per skeleton of ``checked.skeletons``, in order, the
+        lifted skeleton or why not (an unanswered frame lifts and expires nothing)."""
+        if not checked.answered:
+            return []
+        out = [x if isinstance(x, SkipSkeleton) else self.lift(x, stamp_ns, intrinsics)
+               for x in checked.skeletons]
+        self.end_frame(stamp_ns)
+        return out

@@ -1,0 +1,42 @@
+"""Topic and message type names, written once.
+
+The topics are those of a bag the package writes or lifts (the scene generator's inputs and
+ground truth, the offline lift's outputs); the node's are the same names, relative
+(``keypoints_2d``, ``camera_info``, ``skeletons_3d``, ``skeleton_markers``), so that a namespace
+or a remapping moves them. The type names are the full ROS names (``package/msg/Name``).
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+__all__ = [
+    "CAMERA_INFO",
+    "MARKER_ARRAY",
+    "SKELETON2D_ARRAY",
+    "SKELETON3D_ARRAY",
+    "TOPIC_CAMERA_INFO",
+    "TOPIC_GROUND_TRUTH",
+    "TOPIC_KEYPOINTS",
+    "TOPIC_MARKERS",
+    "TOPIC_SKELETONS",
+    "YOLO_DETECTION_ARRAY",
+]
+
+#: The 2D input (``Skeleton2DArray``).
+TOPIC_KEYPOINTS: Final[str] = "/keypoints_2d"
+#: The camera intrinsics (``CameraInfo``).
+TOPIC_CAMERA_INFO: Final[str] = "/camera_info"
+#: The lifted skeletons (``Skeleton3DArray``, camera optical frame, metres).
+TOPIC_SKELETONS: Final[str] = "/skeletons_3d"
+#: Joints and bones per track (``MarkerArray``).
+TOPIC_MARKERS: Final[str] = "/skeleton_markers"
+#: The generated scenes' true 3D skeletons (``Skeleton3DArray``).
+TOPIC_GROUND_TRUTH: Final[str] = "/ground_truth/skeletons_3d"
+
+SKELETON2D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
+SKELETON3D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
+MARKER_ARRAY: Final[str] = "visualization_msgs/msg/MarkerArray"
+CAMERA_INFO: Final[str] = "sensor_msgs/msg/CameraInfo"
+#: yolo_ros' detections (with keypoints), lifted through :mod:`pose_lifter.messages.adapters`.
+YOLO_DETECTION_ARRAY: Final[str] = "yolo_msgs/msg/DetectionArray"

@@ -1,0 +1,335 @@
+"""The chains of an offline lift: the checked skeletons of a bag split per track, each lifted
+through its own frame pipeline (:mod:`pose_lifter.messages.frame`), serially or on forked worker
+processes, with the same outcomes.
+
+A track's frames depend on one another (warm starts, the track's history); different tracks do
+not, so each track is a chain. A chain expires its track at the stamps a pipeline lifting every
+frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
+node's one pipeline over the whole bag.
+"""
+
+from __future__ import annotations
+
+import bisect
+import gc
+import os
+import signal
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.placement import place_in_camera
+from pose_lifter.core.skeleton import N_JOINTS
+from pose_lifter.core.smoothing import centred_smoothing
+from pose_lifter.messages import convert as m
+from pose_lifter.messages.frame import (
+    CheckedFrame,
+    FramePipeline,
+    FrameSettings,
+    Intrinsics,
+    LiftedSkeleton,
+    SkeletonInput,
+    SkipSkeleton,
+    expiry_stamps,
+)
+
+__all__ = [
+    "CameraTimeline",
+    "ChainWork",
+    "Done",
+    "Item",
+    "MessageFields",
+    "lift_chain",
+    "lift_parallel",
+    "smooth_chain",
+    "split_chains",
+    "stop_workers",
+]
+
+
+class CameraTimeline:
+    """The usable intrinsics of a bag's CameraInfo messages, by stamp: a CameraInfo the node
+    would ignore (bad intrinsics) is left out.
+
+    Parameters
+    ----------
+    camera_infos : list of (stamp_ns, CameraInfo), time-ordered
+    """
+
+    def __init__(self, camera_infos: list[tuple[int, Any]]) -> None:
+        self._stamps: list[int] = []
+        self._intrinsics: list[Intrinsics] = []
+        for stamp, info in camera_infos:
+            try:
+                intrinsics = m.intrinsics_from_camera_info(info)
+            except (InvalidInputError, ValueError, TypeError):
+                continue
+            self._stamps.append(stamp)
+            self._intrinsics.append(intrinsics)
+
+    def at(self, stamp: int) -> Intrinsics:
+        """The latest usable intrinsics at or before ``stamp`` (before the first: the first; none
+        at all: None, the default distance)."""
+        if not self._intrinsics:
+            return None
+        return self._intrinsics[max(0, bisect.bisect_right(self._stamps, stamp) - 1)]
+
+
+@dataclass(frozen=True)
+class Item:
+    """One checked skeleton of one message, to lift: its input, the camera, and the stamp its
+    track expires at before it (:func:`~pose_lifter.messages.frame.expiry_stamps`)."""
+
+    msg_index: int
+    stamp_ns: int
+    input: SkeletonInput
+    intrinsics: Intrinsics
+    expire_ns: int | None = None
+
+    @property
+    def track_id(self) -> int:
+        return self.input.track_id
+
+
+@dataclass(frozen=True)
+class Done:
+    """What lifting one :class:`Item` gave: the result and metric joints, or the failure."""
+
+    item: Item
+    result: Any | None
+    joints_m: NDArray[np.float64] | None
+    warm_started: bool
+    solve_time: float
+    failure: str | None
+
+
+def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, Any]],
+                 pipeline: FramePipeline
+                 ) -> tuple[list[list[Item]], list[list[Item | SkipSkeleton]], list[CheckedFrame]]:
+    """Check every message (step 1 of the pipeline) and split the checked skeletons into
+    independent chains: one per track id (in message order), one per untracked skeleton.
+    Returns (chains, per message its items or refusals in input order, the checked frames)."""
+    checked = [pipeline.check(msg) for _, msg in keypoint_msgs]
+    cameras = CameraTimeline(camera_infos)
+    per_track: dict[int, list[Item]] = {}
+    chains: list[list[Item]] = []
+    per_msg: list[list[Item | SkipSkeleton]] = []
+    for i, ((stamp, _), frame) in enumerate(zip(keypoint_msgs, checked, strict=True)):
+        row: list[Item | SkipSkeleton] = []
+        intrinsics = cameras.at(stamp) if frame.skeletons else None
+        for x in frame.skeletons:
+            if isinstance(x, SkipSkeleton):
+                row.append(x)
+                continue
+            item = Item(i, stamp, x, intrinsics)
+            row.append(item)
+            if x.track_id >= 0:
+                per_track.setdefault(x.track_id, []).append(item)
+            else:
+                chains.append([item])
+        per_msg.append(row)
+    stamps = [s if c.answered else None for (s, _), c in zip(keypoint_msgs, checked, strict=True)]
+    for track in per_track.values():
+        expire = expiry_stamps(stamps, [it.msg_index for it in track])
+        chains.append([replace(it, expire_ns=e) for it, e in zip(track, expire, strict=True)])
+    # the items per message with their expiry (the same objects as in the chains)
+    final = {(it.msg_index, id(it.input)): it for chain in chains for it in chain}
+    per_msg = [[x if isinstance(x, SkipSkeleton) else final[(x.msg_index, id(x.input))] for x in row]
+               for row in per_msg]
+    return chains, per_msg, checked
+
+
+def lift_chain(lifter: Lifter, chain: list[Item], settings: FrameSettings, smoothing_s: float = 0.0
+                ) -> list[Done]:
+    """Lift one chain in order through its own frame pipeline (steps 2 and 3: the per-track
+    policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0`` the chain's
+    poses are then smoothed centred (:func:`smooth_chain`)."""
+    out: list[Done] = []
+    fits: list[NDArray[np.float64] | None] = []  # the fit's own pose_camera per outcome
+    pipeline = FramePipeline(lifter, settings)
+    for item in chain:
+        if item.expire_ns is not None:
+            pipeline.end_frame(item.expire_ns)
+        lifted = pipeline.lift(item.input, item.stamp_ns, item.intrinsics)
+        if not isinstance(lifted, LiftedSkeleton):
+            out.append(Done(item, None, None, False, 0.0, str(lifted)))
+            fits.append(None)
+            continue
+        out.append(Done(item, lifted.result, lifted.joints_m, lifted.warm_started, lifted.solve_time, None))
+        # the centred smoothing starts from the fit's own pose; with the measurement update, from
+        # the published one (which has read each frame's 2D; docs/tuning.md)
+        fits.append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
+    if smoothing_s > 0:
+        return smooth_chain(out, fits, settings, smoothing_s)
+    return out
+
+
+def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], settings: FrameSettings,
+                  smoothing_s: float) -> list[Done]:
+    """A lifted chain with its metric joints smoothed by a centred Gaussian window of
+    ``smoothing_s`` seconds (:func:`pose_lifter.core.smoothing.centred_smoothing`, segments split at
+    gaps over ``track_timeout``), from the fit's own poses (``fits[i]``; None: from the result's
+    pose, the fit's or, with ``measurement_update``, the published one): without the update the
+    causal output smoothing of the live node is replaced, not compounded. Each result's ``pose``
+    and ``pose_camera`` become the smoothed pose (camera and the rest kept)."""
+    rows = [i for i, d in enumerate(done) if d.result is not None and d.joints_m is not None]
+    if len(rows) < 2:
+        return done
+    leg = settings.lower_leg_length
+    placed = np.empty((len(rows), N_JOINTS, 3))
+    for r, i in enumerate(rows):
+        d, fit = done[i], fits[i]
+        assert d.result is not None
+        res = d.result if fit is None else replace(d.result, pose_camera=fit)
+        focal, centre = d.item.intrinsics if d.item.intrinsics is not None else (None, None)
+        placed[r] = place_in_camera(res, leg, focal, centre, settings.default_distance)
+    stamps = np.array([done[i].item.stamp_ns for i in rows], dtype=np.int64)
+    smooth = centred_smoothing(placed, stamps, np.ones(len(rows), dtype=bool), smoothing_s,
+                               settings.track_timeout)
+    out = list(done)
+    for r, i in enumerate(rows):
+        d = done[i]
+        assert d.result is not None
+        pose_camera = (smooth[r] - smooth[r].mean(axis=0)) / leg
+        # the body-frame pose with the same camera: pose_camera = (pose - mean) @ R^T
+        pose = pose_camera @ d.result.camera.rotation + d.result.pose.mean(axis=0)
+        res = replace(d.result, pose=pose, pose_camera=pose_camera)
+        out[i] = Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None)
+    return out
+
+
+@dataclass(frozen=True)
+class MessageFields:
+    """The part of a ``LiftResult`` that the output messages carry
+    (:meth:`pose_lifter.messages.cdr.SkeletonFrame.from_results`): what a worker of :func:`lift_bag` sends
+    back instead of the whole result (its history, prior pose, ...), as columns of a chain
+    (:func:`_columns`)."""
+
+    camera: Any
+    objective: float
+    reprojection_error: float
+    total_alternations: int
+    converged: bool
+    weights: NDArray[np.float64]
+
+
+def _columns(done: list[Done]) -> tuple[list[tuple[bool, float, str | None, int]],
+                                        dict[str, NDArray[Any]]]:
+    """A chain's outcomes as a few arrays (one pickle each, not one object tree per pose): per
+    item (warm_started, solve_time, failure, row of its lift or -1), and the rows' message fields."""
+    ok = [d for d in done if d.failure is None and d.result is not None and d.joints_m is not None]
+    row = {id(d): i for i, d in enumerate(ok)}
+    items = [(d.warm_started, d.solve_time, d.failure, row.get(id(d), -1)) for d in done]
+    res: list[Any] = [d.result for d in ok]
+    cams = [r.camera for r in res]
+    cols: dict[str, NDArray[Any]] = {
+        "rotation": np.array([c.rotation for c in cams], dtype=np.float64).reshape(-1, 3, 3),
+        "scale": np.array([c.scale for c in cams], dtype=np.float64),
+        "translation": np.array([c.translation for c in cams], dtype=np.float64).reshape(-1, 2),
+        "objective": np.array([r.objective for r in res], dtype=np.float64),
+        "reprojection_error": np.array([r.reprojection_error for r in res], dtype=np.float64),
+        "total_alternations": np.array([r.total_alternations for r in res], dtype=np.int64),
+        "converged": np.array([r.converged for r in res], dtype=bool),
+        "weights": np.array([r.weights for r in res], dtype=np.float64).reshape(-1, N_JOINTS),
+        "joints_m": np.array([d.joints_m for d in ok], dtype=np.float64).reshape(-1, N_JOINTS, 3),
+    }
+    return items, cols
+
+
+def _from_columns(chain: list[Item], items: list[tuple[bool, float, str | None, int]],
+                  cols: dict[str, NDArray[Any]]) -> list[Done]:
+    """The :class:`Done` s of a chain from :func:`_columns` (results as :class:`MessageFields`)."""
+    from pose_lifter.core.results import Camera
+
+    out = []
+    for item, (warm, dt, failure, i) in zip(chain, items, strict=True):
+        if i < 0:
+            out.append(Done(item, None, None, warm, dt, failure))
+            continue
+        cam = Camera(cols["rotation"][i], float(cols["scale"][i]), cols["translation"][i])
+        fields = MessageFields(cam, float(cols["objective"][i]), float(cols["reprojection_error"][i]),
+                               int(cols["total_alternations"][i]), bool(cols["converged"][i]),
+                               cols["weights"][i])
+        out.append(Done(item, fields, cols["joints_m"][i], warm, dt, None))
+    return out
+
+
+@dataclass(frozen=True)
+class ChainWork:
+    """What the worker processes of :func:`lift_messages` lift: handed to each worker by the pool
+    initialiser (:func:`_worker_init`; inherited through fork, not pickled), so a task is only the
+    index of a chain, and only the outcomes come back (the parent holds the items): whole
+    results, or only their message fields as columns (:func:`_columns`)."""
+
+    lifter: Lifter
+    settings: FrameSettings
+    smoothing_s: float
+    chains: list[list[Item]]
+    message_fields_only: bool
+
+    def run(self, index: int) -> Any:
+        done = lift_chain(self.lifter, self.chains[index], self.settings, self.smoothing_s)
+        if self.message_fields_only:
+            return _columns(done)
+        return [(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done]
+
+
+#: The work of this worker process (set by :func:`_worker_init`; None in the parent).
+_work: ChainWork | None = None
+
+
+def _worker_init(work: ChainWork) -> None:
+    """Keep the worker's work; Ctrl-C ends a worker silently (the parent reports it once), not
+    with a traceback each."""
+    global _work
+    _work = work
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _worker_chain(index: int) -> Any:
+    assert _work is not None, "called outside a worker of lift_messages"
+    return _work.run(index)
+
+
+def stop_workers(ex: Any) -> None:
+    """Terminate a ProcessPoolExecutor's processes and drop its queued work."""
+    processes = getattr(ex, "_processes", None) or {}  # pid -> Process (no public accessor)
+    for proc in list(processes.values()):
+        proc.terminate()
+    ex.shutdown(wait=True, cancel_futures=True)
+
+
+def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any) -> None:
+    """Lift ``work.chains`` on ``workers`` forked processes into ``done`` (id(item) -> outcome)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
+    n_proc = min(workers, len(work.chains), os.cpu_count() or 1)
+    # the workers inherit every object of this process (the bag's messages too): frozen, the
+    # garbage collector of a worker does not walk them, so their pages are not copied
+    gc.freeze()
+    try:
+        ex = ProcessPoolExecutor(n_proc, mp_context=multiprocessing.get_context("fork"),
+                                 initializer=_worker_init, initargs=(work,))
+        try:
+            outcomes_of = ex.map(_worker_chain, range(len(work.chains)))
+            for chain, outcomes in zip(work.chains, outcomes_of, strict=True):
+                if work.message_fields_only:
+                    for d in _from_columns(chain, *outcomes):
+                        done[id(d.item)] = d
+                    bar.update(len(chain))
+                    continue
+                for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
+                    done[id(item)] = Done(item, res, joints, warm, dt, failure)
+                    bar.update(1)
+        except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
+            stop_workers(ex)
+            raise
+        ex.shutdown()
+    finally:
+        gc.unfreeze()

@@ -1,0 +1,107 @@
+"""The settings of an offline lift: everything that decides a lifted bag's content.
+
+:class:`LiftSettings` is what :func:`pose_lifter.offline.lift.lift_bag` and
+:func:`~pose_lifter.offline.lift.lift_messages` take, and what a collection's manifest keys its
+outputs by (:mod:`pose_lifter.offline.collection`). Its defaults are the node's (the per-track
+policy's, the placement's, the topics'). This module imports neither numpy nor the solver.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
+from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+
+__all__ = ["LiftSettings", "file_sha256", "package_version"]
+
+
+def package_version() -> str:
+    """The installed distribution's version (the source tree's ``__version__`` when not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from pose_lifter import __version__
+
+    try:
+        return version("pose_lifter")
+    except PackageNotFoundError:
+        return __version__
+
+
+def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class LiftSettings:
+    """Everything that decides a lifted bag's content: the lifter's options and files, the
+    per-track policy and the output's shape. Picklable (it is what a Dask worker receives) and
+    JSON-able (its digest keys the manifest)."""
+
+    options: dict[str, Any] = field(default_factory=dict)
+    bases: str | None = None
+    warm_start: bool = True
+    leg_length_m: float = DEFAULT_LEG_LENGTH_M
+    default_distance_m: float = DEFAULT_DISTANCE_M
+    every: int = 1
+    max_messages: int | None = None
+    topic: str = TOPIC_KEYPOINTS
+    camera_info_topic: str | None = TOPIC_CAMERA_INFO
+    keep: list[str] | None = None
+    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S
+    reinit_ratio: float = DEFAULT_REINIT_RATIO
+    smoothing_s: float = OFFLINE_SMOOTHING_S  # centred, offline only (0: the node's causal poses)
+    marker_lifetime: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The settings as JSON-ready values (options sorted by name)."""
+        d = dataclasses.asdict(self)
+        d["options"] = {k: _jsonable(v) for k, v in sorted(self.options.items())}
+        return d
+
+    def digest(self) -> str:
+        """SHA-256 over the settings, the package version and the bytes of the files they name
+        (bases, prior files): a changed file or package changes the digest."""
+        files = [self.bases, self.options.get("prior_file"), self.options.get("temporal_prior_file")]
+        named = {str(f): file_sha256(f) for f in files if f and Path(str(f)).is_file()}
+        text = json.dumps({"settings": self.to_json(), "version": package_version(), "files": named},
+                          sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def build_lifter(self) -> Any:
+        """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up)."""
+        from pose_lifter.core.bases import PoseBases
+        from pose_lifter.core.lifter import Lifter
+        from pose_lifter.core.options import LifterOptions
+
+        opts = LifterOptions().replace(**self.options)
+        lifter = Lifter(PoseBases.load(self.bases) if self.bases else None, opts)
+        if opts.camera_solver == "admm" and opts.pose_solver == "admm":
+            lifter.warm_up()
+        return lifter
+
+    @staticmethod
+    def options_of(options: Any) -> dict[str, Any]:
+        """A :class:`pose_lifter.core.options.LifterOptions` as the ``options`` of
+        :class:`LiftSettings` (every field)."""
+        return {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, tuple | list):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, float | int | str | bool) or v is None:
+        return v
+    return repr(v)

@@ -1,0 +1,218 @@
+"""The frame pipeline (pose_lifter.messages.frame): the node's path (one pipeline, frame by frame)
+and the offline lift's (every frame checked first, then each track on its own pipeline, in one
+process or in workers) give the same outputs for the same skeleton sequence, refusals included;
+bad input is refused with a kind and a reason that name what was wrong."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from pose_lifter.core import Lifter, LifterOptions, PoseBases
+from pose_lifter.core.errors import SolverError
+from pose_lifter.core.results import Camera, LiftResult, WarmStart
+from pose_lifter.messages import convert as m
+from pose_lifter.messages.frame import (
+    FramePipeline,
+    FrameSettings,
+    LiftedSkeleton,
+    SkipSkeleton,
+    expiry_stamps,
+)
+from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+from pose_lifter.offline import bags
+from pose_lifter.offline.lift import FrameLift, LiftSummary, frame_settings, lift_messages
+from pose_lifter.offline.settings import LiftSettings
+from pose_lifter.ros.params import PARAMS, NodeSettings
+
+REPO = Path(__file__).resolve().parents[2]
+T = m.rosbags_types()
+STEP_NS = 100_000_000  # 10 Hz
+N_FRAMES = 23
+#: Frames of track 1's absence (1.2 s > track_timeout): the node forgets it before it returns.
+GAP = range(8, 20)
+
+
+def _skeleton(skel: Any, track_id: int | None = None, scale: float = 1.0,
+              confidence: float | None = None) -> Any:
+    kp = np.array([[k.x, k.y] for k in skel.keypoints]) * scale
+    cf = np.array([k.confidence for k in skel.keypoints]) if confidence is None else \
+        np.full(len(skel.keypoints), confidence)
+    return m.arrays_to_skeleton2d(kp, cf, int(skel.track_id) if track_id is None else track_id, T)
+
+
+def sequence() -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
+    """Two people of a committed bag re-stamped at 10 Hz, with every kind of bad input the
+    pipeline refuses and a track that is forgotten and comes back; and the bag's camera_info."""
+    kps, infos = [], []
+    for x in bags.read_messages(REPO / "bags" / "two_people.mcap", [TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO]):
+        (kps if x.topic == TOPIC_KEYPOINTS else infos).append(x.msg)
+    seq = []
+    stamp = 1_000_000_000
+    for i, msg in enumerate(kps[:N_FRAMES]):
+        # frame 22: older than both tracks' last frames (track 0's is frame 20): out of order
+        stamp = stamp - 3 * STEP_NS // 2 if i == 22 else stamp + STEP_NS
+        skels = [s for s in msg.skeletons if not (i in GAP and int(s.track_id) == 1)]
+        layout, frame_id = str(msg.layout), "camera"
+        if i == 2:
+            skels.append(_skeleton(skels[0]))  # a duplicate track id
+        if i == 3:
+            skels[1] = _skeleton(skels[1], confidence=1.5)  # clipped into [0, 1]
+        if i == 4:
+            frame_id = "x" * 300  # over max_frame_id_length: unanswered
+        if i == 5:
+            layout = "no_such_layout"
+        if i == 6:
+            skels.append(_skeleton(skels[1], track_id=-1, scale=1.1))  # untracked
+        if i == 21:
+            skels[0] = _skeleton(skels[0], scale=1e6)  # absurd coordinates
+        if i == 22:
+            skels.append(_skeleton(skels[0], confidence=0.0, track_id=7))  # no confident keypoint
+        header = m.make_header(stamp, frame_id, T)
+        seq.append((stamp, T.Skeleton2DArray(header=header, layout=layout, skeletons=skels)))
+    return seq, [(seq[0][0], infos[0])]
+
+
+def node_path(lifter: Lifter, settings: FrameSettings, seq: list[tuple[int, Any]], intrinsics: Any
+              ) -> tuple[list[tuple[int, LiftedSkeleton | SkipSkeleton]], dict[str, Any]]:
+    """What :meth:`LifterNode.on_keypoints` does with the pipeline, frame by frame."""
+    pipeline = FramePipeline(lifter, settings)
+    clipped: list[str] = []
+    seen: dict[str, Any] = {"unanswered": [], "frame_skips": [], "tracks_after_gap": None}
+    out: list[tuple[int, LiftedSkeleton | SkipSkeleton]] = []
+    for i, (stamp, msg) in enumerate(seq):
+        checked = pipeline.check(msg, clipped.append)
+        seen["frame_skips"] += [s.kind for s in checked.skipped]
+        if not checked.answered:
+            seen["unanswered"].append(i)
+        out += [(stamp, x) for x in pipeline.frame(checked, stamp, intrinsics)]
+        if i == GAP[-1]:
+            seen["tracks_after_gap"] = len(pipeline.policy)
+    seen["clipped"] = clipped
+    return out, seen
+
+
+@pytest.fixture(scope="module")
+def lifter() -> Lifter:
+    return Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=3))  # hybrid
+
+
+@pytest.mark.parametrize(("warm_start", "workers"), [(True, 1), (True, 2), (False, 1)])
+def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, warm_start: bool,
+                                                             workers: int) -> None:
+    seq, infos = sequence()
+    settings = LiftSettings(warm_start=warm_start, smoothing_s=0.0)
+    intrinsics = m.intrinsics_from_camera_info(infos[0][1])
+    node, seen = node_path(lifter, frame_settings(settings), seq, intrinsics)
+    # the scenario exercised what it means to
+    assert seen["unanswered"] == [4] and seen["clipped"]
+    assert seen["frame_skips"] == ["frame_id too long", "UnknownLayoutError"]
+    assert seen["tracks_after_gap"] == 1  # track 1 forgotten, track 0 kept
+    skips = [x.kind for _, x in node if isinstance(x, SkipSkeleton)]
+    assert sorted(skips) == sorted(["duplicate track id", "absurd coordinates", "no confident keypoints",
+                                    "out-of-order stamp", "out-of-order stamp"]), skips
+
+    answered: list[int] = []
+    summary = LiftSummary()
+
+    def on_frame(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
+        answered.append(stamp)
+
+    offline = lift_messages(seq, infos, lifter, settings, on_frame=on_frame, summary=summary, workers=workers)
+    lifted = [(s, x) for s, x in node if isinstance(x, LiftedSkeleton)]
+    assert answered == [s for i, (s, _) in enumerate(seq) if i != 4]
+    assert summary.n_lifted == len(offline) == len(lifted)
+    assert summary.n_failed == len(skips) + 2  # and frame 5's two skeletons (unknown layout)
+    assert [(f.stamp_ns, f.track_id, f.warm_started) for f in offline] == [
+        (s, x.track_id, x.warm_started) for s, x in lifted]
+    assert any(f.warm_started for f in offline) == warm_start
+    # bit for bit: the same solves in the same order per track
+    np.testing.assert_array_equal(np.array([f.joints_m for f in offline]),
+                                  np.array([x.joints_m for _, x in lifted]))
+    np.testing.assert_array_equal(np.array([f.confidence for f in offline]),
+                                  np.array([x.input.confidence for _, x in lifted]))
+    assert max(f.confidence.max() for f in offline) <= 1.0
+
+
+def test_expiry_stamps_are_the_latest_answered_stamp_since_the_tracks_last_frame() -> None:
+    stamps = [10, 20, None, 40, 35, 60]
+    assert expiry_stamps(stamps, [0, 3, 5]) == [None, 20, 40]
+    assert expiry_stamps(stamps, [1, 2]) == [None, 20]
+    assert expiry_stamps([None, None, 5], [0, 2]) == [None, None]
+
+
+class StubLifter:
+    """Paper-mode stand-in: a fixed pose, the camera at the 2D mean; ``fail`` decides per call."""
+
+    options = LifterOptions(mode="paper")
+
+    def __init__(self, fail: Any = None) -> None:
+        self.calls = 0
+        self.fail = fail
+        self.pose = np.random.default_rng(0).normal(size=(12, 3))
+        self.pose -= self.pose.mean(axis=0)
+
+    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
+             **per_frame: Any) -> LiftResult:
+        self.calls += 1
+        if self.fail is not None:
+            self.fail(self.calls)
+        cam = Camera(np.eye(3), 100.0, points[confidence > 0].mean(axis=0))
+        return LiftResult(self.pose, self.pose, cam, np.zeros(3), 1.0, 0.5, 0.0, 3, True, 1, 0, np.ones(12))
+
+
+def _frame(*skeletons: Any, layout: str = "coco17", frame_id: str = "camera") -> Any:
+    return T.Skeleton2DArray(header=m.make_header(1, frame_id, T), layout=layout, skeletons=list(skeletons))
+
+
+def _person(track_id: int, k: int = 17, confidence: float = 0.9, offset: float = 0.0) -> Any:
+    rng = np.random.default_rng(track_id + 3)
+    return m.arrays_to_skeleton2d(rng.uniform(100, 400, (k, 2)) + offset, np.full(k, confidence), track_id, T)
+
+
+def test_bad_input_is_refused_with_its_kind_and_reason() -> None:
+    pipeline = FramePipeline(StubLifter())  # type: ignore[arg-type]
+    checked = pipeline.check(_frame(_person(1), layout="nope"))
+    (skip,) = checked.skipped
+    assert checked.answered and checked.n_left_out == 1 and not checked.skeletons
+    assert skip.kind == "UnknownLayoutError" and str(skip).startswith("frame skipped:")
+    assert "nope" in str(skip)
+    checked = pipeline.check(_frame(layout="y" * 65))
+    assert not checked.answered and "max_layout_length=64" in str(checked.skipped[0])
+    many = FramePipeline(StubLifter(), FrameSettings(max_skeletons=2))  # type: ignore[arg-type]
+    checked = many.check(_frame(_person(1), _person(2), _person(3)))
+    assert checked.n_left_out == 1 and "lifting the first 2 (max_skeletons)" in str(checked.skipped[0])
+    checked = pipeline.check(_frame(_person(1, k=10), _person(2), _person(3, k=600), _person(4)))
+    wrong, ok, too_many, ok2 = checked.skeletons
+    assert isinstance(wrong, SkipSkeleton) and wrong.kind == "InvalidInputError" and wrong.track_id == 1
+    assert "keypoints" in str(wrong)  # the layout's count is named
+    assert isinstance(too_many, SkipSkeleton) and "more than max_keypoints=512" in str(too_many)
+    assert not isinstance(ok, SkipSkeleton) and not isinstance(ok2, SkipSkeleton)
+
+
+def test_a_failed_or_non_finite_solve_is_one_refusal_and_the_others_are_lifted() -> None:
+    def fail(call: int) -> None:
+        if call == 1:
+            raise SolverError("pose step diverged")
+        if call == 2:
+            raise RuntimeError("a bug")
+
+    pipeline = FramePipeline(StubLifter(fail))  # type: ignore[arg-type]
+    checked = pipeline.check(_frame(_person(1), _person(2), _person(3)))
+    diverged, bug, lifted = pipeline.frame(checked, 1, None)
+    assert isinstance(diverged, SkipSkeleton) and diverged.kind == "SolverError"
+    assert isinstance(bug, SkipSkeleton) and bug.kind == "unexpected" and "a bug" in str(bug)
+    assert isinstance(lifted, LiftedSkeleton) and np.isfinite(lifted.joints_m).all()
+    assert lifted.joints_m.mean(axis=0)[2] == pytest.approx(FrameSettings().default_distance)
+    nan = StubLifter()
+    nan.pose = np.full((12, 3), np.nan)
+    (out,) = FramePipeline(nan).frame(FramePipeline(nan).check(_frame(_person(1))), 1, None)  # type: ignore[arg-type]
+    assert isinstance(out, SkipSkeleton) and out.kind == "non-finite result" and out.track_id == 1
+
+
+def test_the_settings_defaults_are_written_once() -> None:
+    defaults = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__)
+    assert defaults.frame == FrameSettings()
+    assert frame_settings(LiftSettings()) == FrameSettings()
