@@ -117,7 +117,7 @@ def test_signal_while_running_finishes_the_callback_then_exits_0(tmp_path: Path,
     proc = _start(tmp_path, "running")
     _wait_for(proc, "callback start")
     code, seconds, rest = _stop(proc, sig)
-    assert code == 0, rest
+    assert code == 0 and seconds < EXIT_TIMEOUT, rest
     assert rest[0] == "callback end" and "callback start" not in rest, rest  # no new callback
     assert rest[-1] == "run_node returned" and not any("Traceback" in line for line in rest), rest
 

@@ -74,7 +74,7 @@ def fatal(name: str, text: str) -> NoReturn:
     try:
         import rclpy
 
-        rclpy.logging.get_logger(name).fatal(text)
+        rclpy.logging.get_logger(name).fatal(text)  # type: ignore[no-untyped-call]
     except Exception:  # logging not initialised (rclpy.init itself failed)
         print(f"[FATAL] [{name}]: {text}", file=sys.stderr, flush=True)
     raise SystemExit(1)
@@ -97,6 +97,7 @@ def run_node(make: Callable[[PhasedSignals], Any], name: str, args: list[str] | 
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
+    from rclpy.utilities import ok, try_shutdown
 
     node: Any = None
     executor: Any = None
@@ -111,7 +112,7 @@ def run_node(make: Callable[[PhasedSignals], Any], name: str, args: list[str] | 
         signals.running = True
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while not signals.stop and rclpy.ok():
+        while not signals.stop and ok():
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -120,4 +121,4 @@ def run_node(make: Callable[[PhasedSignals], Any], name: str, args: list[str] | 
             executor.shutdown()
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        try_shutdown()
