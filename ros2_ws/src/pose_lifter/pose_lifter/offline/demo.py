@@ -6,7 +6,6 @@ skeletons and the ground truth in the camera frame (right).
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
@@ -14,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.placement import DEFAULT_LEG_LENGTH_M
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING
 
 if TYPE_CHECKING:
@@ -113,24 +113,42 @@ def plot_frames(
     plt.close(fig)
 
 
-def run_demo(args: argparse.Namespace, make_lifter: Callable[[], Lifter]) -> int:
-    """Lift the demo bag, print the error table, write ``OUT/demo.mcap`` and ``OUT/demo.png``.
+def run_demo(make_lifter: Callable[[], Lifter], out: str | Path, bag: str | Path | None = None, *,
+             warm_start: bool = True, leg_length_m: float = DEFAULT_LEG_LENGTH_M, every: int = 1) -> int:
+    """Lift the demo bag, print the error table, write ``out/demo.mcap`` and ``out/demo.png``.
 
-    ``args`` holds the ``pose-lifter demo`` flags (``bag``, ``out``, ``no_warm_start``,
-    ``leg_length``, ``every``); ``make_lifter()`` builds the lifter once the bag is found (the
-    CLI's, from the same flags: a kernel compile is not wasted on a missing bag).
+    Parameters
+    ----------
+    make_lifter : callable
+        Builds the lifter, called once the bag is found (a kernel compile is not wasted on a
+        missing bag).
+    out : path
+        Output directory (created).
+    bag : path, optional
+        The bag to lift (default: the committed :data:`DEFAULT_DEMO_BAG`).
+    warm_start : bool
+        Warm-start each track from its previous frame.
+    leg_length_m : float
+        Right lower leg in metres (the lifted poses' scale).
+    every : int
+        Lift every ``every``-th keypoint message.
+
+    Returns
+    -------
+    int
+        The exit code (0).
     """
     from pose_lifter.messages import convert as m
     from pose_lifter.mocap.scenes import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
     from pose_lifter.offline.lift import evaluate_bag, format_evaluation, lift_bag
 
-    bag = Path(args.bag) if args.bag else find_demo_bag()
-    out = Path(args.out)
+    bag = Path(bag) if bag else find_demo_bag()
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     lifter = make_lifter()
-    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=not args.no_warm_start,
-                               leg_length_m=args.leg_length, every=args.every, overwrite=True)
+    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=warm_start,
+                               leg_length_m=leg_length_m, every=every, overwrite=True)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     ev = evaluate_bag(out / "demo.mcap", lifter.bases)
