@@ -320,10 +320,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from pose_lifter.offline.collection import LiftSettings
     from pose_lifter.offline.demo import run_demo
 
-    return run_demo(lambda: _lifter(args), args.out, args.bag, warm_start=not args.no_warm_start,
-                    leg_length_m=args.leg_length, every=args.every)
+    settings = LiftSettings(warm_start=not args.no_warm_start, leg_length_m=args.leg_length, every=args.every,
+                            smoothing_s=0.0)
+    return run_demo(lambda: _lifter(args), settings, args.out, args.bag)
 
 
 # --------------------------------------------------------------------------- parser

@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.placement import DEFAULT_LEG_LENGTH_M
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING
 
 if TYPE_CHECKING:
     from pose_lifter.core.lifter import Lifter
+    from pose_lifter.offline.collection import LiftSettings
 
 __all__ = ["DEFAULT_DEMO_BAG", "find_demo_bag", "plot_frames", "run_demo"]
 
@@ -113,8 +113,8 @@ def plot_frames(
     plt.close(fig)
 
 
-def run_demo(make_lifter: Callable[[], Lifter], out: str | Path, bag: str | Path | None = None, *,
-             warm_start: bool = True, leg_length_m: float = DEFAULT_LEG_LENGTH_M, every: int = 1) -> int:
+def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str | Path,
+             bag: str | Path | None = None) -> int:
     """Lift the demo bag, print the error table, write ``out/demo.mcap`` and ``out/demo.png``.
 
     Parameters
@@ -122,16 +122,13 @@ def run_demo(make_lifter: Callable[[], Lifter], out: str | Path, bag: str | Path
     make_lifter : callable
         Builds the lifter, called once the bag is found (a kernel compile is not wasted on a
         missing bag).
+    settings : LiftSettings
+        The lift's warm starts, leg length and message step (``warm_start``, ``leg_length_m``,
+        ``every``).
     out : path
         Output directory (created).
     bag : path, optional
         The bag to lift (default: the committed :data:`DEFAULT_DEMO_BAG`).
-    warm_start : bool
-        Warm-start each track from its previous frame.
-    leg_length_m : float
-        Right lower leg in metres (the lifted poses' scale).
-    every : int
-        Lift every ``every``-th keypoint message.
 
     Returns
     -------
@@ -147,8 +144,8 @@ def run_demo(make_lifter: Callable[[], Lifter], out: str | Path, bag: str | Path
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     lifter = make_lifter()
-    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=warm_start,
-                               leg_length_m=leg_length_m, every=every, overwrite=True)
+    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, warm_start=settings.warm_start,
+                               leg_length_m=settings.leg_length_m, every=settings.every, overwrite=True)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     ev = evaluate_bag(out / "demo.mcap", lifter.bases)
