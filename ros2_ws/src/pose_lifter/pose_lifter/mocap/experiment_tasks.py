@@ -251,19 +251,21 @@ def _errors(pred: NDArray[np.float64], gt: NDArray[np.float64], leg_mm: float) -
     return float(normalised_error(pred, gt)), float(leg_mm * p_mpjpe(pred, gt))
 
 
-# The pool calls a plain function per task, so each worker process keeps its Worker in this one slot
-# (set by the initialiser; never set in the parent process).
-_WORKER: list[Worker] = []
+#: The Worker of this worker process (set by :func:`start_worker`; None in the parent): the pool
+#: calls a plain function per task, which finds the worker's state here.
+_worker: Worker | None = None
 
 
 def start_worker(inputs: WorkerInputs) -> None:
     """Pool initialiser: one BLAS thread, the worker's inputs kept for its lifetime."""
     from threadpoolctl import threadpool_limits
 
-    _WORKER[:] = [Worker(inputs, blas_limit=threadpool_limits(limits=1))]
+    global _worker
+    _worker = Worker(inputs, blas_limit=threadpool_limits(limits=1))
     warnings.filterwarnings("ignore", message="Objective did not converge")
 
 
 def run_task(task: Task) -> dict[str, Any]:
     """Run ``task`` in this worker process (see :func:`start_worker`)."""
-    return _WORKER[0].run(task)
+    assert _worker is not None, "called outside a worker of run_experiments"
+    return _worker.run(task)
