@@ -12,10 +12,13 @@ topics), driven by the standard ``rclpy.lifecycle`` transitions (``/pose_lifter/
 - **cleanup**: destroy the publishers; **shutdown**: as cleanup, from any state.
 
 ``ros2 run pose_lifter lifter`` (the plain node) does configure + activate in its constructor.
+Both run in the one run loop (:func:`pose_lifter.ros.run.run_node`): SIGINT / SIGTERM exit with
+code 0, at once during configure (loading, compiling), after the current callback otherwise.
 """
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from typing import Any
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -28,7 +31,15 @@ __all__ = ["LifecycleLifterNode", "main"]
 
 
 class LifecycleLifterNode(LifterNode, LifecycleNode):
-    """:class:`LifterNode` whose start is split into lifecycle transitions (see the module doc)."""
+    """:class:`LifterNode` whose start is split into lifecycle transitions (see the module doc).
+
+    Parameters
+    ----------
+    signals : PhasedSignals, optional
+        The run loop's signal handling (configure is marked a start-up phase in it).
+    **kwargs
+        Passed to :class:`rclpy.node.Node`.
+    """
 
     def __init__(self, signals: PhasedSignals | None = None, **kwargs: Any) -> None:
         self._signals = signals
@@ -41,11 +52,9 @@ class LifecycleLifterNode(LifterNode, LifecycleNode):
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            if self._signals is None:
+            # loading and compiling: a signal exits at once, as during the plain node's start
+            with self._signals.starting() if self._signals is not None else nullcontext():
                 self.configure_lifter()
-            else:  # loading and compiling: a signal exits at once, as during the plain node's start
-                with self._signals.starting():
-                    self.configure_lifter()
         except (PoseLifterError, OSError, ValueError) as err:
             self.get_logger().error(f"configure failed: {err}")
             return TransitionCallbackReturn.FAILURE
