@@ -1,4 +1,5 @@
-"""pose-lifter experiments: the camera convention, class labels, and a --quick run on real data."""
+"""pose-lifter experiments: the camera convention, class labels, a worker running each kind of task,
+and a --quick run on real data."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import tolerances as tol
 from pose_lifter import cli
 from pose_lifter.core.skeleton import body_frame
 from pose_lifter.mocap import cmu as mocap
+from pose_lifter.mocap.experiment_tasks import BasesTask, LiftSolver, LiftTask, Worker, WorkerInputs, cost
 from pose_lifter.mocap.experiments import action_class, camera_rotation, project
 
 try:
@@ -57,6 +59,35 @@ def test_action_class_labels() -> None:
     assert action_class("playground - climb, sit, dangle legs, jump down") == "sit"
     assert action_class("playground - forward jumps, turn around") == "jump"
     assert action_class("playground - climb, go under") == "climb"
+
+
+def test_a_worker_runs_each_kind_of_task_and_reports_failures_in_the_row() -> None:
+    from pose_lifter.core import PoseBases
+
+    sparse = PoseBases.load()
+    gt = sparse.mean_pose
+    rng = np.random.default_rng(0)
+    train = gt + rng.normal(0.0, 0.05, size=(40, 12, 3))
+    worker = Worker(WorkerInputs(sparse, sparse, train, np.repeat(["a", "b"], 20), train[:6],
+                                 np.full(6, 430.0)))
+    x = project(gt, 30.0)
+    common = {"exp": "exp2_factors", "cond": "clean", "level": 0.0, "pose": 0, "src": "t:0", "yaw": 30.0,
+              "x": x, "conf": None, "gt": gt, "leg_mm": 430.0}
+    lift = LiftTask(**common, method="L1WAWS", solver=LiftSolver.LIFTER, variant="L1WAWS", starts=2)
+    true_camera = LiftTask(**common, method="GT camera", solver=LiftSolver.GT_CAMERA,
+                           rotation=camera_rotation(30.0))
+    rows = [worker.run(task) for task in (lift, true_camera)]
+    for task, row in zip((lift, true_camera), rows, strict=True):
+        assert row["failed"] == "" and row["method"] == task.method and row["exp"] == "exp2_factors"
+        assert 0.0 <= row["err"] < 3.0 and 0.0 <= row["pmpjpe_mm"] < 1000.0
+        assert "x" not in row and "gt" not in row  # rows hold the task's scalars only
+    broken = LiftTask(**{**common, "x": np.full((12, 2), np.nan)}, method="L1WAWS", solver=LiftSolver.LIFTER,
+                      variant="L1WAWS")
+    row = worker.run(broken)
+    assert row["failed"] and np.isnan(row["err"]) and np.isnan(row["pmpjpe_mm"])
+    pca = worker.run(BasesTask("PCA", 3, 0.1))
+    assert pca["failed"] == "" and pca["k"] == 3 and np.isfinite(pca["err"]) and len(pca["active"]) == 6
+    assert cost(BasesTask("PCA", 3, 0.1)) > cost(lift) > cost(true_camera)  # slowest first
 
 
 def _rows(path: Path) -> list[dict[str, str]]:

@@ -1,9 +1,11 @@
 """The installed ``lifter_lifecycle`` driven through its lifecycle transitions on the real graph:
 nothing subscribed before activate, lifting while active, nothing after deactivate, a bad basis
-file fails configure with the reason, and the plain ``lifter`` is unchanged (other tests)."""
+file fails configure with the reason, a signal during configure exits at once with code 0, and
+the plain ``lifter`` is unchanged (other tests)."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import time
 from collections.abc import Iterator
@@ -11,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from .conftest import DISCOVERY_TIMEOUT, INSTALL, REPO, GraphClient, LifterProcess
+from .conftest import DISCOVERY_TIMEOUT, INSTALL, REPO, SHUTDOWN_TIMEOUT, GraphClient, LifterProcess
 from .test_lifter_graph import CHEAP, good_frame
 
 pytestmark = pytest.mark.ros
@@ -128,3 +130,21 @@ def test_configure_with_a_bad_basis_file_fails_with_the_reason(graph: GraphClien
     assert not lc.transition("configure")
     assert lc.state() == "unconfigured" and proc.alive()
     assert "configure failed:" in proc.log()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_signal_during_configure_exits_at_once(graph: GraphClient, managed: Any, sig: int) -> None:
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    proc = managed()
+    lc = Lifecycle(graph)
+    req = ChangeState.Request()
+    req.transition.id = Transition.TRANSITION_CONFIGURE
+    lc.change.call_async(req)  # not waited for: the node is loading the bases and the kernels
+    settle(graph, 0.5)
+    proc.proc.send_signal(sig)
+    sent = time.monotonic()
+    assert proc.proc.wait(SHUTDOWN_TIMEOUT) == 0, proc.log()
+    assert time.monotonic() - sent < 2.0  # the configure in progress is not waited for
+    assert "Traceback" not in proc.log()

@@ -34,10 +34,10 @@ setup(
     entry_points={
         "console_scripts": [
             "lifter = pose_lifter.ros.entry:lifter",
-            "adapter = pose_lifter.ros.adapter_node:main",
-            "lifter_lifecycle = pose_lifter.ros.lifecycle:main",
+            "adapter = pose_lifter.ros.entry:adapter",
+            "lifter_lifecycle = pose_lifter.ros.entry:lifter_lifecycle",
             "pose-lifter = pose_lifter.cli:main",
-            "action_recognition = pose_lifter.ros.action_recognition:main",
+            "action_recognition = pose_lifter.ros.entry:action_recognition",
         ],
     },
 )

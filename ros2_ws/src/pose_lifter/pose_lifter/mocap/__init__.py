@@ -1,1 +1,2 @@
-"""Motion capture: the CMU loaders, views and scenes, prior training, experiments and the action example."""
+"""Motion capture: the CMU data set and its file formats, views and scenes, basis and prior training,
+the paper's experiments and the action example."""

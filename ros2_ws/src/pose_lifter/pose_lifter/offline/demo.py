@@ -6,7 +6,6 @@ skeletons and the ground truth in the camera frame (right).
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
@@ -18,6 +17,7 @@ from pose_lifter.core.skeleton import BONES_FOR_DRAWING
 
 if TYPE_CHECKING:
     from pose_lifter.core.lifter import Lifter
+    from pose_lifter.offline.settings import LiftSettings
 
 __all__ = ["DEFAULT_DEMO_BAG", "find_demo_bag", "plot_frames", "run_demo"]
 
@@ -113,26 +113,38 @@ def plot_frames(
     plt.close(fig)
 
 
-def run_demo(args: argparse.Namespace, make_lifter: Callable[[], Lifter]) -> int:
-    """Lift the demo bag, print the error table, write ``OUT/demo.mcap`` and ``OUT/demo.png``.
+def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str | Path,
+             bag: str | Path | None = None) -> int:
+    """Lift the demo bag, print the error table, write ``out/demo.mcap`` and ``out/demo.png``.
 
-    ``args`` holds the ``pose-lifter demo`` flags (``bag``, ``out``, ``no_warm_start``,
-    ``leg_length``, ``every``); ``make_lifter()`` builds the lifter once the bag is found (the
-    CLI's, from the same flags: a kernel compile is not wasted on a missing bag).
+    Parameters
+    ----------
+    make_lifter : callable
+        Builds the lifter, called once the bag is found (a kernel compile is not wasted on a
+        missing bag).
+    settings : LiftSettings
+        The lift's warm starts, leg length and message step (``warm_start``, ``leg_length_m``,
+        ``every``).
+    out : path
+        Output directory (created).
+    bag : path, optional
+        The bag to lift (default: the committed :data:`DEFAULT_DEMO_BAG`).
+
+    Returns
+    -------
+    int
+        The exit code (0).
     """
     from pose_lifter.messages import convert as m
     from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
     from pose_lifter.offline.bags import read_messages
     from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
     from pose_lifter.offline.lift import lift_bag
-    from pose_lifter.offline.settings import LiftSettings
 
-    bag = Path(args.bag) if args.bag else find_demo_bag()
-    out = Path(args.out)
+    bag = Path(bag) if bag else find_demo_bag()
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     lifter = make_lifter()
-    settings = LiftSettings(warm_start=not args.no_warm_start, leg_length_m=args.leg_length, every=args.every,
-                            smoothing_s=0.0)
     summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, settings, overwrite=True)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")

@@ -1,2 +1,2 @@
 """The ROS 2 shell, the only subpackage that imports rclpy: nodes, parameters, checks, markers,
-diagnostics."""
+statistics and diagnostics (one counter), and the one run loop of every executable."""

@@ -85,7 +85,7 @@ class ActionRecognitionNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter action_recognition``."""
-    run_node(ActionRecognitionNode, "action_recognition", args)
+    run_node(lambda signals: ActionRecognitionNode(), "action_recognition", args)
 
 
 if __name__ == "__main__":

@@ -146,7 +146,7 @@ class AdapterNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter adapter``."""
-    run_node(AdapterNode, NODE_NAME, args)
+    run_node(lambda signals: AdapterNode(), NODE_NAME, args)
 
 
 if __name__ == "__main__":

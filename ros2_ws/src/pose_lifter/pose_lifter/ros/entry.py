@@ -1,27 +1,52 @@
-"""Entry point of ``ros2 run pose_lifter lifter``: signals are handled from the first instruction.
+"""Entry points of the package's executables (``ros2 run pose_lifter <name>``): signals are
+handled from the first instruction.
 
-Importing the node (rclpy, numpy, numba: ~1 s) happens after SIGINT / SIGTERM handlers are in
-place, so a signal during the import exits quietly with code 0 instead of a traceback.
-:func:`pose_lifter.ros.node.main` then takes over the handlers for the start-up and running phases.
+Importing a node (rclpy, numpy, numba: ~1 s) happens after SIGINT / SIGTERM handlers are in
+place, so a signal during the import exits quietly with code 0 instead of a traceback. The
+node's ``main`` then runs it in the one run loop (:func:`pose_lifter.ros.run.run_node`), which
+takes over the handlers for the start-up and running phases.
 """
 
 from __future__ import annotations
 
+import importlib
 import signal
 import sys
 from types import FrameType
+
+__all__ = ["action_recognition", "adapter", "lifter", "lifter_lifecycle"]
 
 
 def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
-def lifter() -> None:
-    """Install the handlers, import the node, run it (see :func:`pose_lifter.ros.node.main`)."""
+def _run(module: str) -> None:
+    """Install the handlers, import ``module``, call its ``main()``."""
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
     try:
-        from pose_lifter.ros.node import main
+        main = importlib.import_module(module).main
     except KeyboardInterrupt:
         sys.exit(0)
     main()
+
+
+def lifter() -> None:
+    """``lifter``: :func:`pose_lifter.ros.node.main`."""
+    _run("pose_lifter.ros.node")
+
+
+def lifter_lifecycle() -> None:
+    """``lifter_lifecycle``: :func:`pose_lifter.ros.lifecycle.main`."""
+    _run("pose_lifter.ros.lifecycle")
+
+
+def adapter() -> None:
+    """``adapter``: :func:`pose_lifter.ros.adapter_node.main`."""
+    _run("pose_lifter.ros.adapter_node")
+
+
+def action_recognition() -> None:
+    """``action_recognition``: :func:`pose_lifter.ros.action_recognition.main`."""
+    _run("pose_lifter.ros.action_recognition")

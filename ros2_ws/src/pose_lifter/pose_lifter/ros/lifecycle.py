@@ -12,25 +12,37 @@ topics), driven by the standard ``rclpy.lifecycle`` transitions (``/pose_lifter/
 - **cleanup**: destroy the publishers; **shutdown**: as cleanup, from any state.
 
 ``ros2 run pose_lifter lifter`` (the plain node) does configure + activate in its constructor.
+Both run in the one run loop (:func:`pose_lifter.ros.run.run_node`): SIGINT / SIGTERM exit with
+code 0, at once during configure (loading, compiling), after the current callback otherwise.
 """
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from typing import Any
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from pose_lifter.core import PoseLifterError
 from pose_lifter.ros.node import NODE_NAME, LifterNode
-from pose_lifter.ros.run import run_node
+from pose_lifter.ros.run import PhasedSignals, run_node
 
 __all__ = ["LifecycleLifterNode", "main"]
 
 
 class LifecycleLifterNode(LifterNode, LifecycleNode):
-    """:class:`LifterNode` whose start is split into lifecycle transitions (see the module doc)."""
+    """:class:`LifterNode` whose start is split into lifecycle transitions (see the module doc).
 
-    def __init__(self, **kwargs: Any) -> None:
+    Parameters
+    ----------
+    signals : PhasedSignals, optional
+        The run loop's signal handling (configure is marked a start-up phase in it).
+    **kwargs
+        Passed to :class:`rclpy.node.Node`.
+    """
+
+    def __init__(self, signals: PhasedSignals | None = None, **kwargs: Any) -> None:
+        self._signals = signals
         self._configured = False
         self._active = False
         super().__init__(**kwargs)
@@ -40,7 +52,9 @@ class LifecycleLifterNode(LifterNode, LifecycleNode):
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            self.configure_lifter()
+            # loading and compiling: a signal exits at once, as during the plain node's start
+            with self._signals.starting() if self._signals is not None else nullcontext():
+                self.configure_lifter()
         except (PoseLifterError, OSError, ValueError) as err:
             self.get_logger().error(f"configure failed: {err}")
             return TransitionCallbackReturn.FAILURE
@@ -74,10 +88,14 @@ class LifecycleLifterNode(LifterNode, LifecycleNode):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run pose_lifter lifter_lifecycle``."""
+    """Entry point of ``ros2 run pose_lifter lifter_lifecycle`` (exit codes as ``lifter``:
+    :func:`pose_lifter.ros.run.run_node`)."""
+    from pose_lifter.core._threads import one_blas_thread
 
-    def make() -> LifecycleLifterNode:
-        node = LifecycleLifterNode()
+    one_blas_thread()  # as the plain node: the solver's matrices are small
+
+    def make(signals: PhasedSignals) -> LifecycleLifterNode:
+        node = LifecycleLifterNode(signals)
         node.get_logger().info("unconfigured: waiting for the configure transition")
         return node
 

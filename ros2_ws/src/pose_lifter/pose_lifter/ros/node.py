@@ -36,14 +36,11 @@ import time
 from pathlib import Path
 from typing import Any, Final
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.signals import SignalHandlerOptions
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from pose_lifter.core._jit import HAVE_NUMBA
@@ -56,13 +53,14 @@ from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
-from pose_lifter.ros.run import PhasedSignals, fatal, one_line
-from pose_lifter.ros.stats import FrameStats
+from pose_lifter.ros.run import run_node
+from pose_lifter.ros.stats import FrameCounter
 
 __all__ = ["NODE_NAME", "LifterNode", "StartupError", "main"]
 
 NODE_NAME: Final[str] = "pose_lifter"
 MARKER_NS: Final[str] = "pose_lifter"
+STATS_LINE: Final[str] = "stats line"  # the statistics line's window in the node's counter
 
 
 class StartupError(Exception):
@@ -113,7 +111,7 @@ class LifterNode(Node):
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
         self._markers = MarkerBook(MARKER_NS, self._types)
         self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
-        self._stats = FrameStats()
+        self._counts = FrameCounter()  # one counter, a window per report (stats line, /diagnostics)
 
         qos_override = QoSOverridingOptions.with_default_policies()
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -121,7 +119,8 @@ class LifterNode(Node):
             self._types.Skeleton3DArray, "skeletons_3d", reliable, qos_overriding_options=qos_override)
         self._pub_markers = self.create_publisher(
             self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
-        self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")))
+        self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")),
+                                                         self._counts)
         if not self._callbacks_added:
             self.add_on_set_parameters_callback(self._validate_parameters)
             self.add_post_set_parameters_callback(self._apply_parameters)
@@ -140,7 +139,10 @@ class LifterNode(Node):
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
         period = float(self._param("stats_period"))
-        self._stats_timer = self.create_timer(period, self._log_stats) if period > 0 else None
+        self._stats_timer = None
+        if period > 0:
+            self._counts.open(STATS_LINE)
+            self._stats_timer = self.create_timer(period, self._log_stats)
         self.get_logger().info(
             f"lifting {self._sub_keypoints.topic_name} -> {self._pub_skeletons.topic_name}: "
             f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
@@ -154,6 +156,7 @@ class LifterNode(Node):
         if self._stats_timer is not None:
             self.destroy_timer(self._stats_timer)
             self._stats_timer = None
+            self._counts.close(STATS_LINE)
         self._pipeline.policy.clear()
 
     def cleanup_lifter(self) -> None:
@@ -261,20 +264,18 @@ class LifterNode(Node):
         if self._settings.publish_markers:  # the Skeleton3Ds' own points, not rebuilt
             shown = [(int(s.track_id), s.joints) for s in lifted]
             self._pub_markers.publish(self._markers.update(msg.header, shown, self._settings.marker_lifetime))
-        self._stats.frame(lifted, time.perf_counter() - received)
-        self._diagnostics.frame(lifted, time.perf_counter() - received)
+        self._counts.frame(lifted, time.perf_counter() - received)
 
     # ------------------------------------------------------------------ diagnostics
 
     def _warn_skip(self, kind: str, text: str) -> None:
         """Count a skipped input and warn, rate-limited per kind (each kind at least once a period)."""
-        self._stats.skipped[kind] += 1
-        self._diagnostics.skipped(kind)
+        self._counts.skip(kind)
         self._throttle.warn(kind, text)
 
     def _on_clipped(self, text: str) -> None:
         """Confidences outside [0, 1] were clipped into it: counted and warned (rate-limited)."""
-        self._stats.clipped += 1
+        self._counts.clip()
         self._throttle.warn("confidence outside [0, 1]", text)
 
     def _check_unknown_parameters(self) -> None:
@@ -287,18 +288,19 @@ class LifterNode(Node):
         self.get_logger().warning(f"{text}; ignored (strict_parameters:=true refuses them)")
 
     def _log_stats(self) -> None:
-        text = self._stats.line()
+        text = self._counts.take(STATS_LINE).line()
         if text:
             self.get_logger().info(text)
-        self._stats = FrameStats()
 
 
 def main(args: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run pose_lifter lifter``.
+    """Entry point of ``ros2 run pose_lifter lifter`` (``--params-yaml``: print config/lifter.yaml;
+    ``--warm-up``: compile the solver kernels into the cache).
 
-    Exit codes: 0 after SIGINT / SIGTERM (in any phase, within a frame's solve time), 1 when the
-    node cannot start (bad parameter value or type, unknown parameter with strict_parameters,
-    bad basis file, bad ROS arguments), with one ``[FATAL]`` line giving the reason.
+    Exit codes (:func:`pose_lifter.ros.run.run_node`): 0 after SIGINT / SIGTERM (in any phase,
+    within a frame's solve time), 1 when the node cannot start (bad parameter value or type,
+    unknown parameter with strict_parameters, bad basis file, bad ROS arguments), with one
+    ``[FATAL]`` line giving the reason.
     """
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:  # config/lifter.yaml
         print(params_yaml(), end="")
@@ -312,31 +314,7 @@ def main(args: list[str] | None = None) -> None:
         print(f"pose_lifter: solver kernels {'compiled' if HAVE_NUMBA else 'not compiled (no numba)'} "
               f"and cached in {seconds:.1f} s")
         return
-    signals = PhasedSignals()
-    node: LifterNode | None = None
-    executor: SingleThreadedExecutor | None = None
-    try:
-        try:
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-            node = LifterNode()
-        except (KeyboardInterrupt, ExternalShutdownException):
-            return
-        except Exception as err:  # bad start-up parameters or basis file: say why, exit 1
-            fatal(NODE_NAME, f"cannot start: {one_line(err)}")
-        signals.running = True
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not signals.stop and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if executor is not None:  # its guard conditions go before the context they belong to
-            executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
+    run_node(lambda signals: LifterNode(), NODE_NAME, args)
 
 if __name__ == "__main__":
     main()

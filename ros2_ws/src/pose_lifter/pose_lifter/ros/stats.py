@@ -1,4 +1,9 @@
-"""The lifter node's statistics line: counters between two lines and the line itself.
+"""The lifter node's one counter of frames, skeletons and skipped inputs, and its statistics line.
+
+The node counts each answered frame, skipped input and clipped skeleton once, in a
+:class:`FrameCounter`; each report of the counts takes its own window of them on its own period:
+the statistics line (:meth:`FrameStats.line`) and ``/diagnostics``
+(:mod:`pose_lifter.ros.diagnostics`).
 
 Every ``stats_period`` s the node logs the frame rate, the latency per frame (callback in ->
 answer published: median, p95, max), the solve time per person-frame (median, p95), the
@@ -15,12 +20,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FrameStats"]
+__all__ = ["FrameCounter", "FrameStats"]
 
 
 @dataclass
 class FrameStats:
-    """Counters between two statistics log lines."""
+    """The counts of one window (from ``started``, :func:`time.monotonic`, to now)."""
 
     started: float = field(default_factory=time.monotonic)
     frames: int = 0
@@ -39,9 +44,13 @@ class FrameStats:
         self.solve_times.extend(float(s.solve_time) for s in lifted)
         self.latencies.append(latency)
 
+    def elapsed(self) -> float:
+        """Seconds since the window started (at least 1 ns)."""
+        return max(time.monotonic() - self.started, 1e-9)
+
     def line(self) -> str:
         """The statistics line (``""`` when nothing happened since the counters started)."""
-        elapsed = max(time.monotonic() - self.started, 1e-9)
+        elapsed = self.elapsed()
         if self.frames == 0 and not self.skipped:
             return ""
         lat = np.asarray(self.latencies) * 1e3
@@ -58,3 +67,43 @@ class FrameStats:
         if self.skipped:
             text += ", skipped: " + ", ".join(f"{k} {n}" for k, n in sorted(self.skipped.items()))
         return text
+
+
+class FrameCounter:
+    """The node's one counter: each count goes into the open window of every report.
+
+    A report opens its window (:meth:`open`), takes it on its own period (:meth:`take`: the
+    counts since the last take, and a new window starts) and closes it when it stops.
+    """
+
+    def __init__(self) -> None:
+        self._windows: dict[str, FrameStats] = {}
+
+    def open(self, report: str) -> None:
+        """Start counting for ``report`` (from now)."""
+        self._windows[report] = FrameStats()
+
+    def close(self, report: str) -> None:
+        """Stop counting for ``report``."""
+        self._windows.pop(report, None)
+
+    def take(self, report: str) -> FrameStats:
+        """The window of ``report`` since its last take (or open); a new window starts."""
+        window = self._windows[report]
+        self._windows[report] = FrameStats()
+        return window
+
+    def frame(self, lifted: Sequence[Any], latency: float) -> None:
+        """One answered frame: its Skeleton3D messages and its latency (s)."""
+        for window in self._windows.values():
+            window.frame(lifted, latency)
+
+    def skip(self, kind: str) -> None:
+        """One skipped input of a kind."""
+        for window in self._windows.values():
+            window.skipped[kind] += 1
+
+    def clip(self) -> None:
+        """One skeleton lifted with confidences clipped into [0, 1]."""
+        for window in self._windows.values():
+            window.clipped += 1

@@ -11,7 +11,7 @@ import yaml
 from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
 from pose_lifter.ros.params import NODE_ONLY, PARAMS, SPECS, NodeSettings, params_yaml, read_params_file
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml"
 DEFAULTS = {f.name: f.default for f in dataclasses.fields(LifterOptions)}
 

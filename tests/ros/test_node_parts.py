@@ -1,6 +1,6 @@
-"""The lifter node's parts that need no ROS graph: the frame pipeline's input checks and its one
-output check, warning throttle, marker bookkeeping and the statistics line (rosbags message types
-stand in for rclpy's)."""
+"""The lifter node's parts that need no ROS graph: input checks, the one output check, warning
+throttle, marker bookkeeping, the one frame counter and its two reports (the statistics line and
+the ``/diagnostics`` values; rosbags message types stand in for rclpy's)."""
 
 from __future__ import annotations
 
@@ -16,9 +16,10 @@ from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import SkipSkeleton, check_output, frame_over_cap, skeleton_input
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from pose_lifter.ros.checks import WarningThrottle
+from pose_lifter.ros.diagnostics import status_level, values
 from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, NodeSettings
-from pose_lifter.ros.stats import FrameStats
+from pose_lifter.ros.stats import FrameCounter, FrameStats
 
 T = m.rosbags_types()
 SETTINGS = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__).frame
@@ -137,3 +138,50 @@ def test_stats_line() -> None:
     assert line.startswith("1 frames (") and "2 skeletons (2 warm)" in line and "solve median 4.0 ms" in line
     assert "latency median 10.0 ms" in line and line.endswith("skipped: duplicate track id 2")
     assert "confidences clipped in 1 skeletons" in line
+
+
+def skeleton3d(track_id: int, solve_time: float, warm: bool) -> Any:
+    return m.result_to_skeleton3d(lift_result(), track_id, np.zeros((12, 3)), T, solve_time=solve_time,
+                                  warm_started=warm)
+
+
+def test_one_counter_gives_each_report_its_own_window() -> None:
+    counter = FrameCounter()
+    skel = skeleton3d(0, 0.004, False)
+    counter.frame([skel], 0.01)  # no report open: counted nowhere
+    counter.open("line")
+    counter.frame([skel], 0.01)
+    counter.open("diagnostics")
+    counter.frame([skel, skel], 0.02)
+    counter.skip("out-of-order stamp")
+    counter.clip()
+    line = counter.take("line")
+    assert (line.frames, line.lifted, line.warm, dict(line.skipped), line.clipped) == (
+        2, 3, 0, {"out-of-order stamp": 1}, 1)
+    assert counter.take("line").frames == 0  # a take starts a new window
+    counter.frame([], 0.01)
+    diag = counter.take("diagnostics")
+    assert (diag.frames, diag.lifted, diag.latencies) == (2, 2, [0.02, 0.01])
+    counter.close("line")
+    counter.frame([], 0.01)
+    assert counter.take("diagnostics").frames == 1
+    with pytest.raises(KeyError):
+        counter.take("line")
+
+
+def test_diagnostics_values_and_levels_of_a_window() -> None:
+    window = FrameStats()
+    assert status_level(0, 0, 0) == (1, "no input on keypoints_2d")
+    skel, cold = skeleton3d(0, 0.004, True), skeleton3d(1, 0.002, False)
+    window.frame([skel, cold, skel, skel], 0.010)
+    kv = dict(values(window))
+    assert (kv["frames"], kv["skeletons lifted"]) == ("1", "4")
+    assert (kv["warm share"], kv["cold share"]) == ("0.750", "0.250")
+    assert (kv["latency median (ms)"], kv["solve median (ms)"], kv["skipped total"]) == ("10.00", "4.00", "0")
+    assert status_level(window.frames, window.lifted, 0) == (0, "lifting")
+    window.skipped["no confident keypoints"] += 2
+    kv = dict(values(window))
+    assert (kv["skipped total"], kv["skipped: no confident keypoints"]) == ("2", "2")
+    assert status_level(1, 4, 2) == (1, "2 inputs skipped")
+    assert status_level(3, 0, 3) == (2, "no skeleton could be lifted (3 skipped)")
+    assert dict(values(FrameStats()))["warm share"] == "nan"

@@ -1,0 +1,131 @@
+"""The one run loop of the package's executables (:func:`pose_lifter.ros.run.run_node`), driven in a
+child process with a plain rclpy node (no colcon install, no graph peers): SIGINT and SIGTERM exit
+with code 0 in every phase, at once while starting (also inside the loop, as a lifecycle configure
+marks it), after the current callback while running; a node that cannot be built is one
+``[FATAL]`` line and exit code 1."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+PROBE = '''
+import sys, time
+from pose_lifter.ros.run import run_node
+
+phase = sys.argv[1]
+
+def make(signals):
+    from rclpy.node import Node
+    if phase == "bad":
+        raise ValueError("theta must be\\n positive")
+    if phase == "starting":
+        print("starting", flush=True)
+        time.sleep(30)
+    node = Node("run_loop_probe")
+
+    def busy():
+        print("callback start", flush=True)
+        time.sleep(1.0)
+        print("callback end", flush=True)
+
+    def configure():
+        with signals.starting():
+            print("configuring", flush=True)
+            time.sleep(30)
+        print("configured", flush=True)
+
+    node.create_timer(0.2, configure if phase == "configure" else busy)
+    return node
+
+run_node(make, "probe", ["probe"])
+print("run_node returned", flush=True)
+'''
+
+#: Seconds for a child to reach a phase (imports on a loaded machine), and to exit after a signal.
+REACH_TIMEOUT = 60.0
+EXIT_TIMEOUT = 10.0
+
+
+def _start(tmp_path: Path, phase: str) -> subprocess.Popen[str]:
+    script = tmp_path / "probe.py"
+    script.write_text(PROBE)
+    src = Path(__file__).resolve().parents[2] / "ros2_ws" / "src" / "pose_lifter"
+    env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+           "ROS_DOMAIN_ID": str(random.SystemRandom().randint(1, 101))}
+    return subprocess.Popen([sys.executable, str(script), phase], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def _wait_for(proc: subprocess.Popen[str], marker: str) -> list[str]:
+    assert proc.stdout is not None
+    lines: list[str] = []
+    deadline = time.monotonic() + REACH_TIMEOUT
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line.rstrip("\n"))
+        if line.strip() == marker:
+            return lines
+    proc.kill()
+    pytest.fail(f"the probe never printed {marker!r}: {lines}")
+
+
+def _stop(proc: subprocess.Popen[str], sig: int) -> tuple[int, float, list[str]]:
+    proc.send_signal(sig)
+    sent = time.monotonic()
+    try:
+        out, _ = proc.communicate(timeout=EXIT_TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, time.monotonic() - sent, out.splitlines()
+
+
+SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+
+
+@SIGNALS
+def test_signal_while_starting_exits_at_once_with_code_0(tmp_path: Path, sig: int) -> None:
+    proc = _start(tmp_path, "starting")
+    _wait_for(proc, "starting")
+    code, seconds, rest = _stop(proc, sig)
+    assert code == 0 and seconds < 2.0 and rest == [], rest  # the 30 s start is not waited for
+
+
+@SIGNALS
+def test_signal_in_a_marked_start_up_phase_of_the_loop_exits_at_once(tmp_path: Path, sig: int) -> None:
+    proc = _start(tmp_path, "configure")
+    _wait_for(proc, "configuring")
+    code, seconds, rest = _stop(proc, sig)
+    assert code == 0 and seconds < 2.0 and rest == [], rest
+
+
+@SIGNALS
+def test_signal_while_running_finishes_the_callback_then_exits_0(tmp_path: Path, sig: int) -> None:
+    proc = _start(tmp_path, "running")
+    _wait_for(proc, "callback start")
+    code, seconds, rest = _stop(proc, sig)
+    assert code == 0 and seconds < EXIT_TIMEOUT, rest
+    assert rest[0] == "callback end" and "callback start" not in rest, rest  # no new callback
+    assert rest[-1] == "run_node returned" and not any("Traceback" in line for line in rest), rest
+
+
+def test_a_node_that_cannot_be_built_is_one_fatal_line_and_exit_1(tmp_path: Path) -> None:
+    proc = _start(tmp_path, "bad")
+    out, _ = proc.communicate(timeout=REACH_TIMEOUT)
+    lines = out.strip().splitlines()
+    assert proc.returncode == 1, out
+    assert len(lines) == 1 and lines[0].startswith("[FATAL]"), out
+    assert lines[0].endswith("cannot start: theta must be positive"), out
