@@ -209,15 +209,8 @@ def hybrid_runs(lifter: LifterParts, x: NDArray[np.float64], xn: NDArray[np.floa
     # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
     n_alt = o.hybrid_alternations
     runs: list[tuple[int, Run]] = [(-3, lifter.runs.run(xn, w, a_prior, cam0, n_alt, prior=prior))]
-    if warm is not None and o.warm_competes:
-        wr = lifter.runs.run(xn, w, warm.alpha, cam0, max_alternations=1, prior=prior,
-                       pose_max_iter=o.screen_pose_max_iter)
-        if wr.objective < runs[0][1].objective:
-            wr = lifter.runs.run(xn, w, wr.pose.alpha, None, n_alt, start=wr, prior=prior)
-        runs.append((-1, wr))
-    if o.warm_flip and (warm is None or o.hybrid_flip_warm):
-        best = min(runs, key=lambda r: r[1].objective)[1]
-        runs.append((-2, lifter.runs.mirrored_run(xn, w, best, prior, n_alt)))
+    if o.warm_flip and warm is None:
+        runs.append((-2, lifter.runs.mirrored_run(xn, w, runs[0][1], prior, n_alt)))
     total = sum(r.n_iter for _, r in runs)
     n_starts = len(runs)
     threshold = o.outlier_threshold_gated if gated else o.outlier_threshold

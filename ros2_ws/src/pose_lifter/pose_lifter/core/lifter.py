@@ -24,9 +24,9 @@ with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_err
 step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
 :class:`.pose_step.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
 paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
-Starts: every frame starts from the prior's pose (with the warm start's camera when tracked; the
-warm pose competes only with ``warm_competes``), ``hybrid_alternations`` alternations per run;
-the depth-mirrored hypothesis is scored on cold solves (and warm ones with ``hybrid_flip_warm``).
+Starts: every frame starts from the prior's pose (with the warm start's camera when tracked),
+``hybrid_alternations`` alternations per run; the depth-mirrored hypothesis is scored on cold
+solves (on warm ones it won no frame: the prior re-initialises the depth on every frame).
 Then up to ``outlier_passes`` outlier passes: visible joints farther than ``outlier_threshold``
 (and ``OUTLIER_MEDIAN_FACTOR`` times the frame's median) from the fit's projection or from the
 prior's image position get weight 0, the prior is re-run without them and the fit is continued
