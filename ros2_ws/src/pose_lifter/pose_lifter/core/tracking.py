@@ -55,10 +55,10 @@ from numpy.typing import NDArray
 
 from ._fast import mean_rows, median_rows, row_norms
 from .errors import PoseLifterError
-from .lifter import Lifter, TrackContext
+from .lifter import Lifter
 from .measurement import MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
-from .results import LiftResult, WarmStart
+from .results import LiftResult, TrackContext, WarmStart
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, RIGHT_LIMBS
 
 LIMB_A = np.array([a for a, _ in LIMBS])
