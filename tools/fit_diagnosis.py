@@ -133,10 +133,10 @@ def main(argv: list[str] | None = None) -> int:
     lifter.warm_up()
     hybrid_mod.PriorFit.starts = _wrapped(hybrid_mod.PriorFit.starts)  # type: ignore[method-assign]
     if args.true_limbs:
-        from pose_lifter.core import tracking
+        from pose_lifter.core import track as track_mod
         def true_props(self: Any, image: bool = False) -> Any:
             return CAPTURE["true_props"]
-        tracking._Track.limb_proportions = true_props  # type: ignore[method-assign]
+        track_mod.Track.limb_proportions = true_props  # type: ignore[method-assign]
     rows: list[dict[str, float]] = []
     seqs: list[tuple[NDArray[np.float64], ...]] = []
     jit: dict[str, list[float]] = {"fit": [], "prior": [], "switch": [], "steady": []}

@@ -434,7 +434,7 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     """A window-2 prior (random weights: the plumbing, not the accuracy) gets the previous frame
     from the lift's ``past``; no past means the current frame repeated; the per-track policy
     hands over only evenly spaced frames."""
-    from pose_lifter.core.tracking import _Track
+    from pose_lifter.core.track import Track
 
     rng = np.random.default_rng(0)
     net = PosePrior((rng.normal(size=(72, 16)) * 0.3, rng.normal(size=(16, 36)) * 0.3),
@@ -450,7 +450,7 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     assert moved is not None and np.abs(moved - now).max() > 1e-3
     with pytest.raises(InvalidInputError):
         lifter.lift(x[1], track=TrackContext(past=(x[0], vis)))
-    track = _Track(None, 0)
+    track = Track(None, 0)
     for stamp in (0, 100, 133, 166):  # a gap, then 33 ms steps
         track.history.append((stamp, np.full((12, 2), float(stamp)), np.ones(12, dtype=bool)))
     past = track.past(199, 5)
