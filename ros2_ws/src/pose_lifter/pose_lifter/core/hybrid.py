@@ -54,7 +54,7 @@ class TargetStatus(IntEnum):
 def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], spread: float,
                    previous: NDArray[np.float64], temporal_weight: NDArray[np.float64],
                    visible: NDArray[np.bool_], blend: bool) -> tuple[NDArray[np.float64], int]:
-    """The prior rows' target (12, 3) of :func:`prior_rows`: the prior's ``pose`` (12, 3, input
+    """The prior rows' target (12, 3) of :meth:`PriorFit.rows`: the prior's ``pose`` (12, 3, input
     units) in the normalised frame (``(x - centre) / spread``, depth ``/ spread``), and with
     ``blend`` the previous frame's pose ``P`` (12, 3, same frame), its image positions moved by
     the median over the ``visible`` joints of the target's minus its own (numpy's median: the

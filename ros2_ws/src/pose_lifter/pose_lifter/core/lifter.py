@@ -78,10 +78,6 @@ KERNEL_MODES: tuple[Mode, ...] = ("hybrid", "paper")
 _LEFT_LIMBS = np.array(LEFT_LIMBS)
 _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
-
-
-
-
 _NO_TRACK = TrackContext()
 
 
