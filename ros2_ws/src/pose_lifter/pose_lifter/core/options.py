@@ -290,11 +290,11 @@ class UserOptions(_Validated):
     hybrid_pose_max_iter: int = field(default=20, metadata=_meta(
         "Hybrid: pose-step ADM iterations at most per alternation.", 1, _ITER))
 
-
     @property
     def method(self) -> Variant:
         """The :class:`Variant` named by ``variant``."""
         return get_variant(self.variant)
+
 
 @dataclass(frozen=True)
 class ExperimentOptions(_Validated):
