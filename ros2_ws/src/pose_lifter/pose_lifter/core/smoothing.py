@@ -16,8 +16,6 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .skeleton import N_JOINTS
-
 __all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing"]
 
 #: Standard deviation (seconds of input time) of the Gaussian window ``pose-lifter lift`` applies
@@ -116,14 +114,14 @@ class CausalSmoother:
     def __init__(self) -> None:
         self.correction: NDArray[np.float64] | None = None
         self.level: NDArray[np.float64] | None = None
-        self.velocity = np.zeros((N_JOINTS, 3))
+        self.velocity: NDArray[np.float64] | None = None
 
     def update(self, fit: NDArray[np.float64], prior: NDArray[np.float64], b: float, gain: float
                ) -> NDArray[np.float64]:
         """The smoothed pose (12, 3) for this frame's fit and prior poses (12, 3)."""
         corr = fit - prior
-        if self.correction is None or self.level is None:
-            self.correction, self.level = corr, prior.copy()
+        if self.correction is None or self.level is None or self.velocity is None:
+            self.correction, self.level, self.velocity = corr, prior.copy(), np.zeros_like(prior)
             return np.asarray(fit, dtype=np.float64).copy()
         self.correction = b * self.correction + (1.0 - b) * corr
         predicted = self.level + self.velocity
