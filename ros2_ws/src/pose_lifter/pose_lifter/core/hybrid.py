@@ -60,8 +60,8 @@ def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], sprea
     the median over the ``visible`` joints of the target's minus its own (numpy's median: the
     middle of the sorted values, or the mean of the two middle ones), blended in by
     ``temporal_weight`` ``t`` (12,) as ``(target + t P) / (1 + t)`` (when some ``t > 0``):
-    numpy's operations of the code it replaces, one by one. Returns ``(target, status)``:
-    :class:`TargetStatus`."""
+    numpy's operations of the code it replaces, one by one. Returns ``(target, status)``, the
+    status a :class:`TargetStatus` value (an int: a compiled function boxes no enum member)."""
     nj = pose.shape[0]
     target = np.empty((nj, 3))
     for j in range(nj):
@@ -71,19 +71,19 @@ def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], sprea
     for j in range(nj):
         for a in range(3):
             if not math.isfinite(target[j, a]):
-                return target, TargetStatus.NOT_FINITE
+                return target, TargetStatus.NOT_FINITE.value
     if not blend:
-        return target, TargetStatus.OK
+        return target, TargetStatus.OK.value
     weighted = False
     for j in range(nj):
         weighted = weighted or temporal_weight[j] > 0
     if not weighted:
-        return target, TargetStatus.OK
+        return target, TargetStatus.OK.value
     n = 0
     for j in range(nj):
         n += visible[j]
     if n == 0:
-        return target, TargetStatus.NO_JOINT
+        return target, TargetStatus.NO_JOINT.value
     d0 = np.empty(n)
     d1 = np.empty(n)
     k = 0
@@ -102,7 +102,7 @@ def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], sprea
         target[j, 0] = (target[j, 0] + t * (previous[j, 0] + m0)) / (1.0 + t)
         target[j, 1] = (target[j, 1] + t * (previous[j, 1] + m1)) / (1.0 + t)
         target[j, 2] = (target[j, 2] + t * previous[j, 2]) / (1.0 + t)
-    return target, TargetStatus.OK
+    return target, TargetStatus.OK.value
 
 
 def _prior_weights(prior: PosePrior, weight_xy: float, weight_z: float) -> NDArray[np.float64]:
