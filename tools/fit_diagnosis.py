@@ -41,9 +41,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from accuracy import CENTRE, FOCAL, _parse
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core import hybrid as hybrid_mod
-from pose_lifter.core import lifter as lifter_mod
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.metrics import procrustes_align
+from pose_lifter.core.results import StartKind
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, limb_lengths, normalise_pose_flat
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial
@@ -51,28 +51,30 @@ from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import film, view_rotation
 
 CAPTURE: dict[str, Any] = {}
+#: The saved ``start`` column: a cold start's index, or a negative code for the other kinds.
+START_CODES = {StartKind.WARM: -1, StartKind.MIRRORED: -2, StartKind.PRIOR: -3, StartKind.LEARNED: -4}
 
 
 def _wrapped(orig: Any) -> Any:
-    def hybrid_runs(lifter: Any, x: Any, xn: Any, w: Any, norm: Any, warm: Any, cam0: Any, limbs: Any,
-                    tw: Any, past: Any = None, gated: bool = False, fill: Any = None) -> Any:
-        out = orig(lifter, x, xn, w, norm, warm, cam0, limbs, tw, past, gated, fill)
-        CAPTURE["args"] = (x, xn, w, norm, warm, cam0, limbs, tw, past, gated, fill)
+    def starts(fit: Any, x: Any, xn: Any, w: Any, norm: Any, warm: Any, cam0: Any, track: Any) -> Any:
+        out = orig(fit, x, xn, w, norm, warm, cam0, track)
+        CAPTURE["fit"] = fit
+        CAPTURE["args"] = (x, xn, w, norm, warm, cam0, track)
         CAPTURE["out"] = out
         return out
-    return hybrid_runs
+    return starts
 
 
 def _oracle(lifter: Lifter, truth_c: NDArray[np.float64], scale_px: float) -> dict[str, float]:
     """The truth's start under the frame's captured prior rows: objectives at the default caps and
     at convergence, and their errors."""
-    x, xn, _, norm, warm, cam0, limbs, tw, past, _, fill = CAPTURE["args"]
-    runs_out, _, _, w_after, _ = CAPTURE["out"]
+    x, xn, _, norm, warm, cam0, track = CAPTURE["args"]
+    w_after = CAPTURE["out"].weights
     prev = None
     if warm is not None and cam0 is not None:
         pv = lifter.model.pose(warm.alpha)
         prev = np.column_stack([cam0.project(pv), cam0.scale * (pv - pv.mean(0)) @ cam0.rotation[2]])
-    prior, _ = hybrid_mod.prior_rows(lifter, x, w_after, norm, limbs, prev, tw, past, fill)
+    prior, _ = CAPTURE["fit"].rows(x, w_after, norm, track, prev)
     # the truth in the normalised frame: its image positions there, depth at the same scale
     target = np.empty((12, 3))
     target[:, :2] = xn
@@ -82,7 +84,7 @@ def _oracle(lifter: Lifter, truth_c: NDArray[np.float64], scale_px: float) -> di
     o = lifter.options
     r_caps = lifter.runs.run(xn, w_after, a_true, cam0, o.hybrid_alternations, prior=prior)
     r_conv = lifter.runs.run(xn, w_after, a_true, cam0, 20, prior=prior, pose_max_iter=200)
-    best = min(runs_out, key=lambda r: r[1].objective)[1]
+    best = CAPTURE["out"].best().run
     r_fit_conv = lifter.runs.run(xn, w_after, best.pose.alpha, best.camera.camera, 20, prior=prior,
                                  pose_max_iter=200)
     th = o.theta
@@ -129,12 +131,12 @@ def main(argv: list[str] | None = None) -> int:
     opts = LifterOptions().replace(**settings)
     lifter = Lifter(PoseBases.load(args.bases or default_bases_path("hybrid")), opts)
     lifter.warm_up()
-    lifter_mod.hybrid_runs = _wrapped(hybrid_mod.hybrid_runs)  # type: ignore[assignment]
+    hybrid_mod.PriorFit.starts = _wrapped(hybrid_mod.PriorFit.starts)  # type: ignore[method-assign]
     if args.true_limbs:
-        from pose_lifter.core import tracking
+        from pose_lifter.core import track as track_mod
         def true_props(self: Any, image: bool = False) -> Any:
             return CAPTURE["true_props"]
-        tracking._Track.limb_proportions = true_props  # type: ignore[method-assign]
+        track_mod.Track.limb_proportions = true_props  # type: ignore[method-assign]
     rows: list[dict[str, float]] = []
     seqs: list[tuple[NDArray[np.float64], ...]] = []
     jit: dict[str, list[float]] = {"fit": [], "prior": [], "switch": [], "steady": []}
@@ -167,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
                 pp = r.prior_pose - r.prior_pose.mean(0)
                 pp = pp / limb_lengths(pp)[RIGHT_LOWER_LEG]  # the prior's pose, its right shin = 1
                 pri[i] = pp * leg_m[i]
-                starts[i] = r.start_index
+                starts[i] = START_CODES.get(r.start, r.start_index)
                 vis = conf[i] >= opts.confidence_threshold
                 row = {"e_fit": 1000 * float(p_mpjpe(fit[i], truth[i])),
                        "e_prior": 1000 * float(p_mpjpe(pri[i], truth[i])),
@@ -175,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                        "m_prior": 1000 * float(np.linalg.norm(pri[i] - truth[i], axis=1).mean()),
                        "e_published": out_m,
                        "dropped": float(np.count_nonzero(vis & (r.weights == 0))),
-                       "start": float(r.start_index), "warm": float(tl.warm_started),
+                       "start": float(starts[i]), "warm": float(tl.warm_started),
                        "reinit": float(tl.reinitialised)}
                 # representation: the truth's residual from the bases' span (body frame, leg = 1)
                 body, ok = normalise_pose_flat(np.ascontiguousarray(truth[i]))
@@ -187,8 +189,8 @@ def main(argv: list[str] | None = None) -> int:
                 tl_ = np.log(limb_lengths(truth[i]))
                 ml_ = np.log(np.sqrt(lifter.model.limb_sq))
                 row["limb_model_err"] = float(np.abs((tl_ - tl_.mean()) - (ml_ - ml_.mean())).mean())
-                if CAPTURE.get("args") and CAPTURE["args"][6] is not None:
-                    rad = lifter.limb_radii(CAPTURE["args"][6])
+                if CAPTURE.get("args") and CAPTURE["args"][6].limb_proportions is not None:
+                    rad = CAPTURE["fit"].limb_radii(CAPTURE["args"][6].limb_proportions)
                     if rad is not None:
                         rl_ = np.log(rad)
                         row["limb_track_err"] = float(np.abs((tl_ - tl_.mean()) - (rl_ - rl_.mean())).mean())

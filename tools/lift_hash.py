@@ -61,7 +61,7 @@ from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
 from pose_lifter.core.options import LifterOptions
-from pose_lifter.core.results import LiftResult
+from pose_lifter.core.results import LiftResult, StartKind
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
@@ -131,9 +131,13 @@ def _keypoints(bag: Path) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]
     return kps, infos
 
 
+#: Where the kept run began, as hashed: a cold start's index, or a fixed negative code per kind.
+START_CODES = {StartKind.WARM: -1, StartKind.MIRRORED: -2, StartKind.PRIOR: -3, StartKind.LEARNED: -4}
+
+
 def _hash_result(d: Digest, f: FrameLift, r: LiftResult) -> None:
     d.ints(f.stamp_ns, f.track_id, int(f.warm_started), r.n_iter, r.total_alternations, r.n_starts,
-           r.start_index, int(r.converged))
+           START_CODES.get(r.start, r.start_index), int(r.converged))
     d.floats(f.joints_m, r.pose, r.alpha, r.camera.rotation, r.camera.scale, r.camera.translation,
              r.objective, r.reprojection_error, r.limb_violation, r.weights)
 

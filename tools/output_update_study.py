@@ -180,9 +180,11 @@ TIMES: list[float] = []
 
 def replay_smoother(d: dict[str, NDArray[Any]], b: float = 0.7, low: float = 0.55, keep: bool = False
                     ) -> NDArray[np.float64]:
-    """The track's output smoother (core.tracking._Smoother) again on the recorded fits and priors
+    """The track's output smoother (core.smoothing.CausalSmoother) again on the recorded fits and priors
     (``keep``: not restarted when a warm track's frame was solved cold)."""
+    from pose_lifter.core import track as tk
     from pose_lifter.core import tracking as tr
+    from pose_lifter.core.smoothing import CausalSmoother
     out = d["fit"].copy()
     sm = None
     shares: list[float] = []
@@ -196,16 +198,16 @@ def replay_smoother(d: dict[str, NDArray[Any]], b: float = 0.7, low: float = 0.5
         if not d["ok"][i]:
             sm = None
             continue
-        shares = [*shares, float(np.count_nonzero(d["weights"][i] <= 0)) / 12.0][-tr.DISTURBANCE_FRAMES:]
+        shares = [*shares, float(np.count_nonzero(d["weights"][i] <= 0)) / 12.0][-tk.DISTURBANCE_FRAMES:]
         noise = float(d["noise"][i])
-        dw = 1.0 if noise <= 0 else float(np.clip(tr.NOISE_REFERENCE / max(noise, 1e-12),
-                                                  tr.NOISE_MIN_WEIGHT, 1.0))
+        dw = 1.0 if noise <= 0 else float(np.clip(tk.NOISE_REFERENCE / max(noise, 1e-12),
+                                                  tk.NOISE_MIN_WEIGHT, 1.0))
         prior = d["prior"][i]
         if not np.isfinite(prior).all():
             sm = None
             continue
         if sm is None or (not d["follows"][i] and not keep):
-            sm = tr._Smoother()
+            sm = CausalSmoother()
         dist = max(sum(shares) / len(shares), tr.NOISE_DISTURBANCE * (1.0 - dw))
         gain = 1.0 - min(1.0, dist / tr.DISTURBANCE_FULL) * (1.0 - low)
         out[i] = sm.update(d["fit"][i], prior, b, gain)

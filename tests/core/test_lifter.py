@@ -20,6 +20,7 @@ from pose_lifter.core import (
     LifterOptions,
     OptionsError,
     PoseBases,
+    StartKind,
     TooFewJointsError,
     limb_lengths,
     p_mpjpe,
@@ -100,7 +101,7 @@ def test_warm_start_from_the_optimum_converges_in_few_alternations(
     cold = lifter.lift(x)
     warm = lifter.lift(x, warm=cold.warm_start())
     # the warm start and its depth mirror (options.warm_flip); the optimum stops after one alternation
-    assert warm.start_index == -1 and warm.n_starts == 2
+    assert warm.start is StartKind.WARM and warm.start_index == -1 and warm.n_starts == 2
     assert warm.n_iter <= 3
     # the work: two short runs against ten screened starts and three refined ones
     assert warm.total_alternations <= 6 < 10 < cold.total_alternations

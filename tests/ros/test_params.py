@@ -8,7 +8,7 @@ import re
 from pathlib import Path
 
 import yaml
-from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
+from pose_lifter.core.options import EXPERIMENT_OPTIONS, NODE_OPTIONS, OPTION_META, LifterOptions
 from pose_lifter.ros.params import NODE_ONLY, PARAMS, SPECS, NodeSettings, params_yaml, read_params_file
 
 REPO = Path(__file__).resolve().parents[2]
@@ -24,7 +24,7 @@ def test_option_parameters_are_the_metadata() -> None:
         assert p.default == DEFAULTS[p.name] and type(p.default) is type(DEFAULTS[p.name]), p.name
         assert (p.description, p.low, p.high) == (meta.doc, meta.low, meta.high), p.name
         assert p.constraints == meta.constraint_text(), p.name
-        assert p.experiment is meta.experiment and not p.read_only, p.name
+        assert not p.read_only, p.name
     assert len(SPECS) == len(PARAMS)  # no name twice
 
 
@@ -39,7 +39,6 @@ def test_the_yaml_states_each_range_and_default() -> None:
         assert comments[p.name].startswith(f"# {p.description}"), p.name
         if p.range_text():
             assert p.range_text() in comments[p.name], p.name
-        assert ("(experiment toggle)" in comments[p.name]) is p.experiment, p.name
     assert "theta: 0.1" in text and "[0, 1e+06]" in comments["theta"]
     assert "(0, 1)" in comments["alternation_tol"]  # open: the bounds are refused
 
@@ -73,6 +72,5 @@ def test_the_node_docs_list_every_parameter_and_the_experiment_toggles() -> None
     listed = set(re.findall(r"`([a-z_0-9]+)`", section))
     assert listed & set(OPTION_META) - set(SPECS) <= {"alpha_step", "warm_duals"}  # named as not parameters
     assert set(SPECS) <= listed
-    toggles = section[section.index("experiment toggles kept as parameters ("):]
-    toggles = toggles[:toggles.index(";")]
-    assert set(re.findall(r"`([a-z_0-9]+)`", toggles)) == {p.name for p in PARAMS if p.experiment}
+    assert "`ExperimentOptions`" in section and "are not node parameters" in section
+    assert not set(EXPERIMENT_OPTIONS) & set(SPECS)

@@ -22,10 +22,19 @@ if TYPE_CHECKING:
         UnknownLayoutError,
     )
     from .layouts import LAYOUTS, get_layout, to_model_joints
-    from .lifter import Lifter, TrackContext
+    from .lifter import Lifter
     from .metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
-    from .options import VARIANTS, LifterOptions, Variant, get_variant
-    from .results import Camera, CameraResult, LiftResult, PoseResult, SolveInfo, WarmStart
+    from .options import VARIANTS, ExperimentOptions, LifterOptions, UserOptions, Variant, get_variant
+    from .results import (
+        Camera,
+        CameraResult,
+        LiftResult,
+        PoseResult,
+        SolveInfo,
+        StartKind,
+        TrackContext,
+        WarmStart,
+    )
     from .skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
 
 #: Public name -> the module of this package that defines it.
@@ -45,13 +54,14 @@ _MODULE_OF: dict[str, str] = {
     "get_layout": "layouts",
     "to_model_joints": "layouts",
     "Lifter": "lifter",
-    "TrackContext": "lifter",
     "mpjpe": "metrics",
     "normalised_error": "metrics",
     "p_mpjpe": "metrics",
     "per_joint_error": "metrics",
     "procrustes_align": "metrics",
+    "ExperimentOptions": "options",
     "LifterOptions": "options",
+    "UserOptions": "options",
     "VARIANTS": "options",
     "Variant": "options",
     "get_variant": "options",
@@ -65,6 +75,8 @@ _MODULE_OF: dict[str, str] = {
     "LiftResult": "results",
     "PoseResult": "results",
     "SolveInfo": "results",
+    "StartKind": "results",
+    "TrackContext": "results",
     "WarmStart": "results",
 }
 
@@ -77,6 +89,7 @@ __all__ = [
     "BasisFileError",
     "Camera",
     "CameraResult",
+    "ExperimentOptions",
     "InvalidInputError",
     "LiftResult",
     "Lifter",
@@ -87,9 +100,11 @@ __all__ = [
     "PoseResult",
     "SolveInfo",
     "SolverError",
+    "StartKind",
     "TooFewJointsError",
     "TrackContext",
     "UnknownLayoutError",
+    "UserOptions",
     "Variant",
     "WarmStart",
     "get_layout",

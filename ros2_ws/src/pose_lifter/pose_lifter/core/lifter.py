@@ -24,9 +24,9 @@ with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_err
 step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
 :class:`.pose_step.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
 paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
-Starts: every frame starts from the prior's pose (with the warm start's camera when tracked; the
-warm pose competes only with ``warm_competes``), ``hybrid_alternations`` alternations per run;
-the depth-mirrored hypothesis is scored on cold solves (and warm ones with ``hybrid_flip_warm``).
+Starts: every frame starts from the prior's pose (with the warm start's camera when tracked),
+``hybrid_alternations`` alternations per run; the depth-mirrored hypothesis is scored on cold
+solves (on warm ones it won no frame: the prior re-initialises the depth on every frame).
 Then up to ``outlier_passes`` outlier passes: visible joints farther than ``outlier_threshold``
 (and ``OUTLIER_MEDIAN_FACTOR`` times the frame's median) from the fit's projection or from the
 prior's image position get weight 0, the prior is re-run without them and the fit is continued
@@ -39,10 +39,11 @@ Input normalisation: the 2D points are centred on the weighted centroid of the v
 and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
 mean the same at any image size. Results are mapped back to input units.
 
-Where it lives: this module checks the input once, normalises it, picks the starts and maps the
-winner back (one output check); a run of alternations is :mod:`.runs`, the hybrid and learned
-modes' prior terms, starts and outlier pass are :mod:`.hybrid`, the steps :mod:`.camera` and
-:mod:`.pose_step`.
+Where it lives: this module checks the input once, normalises it, picks the mode's starts and
+maps the winner back (one output check); the bases, pose model and priors are loaded by
+:mod:`.models`, the paper's starts are :mod:`.starts`, a run of alternations is :mod:`.runs`, the
+hybrid and learned modes' prior terms, starts and outlier pass are :mod:`.hybrid`, the steps
+:mod:`.camera` and :mod:`.pose_step`.
 """
 
 from __future__ import annotations
@@ -50,32 +51,26 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._fast import mean_rows, row_norms
 from .alpha.lifted_admm import QStepFn
-from .bases import PoseBases, default_bases_path
+from .bases import PoseBases
 from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
-from .hybrid import hybrid_runs, lift_learned
+from .hybrid import PriorFit
+from .models import LifterData
 from .options import LifterOptions, Mode
 from .pose_model import LiftedConstraints, PoseModel
-from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
-from .results import Camera, LiftResult, Normalisation, WarmStart
-from .runs import Run, Runs
-from .skeleton import (
-    ANTHROPOMETRIC_PROPORTIONS,
-    LEFT_LIMBS,
-    LIMB_GROUP_OF,
-    N_JOINTS,
-    RIGHT_LIMBS,
-    limb_lengths,
-)
+from .prior import PosePrior
+from .results import Camera, LiftResult, Normalisation, TrackContext, WarmStart
+from .runs import Runs
+from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, N_JOINTS, RIGHT_LIMBS, limb_lengths
+from .starts import StartRun, paper_starts
 from .validation import check_keypoints
 
-__all__ = ["KERNEL_MODES", "Lifter", "TrackContext", "compile_kernels"]
+__all__ = ["KERNEL_MODES", "Lifter", "compile_kernels"]
 
 #: The modes whose default paths :func:`compile_kernels` runs: between them, every compiled kernel
 #: a default lift calls (``learned`` calls none of its own).
@@ -83,52 +78,6 @@ KERNEL_MODES: tuple[Mode, ...] = ("hybrid", "paper")
 _LEFT_LIMBS = np.array(LEFT_LIMBS)
 _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
-
-
-
-
-@dataclass(frozen=True)
-class TrackContext:
-    """What a track knows about this frame of its person (:class:`pose_lifter.core.tracking.TrackPolicy`
-    fills it; every field is optional). Used by the hybrid mode; the learned mode reads ``past``.
-
-    Attributes
-    ----------
-    limb_proportions : ndarray, shape (8,), optional
-        The person's limb proportions (the track's estimate over its frames), used for the limb
-        constraints with ``options.prior_limbs``.
-    data_weight : float
-        Factor on the 2D term's weights, in (0, 1] (the track's estimate of its detector's noise).
-    temporal_weight : float or ndarray, shape (12,)
-        With a warm start: weight ``w`` (per joint, or one for all) of the warm start's pose ``Y``
-        in the prior term's target ``(P + w Y) / (1 + w)``, ``Y``'s image positions moved by the
-        median motion of the visible joints since it (0: none; the policy sets it from the track's
-        2D noise, up to ``options.temporal_weight``, and to ``options.missing_temporal_weight`` for
-        joints missing in this frame).
-    past : (ndarray (k, 12, 2), ndarray of bool (k, 12)), optional
-        The track's previous frames (oldest first, evenly spaced up to this one) and which of
-        their joints were used: the input of a temporal prior (``PosePrior.window > 1``; missing
-        history is padded with the oldest frame given, or this one). Ignored by a single-frame
-        prior.
-    gated : bool
-        The frame was screened by the per-track outlier gate; the outlier pass then uses
-        ``options.outlier_threshold_gated`` instead of ``options.outlier_threshold``.
-    fill : (ndarray (12, 2), ndarray of bool (12,)), optional
-        Predicted image positions of the joints (input units) and which of them may stand in for
-        a joint this frame lacks (missing: low confidence or non-finite) in the learned prior's
-        input; the 2D fit still ignores such a joint. A joint the outlier pass flags is not
-        filled: it disagreed with the fit or the prior on this frame (filled or not, the held-out
-        figures agreed within 0.2 mm).
-    """
-
-    limb_proportions: NDArray[np.float64] | None = None
-    data_weight: float = 1.0
-    temporal_weight: float | NDArray[np.float64] = 0.0
-    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
-    gated: bool = False
-    fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
-
-
 _NO_TRACK = TrackContext()
 
 
@@ -149,15 +98,11 @@ class Lifter:
     def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None,
                  prior: PosePrior | None = None, temporal_prior: PosePrior | None = None) -> None:
         self._options = options if options is not None else LifterOptions()
-        self.bases = bases if bases is not None else PoseBases.load(default_bases_path(self._options.mode))
-        self._prior: PosePrior | None = prior
-        self._prior_key: str | None = None if prior is None else self._options.prior_file
-        self._temporal: PosePrior | None = temporal_prior
-        self._temporal_key: str | None = None if temporal_prior is None else self._options.temporal_prior_file
-        self._model: PoseModel | None = None
-        self._model_key: str | None = None
-        mp = self.bases.mean_pose
-        self._mean_spread = float(np.sqrt(np.mean(np.sum((mp[:, :2] - mp[:, :2].mean(0)) ** 2, axis=1))))
+        o = self._options
+        self._data = (LifterData(bases, prior, temporal_prior, o.prior_file, o.temporal_prior_file)
+                      if bases is not None else
+                      LifterData.packaged(o.mode, prior, temporal_prior, o.prior_file, o.temporal_prior_file))
+        self.bases = self._data.bases
         self._build()
 
     @property
@@ -174,10 +119,7 @@ class Lifter:
     @property
     def prior(self) -> PosePrior:
         """The learned prior (loaded from ``options.prior_file`` on first use)."""
-        if self._prior is None or self._prior_key != self._options.prior_file:
-            self._prior = PosePrior.load(self._options.prior_file or None)
-            self._prior_key = self._options.prior_file
-        return self._prior
+        return self._data.prior(self._options.prior_file)
 
     @property
     def temporal_prior(self) -> PosePrior | None:
@@ -185,42 +127,34 @@ class Lifter:
         ``options.temporal_prior_file`` on first use), or None when it is off."""
         if not self._options.temporal_prior:
             return None
-        if self._temporal is None or self._temporal_key != self._options.temporal_prior_file:
-            self._temporal = PosePrior.load(self._options.temporal_prior_file or DEFAULT_TEMPORAL_PRIOR_PATH)
-            self._temporal_key = self._options.temporal_prior_file
-        return self._temporal
+        return self._data.temporal_prior(self._options.temporal_prior_file)
 
     @property
     def model(self) -> PoseModel:
         """Precomputed pose-step data of the current bases and limb targets."""
-        assert self._model is not None
         return self._model
 
     def _build(self) -> None:
-        key = self._options.limb_proportions
-        if self._model is None or self._model_key != key:
-            props = self.bases.limb_proportions if key == "bases" else ANTHROPOMETRIC_PROPORTIONS
-            self._model = PoseModel.build(self.bases, props)
-            self._model_key = key
-            #: the mean log length of the model's own limbs (:meth:`limb_radii`)
-            self._log_limb_mean = float(np.mean(np.log(np.sqrt(self._model.limb_sq))))
-        self._qstep_fn: QStepFn | None = None
-        if self._options.mode != "paper":
-            _ = self.prior, self.temporal_prior  # load (and validate) the priors now, not on the first frame
-            if self._options.mode == "hybrid" and (self._options.alpha_solver != "riemannian"
-                                                   or not self._options.method.limbs
-                                                   or self.model.limb_coordinates is None):
-                raise OptionsError("mode 'hybrid' needs alpha_solver='riemannian', a variant with limb "
-                                   "constraints and bases with >= 24 independent directions")
-        if self._options.pose_solver == "cvxpy":
+        o = self._options
+        self._model = self._data.model(o.limb_proportions)
+        qstep_fn: QStepFn | None = None
+        if o.pose_solver == "cvxpy":
             from .reference import reference_qstep
 
             def _q(w: NDArray[np.float64], cons: LiftedConstraints, p: NDArray[np.float64],
                    g: NDArray[np.float64], delta: float) -> NDArray[np.float64]:
                 return np.asarray(reference_qstep(w, cons.omegas, p, g, delta))
 
-            self._qstep_fn = _q
-        self._runs = Runs(self.model, self._options, self._qstep_fn)
+            qstep_fn = _q
+        self._runs = Runs(self._model, o, qstep_fn)
+        self._prior_fit: PriorFit | None = None
+        if o.mode != "paper":
+            # the priors are loaded (and validated) now, not on the first frame
+            self._prior_fit = PriorFit(o, self.prior, self.temporal_prior, self._model, self._runs)
+            if o.mode == "hybrid" and (o.alpha_solver != "riemannian" or not o.method.limbs
+                                       or self._model.limb_coordinates is None):
+                raise OptionsError("mode 'hybrid' needs alpha_solver='riemannian', a variant with limb "
+                                   "constraints and bases with >= 24 independent directions")
 
     @property
     def runs(self) -> Runs:
@@ -252,7 +186,7 @@ class Lifter:
         spread = math.sqrt(w @ np.add.reduce(d * d, axis=1) / total)
         if not math.isfinite(spread) or spread <= 1e-9 * max(1.0, abs(centre[0]), abs(centre[1])):
             raise InvalidInputError("the visible keypoints are (almost) all at one point")
-        return Normalisation(centre, spread / self._mean_spread)
+        return Normalisation(centre, spread / self._data.mean_spread)
 
     # ------------------------------------------------------------------ public
     def warm_up(self) -> float:
@@ -303,12 +237,32 @@ class Lifter:
         SolverError
             The solve diverged on valid input.
         """
-        tc = _NO_TRACK if track is None else track
-        limb_proportions, data_weight = tc.limb_proportions, tc.data_weight
-        temporal_weight, past, gated, fill = tc.temporal_weight, tc.past, tc.gated, tc.fill
         x, w = self._weights(points_2d, confidence)
         norm = self._normalise(x, w)
-        mode = self._options.mode
+        tc = self._track_context(_NO_TRACK if track is None else track, w)
+        fit = self._prior_fit
+        if fit is not None and self._options.mode == "learned":
+            return fit.learned(x, w, norm, tc.past)
+        xn = (x - norm.centre) / norm.spread
+        cam0: Camera | None = None
+        if warm is not None:
+            if warm.alpha.shape != (self.bases.n_bases,):
+                raise InvalidInputError("warm start alpha does not match the bases")
+            cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
+                          (warm.camera.translation - norm.centre) / norm.spread)
+        if fit is not None:  # hybrid
+            starts = fit.starts(x, xn, w * tc.data_weight, norm, warm, cam0, tc)
+            w = starts.weights / tc.data_weight
+        else:
+            starts = paper_starts(self._runs, self.bases, self._options, xn, w, warm, cam0)
+        return self._result(x, w, norm, starts.best(), starts.n_starts, starts.total_alternations,
+                            starts.prior_pose)
+
+    def _track_context(self, track: TrackContext, w: NDArray[np.float64]) -> TrackContext:
+        """``track`` checked, as the modes read it: ``past`` without non-finite joints, ``fill``
+        only for the joints this frame lacks (weight 0), ``temporal_weight`` an array (12,) (the
+        hybrid mode's; the paper mode reads none of it)."""
+        past, fill = track.past, track.fill
         if past is not None:
             pp, pv = np.asarray(past[0], dtype=np.float64), np.asarray(past[1], dtype=bool)
             if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
@@ -322,53 +276,18 @@ class Lifter:
                                         f"and {fv.shape}")
             # only for the joints this frame lacks: one the outlier pass flags stays missing
             fill = (fp, fv & np.isfinite(fp).all(axis=-1) & ~(w > 0))
-        if mode == "learned":
-            return lift_learned(self, x, w, norm, past)
-        xn = (x - norm.centre) / norm.spread
-        cam0: Camera | None = None
-        if warm is not None:
-            if warm.alpha.shape != (self.bases.n_bases,):
-                raise InvalidInputError("warm start alpha does not match the bases")
-            cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
-                          (warm.camera.translation - norm.centre) / norm.spread)
-        if mode == "hybrid":
-            if not 0.0 < data_weight <= 1.0:
-                raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
-            tw = np.array(temporal_weight, dtype=np.float64)
-            if tw.shape != (N_JOINTS,):
-                tw = np.broadcast_to(tw, (N_JOINTS,)).copy()
-            if not ((tw >= 0.0) & (tw <= 1e3)).all():
-                raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {temporal_weight!r}")
-            runs, total, n_starts, w, prior_pose = hybrid_runs(
-                self, x, xn, w * data_weight, norm, warm, cam0, limb_proportions, tw, past, gated, fill)
-            w = w / data_weight
-        else:
-            runs, total, n_starts = self._paper_runs(xn, w, warm, cam0)
-            prior_pose = None
-        idx, run = min(runs, key=lambda r: r[1].objective)
-        return self._result(x, w, norm, idx, run, n_starts, total, prior_pose)
-
-    def _paper_runs(self, xn: NDArray[np.float64], w: NDArray[np.float64], warm: WarmStart | None,
-                    cam0: Camera | None) -> tuple[list[tuple[int, Run]], int, int]:
-        """The paper's starts: the warm start and its mirrored copy, or the screened multi-start.
-        Returns ``(runs as (start index, run), total alternations, starts tried)``."""
-        if warm is not None:
-            runs = [(-1, self._runs.run(xn, w, warm.alpha, cam0))]
-            if self._options.warm_flip:
-                runs.append((-2, self._runs.mirrored_run(xn, w, runs[0][1], None)))
-            return runs, sum(r.n_iter for _, r in runs), len(runs)
-        starts = self.bases.with_starts(self._options.n_starts)
-        # a short first pose step only when it screens (some starts are then dropped)
-        screen = self._options.screen_pose_max_iter if len(starts) > self._options.n_refine else None
-        runs = [(i, self._runs.run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
-                for i, a in enumerate(starts)]
-        n_screened = len(runs)
-        if len(runs) > 1:  # screen: continue only the most promising starts
-            runs.sort(key=lambda r: r[1].objective)
-            runs = runs[: self._options.n_refine]
-        runs = [(i, self._runs.run(xn, w, r.pose.alpha, None, start=r)) for i, r in runs]
-        # a continued run's n_iter counts its screening alternation too
-        return runs, n_screened - len(runs) + sum(r.n_iter for _, r in runs), len(starts)
+        if self._options.mode != "hybrid":
+            return TrackContext(track.limb_proportions, track.data_weight, track.temporal_weight, past,
+                                track.gated, fill)
+        data_weight = track.data_weight
+        if not 0.0 < data_weight <= 1.0:
+            raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
+        tw = np.array(track.temporal_weight, dtype=np.float64)
+        if tw.shape != (N_JOINTS,):
+            tw = np.broadcast_to(tw, (N_JOINTS,)).copy()
+        if not ((tw >= 0.0) & (tw <= 1e3)).all():
+            raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {track.temporal_weight!r}")
+        return TrackContext(track.limb_proportions, data_weight, tw, past, track.gated, fill)
 
     def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
         """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
@@ -385,19 +304,10 @@ class Lifter:
         pairs = 0.5 * (lengths[_LEFT_LIMBS] + lengths[_RIGHT_LIMBS])
         return np.asarray(pairs[_GROUP_OF])
 
-    def limb_radii(self, proportions: NDArray[np.float64]) -> NDArray[np.float64] | None:
-        """Limb-constraint radii (8,) with the ratios of ``proportions`` and the geometric-mean
-        size of the model's own limbs (so the person keeps the bases' scale); None when the
-        proportions are unusable (non-finite or not positive)."""
-        p = np.asarray(proportions, dtype=np.float64)
-        if p.shape != (8,) or not np.isfinite(p).all() or (p <= 0).any():
-            return None
-        lp = np.log(p)
-        return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))  # np.mean
-
-    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, idx: int,
-                run: Run, n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
+    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, won: StartRun,
+                n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
         """The winning run mapped back to input units, checked finite."""
+        run = won.run
         cam_n = run.camera.camera
         cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
         pose = run.pose.pose
@@ -414,11 +324,12 @@ class Lifter:
             n_iter=run.n_iter,
             converged=run.converged,
             n_starts=n_starts,
-            start_index=idx,
+            start_index=won.index,
             weights=w,
             total_alternations=total,
             prior_pose=prior_pose,
             history=run.history,
+            start=won.kind,
         )
         for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
             if not np.isfinite(arr).all():

@@ -1,11 +1,16 @@
 """Solver options and the paper's method variants: one table, validated in one place.
 
-Every :class:`LifterOptions` field carries its metadata (:class:`OptionMeta`: a one-line doc,
-its range or choices, whether it is a node parameter and whether it is an experiment toggle).
-From that one table come :meth:`LifterOptions.validate`, the node's parameter descriptors
-and ``config/lifter.yaml`` (:mod:`pose_lifter.ros.params`), so a range cannot differ between the
-core and the node. The node also validates every live parameter change through
-:meth:`LifterOptions.replace`.
+The options come in two parts. :class:`UserOptions` is what a user sets: each of its fields is a
+parameter of the ROS node (same name, default and range). :class:`ExperimentOptions` is what an
+experiment sets: the solver's internal penalties and tolerances and the reference solvers, for
+experiments, tests and benchmarks, not node parameters. :class:`LifterOptions` is both, the one
+object the solver reads.
+
+Every field carries its metadata (:class:`OptionMeta`: a one-line doc, its range or choices). From
+that one table come :meth:`LifterOptions.validate`, the node's parameter descriptors and
+``config/lifter.yaml`` (:mod:`pose_lifter.ros.params`), so a range cannot differ between the core
+and the node. The node also validates every live parameter change through
+:meth:`LifterOptions.replace`. Why the defaults are what they are: ``docs/tuning.md``.
 """
 
 from __future__ import annotations
@@ -25,11 +30,13 @@ __all__ = [
     "VARIANTS",
     "AlphaSolver",
     "AlphaStep",
+    "ExperimentOptions",
     "LifterOptions",
     "LimbProportions",
     "Mode",
     "OptionMeta",
     "SubproblemSolver",
+    "UserOptions",
     "Variant",
     "get_variant",
 ]
@@ -89,7 +96,7 @@ MAX_PATH_LENGTH: Final[int] = 4096
 
 @dataclass(frozen=True)
 class OptionMeta:
-    """What one :class:`LifterOptions` field accepts, and where it shows.
+    """What one option field accepts.
 
     The kind of value (bool, int, float, str) is the type of the field's default.
 
@@ -108,11 +115,6 @@ class OptionMeta:
     check : callable or None
         Extra check of the value, raising :class:`OptionsError` (``variant``: case-insensitive
         names and ``"full"``).
-    node : bool
-        Declared as a parameter of the ROS node (same name, default and range).
-    experiment : bool
-        An experiment toggle: a solver internal or a measured-off alternative kept for
-        experiments and benchmarks, not for users.
     """
 
     doc: str
@@ -123,8 +125,6 @@ class OptionMeta:
     choices: tuple[str, ...] = ()
     max_length: int | None = None
     check: Callable[[Any], object] | None = None
-    node: bool = True
-    experiment: bool = False
 
     def range_text(self) -> str:
         """``"[0, 1e+06]"``, ``"(0, 1)"``, ... (``""`` without a range)."""
@@ -154,70 +154,35 @@ class OptionMeta:
 
 def _meta(doc: str, low: float | None = None, high: float | None = None, *, open_low: bool = False,
           open_high: bool = False, choices: tuple[str, ...] = (), max_length: int | None = None,
-          check: Callable[[Any], object] | None = None, node: bool = True,
-          experiment: bool = False) -> dict[str, OptionMeta]:
-    """The ``metadata`` of a :class:`LifterOptions` field (key ``"option"``)."""
-    return {"option": OptionMeta(doc, low, high, open_low, open_high, choices, max_length, check, node,
-                                 experiment)}
+          check: Callable[[Any], object] | None = None) -> dict[str, OptionMeta]:
+    """The ``metadata`` of an option field (key ``"option"``)."""
+    return {"option": OptionMeta(doc, low, high, open_low, open_high, choices, max_length, check)}
 
 
 _ITER = 100_000  # the cap of every iteration / start count
 _WEIGHT = 1e3  # the cap of every weight and threshold in leg lengths
 
 
+class _Validated:
+    """Validation of a frozen dataclass of option fields on construction."""
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`OptionsError` on any value its field's :class:`OptionMeta` refuses."""
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            _check(f.name, type(f.default), f.metadata["option"], getattr(self, f.name))
+
+
 @dataclass(frozen=True)
-class LifterOptions:
-    """Everything that tunes a solve. Units: 2D input is normalised (see ``Lifter``) so the
-    loss and ``theta`` are in right-lower-leg units whatever the image size.
-
-    Each field's doc, range or choices and whether the node declares it live in its metadata
-    (:class:`OptionMeta`, :data:`OPTION_META`); :meth:`validate`, the node's parameter
-    descriptors and ``config/lifter.yaml`` are derived from it.
-
-    User options (node parameters): ``variant``, ``theta``, ``max_alternations``,
-    ``alternation_tol``, ``pose_max_iter``, ``pose_tol``, ``camera_max_iter``, ``camera_tol``,
-    ``n_starts``, ``n_refine``, ``screen_pose_max_iter``, ``warm_flip``, ``warm_flip_screen``,
-    ``confidence_threshold``, ``min_visible_joints``, ``limb_proportions``, ``alpha_solver``,
-    ``alpha_prox``, ``mode``, ``prior_file``, ``temporal_prior``, ``temporal_prior_file``,
-    ``prior_weight_xy``, ``prior_weight_z``, ``outlier_threshold``, ``outlier_threshold_gated``,
-    ``outlier_passes``, ``prior_limbs``, ``temporal_weight``, ``outlier_gate``,
-    ``missing_temporal_weight``, ``fill_missing_frames``, ``hybrid_alternations``,
-    ``hybrid_pose_max_iter``, ``image_limbs``, ``prior_flip``, ``correction_smoothing``,
-    ``disturbed_smoothing_gain``, ``measurement_update``, ``measurement_depth``,
-    ``measurement_gate``.
-
-    Experiment toggles (:data:`EXPERIMENT_OPTIONS`: solver internals and measured-off
-    alternatives, for experiments and benchmarks): not node parameters: ``eta``, ``eta_growth``,
-    ``delta``, ``tau`` (ADM penalties), ``alpha_step="full"`` (the paper's coefficient-space
-    lifting, exactly equivalent and slower), ``camera_solver`` / ``pose_solver="cvxpy"`` (the
-    reference solvers), ``warm_duals``, ``newton_tol``; node parameters nevertheless (kept for
-    existing parameter files): ``inner_max_iter``, ``inner_tol`` (only the ``"admm"``
-    alpha-solver uses them), ``warm_competes``, ``hybrid_flip_warm`` (both measured worse on).
-
-    Notes
-    -----
-    Why some defaults (one measured fact each; the runs are in ``docs/tuning.md``):
-    ``pose_max_iter=40``: the limb pose step rarely meets its tolerance, so the cap sets the
-    quality (mean objective 0.7696 / 0.6916 / 0.6654 at caps 20 / 30 / 40).
-    ``screen_pose_max_iter=5``: a short first pose step keeps more cold starts in play (P-MPJPE
-    68.5 mm at 20, 62.6 mm at 5, in half the time).
-    ``warm_flip_screen``: P-MPJPE 87.9 -> 85.1 mm and warm frames 24.6 -> 16.5 ms.
-    ``alpha_prox=1``: mean objective 0.8178 -> 0.7679 from 0, at the same speed.
-    ``temporal_prior``: clean tracks 54.6 -> 51.1 mm, 20 % outliers 71.8 -> 68.0 mm.
-    ``outlier_threshold_gated=1.0``: better than 0.6 in every condition once the gate has
-    screened the frame (single images keep ``outlier_threshold=0.6``).
-    ``temporal_weight=0.3``, ``missing_temporal_weight=1.0``, ``fill_missing_frames=3``,
-    ``hybrid_alternations=2``, ``hybrid_pose_max_iter=20``: best or as good on 36 held-out
-    training-split tracks, at a lower cost.
-    ``hybrid_flip_warm``, ``warm_competes`` off: they won no accuracy on held-out tracks.
-    ``correction_smoothing=0.7``, ``disturbed_smoothing_gain=0.55``: the published pose's mean 3D
-    acceleration error on unseen motion 17.1 -> 8.8 mm/frame^2 clean and 60.5 -> 28.7 with 20 %
-    outliers at the same P-MPJPE (0.4: 22.2, but +4.4 mm with outliers on the evaluation split).
-    ``image_limbs`` off: -1.2 mm on a cross-action fold (dance), +0.5 mm clean on the evaluation
-    split. ``prior_flip`` on: hybrid P-MPJPE on the evaluation split (``tools/accuracy.py --split
-    eval --frames 45 --views 1 --methods learned hybrid --set prior_flip=...``) clean 49.4 -> 47.7,
-    outliers20 59.8 -> 58.6, noise0.1 59.4 -> 57.8 mm; the prior alone 51.7 -> 50.1 clean; on the
-    dance fold (its prior, temporal prior off) hybrid 97.0 -> 96.2 clean, 104.6 -> 102.8 outliers20.
+class UserOptions(_Validated):
+    """What a user sets: the lifting method, its quality and speed, the input's acceptance, the
+    hybrid mode's prior and a track's output. Each field is a parameter of the ROS node (same
+    name, default and range, :data:`NODE_OPTIONS`). Units: 2D input is normalised (see
+    ``Lifter``) so the loss and ``theta`` are in right-lower-leg units whatever the image size.
+    Each field's doc, range or choices are in its metadata (:data:`OPTION_META`); why each default
+    is what it is: ``docs/tuning.md``.
     """
 
     variant: str = field(default="full", metadata=_meta(
@@ -234,24 +199,10 @@ class LifterOptions:
         "Iteration cap of the pose-step ADM.", 1, _ITER))
     pose_tol: float = field(default=1e-3, metadata=_meta(
         "Relative residual tolerance of the pose-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
-    inner_max_iter: int = field(default=60, metadata=_meta(
-        "Iteration cap of the inner alpha-step ADM (alpha_solver 'admm').", 1, _ITER, experiment=True))
-    inner_tol: float = field(default=1e-6, metadata=_meta(
-        "Tolerance of the inner alpha-step ADM (alpha_solver 'admm').", 0.0, 1.0, open_low=True,
-        open_high=True, experiment=True))
     camera_max_iter: int = field(default=100, metadata=_meta(
         "Iteration cap of the camera-step ADM.", 1, _ITER))
     camera_tol: float = field(default=1e-4, metadata=_meta(
         "Tolerance of the camera-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
-    eta: float = field(default=0.3, metadata=_meta(
-        "Initial penalty of the pose ADM.", 1e-6, 1e6, node=False, experiment=True))
-    eta_growth: float = field(default=1.1, metadata=_meta(
-        "Per-iteration growth of the pose ADM penalty (the paper's eta_k).", 1.0, 2.0, node=False,
-        experiment=True))
-    delta: float = field(default=1.0, metadata=_meta(
-        "Penalty of the inner alpha-step ADM.", 1e-6, 1e6, node=False, experiment=True))
-    tau: float = field(default=10.0, metadata=_meta(
-        "Penalty of the camera ADM (constant).", 1e-6, 1e6, node=False, experiment=True))
     n_starts: int = field(default=30, metadata=_meta(
         "Starts of a cold (multi-start) solve; 1 = mean pose only (the paper: 30).", 1, _ITER))
     n_refine: int = field(default=3, metadata=_meta(
@@ -269,27 +220,11 @@ class LifterOptions:
     limb_proportions: LimbProportions = field(default="bases", metadata=_meta(
         "Limb-length targets: 'bases' (training mean) or 'anthropometric'.",
         choices=get_args(LimbProportions)))
-    alpha_step: AlphaStep = field(default="reduced", metadata=_meta(
-        "Alpha-step lifting: 'reduced' (36-dim pose space, fast) or 'full' (the paper's "
-        "(k+1)-dim coefficient space, exactly equivalent).", choices=get_args(AlphaStep), node=False,
-        experiment=True))
     alpha_solver: AlphaSolver = field(default="riemannian", metadata=_meta(
         "Alpha-step solver: 'riemannian' (Newton on the limb spheres), 'newton' (SQP) or 'admm' "
         "(the paper's lifted inner ADM).", choices=get_args(AlphaSolver)))
     alpha_prox: float = field(default=1.0, metadata=_meta(
         "Proximal weight of the 'riemannian' alpha-step (0 = none).", 0.0, _WEIGHT))
-    camera_solver: SubproblemSolver = field(default="admm", metadata=_meta(
-        "Camera step: 'admm' (closed-form ADM) or 'cvxpy' (the reference solver).",
-        choices=get_args(SubproblemSolver), node=False, experiment=True))
-    pose_solver: SubproblemSolver = field(default="admm", metadata=_meta(
-        "Pose step: 'admm' (closed-form ADM) or 'cvxpy' (the reference solver).",
-        choices=get_args(SubproblemSolver), node=False, experiment=True))
-    warm_duals: bool = field(default=False, metadata=_meta(
-        "Carry the camera and pose ADM multipliers from one alternation to the next.", node=False,
-        experiment=True))
-    newton_tol: float = field(default=1e-9, metadata=_meta(
-        "Relative KKT tolerance of each Newton alpha-step inside the pose ADM.", 0.0, 1.0,
-        open_low=True, open_high=True, node=False, experiment=True))
     mode: Mode = field(default="hybrid", metadata=_meta(
         "'hybrid' (the learned prior inside the paper's robust fit), 'paper' (the paper's method "
         "alone) or 'learned' (the prior alone).", choices=get_args(Mode)))
@@ -350,28 +285,59 @@ class LifterOptions:
     measurement_gate: float = field(default=0.3, metadata=_meta(
         "Hybrid, tracked, with measurement_update: a used joint farther than this (leg lengths) "
         "from the smoothed pose is not moved to its 2D on that frame.", 0.0, _WEIGHT))
-    warm_competes: bool = field(default=False, metadata=_meta(
-        "Hybrid: warm solves also start from the previous frame's pose (screened).",
-        experiment=True))
     hybrid_alternations: int = field(default=2, metadata=_meta(
         "Hybrid: alternations of each run at most.", 1, _ITER))
     hybrid_pose_max_iter: int = field(default=20, metadata=_meta(
         "Hybrid: pose-step ADM iterations at most per alternation.", 1, _ITER))
-    hybrid_flip_warm: bool = field(default=False, metadata=_meta(
-        "Hybrid: also score the depth-mirrored hypothesis on warm frames.", experiment=True))
-
-    def __post_init__(self) -> None:
-        self.validate()
 
     @property
     def method(self) -> Variant:
         """The :class:`Variant` named by ``variant``."""
         return get_variant(self.variant)
 
-    def validate(self) -> None:
-        """Raise :class:`OptionsError` on any value its field's :class:`OptionMeta` refuses."""
-        for name, kind, meta in _TABLE:
-            _check(name, kind, meta, getattr(self, name))
+
+@dataclass(frozen=True)
+class ExperimentOptions(_Validated):
+    """What an experiment sets: the ADM penalties (``eta``, ``eta_growth``, ``delta``, ``tau``) and
+    inner tolerances, the paper's coefficient-space lifting (``alpha_step="full"``, exactly
+    equivalent and slower), the cvxpy reference solvers and carried ADM multipliers
+    (``warm_duals``). For experiments, tests and benchmarks; not node parameters
+    (:data:`EXPERIMENT_OPTIONS`).
+    """
+
+    inner_max_iter: int = field(default=60, metadata=_meta(
+        "Iteration cap of the inner alpha-step ADM (alpha_solver 'admm').", 1, _ITER))
+    inner_tol: float = field(default=1e-6, metadata=_meta(
+        "Tolerance of the inner alpha-step ADM (alpha_solver 'admm').", 0.0, 1.0, open_low=True,
+        open_high=True))
+    eta: float = field(default=0.3, metadata=_meta(
+        "Initial penalty of the pose ADM.", 1e-6, 1e6))
+    eta_growth: float = field(default=1.1, metadata=_meta(
+        "Per-iteration growth of the pose ADM penalty (the paper's eta_k).", 1.0, 2.0))
+    delta: float = field(default=1.0, metadata=_meta(
+        "Penalty of the inner alpha-step ADM.", 1e-6, 1e6))
+    tau: float = field(default=10.0, metadata=_meta(
+        "Penalty of the camera ADM (constant).", 1e-6, 1e6))
+    alpha_step: AlphaStep = field(default="reduced", metadata=_meta(
+        "Alpha-step lifting: 'reduced' (36-dim pose space, fast) or 'full' (the paper's "
+        "(k+1)-dim coefficient space, exactly equivalent).", choices=get_args(AlphaStep)))
+    camera_solver: SubproblemSolver = field(default="admm", metadata=_meta(
+        "Camera step: 'admm' (closed-form ADM) or 'cvxpy' (the reference solver).",
+        choices=get_args(SubproblemSolver)))
+    pose_solver: SubproblemSolver = field(default="admm", metadata=_meta(
+        "Pose step: 'admm' (closed-form ADM) or 'cvxpy' (the reference solver).",
+        choices=get_args(SubproblemSolver)))
+    warm_duals: bool = field(default=False, metadata=_meta(
+        "Carry the camera and pose ADM multipliers from one alternation to the next."))
+    newton_tol: float = field(default=1e-9, metadata=_meta(
+        "Relative KKT tolerance of each Newton alpha-step inside the pose ADM.", 0.0, 1.0,
+        open_low=True, open_high=True))
+
+
+@dataclass(frozen=True)
+class LifterOptions(ExperimentOptions, UserOptions):
+    """Everything that tunes a solve: the :class:`UserOptions` fields, then the
+    :class:`ExperimentOptions` fields (one flat, frozen, validated object)."""
 
     def replace(self, **changes: Any) -> LifterOptions:
         """A validated copy with some fields changed (unknown names raise ``OptionsError``)."""
@@ -406,13 +372,11 @@ def _check(name: str, kind: type, meta: OptionMeta, v: Any) -> None:
         meta.check(v)
 
 
-#: (name, kind of value, metadata) of every field, in declaration order.
-_TABLE: Final[tuple[tuple[str, type, OptionMeta], ...]] = tuple(
-    (f.name, type(f.default), f.metadata["option"]) for f in dataclasses.fields(LifterOptions)
-)
-#: Each :class:`LifterOptions` field's metadata, in declaration order.
-OPTION_META: Final[Mapping[str, OptionMeta]] = MappingProxyType({name: m for name, _, m in _TABLE})
-#: The fields the ROS node declares as parameters (same names, defaults and ranges), in order.
-NODE_OPTIONS: Final[tuple[str, ...]] = tuple(name for name, _, m in _TABLE if m.node)
-#: The experiment toggles (see the :class:`LifterOptions` docstring), in order.
-EXPERIMENT_OPTIONS: Final[tuple[str, ...]] = tuple(name for name, _, m in _TABLE if m.experiment)
+#: Each :class:`LifterOptions` field's metadata, in declaration order (the user options first).
+OPTION_META: Final[Mapping[str, OptionMeta]] = MappingProxyType(
+    {f.name: f.metadata["option"] for f in dataclasses.fields(LifterOptions)})
+#: The :class:`UserOptions` fields: the ROS node declares them as parameters (same names, defaults
+#: and ranges), in order.
+NODE_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(UserOptions))
+#: The :class:`ExperimentOptions` fields, in order.
+EXPERIMENT_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(ExperimentOptions))

@@ -9,6 +9,7 @@ step to the next are :class:`Duals`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +24,8 @@ __all__ = [
     "Normalisation",
     "PoseResult",
     "SolveInfo",
+    "StartKind",
+    "TrackContext",
     "WarmStart",
 ]
 
@@ -161,6 +164,63 @@ class WarmStart:
     alpha: NDArray[np.float64]
 
 
+class StartKind(Enum):
+    """Where the run a lift kept began."""
+
+    #: One of the multi-start poses of a cold solve (``LiftResult.start_index`` says which).
+    COLD = "cold"
+    #: The warm start: the track's previous frame.
+    WARM = "warm"
+    #: The depth-mirrored copy of the best run (the weak-perspective ambiguity).
+    MIRRORED = "mirrored"
+    #: The learned prior's pose for this frame (hybrid mode).
+    PRIOR = "prior"
+    #: No run: the learned prior's pose alone (learned mode).
+    LEARNED = "learned"
+
+
+@dataclass(frozen=True)
+class TrackContext:
+    """What a track knows about this frame of its person (:class:`pose_lifter.core.tracking.TrackPolicy`
+    fills it; every field is optional). Used by the hybrid mode; the learned mode reads ``past``.
+
+    Attributes
+    ----------
+    limb_proportions : ndarray, shape (8,), optional
+        The person's limb proportions (the track's estimate over its frames), used for the limb
+        constraints with ``options.prior_limbs``.
+    data_weight : float
+        Factor on the 2D term's weights, in (0, 1] (the track's estimate of its detector's noise).
+    temporal_weight : float or ndarray, shape (12,)
+        With a warm start: weight ``w`` (per joint, or one for all) of the warm start's pose ``Y``
+        in the prior term's target ``(P + w Y) / (1 + w)``, ``Y``'s image positions moved by the
+        median motion of the visible joints since it (0: none; the policy sets it from the track's
+        2D noise, up to ``options.temporal_weight``, and to ``options.missing_temporal_weight`` for
+        joints missing in this frame).
+    past : (ndarray (k, 12, 2), ndarray of bool (k, 12)), optional
+        The track's previous frames (oldest first, evenly spaced up to this one) and which of
+        their joints were used: the input of a temporal prior (``PosePrior.window > 1``; missing
+        history is padded with the oldest frame given, or this one). Ignored by a single-frame
+        prior.
+    gated : bool
+        The frame was screened by the per-track outlier gate; the outlier pass then uses
+        ``options.outlier_threshold_gated`` instead of ``options.outlier_threshold``.
+    fill : (ndarray (12, 2), ndarray of bool (12,)), optional
+        Predicted image positions of the joints (input units) and which of them may stand in for
+        a joint this frame lacks (missing: low confidence or non-finite) in the learned prior's
+        input; the 2D fit still ignores such a joint. A joint the outlier pass flags is not
+        filled: it disagreed with the fit or the prior on this frame (filled or not, the held-out
+        figures agreed within 0.2 mm).
+    """
+
+    limb_proportions: NDArray[np.float64] | None = None
+    data_weight: float = 1.0
+    temporal_weight: float | NDArray[np.float64] = 0.0
+    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+    gated: bool = False
+    fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+
+
 @dataclass(frozen=True)
 class LiftResult:
     """Everything one lift returns.
@@ -187,9 +247,8 @@ class LiftResult:
     n_starts : int
         Starts tried.
     start_index : int
-        Which start won (-1 = the warm start, -2 = the depth-mirrored copy of the best run,
-        -3 = the learned prior's pose (hybrid), -4 = the prior alone (learned mode); >= 0 the
-        index of a multi-start pose).
+        With ``start`` COLD the index of the multi-start pose the kept run began at
+        (``PoseBases.with_starts``), else -1.
     weights : ndarray, shape (12,)
         Per-joint weights used in the loss (0 = missing, or dropped as a confident outlier by
         the hybrid mode's outlier pass).
@@ -203,6 +262,8 @@ class LiftResult:
     history : tuple of Alternation
         The kept run's alternations in order (objective, and each step's convergence); empty in
         learned mode.
+    start : StartKind
+        Where the kept run began.
     """
 
     pose: NDArray[np.float64]
@@ -220,6 +281,7 @@ class LiftResult:
     total_alternations: int = 0
     prior_pose: NDArray[np.float64] | None = None
     history: tuple[Alternation, ...] = ()
+    start: StartKind = StartKind.COLD
 
     def warm_start(self) -> WarmStart:
         """The state to warm-start the next frame of the same person."""

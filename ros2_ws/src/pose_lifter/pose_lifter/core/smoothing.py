@@ -1,11 +1,12 @@
-"""Centred (non-causal) smoothing of a track's lifted poses, for offline lifting.
+"""Smoothing of a track's lifted poses: causal (:class:`CausalSmoother`) and centred.
 
-Live, a track's pose is smoothed causally (:class:`pose_lifter.core.tracking.TrackPolicy`): the
-node cannot wait for later frames. Offline every frame of a track is known before anything is
-written, so ``pose-lifter lift`` smooths the fit's own poses with a Gaussian window centred on
-each frame: past and future frames alike, so without the lag of a causal filter. Measured on the
-evaluation split (``tools/accuracy.py --methods hybrid hybrid-offline``; docs/accuracy.md) it
-lowers both the error and the jitter in every condition, most with outliers and 2D noise.
+Live, a track's pose is smoothed causally (:class:`CausalSmoother`, run by
+:class:`pose_lifter.core.tracking.TrackPolicy`): the node cannot wait for later frames. Offline
+every frame of a track is known before anything is written, so ``pose-lifter lift`` smooths the
+fit's own poses with a Gaussian window centred on each frame: past and future frames alike, so
+without the lag of a causal filter. Measured on the evaluation split (``tools/accuracy.py
+--methods hybrid hybrid-offline``; docs/accuracy.md) it lowers both the error and the jitter in
+every condition, most with outliers and 2D noise.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["OFFLINE_SMOOTHING_S", "centred_smoothing"]
+__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing"]
 
 #: Standard deviation (seconds of input time) of the Gaussian window ``pose-lifter lift`` applies
 #: by default: 1.2 frames at 30 Hz (the window spans +-3 standard deviations). Chosen on the
@@ -90,3 +91,41 @@ def centred_smoothing(poses: NDArray[np.float64], stamps_ns: NDArray[np.int64], 
         total[i] += w
     out[idx] = acc / total[:, None, None]  # total >= 1: every frame weighs itself with w = 1
     return out
+
+
+class CausalSmoother:
+    """Causal smoothing of one track's published pose (camera frame, centred, model units).
+
+    Per frame ``t``, with ``P_t`` the prior's pose and ``F_t`` the fit's (both (12, 3))::
+
+        c_t = b c_{t-1} + (1 - b) (F_t - P_t)               (the fit's correction, averaged)
+        S_t = alpha-beta filter of P_t with gain g, h = g^2 / (2 - g)   (g = 1: S_t = P_t)
+        out_t = S_t + c_t
+
+``b`` is ``correction_smoothing``; the prior is smooth on clean input and the fit's correction
+    of it is where the jitter is (measured: clean unseen tracks 15.6 -> 6.0 mm/frame^2 at b = 0.7,
+    P-MPJPE 60.6 -> 60.4 mm), so averaging the correction costs little lag. ``g`` falls with the
+    track's disturbance (:data:`pose_lifter.core.tracking.DISTURBANCE_FULL`): with outliers the
+    prior's input changes from frame to frame and the prior jitters too. Uses only the frames
+    given so far.
+
+    """
+
+    def __init__(self) -> None:
+        self.correction: NDArray[np.float64] | None = None
+        self.level: NDArray[np.float64] | None = None
+        self.velocity: NDArray[np.float64] | None = None
+
+    def update(self, fit: NDArray[np.float64], prior: NDArray[np.float64], b: float, gain: float
+               ) -> NDArray[np.float64]:
+        """The smoothed pose (12, 3) for this frame's fit and prior poses (12, 3)."""
+        corr = fit - prior
+        if self.correction is None or self.level is None or self.velocity is None:
+            self.correction, self.level, self.velocity = corr, prior.copy(), np.zeros_like(prior)
+            return np.asarray(fit, dtype=np.float64).copy()
+        self.correction = b * self.correction + (1.0 - b) * corr
+        predicted = self.level + self.velocity
+        resid = prior - predicted
+        self.level = predicted + gain * resid
+        self.velocity = self.velocity + (gain * gain / (2.0 - gain)) * resid
+        return np.asarray(self.level + self.correction)

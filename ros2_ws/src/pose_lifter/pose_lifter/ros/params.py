@@ -61,8 +61,6 @@ class ParamSpec:
         choices.
     option : bool
         A :class:`LifterOptions` field: live changes are validated by ``LifterOptions.replace``.
-    experiment : bool
-        An experiment toggle of the options (:data:`~pose_lifter.core.options.EXPERIMENT_OPTIONS`).
     read_only : bool
         Set at start-up only.
     offline : bool
@@ -76,7 +74,6 @@ class ParamSpec:
     high: float | None = None
     constraints: str = ""
     option: bool = False
-    experiment: bool = False
     read_only: bool = False
     offline: bool = False
 
@@ -85,8 +82,7 @@ class ParamSpec:
         """The parameter of the :class:`LifterOptions` field ``name``, from its metadata."""
         meta = OPTION_META[name]
         default = next(f.default for f in dataclasses.fields(LifterOptions) if f.name == name)
-        return cls(name, default, meta.doc, meta.low, meta.high, meta.constraint_text(), option=True,
-                   experiment=meta.experiment)
+        return cls(name, default, meta.doc, meta.low, meta.high, meta.constraint_text(), option=True)
 
     def range_text(self) -> str:
         """``"[0, 1]"``, ``"(0, 1)"``, ... (``""`` without a range)."""
@@ -245,8 +241,6 @@ def params_yaml() -> str:
     lines = [_YAML_HEAD]
     for p in PARAMS:
         note = " ".join(t for t in (p.description, p.range_text()) if t)
-        if p.experiment:
-            note += " (experiment toggle)"
         if p.read_only:
             note += " (read-only: set at start-up)"
         lines.append(f"    # {note}\n    {p.name}: {_yaml_value(p.default)}\n")
@@ -287,6 +281,10 @@ class OfflineParams:
 _SECTIONS: Final[tuple[str, ...]] = ("/**", "pose_lifter", "/pose_lifter")
 
 
+#: The option parameters a params file may set (the experiment options are not parameters).
+_OPTIONS: Final[frozenset[str]] = frozenset(NODE_OPTIONS)
+
+
 def read_params_file(path: str | Path) -> OfflineParams:
     """Read a node params YAML (see the module doc).
 
@@ -313,13 +311,13 @@ def read_params_file(path: str | Path) -> OfflineParams:
             found = True
     if not found:
         raise OptionsError(f"params file {p} has no {' / '.join(_SECTIONS)} section with ros__parameters")
-    options = {k: v for k, v in merged.items() if k in OPTION_META}
+    options = {k: v for k, v in merged.items() if k in _OPTIONS}
     try:
         LifterOptions().replace(**options)  # refuse now, with the core's reason
     except OptionsError as exc:
         raise OptionsError(f"params file {p}: {exc}") from None
     own = {s.name for s in PARAMS if s.offline}
-    ignored = tuple(sorted(k for k in merged if k not in OPTION_META and k not in own and k not in NODE_ONLY))
+    ignored = tuple(sorted(k for k in merged if k not in _OPTIONS and k not in own and k not in NODE_ONLY))
 
     def get(name: str, kind: type) -> Any:
         if name not in merged:

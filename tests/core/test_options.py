@@ -1,4 +1,5 @@
-"""LifterOptions' per-field metadata is the one table its validation follows (issue 12)."""
+"""The options (pose_lifter.core.options): each field's metadata is the one table its validation
+follows, and the user options stand apart from the experiment options."""
 
 from __future__ import annotations
 
@@ -14,8 +15,10 @@ from pose_lifter.core.options import (
     EXPERIMENT_OPTIONS,
     NODE_OPTIONS,
     OPTION_META,
+    ExperimentOptions,
     LifterOptions,
     OptionMeta,
+    UserOptions,
 )
 
 FIELDS = {f.name: f for f in dataclasses.fields(LifterOptions)}
@@ -112,19 +115,21 @@ def test_bools_and_paths() -> None:
         assert accepted(name, "x" * 4096) and not accepted(name, "x" * 4097) and not accepted(name, None)
 
 
-def test_experiment_toggles_stand_apart_from_the_user_options() -> None:
+def test_experiment_options_stand_apart_from_the_user_options() -> None:
     for name in ("warm_duals", "alpha_step", "camera_solver", "pose_solver", "newton_tol", "inner_max_iter",
                  "inner_tol", "eta", "delta", "tau", "eta_growth"):
         assert name in EXPERIMENT_OPTIONS, name
     assert "theta" not in EXPERIMENT_OPTIONS and "mode" not in EXPERIMENT_OPTIONS
-    # an option a user may set is a node parameter: only experiment toggles stay off the node
-    assert all(OPTION_META[n].experiment for n in FIELDS if n not in NODE_OPTIONS)
-    docstring = LifterOptions.__doc__ or ""
-    experiments = docstring[docstring.index("Experiment toggles"):docstring.index("Notes")]
-    users = docstring[docstring.index("User options"):docstring.index("Experiment toggles")]
-    for name in FIELDS:  # the class docstring lists each field in its group
-        assert (f"``{name}" in experiments) is (name in EXPERIMENT_OPTIONS), name
-        assert (f"``{name}``" in users) is (name not in EXPERIMENT_OPTIONS), name
+    # every field is a user option (a node parameter) or an experiment option, the users' first
+    assert list(FIELDS) == [*NODE_OPTIONS, *EXPERIMENT_OPTIONS]
+    assert NODE_OPTIONS == tuple(f.name for f in dataclasses.fields(UserOptions))
+    assert EXPERIMENT_OPTIONS == tuple(f.name for f in dataclasses.fields(ExperimentOptions))
+    # each part validates its own fields
+    with pytest.raises(OptionsError, match="theta"):
+        UserOptions(theta=-1.0)
+    with pytest.raises(OptionsError, match="eta"):
+        ExperimentOptions(eta=0.0)
+    assert LifterOptions(eta=0.5, theta=0.2).method == UserOptions(theta=0.2).method
 
 
 def test_replace_keeps_refusing_unknown_names_and_bad_types() -> None:
