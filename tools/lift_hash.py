@@ -21,7 +21,8 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   :func:`pose_lifter.offline.lift.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
   first bag in each mode through ``Runs.run``'s Python loop (the compiled run calls no Python
-  ``pose_step``; the loop runs the same steps, ``tests/core/test_run_kernel.py``) (every ``--record-every``-th call, up to ``--record`` per mode),
+  ``pose_step``; the loop runs the same steps, ``tests/core/test_run_kernel.py``) (every
+  ``--record-every``-th call, up to ``--record`` per mode),
   replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
   ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
   their objectives, limb violations, iteration counts and coefficients.
