@@ -39,17 +39,17 @@ LIFT_LIMB_VIOLATION: Final[float] = 1e-6
 #: (normalised units) and camera scale (relative).
 SOLVE_REPEAT: Final[float] = 1e-6
 #: The compiled pose step against the Python ADM loop around the same alpha-step, one ADM iteration
-#: from the same input (iterate and multipliers): the same arithmetic in another order (loops
-#: against numpy's vector and BLAS operations), so they differ by round-off times the conditioning
-#: of the iteration's small solves. Relative, objective, coefficients and multipliers. Worst of
-#: 24 problems x 15 iterations measured 1.1e-12 under four BLAS / numba set-ups (OpenBLAS Haswell,
-#: Sandybridge, Prescott; numba host and generic x86-64); a second Newton
-#: step in the alpha-step or a flipped sign moves them by far more.
+#: from the same input (iterate and multipliers): the same compiled rows and updates, but the loop
+#: forms ``A alpha`` with numpy / BLAS products from ``alpha`` where the kernel sums rows of the
+#: carried ``V^T alpha``, so they differ by round-off times the conditioning of the iteration's
+#: small solves. Relative, objective, coefficients and multipliers. Worst of 24 problems x 15
+#: iterations measured 2e-14 (OpenBLAS Haswell, numba host target); a second Newton step in the
+#: alpha-step or a flipped sign moves them by far more.
 FUSED_STEP_REL: Final[float] = 1e-9
 #: ... and the whole step, 15 iterations and not converged, by what a user sees (objective and
-#: pose, relative): round-off grows by about 10^5 over 15 iterations of the nonconvex ADM
-#: (measured worst 7.6e-11 under the same four set-ups; the final multipliers, which no user
-#: sees, up to 5.7e-7 and so not compared).
+#: pose, relative): round-off grows by up to about 10^5 over 15 iterations of the nonconvex ADM
+#: (measured worst 6e-11 on the same 24 problems; the final multipliers, which no user sees, are
+#: not compared).
 FUSED_VS_LOOP_REL: Final[float] = 1e-6
 #: The compiled run (core/run_kernel.py) against ``Runs.run``'s Python loop, the same inputs:
 #: both call the same compiled steps and the same compiled objective terms, so they perform the
