@@ -32,8 +32,8 @@ class PoseOut(NamedTuple):
 
 @njit
 def _sum_abs(a: NDArray[np.float64]) -> float:
-    """``||a||_1`` of an (n,) array, summed in order. The one implementation of the sparsity term
-    ``||alpha||_1`` of a run's objective (the compiled run and the Python loop both call it)."""
+    """``||a||_1`` of an (n,) array, summed in order: the sparsity term ``||alpha||_1`` of a run's
+    objective (:func:`pose_lifter.core.run_kernel._run_objective`)."""
     res = 0.0
     for i in range(a.size):
         res += abs(a[i])
