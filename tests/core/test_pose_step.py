@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 import tolerances as tol
 from numpy.typing import NDArray
-from pose_lifter.core.alpha.sphere_newton import RIEMANNIAN_MAX_ITER, _riemannian_alpha_kernel, _sphere_setup
+from pose_lifter.core.alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_kernel import _pose_rows
 from pose_lifter.core.pose_model import PoseModel
-from pose_lifter.core.pose_step import PriorRows, _adm, pose_step, prior_operands
+from pose_lifter.core.pose_step import PriorRows, _adm, pose_step, prior_operands, step_settings
 from pose_lifter.core.results import Duals, PoseResult, SolveInfo
 from scipy.spatial.transform import Rotation
 
@@ -62,29 +62,23 @@ class _RiemannianStep:
     ``_adm``: the compiled pose step's ADM written as that loop, its reference. It carries
     ``s = V^T alpha`` from call to call as the kernel does."""
 
-    def __init__(self, model: PoseModel, mus: Arr, radii: Arr, alpha0: Arr, tol: float, prox: float) -> None:
+    def __init__(self, model: PoseModel, mus: Arr, radii: Arr, alpha0: Arr, opts: LifterOptions) -> None:
         coords = model.limb_coordinates
         assert coords is not None
-        z, n, self._s0, _ = coords
+        z, n, s0, _ = coords
+        self._km, self._st = model.kernel_arrays, step_settings(opts)
         self._rad = np.ascontiguousarray(radii, dtype=np.float64)
         self._mus = np.ascontiguousarray(mus)
-        self._vc, self._vt, self._cu24_t = model.riemannian_arrays
-        self._cmu24 = model.kernel_limbs[1]
-        g = self._mus.T @ self._mus + (1.0 + prox) * np.eye(model.sig.size)
+        g = self._mus.T @ self._mus + (1.0 + opts.alpha_prox) * np.eye(model.sig.size)
         q, rmat, s1, s2 = _sphere_setup(g, z, n)
-        self._q = q
-        self._rmat_t, self._s1_t, self._s2_t = (np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
-                                               np.ascontiguousarray(s2.T))
-        self._gs0 = g @ self._s0
-        self._tol, self._prox = float(tol), float(prox)
-        self._sk = self._vt @ alpha0
+        self._geom = (g @ s0, q, np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
+                      np.ascontiguousarray(s2.T))
+        self._sk = model.v.T @ alpha0
 
     def __call__(self, d1: Arr, d2: Arr, alpha: Arr) -> tuple[Arr, int]:
-        out = np.empty(self._vc.shape[0])
+        out = np.empty(alpha.size)
         it = _riemannian_alpha_kernel(np.ascontiguousarray(d1), np.ascontiguousarray(d2), self._sk, self._mus,
-                                      self._vc, self._vt, self._gs0, self._q, self._rmat_t, self._s1_t,
-                                      self._s2_t, self._s0, self._cu24_t, self._cmu24, self._rad,
-                                      RIEMANNIAN_MAX_ITER, self._tol, self._prox, out, self._sk)
+                                      self._km, self._geom, self._rad, self._st, out, self._sk)
         return out, int(it)
 
 
@@ -93,7 +87,7 @@ def _loop(x: Arr, m0: Arr, t: Arr, w: Arr, model: PoseModel, alpha0: Arr, opts: 
     """The pose step with the Riemannian alpha-step through the Python ADM loop (the reference)."""
     xp, pw, rad = prior_operands(model, prior)
     c, wts, mus = _pose_rows(x, m0, t, w, model.kernel_arrays, xp, pw)
-    step = _RiemannianStep(model, mus, rad, alpha0, opts.newton_tol, opts.alpha_prox)
+    step = _RiemannianStep(model, mus, rad, alpha0, opts)
     th = opts.theta if opts.method.sparsity else 0.0
     return _adm(c, wts, mus, model, opts.method, th, alpha0.copy(), step, max_iter, opts, duals)
 

@@ -254,7 +254,7 @@ def _riemannian_adm(
     from step to step. ``u1`` (m,), ``u2`` (k,) are the scaled multipliers, updated in place;
     ``best_obj`` the objective of ``alpha0`` (k,) if feasible, else ``inf``. Returns ``(best
     alpha, best objective, final eta, iterations, converged, alpha-step iterations)``."""
-    vc, vt = km.vc, km.vt
+    vt = km.vt
     th, l1, prox, tol = st.th, st.l1, st.prox, st.pose_tol
     eta = st.eta
     r = mus.shape[1]
@@ -262,7 +262,9 @@ def _riemannian_adm(
     for j in range(r):
         g[j, j] += 1.0 + prox
     q, rmat, s1, s2 = _sphere_setup(g, km.z, km.n)
-    gs0 = g @ km.s0
+    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
+    geom = (g @ km.s0, q, np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
+            np.ascontiguousarray(s2.T))
     scale_c = max(1.0, math.sqrt(float(c @ c)))
     m = c.size
     k = alpha0.size
@@ -279,17 +281,11 @@ def _riemannian_adm(
     it = 0
     alpha_it = 0
     ax_prev = np.empty(m)
-    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
     mus_t = np.ascontiguousarray(mus.T)
-    rmat_t = np.ascontiguousarray(rmat.T)
-    s1_t = np.ascontiguousarray(s1.T)
-    s2_t = np.ascontiguousarray(s2.T)
     for it in range(1, max_iter + 1):
         beta, beta_prev = beta_prev, beta
         _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
-        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, vc, vt, gs0, q, rmat_t, s1_t, s2_t, km.s0,
-                                             km.cu24_t, km.cmu24, rad, st.alpha_max_iter, st.alpha_tol, prox,
-                                             alpha, sk)
+        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, km, geom, rad, st, alpha, sk)
         ax, ax_prev = ax_prev, ax
         ax[:] = 0.0
         _axpy_rows(mus_t, sk, ax)
