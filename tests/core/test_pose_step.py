@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 import tolerances as tol
 from numpy.typing import NDArray
-from pose_lifter.core.alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
+from pose_lifter.core._records import StepSettings, settings_record
+from pose_lifter.core.alpha.sphere_newton import RIEMANNIAN_MAX_ITER, _riemannian_alpha_kernel, _sphere_setup
 from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_kernel import _pose_rows
 from pose_lifter.core.pose_model import PoseModel
-from pose_lifter.core.pose_step import PriorRows, _adm, pose_step, prior_operands, step_settings
+from pose_lifter.core.pose_step import PriorRows, _adm, pose_step, prior_operands
 from pose_lifter.core.results import Duals, PoseResult, SolveInfo
 from scipy.spatial.transform import Rotation
 
@@ -66,7 +67,13 @@ class _RiemannianStep:
         coords = model.limb_coordinates
         assert coords is not None
         z, n, s0, _ = coords
-        self._km, self._st = model.kernel_arrays, step_settings(opts)
+        # one Newton step per alpha-step, the method's (RIEMANNIAN_MAX_ITER), whatever the product's
+        # settings say; only the alpha-step's fields are read
+        self._km = model.kernel_arrays
+        self._st = settings_record(StepSettings(
+            th=0.0, l1=True, eta=1.0, eta_growth=1.0, eta_max=1.0, pose_tol=0.0,
+            alpha_max_iter=RIEMANNIAN_MAX_ITER, alpha_tol=opts.newton_tol, prox=opts.alpha_prox,
+            cam_max_iter=0, cam_tol=0.0, tau=0.0, alt_tol=0.0))
         self._rad = np.ascontiguousarray(radii, dtype=np.float64)
         self._mus = np.ascontiguousarray(mus)
         g = self._mus.T @ self._mus + (1.0 + opts.alpha_prox) * np.eye(model.sig.size)
