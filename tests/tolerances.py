@@ -38,20 +38,20 @@ LIFT_LIMB_VIOLATION: Final[float] = 1e-6
 #: Two solves of one problem posed two equivalent ways (the image scaled and shifted): pose
 #: (normalised units) and camera scale (relative).
 SOLVE_REPEAT: Final[float] = 1e-6
-#: The pose step's fused compiled kernel against the Python ADM loop it fuses, one ADM iteration
-#: from the same input (iterate and multipliers): the same arithmetic in another order (loops
-#: against numpy's vector and BLAS operations), so they differ by round-off times the conditioning
-#: of the iteration's small solves. Relative, objective, coefficients and multipliers. Worst of
-#: 24 problems x 15 iterations measured 1.1e-12 under four BLAS / numba set-ups (OpenBLAS Haswell,
-#: Sandybridge, Prescott; numba host and generic x86-64; tools/fused_vs_loop.py); a second Newton
-#: step in the alpha-step or a flipped sign moves them by far more.
+#: The compiled pose step against the Python ADM loop around the same alpha-step, one ADM iteration
+#: from the same input (iterate and multipliers): the same compiled rows and updates, but the loop
+#: forms ``A alpha`` with numpy / BLAS products from ``alpha`` where the kernel sums rows of the
+#: carried ``V^T alpha``, so they differ by round-off times the conditioning of the iteration's
+#: small solves. Relative, objective, coefficients and multipliers. Worst of 24 problems x 15
+#: iterations measured 2e-14 (OpenBLAS Haswell, numba host target); a second Newton step in the
+#: alpha-step or a flipped sign moves them by far more.
 FUSED_STEP_REL: Final[float] = 1e-9
 #: ... and the whole step, 15 iterations and not converged, by what a user sees (objective and
-#: pose, relative): round-off grows by about 10^5 over 15 iterations of the nonconvex ADM
-#: (measured worst 7.6e-11 under the same four set-ups; the final multipliers, which no user
-#: sees, up to 5.7e-7 and so not compared).
+#: pose, relative): round-off grows by up to about 10^5 over 15 iterations of the nonconvex ADM
+#: (measured worst 6e-11 on the same 24 problems; the final multipliers, which no user sees, are
+#: not compared).
 FUSED_VS_LOOP_REL: Final[float] = 1e-6
-#: The fused run kernel (core/run_kernel.py) against ``Runs.run``'s Python loop, the same inputs:
+#: The compiled run (core/run_kernel.py) against ``Runs.run``'s Python loop, the same inputs:
 #: both call the same compiled steps and the same compiled objective terms, so they perform the
 #: same floating-point operations on any CPU and BLAS (measured 0 on every replayed run); the
 #: bound leaves room for nothing but a changed operation, which moves a run by far more (a flipped

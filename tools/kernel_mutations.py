@@ -1,15 +1,15 @@
-"""The fused kernels' tests against deliberate changes: each must turn the tests red.
+"""The compiled steps' tests against deliberate changes: each must turn the tests red.
 
 Usage::
 
     .venv/bin/python tools/kernel_mutations.py
 
 Applies one change at a time to the source tree (restored afterwards, also on Ctrl-C), runs the
-test that compares that kernel with its Python loop, and prints whether it failed. The changes:
-a sign in the fused pose ADM, two Newton steps per alpha-step in the fused pose step and in the
-fused run (the Python loops keep one), a sign in the run kernel's objective, and a run kernel
-that keeps its last alternation instead of its best. Each recompiles the kernels it touches
-(about a minute each on 2 cores).
+test that must catch it, and prints whether it failed. The changes: a sign in the pose ADM (the
+compiled pose step against the independent references), two Newton steps per alpha-step (against
+the Python ADM loop around one), a sign in the run's objective (against its formula in numpy)
+and a run that keeps its last alternation instead of its best (against the Python alternation
+loop). Each recompiles the kernels it touches (minutes on 2 cores).
 """
 
 from __future__ import annotations
@@ -23,19 +23,15 @@ CORE = REPO / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter" / "core"
 
 #: (what, file under core/, text, its replacement, the test that must fail)
 MUTATIONS = [
-    ("a sign in the fused pose ADM's d1", "pose_kernel.py", "d1[i] = c[i] - gi + u1[i]",
-     "d1[i] = c[i] - gi - u1[i]", "tests/core/test_pose_step.py"),
-    ("two Newton steps in the fused pose step", "pose_step.py",
-     "float(eta_max), int(max_iter), float(tol), RIEMANNIAN_MAX_ITER,",
-     "float(eta_max), int(max_iter), float(tol), 2 * RIEMANNIAN_MAX_ITER,", "tests/core/test_pose_step.py"),
-    ("the sign of ||alpha||_1 in the run kernel's objective", "run_kernel.py",
+    ("a sign in the pose ADM's d1", "pose_kernel.py", "d1[i] = c[i] - gi + u1[i]",
+     "d1[i] = c[i] - gi - u1[i]", "tests/core/test_against_reference.py"),
+    ("two Newton steps per alpha-step in the compiled pose step", "pose_step.py",
+     "alpha_max_iter=RIEMANNIAN_MAX_ITER,", "alpha_max_iter=2 * RIEMANNIAN_MAX_ITER,",
+     "tests/core/test_pose_step.py"),
+    ("the sign of ||alpha||_1 in the run's objective", "run_kernel.py",
      "obj = cobj + th * _sum_abs(alpha)", "obj = cobj - th * _sum_abs(alpha)",
      "tests/core/test_run_kernel.py"),
-    ("two Newton steps in the fused run", "runs.py",
-     "eta_growth, ETA_MAX, int(max_iter), pose_tol, RIEMANNIAN_MAX_ITER,",
-     "eta_growth, ETA_MAX, int(max_iter), pose_tol, 2 * RIEMANNIAN_MAX_ITER,",
-     "tests/core/test_run_kernel.py"),
-    ("the run kernel keeps its last alternation, not its best", "run_kernel.py",
+    ("the compiled run keeps its last alternation, not its best", "run_kernel.py",
      "if (b_idx < 0 and not continued) or obj < b_obj:",
      "if (b_idx < 0 and not continued) or obj < b_obj or True:", "tests/core/test_run_kernel.py"),
 ]

@@ -20,9 +20,9 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
   :func:`pose_lifter.offline.lift.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
-  first bag in each mode through ``Runs.run``'s Python loop (the default fused run kernel calls no
-  Python ``pose_step``; the loop performs the same operations, ``tests/core/test_run_kernel.py``)
-  (every ``--record-every``-th call, up to ``--record`` per mode),
+  first bag in each mode through ``Runs.run``'s Python loop (the compiled run calls no Python
+  ``pose_step``; the loop runs the same steps, ``tests/core/test_run_kernel.py``) (every
+  ``--record-every``-th call, up to ``--record`` per mode),
   replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
   ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
   their objectives, limb violations, iteration counts and coefficients.
@@ -164,11 +164,11 @@ def lift_bags(bags: Iterable[Path], mode: str, starts: int | None,
 
         d.text(f"{bag.name} {mode}")
         if recorder is not None and i == 0:
-            # the fused run kernel calls no Python pose_step: the calls are recorded from a lift
-            # of this bag through the Python loop (Runs.fused False, the same results to the bit),
-            # not hashed; the hashed lift below is the default (fused) path's
+            # the compiled run calls no Python pose_step: the calls are recorded from a lift of
+            # this bag through the Python loop (Runs.compiled False), not hashed; the hashed lift
+            # below is the default (compiled) path's
             ref = Lifter(lifter.bases, lifter.options)
-            ref.runs.fused = False
+            ref.runs.compiled = False
             lifter_module.pose_step = recorder.wrap(original)  # type: ignore[assignment]
             try:
                 lift_messages(kps, infos, ref, NODE)

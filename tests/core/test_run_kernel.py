@@ -1,7 +1,7 @@
-"""The fused run kernel (core/run_kernel.py) against the Python alternation loop of ``Runs.run``
-it replaces: every run of tracked lifts (new, warm, continued, screening and mirrored runs, with
-and without the prior's rows) replayed both ways; and the objective's terms, which both paths
-call, against their formulas written with numpy.
+"""The compiled run (core/run_kernel.py) against the Python alternation loop of ``Runs.run`` (the
+other solvers' path, and the kernel's reference): every run of tracked lifts (new, warm,
+continued, screening and mirrored runs, with and without the prior's rows) replayed both ways;
+and the objective's terms, which both paths call, against their formulas written with numpy.
 
 The two paths call the same compiled steps and the same compiled objective terms, so they perform
 the same floating-point operations on any CPU and BLAS: what the replay checks is the kernel's
@@ -20,6 +20,7 @@ from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.pose_step import PriorRows
+from pose_lifter.core.run_kernel import _run_objective
 from pose_lifter.core.runs import Run, Runs
 from pose_lifter.offline.lift import lift_messages
 from pose_lifter.offline.settings import LiftSettings
@@ -39,7 +40,7 @@ def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[C
         elif x.topic.endswith("camera_info"):
             infos.append((x.stamp_ns, x.msg))
     lifter = Lifter(None, LifterOptions(mode=mode, n_starts=4) if mode == "paper" else LifterOptions())
-    lifter.runs.fused = False
+    lifter.runs.compiled = False
     calls: list[Call] = []
     original = lifter.runs.run
 
@@ -81,15 +82,16 @@ def _assert_same(a: Run, b: Run) -> None:
 
 @pytest.mark.parametrize(("mode", "bag"), [("hybrid", "punch_outliers.mcap"), ("hybrid", "two_people.mcap"),
                                            ("paper", "walk_noisy.mcap")])
-def test_fused_run_is_the_python_loop(mode: str, bag: str) -> None:
+def test_compiled_run_is_the_python_loop(mode: str, bag: str) -> None:
     lifter, calls = _recorded_runs(mode, bag, 6)
-    loop = Runs(lifter.model, lifter.options, fused=False)
-    fused = Runs(lifter.model, lifter.options)
-    assert fused.fusable and not loop.fused
+    loop = Runs(lifter.model, lifter.options)
+    loop.compiled = False
+    compiled = Runs(lifter.model, lifter.options)
+    assert compiled.compiled
     kinds = set()
     for args, kwargs in calls:
         kinds.add((kwargs.get("start") is not None, args[3] is not None, kwargs.get("prior") is not None))
-        _assert_same(fused.run(*args, **kwargs), loop.run(*args, **kwargs))
+        _assert_same(compiled.run(*args, **kwargs), loop.run(*args, **kwargs))
     # new runs, cold and (hybrid) from the previous frame's camera, and (paper) continued screened
     # starts were replayed
     hybrid = mode == "hybrid"
@@ -100,24 +102,24 @@ def test_fused_run_is_the_python_loop(mode: str, bag: str) -> None:
         if kwargs.get("start") is not None:
             continue
         prior = kwargs.get("prior")
-        sa = fused.run(*args[:4], max_alternations=1, prior=prior)
+        sa = compiled.run(*args[:4], max_alternations=1, prior=prior)
         sb = loop.run(*args[:4], max_alternations=1, prior=prior)
         _assert_same(sa, sb)
-        _assert_same(fused.run(args[0], args[1], sa.pose.alpha, None, start=sa, prior=prior),
+        _assert_same(compiled.run(args[0], args[1], sa.pose.alpha, None, start=sa, prior=prior),
                      loop.run(args[0], args[1], sb.pose.alpha, None, start=sb, prior=prior))
 
 
-def test_the_reference_paths_do_not_fuse() -> None:
+def test_the_other_solvers_run_the_python_loop() -> None:
     lifter = Lifter(None, LifterOptions())
-    assert lifter.runs.fusable and lifter.runs.fused
+    assert lifter.runs.compiled
     for opts in (LifterOptions(warm_duals=True), LifterOptions(mode="paper", alpha_solver="newton"),
                  LifterOptions(mode="paper", alpha_step="full")):
-        assert not Runs(lifter.model, opts).fusable
+        assert not Runs(lifter.model, opts).compiled
 
 
 def test_the_objective_terms_are_their_formulas() -> None:
-    """``||a||_1``, the depth row ``s r1 x r2`` and the prior's depth rows, compiled, against the
-    same formulas in numpy (another summation order: ROUND_OFF relative)."""
+    """``||a||_1``, the depth row ``s r1 x r2``, the prior's depth rows and the run's objective,
+    compiled, against the same formulas in numpy (another summation order: ROUND_OFF relative)."""
     rng = np.random.default_rng(3)
     for n in (0, 5, 8, 13, 128, 129, 200, 1000):
         a = rng.normal(size=n)
@@ -130,3 +132,10 @@ def test_the_objective_terms_are_their_formulas() -> None:
         expected = float(pw[:, 1] @ np.abs(xp[:, 2] - (y - y.mean(axis=0)) @ m3))
         assert _depth_term(y.reshape(-1), m0, xp, pw) == pytest.approx(expected, rel=tol.ROUND_OFF)
         assert PriorRows(xp, pw).depth_term(y, m0) == _depth_term(y.reshape(-1), m0, xp, pw)
+        # the run's objective F: the camera step's objective, theta ||alpha||_1 and the depth rows
+        alpha, cobj, th = rng.normal(size=30), float(rng.uniform(0.1, 2.0)), float(rng.uniform(0.0, 0.5))
+        f = _run_objective(cobj, alpha, th, y.reshape(-1), m0, xp, pw)
+        assert f == pytest.approx(cobj + th * float(np.sum(np.abs(alpha))) + expected, rel=tol.ROUND_OFF)
+        no_depth = np.column_stack([pw[:, 0], np.zeros(12)])
+        assert _run_objective(cobj, alpha, th, y.reshape(-1), m0, xp, no_depth) == pytest.approx(
+            cobj + th * float(np.sum(np.abs(alpha))), rel=tol.ROUND_OFF)

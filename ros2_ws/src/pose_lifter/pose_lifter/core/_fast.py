@@ -1,9 +1,9 @@
 """Small numpy helpers for the per-frame path, without numpy's per-call argument handling (which
 costs more than the arithmetic on arrays of 12 joints). Each returns what its numpy original does.
 
-:func:`pairwise_sum` is numpy's sum for the compiled kernels: the same floating-point operations in
-the same order, so a kernel that uses it returns what the numpy code it replaces does, to the bit
-(``tests/core/test_fast.py``)."""
+:func:`pairwise_sum` is numpy's sum for the compiled kernels, in numpy's pairwise order, so a
+kernel that uses it sums as the numpy code it replaces does (``tests/core/test_fast.py`` checks
+it to round-off: nothing may depend on the last bit, which differs between CPUs anyway)."""
 
 from __future__ import annotations
 

@@ -1,24 +1,39 @@
-"""The pose ADM's compiled pieces: its splitting, dual and penalty updates, and the whole pose
-step with the Riemannian alpha-step fused into one kernel (checked against the one Python loop of
-:func:`pose_lifter.core.pose_step.pose_step`)."""
+"""The pose step's compiled pieces: its L1 rows, the ADM's splitting, dual and penalty updates, and
+the pose step with the Riemannian alpha-step as one kernel (:func:`_pose_kernel`, the pose step of
+the default solver; :func:`pose_lifter.core.pose_step.pose_step` calls it, and its Python ADM loop
+calls the same rows and updates around the other alpha-steps)."""
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._jit import njit
 from ._linalg import _axpy_rows
+from ._records import ModelArrays, StepSettings
 from .alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
+
+
+class PoseOut(NamedTuple):
+    """What :func:`_pose_kernel` returns."""
+
+    alpha: NDArray[np.float64]  #: (k,) the best feasible iterate's coefficients
+    objective: float  #: its objective
+    limb_violation: float  #: its largest limb-length error
+    pose: NDArray[np.float64]  #: (36,) its pose ``mu + B alpha``
+    eta: float  #: the final penalty (the unscaled multipliers are ``eta * u``)
+    n_iter: int  #: ADM iterations
+    converged: bool  #: whether the residuals fell below the tolerance
+    alpha_iter: int  #: Newton steps of the alpha-steps, summed
 
 
 @njit
 def _sum_abs(a: NDArray[np.float64]) -> float:
-    """``||a||_1`` of an (n,) array, summed in order. The one implementation of the sparsity term
-    ``||alpha||_1`` of a run's objective: the fused run and the Python loop both call it, so the
-    two evaluate the objective with the same operations on every machine."""
+    """``||a||_1`` of an (n,) array, summed in order: the sparsity term ``||alpha||_1`` of a run's
+    objective (:func:`pose_lifter.core.run_kernel._run_objective`)."""
     res = 0.0
     for i in range(a.size):
         res += abs(a[i])
@@ -67,7 +82,7 @@ def _depth_term(y: NDArray[np.float64], m0: NDArray[np.float64], xp: NDArray[np.
 @njit
 def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64],
                theta: float, l1: bool) -> float:
-    """:func:`pose_objective` on plain arrays (``l1`` False: squared loss)."""
+    """``sum wts rho(resid) + theta ||alpha||_1`` (``l1`` False: squared loss)."""
     data = np.sum(wts * np.abs(resid)) if l1 else np.sum(wts * resid * resid)
     return float(data + theta * np.sum(np.abs(alpha)))
 
@@ -76,17 +91,59 @@ def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDAr
 def _adm_split(
     c: NDArray[np.float64], ax: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
     alpha: NDArray[np.float64], wts: NDArray[np.float64], eta: float, th: float, l1: bool,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """gamma- and beta-steps of the pose ADM: ``(gamma, beta, d1, d2)`` of the module docstring
-    (``ax = A alpha``; ``th = 0``: no sparsity)."""
-    vg = c - ax + u1
-    if l1:
-        gamma = np.sign(vg) * np.maximum(np.abs(vg) - wts / eta, 0.0)
-    else:
-        gamma = eta * vg / (2.0 * wts + eta)
-    vb = alpha + u2
-    beta = np.sign(vb) * np.maximum(np.abs(vb) - th / eta, 0.0) if th > 0 else vb
-    return gamma, beta, c - gamma + u1, beta - u2
+    gamma: NDArray[np.float64], beta: NDArray[np.float64], d1: NDArray[np.float64], d2: NDArray[np.float64],
+) -> None:
+    """gamma- and beta-steps of the pose ADM (``pose_step`` module docstring), written into
+    ``gamma``, ``d1`` (m,) and ``beta``, ``d2`` (k,): ``gamma = prox(c - A alpha + u1)``,
+    ``beta = soft(alpha + u2, th / eta)`` (``th = 0``: no sparsity), ``d1 = c - gamma + u1``,
+    ``d2 = beta - u2``; ``ax = A alpha`` (m,)."""
+    for i in range(c.size):  # gamma-step (prox of the data term)
+        vg = c[i] - ax[i] + u1[i]
+        if l1:
+            gi = math.copysign(max(abs(vg) - wts[i] / eta, 0.0), vg)
+        else:
+            gi = eta * vg / (2.0 * wts[i] + eta)
+        gamma[i] = gi
+        d1[i] = c[i] - gi + u1[i]
+    for i in range(alpha.size):  # beta-step (prox of theta ||.||_1)
+        vb = alpha[i] + u2[i]
+        bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
+        beta[i] = bi
+        d2[i] = bi - u2[i]
+
+
+@njit
+def _adm_dual_update(
+    c: NDArray[np.float64], ax: NDArray[np.float64], ax_prev: NDArray[np.float64], gamma: NDArray[np.float64],
+    alpha: NDArray[np.float64], beta: NDArray[np.float64], beta_prev: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64], wts: NDArray[np.float64], th: float, l1: bool,
+    scale_c: float,
+) -> tuple[float, float, float]:
+    """After the alpha-step of the pose ADM (``ax = A alpha`` (m,), ``ax_prev`` before it): the
+    multipliers ``u1`` (m,), ``u2`` (k,) updated in place; returns the objective and the relative
+    primal and dual residuals (sums in order, no temporaries)."""
+    r1sq, dsq, data = 0.0, 0.0, 0.0
+    for i in range(c.size):
+        e = c[i] - ax[i]
+        data += wts[i] * (abs(e) if l1 else e * e)
+        r = e - gamma[i]
+        u1[i] += r
+        r1sq += r * r
+        dsq += (ax[i] - ax_prev[i]) ** 2
+    r2sq, asq, anorm1, dbsq = 0.0, 0.0, 0.0, 0.0
+    for i in range(alpha.size):
+        a = alpha[i]
+        r = a - beta[i]
+        u2[i] += r
+        r2sq += r * r
+        asq += a * a
+        anorm1 += abs(a)
+        dbsq += (beta[i] - beta_prev[i]) ** 2
+    obj = data + th * anorm1
+    an = max(1.0, math.sqrt(asq))
+    primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
+    dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
+    return obj, primal, dual
 
 
 @njit
@@ -100,120 +157,6 @@ def _grow_penalty(eta: float, eta_growth: float, eta_max: float, u1: NDArray[np.
         u2 *= eta / eta_new
         return eta_new
     return eta
-
-
-@njit
-def _adm_dual_update(
-    c: NDArray[np.float64], gamma: NDArray[np.float64], alpha: NDArray[np.float64],
-    beta: NDArray[np.float64], beta_prev: NDArray[np.float64], ax_prev: NDArray[np.float64],
-    u1: NDArray[np.float64], u2: NDArray[np.float64], mus: NDArray[np.float64], v: NDArray[np.float64],
-    wts: NDArray[np.float64], th: float, l1: bool, scale_c: float,
-) -> tuple[NDArray[np.float64], float, float, float]:
-    """After the alpha-step of the pose ADM: ``u1``, ``u2`` updated in place; returns ``A alpha``,
-    the objective and the relative primal and dual residuals."""
-    ax = mus @ (v.T @ alpha)
-    r1 = c - ax - gamma
-    r2 = alpha - beta
-    u1 += r1
-    u2 += r2
-    obj = _objective(c - ax, wts, alpha, th, l1)
-    an = max(1.0, math.sqrt(float(alpha @ alpha)))
-    primal = max(math.sqrt(float(r1 @ r1)) / scale_c, math.sqrt(float(r2 @ r2)) / an)
-    dax = ax - ax_prev
-    dbeta = beta - beta_prev
-    dual = max(math.sqrt(float(dax @ dax)) / scale_c, math.sqrt(float(dbeta @ dbeta)) / an)
-    return ax, obj, primal, dual
-
-
-@njit
-def _riemannian_adm_kernel(
-    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], vc: NDArray[np.float64],
-    vt: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64], rmat: NDArray[np.float64],
-    s1: NDArray[np.float64], s2: NDArray[np.float64], s0: NDArray[np.float64], cu24_t: NDArray[np.float64],
-    cmu24: NDArray[np.float64],
-    rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
-    best_obj: float, eta: float, eta_growth: float, eta_max: float, th: float, l1: bool, max_iter: int,
-    tol: float, alpha_max_iter: int, alpha_tol: float, prox: float, scale_c: float,
-) -> tuple[NDArray[np.float64], float, float, int, bool, int]:
-    """The pose ADM loop of :func:`pose_step` with the Riemannian alpha-step, in one kernel (the
-    Python loop's updates; ``V^T alpha`` is carried instead of recomputed). ``u1``, ``u2``
-    (scaled multipliers) are updated in place. ``vc = V`` (k, r), ``vt = V^T`` (r, k) and
-    ``cu24_t = (C U S)^T`` (r, 24) come C-contiguous (``PoseModel.riemannian_arrays``). Returns
-    ``(best alpha, best objective, final eta, iterations, converged, alpha-step iterations)``;
-    ``best_obj`` is the objective of ``alpha0`` if feasible, else ``inf``."""
-    m = c.size
-    k = alpha0.size
-    alpha = alpha0.copy()
-    best_alpha = alpha.copy()
-    beta = alpha.copy()
-    beta_prev = np.empty(k)
-    gamma = np.empty(m)
-    d1 = np.empty(m)
-    d2 = np.empty(k)
-    sk = vt @ alpha
-    ax = mus @ sk
-    converged = False
-    it = 0
-    alpha_it = 0
-    # the vector updates are written as loops (fused, no temporaries): the same arithmetic as
-    # _adm_split / _adm_dual_update, summed sequentially
-    ax_prev = np.empty(m)
-    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
-    mus_t = np.ascontiguousarray(mus.T)
-    rmat_t = np.ascontiguousarray(rmat.T)
-    s1_t = np.ascontiguousarray(s1.T)
-    s2_t = np.ascontiguousarray(s2.T)
-    for it in range(1, max_iter + 1):
-        beta, beta_prev = beta_prev, beta
-        for i in range(m):  # gamma-step (prox of the data term)
-            vg = c[i] - ax[i] + u1[i]
-            if l1:
-                gi = math.copysign(max(abs(vg) - wts[i] / eta, 0.0), vg)
-            else:
-                gi = eta * vg / (2.0 * wts[i] + eta)
-            gamma[i] = gi
-            d1[i] = c[i] - gi + u1[i]
-        for i in range(k):  # beta-step (prox of theta ||.||_1)
-            vb = alpha[i] + u2[i]
-            bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
-            beta[i] = bi
-            d2[i] = bi - u2[i]
-        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, vc, vt, gs0, q, rmat_t, s1_t, s2_t, s0, cu24_t,
-                                             cmu24, rad, alpha_max_iter, alpha_tol, prox, alpha, sk)
-        ax, ax_prev = ax_prev, ax
-        ax[:] = 0.0
-        _axpy_rows(mus_t, sk, ax)
-        r1sq, dsq, data = 0.0, 0.0, 0.0
-        for i in range(m):
-            e = c[i] - ax[i]
-            data += wts[i] * (abs(e) if l1 else e * e)
-            r = e - gamma[i]
-            u1[i] += r
-            r1sq += r * r
-            dsq += (ax[i] - ax_prev[i]) ** 2
-        r2sq, asq, anorm1, dbsq = 0.0, 0.0, 0.0, 0.0
-        for i in range(k):
-            a = alpha[i]
-            r = a - beta[i]
-            u2[i] += r
-            r2sq += r * r
-            asq += a * a
-            anorm1 += abs(a)
-            dbsq += (beta[i] - beta_prev[i]) ** 2
-        obj = data + th * anorm1
-        an = max(1.0, math.sqrt(asq))
-        primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
-        dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
-        eta = _grow_penalty(eta, eta_growth, eta_max, u1, u2)
-        if obj < best_obj:
-            best_obj = obj
-            best_alpha[:] = alpha
-        if primal < tol and dual < tol:
-            converged = True
-            break
-    if not math.isfinite(best_obj):
-        best_alpha = alpha
-    return best_alpha, best_obj, eta, it, converged, alpha_it
 
 
 @njit
@@ -240,29 +183,19 @@ def _n_rows(pw: NDArray[np.float64]) -> int:
 
 
 @njit
-def _riemannian_pose_kernel(
-    x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
-    mean: NDArray[np.float64], u: NDArray[np.float64], sig: NDArray[np.float64], vc: NDArray[np.float64],
-    vt: NDArray[np.float64], comps: NDArray[np.float64], limb_matrix: NDArray[np.float64],
-    z: NDArray[np.float64], n: NDArray[np.float64], s0: NDArray[np.float64], rad: NDArray[np.float64],
-    cu24_t: NDArray[np.float64], cmu24: NDArray[np.float64], alpha0: NDArray[np.float64],
-    u1: NDArray[np.float64], u2: NDArray[np.float64],
-    th: float, l1: bool, eta: float, eta_growth: float, eta_max: float, max_iter: int, tol: float,
-    alpha_max_iter: int, alpha_tol: float, prox: float,
-    xp: NDArray[np.float64], pw: NDArray[np.float64], m3: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float, int, bool, int]:
-    """:func:`pose_step` with the Riemannian alpha-step, set-up included: ``c = x - t - M mu``,
-    ``M U S``, the limb-coordinate quadratic (:func:`_sphere_setup`), then
-    :func:`_riemannian_adm_kernel`. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,), alpha0 (k,),
-    u1 (m,), u2 (k,) (scaled multipliers, updated in place; ``m`` = 24 + the prior rows below).
+def _pose_rows(x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64],
+               w: NDArray[np.float64], km: ModelArrays, xp: NDArray[np.float64], pw: NDArray[np.float64]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The L1 rows of the pose objective ``sum_i wts_i rho(c_i - (M U S s)_i)`` (``s = V^T alpha``)
+    for the camera ``m0`` (2, 3), ``t`` (2,), the 2D ``x`` (12, 2) and weights ``w`` (12,):
+    ``(c (m,), wts (m,), M U S (m, r))``, ``m`` = :func:`_n_rows`.
 
-    Prior rows (the hybrid mode's L1 prior term, :class:`pose_lifter.core.lifter.Lifter`): for
-    each joint ``j`` with ``pw[j, 0] > 0`` two rows ``pw[j, 0] |xp[j, a] - t_a - M_a y_j|`` (the
-    prior's image position, a = x, y), and with ``pw[j, 1] > 0`` one row
-    ``pw[j, 1] |xp[j, 2] - m3 (y_j - mean_i y_i)|`` (its depth relative to the joints' mean;
-    ``m3`` = scale times the camera's third rotation row). ``pw`` all zero: the paper's problem.
-    Returns ``(alpha, objective, limb violation, pose (36,), final eta, iterations, converged,
-    alpha-step iterations)``."""
+    2 rows per joint, then the prior's (the hybrid mode's L1 prior term): for each joint ``j`` with
+    ``pw[j, 0] > 0`` two rows ``pw[j, 0] |xp[j, a] - t_a - M_a y_j|`` (the prior's image position,
+    a = x, y), and with ``pw[j, 1] > 0`` one row ``pw[j, 1] |xp[j, 2] - m3 (y_j - mean_i y_i)|``
+    (its depth relative to the joints' mean; ``m3`` = :func:`_depth_row`). ``pw`` all zero: the
+    paper's problem."""
+    mean, u, sig = km.mean, km.u, km.sig
     r = sig.size
     nj = x.shape[0]
     m = _n_rows(pw)
@@ -289,6 +222,7 @@ def _riemannian_pose_kernel(
                                    + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
                 row += 1
     if (pw[:, 1] > 0.0).any():  # the prior's relative depths: m3 (y_j - mean_i y_i)
+        m3 = _depth_row(m0)
         ubar = np.zeros((3, r))
         mbar = np.zeros(3)
         for j in range(nj):
@@ -305,20 +239,90 @@ def _riemannian_pose_kernel(
                     mus[row, k] = (m3[0] * (u[3 * j, k] - ubar[0, k]) + m3[1] * (u[3 * j + 1, k] - ubar[1, k])
                                    + m3[2] * (u[3 * j + 2, k] - ubar[2, k])) * sig[k]
                 row += 1
-    g = mus.T @ mus
-    for k in range(r):
-        g[k, k] += 1.0 + prox
-    q, rmat, s1, s2 = _sphere_setup(g, z, n)
-    gs0 = g @ s0
-    best_obj = np.inf
-    if _limb_violation_jit(mean + comps @ alpha0, limb_matrix, rad) < 1e-6:
-        best_obj = _objective(c - mus @ (vt @ alpha0), wts, alpha0, th, l1)
-    scale_c = max(1.0, math.sqrt(float(c @ c)))
-    best_alpha, best_obj, eta, it, converged, alpha_it = _riemannian_adm_kernel(
-        c, wts, mus, vc, vt, gs0, q, rmat, s1, s2, s0, cu24_t, cmu24, rad, alpha0, u1, u2, best_obj, eta,
-        eta_growth, eta_max, th, l1, max_iter, tol, alpha_max_iter, alpha_tol, prox, scale_c)
-    if not math.isfinite(best_obj):
-        best_obj = _objective(c - mus @ (vt @ best_alpha), wts, best_alpha, th, l1)
-    y = mean + comps @ best_alpha
-    return best_alpha, best_obj, _limb_violation_jit(y, limb_matrix, rad), y, eta, it, converged, alpha_it
+    return c, wts, mus
 
+
+@njit
+def _riemannian_adm(
+    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], km: ModelArrays,
+    st: StepSettings, rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64],
+    u2: NDArray[np.float64], best_obj: float, max_iter: int,
+) -> tuple[NDArray[np.float64], float, float, int, bool, int]:
+    """The pose ADM (``pose_step`` module docstring) on the rows ``(c, wts, mus)``
+    (:func:`_pose_rows`) with the Riemannian alpha-step (:func:`_riemannian_alpha_kernel`, its
+    quadratic in limb coordinates set up once, :func:`_sphere_setup`); ``V^T alpha`` is carried
+    from step to step. ``u1`` (m,), ``u2`` (k,) are the scaled multipliers, updated in place;
+    ``best_obj`` the objective of ``alpha0`` (k,) if feasible, else ``inf``. Returns ``(best
+    alpha, best objective, final eta, iterations, converged, alpha-step iterations)``."""
+    vt = km.vt
+    th, l1, prox, tol = st.th, st.l1, st.prox, st.pose_tol
+    eta = st.eta
+    r = mus.shape[1]
+    g = mus.T @ mus
+    for j in range(r):
+        g[j, j] += 1.0 + prox
+    q, rmat, s1, s2 = _sphere_setup(g, km.z, km.n)
+    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
+    geom = (g @ km.s0, q, np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
+            np.ascontiguousarray(s2.T))
+    scale_c = max(1.0, math.sqrt(float(c @ c)))
+    m = c.size
+    k = alpha0.size
+    alpha = alpha0.copy()
+    best_alpha = alpha.copy()
+    beta = alpha.copy()
+    beta_prev = np.empty(k)
+    gamma = np.empty(m)
+    d1 = np.empty(m)
+    d2 = np.empty(k)
+    sk = vt @ alpha
+    ax = mus @ sk
+    converged = False
+    it = 0
+    alpha_it = 0
+    ax_prev = np.empty(m)
+    mus_t = np.ascontiguousarray(mus.T)
+    for it in range(1, max_iter + 1):
+        beta, beta_prev = beta_prev, beta
+        _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
+        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, km, geom, rad, st, alpha, sk)
+        ax, ax_prev = ax_prev, ax
+        ax[:] = 0.0
+        _axpy_rows(mus_t, sk, ax)
+        obj, primal, dual = _adm_dual_update(c, ax, ax_prev, gamma, alpha, beta, beta_prev, u1, u2, wts, th,
+                                             l1, scale_c)
+        eta = _grow_penalty(eta, st.eta_growth, st.eta_max, u1, u2)
+        if obj < best_obj:
+            best_obj = obj
+            best_alpha[:] = alpha
+        if primal < tol and dual < tol:
+            converged = True
+            break
+    if not math.isfinite(best_obj):
+        best_alpha = alpha
+    return best_alpha, best_obj, eta, it, converged, alpha_it
+
+
+@njit
+def _pose_kernel(
+    x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
+    km: ModelArrays, st: StepSettings, max_iter: int, xp: NDArray[np.float64], pw: NDArray[np.float64],
+    rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+) -> PoseOut:
+    """The pose step with the Riemannian alpha-step: its rows (:func:`_pose_rows`; the prior's
+    target ``xp`` (12, 3) and weights ``pw`` (12, 2), zeros: none), the start's objective if it
+    meets the limb lengths ``rad`` (8,), then the ADM (:func:`_riemannian_adm`) from ``alpha0``
+    (k,) with the scaled multipliers ``u1`` (m,), ``u2`` (k,) (updated in place) and at most
+    ``max_iter`` iterations. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,)."""
+    th, l1 = st.th, st.l1
+    c, wts, mus = _pose_rows(x, m0, t, w, km, xp, pw)
+    best_obj = np.inf
+    if _limb_violation_jit(km.mean + km.comps @ alpha0, km.limb_matrix, rad) < 1e-6:
+        best_obj = _objective(c - mus @ (km.vt @ alpha0), wts, alpha0, th, l1)
+    best_alpha, best_obj, eta, it, converged, alpha_it = _riemannian_adm(
+        c, wts, mus, km, st, rad, alpha0, u1, u2, best_obj, max_iter)
+    if not math.isfinite(best_obj):
+        best_obj = _objective(c - mus @ (km.vt @ best_alpha), wts, best_alpha, th, l1)
+    y = km.mean + km.comps @ best_alpha
+    return PoseOut(best_alpha, best_obj, _limb_violation_jit(y, km.limb_matrix, rad), y, eta, it, converged,
+                   alpha_it)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ._records import ModelArrays, model_record
 from .bases import PoseBases
 from .errors import InvalidInputError
 from .skeleton import N_JOINTS, limb_selectors
@@ -195,6 +196,24 @@ class PoseModel:
         kernel's operands that depend only on the bases (made once per model)."""
         return (np.ascontiguousarray(self.v), np.ascontiguousarray(self.v.T),
                 np.ascontiguousarray(self.kernel_limbs[0].T))
+
+    @functools.cached_property
+    def limb_radii(self) -> NDArray[np.float64]:
+        """The limb lengths ``sqrt(L_i)`` (8,), C-contiguous."""
+        return np.ascontiguousarray(np.sqrt(self.limb_sq))
+
+    @functools.cached_property
+    def kernel_arrays(self) -> ModelArrays:
+        """The model as the compiled pose step and run read it (:func:`model_record`; made once per
+        model). Without an onto limb map (:attr:`limb_coordinates` None) its limb-coordinate
+        arrays are zeros: only the rows and the limb matrix are read then."""
+        r = self.sig.size
+        vc, vt, cu24_t = self.riemannian_arrays
+        coords = self.limb_coordinates
+        z, n, s0 = (np.zeros((r, 24)), np.zeros((r, 0)), np.zeros(r)) if coords is None else coords[:3]
+        return model_record(ModelArrays(mean=self.mean, u=self.u, sig=self.sig, vc=vc, vt=vt,
+                                        comps=self.components, limb_matrix=self._limb_matrix, z=z, n=n, s0=s0,
+                                        cu24_t=cu24_t, cmu24=self.kernel_limbs[1]))
 
     @functools.cached_property
     def _limb_matrix(self) -> NDArray[np.float64]:

@@ -39,11 +39,11 @@ with ``t`` free, eliminated in closed form, and the constraints are
 ``||l_i|| = sqrt(L_i)``. Inside the ADM it takes one Newton step per iteration with the proximal
 term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM).
 
-Where: this module holds the one outer ADM loop (:func:`_adm`) over an alpha-step solver
-(:class:`.alpha.base.AlphaStep`: :mod:`.alpha.lifted_admm`, :mod:`.alpha.sqp`,
-:mod:`.alpha.sphere_newton`); :mod:`.pose_kernel` holds the same loop with the Riemannian
-alpha-step fused into one compiled kernel (the default path, ``fused=True``), checked against
-the loop in ``tests/core/test_pose_step.py``.
+Where: with the Riemannian alpha-step (the default) the whole step is one compiled kernel,
+:func:`pose_lifter.core.pose_kernel._pose_kernel`. The other alpha-steps (:class:`.alpha.base.AlphaStep`:
+:mod:`.alpha.lifted_admm`, :mod:`.alpha.sqp`, and the linear solve without limbs; the cvxpy Q-step)
+run in this module's Python ADM loop (:func:`_adm`), which calls the kernel's compiled rows,
+splitting, dual and penalty updates: each is written once.
 
 Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
 numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
@@ -58,14 +58,14 @@ between machines with different BLAS builds.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ._records import StepSettings, settings_record
 from .alpha.base import AlphaStep, Coordinates, LiftedStep, UnconstrainedStep
 from .alpha.lifted_admm import QStepFn
-from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER, SphereNewtonStep
+from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
 from .alpha.sqp import ReducedSQPStep
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions, Variant
@@ -75,8 +75,10 @@ from .pose_kernel import (
     _depth_row,
     _depth_term,
     _grow_penalty,
+    _n_rows,
     _objective,
-    _riemannian_pose_kernel,
+    _pose_kernel,
+    _pose_rows,
 )
 from .pose_model import PoseModel
 from .results import Duals, PoseResult
@@ -112,70 +114,62 @@ class PriorRows:
 
     def depth_term(self, pose: NDArray[np.float64], projection: NDArray[np.float64]) -> float:
         """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)
-        (:func:`pose_lifter.core.pose_kernel._depth_term`, the fused run's own)."""
+        (:func:`pose_lifter.core.pose_kernel._depth_term`, the compiled run's own)."""
         return float(_depth_term(np.ascontiguousarray(pose, dtype=np.float64).reshape(-1),
                                  np.ascontiguousarray(projection, dtype=np.float64),
                                  np.ascontiguousarray(self.target, dtype=np.float64),
                                  np.ascontiguousarray(self.weights, dtype=np.float64)))
 
 
-#: The compiled pose kernel's prior operands without a prior: target (12, 3), weights (12, 2) and
-#: depth row (3,), all zero (no prior rows).
-NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)), np.zeros(3))
+#: The compiled steps' prior operands without a prior: target (12, 3) and weights (12, 2), all
+#: zero (no prior rows).
+NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)))
+#: Cap of the pose ADM's growing penalty ``eta`` (``LifterOptions.eta_growth``).
+ETA_MAX = 1e3
 _DEFAULTS = LifterOptions()
 
 
-def pose_objective(
-    resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64], theta: float,
-    loss: Literal["l1", "l2"],
-) -> float:
-    """``sum w rho(resid) + theta ||alpha||_1`` (resid, wts: shape (2n,))."""
-    return _objective(np.ascontiguousarray(resid, dtype=np.float64),
-                      np.ascontiguousarray(wts, dtype=np.float64),
-                      np.ascontiguousarray(alpha, dtype=np.float64), float(theta), loss == "l1")
+def step_settings(options: LifterOptions) -> StepSettings:
+    """The settings of a run's compiled steps for ``options`` (:func:`settings_record`)."""
+    o = options
+    return settings_record(StepSettings(
+        th=o.theta if o.method.sparsity else 0.0, l1=o.method.loss == "l1", eta=o.eta,
+        eta_growth=o.eta_growth, eta_max=ETA_MAX, pose_tol=o.pose_tol, alpha_max_iter=RIEMANNIAN_MAX_ITER,
+        alpha_tol=o.newton_tol, prox=o.alpha_prox, cam_max_iter=o.camera_max_iter, cam_tol=o.camera_tol,
+        tau=o.tau, alt_tol=o.alternation_tol))
 
 
-def _fused_riemannian(
-    x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
-    weights: NDArray[np.float64], model: PoseModel, l1: bool, th: float, alpha: NDArray[np.float64],
-    max_iter: int, tol: float, eta: float, eta_growth: float, eta_max: float, duals: Duals | None,
-    newton_tol: float, alpha_prox: float, prior: PriorRows | None,
-) -> PoseResult:
-    """:func:`pose_step` with the Riemannian alpha-step as one call of the fused kernel
-    :func:`pose_lifter.core.pose_kernel._riemannian_pose_kernel` (set-up included)."""
-    coords = model.limb_coordinates
-    assert coords is not None
-    z, n, s0, rad = coords
-    if prior is not None and prior.limb_radii is not None:
+def prior_operands(model: PoseModel, prior: PriorRows | None
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The compiled steps' prior operands: target (12, 3), weights (12, 2) (zeros without a prior)
+    and the limb lengths in use (8,) (the prior's per-person ones, else the model's)."""
+    rad = model.limb_radii
+    if prior is None:
+        return NO_PRIOR[0], NO_PRIOR[1], rad
+    if prior.limb_radii is not None:
         rad = np.ascontiguousarray(prior.limb_radii, dtype=np.float64)
-    if prior is None:
-        xp, pw, m3 = NO_PRIOR
-    else:
-        xp, pw = prior.target, prior.weights
-        m3 = prior.depth_row(m0)
-    u1, u2 = _scaled_duals(duals, _n_rows(prior), model.n_bases, eta)
-    vc, vt, cu24_t = model.riemannian_arrays
-    best, obj, viol, y, eta_end, it, converged, alpha_it = _riemannian_pose_kernel(
-        np.ascontiguousarray(x), np.ascontiguousarray(m0),
-        np.ascontiguousarray(translation, dtype=np.float64), np.ascontiguousarray(weights, dtype=np.float64),
-        model.mean, model.u, model.sig, vc, vt, model.components, model._limb_matrix, z, n, s0, rad, cu24_t,
-        model.kernel_limbs[1], alpha, u1, u2, float(th), bool(l1), float(eta), float(eta_growth),
-        float(eta_max), int(max_iter), float(tol), RIEMANNIAN_MAX_ITER, float(newton_tol), float(alpha_prox),
-        xp, pw, m3)
-    if not np.all(np.isfinite(best)):
+    return (np.ascontiguousarray(prior.target, dtype=np.float64),
+            np.ascontiguousarray(prior.weights, dtype=np.float64), rad)
+
+
+def _riemannian(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
+                weights: NDArray[np.float64], model: PoseModel, options: LifterOptions,
+                alpha: NDArray[np.float64], max_iter: int, duals: Duals | None, prior: PriorRows | None
+                ) -> PoseResult:
+    """:func:`pose_step` with the Riemannian alpha-step: one call of
+    :func:`pose_lifter.core.pose_kernel._pose_kernel`."""
+    xp, pw, rad = prior_operands(model, prior)
+    u1, u2 = _scaled_duals(duals, _n_rows(pw), model.n_bases, options.eta)
+    out = _pose_kernel(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(m0, dtype=np.float64),
+                       np.ascontiguousarray(translation, dtype=np.float64),
+                       np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays,
+                       step_settings(options), int(max_iter), xp, pw, rad, alpha, u1, u2)
+    if not np.all(np.isfinite(out.alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
-    return PoseResult(objective=float(obj), n_iter=int(it), converged=bool(converged), alpha=best,
-                      pose=y.reshape(N_JOINTS, 3), limb_violation=float(viol), alpha_iter=int(alpha_it),
-                      duals=Duals(eta_end * u1, eta_end * u2))
-
-
-def _n_rows(prior: PriorRows | None) -> int:
-    """Rows of the pose step's L1 objective: 2 per joint, plus the prior's (2 per image position,
-    1 per depth)."""
-    if prior is None:
-        return 2 * N_JOINTS
-    pw = prior.weights
-    return 2 * N_JOINTS + 2 * int(np.count_nonzero(pw[:, 0] > 0)) + int(np.count_nonzero(pw[:, 1] > 0))
+    return PoseResult(objective=float(out.objective), n_iter=int(out.n_iter), converged=bool(out.converged),
+                      alpha=out.alpha, pose=out.pose.reshape(N_JOINTS, 3),
+                      limb_violation=float(out.limb_violation), alpha_iter=int(out.alpha_iter),
+                      duals=Duals(out.eta * u1, out.eta * u2))
 
 
 def _scaled_duals(duals: Duals | None, m: int, k: int, eta: float
@@ -185,34 +179,6 @@ def _scaled_duals(duals: Duals | None, m: int, k: int, eta: float
     if duals is None or duals.data.shape != (m,):
         return np.zeros(m), np.zeros(k)
     return np.asarray(duals.data, dtype=np.float64) / eta, np.asarray(duals.coupling, dtype=np.float64) / eta
-
-
-def _rows(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
-          weights: NDArray[np.float64], model: PoseModel, prior: PriorRows | None
-          ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """The L1 rows of the pose objective ``sum_i wts_i rho(c_i - (M U S s)_i)``: ``c`` (m,), ``wts``
-    (m,) and ``mus = M U S`` (m, r) (``s = V^T alpha``): 2 per joint, then the prior's rows in the
-    fused kernel's order (:func:`pose_lifter.core.pose_kernel._riemannian_pose_kernel`)."""
-    u3 = model.u.reshape(N_JOINTS, 3, -1)
-    mean3 = model.mean.reshape(N_JOINTS, 3)
-    c = (x - translation - mean3 @ m0.T).reshape(-1)
-    mus = np.einsum("ab,jbr->jar", m0, u3).reshape(2 * N_JOINTS, -1) * model.sig  # (24, r)
-    wts = np.repeat(np.asarray(weights, dtype=np.float64), 2)
-    if prior is None:
-        return c, wts, mus
-    xy = prior.weights[:, 0] > 0
-    z = prior.weights[:, 1] > 0
-    m3 = prior.depth_row(m0)
-    c_xy = (prior.target[:, :2] - translation - mean3 @ m0.T)[xy].reshape(-1)
-    mus_xy = mus.reshape(N_JOINTS, 2, -1)[xy].reshape(-1, mus.shape[1])
-    c_z = prior.target[z, 2] - (mean3[z] - mean3.mean(axis=0)) @ m3
-    mus_z = np.einsum("a,jar->jr", m3, (u3 - u3.mean(axis=0))[z]) * model.sig
-    wts_all = np.concatenate([wts, np.repeat(prior.weights[xy, 0], 2), prior.weights[z, 1]])
-    return np.concatenate([c, c_xy, c_z]), wts_all, np.vstack([mus, mus_xy, mus_z])
-
-
-#: Cap of the pose ADM's growing penalty ``eta`` (``LifterOptions.eta_growth``).
-ETA_MAX = 1e3
 
 
 def pose_step(
@@ -228,13 +194,12 @@ def pose_step(
     prior: PriorRows | None = None,
     duals: Duals | None = None,
     qstep_fn: QStepFn | None = None,
-    fused: bool = True,
 ) -> PoseResult:
     """Solve the pose problem of the module docstring for a fixed camera by ADM.
 
-    One outer ADM loop over an alpha-step solver (:class:`pose_lifter.core.alpha.base.AlphaStep`);
-    with the Riemannian alpha-step (``fused``) the same loop runs as one compiled kernel
-    (:mod:`pose_lifter.core.pose_kernel`), checked against this loop in the tests.
+    With the Riemannian alpha-step one compiled kernel (:func:`pose_lifter.core.pose_kernel._pose_kernel`);
+    with another, the Python ADM loop :func:`_adm` over it
+    (:class:`pose_lifter.core.alpha.base.AlphaStep`).
 
     Parameters
     ----------
@@ -266,8 +231,6 @@ def pose_step(
         e.g. the previous alternation's ``PoseResult.duals`` (default zeros).
     qstep_fn : callable, optional
         Replaces the closed-form Q-step (the cvxpy reference path).
-    fused : bool
-        Riemannian path: run the compiled kernel (False: the Python loop, the kernel's reference).
 
     Returns
     -------
@@ -284,99 +247,89 @@ def pose_step(
     """
     o = _DEFAULTS if options is None else options
     variant = o.method
-    theta, eta, eta_growth, eta_max, tol = o.theta, o.eta, o.eta_growth, ETA_MAX, o.pose_tol
-    alpha_step, alpha_solver = o.alpha_step, o.alpha_solver
-    alpha_prox, newton_tol = o.alpha_prox, o.newton_tol
-    delta, inner_max_iter, inner_tol = o.delta, o.inner_max_iter, o.inner_tol
     if max_iter is None:
         max_iter = o.pose_max_iter
-    loss = variant.loss
-    l1 = loss == "l1"
-    th = float(theta) if variant.sparsity else 0.0
-    x = np.asarray(points, dtype=np.float64)
-    m0 = np.asarray(projection, dtype=np.float64)
+    th = float(o.theta) if variant.sparsity else 0.0
+    x = np.ascontiguousarray(points, dtype=np.float64)
+    m0 = np.ascontiguousarray(projection, dtype=np.float64)
     k = model.n_bases
     alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
     if alpha.shape != (k,):
         raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
-    riemannian = (alpha_solver == "riemannian" and variant.limbs and alpha_step != "full"
+    riemannian = (o.alpha_solver == "riemannian" and variant.limbs and o.alpha_step != "full"
                   and model.limb_coordinates is not None)
     if prior is not None and not riemannian:
         raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
                                 "lifting and bases whose limb map is onto (>= 24 basis directions)")
     with diverged_as_solver_error("pose step"):
-        if riemannian and fused:
-            return _fused_riemannian(x, m0, translation, weights, model, l1, th, alpha, max_iter, tol, eta,
-                                     eta_growth, eta_max, duals, newton_tol, alpha_prox, prior)
-        c, wts, mus = _rows(x, m0, np.asarray(translation, dtype=np.float64), weights, model, prior)
+        if riemannian:
+            return _riemannian(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
+        xp, pw, _ = prior_operands(model, None)
+        c, wts, mus = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
+                                 np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
         # "riemannian" where it does not apply (limbs off, the full lifting or a limb map that is not
         # onto): the SQP solves the same problem
-        solver = "newton" if alpha_solver == "riemannian" and not riemannian else alpha_solver
-        step = _alpha_step(model, variant, m0, mus, alpha, alpha_step, solver, delta, inner_max_iter,
-                           inner_tol, qstep_fn, newton_tol, alpha_prox, prior)
-        radii = None if prior is None else prior.limb_radii
-        return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, tol, eta, eta_growth,
-                    eta_max, duals, radii)
+        solver = "newton" if o.alpha_solver == "riemannian" else o.alpha_solver
+        step = _alpha_step(model, variant, m0, mus, o.alpha_step, solver, o, qstep_fn)
+        return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, o, duals)
 
 
 def _alpha_step(model: PoseModel, variant: Variant, m0: NDArray[np.float64], mus: NDArray[np.float64],
-                alpha0: NDArray[np.float64], alpha_step: str, solver: str, delta: float, inner_max_iter: int,
-                inner_tol: float, qstep_fn: QStepFn | None, newton_tol: float, alpha_prox: float,
-                prior: PriorRows | None) -> AlphaStep:
-    """The alpha-step solver of one pose step (see :func:`pose_step`)."""
-    if solver == "riemannian":
-        radii = model.limb_coordinates[3] if model.limb_coordinates is not None else None
-        if prior is not None and prior.limb_radii is not None:
-            radii = prior.limb_radii
-        assert radii is not None
-        return SphereNewtonStep(model, mus, radii, alpha0, newton_tol, alpha_prox)
+                alpha_step: str, solver: str, o: LifterOptions, qstep_fn: QStepFn | None) -> AlphaStep:
+    """The alpha-step solver of one pose step of the Python loop (see :func:`pose_step`):
+    ``solver`` is ``"newton"`` or ``"admm"``."""
     if alpha_step == "full":
         k = model.n_bases
         a_full = np.einsum("ab,jbk->jak", m0, model.components.reshape(N_JOINTS, 3, k))
         coords, cons = Coordinates(a_full.reshape(2 * N_JOINTS, k), None), model.full
     else:
         if solver == "newton" and variant.limbs:
-            return ReducedSQPStep(model, mus, newton_tol)
+            return ReducedSQPStep(model, mus, o.newton_tol)
         coords, cons = Coordinates(mus, model.v), model.reduced
     if not variant.limbs:
         return UnconstrainedStep(coords)
-    return LiftedStep(coords, cons, "newton" if solver == "newton" else "admm", delta, inner_max_iter,
-                      inner_tol, qstep_fn)
+    return LiftedStep(coords, cons, "newton" if solver == "newton" else "admm", o.delta, o.inner_max_iter,
+                      o.inner_tol, qstep_fn)
 
 
 def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], model: PoseModel,
-         variant: Variant, th: float, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int, tol: float,
-         eta: float, eta_growth: float, eta_max: float, duals: Duals | None,
-         radii: NDArray[np.float64] | None = None) -> PoseResult:
-    """The outer pose ADM of the module docstring on the rows ``(c, wts, mus)`` (see :func:`_rows`)
-    with the alpha-step ``step``; feasibility (the start's, the result's limb violation) against
-    the limb lengths ``radii`` (8,) the step constrains (None: the model's)."""
+         variant: Variant, th: float, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int,
+         o: LifterOptions, duals: Duals | None) -> PoseResult:
+    """The outer pose ADM of the module docstring on the rows ``(c, wts, mus)``
+    (:func:`pose_lifter.core.pose_kernel._pose_rows`) with the alpha-step ``step``, in Python
+    around the compiled updates :func:`~pose_lifter.core.pose_kernel._adm_split`,
+    :func:`~pose_lifter.core.pose_kernel._adm_dual_update` and
+    :func:`~pose_lifter.core.pose_kernel._grow_penalty` (the compiled step's own)."""
     l1 = variant.loss == "l1"
     v = model.v
     k = model.n_bases
-    feas_tol = 1e-6
+    m = c.size
+    eta = float(o.eta)
     best_alpha = alpha.copy()
     best_obj = np.inf
-    if not variant.limbs or model.limb_violation(alpha, radii) < feas_tol:
+    if not variant.limbs or model.limb_violation(alpha) < 1e-6:
         best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
-    u1, u2 = _scaled_duals(duals, c.size, k, eta)
-    beta = alpha.copy()
+    u1, u2 = _scaled_duals(duals, m, k, eta)
+    beta, beta_prev = alpha.copy(), np.empty(k)
+    gamma, d1, d2 = np.empty(m), np.empty(m), np.empty(k)
     converged = False
     it = 0
     alpha_it = 0
-    scale_c = max(1.0, float(np.linalg.norm(c)))
-    ax = mus @ (v.T @ alpha)
+    scale_c = max(1.0, float(np.sqrt(c @ c)))
+    ax = np.ascontiguousarray(mus @ (v.T @ alpha))
     for it in range(1, max_iter + 1):
-        beta_prev, ax_prev = beta, ax
-        gamma, beta, d1, d2 = _adm_split(c, ax, u1, u2, alpha, wts, float(eta), th, l1)
+        beta, beta_prev = beta_prev, beta
+        _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
         alpha, n = step(d1, d2, alpha)
+        alpha = np.ascontiguousarray(alpha, dtype=np.float64)
         alpha_it += n
-        ax, obj, primal, dual = _adm_dual_update(c, gamma, alpha, beta, beta_prev, ax_prev, u1, u2, mus, v,
-                                                 wts, th, l1, scale_c)
-        eta = _grow_penalty(float(eta), float(eta_growth), float(eta_max), u1, u2)
+        ax_prev, ax = ax, np.ascontiguousarray(mus @ (v.T @ alpha))
+        obj, primal, dual = _adm_dual_update(c, ax, ax_prev, gamma, alpha, beta, beta_prev, u1, u2, wts, th,
+                                             l1, scale_c)
+        eta = _grow_penalty(eta, float(o.eta_growth), ETA_MAX, u1, u2)
         if obj < best_obj:
             best_obj, best_alpha = obj, alpha.copy()
-        if primal < tol and dual < tol:
+        if primal < o.pose_tol and dual < o.pose_tol:
             converged = True
             break
     if not np.isfinite(best_obj):
@@ -385,7 +338,7 @@ def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float
         best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
     if not np.all(np.isfinite(best_alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
-    viol = model.limb_violation(best_alpha, radii) if variant.limbs else 0.0
+    viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
     return PoseResult(objective=float(best_obj), n_iter=it, converged=converged, alpha=best_alpha,
                       pose=model.pose(best_alpha), limb_violation=viol, alpha_iter=alpha_it,
                       duals=Duals(eta * u1, eta * u2))

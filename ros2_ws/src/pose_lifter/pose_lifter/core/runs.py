@@ -6,6 +6,11 @@ pose step (:func:`pose_lifter.core.pose_step.pose_step`) until the relative decr
 below ``alternation_tol`` or the alternation cap is reached, and keeps its lowest-``F``
 alternation. A run can be continued (a screened start), and its depth-mirrored copy (the
 weak-perspective ambiguity: the same 2D, reflected depth) started.
+
+With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.run_kernel`); the
+other solvers (the cvxpy references, the lifted ADM and SQP alpha-steps, multipliers carried
+between steps) run in the Python loop of :meth:`Runs.run`, on the same objective terms and
+stopping rule (:func:`pose_lifter.core.run_kernel._run_objective`, ``_alternation_stops``).
 """
 
 from __future__ import annotations
@@ -17,16 +22,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._jit import njit
+from ._records import StepSettings
 from .alpha.lifted_admm import QStepFn
-from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
 from .camera import camera_step_trusted, initial_camera
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions
-from .pose_kernel import _sum_abs
 from .pose_model import PoseModel
-from .pose_step import ETA_MAX, NO_PRIOR, PriorRows, pose_step
+from .pose_step import PriorRows, pose_step, prior_operands, step_settings
 from .results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
-from .run_kernel import CAMERA_DIVERGED, OK, _run_kernel
+from .run_kernel import (
+    CAMERA_DIVERGED,
+    OK,
+    _alternation_stops,
+    _run_kernel,
+    _run_objective,
+    _stack_camera_data,
+)
 from .skeleton import N_JOINTS, normalise_pose_flat
 
 __all__ = ["PINV_RCOND", "Run", "Runs"]
@@ -97,39 +108,31 @@ class Runs:
     options : LifterOptions
     qstep_fn : callable, optional
         The cvxpy reference Q-step (``options.pose_solver == "cvxpy"``).
-    fused : bool
-        Run the alternations as one compiled kernel (:mod:`pose_lifter.core.run_kernel`) where it
-        applies (:attr:`fusable`); False: the Python loop of :meth:`run`, its reference.
     """
 
-    def __init__(self, model: PoseModel, options: LifterOptions, qstep_fn: QStepFn | None = None,
-                 fused: bool = True) -> None:
-        self.model, self.options, self.qstep_fn, self.fused = model, options, qstep_fn, fused
+    def __init__(self, model: PoseModel, options: LifterOptions, qstep_fn: QStepFn | None = None) -> None:
+        self.model, self.options, self.qstep_fn = model, options, qstep_fn
         o = options
-        #: the fused kernel's path: both steps' ADMs, the Riemannian alpha-step (on the reduced
-        #: lifting with an onto limb map) and no multipliers carried between steps
-        self.fusable = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
-                        and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
-                        and model.limb_coordinates is not None and not o.warm_duals)
-        #: the model's arrays as the kernel takes them (made on the first fused run)
-        self._kernel_model: tuple[NDArray[np.float64], ...] | None = None
-        #: the kernel's settings before and after the pose step's cap (which varies per run)
-        self._settings = (
-            (float(o.alternation_tol), float(o.theta if o.method.sparsity else 0.0), o.method.loss == "l1",
-             float(o.eta), float(o.eta_growth)),
-            (float(o.pose_tol), float(o.newton_tol), float(o.alpha_prox), int(o.camera_max_iter),
-             float(o.camera_tol), float(o.tau)))
+        #: whether a run is the compiled kernel (:mod:`pose_lifter.core.run_kernel`): both steps'
+        #: ADMs, the Riemannian alpha-step (on the reduced lifting with an onto limb map) and no
+        #: multipliers carried between steps; otherwise the Python loop of :meth:`run` (the tests
+        #: set it False to run the loop on the kernel's problems as its reference)
+        self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
+                         and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
+                         and model.limb_coordinates is not None and not o.warm_duals)
+        #: the steps' settings as the kernel takes them (made on the first compiled run)
+        self._settings: StepSettings | None = None
 
-    @staticmethod
-    def camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
-                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+    def camera_data(self, xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
         """The camera step's 2D points and weights for a run: with a prior term, the prior's
         image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
-        stacked twice, the returned flag). Built once per run, not per alternation."""
-        if prior is not None and (prior.weights[:, 0] > 0).any():
-            return (np.ascontiguousarray(np.concatenate([xn, prior.target[:, :2]])),
-                    np.concatenate([w, prior.weights[:, 0]]), True)
-        return xn, w, False
+        stacked twice, the returned flag; :func:`pose_lifter.core.run_kernel._stack_camera_data`).
+        Built once per run, not per alternation."""
+        xp, pw, _ = prior_operands(self.model, prior)
+        cx, cw, doubled = _stack_camera_data(np.ascontiguousarray(xn, dtype=np.float64),
+                                             np.ascontiguousarray(w, dtype=np.float64), xp, pw)
+        return cx, cw, bool(doubled)
 
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
                 init: Camera | None, last: CameraResult | None = None) -> CameraResult:
@@ -173,8 +176,8 @@ class Runs:
         o = self.options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         data = self.camera_data(xn, w, prior)
-        if self.fused and self.fusable:
-            return self._run_fused(xn, w, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
+        if self.compiled:
+            return self._run_compiled(xn, w, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
         last_pose: PoseResult | None
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
@@ -186,53 +189,42 @@ class Runs:
         converged = False
         it = it0
         th = o.theta if o.method.sparsity else 0.0
+        xp, pw, _ = prior_operands(self.model, prior)
         for it in range(it0 + 1, n_alt + 1):
             pres = self.pose(xn, cam.camera, w, alpha, last_pose, pose_max_iter, prior)
             alpha, last_pose = pres.alpha, pres
             cam = self.camera(data, pres.pose, cam.camera, cam)
-            obj = cam.objective + th * _sum_abs(alpha)  # the fused run's own sum
-            if prior is not None:
-                obj += prior.depth_term(pres.pose, cam.camera.projection)
+            obj = _run_objective(cam.objective, alpha, th, np.ascontiguousarray(pres.pose).reshape(-1),
+                                 np.ascontiguousarray(cam.camera.projection), xp, pw)
             history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),
                                        SolveInfo(pres.objective, pres.n_iter, pres.converged)))
             if best is None or obj < best.objective:
                 best = Run(pres, cam, obj, it, False, tuple(history))
-            if prev - obj <= o.alternation_tol * max(abs(prev), 1e-12) and np.isfinite(prev):
+            if _alternation_stops(float(prev), obj, o.alternation_tol):
                 converged = True
                 break
             prev = obj
         assert best is not None
         return Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
 
-    def _run_fused(self, xn: NDArray[np.float64], w: NDArray[np.float64],
-                   data: tuple[NDArray[np.float64], NDArray[np.float64], bool], alpha0: NDArray[np.float64],
-                   cam0: Camera | None, n_alt: int, start: Run | None, pose_max_iter: int | None,
-                   prior: PriorRows | None) -> Run:
-        """:meth:`run` as one call of :func:`pose_lifter.core.run_kernel._run_kernel` (the same
-        steps, objective, best alternation and stopping rule; the steps' results carry no
-        multipliers)."""
+    def _run_compiled(self, xn: NDArray[np.float64], w: NDArray[np.float64],
+                      data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
+                      alpha0: NDArray[np.float64], cam0: Camera | None, n_alt: int, start: Run | None,
+                      pose_max_iter: int | None, prior: PriorRows | None) -> Run:
+        """:meth:`run` as one call of :func:`pose_lifter.core.run_kernel._run_kernel` (the steps'
+        results carry no multipliers)."""
         o, m = self.options, self.model
-        if self._kernel_model is None:
-            coords = m.limb_coordinates
-            assert coords is not None
-            vc, vt, cu24_t = m.riemannian_arrays
-            self._kernel_model = (m.mean, m.u, m.sig, vc, vt, m.components, m._limb_matrix, coords[0],
-                                  coords[1], coords[2], coords[3], cu24_t, m.kernel_limbs[1])
-        mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t, cmu24 = self._kernel_model
-        if prior is None:
-            xp, pw = NO_PRIOR[0], NO_PRIOR[1]
-            max_iter = o.pose_max_iter if pose_max_iter is None else pose_max_iter
-        else:
-            xp, pw = prior.target, prior.weights
-            if prior.limb_radii is not None:
-                rad = prior.limb_radii
-            max_iter = o.hybrid_pose_max_iter if pose_max_iter is None else pose_max_iter
+        if self._settings is None:
+            self._settings = step_settings(o)
+        xp, pw, rad = prior_operands(m, prior)
+        if pose_max_iter is None:
+            pose_max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
         cx, cw, doubled = data
         if start is not None:
             cam = start.camera.camera
             alpha, y0 = start.pose.alpha, m.mean
             m_init, t_init = cam.projection, cam.translation
-            best0, prev0, it0 = start.objective, start.objective, start.n_iter
+            obj0, it0 = start.objective, start.n_iter
         else:
             alpha, y0 = alpha0, m.mean + m.components @ alpha0
             if cam0 is None:
@@ -240,39 +232,33 @@ class Runs:
                 m_init, t_init = initial_camera(cx, np.concatenate([y, y]) if doubled else y, cw)
             else:
                 m_init, t_init = cam0.projection, cam0.translation
-            best0, prev0, it0 = np.inf, np.inf, 0
-        alt_tol, th, l1, eta, eta_growth = self._settings[0]
-        pose_tol, newton_tol, prox, cam_max_iter, cam_tol, tau = self._settings[1]
+            obj0, it0 = np.inf, 0
         with diverged_as_solver_error("run"):
-            (status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f,
-             b_i) = _run_kernel(
-                xn, w, cx, cw, doubled, mean, u, sig, vc, vt, comps, limb_matrix, z, nmat, s0, rad, cu24_t,
-                cmu24, xp, pw, prior is not None,
-                np.ascontiguousarray(alpha, dtype=np.float64), y0,
-                np.ascontiguousarray(m_init, dtype=np.float64),
-                np.ascontiguousarray(t_init, dtype=np.float64),
-                start is not None, float(best0), float(prev0), int(it0), int(n_alt), alt_tol, th, l1, eta,
-                eta_growth, ETA_MAX, int(max_iter), pose_tol, RIEMANNIAN_MAX_ITER, newton_tol, prox,
-                cam_max_iter, cam_tol, tau)
-        if status != OK:
+            out = _run_kernel(xn, w, m.kernel_arrays, self._settings, xp, pw, rad,
+                              np.ascontiguousarray(alpha, dtype=np.float64), y0,
+                              np.column_stack([m_init, t_init]).astype(np.float64), float(obj0), int(it0),
+                              int(n_alt), int(pose_max_iter))
+        if out.status != OK:
             raise SolverError("camera step diverged (non-finite camera); check the inputs"
-                              if status == CAMERA_DIVERGED
+                              if out.status == CAMERA_DIVERGED
                               else "pose step diverged (non-finite coefficients)")
         history = [] if start is None else list(start.history)
-        for (obj, cobj, pobj), (cit, cconv, pit, pconv) in zip(objs[:done].tolist(), counts[:done].tolist(),
-                                                              strict=True):
+        done = out.done
+        for (obj, cobj, pobj), (cit, cconv, pit, pconv) in zip(out.objs[:done].tolist(),
+                                                              out.counts[:done].tolist(), strict=True):
             history.append(Alternation(obj, SolveInfo(cobj, cit, bool(cconv)),
                                        SolveInfo(pobj, pit, bool(pconv))))
-        if b_idx < 0:
+        it, converged = int(out.it), bool(out.converged)
+        if out.best_it < 0:
             assert start is not None
             return Run(start.pose, start.camera, start.objective, it, converged, tuple(history))
-        pobj, viol, cobj, scale = b_f.tolist()
-        pit, pconv, ait, cit, cconv = b_i.tolist()
-        pres = PoseResult(objective=pobj, n_iter=pit, converged=bool(pconv), alpha=b_alpha,
-                          pose=b_y.reshape(N_JOINTS, 3), limb_violation=viol, alpha_iter=ait)
+        pobj, viol, cobj, scale = out.floats.tolist()
+        pit, pconv, ait, cit, cconv = out.ints.tolist()
+        pres = PoseResult(objective=pobj, n_iter=pit, converged=bool(pconv), alpha=out.alpha,
+                          pose=out.pose.reshape(N_JOINTS, 3), limb_violation=viol, alpha_iter=ait)
         cres = CameraResult(objective=cobj, n_iter=cit, converged=bool(cconv),
-                            camera=Camera(b_rot, scale, b_t))
-        return Run(pres, cres, float(b_obj), it, converged, tuple(history))
+                            camera=Camera(out.rotation, scale, out.translation))
+        return Run(pres, cres, float(out.best_obj), it, converged, tuple(history))
 
     def mirrored_alpha(self, run: Run) -> NDArray[np.float64]:
         """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),

@@ -10,9 +10,16 @@ from numpy.typing import NDArray
 
 from .._jit import njit
 from .._linalg import _axpy_rows, _cholesky_solve
+from .._records import ModelArrays, StepSettings
 from ..errors import InvalidInputError
 from ..pose_model import PoseModel
 from ..results import AlphaResult
+
+#: The alpha-step's quadratic in limb coordinates for one pose step (:func:`_sphere_setup`), as
+#: :func:`_riemannian_alpha_kernel` takes it: ``(G s0 (r,), Q (24, 24), R^T (r, 24), S1^T (24, r),
+#: S2^T (r, r))``, C-contiguous.
+SphereGeometry = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                       NDArray[np.float64]]
 
 #: Iteration cap of each Riemannian Newton alpha-step inside the pose ADM (an inexact, proximal
 #: ADM). Measured on 190 recorded warm lifts of 5 committed bags, pose_max_iter 30: 1, 2, 3 Newton
@@ -234,20 +241,21 @@ def _sphere_setup(g: NDArray[np.float64], z: NDArray[np.float64], n: NDArray[np.
 @njit
 def _riemannian_alpha_kernel(
     d1: NDArray[np.float64], d2: NDArray[np.float64], sk: NDArray[np.float64], mus: NDArray[np.float64],
-    vc: NDArray[np.float64], vt: NDArray[np.float64], gs0: NDArray[np.float64], q: NDArray[np.float64],
-    rmat_t: NDArray[np.float64], s1_t: NDArray[np.float64], s2_t: NDArray[np.float64],
-    s0: NDArray[np.float64], cu24_t: NDArray[np.float64], cmu24: NDArray[np.float64],
-    rad: NDArray[np.float64], max_iter: int, tol: float, prox: float, alpha_out: NDArray[np.float64],
-    s_out: NDArray[np.float64],
+    km: ModelArrays, geom: SphereGeometry, rad: NDArray[np.float64], st: StepSettings,
+    alpha_out: NDArray[np.float64], s_out: NDArray[np.float64],
 ) -> int:
     """The alpha-step of :func:`pose_step` (limbs on) by :func:`_sphere_newton` in limb
     coordinates (see :func:`_sphere_setup`), started from the limb vectors of the current
     iterate, whose reduced coordinates are ``sk = V^T alpha_k`` (r,). Writes ``alpha`` (k,) and
     ``s = V^T alpha`` (r,) into ``alpha_out``, ``s_out`` (which may be ``sk``); returns the
-    Newton iterations. Matrices come C-contiguous and transposed where that makes every product
-    a sum of rows (:func:`_axpy_rows`): ``vc = V`` (k, r), ``vt = V^T`` (r, k), ``mus = M U S``
-    (24, r), ``rmat_t = R^T`` (r, 24), ``s1_t = S1^T`` (24, r), ``s2_t = S2^T`` (r, r),
-    ``cu24_t = (C U S)^T`` (r, 24)."""
+    Newton iterations (at most ``st.alpha_max_iter``, tolerance ``st.alpha_tol``, proximal weight
+    ``st.prox``; the limb lengths ``rad`` (8,)). Matrices come C-contiguous and transposed where
+    that makes every product a sum of rows (:func:`_axpy_rows`): ``mus = M U S`` (m, r), the
+    model's ``V``, ``V^T``, ``(C U S)^T`` (:class:`pose_lifter.core._records.ModelArrays`) and the
+    step's ``geom = (G s0, Q, R^T, S1^T, S2^T)`` (:func:`_sphere_setup`)."""
+    vc, vt, s0, cu24_t, cmu24 = km.vc, km.vt, km.s0, km.cu24_t, km.cmu24
+    gs0, q, rmat_t, s1_t, s2_t = geom
+    prox = st.prox
     r = sk.size
     vtd2 = np.zeros(r)
     _axpy_rows(vc, d2, vtd2)  # V^T d2
@@ -259,7 +267,7 @@ def _riemannian_alpha_kernel(
     _axpy_rows(rmat_t, h, b)
     l0 = cmu24.copy()
     _axpy_rows(cu24_t, sk, l0)
-    lv, it, _ = _sphere_newton(q, b, l0, rad, max_iter, tol)
+    lv, it, _ = _sphere_newton(q, b, l0, rad, st.alpha_max_iter, st.alpha_tol)
     s = s0.copy()
     _axpy_rows(s1_t, lv, s)
     _axpy_rows(s2_t, h, s)
@@ -269,41 +277,3 @@ def _riemannian_alpha_kernel(
     alpha_out[:] = d2
     _axpy_rows(vt, s, alpha_out)  # d2 + V (s - V^T d2)
     return it
-
-
-
-
-class SphereNewtonStep:
-    """The alpha-step protocol (:class:`pose_lifter.core.alpha.base.AlphaStep`) by
-    :func:`_riemannian_alpha_kernel` for one pose step, in Python around the kernel: the pose
-    ADM's loop that the fused kernel (:func:`pose_lifter.core.pose_kernel._riemannian_pose_kernel`)
-    is checked against. ``mus = M U S`` (m, r); ``radii`` (8,) the limb lengths. It carries
-    ``s = V^T alpha`` from call to call as the fused kernel does."""
-
-    def __init__(self, model: PoseModel, mus: NDArray[np.float64], radii: NDArray[np.float64],
-                 alpha0: NDArray[np.float64], tol: float, prox: float) -> None:
-        coords = model.limb_coordinates
-        if coords is None:
-            raise InvalidInputError("the bases' limb map is not onto (fewer than 24 independent directions)")
-        z, n, self._s0, _ = coords
-        self._rad = np.ascontiguousarray(radii, dtype=np.float64)
-        self._mus = np.ascontiguousarray(mus)
-        self._vc, self._vt, self._cu24_t = model.riemannian_arrays
-        self._cmu24 = model.kernel_limbs[1]
-        g = self._mus.T @ self._mus + (1.0 + prox) * np.eye(model.sig.size)
-        q, rmat, s1, s2 = _sphere_setup(g, z, n)
-        self._q = q
-        self._rmat_t, self._s1_t, self._s2_t = (np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
-                                               np.ascontiguousarray(s2.T))
-        self._gs0 = g @ self._s0
-        self._tol, self._prox = float(tol), float(prox)
-        self._sk = self._vt @ alpha0
-
-    def __call__(self, d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
-                 ) -> tuple[NDArray[np.float64], int]:
-        out = np.empty(self._vc.shape[0])
-        it = _riemannian_alpha_kernel(np.ascontiguousarray(d1), np.ascontiguousarray(d2), self._sk, self._mus,
-                                      self._vc, self._vt, self._gs0, self._q, self._rmat_t, self._s1_t,
-                                      self._s2_t, self._s0, self._cu24_t, self._cmu24, self._rad,
-                                      RIEMANNIAN_MAX_ITER, self._tol, self._prox, out, self._sk)
-        return out, int(it)
