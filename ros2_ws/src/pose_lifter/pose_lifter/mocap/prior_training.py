@@ -82,8 +82,8 @@ GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0
 
 
 #: Knees and ankles; hips (:data:`pose_lifter.core.skeleton.JOINT_NAMES`).
-_LOWER_LEGS = [7, 8, 10, 11]
-_HIPS = [6, 9]
+_LOWER_LEGS = np.array([7, 8, 10, 11])
+_HIPS = np.array([6, 9])
 
 
 @dataclass(frozen=True)
@@ -168,7 +168,7 @@ def augment_poses(frames: NDArray[np.float64], sequences: Sequence[NDArray[np.fl
     n, window = frames.shape[:2]
     out = frames
     if aug.p_mirror > 0:
-        m = rng.random(n) < aug.p_mirror
+        m = np.asarray(rng.random(n) < aug.p_mirror)
         out = np.where(m[:, None, None, None], mirror_poses(out), out)
     if aug.p_transplant > 0:
         t = rng.random(n) < aug.p_transplant
@@ -326,7 +326,8 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
         h = stem(x)
         for blk in body:
             h = h + blk(h)
-        return head(h)
+        out: torch.Tensor = head(h)
+        return out
 
     opt = torch.optim.AdamW(modules.parameters(), lr=lr, weight_decay=weight_decay)
     decay = (lr_final / lr) ** (1.0 / max(1, epochs - 1))

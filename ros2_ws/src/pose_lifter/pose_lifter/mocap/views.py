@@ -45,7 +45,8 @@ def view_rotations(azimuth_deg: NDArray[np.float64], elevation_deg: NDArray[np.f
     c, s = np.cos(ro), np.sin(ro)
     roll = np.zeros((len(az), 3, 3))
     roll[:, 0, 0], roll[:, 0, 1], roll[:, 1, 0], roll[:, 1, 1], roll[:, 2, 2] = c, -s, s, c, 1.0
-    return np.einsum("nab,nbc->nac", roll, rot)
+    out: NDArray[np.float64] = np.einsum("nab,nbc->nac", roll, rot)
+    return out
 
 
 def film(poses: NDArray[np.float64], rotations: NDArray[np.float64], distance: NDArray[np.float64],

@@ -21,7 +21,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Final
+from typing import IO, Any, Final
 
 import numpy as np
 
@@ -100,8 +100,8 @@ def export_skeletons(bag: str | Path, out: str | Path, topic: str = TOPIC_SKELET
     frames = _frames(bag, topic)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent.resolve())
     try:
-        with os.fdopen(fd, "wb" if path.suffix == ".npz" else "w", **({} if path.suffix == ".npz" else
-                                                                        {"newline": ""})) as handle:
+        handle: IO[Any]
+        with (os.fdopen(fd, "wb") if path.suffix == ".npz" else os.fdopen(fd, "w", newline="")) as handle:
             _write(path, frames, handle)
         os.replace(tmp, path)
     except BaseException:

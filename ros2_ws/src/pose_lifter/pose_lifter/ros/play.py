@@ -99,4 +99,4 @@ def play_bag(
         return n
     finally:
         node.destroy_node()
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()

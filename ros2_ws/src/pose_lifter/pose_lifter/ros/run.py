@@ -74,7 +74,7 @@ def fatal(name: str, text: str) -> NoReturn:
     try:
         import rclpy
 
-        rclpy.logging.get_logger(name).fatal(text)  # type: ignore[no-untyped-call]
+        rclpy.logging.get_logger(name).fatal(text)
     except Exception:  # logging not initialised (rclpy.init itself failed)
         print(f"[FATAL] [{name}]: {text}", file=sys.stderr, flush=True)
     raise SystemExit(1)
