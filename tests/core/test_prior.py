@@ -193,3 +193,30 @@ def test_the_compiled_features_are_the_numpy_ones() -> None:
         for a, b in zip(got, ref, strict=True):
             assert np.shape(a) == np.shape(b), trial
             assert np.allclose(a, b, rtol=tol.ROUND_OFF_LONG, atol=tol.ROUND_OFF), trial
+
+
+def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
+        prior: PosePrior, monkeypatch: pytest.MonkeyPatch) -> None:
+    """PosePrior.forward of up to SMALL_BATCH rows (the compiled pass) against the same network
+    through numpy's matrix products (float32 both: equal up to the summation order's rounding)."""
+    from pose_lifter.core import prior as prior_module
+
+    rng = np.random.default_rng(6)
+    d = prior._layers32[0][0].shape[0]
+    for rows in (1, 2, prior_module.SMALL_BATCH):
+        x = rng.normal(size=(rows, d))
+        got = prior.forward(x)
+        with monkeypatch.context() as mp:
+            mp.setattr(prior_module, "HAVE_NUMBA", False)
+            ref = prior.forward(x)
+        scale = np.abs(ref).max()
+        assert got.shape == ref.shape == (rows, 12, 3)
+        assert np.abs(got - ref).max() <= tol.PRIOR_FLOAT32_REL * scale, rows
+        assert np.abs(prior.forward(x[0]) - ref[0]).max() <= tol.PRIOR_FLOAT32_REL * scale
+    relu_off = prior_module._affine_rows(np.array([[1.0, -2.0]], np.float32),
+                                         np.array([[1.0, 0.0], [1.0, 1.0]], np.float32),
+                                         np.array([0.5, 0.0], np.float32), False)
+    assert np.allclose(relu_off, [[-0.5, -2.0]])  # h @ w + b, negatives kept without the ReLU
+    assert np.allclose(prior_module._affine_rows(np.array([[1.0, -2.0]], np.float32),
+                                                 np.array([[1.0, 0.0], [1.0, 1.0]], np.float32),
+                                                 np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
