@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_package_xml import imported_roots
 
 PACKAGE = Path(__file__).resolve().parents[1] / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter"
 
@@ -111,20 +112,9 @@ def test_every_public_core_name_resolves_lazily() -> None:
         _ = core.nope  # type: ignore[attr-defined]
 
 
-def _external_roots(path: Path) -> set[str]:
-    """The top-level names of everything ``path`` imports (function-level imports included)."""
-    roots: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            roots |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            roots.add(node.module.split(".")[0])
-    return roots
-
-
 def test_rclpy_is_imported_only_under_ros() -> None:
     mods = _modules()
-    ros = {name for name, f in mods.items() if "rclpy" in _external_roots(f)}
+    ros = {name for name, f in mods.items() if "rclpy" in imported_roots(f)}
     assert "pose_lifter.ros.node" in ros  # the check reads imports at all
     assert all(name.startswith("pose_lifter.ros.") for name in ros), sorted(ros)
     # and the rest of the package never imports the ROS shell
