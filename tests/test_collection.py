@@ -154,9 +154,13 @@ def test_a_stopped_run_leaves_no_partial_output_and_resumes(workers: str, tmp_pa
     assert cli.main(["lift", str(src), "--out", str(out), "--workers", workers, *FAST]) == 130
     done = {rel for rel, e in manifest(out).items() if e["status"] == "done"}
     assert "robot_b/two.mcap" not in done
-    assert set(outputs(out)) == done  # every output under its final name is complete and recorded
+    # every output the manifest records exists; with several workers a bag finished in another
+    # process may be complete under its final name and not yet recorded when the stop lands (it is
+    # lifted again on resume); every output under a final name is complete (it reads to its end)
+    finished = set(outputs(out))
+    assert done <= finished and "robot_b/two.mcap" not in finished
     assert not list(out.rglob(".bagwriter-*"))  # no temporary left either
-    for rel in done:
+    for rel in finished:
         assert messages(out / rel)
     monkeypatch.setattr(bags.BagWriter, "write_cdr", write_cdr)
     capsys.readouterr()
