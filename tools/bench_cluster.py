@@ -2,7 +2,7 @@
 localhost cluster of W worker processes against the local pool, side by side.
 
     OMP_NUM_THREADS=1 .venv/bin/python tools/bench_cluster.py BAG --copies 4 --workers 1 2 \\
-        --work /work/scratch/cluster [--max-messages N]
+        --work out/cluster [--max-messages N]
 
 For each W: a ``distributed.LocalCluster`` of W processes (one thread each) on this machine;
 the round trip of 200 empty tasks (submit -> result, the scheduler's cost per task); then the

@@ -2,9 +2,9 @@
 (this checkout) against one ``pose-lifter lift BAG --out FILE`` per bag (the ``before`` checkout,
 which lifts one bag per command), side by side, alternating in every repetition.
 
-    git -C /work/main worktree add --detach /work/scratch/before <commit>
+    git worktree add --detach ../before <commit>
     OMP_NUM_THREADS=1 .venv/bin/python tools/bench_collection.py many36.mcap --copies 20 \\
-        --before /work/scratch/before --work /work/scratch/coll [--reps 1] [--workers 0]
+        --before ../before --work out/coll [--reps 1] [--workers 0]
 
 The collection is ``--copies`` hard links of ``BAG`` (distinct files to the lifter). Prints, per
 code and repetition, the wall time, poses/s (poses lifted over the whole wall time: imports,
