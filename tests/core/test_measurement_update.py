@@ -169,18 +169,6 @@ def test_noisy_2d_moves_the_pose_less() -> None:
     assert np.linalg.norm(noisy[2, :2] - pose[2, :2]) < 0.3 * np.linalg.norm(clean[2, :2] - pose[2, :2])
 
 
-def test_the_update_never_reads_a_later_frame(walker: tuple[np.ndarray, np.ndarray]) -> None:
-    x, _ = walker
-    n, k = 30, 18
-    other = x[:n].copy()
-    other[k:] = x[::-1][: n - k] + 25.0  # from frame k on, another motion
-    a = _track(LifterOptions(), x[:n])
-    b = _track(LifterOptions(), other)
-    for i in range(k):
-        np.testing.assert_array_equal(a[i].result.pose_camera, b[i].result.pose_camera)
-    assert not np.allclose(a[k].result.pose_camera, b[k].result.pose_camera)
-
-
 def test_the_update_feeds_nothing_back_into_the_fit(walker: tuple[np.ndarray, np.ndarray]) -> None:
     """The track's fits are the same with and without the update, the fit's own pose stays
     available, and the published body-frame and camera-frame poses stay one pose."""

@@ -54,6 +54,7 @@ def test_the_smoothed_output_never_reads_a_later_frame(walker: tuple[np.ndarray,
     other[k:] = x[::-1][: n - k] + 25.0  # from frame k on, another motion
     a = _track(LifterOptions(), x[:n])
     b = _track(LifterOptions(), other)
+    # default options: the output smoothing and the measurement update both publish causally
     for i in range(k):  # the same frames so far give the same outputs, whatever follows
         np.testing.assert_array_equal(a[i].result.pose_camera, b[i].result.pose_camera)
     assert not np.allclose(a[k].result.pose_camera, b[k].result.pose_camera)
