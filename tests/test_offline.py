@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,10 @@ class EchoLifter:
         self.pose -= self.pose.mean(axis=0)
 
     options = LifterOptions(mode="paper")
+    prior_fit = None  # the paper mode runs no learned prior
+
+    def compute_prior_ahead(self, expected: list[Any]) -> None:
+        assert expected == []
 
     def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
              **per_frame: Any) -> LiftResult:
@@ -62,8 +67,9 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
     # warm starts: from the second frame of each track on, restarted after the gap of track 5
     assert summary.n_warm == 11 - 3
-    # lifts go chain by chain (track 0, then track 5): cold first frames, cold after the failure
-    assert [w is None for w in lifter.warm] == [True] + [False] * 5 + [True, False, False, False, True, False]
+    # the tracks' chains are lifted in step, message by message (track 0, then track 5): cold
+    # first frames, track 5 cold after its failure in frame 3
+    assert [w is None for w in lifter.warm] == [True, True] + [False] * 6 + [False, True] + [False] * 2
     topics = bags.bag_topics(out)
     assert check_mcap(out)["/skeletons_3d"] == 6  # the independent reader: summary, index, decoding
     assert topics["/skeletons_3d"] == "pose_lifter_msgs/msg/Skeleton3DArray"
@@ -106,7 +112,9 @@ def test_a_diverged_solve_is_one_failed_skeleton_and_the_track_restarts_cold(tmp
     summary, _ = offline.lift_bag(path, tmp_path / "out.mcap", lifter, NODE, progress=False)
     assert (summary.n_lifted, summary.n_failed) == (10, 2)
     assert any("pose step diverged" in f for f in summary.failures)
-    assert lifter.warm[3] is None  # the frame after the diverged one starts cold
+    # solves in step (track 0, track 5 per message): the third is track 0's second frame, and
+    # that track's next frame (the fifth solve) starts cold
+    assert lifter.warm[3] is not None and lifter.warm[4] is None
 
 
 def test_lift_bag_every_and_max(tmp_path: Path) -> None:
@@ -184,3 +192,28 @@ def test_the_camera_timeline_takes_the_latest_usable_camera_info_as_the_node_wou
     assert cameras.at(5) == cameras.at(10) == cameras.at(25) == ((500.0, 500.0), (320.0, 240.0))
     assert cameras.at(30)[0] == (700.0, 700.0)  # type: ignore[index]
     assert CameraTimeline([(10, info(0.0))]).at(10) is None  # none usable: the default distance
+
+
+def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together() -> None:
+    from pose_lifter.offline.chains import GROUP_CHAINS, Item, chain_groups
+
+    def chain(first: int, n: int) -> list[Item]:
+        return [Item(first + k, first + k, None, None) for k in range(n)]  # type: ignore[arg-type]
+
+    # 20 tracks: 10 in the first half of the bag, 10 in the second; 4 single untracked skeletons
+    chains = [chain(0, 50) for _ in range(10)] + [chain(60, 40) for _ in range(10)] + \
+        [chain(k, 1) for k in (3, 30, 70, 99)]
+    for tasks, workers in ((1, 1), (3, 2), (100, 2)):
+        groups = chain_groups(chains, tasks, workers)
+        assert sorted(c for g in groups for c in g) == list(range(len(chains)))
+        assert all(1 <= len(g) <= GROUP_CHAINS for g in groups)
+        assert len(groups) >= min(len(chains), tasks * workers)
+        sizes = [sum(len(chains[c]) for c in g) for g in groups]
+        assert sizes == sorted(sizes, reverse=True)
+        # a group holds chains that start close in time: the groups' start ranges do not interleave
+        spans = sorted((min(chains[c][0].msg_index for c in g), max(chains[c][0].msg_index for c in g))
+                       for g in groups)
+        assert all(a[1] <= b[0] for a, b in itertools.pairwise(spans))
+    # enough groups of people seen together: the halves' tracks are not mixed
+    assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
+               for g in chain_groups(chains[:20], 1, 1))

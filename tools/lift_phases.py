@@ -4,12 +4,12 @@
         --overwrite --quiet [--mode learned] [--workers 1]
 
 Wraps the functions of the offline path with timers (cumulative seconds, nested phases overlap:
-``lift_messages`` holds ``split_chains``, ``lift_chain`` and the message building) and prints one
-``PHASES`` line on stderr at exit. ``lift_chain`` is the per-track solve (the core's time) in
+``lift_messages`` holds ``split_chains``, ``lift_chains`` and the message building) and prints one
+``PHASES`` line on stderr at exit. ``lift_chains`` is the per-track solve (the core's time) in
 one process; with workers it runs in the children and is not seen here. Inside it, ``run_kernel``
 (the compiled alternations, :func:`pose_lifter.core.run_kernel._run_kernel`) and
 ``prior_forward`` (the learned prior's network, :meth:`pose_lifter.core.prior.PosePrior.forward`);
-the rest of ``lift_chain`` is the Python around them (tracking, the lifter's set-up, results).
+the rest of ``lift_chains`` is the Python around them (tracking, the lifter's set-up, results).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def main() -> int:
     wrap(Lifter, "warm_up")
     wrap(off, "check_lift_inputs")
     wrap(off, "split_chains")
-    wrap(off, "lift_chain")
+    wrap(off, "lift_chains")
     try:
         import pose_lifter.core.runs as runs
         from pose_lifter.core.prior import PosePrior

@@ -11,8 +11,15 @@ import pytest
 import tolerances as tol
 from filmed import filmed_views
 from pose_lifter.core import Lifter, LifterOptions
+from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.errors import InvalidInputError, PriorFileError
-from pose_lifter.core.prior import DEFAULT_PRIOR_PATH, PosePrior, prior_features
+from pose_lifter.core.prior import (
+    DEFAULT_PRIOR_PATH,
+    DEFAULT_TEMPORAL_PRIOR_PATH,
+    OutputsAhead,
+    PosePrior,
+    prior_features,
+)
 from pose_lifter.core.synthetic import synthetic_poses
 from pose_lifter.mocap.views import scale_limbs
 
@@ -220,3 +227,41 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
     assert np.allclose(prior_module._affine_rows(np.array([[1.0, -2.0]], np.float32),
                                                  np.array([[1.0, 0.0], [1.0, 1.0]], np.float32),
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="outputs are computed ahead only through the compiled pass")
+def test_outputs_computed_ahead_are_each_poses_own_bit_for_bit(prior: PosePrior) -> None:
+    """OutputsAhead: the outputs of many people's rows computed in one pass are, row by row, those
+    of each pose computed alone (the rows of the compiled pass do not mix); a row not computed
+    ahead, or computed by another prior, is computed on demand, with the same value."""
+    temporal = PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH)
+    rng = np.random.default_rng(11)
+    people = [rng.uniform(100.0, 500.0, (12, 2)) for _ in range(9)]
+    visible = [rng.random(12) > 0.15 for _ in people]
+    windows = [(rng.uniform(100.0, 500.0, (temporal.window, 12, 2)), rng.random((temporal.window, 12)) > 0.1)
+               for _ in range(5)]
+    ahead = OutputsAhead()
+    pairs = list(zip(people[:-1], visible[:-1], strict=True))
+    expected = [(prior, prior.input_rows(x, v, True)[0]) for x, v in pairs]
+    expected += [(temporal, temporal.input_rows(x, v, True)[0]) for x, v in windows]
+    ahead.compute(expected)
+    assert len(ahead) == 2 * (len(people) - 1 + len(windows))  # two rows a pose: it and its mirror
+    for x, v in pairs:
+        np.testing.assert_array_equal(prior.predict(x, v, True, ahead), prior.predict(x, v, True))
+    for x, v in windows:
+        np.testing.assert_array_equal(temporal.predict(x, v, True, ahead), temporal.predict(x, v, True))
+    assert (ahead.hits, ahead.misses) == (len(ahead), 0)
+    # the last person was not expected: computed now, the same as alone
+    np.testing.assert_array_equal(prior.predict(people[-1], visible[-1], True, ahead),
+                                  prior.predict(people[-1], visible[-1], True))
+    assert ahead.misses == 2
+    # the same rows through another prior (other weights): not taken from the first one's outputs
+    other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean, prior.out_scale,
+                      prior.abs_error, prior.window, prior.metadata, prior.blocks)
+    np.testing.assert_array_equal(other.predict(people[0], visible[0], True, ahead),
+                                  other.predict(people[0], visible[0], True))
+    assert ahead.misses == 4
+    assert not np.array_equal(other.predict(people[0], visible[0], True),
+                              prior.predict(people[0], visible[0], True))
+    ahead.compute([])
+    assert len(ahead) == 0

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions, PoseBases
+from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.errors import SolverError
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
@@ -143,10 +144,46 @@ def test_expiry_stamps_are_the_latest_answered_stamp_since_the_tracks_last_frame
     assert expiry_stamps([None, None, 5], [0, 2]) == [None, None]
 
 
+@pytest.mark.skipif(not HAVE_NUMBA, reason="outputs are computed ahead only through the compiled pass")
+def test_the_prior_computed_ahead_changes_no_output(lifter: Lifter, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The node computes the prior of every person of a frame in one pass, the offline lift that
+    of every chain of a step (Lifter.compute_prior_ahead): most lifts take their prior's output
+    from it, and every output is the one computed without it, bit for bit."""
+    seq, infos = sequence()
+    settings = LiftSettings(smoothing_s=0.0)
+    intrinsics = m.intrinsics_from_camera_info(infos[0][1])
+    fit = lifter.prior_fit
+    assert fit is not None
+    runs: dict[str, tuple[np.ndarray, np.ndarray, int]] = {}
+    for name in ("ahead", "alone"):
+        with monkeypatch.context() as mp:
+            if name == "alone":
+                mp.setattr(Lifter, "compute_prior_ahead", lambda self, expected: None)
+            fit.ahead.clear()
+            node, _ = node_path(lifter, frame_settings(settings), seq, intrinsics)
+            offline = lift_messages(seq, infos, lifter, settings)
+            lifted = [(s, x) for s, x in node if isinstance(x, LiftedSkeleton)]
+            runs[name] = (np.array([x.joints_m for _, x in lifted]), np.array([f.joints_m for f in offline]),
+                          fit.ahead.hits)
+    np.testing.assert_array_equal(runs["ahead"][0], runs["alone"][0])
+    np.testing.assert_array_equal(runs["ahead"][1], runs["alone"][1])
+    assert runs["alone"][2] == 0
+    # a frame of one person computes nothing ahead; of the frames of two, most lifts (two rows
+    # each: the pose and its mirror image), node and offline, took their output from it
+    stamps = [s for s, _ in lifted]
+    in_pairs = sum(1 for s in stamps if stamps.count(s) >= 2)
+    assert in_pairs >= 10
+    assert runs["ahead"][2] >= 0.8 * 2 * 2 * in_pairs
+
+
 class StubLifter:
     """Paper-mode stand-in: a fixed pose, the camera at the 2D mean; ``fail`` decides per call."""
 
     options = LifterOptions(mode="paper")
+    prior_fit = None  # the paper mode runs no learned prior
+
+    def compute_prior_ahead(self, expected: list[Any]) -> None:
+        assert expected == []
 
     def __init__(self, fail: Any = None) -> None:
         self.calls = 0

@@ -22,7 +22,7 @@ from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
 from .pose_step import PriorRows
-from .prior import PosePrior
+from .prior import OutputsAhead, PosePrior
 from .results import Camera, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
@@ -135,6 +135,8 @@ class PriorFit:
                  model: PoseModel, runs: Runs) -> None:
         self.options, self.prior, self.temporal_prior = options, prior, temporal_prior
         self.model, self.runs = model, runs
+        #: the priors' outputs computed ahead for the frames expected next (:meth:`predict`)
+        self.ahead = OutputsAhead()
         #: the mean log length of the model's own limbs (:meth:`limb_radii`)
         self._log_limb_mean = float(np.mean(np.log(np.sqrt(model.limb_sq))))
 
@@ -153,12 +155,33 @@ class PriorFit:
                 ) -> tuple[NDArray[np.float64], PosePrior]:
         """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
         temporal prior when the lift has ``past`` frames (padded to its window with the oldest
-        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated)."""
+        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated). Outputs
+        computed ahead (:attr:`ahead`) are used when they are this input's."""
+        prior, pts, vis = self.prior_input(x, visible, past)
+        return prior.predict(pts, vis, self.options.prior_flip, self.ahead), prior
+
+    def expected_rows(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
+                      past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
+                      ) -> tuple[PosePrior, NDArray[np.float64]] | None:
+        """The prior and its input rows that :meth:`predict` of these arguments runs (for
+        :meth:`OutputsAhead.compute`), or None when the prior would refuse the input."""
+        prior, pts, vis = self.prior_input(x, visible, past)
+        try:
+            rows, _, _ = prior.input_rows(pts, vis, self.options.prior_flip)
+        except InvalidInputError:
+            return None
+        return prior, rows
+
+    def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
+                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
+                    ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
+        """The prior :meth:`predict` runs and its input: this frame (12, 2), (12,), or its window
+        (W, 12, 2), (W, 12) with the ``past`` frames (see :meth:`predict`)."""
         prior = self.prior
         if past is not None and len(past[0]) > 0 and self.temporal_prior is not None:
             prior = self.temporal_prior
         if prior.window == 1:
-            return prior.predict(x, visible, self.options.prior_flip), prior
+            return prior, x, visible
         k = prior.window - 1
         pts = np.empty((prior.window, N_JOINTS, 2))
         vis = np.empty((prior.window, N_JOINTS), dtype=bool)
@@ -170,7 +193,7 @@ class PriorFit:
             pts[:k], vis[:k] = x, visible
         pts[k], vis[k] = x, visible
         # the prior reads only the visible joints (missing ones are zeros of its input)
-        return prior.predict(pts, vis, self.options.prior_flip), prior
+        return prior, pts, vis
 
     def rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, track: TrackContext,
              previous: NDArray[np.float64] | None) -> tuple[PriorRows, NDArray[np.float64]]:

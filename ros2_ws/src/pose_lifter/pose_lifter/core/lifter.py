@@ -157,6 +157,23 @@ class Lifter:
                                    "constraints and bases with >= 24 independent directions")
 
     @property
+    def prior_fit(self) -> PriorFit | None:
+        """The hybrid and learned modes' solve with the learned prior (None in the paper mode)."""
+        return self._prior_fit
+
+    def compute_prior_ahead(self, expected: list[tuple[PosePrior, NDArray[np.float64]]]) -> None:
+        """Compute the prior's outputs for the input rows of lifts expected next in one pass
+        (:class:`~pose_lifter.core.prior.OutputsAhead`; fewer than 2: nothing is computed ahead).
+        The lifts' results are the same with or without it."""
+        fit = self._prior_fit
+        if fit is None:
+            return
+        if len(expected) < 2:
+            fit.ahead.compute([])
+            return
+        fit.ahead.compute(expected)
+
+    @property
     def runs(self) -> Runs:
         """The alternation runs of the current model and options."""
         return self._runs

@@ -60,6 +60,7 @@ from .errors import PoseLifterError
 from .lifter import Lifter
 from .measurement import MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
+from .prior import PosePrior
 from .results import LiftResult, TrackContext, WarmStart
 from .skeleton import N_JOINTS
 from .smoothing import CausalSmoother
@@ -233,6 +234,27 @@ class TrackPolicy:
             if out is not None:
                 return TrackedLift(out, warm is not None, reinit, result.pose_camera)
         return TrackedLift(result, warm is not None, reinit)
+
+    def expected_prior(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
+                       confidence: NDArray[np.float64] | None = None
+                       ) -> tuple[PosePrior, NDArray[np.float64]] | None:
+        """The prior and its input rows that :meth:`lift` of this frame is expected to run (for
+        :meth:`Lifter.compute_prior_ahead`): the track's past frames as the lift reads them and
+        this frame's joints as given; a joint the gate or the outlier pass removes, or one the
+        track fills in, changes the rows and the lift computes its own. None in the paper mode
+        or for input the lift refuses. Changes nothing."""
+        fit = self.lifter.prior_fit
+        if fit is None:
+            return None
+        vis = _visible(points, confidence, self.lifter.options.confidence_threshold)
+        if vis is None or int(np.count_nonzero(vis)) < 2:
+            return None
+        track = self._tracks.get(track_id) if track_id >= 0 else None
+        past = None
+        if track is not None and self.warm_start and track.warm is not None:
+            if 0 <= stamp_ns - track.last_stamp_ns <= self.track_timeout_ns:
+                past = track.past(stamp_ns, (fit.temporal_prior or fit.prior).window - 1)
+        return fit.expected_rows(np.asarray(points, dtype=np.float64), vis, past)
 
     def _find(self, track_id: int, stamp_ns: int) -> tuple[Track | None, WarmStart | None]:
         """The frame's track (None: untracked, new, or forgotten because the input clock jumped

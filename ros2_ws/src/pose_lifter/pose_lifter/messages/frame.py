@@ -37,6 +37,7 @@ from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.layouts import Layout, get_layout
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera
+from pose_lifter.core.prior import PosePrior
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
@@ -366,6 +367,15 @@ class FramePipeline:
             return _refusal(err, inp.track_id)
         return LiftedSkeleton(inp, result, joints, tracked.warm_started, solve_time, tracked.fit_pose_camera)
 
+    def expected_prior(self, inp: SkeletonInput, stamp_ns: int
+                       ) -> tuple[PosePrior, NDArray[np.float64]] | None:
+        """The prior's input rows :meth:`lift` of this skeleton is expected to run
+        (:meth:`TrackPolicy.expected_prior`; None when there are none or the input is refused)."""
+        try:
+            return self.policy.expected_prior(inp.track_id, stamp_ns, inp.points, inp.confidence)
+        except PoseLifterError:
+            return None
+
     def end_frame(self, stamp_ns: int) -> None:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
         self.policy.expire(stamp_ns)
@@ -376,6 +386,9 @@ class FramePipeline:
         lifted skeleton or why not (an unanswered frame lifts and expires nothing)."""
         if not checked.answered:
             return []
+        # the prior's network for every person of the frame in one pass over its weights
+        self.lifter.compute_prior_ahead([e for x in checked.skeletons if not isinstance(x, SkipSkeleton)
+                                         if (e := self.expected_prior(x, stamp_ns)) is not None])
         out = [x if isinstance(x, SkipSkeleton) else self.lift(x, stamp_ns, intrinsics)
                for x in checked.skeletons]
         self.end_frame(stamp_ns)

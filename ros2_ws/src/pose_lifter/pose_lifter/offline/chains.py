@@ -15,7 +15,7 @@ import gc
 import os
 import signal
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,12 +38,14 @@ from pose_lifter.messages.frame import (
 )
 
 __all__ = [
+    "GROUP_CHAINS",
     "CameraTimeline",
     "ChainWork",
     "Done",
     "Item",
     "MessageFields",
-    "lift_chain",
+    "chain_groups",
+    "lift_chains",
     "lift_parallel",
     "smooth_chain",
     "split_chains",
@@ -143,28 +145,76 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     return chains, per_msg, checked
 
 
-def lift_chain(lifter: Lifter, chain: list[Item], settings: FrameSettings, smoothing_s: float = 0.0
-                ) -> list[Done]:
-    """Lift one chain in order through its own frame pipeline (steps 2 and 3: the per-track
-    policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0`` the chain's
-    poses are then smoothed centred (:func:`smooth_chain`)."""
-    out: list[Done] = []
-    fits: list[NDArray[np.float64] | None] = []  # the fit's own pose_camera per outcome
-    pipeline = FramePipeline(lifter, settings)
-    for item in chain:
-        if item.expire_ns is not None:
-            pipeline.end_frame(item.expire_ns)
-        lifted = pipeline.lift(item.input, item.stamp_ns, item.intrinsics)
-        if not isinstance(lifted, LiftedSkeleton):
-            out.append(Done(item, None, None, False, 0.0, str(lifted)))
-            fits.append(None)
-            continue
-        out.append(Done(item, lifted.result, lifted.joints_m, lifted.warm_started, lifted.solve_time, None))
-        # the centred smoothing starts from the fit's own pose; with the measurement update, from
-        # the published one (which has read each frame's 2D; docs/tuning.md)
-        fits.append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
+#: Chains lifted in step by one task (:func:`chain_groups`): up to this many people's prior
+#: networks run in one pass over the weights (:meth:`Lifter.compute_prior_ahead`).
+GROUP_CHAINS: Final[int] = 8
+
+
+def chain_groups(chains: list[list[Item]], tasks_per_worker: int, workers: int) -> list[list[int]]:
+    """The chains (indices) split into groups lifted in step (:func:`lift_chains`): in the order
+    of their first message, a group closed when full or when the next chain starts after every
+    chain of the group has ended (so a group's people are seen together); full is at most
+    :data:`GROUP_CHAINS`, and small enough for ``tasks_per_worker * workers`` groups when there
+    are enough chains (the workers stay balanced). The groups with most items first."""
+    order = sorted(range(len(chains)), key=lambda c: (chains[c][0].msg_index, -len(chains[c])))
+    n_groups = max(min(len(chains), tasks_per_worker * workers), -(-len(chains) // GROUP_CHAINS), 1)
+    size = -(-len(chains) // n_groups)
+    groups: list[list[int]] = []
+    current: list[int] = []
+    end = -1
+    for c in order:
+        if current and (len(current) >= size or chains[c][0].msg_index > end):
+            groups.append(current)
+            current, end = [], -1
+        current.append(c)
+        end = max(end, chains[c][-1].msg_index)
+    if current:
+        groups.append(current)
+    return sorted(groups, key=lambda g: -sum(len(chains[c]) for c in g))
+
+
+def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSettings, smoothing_s: float = 0.0
+                ) -> list[list[Done]]:
+    """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
+    per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
+    each chain's poses are then smoothed centred (:func:`smooth_chain`).
+
+    Message by message, the chains' items of that message are expired as their chain requires,
+    their prior's networks run in one pass (:meth:`Lifter.compute_prior_ahead`), then each is
+    lifted in its chain's pipeline. A chain's outcomes are those of lifting it alone: the chains
+    share only the lifter, whose outputs computed ahead are bit for bit its own."""
+    pipelines = [FramePipeline(lifter, settings) for _ in chains]
+    out: list[list[Done]] = [[] for _ in chains]
+    # the fit's own pose_camera per outcome (the centred smoothing's start)
+    fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
+    steps: dict[int, list[tuple[int, Item]]] = {}
+    for c, chain in enumerate(chains):
+        for item in chain:
+            steps.setdefault(item.msg_index, []).append((c, item))
+    for msg_index in sorted(steps):
+        step = steps[msg_index]
+        expected = []
+        for c, item in step:
+            if item.expire_ns is not None:
+                pipelines[c].end_frame(item.expire_ns)
+            e = pipelines[c].expected_prior(item.input, item.stamp_ns)
+            if e is not None:
+                expected.append(e)
+        lifter.compute_prior_ahead(expected)
+        for c, item in step:
+            lifted = pipelines[c].lift(item.input, item.stamp_ns, item.intrinsics)
+            if not isinstance(lifted, LiftedSkeleton):
+                out[c].append(Done(item, None, None, False, 0.0, str(lifted)))
+                fits[c].append(None)
+                continue
+            out[c].append(Done(item, lifted.result, lifted.joints_m, lifted.warm_started, lifted.solve_time,
+                               None))
+            # the centred smoothing starts from the fit's own pose; with the measurement update,
+            # from the published one (which has read each frame's 2D; docs/tuning.md)
+            fits[c].append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
+    lifter.compute_prior_ahead([])
     if smoothing_s > 0:
-        return smooth_chain(out, fits, settings, smoothing_s)
+        return [smooth_chain(d, f, settings, smoothing_s) for d, f in zip(out, fits, strict=True)]
     return out
 
 
@@ -262,20 +312,26 @@ def _from_columns(chain: list[Item], items: list[tuple[bool, float, str | None, 
 class ChainWork:
     """What the worker processes of :func:`lift_messages` lift: handed to each worker by the pool
     initialiser (:func:`_worker_init`; inherited through fork, not pickled), so a task is only the
-    index of a chain, and only the outcomes come back (the parent holds the items): whole
-    results, or only their message fields as columns (:func:`_columns`)."""
+    index of a group of chains (:func:`chain_groups`), and only the outcomes come back (the
+    parent holds the items): whole results, or only their message fields as columns
+    (:func:`_columns`)."""
 
     lifter: Lifter
     settings: FrameSettings
     smoothing_s: float
     chains: list[list[Item]]
+    groups: list[list[int]]
     message_fields_only: bool
 
-    def run(self, index: int) -> Any:
-        done = lift_chain(self.lifter, self.chains[index], self.settings, self.smoothing_s)
-        if self.message_fields_only:
-            return _columns(done)
-        return [(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done]
+    def run(self, index: int) -> list[Any]:
+        group = [self.chains[c] for c in self.groups[index]]
+        out: list[Any] = []
+        for done in lift_chains(self.lifter, group, self.settings, self.smoothing_s):
+            if self.message_fields_only:
+                out.append(_columns(done))
+            else:
+                out.append([(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done])
+        return out
 
 
 #: The work of this worker process (set by :func:`_worker_init`; None in the parent).
@@ -304,12 +360,13 @@ def stop_workers(ex: Any) -> None:
 
 
 def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any) -> None:
-    """Lift ``work.chains`` on ``workers`` forked processes into ``done`` (id(item) -> outcome)."""
+    """Lift ``work.groups`` of ``work.chains`` on ``workers`` forked processes into ``done``
+    (id(item) -> outcome)."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    # never more processes than chains or cores (1000 workers for 5 tracks forked 1000)
-    n_proc = min(workers, len(work.chains), os.cpu_count() or 1)
+    # never more processes than groups or cores (1000 workers for 5 tracks forked 1000)
+    n_proc = min(workers, len(work.groups), os.cpu_count() or 1)
     # the workers inherit every object of this process (the bag's messages too): frozen, the
     # garbage collector of a worker does not walk them, so their pages are not copied
     gc.freeze()
@@ -317,16 +374,18 @@ def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any
         ex = ProcessPoolExecutor(n_proc, mp_context=multiprocessing.get_context("fork"),
                                  initializer=_worker_init, initargs=(work,))
         try:
-            outcomes_of = ex.map(_worker_chain, range(len(work.chains)))
-            for chain, outcomes in zip(work.chains, outcomes_of, strict=True):
-                if work.message_fields_only:
-                    for d in _from_columns(chain, *outcomes):
-                        done[id(d.item)] = d
-                    bar.update(len(chain))
-                    continue
-                for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
-                    done[id(item)] = Done(item, res, joints, warm, dt, failure)
-                    bar.update(1)
+            outcomes_of = ex.map(_worker_chain, range(len(work.groups)))
+            for group, per_chain in zip(work.groups, outcomes_of, strict=True):
+                for c, outcomes in zip(group, per_chain, strict=True):
+                    chain = work.chains[c]
+                    if work.message_fields_only:
+                        for d in _from_columns(chain, *outcomes):
+                            done[id(d.item)] = d
+                        bar.update(len(chain))
+                        continue
+                    for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
+                        done[id(item)] = Done(item, res, joints, warm, dt, failure)
+                        bar.update(1)
         except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
             stop_workers(ex)
             raise

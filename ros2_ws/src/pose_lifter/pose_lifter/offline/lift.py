@@ -53,7 +53,15 @@ from pose_lifter.offline.bags import (
     read_messages,
     read_raw,
 )
-from pose_lifter.offline.chains import ChainWork, Done, MessageFields, lift_chain, lift_parallel, split_chains
+from pose_lifter.offline.chains import (
+    ChainWork,
+    Done,
+    MessageFields,
+    chain_groups,
+    lift_chains,
+    lift_parallel,
+    split_chains,
+)
 from pose_lifter.offline.settings import LiftSettings
 
 __all__ = [
@@ -68,6 +76,9 @@ __all__ = [
 ]
 
 _MARKER_NS: Final[str] = "pose_lifter"
+#: Groups of chains per worker (:func:`~pose_lifter.offline.chains.chain_groups`): several, so a
+#: worker whose groups are short takes another while the other finishes.
+_TASKS_PER_WORKER: Final[int] = 3
 #: Message types ``lift_bag`` lifts: ours as they are, yolo_ros' through :mod:`pose_lifter.messages.adapters`.
 LIFTABLE_TYPES: Final[tuple[str, ...]] = (SKELETON2D_ARRAY, YOLO_DETECTION_ARRAY)
 
@@ -171,14 +182,15 @@ def lift_messages(
     done: dict[int, Done] = {}  # id(item) -> outcome
     bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
     if workers == 1 or len(chains) < 2:
-        for chain in chains:
-            for d in lift_chain(lifter, chain, frame, settings.smoothing_s):
-                done[id(d.item)] = d
-                bar.update(1)
+        for group in chain_groups(chains, 1, 1):
+            for outcomes in lift_chains(lifter, [chains[c] for c in group], frame, settings.smoothing_s):
+                for d in outcomes:
+                    done[id(d.item)] = d
+                bar.update(sum(len(chains[c]) for c in group))
     else:
-        order = sorted(chains, key=len, reverse=True)  # longest first: balanced workers
-        lift_parallel(ChainWork(lifter, frame, settings.smoothing_s, order, message_fields_only),
-                       workers, done, bar)
+        groups = chain_groups(chains, _TASKS_PER_WORKER, workers)
+        lift_parallel(ChainWork(lifter, frame, settings.smoothing_s, chains, groups, message_fields_only),
+                      workers, done, bar)
     bar.close()
 
     out: list[FrameLift] = []
