@@ -16,10 +16,10 @@ from pose_lifter.core.errors import InvalidInputError, PriorFileError
 from pose_lifter.core.prior import (
     DEFAULT_PRIOR_PATH,
     DEFAULT_TEMPORAL_PRIOR_PATH,
-    OutputsAhead,
     PosePrior,
     prior_features,
 )
+from pose_lifter.core.prior_ahead import OutputsAhead
 from pose_lifter.core.synthetic import synthetic_poses
 from pose_lifter.mocap.views import scale_limbs
 
@@ -229,6 +229,13 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
 
 
+def _ahead_predict(prior: PosePrior, ahead: OutputsAhead, points: np.ndarray, visible: np.ndarray
+                   ) -> np.ndarray:
+    """PosePrior.predict with flip averaging, its network's outputs from ``ahead`` (as PriorFit)."""
+    rows, centre, radius = prior.input_rows(points, visible, True)
+    return prior.poses(ahead.forward(prior, rows), centre, radius, True)
+
+
 @pytest.mark.skipif(not HAVE_NUMBA, reason="outputs are computed ahead only through the compiled pass")
 def test_outputs_computed_ahead_are_each_poses_own_bit_for_bit(prior: PosePrior) -> None:
     """OutputsAhead: the outputs of many people's rows computed in one pass are, row by row, those
@@ -247,18 +254,18 @@ def test_outputs_computed_ahead_are_each_poses_own_bit_for_bit(prior: PosePrior)
     ahead.compute(expected)
     assert len(ahead) == 2 * (len(people) - 1 + len(windows))  # two rows a pose: it and its mirror
     for x, v in pairs:
-        np.testing.assert_array_equal(prior.predict(x, v, True, ahead), prior.predict(x, v, True))
+        np.testing.assert_array_equal(_ahead_predict(prior, ahead, x, v), prior.predict(x, v, True))
     for x, v in windows:
-        np.testing.assert_array_equal(temporal.predict(x, v, True, ahead), temporal.predict(x, v, True))
+        np.testing.assert_array_equal(_ahead_predict(temporal, ahead, x, v), temporal.predict(x, v, True))
     assert (ahead.hits, ahead.misses) == (len(ahead), 0)
     # the last person was not expected: computed now, the same as alone
-    np.testing.assert_array_equal(prior.predict(people[-1], visible[-1], True, ahead),
+    np.testing.assert_array_equal(_ahead_predict(prior, ahead, people[-1], visible[-1]),
                                   prior.predict(people[-1], visible[-1], True))
     assert ahead.misses == 2
     # the same rows through another prior (other weights): not taken from the first one's outputs
     other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean, prior.out_scale,
                       prior.abs_error, prior.window, prior.metadata, prior.blocks)
-    np.testing.assert_array_equal(other.predict(people[0], visible[0], True, ahead),
+    np.testing.assert_array_equal(_ahead_predict(other, ahead, people[0], visible[0]),
                                   other.predict(people[0], visible[0], True))
     assert ahead.misses == 4
     assert not np.array_equal(other.predict(people[0], visible[0], True),

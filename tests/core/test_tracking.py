@@ -12,7 +12,7 @@ import tolerances as tol
 from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, StartKind, TrackContext, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.prior import OutputsAhead, PosePrior
+from pose_lifter.core.prior import PosePrior
 from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
 from pose_lifter.mocap.views import scale_limbs
 
@@ -195,10 +195,10 @@ def test_the_temporal_prior_never_reads_a_future_frame(
     windows: list[tuple[np.ndarray, np.ndarray]] = []
 
     class Spy(PosePrior):
-        def predict(self, points: np.ndarray, visible: np.ndarray, flip: bool = False,
-                    ahead: OutputsAhead | None = None) -> np.ndarray:
+        def input_rows(self, points: np.ndarray, visible: np.ndarray, flip: bool = False
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             windows.append((np.array(points), np.array(visible)))
-            return super().predict(points, visible, flip, ahead)
+            return super().input_rows(points, visible, flip)
 
     spy = Spy(temporal.weights, temporal.biases, temporal.out_mean, temporal.out_scale,
               temporal.abs_error, temporal.window, temporal.metadata, temporal.blocks)

@@ -22,7 +22,8 @@ from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
 from .pose_step import PriorRows
-from .prior import OutputsAhead, PosePrior
+from .prior import PosePrior
+from .prior_ahead import OutputsAhead
 from .results import Camera, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
@@ -158,7 +159,9 @@ class PriorFit:
         one given), else ``prior`` (a windowed ``prior`` gets this frame repeated). Outputs
         computed ahead (:attr:`ahead`) are used when they are this input's."""
         prior, pts, vis = self.prior_input(x, visible, past)
-        return prior.predict(pts, vis, self.options.prior_flip, self.ahead), prior
+        flip = self.options.prior_flip
+        rows, centre, radius = prior.input_rows(pts, vis, flip)
+        return prior.poses(self.ahead.forward(prior, rows), centre, radius, flip), prior
 
     def expected_rows(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
                       past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None

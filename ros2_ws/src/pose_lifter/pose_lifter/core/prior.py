@@ -43,8 +43,7 @@ from ._jit import HAVE_NUMBA, njit
 from .errors import InvalidInputError, PriorFileError
 from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
-__all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "OutputsAhead", "PosePrior", "normalise_2d",
-           "prior_features"]
+__all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "normalise_2d", "prior_features"]
 
 #: The prior shipped with the package (``make prior``: tools/train_prior.py).
 DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "prior_mlp.npz"
@@ -526,8 +525,8 @@ class PosePrior:
             feats = np.stack([feats, mirror_features(feats)], axis=-2)
         return feats, centre, radius
 
-    def predict(self, points: NDArray[np.float64], visible: NDArray[np.bool_], flip: bool = False,
-                ahead: OutputsAhead | None = None) -> NDArray[np.float64]:
+    def predict(self, points: NDArray[np.float64], visible: NDArray[np.bool_], flip: bool = False
+                ) -> NDArray[np.float64]:
         """3D poses in input units: ``x, y`` in the image (``c + r u``), ``z`` relative depth
         (``r z``), shape (..., 12, 3) for input as in :meth:`features`.
 
@@ -535,79 +534,17 @@ class PosePrior:
         answer for the mirrored input (the image flipped left-right, left and right joints
         swapped), mirrored back (test-time flip averaging): a person and their mirror image are
         equally likely, so the two answers' errors are partly independent. Both go through the
-        network as one batch of two (the cost of one pose: the weights are read once).
-
-        ``ahead`` holds outputs computed ahead for rows expected now (:class:`OutputsAhead`); the
-        pose is the same with or without it."""
+        network as one batch of two (the cost of one pose: the weights are read once)."""
         rows, centre, radius = self.input_rows(points, visible, flip)
-        y = self.forward(rows) if ahead is None else ahead.forward(self, rows)
+        return self.poses(self.forward(rows), centre, radius, flip)
+
+    def poses(self, outputs: NDArray[np.float64], centre: NDArray[np.float64], radius: NDArray[np.float64],
+              flip: bool) -> NDArray[np.float64]:
+        """:meth:`predict`'s poses (..., 12, 3) from the network's ``outputs`` for the rows of
+        :meth:`input_rows` (with ``flip``, (..., 2, 12, 3): averaged with the mirror image's)."""
+        y = outputs
         if flip:
             y = 0.5 * (y[..., 0, :, :] + mirror_pose(y[..., 1, :, :]))
         out = y * radius[..., None, None]
         out[..., :2] += centre[..., None, :]
         return out
-
-
-class OutputsAhead:
-    """Outputs of priors' networks computed ahead, in one pass, for the input rows expected next.
-
-    The weights of a prior (4 MB) no longer sit in the cache when the next pose needs them: the
-    network of one pose and its mirror image costs their reading from memory (~0.4 ms in a lift,
-    against ~0.15 ms with the weights in cache). The node's frame of several people, or a worker
-    lifting several tracks in step, expects a row per person (:meth:`PriorFit.expected_rows
-    <pose_lifter.core.hybrid.PriorFit.expected_rows>`) and computes them all in one pass over the
-    weights (:meth:`compute`); :meth:`PosePrior.predict` then takes a row's output from here when
-    the row is the expected one, bit for bit (the row, as float32 bytes, is the key), and
-    computes it otherwise (an outlier pass, a joint the track gated). Rows run through the same
-    compiled pass as a single pose's (:meth:`PosePrior._forward_small`), whose rows do not mix:
-    the outputs are those of the pose alone. Without numba nothing is computed ahead (numpy's
-    matrix product of many rows rounds otherwise than of two).
-    """
-
-    def __init__(self) -> None:
-        self._outputs: dict[bytes, tuple[PosePrior, NDArray[np.float64]]] = {}
-        #: rows answered from here and rows computed on demand since the last :meth:`clear`
-        self.hits = 0
-        self.misses = 0
-
-    def __len__(self) -> int:
-        return len(self._outputs)
-
-    def clear(self) -> None:
-        """Forget every output computed ahead (the counters too)."""
-        self._outputs.clear()
-        self.hits = self.misses = 0
-
-    def compute(self, expected: list[tuple[PosePrior, NDArray[np.float64]]]) -> None:
-        """Replace the outputs held by those of ``expected`` (per prior, its rows (k, 36 window)
-        or (36 window,)), each prior's rows in one compiled pass."""
-        self._outputs.clear()
-        if not HAVE_NUMBA:
-            return
-        by_prior: dict[int, tuple[PosePrior, list[NDArray[np.float32]]]] = {}
-        for prior, rows in expected:
-            r32 = np.asarray(rows, dtype=np.float32).reshape(-1, FRAME_DIM * prior.window)
-            by_prior.setdefault(id(prior), (prior, []))[1].extend(r32)
-        for prior, rows32 in by_prior.values():
-            unique = {r.tobytes(): r for r in rows32}
-            if not unique:
-                continue
-            h = np.ascontiguousarray(np.stack(list(unique.values())))
-            y = prior._forward_small(h)
-            for key, out in zip(unique, y, strict=True):
-                self._outputs[key] = (prior, out)
-
-    def forward(self, prior: PosePrior, rows: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``prior.forward(rows)`` (rows (..., 36 window)), from the outputs held when every row
-        is there (computed by ``prior``), else computed now."""
-        r32 = np.asarray(rows, dtype=np.float32)
-        flat = r32.reshape(-1, r32.shape[-1])
-        outs = []
-        for r in flat:
-            held = self._outputs.get(r.tobytes())
-            if held is None or held[0] is not prior:
-                self.misses += len(flat)
-                return prior.forward(rows)
-            outs.append(held[1])
-        self.hits += len(flat)
-        return np.stack(outs).reshape(*r32.shape[:-1], N_JOINTS, 3)
