@@ -1,14 +1,13 @@
-"""Whole-command wall time of lifting a collection of bags: one ``pose-lifter lift DIR --out OUT``
-(this checkout) against one ``pose-lifter lift BAG --out FILE`` per bag (the ``before`` checkout,
-which lifts one bag per command), side by side, alternating in every repetition.
+"""Whole-command wall time of lifting a collection of bags, ``pose-lifter lift DIR --out OUT``,
+of this checkout and of a ``before`` checkout, side by side, alternating in every repetition.
 
     git worktree add --detach ../before <commit>
-    OMP_NUM_THREADS=1 .venv/bin/python tools/bench_collection.py many36.mcap --copies 20 \\
+    OMP_NUM_THREADS=1 .venv/bin/python tools/bench_collection.py out/many36.mcap --copies 20 \\
         --before ../before --work out/coll [--reps 1] [--workers 0]
 
 The collection is ``--copies`` hard links of ``BAG`` (distinct files to the lifter). Prints, per
 code and repetition, the wall time, poses/s (poses lifted over the whole wall time: imports,
-kernel loading, pools, reading, writing) and the CPU seconds of the commands and their workers,
+kernel loading, pools, reading, writing) and the CPU seconds of the command and its workers,
 the machine's load average around each run, and the start-up: a run that lifts one message of
 two small committed bags (imports + kernel loading + pool + two tiny outputs). ``--single`` also
 times both codes on ``BAG`` alone (``lift BAG --out FILE``). ``--cores 1`` pins every command to
@@ -85,26 +84,14 @@ def main() -> int:
     extra = ["--quiet", "--overwrite"] + (["--workers", str(args.workers)] if args.workers else [])
 
     def collection(key: str) -> tuple[float, float, int]:
-        out = args.work / f"out_{key}"
-        if key == "after":
-            run = ["lift", str(src), "--out", str(out), *extra]
-            wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
-            return wall, cpu, poses_of(stdout)
-        out.mkdir(parents=True, exist_ok=True)
-        walls, cpus, poses = 0.0, 0.0, 0
-        for bag in sorted(src.glob("*.mcap")):
-            run = ["lift", str(bag), "--out", str(out / bag.name), *extra]
-            wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
-            walls, cpus, poses = walls + wall, cpus + cpu, poses + poses_of(stdout)
-        return walls, cpus, poses
+        run = ["lift", str(src), "--out", str(args.work / f"out_{key}"), *extra]
+        wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
+        return wall, cpu, poses_of(stdout)
 
     def startup(key: str) -> float:
-        base = ["--max-messages", "1", *extra]
-        if key == "after":
-            run = ["lift", *map(str, SMALL), "--out", str(args.work / "start"), *base]
-            return pose_lifter(codes[key], run, args.cores)[0]
-        return sum(pose_lifter(codes[key], ["lift", str(b), "--out", str(args.work / f"start_{b.name}"),
-                                            *base], args.cores)[0] for b in SMALL)
+        run = ["lift", *map(str, SMALL), "--out", str(args.work / f"start_{key}"), "--max-messages", "1",
+               *extra]
+        return pose_lifter(codes[key], run, args.cores)[0]
 
     def single(key: str) -> tuple[float, float, int]:
         run = ["lift", args.bag, "--out", str(args.work / "single.mcap"), *extra]

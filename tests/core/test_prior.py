@@ -19,7 +19,7 @@ from pose_lifter.core.prior import (
     PosePrior,
     prior_features,
 )
-from pose_lifter.core.prior_ahead import OutputsAhead
+from pose_lifter.core.prior_ahead import PosesAhead
 from pose_lifter.core.synthetic import synthetic_poses
 from pose_lifter.mocap.views import scale_limbs
 
@@ -229,46 +229,34 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
 
 
-def _ahead_predict(prior: PosePrior, ahead: OutputsAhead, points: np.ndarray, visible: np.ndarray
-                   ) -> np.ndarray:
-    """PosePrior.predict with flip averaging, its network's outputs from ``ahead`` (as PriorFit)."""
-    rows, centre, radius = prior.input_rows(points, visible, True)
-    return prior.poses(ahead.forward(prior, rows), centre, radius, True)
-
-
-@pytest.mark.skipif(not HAVE_NUMBA, reason="outputs are computed ahead only through the compiled pass")
-def test_outputs_computed_ahead_are_each_poses_own_bit_for_bit(prior: PosePrior) -> None:
-    """OutputsAhead: the outputs of many people's rows computed in one pass are, row by row, those
-    of each pose computed alone (the rows of the compiled pass do not mix); a row not computed
-    ahead, or computed by another prior, is computed on demand, with the same value."""
+@pytest.mark.skipif(not HAVE_NUMBA, reason="poses are computed ahead only through the compiled pass")
+def test_poses_computed_ahead_are_each_poses_own_bit_for_bit(prior: PosePrior) -> None:
+    """PosesAhead: the poses of many people computed with one pass of each prior's network are,
+    one by one, those of each pose computed alone (the rows of the compiled pass do not mix); an
+    input not computed ahead, or computed by another prior, is computed on demand."""
     temporal = PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH)
     rng = np.random.default_rng(11)
-    people = [rng.uniform(100.0, 500.0, (12, 2)) for _ in range(9)]
-    visible = [rng.random(12) > 0.15 for _ in people]
+    people = [(rng.uniform(100.0, 500.0, (12, 2)), rng.random(12) > 0.15) for _ in range(9)]
     windows = [(rng.uniform(100.0, 500.0, (temporal.window, 12, 2)), rng.random((temporal.window, 12)) > 0.1)
                for _ in range(5)]
-    ahead = OutputsAhead()
-    pairs = list(zip(people[:-1], visible[:-1], strict=True))
-    expected = [(prior, prior.input_rows(x, v, True)[0]) for x, v in pairs]
-    expected += [(temporal, temporal.input_rows(x, v, True)[0]) for x, v in windows]
-    ahead.compute(expected)
-    assert len(ahead) == 2 * (len(people) - 1 + len(windows))  # two rows a pose: it and its mirror
-    for x, v in pairs:
-        np.testing.assert_array_equal(_ahead_predict(prior, ahead, x, v), prior.predict(x, v, True))
-    for x, v in windows:
-        np.testing.assert_array_equal(_ahead_predict(temporal, ahead, x, v), temporal.predict(x, v, True))
-    assert (ahead.hits, ahead.misses) == (len(ahead), 0)
-    # the last person was not expected: computed now, the same as alone
-    np.testing.assert_array_equal(_ahead_predict(prior, ahead, people[-1], visible[-1]),
-                                  prior.predict(people[-1], visible[-1], True))
-    assert ahead.misses == 2
-    # the same rows through another prior (other weights): not taken from the first one's outputs
-    other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean, prior.out_scale,
-                      prior.abs_error, prior.window, prior.metadata, prior.blocks)
-    np.testing.assert_array_equal(_ahead_predict(other, ahead, people[0], visible[0]),
-                                  other.predict(people[0], visible[0], True))
-    assert ahead.misses == 4
-    assert not np.array_equal(other.predict(people[0], visible[0], True),
-                              prior.predict(people[0], visible[0], True))
-    ahead.compute([])
-    assert len(ahead) == 0
+    refused = (np.zeros((12, 2)), np.zeros(12, dtype=bool))  # no visible joint: left out
+    for flip in (True, False):
+        ahead = PosesAhead(flip)
+        ahead.compute([(prior, x, v) for x, v in [*people[:-1], refused]]
+                      + [(temporal, x, v) for x, v in windows])
+        assert len(ahead) == len(people) - 1 + len(windows)
+        for p, inputs in ((prior, people[:-1]), (temporal, windows)):
+            for x, v in inputs:
+                np.testing.assert_array_equal(ahead.predict(p, x, v), p.predict(x, v, flip))
+        assert (ahead.hits, ahead.misses) == (len(ahead), 0)
+        # the last person was not expected: computed now, the same as alone
+        np.testing.assert_array_equal(ahead.predict(prior, *people[-1]), prior.predict(*people[-1], flip))
+        assert ahead.misses == 1
+        # the same input to another prior (other weights): not taken from the first one's poses
+        other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean,
+                          prior.out_scale, prior.abs_error, prior.window, prior.metadata, prior.blocks)
+        np.testing.assert_array_equal(ahead.predict(other, *people[0]), other.predict(*people[0], flip))
+        assert ahead.misses == 2
+        assert not np.array_equal(other.predict(*people[0], flip), prior.predict(*people[0], flip))
+        ahead.compute([])
+        assert len(ahead) == 0

@@ -23,7 +23,7 @@ from .options import LifterOptions
 from .pose_model import PoseModel
 from .pose_step import PriorRows
 from .prior import PosePrior
-from .prior_ahead import OutputsAhead
+from .prior_ahead import PosesAhead
 from .results import Camera, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
@@ -136,8 +136,8 @@ class PriorFit:
                  model: PoseModel, runs: Runs) -> None:
         self.options, self.prior, self.temporal_prior = options, prior, temporal_prior
         self.model, self.runs = model, runs
-        #: the priors' outputs computed ahead for the frames expected next (:meth:`predict`)
-        self.ahead = OutputsAhead()
+        #: the priors' poses computed ahead for the frames expected next (:meth:`predict`)
+        self.ahead = PosesAhead(options.prior_flip)
         #: the mean log length of the model's own limbs (:meth:`limb_radii`)
         self._log_limb_mean = float(np.mean(np.log(np.sqrt(model.limb_sq))))
 
@@ -156,30 +156,17 @@ class PriorFit:
                 ) -> tuple[NDArray[np.float64], PosePrior]:
         """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
         temporal prior when the lift has ``past`` frames (padded to its window with the oldest
-        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated). Outputs
-        computed ahead (:attr:`ahead`) are used when they are this input's."""
+        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated); the pose
+        computed ahead for this input when there is one (:attr:`ahead`)."""
         prior, pts, vis = self.prior_input(x, visible, past)
-        flip = self.options.prior_flip
-        rows, centre, radius = prior.input_rows(pts, vis, flip)
-        return prior.poses(self.ahead.forward(prior, rows), centre, radius, flip), prior
-
-    def expected_rows(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
-                      past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
-                      ) -> tuple[PosePrior, NDArray[np.float64]] | None:
-        """The prior and its input rows that :meth:`predict` of these arguments runs (for
-        :meth:`OutputsAhead.compute`), or None when the prior would refuse the input."""
-        prior, pts, vis = self.prior_input(x, visible, past)
-        try:
-            rows, _, _ = prior.input_rows(pts, vis, self.options.prior_flip)
-        except InvalidInputError:
-            return None
-        return prior, rows
+        return self.ahead.predict(prior, pts, vis), prior
 
     def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
                     past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
                     ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
         """The prior :meth:`predict` runs and its input: this frame (12, 2), (12,), or its window
-        (W, 12, 2), (W, 12) with the ``past`` frames (see :meth:`predict`)."""
+        (W, 12, 2), (W, 12) with the ``past`` frames (see :meth:`predict`; what
+        :meth:`PosesAhead.compute` takes)."""
         prior = self.prior
         if past is not None and len(past[0]) > 0 and self.temporal_prior is not None:
             prior = self.temporal_prior

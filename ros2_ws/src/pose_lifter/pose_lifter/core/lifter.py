@@ -161,17 +161,17 @@ class Lifter:
         """The hybrid and learned modes' solve with the learned prior (None in the paper mode)."""
         return self._prior_fit
 
-    def compute_prior_ahead(self, expected: list[tuple[PosePrior, NDArray[np.float64]]]) -> None:
-        """Compute the prior's outputs for the input rows of lifts expected next in one pass
-        (:class:`~pose_lifter.core.prior.OutputsAhead`; fewer than 2: nothing is computed ahead).
-        The lifts' results are the same with or without it."""
+    def compute_prior_ahead(self, expected: list[tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]]
+                            ) -> None:
+        """Compute the prior's poses for the inputs of lifts expected next (``(prior, points,
+        visible)``, :meth:`PriorFit.prior_input <pose_lifter.core.hybrid.PriorFit.prior_input>`)
+        in one pass of each prior's network (:class:`~pose_lifter.core.prior_ahead.PosesAhead`;
+        fewer than 2: nothing is computed ahead). The lifts' results are the same with or
+        without it."""
         fit = self._prior_fit
         if fit is None:
             return
-        if len(expected) < 2:
-            fit.ahead.compute([])
-            return
-        fit.ahead.compute(expected)
+        fit.ahead.compute(expected if len(expected) >= 2 else [])
 
     @property
     def runs(self) -> Runs:

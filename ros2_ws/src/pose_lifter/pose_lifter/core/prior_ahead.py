@@ -1,10 +1,10 @@
-"""Outputs of the learned prior's network computed ahead, for several people in one pass.
+"""The learned prior's poses computed ahead, for several people in one pass of its network.
 
 The weights of a prior (4 MB) are no longer in the cache when the next pose needs them, so the
 network of one pose costs the reading of its weights from memory. The node's frame of several
-people, and the offline lift's chains lifted in step, compute the rows they expect in one pass
-(:class:`OutputsAhead`); :meth:`pose_lifter.core.hybrid.PriorFit.predict` takes a row's output
-from it, bit for bit the output of the pose alone.
+people, and the offline lift's chains lifted in step, compute the poses they expect in one pass
+(:class:`PosesAhead`); :meth:`pose_lifter.core.hybrid.PriorFit.predict` takes a pose from it,
+bit for bit the pose computed alone.
 """
 
 from __future__ import annotations
@@ -13,72 +13,85 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._jit import HAVE_NUMBA
-from .prior import FRAME_DIM, PosePrior
+from .errors import InvalidInputError
+from .prior import PosePrior
 from .skeleton import N_JOINTS
 
-__all__ = ["OutputsAhead"]
+__all__ = ["PosesAhead"]
 
 
-class OutputsAhead:
-    """Outputs of priors' networks computed ahead, in one pass, for the input rows expected next.
+class PosesAhead:
+    """Poses of priors computed ahead, their networks in one pass, for the inputs expected next.
 
     In a lift, a pose and its mirror image cost ~0.5 ms of network (the weights read from
-    memory; ~0.15 ms with them in cache); computed ahead for the 6 people of a step, ~0.2 ms a
-    pose (many36.mcap, one process). The caller expects a row per person
-    (:meth:`PriorFit.expected_rows <pose_lifter.core.hybrid.PriorFit.expected_rows>`) and
-    computes them in one pass over the weights (:meth:`compute`); :meth:`PriorFit.predict
-    <pose_lifter.core.hybrid.PriorFit.predict>` takes a row's output from here when the row is
-    the expected one (the row's float32 bytes are the key) and computes it otherwise (an outlier
-    pass, a joint the track gated). Rows run through the compiled pass of a single pose
-    (:meth:`PosePrior._forward_small <pose_lifter.core.prior.PosePrior._forward_small>`), whose
-    rows do not mix: the outputs are those of the pose alone, bit for bit. Without numba nothing
-    is computed ahead (numpy's matrix product of many rows rounds otherwise than of two).
+    memory; ~0.15 ms with them in cache); computed ahead for the 6-8 people of a step, ~0.2 ms
+    a pose (many36.mcap, one process). The caller expects an input per person
+    (:meth:`PriorFit.prior_input <pose_lifter.core.hybrid.PriorFit.prior_input>`) and computes
+    their poses in one pass over each prior's weights (:meth:`compute`); :meth:`predict` returns
+    the pose held for its input (the prior, and the input's bytes, are the key) and computes it
+    otherwise (an outlier pass, a joint the track gated or filled in). The rows run through the
+    compiled pass of a single pose (:meth:`PosePrior._forward_small
+    <pose_lifter.core.prior.PosePrior._forward_small>`), whose rows do not mix: a pose is the one
+    :meth:`PosePrior.predict <pose_lifter.core.prior.PosePrior.predict>` gives alone, bit for
+    bit. Without numba nothing is computed ahead (numpy's matrix product of many rows rounds
+    otherwise than of two).
+
+    Parameters
+    ----------
+    flip : bool
+        The priors' test-time flip averaging (``LifterOptions.prior_flip``).
     """
 
-    def __init__(self) -> None:
-        self._outputs: dict[bytes, tuple[PosePrior, NDArray[np.float64]]] = {}
-        #: rows answered from here and rows computed on demand since the last :meth:`clear`
+    def __init__(self, flip: bool) -> None:
+        self.flip = flip
+        self._poses: dict[tuple[int, bytes], tuple[PosePrior, NDArray[np.float64]]] = {}
+        #: poses answered from here and computed on demand since the last :meth:`clear`
         self.hits = 0
         self.misses = 0
 
     def __len__(self) -> int:
-        return len(self._outputs)
+        return len(self._poses)
 
     def clear(self) -> None:
-        """Forget every output computed ahead (the counters too)."""
-        self._outputs.clear()
+        """Forget every pose computed ahead (the counters too)."""
+        self._poses.clear()
         self.hits = self.misses = 0
 
-    def compute(self, expected: list[tuple[PosePrior, NDArray[np.float64]]]) -> None:
-        """Replace the outputs held by those of ``expected`` (per prior, its rows (k, 36 window)
-        or (36 window,)), each prior's rows in one compiled pass."""
-        self._outputs.clear()
+    @staticmethod
+    def _key(prior: PosePrior, points: NDArray[np.float64], visible: NDArray[np.bool_]) -> tuple[int, bytes]:
+        return id(prior), np.ascontiguousarray(points, dtype=np.float64).tobytes() + \
+            np.ascontiguousarray(visible, dtype=np.bool_).tobytes()
+
+    def compute(self, expected: list[tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]]) -> None:
+        """Replace the poses held by those of the ``expected`` inputs ``(prior, points, visible)``
+        (a frame (12, 2), (12,) or a window (W, 12, 2), (W, 12)), each prior's network in one
+        compiled pass; an input the prior refuses is left out."""
+        self._poses.clear()
         if not HAVE_NUMBA:
             return
-        by_prior: dict[int, tuple[PosePrior, list[NDArray[np.float32]]]] = {}
-        for prior, rows in expected:
-            r32 = np.asarray(rows, dtype=np.float32).reshape(-1, FRAME_DIM * prior.window)
-            by_prior.setdefault(id(prior), (prior, []))[1].extend(r32)
-        for prior, rows32 in by_prior.values():
-            unique = {r.tobytes(): r for r in rows32}
-            if not unique:
+        by_prior: dict[int, tuple[PosePrior, list[tuple[tuple[int, bytes], NDArray[np.float64],
+                                                        NDArray[np.float64], NDArray[np.float64]]]]] = {}
+        for prior, points, visible in expected:
+            key = self._key(prior, points, visible)
+            try:
+                rows, centre, radius = prior.input_rows(points, visible, self.flip)
+            except InvalidInputError:
                 continue
-            h = np.ascontiguousarray(np.stack(list(unique.values())))
-            y = prior._forward_small(h)
-            for key, out in zip(unique, y, strict=True):
-                self._outputs[key] = (prior, out)
+            by_prior.setdefault(id(prior), (prior, []))[1].append((key, rows, centre, radius))
+        for prior, inputs in by_prior.values():
+            rows = np.stack([r for _, r, _, _ in inputs])  # (n, 2, d) with flip, else (n, d)
+            h = np.ascontiguousarray(rows.reshape(-1, rows.shape[-1]), dtype=np.float32)
+            y = prior._forward_small(h).reshape(*rows.shape[:-1], N_JOINTS, 3)
+            for (key, _, centre, radius), out in zip(inputs, y, strict=True):
+                self._poses[key] = (prior, prior.poses(out, centre, radius, self.flip))
 
-    def forward(self, prior: PosePrior, rows: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``prior.forward(rows)`` (rows (..., 36 window)), from the outputs held when every row
-        is there (computed by ``prior``), else computed now."""
-        r32 = np.asarray(rows, dtype=np.float32)
-        flat = r32.reshape(-1, r32.shape[-1])
-        outs = []
-        for r in flat:
-            held = self._outputs.get(r.tobytes())
-            if held is None or held[0] is not prior:
-                self.misses += len(flat)
-                return prior.forward(rows)
-            outs.append(held[1])
-        self.hits += len(flat)
-        return np.stack(outs).reshape(*r32.shape[:-1], N_JOINTS, 3)
+    def predict(self, prior: PosePrior, points: NDArray[np.float64], visible: NDArray[np.bool_]
+                ) -> NDArray[np.float64]:
+        """``prior.predict(points, visible, flip)``: the pose held for this input (computed by
+        ``prior``), else computed now."""
+        held = self._poses.get(self._key(prior, points, visible))
+        if held is not None and held[0] is prior:
+            self.hits += 1
+            return held[1].copy()
+        self.misses += 1
+        return prior.predict(points, visible, self.flip)

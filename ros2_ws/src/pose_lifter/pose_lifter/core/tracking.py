@@ -237,12 +237,12 @@ class TrackPolicy:
 
     def expected_prior(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
                        confidence: NDArray[np.float64] | None = None
-                       ) -> tuple[PosePrior, NDArray[np.float64]] | None:
-        """The prior and its input rows that :meth:`lift` of this frame is expected to run (for
-        :meth:`Lifter.compute_prior_ahead`): the track's past frames as the lift reads them and
-        this frame's joints as given; a joint the gate or the outlier pass removes, or one the
-        track fills in, changes the rows and the lift computes its own. None in the paper mode
-        or for input the lift refuses. Changes nothing."""
+                       ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The prior and its input that :meth:`lift` of this frame is expected to run (for
+        :meth:`Lifter.compute_prior_ahead`): the track's past frames and this frame's joints as
+        the lift reads them; a joint the gate or the outlier pass removes, or one the track fills
+        in, changes the input and the lift computes its own pose. None in the paper mode or for
+        input the lift refuses. Changes nothing."""
         fit = self.lifter.prior_fit
         if fit is None:
             return None
@@ -254,7 +254,15 @@ class TrackPolicy:
         if track is not None and self.warm_start and track.warm is not None:
             if 0 <= stamp_ns - track.last_stamp_ns <= self.track_timeout_ns:
                 past = track.past(stamp_ns, (fit.temporal_prior or fit.prior).window - 1)
-        return fit.expected_rows(np.asarray(points, dtype=np.float64), vis, past)
+        # the lifter's reading of its input (Lifter.lift): a joint with a non-finite coordinate
+        # is 0 and missing, in this frame and in the past ones
+        x = np.asarray(points, dtype=np.float64)
+        bad = np.asarray(~np.isfinite(x).all(axis=1), dtype=bool)
+        if bad.any():
+            x = np.where(bad[:, None], 0.0, x)
+        if past is not None:
+            past = (past[0], past[1] & np.isfinite(past[0]).all(axis=-1))
+        return fit.prior_input(x, vis, past)
 
     def _find(self, track_id: int, stamp_ns: int) -> tuple[Track | None, WarmStart | None]:
         """The frame's track (None: untracked, new, or forgotten because the input clock jumped

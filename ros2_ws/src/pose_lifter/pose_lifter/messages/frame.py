@@ -52,6 +52,7 @@ __all__ = [
     "SkeletonInput",
     "SkipSkeleton",
     "check_output",
+    "compute_ahead",
     "expiry_stamps",
     "frame_over_cap",
     "skeleton_input",
@@ -262,6 +263,20 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
     return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
 
 
+def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int]]) -> float:
+    """The prior's network for every ``(pipeline, skeleton, stamp)`` about to be lifted (each
+    pipeline's tracks as they are now) in one pass over its weights
+    (:meth:`~pose_lifter.core.lifter.Lifter.compute_prior_ahead`; the lifts' results are the same
+    with or without it). Returns each skeleton's share of its time, in seconds."""
+    if not frames:
+        return 0.0
+    start = time.perf_counter()
+    expected = [e for pipeline, inp, stamp in frames
+                if (e := pipeline.expected_prior(inp, stamp)) is not None]
+    lifter.compute_prior_ahead(expected)
+    return (time.perf_counter() - start) / len(frames)
+
+
 def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:
     """For one track lifted apart from the others (its own :class:`FramePipeline`), the stamp to
     expire at before each of its frames, so that it is forgotten exactly when a pipeline lifting
@@ -350,14 +365,15 @@ class FramePipeline:
                 out.append(_refusal(err, track_id))
         return CheckedFrame(True, tuple(out), skipped, n_left_out)
 
-    def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
+    def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics, shared_s: float = 0.0
              ) -> LiftedSkeleton | SkipSkeleton:
         """Step 2 for one checked skeleton: lifted and placed, or why not (never raises for bad
-        input or a failed solve)."""
+        input or a failed solve). ``shared_s``: this skeleton's share of work done for several
+        (the prior computed ahead, :meth:`compute_ahead`), added to its solve time."""
         try:
             start = time.perf_counter()
             tracked = self.policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence)
-            solve_time = time.perf_counter() - start
+            solve_time = time.perf_counter() - start + shared_s
             result = tracked.result
             focal, centre = intrinsics if intrinsics is not None else (None, None)
             joints = place_in_camera(result, self.settings.lower_leg_length, focal, centre,
@@ -368,8 +384,8 @@ class FramePipeline:
         return LiftedSkeleton(inp, result, joints, tracked.warm_started, solve_time, tracked.fit_pose_camera)
 
     def expected_prior(self, inp: SkeletonInput, stamp_ns: int
-                       ) -> tuple[PosePrior, NDArray[np.float64]] | None:
-        """The prior's input rows :meth:`lift` of this skeleton is expected to run
+                       ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The prior and its input that :meth:`lift` of this skeleton is expected to run
         (:meth:`TrackPolicy.expected_prior`; None when there are none or the input is refused)."""
         try:
             return self.policy.expected_prior(inp.track_id, stamp_ns, inp.points, inp.confidence)
@@ -386,10 +402,9 @@ class FramePipeline:
         lifted skeleton or why not (an unanswered frame lifts and expires nothing)."""
         if not checked.answered:
             return []
-        # the prior's network for every person of the frame in one pass over its weights
-        self.lifter.compute_prior_ahead([e for x in checked.skeletons if not isinstance(x, SkipSkeleton)
-                                         if (e := self.expected_prior(x, stamp_ns)) is not None])
-        out = [x if isinstance(x, SkipSkeleton) else self.lift(x, stamp_ns, intrinsics)
+        inputs = [x for x in checked.skeletons if not isinstance(x, SkipSkeleton)]
+        shared = compute_ahead(self.lifter, [(self, x, stamp_ns) for x in inputs])
+        out = [x if isinstance(x, SkipSkeleton) else self.lift(x, stamp_ns, intrinsics, shared)
                for x in checked.skeletons]
         self.end_frame(stamp_ns)
         return out

@@ -34,6 +34,7 @@ from pose_lifter.messages.frame import (
     LiftedSkeleton,
     SkeletonInput,
     SkipSkeleton,
+    compute_ahead,
     expiry_stamps,
 )
 
@@ -193,16 +194,12 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
             steps.setdefault(item.msg_index, []).append((c, item))
     for msg_index in sorted(steps):
         step = steps[msg_index]
-        expected = []
         for c, item in step:
             if item.expire_ns is not None:
                 pipelines[c].end_frame(item.expire_ns)
-            e = pipelines[c].expected_prior(item.input, item.stamp_ns)
-            if e is not None:
-                expected.append(e)
-        lifter.compute_prior_ahead(expected)
+        shared = compute_ahead(lifter, [(pipelines[c], item.input, item.stamp_ns) for c, item in step])
         for c, item in step:
-            lifted = pipelines[c].lift(item.input, item.stamp_ns, item.intrinsics)
+            lifted = pipelines[c].lift(item.input, item.stamp_ns, item.intrinsics, shared)
             if not isinstance(lifted, LiftedSkeleton):
                 out[c].append(Done(item, None, None, False, 0.0, str(lifted)))
                 fits[c].append(None)
