@@ -193,7 +193,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                         t = policy.lift(0, int(stamps[i]), px[i], conf[i])
                         r = t.result
                         # what pose-lifter lift smooths: the fit's own pose, or the published
-                        # one with the measurement update (pose_lifter.offline.lift._lift_chain)
+                        # one with the measurement update (pose_lifter.offline.chains.lift_chains)
                         own = (r.pose_camera if t.fit_pose_camera is None or lifter.options.measurement_update
                                else t.fit_pose_camera)
                         fit[i] = own * leg_m[i]

@@ -8,7 +8,8 @@ Wraps the functions of the offline path with timers (cumulative seconds, nested 
 ``PHASES`` line on stderr at exit. ``lift_chains`` is the per-track solve (the core's time) in
 one process; with workers it runs in the children and is not seen here. Inside it, ``run_kernel``
 (the compiled alternations, :func:`pose_lifter.core.run_kernel._run_kernel`) and
-``prior_forward`` (the learned prior's network, :meth:`pose_lifter.core.prior.PosePrior.forward`);
+``prior_network`` (the learned prior's network, its compiled layer pass
+:meth:`pose_lifter.core.prior.PosePrior._forward_small`, for one pose or computed ahead for several);
 the rest of ``lift_chains`` is the Python around them (tracking, the lifter's set-up, results).
 """
 
@@ -59,7 +60,7 @@ def main() -> int:
         pass
     else:
         wrap(runs, "_run_kernel", "run_kernel")
-        wrap(PosePrior, "forward", "prior_forward")
+        wrap(PosePrior, "_forward_small", "prior_network")
     wrap(off, "lift_messages")
     wrap(bags.BagWriter, "write", "BagWriter.write")
     wrap(bags.BagWriter, "write_cdr", "BagWriter.write_cdr")

@@ -498,8 +498,9 @@ class PosePrior:
 
     def _forward_small(self, x: NDArray[np.float32]) -> NDArray[np.float64]:
         """:meth:`forward` through the compiled layer pass (:meth:`forward` sends it 1 to
-        SMALL_BATCH rows; :class:`OutputsAhead` any number). Each row's arithmetic is independent
-        of the others': a row's output is the same bit for bit in a pass of 2 rows or of 200."""
+        SMALL_BATCH rows; :class:`~pose_lifter.core.prior_ahead.PosesAhead` any number). Each
+        row's arithmetic is independent of the others': a row's output is the same bit for bit
+        in a pass of 2 rows or of 200."""
         h = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
         layers = self._layers32
         if self.blocks == 0:
