@@ -36,7 +36,7 @@ class EchoLifter:
     prior_fit = None  # the paper mode runs no learned prior
 
     def compute_prior_ahead(self, expected: list[Any]) -> None:
-        assert expected == []
+        """Nothing to compute ahead without a learned prior."""
 
     def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
              **per_frame: Any) -> LiftResult:

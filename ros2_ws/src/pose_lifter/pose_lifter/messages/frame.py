@@ -267,13 +267,18 @@ def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
     """The prior's network for every ``(pipeline, skeleton, stamp)`` about to be lifted (each
     pipeline's tracks as they are now) in one pass over its weights
     (:meth:`~pose_lifter.core.lifter.Lifter.compute_prior_ahead`; the lifts' results are the same
-    with or without it). Returns each skeleton's share of its time, in seconds."""
+    with or without it). Returns each skeleton's share of its time, in seconds. It never raises:
+    whatever goes wrong here costs only speed (each lift then computes its own pose; the
+    pass's use is asserted in tests/messages/test_frame.py), never a skeleton."""
     if not frames:
         return 0.0
     start = time.perf_counter()
-    expected = [e for pipeline, inp, stamp in frames
-                if (e := pipeline.expected_prior(inp, stamp)) is not None]
-    lifter.compute_prior_ahead(expected)
+    try:
+        expected = [e for pipeline, inp, stamp in frames
+                    if (e := pipeline.expected_prior(inp, stamp)) is not None]
+        lifter.compute_prior_ahead(expected)
+    except Exception:
+        lifter.compute_prior_ahead([])
     return (time.perf_counter() - start) / len(frames)
 
 
@@ -369,7 +374,7 @@ class FramePipeline:
              ) -> LiftedSkeleton | SkipSkeleton:
         """Step 2 for one checked skeleton: lifted and placed, or why not (never raises for bad
         input or a failed solve). ``shared_s``: this skeleton's share of work done for several
-        (the prior computed ahead, :meth:`compute_ahead`), added to its solve time."""
+        (the prior computed ahead, :func:`compute_ahead`), added to its solve time."""
         try:
             start = time.perf_counter()
             tracked = self.policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence)

@@ -5,7 +5,10 @@ processes, with the same outcomes.
 A track's frames depend on one another (warm starts, the track's history); different tracks do
 not, so each track is a chain. A chain expires its track at the stamps a pipeline lifting every
 frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
-node's one pipeline over the whole bag.
+node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
+(:func:`lift_chains`), so that the prior's network runs once per step for all of them
+(:class:`~pose_lifter.core.prior_ahead.PosesAhead`); a chain's outcomes do not depend on its
+group.
 """
 
 from __future__ import annotations
@@ -183,7 +186,7 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     Message by message, the chains' items of that message are expired as their chain requires,
     their prior's networks run in one pass (:meth:`Lifter.compute_prior_ahead`), then each is
     lifted in its chain's pipeline. A chain's outcomes are those of lifting it alone: the chains
-    share only the lifter, whose outputs computed ahead are bit for bit its own."""
+    share only the lifter, whose poses computed ahead are bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     out: list[list[Done]] = [[] for _ in chains]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
