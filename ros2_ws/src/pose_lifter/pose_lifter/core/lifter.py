@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 from ._fast import mean_rows, row_norms
 from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases
-from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
+from .errors import InvalidInputError, OptionsError, PoseLifterError, SolverError, TooFewJointsError
 from .hybrid import PriorFit
 from .models import LifterData
 from .options import LifterOptions, Mode
@@ -160,6 +160,21 @@ class Lifter:
     def prior_fit(self) -> PriorFit | None:
         """The hybrid and learned modes' solve with the learned prior (None in the paper mode)."""
         return self._prior_fit
+
+    def expected_prior_input(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
+                             past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
+                             ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The prior and its input that :meth:`lift` of these arguments runs first (read as the
+        lift reads them; for :meth:`compute_prior_ahead`), or None in the paper mode or for input
+        the lift refuses."""
+        fit = self._prior_fit
+        if fit is None:
+            return None
+        try:
+            x, w = self._weights(points, confidence)
+        except PoseLifterError:
+            return None
+        return fit.prior_input(x, w > 0, None if past is None else _checked_past(past))
 
     def compute_prior_ahead(self, expected: list[tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]]
                             ) -> None:
@@ -281,11 +296,7 @@ class Lifter:
         hybrid mode's; the paper mode reads none of it)."""
         past, fill = track.past, track.fill
         if past is not None:
-            pp, pv = np.asarray(past[0], dtype=np.float64), np.asarray(past[1], dtype=bool)
-            if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
-                raise InvalidInputError(f"past must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), got "
-                                        f"{pp.shape} and {pv.shape}")
-            past = (pp, pv & np.isfinite(pp).all(axis=-1))
+            past = _checked_past(past)
         if fill is not None:
             fp, fv = np.asarray(fill[0], dtype=np.float64), np.asarray(fill[1], dtype=bool)
             if fp.shape != (N_JOINTS, 2) or fv.shape != (N_JOINTS,):
@@ -391,3 +402,14 @@ def compile_kernels() -> float:
         Lifter(None, LifterOptions(mode=mode)).warm_up()
     compile_measurement()
     return time.perf_counter() - start
+
+
+def _checked_past(past: tuple[NDArray[np.float64], NDArray[np.bool_]]
+                  ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """A track's past frames ``(points (k, 12, 2), used (k, 12))`` as the lift reads them: float64,
+    a joint with a non-finite coordinate unused; InvalidInputError for other shapes."""
+    pp, pv = np.asarray(past[0], dtype=np.float64), np.asarray(past[1], dtype=bool)
+    if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
+        raise InvalidInputError(f"past must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), got "
+                                f"{pp.shape} and {pv.shape}")
+    return pp, pv & np.isfinite(pp).all(axis=-1)

@@ -243,26 +243,11 @@ class TrackPolicy:
         the lift reads them; a joint the gate or the outlier pass removes, or one the track fills
         in, changes the input and the lift computes its own pose. None in the paper mode or for
         input the lift refuses. Changes nothing."""
-        fit = self.lifter.prior_fit
-        if fit is None:
-            return None
-        vis = _visible(points, confidence, self.lifter.options.confidence_threshold)
-        if vis is None or int(np.count_nonzero(vis)) < 2:
-            return None
         track = self._tracks.get(track_id) if track_id >= 0 else None
-        past = None
-        if track is not None and self.warm_start and track.warm is not None:
-            if 0 <= stamp_ns - track.last_stamp_ns <= self.track_timeout_ns:
-                past = track.past(stamp_ns, (fit.temporal_prior or fit.prior).window - 1)
-        # the lifter's reading of its input (Lifter.lift): a joint with a non-finite coordinate
-        # is 0 and missing, in this frame and in the past ones
-        x = np.asarray(points, dtype=np.float64)
-        bad = np.asarray(~np.isfinite(x).all(axis=1), dtype=bool)
-        if bad.any():
-            x = np.where(bad[:, None], 0.0, x)
-        if past is not None:
-            past = (past[0], past[1] & np.isfinite(past[0]).all(axis=-1))
-        return fit.prior_input(x, vis, past)
+        warm = None
+        if track is not None and stamp_ns >= track.last_stamp_ns:  # as _find, without its refusals
+            warm = self._warm(track, stamp_ns - track.last_stamp_ns)
+        return self.lifter.expected_prior_input(points, confidence, self._past(track, warm, stamp_ns))
 
     def _find(self, track_id: int, stamp_ns: int) -> tuple[Track | None, WarmStart | None]:
         """The frame's track (None: untracked, new, or forgotten because the input clock jumped
@@ -277,7 +262,20 @@ class TrackPolicy:
         if age < -self.track_timeout_ns:  # the input clock jumped back (e.g. a looping bag)
             del self._tracks[track_id]
             return None, None
-        return track, (track.warm if age <= self.track_timeout_ns and self.warm_start else None)
+        return track, self._warm(track, age)
+
+    def _warm(self, track: Track, age_ns: int) -> WarmStart | None:
+        """The track's warm start for a frame ``age_ns`` >= 0 after its last one (None: cold)."""
+        return track.warm if age_ns <= self.track_timeout_ns and self.warm_start else None
+
+    def _past(self, track: Track | None, warm: WarmStart | None, stamp_ns: int
+              ) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The past frames the learned prior reads (a warm-started frame of the hybrid or learned
+        mode; see :meth:`Track.past`)."""
+        if track is None or warm is None or self.lifter.options.mode == "paper":
+            return None
+        temporal = self.lifter.temporal_prior
+        return track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
 
     def _screen(self, track: Track | None, warm: WarmStart | None, stamp_ns: int,
                 points: NDArray[np.float64], confidence: NDArray[np.float64] | None) -> _Screened:
@@ -316,10 +314,7 @@ class TrackPolicy:
         if warm is not None and frame.visible is not None and opts.missing_temporal_weight > 0:
             # a joint the detector lost on this frame is carried over from the track's last pose
             tw = np.where(frame.visible, tw, np.maximum(tw, opts.missing_temporal_weight))
-        past = None
-        if track is not None and warm is not None and opts.mode != "paper":
-            temporal = self.lifter.temporal_prior
-            past = track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
+        past = self._past(track, warm, stamp_ns)
         fill = None
         if frame.predicted is not None and opts.fill_missing_frames > 0:
             assert track is not None
