@@ -19,8 +19,8 @@ so ``except PoseLifterError`` catches every error the package raises on purpose.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager
+from typing import Literal
 
 import numpy as np
 
@@ -72,11 +72,26 @@ class SolverError(PoseLifterError, RuntimeError):
     """A solve diverged (non-finite iterates or result) although its input passed the checks."""
 
 
-@contextmanager
-def diverged_as_solver_error(step: str) -> Iterator[None]:
+class _DivergedAsSolverError:
+    """The context of :func:`diverged_as_solver_error` (a class: entered around every run, where
+    a generator-based context manager costs several times more)."""
+
+    __slots__ = ("step",)
+
+    def __init__(self, step: str) -> None:
+        self.step = step
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: object
+                 ) -> Literal[False]:
+        if kind is not None and issubclass(kind, np.linalg.LinAlgError):
+            raise SolverError(f"{self.step} diverged ({exc})") from exc
+        return False
+
+
+def diverged_as_solver_error(step: str) -> AbstractContextManager[None]:
     """Re-raise numpy's ``LinAlgError`` (a kernel met an infinite or NaN matrix: the iterates
     diverged) as :class:`SolverError` naming ``step``."""
-    try:
-        yield
-    except np.linalg.LinAlgError as exc:
-        raise SolverError(f"{step} diverged ({exc})") from exc
+    return _DivergedAsSolverError(step)

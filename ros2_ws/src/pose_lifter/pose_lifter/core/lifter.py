@@ -197,9 +197,9 @@ class Lifter:
     def _weights(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         x, conf = check_keypoints(points, confidence)
-        w = np.where(conf >= self._options.confidence_threshold, np.clip(conf, 0.0, 1.0), 0.0)
+        w = np.where(conf >= self._options.confidence_threshold, conf.clip(0.0, 1.0), 0.0)
         # a joint with non-finite coordinates is missing, whatever its confidence
-        bad = ~np.all(np.isfinite(x), axis=1)
+        bad = ~np.asarray(np.isfinite(x).all(axis=1))
         has_bad = bool(bad.any())
         if has_bad:
             w[bad] = 0.0

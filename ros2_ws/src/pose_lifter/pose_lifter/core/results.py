@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,9 +50,9 @@ class Camera:
     scale: float
     translation: NDArray[np.float64]
 
-    @property
+    @cached_property
     def projection(self) -> NDArray[np.float64]:
-        """``M0 = [m1; m2]``, shape (2, 3)."""
+        """``M0 = [m1; m2]``, shape (2, 3) (computed once: a camera's arrays are not changed)."""
         return np.asarray(self.scale * self.rotation[:2])
 
     def project(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -286,3 +287,16 @@ class LiftResult:
     def warm_start(self) -> WarmStart:
         """The state to warm-start the next frame of the same person."""
         return WarmStart(self.camera, self.alpha.copy())
+
+    def with_pose(self, pose: NDArray[np.float64] | None = None,
+                  pose_camera: NDArray[np.float64] | None = None) -> LiftResult:
+        """This result with ``pose`` and/or ``pose_camera`` (12, 3) replaced, every other field
+        shared: ``dataclasses.replace`` without its pass through ``__init__`` (the per-track
+        policy and the offline smoothing replace the pose of every frame)."""
+        new = object.__new__(LiftResult)
+        new.__dict__.update(self.__dict__)
+        if pose is not None:
+            new.__dict__["pose"] = pose
+        if pose_camera is not None:
+            new.__dict__["pose_camera"] = pose_camera
+        return new

@@ -233,11 +233,13 @@ class Runs:
             else:
                 m_init, t_init = cam0.projection, cam0.translation
             obj0, it0 = np.inf, 0
+        cam_init = np.empty((2, 4))  # [M | t]
+        cam_init[:, :3] = m_init
+        cam_init[:, 3] = t_init
         with diverged_as_solver_error("run"):
             out = _run_kernel(xn, w, m.kernel_arrays, self._settings, xp, pw, rad,
-                              np.ascontiguousarray(alpha, dtype=np.float64), y0,
-                              np.column_stack([m_init, t_init]).astype(np.float64), float(obj0), int(it0),
-                              int(n_alt), int(pose_max_iter))
+                              np.ascontiguousarray(alpha, dtype=np.float64), y0, cam_init, float(obj0),
+                              int(it0), int(n_alt), int(pose_max_iter))
         if out.status != OK:
             raise SolverError("camera step diverged (non-finite camera); check the inputs"
                               if out.status == CAMERA_DIVERGED

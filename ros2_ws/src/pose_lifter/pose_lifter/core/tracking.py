@@ -49,7 +49,7 @@ A track's state and the rules that read it are :mod:`pose_lifter.core.track`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
@@ -376,7 +376,7 @@ class TrackPolicy:
             track.measurement = None
             return None
         pose = out @ result.camera.rotation + mean_rows(result.pose)
-        return replace(result, pose=np.ascontiguousarray(pose), pose_camera=np.ascontiguousarray(out))
+        return result.with_pose(np.ascontiguousarray(pose), np.ascontiguousarray(out))
 
     def _smooth(self, track: Track, result: LiftResult, follows: bool, data_weight: float
                 ) -> LiftResult | None:
@@ -404,4 +404,4 @@ class TrackPolicy:
         rot = result.camera.rotation
         # the body-frame pose with the same camera: pose_camera = (pose - mean) @ R^T
         pose = out @ rot + mean_rows(result.pose)
-        return replace(result, pose=np.ascontiguousarray(pose), pose_camera=np.ascontiguousarray(out))
+        return result.with_pose(np.ascontiguousarray(pose), np.ascontiguousarray(out))

@@ -25,6 +25,7 @@ step 3 per track at the same stamps (see :func:`expiry_stamps`): the outputs are
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
@@ -224,17 +225,17 @@ def skeleton_input(skel: Any, layout: Layout, settings: FrameSettings, confidenc
         seen.add(track_id)
     points, confidence = skeleton2d_to_arrays(skel, layout)
     outside = (confidence < 0.0) | (confidence > 1.0)
-    if np.any(outside):  # they weigh the solve: clipped into [0, 1], with a warning
+    if outside.any():  # they weigh the solve: clipped into [0, 1], with a warning
         worst = float(confidence[outside][np.argmax(np.abs(confidence[outside]))])
         on_clipped(f"track {track_id}: {int(outside.sum())} confidences outside [0, 1] "
                    f"(e.g. {worst:.3g}) clipped into it")
         confidence = np.clip(confidence, 0.0, 1.0)
     visible = confidence >= confidence_threshold
-    if not np.any(visible):
+    if not visible.any():
         raise SkipSkeleton("no confident keypoints",
                            f"track {track_id}: no keypoint above the confidence threshold", track_id)
     limit = settings.max_coordinate
-    if np.max(np.abs(points[visible])) > limit:
+    if np.abs(points[visible]).max() > limit:
         raise SkipSkeleton("absurd coordinates",
                            f"track {track_id}: keypoints beyond {limit:g} px (max_coordinate)", track_id)
     return SkeletonInput(track_id, points, confidence)
@@ -244,9 +245,11 @@ def check_output(track_id: int, result: LiftResult, joints_m: NDArray[np.float64
     """The one check of what leaves the pipeline: the metric joints and the lift's camera,
     objective and reprojection error must be finite, else :class:`SkipSkeleton`."""
     cam = result.camera
-    values: Sequence[Any] = (joints_m, cam.rotation, cam.scale, cam.translation, result.objective,
-                             result.reprojection_error)
-    if not all(bool(np.all(np.isfinite(np.asarray(v, dtype=np.float64)))) for v in values):
+    finite = (math.isfinite(float(cam.scale)) and math.isfinite(float(result.objective))
+              and math.isfinite(float(result.reprojection_error))
+              and all(np.isfinite(np.asarray(a, dtype=np.float64)).all()
+                      for a in (joints_m, cam.rotation, cam.translation)))
+    if not finite:
         raise SkipSkeleton("non-finite result", f"track {track_id}: the solve returned non-finite values",
                            track_id)
 

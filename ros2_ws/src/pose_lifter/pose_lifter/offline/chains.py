@@ -17,7 +17,7 @@ import bisect
 import gc
 import os
 import signal
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Final
 
 import numpy as np
@@ -141,7 +141,8 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     stamps = [s if c.answered else None for (s, _), c in zip(keypoint_msgs, checked, strict=True)]
     for track in per_track.values():
         expire = expiry_stamps(stamps, [it.msg_index for it in track])
-        chains.append([replace(it, expire_ns=e) for it, e in zip(track, expire, strict=True)])
+        chains.append([Item(it.msg_index, it.stamp_ns, it.input, it.intrinsics, e)
+                       for it, e in zip(track, expire, strict=True)])
     # the items per message with their expiry (the same objects as in the chains)
     final = {(it.msg_index, id(it.input)): it for chain in chains for it in chain}
     per_msg = [[x if isinstance(x, SkipSkeleton) else final[(x.msg_index, id(x.input))] for x in row]
@@ -234,7 +235,7 @@ def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], setti
     for r, i in enumerate(rows):
         d, fit = done[i], fits[i]
         assert d.result is not None
-        res = d.result if fit is None else replace(d.result, pose_camera=fit)
+        res = d.result if fit is None else d.result.with_pose(pose_camera=fit)
         focal, centre = d.item.intrinsics if d.item.intrinsics is not None else (None, None)
         placed[r] = place_in_camera(res, leg, focal, centre, settings.default_distance)
     stamps = np.array([done[i].item.stamp_ns for i in rows], dtype=np.int64)
@@ -247,7 +248,7 @@ def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], setti
         pose_camera = (smooth[r] - smooth[r].mean(axis=0)) / leg
         # the body-frame pose with the same camera: pose_camera = (pose - mean) @ R^T
         pose = pose_camera @ d.result.camera.rotation + d.result.pose.mean(axis=0)
-        res = replace(d.result, pose=pose, pose_camera=pose_camera)
+        res = d.result.with_pose(pose, pose_camera)
         out[i] = Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None)
     return out
 
