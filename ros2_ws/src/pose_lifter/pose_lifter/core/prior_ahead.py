@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from ._jit import HAVE_NUMBA
 from .errors import InvalidInputError
-from .prior import PosePrior
+from .prior import PosePrior, mirror_features
 from .skeleton import N_JOINTS
 
 __all__ = ["PosesAhead"]
@@ -74,16 +74,21 @@ class PosesAhead:
         for prior, points, visible in expected:
             key = self._key(prior, points, visible)
             try:
-                rows, centre, radius = prior.input_rows(points, visible, self.flip)
+                feats, centre, radius = prior.features(points, visible)
             except InvalidInputError:
                 continue
-            by_prior.setdefault(id(prior), (prior, []))[1].append((key, rows, centre, radius))
+            by_prior.setdefault(id(prior), (prior, []))[1].append((key, feats, centre, radius))
         for prior, inputs in by_prior.values():
-            rows = np.stack([r for _, r, _, _ in inputs])  # (n, 2, d) with flip, else (n, d)
+            # the inputs stacked: the mirror images and the poses formed once for all of them,
+            # the same element-wise arithmetic as PosePrior.input_rows and .poses of each alone
+            feats = np.stack([f for _, f, _, _ in inputs])  # (n, d)
+            rows = np.stack([feats, mirror_features(feats)], axis=-2) if self.flip else feats
             h = np.ascontiguousarray(rows.reshape(-1, rows.shape[-1]), dtype=np.float32)
             y = prior._forward_small(h).reshape(*rows.shape[:-1], N_JOINTS, 3)
-            for (key, _, centre, radius), out in zip(inputs, y, strict=True):
-                self._poses[key] = (prior, prior.poses(out, centre, radius, self.flip))
+            poses = prior.poses(y, np.stack([c for _, _, c, _ in inputs]),
+                                np.stack([r for _, _, _, r in inputs]), self.flip)  # (n, 12, 3)
+            for (key, _, _, _), pose in zip(inputs, poses, strict=True):
+                self._poses[key] = (prior, pose)
 
     def predict(self, prior: PosePrior, points: NDArray[np.float64], visible: NDArray[np.bool_]
                 ) -> NDArray[np.float64]:
