@@ -21,7 +21,7 @@ from pose_lifter.core import (
 from pose_lifter.core.camera import camera_step, weighted_median
 from pose_lifter.core.metrics import similarity_normalised_error
 from pose_lifter.core.options import LifterOptions
-from pose_lifter.core.results import Camera
+from pose_lifter.core.results import Camera, LiftResult, StartKind
 from pose_lifter.core.skeleton import LIMBS, body_frame, limb_lengths
 from scipy.spatial.transform import Rotation
 
@@ -130,3 +130,29 @@ def test_packaged_bases_match_the_paper_setup() -> None:
     assert b.method == "sparse" and b.n_bases == 200
     assert b.limb_proportions[7] == pytest.approx(1.0)
     assert b.start_alphas.shape[0] == 30
+
+
+def test_a_results_pose_replaced_shares_everything_else() -> None:
+    """``LiftResult.with_pose`` (the per-frame copy of the smoothing and the measurement update)
+    gives what ``dataclasses.replace`` gives, and leaves the original as it was; a camera's
+    projection is its scaled first two rotation rows."""
+    import dataclasses
+
+    rot = Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix()
+    cam = Camera(rot, 2.5, np.array([3.0, -1.0]))
+    np.testing.assert_array_equal(cam.projection, 2.5 * rot[:2])
+    assert cam.projection is cam.projection  # computed once
+    rng = np.random.default_rng(1)
+    pose, pose_camera, alpha = rng.normal(size=(12, 3)), rng.normal(size=(12, 3)), rng.normal(size=8)
+    res = LiftResult(pose=pose, pose_camera=pose_camera, camera=cam, alpha=alpha, objective=1.5,
+                     reprojection_error=0.2, limb_violation=0.0, n_iter=2, converged=True, n_starts=1,
+                     start_index=-1, weights=np.ones(12), total_alternations=2, start=StartKind.PRIOR)
+    new_pose, new_cam = rng.normal(size=(12, 3)), rng.normal(size=(12, 3))
+    both = res.with_pose(new_pose, new_cam)
+    assert both == dataclasses.replace(res, pose=new_pose, pose_camera=new_cam)
+    assert both.pose is new_pose and both.pose_camera is new_cam and both.camera is cam
+    assert res.pose is pose and res.pose_camera is pose_camera  # the original unchanged
+    only = res.with_pose(pose_camera=new_cam)
+    assert only.pose is pose and only.pose_camera is new_cam and only.alpha is alpha
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        both.pose = pose  # type: ignore[misc]

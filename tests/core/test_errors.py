@@ -13,6 +13,7 @@ from pose_lifter.core.errors import (
     OptionsError,
     PoseLifterError,
     SolverError,
+    diverged_as_solver_error,
 )
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_step import pose_step
@@ -40,6 +41,16 @@ def test_solver_errors_are_not_input_errors() -> None:
     assert issubclass(SolverError, PoseLifterError)
     assert not issubclass(SolverError, InvalidInputError)
     assert issubclass(ref.ReferenceSolverError, SolverError)
+
+
+def test_a_kernels_linalg_error_becomes_a_solver_error_naming_the_step() -> None:
+    with pytest.raises(SolverError, match="run diverged") as info, diverged_as_solver_error("run"):
+        raise np.linalg.LinAlgError("Matrix is singular")
+    assert isinstance(info.value.__cause__, np.linalg.LinAlgError)
+    with pytest.raises(ValueError, match="other"), diverged_as_solver_error("run"):
+        raise ValueError("other")  # any other error passes unchanged
+    with diverged_as_solver_error("run"):
+        pass
 
 
 def test_a_diverged_camera_step_is_a_solver_error() -> None:

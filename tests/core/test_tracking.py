@@ -160,7 +160,13 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     past = track.past(199, 5)
     assert past is not None
     assert past[0][:, 0, 0].tolist() == [100.0, 133.0, 166.0]
+    assert track.past(199, 5) is past  # asked again for the same frame: read once
+    assert track.past(199, 2)[0][:, 0, 0].tolist() == [133.0, 166.0]  # other frames: read again
     assert track.past(166, 5) is None  # not after the last frame
+    # a frame entered since: the same stamp's past is read again and holds it
+    track.history.append((199, np.full((12, 2), 199.0), np.ones(12, dtype=bool)))
+    assert track.past(232, 5)[0][:, 0, 0].tolist() == [100.0, 133.0, 166.0, 199.0]
+    assert track.past(199, 5) is None
 
 
 def test_the_packaged_temporal_prior_is_used_on_tracked_frames(
