@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,10 +49,15 @@ class Camera:
     scale: float
     translation: NDArray[np.float64]
 
-    @cached_property
+    @property
     def projection(self) -> NDArray[np.float64]:
-        """``M0 = [m1; m2]``, shape (2, 3) (computed once: a camera's arrays are not changed)."""
-        return np.asarray(self.scale * self.rotation[:2])
+        """``M0 = [m1; m2]``, shape (2, 3) (computed once: a camera's arrays are not changed; kept
+        in the instance's ``__dict__`` by hand, as ``functools.cached_property`` does, without its
+        lock)."""
+        m0: NDArray[np.float64] | None = self.__dict__.get("_projection")
+        if m0 is None:
+            m0 = self.__dict__["_projection"] = np.asarray(self.scale * self.rotation[:2])
+        return m0
 
     def project(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """Project a pose (12, 3) -> (12, 2)."""
