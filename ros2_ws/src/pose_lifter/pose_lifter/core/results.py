@@ -297,7 +297,7 @@ class LiftResult:
         """This result with ``pose`` and/or ``pose_camera`` (12, 3) replaced, every other field
         shared: ``dataclasses.replace`` without its pass through ``__init__`` (the per-track
         policy and the offline smoothing replace the pose of every frame)."""
-        new = object.__new__(LiftResult)
+        new = object.__new__(type(self))
         new.__dict__.update(self.__dict__)
         if pose is not None:
             new.__dict__["pose"] = pose
