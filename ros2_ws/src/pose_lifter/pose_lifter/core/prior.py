@@ -253,6 +253,12 @@ def mirror_features(features: NDArray[np.float64]) -> NDArray[np.float64]:
     return out.reshape(f.shape)
 
 
+def flip_rows(features: NDArray[np.float64], flip: bool) -> NDArray[np.float64]:
+    """The network's input rows for ``features`` (..., 36 * window): with ``flip`` (test-time flip
+    averaging) stacked with their mirror image, (..., 2, 36 * window); else the features."""
+    return np.stack([features, mirror_features(features)], axis=-2) if flip else features
+
+
 def mirror_pose(pose: NDArray[np.float64]) -> NDArray[np.float64]:
     """A pose (..., 12, 3) in the camera frame mirrored left-right: ``x`` negated, left and right
     joints swapped (its own inverse)."""
@@ -522,9 +528,7 @@ class PosePrior:
         ``flip`` stacked with their mirror image (..., 2, 36 * window); and the current frame's
         centre (..., 2) and radius (...) (:func:`prior_features`)."""
         feats, centre, radius = self.features(points, visible)
-        if flip:
-            feats = np.stack([feats, mirror_features(feats)], axis=-2)
-        return feats, centre, radius
+        return flip_rows(feats, flip), centre, radius
 
     def predict(self, points: NDArray[np.float64], visible: NDArray[np.bool_], flip: bool = False
                 ) -> NDArray[np.float64]:

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from ._jit import HAVE_NUMBA
 from .errors import InvalidInputError
-from .prior import PosePrior, mirror_features
+from .prior import PosePrior, flip_rows
 from .skeleton import N_JOINTS
 
 __all__ = ["PosesAhead"]
@@ -79,10 +79,9 @@ class PosesAhead:
                 continue
             by_prior.setdefault(id(prior), (prior, []))[1].append((key, feats, centre, radius))
         for prior, inputs in by_prior.values():
-            # the inputs stacked: the mirror images and the poses formed once for all of them,
-            # the same element-wise arithmetic as PosePrior.input_rows and .poses of each alone
-            feats = np.stack([f for _, f, _, _ in inputs])  # (n, d)
-            rows = np.stack([feats, mirror_features(feats)], axis=-2) if self.flip else feats
+            # the inputs stacked: the rows and the poses formed once for all of them (element-wise:
+            # what PosePrior.input_rows and .poses give each alone)
+            rows = flip_rows(np.stack([f for _, f, _, _ in inputs]), self.flip)  # (n, [2,] d)
             h = np.ascontiguousarray(rows.reshape(-1, rows.shape[-1]), dtype=np.float32)
             y = prior._forward_small(h).reshape(*rows.shape[:-1], N_JOINTS, 3)
             poses = prior.poses(y, np.stack([c for _, _, c, _ in inputs]),

@@ -17,7 +17,7 @@ import bisect
 import gc
 import os
 import signal
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Final
 
 import numpy as np
@@ -141,8 +141,7 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     stamps = [s if c.answered else None for (s, _), c in zip(keypoint_msgs, checked, strict=True)]
     for track in per_track.values():
         expire = expiry_stamps(stamps, [it.msg_index for it in track])
-        chains.append([Item(it.msg_index, it.stamp_ns, it.input, it.intrinsics, e)
-                       for it, e in zip(track, expire, strict=True)])
+        chains.append([replace(it, expire_ns=e) for it, e in zip(track, expire, strict=True)])
     # the items per message with their expiry (the same objects as in the chains)
     final = {(it.msg_index, id(it.input)): it for chain in chains for it in chain}
     per_msg = [[x if isinstance(x, SkipSkeleton) else final[(x.msg_index, id(x.input))] for x in row]
