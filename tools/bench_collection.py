@@ -9,7 +9,10 @@ The collection is ``--copies`` hard links of ``BAG`` (distinct files to the lift
 code and repetition, the wall time, poses/s (poses lifted over the whole wall time: imports,
 kernel loading, pools, reading, writing) and the CPU seconds of the command and its workers,
 the machine's load average around each run, and the start-up: a run that lifts one message of
-two small committed bags (imports + kernel loading + pool + two tiny outputs). ``--single`` also
+two small committed bags, timed twice: from its launch to the first bag task starting in a worker
+("ready": imports, kernel loading, the pool; stamped by a wrapper around the checkout's
+``collection.lift_one``) and to its end ("start-up": also the two tiny bags' checks, reading,
+writing and the exit). ``--single`` also
 times both codes on ``BAG`` alone (``lift BAG --out FILE``). ``--cores 1`` pins every command to
 one core (``taskset``): the throughput of one worker, for the scaling table of docs/collections.md.
 """
@@ -49,6 +52,43 @@ def pose_lifter(package: Path, args: list[str], cores: int) -> tuple[float, floa
     return wall, cpu, done.stdout
 
 
+#: Runs the ``pose-lifter`` command line of the checkout on ``PYTHONPATH`` and writes the wall
+#: clock time at which the first bag task starts (in whichever process) to the file ``argv[1]``.
+READY_PROBE = """
+import os, sys, time
+stamp = sys.argv.pop(1)
+import pose_lifter.offline.collection as c
+lift_one = c.lift_one
+def first_task(*args, **kwargs):
+    try:
+        fd = os.open(stamp, os.O_WRONLY | os.O_CREAT | os.O_EXCL)
+    except FileExistsError:
+        pass
+    else:
+        os.write(fd, repr(time.time()).encode())
+        os.close(fd)
+    return lift_one(*args, **kwargs)
+c.lift_one = first_task
+from pose_lifter.cli import main
+sys.argv[0] = "pose-lifter"
+sys.exit(main())
+"""
+
+
+def ready_time(package: Path, args: list[str], cores: int, stamp: Path) -> float:
+    """Seconds from launching ``pose-lifter ARGS`` (``READY_PROBE``) to its first bag task."""
+    stamp.unlink(missing_ok=True)
+    cmd = [sys.executable, "-c", READY_PROBE, str(stamp), *args]
+    if cores:
+        cmd = ["taskset", "-c", ",".join(str(c) for c in range(cores)), *cmd]
+    env = dict(os.environ, PYTHONPATH=str(package), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    t0 = time.time()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
+    return float(stamp.read_text()) - t0
+
+
 def poses_of(stdout: str) -> int:
     """Poses lifted, from a one-bag line (``lifted N of``) or a collection summary (``N poses``)."""
     single = [int(x) for x in re.findall(r"lifted (\d+) of", stdout)]
@@ -72,6 +112,9 @@ def main() -> int:
     ap.add_argument("--cores", type=int, default=0, help="pin the commands to this many cores (0: all)")
     ap.add_argument("--single", action="store_true", help="also time lift BAG --out FILE alone")
     ap.add_argument("--skip-before", action="store_true", help="time this checkout only")
+    ap.add_argument("--startup-only", action="store_true", help="time only the start-up runs")
+    ap.add_argument("--mode", choices=("hybrid", "paper", "learned"),
+                    help="--mode of the commands (default: theirs)")
     args = ap.parse_args()
     codes = {"before": args.before / PACKAGE, "after": args.after / PACKAGE}
     if args.skip_before:
@@ -81,7 +124,8 @@ def main() -> int:
     src.mkdir(parents=True)
     for i in range(args.copies):
         os.link(args.bag, src / f"bag_{i:02d}.mcap")
-    extra = ["--quiet", "--overwrite"] + (["--workers", str(args.workers)] if args.workers else [])
+    extra = (["--quiet", "--overwrite"] + (["--workers", str(args.workers)] if args.workers else [])
+             + (["--mode", args.mode] if args.mode else []))
 
     def collection(key: str) -> tuple[float, float, int]:
         run = ["lift", str(src), "--out", str(args.work / f"out_{key}"), *extra]
@@ -93,6 +137,11 @@ def main() -> int:
                *extra]
         return pose_lifter(codes[key], run, args.cores)[0]
 
+    def ready(key: str) -> float:
+        run = ["lift", *map(str, SMALL), "--out", str(args.work / f"ready_{key}"), "--max-messages", "1",
+               *extra]
+        return ready_time(codes[key], run, args.cores, args.work / f"ready_{key}.stamp")
+
     def single(key: str) -> tuple[float, float, int]:
         run = ["lift", args.bag, "--out", str(args.work / "single.mcap"), *extra]
         wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
@@ -101,18 +150,19 @@ def main() -> int:
     for key in codes:  # untimed: compiles each checkout's kernels when its cache is cold
         startup(key)
     print(f"collection: {args.copies} x {args.bag}; cores {args.cores or os.cpu_count()}, "
-          f"--workers {args.workers or 'default'}; load average {load()} at the start", flush=True)
+          f"--workers {args.workers or 'default'}, --mode {args.mode or 'default'}; "
+          f"load average {load()} at the start", flush=True)
     print(f"{'what':11s} {'code':6s} {'rep':>3s} {'wall s':>8s} {'poses':>7s} {'poses/s':>8s} "
           f"{'CPU s':>7s}  load", flush=True)
     rows: dict[tuple[str, str], list[float]] = {}
     for rep in range(args.reps):
-        for what, fn in (("start-up", None), ("single", single if args.single else None),
-                         ("collection", collection)):
-            if what == "single" and fn is None:
+        for what, fn in (("ready", None), ("start-up", None), ("single", single if args.single else None),
+                         ("collection", None if args.startup_only else collection)):
+            if what in ("single", "collection") and fn is None:
                 continue
             for key in codes:
-                if what == "start-up":
-                    wall = startup(key)
+                if what in ("ready", "start-up"):
+                    wall = ready(key) if what == "ready" else startup(key)
                     print(f"{what:11s} {key:6s} {rep:3d} {wall:8.2f} {'':>7s} {'':>8s} {'':>7s}  {load()}",
                           flush=True)
                     rows.setdefault((what, key), []).append(wall)
@@ -122,9 +172,9 @@ def main() -> int:
                 rows.setdefault((what, key), []).append(poses / wall)
                 print(f"{what:11s} {key:6s} {rep:3d} {wall:8.2f} {poses:7d} {poses / wall:8.0f} {cpu:7.1f}  "
                       f"{load()}", flush=True)
-    print("medians: " + "; ".join(f"{w} {k} {statistics.median(v):.2f}"
-                                  + (" s" if w == "start-up" else " poses/s") for (w, k), v in rows.items()),
-          flush=True)
+    unit = {"ready": " s", "start-up": " s"}
+    print("medians: " + "; ".join(f"{w} {k} {statistics.median(v):.2f}{unit.get(w, ' poses/s')}"
+                                  for (w, k), v in rows.items()), flush=True)
     return 0
 
 
