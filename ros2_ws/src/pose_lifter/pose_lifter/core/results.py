@@ -14,6 +14,8 @@ from enum import Enum
 import numpy as np
 from numpy.typing import NDArray
 
+from ._fast import mean_rows
+
 __all__ = [
     "AlphaResult",
     "Alternation",
@@ -304,3 +306,11 @@ class LiftResult:
         if pose_camera is not None:
             new.__dict__["pose_camera"] = pose_camera
         return new
+
+    def with_camera_pose(self, pose_camera: NDArray[np.float64]) -> LiftResult:
+        """This result with its camera-frame pose replaced by ``pose_camera`` (12, 3, centred) and
+        its body-frame pose derived for the same camera and centre (``pose_camera = (pose -
+        mean) R^T``, so ``pose = pose_camera R + mean``): what the output smoothing, the
+        measurement update and the offline centred smoothing publish."""
+        pose = pose_camera @ self.camera.rotation + mean_rows(self.pose)
+        return self.with_pose(np.ascontiguousarray(pose), np.ascontiguousarray(pose_camera))

@@ -375,8 +375,7 @@ class TrackPolicy:
         if not np.isfinite(out).all():
             track.measurement = None
             return None
-        pose = out @ result.camera.rotation + mean_rows(result.pose)
-        return result.with_pose(np.ascontiguousarray(pose), np.ascontiguousarray(out))
+        return result.with_camera_pose(out)
 
     def _smooth(self, track: Track, result: LiftResult, follows: bool, data_weight: float
                 ) -> LiftResult | None:
@@ -401,7 +400,4 @@ class TrackPolicy:
         if not np.isfinite(out).all():  # ndarray.all: no numpy wrapper on the per-frame path
             track.smoother = None
             return None
-        rot = result.camera.rotation
-        # the body-frame pose with the same camera: pose_camera = (pose - mean) @ R^T
-        pose = out @ rot + mean_rows(result.pose)
-        return result.with_pose(np.ascontiguousarray(pose), np.ascontiguousarray(out))
+        return result.with_camera_pose(out)

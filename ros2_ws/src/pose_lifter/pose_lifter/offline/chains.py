@@ -244,10 +244,7 @@ def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], setti
     for r, i in enumerate(rows):
         d = done[i]
         assert d.result is not None
-        pose_camera = (smooth[r] - smooth[r].mean(axis=0)) / leg
-        # the body-frame pose with the same camera: pose_camera = (pose - mean) @ R^T
-        pose = pose_camera @ d.result.camera.rotation + d.result.pose.mean(axis=0)
-        res = d.result.with_pose(pose, pose_camera)
+        res = d.result.with_camera_pose((smooth[r] - smooth[r].mean(axis=0)) / leg)
         out[i] = Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None)
     return out
 
