@@ -35,21 +35,27 @@ REPO = Path(__file__).resolve().parents[1]
 SMALL = [REPO / "bags" / "walk_clean.mcap", REPO / "bags" / "punch_clean.mcap"]
 
 
-def pose_lifter(package: Path, args: list[str], cores: int) -> tuple[float, float, str]:
-    """(wall s, CPU s of the command and its children, stdout) of one ``pose-lifter`` command."""
-    cmd = [str(Path(sys.executable).parent / "pose-lifter"), *args]
+def run_command(package: Path, cmd: list[str], cores: int) -> str:
+    """Run ``cmd`` with the checkout ``package`` on ``PYTHONPATH``, one BLAS thread, pinned to
+    ``cores`` cores (0: all); its stdout, or exit with its stderr when it fails."""
     if cores:
         cmd = ["taskset", "-c", ",".join(str(c) for c in range(cores)), *cmd]
     env = dict(os.environ, PYTHONPATH=str(package), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
+    return done.stdout
+
+
+def pose_lifter(package: Path, args: list[str], cores: int) -> tuple[float, float, str]:
+    """(wall s, CPU s of the command and its children, stdout) of one ``pose-lifter`` command."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    stdout = run_command(package, [str(Path(sys.executable).parent / "pose-lifter"), *args], cores)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, done.stdout
+    return wall, cpu, stdout
 
 
 #: Runs the ``pose-lifter`` command line of the checkout on ``PYTHONPATH`` and writes the wall
@@ -78,14 +84,8 @@ sys.exit(main())
 def ready_time(package: Path, args: list[str], cores: int, stamp: Path) -> float:
     """Seconds from launching ``pose-lifter ARGS`` (``READY_PROBE``) to its first bag task."""
     stamp.unlink(missing_ok=True)
-    cmd = [sys.executable, "-c", READY_PROBE, str(stamp), *args]
-    if cores:
-        cmd = ["taskset", "-c", ",".join(str(c) for c in range(cores)), *cmd]
-    env = dict(os.environ, PYTHONPATH=str(package), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     t0 = time.time()
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    if done.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
+    run_command(package, [sys.executable, "-c", READY_PROBE, str(stamp), *args], cores)
     return float(stamp.read_text()) - t0
 
 
@@ -132,15 +132,14 @@ def main() -> int:
         wall, cpu, stdout = pose_lifter(codes[key], run, args.cores)
         return wall, cpu, poses_of(stdout)
 
+    def tiny(out: str) -> list[str]:  # one message of each of the two small bags
+        return ["lift", *map(str, SMALL), "--out", str(args.work / out), "--max-messages", "1", *extra]
+
     def startup(key: str) -> float:
-        run = ["lift", *map(str, SMALL), "--out", str(args.work / f"start_{key}"), "--max-messages", "1",
-               *extra]
-        return pose_lifter(codes[key], run, args.cores)[0]
+        return pose_lifter(codes[key], tiny(f"start_{key}"), args.cores)[0]
 
     def ready(key: str) -> float:
-        run = ["lift", *map(str, SMALL), "--out", str(args.work / f"ready_{key}"), "--max-messages", "1",
-               *extra]
-        return ready_time(codes[key], run, args.cores, args.work / f"ready_{key}.stamp")
+        return ready_time(codes[key], tiny(f"ready_{key}"), args.cores, args.work / f"ready_{key}.stamp")
 
     def single(key: str) -> tuple[float, float, int]:
         run = ["lift", args.bag, "--out", str(args.work / "single.mcap"), *extra]
