@@ -156,3 +156,10 @@ def test_a_results_pose_replaced_shares_everything_else() -> None:
     assert only.pose is pose and only.pose_camera is new_cam and only.alpha is alpha
     with pytest.raises(dataclasses.FrozenInstanceError):
         both.pose = pose  # type: ignore[misc]
+    centred = new_cam - new_cam.mean(axis=0)
+    derived = res.with_camera_pose(centred)  # pose_camera = (pose - mean) R^T, the centre kept
+    assert derived.pose_camera is not None
+    np.testing.assert_array_equal(derived.pose_camera, centred)
+    np.testing.assert_allclose(derived.pose.mean(axis=0), pose.mean(axis=0), atol=1e-12)
+    np.testing.assert_allclose((derived.pose - derived.pose.mean(axis=0)) @ rot.T, centred, atol=1e-12)
+    assert derived.camera is cam and derived.alpha is alpha
