@@ -56,3 +56,20 @@ def test_a_close_camera_is_in_perspective_and_a_high_one_looks_down(acc: ModuleT
     tilt = np.degrees(np.arctan2(up[:, 2], -up[:, 1])).mean()
     level = np.degrees(np.arctan2(up_level[:, 2], -up_level[:, 1])).mean()
     assert tilt - level == pytest.approx(-50.0, abs=8.0)
+
+
+def test_the_detector_conditions_film_every_fault_at_their_distance(acc: ModuleType) -> None:
+    track = _track(acc, (90.0, 0.0, "weak"))
+    clean6, _, _, cam6 = acc.film_track(track, {"distance": 6.0}, np.random.default_rng(0))
+    px6, conf6, _, _ = acc.film_track(track, acc.CONDITIONS["detector6m"], np.random.default_rng(0))
+    clean3, _, _, _ = acc.film_track(track, {"distance": 3.0}, np.random.default_rng(0))
+    px3, _, _, _ = acc.film_track(track, acc.CONDITIONS["detector3m"], np.random.default_rng(0))
+    spread = lambda p: np.linalg.norm(p - p.mean(axis=1, keepdims=True), axis=-1).mean()  # noqa: E731
+    assert spread(clean3) == pytest.approx(2.0 * spread(clean6), rel=0.1)  # perspective at 6 and 3 m
+    seen = conf6 >= 0.1
+    err = np.linalg.norm(px6 - clean6, axis=-1)
+    # noisy everywhere, a few joints lost, and the error in pixels halves with the distance doubled
+    assert np.median(err[seen]) > 0.5 and 0.01 < (~seen).mean() < 0.2
+    ratio = np.median(np.linalg.norm(px3 - clean3, axis=-1)) / np.median(err)
+    assert ratio == pytest.approx(2.0, rel=0.2)
+    assert np.isfinite(px6).all() and np.isfinite(cam6).all()

@@ -17,12 +17,18 @@ scaled per person (one factor per bone group, uniform +-20 %), clean 2D. Faults 
 and cameras (clean 2D otherwise): ``lrswap`` (on 10 % of frames each the arms' and, independently,
 the legs' left/right labels swapped, confidence kept), ``lowercut`` (the lower body out of the
 image: knees and ankles missing on every frame), ``close`` (a perspective camera at 2 m), ``above``
-(the camera 50 degrees above the person, looking down).
+(the camera 50 degrees above the person, looking down). ``detector6m`` / ``detector3m``: every
+fault of a real detector together (:data:`pose_lifter.mocap.detector_model.REALISTIC`: per-joint
+noise scaled like the COCO sigmas and correlated over frames, a confidence that falls with the
+error, confident outliers, misses, dropped limbs, swaps, the lower body cut, joints outside the
+640x480 image lost), a perspective camera at 6 m / 3 m.
 
 Methods: ``flat`` (the 2D with zero depth) and ``mean-pose`` floors; ``paper`` (the paper's
 method, tracked as the node tracks: cold 30-start first frame, then warm + mirrored starts);
-``learned`` (the prior alone, per frame); ``hybrid`` tracked (default mode, the node's per-track
-policy :class:`pose_lifter.core.tracking.TrackPolicy`), ``hybrid-offline`` (the same tracks as
+``learned`` (the prior alone, per frame); ``learned-t`` (the prior alone tracked as the node
+runs ``mode: learned``: the causal temporal prior) and ``learned-offline`` (the same smoothed over
+past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked (default mode,
+the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`), ``hybrid-offline`` (the same tracks as
 ``pose-lifter lift`` gives them: the fit's poses smoothed by the centred window of
 :mod:`pose_lifter.core.smoothing`) and ``hybrid-1`` (every frame cold).
 
@@ -60,6 +66,7 @@ from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, RIGHT_LOWER_LEG
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial, split_trials
+from pose_lifter.mocap.detector_model import REALISTIC, detect
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
@@ -76,15 +83,21 @@ CONDITIONS: dict[str, dict[str, float]] = {
     "lowercut": {"cut": 1.0},
     "close": {"distance": 2.0},
     "above": {"elevation": 50.0},
+    # every fault of a real detector together (pose_lifter.mocap.detector_model.REALISTIC), a
+    # perspective camera at 6 m and at 3 m, joints outside the 640x480 image lost
+    "detector6m": {"detector": 1.0, "distance": 6.0},
+    "detector3m": {"detector": 1.0, "distance": 3.0},
 }
 #: Left/right joint pairs of the arms and the legs (the 2D labels a detector swaps).
 _ARMS = tuple(zip(JOINTS_LEFT[:3], JOINTS_RIGHT[:3], strict=True))
 _LEGS = tuple(zip(JOINTS_LEFT[3:], JOINTS_RIGHT[3:], strict=True))
-METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "hybrid", "hybrid-offline", "hybrid-1")
+METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "learned-offline", "hybrid",
+           "hybrid-offline", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
 ELEVATIONS = (0.0, 30.0)
 PROJECTIONS = ("weak", "perspective")
 FOCAL, CENTRE, DISTANCE = 800.0, np.array([320.0, 240.0]), 3.0
+IMAGE_SIZE = (640.0, 480.0)
 CAMERAS = [(a, e, p) for p in PROJECTIONS for e in ELEVATIONS for a in AZIMUTHS]
 
 
@@ -111,8 +124,8 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
     warnings.simplefilter("ignore")
     lifters = {}
     for m in methods:
-        if m in ("paper", "learned", "learned-t", "hybrid", "hybrid-offline", "hybrid-1"):
-            mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t")
+        if m in ("paper", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-offline", "hybrid-1"):
+            mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t").removesuffix("-offline")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
             lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings))
             lifters[m].warm_up()
@@ -146,6 +159,8 @@ def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
     rots = np.repeat(view_rotation(az, el)[None], n, axis=0)
     pts, cam_pose, leg = film(world, rots, np.full(n, dist), np.full(n, proj == "perspective"))
     px = FOCAL * pts + CENTRE
+    if spec.get("detector", 0.0) > 0:
+        return (*detect(px, FOCAL * leg, REALISTIC, rng, IMAGE_SIZE), world, cam_pose)
     px, conf = corrupt_2d(px, FOCAL * leg, spec.get("noise", 0.0),
                           spec.get("outliers", 0.0), spec.get("missing", 0.0), rng)
     if spec.get("swap", 0.0) > 0:  # a detector's left/right label swaps (arms, legs apart)
@@ -183,7 +198,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             preds[:] = np.einsum("jb,nba->nja", _STATE["mean"], body_frame(truth_c)) * leg_m[:, None, None]
         else:
             lifter: Lifter = _STATE["lifters"][m]
-            tracked = m in ("hybrid", "hybrid-offline", "learned-t")
+            tracked = m in ("hybrid", "hybrid-offline", "learned-t", "learned-offline")
             policy = TrackPolicy(lifter, track_timeout=1e9) if tracked else None
             fit = np.full((n, 12, 3), np.nan)
             warm = None
@@ -206,7 +221,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                 preds[i] = r.pose_camera * leg_m[i]
             if m in ("hybrid", "hybrid-offline"):
                 fits["hybrid"] = fit
-            if m == "hybrid-offline":
+            if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))
                 preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
                 preds[~ok] = np.nan

@@ -18,8 +18,11 @@ as ``tools/accuracy.py`` lifts the evaluation split: tracks at 30 Hz of at most 
 frames (``--segments`` segments spread over C's trials, each filmed from ``--views`` of
 accuracy.py's 32 cameras), the conditions of accuracy.py (clean, noise, confident outliers,
 missing joints, and the detector / camera faults: left/right swaps, the lower body out of the
-image, a camera at 2 m, a camera 50 degrees above). Methods: ``flat`` (the 2D with zero depth),
-``learned`` (the fold's prior alone) and ``hybrid`` (the default mode tracked by
+image, a camera at 2 m, a camera 50 degrees above; and every fault of a real detector together,
+``detector6m`` / ``detector3m``: :mod:`pose_lifter.mocap.detector_model`). Methods: ``flat`` (the
+2D with zero depth), ``learned`` (the fold's prior alone, per frame), ``learned-offline`` (the
+prior alone tracked and smoothed over past and future frames: ``pose-lifter lift --mode
+learned``) and ``hybrid`` (the default mode tracked by
 :class:`pose_lifter.core.tracking.TrackPolicy`, with the fold's prior as its single-frame prior and
 the temporal prior off: the packaged temporal prior has seen every class).
 
@@ -55,8 +58,9 @@ from pose_lifter.core.prior import PosePrior
 from pose_lifter.mocap.cmu import load_trial, trials_by_action
 from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 
-DEFAULT_CONDITIONS = ("clean", "noise0.1", "outliers20", "missing15", "lrswap", "lowercut", "close", "above")
-METHODS = ("flat", "learned", "hybrid", "hybrid-offline")
+DEFAULT_CONDITIONS = ("detector6m", "detector3m", "clean", "noise0.05", "noise0.1", "outliers20", "missing15",
+                      "lrswap", "lowercut", "close", "above")
+METHODS = ("flat", "learned", "learned-offline", "hybrid", "hybrid-offline")
 AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
 
 
