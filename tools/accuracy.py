@@ -28,8 +28,8 @@ method, tracked as the node tracks: cold 30-start first frame, then warm + mirro
 ``learned`` (the prior alone, per frame); ``learned-t`` (the prior alone tracked as the node
 runs ``mode: learned``: the causal temporal prior) and ``learned-offline`` (the same smoothed over
 past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked (default mode,
-the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`), ``hybrid-offline`` (the same tracks as
-``pose-lifter lift`` gives them: the fit's poses smoothed by the centred window of
+the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`), ``hybrid-offline``
+(the same tracks as ``pose-lifter lift`` gives them: the fit's poses smoothed by the centred window of
 :mod:`pose_lifter.core.smoothing`) and ``hybrid-1`` (every frame cold).
 
 Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
