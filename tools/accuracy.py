@@ -28,9 +28,10 @@ method, tracked as the node tracks: cold 30-start first frame, then warm + mirro
 ``learned`` (the prior alone, per frame); ``learned-t`` (the prior alone tracked as the node
 runs ``mode: learned``: the causal temporal prior) and ``learned-offline`` (the same smoothed over
 past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked (default mode,
-the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`), ``hybrid-offline``
-(the same tracks as ``pose-lifter lift`` gives them: the fit's poses smoothed by the centred window of
-:mod:`pose_lifter.core.smoothing`) and ``hybrid-1`` (every frame cold).
+the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`),
+``hybrid-offline`` (the tracks as ``pose-lifter lift`` gives them: without the causal smoothing
+of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.smoothing`) and
+``hybrid-1`` (every frame cold).
 
 Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
 joints' centroid, the prediction scaled by the subject's true right-lower-leg length, no
@@ -182,16 +183,11 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
     leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
     truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
     out: dict[str, Any] = {}
-    fits: dict[str, NDArray[np.float64]] = {}  # a tracked run's own fit poses (before its smoothing)
     stamps = np.arange(n, dtype=np.int64) * 33_333_333
     for m in methods:
         t0 = time.perf_counter()
         preds = np.full((n, 12, 3), np.nan)  # metres, camera frame, centred
-        if m == "hybrid-offline" and "hybrid" in fits:  # pose-lifter lift: the same run, smoothed centred
-            ok = np.all(np.isfinite(fits["hybrid"]), axis=(1, 2))
-            preds[:] = centred_smoothing(np.nan_to_num(fits["hybrid"]), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
-            preds[~ok] = np.nan
-        elif m == "flat":
+        if m == "flat":
             flat = np.concatenate([truth_c[..., :2], np.zeros((n, 12, 1))], axis=-1)
             preds[:] = flat
         elif m == "mean-pose":  # the mean training pose, turned by the true body frame (an oracle)
@@ -200,6 +196,8 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             lifter: Lifter = _STATE["lifters"][m]
             tracked = m in ("hybrid", "hybrid-offline", "learned-t", "learned-offline")
             policy = TrackPolicy(lifter, track_timeout=1e9) if tracked else None
+            if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
+                policy.noise_smoothing = False
             fit = np.full((n, 12, 3), np.nan)
             warm = None
             for i in range(n):
@@ -219,8 +217,6 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     warm = None
                     continue
                 preds[i] = r.pose_camera * leg_m[i]
-            if m in ("hybrid", "hybrid-offline"):
-                fits["hybrid"] = fit
             if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))
                 preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)

@@ -287,3 +287,36 @@ def test_the_track_learns_a_persons_limb_proportions(walk_track: tuple[np.ndarra
     assert plain_fit is not None
     plain = shape(Lifter.limb_proportions_of(plain_fit))
     assert np.allclose(plain, shape(bases.limb_proportions), atol=1e-3)
+
+
+def test_noisy_2d_weighs_the_fit_down_unless_the_causal_noise_smoothing_is_off(
+        walk_track: tuple[np.ndarray, np.ndarray]) -> None:
+    """A track's 2D noise lowers its data weight (the node's causal smoothing of noisy tracks);
+    with ``noise_smoothing`` off (the offline lift, which smooths over past and future) the 2D
+    keeps its full weight, and clean 2D keeps it either way."""
+    x, _ = walk_track
+    lifter = Lifter(PoseBases.load(default_bases_path("hybrid")), LifterOptions())
+    noisy = x + np.random.default_rng(0).normal(0.0, 0.1, x.shape) * np.ptp(x[0], axis=0).max() / 4.0
+    seen: dict[tuple[str, bool], list[float]] = {}
+    original = lifter.lift
+
+    for name, pts in (("clean", x), ("noisy", noisy)):
+        for on in (True, False):
+            weights: list[float] = []
+
+            def spy(*args: object, _w: list[float] = weights, **kwargs: object) -> LiftResult:
+                track = kwargs.get("track")
+                if isinstance(track, TrackContext):
+                    _w.append(track.data_weight)
+                return original(*args, **kwargs)  # type: ignore[arg-type]
+
+            lifter.lift = spy  # type: ignore[method-assign]
+            policy = TrackPolicy(lifter)
+            policy.noise_smoothing = on
+            for i in range(min(len(pts), 20)):
+                policy.lift(0, i * 33_333_333, pts[i])
+            seen[(name, on)] = weights
+    lifter.lift = original  # type: ignore[method-assign]
+    assert min(seen[("noisy", True)]) < 0.5  # the node trusts noisy 2D less ...
+    assert min(seen[("noisy", False)]) == 1.0  # ... the offline lift does not
+    assert min(seen[("clean", True)]) == 1.0 and min(seen[("clean", False)]) == 1.0

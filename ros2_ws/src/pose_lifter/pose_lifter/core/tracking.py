@@ -167,6 +167,12 @@ class TrackPolicy:
     def __init__(self, lifter: Lifter, track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
                  warm_start: bool = True, reinit_ratio: float = DEFAULT_REINIT_RATIO) -> None:
         self._tracks: dict[int, Track] = {}
+        #: Hybrid mode: a track's 2D noise weights its 2D term down and smooths what it publishes
+        #: (causally: its data weight, ``temporal_weight``, NOISE_DISTURBANCE). The offline lift turns
+        #: this off when it smooths each track over past and future frames instead: on noisy 2D the
+        #: causal smoothing's lag then costs more than it removes (docs/accuracy.md, "Under a real
+        #: detector").
+        self.noise_smoothing = True
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame
 
@@ -286,8 +292,9 @@ class TrackPolicy:
         hybrid = opts.mode == "hybrid"
         # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
         vis = _visible(points, confidence, opts.confidence_threshold)
+        noisy = hybrid and self.noise_smoothing
         if not (hybrid and track is not None and warm is not None and vis is not None):
-            dw = track.data_weight() if hybrid and track is not None else 1.0
+            dw = track.data_weight() if noisy and track is not None else 1.0
             return _Screened(confidence, vis, None, False, dw)
         # where the track puts each joint on this frame (the gate's and the fill's reference)
         predicted = track.predict(points, vis, stamp_ns)
@@ -300,7 +307,7 @@ class TrackPolicy:
                 vis = vis & ~gated
                 predicted = track.predict(points, vis, stamp_ns)  # the motion of the joints kept
         track.observe_noise(self.lifter, points, vis, stamp_ns)
-        return _Screened(confidence, vis, predicted, screened, track.data_weight())
+        return _Screened(confidence, vis, predicted, screened, track.data_weight() if noisy else 1.0)
 
     def _context(self, track: Track | None, warm: WarmStart | None, stamp_ns: int, frame: _Screened,
                  limbs: NDArray[np.float64] | None) -> TrackContext:

@@ -181,13 +181,16 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
                 ) -> list[list[Done]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
-    each chain's poses are then smoothed centred (:func:`smooth_chain`).
+    each chain's poses are then smoothed centred (:func:`smooth_chain`), and the policy's causal
+    smoothing of noisy tracks is off (:attr:`TrackPolicy.noise_smoothing`).
 
     Message by message, the chains' items of that message are expired as their chain requires,
     their prior's networks run in one pass (:meth:`Lifter.compute_prior_ahead`), then each is
     lifted in its chain's pipeline. A chain's outcomes are those of lifting it alone: the chains
     share only the lifter, whose poses computed ahead are bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
+    for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
+        p.policy.noise_smoothing = smoothing_s <= 0
     out: list[list[Done]] = [[] for _ in chains]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
