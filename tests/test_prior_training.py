@@ -216,3 +216,24 @@ def test_train_prior_overrides_one_augmentation_field_and_refuses_unknown_ones()
     for bad in (["p_nothing=1"], ["p_mirror=x"]):
         with pytest.raises(ValueError):
             tp.augmentation("generalise", bad)
+
+
+def test_a_detectors_training_noise_is_per_joint_and_correlated_over_a_window() -> None:
+    """The training's detector noise (Augmentation.p_detector): each joint's spread is the detector
+    model's, a window's frames err alike by the correlation drawn, and an augmentation without
+    it draws the same samples as before it existed."""
+    from dataclasses import replace
+
+    from pose_lifter.mocap.detector_model import joint_spreads
+    from pose_lifter.mocap.prior_training import detector_noise
+
+    e = detector_noise((20_000, 4), 0.05, 0.8, np.random.default_rng(0))
+    np.testing.assert_allclose(e.std(axis=(0, 1, 3)), joint_spreads(0.05), rtol=0.03)
+    lag1 = np.mean([np.corrcoef(e[:, t, :, 0].ravel(), e[:, t + 1, :, 0].ravel())[0, 1] for t in range(3)])
+    assert lag1 == pytest.approx(0.8, abs=0.02)
+    seqs = [synthetic_poses(40, seed=s) for s in range(3)]
+    off = make_batch(seqs, 64, np.random.default_rng(2), replace(GENERALISE, p_detector=0.0), window=4)
+    base = make_batch(seqs, 64, np.random.default_rng(2), GENERALISE, window=4)
+    assert np.array_equal(off.features, base.features)
+    on = make_batch(seqs, 64, np.random.default_rng(2), replace(GENERALISE, p_detector=1.0), window=4)
+    assert np.isfinite(on.features).all() and not np.array_equal(on.features, base.features)

@@ -184,6 +184,11 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
     truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
     out: dict[str, Any] = {}
     stamps = np.arange(n, dtype=np.int64) * 33_333_333
+    # the camera's intrinsics, given to the lift of a perspective track with --intrinsics
+    perspective = track.camera[2] == "perspective" or "distance" in CONDITIONS[cond]
+    dist_m = CONDITIONS[cond].get("distance", _STATE.get("distance", DISTANCE))
+    intrinsics = ((FOCAL, FOCAL), (float(CENTRE[0]), float(CENTRE[1]))) if (
+        perspective and _STATE.get("intrinsics")) else None
     for m in methods:
         t0 = time.perf_counter()
         preds = np.full((n, 12, 3), np.nan)  # metres, camera frame, centred
@@ -199,11 +204,12 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
                 policy.noise_smoothing = False
             fit = np.full((n, 12, 3), np.nan)
+            depth = np.full(n, np.nan)  # the centroid's depth error (%) on a perspective track
             warm = None
             for i in range(n):
                 try:
                     if policy is not None:
-                        t = policy.lift(0, int(stamps[i]), px[i], conf[i])
+                        t = policy.lift(0, int(stamps[i]), px[i], conf[i], intrinsics)
                         r = t.result
                         # what pose-lifter lift smooths: the fit's own pose, or the published
                         # one with the measurement update (pose_lifter.offline.chains.lift_chains)
@@ -217,6 +223,8 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     warm = None
                     continue
                 preds[i] = r.pose_camera * leg_m[i]
+                if perspective:  # placement with the focal length and the person's true leg
+                    depth[i] = 100.0 * abs(FOCAL * leg_m[i] / float(r.camera.scale) - dist_m) / dist_m
             if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))
                 preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
@@ -233,6 +241,8 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             at = truth_c[2:] - 2 * truth_c[1:-1] + truth_c[:-2]
             acc[1:-1] = 1000.0 * np.linalg.norm(ap - at, axis=-1).mean(axis=-1)
         out[m] = {"p_mpjpe": pm.tolist(), "mpjpe": mp_.tolist(), "jitter": acc.tolist(), "ms": ms}
+        if m not in ("flat", "mean-pose") and perspective:
+            out[m]["depth_pct"] = depth.tolist()
     return {"track": track.name, "cond": cond, "camera": track.camera, "n": n, "methods": out}
 
 
@@ -281,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="only these azimuths (degrees, elevation 0, --projection): cameras rotate over them")
     ap.add_argument("--projection", choices=PROJECTIONS, default="perspective",
                     help="the projection of the --azimuths cameras")
+    ap.add_argument("--intrinsics", action="store_true",
+                    help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
                     help="no lifting: join these runs' accuracy.json into one table in --out")
     ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
@@ -307,6 +319,7 @@ def main(argv: list[str] | None = None) -> int:
           flush=True)
     settings = _parse(args.set)
     _STATE["distance"] = args.distance
+    _STATE["intrinsics"] = args.intrinsics
     if args.workers > 1:
         with mp.get_context("fork").Pool(args.workers, _init, (settings, methods, args.bases)) as pool:
             results = list(pool.imap_unordered(_job, jobs, chunksize=1))
@@ -322,6 +335,7 @@ def main(argv: list[str] | None = None) -> int:
                     for k in ("p_mpjpe", "mpjpe", "jitter")}
             vals["ms"] = float(np.mean([r["methods"][m]["ms"] for r in rows]))
             vals["lifted"] = float(np.mean([np.isfinite(r["methods"][m]["p_mpjpe"]).mean() for r in rows]))
+            vals["depth_pct"] = _nanmean([v for r in rows for v in r["methods"][m].get("depth_pct", [])])
             table[cond][m] = vals
     header = (f"{args.split} split, {len(tracks)} tracks, {n_frames} frames per condition "
               f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)")
@@ -342,7 +356,13 @@ def _write(table: dict[str, dict[str, dict[str, float]]], methods: tuple[str, ..
     lines += ["", "ms per frame: " + ", ".join(
         f"{m} {np.mean([table[c][m]['ms'] for c in table]):.2f}" for m in methods),
         "frames lifted: " + ", ".join(f"{m} {100 * min(table[c][m]['lifted'] for c in table):.1f} %"
-                                      for m in methods), footer]
+                                      for m in methods)]
+    depths = [(c, m, row[m].get("depth_pct", float("nan"))) for c, row in table.items() for m in methods]
+    if any(np.isfinite(d) for _, _, d in depths):
+        lines.append("centroid depth error (%, perspective tracks, from the camera scale, the focal length "
+                     "and the true leg): "
+                     + ", ".join(f"{c} {m} {d:.1f}" for c, m, d in depths if np.isfinite(d)))
+    lines.append(footer)
     text = "\n".join(lines)
     print(text, flush=True)
     out.mkdir(parents=True, exist_ok=True)

@@ -145,6 +145,7 @@ def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Name
                   ) -> dict[str, dict[str, dict[str, float]]]:
     """Per condition and method: mean P-MPJPE, MPJPE, jitter over the frames of ``tracks``."""
     settings = {"prior_file": str(prior_path), "temporal_prior": False}
+    acc._STATE["intrinsics"] = args.intrinsics
     methods = tuple(args.methods)
     jobs = [(t, c, methods) for c in args.conditions for t in tracks]
     if args.workers > 1:
@@ -216,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
     ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
+    ap.add_argument("--intrinsics", action="store_true",
+                    help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
     ap.add_argument("--train-only", action="store_true",
                     help="train (or reuse) the folds' priors, no lifting")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,

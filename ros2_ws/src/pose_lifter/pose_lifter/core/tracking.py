@@ -68,7 +68,7 @@ from .track import NOISE_MIN_WEIGHT, Track
 from .track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 
 __all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "OutOfOrderFrameError", "TrackPolicy",
-           "TrackedLift"]
+           "TrackedLift", "perspective_corrected"]
 
 
 #: Output smoothing (:class:`~pose_lifter.core.smoothing.CausalSmoother`): the fraction of unused
@@ -82,6 +82,28 @@ DISTURBANCE_FULL = 0.2
 #: with noise 0.1 and a gain of 0.4: factor 0 / 0.2 / 1 gave 56.6 / 26.3 / 20.2 mm/frame^2 at
 #: P-MPJPE 69.4 / 69.6 / 70.7 mm).
 NOISE_DISTURBANCE = 0.25
+
+#: A pinhole camera's ``((fx, fy), (cx, cy))`` in pixels (its ``camera_info``).
+CameraIntrinsics = tuple[tuple[float, float], tuple[float, float]]
+
+
+def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrinsics,
+                          depths: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+    """The 2D (12, 2, pixels) a weak-perspective camera would see of a person a pinhole camera
+    ``intrinsics`` ``((fx, fy), (cx, cy))`` filmed as ``points``: ``c + (x_j - c) Z_j / Z_0`` with
+    ``Z_j / Z_0 = 1 + z_j s / f`` the depth of joint ``j`` over the centroid's, from the person's
+    depths ``depths`` (12,; centred camera frame, leg units: the track's last pose) and the
+    weak-perspective ``scale`` ``s`` (pixels per leg unit; ``Z_0 = f L / s`` for a leg of ``L``
+    metres, so ``L`` cancels). Exact for a pinhole camera when the depths are right; a joint
+    nearer the camera than the centroid is moved toward the principal point."""
+    (fx, fy), (cx, cy) = intrinsics
+    ratio = 1.0 + np.asarray(depths, dtype=np.float64) * float(scale) / (0.5 * (float(fx) + float(fy)))
+    if not (np.isfinite(ratio).all() and (ratio > 0.2).all()):
+        return points
+    x = np.asarray(points, dtype=np.float64)
+    c = np.array([float(cx), float(cy)])
+    return np.asarray(c + (x - c) * ratio[:, None])
+
 
 def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
              threshold: float) -> NDArray[np.bool_] | None:
@@ -205,11 +227,16 @@ class TrackPolicy:
             del self._tracks[t]
 
     def lift(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
-             confidence: NDArray[np.float64] | None = None) -> TrackedLift:
+             confidence: NDArray[np.float64] | None = None,
+             intrinsics: CameraIntrinsics | None = None) -> TrackedLift:
         """Lift one frame of a track (model joints, as :meth:`Lifter.lift`): find the track and its
         warm start, screen the frame (gate, noise), tell the lifter what the track knows, solve
         (cold again when the warm solve degraded), record the frame in the track and publish
         (hybrid: smoothed and measurement-updated).
+
+        With ``intrinsics`` ``((fx, fy), (cx, cy))`` (pixels) the lift reads the 2D corrected for
+        perspective by the track's last pose (:func:`perspective_corrected`; hybrid mode, a frame
+        that follows its track).
 
         Raises
         ------
@@ -222,9 +249,10 @@ class TrackPolicy:
         opts = self.lifter.options
         limbs = track.limb_proportions(opts.image_limbs) if track is not None else None
         frame = self._screen(track, warm, stamp_ns, points, confidence)
+        seen = self._seen(track, warm, points, intrinsics)
         try:
             context = self._context(track, warm, stamp_ns, frame, limbs)
-            result, reinit = self._solve(track, warm, points, frame.confidence, context)
+            result, reinit = self._solve(track, warm, seen, frame.confidence, context)
         except PoseLifterError:
             if track is not None:
                 track.warm = None
@@ -235,14 +263,15 @@ class TrackPolicy:
         if opts.mode == "hybrid":
             # the output's state carries over a re-initialised frame (its jump is smoothed)
             published = self._smooth(track, result, warm is not None, frame.data_weight)
-            updated = self._measure(track, published or result, points, warm is not None)
+            updated = self._measure(track, published or result, seen, warm is not None)
             out = updated if updated is not None else published
             if out is not None:
                 return TrackedLift(out, warm is not None, reinit, result.pose_camera)
         return TrackedLift(result, warm is not None, reinit)
 
     def expected_prior(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
-                       confidence: NDArray[np.float64] | None = None
+                       confidence: NDArray[np.float64] | None = None,
+                       intrinsics: CameraIntrinsics | None = None
                        ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
         """The prior and its input that :meth:`lift` of this frame is expected to run (for
         :meth:`Lifter.compute_prior_ahead`): the track's past frames and this frame's joints as
@@ -253,7 +282,18 @@ class TrackPolicy:
         warm = None
         if track is not None and stamp_ns >= track.last_stamp_ns:  # as _find, without its refusals
             warm = self._warm(track, stamp_ns - track.last_stamp_ns)
-        return self.lifter.expected_prior_input(points, confidence, self._past(track, warm, stamp_ns))
+        seen = self._seen(track, warm, points, intrinsics)
+        return self.lifter.expected_prior_input(seen, confidence, self._past(track, warm, stamp_ns))
+
+    def _seen(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
+              intrinsics: CameraIntrinsics | None) -> NDArray[np.float64]:
+        """The 2D the lift reads: ``points`` corrected for perspective by the track's last pose
+        (:func:`perspective_corrected`) with ``intrinsics``, on a warm-started frame of the
+        hybrid mode; else ``points``."""
+        if (intrinsics is None or track is None or warm is None or track.depths is None
+                or self.lifter.options.mode != "hybrid"):
+            return points
+        return perspective_corrected(points, intrinsics, *track.depths)
 
     def _find(self, track_id: int, stamp_ns: int) -> tuple[Track | None, WarmStart | None]:
         """The frame's track (None: untracked, new, or forgotten because the input clock jumped
@@ -348,6 +388,7 @@ class TrackPolicy:
         if track is None:
             track = self._tracks[track_id] = Track(None, stamp_ns)
         track.warm = result.warm_start()
+        track.depths = (np.array(result.pose_camera[:, 2]), float(result.camera.scale))
         track.last_stamp_ns = stamp_ns
         used = result.weights > 0
         track.unused = np.where(used, 0, track.unused + 1)

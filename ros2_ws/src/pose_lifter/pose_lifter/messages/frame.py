@@ -266,8 +266,9 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
     return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
 
 
-def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int]]) -> float:
-    """The prior's network for every ``(pipeline, skeleton, stamp)`` about to be lifted (each
+def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
+                  ) -> float:
+    """The prior's network for every ``(pipeline, skeleton, stamp, intrinsics)`` about to be lifted (each
     pipeline's tracks as they are now) in one pass over its weights
     (:meth:`~pose_lifter.core.lifter.Lifter.compute_prior_ahead`; the lifts' results are the same
     with or without it). Returns each skeleton's share of its time, in seconds. It never raises:
@@ -277,8 +278,8 @@ def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
         return 0.0
     start = time.perf_counter()
     try:
-        expected = [e for pipeline, inp, stamp in frames
-                    if (e := pipeline.expected_prior(inp, stamp)) is not None]
+        expected = [e for pipeline, inp, stamp, intrinsics in frames
+                    if (e := pipeline.expected_prior(inp, stamp, intrinsics)) is not None]
         lifter.compute_prior_ahead(expected)
     except Exception:
         lifter.compute_prior_ahead([])
@@ -380,7 +381,7 @@ class FramePipeline:
         (the prior computed ahead, :func:`compute_ahead`), added to its solve time."""
         try:
             start = time.perf_counter()
-            tracked = self.policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence)
+            tracked = self.policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence, intrinsics)
             solve_time = time.perf_counter() - start + shared_s
             result = tracked.result
             focal, centre = intrinsics if intrinsics is not None else (None, None)
@@ -391,12 +392,12 @@ class FramePipeline:
             return _refusal(err, inp.track_id)
         return LiftedSkeleton(inp, result, joints, tracked.warm_started, solve_time, tracked.fit_pose_camera)
 
-    def expected_prior(self, inp: SkeletonInput, stamp_ns: int
+    def expected_prior(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics = None
                        ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
         """The prior and its input that :meth:`lift` of this skeleton is expected to run
         (:meth:`TrackPolicy.expected_prior`; None when there are none or the input is refused)."""
         try:
-            return self.policy.expected_prior(inp.track_id, stamp_ns, inp.points, inp.confidence)
+            return self.policy.expected_prior(inp.track_id, stamp_ns, inp.points, inp.confidence, intrinsics)
         except PoseLifterError:
             return None
 
@@ -411,7 +412,7 @@ class FramePipeline:
         if not checked.answered:
             return []
         inputs = [x for x in checked.skeletons if not isinstance(x, SkipSkeleton)]
-        shared = compute_ahead(self.lifter, [(self, x, stamp_ns) for x in inputs])
+        shared = compute_ahead(self.lifter, [(self, x, stamp_ns, intrinsics) for x in inputs])
         out = [x if isinstance(x, SkipSkeleton) else self.lift(x, stamp_ns, intrinsics, shared)
                for x in checked.skeletons]
         self.end_frame(stamp_ns)

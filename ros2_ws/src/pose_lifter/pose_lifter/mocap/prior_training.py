@@ -37,12 +37,13 @@ from numpy.typing import NDArray
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
 from pose_lifter.core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from pose_lifter.mocap.detector_model import joint_spreads
 from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import limb_scale_factors, scale_limbs, view_rotations
 
-__all__ = ["GENERALISE", "Augmentation", "TrainingBatch", "augment_poses", "make_batch", "train_prior",
-           "train_prior_residual"]
+__all__ = ["GENERALISE", "Augmentation", "TrainingBatch", "augment_poses", "detector_noise", "make_batch",
+           "train_prior", "train_prior_residual"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,12 @@ class Augmentation:
     #: the lower body out of the image: knees and ankles missing (and the hips too on a third of
     #: those samples), every frame of the window
     p_lower_cut: float = 0.0
+    #: of the noisy chunks, this share gets a detector's noise instead of white noise: per joint
+    #: scaled like the COCO sigmas and, over a window's frames, correlated (first-order
+    #: autoregressive, correlation uniform in ``detector_correlation``;
+    #: :mod:`pose_lifter.mocap.detector_model`)
+    p_detector: float = 0.0
+    detector_correlation: tuple[float, float] = (0.0, 0.9)
 
 
 #: The augmentation that generalises past the training motions (the cross-action folds,
@@ -137,6 +144,10 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
         outl = rng.uniform(0.02, aug.outliers_max) if rng.random() < aug.p_outliers else 0.0
         miss = rng.uniform(0.0, aug.missing_max) if rng.random() < aug.p_missing else 0.0
         sub = pts[lo:hi]
+        if noise > 0 and aug.p_detector > 0 and rng.random() < aug.p_detector:
+            sub = sub + detector_noise(sub.shape[:2], noise, rng.uniform(*aug.detector_correlation), rng
+                                       ) * leg[lo:hi, None, None, None]
+            noise = 0.0
         noisy, _ = corrupt_2d(sub, np.broadcast_to(leg[lo:hi, None], sub.shape[:2]), noise, outl, 0.0, rng)
         pts[lo:hi] = noisy
         if miss > 0:
@@ -156,6 +167,22 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     tgt[..., :2] = (cur_cam[..., :2] / dist[:, None, None] - centre[:, None, :]) / radius[:, None, None]
     tgt[..., 2] = cur_cam[..., 2] / dist[:, None] / radius[:, None]
     return TrainingBatch(feats, tgt.reshape(n, 3 * N_JOINTS), cur_cam, scale)
+
+
+def detector_noise(shape: tuple[int, ...], noise: float, correlation: float, rng: np.random.Generator
+                   ) -> NDArray[np.float64]:
+    """A detector's 2D error (``shape`` + (12, 2), leg lengths) of samples (N, W): per joint the
+    standard deviation :func:`pose_lifter.mocap.detector_model.joint_spreads` of ``noise``, over
+    the W frames of a window a first-order autoregressive process of that ``correlation``
+    (stationary: every frame has the same spread)."""
+    n, window = shape
+    white = rng.standard_normal((n, window, N_JOINTS, 2))
+    err = np.empty_like(white)
+    err[:, 0] = white[:, 0]
+    innovation = np.sqrt(1.0 - correlation * correlation)
+    for t in range(1, window):
+        err[:, t] = correlation * err[:, t - 1] + innovation * white[:, t]
+    return err * joint_spreads(noise)[None, None, :, None]
 
 
 def augment_poses(frames: NDArray[np.float64], sequences: Sequence[NDArray[np.float64]],

@@ -203,7 +203,8 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
         for c, item in step:
             if item.expire_ns is not None:
                 pipelines[c].end_frame(item.expire_ns)
-        shared = compute_ahead(lifter, [(pipelines[c], item.input, item.stamp_ns) for c, item in step])
+        shared = compute_ahead(lifter, [(pipelines[c], item.input, item.stamp_ns, item.intrinsics)
+                                        for c, item in step])
         for c, item in step:
             lifted = pipelines[c].lift(item.input, item.stamp_ns, item.intrinsics, shared)
             if not isinstance(lifted, LiftedSkeleton):

@@ -146,7 +146,8 @@ class LifterNode(Node):
         self.get_logger().info(
             f"lifting {self._sub_keypoints.topic_name} -> {self._pub_skeletons.topic_name}: "
             f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
-            f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}"
+            f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}, "
+            f"mode {options.mode}, weak perspective until camera_info arrives"
         )
 
     def deactivate_lifter(self) -> None:
@@ -228,11 +229,19 @@ class LifterNode(Node):
     # ------------------------------------------------------------------ callbacks
 
     def on_camera_info(self, msg: Any) -> None:
-        """Keep the latest intrinsics (a bad CameraInfo is ignored with a warning)."""
+        """Keep the latest intrinsics (a bad CameraInfo is ignored with a warning); the first ones
+        switch the lift from weak perspective to the 2D corrected for perspective (said once)."""
         try:
-            self._intrinsics = messages.intrinsics_from_camera_info(msg)
+            intrinsics = messages.intrinsics_from_camera_info(msg)
         except (InvalidInputError, ValueError, TypeError) as err:
             self._warn_skip("camera_info", str(err))
+            return
+        if self._intrinsics is None:
+            (fx, fy), (cx, cy) = intrinsics
+            self.get_logger().info(
+                f"camera_info received (fx {fx:.1f}, fy {fy:.1f}, cx {cx:.1f}, cy {cy:.1f} px): tracked "
+                "people are lifted from their 2D corrected for perspective and placed at metric depth")
+        self._intrinsics = intrinsics
 
     def on_keypoints(self, msg: Any) -> None:
         """Lift one frame and publish its answer (always, even when every skeleton is skipped)."""
