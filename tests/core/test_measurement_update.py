@@ -223,3 +223,27 @@ def test_limb_lengths_come_from_the_image() -> None:
     pairs = (0.5 * (full[[0, 1, 4, 5]] + full[[2, 3, 6, 7]]))[[0, 1, 0, 1, 2, 3, 2, 3]]
     np.testing.assert_allclose(est, pairs, rtol=0.1)
     assert est[1] > 0.9 * 0.95 and est[7] > 0.9
+
+
+def test_the_update_runs_only_while_the_tracks_2d_is_nearly_exact(
+        walker: tuple[np.ndarray, np.ndarray]) -> None:
+    """Above MAX_NOISE the published pose is the one without the update, frame for frame (a
+    detector's correlated error would otherwise be followed); on exact 2D the update moves it."""
+    from pose_lifter.core.measurement import MAX_NOISE
+
+    x, _ = walker
+    x = x[:40]
+    leg_px = 160.0 * float(np.median(limb_lengths(walker[1][:40])[:, RIGHT_LOWER_LEG]))
+    rng = np.random.default_rng(5)
+    noisy, conf = corrupt_2d(x, np.full(len(x), leg_px), 0.05, 0.0, 0.0, rng)
+    on, off = _track(LifterOptions(), noisy, conf), _track(LifterOptions(**OFF), noisy, conf)
+    policy = TrackPolicy(Lifter(options=LifterOptions()))
+    for i in range(len(x)):
+        policy.lift(0, i * 33_333_333, noisy[i], conf[i])
+    assert policy._tracks[0].noise_median() > MAX_NOISE  # this noise is above the limit ...
+    for a, b in zip(on, off, strict=True):  # ... so the update never ran
+        np.testing.assert_array_equal(a.result.pose_camera, b.result.pose_camera)
+    clean_on, clean_off = _track(LifterOptions(), x), _track(LifterOptions(**OFF), x)
+    moved = [np.abs(a.result.pose_camera - b.result.pose_camera).max()
+             for a, b in zip(clean_on, clean_off, strict=True)]
+    assert max(moved) > 0.01  # leg units: on exact 2D it does

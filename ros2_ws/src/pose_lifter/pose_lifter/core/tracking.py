@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 from ._fast import mean_rows
 from .errors import PoseLifterError
 from .lifter import Lifter
-from .measurement import MeasurementUpdate
+from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
 from .prior import PosePrior
 from .results import LiftResult, TrackContext, WarmStart
@@ -408,7 +408,8 @@ class TrackPolicy:
     def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool
                  ) -> LiftResult | None:
         """``result`` (the fit, smoothed) with its pose replaced by the measurement update's (see
-        :mod:`.measurement`), or None when it is off or the track has no 2D noise estimate yet."""
+        :mod:`.measurement`), or None when it is off, the track has no 2D noise estimate yet or
+        its noise is above :data:`~pose_lifter.core.measurement.MAX_NOISE`."""
         opts = self.lifter.options
         if not opts.measurement_update:
             track.measurement = None
@@ -418,6 +419,9 @@ class TrackPolicy:
         if not track.noise:  # its first two frames: how far to trust the 2D is not known yet
             return None
         noise = track.noise_median()
+        if noise > MAX_NOISE:  # the 2D is no better than the fit's image positions
+            track.measurement = None
+            return None
         out = track.measurement.update(result.pose_camera, points, result.weights > 0, noise,
                                        opts.measurement_depth, opts.measurement_gate)
         if not np.isfinite(out).all():
