@@ -202,7 +202,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             tracked = m in ("hybrid", "hybrid-offline", "learned-t", "learned-offline")
             policy = TrackPolicy(lifter, track_timeout=1e9) if tracked else None
             if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
-                policy.noise_smoothing = False
+                policy.smoothed_later = True
             fit = np.full((n, 12, 3), np.nan)
             depth = np.full(n, np.nan)  # the centroid's depth error (%) on a perspective track
             warm = None

@@ -289,37 +289,39 @@ def test_the_track_learns_a_persons_limb_proportions(walk_track: tuple[np.ndarra
     assert np.allclose(plain, shape(bases.limb_proportions), atol=1e-3)
 
 
-def test_noisy_2d_weighs_the_fit_down_unless_the_causal_noise_smoothing_is_off(
+def test_noisy_2d_weighs_the_fit_down_only_with_noise_smoothing(
         walk_track: tuple[np.ndarray, np.ndarray]) -> None:
-    """A track's 2D noise lowers its data weight (the node's causal smoothing of noisy tracks);
-    with ``noise_smoothing`` off (the offline lift, which smooths over past and future) the 2D
-    keeps its full weight, and clean 2D keeps it either way."""
+    """With ``noise_smoothing`` a track's 2D noise lowers its data weight (the causal smoothing of
+    noisy tracks); without it (the default), or when the caller smooths each track over past and
+    future frames (``TrackPolicy.smoothed_later``: the offline lift), the 2D keeps its full weight;
+    clean 2D keeps it always."""
     x, _ = walk_track
-    lifter = Lifter(PoseBases.load(default_bases_path("hybrid")), LifterOptions())
     noisy = x + np.random.default_rng(0).normal(0.0, 0.1, x.shape) * np.ptp(x[0], axis=0).max() / 4.0
-    seen: dict[tuple[str, bool], list[float]] = {}
-    original = lifter.lift
+    seen: dict[tuple[str, bool, bool], list[float]] = {}
+    for smoothing in (True, False):
+        options = LifterOptions(noise_smoothing=smoothing)
+        lifter = Lifter(PoseBases.load(default_bases_path("hybrid")), options)
+        original = lifter.lift
+        for name, pts in (("clean", x), ("noisy", noisy)):
+            for later in (False, True):
+                weights: list[float] = []
 
-    for name, pts in (("clean", x), ("noisy", noisy)):
-        for on in (True, False):
-            weights: list[float] = []
+                def spy(*args: object, _w: list[float] = weights, _f: object = original,
+                        **kwargs: object) -> LiftResult:
+                    track = kwargs.get("track")
+                    if isinstance(track, TrackContext):
+                        _w.append(track.data_weight)
+                    return _f(*args, **kwargs)  # type: ignore[operator,no-any-return]
 
-            def spy(*args: object, _w: list[float] = weights, **kwargs: object) -> LiftResult:
-                track = kwargs.get("track")
-                if isinstance(track, TrackContext):
-                    _w.append(track.data_weight)
-                return original(*args, **kwargs)  # type: ignore[arg-type]
-
-            lifter.lift = spy  # type: ignore[method-assign]
-            policy = TrackPolicy(lifter)
-            policy.noise_smoothing = on
-            for i in range(min(len(pts), 20)):
-                policy.lift(0, i * 33_333_333, pts[i])
-            seen[(name, on)] = weights
-    lifter.lift = original  # type: ignore[method-assign]
-    assert min(seen[("noisy", True)]) < 0.5  # the node trusts noisy 2D less ...
-    assert min(seen[("noisy", False)]) == 1.0  # ... the offline lift does not
-    assert min(seen[("clean", True)]) == 1.0 and min(seen[("clean", False)]) == 1.0
+                lifter.lift = spy  # type: ignore[method-assign]
+                policy = TrackPolicy(lifter)
+                policy.smoothed_later = later
+                for i in range(min(len(pts), 20)):
+                    policy.lift(0, i * 33_333_333, pts[i])
+                seen[(name, smoothing, later)] = weights
+    assert min(seen[("noisy", True, False)]) < 0.5  # noise smoothing trusts noisy 2D less ...
+    others = [k for k in seen if k != ("noisy", True, False)]
+    assert all(min(seen[k]) == 1.0 for k in others), {k: min(v) for k, v in seen.items()}  # ... nothing else
 
 
 def test_the_perspective_correction_gives_the_weak_perspective_image_of_the_person() -> None:

@@ -274,6 +274,10 @@ class UserOptions(_Validated):
     disturbed_smoothing_gain: float = field(default=0.55, metadata=_meta(
         "Hybrid, tracked: gain of the alpha-beta filter on the prior's part of the published "
         "pose when a track is disturbed (unused joints, 2D noise); 1 = no filter.", 0.05, 1.0))
+    noise_smoothing: bool = field(default=False, metadata=_meta(
+        "Hybrid, tracked: a track with noisy 2D weighs its 2D term down and smooths its published "
+        "pose causally by its noise estimate: about half the jitter, 2-4 mm more error on noisy "
+        "2D (docs/accuracy.md). The offline lift's centred smoothing replaces it."))
     measurement_update: bool = field(default=True, metadata=_meta(
         "Hybrid, tracked: the published pose's joints go where the observed 2D puts them (per "
         "joint, weighted by the track's 2D noise; joints the lift did not use or beyond "

@@ -189,12 +189,10 @@ class TrackPolicy:
     def __init__(self, lifter: Lifter, track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
                  warm_start: bool = True, reinit_ratio: float = DEFAULT_REINIT_RATIO) -> None:
         self._tracks: dict[int, Track] = {}
-        #: Hybrid mode: a track's 2D noise weights its 2D term down and smooths what it publishes
-        #: (causally: its data weight, ``temporal_weight``, NOISE_DISTURBANCE). The offline lift turns
-        #: this off when it smooths each track over past and future frames instead: on noisy 2D the
-        #: causal smoothing's lag then costs more than it removes (docs/accuracy.md, "Under a real
-        #: detector").
-        self.noise_smoothing = True
+        #: The caller smooths each track over past and future frames (the offline lift): the
+        #: causal smoothing of noisy tracks (``LifterOptions.noise_smoothing``: the track's data
+        #: weight, ``temporal_weight``, NOISE_DISTURBANCE) is then off whatever the options say.
+        self.smoothed_later = False
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame
 
@@ -332,7 +330,7 @@ class TrackPolicy:
         hybrid = opts.mode == "hybrid"
         # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
         vis = _visible(points, confidence, opts.confidence_threshold)
-        noisy = hybrid and self.noise_smoothing
+        noisy = hybrid and opts.noise_smoothing and not self.smoothed_later
         if not (hybrid and track is not None and warm is not None and vis is not None):
             dw = track.data_weight() if noisy and track is not None else 1.0
             return _Screened(confidence, vis, None, False, dw)

@@ -182,7 +182,7 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
     each chain's poses are then smoothed centred (:func:`smooth_chain`), and the policy's causal
-    smoothing of noisy tracks is off (:attr:`TrackPolicy.noise_smoothing`).
+    smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
 
     Message by message, the chains' items of that message are expired as their chain requires,
     their prior's networks run in one pass (:meth:`Lifter.compute_prior_ahead`), then each is
@@ -190,7 +190,7 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     share only the lifter, whose poses computed ahead are bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
-        p.policy.noise_smoothing = smoothing_s <= 0
+        p.policy.smoothed_later = smoothing_s > 0
     out: list[list[Done]] = [[] for _ in chains]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
