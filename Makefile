@@ -113,9 +113,10 @@ prior-temporal: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 4 --dropout 0.05 \
 	  --out $(PKG)/pose_lifter/data/prior_mlp_w4.npz
 
-# the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12)
+# the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12; the
+# perspective tracks' lifts know the camera's intrinsics, as the node with camera_info)
 accuracy: venv
-	$(PY) tools/accuracy.py --data $(CMU_DATA) --frames 90 --views 4 --workers 2 --out out/accuracy
+	$(PY) tools/accuracy.py --data $(CMU_DATA) --frames 90 --views 4 --workers 2 --intrinsics --out out/accuracy
 
 # ROS 2 build: colcon builds ros2_ws (pose_lifter_msgs + pose_lifter) against the ros-jazzy
 # wheels in the venv. CMAKE_PROJECT_INCLUDE works around the wheels' baked-in /opt/python
@@ -143,7 +144,7 @@ train-deps: venv
 	$(PY) -c "import torch" 2>/dev/null || $(PY) -m pip install -q 'torch==2.13.0'
 
 # accuracy on motion never trained on: per motion class of the manifest, a prior trained without it
-# (tools/cross_action.py; docs/cross_action.md)
+# and its temporal prior, the lifts knowing the camera's intrinsics (tools/cross_action.py; docs/cross_action.md)
 cross-action: venv train-deps
 	$(PY) tools/cross_action.py --data $(CMU_DATA) --epochs 6 --samples 40000 --frames 60 --segments 6 \
-	  --views 2 --out out/cross_action
+	  --views 2 --temporal --intrinsics --out out/cross_action

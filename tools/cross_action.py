@@ -24,7 +24,9 @@ image, a camera at 2 m, a camera 50 degrees above; and every fault of a real det
 prior alone tracked and smoothed over past and future frames: ``pose-lifter lift --mode
 learned``) and ``hybrid`` (the default mode tracked by
 :class:`pose_lifter.core.tracking.TrackPolicy`, with the fold's prior as its single-frame prior and
-the temporal prior off: the packaged temporal prior has seen every class).
+the temporal prior off: the packaged temporal prior has seen every class; with ``--temporal``
+each fold also trains its own temporal prior, ``DIR/<C>_w4.npz``, and every tracked method uses
+it, as the node does).
 
 The hybrid's pose bases are the packaged ``bases_hybrid_sparse200.npz`` (or ``--bases``); their
 training trials are read from the file and each fold's row says whether they include class C.
@@ -62,6 +64,8 @@ DEFAULT_CONDITIONS = ("detector6m", "detector3m", "clean", "noise0.05", "noise0.
                       "lrswap", "lowercut", "close", "above")
 METHODS = ("flat", "learned", "learned-offline", "hybrid", "hybrid-offline")
 AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
+#: Dropout of a fold's temporal prior (``make prior-temporal``'s).
+TEMPORAL_DROPOUT = 0.05
 
 
 def fold_training(args: argparse.Namespace) -> dict[str, Any]:
@@ -77,9 +81,17 @@ def fold_training(args: argparse.Namespace) -> dict[str, Any]:
     return spec
 
 
-def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path) -> PosePrior:
-    """Train (or reuse) the prior of the fold without class ``cls``, saved to ``path``."""
-    spec = json.loads(json.dumps(fold_training(args)))  # as the file's metadata hold it
+def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path, window: int = 1
+               ) -> PosePrior:
+    """Train (or reuse) the prior of the fold without class ``cls``, saved to ``path``; with
+    ``window`` > 1 its causal temporal variant (as ``make prior-temporal``: the track's last
+    ``window`` frames at 30 Hz, dropout 0.05)."""
+    spec = fold_training(args)
+    step, dropout = args.step, args.dropout
+    if window > 1:
+        step, dropout = 4, TEMPORAL_DROPOUT
+        spec.update(window=window, frame_step=step, dropout=dropout)
+    spec = json.loads(json.dumps(spec))  # as the file's metadata hold it
     if path.is_file():
         try:
             old = PosePrior.load(path)
@@ -91,8 +103,8 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     trials = sorted(t for c, ts in pool.items() if c != cls for t in ts)
     val_ids = trials[7::8]
     fit_ids = [t for t in trials if t not in val_ids]
-    fit = [load_trial(t, args.data, step=args.step) for t in fit_ids]
-    val = [load_trial(t, args.data, step=args.step) for t in val_ids]
+    fit = [load_trial(t, args.data, step=step) for t in fit_ids]
+    val = [load_trial(t, args.data, step=step) for t in val_ids]
     print(f"[{cls}] training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames), "
           f"validation {len(val_ids)} trials", flush=True)
     aug = AUGMENTATIONS[args.augment]
@@ -102,15 +114,15 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
 
     t0 = time.perf_counter()
     if args.model == "residual":
-        prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks, dropout=args.dropout,
+        prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks, dropout=dropout,
                                      epochs=args.epochs, samples_per_epoch=args.samples, seed=args.seed,
-                                     aug=aug, log=log)
+                                     aug=aug, window=window, log=log)
     else:
         prior = train_prior(fit, val, hidden=tuple(args.hidden), epochs=args.epochs,
-                            samples_per_epoch=args.samples, seed=args.seed, aug=aug, log=log)
+                            samples_per_epoch=args.samples, window=window, seed=args.seed, aug=aug, log=log)
     meta = dict(prior.metadata)
     meta.update({"held_out_class": cls, "fold_training": spec, "training_trials": fit_ids,
-                 "validation_trials": val_ids, "frame_step": args.step,
+                 "validation_trials": val_ids, "frame_step": step,
                  "command": "python tools/cross_action.py " + " ".join(sys.argv[1:]),
                  "wall_seconds": round(time.perf_counter() - t0, 1)})
     from dataclasses import replace
@@ -144,7 +156,10 @@ def class_tracks(trials: list[str], args: argparse.Namespace) -> list[acc.Track]
 def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Namespace
                   ) -> dict[str, dict[str, dict[str, float]]]:
     """Per condition and method: mean P-MPJPE, MPJPE, jitter over the frames of ``tracks``."""
-    settings = {"prior_file": str(prior_path), "temporal_prior": False}
+    temporal = prior_path.with_name(prior_path.stem + "_w4.npz")
+    settings: dict[str, Any] = {"prior_file": str(prior_path), "temporal_prior": args.temporal}
+    if args.temporal:
+        settings["temporal_prior_file"] = str(temporal)
     acc._STATE["intrinsics"] = args.intrinsics
     methods = tuple(args.methods)
     jobs = [(t, c, methods) for c in args.conditions for t in tracks]
@@ -217,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
     ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
+    ap.add_argument("--temporal", action="store_true",
+                    help="also train each fold's causal temporal prior and lift with it (as the node does)")
     ap.add_argument("--intrinsics", action="store_true",
                     help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
     ap.add_argument("--train-only", action="store_true",
@@ -249,6 +266,8 @@ def main(argv: list[str] | None = None) -> int:
         path = folds_dir / f"{cls}.npz"
         tf = time.perf_counter()
         train_fold(cls, pool, args, path)
+        if args.temporal:
+            train_fold(cls, pool, args, path.with_name(f"{cls}_w4.npz"), window=4)
         if args.train_only:
             continue
         tracks = class_tracks(pool[cls], args)
