@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
-__all__ = ["COCO_SIGMAS", "REALISTIC", "DetectorModel", "detect", "joint_spreads"]
+__all__ = ["COCO_SIGMAS", "REALISTIC", "DetectorModel", "autoregressive", "detect", "joint_spreads"]
 
 #: The COCO keypoint sigmas (Ronchi & Perona 2017, the OKS constants) of the 12 model joints:
 #: shoulders 0.079, elbows 0.072, wrists 0.062, hips 0.107, knees 0.087, ankles 0.089.
@@ -97,6 +97,19 @@ def joint_spreads(noise: float) -> NDArray[np.float64]:
     return np.asarray(noise * COCO_SIGMAS / COCO_SIGMAS.mean(), dtype=np.float64)
 
 
+def autoregressive(white: NDArray[np.float64], correlation: float, axis: int) -> NDArray[np.float64]:
+    """A stationary first-order autoregressive process along ``axis`` of ``white`` (independent
+    standard normal draws, any shape): ``e_0 = w_0``, ``e_t = r e_t-1 + sqrt(1 - r^2) w_t``, so
+    every step keeps unit variance and consecutive steps correlate by ``r``."""
+    w = np.moveaxis(np.asarray(white, dtype=np.float64), axis, 0)
+    out = np.empty_like(w)
+    out[0] = w[0]
+    innovation = np.sqrt(1.0 - correlation * correlation)
+    for t in range(1, len(w)):
+        out[t] = correlation * out[t - 1] + innovation * w[t]
+    return np.moveaxis(out, 0, axis)
+
+
 def _bursts(n: int, rate: float, rng: np.random.Generator) -> NDArray[np.bool_]:
     """(n,) frames covered by bursts of DROP_FRAMES frames, starting on ``rate`` of the frames."""
     on = np.zeros(n, dtype=bool)
@@ -137,13 +150,7 @@ def detect(clean: NDArray[np.float64], leg_px: NDArray[np.float64], model: Detec
     leg = np.asarray(leg_px, dtype=np.float64).reshape(n)
     spread = joint_spreads(model.noise)  # (12,) leg lengths
     rho = model.correlation
-    white = rng.standard_normal((n, N_JOINTS, 2))
-    err = np.empty_like(white)  # AR(1) with unit variance, then scaled
-    err[0] = white[0]
-    innovation = np.sqrt(1.0 - rho * rho)
-    for t in range(1, n):
-        err[t] = rho * err[t - 1] + innovation * white[t]
-    err *= spread[None, :, None]
+    err = autoregressive(rng.standard_normal((n, N_JOINTS, 2)), rho, axis=0) * spread[None, :, None]
     pts = clean + err * leg[:, None, None]
     e = np.linalg.norm(err, axis=-1) / np.maximum(spread, 1e-12)[None, :]  # in units of s_j
     conf = CONFIDENCE_PEAK * np.exp(-0.5 * (e / CONFIDENCE_WIDTH) ** 2)

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
 from pose_lifter.core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
-from pose_lifter.mocap.detector_model import joint_spreads
+from pose_lifter.mocap.detector_model import autoregressive, joint_spreads
 from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import limb_scale_factors, scale_limbs, view_rotations
@@ -176,12 +176,7 @@ def detector_noise(shape: tuple[int, ...], noise: float, correlation: float, rng
     the W frames of a window a first-order autoregressive process of that ``correlation``
     (stationary: every frame has the same spread)."""
     n, window = shape
-    white = rng.standard_normal((n, window, N_JOINTS, 2))
-    err = np.empty_like(white)
-    err[:, 0] = white[:, 0]
-    innovation = np.sqrt(1.0 - correlation * correlation)
-    for t in range(1, window):
-        err[:, t] = correlation * err[:, t - 1] + innovation * white[:, t]
+    err = autoregressive(rng.standard_normal((n, window, N_JOINTS, 2)), correlation, axis=1)
     return err * joint_spreads(noise)[None, None, :, None]
 
 
