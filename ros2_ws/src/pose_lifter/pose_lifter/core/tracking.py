@@ -16,9 +16,12 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   limb proportions over the track's last LIMB_FRAMES frames, once it has MIN_LIMB_FRAMES
   of them, is passed to the lifter for its limb constraints (hybrid mode,
   ``LifterOptions.prior_limbs``, on by default), after :data:`pose_lifter.core.track.LIMB_CALIBRATION`;
-* hybrid mode: the track's 2D noise (NOISE_FRAMES) weights the 2D term down and blends the
-  previous frame's pose into the prior's target (temporal smoothness, up to
-  ``LifterOptions.temporal_weight``);
+* hybrid mode with ``LifterOptions.noise_smoothing`` (off by default; never when the caller
+  smooths over past and future, :attr:`TrackPolicy.smoothed_later`): the track's 2D noise
+  (NOISE_FRAMES) weights the 2D term down and blends the previous frame's pose into the prior's
+  target (temporal smoothness, up to ``LifterOptions.temporal_weight``);
+* hybrid mode with the camera's intrinsics: a frame that follows its track is lifted from its 2D
+  corrected for perspective by the track's last pose (:func:`perspective_corrected`);
 * hybrid mode, temporal outlier gate (``LifterOptions.outlier_gate``): a visible joint farther
   than ``outlier_gate`` leg lengths from where the track's last frame had it (relative to the
   median motion of the joints) is treated as missing for this frame, before the prior sees it (a
@@ -35,8 +38,8 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
 * hybrid mode, causal output smoothing (:class:`pose_lifter.core.smoothing.CausalSmoother`): the
   published pose is the prior's pose on this frame plus the fit's correction of it (fit minus
   prior) averaged over the track's frames (``LifterOptions.correction_smoothing``, exponential);
-  on a disturbed track (joints the lift did not use, or 2D noise) the prior's part is also
-  followed by a constant-velocity (alpha-beta) filter whose gain falls to
+  on a disturbed track (joints the lift did not use, or 2D noise with ``noise_smoothing``) the
+  prior's part is also followed by a constant-velocity (alpha-beta) filter whose gain falls to
   ``LifterOptions.disturbed_smoothing_gain``. Only the output: the track's warm start, limb and
   noise estimates and gate keep the fit's own pose, so no smoothing feeds back into the next
   frame's fit. Every step reads only this and earlier frames (no look-ahead: the node and the
