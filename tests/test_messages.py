@@ -83,7 +83,17 @@ def test_place_in_camera_recovers_metric_position() -> None:
     res = fake_result(rot, f * leg / centroid[2], t)
     joints = place_in_camera(res, leg, (fx, fy), (cx, cy), default_distance_m=3.0)
     np.testing.assert_allclose(joints.mean(axis=0), centroid, atol=tol.ROUND_OFF)
-    np.testing.assert_allclose(joints - joints.mean(axis=0), res.pose_camera * leg, atol=tol.ROUND_OFF)
+    # the pose seen along the ray to its centroid, turned into the camera frame
+    from pose_lifter.core.placement import ray_rotation
+
+    turn = ray_rotation(centroid)
+    ray = centroid / np.linalg.norm(centroid)
+    np.testing.assert_allclose(turn @ [0.0, 0.0, 1.0], ray, atol=tol.ROUND_OFF)
+    np.testing.assert_allclose(turn @ turn.T, np.eye(3), atol=tol.ROUND_OFF)
+    assert np.linalg.det(turn) == pytest.approx(1.0, abs=tol.ROUND_OFF)
+    np.testing.assert_allclose(joints - joints.mean(axis=0), res.pose_camera @ turn.T * leg,
+                               atol=tol.ROUND_OFF)
+    np.testing.assert_allclose(ray_rotation(np.array([0.0, 0.0, 4.0])), np.eye(3), atol=tol.ROUND_OFF)
     # no principal point: on the optical axis at the same depth
     np.testing.assert_allclose(place_in_camera(res, leg, (fx, fy), None, 3.0).mean(axis=0), [0, 0, 5.0],
                                atol=tol.ROUND_OFF)

@@ -325,9 +325,9 @@ def test_noisy_2d_weighs_the_fit_down_only_with_noise_smoothing(
 
 
 def test_the_perspective_correction_gives_the_weak_perspective_image_of_the_person() -> None:
-    """perspective_corrected: with the person's true depths and scale, a pinhole image becomes the
-    weak-perspective image about the centroid's depth (exact); a distant person's image is left
-    as it was (perspective and weak perspective agree)."""
+    """perspective_corrected: with the person's true depths and scale, a pinhole image of a person
+    on the optical axis becomes the weak-perspective image about the centroid's depth (exact); a
+    distant person's image is left as it was (perspective and weak perspective agree)."""
     from pose_lifter.core.synthetic import synthetic_poses
     from pose_lifter.core.tracking import perspective_corrected
 
@@ -335,12 +335,12 @@ def test_the_perspective_correction_gives_the_weak_perspective_image_of_the_pers
     pose = pose - pose.mean(axis=0)
     leg_m, f, c = 0.43, 800.0, np.array([300.0, 250.0])
     intr = ((f, f), (float(c[0]), float(c[1])))
-    for z0, shift in ((2.0, np.array([0.4, -0.2])), (60.0, np.array([3.0, 1.0]))):
-        cam = pose * leg_m + np.array([shift[0], shift[1], z0])  # metres, camera frame
+    for z0 in (1.5, 60.0):
+        cam = pose * leg_m + np.array([0.0, 0.0, z0])  # metres, camera frame, centroid on the axis
         pinhole = f * cam[:, :2] / cam[:, 2:] + c
         weak = f * cam[:, :2] / z0 + c
         scale = f * leg_m / z0  # pixels per leg unit at the centroid's depth
-        out = perspective_corrected(pinhole, intr, pose[:, 2], scale)
+        out = perspective_corrected(pinhole, intr, pose[:, 2], scale, c)
         np.testing.assert_allclose(out, weak, rtol=0, atol=tol.ROUND_OFF_ACCUMULATED)
         moved = np.abs(pinhole - weak).max()
         assert moved > 5.0 if z0 < 10 else moved < 0.5  # pixels: near, the correction matters

@@ -18,7 +18,8 @@ if TYPE_CHECKING:
 
     from pose_lifter.core.results import LiftResult
 
-__all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "place_in_camera"]
+__all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "place_in_camera",
+           "ray_rotation"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -41,7 +42,9 @@ def place_in_camera(
     ``leg_length_m``. The weak-perspective scale fixes the depth of the centroid when the
     focal length is known: ``Z = f * leg_length_m / scale`` (``f`` = mean of ``fx, fy``), and
     the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
-    ``Y = (t_y - c_y) Z / f_y``. Without camera intrinsics the centroid is put at
+    ``Y = (t_y - c_y) Z / f_y``; the pose is then turned from the ray to its centroid into the
+    camera frame (:func:`ray_rotation`: a weak-perspective camera sees a person off the optical
+    axis along that ray). Without camera intrinsics the centroid is put at
     ``(0, 0, default_distance_m)`` (defaults: :data:`DEFAULT_LEG_LENGTH_M`,
     :data:`DEFAULT_DISTANCE_M`). The lift is trusted to be finite (the core checks it); the
     node checks what it publishes once, after this.
@@ -96,4 +99,21 @@ def place_in_camera(
             x = (float(t[0]) - float(principal_point[0])) * z / fx
             y = (float(t[1]) - float(principal_point[1])) * z / fy
         centroid = np.array([x, y, z])
+        if principal_point is not None:
+            local = local @ ray_rotation(centroid).T
     return np.asarray(local + centroid)
+
+
+def ray_rotation(point: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The smallest rotation (3, 3) taking the optical axis (0, 0, 1) onto the ray to ``point``
+    (3,; camera frame, in front of the camera): Rodrigues' formula about ``(0, 0, 1) x d``."""
+    import numpy as np
+
+    d = np.asarray(point, dtype=np.float64) / float(np.linalg.norm(point))
+    axis = np.array([-d[1], d[0], 0.0])
+    s, c = float(np.linalg.norm(axis)), float(d[2])
+    if s < 1e-12:
+        return np.eye(3)
+    k = axis / s
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.asarray(np.eye(3) + s * kx + (1.0 - c) * (kx @ kx))

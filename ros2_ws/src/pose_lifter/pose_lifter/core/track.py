@@ -132,9 +132,10 @@ class Track:
     #: the fraction of joints the lift did not use, per frame (the output smoothing's disturbance)
     unused_share: deque[float] = field(default_factory=lambda: deque(maxlen=DISTURBANCE_FRAMES))
     smoother: CausalSmoother | None = None
-    #: the last lift's depths (12,; camera frame, centred, leg units) and camera scale (input
-    #: units per leg unit): the perspective correction of the next frame
-    depths: tuple[NDArray[np.float64], float] | None = None
+    #: the last lift's depths (12,; camera frame, centred, leg units), camera scale (input units
+    #: per leg unit) and the image position of its centroid (2,): the perspective correction of
+    #: the next frame
+    depths: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None
     measurement: MeasurementUpdate | None = None
     #: the medians of ``noise`` and ``objectives`` while they are unchanged (None: not computed)
     _noise_median: float | None = None

@@ -91,21 +91,26 @@ CameraIntrinsics = tuple[tuple[float, float], tuple[float, float]]
 
 
 def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrinsics,
-                          depths: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
-    """The 2D (12, 2, pixels) a weak-perspective camera would see of a person a pinhole camera
-    ``intrinsics`` ``((fx, fy), (cx, cy))`` filmed as ``points``: ``c + (x_j - c) Z_j / Z_0`` with
+                          depths: NDArray[np.float64], scale: float, centre: NDArray[np.float64]
+                          ) -> NDArray[np.float64]:
+    """The 2D (12, 2, pixels) a weak-perspective camera looking at the person would see of a person
+    the pinhole camera ``intrinsics`` ``((fx, fy), (cx, cy))`` filmed as ``points``:
+    ``m + (x_j - m) Z_j / Z_0`` about the person's image centre ``m`` (``centre``, (2,)), with
     ``Z_j / Z_0 = 1 + z_j s / f`` the depth of joint ``j`` over the centroid's, from the person's
     depths ``depths`` (12,; centred camera frame, leg units: the track's last pose) and the
     weak-perspective ``scale`` ``s`` (pixels per leg unit; ``Z_0 = f L / s`` for a leg of ``L``
-    metres, so ``L`` cancels). Exact for a pinhole camera when the depths are right; a joint
-    nearer the camera than the centroid is moved toward the principal point."""
-    (fx, fy), (cx, cy) = intrinsics
+    metres, so ``L`` cancels). Exact for a pinhole camera and a person on the optical axis when the
+    depths are right; a person off the axis is seen along its own ray, which the placement turns
+    into the camera frame (:func:`pose_lifter.core.placement.place_in_camera`): correcting about
+    the principal point instead would move each joint by the depths' error times its distance from
+    the axis (docs/accuracy.md)."""
+    (fx, fy), _ = intrinsics
     ratio = 1.0 + np.asarray(depths, dtype=np.float64) * float(scale) / (0.5 * (float(fx) + float(fy)))
-    if not (np.isfinite(ratio).all() and (ratio > 0.2).all()):
+    m = np.asarray(centre, dtype=np.float64)
+    if not (np.isfinite(ratio).all() and (ratio > 0.2).all() and np.isfinite(m).all()):
         return points
     x = np.asarray(points, dtype=np.float64)
-    c = np.array([float(cx), float(cy)])
-    return np.asarray(c + (x - c) * ratio[:, None])
+    return np.asarray(m + (x - m) * ratio[:, None])
 
 
 def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
@@ -389,7 +394,8 @@ class TrackPolicy:
         if track is None:
             track = self._tracks[track_id] = Track(None, stamp_ns)
         track.warm = result.warm_start()
-        track.depths = (np.array(result.pose_camera[:, 2]), float(result.camera.scale))
+        cam = result.camera
+        track.depths = (np.array(result.pose_camera[:, 2]), float(cam.scale), np.array(cam.translation))
         track.last_stamp_ns = stamp_ns
         used = result.weights > 0
         track.unused = np.where(used, 0, track.unused + 1)
@@ -398,7 +404,6 @@ class TrackPolicy:
             track.add_limbs(self.lifter.limb_proportions_of(result.prior_pose))
         x = np.array(points, dtype=np.float64)  # the track's own copy
         track.history.append((stamp_ns, x, used))
-        cam = result.camera
         # where each joint was: its detection when the lift used it, else the fit's projection
         track.fits.append((stamp_ns, np.where(used[:, None], x, cam.project(result.pose)), float(cam.scale)))
         opts = self.lifter.options
