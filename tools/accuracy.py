@@ -63,11 +63,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial, split_trials
-from pose_lifter.mocap.detector_model import REALISTIC, detect
+from pose_lifter.mocap.detector_model import REALISTIC, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
@@ -89,9 +89,6 @@ CONDITIONS: dict[str, dict[str, float]] = {
     "detector6m": {"detector": 1.0, "distance": 6.0},
     "detector3m": {"detector": 1.0, "distance": 3.0},
 }
-#: Left/right joint pairs of the arms and the legs (the 2D labels a detector swaps).
-_ARMS = tuple(zip(JOINTS_LEFT[:3], JOINTS_RIGHT[:3], strict=True))
-_LEGS = tuple(zip(JOINTS_LEFT[3:], JOINTS_RIGHT[3:], strict=True))
 METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "learned-offline", "hybrid",
            "hybrid-offline", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
@@ -165,10 +162,7 @@ def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
     px, conf = corrupt_2d(px, FOCAL * leg, spec.get("noise", 0.0),
                           spec.get("outliers", 0.0), spec.get("missing", 0.0), rng)
     if spec.get("swap", 0.0) > 0:  # a detector's left/right label swaps (arms, legs apart)
-        for pairs in (_ARMS, _LEGS):
-            hit = rng.random(n) < spec["swap"]
-            a, b = [p[0] for p in pairs], [p[1] for p in pairs]
-            px[np.ix_(hit, a + b)] = px[np.ix_(hit, b + a)]
+        swap_labels(px, conf, spec["swap"], rng)
     if spec.get("cut", 0.0) > 0:  # the lower body out of the image
         px[:, [7, 8, 10, 11]] = 0.0
         conf[:, [7, 8, 10, 11]] = 0.0

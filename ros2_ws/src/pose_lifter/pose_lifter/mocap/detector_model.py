@@ -40,7 +40,8 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
-__all__ = ["COCO_SIGMAS", "REALISTIC", "DetectorModel", "autoregressive", "detect", "joint_spreads"]
+__all__ = ["COCO_SIGMAS", "REALISTIC", "DetectorModel", "autoregressive", "detect", "joint_spreads",
+           "swap_labels"]
 
 #: The COCO keypoint sigmas (Ronchi & Perona 2017, the OKS constants) of the 12 model joints:
 #: shoulders 0.079, elbows 0.072, wrists 0.062, hips 0.107, knees 0.087, ankles 0.089.
@@ -110,6 +111,19 @@ def autoregressive(white: NDArray[np.float64], correlation: float, axis: int) ->
     return np.moveaxis(out, 0, axis)
 
 
+def swap_labels(points: NDArray[np.float64], confidence: NDArray[np.float64], rate: float,
+                rng: np.random.Generator) -> None:
+    """A detector's left/right label swaps, in place: on ``rate`` of the frames (T, 12, ...) the
+    arms' labels are exchanged, and independently on ``rate`` of them the legs', each joint's
+    confidence going with its coordinates."""
+    n = points.shape[0]
+    for left, right in ((JOINTS_LEFT[:3], JOINTS_RIGHT[:3]), (JOINTS_LEFT[3:], JOINTS_RIGHT[3:])):
+        sw = np.flatnonzero(rng.random(n) < rate)
+        ab, ba = np.array(left + right), np.array(right + left)
+        points[np.ix_(sw, ab)] = points[np.ix_(sw, ba)]
+        confidence[np.ix_(sw, ab)] = confidence[np.ix_(sw, ba)]
+
+
 def _bursts(n: int, rate: float, rng: np.random.Generator) -> NDArray[np.bool_]:
     """(n,) frames covered by bursts of DROP_FRAMES frames, starting on ``rate`` of the frames."""
     on = np.zeros(n, dtype=bool)
@@ -162,12 +176,7 @@ def detect(clean: NDArray[np.float64], leg_px: NDArray[np.float64], model: Detec
     disp = np.stack([np.cos(angle), np.sin(angle)], axis=-1) * mag[..., None]
     pts = np.where(hit[..., None], clean + disp, pts)
     conf = np.where(hit, rng.uniform(0.5, 1.0, (n, N_JOINTS)), conf)
-    # left/right label swaps (arms and legs apart), confidence kept with the coordinates
-    for left, right in ((JOINTS_LEFT[:3], JOINTS_RIGHT[:3]), (JOINTS_LEFT[3:], JOINTS_RIGHT[3:])):
-        sw = np.flatnonzero(rng.random(n) < model.swap)
-        ab, ba = np.array(left + right), np.array(right + left)
-        pts[np.ix_(sw, ab)] = pts[np.ix_(sw, ba)]
-        conf[np.ix_(sw, ab)] = conf[np.ix_(sw, ba)]
+    swap_labels(pts, conf, model.swap, rng)
     # lost joints: misses, dropped limbs, the raised lower edge, the image border
     lost = rng.random((n, N_JOINTS)) < model.missing
     for limb in (_ARM_L, _ARM_R, _LEG_L, _LEG_R):
