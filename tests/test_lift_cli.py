@@ -6,6 +6,7 @@ independent ``mcap`` reader (tests/mcap_check.py)."""
 from __future__ import annotations
 
 import dataclasses
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -186,6 +187,9 @@ def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.C
     assert len(truth) == 6
     for fmt in ("csv", "npz", "json"):
         assert cli.main(["export", str(lifted), "--out", str(tmp_path / f"e.{fmt}")]) == 0
+        mask = os.umask(0)
+        os.umask(mask)
+        assert (tmp_path / f"e.{fmt}").stat().st_mode & 0o777 == 0o666 & ~mask  # a new file's mode
     data = np.load(tmp_path / "e.npz", allow_pickle=False)
     assert data["joints"].shape == (6, 12, 3) and str(data["joint_names"][0]) == "left_shoulder"
     with open(tmp_path / "e.csv", newline="") as f:
@@ -265,3 +269,27 @@ def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
         assert len(a.skeletons[0].observed) == 0
         np.testing.assert_array_equal([[p.x, p.y, p.z] for p in a.skeletons[0].joints],
                                       [[p.x, p.y, p.z] for p in b.skeletons[0].joints])
+
+
+def test_the_command_line_answers_a_bare_call_a_version_request_and_a_closed_reader(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bare `pose-lifter` prints its help (exit 0); `--version` the package's version;
+    `evaluate` of a bag without estimates says it measured the floors only; a reader that goes away
+    (`pose-lifter evaluate X | head -1`) ends the command quietly, as SIGPIPE would (141)."""
+    assert cli.main([]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: pose-lifter") and "evaluate" in out
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.startswith("pose-lifter ")
+    bag = str(REPO / "bags" / "walk_clean.mcap")
+    assert cli.main(["evaluate", bag]) == 0
+    assert "only the floors" in capsys.readouterr().err
+    lifted = tmp_path / "l.mcap"
+    assert lift(bag, "--out", str(lifted), "--max-messages", "2") == 0
+    proc = subprocess.Popen([sys.executable, "-m", "pose_lifter.cli", "evaluate", str(lifted), "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader is gone before the command writes
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 141 and "Broken pipe" not in err and "Traceback" not in err, err

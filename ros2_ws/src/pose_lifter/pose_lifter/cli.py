@@ -314,6 +314,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     ev = evaluate_bag(args.bag, PoseBases.load(args.bases))
     print(format_evaluation(ev, as_json=args.json))
+    if ev.n_estimates == 0:  # an unlifted bag: its floors only
+        print(f"pose-lifter evaluate: {args.bag} has no estimates: only the floors of its 2D are measured; "
+              "lift it first (pose-lifter lift) to evaluate a lifter", file=sys.stderr)
+    elif ev.n_matched == 0:  # estimates of other stamps or tracks: nothing to compare
+        print(f"pose-lifter evaluate: error: none of the {ev.n_estimates} estimates of {args.bag} matches "
+              "a ground-truth skeleton (stamp and track)", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -368,6 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pose-lifter", description="Offline commands: learn bases, make bags, lift bags, evaluate, demo."
     )
+    parser.add_argument("--version", action="version", version=f"pose-lifter {_version()}")
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     p = sub.add_parser("learn-bases", help="learn pose bases from the paper's CMU training split")
@@ -515,11 +523,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     return rc
 
 
+def _version() -> str:
+    """The installed package's version (``setup.py``), or ``unknown`` when it is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pose_lifter")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def _main(argv: Sequence[str] | None) -> int:
     from pose_lifter.core._threads import one_blas_thread
 
     one_blas_thread()  # small matrices: BLAS threads only contend (worker processes inherit it)
     parser = build_parser()
+    if not (sys.argv[1:] if argv is None else list(argv)):  # a bare `pose-lifter`: what it can do
+        parser.print_help()
+        return 0
     args = parser.parse_args(argv)
     if _out_is_a_directory(args):
         print(f"pose-lifter {args.cmd}: error: --out {args.out} is a directory; name the output file",
@@ -527,10 +548,16 @@ def _main(argv: Sequence[str] | None) -> int:
         return 2
     args.command = _command_line(argv)
     try:
-        return int(args.func(args))
+        rc = int(args.func(args))
+        sys.stdout.flush()  # here, where a reader that went away is answered (below)
+        return rc
     except KeyboardInterrupt:
         print(f"pose-lifter {args.cmd}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`pose-lifter evaluate X | head -1`): as SIGPIPE
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # the interpreter's final flush has nowhere to fail
+        return 141
     except Exception as exc:
         if os.environ.get("POSE_LIFTER_DEBUG"):
             raise

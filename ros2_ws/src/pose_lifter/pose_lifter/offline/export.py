@@ -103,6 +103,9 @@ def export_skeletons(bag: str | Path, out: str | Path, topic: str = TOPIC_SKELET
         handle: IO[Any]
         with (os.fdopen(fd, "wb") if path.suffix == ".npz" else os.fdopen(fd, "w", newline="")) as handle:
             _write(path, frames, handle)
+        mask = os.umask(0)  # mkstemp's file is private (0600); the export gets a new file's mode
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
