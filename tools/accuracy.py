@@ -67,7 +67,7 @@ from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial, split_trials
-from pose_lifter.mocap.detector_model import REALISTIC, detect, swap_labels
+from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
@@ -164,8 +164,8 @@ def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
     if spec.get("swap", 0.0) > 0:  # a detector's left/right label swaps (arms, legs apart)
         swap_labels(px, conf, spec["swap"], rng)
     if spec.get("cut", 0.0) > 0:  # the lower body out of the image
-        px[:, [7, 8, 10, 11]] = 0.0
-        conf[:, [7, 8, 10, 11]] = 0.0
+        px[:, LOWER_LEG_JOINTS] = 0.0
+        conf[:, LOWER_LEG_JOINTS] = 0.0
     return px, conf, world, cam_pose
 
 

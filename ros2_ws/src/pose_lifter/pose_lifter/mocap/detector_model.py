@@ -38,10 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
+from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMB_NAMES, LIMBS, N_JOINTS
 
-__all__ = ["COCO_SIGMAS", "REALISTIC", "DetectorModel", "autoregressive", "detect", "joint_spreads",
-           "swap_labels"]
+__all__ = ["COCO_SIGMAS", "LOWER_LEG_JOINTS", "REALISTIC", "DetectorModel", "autoregressive", "detect",
+           "joint_spreads", "swap_labels"]
 
 #: The COCO keypoint sigmas (Ronchi & Perona 2017, the OKS constants) of the 12 model joints:
 #: shoulders 0.079, elbows 0.072, wrists 0.062, hips 0.107, knees 0.087, ankles 0.089.
@@ -58,9 +58,13 @@ CONFIDENCE_MIN = 0.15
 CONFIDENCE_LOST = 0.05
 #: Frames a dropped limb or a raised lower edge lasts (uniform, inclusive).
 DROP_FRAMES = (3, 15)
-_ARM_L, _ARM_R = (1, 2), (4, 5)
-_LEG_L, _LEG_R = (7, 8), (10, 11)
-_LOWER = np.array([7, 8, 10, 11])
+#: The joints a dropped limb takes: elbow and wrist, or knee and ankle (the forearms' and shins'
+#: joints, :data:`pose_lifter.core.skeleton.LIMBS`).
+_DROPPED = tuple(LIMBS[i] for i, name in enumerate(LIMB_NAMES) if name.endswith("lower_arm")
+                 or name.endswith("lower_leg"))
+#: Knees and ankles (the shins' joints): what a lower image edge above the knees hides.
+LOWER_LEG_JOINTS: NDArray[np.int64] = np.array(
+    [j for i, name in enumerate(LIMB_NAMES) if name.endswith("lower_leg") for j in LIMBS[i]])
 
 
 @dataclass(frozen=True)
@@ -179,9 +183,9 @@ def detect(clean: NDArray[np.float64], leg_px: NDArray[np.float64], model: Detec
     swap_labels(pts, conf, model.swap, rng)
     # lost joints: misses, dropped limbs, the raised lower edge, the image border
     lost = rng.random((n, N_JOINTS)) < model.missing
-    for limb in (_ARM_L, _ARM_R, _LEG_L, _LEG_R):
-        lost[np.ix_(_bursts(n, model.limb_drop / 4.0, rng), np.array(limb))] = True
-    lost[np.ix_(_bursts(n, model.lower_cut, rng), _LOWER)] = True
+    for limb in _DROPPED:
+        lost[np.ix_(_bursts(n, model.limb_drop / len(_DROPPED), rng), np.array(limb))] = True
+    lost[np.ix_(_bursts(n, model.lower_cut, rng), LOWER_LEG_JOINTS)] = True
     guess = clean + rng.normal(0.0, 0.5, (n, N_JOINTS, 2)) * leg[:, None, None]
     pts = np.where((lost & ~hit)[..., None], guess, pts)
     if image_size is not None:

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.metrics import p_mpjpe
 from pose_lifter.core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
 from pose_lifter.core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
-from pose_lifter.mocap.detector_model import autoregressive, joint_spreads
+from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, autoregressive, joint_spreads
 from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import limb_scale_factors, scale_limbs, view_rotations
@@ -88,8 +88,7 @@ class Augmentation:
 GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0.5, p_lower_cut=0.1)
 
 
-#: Knees and ankles; hips (:data:`pose_lifter.core.skeleton.JOINT_NAMES`).
-_LOWER_LEGS = np.array([7, 8, 10, 11])
+#: Hips (:data:`pose_lifter.core.skeleton.JOINT_NAMES`).
 _HIPS = np.array([6, 9])
 
 
@@ -155,7 +154,7 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     if aug.p_lower_cut > 0:
         cut = rng.random(n) < aug.p_lower_cut
         hips = cut & (rng.random(n) < 1.0 / 3.0)
-        vis[np.ix_(cut, np.arange(window), _LOWER_LEGS)] = False
+        vis[np.ix_(cut, np.arange(window), LOWER_LEG_JOINTS)] = False
         vis[np.ix_(hips, np.arange(window), _HIPS)] = False
     # keep at least min_visible joints in the current frame
     short = vis[:, -1].sum(axis=1) < aug.min_visible
