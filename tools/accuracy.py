@@ -63,6 +63,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
+from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
@@ -217,8 +218,9 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     warm = None
                     continue
                 preds[i] = r.pose_camera * leg_m[i]
-                if perspective:  # placement with the focal length and the person's true leg
-                    depth[i] = 100.0 * abs(FOCAL * leg_m[i] / float(r.camera.scale) - dist_m) / dist_m
+                if perspective:  # the node's placement with the focal length and the person's true leg
+                    z = place_in_camera(r, float(leg_m[i]), (FOCAL, FOCAL), None, dist_m).mean(axis=0)[2]
+                    depth[i] = 100.0 * abs(z - dist_m) / dist_m
             if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))
                 preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
