@@ -241,12 +241,21 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) ->
 
 
 def _is_collection(args: argparse.Namespace) -> bool:
-    """Several inputs, a directory or a glob pattern: a collection, lifted into a directory."""
+    """Several inputs, a directory of bags or a glob pattern: a collection, lifted into a
+    directory. A rosbag2 directory (or its ``metadata.yaml``) is one bag: lifted into ``--out``
+    when that names a ``.mcap`` file, else as a collection of one into the directory ``--out``."""
+    from pose_lifter.offline.bags import bag_path, is_rosbag2_dir
     from pose_lifter.offline.collection import is_pattern
 
     inputs = list(args.input)
-    return len(inputs) > 1 or any(Path(i).is_dir() or (is_pattern(i) and not Path(i).exists())
-                                  for i in inputs)
+    if len(inputs) > 1:
+        return True
+    (text,) = inputs
+    if is_pattern(text) and not Path(text).exists():
+        return True
+    if is_rosbag2_dir(bag_path(text)):
+        return Path(args.out).suffix != ".mcap"
+    return Path(text).is_dir()
 
 
 def _cmd_lift(args: argparse.Namespace) -> int:
@@ -422,11 +431,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("lift", help="lift every /keypoints_2d message of a bag, or of a collection of bags")
     p.add_argument("input", nargs="+",
-                   help="input .mcap; or several, directories (searched recursively) and glob patterns "
-                   "(a collection, lifted into the directory --out)")
+                   help="input bag: a .mcap file or a rosbag2 directory (a folder with metadata.yaml, "
+                   "as ros2 bag record writes it; its split files are one recording; the directory or "
+                   "its metadata.yaml); or several, directories of bags (searched recursively) and "
+                   "glob patterns (a collection, lifted into the directory --out)")
     p.add_argument("--out", required=True,
-                   help="output .mcap (input topics + /skeletons_3d + markers); for a collection a "
-                   "directory: one output per input with the inputs' relative layout, a manifest "
+                   help="output .mcap (input topics + /skeletons_3d + markers); for a collection (or "
+                   "one rosbag2 directory and --out not a .mcap) a directory: one output per input "
+                   "(a rosbag2 directory NAME: NAME.mcap) with the inputs' relative layout, a manifest "
                    "(pose_lifter_manifest.json) that lets a stopped run resume")
     _add_lifter_options(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
@@ -462,7 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
                                   "mode": "hybrid"})
 
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
-    p.add_argument("bag", help="a lifted .mcap")
+    p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
     p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
     p.add_argument("--topic", default=TOPIC_SKELETONS,
                    help=f"Skeleton3DArray topic (default {TOPIC_SKELETONS})")
@@ -470,7 +482,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("play", help="publish a bag's topics into the live ROS graph at the bag's rate")
-    p.add_argument("bag", help="input .mcap")
+    p.add_argument("bag", help="input bag: .mcap file or rosbag2 directory")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
     p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1: real time)")
     p.add_argument("--wait", type=float, default=0.0,
@@ -478,7 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_play)
 
     p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
-    p.add_argument("bag", help="a lifted .mcap")
+    p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
     p.add_argument("--bases", default=None, help="bases for the mean-pose floor (default: packaged)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_cmd_evaluate)

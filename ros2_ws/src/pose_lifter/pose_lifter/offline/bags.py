@@ -4,32 +4,50 @@ Messages are (de)serialised with the type store of :mod:`pose_lifter.messages.ty
 ``pose_lifter_msgs`` types registered from their ``.msg`` text, no build needed). Bags are
 written as single ``.mcap`` files (rosbag2 storage, version 9 metadata is embedded in the MCAP
 file; ``ros2 bag play file.mcap``, Foxglove and RViz read them).
+
+A bag read is a single ``.mcap`` (or ``.db3``) file or a rosbag2 directory, what ``ros2 bag
+record`` writes: a folder holding ``metadata.yaml`` and the storage files it lists, several when
+the recording was split (``--max-bag-duration``, ``--max-bag-size``). A directory is one bag, its
+files one recording read as one stream in time order; naming its ``metadata.yaml`` names the
+directory (:func:`bag_path`).
 """
 
 from __future__ import annotations
 
+import hashlib
+import heapq
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Final
 
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.messages.typestore import MSG_PACKAGE, pose_lifter_typestore, upgrade_message
 
 __all__ = [
+    "METADATA_NAME",
     "BagError",
     "BagMessage",
     "BagReadError",
     "BagWriter",
     "RawMessage",
+    "bag_files",
+    "bag_path",
+    "bag_sha256",
+    "bag_stat",
     "bag_topics",
     "check_output",
+    "is_rosbag2_dir",
     "read_messages",
     "read_raw",
 ]
+
+#: The file that makes a directory a rosbag2 recording (one bag).
+METADATA_NAME: Final[str] = "metadata.yaml"
 
 
 class BagError(PoseLifterError, RuntimeError):
@@ -181,16 +199,123 @@ def _definition(conn: Any) -> tuple[str, str]:
     return text, str(store.hash_rihs01(conn.msgtype))
 
 
+def is_rosbag2_dir(path: str | Path) -> bool:
+    """``path`` is a rosbag2 directory: a folder holding ``metadata.yaml``."""
+    p = Path(path)
+    return p.is_dir() and (p / METADATA_NAME).is_file()
+
+
+def bag_path(path: str | Path) -> Path:
+    """The bag a path names: a rosbag2 directory's ``metadata.yaml`` names its directory; any
+    other path names itself."""
+    p = Path(path)
+    return p.parent if p.name == METADATA_NAME and p.is_file() else p
+
+
+def bag_files(path: str | Path) -> list[Path]:
+    """The files a bag is made of, sorted: the file itself, or every regular file of a rosbag2
+    directory (``metadata.yaml`` and its storage files; not recursive)."""
+    p = bag_path(path)
+    if p.is_dir():
+        return sorted(x for x in p.iterdir() if x.is_file())
+    return [p]
+
+
+def bag_stat(path: str | Path) -> tuple[int, int]:
+    """(bytes, latest modification time in ns) of a bag's files (:func:`bag_files`)."""
+    stats = [f.stat() for f in bag_files(path)]
+    return sum(st.st_size for st in stats), max((st.st_mtime_ns for st in stats), default=0)
+
+
+def bag_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a bag file's bytes; of a rosbag2 directory, over the name and the SHA-256
+    of each of its files (:func:`bag_files`)."""
+    from pose_lifter.offline.settings import file_sha256
+
+    p = bag_path(path)
+    if not p.is_dir():
+        return file_sha256(p)
+    h = hashlib.sha256()
+    for f in bag_files(p):
+        h.update(f"{f.name}\0{file_sha256(f)}\n".encode())
+    return h.hexdigest()
+
+
+def _existing(path: str | Path) -> Path:
+    """The bag ``path`` names (:func:`bag_path`), refused when missing or a directory that is not a
+    rosbag2 recording."""
+    p = bag_path(path)
+    if not p.exists():
+        raise BagError(f"bag not found: {p}")
+    if p.is_dir() and not (p / METADATA_NAME).is_file():
+        raise BagError(f"{p} is a directory without {METADATA_NAME}: not a rosbag2 recording")
+    return p
+
+
+def _reading_error(p: Path, exc: BaseException) -> BagReadError:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return BagReadError(f"cannot read {p}: {text}")
+
+
+@contextmanager
+def _open_reader(path: str | Path) -> Iterator[tuple[Path, Any]]:
+    """(the bag's path, an open rosbags ``AnyReader``); a bag that cannot be opened (truncated,
+    empty or foreign; a rosbag2 directory whose metadata is damaged or whose files are missing)
+    is a :class:`BagReadError`."""
+    from rosbags.highlevel import AnyReader
+
+    p = _existing(path)
+    try:
+        reader = AnyReader([p], default_typestore=pose_lifter_typestore())
+        reader.open()
+    except Exception as exc:
+        raise _reading_error(p, exc) from None
+    try:
+        yield p, reader
+    finally:
+        reader.close()
+
+
+class _OneFile:
+    """A rosbag2 directory reader seen through one of its storage files (what rosbags'
+    ``DirectoryReader.messages`` reads of it: the storages and the compression mode)."""
+
+    def __init__(self, whole: Any, storage: Any) -> None:
+        self.storages = [storage]
+        self.metadata = whole.metadata
+
+
+def _messages(p: Path, reader: Any, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
+    """(connection, stamp, raw) of ``conns`` in time order; a rosbag2 directory's files are merged
+    by stamp (rosbags reads them one after the other). A read that fails on the way (a damaged
+    file) is a :class:`BagReadError`."""
+    from rosbags.rosbag2.reader import DirectoryReader
+
+    storage = getattr(reader.readers[0], "storage", None) if len(reader.readers) == 1 else None
+    if isinstance(storage, DirectoryReader) and len(storage.storages) > 1:
+        wanted = conns or reader.connections
+        parts = [DirectoryReader.messages(_OneFile(storage, s), wanted)  # type: ignore[arg-type]
+                 for s in storage.storages]
+        stream: Iterator[tuple[Any, int, Any]] = heapq.merge(*parts, key=lambda x: int(x[1]))
+    else:
+        stream = iter(reader.messages(connections=conns))
+    while True:
+        try:
+            item = next(stream)
+        except StopIteration:
+            return
+        except Exception as exc:
+            raise _reading_error(p, exc) from None
+        yield item
+
+
 def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
     """Serialised messages of a bag in time order, one at a time (nothing is deserialised).
 
     Memory stays bounded whatever the bag size. The message definitions come from the bag
     itself, so topics of any type (e.g. ``sensor_msgs/msg/Image``, ``yolo_msgs/...``) are read.
     """
-    from rosbags.highlevel import AnyReader
-
-    p = _existing(path)
-    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+    with _open_reader(path) as (p, reader):
         wanted = set(topics) if topics is not None else None
         conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
         ours = pose_lifter_typestore()
@@ -199,7 +324,7 @@ def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
         # upgraded to today's definition, so one output bag never holds two layouts of one type
         stale = {c.id for c in conns if c.msgtype.startswith(f"{MSG_PACKAGE}/") and c.msgtype in ours.types
                  and meta[c.id][1] != ours.hash_rihs01(c.msgtype)}
-        for conn, stamp, raw in reader.messages(connections=conns):
+        for conn, stamp, raw in _messages(p, reader, conns):
             msgdef, rihs01 = meta[conn.id]
             data = bytes(raw)
             if conn.id in stale:
@@ -211,19 +336,9 @@ def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:
-    """Topic -> message type of a bag."""
-    from rosbags.highlevel import AnyReader
-
-    p = _existing(path)
-    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+    """Topic -> message type of a bag (:class:`BagReadError` when it cannot be opened)."""
+    with _open_reader(path) as (_, reader):
         return {c.topic: c.msgtype for c in reader.connections}
-
-
-def _existing(path: str | Path) -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise BagError(f"bag not found: {p}")
-    return p
 
 
 def read_messages(
@@ -236,6 +351,7 @@ def read_messages(
     Parameters
     ----------
     path : str or Path
+        A bag file, a rosbag2 directory or its ``metadata.yaml``.
     topics : iterable of str, optional
         Only these topics (all when None).
     decoders : mapping of message type -> callable, optional
@@ -243,10 +359,7 @@ def read_messages(
         used on a ROS 2 bag whose definition of the type is ours; a decoder returning None hands
         the message to rosbags.
     """
-    from rosbags.highlevel import AnyReader
-
-    p = _existing(path)
-    with AnyReader([p], default_typestore=pose_lifter_typestore()) as reader:
+    with _open_reader(path) as (p, reader):
         wanted = set(topics) if topics is not None else None
         conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
         if wanted is not None:
@@ -258,7 +371,7 @@ def read_messages(
             ours = pose_lifter_typestore()
             fast = {c.id: decoders[c.msgtype] for c in conns if c.msgtype in decoders
                     and reader.typestore.hash_rihs01(c.msgtype) == ours.hash_rihs01(c.msgtype)}
-        for conn, stamp, raw in reader.messages(connections=conns):
+        for conn, stamp, raw in _messages(p, reader, conns):
             decode = fast.get(conn.id)
             msg = decode(raw) if decode is not None else None
             if msg is None:

@@ -1,8 +1,11 @@
 """Lift a collection of bags: several inputs, one output directory, resumable, local or on Dask.
 
-``pose-lifter lift A.mcap B.mcap DIR/ 'runs/**/*.mcap' --out OUT/`` lifts every ``.mcap`` file
-named, found under a directory (recursively) or matched by a glob into ``OUT`` with the inputs'
-relative layout (paths relative to the inputs' common directory). Each bag is one task:
+``pose-lifter lift A.mcap B.mcap DIR/ 'runs/**/*.mcap' --out OUT/`` lifts every bag named, found
+under a directory (recursively) or matched by a glob into ``OUT`` with the inputs' relative layout
+(paths relative to the inputs' common directory). A bag is an ``.mcap`` file or a rosbag2
+directory (a folder holding ``metadata.yaml``, as ``ros2 bag record`` writes it: one recording,
+its split files read as one stream), lifted into ``<name>.mcap``; a directory without
+``metadata.yaml`` is searched. Each bag is one task:
 
 - **locally** (the default) on one process pool started once for the collection (fork: the
   lifter is built and its kernels loaded once in the parent, the workers inherit it); a bag is
@@ -19,12 +22,12 @@ A bag's output appears under its final name only when complete (:class:`pose_lif
 writes into a hidden ``.bagwriter-*`` directory beside it and renames the finished file), so a
 stopped run leaves only whole outputs. After each bag the manifest ``pose_lifter_manifest.json``
 in ``OUT`` is rewritten (atomically: a temporary file renamed over it): per output, the input's
-SHA-256, size and mtime, the digest of the settings, the package version and the counts. A bag
-whose entry matches (same settings digest, same version, the output present, the input unchanged:
-same size and mtime, or else the same SHA-256) is skipped; ``overwrite`` lifts it again. A bag
-that fails (a damaged file, no keypoints, ...) is recorded as failed and the rest are lifted; its
-error and traceback go to ``pose_lifter_errors.txt`` in ``OUT``. One run per output directory at
-a time.
+SHA-256, size and mtime (of a rosbag2 directory: over its files), the digest of the settings, the
+package version and the counts. A bag whose entry matches (same settings digest, same version,
+the output present, the input unchanged: same size and mtime, or else the same SHA-256) is
+skipped; ``overwrite`` lifts it again. A bag that fails (a damaged file, no keypoints, ...) is
+recorded as failed and the rest are lifted; its error and traceback go to
+``pose_lifter_errors.txt`` in ``OUT``. One run per output directory at a time.
 """
 
 from __future__ import annotations
@@ -45,8 +48,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from pose_lifter.offline.bags import BagError
-from pose_lifter.offline.settings import LiftSettings, file_sha256, package_version
+from pose_lifter.offline.bags import BagError, bag_path, bag_sha256, bag_stat, is_rosbag2_dir
+from pose_lifter.offline.settings import LiftSettings, package_version
 
 __all__ = [
     "ERRORS_NAME",
@@ -76,54 +79,104 @@ def is_pattern(text: str) -> bool:
 # --------------------------------------------------------------------------- inputs -> jobs
 
 
+def _recording_of(path: Path) -> Path | None:
+    """The rosbag2 directory a glob's match names or lies in (the directory, its
+    ``metadata.yaml``, a storage file beside it), if any."""
+    p = bag_path(path)
+    if is_rosbag2_dir(p):
+        return p
+    if p.is_file() and is_rosbag2_dir(p.parent):
+        return p.parent
+    return None
+
+
+def _bags_under(directory: Path) -> list[Path]:
+    """The bags under a directory that is not a recording itself: its ``.mcap`` files and its
+    rosbag2 directories (each one bag, never searched inside), recursively."""
+    found: list[Path] = []
+    stack = [directory]
+    seen: set[Path] = set()
+    while stack:
+        d = stack.pop()
+        if d.resolve() in seen:  # a directory reached twice (symbolic links)
+            continue
+        seen.add(d.resolve())
+        for x in sorted(d.iterdir()):
+            if x.is_dir():
+                if is_rosbag2_dir(x):
+                    found.append(x)
+                else:
+                    stack.append(x)
+            elif x.suffix == ".mcap" and x.is_file():
+                found.append(x)
+    return found
+
+
 def expand_inputs(inputs: Sequence[str], exclude: str | Path | None = None) -> tuple[list[Path], Path]:
-    """The ``.mcap`` files named by ``inputs`` (files, directories searched recursively, glob
-    patterns with ``**``), sorted and without duplicates, and the directory their outputs'
-    relative paths start from (the common directory of the directories named and of the other
-    files' parents). Files that directories and patterns find under ``exclude`` (the output
-    directory: an earlier run's outputs) are left out.
+    """The bags named by ``inputs``, sorted and without duplicates, and the directory their
+    outputs' relative paths start from (the common directory of the directories searched and of
+    the bags' parents).
+
+    A bag is an ``.mcap`` file or a rosbag2 directory (a folder holding ``metadata.yaml``: one
+    recording, however many files it has; its ``metadata.yaml`` names it too). ``inputs`` are
+    bags, directories searched recursively (a rosbag2 directory found is one bag, not searched
+    inside) and glob patterns with ``**`` (a match inside a rosbag2 directory names the
+    recording). Bags that directories and patterns find under ``exclude`` (the output directory:
+    an earlier run's outputs) are left out.
 
     Raises
     ------
     BagError
-        An input that does not exist, a pattern matching nothing, or no ``.mcap`` file at all.
+        An input that does not exist, a directory or a pattern with no bag, or no bag at all.
     """
     skip = Path(exclude).resolve() if exclude is not None else None
-    files: list[Path] = []
+
+    def kept(x: Path) -> bool:
+        return skip is None or not x.resolve().is_relative_to(skip)
+
+    bags: list[Path] = []
     roots: list[Path] = []
     for text in inputs:
-        p = Path(text)
+        p = bag_path(text)
         if is_pattern(text) and not p.exists():
-            matched = [Path(x) for x in glob.glob(text, recursive=True)]
-            found = [x for x in matched if x.is_file() and x.suffix == ".mcap"
-                     and (skip is None or not x.resolve().is_relative_to(skip))]
+            found: list[Path] = []
+            for x in (Path(m) for m in glob.glob(text, recursive=True)):
+                rec = _recording_of(x)
+                if rec is not None:
+                    found.append(rec)
+                elif x.is_file() and x.suffix == ".mcap":
+                    found.append(x)
+            found = [x for x in found if kept(x)]
             if not found:
-                raise BagError(f"no .mcap file matches {text!r}")
-            files += found
+                raise BagError(f"no .mcap file matches {text!r}, nor a rosbag2 directory")
+            bags += found
             roots += [x.resolve().parent for x in found]
+        elif is_rosbag2_dir(p):
+            bags.append(p)
+            roots.append(p.resolve().parent)
         elif p.is_dir():
-            found = sorted(x for x in p.rglob("*.mcap") if x.is_file())
-            if skip is not None:
-                found = [x for x in found if not x.resolve().is_relative_to(skip)]
+            found = [x for x in _bags_under(p) if kept(x)]
             if not found:
-                raise BagError(f"no .mcap file under {p}")
-            files += found
+                raise BagError(f"no .mcap file under {p}, nor a rosbag2 directory")
+            bags += found
             roots.append(p.resolve())
         elif p.is_file():
-            files.append(p)
+            bags.append(p)
             roots.append(p.resolve().parent)
         else:
             raise BagError(f"bag not found: {p}")
-    resolved = sorted({f.resolve() for f in files})
+    resolved = sorted({b.resolve() for b in bags})
     if not resolved:
-        raise BagError("no .mcap input")
+        raise BagError("no bag input")
     root = Path(os.path.commonpath([str(r) for r in roots]))
     return resolved, root
 
 
 @dataclass(frozen=True)
 class BagJob:
-    """One bag of a collection: absolute input and output paths and the manifest key."""
+    """One bag of a collection: absolute input (a file or a rosbag2 directory) and output paths,
+    the manifest key, and the input's size and modification time
+    (:func:`pose_lifter.offline.bags.bag_stat`)."""
 
     input: str
     output: str
@@ -133,18 +186,27 @@ class BagJob:
 
 
 def plan_jobs(inputs: Sequence[str], out_dir: str | Path) -> list[BagJob]:
-    """One :class:`BagJob` per input ``.mcap`` (see :func:`expand_inputs`), its output at the
-    same relative path under ``out_dir``; refuses an output that would replace its input."""
+    """One :class:`BagJob` per input bag (see :func:`expand_inputs`), its output at the same
+    relative path under ``out_dir`` (a rosbag2 directory ``rec/``: ``rec.mcap``); refuses an output
+    that would replace its input or lie inside an input recording, and two inputs with one output."""
     out = Path(out_dir).resolve()
     files, root = expand_inputs(inputs, exclude=out)
     jobs = []
+    seen: dict[Path, Path] = {}
     for f in files:
         rel = f.relative_to(root)
+        if f.is_dir() and rel.suffix != ".mcap":
+            rel = rel.with_name(f"{rel.name}.mcap")
         target = out / rel
         if target == f:
             raise BagError(f"the output of {f} would overwrite it: choose another --out")
-        st = f.stat()
-        jobs.append(BagJob(str(f), str(target), rel.as_posix(), st.st_size, st.st_mtime_ns))
+        if f.is_dir() and target.is_relative_to(f):
+            raise BagError(f"the output of {f} would be written inside the recording: choose another --out")
+        if target in seen:
+            raise BagError(f"{seen[target]} and {f} would both be lifted into {target}: rename one")
+        seen[target] = f
+        size, mtime_ns = bag_stat(f)
+        jobs.append(BagJob(str(f), str(target), rel.as_posix(), size, mtime_ns))
     return jobs
 
 
@@ -186,7 +248,7 @@ class Manifest:
             return False
         if e.get("input_size") == job.size and e.get("input_mtime_ns") == job.mtime_ns:
             return True
-        return bool(e.get("input_size") == job.size and e.get("input_sha256") == file_sha256(job.input))
+        return bool(e.get("input_size") == job.size and e.get("input_sha256") == bag_sha256(job.input))
 
     def forget(self, rel: str) -> None:
         self.data["bags"].pop(rel, None)
@@ -243,7 +305,7 @@ def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1)
     t0 = time.perf_counter()
     worker = f"{os.uname().nodename}:{os.getpid()}"
     try:
-        sha = file_sha256(job.input)
+        sha = bag_sha256(job.input)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         summary, _ = lift_bag(job.input, job.output, lifter, settings, progress=False, overwrite=True,
                               workers=workers)

@@ -128,7 +128,8 @@ def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str
     out : path
         Output directory (created).
     bag : path, optional
-        The bag to lift (default: the committed :data:`DEFAULT_DEMO_BAG`).
+        The bag to lift: an MCAP file or a rosbag2 directory (default: the committed
+        :data:`DEFAULT_DEMO_BAG`).
 
     Returns
     -------
@@ -137,11 +138,11 @@ def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str
     """
     from pose_lifter.messages import convert as m
     from pose_lifter.messages.names import TOPIC_GROUND_TRUTH
-    from pose_lifter.offline.bags import read_messages
+    from pose_lifter.offline.bags import bag_path, read_messages
     from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
     from pose_lifter.offline.lift import lift_bag
 
-    bag = Path(bag) if bag else find_demo_bag()
+    bag = bag_path(bag) if bag else find_demo_bag()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     lifter = make_lifter()

@@ -48,8 +48,10 @@ from pose_lifter.offline.bags import (
     BagError,
     BagReadError,
     BagWriter,
+    bag_path,
     bag_topics,
     check_output,
+    is_rosbag2_dir,
     read_messages,
     read_raw,
 )
@@ -236,13 +238,17 @@ def check_lift_inputs(
     Raises
     ------
     BagError
-        ``out_path`` does not end in ``.mcap``, exists (without ``overwrite``), is a directory or
-        has no parent directory; the input is missing or unreadable; ``topic`` is missing or not a
+        ``out_path`` does not end in ``.mcap``, exists (without ``overwrite``), is a directory,
+        has no parent directory, is the input or lies inside the input rosbag2 directory; the
+        input is missing or unreadable; ``topic`` is missing or not a
         liftable type; a kept topic is missing; ``camera_info_topic`` has another type.
     """
     out = check_output(out_path, (".mcap",), overwrite)
-    if Path(in_path).resolve() == out.resolve():
+    source = bag_path(in_path).resolve()
+    if source == out.resolve():
         raise BagError("the output would overwrite the input")
+    if is_rosbag2_dir(source) and out.resolve().is_relative_to(source):
+        raise BagError(f"the output {out} would be written inside the input recording {source}")
     try:
         topics = bag_topics(in_path)
     except BagError:
@@ -297,7 +303,8 @@ def lift_bag(
     Parameters
     ----------
     in_path, out_path : path
-        MCAP files.
+        The input bag: an MCAP file or a rosbag2 directory (or its ``metadata.yaml``), its split
+        files read as one stream, so tracks continue across them; the output: an MCAP file.
     lifter : Lifter
     settings : LiftSettings
         Read here besides what :func:`lift_messages` reads: ``every`` (lift only every
