@@ -121,13 +121,14 @@ accuracy: venv
 # ROS 2 build: colcon builds ros2_ws (pose_lifter_msgs + pose_lifter) against the ros-jazzy
 # wheels in the venv. CMAKE_PROJECT_INCLUDE works around the wheels' baked-in /opt/python
 # include dirs (tools/colcon_fix_python_include.cmake; a no-op on a normal Jazzy install).
-# tests/ros/msgs holds verbatim copies of yolo_msgs and hri_msgs, built for the adapter's graph tests.
+# ros2_ws/vendor holds hri_msgs and tf2_msgs (what the node publishes; no wheel exists for them) and
+# tests/ros/msgs yolo_msgs (the adapter's graph tests): both have a COLCON_IGNORE, so they are named here.
 # Afterwards: `source ros2_ws/install/setup.bash`, then run ros2_ws/install/pose_lifter/lib/pose_lifter/lifter.
 ros: venv
 	cd ros2_ws && PATH="$(VENV)/bin:$$PATH" VIRTUAL_ENV="$(VENV)" \
 	  AMENT_PREFIX_PATH="$(VENV)" CMAKE_PREFIX_PATH="$(VENV)" \
 	  $(VENV)/bin/colcon --log-level warning build --event-handlers console_direct- summary- \
-	  --base-paths src ../tests/ros/msgs \
+	  --base-paths src vendor/hri_msgs vendor/tf2_msgs ../tests/ros/msgs/yolo_msgs \
 	  --cmake-args -DCMAKE_PROJECT_INCLUDE=$(CURDIR)/tools/colcon_fix_python_include.cmake \
 	  -DPython3_EXECUTABLE=$(PY) -DBUILD_TESTING=OFF
 	@# compile the solver kernels into the installed package's cache now, so the first start of

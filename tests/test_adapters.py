@@ -1,6 +1,7 @@
 """Detector inputs: the layouts, the core converters (pose_lifter.core.detectors) and the ROS
 message adapters (pose_lifter.messages.adapters) on messages of the real yolo_msgs / hri_msgs
-definitions (tests/ros/msgs, registered with rosbags from their text and written to a bag)."""
+definitions (tests/ros/msgs/yolo_msgs and ros2_ws/vendor/hri_msgs, registered with rosbags from
+their text and written to a bag)."""
 
 from __future__ import annotations
 
@@ -188,7 +189,7 @@ def store() -> Any:
         typestore.register_msg_package(st, pkg, typestore.msg_dir())
     names = typestore.register_msg_package(st, "yolo_msgs", THIRD_PARTY / "yolo_msgs" / "msg")
     assert "yolo_msgs/msg/DetectionArray" in names
-    typestore.register_msg_package(st, "hri_msgs", THIRD_PARTY / "hri_msgs" / "msg")
+    typestore.register_msg_package(st, "hri_msgs", REPO / "ros2_ws" / "vendor" / "hri_msgs" / "msg")
     return st
 
 

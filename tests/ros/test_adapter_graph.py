@@ -2,7 +2,7 @@
 ``DetectionArray`` and REP-155 ``hri_msgs/Skeleton2D`` in, ``skeletons_3d`` out.
 
 The message classes are the ones ``make ros`` builds from verbatim copies of the upstream
-``.msg`` files (tests/ros/msgs).
+``.msg`` files (tests/ros/msgs/yolo_msgs, ros2_ws/vendor/hri_msgs).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ from typing import Final
 
 __all__ = [
     "CAMERA_INFO",
+    "LIFTER_NODE",
     "MARKER_ARRAY",
     "SKELETON2D_ARRAY",
     "SKELETON3D_ARRAY",
@@ -23,6 +24,8 @@ __all__ = [
     "YOLO_DETECTION_ARRAY",
 ]
 
+#: The lifter node's name (the adapter recognises the lifter's own REP-155 output by it).
+LIFTER_NODE: Final[str] = "pose_lifter"
 #: The 2D input (``Skeleton2DArray``).
 TOPIC_KEYPOINTS: Final[str] = "/keypoints_2d"
 #: The camera intrinsics (``CameraInfo``).

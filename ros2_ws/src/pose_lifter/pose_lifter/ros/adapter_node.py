@@ -27,7 +27,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from pose_lifter.core.errors import InvalidInputError, PoseLifterError
 from pose_lifter.core.layouts import get_layout
-from pose_lifter.messages import adapters
+from pose_lifter.messages import adapters, names
 from pose_lifter.messages import convert as messages
 from pose_lifter.ros.run import run_node
 
@@ -121,6 +121,9 @@ class AdapterNode(Node):
             body = adapters.hri_body_id(topic)
             if body is None or topic in self._subs or adapters.INPUT_TYPES["hri"] not in kinds:
                 continue
+            publishers = {info.node_name for info in self.get_publishers_info_by_topic(topic)}
+            if not publishers or publishers <= {names.LIFTER_NODE}:
+                continue  # the lifter's own REP-155 output (or not matched yet): never lifted again
             track_id = self._ids(body)
 
             def callback(msg: Any, track_id: int = track_id, body: str = body) -> None:

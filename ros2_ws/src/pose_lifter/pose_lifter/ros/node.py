@@ -15,6 +15,10 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
 4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
    frame), then ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
    :class:`node_markers.MarkerBook`), whose points are the ``Skeleton3D``'s own.
+5. With ``publish_hri`` (default), the tracked people as REP-155 bodies
+   (:class:`~pose_lifter.ros.hri.HriOutputs`): ``/humans/bodies/tracked``, per body
+   ``skeleton2d``, ``roi``, ``joint_states`` and the latched ``urdf``, and their frames on ``/tf``
+   (``body_<id>`` under the input's frame).
 
 Every input frame gets exactly one ``Skeleton3DArray`` answer with the same header. A skeleton
 that cannot be lifted (bad input or a failed solve) is left out of it with one rate-limited
@@ -48,9 +52,12 @@ from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lifter import compile_kernels
 from pose_lifter.messages import convert as messages
+from pose_lifter.messages import names
 from pose_lifter.messages.frame import FramePipeline, SkipSkeleton
+from pose_lifter.messages.hri import LiftedBody
 from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
+from pose_lifter.ros.hri import HriOutputs, message_classes
 from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
 from pose_lifter.ros.run import run_node
@@ -58,7 +65,7 @@ from pose_lifter.ros.stats import FrameCounter
 
 __all__ = ["NODE_NAME", "LifterNode", "StartupError", "main"]
 
-NODE_NAME: Final[str] = "pose_lifter"
+NODE_NAME: Final[str] = names.LIFTER_NODE
 MARKER_NS: Final[str] = "pose_lifter"
 STATS_LINE: Final[str] = "stats line"  # the statistics line's window in the node's counter
 
@@ -121,6 +128,8 @@ class LifterNode(Node):
             self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
         self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")),
                                                          self._counts)
+        self._hri = self._hri_outputs()
+        self._image_size: tuple[float, float] | None = None
         if not self._callbacks_added:
             self.add_on_set_parameters_callback(self._validate_parameters)
             self.add_post_set_parameters_callback(self._apply_parameters)
@@ -150,6 +159,19 @@ class LifterNode(Node):
             f"mode {options.mode}, weak perspective until camera_info arrives"
         )
 
+    def _hri_outputs(self) -> HriOutputs | None:
+        """The REP-155 publishers, or None (``publish_hri`` false, or a message package missing:
+        one warning, the other outputs go on)."""
+        if not self._param("publish_hri"):
+            return None
+        try:
+            types = message_classes()
+        except ImportError as err:
+            self.get_logger().warning(f"REP-155 bodies and /tf not published: {err} (publish_hri:=false "
+                                      "silences this)")
+            return None
+        return HriOutputs(self, types, self._settings.frame.track_timeout)
+
     def deactivate_lifter(self) -> None:
         """Unsubscribe (the solver and the publishers stay: activating again is immediate)."""
         for entity in (self._sub_keypoints, self._sub_camera_info):
@@ -159,12 +181,16 @@ class LifterNode(Node):
             self._stats_timer = None
             self._counts.close(STATS_LINE)
         self._pipeline.policy.clear()
+        if self._hri is not None:
+            self._hri.clear()
 
     def cleanup_lifter(self) -> None:
         """Destroy the publishers and the diagnostics (back to the state after the constructor)."""
         self._diagnostics.close()
         for pub in (self._pub_skeletons, self._pub_markers):
             self.destroy_publisher(pub)
+        if self._hri is not None:
+            self._hri.close()
         self._pipeline.policy.clear()
 
     # ------------------------------------------------------------------ parameters
@@ -236,6 +262,8 @@ class LifterNode(Node):
         except (InvalidInputError, ValueError, TypeError) as err:
             self._warn_skip("camera_info", str(err))
             return
+        if int(msg.width) > 0 and int(msg.height) > 0:  # the REP-155 2D outputs are normalised by it
+            self._image_size = (float(msg.width), float(msg.height))
         if self._intrinsics is None:
             (fx, fy), (cx, cy) = intrinsics
             self.get_logger().info(
@@ -257,6 +285,7 @@ class LifterNode(Node):
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
         lifted: list[Any] = []
+        bodies: list[LiftedBody] = []
         for out in self._pipeline.frame(checked, stamp_ns, self._intrinsics):
             try:
                 if isinstance(out, SkipSkeleton):
@@ -264,6 +293,7 @@ class LifterNode(Node):
                 lifted.append(messages.result_to_skeleton3d(
                     out.result, out.track_id, out.joints_m, self._types, solve_time=out.solve_time,
                     warm_started=out.warm_started))
+                bodies.append(LiftedBody(out.track_id, out.joints_m, out.input.points, out.input.confidence))
             except SkipSkeleton as err:
                 self._warn_skip(err.kind, f"skeleton skipped: {err}")
             except Exception as err:  # never let one skeleton kill the node
@@ -273,6 +303,8 @@ class LifterNode(Node):
         if self._settings.publish_markers:  # the Skeleton3Ds' own points, not rebuilt
             shown = [(int(s.track_id), s.joints) for s in lifted]
             self._pub_markers.publish(self._markers.update(msg.header, shown, self._settings.marker_lifetime))
+        if self._hri is not None:  # REP-155 bodies and /tf
+            self._hri.publish(stamp_ns, msg.header.frame_id, bodies, self._image_size)
         self._counts.frame(lifted, time.perf_counter() - received)
 
     # ------------------------------------------------------------------ diagnostics

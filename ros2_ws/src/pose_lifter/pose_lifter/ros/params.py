@@ -127,6 +127,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("default_distance", _FRAME.default_distance, "Depth of the skeleton centroid in metres "
               "when no camera_info has been received.", 0.01, 1000.0, offline=True),
     ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
+    ParamSpec("publish_hri", True, "Publish the tracked people as REP-155 bodies (/humans/bodies/...) and "
+              "their frames on /tf.", read_only=True),
     ParamSpec("max_skeletons", _FRAME.max_skeletons, "Skeletons lifted per frame at most; the rest are "
               "skipped.", 1, 10000),
     ParamSpec("max_coordinate", _FRAME.max_coordinate, "Keypoints farther than this from the image origin "

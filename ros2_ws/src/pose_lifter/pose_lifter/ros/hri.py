@@ -1,0 +1,110 @@
+"""The node's REP-155 (ros4hri) outputs: ``/humans/bodies/...`` topics and ``/tf``.
+
+The messages are :mod:`pose_lifter.messages.hri`'s (serialised, published as they are); this
+module owns the publishers: the shared ones (``/humans/bodies/tracked``, ``/tf``) and, per body,
+``skeleton2d``, ``roi``, ``joint_states`` and the latched ``urdf``, created when the body appears
+and destroyed when it leaves (its track is forgotten), so that its topics disappear from the
+graph with it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+from types import SimpleNamespace
+from typing import Any, Final
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from pose_lifter.messages import hri
+
+__all__ = ["HriOutputs", "message_classes"]
+
+#: /tf as tf2's TransformBroadcaster publishes it (reliable, volatile, 100 deep).
+TF_QOS: Final[QoSProfile] = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: The URDF, latched: a subscriber that joins later still gets it.
+LATCHED_QOS: Final[QoSProfile] = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_QOS: Final[QoSProfile] = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+_PER_BODY: Final[dict[str, str]] = {"skeleton2d": "Skeleton2D", "roi": "NormalizedRegionOfInterest2D",
+                                    "joint_states": "JointState"}
+
+
+def message_classes() -> SimpleNamespace:
+    """The rclpy classes of the REP-155 outputs, by message name (``IdsList``, ``TFMessage``...).
+
+    Raises
+    ------
+    ImportError
+        A message package is not installed, or its messages' fields are not the ones the
+        outputs are written for (:func:`hri.layout_mismatches`).
+    """
+    classes: dict[str, Any] = {}
+    for name in hri.LAYOUTS:
+        pkg, _, cls = name.split("/")
+        try:
+            classes[cls] = getattr(importlib.import_module(f"{pkg}.msg"), cls)
+        except ImportError as err:
+            raise ImportError(f"{pkg} is not installed ({err})") from err
+    wrong = hri.layout_mismatches(list(classes.values()))
+    if wrong:
+        raise ImportError(f"the installed {', '.join(wrong)} differ from the layout the node writes")
+    return SimpleNamespace(**classes)
+
+
+class HriOutputs:
+    """Publishes one frame's :class:`~pose_lifter.messages.hri.BodyFrame`.
+
+    Parameters
+    ----------
+    node : rclpy Node
+    types : namespace of the REP-155 message classes (:func:`message_classes`)
+    timeout_s : float
+        Seconds (input stamps) after which a body not lifted leaves (the node's ``track_timeout``).
+    """
+
+    def __init__(self, node: Node, types: Any, timeout_s: float) -> None:
+        self._node = node
+        self._types = types
+        self.book = hri.BodyBook(timeout_s)
+        self._tracked = node.create_publisher(types.IdsList, f"{hri.BODIES_NS}/tracked", _QOS)
+        self._tf = node.create_publisher(types.TFMessage, "/tf", TF_QOS)
+        self._bodies: dict[str, dict[str, Any]] = {}
+
+    def publish(self, stamp_ns: int, frame_id: str, lifted: Sequence[hri.LiftedBody],
+                image_size: tuple[float, float] | None) -> None:
+        """Publish the frame: new bodies' URDFs first, then their messages, ``/tf`` and
+        ``tracked``; the publishers of bodies that left are destroyed."""
+        out = self.book.frame(stamp_ns, frame_id, lifted, image_size)
+        for bid in out.gone:
+            self._drop(bid)
+        for bid, urdf in out.new.items():
+            pubs = {kind: self._node.create_publisher(getattr(self._types, attr),
+                                                      f"{hri.BODIES_NS}/{bid}/{kind}", _QOS)
+                    for kind, attr in _PER_BODY.items()}
+            pubs["urdf"] = self._node.create_publisher(self._types.String, f"{hri.BODIES_NS}/{bid}/urdf",
+                                                       LATCHED_QOS)
+            pubs["urdf"].publish(urdf)
+            self._bodies[bid] = pubs
+        for bid, messages in out.bodies.items():
+            for kind, msg in messages.items():
+                self._bodies[bid][kind].publish(msg)
+        if out.tf is not None:
+            self._tf.publish(out.tf)
+        self._tracked.publish(out.tracked)
+
+    def clear(self) -> None:
+        """Every body leaves (the node deactivates or its tracks are cleared)."""
+        for bid in self.book.clear():
+            self._drop(bid)
+
+    def close(self) -> None:
+        """Destroy every publisher."""
+        self.clear()
+        for pub in (self._tracked, self._tf):
+            self._node.destroy_publisher(pub)
+
+    def _drop(self, bid: str) -> None:
+        for pub in self._bodies.pop(bid, {}).values():
+            self._node.destroy_publisher(pub)
