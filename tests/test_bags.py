@@ -26,6 +26,15 @@ def test_packaged_msg_copies_equal_the_originals() -> None:
         )
 
 
+def test_packaged_hri_msgs_copies_equal_the_vendored_ones() -> None:
+    vendored = REPO / "ros2_ws" / "vendor" / "hri_msgs" / "msg"
+    names = sorted(p.name for p in vendored.glob("*.msg"))
+    assert names == sorted(p.name for p in typestore.HRI_MSG_DIR.glob("*.msg")) and names
+    for name in names:
+        assert (typestore.HRI_MSG_DIR / name).read_text() == (vendored / name).read_text(), (
+            f"{name}: run `cp {vendored}/*.msg {typestore.HRI_MSG_DIR}/`")
+
+
 def test_typestore_has_our_types() -> None:
     store = typestore.pose_lifter_typestore()
     for name in typestore.MSG_NAMES:

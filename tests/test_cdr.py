@@ -37,7 +37,8 @@ _NUMPY = {"bool": "bool", "byte": "uint8", "char": "uint8", "int8": "int8", "uin
 
 class _Reference:
     """The previous builders: ``bags._default_message`` and ``messages.result_to_skeleton3d`` /
-    ``skeleton_markers`` / ``skeletons3d_array`` of commit 2a5a7f0."""
+    ``skeleton_markers`` / ``skeletons3d_array`` of commit 2a5a7f0, with the node's marker book
+    (DELETEALL first, DELETE for untracked positions no longer used) written out here again."""
 
     def __init__(self, store: Any) -> None:
         self.store = store
@@ -91,8 +92,12 @@ class _Reference:
             observed=[bool(w > 0) for w in weights], joint_weights=[float(w) for w in weights])
 
     def markers(self, header: Any, tracks: list[tuple[int, np.ndarray]], ns: str, lifetime: float,
-                deleted: list[int]) -> Any:
+                deleted: list[int], clear: bool = False, deleted_untracked: range = range(0)) -> Any:
         out, untracked = [], 0
+        if clear:
+            for kind in ("joints", "bones"):
+                out.append(self.msg("visualization_msgs/msg/Marker", header=header, ns=f"{ns}/{kind}", id=0,
+                                    action=3))
         sec, nsec = divmod(max(0, round(float(lifetime) * 1e9)), 1_000_000_000)
         for track_id, joints in tracks:
             mid = track_id % (2**31 - 1) if track_id >= 0 else -1 - untracked
@@ -118,16 +123,22 @@ class _Reference:
                 for kind in ("joints", "bones"):
                     out.append(self.msg("visualization_msgs/msg/Marker", header=header, ns=f"{ns}/{kind}",
                                         id=track_id % (2**31 - 1), action=2))
+        for position in deleted_untracked:
+            for kind in ("joints", "bones"):
+                out.append(self.msg("visualization_msgs/msg/Marker", header=header, ns=f"{ns}/{kind}",
+                                    id=-1 - position, action=2))
         return self.msg("visualization_msgs/msg/MarkerArray", markers=out)
 
     def frame(self, header: Any, lifted: list[Any], results: list[Any], previous: set[int], ns: str,
-              lifetime: float) -> tuple[bytes, bytes, set[int]]:
+              lifetime: float, first: bool = False,
+              previous_untracked: int = 0) -> tuple[bytes, bytes, set[int]]:
         """The two serialised messages of one keypoint message (``lift_bag``'s ``record``)."""
         skels = [self.skeleton3d(r, f.track_id, f.joints_m, f.solve_time, f.warm_started)
                  for f, r in zip(lifted, results, strict=True)]
         now = {f.track_id for f in lifted if f.track_id >= 0}
+        untracked = sum(1 for f in lifted if f.track_id < 0)
         markers = self.markers(header, [(f.track_id, f.joints_m) for f in lifted], ns, lifetime,
-                               sorted(previous - now))
+                               sorted(previous - now), first, range(untracked, previous_untracked))
         arr = self.msg("pose_lifter_msgs/msg/Skeleton3DArray", header=header, skeletons=skels)
         return (bytes(self.store.serialize_cdr(arr, cdr.SKELETON3D_ARRAY)),
                 bytes(self.store.serialize_cdr(markers, cdr.MARKER_ARRAY)), now)
@@ -138,6 +149,7 @@ def _reference_outputs(monkeypatch: pytest.MonkeyPatch, lifetime: float) -> list
     ref = _Reference(typestore.pose_lifter_typestore())
     expected: list[tuple[bytes, bytes]] = []
     previous: set[int] = set()
+    previous_untracked = 0
     original = offline.lift_messages
 
     def spy(*args: Any, **kwargs: Any) -> Any:
@@ -145,8 +157,10 @@ def _reference_outputs(monkeypatch: pytest.MonkeyPatch, lifetime: float) -> list
         record = bound.arguments["on_frame"]
 
         def both(stamp: int, msg: Any, lifted: list[Any], results: list[Any]) -> None:
-            nonlocal previous
-            a, b, previous = ref.frame(msg.header, lifted, results, previous, "pose_lifter", lifetime)
+            nonlocal previous, previous_untracked
+            a, b, previous = ref.frame(msg.header, lifted, results, previous, "pose_lifter", lifetime,
+                                       first=not expected, previous_untracked=previous_untracked)
+            previous_untracked = sum(1 for f in lifted if f.track_id < 0)
             expected.append((a, b))
             record(stamp, msg, lifted, results)
 

@@ -293,3 +293,53 @@ def test_the_command_line_answers_a_bare_call_a_version_request_and_a_closed_rea
     proc.stdout.close()  # the reader is gone before the command writes
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=300) == 141 and "Broken pipe" not in err and "Traceback" not in err, err
+
+
+def test_lift_hri_writes_the_node_s_rep155_bodies_and_tf(tmp_path: Path) -> None:
+    """``lift --hri``: per keypoint message the node's REP-155 outputs (tracked, each body's
+    joint_states / skeleton2d / roi, /tf), each body's URDF once; the TF joint links land on
+    /skeletons_3d's joints; without --hri none of it."""
+    from pose_lifter.core.skeleton import JOINT_NAMES
+    from pose_lifter.messages import body, hri
+    from pose_lifter.messages.convert import skeleton3d_to_joints
+    from scipy.spatial.transform import Rotation
+
+    src = REPO / "bags" / "two_people.mcap"
+    out = tmp_path / "hri.mcap"
+    assert lift(str(src), "--out", str(out), "--hri", "--max-messages", "6") == 0
+    check_mcap(out)
+    msgs = list(bags.read_messages(out))
+    skeletons = [x for x in msgs if x.topic == "/skeletons_3d"]
+    tracked = [x for x in msgs if x.topic == "/humans/bodies/tracked"]
+    tfs = [x for x in msgs if x.topic == "/tf"]
+    assert len(skeletons) == len(tracked) == len(tfs) == 6
+    ids = {int(s.track_id): hri.body_id(int(s.track_id)) for s in skeletons[0].msg.skeletons}
+    assert sorted(tracked[-1].msg.ids) == sorted(ids.values())
+    for bid in ids.values():
+        assert len([x for x in msgs if x.topic == f"/humans/bodies/{bid}/urdf"]) == 1
+        for kind in ("joint_states", "skeleton2d", "roi"):
+            assert len([x for x in msgs if x.topic == f"/humans/bodies/{bid}/{kind}"]) == 6
+    links = body.joint_link_names()
+    for sk, tf in zip(skeletons, tfs, strict=True):
+        edges = {t.child_frame_id: t for t in tf.msg.transforms}
+        for s in sk.msg.skeletons:
+            bid = ids[int(s.track_id)]
+
+            def pose(name: str, edges: dict[str, Any] = edges,
+                     root: str = sk.msg.header.frame_id) -> np.ndarray:
+                if name not in edges:
+                    assert name == root
+                    return np.eye(4)
+                t = edges[name]
+                local = np.eye(4)
+                q = t.transform.rotation
+                local[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+                v = t.transform.translation
+                local[:3, 3] = [v.x, v.y, v.z]
+                return pose(t.header.frame_id, edges, root) @ local
+
+            got = np.array([pose(f"{links[n]}_{bid}")[:3, 3] for n in JOINT_NAMES])
+            np.testing.assert_allclose(got, skeleton3d_to_joints(s), atol=1e-9)
+    plain = tmp_path / "plain.mcap"
+    assert lift(str(src), "--out", str(plain), "--max-messages", "2") == 0
+    assert not [t for t in bags.bag_topics(plain) if t.startswith("/humans") or t == "/tf"]

@@ -426,6 +426,23 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
                             Lifter(None, LifterOptions(n_starts=N_STARTS)), LiftSettings(smoothing_s=0.0))
     node_joints = np.array([m.skeleton3d_to_joints(s) for a in warm for s in a.skeletons.skeletons])
     np.testing.assert_allclose(node_joints, np.array([f.joints_m for f in offline]), atol=1e-6)
+    # and publishes the offline lift's markers, message for message (one marker book for both;
+    # from the second frame on: the node's book also saw this test's probe frames)
+    from pose_lifter.offline.bags import read_raw
+    from pose_lifter.offline.lift import lift_bag
+    from rclpy.serialization import serialize_message
+
+    lifted = tmp_path / "offline.mcap"
+    lift_bag(BAG, lifted, Lifter(None, LifterOptions(n_starts=N_STARTS)),
+             LiftSettings(smoothing_s=0.0, marker_lifetime=1.0, max_messages=BAG_FRAMES), progress=False)
+    offline_markers = [r.data for r in read_raw(lifted, ["/skeleton_markers"])]
+    kind = "visualization_msgs/msg/MarkerArray"
+    assert len(offline_markers) == BAG_FRAMES
+    for a, expected in list(zip(warm, offline_markers, strict=True))[1:]:
+        # through rosbags: rclpy's serialiser leaves its padding bytes unset
+        received = store.deserialize_cdr(bytes(serialize_message(a.markers)), kind)
+        got = bytes(store.serialize_cdr(received, kind))
+        assert got == expected
 
     # and its errors against the bag's ground truth: written next to it, evaluated offline
     out = tmp_path / "node_output.mcap"

@@ -14,10 +14,10 @@ from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import SkipSkeleton, check_output, frame_over_cap, skeleton_input
+from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.diagnostics import status_level, values
-from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, NodeSettings
 from pose_lifter.ros.stats import FrameCounter, FrameStats
 
@@ -106,25 +106,25 @@ def test_warnings_are_rate_limited_per_kind() -> None:
     assert lines[-1].startswith("again")
 
 
-def test_marker_book_shares_the_skeleton_points_and_deletes_what_is_gone() -> None:
+def test_marker_book_clears_first_then_shows_and_deletes_what_is_gone() -> None:
+    """The node's and the offline lift's MarkerBook: the first MarkerArray clears what an earlier
+    run left (DELETEALL), then the skeletons' markers are those of convert.skeleton_markers (the
+    same bytes), and later ones delete the tracks and untracked positions no longer shown."""
     store = pose_lifter_typestore()
-    header = m.make_header(5, "cam", T)
-    j = [np.full((12, 3), float(i)) for i in range(3)]
-    skels = [m.result_to_skeleton3d(lift_result(), tid, joints, T) for tid, joints in zip((4, 9, -1), j,
-                                                                                          strict=True)]
-    book = MarkerBook("ns", T)
-    first = book.update(header, [(s.track_id, s.joints) for s in skels], 1.0)
-    # the same bytes as markers built from the joint arrays, after the first message's DELETEALLs
-    from_arrays = m.skeleton_markers(header, [(4, j[0]), (9, j[1]), (-1, j[2])], "ns", 1.0, T)
-    assert [x.action for x in first.markers[:2]] == [3, 3]
     kind = "visualization_msgs/msg/MarkerArray"
+    header = m.make_header(5, "cam", T)
+    j = np.stack([np.full((12, 3), float(i)) for i in range(3)])
+    book = MarkerBook("ns")
+    first = store.deserialize_cdr(book.update(header, [4, 9, -1], j, 1.0), kind)
+    assert [(x.ns, x.action) for x in first.markers[:2]] == [("ns/joints", 3), ("ns/bones", 3)]
+    from_arrays = m.skeleton_markers(header, [(4, j[0]), (9, j[1]), (-1, j[2])], "ns", 1.0, T)
     assert (bytes(store.serialize_cdr(T.MarkerArray(markers=first.markers[2:]), kind))
             == bytes(store.serialize_cdr(from_arrays, kind)))
-    assert all(p is q for p, q in zip(first.markers[2].points, skels[0].joints, strict=True))  # not rebuilt
-    second = book.update(header, [(9, skels[1].joints)], 1.0)
+    second = store.deserialize_cdr(book.update(header, [9], j[1:2], 1.0), kind)
     assert [(x.ns, x.id, x.action) for x in second.markers[2:]] == [
         ("ns/joints", 4, 2), ("ns/bones", 4, 2), ("ns/joints", -1, 2), ("ns/bones", -1, 2)]
-    assert len(book.update(header, [(9, skels[1].joints)], 1.0).markers) == 2  # nothing more to delete
+    third = store.deserialize_cdr(book.update(header, [9], j[1:2], 1.0), kind)
+    assert len(third.markers) == 2  # nothing more to delete, no DELETEALL again
 
 
 def test_stats_line() -> None:

@@ -10,7 +10,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "tests"]),
-    package_data={"pose_lifter": ["py.typed", "data/*.npz", "msg/*.msg"]},
+    package_data={"pose_lifter": ["py.typed", "data/*.npz", "msg/*.msg", "msg/hri_msgs/*.msg"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

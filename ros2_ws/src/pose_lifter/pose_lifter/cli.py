@@ -205,7 +205,7 @@ def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) ->
     keep = _keep_topics(args.keep)
     common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
                                   camera_info_topic=args.camera_info_topic or None, keep=keep,
-                                  smoothing_s=args.smoothing)
+                                  smoothing_s=args.smoothing, hri=args.hri)
     if not args.params_file:
         options = {"variant": args.variant, "camera_solver": args.solver, "pose_solver": args.solver,
                    "n_starts": args.starts, "mode": "paper" if args.solver == "cvxpy" else args.mode}
@@ -448,6 +448,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="each track's poses smoothed by a centred Gaussian window of this standard "
                    "deviation, past and future frames alike (offline only; default "
                    f"{OFFLINE_SMOOTHING_S}); 0: the live node's causal poses, message for message")
+    p.add_argument("--hri", action="store_true",
+                   help="also write the node's REP-155 outputs: /humans/bodies/tracked, per body "
+                   "skeleton2d, roi, joint_states, urdf, and /tf (Foxglove and RViz show the bodies as "
+                   "TF frames)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the output; for a collection: lift again the bags already done")

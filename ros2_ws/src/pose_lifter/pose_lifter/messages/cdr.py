@@ -69,6 +69,7 @@ _SPHERE_LIST: Final[int] = 7
 _LINE_LIST: Final[int] = 5
 _ADD: Final[int] = 0
 _DELETE: Final[int] = 2
+_DELETEALL: Final[int] = 3
 
 _ENCAPSULATION: Final[bytes] = b"\x00\x01\x00\x00"  # CDR, little endian
 _I32: Final = struct.Struct("<i")
@@ -306,20 +307,30 @@ def marker_array_cdr(
     deleted_track_ids: Iterable[int] = (),
     joint_diameter: float = 0.05,
     line_width: float = 0.02,
+    clear: bool = False,
+    deleted_untracked: Iterable[int] = (),
 ) -> bytes:
     """A serialised ``visualization_msgs/MarkerArray``: the bytes of
     :func:`pose_lifter.messages.convert.skeleton_markers` (same arguments; ``joints_m`` is (n, 12, 3)
-    for the ``n`` track ids) as rosbags serialises it."""
+    for the ``n`` track ids) as rosbags serialises it; with ``clear``, DELETEALL markers of both
+    namespaces first, and DELETE markers for the untracked positions ``deleted_untracked`` last
+    (ids ``-1 - position``, :func:`~pose_lifter.messages.convert.marker_id`)."""
     joints = np.asarray(joints_m, dtype="<f8").reshape(len(track_ids), N_JOINTS, 3)
     deleted = [int(t) for t in deleted_track_ids if t >= 0]
+    positions = [int(p) for p in deleted_untracked]
     hb = _header_bytes(header)
     ns_joints, ns_bones = _string_bytes(f"{ns}/joints"), _string_bytes(f"{ns}/bones")
     ns_sec, ns_nsec = divmod(max(0, round(float(lifetime) * 1e9)), 1_000_000_000)
     identity = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # position, orientation (x, y, z, w)
     joint_pose = _POSE_SCALE.pack(*identity, joint_diameter, joint_diameter, joint_diameter)
     bone_pose = _POSE_SCALE.pack(*identity, line_width, 0.0, 0.0)
+    zero_pose = _POSE_SCALE.pack(*([0.0] * 10))
+    zero_color = _COLOR_LIFETIME.pack(0.0, 0.0, 0.0, 0.0, 0, 0, False)
     w = _Writer()
-    w.u32(2 * len(track_ids) + 2 * len(deleted))
+    w.u32(2 * (len(track_ids) + len(deleted) + len(positions) + int(clear)))
+    if clear:
+        for kind in (ns_joints, ns_bones):
+            _marker(w, hb, kind, (0, 0, _DELETEALL), zero_pose, zero_color, None)
     untracked = 0
     for i, tid in enumerate(track_ids):
         track_id = int(tid)
@@ -330,10 +341,7 @@ def marker_array_cdr(
         color = _COLOR_LIFETIME.pack(r, g, b, 1.0, int(ns_sec), int(ns_nsec), False)
         _marker(w, hb, ns_joints, (mid, _SPHERE_LIST, _ADD), joint_pose, color, joints[i])
         _marker(w, hb, ns_bones, (mid, _LINE_LIST, _ADD), bone_pose, color, joints[i][_BONE_INDEX])
-    zero_pose = _POSE_SCALE.pack(*([0.0] * 10))
-    zero_color = _COLOR_LIFETIME.pack(0.0, 0.0, 0.0, 0.0, 0, 0, False)
-    for track_id in deleted:
-        mid = marker_id(track_id, 0)
+    for mid in [marker_id(t, 0) for t in deleted] + [marker_id(-1, p) for p in positions]:
         for kind in (ns_joints, ns_bones):
             _marker(w, hb, kind, (mid, 0, _DELETE), zero_pose, zero_color, None)
     return bytes(w.buf)

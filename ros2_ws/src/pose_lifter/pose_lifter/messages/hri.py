@@ -36,6 +36,8 @@ from pose_lifter.messages.cdr import _STAMP, _U32, _Writer
 __all__ = [
     "BODIES_NS",
     "LAYOUTS",
+    "PER_BODY",
+    "TF_TOPIC",
     "BodyBook",
     "BodyFrame",
     "LiftedBody",
@@ -51,6 +53,12 @@ __all__ = [
 
 #: The REP-155 namespace of bodies.
 BODIES_NS: Final[str] = "/humans/bodies"
+#: The topic of the bodies' frames.
+TF_TOPIC: Final[str] = "/tf"
+#: Each body's topics (``BODIES_NS/<id>/<kind>``) and their types; ``urdf`` is latched.
+PER_BODY: Final[dict[str, str]] = {"urdf": "std_msgs/msg/String", "skeleton2d": "hri_msgs/msg/Skeleton2D",
+                                   "roi": "hri_msgs/msg/NormalizedRegionOfInterest2D",
+                                   "joint_states": "sensor_msgs/msg/JointState"}
 #: The field layouts the CDR writers follow (``get_fields_and_field_types()`` of rclpy's classes).
 LAYOUTS: Final[dict[str, dict[str, str]]] = {
     "hri_msgs/msg/IdsList": {"header": "std_msgs/Header", "ids": "sequence<string>"},
@@ -267,6 +275,17 @@ class BodyFrame:
     bodies: dict[str, dict[str, bytes]] = field(default_factory=dict)
     new: dict[str, bytes] = field(default_factory=dict)
     gone: list[str] = field(default_factory=list)
+
+    def messages(self) -> list[tuple[str, bytes, str]]:
+        """Everything to publish, in order, as (topic, CDR, type): the new bodies' URDFs, each
+        body's messages, ``/tf``, ``tracked`` (the node and the offline lift alike)."""
+        out = [(f"{BODIES_NS}/{bid}/urdf", data, PER_BODY["urdf"]) for bid, data in self.new.items()]
+        for bid, per_kind in self.bodies.items():
+            out += [(f"{BODIES_NS}/{bid}/{kind}", data, PER_BODY[kind]) for kind, data in per_kind.items()]
+        if self.tf is not None:
+            out.append((TF_TOPIC, self.tf, "tf2_msgs/msg/TFMessage"))
+        out.append((f"{BODIES_NS}/tracked", self.tracked, "hri_msgs/msg/IdsList"))
+        return out
 
 
 class BodyBook:

@@ -23,6 +23,7 @@ import numpy as np
 from pose_lifter.core.errors import PoseLifterError
 
 __all__ = [
+    "HRI_MSG_DIR",
     "MSG_NAMES",
     "MSG_PACKAGE",
     "TypestoreError",
@@ -40,6 +41,9 @@ MSG_NAMES: Final[tuple[str, ...]] = (
 )
 _PACKAGE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[1] / "msg"
 _SOURCE_MSG_DIR: Final[Path] = Path(__file__).resolve().parents[3] / MSG_PACKAGE / "msg"
+#: The REP-155 messages the node publishes (``hri_msgs``, not in rosbags' Jazzy store): the pinned
+#: copies of ``ros2_ws/vendor/hri_msgs/msg``, shipped as package data (a test keeps them equal).
+HRI_MSG_DIR: Final[Path] = _PACKAGE_MSG_DIR / "hri_msgs"
 
 
 class TypestoreError(PoseLifterError, RuntimeError):
@@ -56,7 +60,8 @@ def msg_dir() -> Path:
 
 @lru_cache(maxsize=1)
 def pose_lifter_typestore() -> Any:
-    """A ROS 2 Jazzy typestore with the ``pose_lifter_msgs`` types registered (cached)."""
+    """A ROS 2 Jazzy typestore with the ``pose_lifter_msgs`` and ``hri_msgs`` types registered
+    (cached)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -65,6 +70,7 @@ def pose_lifter_typestore() -> Any:
     for name in MSG_NAMES:
         types.update(get_types_from_msg((d / f"{name}.msg").read_text(), f"{MSG_PACKAGE}/msg/{name}"))
     store.register(types)
+    register_msg_package(store, "hri_msgs", HRI_MSG_DIR)
     return store
 
 

@@ -29,9 +29,10 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lifter import Lifter
-from pose_lifter.messages import cdr
+from pose_lifter.messages import cdr, hri
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import FramePipeline, FrameSettings, SkipSkeleton
+from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.names import (
     CAMERA_INFO,
     MARKER_ARRAY,
@@ -278,6 +279,19 @@ def _as_skeleton2d(msg: Any, msgtype: str, types: Any, track_ids: Any) -> Any:
     return adapters.people_to_skeleton2d_array(msg.header, people, types)
 
 
+def _hri_messages(book: hri.BodyBook, stamp: int, header: Any, lifted: list[FrameLift],
+                  sizes: list[tuple[int, tuple[float, float]]]) -> list[tuple[str, bytes, str]]:
+    """The node's REP-155 outputs of one frame as (topic, CDR, type): the new bodies' URDFs, then
+    each body's messages, ``/tf`` and ``tracked`` (the node's order). The header stamp times the
+    bodies (the bag stamp when it is 0, as the node's arrival time); the image size is the last
+    ``camera_info``'s at or before the frame."""
+    stamp_ns = m.stamp_to_ns(header.stamp) or stamp
+    size = next((wh for s, wh in reversed(sizes) if s <= stamp), None)
+    people = [hri.LiftedBody(f.track_id, f.joints_m, f.points_2d, f.confidence) for f in lifted]
+    out = book.frame(stamp_ns, str(header.frame_id), people, size)
+    return out.messages()
+
+
 def lift_bag(
     in_path: str | Path,
     out_path: str | Path,
@@ -346,20 +360,23 @@ def lift_bag(
     index_of = {id(msg): i * every for i, (_, msg) in enumerate(to_lift)}
     summary = LiftSummary()
     outputs: dict[int, tuple[bytes, bytes]] = {}  # index of the keypoint message -> its answers (CDR)
-    previous: set[int] = set()
+    marker_book = MarkerBook(_MARKER_NS)
+    bodies = hri.BodyBook(settings.track_timeout) if settings.hri else None
+    hri_outputs: dict[int, list[tuple[str, bytes, str]]] = {}  # -> (topic, CDR, type) of REP-155
+    sizes = [(s, (float(i.width), float(i.height))) for s, i in infos if i.width > 0 and i.height > 0]
 
     def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
         # serialised here, straight from the arrays: the bytes of the node's builders
-        # (messages.result_to_skeleton3d / skeleton_markers) through rosbags, see pose_lifter.messages.cdr
-        nonlocal previous
+        # (messages.result_to_skeleton3d through rosbags, see pose_lifter.messages.cdr; the
+        # node's own MarkerBook for the markers)
         frame = cdr.SkeletonFrame.from_results([f.track_id for f in lifted], [f.joints_m for f in lifted],
                                                results, [f.solve_time for f in lifted],
                                                [f.warm_started for f in lifted])
-        now = {f.track_id for f in lifted if f.track_id >= 0}
-        markers = cdr.marker_array_cdr(msg.header, frame.track_ids.tolist(), frame.joints_m, _MARKER_NS,
-                                       settings.marker_lifetime, deleted_track_ids=sorted(previous - now))
-        previous = now
+        markers = marker_book.update(msg.header, frame.track_ids.tolist(), frame.joints_m,
+                                     settings.marker_lifetime)
         outputs[index_of[id(msg)]] = (cdr.skeleton3d_array_cdr(msg.header, frame), markers)
+        if bodies is not None:
+            hri_outputs[index_of[id(msg)]] = _hri_messages(bodies, stamp, msg.header, lifted, sizes)
 
     frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_frame=record,
                            summary=summary, workers=workers, message_fields_only=True)
@@ -376,5 +393,7 @@ def lift_bag(
                     skels, markers = outputs.pop(index)
                     w.write_cdr(TOPIC_SKELETONS, raw.stamp_ns, skels, SKELETON3D_ARRAY)
                     w.write_cdr(TOPIC_MARKERS, raw.stamp_ns, markers, MARKER_ARRAY)
+                    for out_topic, data, msgtype in hri_outputs.pop(index, []):
+                        w.write_cdr(out_topic, raw.stamp_ns, data, msgtype)
                 index += 1
     return summary, frames

@@ -64,6 +64,7 @@ class LiftSettings:
     reinit_ratio: float = DEFAULT_REINIT_RATIO
     smoothing_s: float = OFFLINE_SMOOTHING_S  # centred, offline only (0: the node's causal poses)
     marker_lifetime: float = 0.0
+    hri: bool = False  # the node's REP-155 outputs (/humans/bodies/..., /tf) into the output bag
 
     def to_json(self) -> dict[str, Any]:
         """The settings as JSON-ready values (options sorted by name)."""

@@ -27,8 +27,6 @@ TF_QOS: Final[QoSProfile] = QoSProfile(depth=100, reliability=ReliabilityPolicy.
 LATCHED_QOS: Final[QoSProfile] = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _QOS: Final[QoSProfile] = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-_PER_BODY: Final[dict[str, str]] = {"skeleton2d": "Skeleton2D", "roi": "NormalizedRegionOfInterest2D",
-                                    "joint_states": "JointState"}
 
 
 def message_classes() -> SimpleNamespace:
@@ -68,31 +66,31 @@ class HriOutputs:
         self._node = node
         self._types = types
         self.book = hri.BodyBook(timeout_s)
+        self._class = {name: getattr(types, name.rsplit("/", 1)[1]) for name in hri.LAYOUTS}
         self._tracked = node.create_publisher(types.IdsList, f"{hri.BODIES_NS}/tracked", _QOS)
-        self._tf = node.create_publisher(types.TFMessage, "/tf", TF_QOS)
+        self._tf = node.create_publisher(types.TFMessage, hri.TF_TOPIC, TF_QOS)
         self._bodies: dict[str, dict[str, Any]] = {}
 
     def publish(self, stamp_ns: int, frame_id: str, lifted: Sequence[hri.LiftedBody],
                 image_size: tuple[float, float] | None) -> None:
-        """Publish the frame: new bodies' URDFs first, then their messages, ``/tf`` and
-        ``tracked``; the publishers of bodies that left are destroyed."""
+        """Publish the frame (:meth:`hri.BodyFrame.messages`, new bodies' publishers created
+        first); the publishers of bodies that left are destroyed."""
         out = self.book.frame(stamp_ns, frame_id, lifted, image_size)
         for bid in out.gone:
             self._drop(bid)
-        for bid, urdf in out.new.items():
-            pubs = {kind: self._node.create_publisher(getattr(self._types, attr),
-                                                      f"{hri.BODIES_NS}/{bid}/{kind}", _QOS)
-                    for kind, attr in _PER_BODY.items()}
-            pubs["urdf"] = self._node.create_publisher(self._types.String, f"{hri.BODIES_NS}/{bid}/urdf",
-                                                       LATCHED_QOS)
-            pubs["urdf"].publish(urdf)
-            self._bodies[bid] = pubs
-        for bid, messages in out.bodies.items():
-            for kind, msg in messages.items():
-                self._bodies[bid][kind].publish(msg)
-        if out.tf is not None:
-            self._tf.publish(out.tf)
-        self._tracked.publish(out.tracked)
+        for bid in out.new:
+            self._bodies[bid] = {
+                kind: self._node.create_publisher(self._class[msgtype], f"{hri.BODIES_NS}/{bid}/{kind}",
+                                                  LATCHED_QOS if kind == "urdf" else _QOS)
+                for kind, msgtype in hri.PER_BODY.items()}
+        for topic, data, _ in out.messages():
+            self._publisher(topic).publish(data)
+
+    def _publisher(self, topic: str) -> Any:
+        if topic == hri.TF_TOPIC:
+            return self._tf
+        bid, _, kind = topic[len(hri.BODIES_NS) + 1:].partition("/")
+        return self._tracked if bid == "tracked" else self._bodies[bid][kind]
 
     def clear(self) -> None:
         """Every body leaves (the node deactivates or its tracks are cleared)."""

@@ -14,7 +14,7 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
 3. Each lifted skeleton becomes a ``Skeleton3D`` (:func:`messages.result_to_skeleton3d`).
 4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
    frame), then ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
-   :class:`node_markers.MarkerBook`), whose points are the ``Skeleton3D``'s own.
+   :class:`~pose_lifter.messages.markers.MarkerBook`, the offline lift's too: the same bytes).
 5. With ``publish_hri`` (default), the tracked people as REP-155 bodies
    (:class:`~pose_lifter.ros.hri.HriOutputs`): ``/humans/bodies/tracked``, per body
    ``skeleton2d``, ``roi``, ``joint_states`` and the latched ``urdf``, and their frames on ``/tf``
@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 from typing import Any, Final
 
+import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -51,14 +52,15 @@ from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lifter import compile_kernels
+from pose_lifter.core.skeleton import N_JOINTS
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
 from pose_lifter.messages.frame import FramePipeline, SkipSkeleton
 from pose_lifter.messages.hri import LiftedBody
+from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.hri import HriOutputs, message_classes
-from pose_lifter.ros.markers import MarkerBook
 from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
 from pose_lifter.ros.run import run_node
 from pose_lifter.ros.stats import FrameCounter
@@ -116,7 +118,7 @@ class LifterNode(Node):
         self._settings = self._read_settings()
 
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
-        self._markers = MarkerBook(MARKER_NS, self._types)
+        self._markers = MarkerBook(MARKER_NS)
         self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
         self._counts = FrameCounter()  # one counter, a window per report (stats line, /diagnostics)
 
@@ -300,9 +302,11 @@ class LifterNode(Node):
                 self._warn_skip("unexpected", f"skeleton skipped after an unexpected error: {err!r}")
 
         self._pub_skeletons.publish(messages.skeletons3d_array(msg.header, lifted, self._types))
-        if self._settings.publish_markers:  # the Skeleton3Ds' own points, not rebuilt
-            shown = [(int(s.track_id), s.joints) for s in lifted]
-            self._pub_markers.publish(self._markers.update(msg.header, shown, self._settings.marker_lifetime))
+        if self._settings.publish_markers:  # serialised by the offline lift's marker book
+            joints = np.array([b.joints_m for b in bodies], dtype=np.float64)
+            joints = joints.reshape(len(bodies), N_JOINTS, 3)
+            self._pub_markers.publish(self._markers.update(
+                msg.header, [b.track_id for b in bodies], joints, self._settings.marker_lifetime))
         if self._hri is not None:  # REP-155 bodies and /tf
             self._hri.publish(stamp_ns, msg.header.frame_id, bodies, self._image_size)
         self._counts.frame(lifted, time.perf_counter() - received)
