@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from detector_poses import coco17, model_xy
 from mcap_check import check_mcap
+from params_cases import NON_DEFAULT_PARAMS
 from pose_lifter import cli
 from pose_lifter.messages import typestore
 from pose_lifter.offline import bags
@@ -343,3 +344,27 @@ def test_lift_hri_writes_the_node_s_rep155_bodies_and_tf(tmp_path: Path) -> None
     plain = tmp_path / "plain.mcap"
     assert lift(str(src), "--out", str(plain), "--max-messages", "2") == 0
     assert not [t for t in bags.bag_topics(plain) if t.startswith("/humans") or t == "/tf"]
+
+
+def test_a_params_file_of_non_default_values_reaches_the_offline_lift(tmp_path: Path) -> None:
+    """The node's file, read offline: every lifter value it sets is used (the node-only ones,
+    frame_id and publish_markers, are accepted and ignored)."""
+    import yaml
+    from pose_lifter.ros.params import SPECS, read_params_file
+
+    for name, value in NON_DEFAULT_PARAMS.items():
+        assert value != SPECS[name].default and type(value) is type(SPECS[name].default), name
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump({"pose_lifter": {"ros__parameters": NON_DEFAULT_PARAMS}}))
+    read = read_params_file(path)
+    assert (read.options["n_starts"], read.options["variant"]) == (3, "L1WANS")
+    assert (read.warm_start, read.default_distance, read.lower_leg_length) == (False, 4.25, 0.41)
+    assert read.ignored == ()
+    out = tmp_path / "out.mcap"
+    assert lift(str(WALK), "--out", str(out), "--params-file", str(path), "--max-messages", "4") == 0
+    skeletons = [s for x in bags.read_messages(out, ["/skeletons_3d"]) for s in x.msg.skeletons]
+    assert len(skeletons) == 4 and not any(s.warm_started for s in skeletons)
+    from pose_lifter.messages.convert import skeleton3d_to_joints
+
+    shins = [np.linalg.norm(np.subtract(*skeleton3d_to_joints(s)[[10, 11]])) for s in skeletons]
+    np.testing.assert_allclose(shins, 0.41, rtol=0.01)  # the metric scale is the file's

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import tolerances as tol
 import yaml
+from params_cases import NON_DEFAULT_PARAMS
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.core.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
@@ -76,6 +77,33 @@ def test_params_yaml_is_loaded_and_every_key_declared(start_lifter: Any, graph: 
     declared = yaml.safe_load(PARAMS_YAML.read_text())["/**"]["ros__parameters"]
     reported = graph.get_parameters(*declared)
     assert reported == declared
+
+
+def test_a_params_file_of_non_default_values_reaches_the_node(start_lifter: Any, graph: GraphClient,
+                                                              tmp_path: Any) -> None:
+    from pose_lifter.ros.params import SPECS
+
+    for name, value in NON_DEFAULT_PARAMS.items():  # every value differs from its default
+        assert value != SPECS[name].default and type(value) is type(SPECS[name].default), name
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump({"pose_lifter": {"ros__parameters": NON_DEFAULT_PARAMS}}))
+    lifter = start_lifter(params_file=path)
+    graph.wait_for_lifter(lifter)
+    assert graph.get_parameters(*NON_DEFAULT_PARAMS) == NON_DEFAULT_PARAMS
+    # and the node runs with them: the empty frame_id becomes the file's, the untracked person
+    # stands at the file's distance, cold (no warm starts), no markers
+    t = graph.types
+    kp, c = coco_keypoints(STANDING, 30.0)
+    n_markers = len(graph.markers)
+    from rclpy.serialization import serialize_message
+
+    for i in range(2):  # sent as bytes: GraphClient.send would expect the sent (empty) frame_id back
+        answer = graph.send(serialize_message(frame(t, (i + 1) * 10**9, [(3, kp, c)], frame_id="")),
+                            expect_markers=False)
+    (s,) = answer.skeletons.skeletons
+    assert answer.skeletons.header.frame_id == "yaml_frame" and not s.warm_started
+    np.testing.assert_allclose(m.skeleton3d_to_joints(s).mean(axis=0)[2], 4.25, atol=1e-9)
+    assert len(graph.markers) == n_markers
 
 
 def test_declared_descriptors_are_the_option_metadata(start_lifter: Any, graph: GraphClient) -> None:
