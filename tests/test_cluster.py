@@ -8,11 +8,10 @@ import os
 import shutil
 from pathlib import Path
 
+import distributed
 import pytest
 from lift_compare import assert_same_lift
 from pose_lifter import cli
-
-distributed = pytest.importorskip("distributed")
 
 BAGS = Path(__file__).resolve().parents[1] / "bags"
 FAST = ["--max-messages", "6", "--quiet"]

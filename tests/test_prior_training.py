@@ -168,10 +168,45 @@ def test_a_damaged_residual_prior_file_is_refused(tmp_path: Path, defect: str) -
     assert str(path) in str(err.value)
 
 
+#: torch's outputs of a small trained prior (tools/make_prior_fixture.py, torch 2.13 on CPU).
+TORCH_FIXTURE = Path(__file__).resolve().parent / "fixtures" / "prior_torch.npz"
+
+
+def test_the_numpy_prior_equals_torch_s_outputs_of_a_committed_network() -> None:
+    """Without torch: the committed network's Linear -> BatchNorm layers folded by
+    fold_linear_bn into a PosePrior give torch's own evaluation-mode outputs (float32 in torch:
+    the tolerance of the test below)."""
+    from pose_lifter.mocap.prior_training import fold_linear_bn
+
+    f = np.load(TORCH_FIXTURE, allow_pickle=False)
+
+    def fold(name: str) -> tuple[np.ndarray, np.ndarray]:
+        return fold_linear_bn(*(f[f"{name}_{k}"] for k in ("weight", "bias", "gamma", "beta", "mean", "var")),
+                              float(f[f"{name}_eps"]))
+
+    n_blocks = int(f["n_blocks"])
+    layers = [fold("stem")]
+    for i in range(n_blocks):
+        layers += [fold(f"block{i}_a"), fold(f"block{i}_b")]
+    layers.append((f["head_weight"].T, f["head_bias"]))
+    prior = PosePrior(tuple(np.ascontiguousarray(w) for w, _ in layers),
+                      tuple(np.ascontiguousarray(b) for _, b in layers),
+                      f["out_mean"], f["out_scale"], np.ones((12, 3)), 1, {}, n_blocks)
+    want = (f["y_torch"] * f["out_scale"] + f["out_mean"]).reshape(-1, 12, 3)
+    np.testing.assert_allclose(prior.forward(f["x"]), want, rtol=1e-4, atol=1e-4 * float(np.abs(want).max()))
+    # the tolerance is far below what a wrong layer costs: a shifted bias is caught
+    w, b = layers[0]
+    layers[0] = (w, b + 0.1)
+    broken = PosePrior(tuple(w for w, _ in layers), tuple(b for _, b in layers), f["out_mean"],
+                       f["out_scale"], np.ones((12, 3)), 1, {}, n_blocks)
+    assert np.abs(broken.forward(f["x"]) - want).max() > 1e-3 * float(np.abs(want).max())
+
+
 def test_the_trained_residual_prior_runs_in_numpy_as_in_torch() -> None:
     """Batch normalisation folded into the linear layers: the numpy prior equals the torch
-    network in evaluation mode; seeded training repeats exactly."""
-    torch = pytest.importorskip("torch")
+    network in evaluation mode; seeded training repeats exactly. Needs the training extra (torch,
+    ``make train-deps``); CI checks the same equivalence on a committed network above."""
+    torch = pytest.importorskip("torch", reason="torch is the training extra (make train-deps)")
     from pose_lifter.mocap import prior_training as pt
 
     seqs = [synthetic_poses(200, seed=s, n_actions=2) for s in range(3)]

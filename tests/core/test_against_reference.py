@@ -8,6 +8,7 @@ the same point (or the same basin).
 
 from __future__ import annotations
 
+import cvxpy  # noqa: F401  (required: in the lock; a broken install fails here)
 import numpy as np
 import pytest
 import tolerances as tol
@@ -27,7 +28,6 @@ from pose_lifter.core.skeleton import limb_selectors
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
 
-pytest.importorskip("cvxpy")
 Arr = NDArray[np.float64]
 
 

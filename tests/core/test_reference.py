@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cvxpy  # noqa: F401  (required: in the lock; a broken install fails here)
 import numpy as np
 import pytest
 import tolerances as tol
@@ -15,8 +16,6 @@ from pose_lifter.core.results import Camera
 from pose_lifter.core.skeleton import limb_lengths, limb_selectors
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
-
-pytest.importorskip("cvxpy")
 
 
 @pytest.fixture(scope="module")

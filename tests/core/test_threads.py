@@ -5,9 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-import pytest
-
-threadpoolctl = pytest.importorskip("threadpoolctl")
+import threadpoolctl  # noqa: F401  (required: in the lock; a broken install fails here)
 
 CHILD = """
 import numpy

@@ -388,24 +388,45 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     return replace(prior, abs_error=np.maximum(err, 1e-6), metadata=meta)
 
 
+def fold_linear_bn(weight: NDArray[np.float64], bias: NDArray[np.float64], gamma: NDArray[np.float64],
+                   beta: NDArray[np.float64], mean: NDArray[np.float64], var: NDArray[np.float64],
+                   eps: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``Linear -> BatchNorm`` in evaluation mode as one linear layer (``x @ W' + b'``).
+
+    Parameters
+    ----------
+    weight : ndarray, shape (out, in)
+        torch's ``Linear.weight``; ``bias`` (out,).
+    gamma, beta, mean, var : ndarray, shape (out,)
+        The batch norm's weight, bias, running mean and running variance; ``eps`` its epsilon.
+
+    Returns
+    -------
+    W' : ndarray, shape (in, out)
+        ``W.T s`` with ``s = gamma / sqrt(var + eps)``.
+    b' : ndarray, shape (out,)
+        ``(b - mean) s + beta``.
+    """
+    s = gamma / np.sqrt(var + eps)
+    return weight.T * s, (bias - mean) * s + beta
+
+
 def _fold_residual(stem: Any, body: Any, head: Any, out_mean: NDArray[np.float64],
                    out_scale: NDArray[np.float64], window: int) -> PosePrior:
     """The trained torch modules (eval mode: dropout off, batch norm by its running statistics)
-    as a numpy :class:`PosePrior`: each ``Linear -> BatchNorm`` becomes one linear layer
-    ``W' = W s``, ``b' = (b - mu) s + beta`` with ``s = gamma / sqrt(var + eps)``."""
-    import torch
+    as a numpy :class:`PosePrior`, each ``Linear -> BatchNorm`` folded (:func:`fold_linear_bn`)."""
+
+    def arr(t: Any) -> NDArray[np.float64]:
+        return np.asarray(t.detach().double().numpy())
 
     def fold(lin: Any, bn: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        w = lin.weight.detach().double().numpy().T
-        b = lin.bias.detach().double().numpy()
-        s = (bn.weight.detach().double() / torch.sqrt(bn.running_var.double() + bn.eps)).numpy()
-        mu = bn.running_mean.detach().double().numpy()
-        return w * s, (b - mu) * s + bn.bias.detach().double().numpy()
+        return fold_linear_bn(arr(lin.weight), arr(lin.bias), arr(bn.weight), arr(bn.bias),
+                              arr(bn.running_mean), arr(bn.running_var), float(bn.eps))
 
     layers = [fold(stem[0], stem[1])]
     for blk in body:
         layers += [fold(blk[0], blk[1]), fold(blk[4], blk[5])]
-    layers.append((head.weight.detach().double().numpy().T, head.bias.detach().double().numpy()))
+    layers.append((arr(head.weight).T, arr(head.bias)))
     return PosePrior(tuple(np.ascontiguousarray(w) for w, _ in layers),
                      tuple(np.ascontiguousarray(b) for _, b in layers),
                      out_mean, out_scale, np.ones((N_JOINTS, 3)), window, {}, len(body))
