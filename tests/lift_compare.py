@@ -35,6 +35,17 @@ def assert_same_lift(a: Path, b: Path) -> int:
     ma, mb = lifted_messages(a), lifted_messages(b)
     assert len(ma) == len(mb), (a, b, len(ma), len(mb))
     for x, y in zip(ma, mb, strict=True):
-        assert x == y, (a, b, x[0], x[1])
+        assert x == y, (a, b, x[0], x[1], _first_difference(x[2], y[2]))
     assert any(t == "/skeletons_3d" for t, _, _ in ma)
     return len(ma)
+
+
+def _first_difference(x: Any, y: Any, path: str = "") -> str:
+    """Where two plain() values first differ, as a path with both values (for a readable failure)."""
+    if isinstance(x, list | tuple) and isinstance(y, list | tuple):
+        if len(x) != len(y):
+            return f"{path}: length {len(x)} != {len(y)}"
+        for i, (u, v) in enumerate(zip(x, y, strict=True)):
+            if u != v:
+                return _first_difference(u, v, f"{path}[{i}]")
+    return f"{path}: {x!r} != {y!r}"

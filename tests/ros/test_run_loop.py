@@ -81,15 +81,16 @@ def _wait_for(proc: subprocess.Popen[str], marker: str) -> list[str]:
     pytest.fail(f"the probe never printed {marker!r}: {lines}")
 
 
-def _stop(proc: subprocess.Popen[str], sig: int) -> tuple[int, float, list[str]]:
+def _stop(proc: subprocess.Popen[str], sig: int) -> tuple[int, list[str]]:
+    """Signal the child and wait for it to exit (killed after EXIT_TIMEOUT: a non-zero code);
+    returns its exit code and the lines it printed after the signal."""
     proc.send_signal(sig)
-    sent = time.monotonic()
     try:
         out, _ = proc.communicate(timeout=EXIT_TIMEOUT)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    return proc.returncode, time.monotonic() - sent, out.splitlines()
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return proc.returncode, out.splitlines()
 
 
 SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
@@ -99,24 +100,25 @@ SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["
 def test_signal_while_starting_exits_at_once_with_code_0(tmp_path: Path, sig: int) -> None:
     proc = _start(tmp_path, "starting")
     _wait_for(proc, "starting")
-    code, seconds, rest = _stop(proc, sig)
-    assert code == 0 and seconds < 2.0 and rest == [], rest  # the 30 s start is not waited for
+    code, rest = _stop(proc, sig)
+    # exit 0 within EXIT_TIMEOUT, far less than the 30 s start: the start is not waited for
+    assert code == 0 and rest == [], rest
 
 
 @SIGNALS
 def test_signal_in_a_marked_start_up_phase_of_the_loop_exits_at_once(tmp_path: Path, sig: int) -> None:
     proc = _start(tmp_path, "configure")
     _wait_for(proc, "configuring")
-    code, seconds, rest = _stop(proc, sig)
-    assert code == 0 and seconds < 2.0 and rest == [], rest
+    code, rest = _stop(proc, sig)
+    assert code == 0 and rest == [], rest  # "configured" (after 30 s) never comes
 
 
 @SIGNALS
 def test_signal_while_running_finishes_the_callback_then_exits_0(tmp_path: Path, sig: int) -> None:
     proc = _start(tmp_path, "running")
     _wait_for(proc, "callback start")
-    code, seconds, rest = _stop(proc, sig)
-    assert code == 0 and seconds < EXIT_TIMEOUT, rest
+    code, rest = _stop(proc, sig)
+    assert code == 0, rest
     assert rest[0] == "callback end" and "callback start" not in rest, rest  # no new callback
     assert rest[-1] == "run_node returned" and not any("Traceback" in line for line in rest), rest
 
