@@ -249,7 +249,7 @@ def test_yolo_detection_array_through_a_bag_to_a_lift(store: Any, tmp_path: Path
     back = store.deserialize_cdr(raw, "pose_lifter_msgs/msg/Skeleton2DArray")
     pts, c = m.skeleton2d_to_arrays(back.skeletons[0], back.layout)
     result = Lifter(PoseBases.load()).lift(pts, c)
-    assert result.reprojection_error < 0.2 * np.ptp(xy[:, 1])
+    assert result.reprojection_error < tol.ADAPTED_REPROJECTION_PX
 
 
 def test_yolo_bad_keypoint_id_is_reported_not_raised(store: Any) -> None:

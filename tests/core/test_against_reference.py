@@ -170,13 +170,8 @@ def test_alpha_step_admm_feasible_and_above_sdp_bound(
     assert float(z @ w_mat @ z) >= lower - tol.SDP_BOUND_REL * (1 + abs(lower))
 
 
-#: How far above the SLSQP polish of its own output the paper's inner ADM may end: on most of
-#: the 8 problems within the alpha-step tolerance, on every one within this. It never meets its
-#: tolerance in 60 iterations on these problems, and which problems end a few % above a local
-#: minimum changes with the machine's round-off (measured: case 4 at +5.0 % on one machine,
-#: case 0 at +2.3 % on another, the other cases within 1 % on both).
-ADMM_MAX_GAP = 0.08
-ADMM_CASES_WITHIN_TOL = 6
+ADMM_MAX_GAP = tol.ADMM_ALPHA_MAX_GAP
+ADMM_CASES_WITHIN_TOL = tol.ADMM_ALPHA_CASES_WITHIN_TOL
 
 
 def test_alpha_step_admm_is_a_local_minimum(bases: PoseBases, model: PoseModel, test_poses: Arr) -> None:
@@ -409,10 +404,7 @@ _NEWTON_POOR_MINIMA = pytest.mark.xfail(strict=True, reason=(
     "ADM: median 1.00-1.05 / max 1.10-1.27"))
 
 
-#: Worst case of the paper's inner-ADM pose step over the 4 problems: which problem ends in a poor
-#: local minimum depends on the machine's round-off (measured max 1.10-1.27 on the machines of
-#: a44827f..2ac609f, 1.56 for L2WAWS case 1 on the one of 2026-12-01; median 1.00 on all).
-ADMM_POSE_MAX_RATIO = 1.7
+ADMM_POSE_MAX_RATIO = tol.ADMM_POSE_MAX_RATIO
 
 
 @pytest.mark.parametrize("name", ["L1WAWS", "L2WAWS"])

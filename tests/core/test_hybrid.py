@@ -43,7 +43,7 @@ def test_hybrid_meets_the_limb_constraints_and_beats_both_parts(
             assert np.all(np.isfinite(r.pose_camera))
     mean = {k: float(np.mean(v)) for k, v in errs.items()}
     assert mean["hybrid"] < mean["paper"], mean
-    assert mean["hybrid"] < 1.1 * mean["learned"], mean
+    assert mean["hybrid"] < mean["learned"], mean  # measured 0.0635 against 0.0654 (and paper 0.0694)
 
 
 def test_a_confident_outlier_is_dropped_and_does_not_drag_the_depth(bases: PoseBases) -> None:
