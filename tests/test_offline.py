@@ -93,9 +93,11 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     np.testing.assert_allclose(j - j.mean(axis=0), lifter.pose @ turn.T * 0.5, atol=tol.ROUND_OFF_ACCUMULATED)
     u = 800 * j.mean(axis=0)[0] / 4.0 + 320
     assert u == pytest.approx(sc.points_2d[0, 0].mean(axis=0)[0])
-    # markers: two per person; the vanished track gets DELETE markers
+    # markers: two per person, after the first message's two DELETEALL (what an earlier run left
+    # on screen goes, as the node does); the vanished track gets DELETE markers
     mk = [x.msg.markers for x in msgs if x.topic == "/skeleton_markers"]
-    assert [len(a) for a in mk[:3]] == [4, 4, 4]
+    assert [(k.id, k.action) for k in mk[0][:2]] == [(0, 3), (0, 3)]
+    assert [len(a) for a in mk[:3]] == [6, 4, 4]
     assert [(k.id, k.action) for k in mk[3]] == [(0, 0), (0, 0), (5, 2), (5, 2)]
     assert len(frames) == 11
 
