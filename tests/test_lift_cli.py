@@ -54,9 +54,11 @@ def test_lift_topic_camera_info_topic_and_keep(tmp_path: Path, capsys: pytest.Ca
     z = np.array([[p.z for p in s.joints] for a in skels for s in a.skeletons])
     assert np.all(np.abs(z.mean(axis=1) - 5.0) < 1.0)  # placed with the camera's focal length
     assert "lifted 10 of 10 skeletons" in capsys.readouterr().out
-    # without --keep everything is copied (and the default topic does not exist here)
+    # without --keep everything is copied (and the default camera_info topic does not exist here:
+    # a note, the default distance)
     assert lift(str(bag), "--out", str(tmp_path / "all.mcap"), "--topic", "/detector/pose",
                 "--max-messages", "3") == 0
+    assert "has no /camera_info: depth at the default distance, 5 m" in capsys.readouterr().err
     assert {"/detector/pose", "/cam/camera_info", "/ground_truth/skeletons_3d"} <= set(
         check_mcap(tmp_path / "all.mcap"))
 
@@ -126,6 +128,7 @@ def bad_inputs(tmp: Path) -> list[tuple[list[str], str, int]]:
         ([w, "--out", o, "--topic", "/nope"], "has no topic '/nope'", 2),
         ([w, "--out", o, "--topic", "/ground_truth/skeletons_3d"], "lift takes", 2),
         ([w, "--out", o, "--camera-info-topic", "/keypoints_2d"], "not sensor_msgs/msg/CameraInfo", 2),
+        ([w, "--out", o, "--camera-info-topic", "/cam/info"], "has no topic '/cam/info'", 2),
         ([w, "--out", o, "--keep", "/camera_info", "/images"], "to keep", 2),
         ([w, "--out", o, "--params-file", str(tmp / "none.yaml")], "cannot read params file", 2),
         ([w, "--out", o, "--params-file", str(tmp / "noparams.yaml")], "no /** / pose_lifter", 2),
@@ -140,6 +143,97 @@ def test_bad_inputs_one_line_exit_code_no_output(tmp_path: Path, capsys: pytest.
         assert err.count("\n") == 1 and err.startswith("pose-lifter lift: error: "), err
         assert not (tmp_path / "o.mcap").exists() and not (tmp_path / "nodir").exists()
     assert (tmp_path / "exists.mcap").read_bytes() == b"x"
+
+
+def test_camera_info_topic_named_must_exist_the_default_may_not(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A mistyped --camera-info-topic is an error as a mistyped --topic is; the default topic on a
+    bag without camera_info lifts at the default distance with a note; '' means none, silently."""
+    bag = tmp_path / "no_info.mcap"
+    with bags.BagWriter(bag, compress=False) as w:
+        for raw in bags.read_raw(WALK, ["/keypoints_2d"]):
+            w.write_raw(raw)
+    out = tmp_path / "o.mcap"
+    for typed in ("/camera_info", "/camera/camera_info"):  # named, even as the default's name
+        assert lift(str(bag), "--out", str(out), "--camera-info-topic", typed) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"pose-lifter lift: error: {bag} has no topic {typed!r}"), err
+        assert err.count("\n") == 1
+        assert not out.exists()
+    assert lift(str(bag), "--out", str(out), "--max-messages", "2") == 0
+    err = capsys.readouterr().err
+    assert err == (f"pose-lifter lift: note: {bag} has no /camera_info: depth at the default distance, 5 m "
+                   "(--camera-info-topic names another topic)\n")
+    assert lift(str(bag), "--out", str(tmp_path / "none.mcap"), "--max-messages", "2",
+                "--camera-info-topic", "") == 0
+    assert capsys.readouterr().err == ""
+    skels = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
+    z = np.array([[p.z for p in s.joints] for a in skels for s in a.skeletons])
+    assert np.allclose(z.mean(axis=1), 5.0)  # the centroid at the default distance
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_the_progress_bar_counts_each_skeleton_once(workers: str, monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str],
+                                                    tmp_path: Path) -> None:
+    """Two tracks lifted in one group (one worker) or two (two workers): the bar's total and its
+    final count are the skeletons lifted."""
+    import tqdm
+
+    bars: list[Recorder] = []
+
+    class Recorder:
+        def __init__(self, *args: Any, total: int | None = None, **kwargs: Any) -> None:
+            self.total, self.n = total, 0
+            bars.append(self)
+
+        def update(self, n: int = 1) -> None:
+            self.n += n
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(tqdm, "tqdm", Recorder)
+    assert cli.main(["lift", str(REPO / "bags" / "two_people.mcap"), "--out", str(tmp_path / "o.mcap"),
+                     "--max-messages", "10", "--workers", workers]) == 0
+    assert "lifted 20 of 20 skeletons" in capsys.readouterr().out
+    assert [(b.total, b.n) for b in bars] == [(20, 20)]
+
+
+def test_a_typed_flag_wins_over_the_params_file_even_at_its_default(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The file sets 5 starts, paper mode and a 0.40 m leg; flags typed with the parser's defaults
+    (30, hybrid, 0.43) still win; flags not typed leave the file's values."""
+    text = PARAMS.read_text()
+    for old, new in (("n_starts: 30", "n_starts: 5"), ('mode: "hybrid"', 'mode: "paper"'),
+                     ("lower_leg_length: 0.43", "lower_leg_length: 0.40")):
+        assert old in text
+        text = text.replace(old, new)
+    (tmp_path / "p.yaml").write_text(text)
+    from pose_lifter.offline import flags
+
+    made: list[Any] = []
+    real = flags.lift_settings
+
+    def recorded(args: Any, params: Any) -> Any:
+        made.append(real(args, params))
+        return made[-1]
+
+    monkeypatch.setattr(flags, "lift_settings", recorded)
+    base = [str(WALK), "--params-file", str(tmp_path / "p.yaml"), "--max-messages", "1"]
+    assert lift(*base, "--out", str(tmp_path / "a.mcap")) == 0
+    assert lift(*base, "--out", str(tmp_path / "b.mcap"), "--starts", "30", "--mode", "hybrid",
+                "--leg-length", "0.43") == 0
+    assert lift(*base, "--out=" + str(tmp_path / "c.mcap"), "--start=30") == 0  # an abbreviation
+    got = [(s.options["n_starts"], s.options["mode"], s.leg_length_m) for s in made]
+    assert got == [(5, "paper", 0.40), (30, "hybrid", 0.43), (30, "paper", 0.40)]
+
+
+def test_play_waits_by_default() -> None:
+    from pose_lifter.ros.play import DEFAULT_WAIT_S, lifter_topics
+
+    assert cli.build_parser().parse_args(["play", "x.mcap"]).wait == DEFAULT_WAIT_S > 0
+    assert lifter_topics(bags.bag_topics(WALK)) == ["/camera_info", "/keypoints_2d"]  # not the ground truth
 
 
 @pytest.mark.slow
@@ -181,9 +275,12 @@ def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.C
     from pose_lifter.messages import convert as m
 
     lifted = tmp_path / "l.mcap"
+    # punch_outliers has missing joints (observed False); two_people has two tracks
+    assert lift(str(REPO / "bags" / "punch_outliers.mcap"), "--out", str(tmp_path / "p.mcap"),
+                "--max-messages", "3", "--keep", "none") == 0
     assert lift(str(REPO / "bags" / "two_people.mcap"), "--out", str(lifted), "--max-messages", "3",
                 "--keep", "none") == 0
-    truth = [(m.stamp_to_ns(a.header.stamp), s.track_id, m.skeleton3d_to_joints(s))
+    truth = [(m.stamp_to_ns(a.header.stamp), s.track_id, m.skeleton3d_to_joints(s), list(s.observed))
              for a in (x.msg for x in bags.read_messages(lifted, ["/skeletons_3d"])) for s in a.skeletons]
     assert len(truth) == 6
     for fmt in ("csv", "npz", "json"):
@@ -193,20 +290,51 @@ def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.C
         assert (tmp_path / f"e.{fmt}").stat().st_mode & 0o777 == 0o666 & ~mask  # a new file's mode
     data = np.load(tmp_path / "e.npz", allow_pickle=False)
     assert data["joints"].shape == (6, 12, 3) and str(data["joint_names"][0]) == "left_shoulder"
+    assert data["observed"].shape == (6, 12) and data["observed"].dtype == bool
     with open(tmp_path / "e.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    frames = json.loads((tmp_path / "e.json").read_text())["frames"]
-    from_json = [(fr["stamp_ns"], s["track_id"], np.array(s["joints"]))
-                 for fr in frames for s in fr["skeletons"]]
+        reader = csv.DictReader(f)
+        rows = list(reader)
+    # units in the column names (a pandas user reads them with the data)
+    assert reader.fieldnames == ["stamp_ns", "frame_id", "track_id", "joint", "x_m", "y_m", "z_m", "observed",
+                                 "reprojection_error_px", "warm_started"]
+    document = json.loads((tmp_path / "e.json").read_text())
+    assert document["units"]["joints"].startswith("metres")
+    from_json = [(fr["stamp_ns"], s["track_id"], np.array(s["joints"]), s["observed"])
+                 for fr in document["frames"] for s in fr["skeletons"]]
     assert len(rows) == 6 * 12
-    for i, (stamp, tid, joints) in enumerate(truth):
+    for i, (stamp, tid, joints, observed) in enumerate(truth):
+        assert len(observed) == 12
         assert data["stamp_ns"][i] == stamp and data["track_id"][i] == tid
         np.testing.assert_array_equal(data["joints"][i], joints)
-        assert from_json[i][:2] == (stamp, tid)
+        assert data["observed"][i].tolist() == observed
+        assert from_json[i][:2] == (stamp, tid) and from_json[i][3] == observed
         np.testing.assert_array_equal(from_json[i][2], joints)
-        xyz = [[float(r["x"]), float(r["y"]), float(r["z"])] for r in rows[12 * i:12 * i + 12]]
+        block = rows[12 * i:12 * i + 12]
+        xyz = [[float(r["x_m"]), float(r["y_m"]), float(r["z_m"])] for r in block]
         np.testing.assert_array_equal(np.array(xyz), joints)
+        assert [r["observed"] for r in block] == [str(int(v)) for v in observed]
         assert int(rows[12 * i]["stamp_ns"]) == stamp and int(rows[12 * i]["track_id"]) == tid
+    # a joint the 2D did not show is exported as not observed, alike in the three formats
+    flags = [list(s.observed) for x in bags.read_messages(tmp_path / "p.mcap", ["/skeletons_3d"])
+             for s in x.msg.skeletons]
+    assert not all(all(f) for f in flags)
+    for fmt in ("csv", "npz", "json"):
+        assert cli.main(["export", str(tmp_path / "p.mcap"), "--out", str(tmp_path / f"p.{fmt}")]) == 0
+    with open(tmp_path / "p.csv", newline="") as f:
+        assert [r["observed"] == "1" for r in csv.DictReader(f)] == [v for f in flags for v in f]
+    assert np.load(tmp_path / "p.npz")["observed"].tolist() == flags
+    assert [s["observed"] for fr in json.loads((tmp_path / "p.json").read_text())["frames"]
+            for s in fr["skeletons"]] == flags
+    # ground truth carries no flags: an empty cell, null, False
+    gt = REPO / "bags" / "two_people.mcap"
+    for fmt in ("csv", "npz", "json"):
+        assert cli.main(["export", str(gt), "--topic", "/ground_truth/skeletons_3d",
+                         "--out", str(tmp_path / f"gt.{fmt}")]) == 0
+    with open(tmp_path / "gt.csv", newline="") as f:
+        assert {r["observed"] for r in csv.DictReader(f)} == {""}
+    assert not np.load(tmp_path / "gt.npz")["observed"].any()
+    assert {str(s["observed"]) for fr in json.loads((tmp_path / "gt.json").read_text())["frames"]
+            for s in fr["skeletons"]} == {"None"}
     capsys.readouterr()
     for args, expected in [
         ([str(lifted), "--out", str(tmp_path / "e.txt")], "must end in .csv or .npz or .json"),

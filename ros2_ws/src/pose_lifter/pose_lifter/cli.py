@@ -20,14 +20,11 @@ import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Final
 
-from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
+from pose_lifter.core.placement import DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
-
-if TYPE_CHECKING:
-    from pose_lifter.offline.collection import LiftSettings
 
 __all__ = ["build_parser", "main", "make_bag"]
 
@@ -164,80 +161,15 @@ def _cmd_make_bag(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- lift / evaluate
 
 
-def _lifter(args: argparse.Namespace) -> Any:
-    from pose_lifter.core.bases import PoseBases
-    from pose_lifter.core.lifter import Lifter
-    from pose_lifter.core.options import LifterOptions
-
-    opts = LifterOptions(variant=args.variant, camera_solver=args.solver, pose_solver=args.solver,
-                         n_starts=args.starts, mode="paper" if args.solver == "cvxpy" else args.mode)
-    lifter = Lifter(PoseBases.load(args.bases) if args.bases else None, opts)  # None: the mode's bases
-    if args.solver == "admm":
-        # compile (first run after an install, ~25 s) or load the solver kernels now, so that the
-        # per-skeleton times reported are solve times (the reference path has no kernels)
-        lifter.warm_up()
-    return lifter
-
-
-def _keep_topics(values: Sequence[str] | None) -> list[str] | None:
-    """``--keep``: None / ``all`` = every input topic, ``none`` = none, else the topics named."""
-    if values is None or list(values) == ["all"]:
-        return None
-    if list(values) == ["none"]:
-        return []
-    return list(values)
-
-
 def _cores() -> int:
-    import os
-
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def _lift_settings(args: argparse.Namespace, parser_defaults: dict[str, Any]) -> LiftSettings:
-    """The :class:`pose_lifter.offline.collection.LiftSettings` of the flags and ``--params-file``.
-
-    The file gives the node's options; a flag given with a value other than its default wins.
-    """
-    from pose_lifter.core.options import LifterOptions
-    from pose_lifter.offline.collection import LiftSettings
-
-    keep = _keep_topics(args.keep)
-    common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
-                                  camera_info_topic=args.camera_info_topic or None, keep=keep,
-                                  smoothing_s=args.smoothing, hri=args.hri)
-    if not args.params_file:
-        options = {"variant": args.variant, "camera_solver": args.solver, "pose_solver": args.solver,
-                   "n_starts": args.starts, "mode": "paper" if args.solver == "cvxpy" else args.mode}
-        full = LiftSettings.options_of(LifterOptions().replace(**options))
-        return LiftSettings(options=full, bases=args.bases, warm_start=not args.no_warm_start,
-                            leg_length_m=args.leg_length, default_distance_m=DEFAULT_DISTANCE_M, **common)
+def _params(args: argparse.Namespace) -> Any:
+    """The ``--params-file`` read (:class:`pose_lifter.ros.params.OfflineParams`), or None."""
     from pose_lifter.ros.params import read_params_file
 
-    params = read_params_file(args.params_file)
-    options = dict(params.options)
-    if args.variant != parser_defaults["variant"]:
-        options["variant"] = args.variant
-    if args.starts != parser_defaults["starts"]:
-        options["n_starts"] = args.starts
-    if args.mode != parser_defaults["mode"] or args.solver == "cvxpy":
-        options["mode"] = "paper" if args.solver == "cvxpy" else args.mode
-    options.update(camera_solver=args.solver, pose_solver=args.solver)
-    full = LiftSettings.options_of(LifterOptions().replace(**options))
-    path = args.bases or params.bases_file
-    warm = False if args.no_warm_start else (True if params.warm_start is None else params.warm_start)
-    leg = params.lower_leg_length
-    if leg is None or args.leg_length != parser_defaults["leg_length"]:
-        leg = args.leg_length
-    distance = DEFAULT_DISTANCE_M if params.default_distance is None else params.default_distance
-    if params.ignored:
-        print(f"pose-lifter lift: {args.params_file}: ignored offline: {', '.join(params.ignored)}",
-              file=sys.stderr)
-    defaults = LiftSettings()
-    timeout = defaults.track_timeout if params.track_timeout is None else params.track_timeout
-    reinit = defaults.reinit_ratio if params.reinit_ratio is None else params.reinit_ratio
-    return LiftSettings(options=full, bases=str(path) if path else None, warm_start=warm, leg_length_m=leg,
-                        default_distance_m=distance, track_timeout=timeout, reinit_ratio=reinit, **common)
+    return read_params_file(args.params_file) if args.params_file else None
 
 
 def _is_collection(args: argparse.Namespace) -> bool:
@@ -264,14 +196,22 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     if args.scheduler:
         raise ValueError("--scheduler lifts a collection: name several bags, a directory or a glob, "
                          "and --out a directory")
+    from pose_lifter.offline.bags import BagError
+    from pose_lifter.offline.flags import keep_topics, lift_settings
     from pose_lifter.offline.lift import check_lift_inputs, lift_bag
 
     (bag,) = args.input
-    keep = _keep_topics(args.keep)
+    keep = keep_topics(args.keep)
     camera_info = args.camera_info_topic or None
     # every check that needs no lifting first: bad input never costs a kernel compile
-    check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
-    s = _lift_settings(args, args.lift_defaults)
+    topics = check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
+    if camera_info and camera_info not in topics and "camera_info_topic" in args.typed:
+        raise BagError(f"{bag} has no topic {camera_info!r}; its topics: {sorted(topics)} "
+                       "(--camera-info-topic '' lifts without camera_info, at the default distance)")
+    s = lift_settings(args, _params(args))
+    if camera_info and camera_info not in topics:  # the default topic, absent: as the node without it
+        print(f"pose-lifter lift: note: {bag} has no {camera_info}: depth at the default distance, "
+              f"{s.default_distance_m:g} m (--camera-info-topic names another topic)", file=sys.stderr)
     lifter = s.build_lifter()
     summary, _ = lift_bag(bag, args.out, lifter, s, progress=not args.quiet, overwrite=args.overwrite,
                           workers=args.workers or _cores())
@@ -286,12 +226,13 @@ def _cmd_lift(args: argparse.Namespace) -> int:
 def _cmd_lift_collection(args: argparse.Namespace) -> int:
     from pose_lifter.offline.bags import BagError
     from pose_lifter.offline.collection import format_summary, lift_collection, plan_jobs
+    from pose_lifter.offline.flags import lift_settings
 
     out = Path(args.out)
     if out.suffix == ".mcap" and not out.is_dir():
         raise BagError(f"a collection is lifted into a directory: --out {out} names a .mcap file")
     jobs = plan_jobs(args.input, out)  # every input found before any work
-    settings = _lift_settings(args, args.lift_defaults)
+    settings = lift_settings(args, _params(args))
     summary = lift_collection(args.input, out, settings, workers=args.workers or _cores(),
                               scheduler=args.scheduler, overwrite=args.overwrite, progress=not args.quiet,
                               jobs=jobs)
@@ -334,12 +275,14 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from pose_lifter.offline.collection import LiftSettings
     from pose_lifter.offline.demo import run_demo
+    from pose_lifter.offline.flags import flag_options
+    from pose_lifter.offline.settings import LiftSettings
 
-    settings = LiftSettings(warm_start=not args.no_warm_start, leg_length_m=args.leg_length, every=args.every,
-                            smoothing_s=0.0)
-    return run_demo(lambda: _lifter(args), settings, args.out, args.bag)
+    # the lift `pose-lifter lift BAG` does by default (every frame, 30 starts, centred smoothing)
+    settings = LiftSettings(options=flag_options(args), bases=args.bases, warm_start=not args.no_warm_start,
+                            leg_length_m=args.leg_length, every=args.every, smoothing_s=args.smoothing)
+    return run_demo(settings.build_lifter, settings, args.out, args.bag, workers=_cores())
 
 
 # --------------------------------------------------------------------------- parser
@@ -381,6 +324,27 @@ def _cmd_warm_up(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``pose-lifter`` argument parser."""
+    return _build_parsers()[0]
+
+
+#: The value of every option not typed, in :func:`_typed_options`' second parse.
+_NOT_TYPED: Final[object] = object()
+
+
+def _typed_options(argv: Sequence[str] | None, args: argparse.Namespace) -> frozenset[str]:
+    """The options (``dest`` names) typed on the command line of ``args.cmd``, whatever their
+    value: ``--starts 30`` is typed even where 30 is the default (so it wins over a params file).
+
+    The command line is parsed again with every default of the command set to a marker; argparse
+    resolves abbreviations and ``--opt=value`` forms as in the first parse."""
+    parser, commands = _build_parsers()
+    commands[args.cmd].set_defaults(**{dest: _NOT_TYPED for dest in vars(args) if dest != "cmd"})
+    again = parser.parse_args(argv)
+    return frozenset(k for k, v in vars(again).items() if v is not _NOT_TYPED and k != "cmd")
+
+
+def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    """The ``pose-lifter`` parser and its commands' parsers (name -> parser)."""
     parser = argparse.ArgumentParser(
         prog="pose-lifter", description="Offline commands: learn bases, make bags, lift bags, evaluate, demo."
     )
@@ -472,10 +436,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="input topics copied to the output: 'all' (default), 'none', or topic names")
     p.add_argument("--params-file", default=None,
                    help="the node's params YAML (config/lifter.yaml): lift with the live node's options; "
-                   "flags given with non-default values win")
-    p.set_defaults(func=_cmd_lift,
-                   lift_defaults={"variant": "full", "starts": 30, "leg_length": DEFAULT_LEG_LENGTH_M,
-                                  "mode": "hybrid"})
+                   "a flag typed on the command line wins over the file")
+    p.set_defaults(func=_cmd_lift)
 
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
@@ -489,8 +451,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("bag", help="input bag: .mcap file or rosbag2 directory")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
     p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1: real time)")
-    p.add_argument("--wait", type=float, default=0.0,
-                   help="seconds to wait for a subscriber on every topic first (default 0)")
+    p.add_argument("--wait", type=_NONNEG, default=5.0, metavar="SECONDS",
+                   help="before the first message, wait up to SECONDS for a subscriber on the played "
+                   "topics a lifter reads (keypoints, camera_info; the ground truth is not waited for), "
+                   "so that no first message is lost; on giving up, one line on stderr and play "
+                   "(default 5; 0: do not wait)")
     p.set_defaults(func=_cmd_play)
 
     p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
@@ -503,9 +468,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
     _add_lifter_options(p)
-    p.add_argument("--every", type=_POS_INT, default=3, help="lift every N-th frame (default 3: 10 Hz)")
-    # a one-minute demo: 10 cold starts per person (the first frame), warm starts after that
-    p.set_defaults(func=_cmd_demo, starts=10)
+    p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th frame (default 1: all)")
+    p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
+                   metavar="SECONDS", help=f"as for lift (default {OFFLINE_SMOOTHING_S})")
+    p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("experiments", help="the paper's experiments (Sec. 4) on CMU data -> PNG/CSV/markdown")
     p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
@@ -517,7 +483,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("warm-up", help="compile the solver kernels into the package's cache (make venv does)")
     p.set_defaults(func=_cmd_warm_up)
-    return parser
+    return parser, dict(sub.choices)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -563,6 +529,7 @@ def _main(argv: Sequence[str] | None) -> int:
               file=sys.stderr)
         return 2
     args.command = _command_line(argv)
+    args.typed = _typed_options(argv, args)
     try:
         rc = int(args.func(args))
         sys.stdout.flush()  # here, where a reader that went away is answered (below)

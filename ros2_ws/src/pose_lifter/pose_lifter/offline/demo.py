@@ -1,7 +1,9 @@
 """``pose-lifter demo``: lift a committed bag, print its error table, write an MCAP and a PNG.
 
-The PNG shows a few frames: the 2D keypoints the lifter got (left) beside the lifted 3D
-skeletons and the ground truth in the camera frame (right).
+The bag is lifted as ``pose-lifter lift BAG`` lifts it by default. The PNG shows three frames:
+the 2D keypoints the lifter got (left) beside the lifted 3D skeletons and the ground truth in
+the camera frame (right); one colour per track, the person's left limbs in full colour and the
+right ones lighter.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import BONES_FOR_DRAWING
+from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINTS_LEFT, JOINTS_RIGHT
 
 if TYPE_CHECKING:
     from pose_lifter.core.lifter import Lifter
@@ -35,6 +37,22 @@ def find_demo_bag(name: str = DEFAULT_DEMO_BAG) -> Path:
                             "pass --bag PATH")
 
 
+def _side_shade(a: int, b: int) -> float:
+    """How much a bone's colour is lightened: 0 for the person's left limbs, 0.55 for the right
+    ones, between for the bones across the torso."""
+    if a in JOINTS_LEFT and b in JOINTS_LEFT:
+        return 0.0
+    if a in JOINTS_RIGHT and b in JOINTS_RIGHT:
+        return 0.55
+    return 0.3
+
+
+def _lighter(colour: tuple[float, ...], amount: float) -> tuple[float, float, float]:
+    """``colour`` mixed with white by ``amount`` (0: unchanged)."""
+    r, g, b = colour[:3]
+    return (r + (1 - r) * amount, g + (1 - g) * amount, b + (1 - b) * amount)
+
+
 def _to_plot(points_cam: NDArray[np.float64]) -> NDArray[np.float64]:
     """Camera optical frame (x right, y down, z forward) -> plot axes (x right, depth, up)."""
     p = np.asarray(points_cam)
@@ -45,6 +63,10 @@ def plot_frames(
     frames: list[dict[str, Any]], path: str | Path, title: str = "", image_size: tuple[int, int] = (640, 480)
 ) -> None:
     """Draw frames side by side and save a PNG.
+
+    One row per frame: the 2D input (left) and, larger, the lifted 3D skeletons with the ground
+    truth (right). Each track has its colour (a legend names them); the person's left limbs are
+    drawn in full colour, the right ones lighter; the ground truth is grey and dashed.
 
     Parameters
     ----------
@@ -60,23 +82,28 @@ def plot_frames(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
 
     from pose_lifter.messages.convert import track_color
 
     n = len(frames)
-    fig = plt.figure(figsize=(9.0, 3.6 * n))
+    fig = plt.figure(figsize=(12.0, 4.8 * n + 0.6))
+    grid = fig.add_gridspec(n, 2, width_ratios=(1.0, 1.7))
+    tracks: set[int] = set()
     for row, fr in enumerate(frames):
-        ax2 = fig.add_subplot(n, 2, 2 * row + 1)
-        ax3 = fig.add_subplot(n, 2, 2 * row + 2, projection="3d")
+        ax2 = fig.add_subplot(grid[row, 0])
+        ax3 = fig.add_subplot(grid[row, 1], projection="3d")
         t = (fr["stamp_ns"] - frames[0]["stamp_ns"]) * 1e-9
         everything = []
         for person in fr["people"]:
+            tracks.add(int(person["track_id"]))
             colour = track_color(int(person["track_id"]))
             pts, conf = person["points_2d"], person["confidence"]
             for a, b in BONES_FOR_DRAWING:
                 if conf[a] > 0 and conf[b] > 0:
-                    ax2.plot([pts[a, 0], pts[b, 0]], [pts[a, 1], pts[b, 1]], color=colour, lw=2)
+                    ax2.plot([pts[a, 0], pts[b, 0]], [pts[a, 1], pts[b, 1]], lw=2,
+                             color=_lighter(colour, _side_shade(a, b)))
             vis = conf > 0
             ax2.scatter(pts[vis, 0], pts[vis, 1], s=10, color=colour)
             for key, style in (("truth", "--"), ("lifted", "-")):
@@ -85,8 +112,9 @@ def plot_frames(
                 q = _to_plot(person[key])
                 everything.append(q)
                 for a, b in BONES_FOR_DRAWING:
-                    ax3.plot(*zip(q[a], q[b], strict=True), ls=style, lw=1.2 if style == "--" else 2.2,
-                             color="0.35" if key == "truth" else colour)
+                    base = (0.3, 0.3, 0.3) if key == "truth" else colour
+                    ax3.plot(*zip(q[a], q[b], strict=True), ls=style, lw=1.2 if style == "--" else 2.4,
+                             color=_lighter(base, _side_shade(a, b)))
         ax2.set_xlim(0, image_size[0])
         ax2.set_ylim(image_size[1], 0)
         ax2.set_aspect("equal")
@@ -97,7 +125,7 @@ def plot_frames(
             half = 0.55 * float(np.max(allp.max(axis=0) - allp.min(axis=0)))
             for setter, c in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), centre, strict=True):
                 setter(c - half, c + half)
-        ax3.set_box_aspect((1, 1, 1))
+        ax3.set_box_aspect((1, 1, 1), zoom=1.1)
         ax3.view_init(elev=15, azim=-78)
         for axis in (ax3.xaxis, ax3.yaxis, ax3.zaxis):
             axis.set_major_locator(MaxNLocator(4))
@@ -105,16 +133,25 @@ def plot_frames(
         ax3.set_ylabel("depth (m)", fontsize=8)
         ax3.set_zlabel("up (m)", fontsize=8)
         ax3.tick_params(labelsize=7)
-        ax3.set_title("lifted 3D (colour) vs ground truth (grey, dashed)", fontsize=9)
+        ax3.set_title(f"lifted 3D vs ground truth (camera frame), t = {t:.2f} s", fontsize=9)
+    handles = [Line2D([], [], color=track_color(k), lw=2.4, label=f"track {k}") for k in sorted(tracks)]
+    grey = (0.3, 0.3, 0.3)
+    handles += [Line2D([], [], color=grey, lw=2.4, label="left limbs"),
+                Line2D([], [], color=_lighter(grey, 0.55), lw=2.4, label="right limbs (lighter)"),
+                Line2D([], [], color=grey, lw=1.2, ls="--", label="ground truth (3D)")]
+    fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=9, frameon=False,
+               bbox_to_anchor=(0.5, 1.0 - 0.25 / fig.get_figheight()))
     if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=11, y=1.0 - 0.02 / fig.get_figheight())
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0.05, right=0.96, bottom=0.3 / height, top=1.0 - 1.0 / height, wspace=0.08,
+                        hspace=0.22)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
 def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str | Path,
-             bag: str | Path | None = None) -> int:
+             bag: str | Path | None = None, workers: int = 1) -> int:
     """Lift the demo bag, print the error table, write ``out/demo.mcap`` and ``out/demo.png``.
 
     Parameters
@@ -123,13 +160,15 @@ def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str
         Builds the lifter, called once the bag is found (a kernel compile is not wasted on a
         missing bag).
     settings : LiftSettings
-        The lift's warm starts, leg length and message step (``warm_start``, ``leg_length_m``,
-        ``every``).
+        The lift's settings, as for :func:`pose_lifter.offline.lift.lift_bag` (``pose-lifter
+        demo`` passes those of ``pose-lifter lift BAG``).
     out : path
         Output directory (created).
     bag : path, optional
         The bag to lift: an MCAP file or a rosbag2 directory (default: the committed
         :data:`DEFAULT_DEMO_BAG`).
+    workers : int
+        Processes lifting the tracks (results identical to 1).
 
     Returns
     -------
@@ -146,7 +185,7 @@ def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     lifter = make_lifter()
-    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, settings, overwrite=True)
+    summary, lifted = lift_bag(bag, out / "demo.mcap", lifter, settings, overwrite=True, workers=workers)
     print(f"lifted {summary.n_lifted} skeletons of {bag.name} ({summary.n_warm} warm-started), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     ev = evaluate_bag(out / "demo.mcap", lifter.bases)

@@ -2,14 +2,20 @@
 
 One row per lifted skeleton, in bag order:
 
-- CSV: ``stamp_ns, frame_id, track_id, joint, x, y, z`` (one line per joint, metres) plus the
-  skeleton's ``reprojection_error`` and ``warm_started`` on each line;
-- NPZ (``numpy.load(f)``, no pickle): ``stamp_ns (N,)``, ``track_id (N,)``, ``joints (N, 12, 3)``,
-  ``joint_names (12,)``, ``frame_id (N,)``, ``reprojection_error (N,)``, ``objective (N,)``,
-  ``warm_started (N,)``;
-- JSON: ``{"joint_names": [...], "frames": [{"stamp_ns", "frame_id", "skeletons": [{"track_id",
-  "joints", "reprojection_error", "objective", "warm_started"}]}]}`` (one entry per message, also
-  the empty ones).
+- CSV (``pandas.read_csv(f)``), one line per joint, the unit in each column's name:
+  ``stamp_ns, frame_id, track_id, joint, x_m, y_m, z_m, observed`` plus the skeleton's
+  ``reprojection_error_px`` and ``warm_started`` on each line (flags as 1 / 0);
+- NPZ (``numpy.load(f)``, no pickle): ``stamp_ns (N,)``, ``track_id (N,)``, ``joints (N, 12, 3)``
+  metres, ``observed (N, 12)``, ``joint_names (12,)``, ``frame_id (N,)``, ``reprojection_error
+  (N,)`` pixels, ``objective (N,)``, ``warm_started (N,)``;
+- JSON: ``{"joint_names": [...], "units": {...}, "frames": [{"stamp_ns", "frame_id",
+  "skeletons": [{"track_id", "joints", "observed", "reprojection_error", "objective",
+  "warm_started"}]}]}`` (one entry per message, also the empty ones).
+
+Joints are in the message's frame (the camera optical frame: x right, y down, z forward).
+``observed`` is ``Skeleton3D.observed``: per joint, whether the 2D input showed it (else its 3D
+position is the pose model's alone). A message without the flags (ground truth, or a bag written
+before the field) gives an empty CSV cell, JSON ``null`` and NPZ ``False``.
 
 The file is written next to its final name and renamed at the end: an error leaves nothing.
 """
@@ -30,9 +36,15 @@ from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import SKELETON3D_ARRAY, TOPIC_SKELETONS
 from pose_lifter.offline.bags import BagError, bag_topics, check_output, read_messages
 
-__all__ = ["FORMATS", "export_skeletons"]
+__all__ = ["CSV_COLUMNS", "FORMATS", "UNITS", "export_skeletons"]
 
 FORMATS: Final[tuple[str, ...]] = (".csv", ".npz", ".json")
+#: The CSV header: one line per joint, units in the names (metres, pixels).
+CSV_COLUMNS: Final[tuple[str, ...]] = ("stamp_ns", "frame_id", "track_id", "joint", "x_m", "y_m", "z_m",
+                                       "observed", "reprojection_error_px", "warm_started")
+#: The units of the JSON's numbers (its ``units`` entry).
+UNITS: Final[dict[str, str]] = {"stamp_ns": "nanoseconds", "joints": "metres (camera optical frame)",
+                                "reprojection_error": "pixels", "objective": "normalised"}
 
 
 def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
@@ -46,6 +58,7 @@ def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
         skels = [{
             "track_id": int(s.track_id),
             "joints": m.skeleton3d_to_joints(s).tolist(),
+            "observed": [bool(v) for v in s.observed] if len(s.observed) == len(JOINT_NAMES) else None,
             "reprojection_error": float(s.reprojection_error),
             "objective": float(s.objective),
             "warm_started": bool(s.warm_started),
@@ -58,15 +71,16 @@ def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
 def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
     rows = [(f, s) for f in frames for s in f["skeletons"]]
     if path.suffix == ".json":
-        json.dump({"joint_names": list(JOINT_NAMES), "frames": frames}, handle)
+        json.dump({"joint_names": list(JOINT_NAMES), "units": UNITS, "frames": frames}, handle)
     elif path.suffix == ".csv":
         w = csv.writer(handle)
-        w.writerow(["stamp_ns", "frame_id", "track_id", "joint", "x", "y", "z", "reprojection_error",
-                    "warm_started"])
+        w.writerow(CSV_COLUMNS)
         for f, s in rows:
-            for name, (x, y, z) in zip(JOINT_NAMES, s["joints"], strict=True):
+            flags = s["observed"] or [""] * len(JOINT_NAMES)
+            for name, (x, y, z), seen in zip(JOINT_NAMES, s["joints"], flags, strict=True):
                 w.writerow([f["stamp_ns"], f["frame_id"], s["track_id"], name, repr(x), repr(y), repr(z),
-                            repr(s["reprojection_error"]), int(s["warm_started"])])
+                            seen if seen == "" else int(seen), repr(s["reprojection_error"]),
+                            int(s["warm_started"])])
     else:
         np.savez_compressed(
             handle,
@@ -74,6 +88,8 @@ def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
             track_id=np.array([s["track_id"] for _, s in rows], dtype=np.int64),
             joints=np.array([s["joints"] for _, s in rows], dtype=np.float64).reshape(
                 len(rows), len(JOINT_NAMES), 3),
+            observed=np.array([s["observed"] or [False] * len(JOINT_NAMES) for _, s in rows],
+                              dtype=bool).reshape(len(rows), len(JOINT_NAMES)),
             joint_names=np.array(JOINT_NAMES),
             frame_id=np.array([f["frame_id"] for f, _ in rows], dtype=np.str_),
             reprojection_error=np.array([s["reprojection_error"] for _, s in rows], dtype=np.float64),

@@ -186,10 +186,11 @@ def lift_messages(
     bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
     if workers == 1 or len(chains) < 2:
         for group in chain_groups(chains, 1, 1):
+            # one list of outcomes per chain of the group: the bar advances by that chain's items
             for outcomes in lift_chains(lifter, [chains[c] for c in group], frame, settings.smoothing_s):
                 for d in outcomes:
                     done[id(d.item)] = d
-                bar.update(sum(len(chains[c]) for c in group))
+                bar.update(len(outcomes))
     else:
         groups = chain_groups(chains, _TASKS_PER_WORKER, workers)
         lift_parallel(ChainWork(lifter, frame, settings.smoothing_s, chains, groups, message_fields_only),
