@@ -191,10 +191,9 @@ def test_alpha_step_admm_is_a_local_minimum(bases: PoseBases, model: PoseModel, 
     assert max(gaps) <= ADMM_MAX_GAP, gaps
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "known limitation (docs/method.md): newton_alpha converges to KKT points that are saddles "
-    "(reduced Hessian eigenvalue -0.76, -0.79): 4.858 vs SLSQP 4.351 and 5.135 vs 4.343 from "
-    "the same start; it needs an inertia correction (or a descent safeguard)"))
+# newton_alpha took the Lagrangian Hessian where it is indefinite on the tangent space and
+# converged to saddles there (4.858 vs SLSQP 4.351, 5.135 vs 4.343 from the same starts); with
+# the compiled kernel's safeguard (2 W there) it reaches the local minimum
 @pytest.mark.parametrize("case", range(2))
 def test_alpha_step_newton_not_worse_than_local_reference(
     bases: PoseBases, model: PoseModel, test_poses: Arr, case: int,

@@ -48,6 +48,12 @@ def newton_alpha(
             converged = True
             break
         hess = 2.0 * wss + 2.0 * np.einsum("k,kij->ij", nu, om_ss)
+        # as the compiled kernel: the Lagrangian Hessian only where it is positive definite on
+        # the constraints' tangent space (else the step may head for a saddle), else 2 W
+        jtj = jac.T @ jac
+        test = hess + (10.0 * float(np.abs(hess).max()) / max(float(np.abs(jtj).max()), 1e-300)) * jtj
+        if not bool(_pos_def(test)):
+            hess = 2.0 * wss
         m = jac.shape[0]
         n = hess.shape[0]
         kmat = np.zeros((n + m, n + m))
