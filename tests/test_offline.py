@@ -224,29 +224,3 @@ def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together()
     # enough groups of people seen together: the halves' tracks are not mixed
     assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
                for g in chain_groups(chains[:20], 1, 1))
-
-
-def test_presmoothing_lifts_each_track_from_its_smoothed_2d_and_keeps_the_items() -> None:
-    """``lift_chains(presmooth_2d_s=...)``: each track's frames are lifted from their 2D smoothed
-    over the track's frames (:func:`pose_lifter.core.smoothing.centred_smoothing_2d`), with their
-    own confidences; the outcomes keep the chain's items; 0 lifts the 2D as given."""
-    from pose_lifter.core.smoothing import centred_smoothing_2d
-    from pose_lifter.messages.frame import FrameSettings, SkeletonInput
-    from pose_lifter.offline.chains import Item, lift_chains
-
-    rng = np.random.default_rng(3)
-    n = 12
-    points = rng.uniform(100.0, 400.0, size=(12, 2)) + rng.normal(scale=3.0, size=(n, 12, 2))
-    conf = np.ones((n, 12))
-    conf[4, 2] = 0.0
-    stamps = np.arange(n) * 33_333_333
-    chain = [Item(i, int(stamps[i]), SkeletonInput(0, points[i], conf[i]), None) for i in range(n)]
-    settings = FrameSettings()
-    smooth = centred_smoothing_2d(points, conf, stamps, 0.05, settings.track_timeout)
-    for s, expected in ((0.0, points), (0.05, smooth)):
-        lifter: Any = EchoLifter()
-        (done,) = lift_chains(lifter, [chain], settings, presmooth_2d_s=s)
-        assert all(d.item is it for d, it in zip(done, chain, strict=True)) and len(done) == n
-        for i, d in enumerate(done):  # the echo's translation: the mean of the visible 2D it was given
-            vis = conf[i] > 0
-            np.testing.assert_allclose(d.result.camera.translation, expected[i][vis].mean(axis=0), rtol=1e-12)

@@ -3,7 +3,6 @@
     .venv/bin/python tools/accuracy.py [--data ../shared/data/cmu] [--split eval|val]
         [--frames 120] [--views 4] [--workers 2] [--conditions clean noise0.1 ...]
         [--out out/accuracy] [--set NAME=VALUE ...] [--bases PATH]
-        [--smoothing SECONDS] [--presmooth-2d SECONDS]
     .venv/bin/python tools/accuracy.py --merge RUN1/accuracy.json RUN2/accuracy.json --out DIR
 
 Tracks: every trial of the split (``eval``: subjects 02, 07, 08 and 09_12, never trained on;
@@ -32,10 +31,7 @@ past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked
 the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`),
 ``hybrid-offline`` (the tracks as ``pose-lifter lift`` gives them: without the causal smoothing
 of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.smoothing`) and
-``hybrid-1`` (every frame cold). The ``-offline`` methods' window is ``--smoothing`` seconds (0: none,
-and the policy's causal smoothing of noisy tracks as live); ``--presmooth-2d S`` first smooths each
-track's 2D by a centred, confidence-weighted window of ``S`` seconds
-(:func:`pose_lifter.core.smoothing.centred_smoothing_2d`, as ``lift_chains(presmooth_2d_s=S)``).
+``hybrid-1`` (every frame cold).
 
 Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
 joints' centroid, the prediction scaled by the subject's true right-lower-leg length, no
@@ -69,7 +65,7 @@ from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
-from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing, centred_smoothing_2d
+from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.core.tracking import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
@@ -200,21 +196,15 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             lifter: Lifter = _STATE["lifters"][m]
             tracked = m in ("hybrid", "hybrid-offline", "learned-t", "learned-offline")
             policy = TrackPolicy(lifter, track_timeout=1e9) if tracked else None
-            offline = policy is not None and m.endswith("-offline")
-            smoothing_s = float(_STATE.get("smoothing", OFFLINE_SMOOTHING_S))
-            if offline and policy is not None:  # as pose-lifter lift (offline/chains.py)
-                policy.smoothed_later = smoothing_s > 0
-            px_m = px
-            if offline and _STATE.get("presmooth_2d", 0.0) > 0:  # as lift_chains(presmooth_2d_s=...)
-                px_m = centred_smoothing_2d(px, conf, stamps, float(_STATE["presmooth_2d"]), 1.0,
-                                            float(_STATE.get("presmooth_gate", 0.0)))
+            if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
+                policy.smoothed_later = True
             fit = np.full((n, 12, 3), np.nan)
             depth = np.full(n, np.nan)  # the centroid's depth error (%) on a perspective track
             warm = None
             for i in range(n):
                 try:
                     if policy is not None:
-                        t = policy.lift(0, int(stamps[i]), px_m[i], conf[i], intrinsics)
+                        t = policy.lift(0, int(stamps[i]), px[i], conf[i], intrinsics)
                         r = t.result
                         # what pose-lifter lift smooths: the fit's own pose, or the published
                         # one with the measurement update (pose_lifter.offline.chains.lift_chains)
@@ -231,9 +221,9 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                 if perspective:  # the node's placement with the focal length and the person's true leg
                     z = place_in_camera(r, float(leg_m[i]), (FOCAL, FOCAL), None, dist_m).mean(axis=0)[2]
                     depth[i] = 100.0 * abs(z - dist_m) / dist_m
-            if offline and smoothing_s > 0:  # 0: the published (causal) poses, as lift_chains gives
+            if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))
-                preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, smoothing_s, 1.0)
+                preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
                 preds[~ok] = np.nan
         ms = 1000.0 * (time.perf_counter() - t0) / n
         ok = np.all(np.isfinite(preds), axis=(1, 2))
@@ -299,13 +289,6 @@ def main(argv: list[str] | None = None) -> int:
                     help="the projection of the --azimuths cameras")
     ap.add_argument("--intrinsics", action="store_true",
                     help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
-    ap.add_argument("--smoothing", type=float, default=OFFLINE_SMOOTHING_S,
-                    help="the -offline methods' centred output window (s; 0: none)")
-    ap.add_argument("--presmooth-2d", type=float, default=0.0,
-                    help="the -offline methods' centred 2D window before the fit (s; 0: none)")
-    ap.add_argument("--presmooth-gate", type=float, default=0.0,
-                    help="--presmooth-2d: neighbours' joints farther than this x the frame's 2D size "
-                         "from its own are not averaged in (0: no gate)")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
                     help="no lifting: join these runs' accuracy.json into one table in --out")
     ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
@@ -333,9 +316,6 @@ def main(argv: list[str] | None = None) -> int:
     settings = _parse(args.set)
     _STATE["distance"] = args.distance
     _STATE["intrinsics"] = args.intrinsics
-    _STATE["smoothing"] = args.smoothing
-    _STATE["presmooth_2d"] = args.presmooth_2d
-    _STATE["presmooth_gate"] = args.presmooth_gate
     if args.workers > 1:
         with mp.get_context("fork").Pool(args.workers, _init, (settings, methods, args.bases)) as pool:
             results = list(pool.imap_unordered(_job, jobs, chunksize=1))
@@ -357,9 +337,7 @@ def main(argv: list[str] | None = None) -> int:
               f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)")
     _write(table, methods, header, f"wall time {time.perf_counter() - t0:.0f} s", args.out,
            {"table": table, "settings": settings, "split": args.split if not trials else "trials",
-            "trials": trials, "distance": args.distance, "cameras": cameras,
-            "smoothing": args.smoothing, "presmooth_2d": args.presmooth_2d,
-            "presmooth_gate": args.presmooth_gate})
+            "trials": trials, "distance": args.distance, "cameras": cameras})
     return 0
 
 

@@ -16,7 +16,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "centred_smoothing_2d"]
+__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing"]
 
 #: Standard deviation (seconds of input time) of the Gaussian window ``pose-lifter lift`` applies
 #: by default: 1.2 frames at 30 Hz (the window spans +-3 standard deviations). Chosen on the
@@ -90,92 +90,6 @@ def centred_smoothing(poses: NDArray[np.float64], stamps_ns: NDArray[np.int64], 
         acc[i] += w[:, None, None] * x[j]
         total[i] += w
     out[idx] = acc / total[:, None, None]  # total >= 1: every frame weighs itself with w = 1
-    return out
-
-
-
-def centred_smoothing_2d(points: NDArray[np.float64], confidence: NDArray[np.float64],
-                         stamps_ns: NDArray[np.int64], sigma_s: float, gap_s: float,
-                         gate: float = 0.0) -> NDArray[np.float64]:
-    """Confidence- and Gaussian-weighted average of each frame's 2D keypoints over the track's
-    frames around it (offline only: it reads future frames).
-
-    ``out[i, j] = sum_k w_ikj x[k, j] / sum_k w_ikj`` with ``w_ikj = c[k, j] exp(-(t_k - t_i)^2 /
-    (2 sigma^2))`` over the frames ``k`` within ``3 sigma`` of frame ``i`` and in the same segment
-    (a gap of more than ``gap_s`` between consecutive frames starts a new one, as in
-    :func:`centred_smoothing`). A joint missing in a frame (confidence 0, or a non-finite point)
-    gives nothing to its neighbours and is left as given in its own frame; the confidences are
-    not changed (the caller keeps each frame's own). With ``gate > 0`` a neighbour's joint farther
-    than ``gate`` times the frame's 2D size (the RMS distance of its usable joints from their
-    centroid) from the frame's own joint is not averaged in: an outlier or a left/right swap is
-    neither spread into its neighbours nor averaged away (the fit's gate and outlier pass still
-    see it).
-
-    Parameters
-    ----------
-    points : ndarray, shape (T, J, 2)
-        A track's 2D keypoints (pixels), in time order.
-    confidence : ndarray, shape (T, J)
-        Their confidences in [0, 1] (0: missing).
-    stamps_ns : ndarray of int, shape (T,)
-        Their stamps (nanoseconds), non-decreasing.
-    sigma_s : float
-        Standard deviation of the window in seconds; ``<= 0`` returns a copy of ``points``.
-    gap_s : float
-        Largest gap (seconds) within one segment.
-    gate : float
-        Largest distance of a neighbour's joint from the frame's own, in the frame's 2D sizes;
-        ``<= 0``: no gate.
-
-    Returns
-    -------
-    ndarray, shape (T, J, 2)
-        The smoothed keypoints (missing joints as given).
-    """
-    x = np.asarray(points, dtype=np.float64)
-    out = x.copy()
-    c = np.asarray(confidence, dtype=np.float64)
-    stamps = np.asarray(stamps_ns, dtype=np.int64)
-    if x.ndim != 3 or x.shape[-1] != 2 or c.shape != x.shape[:2] or stamps.shape != (len(x),):
-        raise ValueError(f"points (T, J, 2), confidence (T, J) and stamps (T,) expected, got {x.shape}, "
-                         f"{c.shape}, {stamps.shape}")
-    n = len(x)
-    if sigma_s <= 0 or n < 2:
-        return out
-    t = stamps.astype(np.float64) * 1e-9
-    dt = np.diff(t)
-    if np.any(dt < 0):
-        raise ValueError("stamps must be non-decreasing")
-    usable = np.isfinite(x).all(axis=-1) & np.isfinite(c) & (c > 0)  # (T, J)
-    cw = np.where(usable, c, 0.0)
-    xz = np.where(usable[..., None], x, 0.0)
-    segment = np.concatenate([[0], np.cumsum(dt > gap_s)])
-    positive = dt[dt > 0]
-    step = float(positive.min()) if len(positive) else 3.0 * sigma_s
-    half = int(min(_MAX_HALF_WIDTH, np.ceil(3.0 * sigma_s / step)))
-    if gate > 0:  # the largest distance per frame: gate x the RMS spread of its usable joints
-        count = usable.sum(axis=1)
-        centroid = xz.sum(axis=1) / np.maximum(count, 1)[:, None]
-        spread = np.where(usable, ((xz - centroid[:, None]) ** 2).sum(axis=-1), 0.0).sum(axis=1)
-        reach2 = gate**2 * spread / np.maximum(count, 1)
-    acc = np.zeros_like(xz)
-    total = np.zeros(cw.shape)
-    for k in range(-half, half + 1):  # every offset at once over the frames
-        lo, hi = max(0, -k), min(n, n - k)
-        if lo >= hi:
-            continue
-        i = np.arange(lo, hi)
-        j = i + k
-        gap = t[j] - t[i]
-        g = np.exp(-0.5 * (gap / sigma_s) ** 2)
-        g[(segment[j] != segment[i]) | (np.abs(gap) > 3.0 * sigma_s)] = 0.0
-        w = g[:, None] * cw[j]  # (n_i, J)
-        if gate > 0 and k != 0:
-            w[((xz[j] - xz[i]) ** 2).sum(axis=-1) > reach2[i][:, None]] = 0.0
-        acc[i] += w[..., None] * xz[j]
-        total[i] += w
-    # a usable joint weighs itself with its confidence > 0
-    out[usable] = acc[usable] / total[usable][:, None]
     return out
 
 

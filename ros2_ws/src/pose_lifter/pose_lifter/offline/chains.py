@@ -27,7 +27,7 @@ from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.skeleton import N_JOINTS
-from pose_lifter.core.smoothing import centred_smoothing, centred_smoothing_2d
+from pose_lifter.core.smoothing import centred_smoothing
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -51,7 +51,6 @@ __all__ = [
     "chain_groups",
     "lift_chains",
     "lift_parallel",
-    "presmoothed_inputs",
     "smooth_chain",
     "split_chains",
     "stop_workers",
@@ -178,34 +177,12 @@ def chain_groups(chains: list[list[Item]], tasks_per_worker: int, workers: int) 
     return sorted(groups, key=lambda g: -sum(len(chains[c]) for c in g))
 
 
-def presmoothed_inputs(chain: list[Item], settings: FrameSettings, presmooth_2d_s: float,
-                       gate: float = 0.0) -> list[SkeletonInput]:
-    """The inputs of a track's chain with their 2D keypoints smoothed by a centred Gaussian window
-    of ``presmooth_2d_s`` seconds over the chain's frames, weighted by confidence
-    (:func:`pose_lifter.core.smoothing.centred_smoothing_2d`; frames more than ``track_timeout``
-    apart do not mix, a missing joint gives nothing, each frame keeps its own confidences; with
-    ``gate > 0`` a neighbour's joint farther than ``gate`` times the frame's 2D size is left out).
-    Offline only (it reads later frames); ``<= 0``, or an untracked chain: the inputs as given."""
-    inputs = [it.input for it in chain]
-    if presmooth_2d_s <= 0 or len(chain) < 2 or chain[0].track_id < 0:
-        return inputs
-    points = np.array([x.points for x in inputs], dtype=np.float64)
-    conf = np.array([x.confidence for x in inputs], dtype=np.float64)
-    stamps = np.array([it.stamp_ns for it in chain], dtype=np.int64)
-    smooth = centred_smoothing_2d(points, conf, stamps, presmooth_2d_s, settings.track_timeout, gate)
-    return [replace(x, points=smooth[i]) for i, x in enumerate(inputs)]
-
-
-def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSettings, smoothing_s: float = 0.0,
-                presmooth_2d_s: float = 0.0, presmooth_gate: float = 0.0) -> list[list[Done]]:
+def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSettings, smoothing_s: float = 0.0
+                ) -> list[list[Done]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
     each chain's poses are then smoothed centred (:func:`smooth_chain`), and the policy's causal
-    smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`). With
-    ``presmooth_2d_s > 0`` each track's 2D keypoints are first smoothed centred
-    (:func:`presmoothed_inputs` with ``presmooth_gate``; offline only, off by default: measured
-    no better under the realistic detector, issue 28); the outcomes keep the original
-    items.
+    smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
 
     Message by message, the chains' items of that message are expired as their chain requires,
     their prior's networks run in one pass (:meth:`Lifter.compute_prior_ahead`), then each is
@@ -217,20 +194,19 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     out: list[list[Done]] = [[] for _ in chains]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
-    steps: dict[int, list[tuple[int, Item, SkeletonInput]]] = {}
+    steps: dict[int, list[tuple[int, Item]]] = {}
     for c, chain in enumerate(chains):
-        for item, x in zip(chain, presmoothed_inputs(chain, settings, presmooth_2d_s, presmooth_gate),
-                           strict=True):
-            steps.setdefault(item.msg_index, []).append((c, item, x))
+        for item in chain:
+            steps.setdefault(item.msg_index, []).append((c, item))
     for msg_index in sorted(steps):
         step = steps[msg_index]
-        for c, item, _ in step:
+        for c, item in step:
             if item.expire_ns is not None:
                 pipelines[c].end_frame(item.expire_ns)
-        shared = compute_ahead(lifter, [(pipelines[c], x, item.stamp_ns, item.intrinsics)
-                                        for c, item, x in step])
-        for c, item, x in step:
-            lifted = pipelines[c].lift(x, item.stamp_ns, item.intrinsics, shared)
+        shared = compute_ahead(lifter, [(pipelines[c], item.input, item.stamp_ns, item.intrinsics)
+                                        for c, item in step])
+        for c, item in step:
+            lifted = pipelines[c].lift(item.input, item.stamp_ns, item.intrinsics, shared)
             if not isinstance(lifted, LiftedSkeleton):
                 out[c].append(Done(item, None, None, False, 0.0, str(lifted)))
                 fits[c].append(None)
@@ -347,14 +323,11 @@ class ChainWork:
     chains: list[list[Item]]
     groups: list[list[int]]
     message_fields_only: bool
-    presmooth_2d_s: float = 0.0
-    presmooth_gate: float = 0.0
 
     def run(self, index: int) -> list[Any]:
         group = [self.chains[c] for c in self.groups[index]]
         out: list[Any] = []
-        for done in lift_chains(self.lifter, group, self.settings, self.smoothing_s,
-                                self.presmooth_2d_s, self.presmooth_gate):
+        for done in lift_chains(self.lifter, group, self.settings, self.smoothing_s):
             if self.message_fields_only:
                 out.append(_columns(done))
             else:
