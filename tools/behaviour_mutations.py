@@ -1,0 +1,84 @@
+"""The suite against deliberate changes of behaviour: each planted change must turn `make test` red.
+
+Usage::
+
+    .venv/bin/python tools/behaviour_mutations.py [--only SUBSTRING]
+
+The sibling of tools/kernel_mutations.py (which plants changes in the compiled solver steps):
+these change what a user sees. One change at a time is applied to the source tree (restored
+afterwards, also on Ctrl-C), the test file of `make test` that must catch it runs, and the tool
+prints whether it failed. Exit 0 when every change is caught.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PKG = REPO / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter"
+
+#: (what, file under the package, text (every occurrence is changed), its replacement, the test)
+MUTATIONS = [
+    ("a sign in the prior's output (its de-standardisation)", "core/prior.py",
+     "* self.out_scale + self.out_mean", "* self.out_scale - self.out_mean",
+     "tests/test_prior_training.py"),
+    ("the measurement update pushed the wrong way", "core/measurement.py",
+     "offset[j, c] += k * (obs[j, c] - pose[j, c] - offset[j, c])",
+     "offset[j, c] -= k * (obs[j, c] - pose[j, c] - offset[j, c])",
+     "tests/core/test_measurement_update.py"),
+    ("the params file's options ignored", "ros/params.py",
+     "options = {k: v for k, v in merged.items() if k in _OPTIONS}", "options: dict[str, Any] = {}",
+     "tests/test_lift_cli.py"),
+    ("a wrong joint order in an adapter (COCO-17 wrists swapped)", "core/layouts.py",
+     '"coco17": Layout("coco17", 17, (5, 7, 9, 6, 8, 10,',
+     '"coco17": Layout("coco17", 17, (5, 7, 10, 6, 8, 9,',
+     "tests/test_adapters.py"),
+    ("a zeroed depth in the metric placement", "core/placement.py",
+     "local = pose * float(leg_length_m)", "local = pose * np.array([1.0, 1.0, 0.0]) * float(leg_length_m)",
+     "tests/test_offline.py"),
+    ("the perspective correction's sign", "core/tracking.py",
+     "ratio = 1.0 + np.asarray(depths", "ratio = 1.0 - np.asarray(depths", "tests/core/test_tracking.py"),
+    ("a REP-155 body's y axis from the left hip to the right", "messages/body.py",
+     "        y = lh - rh\n", "        y = rh - lh\n", "tests/messages/test_body.py"),
+    ("a lifted bag's markers never cleared first (not the node's)", "messages/markers.py",
+     "clear=not self._cleared", "clear=False", "tests/test_offline.py"),
+    ("a split rosbag2 recording read file after file, not in time order", "offline/bags.py",
+     "heapq.merge(*parts, key=lambda x: int(x[1]))", "iter([m for p in parts for m in p])",
+     "tests/test_rosbag2_dirs.py"),
+    ("a REP-155 elbow placed the forearm's length down the upper arm", "messages/body.py",
+     "trans[:, chain_rows + 3, 2] = -len1", "trans[:, chain_rows + 3, 2] = -len2",
+     "tests/messages/test_body.py"),
+]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", default="", help="run the changes whose description contains this")
+    args = ap.parse_args()
+    chosen = [m for m in MUTATIONS if args.only in m[0]]
+    caught = 0
+    for what, name, old, new, test in chosen:
+        path = PKG / name
+        source = path.read_text()
+        if old not in source:
+            print(f"{what}: the text to change is not in {name}; update this tool")
+            return 2
+        path.write_text(source.replace(old, new))
+        try:
+            run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", test],
+                                 cwd=REPO, capture_output=True, text=True, check=False)
+        finally:
+            path.write_text(source)
+        errors = [line for line in run.stdout.splitlines() if line.startswith("E ")]
+        verdict = "caught" if run.returncode == 1 else f"NOT caught (pytest exit {run.returncode})"
+        caught += run.returncode == 1
+        print(f"{what}: {verdict} by {test}; {errors[0].strip()[:120] if errors else ''}", flush=True)
+    print(f"{caught} of {len(chosen)} changes caught")
+    return 0 if caught == len(chosen) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
