@@ -128,7 +128,7 @@ def test_configure_with_a_bad_basis_file_fails_with_the_reason(graph: GraphClien
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_signal_during_configure_exits_at_once(graph: GraphClient, managed: Any, sig: int) -> None:
+def test_signal_during_configure_exits_0(graph: GraphClient, managed: Any, sig: int) -> None:
     from lifecycle_msgs.msg import Transition
     from lifecycle_msgs.srv import ChangeState
 

@@ -97,7 +97,7 @@ SIGNALS = pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["
 
 
 @SIGNALS
-def test_signal_while_starting_exits_at_once_with_code_0(tmp_path: Path, sig: int) -> None:
+def test_signal_while_starting_exits_0_without_waiting_for_the_start(tmp_path: Path, sig: int) -> None:
     proc = _start(tmp_path, "starting")
     _wait_for(proc, "starting")
     code, rest = _stop(proc, sig)
@@ -106,7 +106,7 @@ def test_signal_while_starting_exits_at_once_with_code_0(tmp_path: Path, sig: in
 
 
 @SIGNALS
-def test_signal_in_a_marked_start_up_phase_of_the_loop_exits_at_once(tmp_path: Path, sig: int) -> None:
+def test_signal_in_a_marked_start_up_phase_of_the_loop_exits_0(tmp_path: Path, sig: int) -> None:
     proc = _start(tmp_path, "configure")
     _wait_for(proc, "configuring")
     code, rest = _stop(proc, sig)
