@@ -7,15 +7,17 @@ Usage::
 The sibling of tools/kernel_mutations.py (which plants changes in the compiled solver steps):
 these change what a user sees. One change at a time is applied to the source tree (restored
 afterwards, also on Ctrl-C), the test file of `make test` that must catch it runs, and the tool
-prints whether it failed. Exit 0 when every change is caught.
+prints whether it failed (the loop of tools/kernel_mutations.py). Exit 0 when every change is
+caught.
 """
 
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 from pathlib import Path
+
+from kernel_mutations import run_mutations  # the same loop (tools/ is the script's path)
 
 REPO = Path(__file__).resolve().parents[1]
 PKG = REPO / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter"
@@ -58,26 +60,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default="", help="run the changes whose description contains this")
     args = ap.parse_args()
-    chosen = [m for m in MUTATIONS if args.only in m[0]]
-    caught = 0
-    for what, name, old, new, test in chosen:
-        path = PKG / name
-        source = path.read_text()
-        if old not in source:
-            print(f"{what}: the text to change is not in {name}; update this tool")
-            return 2
-        path.write_text(source.replace(old, new))
-        try:
-            run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", test],
-                                 cwd=REPO, capture_output=True, text=True, check=False)
-        finally:
-            path.write_text(source)
-        errors = [line for line in run.stdout.splitlines() if line.startswith("E ")]
-        verdict = "caught" if run.returncode == 1 else f"NOT caught (pytest exit {run.returncode})"
-        caught += run.returncode == 1
-        print(f"{what}: {verdict} by {test}; {errors[0].strip()[:120] if errors else ''}", flush=True)
-    print(f"{caught} of {len(chosen)} changes caught")
-    return 0 if caught == len(chosen) else 1
+    return run_mutations([m for m in MUTATIONS if args.only in m[0]], PKG)
 
 
 if __name__ == "__main__":
