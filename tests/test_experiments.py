@@ -113,7 +113,7 @@ def test_quick_run_writes_sane_outputs(tmp_path: Path) -> None:
     assert pca[-1][1] < pca[0][1]  # more principal components reconstruct unseen poses better
     assert {r["method"] for r in bases} == {"sparse", "PCA", "class-wise PCA"}
     for r in bases:
-        assert 0.0 < float(r["err"]) < 3.0
+        assert 0.0 < float(r["err"]) < tol.QUICK_RUN_MAX["exp1_bases"][0]
         assert 1.0 <= float(r["active_mean"]) <= int(r["k"])
 
     for name in ("exp2_factors", "exp3_noise", "exp3_robust", "exp4_angle", "exp5_camera"):
@@ -121,9 +121,10 @@ def test_quick_run_writes_sane_outputs(tmp_path: Path) -> None:
         assert not [r for r in rows if r["failed"]]
         methods = {r["method"] for r in rows}
         assert {"flat floor", "mean-pose floor"} <= methods
+        worst_err, worst_mm = tol.QUICK_RUN_MAX[name]
         for r in rows:
             err, mm = float(r["err"]), float(r["pmpjpe_mm"])
-            assert 0.0 < err < 10.0 and 0.0 < mm < 1000.0
+            assert 0.0 < err < worst_err and 0.0 < mm < worst_mm, (name, r["method"], err, mm)
     cam = {r["method"]: float(r["err"]) for r in _rows(out / "exp5_camera_raw.csv")}
     # with the true camera the pose step reconstructs better than the mean pose
     assert cam["GT camera, mean-pose start"] < cam["mean-pose floor"]
