@@ -241,6 +241,8 @@ class LifterNode(Node):
     def _apply_parameters(self, params: list[Parameter]) -> None:
         """Post-set callback: switch to what :meth:`_validate_parameters` built (cannot fail)."""
         self._settings = self._read_settings()
+        if self._hri is not None:  # bodies leave as tracks are forgotten
+            self._hri.book.timeout_ns = round(self._settings.frame.track_timeout * 1e9)
         if self._pending is None:
             return
         bases, lifter = self._pending
