@@ -130,3 +130,33 @@ def test_a_node_that_cannot_be_built_is_one_fatal_line_and_exit_1(tmp_path: Path
     assert proc.returncode == 1, out
     assert len(lines) == 1 and lines[0].startswith("[FATAL]"), out
     assert lines[0].endswith("cannot start: theta must be positive"), out
+
+
+def test_a_signal_inside_an_extension_s_import_still_exits_0(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A signal landing in rclpy's C-extension initialisation surfaces as ImportError
+    ("initialization failed", from the KeyboardInterrupt): the entry point exits 0 all the same;
+    an ImportError without a signal is raised as it is."""
+    import importlib
+
+    from pose_lifter.ros import entry
+
+    def import_interrupted(name: str) -> None:
+        try:
+            entry._interrupt(15, None)
+        except KeyboardInterrupt as err:
+            raise ImportError("initialization failed") from err
+
+    monkeypatch.setattr(entry.signal, "signal", lambda *args: None)  # this process keeps its handlers
+    monkeypatch.setattr(importlib, "import_module", import_interrupted)
+    monkeypatch.setattr(entry, "_signalled", False)
+    with pytest.raises(SystemExit) as done:
+        entry._run("pose_lifter.ros.node")
+    assert done.value.code == 0
+
+    def import_broken(name: str) -> None:
+        raise ImportError("no such module")
+
+    monkeypatch.setattr(importlib, "import_module", import_broken)
+    monkeypatch.setattr(entry, "_signalled", False)
+    with pytest.raises(ImportError, match="no such module"):
+        entry._run("pose_lifter.ros.node")

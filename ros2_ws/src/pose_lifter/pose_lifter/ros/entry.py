@@ -17,18 +17,27 @@ from types import FrameType
 __all__ = ["action_recognition", "adapter", "lifter", "lifter_lifecycle"]
 
 
+_signalled = False  # a signal arrived during the import
+
+
 def _interrupt(signum: int, frame: FrameType | None) -> None:
+    global _signalled
+    _signalled = True
     raise KeyboardInterrupt
 
 
 def _run(module: str) -> None:
-    """Install the handlers, import ``module``, call its ``main()``."""
+    """Install the handlers, import ``module``, call its ``main()``. A signal during the import
+    exits 0 whatever it interrupted: inside a C extension's initialisation (rclpy's) the
+    KeyboardInterrupt comes out as an ImportError ("initialization failed")."""
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
     try:
         main = importlib.import_module(module).main
-    except KeyboardInterrupt:
-        sys.exit(0)
+    except BaseException:
+        if _signalled:
+            sys.exit(0)
+        raise
     main()
 
 
