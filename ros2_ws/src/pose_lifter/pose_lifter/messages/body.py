@@ -116,29 +116,6 @@ def _rotation(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
     return out
 
 
-def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """a × b of two 3-vectors (np.cross costs ~20 us a call on 3-vectors)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _unit(v: NDArray[np.float64], what: str) -> NDArray[np.float64]:
-    n = math.sqrt(float(v @ v))
-    if not math.isfinite(n) or n < 1e-12:
-        raise ValueError(f"degenerate skeleton: {what} has no direction")
-    return v / n
-
-
-def _body_rotation(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(origin (3,), rotation (3, 3) whose columns are the body's x, y, z in the joints' frame)."""
-    lh, rh = joints[_J["left_hip"]], joints[_J["right_hip"]]
-    ls, rs = joints[_J["left_shoulder"]], joints[_J["right_shoulder"]]
-    origin = 0.5 * (lh + rh)
-    y = _unit(lh - rh, "the hip line")
-    up = 0.5 * (ls + rs) - origin
-    z = _unit(up - (up @ y) * y, "the torso")
-    return origin, np.column_stack([_cross(y, z), y, z])
-
-
 def _link_order() -> tuple[tuple[str, str], ...]:
     """(parent, child) of every link, parents first (``""``: the skeleton's own frame)."""
     links = [("", "body"), ("body", "waist"), ("waist", "torso")]
@@ -419,22 +396,19 @@ class BodyDimensions:
 
 
 def body_dimensions(joints: NDArray[np.float64]) -> BodyDimensions:
-    """The URDF dimensions of one skeleton (shape (12, 3), metres)."""
-    origin, rb = _body_rotation(np.asarray(joints, dtype=np.float64))
-    local = (np.asarray(joints, dtype=np.float64) - origin) @ rb
-    ls, rs = local[_J["left_shoulder"]], local[_J["right_shoulder"]]
-    torso = 0.5 * float(ls[2] + rs[2])
-    centre = np.array([0.0, 0.0, torso])
-    upper, lower = {}, {}
-    for side, kind, (a, b, c) in _CHAINS:
-        upper[f"{side}_{kind}"] = float(np.linalg.norm(local[b] - local[a]))
-        lower[f"{side}_{kind}"] = float(np.linalg.norm(local[c] - local[b]))
-    return BodyDimensions(
-        torso=torso,
-        shoulders={"l": float(np.linalg.norm(ls - centre)), "r": float(np.linalg.norm(rs - centre))},
-        hips={"l": float(np.linalg.norm(local[_J["left_hip"]])),
-              "r": float(np.linalg.norm(local[_J["right_hip"]]))},
-        upper=upper, lower=lower)
+    """The URDF dimensions of one skeleton (shape (12, 3), metres), read off its
+    :func:`body_pose` (the shoulders' and hips' offsets, the segments' lengths)."""
+    t = body_pose(joints).translations
+    upper: dict[str, float] = {}
+    lower: dict[str, float] = {}
+    shoulders: dict[str, float] = {}
+    hips: dict[str, float] = {}
+    for k, (side, kind, _) in enumerate(_CHAINS):
+        row = _HEAD_ROWS + 5 * k
+        (shoulders if kind == "arm" else hips)[side] = float(np.linalg.norm(t[row]))
+        upper[f"{side}_{kind}"] = -float(t[row + 3, 2])
+        lower[f"{side}_{kind}"] = -float(t[row + 4, 2])
+    return BodyDimensions(torso=float(t[2, 2]), shoulders=shoulders, hips=hips, upper=upper, lower=lower)
 
 
 def forward_kinematics(dims: BodyDimensions, angles: dict[str, float]) -> NDArray[np.float64]:
