@@ -84,18 +84,6 @@ def test_tf_chain_lands_on_the_joints_and_frames_are_rotations() -> None:
             np.testing.assert_allclose(-rot[:, 2], seg / np.linalg.norm(seg), atol=1e-9)
 
 
-def test_body_rotation_quaternion_against_scipy() -> None:
-    from scipy.spatial.transform import Rotation
-
-    rotations = Rotation.random(500, random_state=3).as_matrix()
-    half_turns = [np.diag(d) for d in ([1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0])]
-    for r in [*rotations, *half_turns, np.eye(3)]:
-        q = body._quaternion(r)
-        want = Rotation.from_matrix(r).as_quat()
-        assert min(np.abs(q - want).max(), np.abs(q + want).max()) < EXACT_M
-        assert q[3] >= 0
-
-
 def test_angles_through_the_urdf_reproduce_a_body_of_the_urdf_s_proportions() -> None:
     rng = np.random.default_rng(0)
     # the URDF's torso: hips on the body's y axis, shoulders level above them (no twist)

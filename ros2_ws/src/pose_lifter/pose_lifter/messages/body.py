@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.messages.convert import quaternions_xyzw
 
 __all__ = [
     "HEAD_JOINTS",
@@ -185,27 +186,6 @@ class BodyPose:
         return dict(zip(REVOLUTE_JOINTS, (float(a) for a in self.angles), strict=True))
 
 
-def _quaternion(r: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The unit quaternion (x, y, z, w), w >= 0, of a rotation matrix that is orthonormal to
-    rounding (Shepperd's method: the largest of the trace and the diagonal)."""
-    m = r.tolist()
-    trace = m[0][0] + m[1][1] + m[2][2]
-    k = max(range(3), key=lambda i: m[i][i])
-    if trace >= m[k][k]:
-        w = math.sqrt(1.0 + trace) * 0.5
-        f = 0.25 / w
-        q = [(m[2][1] - m[1][2]) * f, (m[0][2] - m[2][0]) * f, (m[1][0] - m[0][1]) * f, w]
-    else:
-        i, j, l = k, (k + 1) % 3, (k + 2) % 3
-        v = math.sqrt(1.0 + m[i][i] - m[j][j] - m[l][l]) * 0.5
-        f = 0.25 / v
-        q = [0.0, 0.0, 0.0, (m[l][j] - m[j][l]) * f]
-        q[i], q[j], q[l] = v, (m[j][i] + m[i][j]) * f, (m[l][i] + m[i][l]) * f
-    out = np.array(q)
-    out /= math.sqrt(float(out @ out))
-    return -out if out[3] < 0 else out
-
-
 def _matrix(q: NDArray[np.float64]) -> NDArray[np.float64]:
     """The rotation matrix of a unit quaternion (x, y, z, w)."""
     x, y, z, w = (float(v) for v in q)
@@ -343,14 +323,9 @@ def body_poses(joints: NDArray[np.float64], head_offset: float = 0.0) -> list[Bo
     quats[:, rows, 3] = np.cos(half)
     angles = np.zeros((n, len(REVOLUTE_JOINTS)))
     angles[:, 1 + len(HEAD_JOINTS):] = q.reshape(n, -1)
-    out: list[BodyPose | None] = []
-    for k in range(n):
-        if not ok[k]:
-            out.append(None)
-            continue
-        quats[k, 0] = _quaternion(rb[k])
-        out.append(BodyPose(trans[k], quats[k], angles[k]))
-    return out
+    if ok.any():  # the body frames' rotations, one conversion for the frame's bodies
+        quats[ok, 0] = quaternions_xyzw(rb[ok])
+    return [BodyPose(trans[k], quats[k], angles[k]) if ok[k] else None for k in range(n)]
 
 
 def joint_angles(joints: NDArray[np.float64]) -> dict[str, float]:
