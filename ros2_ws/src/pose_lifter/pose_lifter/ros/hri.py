@@ -64,12 +64,13 @@ class HriOutputs:
 
     def __init__(self, node: Node, types: Any, timeout_s: float) -> None:
         self._node = node
-        self._types = types
         self.book = hri.BodyBook(timeout_s)
         self._class = {name: getattr(types, name.rsplit("/", 1)[1]) for name in hri.LAYOUTS}
-        self._tracked = node.create_publisher(types.IdsList, f"{hri.BODIES_NS}/tracked", _QOS)
-        self._tf = node.create_publisher(types.TFMessage, hri.TF_TOPIC, TF_QOS)
-        self._bodies: dict[str, dict[str, Any]] = {}
+        self._shared = {f"{hri.BODIES_NS}/tracked": node.create_publisher(types.IdsList,
+                                                                         f"{hri.BODIES_NS}/tracked", _QOS),
+                        hri.TF_TOPIC: node.create_publisher(types.TFMessage, hri.TF_TOPIC, TF_QOS)}
+        self._pubs: dict[str, Any] = dict(self._shared)  # topic -> its publisher
+        self._bodies: dict[str, list[str]] = {}  # body id -> its topics
 
     def publish(self, stamp_ns: int, frame_id: str, lifted: Sequence[hri.LiftedBody],
                 image_size: tuple[float, float] | None) -> None:
@@ -79,18 +80,14 @@ class HriOutputs:
         for bid in out.gone:
             self._drop(bid)
         for bid in out.new:
-            self._bodies[bid] = {
-                kind: self._node.create_publisher(self._class[msgtype], f"{hri.BODIES_NS}/{bid}/{kind}",
-                                                  LATCHED_QOS if kind == "urdf" else _QOS)
-                for kind, msgtype in hri.PER_BODY.items()}
+            self._bodies[bid] = []
+            for kind, msgtype in hri.PER_BODY.items():
+                topic = f"{hri.BODIES_NS}/{bid}/{kind}"
+                self._pubs[topic] = self._node.create_publisher(
+                    self._class[msgtype], topic, LATCHED_QOS if kind == "urdf" else _QOS)
+                self._bodies[bid].append(topic)
         for topic, data, _ in out.messages():
-            self._publisher(topic).publish(data)
-
-    def _publisher(self, topic: str) -> Any:
-        if topic == hri.TF_TOPIC:
-            return self._tf
-        bid, _, kind = topic[len(hri.BODIES_NS) + 1:].partition("/")
-        return self._tracked if bid == "tracked" else self._bodies[bid][kind]
+            self._pubs[topic].publish(data)
 
     def clear(self) -> None:
         """Every body leaves (the node deactivates or its tracks are cleared)."""
@@ -100,9 +97,9 @@ class HriOutputs:
     def close(self) -> None:
         """Destroy every publisher."""
         self.clear()
-        for pub in (self._tracked, self._tf):
+        for pub in self._shared.values():
             self._node.destroy_publisher(pub)
 
     def _drop(self, bid: str) -> None:
-        for pub in self._bodies.pop(bid, {}).values():
-            self._node.destroy_publisher(pub)
+        for topic in self._bodies.pop(bid, []):
+            self._node.destroy_publisher(self._pubs.pop(topic))
