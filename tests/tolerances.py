@@ -139,6 +139,14 @@ WORKER_MEAN_POSE_ERR: Final[dict[str, float]] = {"L1WAWS": measured_bound(0.586)
 WORKER_MEAN_POSE_MM: Final[dict[str, float]] = {"L1WAWS": measured_bound(51.9),
                                                  "GT camera": measured_bound(116.1)}
 
+#: tests/core/test_against_reference.py test_limb_pose_step_is_feasible_local_minimum: how far
+#: above the local minimum SLSQP reaches from its result the default pose step (40 ADM
+#: iterations; on its 12-basis model the Riemannian step falls back to the paper's inner ADM) may
+#: end, worst of 6 problems. L1WAWS measured +8.76 % (case 2; the same to 1e-14 with
+#: OPENBLAS_CORETYPE=Prescott NUMBA_CPU_NAME=generic and with one thread) at this file's commit,
+#: `pytest -s` with the gaps printed; L2WAWS ends at the polished minimum (ALPHA_STEP_OBJECTIVE_REL).
+DEFAULT_POSE_LOCAL_GAP: Final[dict[str, float]] = {"L1WAWS": measured_bound(0.0876)}
+
 # ---------------------------------------------------------------- the paper's inner ADM (measured)
 # These two are wider than the solver tolerances above on purpose: the paper's inner ADM never
 # meets its own tolerance in its iteration cap on these problems, and WHICH problem ends in a

@@ -218,7 +218,9 @@ def pose_step(
         iteration up to :data:`ETA_MAX`, the paper's ``eta_k``, as in LADMAP [liu2013linearized];
         the scaled multipliers are rescaled with it); the alpha-step's ``alpha_step``,
         ``alpha_solver`` (``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map,
-        ``model.limb_coordinates``; otherwise ``"newton"`` is used), ``alpha_prox``, ``newton_tol``,
+        ``model.limb_coordinates``; otherwise the paper's inner ADM, ``"admm"``, is used: on such
+        bases it ends lower than the SQP, ``tools/alpha_solvers.py``),
+        ``alpha_prox``, ``newton_tol``,
         and the inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
     max_iter : int, optional
         Outer ADM cap instead of ``options.pose_max_iter`` (the hybrid mode's and the screening
@@ -268,8 +270,9 @@ def pose_step(
         c, wts, mus = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
                                  np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
         # "riemannian" where it does not apply (limbs off, the full lifting or a limb map that is not
-        # onto): the SQP solves the same problem
-        solver = "newton" if o.alpha_solver == "riemannian" else o.alpha_solver
+        # onto): the paper's inner ADM solves the same problem (the SQP's minima are poorer:
+        # docs/method.md)
+        solver = "admm" if o.alpha_solver == "riemannian" else o.alpha_solver
         step = _alpha_step(model, variant, m0, mus, o.alpha_step, solver, o, qstep_fn)
         return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, o, duals)
 
