@@ -11,7 +11,9 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    metres (:func:`~pose_lifter.core.placement.place_in_camera`: depth from the weak-perspective
    scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
    checks it finite once.
-3. Each lifted skeleton becomes a ``Skeleton3D`` (:func:`messages.result_to_skeleton3d`).
+3. The lifted skeletons become one ``Skeleton3DArray``, written as CDR from their arrays
+   (:func:`~pose_lifter.messages.cdr.skeleton3d_array_cdr`, the offline lift's writer; rclpy
+   reads them as the message built field by field, ``tests/ros/test_rclpy_bytes.py``).
 4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
    frame), then ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
    :class:`~pose_lifter.messages.markers.MarkerBook`, the offline lift's too: the same bytes).
@@ -40,7 +42,6 @@ import time
 from pathlib import Path
 from typing import Any, Final
 
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -52,10 +53,10 @@ from pose_lifter.core._jit import HAVE_NUMBA
 from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lifter import compile_kernels
-from pose_lifter.core.skeleton import N_JOINTS
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
-from pose_lifter.messages.frame import FramePipeline, SkipSkeleton
+from pose_lifter.messages.cdr import SkeletonFrame, skeleton3d_array_cdr
+from pose_lifter.messages.frame import FramePipeline, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.hri import LiftedBody
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
@@ -288,28 +289,23 @@ class LifterNode(Node):
         stamp_ns = messages.stamp_to_ns(msg.header.stamp)
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
-        lifted: list[Any] = []
-        bodies: list[LiftedBody] = []
+        lifted: list[LiftedSkeleton] = []
         for out in self._pipeline.frame(checked, stamp_ns, self._intrinsics):
-            try:
-                if isinstance(out, SkipSkeleton):
-                    raise out
-                lifted.append(messages.result_to_skeleton3d(
-                    out.result, out.track_id, out.joints_m, self._types, solve_time=out.solve_time,
-                    warm_started=out.warm_started))
-                bodies.append(LiftedBody(out.track_id, out.joints_m, out.input.points, out.input.confidence))
-            except SkipSkeleton as err:
-                self._warn_skip(err.kind, f"skeleton skipped: {err}")
-            except Exception as err:  # never let one skeleton kill the node
-                self._warn_skip("unexpected", f"skeleton skipped after an unexpected error: {err!r}")
-
-        self._pub_skeletons.publish(messages.skeletons3d_array(msg.header, lifted, self._types))
+            if isinstance(out, SkipSkeleton):
+                self._warn_skip(out.kind, f"skeleton skipped: {out}")
+            else:
+                lifted.append(out)
+        # the frame's answer in CDR straight from the arrays, by the offline lift's writer
+        # (messages/cdr.py; rclpy message objects cost ~0.5 ms more a skeleton: tools/node_callback.py)
+        frame = SkeletonFrame.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],
+                                           [s.result for s in lifted], [s.solve_time for s in lifted],
+                                           [s.warm_started for s in lifted])
+        self._pub_skeletons.publish(skeleton3d_array_cdr(msg.header, frame))
         if self._settings.publish_markers:  # serialised by the offline lift's marker book
-            joints = np.array([b.joints_m for b in bodies], dtype=np.float64)
-            joints = joints.reshape(len(bodies), N_JOINTS, 3)
             self._pub_markers.publish(self._markers.update(
-                msg.header, [b.track_id for b in bodies], joints, self._settings.marker_lifetime))
+                msg.header, frame.track_ids.tolist(), frame.joints_m, self._settings.marker_lifetime))
         if self._hri is not None:  # REP-155 bodies and /tf
+            bodies = [LiftedBody(s.track_id, s.joints_m, s.input.points, s.input.confidence) for s in lifted]
             self._hri.publish(stamp_ns, msg.header.frame_id, bodies, self._image_size)
         self._counts.frame(lifted, time.perf_counter() - received)
 
