@@ -5,7 +5,8 @@
         [--param NAME:=VALUE ...]
 
 Builds :class:`pose_lifter.ros.node.LifterNode` in this process, gives it the bag's first
-``camera_info`` and calls ``on_keypoints`` on every ``/keypoints_2d`` message, pass after pass
+``camera_info`` and lifts every ``/keypoints_2d`` message as its lifting thread does
+(``lift_frame``), pass after pass
 (each pass's stamps shifted by the bag's duration, so the tracks stay warm). The first two passes
 warm the tracks up; the others are timed: per frame, callback in -> the frame's answers
 published (the solve, the messages, the markers and the REP-155 outputs). With ``--profile N``,
@@ -73,7 +74,7 @@ def main() -> None:
         for f, s in zip(frames, stamps, strict=True):
             f.header.stamp = ns_to_stamp(s + k * span, node._types)
             t0 = time.perf_counter()
-            node.on_keypoints(f)
+            node.lift_frame(f, time.perf_counter())
             times.append(time.perf_counter() - t0)
         return times
 

@@ -16,6 +16,7 @@ from pose_lifter.core.errors import SolverError
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (
+    CROWD_SCAN,
     FramePipeline,
     FrameSettings,
     LiftedSkeleton,
@@ -221,13 +222,45 @@ def test_bad_input_is_refused_with_its_kind_and_reason() -> None:
     assert not checked.answered and "max_layout_length=64" in str(checked.skipped[0])
     many = FramePipeline(StubLifter(), FrameSettings(max_skeletons=2))  # type: ignore[arg-type]
     checked = many.check(_frame(_person(1), _person(2), _person(3)))
-    assert checked.n_left_out == 1 and "lifting the first 2 (max_skeletons)" in str(checked.skipped[0])
+    assert checked.n_left_out == 1 and "lifting the 2 largest (max_skeletons)" in str(checked.skipped[0])
     checked = pipeline.check(_frame(_person(1, k=10), _person(2), _person(3, k=600), _person(4)))
     wrong, ok, too_many, ok2 = checked.skeletons
     assert isinstance(wrong, SkipSkeleton) and wrong.kind == "InvalidInputError" and wrong.track_id == 1
     assert "keypoints" in str(wrong)  # the layout's count is named
     assert isinstance(too_many, SkipSkeleton) and "more than max_keypoints=512" in str(too_many)
     assert not isinstance(ok, SkipSkeleton) and not isinstance(ok2, SkipSkeleton)
+
+
+def _sized(track_id: int, size: float, confidence: float = 0.9) -> Any:
+    """A person whose confident joints span a box of diagonal ``size`` pixels (a far, low-confidence
+    keypoint does not count)."""
+    xy = np.zeros((17, 2))
+    xy[:, 0] = np.linspace(0.0, size / np.sqrt(2.0), 17) + 50.0 * track_id
+    xy[:, 1] = np.linspace(0.0, size / np.sqrt(2.0), 17)[::-1] + 100.0
+    conf = np.full(17, confidence)
+    xy[0] = [5000.0, 5000.0]  # the nose, below the confidence threshold
+    conf[0] = 0.01
+    return m.arrays_to_skeleton2d(xy, conf, track_id, T)
+
+
+def test_a_crowd_over_the_cap_lifts_its_largest_people_in_the_frames_order() -> None:
+    pipeline = FramePipeline(StubLifter(), FrameSettings(max_skeletons=3))  # type: ignore[arg-type]
+    people = [_sized(0, 100.0), _sized(1, 300.0), _person(2, k=10), _sized(3, 200.0, 0.6),
+              _sized(4, 200.0, 0.8), _sized(5, 50.0), _sized(6, 250.0)]
+    checked = pipeline.check(_frame(*people))
+    # 6 liftable people (2 is malformed): 1 (300 px), 6 (250) and 4 (200, more confident than 3)
+    ids = [x.track_id for x in checked.skeletons]
+    assert ids == [1, 2, 4, 6]
+    assert isinstance(checked.skeletons[1], SkipSkeleton)  # the malformed one stays refused
+    assert checked.n_left_out == 3 and "7 skeletons in one frame" in str(checked.skipped[0])
+    # within the cap nothing is left out, whatever the sizes
+    assert [x.track_id for x in FramePipeline(StubLifter(), FrameSettings(max_skeletons=6)).check(  # type: ignore[arg-type]
+        _frame(*people)).skeletons] == list(range(7))
+    # past CROWD_SCAN x the cap the skeletons are not read (here: the 4 after the first 4)
+    small = FramePipeline(StubLifter(), FrameSettings(max_skeletons=1))  # type: ignore[arg-type]
+    checked = small.check(_frame(*[_sized(i, 10.0 * (i + 1)) for i in range(8)]))
+    assert [x.track_id for x in checked.skeletons] == [3] and checked.n_left_out == 7
+    assert CROWD_SCAN == 4
 
 
 def test_a_failed_or_non_finite_solve_is_one_refusal_and_the_others_are_lifted() -> None:

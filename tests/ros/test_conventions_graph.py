@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from pose_lifter.messages import convert as m
 
 from .conftest import GraphClient
 from .test_lifter_graph import CHEAP, STANDING, coco_keypoints, frame
@@ -94,3 +95,45 @@ def test_markers_lifetime_deleteall_first_frame_fallback_observed(start_lifter: 
     weights = np.asarray(skel.joint_weights)
     assert weights[names.index("left_wrist")] == 0.0
     assert weights[names.index("right_wrist")] == pytest.approx(0.9)
+
+
+def test_a_burst_faster_than_the_lift_drops_whole_frames_and_says_so(start_lifter: Any,
+                                                                     graph: GraphClient) -> None:
+    """Frames published faster than the node lifts them: the node answers whole frames in
+    arrival order, drops the others whole (the oldest waiting first: the newest frame of the
+    burst is always answered), and /diagnostics counts every frame it dropped. A reliable input
+    queue (QoS override) keeps the middleware from dropping any, so answered + dropped is every
+    frame published."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    diags: list[Any] = []
+    graph.node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 100)
+    # cold multi-start solves of 6 people: each frame takes far longer than the burst's spacing
+    graph.wait_for_lifter(start_lifter(params={
+        "n_starts": 30, "warm_start": False, "diagnostics_period": 0.5, "max_waiting_frames": 1,
+        "qos_overrides./keypoints_2d.subscription.reliability": "reliable",
+        "qos_overrides./keypoints_2d.subscription.depth": 100}))
+    t = graph.types
+    people = [(i, *coco_keypoints(STANDING, 30.0 * i, centre=(100.0 + 90 * i, 240.0))) for i in range(6)]
+    n_sk = len(graph.skeletons)
+    stamps = [10**9 + i * 10**7 for i in range(12)]
+    for s in stamps:
+        graph.pub_keypoints.publish(frame(t, s, people))
+        graph.executor.spin_once(timeout_sec=0.001)
+    graph.spin_until(lambda: any(m.stamp_to_ns(a.header.stamp) == stamps[-1] for a in graph.skeletons[n_sk:]),
+                     60.0, "the answer to the burst's last frame")
+
+    def dropped() -> int:
+        return sum(int(_status(d)[2]["frames dropped"]) for d in diags)
+
+    answers = graph.skeletons[n_sk:]
+    answered = [m.stamp_to_ns(a.header.stamp) for a in answers]
+    graph.spin_until(lambda: dropped() + len(answered) >= len(stamps), 10.0,
+                     "/diagnostics counting the dropped frames")
+    assert answered == sorted(answered) and set(answered) <= set(stamps)
+    assert all(len(a.skeletons) == len(people) for a in answers)  # whole frames only
+    assert answered[-1] == stamps[-1]  # the newest frame never waits behind another
+    assert 2 <= len(answered) < len(stamps)  # the lift is slower than the burst
+    assert dropped() + len(answered) == len(stamps)
+    level, message, _ = next(_status(d) for d in diags if _status(d)[2]["frames dropped"] != "0")
+    assert level == 1 and "frames dropped" in message

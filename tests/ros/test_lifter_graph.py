@@ -281,11 +281,13 @@ def test_bad_input_never_kills_the_node_nor_publishes_nan(start_lifter: Any, gra
     answer = graph.send(frame(t, next(stamp), [skel(0, np.full((17, 2), 100.0))]))
     assert all_finite(answer.skeletons)
 
-    # more skeletons than max_skeletons: the first max_skeletons are lifted
+    # more people than max_skeletons: the largest in the image are lifted, in the frame's order
     (r,) = graph.set_parameters(max_skeletons=2)
     assert r.successful
-    answer = graph.send(frame(t, next(stamp), [skel(i) for i in range(5)]))
-    assert [s.track_id for s in answer.skeletons.skeletons] == [0, 1]
+    sizes = [1.0, 1.6, 0.7, 2.0, 1.2]  # people 3 and 1 are the largest
+    crowd = [skel(i, (kp - kp.mean(axis=0)) * f + kp.mean(axis=0)) for i, f in enumerate(sizes)]
+    answer = graph.send(frame(t, next(stamp), crowd))
+    assert [s.track_id for s in answer.skeletons.skeletons] == [1, 3]
 
     assert lifter.alive()
     # rate-limited per kind (5 s): at most one warning per kind here, far fewer than bad skeletons

@@ -4,6 +4,7 @@ the ``/diagnostics`` values; rosbags message types stand in for rclpy's)."""
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.diagnostics import status_level, values
+from pose_lifter.ros.frame_queue import FrameQueue
 from pose_lifter.ros.params import PARAMS, NodeSettings
 from pose_lifter.ros.stats import FrameCounter, FrameStats
 
@@ -185,3 +187,61 @@ def test_diagnostics_values_and_levels_of_a_window() -> None:
     assert status_level(1, 4, 2) == (1, "2 inputs skipped")
     assert status_level(3, 0, 3) == (2, "no skeleton could be lifted (3 skipped)")
     assert dict(values(FrameStats()))["warm share"] == "nan"
+
+
+def test_dropped_frames_are_counted_in_the_line_and_the_diagnostics() -> None:
+    counter = FrameCounter()
+    counter.open("line")
+    counter.open("diagnostics")
+    counter.drop()
+    counter.drop()
+    line = counter.take("line")
+    assert line.dropped == 2 and "2 frames dropped (the node was busy)" in line.line()
+    counter.frame([skeleton3d(0, 0.004, True)], 0.01)
+    diag = counter.take("diagnostics")
+    before = diag.elapsed()
+    kv = dict(values(diag))
+    after = diag.elapsed()
+    assert (kv["frames"], kv["frames dropped"]) == ("1", "2")
+    assert 3 / after - 0.005 <= float(kv["input rate (Hz)"]) <= 3 / before + 0.005  # received: 1 + 2
+    assert status_level(1, 1, 0, 2) == (1, "2 of 3 frames dropped: the input is faster than the lift")
+    assert status_level(0, 0, 0, 4)[0] == 1 and "4 of 4 frames dropped" in status_level(0, 0, 0, 4)[1]
+    assert status_level(3, 0, 3, 1)[0] == 2  # nothing liftable stays the ERROR it is
+
+
+def test_the_frame_queue_drops_the_oldest_whole_frame_and_wakes_on_close() -> None:
+    with pytest.raises(ValueError):
+        FrameQueue(0)
+    q: FrameQueue[int] = FrameQueue(2)
+    assert q.put(1) is None and q.put(2) is None
+    assert q.put(3) == 1 and q.put(4) == 2  # the oldest waiting frame goes first
+    assert len(q) == 2 and q.get() == 3 and q.get() == 4
+    assert q.put(5) is None and q.clear() == 1 and len(q) == 0
+    # a reader blocked on an empty queue: woken by a frame, then by close (None from then on)
+    got: list[int | None] = []
+    reader = threading.Thread(target=lambda: got.extend([q.get(), q.get()]))
+    reader.start()
+    q.put(6)
+    q.close()
+    reader.join(timeout=60)
+    assert not reader.is_alive() and got in ([6, None], [None, None])
+    assert q.get() is None and q.put(7) == 7  # a closed queue takes nothing
+
+
+def test_the_frame_queue_hands_each_frame_to_one_reader_in_order() -> None:
+    q: FrameQueue[int] = FrameQueue(1000)
+    taken: list[int] = []
+
+    def read() -> None:
+        while (x := q.get()) is not None:
+            taken.append(x)
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    for i in range(500):
+        assert q.put(i) is None
+    while len(q):  # the reader drains the queue
+        threading.Event().wait(0.001)
+    q.close()
+    reader.join(timeout=60)
+    assert taken == list(range(500))

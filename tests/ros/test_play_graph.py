@@ -40,12 +40,13 @@ def play(graph: GraphClient, args: list[str], env: dict[str, str]) -> tuple[str,
 
 
 def test_play_feeds_the_lifter(graph: GraphClient, start_lifter: Any, lifter_env: dict[str, str]) -> None:
-    # a reliable input with a deep queue (the override config/lifter.yaml documents): the first
-    # frame takes ~0.3 s (cold solve + first publish), and the default sensor-data input (best
-    # effort, depth 5) would drop the frames that arrive meanwhile, as with `ros2 bag play`
+    # a reliable input with a deep queue (the override config/lifter.yaml documents) and as many
+    # frames waiting for the lift: the first frame takes ~0.3 s (cold solve + first publish), and
+    # the default sensor-data input (best effort, depth 5) and one waiting frame would drop the
+    # frames that arrive meanwhile, as with `ros2 bag play`
     lifter = start_lifter(params={
         "stats_period": 1.0, "qos_overrides./keypoints_2d.subscription.reliability": "reliable",
-        "qos_overrides./keypoints_2d.subscription.depth": 100})
+        "qos_overrides./keypoints_2d.subscription.depth": 100, "max_waiting_frames": 100})
     graph.wait_for_lifter(lifter)
     stamps = [x.stamp_ns for x in bags.read_messages(BAG, ["/keypoints_2d"])]
     # every topic of the bag, no --wait: by default play waits for a subscriber on the topics a

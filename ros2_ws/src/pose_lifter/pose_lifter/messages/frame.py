@@ -6,8 +6,9 @@ what the node publishes for it. One frame:
 
 1. :meth:`FramePipeline.check` (stateless): a frame whose ``header.frame_id`` or ``layout``
    is over its cap is skipped unanswered (:attr:`CheckedFrame.answered` False: no output, no
-   expiry); an unknown layout skips the whole frame (answered, empty); beyond
-   ``max_skeletons`` the rest of the frame is skipped; each skeleton is checked by
+   expiry); an unknown layout skips the whole frame (answered, empty); of a crowd of more than
+   ``max_skeletons`` liftable skeletons only the ``max_skeletons`` largest in the image are
+   lifted (:func:`largest_first`), the others skipped; each skeleton is checked by
    :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
 2. :meth:`FramePipeline.lift` per checked skeleton: the core's
@@ -174,17 +175,37 @@ class CheckedFrame:
     answered : bool
         False: the frame is over a cap and skipped unanswered (no output, no expiry).
     skeletons : tuple of SkeletonInput or SkipSkeleton
-        Per input skeleton (up to ``max_skeletons``), in order: ready to lift, or why not.
+        Per input skeleton, in order: ready to lift, or why not (without those a crowd cap left out).
     skipped : tuple of SkipSkeleton
         Refusals of the frame itself (over a cap, unknown layout, too many skeletons).
     n_left_out : int
-        Skeletons of the frame not in ``skeletons`` (unknown layout, beyond ``max_skeletons``).
+        Skeletons of the frame not in ``skeletons`` (unknown layout, left out by ``max_skeletons``).
     """
 
     answered: bool
     skeletons: tuple[SkeletonInput | SkipSkeleton, ...] = ()
     skipped: tuple[SkipSkeleton, ...] = ()
     n_left_out: int = 0
+
+
+#: A frame with more than ``max_skeletons`` skeletons: at most this many times ``max_skeletons``
+#: of them are read and ranked (:func:`largest_first`); the rest are left out unread.
+CROWD_SCAN: Final[int] = 4
+
+
+def largest_first(inputs: Sequence[SkeletonInput], confidence_threshold: float) -> NDArray[np.intp]:
+    """Indices of ``inputs`` from the largest person in the image to the smallest: the diagonal of
+    the box of the joints at or above ``confidence_threshold`` (pixels), ties broken by their mean
+    confidence, then by the order in the frame (a stable sort). The nearest people, whose 2D is
+    the most precise, are the ones a crowd cap keeps."""
+    size = np.zeros(len(inputs))
+    conf = np.zeros(len(inputs))
+    for i, x in enumerate(inputs):
+        vis = x.confidence >= confidence_threshold
+        pts = x.points[vis]
+        size[i] = float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0))))
+        conf[i] = float(x.confidence[vis].mean())
+    return np.lexsort((-conf, -size))
 
 
 def frame_over_cap(msg: Any, settings: FrameSettings) -> SkipSkeleton | None:
@@ -353,15 +374,11 @@ class FramePipeline:
             skip = SkipSkeleton(skip.kind, f"frame skipped: {skip}")
             return CheckedFrame(True, skipped=(skip,), n_left_out=len(skeletons))
         skipped: tuple[SkipSkeleton, ...] = ()
-        n_left_out = max(0, len(skeletons) - st.max_skeletons)
-        if n_left_out:
-            skipped = (SkipSkeleton("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
-                                    f"lifting the first {st.max_skeletons} (max_skeletons)"),)
-            skeletons = skeletons[:st.max_skeletons]
+        n_scanned = min(len(skeletons), CROWD_SCAN * st.max_skeletons)
         threshold = self.lifter.options.confidence_threshold
         seen: set[int] = set()
         out: list[SkeletonInput | SkipSkeleton] = []
-        for skel in skeletons:
+        for skel in skeletons[:n_scanned]:
             try:
                 out.append(skeleton_input(skel, layout, st, threshold, seen, on_clipped))
             except Exception as err:
@@ -372,6 +389,16 @@ class FramePipeline:
                     except Exception:
                         track_id = None
                 out.append(_refusal(err, track_id))
+        inputs = [(i, x) for i, x in enumerate(out) if isinstance(x, SkeletonInput)]
+        n_left_out = len(skeletons) - n_scanned
+        if len(inputs) > st.max_skeletons:  # a crowd: the largest people are lifted
+            kept = set(largest_first([x for _, x in inputs], threshold)[:st.max_skeletons].tolist())
+            dropped = {i for k, (i, _) in enumerate(inputs) if k not in kept}
+            n_left_out += len(dropped)
+            out = [x for i, x in enumerate(out) if i not in dropped]
+        if n_left_out:
+            skipped = (SkipSkeleton("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
+                                    f"lifting the {st.max_skeletons} largest (max_skeletons)"),)
         return CheckedFrame(True, tuple(out), skipped, n_left_out)
 
     def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics, shared_s: float = 0.0

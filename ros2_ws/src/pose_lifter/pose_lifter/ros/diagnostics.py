@@ -7,20 +7,22 @@ Once per ``diagnostics_period`` the node publishes one ``DiagnosticStatus`` name
 ========================  ===============================================================
 key                       value
 ========================  ===============================================================
-``input rate (Hz)``       keypoint frames received per second
+``input rate (Hz)``       keypoint frames received per second (answered or dropped)
 ``frames``                keypoint frames answered
+``frames dropped``        frames dropped unanswered while the node was busy (the oldest first)
 ``skeletons lifted``      skeletons published
 ``warm share``            fraction of them warm-started from their track's previous frame
 ``cold share``            fraction solved cold (multi-start)
-``latency median (ms)``   per frame, callback in -> answer published (also ``p95``)
+``latency median (ms)``   per frame, received -> answer published (also ``p95``)
 ``solve median (ms)``     per skeleton (also ``p95``)
 ``skipped total``         skeletons or frames left out, and ``skipped: <kind>`` per kind
 ========================  ===============================================================
 
 The counts come from the node's one counter (:class:`pose_lifter.ros.stats.FrameCounter`), in a
 window of their own. Levels: ``ERROR`` when skeletons came in but none could be lifted; ``WARN``
-when no input came in the window, or some inputs were skipped; ``OK`` otherwise. The message
-says which.
+when no input came in the window, frames were dropped (the input is faster than the lift: fewer
+people, ``max_skeletons``, or a lower rate) or some inputs were skipped; ``OK`` otherwise. The
+message says which.
 """
 
 from __future__ import annotations
@@ -39,12 +41,14 @@ WARN: Final[int] = 1
 ERROR: Final[int] = 2
 
 
-def status_level(frames: int, lifted: int, skipped: int) -> tuple[int, str]:
+def status_level(frames: int, lifted: int, skipped: int, dropped: int = 0) -> tuple[int, str]:
     """(level, message) of a window with these counts (see the module doc)."""
-    if frames == 0:
+    if frames == 0 and dropped == 0:
         return WARN, "no input on keypoints_2d"
     if lifted == 0 and skipped > 0:
         return ERROR, f"no skeleton could be lifted ({skipped} skipped)"
+    if dropped > 0:
+        return WARN, f"{dropped} of {frames + dropped} frames dropped: the input is faster than the lift"
     if skipped > 0:
         return WARN, f"{skipped} inputs skipped"
     return OK, "lifting"
@@ -60,8 +64,9 @@ def values(window: FrameStats) -> list[tuple[str, str]]:
         return f"{np.percentile(a, q):.2f}" if a.size else "nan"
 
     out = [
-        ("input rate (Hz)", f"{window.frames / window.elapsed():.2f}"),
+        ("input rate (Hz)", f"{(window.frames + window.dropped) / window.elapsed():.2f}"),
         ("frames", str(window.frames)),
+        ("frames dropped", str(window.dropped)),
         ("skeletons lifted", str(window.lifted)),
         ("warm share", f"{window.warm / n:.3f}" if window.lifted else "nan"),
         ("cold share", f"{(window.lifted - window.warm) / n:.3f}" if window.lifted else "nan"),
@@ -113,7 +118,8 @@ class LifterDiagnostics:
             return
         array_t, status_t, kv_t = self._types
         window = self._counter.take(self.REPORT)
-        level, message = status_level(window.frames, window.lifted, sum(window.skipped.values()))
+        level, message = status_level(window.frames, window.lifted, sum(window.skipped.values()),
+                                      window.dropped)
         status = status_t(level=bytes([level]), name=f"{self._node.get_name()}: lifter", message=message,
                           hardware_id=HARDWARE_ID, values=[kv_t(key=k, value=v) for k, v in values(window)])
         msg = array_t(status=[status])

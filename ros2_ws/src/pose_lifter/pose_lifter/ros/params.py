@@ -129,10 +129,14 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
     ParamSpec("publish_hri", True, "Publish the tracked people as REP-155 bodies (/humans/bodies/...) and "
               "their frames on /tf.", read_only=True),
-    ParamSpec("max_skeletons", _FRAME.max_skeletons, "Skeletons lifted per frame at most; the rest are "
-              "skipped.", 1, 10000),
+    ParamSpec("max_skeletons", _FRAME.max_skeletons, "People lifted per frame at most: of a larger crowd "
+              "the largest in the image (the box of their confident joints) are lifted, the rest skipped.",
+              1, 10000),
     ParamSpec("max_coordinate", _FRAME.max_coordinate, "Keypoints farther than this from the image origin "
               "(pixels) are absurd: the skeleton is skipped.", 1.0, 1.0e9),
+    ParamSpec("max_waiting_frames", 1, "Frames that may wait while one is lifted; a newer frame drops the "
+              "oldest waiting one whole (counted in /diagnostics), so an answer is never more than this "
+              "many frames + 1 behind.", 1, 1000, read_only=True),
     ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
               read_only=True),
     ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "
@@ -215,7 +219,8 @@ _YAML_HEAD: Final[str] = """\
 
 _YAML_TAIL: Final[str] = """\
     # QoS of the topics can be overridden at start-up (QoSOverridingOptions), e.g. a reliable
-    # input with a deeper queue for a detector that publishes reliably:
+    # input with a deeper queue for a detector that publishes reliably (with max_waiting_frames
+    # as deep, every frame of a bag played faster than the lift is answered):
     # qos_overrides:
     #   /keypoints_2d:
     #     subscription:

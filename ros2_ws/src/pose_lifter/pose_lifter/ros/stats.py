@@ -5,13 +5,15 @@ The node counts each answered frame, skipped input and clipped skeleton once, in
 the statistics line (:meth:`FrameStats.line`) and ``/diagnostics``
 (:mod:`pose_lifter.ros.diagnostics`).
 
-Every ``stats_period`` s the node logs the frame rate, the latency per frame (callback in ->
-answer published: median, p95, max), the solve time per person-frame (median, p95), the
-skeletons lifted with clipped confidences and the skipped inputs by kind.
+Every ``stats_period`` s the node logs the frame rate, the latency per frame (frame received ->
+answer published: median, p95, max), the solve time per person-frame (median, p95), the frames
+dropped while it was busy, the skeletons lifted with clipped confidences and the skipped inputs
+by kind.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -35,6 +37,7 @@ class FrameStats:
     solve_times: list[float] = field(default_factory=list)
     skipped: Counter[str] = field(default_factory=Counter)
     clipped: int = 0  # skeletons lifted with confidences clipped into [0, 1]
+    dropped: int = 0  # whole frames dropped unanswered while the node was busy (the oldest first)
 
     def frame(self, lifted: Sequence[Any], latency: float) -> None:
         """Count one answered frame: its Skeleton3D messages and its latency (s)."""
@@ -51,7 +54,7 @@ class FrameStats:
     def line(self) -> str:
         """The statistics line (``""`` when nothing happened since the counters started)."""
         elapsed = self.elapsed()
-        if self.frames == 0 and not self.skipped:
+        if self.frames == 0 and not self.skipped and not self.dropped:
             return ""
         lat = np.asarray(self.latencies) * 1e3
         solve = np.asarray(self.solve_times) * 1e3
@@ -62,6 +65,8 @@ class FrameStats:
                      f"max {lat.max():.1f} ms")
         if solve.size:  # per person-frame
             text += f", solve median {np.median(solve):.1f} ms p95 {np.percentile(solve, 95):.1f} ms"
+        if self.dropped:
+            text += f", {self.dropped} frames dropped (the node was busy)"
         if self.clipped:
             text += f", confidences clipped in {self.clipped} skeletons"
         if self.skipped:
@@ -78,32 +83,47 @@ class FrameCounter:
 
     def __init__(self) -> None:
         self._windows: dict[str, FrameStats] = {}
+        # the lifting thread counts frames, the executor's callbacks drops and reports
+        self._lock = threading.Lock()
 
     def open(self, report: str) -> None:
         """Start counting for ``report`` (from now)."""
-        self._windows[report] = FrameStats()
+        with self._lock:
+            self._windows[report] = FrameStats()
 
     def close(self, report: str) -> None:
         """Stop counting for ``report``."""
-        self._windows.pop(report, None)
+        with self._lock:
+            self._windows.pop(report, None)
 
     def take(self, report: str) -> FrameStats:
         """The window of ``report`` since its last take (or open); a new window starts."""
-        window = self._windows[report]
-        self._windows[report] = FrameStats()
-        return window
+        with self._lock:
+            window = self._windows[report]
+            self._windows[report] = FrameStats()
+            return window
 
     def frame(self, lifted: Sequence[Any], latency: float) -> None:
-        """One answered frame: its Skeleton3D messages and its latency (s)."""
-        for window in self._windows.values():
-            window.frame(lifted, latency)
+        """One answered frame: its lifted skeletons (``warm_started``, ``solve_time``) and its
+        latency (s)."""
+        with self._lock:
+            for window in self._windows.values():
+                window.frame(lifted, latency)
 
     def skip(self, kind: str) -> None:
         """One skipped input of a kind."""
-        for window in self._windows.values():
-            window.skipped[kind] += 1
+        with self._lock:
+            for window in self._windows.values():
+                window.skipped[kind] += 1
+
+    def drop(self) -> None:
+        """One whole frame dropped unanswered (a newer one came while the node was busy)."""
+        with self._lock:
+            for window in self._windows.values():
+                window.dropped += 1
 
     def clip(self) -> None:
         """One skeleton lifted with confidences clipped into [0, 1]."""
-        for window in self._windows.values():
-            window.clipped += 1
+        with self._lock:
+            for window in self._windows.values():
+                window.clipped += 1
