@@ -53,6 +53,11 @@ MUTATIONS = [
     ("a REP-155 elbow placed the forearm's length down the upper arm", "messages/body.py",
      "trans[:, chain_rows + 3, 2] = -len1", "trans[:, chain_rows + 3, 2] = -len2",
      "tests/messages/test_body.py"),
+    ("a batch of solves hands each its neighbours' runs", "core/batch.py",
+     "advance(i, outs[start:start + size])", "advance(i, outs[::-1][start:start + size])",
+     "tests/core/test_batch.py"),
+    ("a busy node drops the newest waiting frame instead of the oldest", "ros/frame_queue.py",
+     "dropped = self._items.popleft() if", "dropped = self._items.pop() if", "tests/ros/test_node_parts.py"),
 ]
 
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 import tolerances as tol
+from pose_lifter.core.batch import Steps
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.pose_kernel import _depth_row, _depth_term, _sum_abs
@@ -30,7 +31,8 @@ Call = tuple[tuple[Any, ...], dict[str, Any]]
 
 
 def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[Call]]:
-    """The ``Runs.run`` calls of a tracked lift of a bag's first messages (through the loop)."""
+    """The runs (``Runs.run_steps`` calls) of a tracked lift of a bag's first messages (through
+    the loop)."""
     from pose_lifter.offline.bags import read_messages
 
     kps, infos = [], []
@@ -42,13 +44,13 @@ def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[C
     lifter = Lifter(None, LifterOptions(mode=mode, n_starts=4) if mode == "paper" else LifterOptions())
     lifter.runs.compiled = False
     calls: list[Call] = []
-    original = lifter.runs.run
+    original = lifter.runs.run_steps
 
-    def recorded(*args: Any, **kwargs: Any) -> Run:
+    def recorded(*args: Any, **kwargs: Any) -> Steps[Run]:
         calls.append((args, kwargs))
         return original(*args, **kwargs)
 
-    lifter.runs.run = recorded  # type: ignore[method-assign]
+    lifter.runs.run_steps = recorded  # type: ignore[method-assign]
     lift_messages(kps[:n_messages], infos, lifter, LiftSettings(smoothing_s=0.0))
     return lifter, calls
 

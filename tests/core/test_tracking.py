@@ -11,6 +11,7 @@ import pytest
 import tolerances as tol
 from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, StartKind, TrackContext, p_mpjpe
 from pose_lifter.core.bases import default_bases_path
+from pose_lifter.core.batch import Steps
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.prior import PosePrior
 from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
@@ -93,9 +94,9 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     conf[np.ix_(lost, [2, 8])] = 0.0  # the left wrist and ankle lost for 2 frames, 3 times
     conf[5:15, 5] = 0.0  # the right wrist lost for 10 frames: filled on its first 3 only
     seen: list[np.ndarray | None] = []
-    lift = Lifter.lift
+    lift = Lifter.lift_steps
 
-    def spy(self: Lifter, *args: object, **kwargs: object) -> LiftResult:
+    def spy(self: Lifter, *args: object, **kwargs: object) -> Steps[LiftResult]:
         track = kwargs.get("track")
         f = None if track is None else track.fill  # type: ignore[attr-defined]
         seen.append(None if f is None else np.asarray(f[1]).copy())
@@ -108,9 +109,9 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
         # on: 0.955-0.964; off: 0.914-0.929, measured under both floating-point set-ups)
         opts = LifterOptions(fill_missing_frames=n, missing_temporal_weight=0.0, measurement_update=False)
         if n:
-            monkeypatch.setattr(Lifter, "lift", spy)
+            monkeypatch.setattr(Lifter, "lift_steps", spy)
         res = _track(Lifter(bases, opts), x, conf)
-        monkeypatch.setattr(Lifter, "lift", lift)
+        monkeypatch.setattr(Lifter, "lift_steps", lift)
         errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in lost]))
     assert errs[0] < 0.97 * errs[1], errs
     assert seen[0] is None  # the first frame has no track to predict from
@@ -124,13 +125,13 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     for i in range(5):
         policy.lift(0, i * 33_333_333, x[i])
     seen.clear()
-    monkeypatch.setattr(Lifter, "lift", spy)
+    monkeypatch.setattr(Lifter, "lift_steps", spy)
     policy.lift(0, 5 * 33_333_333, x[5], conf[10])
     assert seen[-1] is not None
     policy._tracks[0].objectives.append(1e6)
     policy.lift(0, 6 * 33_333_333, x[6], conf[10])
     assert seen[-1] is None
-    monkeypatch.setattr(Lifter, "lift", lift)
+    monkeypatch.setattr(Lifter, "lift_steps", lift)
 
 
 def test_a_temporal_prior_sees_the_tracks_past_frames(
@@ -301,19 +302,19 @@ def test_noisy_2d_weighs_the_fit_down_only_with_noise_smoothing(
     for smoothing in (True, False):
         options = LifterOptions(noise_smoothing=smoothing)
         lifter = Lifter(PoseBases.load(default_bases_path("hybrid")), options)
-        original = lifter.lift
+        original = lifter.lift_steps
         for name, pts in (("clean", x), ("noisy", noisy)):
             for later in (False, True):
                 weights: list[float] = []
 
                 def spy(*args: object, _w: list[float] = weights, _f: object = original,
-                        **kwargs: object) -> LiftResult:
+                        **kwargs: object) -> Steps[LiftResult]:
                     track = kwargs.get("track")
                     if isinstance(track, TrackContext):
                         _w.append(track.data_weight)
                     return _f(*args, **kwargs)  # type: ignore[operator,no-any-return]
 
-                lifter.lift = spy  # type: ignore[method-assign]
+                lifter.lift_steps = spy  # type: ignore[method-assign]
                 policy = TrackPolicy(lifter)
                 policy.smoothed_later = later
                 for i in range(min(len(pts), 20)):

@@ -27,3 +27,9 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 def njit(f: _F) -> _F:
     """``numba.njit(cache=True)(f)`` when numba is importable, else ``f`` unchanged."""
     return f if _numba_njit is None else cast(_F, _numba_njit(cache=True)(f))
+
+
+def njit_nogil(f: _F) -> _F:
+    """``numba.njit(cache=True, nogil=True)(f)`` when numba is importable, else ``f`` unchanged:
+    a kernel that releases the GIL while it runs, so that threads run it in parallel."""
+    return f if _numba_njit is None else cast(_F, _numba_njit(cache=True, nogil=True)(f))

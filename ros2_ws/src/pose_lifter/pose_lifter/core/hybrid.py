@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ._fast import mean_rows, median_rows, row_norms
 from ._jit import njit
+from .batch import Steps, gather
 from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
@@ -219,11 +220,12 @@ class PriorFit:
 
     def starts(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
                norm: Normalisation, warm: WarmStart | None, cam0: Camera | None, track: TrackContext
-               ) -> Starts:
+               ) -> Steps[Starts]:
         """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring) on the
         2D ``x`` (12, 2, input units; ``xn`` normalised by ``norm``) with weights ``w`` (12,), the
         warm start and its camera ``cam0`` (normalised) and the track's context (its
-        ``temporal_weight`` an array (12,))."""
+        ``temporal_weight`` an array (12,)). A solve (:mod:`pose_lifter.core.batch`): an outlier
+        pass's two runs go in one round."""
         o, runs = self.options, self.runs
         previous = None
         if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
@@ -236,10 +238,11 @@ class PriorFit:
         # every frame starts from the prior's pose (with the previous frame's camera when tracked):
         # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
         n_alt = o.hybrid_alternations
-        first = runs.run(xn, w, a_prior, cam0, n_alt, prior=prior)
+        first = yield from runs.run_steps(xn, w, a_prior, cam0, n_alt, prior=prior)
         tried = [StartRun(StartKind.PRIOR, -1, first)]
         if o.warm_flip and warm is None:
-            tried.append(StartRun(StartKind.MIRRORED, -1, runs.mirrored_run(xn, w, first, prior, n_alt)))
+            flip = yield from runs.mirrored_run_steps(xn, w, first, prior, n_alt)
+            tried.append(StartRun(StartKind.MIRRORED, -1, flip))
         total = sum(r.run.n_iter for r in tried)
         n_starts = len(tried)
         threshold = o.outlier_threshold_gated if track.gated else o.outlier_threshold
@@ -260,8 +263,9 @@ class PriorFit:
             w[out] = 0.0
             prior, prior_pose = self.rows(x, w, norm, track, previous)
             # continue the fit, and start again from the prior's new pose: the lower objective
-            cont = runs.run(xn, w, run.pose.alpha, cam, n_alt, prior=prior)
-            fresh = runs.run(xn, w, runs.start_alpha(prior.target), None, n_alt, prior=prior)
+            cont, fresh = yield from gather([
+                runs.run_steps(xn, w, run.pose.alpha, cam, n_alt, prior=prior),
+                runs.run_steps(xn, w, runs.start_alpha(prior.target), None, n_alt, prior=prior)])
             tried = [StartRun(best.kind, best.index, cont), StartRun(StartKind.PRIOR, -1, fresh)]
             total += cont.n_iter + fresh.n_iter
         return Starts(tried, total, n_starts, w, prior_pose)

@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 from ._fast import mean_rows, row_norms
 from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases
+from .batch import Steps
 from .errors import InvalidInputError, OptionsError, PoseLifterError, SolverError, TooFewJointsError
 from .hybrid import PriorFit
 from .models import LifterData
@@ -103,7 +104,21 @@ class Lifter:
                       if bases is not None else
                       LifterData.packaged(o.mode, prior, temporal_prior, o.prior_file, o.temporal_prior_file))
         self.bases = self._data.bases
+        self._threads = 1
         self._build()
+
+    @property
+    def threads(self) -> int:
+        """Threads over which each round of runs is split (:mod:`pose_lifter.core.batch`; the
+        compiled kernel releases the GIL): 1 by default; the results do not depend on it."""
+        return self._threads
+
+    @threads.setter
+    def threads(self, value: int) -> None:
+        if int(value) < 1:
+            raise OptionsError(f"threads must be >= 1, got {value}")
+        self._threads = int(value)
+        self._runs.threads = self._threads
 
     @property
     def options(self) -> LifterOptions:
@@ -147,6 +162,7 @@ class Lifter:
 
             qstep_fn = _q
         self._runs = Runs(self._model, o, qstep_fn)
+        self._runs.threads = self._threads
         self._prior_fit: PriorFit | None = None
         if o.mode != "paper":
             # the priors are loaded (and validated) now, not on the first frame
@@ -269,6 +285,17 @@ class Lifter:
         SolverError
             The solve diverged on valid input.
         """
+        return self._runs.solve(self.lift_steps(points_2d, confidence, warm, track))
+
+    def lift_steps(
+        self,
+        points_2d: NDArray[np.float64],
+        confidence: NDArray[np.float64] | None = None,
+        warm: WarmStart | None = None,
+        track: TrackContext | None = None,
+    ) -> Steps[LiftResult]:
+        """:meth:`lift` as a solve (:mod:`pose_lifter.core.batch`): its runs are yielded, to go
+        through the compiled kernel with other people's (:func:`pose_lifter.core.batch.gather`)."""
         x, w = self._weights(points_2d, confidence)
         norm = self._normalise(x, w)
         tc = self._track_context(_NO_TRACK if track is None else track, w)
@@ -283,10 +310,10 @@ class Lifter:
             cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
                           (warm.camera.translation - norm.centre) / norm.spread)
         if fit is not None:  # hybrid
-            starts = fit.starts(x, xn, w * tc.data_weight, norm, warm, cam0, tc)
+            starts = yield from fit.starts(x, xn, w * tc.data_weight, norm, warm, cam0, tc)
             w = starts.weights / tc.data_weight
         else:
-            starts = paper_starts(self._runs, self.bases, self._options, xn, w, warm, cam0)
+            starts = yield from paper_starts(self._runs, self.bases, self._options, xn, w, warm, cam0)
         return self._result(x, w, norm, starts.best(), starts.n_starts, starts.total_alternations,
                             starts.prior_pose)
 

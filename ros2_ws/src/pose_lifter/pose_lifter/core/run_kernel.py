@@ -22,17 +22,19 @@ objective terms and stopping rule.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ._jit import njit
+from ._jit import njit, njit_nogil
 from ._records import ModelArrays, StepSettings
 from .camera import _camera_solve
 from .pose_kernel import _depth_term, _n_rows, _pose_kernel, _sum_abs
 
-__all__ = ["CAMERA_DIVERGED", "OK", "POSE_DIVERGED", "RunOut"]
+__all__ = ["CAMERA_DIVERGED", "OK", "POSE_DIVERGED", "RunCall", "RunOut", "run_calls"]
 
 #: Status codes of :func:`_run_kernel`.
 OK, CAMERA_DIVERGED, POSE_DIVERGED = 0, 1, 2
@@ -56,6 +58,24 @@ class RunOut(NamedTuple):
     floats: NDArray[np.float64]  #: (4,) pose objective, limb violation, camera objective, scale
     #: (5,) pose iterations, converged, alpha-step iterations, camera iterations, converged
     ints: NDArray[np.int64]
+
+
+class RunCall(NamedTuple):
+    """The operands of one run for :func:`_run_kernel` but the model and the settings, which
+    every run of a lifter shares (see :func:`_run_kernel` for each)."""
+
+    xn: NDArray[np.float64]  #: (12, 2)
+    w: NDArray[np.float64]  #: (12,)
+    xp: NDArray[np.float64]  #: (12, 3)
+    pw: NDArray[np.float64]  #: (12, 2)
+    rad: NDArray[np.float64]  #: (8,)
+    alpha0: NDArray[np.float64]  #: (k,)
+    y0: NDArray[np.float64]  #: (36,)
+    cam0: NDArray[np.float64]  #: (2, 4)
+    obj0: float
+    it0: int
+    n_alt: int
+    pose_max_iter: int
 
 
 @njit
@@ -194,3 +214,116 @@ def _run_kernel(
             break
         prev = obj
     return RunOut(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f, b_i)
+
+
+@njit_nogil
+def _run_kernel_many(km: ModelArrays, st: StepSettings, ins: tuple[Any, ...], outs: tuple[Any, ...]) -> None:
+    """:func:`_run_kernel` for each of ``B`` runs of one model and settings.
+
+    ``ins``: the operands of :class:`RunCall`, in its order, stacked on a first axis of size
+    ``B`` (``xn`` (B, 12, 2), ..., ``obj0`` (B,), ``it0``, ``n_alt``, ``pose_max_iter`` (B,)
+    int64). ``outs``, written: ``status`` (B,); ``head`` (B, 4): done, it, converged, best_it;
+    ``best_obj`` (B,); ``objs`` (B, L, 3) and ``counts`` (B, L, 4) with ``L`` at least every
+    run's ``n_alt - it0`` (the first ``done`` rows used); then ``alpha``, ``pose``, ``rotation``,
+    ``translation``, ``floats``, ``ints`` as :class:`RunOut`'s with ``B`` in front. Each run is
+    :func:`_run_kernel`'s on its own operands, bit for bit (nothing is shared but ``km`` and
+    ``st``); the kernel releases the GIL, so threads may run parts of a batch in parallel."""
+    xn, w, xp, pw, rad, alpha0, y0, cam0, obj0, it0, n_alt, pose_max_iter = ins
+    status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
+    for b in range(xn.shape[0]):
+        o = _run_kernel(xn[b], w[b], km, st, xp[b], pw[b], rad[b], alpha0[b], y0[b], cam0[b], obj0[b],
+                        it0[b], n_alt[b], pose_max_iter[b])
+        status[b] = o.status
+        head[b, 0], head[b, 1], head[b, 2], head[b, 3] = o.done, o.it, o.converged, o.best_it
+        best_obj[b] = o.best_obj
+        m = o.objs.shape[0]
+        objs[b, :m] = o.objs
+        counts[b, :m] = o.counts
+        alpha[b] = o.alpha
+        pose[b] = o.pose
+        rotation[b] = o.rotation
+        translation[b] = o.translation
+        floats[b] = o.floats
+        ints[b] = o.ints
+
+
+def _stacked(arrays: list[NDArray[Any]], dtype: type) -> NDArray[Any]:
+    return np.ascontiguousarray(np.stack(arrays), dtype=dtype)
+
+
+def run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads: int = 1
+              ) -> list[RunOut | Exception]:
+    """Every run of ``calls`` (one model and settings) in one compiled pass,
+    :func:`_run_kernel_many`, split into ``threads`` contiguous parts run in parallel (the kernel
+    releases the GIL): each run's :class:`RunOut` is the one :func:`_run_kernel` gives it alone,
+    whatever the batch and the thread count. A run whose kernel raises (numpy's ``LinAlgError``
+    on a diverged matrix) gets its exception in its place; the others their results (the batch
+    is then run again one call at a time)."""
+    n = len(calls)
+    if n == 0:
+        return []
+    try:
+        return list(_run_calls(calls, km, st, threads))
+    except Exception:
+        pass
+    out: list[RunOut | Exception] = []
+    for c in calls:
+        try:
+            out.append(_run_kernel(c.xn, c.w, km, st, c.xp, c.pw, c.rad, c.alpha0, c.y0, c.cam0, c.obj0,
+                                   c.it0, c.n_alt, c.pose_max_iter))
+        except Exception as err:
+            out.append(err)
+    return out
+
+
+def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads: int) -> list[RunOut]:
+    """:func:`run_calls` when no kernel raises."""
+    n = len(calls)
+    k = calls[0].alpha0.size
+    length = max(max(c.n_alt - c.it0 for c in calls), 0)
+    xn = _stacked([c.xn for c in calls], np.float64)
+    ins: tuple[Any, ...] = (
+           xn, _stacked([c.w for c in calls], np.float64),
+           _stacked([c.xp for c in calls], np.float64), _stacked([c.pw for c in calls], np.float64),
+           _stacked([c.rad for c in calls], np.float64), _stacked([c.alpha0 for c in calls], np.float64),
+           _stacked([c.y0 for c in calls], np.float64), _stacked([c.cam0 for c in calls], np.float64),
+           np.array([c.obj0 for c in calls], dtype=np.float64),
+           np.array([c.it0 for c in calls], dtype=np.int64),
+           np.array([c.n_alt for c in calls], dtype=np.int64),
+           np.array([c.pose_max_iter for c in calls], dtype=np.int64))
+    outs: tuple[NDArray[Any], ...] = (
+        np.zeros(n, np.int64), np.zeros((n, 4), np.int64), np.zeros(n), np.zeros((n, length, 3)),
+        np.zeros((n, length, 4), np.int64), np.zeros((n, k)), np.zeros((n, xn.shape[1] * 3)),
+        np.zeros((n, 3, 3)), np.zeros((n, 2)), np.zeros((n, 4)), np.zeros((n, 5), np.int64))
+    parts = min(max(threads, 1), n)
+    if parts == 1:
+        _run_kernel_many(km, st, ins, outs)
+    else:
+        edges = [round(i * n / parts) for i in range(parts + 1)]
+
+        def part(i: int) -> None:
+            lo, hi = edges[i], edges[i + 1]
+            _run_kernel_many(km, st, tuple(a[lo:hi] for a in ins), tuple(a[lo:hi] for a in outs))
+
+        list(_pool(parts).map(part, range(parts)))
+    status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
+    out = []
+    for b, c in enumerate(calls):
+        m = max(c.n_alt - c.it0, 0)
+        out.append(RunOut(int(status[b]), int(head[b, 0]), int(head[b, 1]), bool(head[b, 2]), int(head[b, 3]),
+                          float(best_obj[b]), objs[b, :m], counts[b, :m], alpha[b], pose[b], rotation[b],
+                          translation[b], floats[b], ints[b]))
+    return out
+
+
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """This process's pool of ``threads`` threads (a forked child makes its own: the parent's
+    threads do not exist in it)."""
+    key = (os.getpid(), threads)
+    pool = _POOLS.get(key)
+    if pool is None:
+        pool = _POOLS[key] = ThreadPoolExecutor(threads, thread_name_prefix="pose_lifter_runs")
+    return pool

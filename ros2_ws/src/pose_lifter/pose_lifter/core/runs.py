@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +25,7 @@ from numpy.typing import NDArray
 from ._jit import njit
 from ._records import StepSettings
 from .alpha.lifted_admm import QStepFn
+from .batch import Steps, solve
 from .camera import camera_step_trusted, initial_camera
 from .errors import InvalidInputError, SolverError, diverged_as_solver_error
 from .options import LifterOptions
@@ -33,14 +35,17 @@ from .results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
 from .run_kernel import (
     CAMERA_DIVERGED,
     OK,
+    RunCall,
+    RunOut,
     _alternation_stops,
-    _run_kernel,
     _run_objective,
     _stack_camera_data,
 )
 from .skeleton import N_JOINTS, normalise_pose_flat
 
 __all__ = ["PINV_RCOND", "Run", "Runs"]
+
+T = TypeVar("T")
 
 #: Relative cut-off of the bases' singular values in the minimum-norm coefficients of a start
 #: pose (:func:`_mirror_kernel`, a pseudo-inverse): the packaged bases' smallest singular value is
@@ -122,6 +127,20 @@ class Runs:
                          and model.limb_coordinates is not None and not o.warm_duals)
         #: the steps' settings as the kernel takes them (made on the first compiled run)
         self._settings: StepSettings | None = None
+        #: threads over which a round of runs is split (:func:`pose_lifter.core.run_kernel.run_calls`)
+        self.threads = 1
+
+    @property
+    def settings(self) -> StepSettings:
+        """The steps' settings as the compiled kernel takes them."""
+        if self._settings is None:
+            self._settings = step_settings(self.options)
+        return self._settings
+
+    def solve(self, steps: Steps[T]) -> T:
+        """Drive a solve of this model and options to its result
+        (:func:`pose_lifter.core.batch.solve`, over :attr:`threads` threads)."""
+        return solve(steps, self.model.kernel_arrays, self.settings, self.threads)
 
     def camera_data(self, xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
@@ -167,17 +186,32 @@ class Runs:
                          qstep_fn=self.qstep_fn)
 
     def run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
-             cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
-             pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Run:
+            cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
+            pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Run:
+        """:meth:`run_steps` driven alone."""
+        return self.solve(self.run_steps(xn, w, alpha0, cam0, max_alternations, start, pose_max_iter, prior))
+
+    def run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
+                  cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
+                  pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Steps[Run]:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
         continue a previous run ``start``. With ``options.warm_duals`` the ADM multipliers of both
         steps are carried from one alternation to the next. The run keeps its lowest-objective
-        alternation (the hybrid objective adds the prior's depth rows to the camera step's)."""
+        alternation (the hybrid objective adds the prior's depth rows to the camera step's).
+
+        A solve (:mod:`pose_lifter.core.batch`): the compiled run is yielded as one
+        :class:`~pose_lifter.core.run_kernel.RunCall`; the other solvers' Python loop runs here
+        and yields nothing."""
         o = self.options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         data = self.camera_data(xn, w, prior)
         if self.compiled:
-            return self._run_compiled(xn, w, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
+            call = self._compiled_call(w, xn, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
+            (out,) = yield [call]
+            if isinstance(out, Exception):
+                with diverged_as_solver_error("run"):
+                    raise out
+            return self._compiled_run(out, start)
         last_pose: PoseResult | None
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
@@ -207,15 +241,13 @@ class Runs:
         assert best is not None
         return Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
 
-    def _run_compiled(self, xn: NDArray[np.float64], w: NDArray[np.float64],
-                      data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
-                      alpha0: NDArray[np.float64], cam0: Camera | None, n_alt: int, start: Run | None,
-                      pose_max_iter: int | None, prior: PriorRows | None) -> Run:
-        """:meth:`run` as one call of :func:`pose_lifter.core.run_kernel._run_kernel` (the steps'
-        results carry no multipliers)."""
+    def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64],
+                       data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
+                       alpha0: NDArray[np.float64], cam0: Camera | None, n_alt: int, start: Run | None,
+                       pose_max_iter: int | None, prior: PriorRows | None) -> RunCall:
+        """The operands of :meth:`run_steps`' compiled run
+        (:func:`pose_lifter.core.run_kernel._run_kernel`)."""
         o, m = self.options, self.model
-        if self._settings is None:
-            self._settings = step_settings(o)
         xp, pw, rad = prior_operands(m, prior)
         if pose_max_iter is None:
             pose_max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
@@ -236,10 +268,13 @@ class Runs:
         cam_init = np.empty((2, 4))  # [M | t]
         cam_init[:, :3] = m_init
         cam_init[:, 3] = t_init
-        with diverged_as_solver_error("run"):
-            out = _run_kernel(xn, w, m.kernel_arrays, self._settings, xp, pw, rad,
-                              np.ascontiguousarray(alpha, dtype=np.float64), y0, cam_init, float(obj0),
-                              int(it0), int(n_alt), int(pose_max_iter))
+        return RunCall(np.ascontiguousarray(xn, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
+                       xp, pw, rad, np.ascontiguousarray(alpha, dtype=np.float64), y0, cam_init, float(obj0),
+                       int(it0), int(n_alt), int(pose_max_iter))
+
+    @staticmethod
+    def _compiled_run(out: RunOut, start: Run | None) -> Run:
+        """The :class:`Run` of a compiled run's output (its steps' results carry no multipliers)."""
         if out.status != OK:
             raise SolverError("camera step diverged (non-finite camera); check the inputs"
                               if out.status == CAMERA_DIVERGED
@@ -275,19 +310,21 @@ class Runs:
         return alpha
 
 
-    def mirrored_run(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: Run,
-                      prior: PriorRows | None, max_alternations: int | None = None) -> Run:
+    def mirrored_run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: Run,
+                           prior: PriorRows | None, max_alternations: int | None = None) -> Steps[Run]:
         """The depth-mirrored copy of ``run`` as a start: screened by one alternation and continued
-        when it already beats ``run`` (``warm_flip_screen``), or run to convergence."""
+        when it already beats ``run`` (``warm_flip_screen``), or run to convergence (a solve)."""
         mirrored = self.mirrored_alpha(run)
         if self.options.warm_flip_screen:
             # hybrid: a short screening pose step, as for the paper's cold starts
             short = None if prior is None else self.options.screen_pose_max_iter
-            flip = self.run(xn, w, mirrored, None, max_alternations=1, prior=prior, pose_max_iter=short)
+            flip = yield from self.run_steps(xn, w, mirrored, None, max_alternations=1, prior=prior,
+                                             pose_max_iter=short)
             if flip.objective < run.objective:
-                flip = self.run(xn, w, flip.pose.alpha, None, max_alternations, start=flip, prior=prior)
+                flip = yield from self.run_steps(xn, w, flip.pose.alpha, None, max_alternations, start=flip,
+                                                 prior=prior)
             return flip
-        return self.run(xn, w, mirrored, None, max_alternations, prior=prior)
+        return (yield from self.run_steps(xn, w, mirrored, None, max_alternations, prior=prior))
 
 
     def start_alpha(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:

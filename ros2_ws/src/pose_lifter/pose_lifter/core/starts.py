@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bases import PoseBases
+from .batch import Steps, gather
 from .options import LifterOptions
 from .results import Camera, StartKind, WarmStart
 from .runs import Run, Runs
@@ -67,26 +68,30 @@ class Starts:
 
 
 def paper_starts(runs: Runs, bases: PoseBases, options: LifterOptions, xn: NDArray[np.float64],
-                 w: NDArray[np.float64], warm: WarmStart | None, cam0: Camera | None) -> Starts:
+                 w: NDArray[np.float64], warm: WarmStart | None, cam0: Camera | None) -> Steps[Starts]:
     """The paper's starts on the normalised 2D ``xn`` (12, 2) with weights ``w`` (12,): the warm
     start (camera ``cam0``, normalised) and its depth-mirrored copy (``warm_flip``), or the
     screened multi-start: every start pose one alternation (a short first pose step when it
-    screens), the ``n_refine`` best continued."""
+    screens; the starts' runs in one round), the ``n_refine`` best continued (in one round). A
+    solve (:mod:`pose_lifter.core.batch`)."""
     if warm is not None:
-        first = runs.run(xn, w, warm.alpha, cam0)
+        first = yield from runs.run_steps(xn, w, warm.alpha, cam0)
         tried = [StartRun(StartKind.WARM, -1, first)]
         if options.warm_flip:
-            tried.append(StartRun(StartKind.MIRRORED, -1, runs.mirrored_run(xn, w, first, None)))
+            flip = yield from runs.mirrored_run_steps(xn, w, first, None)
+            tried.append(StartRun(StartKind.MIRRORED, -1, flip))
         return Starts(tried, sum(r.run.n_iter for r in tried), len(tried), w)
     alphas = bases.with_starts(options.n_starts)
     # a short first pose step only when it screens (some starts are then dropped)
     screen = options.screen_pose_max_iter if len(alphas) > options.n_refine else None
-    screened = [(i, runs.run(xn, w, a, None, max_alternations=1, pose_max_iter=screen))
-                for i, a in enumerate(alphas)]
+    first_runs = yield from gather([runs.run_steps(xn, w, a, None, max_alternations=1, pose_max_iter=screen)
+                                    for a in alphas])
+    screened = list(enumerate(first_runs))
     n_screened = len(screened)
     if len(screened) > 1:  # screen: continue only the most promising starts
         screened.sort(key=lambda r: r[1].objective)
         screened = screened[: options.n_refine]
-    tried = [StartRun(StartKind.COLD, i, runs.run(xn, w, r.pose.alpha, None, start=r)) for i, r in screened]
+    continued = yield from gather([runs.run_steps(xn, w, r.pose.alpha, None, start=r) for _, r in screened])
+    tried = [StartRun(StartKind.COLD, i, run) for (i, _), run in zip(screened, continued, strict=True)]
     # a continued run's n_iter counts its screening alternation too
     return Starts(tried, n_screened - len(tried) + sum(r.run.n_iter for r in tried), len(alphas), w)

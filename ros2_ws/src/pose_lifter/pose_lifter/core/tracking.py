@@ -59,6 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._fast import mean_rows
+from .batch import Steps
 from .errors import PoseLifterError
 from .lifter import Lifter
 from .measurement import MAX_NOISE, MeasurementUpdate
@@ -235,6 +236,12 @@ class TrackPolicy:
     def lift(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
              confidence: NDArray[np.float64] | None = None,
              intrinsics: CameraIntrinsics | None = None) -> TrackedLift:
+        """:meth:`lift_steps` driven alone."""
+        return self.lifter.runs.solve(self.lift_steps(track_id, stamp_ns, points, confidence, intrinsics))
+
+    def lift_steps(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
+                   confidence: NDArray[np.float64] | None = None,
+                   intrinsics: CameraIntrinsics | None = None) -> Steps[TrackedLift]:
         """Lift one frame of a track (model joints, as :meth:`Lifter.lift`): find the track and its
         warm start, screen the frame (gate, noise), tell the lifter what the track knows, solve
         (cold again when the warm solve degraded), record the frame in the track and publish
@@ -243,6 +250,9 @@ class TrackPolicy:
         With ``intrinsics`` ``((fx, fy), (cx, cy))`` (pixels) the lift reads the 2D corrected for
         perspective by the track's last pose (:func:`perspective_corrected`; hybrid mode, a frame
         that follows its track).
+
+        A solve (:mod:`pose_lifter.core.batch`): the frames of other tracks may be lifted in the
+        same rounds (each track's state is its own).
 
         Raises
         ------
@@ -258,7 +268,7 @@ class TrackPolicy:
         seen = self._seen(track, warm, points, intrinsics)
         try:
             context = self._context(track, warm, stamp_ns, frame, limbs)
-            result, reinit = self._solve(track, warm, seen, frame.confidence, context)
+            result, reinit = yield from self._solve(track, warm, seen, frame.confidence, context)
         except PoseLifterError:
             if track is not None:
                 track.warm = None
@@ -376,13 +386,14 @@ class TrackPolicy:
         return TrackContext(limbs, dw, tw, past, frame.gated, fill)
 
     def _solve(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
-               confidence: NDArray[np.float64] | None, context: TrackContext) -> tuple[LiftResult, bool]:
+               confidence: NDArray[np.float64] | None, context: TrackContext
+               ) -> Steps[tuple[LiftResult, bool]]:
         """The lift, and whether it was re-initialised: a warm solve whose objective exceeds
         ``reinit_ratio`` times the track's recent median is solved cold too (the lower kept)."""
-        result = self.lifter.lift(points, confidence, warm=warm, track=context)
+        result = yield from self.lifter.lift_steps(points, confidence, warm=warm, track=context)
         if (warm is not None and track is not None and self.reinit_ratio > 0 and len(track.objectives) >= 3
                 and result.objective > self.reinit_ratio * track.objective_median()):
-            cold = self.lifter.lift(points, confidence, warm=None, track=context)
+            cold = yield from self.lifter.lift_steps(points, confidence, warm=None, track=context)
             if cold.objective < result.objective:
                 return cold, True
         return result, False

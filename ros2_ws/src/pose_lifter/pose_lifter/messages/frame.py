@@ -29,12 +29,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.batch import Failed, Steps, gather
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.layouts import Layout, get_layout
 from pose_lifter.core.lifter import Lifter
@@ -164,6 +165,10 @@ class LiftedSkeleton:
     @property
     def track_id(self) -> int:
         return self.input.track_id
+
+    def timed(self, solve_time: float) -> LiftedSkeleton:
+        """This skeleton with ``solve_time`` (seconds)."""
+        return replace(self, solve_time=solve_time)
 
 
 @dataclass(frozen=True)
@@ -307,6 +312,31 @@ def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
     return (time.perf_counter() - start) / len(frames)
 
 
+def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
+                  ) -> list[LiftedSkeleton | SkipSkeleton]:
+    """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
+    pipelines share ``lifter``): the prior's network for all of them in one pass
+    (:func:`compute_ahead`), then their solves in step (:func:`pose_lifter.core.batch.gather`), each
+    round's runs of alternations in one compiled pass. Each person gets what they get lifted
+    alone (their track is theirs; the kernel solves each run on its own operands). Their
+    ``solve_time`` is the whole lift's time divided among them."""
+    if not frames:
+        return []
+    start = time.perf_counter()
+    compute_ahead(lifter, frames)
+    steps = gather([pipeline.lift_steps(inp, stamp, intrinsics)
+                    for pipeline, inp, stamp, intrinsics in frames], capture=True)
+    done = lifter.runs.solve(steps)
+    share = (time.perf_counter() - start) / len(frames)
+    out: list[LiftedSkeleton | SkipSkeleton] = []
+    for (_, inp, _, _), d in zip(frames, done, strict=True):
+        if isinstance(d, Failed):  # lift_steps refuses what it can; anything else is a bug
+            out.append(_refusal(d.error, inp.track_id))
+        else:
+            out.append(d if isinstance(d, SkipSkeleton) else d.timed(share))
+    return out
+
+
 def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:
     """For one track lifted apart from the others (its own :class:`FramePipeline`), the stamp to
     expire at before each of its frames, so that it is forgotten exactly when a pipeline lifting
@@ -401,15 +431,23 @@ class FramePipeline:
                                     f"lifting the {st.max_skeletons} largest (max_skeletons)"),)
         return CheckedFrame(True, tuple(out), skipped, n_left_out)
 
-    def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics, shared_s: float = 0.0
+    def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
              ) -> LiftedSkeleton | SkipSkeleton:
-        """Step 2 for one checked skeleton: lifted and placed, or why not (never raises for bad
-        input or a failed solve). ``shared_s``: this skeleton's share of work done for several
-        (the prior computed ahead, :func:`compute_ahead`), added to its solve time."""
+        """Step 2 for one checked skeleton, alone: :meth:`lift_steps` driven to its result, its
+        solve time its own."""
+        start = time.perf_counter()
+        out = self.lifter.runs.solve(self.lift_steps(inp, stamp_ns, intrinsics))
+        return out if isinstance(out, SkipSkeleton) else out.timed(time.perf_counter() - start)
+
+    def lift_steps(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
+                   ) -> Steps[LiftedSkeleton | SkipSkeleton]:
+        """Step 2 for one checked skeleton, as a solve (:mod:`pose_lifter.core.batch`): lifted and
+        placed, or why not (never raises for bad input or a failed solve). Its ``solve_time`` is
+        0 here: the caller that drives it times it (:meth:`frame`: the frame's lift shared by its
+        people)."""
         try:
-            start = time.perf_counter()
-            tracked = self.policy.lift(inp.track_id, stamp_ns, inp.points, inp.confidence, intrinsics)
-            solve_time = time.perf_counter() - start + shared_s
+            tracked = yield from self.policy.lift_steps(inp.track_id, stamp_ns, inp.points, inp.confidence,
+                                                        intrinsics)
             result = tracked.result
             focal, centre = intrinsics if intrinsics is not None else (None, None)
             joints = place_in_camera(result, self.settings.lower_leg_length, focal, centre,
@@ -417,7 +455,7 @@ class FramePipeline:
             check_output(inp.track_id, result, joints)
         except Exception as err:
             return _refusal(err, inp.track_id)
-        return LiftedSkeleton(inp, result, joints, tracked.warm_started, solve_time, tracked.fit_pose_camera)
+        return LiftedSkeleton(inp, result, joints, tracked.warm_started, 0.0, tracked.fit_pose_camera)
 
     def expected_prior(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics = None
                        ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
@@ -435,12 +473,12 @@ class FramePipeline:
     def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics
               ) -> list[LiftedSkeleton | SkipSkeleton]:
         """Steps 2 and 3 of a checked frame: per skeleton of ``checked.skeletons``, in order, the
-        lifted skeleton or why not (an unanswered frame lifts and expires nothing)."""
+        lifted skeleton or why not (an unanswered frame lifts and expires nothing). The people
+        are lifted together (:func:`lift_together`)."""
         if not checked.answered:
             return []
         inputs = [x for x in checked.skeletons if not isinstance(x, SkipSkeleton)]
-        shared = compute_ahead(self.lifter, [(self, x, stamp_ns, intrinsics) for x in inputs])
-        out = [x if isinstance(x, SkipSkeleton) else self.lift(x, stamp_ns, intrinsics, shared)
-               for x in checked.skeletons]
+        lifted = iter(lift_together(self.lifter, [(self, x, stamp_ns, intrinsics) for x in inputs]))
+        out = [x if isinstance(x, SkipSkeleton) else next(lifted) for x in checked.skeletons]
         self.end_frame(stamp_ns)
         return out

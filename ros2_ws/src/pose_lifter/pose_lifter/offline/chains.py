@@ -37,8 +37,8 @@ from pose_lifter.messages.frame import (
     LiftedSkeleton,
     SkeletonInput,
     SkipSkeleton,
-    compute_ahead,
     expiry_stamps,
+    lift_together,
 )
 
 __all__ = [
@@ -185,9 +185,10 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
 
     Message by message, the chains' items of that message are expired as their chain requires,
-    their prior's networks run in one pass (:meth:`Lifter.compute_prior_ahead`), then each is
-    lifted in its chain's pipeline. A chain's outcomes are those of lifting it alone: the chains
-    share only the lifter, whose poses computed ahead are bit for bit those computed alone."""
+    then lifted together, each in its chain's pipeline (:func:`lift_together`: the prior's
+    networks in one pass, the runs of alternations in one compiled pass per round). A chain's
+    outcomes are those of lifting it alone: the chains share only the lifter, whose poses
+    computed ahead and runs are bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
@@ -203,10 +204,9 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
         for c, item in step:
             if item.expire_ns is not None:
                 pipelines[c].end_frame(item.expire_ns)
-        shared = compute_ahead(lifter, [(pipelines[c], item.input, item.stamp_ns, item.intrinsics)
-                                        for c, item in step])
-        for c, item in step:
-            lifted = pipelines[c].lift(item.input, item.stamp_ns, item.intrinsics, shared)
+        together = lift_together(lifter, [(pipelines[c], item.input, item.stamp_ns, item.intrinsics)
+                                          for c, item in step])
+        for (c, item), lifted in zip(step, together, strict=True):
             if not isinstance(lifted, LiftedSkeleton):
                 out[c].append(Done(item, None, None, False, 0.0, str(lifted)))
                 fits[c].append(None)

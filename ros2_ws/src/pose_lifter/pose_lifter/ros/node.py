@@ -40,6 +40,7 @@ core's reason. Input checks: :mod:`pose_lifter.messages.frame`; warnings:
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -120,10 +121,12 @@ class LifterNode(Node):
         options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
         self._bases = self._load_bases(self._param("bases_file"), options.mode)
         self._lifter = Lifter(self._bases, options)
+        self._lifter.threads = self._solver_threads()
         # compile (first start after an install: ~25 s) or load the solver kernels before the
         # topics exist, so the first frame is not the one that pays for it
         kernels = "numba-compiled" if HAVE_NUMBA else "plain Python (pip install numba: ~3x faster)"
-        self.get_logger().info(f"solver ready in {self._lifter.warm_up():.1f} s, {kernels} kernels")
+        self.get_logger().info(f"solver ready in {self._lifter.warm_up():.1f} s, {kernels} kernels, "
+                               f"{self._lifter.threads} solver threads")
         self._pending: tuple[PoseBases, Lifter] | None = None
         self._settings = self._read_settings()
 
@@ -215,6 +218,11 @@ class LifterNode(Node):
     def _param(self, name: str) -> Any:
         return self.get_parameter(name).value
 
+    def _solver_threads(self) -> int:
+        """``solver_threads``, 0 resolved to the CPU cores this process may run on."""
+        threads = int(self._param("solver_threads"))
+        return threads if threads > 0 else len(os.sched_getaffinity(0))
+
     def _read_settings(self) -> NodeSettings:
         return NodeSettings.read(self._param)
 
@@ -245,6 +253,7 @@ class LifterNode(Node):
             # refuse (e.g. limb targets) is refused now, and the running solver stays as it was
             lifter = (Lifter(bases, options) if bases is not self._lifter.bases
                       or options != self._lifter.options else self._lifter)
+            lifter.threads = self._lifter.threads
         except Exception as err:  # nothing may raise out of a parameter callback (it kills the node)
             self._pending = None
             reason = str(err) if isinstance(err, PoseLifterError | OSError | ValueError) else repr(err)
