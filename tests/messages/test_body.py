@@ -187,6 +187,115 @@ def test_cdr_bytes_are_rosbags_serialisation_of_the_same_messages() -> None:
     np.testing.assert_array_equal(js.position, pose.angles)
 
 
+def crowd(rng: np.random.Generator, n: int) -> list[hri.LiftedBody]:
+    """``n`` plausible people: mocap poses turned and moved at random (metres, in front of the
+    camera), their 2D input partly outside a 640 x 480 image (boxes clipped at 0 and 1), some
+    joints missing; one person with no joint seen, one without shoulders (no neck), one with a
+    -0.0 pixel coordinate."""
+    poses = ground_truth_poses(n)
+    out = []
+    for k in range(n):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        q *= np.sign(np.linalg.det(q))
+        joints = poses[k] @ q.T + rng.normal(scale=[2.0, 1.0, 0.5]) + [0.0, 0.0, 4.0]
+        points = rng.uniform([-60.0, -40.0], [700.0, 520.0], size=(12, 2))
+        conf = np.where(rng.random(12) < 0.2, 0.0, rng.uniform(0.05, 1.0, 12))
+        if k == 1:
+            conf[:] = 0.0
+        elif k == 2:
+            conf[[0, 3]] = 0.0
+        elif k == 3:
+            points[4, 0], conf[4] = -0.0, 0.7
+        out.append(hri.LiftedBody(100 + 7 * k, joints, points, conf))
+    return out
+
+
+def expected_messages(store: Any, stamp_ns: int, frame_id: str, people: list[hri.LiftedBody],
+                      image_size: tuple[float, float] | None, ids: list[str],
+                      new: set[str]) -> dict[str, tuple[Any, str]]:
+    """Every message of a body book's frame of ``people`` (all tracked, none degenerate) built as
+    rosbags objects from their definitions: {topic: (message, type)}."""
+    t = store.types
+    sec, nanosec = divmod(stamp_ns, 10**9)
+
+    def header(frame: str) -> Any:
+        return t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+                                        frame_id=frame)
+
+    coco = get_layout("coco18").model_indices
+    poses = body.body_poses(np.stack([p.joints_m for p in people]))
+    out: dict[str, tuple[Any, str]] = {}
+    transforms = []
+    for person, pose in zip(people, poses, strict=True):
+        assert pose is not None
+        bid = hri.body_id(person.track_id)
+        ns = f"{hri.BODIES_NS}/{bid}"
+        if bid in new:
+            urdf = body.body_urdf(bid, body.body_dimensions(person.joints_m))
+            out[f"{ns}/urdf"] = (t["std_msgs/msg/String"](data=urdf), "std_msgs/msg/String")
+        out[f"{ns}/joint_states"] = (t["sensor_msgs/msg/JointState"](
+            header=header(""), name=[f"{n}_{bid}" for n in body.REVOLUTE_JOINTS],
+            position=np.array(pose.angles), velocity=np.zeros(0), effort=np.zeros(0)),
+            "sensor_msgs/msg/JointState")
+        for (parent, child), tr, q in zip(body.LINKS, pose.translations, pose.quaternions, strict=True):
+            transforms.append(t["geometry_msgs/msg/TransformStamped"](
+                header=header(f"{parent}_{bid}" if parent else frame_id), child_frame_id=f"{child}_{bid}",
+                transform=t["geometry_msgs/msg/Transform"](
+                    translation=t["geometry_msgs/msg/Vector3"](x=tr[0], y=tr[1], z=tr[2]),
+                    rotation=t["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))))
+        if image_size is None:
+            continue
+        norm = np.clip(person.points / np.array(image_size), 0.0, 1.0)
+        xyc = np.zeros((18, 3))
+        for j, slot in enumerate(coco):
+            xyc[slot] = [norm[j, 0], norm[j, 1], person.confidence[j]]
+        if person.confidence[0] > 0 and person.confidence[3] > 0:  # the neck: the shoulders' midpoint
+            xyc[1] = [*(0.5 * (norm[0] + norm[3])), min(person.confidence[0], person.confidence[3])]
+        point = t["hri_msgs/msg/NormalizedPointOfInterest2D"]
+        out[f"{ns}/skeleton2d"] = (t["hri_msgs/msg/Skeleton2D"](
+            header=header(frame_id), skeleton=[point(x=x, y=y, c=c) for x, y, c in xyc]),
+            "hri_msgs/msg/Skeleton2D")
+        seen = person.confidence > 0
+        box = [0.0] * 5
+        if seen.any():
+            lo, hi = norm[seen].min(axis=0), norm[seen].max(axis=0)
+            box = [lo[0], lo[1], hi[0], hi[1], np.mean(person.confidence[seen])]
+        out[f"{ns}/roi"] = (t["hri_msgs/msg/NormalizedRegionOfInterest2D"](
+            header(frame_id), *box), "hri_msgs/msg/NormalizedRegionOfInterest2D")
+    out[hri.TF_TOPIC] = (t["tf2_msgs/msg/TFMessage"](transforms=transforms), "tf2_msgs/msg/TFMessage")
+    out[f"{hri.BODIES_NS}/tracked"] = (t["hri_msgs/msg/IdsList"](header=header(frame_id), ids=ids),
+                                       "hri_msgs/msg/IdsList")
+    return out
+
+
+def test_crowd_frames_are_rosbags_serialisation_of_messages_built_from_their_fields() -> None:
+    """A body book's frames of 30 people, with and without the image size, the input's frame id
+    of every length mod 8 (the padding of the headers and of each body's first transform moves
+    with it): every message's bytes are rosbags' serialisation of the message built as objects
+    from the bodies' fields, so a wrong offset, padding or value fails."""
+    store = _store()
+    rng = np.random.default_rng(155)
+    people = crowd(rng, 30)
+    for length in range(10):
+        frame_id = "abcdefghi"[:length]
+        book = hri.BodyBook(timeout_s=10.0)
+        alive: set[str] = set()
+        steps = [(people, (640.0, 480.0)), (people[::-1][:25], None), (people[5:], (1280, 720))]
+        for step, (shown, size) in enumerate(steps):
+            stamp_ns = 1_700_000_000 * 10**9 + 123_456_789 * step + length
+            out = book.frame(stamp_ns, frame_id, shown, size)
+            bids = [hri.body_id(p.track_id) for p in shown]
+            new = set(bids) - alive
+            alive |= new
+            expected = expected_messages(store, stamp_ns, frame_id, list(shown), size, sorted(alive), new)
+            got = {topic: (data, msgtype) for topic, data, msgtype in out.messages()}
+            assert set(got) == set(expected), (length, step)
+            for topic, (data, msgtype) in got.items():
+                msg, expected_type = expected[topic]
+                assert msgtype == expected_type
+                assert bytes(store.serialize_cdr(msg, msgtype)) == data, (length, step, topic)
+
+
 def test_book_messages_and_bodies_coming_and_going() -> None:
     store = _store()
     book = hri.BodyBook(timeout_s=0.5)

@@ -11,11 +11,13 @@ For each tracked person the node publishes, under ``/humans/bodies``:
 
 and on ``/tf`` (``tf2_msgs/TFMessage``) every link of the body, ``body_<id>`` under the input's
 frame. The messages are written as CDR bytes straight from the arrays (27 transforms per body
-built as rclpy objects cost ~2 ms a body; the bytes ~0.1 ms), which rclpy publishes as they are
-and a bag stores as they are. :data:`LAYOUTS` are the field layouts these bytes follow;
-:func:`layout_mismatches` compares them with the installed message classes, and
-``tests/messages/test_body.py`` compares the bytes with rosbags' serialisation of the same
-messages.
+built as rclpy objects cost ~2 ms a body; the bytes of a 30-body frame ~0.4 ms), which rclpy
+publishes as they are and a bag stores as they are. A body's constant bytes (its frame and joint
+names with their padding) are encoded once per body id and cached; per frame only the numbers are
+written, the 2D fields of all the frame's bodies in one numpy pass. :data:`LAYOUTS` are the
+field layouts these bytes follow; :func:`layout_mismatches` compares them with the installed
+message classes, and ``tests/messages/test_body.py`` compares the bytes with rosbags'
+serialisation of the same messages.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.layouts import get_layout
 from pose_lifter.messages import body
-from pose_lifter.messages.cdr import _STAMP, _U32, _Writer
+from pose_lifter.messages.cdr import _ENCAPSULATION, _STAMP, _U32, _string_bytes, _Writer
 
 __all__ = [
     "BODIES_NS",
@@ -84,8 +86,6 @@ _N_IDS: Final[int] = 26**5
 _ID_MULTIPLIER: Final[int] = 7_654_321  # coprime with 26**5 (odd, not a multiple of 13)
 _ID_OFFSET: Final[int] = 4_242_424
 _TRANSFORM: Final = struct.Struct("<7d")  # translation (3), rotation (x, y, z, w)
-_POINTS: Final = struct.Struct(f"<{3 * _N_COCO18}f")
-_BOX: Final = struct.Struct("<5f")
 
 
 def layout_mismatches(classes: Sequence[Any]) -> list[str]:
@@ -114,72 +114,156 @@ def body_id(track_id: int) -> str:
     return "".join(letters)
 
 
-def _header(w: _Writer, stamp_ns: int, frame_id: str) -> None:
-    """A std_msgs/Header at a 4-aligned position."""
-    w.align(4)
-    w.buf += _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
-    w.string(frame_id)
+def _stamp(stamp_ns: int) -> bytes:
+    """A ``builtin_interfaces/Time`` (sec, nanosec) of ``stamp_ns``."""
+    return _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
+
+
+def _header_block(stamp: bytes, frame_id: str) -> bytes:
+    """The encapsulation and a std_msgs/Header (``stamp`` from :func:`_stamp`) padded to 4: the
+    start of every message here whose header is followed by 4-aligned fields, shared by the
+    frame's messages that have the input's frame."""
+    data = _ENCAPSULATION + stamp + _string_bytes(frame_id)
+    return data + b"\x00" * (-len(data) % 4)
 
 
 def ids_list_cdr(stamp_ns: int, frame_id: str, ids: Sequence[str]) -> bytes:
     """``hri_msgs/IdsList`` of ``ids``."""
-    w = _Writer()
-    _header(w, stamp_ns, frame_id)
-    w.u32(len(ids))
+    buf = bytearray(_header_block(_stamp(stamp_ns), frame_id))
+    buf += _U32.pack(len(ids))
     for i in ids:
-        w.string(i)
-    return bytes(w.buf)
+        buf += b"\x00" * (-len(buf) % 4)
+        buf += _string_bytes(i)
+    return bytes(buf)
 
 
-@lru_cache(maxsize=4096)
-def _link_names(bid: str) -> tuple[tuple[bytes, bytes], ...]:
-    """Per link of :data:`body.LINKS`: its parent's and its own frame name as CDR strings
-    (the body's root parent, the input's frame, is ``b""``)."""
-    def enc(name: str) -> bytes:
-        data = name.encode()
-        return _U32.pack(len(data) + 1) + data + b"\x00"
+@dataclass(frozen=True, eq=False)
+class _TfLayout:
+    """Where one body's transforms in a ``TFMessage`` hold their stamps and values (the same for
+    every body whose frame names have the same lengths, compared by identity).
 
-    return tuple((enc(f"{parent}_{bid}") if parent else b"", enc(f"{child}_{bid}"))
-                 for parent, child in body.LINKS)
+    Attributes
+    ----------
+    phase : int
+        The body's first byte modulo 8 (CDR offsets): 4 for the message's first body (after the
+        sequence's count), 0 for the others (after a transform's float64).
+    stamp_words : ndarray, shape (len(LINKS),)
+        Each transform's stamp, in 4-byte words from the body's first byte.
+    translation_words, rotation_words : ndarray, shape (3 * len(LINKS),), (4 * len(LINKS),)
+        Each transform's translation (3 float64) and rotation (4 float64, right after it), in
+        8-byte words from the body's first byte minus ``phase``.
+    """
+
+    phase: int
+    stamp_words: NDArray[np.intp]
+    translation_words: NDArray[np.intp]
+    rotation_words: NDArray[np.intp]
+
+
+@lru_cache(maxsize=256)
+def _tf_layout(phase: int, stamps: tuple[int, ...], values: tuple[int, ...]) -> _TfLayout:
+    """The one :class:`_TfLayout` of these byte offsets (from the body's first byte)."""
+    words = (phase + np.array(values, dtype=np.intp)[:, None]) // 8 + np.arange(7, dtype=np.intp)
+    return _TfLayout(phase, np.array(stamps, dtype=np.intp) // 4, words[:, :3].ravel(), words[:, 3:].ravel())
+
+
+@dataclass(frozen=True)
+class _TfBlock:
+    """One body's transforms in a ``TFMessage``: the bytes with zero stamps and values (names and
+    padding in place) and where those go."""
+
+    data: bytes
+    layout: _TfLayout
+
+
+@lru_cache(maxsize=1024)
+def _tf_block(bid: str, root: bytes, phase: int) -> _TfBlock:
+    """The :class:`_TfBlock` of body ``bid`` starting at a CDR offset of ``phase`` modulo 8, its
+    ``body_<id>`` a child of the CDR string ``root`` (the input's frame)."""
+    buf = bytearray(phase)  # offsets in buf have the message's alignment
+    stamps, values = [], []
+    for parent, child in body.LINKS:
+        buf += b"\x00" * (-len(buf) % 4)  # the header: stamp, frame_id
+        stamps.append(len(buf) - phase)
+        buf += bytes(_STAMP.size)
+        buf += _string_bytes(f"{parent}_{bid}") if parent else root
+        buf += b"\x00" * (-len(buf) % 4)  # child_frame_id
+        buf += _string_bytes(f"{child}_{bid}")
+        buf += b"\x00" * (-len(buf) % 8)  # translation, rotation: float64
+        values.append(len(buf) - phase)
+        buf += bytes(_TRANSFORM.size)
+    return _TfBlock(bytes(buf[phase:]), _tf_layout(phase, tuple(stamps), tuple(values)))
 
 
 def tf_message_cdr(stamp_ns: int, frame_id: str, bodies: Sequence[tuple[str, body.BodyPose]]) -> bytes:
     """``tf2_msgs/TFMessage`` with every link of each ``(body id, pose)``, ``body_<id>`` a child
-    of ``frame_id`` (the joints' frame), the others of their REP-155 parent."""
+    of ``frame_id`` (the joints' frame), the others of their REP-155 parent.
+
+    Each body's names and padding are cached (:func:`_tf_block`); the frame's stamp and the
+    bodies' transforms are written into them with one numpy assignment per layout."""
+    n_links = len(body.LINKS)
+    head = _ENCAPSULATION + _U32.pack(n_links * len(bodies))
+    if not bodies:
+        return head
+    translations = np.array([pose.translations for _, pose in bodies], dtype=np.float64)
+    rotations = np.array([pose.quaternions for _, pose in bodies], dtype=np.float64)
+    if translations.shape != (len(bodies), n_links, 3) or rotations.shape != (len(bodies), n_links, 4):
+        raise ValueError(f"each pose needs {n_links} translations (3) and quaternions (4)")
+    root = _string_bytes(frame_id)
+    # 4 bytes ahead of the message: its float64 (at CDR offsets multiple of 8) aligned in memory
+    buf = bytearray(4) + head
+    groups: dict[_TfLayout, tuple[list[int], list[int]]] = {}  # layout -> (bodies, CDR offsets)
+    for k, (bid, _) in enumerate(bodies):
+        block = _tf_block(bid, root, 4 if k == 0 else 0)
+        ks, starts = groups.setdefault(block.layout, ([], []))
+        ks.append(k)
+        starts.append(len(buf) - 8)
+        buf += block.data
+    words = np.frombuffer(buf, dtype="<u4")  # CDR offset c: word (c + 8) / 4
+    doubles = np.frombuffer(buf, dtype="<f8", offset=8)  # CDR offset c: double c / 8
+    sec, nanosec = np.frombuffer(_stamp(stamp_ns), dtype="<u4")
+    for layout, (ks, starts) in groups.items():
+        at = np.array(starts, dtype=np.intp)[:, None]
+        stamp_at = (at + 8) // 4 + layout.stamp_words
+        words[stamp_at] = sec
+        words[stamp_at + 1] = nanosec
+        first = (at - layout.phase) // 8
+        doubles[first + layout.translation_words] = translations[ks].reshape(len(ks), -1)
+        doubles[first + layout.rotation_words] = rotations[ks].reshape(len(ks), -1)
+    return bytes(memoryview(buf)[4:])
+
+
+@lru_cache(maxsize=1024)
+def _joint_state_names(bid: str, n_angles: int) -> bytes:
+    """A ``JointState``'s bytes from its header's frame_id to its positions' values: the empty
+    frame_id, the names ``<joint>_<id>``, the positions' count and padding; constant per body, as
+    the empty frame_id fixes every offset."""
     w = _Writer()
-    w.u32(len(body.LINKS) * len(bodies))
-    buf = w.buf
-    stamp = _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
-    root = frame_id.encode()
-    root = _U32.pack(len(root) + 1) + root + b"\x00"
-    for bid, pose in bodies:
-        names = _link_names(bid)
-        rows = zip(names, pose.translations.tolist(), pose.quaternions.tolist(), strict=True)
-        for (parent, child), t, q in rows:
-            buf += b"\x00" * (-(len(buf) - 4) % 4)  # the header: stamp, frame_id
-            buf += stamp
-            buf += parent or root
-            buf += b"\x00" * (-(len(buf) - 4) % 4)  # child_frame_id
-            buf += child
-            buf += b"\x00" * (-(len(buf) - 4) % 8)  # translation, rotation: float64
-            buf += _TRANSFORM.pack(*t, *q)
-    return bytes(buf)
+    w.buf += bytes(_STAMP.size)
+    w.string("")
+    w.u32(len(body.REVOLUTE_JOINTS))
+    for name in body.REVOLUTE_JOINTS:
+        w.string(f"{name}_{bid}")
+    w.u32(n_angles)
+    w.align(8)
+    return bytes(w.buf[len(_ENCAPSULATION) + _STAMP.size:])
+
+
+#: A ``JointState``'s velocity and effort: two empty sequences right after the float64 positions.
+_NO_VELOCITY_EFFORT: Final[bytes] = bytes(8)
+
+
+def _joint_state(stamp: bytes, bid: str, angles: NDArray[np.float64]) -> bytes:
+    """:func:`joint_state_cdr` with the stamp as :func:`_stamp` bytes."""
+    positions = np.ascontiguousarray(angles, dtype="<f8")
+    return b"".join((_ENCAPSULATION, stamp, _joint_state_names(bid, len(positions)), positions.tobytes(),
+                     _NO_VELOCITY_EFFORT))
 
 
 def joint_state_cdr(stamp_ns: int, bid: str, pose: body.BodyPose) -> bytes:
     """``sensor_msgs/JointState`` of one body: the REP-155 joint angles (radians), names
     ``<joint>_<id>`` in the order of :data:`body.REVOLUTE_JOINTS`, no velocity or effort."""
-    w = _Writer()
-    _header(w, stamp_ns, "")
-    w.u32(len(body.REVOLUTE_JOINTS))
-    for name in body.REVOLUTE_JOINTS:
-        w.string(f"{name}_{bid}")
-    w.u32(len(pose.angles))
-    w.align(8)
-    w.buf += np.ascontiguousarray(pose.angles, dtype="<f8").tobytes()
-    w.u32(0)  # velocity
-    w.u32(0)  # effort
-    return bytes(w.buf)
+    return _joint_state(_stamp(stamp_ns), bid, pose.angles)
 
 
 def string_cdr(text: str) -> bytes:
@@ -189,10 +273,78 @@ def string_cdr(text: str) -> bytes:
     return bytes(w.buf)
 
 
-def _normalised(points: NDArray[np.float64], image_size: tuple[float, float]) -> NDArray[np.float64]:
-    w, h = image_size
-    out: NDArray[np.float64] = np.clip(np.asarray(points, dtype=np.float64) / np.array([w, h]), 0.0, 1.0)
+def _float32(values: NDArray[np.float64]) -> NDArray[np.float32]:
+    """``values`` as little-endian float32; a finite value float32 cannot hold is refused, as
+    ``struct`` refuses it."""
+    with np.errstate(over="ignore"):
+        out: NDArray[np.float32] = values.astype("<f4")
+    if np.isinf(out).any() and (np.isinf(out) & np.isfinite(values)).any():
+        raise OverflowError("float too large to pack with f format")
     return out
+
+
+def _skeleton2d_and_roi(points: Sequence[NDArray[np.float64]], confidence: Sequence[NDArray[np.float64]],
+                        image_size: tuple[float, float]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """The float32 fields of the ``Skeleton2D`` and the ``NormalizedRegionOfInterest2D`` of
+    several bodies (:func:`skeleton2d_cdr`, :func:`roi_cdr`), one numpy pass over the bodies.
+
+    Parameters
+    ----------
+    points : per body, shape (12, 2), pixels
+    confidence : per body, shape (12,), 0 where missing
+    image_size : (width, height)
+
+    Returns
+    -------
+    skeletons : ndarray, shape (B, 54)
+        Per body the 18 points' (x, y, c).
+    boxes : ndarray, shape (B, 5)
+        Per body (xmin, ymin, xmax, ymax, c).
+
+    Notes
+    -----
+    The values are those of the per-body computation: elementwise operations on the same float64
+    numbers, min / max over the observed points (order-free, except with NaN or -0.0: such a
+    body's box is reduced on its own), and the mean confidence as ``np.mean`` sums it (its
+    ``add.reduce`` of the observed values), one body at a time.
+    """
+    n = len(points)
+    w, h = image_size
+    xy = np.array(points, dtype=np.float64)
+    conf = np.array(confidence, dtype=np.float64)
+    norm = np.clip(xy / np.array([w, h]), 0.0, 1.0)
+    xyc = np.zeros((n, _N_COCO18, 3))
+    xyc[:, _COCO18.index_array, :2] = norm
+    xyc[:, _COCO18.index_array, 2] = conf
+    ls, rs = _COCO18.model_indices[0], _COCO18.model_indices[3]  # left / right shoulder slots
+    neck = (xyc[:, ls, 2] > 0) & (xyc[:, rs, 2] > 0)
+    xyc[neck, _NECK, :2] = 0.5 * (xyc[neck, ls, :2] + xyc[neck, rs, :2])
+    xyc[neck, _NECK, 2] = np.minimum(xyc[neck, ls, 2], xyc[neck, rs, 2])
+
+    seen = conf > 0
+    counts = seen.sum(axis=1)
+    boxes = np.zeros((n, 5))
+    # joints first: the reductions run over whole (bodies, 2) slabs
+    by_joint, seen_by_joint = np.ascontiguousarray(norm.transpose(1, 0, 2)), np.ascontiguousarray(seen.T)
+    boxes[:, :2] = np.where(seen_by_joint[..., None], by_joint, np.inf).min(axis=0)
+    boxes[:, 2:4] = np.where(seen_by_joint[..., None], by_joint, -np.inf).max(axis=0)
+    if np.isnan(norm).any() or np.signbit(norm).any():  # NaN or -0.0: min / max depend on the order
+        for k in np.flatnonzero(counts).tolist():
+            observed = norm[k][seen[k]]
+            boxes[k, :2], boxes[k, 2:4] = observed.min(axis=0), observed.max(axis=0)
+    observed_conf = conf[seen]  # each body's observed confidences, in order, one after the other
+    begin = 0
+    for k, end in enumerate(np.cumsum(counts).tolist()):
+        c = confidence[k]
+        if end == begin:
+            boxes[k] = 0.0  # an empty box with c = 0
+        elif isinstance(c, np.ndarray) and c.dtype == np.float64:  # np.mean: the sum over the count
+            boxes[k, 4] = float(np.add.reduce(observed_conf[begin:end])) / (end - begin)
+        else:  # np.mean in the input's dtype
+            c = np.asarray(c)
+            boxes[k, 4] = float(np.mean(c[c > 0]))
+        begin = end
+    return _float32(xyc.reshape(n, -1)), _float32(boxes)
 
 
 def skeleton2d_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidence: NDArray[np.float64],
@@ -201,34 +353,16 @@ def skeleton2d_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], co
     missing) at their OpenPose-COCO slots normalised by ``image_size`` (width, height), the neck
     at the shoulders' midpoint; the points the model has no joint for (nose, eyes, ears) have
     confidence 0."""
-    xyc = np.zeros((_N_COCO18, 3))
-    xyc[_COCO18.index_array, :2] = _normalised(points, image_size)
-    xyc[_COCO18.index_array, 2] = np.asarray(confidence, dtype=np.float64)
-    ls, rs = _COCO18.model_indices[0], _COCO18.model_indices[3]  # left / right shoulder slots
-    if xyc[ls, 2] > 0 and xyc[rs, 2] > 0:
-        xyc[_NECK] = [*(0.5 * (xyc[ls, :2] + xyc[rs, :2])), min(xyc[ls, 2], xyc[rs, 2])]
-    w = _Writer()
-    _header(w, stamp_ns, frame_id)
-    w.align(4)
-    w.buf += _POINTS.pack(*xyc.ravel().tolist())
-    return bytes(w.buf)
+    skeletons, _ = _skeleton2d_and_roi([points], [confidence], image_size)
+    return _header_block(_stamp(stamp_ns), frame_id) + bytes(skeletons[0].tobytes())
 
 
 def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidence: NDArray[np.float64],
             image_size: tuple[float, float]) -> bytes:
     """``hri_msgs/NormalizedRegionOfInterest2D``: the box of the observed joints (confidence > 0),
     normalised; ``c`` their mean confidence (an empty box with c = 0 when none is observed)."""
-    seen = np.asarray(confidence) > 0
-    box = [0.0] * 5
-    if seen.any():
-        norm = _normalised(np.asarray(points)[seen], image_size)
-        (x0, y0), (x1, y1) = norm.min(axis=0), norm.max(axis=0)
-        box = [float(x0), float(y0), float(x1), float(y1), float(np.mean(np.asarray(confidence)[seen]))]
-    w = _Writer()
-    _header(w, stamp_ns, frame_id)
-    w.align(4)
-    w.buf += _BOX.pack(*box)
-    return bytes(w.buf)
+    _, boxes = _skeleton2d_and_roi([points], [confidence], image_size)
+    return _header_block(_stamp(stamp_ns), frame_id) + bytes(boxes[0].tobytes())
 
 
 @dataclass(frozen=True)
@@ -344,13 +478,15 @@ class BodyBook:
         gone = sorted(self._bodies.pop(tid) for tid in stale)
         for tid in stale:
             del self._seen[tid]
-        outputs: dict[str, dict[str, bytes]] = {}
-        for bid, pose, p in shown:
-            out = {"joint_states": joint_state_cdr(stamp_ns, bid, pose)}
-            if image_size is not None:
-                out["skeleton2d"] = skeleton2d_cdr(stamp_ns, frame_id, p.points, p.confidence, image_size)
-                out["roi"] = roi_cdr(stamp_ns, frame_id, p.points, p.confidence, image_size)
-            outputs[bid] = out
+        stamp = _stamp(stamp_ns)
+        outputs = {bid: {"joint_states": _joint_state(stamp, bid, pose.angles)} for bid, pose, _ in shown}
+        if shown and image_size is not None:
+            header = _header_block(stamp, frame_id)
+            skeletons, boxes = _skeleton2d_and_roi([p.points for _, _, p in shown],
+                                                   [p.confidence for _, _, p in shown], image_size)
+            for (bid, _, _), skeleton, box in zip(shown, skeletons, boxes, strict=True):
+                outputs[bid]["skeleton2d"] = header + skeleton.tobytes()
+                outputs[bid]["roi"] = header + box.tobytes()
         tf = tf_message_cdr(stamp_ns, frame_id, [(bid, pose) for bid, pose, _ in shown]) if shown else None
         return BodyFrame(tracked=ids_list_cdr(stamp_ns, frame_id, sorted(self._bodies.values())), tf=tf,
                          bodies=outputs, new=new, gone=gone)
