@@ -4,7 +4,6 @@ the ``/diagnostics`` values; rosbags message types stand in for rclpy's)."""
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import numpy as np
@@ -209,39 +208,14 @@ def test_dropped_frames_are_counted_in_the_line_and_the_diagnostics() -> None:
     assert status_level(3, 0, 3, 1)[0] == 2  # nothing liftable stays the ERROR it is
 
 
-def test_the_frame_queue_drops_the_oldest_whole_frame_and_wakes_on_close() -> None:
+def test_the_frame_queue_drops_the_oldest_whole_frame() -> None:
     with pytest.raises(ValueError):
         FrameQueue(0)
     q: FrameQueue[int] = FrameQueue(2)
+    assert q.pop() is None
     assert q.put(1) is None and q.put(2) is None
     assert q.put(3) == 1 and q.put(4) == 2  # the oldest waiting frame goes first
-    assert len(q) == 2 and q.get() == 3 and q.get() == 4
+    assert len(q) == 2 and q.pop() == 3 and q.pop() == 4 and q.pop() is None
     assert q.put(5) is None and q.clear() == 1 and len(q) == 0
-    # a reader blocked on an empty queue: woken by a frame, then by close (None from then on)
-    got: list[int | None] = []
-    reader = threading.Thread(target=lambda: got.extend([q.get(), q.get()]))
-    reader.start()
-    q.put(6)
-    q.close()
-    reader.join(timeout=60)
-    assert not reader.is_alive() and got in ([6, None], [None, None])
-    assert q.get() is None and q.put(7) == 7  # a closed queue takes nothing
-
-
-def test_the_frame_queue_hands_each_frame_to_one_reader_in_order() -> None:
-    q: FrameQueue[int] = FrameQueue(1000)
-    taken: list[int] = []
-
-    def read() -> None:
-        while (x := q.get()) is not None:
-            taken.append(x)
-
-    reader = threading.Thread(target=read)
-    reader.start()
-    for i in range(500):
-        assert q.put(i) is None
-    while len(q):  # the reader drains the queue
-        threading.Event().wait(0.001)
-    q.close()
-    reader.join(timeout=60)
-    assert taken == list(range(500))
+    one: FrameQueue[int] = FrameQueue()  # the default: only the newest frame waits
+    assert [one.put(i) for i in range(4)] == [None, 0, 1, 2] and one.pop() == 3

@@ -1,19 +1,18 @@
-"""The frames waiting for the node's lifting thread: a bounded queue that drops the oldest whole
-frame when a new one arrives and it is full.
+"""The frames waiting to be lifted: a bounded queue that drops the oldest whole frame when a
+new one arrives and it is full.
 
 A detector publishes at its own rate; when a frame takes longer to lift than the next takes to
-arrive (a crowd, a busy machine), lifting every frame would let the latency grow without bound
-(each answer later than the last), and the middleware's keep-last queue would drop frames
-without telling anyone. The node's subscription callback only puts the frame here
-(:meth:`FrameQueue.put`, which returns the frame it dropped so that it is counted in
-``/diagnostics``) and its lifting thread takes them in arrival order (:meth:`FrameQueue.get`):
-an answer is never more than ``depth + 1`` lifts behind its frame, and a frame is lifted and
-answered whole or dropped whole, never in part.
+arrive (a crowd, a busy machine), lifting every frame lets the latency grow without bound (each
+answer later than the last), and the middleware's keep-last queue drops frames without telling
+anyone. Before each lift the node moves every frame the middleware holds into this queue
+(:meth:`FrameQueue.put` returns the frame a newer one displaced, so that it is counted in
+``/diagnostics``) and lifts the oldest one left (:meth:`FrameQueue.pop`): an answer is never
+more than ``depth`` lifts behind its frame, and a frame is lifted and answered whole or dropped
+whole, never in part.
 """
 
 from __future__ import annotations
 
-import threading
 from collections import deque
 from typing import Generic, TypeVar
 
@@ -23,12 +22,12 @@ T = TypeVar("T")
 
 
 class FrameQueue(Generic[T]):
-    """At most ``depth`` frames waiting, the oldest dropped first; thread-safe.
+    """At most ``depth`` frames waiting, the oldest dropped first.
 
     Parameters
     ----------
     depth : int
-        Frames that may wait while one is being lifted (>= 1).
+        Frames that may wait (>= 1).
     """
 
     def __init__(self, depth: int = 1) -> None:
@@ -36,44 +35,22 @@ class FrameQueue(Generic[T]):
             raise ValueError(f"a frame queue holds at least one frame, got depth={depth}")
         self.depth = depth
         self._items: deque[T] = deque()
-        self._cv = threading.Condition()
-        self._closed = False
 
     def __len__(self) -> int:
-        with self._cv:
-            return len(self._items)
+        return len(self._items)
 
     def put(self, item: T) -> T | None:
-        """Queue ``item``; returns the oldest frame it displaced (dropped), else None. A closed
-        queue takes nothing and returns ``item`` itself (dropped)."""
-        with self._cv:
-            if self._closed:
-                return item
-            dropped = self._items.popleft() if len(self._items) >= self.depth else None
-            self._items.append(item)
-            self._cv.notify()
-            return dropped
+        """Queue ``item``; returns the oldest frame it displaced (dropped), else None."""
+        dropped = self._items.popleft() if len(self._items) >= self.depth else None
+        self._items.append(item)
+        return dropped
 
-    def get(self) -> T | None:
-        """The oldest waiting frame, waiting for one; None once the queue is closed (what still
-        waits is not handed out)."""
-        with self._cv:
-            while not self._items and not self._closed:
-                self._cv.wait()
-            if self._closed:
-                return None
-            return self._items.popleft()
+    def pop(self) -> T | None:
+        """The oldest waiting frame, taken out of the queue; None when none waits."""
+        return self._items.popleft() if self._items else None
 
     def clear(self) -> int:
         """Drop every waiting frame; returns how many."""
-        with self._cv:
-            n = len(self._items)
-            self._items.clear()
-            return n
-
-    def close(self) -> None:
-        """Wake every :meth:`get` with None, now and from now on."""
-        with self._cv:
-            self._closed = True
-            self._items.clear()
-            self._cv.notify_all()
+        n = len(self._items)
+        self._items.clear()
+        return n

@@ -2,9 +2,10 @@
 
 One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
 
-1. ``keypoints_2d`` (``pose_lifter_msgs/Skeleton2DArray``, sensor-data QoS) arrives and waits for
-   the node's lifting thread (:class:`~pose_lifter.ros.frame_queue.FrameQueue`): when the input
-   is faster than the lift, a newer frame drops the oldest waiting one whole (at most
+1. ``keypoints_2d`` (``pose_lifter_msgs/Skeleton2DArray``, sensor-data QoS) arrives; before each
+   lift every frame the subscription holds joins the waiting frames
+   (:class:`~pose_lifter.ros.frame_queue.FrameQueue`), and the oldest left is lifted: when the
+   input is faster than the lift, a newer frame drops the oldest waiting one whole (at most
    ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded.
 2. The frame pipeline (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's
    too) checks the frame and each skeleton against the caps and converts it to the paper's 12
@@ -42,7 +43,6 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any, Final
@@ -103,10 +103,8 @@ class LifterNode(Node):
         self._throttle = WarningThrottle(self.get_logger().warning)
         self._check_unknown_parameters()
         self._callbacks_added = False
-        # the lifting thread (activate_lifter) and what it shares with the executor's callbacks
-        self._lift_lock = threading.RLock()  # held for a frame's lift and for a parameter switch
-        self._queue: FrameQueue[tuple[float, Any]] = FrameQueue(int(self._param("max_waiting_frames")))
-        self._lift_thread: threading.Thread | None = None
+        # frames taken from the subscription, waiting to be lifted (the oldest dropped first)
+        self._waiting: FrameQueue[tuple[float, Any]] = FrameQueue(int(self._param("max_waiting_frames")))
         if not self._deferred_start():  # the lifecycle node configures and activates on request
             self.configure_lifter()
             self.activate_lifter()
@@ -162,9 +160,9 @@ class LifterNode(Node):
         self._sub_keypoints = self.create_subscription(
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
-        self._queue = FrameQueue(self._queue.depth)
-        self._lift_thread = threading.Thread(target=self._lift_loop, name="pose_lifter_lift", daemon=True)
-        self._lift_thread.start()
+        # triggered while frames wait after a lift: the executor comes back for the next one
+        # between its other callbacks (camera_info, timers, parameter services)
+        self._more = self.create_guard_condition(self._lift_next)
         period = float(self._param("stats_period"))
         self._stats_timer = None
         if period > 0:
@@ -191,9 +189,10 @@ class LifterNode(Node):
         return HriOutputs(self, types, self._settings.frame.track_timeout)
 
     def deactivate_lifter(self) -> None:
-        """Unsubscribe and stop the lifting thread after its frame (the solver and the publishers
-        stay: activating again is immediate); the frames still waiting are dropped."""
-        self._stop_lifting()
+        """Unsubscribe (the solver and the publishers stay: activating again is immediate); the
+        frames still waiting are dropped."""
+        self._waiting.clear()
+        self.destroy_guard_condition(self._more)
         for entity in (self._sub_keypoints, self._sub_camera_info):
             self.destroy_subscription(entity)
         if self._stats_timer is not None:
@@ -263,12 +262,7 @@ class LifterNode(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
-        """Post-set callback: switch to what :meth:`_validate_parameters` built (cannot fail),
-        between two frames of the lifting thread."""
-        with self._lift_lock:
-            self._switch(params)
-
-    def _switch(self, params: list[Parameter]) -> None:
+        """Post-set callback: switch to what :meth:`_validate_parameters` built (cannot fail)."""
         self._settings = self._read_settings()
         if self._hri is not None:  # bodies leave as tracks are forgotten
             self._hri.book.timeout_ns = round(self._settings.frame.track_timeout * 1e9)
@@ -305,33 +299,31 @@ class LifterNode(Node):
         self._intrinsics = intrinsics
 
     def on_keypoints(self, msg: Any) -> None:
-        """Queue a frame for the lifting thread (:class:`~pose_lifter.ros.frame_queue.FrameQueue`:
-        beyond ``max_waiting_frames`` the oldest waiting frame is dropped whole and counted)."""
-        if self._queue.put((time.perf_counter(), msg)) is not None:
+        """A frame arrived: it waits with the others (:class:`~pose_lifter.ros.frame_queue.FrameQueue`),
+        then the oldest waiting frame is lifted."""
+        self._wait(msg)
+        self._lift_next()
+
+    def _wait(self, msg: Any) -> None:
+        """``msg`` joins the waiting frames; the oldest is dropped (and counted) beyond
+        ``max_waiting_frames``."""
+        if self._waiting.put((time.perf_counter(), msg)) is not None:
             self._counts.drop()
 
-    def _lift_loop(self) -> None:
-        """The lifting thread: the queued frames in arrival order until the queue is closed."""
-        while (item := self._queue.get()) is not None:
-            try:
-                with self._lift_lock:
-                    self.lift_frame(item[1], item[0])
-            except Exception as err:  # a frame's failure never ends the thread
-                if not self.context.ok():  # shutting down: the publishers are gone
-                    return
-                self._warn_skip("unexpected", f"frame not answered after an unexpected error: {err!r}")
-
-    def _stop_lifting(self) -> None:
-        """Close the queue and wait for the lifting thread to finish its frame."""
-        self._queue.close()
-        if self._lift_thread is not None and self._lift_thread is not threading.current_thread():
-            self._lift_thread.join()
-        self._lift_thread = None
-
-    def destroy_node(self) -> None:
-        """Stop the lifting thread (after its frame), then destroy the node."""
-        self._stop_lifting()
-        super().destroy_node()
+    def _lift_next(self) -> None:
+        """Take every frame the subscription holds into the waiting frames, then lift the oldest
+        one left; while frames still wait, the guard condition brings the executor back."""
+        sub = self._sub_keypoints
+        # what the executor itself calls to take a message (rclpy has no public take)
+        with sub.handle:
+            while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
+                self._wait(taken[0])
+        item = self._waiting.pop()
+        if item is None:
+            return
+        self.lift_frame(item[1], item[0])
+        if len(self._waiting):
+            self._more.trigger()
 
     def lift_frame(self, msg: Any, received: float) -> None:
         """Lift one frame and publish its answer (always, even when every skeleton is skipped);

@@ -137,9 +137,9 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("solver_threads", 0, "Threads over which each round of a frame's runs of alternations is "
               "split (the compiled kernel releases the GIL; results do not depend on it); 0 = one per "
               "CPU core the node may use.", 0, 256, read_only=True),
-    ParamSpec("max_waiting_frames", 1, "Frames that may wait while one is lifted; a newer frame drops the "
-              "oldest waiting one whole (counted in /diagnostics), so an answer is never more than this "
-              "many frames + 1 behind.", 1, 1000, read_only=True),
+    ParamSpec("max_waiting_frames", 1, "Frames that may wait to be lifted; a newer frame drops the oldest "
+              "waiting one whole (counted in /diagnostics), so an answer is never more than this many "
+              "lifts behind its frame.", 1, 1000, read_only=True),
     ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
               read_only=True),
     ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "

@@ -83,7 +83,7 @@ class FrameCounter:
 
     def __init__(self) -> None:
         self._windows: dict[str, FrameStats] = {}
-        # the lifting thread counts frames, the executor's callbacks drops and reports
+        # thread-safe: a node under a multi-threaded executor counts from several threads
         self._lock = threading.Lock()
 
     def open(self, report: str) -> None:
