@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pose_lifter.core.results import Camera, LiftResult
+from lift_samples import random_frame
 from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
 from pose_lifter.messages import cdr, typestore
 from pose_lifter.messages import convert as m
@@ -256,14 +256,6 @@ def test_lift_bag_writes_the_reference_bytes_with_vanishing_and_untracked_people
     assert actions[4][-2:] == [(9, 2), (9, 2)] and (-1, 0) in actions[0]
 
 
-def _result(rng: np.random.Generator, rotation: np.ndarray) -> LiftResult:
-    weights = rng.uniform(0.0, 1.0, 12) * (rng.uniform(size=12) > 0.2)
-    return LiftResult(rng.normal(size=(12, 3)), rng.normal(size=(12, 3)),
-                      Camera(rotation, float(rng.uniform(50, 200)), rng.normal(300, 50, size=2)),
-                      np.zeros(4), float(rng.uniform()), float(rng.uniform()), 0.0, 3,
-                      bool(rng.uniform() > 0.3), 1, -1, weights, total_alternations=int(rng.integers(0, 40)))
-
-
 @pytest.mark.parametrize("frame_id", ["", "c", "ca", "cam", "came", "camer", "camera", "camera_",
                                       "virtual_camera_optical_frame", "kamera_ü"])
 def test_encoders_equal_the_node_builders_for_every_alignment(frame_id: str) -> None:
@@ -275,10 +267,7 @@ def test_encoders_equal_the_node_builders_for_every_alignment(frame_id: str) -> 
     types = m.rosbags_types(store)
     header = m.make_header(1_234_567_890_123, frame_id, types)
     track_ids = [3, -1, 7, -1, 2**31 + 5, 0]
-    results = [_result(rng, r) for r in Rotation.random(len(track_ids), random_state=rng).as_matrix()]
-    joints = [rng.normal(size=(12, 3)) + np.array([0.0, 0.0, 5.0]) for _ in track_ids]
-    times = list(rng.uniform(0, 0.01, len(track_ids)))
-    warm = [bool(w) for w in rng.uniform(size=len(track_ids)) > 0.5]
+    results, joints, times, warm = random_frame(rng, len(track_ids))
     for n in (0, 1, len(track_ids)):
         skels = [m.result_to_skeleton3d(r, t, j, types, s, w)
                  for r, t, j, s, w in zip(results[:n], track_ids[:n], joints[:n], times[:n], warm[:n],

@@ -10,22 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pose_lifter.core.results import Camera, LiftResult
+from lift_samples import random_frame
 from pose_lifter.messages import cdr
 from pose_lifter.messages import convert as m
-from scipy.spatial.transform import Rotation
 
 from .conftest import _load_workspace_messages
 
 pytestmark = pytest.mark.ros
-
-
-def _result(rng: np.random.Generator, rotation: np.ndarray) -> LiftResult:
-    pose = rng.normal(size=(12, 3))
-    weights = np.where(rng.uniform(size=12) > 0.2, rng.uniform(0.1, 1.0, 12), 0.0)
-    return LiftResult(pose, pose, Camera(rotation, float(rng.uniform(50, 200)), rng.normal(300, 50, size=2)),
-                      np.zeros(4), float(rng.uniform()), float(rng.uniform()), 0.0, 3,
-                      bool(rng.uniform() > 0.3), 1, -1, weights, total_alternations=int(rng.integers(0, 40)))
 
 
 @pytest.mark.parametrize("frame_id", ["", "cam", "camera_", "virtual_camera_optical_frame"])
@@ -38,10 +29,7 @@ def test_the_written_skeletons_are_the_bytes_rclpy_serialises(frame_id: str) -> 
     types = m.rclpy_types()
     header = m.make_header(1_234_567_890_123, frame_id, types)
     track_ids = [4, -1, 9, 2**40 + 3, 0]
-    results = [_result(rng, r) for r in Rotation.random(len(track_ids), random_state=rng).as_matrix()]
-    joints = [rng.normal(size=(12, 3)) + np.array([0.0, 0.0, 4.0]) for _ in track_ids]
-    times = list(rng.uniform(0, 0.01, len(track_ids)))
-    warm = [bool(w) for w in rng.uniform(size=len(track_ids)) > 0.5]
+    results, joints, times, warm = random_frame(rng, len(track_ids), depth=4.0)
     for n in (0, 1, len(track_ids)):
         skels = [m.result_to_skeleton3d(r, t, j, types, s, w)
                  for r, t, j, s, w in zip(results[:n], track_ids[:n], joints[:n], times[:n], warm[:n],
