@@ -23,6 +23,7 @@ import argparse
 import glob
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -50,10 +51,18 @@ def dump(out: Path, src: Path | None, frames: int) -> None:
             where = f"{Path(path).stem} {mode}"
 
             class Capture:
+                """A publisher that keeps what it is given (serialised messages read back as ``cls``)."""
+
+                def __init__(self, cls: Any) -> None:
+                    self.cls = cls
+
                 def publish(self, msg: Any, where: str = where) -> None:
+                    if isinstance(msg, bytes):
+                        msg = deserialize_message(msg, self.cls)
                     published.append((where, type(msg).__name__, msg))
 
-            node._pub_skeletons = node._pub_markers = Capture()
+            node._pub_skeletons = Capture(types.Skeleton3DArray)
+            node._pub_markers = Capture(types.MarkerArray)
             n = 0
             for raw in bags.read_raw(path):
                 if raw.msgtype == "sensor_msgs/msg/CameraInfo":
@@ -61,7 +70,7 @@ def dump(out: Path, src: Path | None, frames: int) -> None:
                 elif raw.msgtype == "pose_lifter_msgs/msg/Skeleton2DArray":
                     if n == frames:
                         break
-                    node.on_keypoints(deserialize_message(raw.data, types.Skeleton2DArray))
+                    node.lift_frame(deserialize_message(raw.data, types.Skeleton2DArray), time.perf_counter())
                     n += 1
             node.destroy_node()
     for _, kind, msg in published:

@@ -77,6 +77,9 @@ __all__ = ["NODE_NAME", "LifterNode", "StartupError", "main"]
 NODE_NAME: Final[str] = names.LIFTER_NODE
 MARKER_NS: Final[str] = "pose_lifter"
 STATS_LINE: Final[str] = "stats line"  # the statistics line's window in the node's counter
+#: A frame's receive stamp older than this (s) is taken as another clock's: its latency counts from
+#: its callback instead.
+MAX_RECEIVE_AGE_S: Final[float] = 10.0
 
 
 class StartupError(Exception):
@@ -157,9 +160,10 @@ class LifterNode(Node):
         self._sub_camera_info = self.create_subscription(
             self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
+        # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only)
         self._sub_keypoints = self.create_subscription(
-            self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints, qos_profile_sensor_data,
-            qos_overriding_options=qos_override)
+            self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints,  # type: ignore[arg-type]
+            qos_profile_sensor_data, qos_overriding_options=qos_override)
         # triggered while frames wait after a lift: the executor comes back for the next one
         # between its other callbacks (camera_info, timers, parameter services)
         self._more = self.create_guard_condition(self._lift_next)
@@ -298,16 +302,24 @@ class LifterNode(Node):
                 "people are lifted from their 2D corrected for perspective and placed at metric depth")
         self._intrinsics = intrinsics
 
-    def on_keypoints(self, msg: Any) -> None:
+    def on_keypoints(self, msg: Any, info: Any) -> None:
         """A frame arrived: it waits with the others (:class:`~pose_lifter.ros.frame_queue.FrameQueue`),
         then the oldest waiting frame is lifted."""
-        self._wait(msg)
+        self._wait(msg, info)
         self._lift_next()
 
-    def _wait(self, msg: Any) -> None:
+    def _wait(self, msg: Any, info: Any) -> None:
         """``msg`` joins the waiting frames; the oldest is dropped (and counted) beyond
-        ``max_waiting_frames``."""
-        if self._waiting.put((time.perf_counter(), msg)) is not None:
+        ``max_waiting_frames``. Its latency counts from when the middleware received it
+        (``info["received_timestamp"]``, system clock): it may have waited in the subscription's
+        queue while the previous frame was lifted."""
+        received = time.perf_counter()
+        stamp = info.get("received_timestamp") if isinstance(info, dict) else None
+        if stamp:
+            waited = (time.time_ns() - int(stamp)) / 1e9
+            if 0.0 < waited < MAX_RECEIVE_AGE_S:  # else another clock: counted from now
+                received -= waited
+        if self._waiting.put((received, msg)) is not None:
             self._counts.drop()
 
     def _lift_next(self) -> None:
@@ -317,7 +329,7 @@ class LifterNode(Node):
         # what the executor itself calls to take a message (rclpy has no public take)
         with sub.handle:
             while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
-                self._wait(taken[0])
+                self._wait(*taken)
         item = self._waiting.pop()
         if item is None:
             return
