@@ -293,23 +293,22 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
 
 
 def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
-                  ) -> float:
+                  ) -> None:
     """The prior's network for every ``(pipeline, skeleton, stamp, intrinsics)`` about to be lifted (each
     pipeline's tracks as they are now) in one pass over its weights
     (:meth:`~pose_lifter.core.lifter.Lifter.compute_prior_ahead`; the lifts' results are the same
-    with or without it). Returns each skeleton's share of its time, in seconds. It never raises:
-    whatever goes wrong here costs only speed (each lift then computes its own pose; the
-    pass's use is asserted in tests/messages/test_frame.py), never a skeleton."""
+    with or without it). It never raises: whatever goes wrong here costs only speed (each lift
+    then computes its own pose; the pass's use is asserted in tests/messages/test_frame.py), never
+    a skeleton. (Each lift reads its input again as this reads it: the prior's input is prepared
+    twice per person.)"""
     if not frames:
-        return 0.0
-    start = time.perf_counter()
+        return
     try:
         expected = [e for pipeline, inp, stamp, intrinsics in frames
                     if (e := pipeline.expected_prior(inp, stamp, intrinsics)) is not None]
         lifter.compute_prior_ahead(expected)
     except Exception:
         lifter.compute_prior_ahead([])
-    return (time.perf_counter() - start) / len(frames)
 
 
 def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
