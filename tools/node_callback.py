@@ -5,7 +5,7 @@
         [--param NAME:=VALUE ...]
 
 Builds :class:`pose_lifter.ros.node.LifterNode` in this process, gives it the bag's first
-``camera_info`` and lifts every ``/keypoints_2d`` message as its lifting thread does
+``camera_info`` and lifts every ``/keypoints_2d`` message as its callback does
 (``lift_frame``), pass after pass
 (each pass's stamps shifted by the bag's duration, so the tracks stay warm). The first two passes
 warm the tracks up; the others are timed: per frame, callback in -> the frame's answers

@@ -1,5 +1,6 @@
 """A run of camera/pose alternations as one compiled kernel: the run of the default solver
-(:meth:`pose_lifter.core.runs.Runs.run`).
+(:meth:`pose_lifter.core.runs.Runs.run_steps`; every person's runs of a round in one call,
+:func:`run_calls`).
 
 Per alternation ``i`` the kernel minimises, for the current camera, the pose objective (the
 compiled pose step, :func:`pose_lifter.core.pose_kernel._pose_kernel`) and then, for the new
@@ -15,7 +16,7 @@ pose, stacked twice then); it keeps the lowest-``F`` alternation and stops when
 
 Applies with ``camera_solver == pose_solver == "admm"``, the Riemannian alpha-step and
 ``warm_duals`` off (every step starts its multipliers at zero; the kernel keeps none); the other
-solvers run in the Python loop of :meth:`~pose_lifter.core.runs.Runs.run`, which calls the same
+solvers run in the Python loop of :meth:`~pose_lifter.core.runs.Runs.run_steps`, which calls the same
 objective terms and stopping rule.
 """
 

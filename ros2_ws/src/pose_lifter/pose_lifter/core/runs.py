@@ -9,7 +9,7 @@ weak-perspective ambiguity: the same 2D, reflected depth) started.
 
 With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.run_kernel`); the
 other solvers (the cvxpy references, the lifted ADM and SQP alpha-steps, multipliers carried
-between steps) run in the Python loop of :meth:`Runs.run`, on the same objective terms and
+between steps) run in the Python loop of :meth:`Runs.run_steps`, on the same objective terms and
 stopping rule (:func:`pose_lifter.core.run_kernel._run_objective`, ``_alternation_stops``).
 """
 

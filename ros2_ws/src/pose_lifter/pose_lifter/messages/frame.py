@@ -11,7 +11,7 @@ what the node publishes for it. One frame:
    lifted (:func:`largest_first`), the others skipped; each skeleton is checked by
    :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
-2. :meth:`FramePipeline.lift` per checked skeleton: the core's
+2. :func:`lift_together` (a skeleton alone: :meth:`FramePipeline.lift`): the core's
    :class:`~pose_lifter.core.tracking.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`~pose_lifter.core.placement.place_in_camera`
    and :func:`check_output` (nothing non-finite leaves).
