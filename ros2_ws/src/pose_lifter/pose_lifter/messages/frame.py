@@ -11,7 +11,7 @@ what the node publishes for it. One frame:
    lifted (:func:`largest_first`), the others skipped; each skeleton is checked by
    :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
-2. :func:`lift_together` (a skeleton alone: :meth:`FramePipeline.lift`): the core's
+2. :func:`lift_together` (:meth:`FramePipeline.lift_steps` of each skeleton in step): the core's
    :class:`~pose_lifter.core.tracking.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`~pose_lifter.core.placement.place_in_camera`
    and :func:`check_output` (nothing non-finite leaves).
@@ -429,14 +429,6 @@ class FramePipeline:
             skipped = (SkipSkeleton("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
                                     f"lifting the {st.max_skeletons} largest (max_skeletons)"),)
         return CheckedFrame(True, tuple(out), skipped, n_left_out)
-
-    def lift(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
-             ) -> LiftedSkeleton | SkipSkeleton:
-        """Step 2 for one checked skeleton, alone: :meth:`lift_steps` driven to its result, its
-        solve time its own."""
-        start = time.perf_counter()
-        out = self.lifter.runs.solve(self.lift_steps(inp, stamp_ns, intrinsics))
-        return out if isinstance(out, SkipSkeleton) else out.timed(time.perf_counter() - start)
 
     def lift_steps(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
                    ) -> Steps[LiftedSkeleton | SkipSkeleton]:

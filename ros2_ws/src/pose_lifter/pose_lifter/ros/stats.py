@@ -13,7 +13,6 @@ by kind.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -83,47 +82,38 @@ class FrameCounter:
 
     def __init__(self) -> None:
         self._windows: dict[str, FrameStats] = {}
-        # thread-safe: a node under a multi-threaded executor counts from several threads
-        self._lock = threading.Lock()
 
     def open(self, report: str) -> None:
         """Start counting for ``report`` (from now)."""
-        with self._lock:
-            self._windows[report] = FrameStats()
+        self._windows[report] = FrameStats()
 
     def close(self, report: str) -> None:
         """Stop counting for ``report``."""
-        with self._lock:
-            self._windows.pop(report, None)
+        self._windows.pop(report, None)
 
     def take(self, report: str) -> FrameStats:
         """The window of ``report`` since its last take (or open); a new window starts."""
-        with self._lock:
-            window = self._windows[report]
-            self._windows[report] = FrameStats()
-            return window
+        window = self._windows[report]
+        self._windows[report] = FrameStats()
+        return window
 
     def frame(self, lifted: Sequence[Any], latency: float) -> None:
         """One answered frame: its lifted skeletons (``warm_started``, ``solve_time``) and its
         latency (s)."""
-        with self._lock:
-            for window in self._windows.values():
-                window.frame(lifted, latency)
+        for window in self._windows.values():
+            window.frame(lifted, latency)
 
     def skip(self, kind: str) -> None:
         """One skipped input of a kind."""
-        with self._lock:
-            for window in self._windows.values():
-                window.skipped[kind] += 1
+        for window in self._windows.values():
+            window.skipped[kind] += 1
 
     def drop(self) -> None:
         """One whole frame dropped unanswered (a newer one came while the node was busy)."""
-        with self._lock:
-            for window in self._windows.values():
-                window.dropped += 1
+        for window in self._windows.values():
+            window.dropped += 1
 
     def clip(self) -> None:
         """One skeleton lifted with confidences clipped into [0, 1]."""
-        with self._lock:
-            for window in self._windows.values():
-                window.clipped += 1
+        for window in self._windows.values():
+            window.clipped += 1
