@@ -157,7 +157,8 @@ def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Name
                   ) -> dict[str, dict[str, dict[str, float]]]:
     """Per condition and method: mean P-MPJPE, MPJPE, jitter over the frames of ``tracks``."""
     temporal = prior_path.with_name(prior_path.stem + "_w4.npz")
-    settings: dict[str, Any] = {"prior_file": str(prior_path), "temporal_prior": args.temporal}
+    settings: dict[str, Any] = {**acc._parse(args.set), "prior_file": str(prior_path),
+                                "temporal_prior": args.temporal}
     if args.temporal:
         settings["temporal_prior_file"] = str(temporal)
     acc._STATE["intrinsics"] = args.intrinsics
@@ -231,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
+    ap.add_argument("--set", action="append", default=[],
+                    help="a LifterOptions field for every lift, e.g. measurement_update=False")
     ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
     ap.add_argument("--temporal", action="store_true",
                     help="also train each fold's causal temporal prior and lift with it (as the node does)")
