@@ -35,11 +35,6 @@ class EchoLifter:
         self.pose -= self.pose.mean(axis=0)
 
     options = LifterOptions(mode="paper")
-    def expected_prior_input(self, points: np.ndarray, confidence: Any, past: Any) -> None:
-        """The paper mode runs no learned prior: nothing to compute ahead."""
-
-    def compute_prior_ahead(self, expected: list[Any]) -> None:
-        """Nothing to compute ahead without a learned prior."""
 
     runs = RUNS_NEEDED_NONE
 

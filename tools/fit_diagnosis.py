@@ -57,7 +57,7 @@ START_CODES = {StartKind.WARM: -1, StartKind.MIRRORED: -2, StartKind.PRIOR: -3, 
 
 def _wrapped(orig: Any) -> Any:
     def starts(fit: Any, x: Any, xn: Any, w: Any, norm: Any, warm: Any, cam0: Any, track: Any) -> Any:
-        out = orig(fit, x, xn, w, norm, warm, cam0, track)
+        out = yield from orig(fit, x, xn, w, norm, warm, cam0, track)  # a solve: its calls pass through
         CAPTURE["fit"] = fit
         CAPTURE["args"] = (x, xn, w, norm, warm, cam0, track)
         CAPTURE["out"] = out
@@ -74,7 +74,7 @@ def _oracle(lifter: Lifter, truth_c: NDArray[np.float64], scale_px: float) -> di
     if warm is not None and cam0 is not None:
         pv = lifter.model.pose(warm.alpha)
         prev = np.column_stack([cam0.project(pv), cam0.scale * (pv - pv.mean(0)) @ cam0.rotation[2]])
-    prior, _ = CAPTURE["fit"].rows(x, w_after, norm, track, prev)
+    prior, _ = lifter.runs.solve(CAPTURE["fit"].rows(x, w_after, norm, track, prev))
     # the truth in the normalised frame: its image positions there, depth at the same scale
     target = np.empty((12, 3))
     target[:, :2] = xn
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
                         row["limb_track_err"] = float(np.abs((tl_ - tl_.mean()) - (rl_ - rl_.mean())).mean())
                 if "args" in CAPTURE:  # the prior's disagreement with its own input (normalised units)
                     xc, _, wc, normc = CAPTURE["args"][:4]
-                    pp_in = CAPTURE["out"][4]
+                    pp_in = CAPTURE["out"].prior_pose
                     vis_c = wc > 0
                     trivial = pp_in.copy()
                     trivial[vis_c, :2] = xc[vis_c]  # the prior's depths under the image's positions

@@ -9,7 +9,7 @@ Wraps the functions of the offline path with timers (cumulative seconds, nested 
 one process; with workers it runs in the children and is not seen here. Inside it, ``run_kernel``
 (the compiled alternations, :func:`pose_lifter.core.run_kernel._run_kernel`) and
 ``prior_network`` (the learned prior's network, its compiled layer pass
-:meth:`pose_lifter.core.prior.PosePrior._forward_small`, for one pose or computed ahead for several);
+:meth:`pose_lifter.core.prior.PosePrior._forward_small`, for the poses of a round of lifts);
 the rest of ``lift_chains`` is the Python around them (tracking, the lifter's set-up, results).
 """
 

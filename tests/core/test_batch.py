@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions
-from pose_lifter.core.batch import Failed, gather, solve
+from pose_lifter.core.batch import Failed, gather, outcomes, solve
 from pose_lifter.core.errors import SolverError
-from pose_lifter.core.run_kernel import RunCall, _run_kernel, run_calls
+from pose_lifter.core.prior import PriorCall
+from pose_lifter.core.run_kernel import RunCall, RunOut, _run_kernel, run_calls
 from pose_lifter.core.tracking import TrackedLift, TrackPolicy
 from synthetic_poses import synthetic_poses
 
@@ -74,13 +75,18 @@ def test_a_30_person_frame_gives_each_person_what_they_get_alone(mode: str) -> N
 
 
 def _calls(lifter: Lifter, n: int) -> list[RunCall]:
-    """The run operands of ``n`` cold hybrid lifts (recorded from real solves)."""
+    """The run operands of ``n`` cold hybrid lifts (recorded from real solves: their first round
+    of runs, after the round of their prior's pose)."""
     points, conf = _crowd(3)
+    km, st = lifter.model.kernel_arrays, lifter.runs.settings
     calls: list[RunCall] = []
     for p in range(n):
         steps = lifter.lift_steps(points[0, p], conf[0, p])
-        batch = next(steps)
-        calls += batch
+        first = next(steps)
+        assert [type(c) for c in first] == [PriorCall]
+        batch = steps.send(outcomes(first, km, st))
+        assert all(isinstance(c, RunCall) for c in batch)
+        calls += [c for c in batch if isinstance(c, RunCall)]
         steps.close()
     return calls
 
@@ -97,6 +103,27 @@ def test_run_calls_are_each_runs_kernel_alone_at_any_thread_count() -> None:
             for a, b in zip(got, want, strict=True):
                 assert np.array_equal(a, b)
     assert run_calls([], km, st) == []
+
+
+def test_a_round_of_runs_and_prior_calls_gets_each_its_own_outcome_in_order() -> None:
+    """A round may mix runs and prior calls (one person's outlier pass asks for its prior while
+    another's runs wait): each call gets what it gets in a round of its own kind, in its place."""
+    lifter = Lifter()
+    runs = _calls(lifter, 2)
+    km, st = lifter.model.kernel_arrays, lifter.runs.settings
+    points, conf = _crowd(3)
+    prior = lifter.prior
+    asks = [PriorCall(prior, points[0, p], conf[0, p] > 0, True) for p in range(3)]
+    mixed = [asks[0], runs[0], asks[1], asks[2], runs[1]]
+    got = outcomes(mixed, km, st)
+    want_runs = run_calls(runs, km, st)
+    for g, w in zip([got[1], got[4]], want_runs, strict=True):
+        assert isinstance(g, RunOut) and isinstance(w, RunOut)
+        assert all(np.array_equal(a, b) for a, b in zip(g, w, strict=True))
+    for g, c in zip([got[0], got[2], got[3]], asks, strict=True):
+        assert isinstance(g, np.ndarray)
+        np.testing.assert_array_equal(g, prior.predict(c.points, c.visible, True))
+    assert not np.array_equal(got[0], got[2])
 
 
 def test_a_run_that_raises_costs_only_its_own_person() -> None:

@@ -17,9 +17,10 @@ from pose_lifter.core.prior import (
     DEFAULT_PRIOR_PATH,
     DEFAULT_TEMPORAL_PRIOR_PATH,
     PosePrior,
+    PriorCall,
+    prior_calls,
     prior_features,
 )
-from pose_lifter.core.prior_ahead import PosesAhead
 from pose_lifter.core.synthetic import synthetic_poses
 from pose_lifter.mocap.views import scale_limbs
 
@@ -229,34 +230,42 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
 
 
-@pytest.mark.skipif(not HAVE_NUMBA, reason="poses are computed ahead only through the compiled pass")
-def test_poses_computed_ahead_are_each_poses_own_bit_for_bit(prior: PosePrior) -> None:
-    """PosesAhead: the poses of many people computed with one pass of each prior's network are,
-    one by one, those of each pose computed alone (the rows of the compiled pass do not mix); an
-    input not computed ahead, or computed by another prior, is computed on demand."""
+def test_prior_calls_are_each_poses_own_bit_for_bit(prior: PosePrior,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """prior_calls: the poses of many people, of two priors and both flip settings, are one by
+    one those of each pose computed alone (the rows of the compiled pass do not mix), each
+    prior's network in one pass over its weights; an input the prior refuses gets its error in
+    its place and costs nobody else."""
     temporal = PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH)
+    other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean,
+                      prior.out_scale, prior.abs_error, prior.window, prior.metadata, prior.blocks)
     rng = np.random.default_rng(11)
     people = [(rng.uniform(100.0, 500.0, (12, 2)), rng.random(12) > 0.15) for _ in range(9)]
     windows = [(rng.uniform(100.0, 500.0, (temporal.window, 12, 2)), rng.random((temporal.window, 12)) > 0.1)
                for _ in range(5)]
-    refused = (np.zeros((12, 2)), np.zeros(12, dtype=bool))  # no visible joint: left out
-    for flip in (True, False):
-        ahead = PosesAhead(flip)
-        ahead.compute([(prior, x, v) for x, v in [*people[:-1], refused]]
-                      + [(temporal, x, v) for x, v in windows])
-        assert len(ahead) == len(people) - 1 + len(windows)
-        for p, inputs in ((prior, people[:-1]), (temporal, windows)):
-            for x, v in inputs:
-                np.testing.assert_array_equal(ahead.predict(p, x, v), p.predict(x, v, flip))
-        assert (ahead.hits, ahead.misses) == (len(ahead), 0)
-        # the last person was not expected: computed now, the same as alone
-        np.testing.assert_array_equal(ahead.predict(prior, *people[-1]), prior.predict(*people[-1], flip))
-        assert ahead.misses == 1
-        # the same input to another prior (other weights): not taken from the first one's poses
-        other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean,
-                          prior.out_scale, prior.abs_error, prior.window, prior.metadata, prior.blocks)
-        np.testing.assert_array_equal(ahead.predict(other, *people[0]), other.predict(*people[0], flip))
-        assert ahead.misses == 2
-        assert not np.array_equal(other.predict(*people[0], flip), prior.predict(*people[0], flip))
-        ahead.compute([])
-        assert len(ahead) == 0
+    refused = (np.zeros((12, 2)), np.zeros(12, dtype=bool))  # no visible joint
+    calls = ([PriorCall(prior, x, v, True) for x, v in people[:4]] + [PriorCall(prior, *refused, True)]
+             + [PriorCall(temporal, x, v, True) for x, v in windows] + [PriorCall(prior, x, v, False)
+                                                                        for x, v in people[4:]]
+             + [PriorCall(other, *people[0], True)])
+    passes: list[int] = []
+    forward = PosePrior._forward_small
+
+    def counted(self: PosePrior, x: np.ndarray) -> np.ndarray:
+        passes.append(len(x))
+        return forward(self, x)
+
+    with monkeypatch.context() as mp:
+        mp.setattr(PosePrior, "_forward_small", counted)
+        out = prior_calls(calls)
+    assert len(out) == len(calls)
+    for c, pose in zip(calls, out, strict=True):
+        if c.points is refused[0]:
+            assert isinstance(pose, InvalidInputError)
+            continue
+        assert isinstance(pose, np.ndarray)
+        np.testing.assert_array_equal(pose, c.prior.predict(c.points, c.visible, c.flip))
+    # the same input through other weights is not the first prior's pose
+    assert not np.array_equal(out[-1], out[0])
+    if HAVE_NUMBA:  # one pass per (prior, flip): 4 + 5 mirrored pairs, 5 single rows, 1 pair
+        assert sorted(passes) == [2, 5, 8, 10]

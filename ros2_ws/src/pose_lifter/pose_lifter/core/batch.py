@@ -1,23 +1,27 @@
-"""Solves that hand their runs to one compiled pass: several people of a frame, and several
-starts of one person, in :func:`pose_lifter.core.run_kernel.run_calls`.
+"""Solves that hand their runs and their prior's poses to one compiled pass each: several
+people of a frame, and several starts of one person, in
+:func:`pose_lifter.core.run_kernel.run_calls` and :func:`pose_lifter.core.prior.prior_calls`.
 
-A solve is written as a generator (:data:`Steps`): where it needs runs of alternations it
-``yield``\\ s their operands (a list of :class:`~pose_lifter.core.run_kernel.RunCall`) and is sent
-back their results (a list of :class:`~pose_lifter.core.run_kernel.RunOut`, in the same order),
-then goes on; its ``return`` value is the solve's result. The Python around the runs (the
-checks, the prior, the starts, the choice of the best run, the track) stays with the person it
-belongs to; the runs of everybody who is waiting go through the kernel together.
+A solve is written as a generator (:data:`Steps`): where it needs runs of alternations or the
+learned prior's poses it ``yield``\\ s their operands (a list of
+:class:`~pose_lifter.core.run_kernel.RunCall` and :class:`~pose_lifter.core.prior.PriorCall`) and
+is sent back their results (a :class:`~pose_lifter.core.run_kernel.RunOut` per run, a pose (12, 3)
+per prior call, in the same order), then goes on; its ``return`` value is the solve's result.
+The Python around them (the checks, the starts, the choice of the best run, the track) stays
+with the person it belongs to; the runs and the prior's poses of everybody who is waiting go
+through the kernel and the network together.
 
 * :func:`gather` runs several solves in step as one solve: each round it yields the runs every
   unfinished solve asked for, concatenated, and hands each its own results back. A person's
   starts (the screened multi-start, the outlier pass's two runs) are gathered so, and so are
   the people of a frame.
 * :func:`solve` drives one solve to its end, each round's runs in one
-  :func:`~pose_lifter.core.run_kernel.run_calls` (a solve of one person is a batch like any other).
+  :func:`~pose_lifter.core.run_kernel.run_calls` and its prior calls in one
+  :func:`~pose_lifter.core.prior.prior_calls` (a solve of one person is a batch like any other).
 
-A run's result does not depend on what else is in its batch (the kernel solves each run on its
-own operands), so a person lifted with others gets what they get alone, bit for bit
-(``tests/core/test_batch.py``).
+A run's or a pose's result does not depend on what else is in its batch (the kernel solves each
+run on its own operands, the network's rows do not mix), so a person lifted with others gets
+what they get alone, bit for bit (``tests/core/test_batch.py``).
 """
 
 from __future__ import annotations
@@ -25,16 +29,24 @@ from __future__ import annotations
 from collections.abc import Generator, Sequence
 from typing import Any, TypeVar
 
+import numpy as np
+from numpy.typing import NDArray
+
 from ._records import ModelArrays, StepSettings
+from .prior import PriorCall, prior_calls
 from .run_kernel import RunCall, RunOut, run_calls
 
-__all__ = ["Failed", "Steps", "gather", "solve"]
+__all__ = ["Call", "Failed", "Outcome", "Steps", "gather", "outcomes", "solve"]
 
 T = TypeVar("T")
 
-#: A solve: yields the runs it needs, is sent their results (a run whose kernel raised: the
-#: exception, which the solve raises), returns its result.
-Steps = Generator[list[RunCall], list[RunOut | Exception], T]
+#: What a solve asks for: a run of alternations or a pose of the learned prior.
+Call = RunCall | PriorCall
+#: What it is sent back for it: the run's result, the prior's pose (12, 3), or the exception the
+#: kernel or the prior raised, which the solve raises.
+Outcome = RunOut | NDArray[np.float64] | Exception
+#: A solve: yields the calls it needs, is sent their outcomes in order, returns its result.
+Steps = Generator[list[Call], list[Outcome], T]
 
 
 class Failed:
@@ -56,9 +68,9 @@ def gather(solves: Sequence[Steps[Any]], capture: bool = False) -> Steps[list[An
     """
     n = len(solves)
     results: list[Any] = [None] * n
-    pending: dict[int, list[RunCall]] = {}
+    pending: dict[int, list[Call]] = {}
 
-    def advance(i: int, sent: list[RunOut | Exception] | None) -> None:
+    def advance(i: int, sent: list[Outcome] | None) -> None:
         try:
             calls = next(solves[i]) if sent is None else solves[i].send(sent)
         except StopIteration as done:
@@ -90,11 +102,24 @@ def gather(solves: Sequence[Steps[Any]], capture: bool = False) -> Steps[list[An
 def solve(steps: Steps[T], km: ModelArrays, st: StepSettings, threads: int = 1) -> T:
     """Drive ``steps`` to its result: each round's runs in one
     :func:`~pose_lifter.core.run_kernel.run_calls` of the model ``km`` and settings ``st`` (over
-    ``threads`` threads)."""
+    ``threads`` threads), its prior calls in one :func:`~pose_lifter.core.prior.prior_calls`."""
     try:
         calls = next(steps)
         while True:
-            calls = steps.send(run_calls(calls, km, st, threads))
+            calls = steps.send(outcomes(calls, km, st, threads))
     except StopIteration as done:
         result: T = done.value
         return result
+
+
+def outcomes(calls: list[Call], km: ModelArrays, st: StepSettings, threads: int = 1) -> list[Outcome]:
+    """The outcomes of a round's ``calls``, in order: the runs through one
+    :func:`~pose_lifter.core.run_kernel.run_calls`, the prior calls through one
+    :func:`~pose_lifter.core.prior.prior_calls`."""
+    runs = [c for c in calls if isinstance(c, RunCall)]
+    if len(runs) == len(calls):
+        return list(run_calls(runs, km, st, threads))
+    priors = [c for c in calls if isinstance(c, PriorCall)]
+    done_runs = iter(run_calls(runs, km, st, threads))
+    done_priors = iter(prior_calls(priors))
+    return [next(done_runs) if isinstance(c, RunCall) else next(done_priors) for c in calls]

@@ -23,8 +23,7 @@ from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
 from .pose_step import PriorRows
-from .prior import PosePrior
-from .prior_ahead import PosesAhead
+from .prior import PosePrior, PriorCall
 from .results import Camera, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
@@ -137,8 +136,6 @@ class PriorFit:
                  model: PoseModel, runs: Runs) -> None:
         self.options, self.prior, self.temporal_prior = options, prior, temporal_prior
         self.model, self.runs = model, runs
-        #: the priors' poses computed ahead for the frames expected next (:meth:`predict`)
-        self.ahead = PosesAhead(options.prior_flip)
         #: the mean log length of the model's own limbs (:meth:`limb_radii`)
         self._log_limb_mean = float(np.mean(np.log(np.sqrt(model.limb_sq))))
 
@@ -154,20 +151,33 @@ class PriorFit:
 
     def predict(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
                 past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
-                ) -> tuple[NDArray[np.float64], PosePrior]:
+                ) -> Steps[tuple[NDArray[np.float64], PosePrior]]:
         """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
         temporal prior when the lift has ``past`` frames (padded to its window with the oldest
-        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated); the pose
-        computed ahead for this input when there is one (:attr:`ahead`)."""
+        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated).
+
+        A solve (:mod:`pose_lifter.core.batch`): the pose is yielded as a
+        :class:`~pose_lifter.core.prior.PriorCall`, so the poses of a frame's people go through
+        the network in one pass.
+
+        Raises
+        ------
+        InvalidInputError
+            The prior refuses the input.
+        """
         prior, pts, vis = self.prior_input(x, visible, past)
-        return self.ahead.predict(prior, pts, vis), prior
+        (pose,) = yield [PriorCall(prior, pts, vis, self.options.prior_flip)]
+        if isinstance(pose, Exception):
+            raise pose
+        assert isinstance(pose, np.ndarray)
+        return pose, prior
 
     def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
                     past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
                     ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
         """The prior :meth:`predict` runs and its input: this frame (12, 2), (12,), or its window
         (W, 12, 2), (W, 12) with the ``past`` frames (see :meth:`predict`; what
-        :meth:`PosesAhead.compute` takes)."""
+        :class:`~pose_lifter.core.prior.PriorCall` takes)."""
         prior = self.prior
         if past is not None and len(past[0]) > 0 and self.temporal_prior is not None:
             prior = self.temporal_prior
@@ -187,13 +197,13 @@ class PriorFit:
         return prior, pts, vis
 
     def rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, track: TrackContext,
-             previous: NDArray[np.float64] | None) -> tuple[PriorRows, NDArray[np.float64]]:
+             previous: NDArray[np.float64] | None) -> Steps[tuple[PriorRows, NDArray[np.float64]]]:
         """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
         normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
         same frame) by the track's ``temporal_weight`` (12,); limb radii from its
         ``limb_proportions`` (``options.prior_limbs``). Returns the rows and the prior's pose in
         input units. Joints without weight take the track's ``fill`` position where it allows
-        (see :class:`TrackContext`) in the prior's input."""
+        (see :class:`TrackContext`) in the prior's input. A solve (:meth:`predict`)."""
         vis = w > 0
         fill = track.fill
         if fill is not None:
@@ -201,7 +211,7 @@ class PriorFit:
             if add.any():
                 x = np.where(add[:, None], fill[0], x)
                 vis = vis | add
-        pose, used = self.predict(x, vis, track.past)
+        pose, used = yield from self.predict(x, vis, track.past)
         tw = track.temporal_weight
         blend = previous is not None
         target, status = _target_kernel(
@@ -225,7 +235,7 @@ class PriorFit:
         2D ``x`` (12, 2, input units; ``xn`` normalised by ``norm``) with weights ``w`` (12,), the
         warm start and its camera ``cam0`` (normalised) and the track's context (its
         ``temporal_weight`` an array (12,)). A solve (:mod:`pose_lifter.core.batch`): an outlier
-        pass's two runs go in one round."""
+        pass's two runs go in one round; the prior's poses are yielded too (:meth:`predict`)."""
         o, runs = self.options, self.runs
         previous = None
         if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
@@ -233,7 +243,7 @@ class PriorFit:
             previous = np.empty((N_JOINTS, 3))
             previous[:, :2] = cam0.project(prev)
             previous[:, 2] = cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]
-        prior, prior_pose = self.rows(x, w, norm, track, previous)
+        prior, prior_pose = yield from self.rows(x, w, norm, track, previous)
         a_prior = runs.start_alpha(prior.target)
         # every frame starts from the prior's pose (with the previous frame's camera when tracked):
         # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
@@ -261,7 +271,7 @@ class PriorFit:
                 break
             w = w.copy()
             w[out] = 0.0
-            prior, prior_pose = self.rows(x, w, norm, track, previous)
+            prior, prior_pose = yield from self.rows(x, w, norm, track, previous)
             # continue the fit, and start again from the prior's new pose: the lower objective
             cont, fresh = yield from gather([
                 runs.run_steps(xn, w, run.pose.alpha, cam, n_alt, prior=prior),
@@ -271,12 +281,12 @@ class PriorFit:
         return Starts(tried, total, n_starts, w, prior_pose)
 
     def learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
-                past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> LiftResult:
+                past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> Steps[LiftResult]:
         """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
         own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
         positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
-        error of the visible joints in the normalised units."""
-        pose_in, _ = self.predict(x, w > 0, past)
+        error of the visible joints in the normalised units. A solve (:meth:`predict`)."""
+        pose_in, _ = yield from self.predict(x, w > 0, past)
         centred = pose_in - pose_in.mean(axis=0)
         flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
         if not ok or not np.all(np.isfinite(flat)):

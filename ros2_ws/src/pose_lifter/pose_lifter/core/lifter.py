@@ -59,7 +59,7 @@ from ._fast import mean_rows, row_norms
 from .alpha.lifted_admm import QStepFn
 from .bases import PoseBases
 from .batch import Steps
-from .errors import InvalidInputError, OptionsError, PoseLifterError, SolverError, TooFewJointsError
+from .errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
 from .hybrid import PriorFit
 from .models import LifterData
 from .options import LifterOptions, Mode
@@ -177,33 +177,6 @@ class Lifter:
         """The hybrid and learned modes' solve with the learned prior (None in the paper mode)."""
         return self._prior_fit
 
-    def expected_prior_input(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
-                             past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
-                             ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
-        """The prior and its input that :meth:`lift` of these arguments runs first (read as the
-        lift reads them; for :meth:`compute_prior_ahead`), or None in the paper mode or for input
-        the lift refuses."""
-        fit = self._prior_fit
-        if fit is None:
-            return None
-        try:
-            x, w = self._weights(points, confidence)
-        except PoseLifterError:
-            return None
-        return fit.prior_input(x, w > 0, None if past is None else _checked_past(past))
-
-    def compute_prior_ahead(self, expected: list[tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]]
-                            ) -> None:
-        """Compute the prior's poses for the inputs of lifts expected next (``(prior, points,
-        visible)``, :meth:`PriorFit.prior_input <pose_lifter.core.hybrid.PriorFit.prior_input>`)
-        in one pass of each prior's network (:class:`~pose_lifter.core.prior_ahead.PosesAhead`;
-        fewer than 2: nothing is computed ahead). The lifts' results are the same with or
-        without it."""
-        fit = self._prior_fit
-        if fit is None:
-            return
-        fit.ahead.compute(expected if len(expected) >= 2 else [])
-
     @property
     def runs(self) -> Runs:
         """The alternation runs of the current model and options."""
@@ -301,7 +274,7 @@ class Lifter:
         tc = self._track_context(_NO_TRACK if track is None else track, w)
         fit = self._prior_fit
         if fit is not None and self._options.mode == "learned":
-            return fit.learned(x, w, norm, tc.past)
+            return (yield from fit.learned(x, w, norm, tc.past))
         xn = (x - norm.centre) / norm.spread
         cam0: Camera | None = None
         if warm is not None:

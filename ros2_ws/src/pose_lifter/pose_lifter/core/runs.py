@@ -211,6 +211,7 @@ class Runs:
             if isinstance(out, Exception):
                 with diverged_as_solver_error("run"):
                     raise out
+            assert isinstance(out, RunOut)
             return self._compiled_run(out, start)
         last_pose: PoseResult | None
         if start is not None:

@@ -140,9 +140,6 @@ class Track:
     #: the medians of ``noise`` and ``objectives`` while they are unchanged (None: not computed)
     _noise_median: float | None = None
     _objective_median: float | None = None
-    #: :meth:`past`'s last answer and what it was for: (stamp, frames, the last history entry)
-    _past_for: tuple[int, int, object] | None = None
-    _past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
 
     def add_objective(self, objective: float) -> None:
         self.objectives.append(objective)
@@ -223,14 +220,6 @@ class Track:
         are evenly spaced up to ``stamp_ns`` (within 20 %), or None."""
         if frames <= 0 or not self.history:
             return None
-        last = self.history[-1]
-        held = self._past_for
-        if held is not None and held[0] == stamp_ns and held[1] == frames and held[2] is last:
-            return self._past  # asked again for the same frame (the prior computed ahead, then the lift)
-        self._past_for, self._past = (stamp_ns, frames, last), self._read_past(stamp_ns, frames)
-        return self._past
-
-    def _read_past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
         step = stamp_ns - self.history[-1][0]
         if step <= 0:
             return None

@@ -64,7 +64,6 @@ from .errors import PoseLifterError
 from .lifter import Lifter
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
-from .prior import PosePrior
 from .results import LiftResult, TrackContext, WarmStart
 from .skeleton import N_JOINTS
 from .smoothing import CausalSmoother
@@ -284,22 +283,6 @@ class TrackPolicy:
             if out is not None:
                 return TrackedLift(out, warm is not None, reinit, result.pose_camera)
         return TrackedLift(result, warm is not None, reinit)
-
-    def expected_prior(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
-                       confidence: NDArray[np.float64] | None = None,
-                       intrinsics: CameraIntrinsics | None = None
-                       ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
-        """The prior and its input that :meth:`lift` of this frame is expected to run (for
-        :meth:`Lifter.compute_prior_ahead`): the track's past frames and this frame's joints as
-        the lift reads them; a joint the gate or the outlier pass removes, or one the track fills
-        in, changes the input and the lift computes its own pose. None in the paper mode or for
-        input the lift refuses. Changes nothing."""
-        track = self._tracks.get(track_id) if track_id >= 0 else None
-        warm = None
-        if track is not None and stamp_ns >= track.last_stamp_ns:  # as _find, without its refusals
-            warm = self._warm(track, stamp_ns - track.last_stamp_ns)
-        seen = self._seen(track, warm, points, intrinsics)
-        return self.lifter.expected_prior_input(seen, confidence, self._past(track, warm, stamp_ns))
 
     def _seen(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
               intrinsics: CameraIntrinsics | None) -> NDArray[np.float64]:

@@ -40,7 +40,6 @@ from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.layouts import Layout, get_layout
 from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera
-from pose_lifter.core.prior import PosePrior
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
@@ -55,7 +54,6 @@ __all__ = [
     "SkeletonInput",
     "SkipSkeleton",
     "check_output",
-    "compute_ahead",
     "expiry_stamps",
     "frame_over_cap",
     "skeleton_input",
@@ -292,37 +290,17 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
     return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
 
 
-def compute_ahead(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
-                  ) -> None:
-    """The prior's network for every ``(pipeline, skeleton, stamp, intrinsics)`` about to be lifted (each
-    pipeline's tracks as they are now) in one pass over its weights
-    (:meth:`~pose_lifter.core.lifter.Lifter.compute_prior_ahead`; the lifts' results are the same
-    with or without it). It never raises: whatever goes wrong here costs only speed (each lift
-    then computes its own pose; the pass's use is asserted in tests/messages/test_frame.py), never
-    a skeleton. (Each lift reads its input again as this reads it: the prior's input is prepared
-    twice per person.)"""
-    if not frames:
-        return
-    try:
-        expected = [e for pipeline, inp, stamp, intrinsics in frames
-                    if (e := pipeline.expected_prior(inp, stamp, intrinsics)) is not None]
-        lifter.compute_prior_ahead(expected)
-    except Exception:
-        lifter.compute_prior_ahead([])
-
-
 def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines share ``lifter``): the prior's network for all of them in one pass
-    (:func:`compute_ahead`), then their solves in step (:func:`pose_lifter.core.batch.gather`), each
-    round's runs of alternations in one compiled pass. Each person gets what they get lifted
-    alone (their track is theirs; the kernel solves each run on its own operands). Their
+    pipelines share ``lifter``): their solves in step (:func:`pose_lifter.core.batch.gather`), each
+    round's runs of alternations in one compiled pass and its prior's poses in one pass of each
+    prior's network. Each person gets what they get lifted alone (their track is theirs; the
+    kernel solves each run on its own operands, the network's rows do not mix). Their
     ``solve_time`` is the whole lift's time divided among them."""
     if not frames:
         return []
     start = time.perf_counter()
-    compute_ahead(lifter, frames)
     steps = gather([pipeline.lift_steps(inp, stamp, intrinsics)
                     for pipeline, inp, stamp, intrinsics in frames], capture=True)
     done = lifter.runs.solve(steps)
@@ -447,15 +425,6 @@ class FramePipeline:
         except Exception as err:
             return _refusal(err, inp.track_id)
         return LiftedSkeleton(inp, result, joints, tracked.warm_started, 0.0, tracked.fit_pose_camera)
-
-    def expected_prior(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics = None
-                       ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]] | None:
-        """The prior and its input that :meth:`lift` of this skeleton is expected to run
-        (:meth:`TrackPolicy.expected_prior`; None when there are none or the input is refused)."""
-        try:
-            return self.policy.expected_prior(inp.track_id, stamp_ns, inp.points, inp.confidence, intrinsics)
-        except PoseLifterError:
-            return None
 
     def end_frame(self, stamp_ns: int) -> None:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""

@@ -7,8 +7,7 @@ not, so each track is a chain. A chain expires its track at the stamps a pipelin
 frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
 node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
 (:func:`lift_chains`), so that the prior's network runs once per step for all of them
-(:class:`~pose_lifter.core.prior_ahead.PosesAhead`); a chain's outcomes do not depend on its
-group.
+(:func:`~pose_lifter.core.prior.prior_calls`); a chain's outcomes do not depend on its group.
 """
 
 from __future__ import annotations
@@ -150,7 +149,7 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
 
 
 #: Chains lifted in step by one task (:func:`chain_groups`): up to this many people's prior
-#: networks run in one pass over the weights (:meth:`Lifter.compute_prior_ahead`).
+#: networks run in one pass over the weights (:func:`~pose_lifter.core.prior.prior_calls`).
 GROUP_CHAINS: Final[int] = 8
 
 
@@ -187,8 +186,8 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     Message by message, the chains' items of that message are expired as their chain requires,
     then lifted together, each in its chain's pipeline (:func:`lift_together`: the prior's
     networks in one pass, the runs of alternations in one compiled pass per round). A chain's
-    outcomes are those of lifting it alone: the chains share only the lifter, whose poses
-    computed ahead and runs are bit for bit those computed alone."""
+    outcomes are those of lifting it alone: the chains share only the lifter, whose prior's poses
+    and runs are bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
@@ -216,7 +215,6 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
             # the centred smoothing starts from the fit's own pose; with the measurement update,
             # from the published one (which has read each frame's 2D; docs/tuning.md)
             fits[c].append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
-    lifter.compute_prior_ahead([])
     if smoothing_s > 0:
         return [smooth_chain(d, f, settings, smoothing_s) for d, f in zip(out, fits, strict=True)]
     return out
