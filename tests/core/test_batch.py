@@ -10,9 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions
-from pose_lifter.core.batch import Failed, gather, outcomes, solve
+from pose_lifter.core.batch import Failed, PriorCall, gather, outcomes, solve
 from pose_lifter.core.errors import SolverError
-from pose_lifter.core.prior import PriorCall
 from pose_lifter.core.run_kernel import RunCall, RunOut, _run_kernel, run_calls
 from pose_lifter.core.tracking import TrackedLift, TrackPolicy
 from synthetic_poses import synthetic_poses

@@ -12,13 +12,12 @@ import tolerances as tol
 from filmed import filmed_views
 from pose_lifter.core import Lifter, LifterOptions
 from pose_lifter.core._jit import HAVE_NUMBA
+from pose_lifter.core.batch import PriorCall, prior_calls
 from pose_lifter.core.errors import InvalidInputError, PriorFileError
 from pose_lifter.core.prior import (
     DEFAULT_PRIOR_PATH,
     DEFAULT_TEMPORAL_PRIOR_PATH,
     PosePrior,
-    PriorCall,
-    prior_calls,
     prior_features,
 )
 from pose_lifter.core.synthetic import synthetic_poses

@@ -18,12 +18,12 @@ from numpy.typing import NDArray
 
 from ._fast import mean_rows, median_rows, row_norms
 from ._jit import njit
-from .batch import Steps, gather
+from .batch import PriorCall, Steps, gather
 from .errors import InvalidInputError
 from .options import LifterOptions
 from .pose_model import PoseModel
 from .pose_step import PriorRows
-from .prior import PosePrior, PriorCall
+from .prior import PosePrior
 from .results import Camera, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
@@ -157,7 +157,7 @@ class PriorFit:
         one given), else ``prior`` (a windowed ``prior`` gets this frame repeated).
 
         A solve (:mod:`pose_lifter.core.batch`): the pose is yielded as a
-        :class:`~pose_lifter.core.prior.PriorCall`, so the poses of a frame's people go through
+        :class:`~pose_lifter.core.batch.PriorCall`, so the poses of a frame's people go through
         the network in one pass.
 
         Raises
@@ -177,7 +177,7 @@ class PriorFit:
                     ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
         """The prior :meth:`predict` runs and its input: this frame (12, 2), (12,), or its window
         (W, 12, 2), (W, 12) with the ``past`` frames (see :meth:`predict`; what
-        :class:`~pose_lifter.core.prior.PriorCall` takes)."""
+        :class:`~pose_lifter.core.batch.PriorCall` takes)."""
         prior = self.prior
         if past is not None and len(past[0]) > 0 and self.temporal_prior is not None:
             prior = self.temporal_prior

@@ -43,8 +43,8 @@ from ._jit import HAVE_NUMBA, njit
 from .errors import InvalidInputError, PriorFileError
 from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
-__all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "PriorCall", "normalise_2d",
-           "prior_calls", "prior_features"]
+__all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "flip_rows", "normalise_2d",
+           "prior_features"]
 
 #: The prior shipped with the package (``make prior``: tools/train_prior.py).
 DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "prior_mlp.npz"
@@ -505,7 +505,7 @@ class PosePrior:
 
     def _forward_small(self, x: NDArray[np.float32]) -> NDArray[np.float64]:
         """:meth:`forward` through the compiled layer pass (:meth:`forward` sends it 1 to
-        SMALL_BATCH rows; :func:`prior_calls` any number). Each
+        SMALL_BATCH rows; :func:`pose_lifter.core.batch.prior_calls` any number). Each
         row's arithmetic is independent of the others': a row's output is the same bit for bit
         in a pass of 2 rows or of 200."""
         h = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
@@ -555,69 +555,3 @@ class PosePrior:
         out[..., :2] += centre[..., None, :]
         return out
 
-
-@dataclass(frozen=True, eq=False)
-class PriorCall:
-    """One pose a solve asks of a prior (:mod:`pose_lifter.core.batch`): ``prior.predict(points,
-    visible, flip)``, computed with the other poses of its round (:func:`prior_calls`).
-
-    Attributes
-    ----------
-    prior : PosePrior
-    points : ndarray, shape (12, 2) or (W, 12, 2)
-        A frame, or a window of frames for a prior with ``window`` W.
-    visible : ndarray of bool, shape (12,) or (W, 12)
-    flip : bool
-        Test-time flip averaging (``LifterOptions.prior_flip``).
-    """
-
-    prior: PosePrior
-    points: NDArray[np.float64]
-    visible: NDArray[np.bool_]
-    flip: bool
-
-
-def prior_calls(calls: list[PriorCall]) -> list[NDArray[np.float64] | Exception]:
-    """The poses (12, 3) of ``calls``, in order, each prior's network in one pass over its
-    weights for all of its calls.
-
-    A prior's weights (4 MB) are no longer in the cache when the next person needs them, so one
-    pose alone costs the reading of the weights from memory; the poses of a frame's people read
-    them once. The rows go through the compiled layer pass (:meth:`PosePrior._forward_small`),
-    whose rows do not mix: each pose is the one :meth:`PosePrior.predict` gives alone, bit for
-    bit. Without numba each pose is computed alone (numpy's matrix product of many rows rounds
-    otherwise than of two). An input the prior refuses gets its :class:`InvalidInputError` in
-    its place.
-    """
-    out: list[NDArray[np.float64] | Exception] = [_NO_POSE] * len(calls)
-    if not HAVE_NUMBA:
-        for i, c in enumerate(calls):
-            try:
-                out[i] = c.prior.predict(c.points, c.visible, c.flip)
-            except InvalidInputError as err:
-                out[i] = err
-        return out
-    groups: dict[tuple[int, bool], list[tuple[int, NDArray[np.float64], NDArray[np.float64],
-                                              NDArray[np.float64]]]] = {}
-    for i, c in enumerate(calls):
-        try:
-            feats, centre, radius = c.prior.features(c.points, c.visible)
-        except InvalidInputError as err:
-            out[i] = err
-            continue
-        groups.setdefault((id(c.prior), c.flip), []).append((i, feats, centre, radius))
-    for (_, flip), members in groups.items():
-        prior = calls[members[0][0]].prior
-        # stacked: the rows and the poses formed once for all of them (element-wise: what
-        # PosePrior.input_rows and .poses give each alone)
-        rows = flip_rows(np.stack([f for _, f, _, _ in members]), flip)  # (n, [2,] d)
-        h = np.ascontiguousarray(rows.reshape(-1, rows.shape[-1]), dtype=np.float32)
-        y = prior._forward_small(h).reshape(*rows.shape[:-1], N_JOINTS, 3)
-        poses = prior.poses(y, np.stack([c for _, _, c, _ in members]),
-                            np.stack([r for _, _, _, r in members]), flip)  # (n, 12, 3)
-        for (i, _, _, _), pose in zip(members, poses, strict=True):
-            out[i] = pose
-    return out
-
-
-_NO_POSE: Final[NDArray[np.float64]] = np.empty((0, 3))

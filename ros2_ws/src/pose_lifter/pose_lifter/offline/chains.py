@@ -7,7 +7,7 @@ not, so each track is a chain. A chain expires its track at the stamps a pipelin
 frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
 node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
 (:func:`lift_chains`), so that the prior's network runs once per step for all of them
-(:func:`~pose_lifter.core.prior.prior_calls`); a chain's outcomes do not depend on its group.
+(:func:`~pose_lifter.core.batch.prior_calls`); a chain's outcomes do not depend on its group.
 """
 
 from __future__ import annotations
@@ -149,7 +149,7 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
 
 
 #: Chains lifted in step by one task (:func:`chain_groups`): up to this many people's prior
-#: networks run in one pass over the weights (:func:`~pose_lifter.core.prior.prior_calls`).
+#: networks run in one pass over the weights (:func:`~pose_lifter.core.batch.prior_calls`).
 GROUP_CHAINS: Final[int] = 8
 
 
