@@ -148,9 +148,12 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     return chains, per_msg, checked
 
 
-#: Chains lifted in step by one task (:func:`chain_groups`): up to this many people's prior
-#: networks run in one pass over the weights (:func:`~pose_lifter.core.batch.prior_calls`).
-GROUP_CHAINS: Final[int] = 8
+#: Chains lifted in step by one task (:func:`chain_groups`): up to this many people's rounds
+#: share one pass of the prior's network and one call of the run kernel
+#: (:mod:`pose_lifter.core.batch`), as the node's frame of up to ``max_skeletons`` (64) people.
+#: One process, the 36-track bag (tools/bench_lift.py --workers 1): CPU 12.3 s with groups of
+#: 8, 10.3 with 32, 9.7 with 64 (every track in step).
+GROUP_CHAINS: Final[int] = 64
 
 
 def chain_groups(chains: list[list[Item]], tasks_per_worker: int, workers: int) -> list[list[int]]:
