@@ -56,6 +56,9 @@ MUTATIONS = [
     ("a batch of solves hands each its neighbours' runs", "core/batch.py",
      "advance(i, outs[start:start + size])", "advance(i, outs[::-1][start:start + size])",
      "tests/core/test_batch.py"),
+    ("a round's prior poses handed to each other's people", "core/batch.py",
+     "zip(members, poses, strict=True)", "zip(members, poses[::-1], strict=True)",
+     "tests/core/test_prior.py"),
     ("a busy node drops the newest waiting frame instead of the oldest", "ros/frame_queue.py",
      "dropped = self._items.popleft() if", "dropped = self._items.pop() if", "tests/ros/test_node_parts.py"),
 ]
