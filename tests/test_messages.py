@@ -106,6 +106,60 @@ def test_place_in_camera_recovers_metric_position() -> None:
         place_in_camera(fake_result(rot, 0.0, t), leg, (fx, fy), (cx, cy), 3.0)
 
 
+def test_place_poses_places_a_crowd_as_each_alone() -> None:
+    """The people of a frame placed in one pass are placed as each alone: the centroid from the
+    pinhole model, the pose turned by the smallest rotation from the optical axis onto the ray
+    to it (an axis perpendicular to both), a person on the axis not turned; and a scale not
+    > 0 refused. Through :func:`place_lifted`, that refusal costs only its own person."""
+    from pose_lifter.core.placement import place_poses
+    from pose_lifter.core.tracking import TrackedLift
+    from pose_lifter.messages.frame import FrameSettings, SkeletonInput, SkipSkeleton, Solved, place_lifted
+
+    fx, fy, cx, cy, leg = 600.0, 580.0, 320.0, 240.0, 0.43
+    rng = np.random.default_rng(4)
+    n = 7
+    rots = Rotation.random(n, random_state=5).as_matrix()
+    scales = rng.uniform(40.0, 200.0, size=n)
+    trans = rng.uniform(0.0, 640.0, size=(n, 2))
+    trans[3] = [cx, cy]  # on the optical axis
+    results = [fake_result(rots[i], float(scales[i]), trans[i], seed=i) for i in range(n)]
+    poses = np.array([r.pose_camera for r in results])
+    joints = place_poses(poses, scales, trans, leg, (fx, fy), (cx, cy), 5.0)
+    assert joints.shape == (n, 12, 3)
+    z_axis = np.array([0.0, 0.0, 1.0])
+    for i in range(n):
+        np.testing.assert_array_equal(joints[i], place_in_camera(results[i], leg, (fx, fy), (cx, cy), 5.0))
+        z = 0.5 * (fx + fy) * leg / scales[i]
+        centroid = np.array([(trans[i, 0] - cx) * z / fx, (trans[i, 1] - cy) * z / fy, z])
+        np.testing.assert_allclose(joints[i].mean(axis=0), centroid, atol=tol.ROUND_OFF)
+        # the turn: local -> joints - centroid, found by least squares from the 12 joints
+        local = poses[i] * leg
+        turn = np.linalg.lstsq(local, joints[i] - centroid, rcond=None)[0].T
+        ray = centroid / np.linalg.norm(centroid)
+        np.testing.assert_allclose(turn @ z_axis, ray, atol=tol.ROUND_OFF)
+        np.testing.assert_allclose(turn @ turn.T, np.eye(3), atol=tol.ROUND_OFF)
+        axis = np.cross(z_axis, ray)
+        np.testing.assert_allclose(turn @ axis, axis, atol=tol.ROUND_OFF)  # turned about it
+        if i == 3:
+            np.testing.assert_allclose(turn, np.eye(3), atol=tol.ROUND_OFF)
+    np.testing.assert_allclose(place_poses(poses, scales, trans, leg, None, None, 4.0).mean(axis=1),
+                               np.tile([0.0, 0.0, 4.0], (n, 1)), atol=tol.ROUND_OFF)
+    bad = scales.copy()
+    bad[2] = 0.0
+    with pytest.raises(InvalidInputError, match="scale"):
+        place_poses(poses, bad, trans, leg, (fx, fy), (cx, cy), 5.0)
+    # in the frame pipeline, the person with the bad scale is refused and the others placed
+    solved = [Solved(SkeletonInput(i, np.zeros((12, 2)), np.ones(12)),
+                     TrackedLift(fake_result(rots[i], float(bad[i]), trans[i], seed=i), False, False))
+              for i in range(n)]
+    out = place_lifted([(FrameSettings(lower_leg_length=leg), ((fx, fy), (cx, cy)), s) for s in solved])
+    assert [isinstance(o, SkipSkeleton) for o in out] == [i == 2 for i in range(n)]
+    for i, o in enumerate(out):
+        if i != 2:
+            assert not isinstance(o, SkipSkeleton) and o.track_id == i
+            np.testing.assert_array_equal(o.joints_m, joints[i])
+
+
 def test_result_to_skeleton3d_fields_and_inverse() -> None:
     rot = Rotation.from_euler("zyx", [30, -60, 100], degrees=True).as_matrix()
     res = fake_result(rot, 80.0, np.array([300.0, 200.0]))

@@ -7,9 +7,9 @@ Wraps the functions of the offline path with timers (cumulative seconds, nested 
 ``lift_messages`` holds ``split_chains``, ``lift_chains`` and the message building) and prints one
 ``PHASES`` line on stderr at exit. ``lift_chains`` is the per-track solve (the core's time) in
 one process; with workers it runs in the children and is not seen here. Inside it, ``run_kernel``
-(the compiled alternations, :func:`pose_lifter.core.run_kernel._run_kernel`) and
-``prior_network`` (the learned prior's network, its compiled layer pass
-:meth:`pose_lifter.core.prior.PosePrior._forward_small`, for the poses of a round of lifts);
+(the compiled alternations of a round of lifts, :func:`pose_lifter.core.run_kernel._run_kernel_many`)
+and ``prior_network`` (the learned prior's network for the poses of a round,
+:meth:`pose_lifter.core.prior.PosePrior._forward_small`);
 the rest of ``lift_chains`` is the Python around them (tracking, the lifter's set-up, results).
 """
 
@@ -54,12 +54,12 @@ def main() -> int:
     wrap(off, "split_chains")
     wrap(off, "lift_chains")
     try:
-        import pose_lifter.core.runs as runs
+        import pose_lifter.core.run_kernel as rk
         from pose_lifter.core.prior import PosePrior
     except ImportError:  # an older layout
         pass
     else:
-        wrap(runs, "_run_kernel", "run_kernel")
+        wrap(rk, "_run_kernel_many", "run_kernel")
         wrap(PosePrior, "_forward_small", "prior_network")
     wrap(off, "lift_messages")
     wrap(bags.BagWriter, "write", "BagWriter.write")

@@ -13,8 +13,9 @@ what the node publishes for it. One frame:
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
 2. :func:`lift_together` (:meth:`FramePipeline.lift_steps` of each skeleton in step): the core's
    :class:`~pose_lifter.core.tracking.TrackPolicy` (warm starts, re-initialisation,
-   out-of-order stamps refused), then :func:`~pose_lifter.core.placement.place_in_camera`
-   and :func:`check_output` (nothing non-finite leaves).
+   out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
+   placed together, :func:`~pose_lifter.core.placement.place_poses`) and :func:`check_output`
+   (nothing non-finite leaves).
 3. :meth:`FramePipeline.end_frame`: tracks unseen for ``track_timeout`` are forgotten.
 
 Every refusal is a :class:`SkipSkeleton` with a short kind (the node counts and warns them; the
@@ -39,10 +40,10 @@ from pose_lifter.core.batch import Failed, Steps, gather
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.layouts import Layout, get_layout
 from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera
+from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera, place_poses
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from pose_lifter.core.tracking import OutOfOrderFrameError, TrackPolicy
+from pose_lifter.core.tracking import OutOfOrderFrameError, TrackedLift, TrackPolicy
 from pose_lifter.messages.convert import skeleton2d_to_arrays
 
 __all__ = [
@@ -53,9 +54,12 @@ __all__ = [
     "LiftedSkeleton",
     "SkeletonInput",
     "SkipSkeleton",
+    "Solved",
     "check_output",
     "expiry_stamps",
     "frame_over_cap",
+    "lift_together",
+    "place_lifted",
     "skeleton_input",
 ]
 
@@ -295,8 +299,9 @@ def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
     pipelines share ``lifter``): their solves in step (:func:`pose_lifter.core.batch.gather`), each
     round's runs of alternations in one compiled pass and its prior's poses in one pass of each
-    prior's network. Each person gets what they get lifted alone (their track is theirs; the
-    kernel solves each run on its own operands, the network's rows do not mix). Their
+    prior's network; then the people seen by one camera placed in one pass
+    (:func:`place_lifted`). Each person gets what they get lifted alone (their track is theirs;
+    the kernel solves each run on its own operands, the network's rows do not mix). Their
     ``solve_time`` is the whole lift's time divided among them."""
     if not frames:
         return []
@@ -304,14 +309,63 @@ def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
     steps = gather([pipeline.lift_steps(inp, stamp, intrinsics)
                     for pipeline, inp, stamp, intrinsics in frames], capture=True)
     done = lifter.runs.solve(steps)
-    share = (time.perf_counter() - start) / len(frames)
-    out: list[LiftedSkeleton | SkipSkeleton] = []
-    for (_, inp, _, _), d in zip(frames, done, strict=True):
+    out: list[LiftedSkeleton | SkipSkeleton | None] = []
+    solved: list[tuple[int, FramePipeline, Intrinsics, Solved]] = []
+    for k, ((pipeline, inp, _, intrinsics), d) in enumerate(zip(frames, done, strict=True)):
         if isinstance(d, Failed):  # lift_steps refuses what it can; anything else is a bug
             out.append(_refusal(d.error, inp.track_id))
+        elif isinstance(d, SkipSkeleton):
+            out.append(d)
         else:
-            out.append(d if isinstance(d, SkipSkeleton) else d.timed(share))
-    return out
+            out.append(None)  # placed below
+            solved.append((k, pipeline, intrinsics, d))
+    placed = place_lifted([(p.settings, i, d) for _, p, i, d in solved])
+    share = (time.perf_counter() - start) / len(frames)
+    for (k, _, _, _), lifted in zip(solved, placed, strict=True):
+        out[k] = lifted if isinstance(lifted, SkipSkeleton) else lifted.timed(share)
+    return [x for x in out if x is not None]
+
+
+@dataclass(frozen=True)
+class Solved:
+    """A skeleton through the track's policy, before its placement (:meth:`FramePipeline.lift_steps`)."""
+
+    input: SkeletonInput
+    tracked: TrackedLift
+
+
+def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, Solved]]
+                 ) -> list[LiftedSkeleton | SkipSkeleton]:
+    """The metric joints of solved skeletons, each with its pipeline's settings and its camera's
+    intrinsics: those that share them in one :func:`~pose_lifter.core.placement.place_poses`
+    pass, then :func:`check_output` per skeleton. A group the pass refuses (a camera scale not
+    > 0) is placed skeleton by skeleton, so a refusal costs only its own skeleton."""
+    out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
+    groups: dict[tuple[float, float, Intrinsics], list[int]] = {}
+    for k, (st, intrinsics, _) in enumerate(solved):
+        groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics), []).append(k)
+    for (leg, distance, intrinsics), members in groups.items():
+        focal, centre = intrinsics if intrinsics is not None else (None, None)
+        results = [solved[k][2].tracked.result for k in members]
+        try:
+            joints = place_poses(np.array([r.pose_camera for r in results], dtype=np.float64),
+                                 np.array([float(r.camera.scale) for r in results], dtype=np.float64),
+                                 np.array([r.camera.translation for r in results], dtype=np.float64),
+                                 leg, focal, centre, distance)
+        except PoseLifterError:
+            joints = None
+        for m, k in enumerate(members):
+            d = solved[k][2]
+            track_id, res = d.input.track_id, d.tracked.result
+            try:
+                j = (joints[m] if joints is not None
+                     else place_in_camera(res, leg, focal, centre, distance))
+                check_output(track_id, res, j)
+            except Exception as err:
+                out[k] = _refusal(err, track_id)
+                continue
+            out[k] = LiftedSkeleton(d.input, res, j, d.tracked.warm_started, 0.0, d.tracked.fit_pose_camera)
+    return [x for x in out if x is not None]
 
 
 def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:
@@ -409,22 +463,17 @@ class FramePipeline:
         return CheckedFrame(True, tuple(out), skipped, n_left_out)
 
     def lift_steps(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
-                   ) -> Steps[LiftedSkeleton | SkipSkeleton]:
-        """Step 2 for one checked skeleton, as a solve (:mod:`pose_lifter.core.batch`): lifted and
-        placed, or why not (never raises for bad input or a failed solve). Its ``solve_time`` is
-        0 here: the caller that drives it times it (:meth:`frame`: the frame's lift shared by its
-        people)."""
+                   ) -> Steps[Solved | SkipSkeleton]:
+        """Step 2 for one checked skeleton up to its placement, as a solve
+        (:mod:`pose_lifter.core.batch`): through the track's policy, or why not (never raises for
+        bad input or a failed solve). :func:`lift_together` drives it with the frame's other
+        people and places them together."""
         try:
             tracked = yield from self.policy.lift_steps(inp.track_id, stamp_ns, inp.points, inp.confidence,
                                                         intrinsics)
-            result = tracked.result
-            focal, centre = intrinsics if intrinsics is not None else (None, None)
-            joints = place_in_camera(result, self.settings.lower_leg_length, focal, centre,
-                                     self.settings.default_distance)
-            check_output(inp.track_id, result, joints)
         except Exception as err:
             return _refusal(err, inp.track_id)
-        return LiftedSkeleton(inp, result, joints, tracked.warm_started, 0.0, tracked.fit_pose_camera)
+        return Solved(inp, tracked)
 
     def end_frame(self, stamp_ns: int) -> None:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""

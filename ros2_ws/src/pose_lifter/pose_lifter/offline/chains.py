@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.placement import place_in_camera
+from pose_lifter.core.placement import place_poses
 from pose_lifter.core.skeleton import N_JOINTS
 from pose_lifter.core.smoothing import centred_smoothing
 from pose_lifter.messages import convert as m
@@ -236,12 +236,20 @@ def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], setti
         return done
     leg = settings.lower_leg_length
     placed = np.empty((len(rows), N_JOINTS, 3))
+    by_camera: dict[Intrinsics, list[int]] = {}  # the rows seen with each camera's intrinsics
     for r, i in enumerate(rows):
-        d, fit = done[i], fits[i]
-        assert d.result is not None
-        res = d.result if fit is None else d.result.with_pose(pose_camera=fit)
-        focal, centre = d.item.intrinsics if d.item.intrinsics is not None else (None, None)
-        placed[r] = place_in_camera(res, leg, focal, centre, settings.default_distance)
+        by_camera.setdefault(done[i].item.intrinsics, []).append(r)
+    for intrinsics, members in by_camera.items():
+        poses = np.empty((len(members), N_JOINTS, 3))
+        scales, translations = np.empty(len(members)), np.empty((len(members), 2))
+        for j, r in enumerate(members):
+            res, fit = done[rows[r]].result, fits[rows[r]]
+            assert res is not None
+            poses[j] = res.pose_camera if fit is None else fit
+            scales[j], translations[j] = float(res.camera.scale), res.camera.translation
+        focal, centre = intrinsics if intrinsics is not None else (None, None)
+        placed[members] = place_poses(poses, scales, translations, leg, focal, centre,
+                                      settings.default_distance)
     stamps = np.array([done[i].item.stamp_ns for i in rows], dtype=np.int64)
     smooth = centred_smoothing(placed, stamps, np.ones(len(rows), dtype=bool), smoothing_s,
                                settings.track_timeout)
