@@ -272,3 +272,30 @@ def test_a_detectors_training_noise_is_per_joint_and_correlated_over_a_window() 
     assert np.array_equal(off.features, base.features)
     on = make_batch(seqs, 64, np.random.default_rng(2), replace(GENERALISE, p_detector=1.0), window=4)
     assert np.isfinite(on.features).all() and not np.array_equal(on.features, base.features)
+
+
+def test_an_offline_priors_target_is_the_frame_future_frames_before_the_windows_last(tmp_path: Path) -> None:
+    """``make_batch(..., future=f)``: the same inputs as the causal batch of the same draws, the
+    target the pose of the window's frame ``window - 1 - f``; the lifter refuses such a prior."""
+    from pose_lifter.core.metrics import p_mpjpe
+    from pose_lifter.core.models import LifterData
+
+    window = 5
+    seq = synthetic_poses(window, seed=7)  # one sequence of one window: it starts at frame 0
+    aug = Augmentation(limb_spread=0.0, p_noise=0.0, p_missing=0.0, p_outliers=0.0)
+    batches = {f: make_batch([seq], 16, np.random.default_rng(4), aug, window=window, future=f)
+               for f in (0, 2)}
+    assert np.array_equal(batches[0].features, batches[2].features)
+    for f, batch in batches.items():
+        errs = [p_mpjpe(batch.camera_pose, np.broadcast_to(seq[k], batch.camera_pose.shape)).max()
+                for k in range(window)]
+        assert errs[window - 1 - f] < EXACT  # that frame, seen from the sample's camera
+        assert min(e for k, e in enumerate(errs) if k != window - 1 - f) > 1e-3
+    with pytest.raises(ValueError, match="future"):
+        make_batch([seq], 4, np.random.default_rng(4), aug, window=window, future=window)
+    net = _residual(np.random.default_rng(0))
+    from dataclasses import replace
+
+    replace(net, metadata={"future_frames": 2}).save(tmp_path / "offline.npz")
+    with pytest.raises(PriorFileError, match="causal"):
+        LifterData.packaged("hybrid").temporal_prior(str(tmp_path / "offline.npz"))

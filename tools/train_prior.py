@@ -3,7 +3,7 @@
     .venv/bin/python tools/train_prior.py [--data ../shared/data/cmu] [--model residual|mlp]
         [--augment generalise|views] [--aug NAME=VALUE ...] [--epochs 24] [--samples 100000]
         [--width 512] [--blocks 2] [--dropout 0.25] [--hidden 768 768] [--holdout every8|action]
-        [--window 1] [--seed 0] [--out PATH]
+        [--window 1] [--future 0] [--seed 0] [--out PATH]
 
 The defaults give the packaged ``data/prior_mlp.npz`` (``make prior``): a residual MLP
 (:func:`pose_lifter.mocap.prior_training.train_prior_residual`: 512 units, 2 residual blocks, dropout
@@ -85,6 +85,9 @@ def main() -> None:
     ap.add_argument("--blocks", type=int, default=2, help="residual: blocks")
     ap.add_argument("--dropout", type=float, default=0.25, help="residual: dropout")
     ap.add_argument("--window", type=int, default=1, help="frames per input (> 1: causal temporal variant)")
+    ap.add_argument("--future", type=int, default=0,
+                    help="frames of the window after the target one (> 0: an offline prior, past and future; "
+                         "for tools/prior_validation.py, the lifter reads causal priors only)")
     ap.add_argument("--step", type=int, default=None,
                     help="mocap frame step (default 2, or 4 with --window > 1)")
     ap.add_argument("--seed", type=int, default=0)
@@ -118,11 +121,12 @@ def main() -> None:
             prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks,
                                          dropout=args.dropout, epochs=args.epochs,
                                          samples_per_epoch=args.samples, window=args.window,
-                                         seed=args.seed, aug=aug, log=lambda s: print(s, flush=True))
+                                         seed=args.seed, aug=aug, log=lambda s: print(s, flush=True),
+                                         future=args.future)
         else:
             prior = train_prior(fit, val, hidden=tuple(args.hidden), epochs=args.epochs,
                                 samples_per_epoch=args.samples, window=args.window, seed=args.seed, aug=aug,
-                                log=lambda s: print(s, flush=True))
+                                log=lambda s: print(s, flush=True), future=args.future)
     meta = dict(prior.metadata)
     meta.update({"command": "python tools/train_prior.py " + " ".join(sys.argv[1:]),
                  "training_trials": fit_ids, "validation_trials": val_ids, "frame_step": step})

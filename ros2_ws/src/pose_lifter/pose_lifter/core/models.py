@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .bases import PoseBases, default_bases_path
+from .errors import PriorFileError
 from .options import LimbProportions, Mode
 from .pose_model import PoseModel
 from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
@@ -65,13 +66,23 @@ class LifterData:
     def prior(self, path: str) -> PosePrior:
         """The learned prior of ``path`` (``""``: the packaged one)."""
         if self._prior is None or self._prior_key != path:
-            self._prior = PosePrior.load(path or None)
+            self._prior = _causal(PosePrior.load(path or None), path)
             self._prior_key = path
         return self._prior
 
     def temporal_prior(self, path: str) -> PosePrior:
         """The causal temporal prior of ``path`` (``""``: the packaged one)."""
         if self._temporal is None or self._temporal_key != path:
-            self._temporal = PosePrior.load(path or DEFAULT_TEMPORAL_PRIOR_PATH)
+            self._temporal = _causal(PosePrior.load(path or DEFAULT_TEMPORAL_PRIOR_PATH), path)
             self._temporal_key = path
         return self._temporal
+
+
+def _causal(prior: PosePrior, path: str) -> PosePrior:
+    """``prior`` if it predicts the last frame of its window; a prior trained to read frames after
+    the one it lifts (``tools/train_prior.py --future``) cannot run on a live track."""
+    future = prior.metadata.get("future_frames", 0)
+    if future:
+        raise PriorFileError(f"{path or 'the packaged prior'}: a prior of the frame {future} before its "
+                             "window's last (an offline experiment); the lifter reads causal priors only")
+    return prior

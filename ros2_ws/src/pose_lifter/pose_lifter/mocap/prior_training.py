@@ -105,9 +105,15 @@ class TrainingBatch:
 
 
 def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.Generator,
-               aug: Augmentation = Augmentation(), window: int = 1) -> TrainingBatch:
-    """``n`` augmented samples from random frames (windows of ``window`` consecutive frames,
-    the last one current) of ``sequences`` (each (F, 12, 3), metres, Y-up)."""
+               aug: Augmentation = Augmentation(), window: int = 1, future: int = 0) -> TrainingBatch:
+    """``n`` augmented samples from random frames (windows of ``window`` consecutive frames) of
+    ``sequences`` (each (F, 12, 3), metres, Y-up). The target is the window's frame
+    ``window - 1 - future``: the last one (a causal prior), or with ``future > 0`` one that has
+    ``future`` frames after it in the window (an offline prior that reads past and future). The
+    input is normalised on the last frame (:func:`~pose_lifter.core.prior.prior_features`), the
+    target expressed in that normalisation."""
+    if not 0 <= future < window:
+        raise ValueError(f"future must be in [0, window), got {future} for a window of {window}")
     lens = np.array([len(s) for s in sequences])
     ok = lens >= window
     if not np.any(ok):
@@ -160,7 +166,7 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     short = vis[:, -1].sum(axis=1) < aug.min_visible
     vis[short, -1] = True
     feats, centre, radius = prior_features(pts, vis, window)
-    cur_cam = cam[:, -1]
+    cur_cam = cam[:, -1 - future]
     scale = radius * dist  # metres per output unit
     tgt = np.empty((n, N_JOINTS, 3))
     tgt[..., :2] = (cur_cam[..., :2] / dist[:, None, None] - centre[:, None, :]) / radius[:, None, None]
@@ -233,7 +239,7 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
                 hidden: tuple[int, ...] = (768, 768), epochs: int = 30, samples_per_epoch: int = 100_000,
                 lr: float = 1e-3, lr_final: float = 5e-5, batch_size: int = 512, l2: float = 1e-5,
                 window: int = 1, seed: int = 0, aug: Augmentation = Augmentation(),
-                log: Callable[[str], None] | None = print) -> PosePrior:
+                log: Callable[[str], None] | None = print, future: int = 0) -> PosePrior:
     """Fit the prior by minimising the mean squared error of its standardised outputs
     (``MLPRegressor`` loss ``1/2 mean ||(y - m)/s - f(x)||^2 + l2/2 ||W||^2``) over freshly
     augmented samples of ``train``; ``validation`` (held-out trials) gives the uncertainty
@@ -251,6 +257,9 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
         Adam step size of the first and the last epoch (geometric decay).
     window : int
         Frames per input (causal temporal variant for ``window > 1``).
+    future : int
+        Frames of the window after the one whose pose is the target (0: causal; > 0: an offline
+        prior, which the lifter does not load, :meth:`~pose_lifter.core.prior.PosePrior.load`).
     seed : int
 
     Returns
@@ -260,8 +269,9 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
     from sklearn.neural_network import MLPRegressor
 
     rng = np.random.default_rng(seed)
-    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug, window)
-    first = make_batch(train, samples_per_epoch, rng, aug, window)
+    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug,
+                     window, future)
+    first = make_batch(train, samples_per_epoch, rng, aug, window, future)
     out_mean = first.targets.mean(axis=0)
     out_scale = first.targets.std(axis=0) + 1e-6
     reg = MLPRegressor(hidden_layer_sizes=hidden, activation="relu", solver="adam", alpha=l2,
@@ -272,7 +282,7 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
     prior: PosePrior | None = None
     for ep in range(epochs):
         if ep > 0:
-            batch = make_batch(train, samples_per_epoch, rng, aug, window)
+            batch = make_batch(train, samples_per_epoch, rng, aug, window, future)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             reg.partial_fit(batch.features, (batch.targets - out_mean) / out_scale)
@@ -290,7 +300,7 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
     mm, err = _evaluate(prior, val)
     meta = {"validation_p_mpjpe_mm": round(mm, 2), "hidden": list(hidden), "epochs": epochs,
             "samples_per_epoch": samples_per_epoch, "seed": seed, "lr": lr, "lr_final": lr_final,
-            "l2": l2, "batch_size": batch_size, "augmentation": aug.__dict__,
+            "l2": l2, "batch_size": batch_size, "augmentation": aug.__dict__, "future_frames": future,
             "train_seconds": round(time.perf_counter() - t0, 1)}
     return PosePrior(prior.weights, prior.biases, out_mean, out_scale, np.maximum(err, 1e-6), window, meta)
 
@@ -299,8 +309,8 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
                          width: int = 512, blocks: int = 2, dropout: float = 0.25, epochs: int = 30,
                          samples_per_epoch: int = 100_000, lr: float = 1e-3, lr_final: float = 5e-5,
                          batch_size: int = 256, weight_decay: float = 1e-5, window: int = 1, seed: int = 0,
-                         aug: Augmentation = Augmentation(), log: Callable[[str], None] | None = print
-                         ) -> PosePrior:
+                         aug: Augmentation = Augmentation(), log: Callable[[str], None] | None = print,
+                         future: int = 0) -> PosePrior:
     """Fit a residual prior (Martinez et al. 2017) in PyTorch (the optional extra ``train``).
 
     The network: ``Linear -> BatchNorm -> ReLU -> Dropout`` to ``width`` units, ``blocks``
@@ -316,7 +326,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     ----------
     train, validation : sequences of ndarray, shape (F, 12, 3)
     width, blocks, dropout : network size and dropout probability during training
-    epochs, samples_per_epoch, lr, lr_final, batch_size, weight_decay, window, seed, aug
+    epochs, samples_per_epoch, lr, lr_final, batch_size, weight_decay, window, seed, aug, future
         As in :func:`train_prior`.
 
     Returns
@@ -329,8 +339,9 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     torch.set_num_threads(1)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug, window)
-    first = make_batch(train, samples_per_epoch, rng, aug, window)
+    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug,
+                     window, future)
+    first = make_batch(train, samples_per_epoch, rng, aug, window, future)
     out_mean = first.targets.mean(axis=0)
     out_scale = first.targets.std(axis=0) + 1e-6
     n_in = FRAME_DIM * window
@@ -358,7 +369,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     loss_val = float("nan")
     for ep in range(epochs):
         if ep > 0:
-            batch = make_batch(train, samples_per_epoch, rng, aug, window)
+            batch = make_batch(train, samples_per_epoch, rng, aug, window, future)
         for g in opt.param_groups:
             g["lr"] = lr * decay ** ep
         x = torch.from_numpy(batch.features.astype(np.float32))
@@ -383,7 +394,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     meta = {"validation_p_mpjpe_mm": round(mm, 2), "model": "residual", "width": width, "blocks": blocks,
             "dropout": dropout, "epochs": epochs, "samples_per_epoch": samples_per_epoch, "seed": seed,
             "lr": lr, "lr_final": lr_final, "weight_decay": weight_decay, "batch_size": batch_size,
-            "augmentation": aug.__dict__, "final_loss": round(loss_val, 5),
+            "augmentation": aug.__dict__, "future_frames": future, "final_loss": round(loss_val, 5),
             "train_seconds": round(time.perf_counter() - t0, 1), "torch": torch.__version__}
     return replace(prior, abs_error=np.maximum(err, 1e-6), metadata=meta)
 
