@@ -339,7 +339,8 @@ def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, Solved]]
     """The metric joints of solved skeletons, each with its pipeline's settings and its camera's
     intrinsics: those that share them in one :func:`~pose_lifter.core.placement.place_poses`
     pass, then :func:`check_output` per skeleton. A group the pass refuses (a camera scale not
-    > 0) is placed skeleton by skeleton, so a refusal costs only its own skeleton."""
+    > 0, or anything unexpected) is placed skeleton by skeleton, so a refusal costs only its own
+    skeleton."""
     out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
     groups: dict[tuple[float, float, Intrinsics], list[int]] = {}
     for k, (st, intrinsics, _) in enumerate(solved):
@@ -352,7 +353,7 @@ def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, Solved]]
                                  np.array([float(r.camera.scale) for r in results], dtype=np.float64),
                                  np.array([r.camera.translation for r in results], dtype=np.float64),
                                  leg, focal, centre, distance)
-        except PoseLifterError:
+        except Exception:  # placed one by one below, where a refusal costs only its own skeleton
             joints = None
         for m, k in enumerate(members):
             d = solved[k][2]
