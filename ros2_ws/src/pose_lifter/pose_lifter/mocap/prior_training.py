@@ -259,7 +259,7 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
         Frames per input (causal temporal variant for ``window > 1``).
     future : int
         Frames of the window after the one whose pose is the target (0: causal; > 0: an offline
-        prior, which the lifter does not load, :meth:`~pose_lifter.core.prior.PosePrior.load`).
+        prior, which the lifter refuses, :class:`~pose_lifter.core.models.LifterData`).
     seed : int
 
     Returns
