@@ -307,7 +307,7 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
 
 def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArray[np.float64]], *,
                          width: int = 512, blocks: int = 2, dropout: float = 0.25, epochs: int = 30,
-                         samples_per_epoch: int = 100_000, lr: float = 1e-3, lr_final: float = 5e-5,
+                         samples_per_epoch: int = 100_000, lr: tuple[float, float] = (1e-3, 5e-5),
                          batch_size: int = 256, weight_decay: float = 1e-5, window: int = 1, seed: int = 0,
                          aug: Augmentation = Augmentation(), log: Callable[[str], None] | None = print,
                          future: int = 0) -> PosePrior:
@@ -317,7 +317,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     residual blocks of two such layers (their output added to their input), a linear output.
     Minimises the mean squared error of the standardised outputs ``mean ||(y - m)/s - f(x)||^2``
     with Adam (decoupled weight decay ``weight_decay``, step size decayed geometrically from
-    ``lr`` to ``lr_final`` over the epochs) on freshly augmented samples of ``train`` per epoch
+    ``lr[0]`` to ``lr[1]`` over the epochs) on freshly augmented samples of ``train`` per epoch
     (as :func:`train_prior`). The batch normalisation (running statistics) is folded into the
     linear layers of the returned :class:`PosePrior`, which runs in numpy. Deterministic for a
     seed on one thread (``torch.set_num_threads(1)``).
@@ -326,8 +326,11 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     ----------
     train, validation : sequences of ndarray, shape (F, 12, 3)
     width, blocks, dropout : network size and dropout probability during training
-    epochs, samples_per_epoch, lr, lr_final, batch_size, weight_decay, window, seed, aug, future
+    epochs, samples_per_epoch, batch_size, weight_decay, window, seed, aug, future
         As in :func:`train_prior`.
+    lr : (float, float)
+        Adam's step size at the first and at the last epoch (as ``lr``, ``lr_final`` of
+        :func:`train_prior`).
 
     Returns
     -------
@@ -361,8 +364,9 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
         out: torch.Tensor = head(h)
         return out
 
-    opt = torch.optim.AdamW(modules.parameters(), lr=lr, weight_decay=weight_decay)
-    decay = (lr_final / lr) ** (1.0 / max(1, epochs - 1))
+    lr_first, lr_final = lr
+    opt = torch.optim.AdamW(modules.parameters(), lr=lr_first, weight_decay=weight_decay)
+    decay = (lr_final / lr_first) ** (1.0 / max(1, epochs - 1))
     gen = torch.Generator().manual_seed(seed)
     t0 = time.perf_counter()
     batch = first
@@ -371,7 +375,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
         if ep > 0:
             batch = make_batch(train, samples_per_epoch, rng, aug, window, future)
         for g in opt.param_groups:
-            g["lr"] = lr * decay ** ep
+            g["lr"] = lr_first * decay ** ep
         x = torch.from_numpy(batch.features.astype(np.float32))
         y = torch.from_numpy(((batch.targets - out_mean) / out_scale).astype(np.float32))
         modules.train()
@@ -393,7 +397,7 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     mm, err = _evaluate(prior, val)
     meta = {"validation_p_mpjpe_mm": round(mm, 2), "model": "residual", "width": width, "blocks": blocks,
             "dropout": dropout, "epochs": epochs, "samples_per_epoch": samples_per_epoch, "seed": seed,
-            "lr": lr, "lr_final": lr_final, "weight_decay": weight_decay, "batch_size": batch_size,
+            "lr": lr_first, "lr_final": lr_final, "weight_decay": weight_decay, "batch_size": batch_size,
             "augmentation": aug.__dict__, "future_frames": future, "final_loss": round(loss_val, 5),
             "train_seconds": round(time.perf_counter() - t0, 1), "torch": torch.__version__}
     return replace(prior, abs_error=np.maximum(err, 1e-6), metadata=meta)
