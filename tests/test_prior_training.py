@@ -277,6 +277,8 @@ def test_a_detectors_training_noise_is_per_joint_and_correlated_over_a_window() 
 def test_an_offline_priors_target_is_the_frame_future_frames_before_the_windows_last(tmp_path: Path) -> None:
     """``make_batch(..., future=f)``: the same inputs as the causal batch of the same draws, the
     target the pose of the window's frame ``window - 1 - f``; the lifter refuses such a prior."""
+    from dataclasses import replace
+
     from pose_lifter.core.metrics import p_mpjpe
     from pose_lifter.core.models import LifterData
 
@@ -294,8 +296,6 @@ def test_an_offline_priors_target_is_the_frame_future_frames_before_the_windows_
     with pytest.raises(ValueError, match="future"):
         make_batch([seq], 4, np.random.default_rng(4), aug, window=window, future=window)
     net = _residual(np.random.default_rng(0))
-    from dataclasses import replace
-
     replace(net, metadata={"future_frames": 2}).save(tmp_path / "offline.npz")
     with pytest.raises(PriorFileError, match="causal"):
         LifterData.packaged("hybrid").temporal_prior(str(tmp_path / "offline.npz"))
