@@ -35,6 +35,7 @@ class EchoLifter:
         self.pose -= self.pose.mean(axis=0)
 
     options = LifterOptions(mode="paper")
+    reads_ahead = False
 
     runs = RUNS_NEEDED_NONE
 
@@ -228,3 +229,42 @@ def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together()
     # enough groups of people seen together: the halves' tracks are not mixed
     assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
                for g in chain_groups(chains[:20], 1, 1))
+
+
+def test_an_offline_lift_reads_each_tracks_next_frames(tmp_path: Path) -> None:
+    """With the centred smoothing (``smoothing_s > 0``) the lifter reads ahead: its temporal prior
+    is the packaged offline one, and each item of a chain carries its track's next frames (the
+    prior's ``future_frames`` items after it); at ``smoothing_s = 0`` the node's causal prior, and
+    the items as they are. The next frames change the fits; the lifted skeletons are the same."""
+    from pose_lifter.messages.frame import FramePipeline
+    from pose_lifter.offline.chains import inputs_ahead, split_chains
+
+    ahead, causal = LiftSettings().build_lifter(), NODE.build_lifter()
+    assert ahead.reads_ahead and not causal.reads_ahead
+    assert causal.temporal_prior is not None and causal.temporal_prior.future_frames == 0
+    n_ahead = ahead.temporal_prior.future_frames if ahead.temporal_prior is not None else 0
+    assert n_ahead > 0
+    bag = Path(__file__).resolve().parents[1] / "bags" / "two_people.mcap"
+    msgs = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, ["/keypoints_2d"])][:20]
+    chains, _, _ = split_chains(msgs, [], FramePipeline(causal, offline.frame_settings(NODE)))
+    chain = max(chains, key=len)
+    assert len(chain) > n_ahead + 1
+    kept = inputs_ahead(causal, chain)
+    assert all(x is it.input for x, it in zip(kept, chain, strict=True))
+    for k, inp in enumerate(inputs_ahead(ahead, chain)):
+        nxt = chain[k + 1:k + 1 + n_ahead]
+        assert inp.ahead is not None and inp.ahead.confidence is not None
+        assert inp.ahead.stamps_ns.tolist() == [it.stamp_ns for it in nxt]
+        points = np.array([it.input.points for it in nxt]).reshape(-1, 12, 2)
+        np.testing.assert_array_equal(inp.ahead.points, points)
+        np.testing.assert_array_equal(inp.ahead.confidence,
+                                      np.array([it.input.confidence for it in nxt]).reshape(-1, 12))
+        np.testing.assert_array_equal(inp.points, chain[k].input.points)
+    fits = {}
+    for name, lifter in (("ahead", ahead), ("causal", causal)):
+        _, frames = offline.lift_bag(bag, tmp_path / f"{name}.mcap", lifter, LiftSettings(max_messages=30),
+                                     progress=False)
+        fits[name] = {(f.stamp_ns, f.track_id): f.joints_m for f in frames}
+    assert fits["ahead"].keys() == fits["causal"].keys()
+    moved = [np.abs(fits["ahead"][k] - fits["causal"][k]).max() for k in fits["ahead"]]
+    assert max(moved) > 1e-3

@@ -275,8 +275,9 @@ def test_a_detectors_training_noise_is_per_joint_and_correlated_over_a_window() 
 
 
 def test_an_offline_priors_target_is_the_frame_future_frames_before_the_windows_last(tmp_path: Path) -> None:
-    """``make_batch(..., future=f)``: the same inputs as the causal batch of the same draws, the
-    target the pose of the window's frame ``window - 1 - f``; the lifter refuses such a prior."""
+    """``make_batch(..., future=f)``: the target is the pose of the window's frame
+    ``window - 1 - f``, and the window is normalised on that frame; only a lifter that reads
+    ahead takes such a prior."""
     from dataclasses import replace
 
     from pose_lifter.core.metrics import p_mpjpe
@@ -287,15 +288,24 @@ def test_an_offline_priors_target_is_the_frame_future_frames_before_the_windows_
     aug = Augmentation(limb_spread=0.0, p_noise=0.0, p_missing=0.0, p_outliers=0.0)
     batches = {f: make_batch([seq], 16, np.random.default_rng(4), aug, window=window, future=f)
                for f in (0, 2)}
-    assert np.array_equal(batches[0].features, batches[2].features)
     for f, batch in batches.items():
         errs = [p_mpjpe(batch.camera_pose, np.broadcast_to(seq[k], batch.camera_pose.shape)).max()
                 for k in range(window)]
         assert errs[window - 1 - f] < EXACT  # that frame, seen from the sample's camera
         assert min(e for k, e in enumerate(errs) if k != window - 1 - f) > 1e-3
+        # every joint visible: the normalised frame's coordinates are centred with RMS radius 1
+        frames = batch.features.reshape(16, window, 36)[..., :24].reshape(16, window, 12, 2)
+        for k in range(window):
+            centred = np.abs(frames[:, k].mean(axis=1)).max() < EXACT
+            unit = np.abs(np.sqrt((frames[:, k] ** 2).sum(axis=-1).mean(axis=-1)) - 1.0).max() < EXACT
+            assert (centred and unit) == (k == window - 1 - f)
     with pytest.raises(ValueError, match="future"):
         make_batch([seq], 4, np.random.default_rng(4), aug, window=window, future=window)
-    net = _residual(np.random.default_rng(0))
+    net = _residual(np.random.default_rng(0), window=window)
     replace(net, metadata={"future_frames": 2}).save(tmp_path / "offline.npz")
-    with pytest.raises(PriorFileError, match="causal"):
+    with pytest.raises(PriorFileError, match="offline lift"):
         LifterData.packaged("hybrid").temporal_prior(str(tmp_path / "offline.npz"))
+    assert LifterData.packaged("hybrid").temporal_prior(str(tmp_path / "offline.npz"), reads_ahead=True
+                                                        ).future_frames == 2
+    with pytest.raises(PriorFileError, match="future_frames"):
+        replace(net, metadata={"future_frames": window})

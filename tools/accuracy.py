@@ -66,7 +66,7 @@ from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.placement import place_in_camera
 from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
-from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.core.tracking import FramesAhead, TrackPolicy
 from pose_lifter.mocap.cmu import load_trial, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -126,7 +126,9 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
         if m in ("paper", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-offline", "hybrid-1"):
             mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t").removesuffix("-offline")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
-            lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings))
+            # an offline lift knows each track's next frames (pose-lifter lift: its offline prior)
+            lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings),
+                                reads_ahead=m.endswith("-offline"))
             lifters[m].warm_up()
     _STATE["lifters"] = lifters
     _STATE["mean"] = PoseBases.load().mean_pose  # the mean-pose floor: the paper's bases, as before
@@ -201,10 +203,14 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             fit = np.full((n, 12, 3), np.nan)
             depth = np.full(n, np.nan)  # the centroid's depth error (%) on a perspective track
             warm = None
+            temporal = lifter.temporal_prior if lifter.reads_ahead else None
+            n_ahead = 0 if temporal is None else temporal.future_frames
             for i in range(n):
                 try:
                     if policy is not None:
-                        t = policy.lift(0, int(stamps[i]), px[i], conf[i], intrinsics)
+                        ahead = (FramesAhead(stamps[i + 1:i + 1 + n_ahead], px[i + 1:i + 1 + n_ahead],
+                                             conf[i + 1:i + 1 + n_ahead]) if n_ahead else None)
+                        t = policy.lift(0, int(stamps[i]), px[i], conf[i], intrinsics, ahead)
                         r = t.result
                         # what pose-lifter lift smooths: the fit's own pose, or the published
                         # one with the measurement update (pose_lifter.offline.chains.lift_chains)

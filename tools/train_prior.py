@@ -1,4 +1,5 @@
-"""Train the packaged learned priors (``make prior``, ``make prior-temporal``) on the training split.
+"""Train the packaged learned priors (``make prior``, ``make prior-temporal``, ``make prior-offline``)
+on the training split.
 
     .venv/bin/python tools/train_prior.py [--data ../shared/data/cmu] [--model residual|mlp]
         [--augment generalise|views] [--aug NAME=VALUE ...] [--epochs 24] [--samples 100000]
@@ -12,8 +13,10 @@ samples with the augmentation ``GENERALISE`` (random views and detector corrupti
 people, arms or legs transplanted from another frame, limbs turned about their joints, the lower
 body out of the image on 10 % of samples), seed 0. ``--window 4 --dropout 0.05 --out
 .../data/prior_mlp_w4.npz`` gives its causal temporal variant (``make prior-temporal``; with
-dropout 0.25 the temporal variant gained almost nothing from the past frames on held-out runs).
-Each took 19-22 min on one thread of the loaded 2-core machine. ``--model mlp --augment views
+dropout 0.25 the temporal variant gained almost nothing from the past frames on held-out runs);
+``--window 7 --future 3 --dropout 0.05 --out .../data/prior_mlp_w7c.npz`` its offline variant,
+which reads 3 frames before the lifted one and 3 after it (``make prior-offline``; what
+``pose-lifter lift`` reads). Each took 19-22 min on one thread of the loaded 2-core machine. ``--model mlp --augment views
 --epochs 30`` is the earlier recipe (scikit-learn MLP 2 x 768, views and corruptions only); the
 cross-action folds (``tools/cross_action.py``, docs/cross_action.md) chose the residual model and
 ``GENERALISE``; ``--aug NAME=VALUE`` changes one field of the augmentation.
@@ -86,8 +89,8 @@ def main() -> None:
     ap.add_argument("--dropout", type=float, default=0.25, help="residual: dropout")
     ap.add_argument("--window", type=int, default=1, help="frames per input (> 1: causal temporal variant)")
     ap.add_argument("--future", type=int, default=0,
-                    help="frames of the window after the target one (> 0: an offline prior, past and future; "
-                         "for tools/prior_validation.py, the lifter reads causal priors only)")
+                    help="frames of the window after the target one (> 0: an offline prior, past and future, "
+                         "which only pose-lifter lift reads)")
     ap.add_argument("--step", type=int, default=None,
                     help="mocap frame step (default 2, or 4 with --window > 1)")
     ap.add_argument("--seed", type=int, default=0)

@@ -170,11 +170,17 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
         one, batch = prior_features(xw, vw, 4), prior_features(xw[None], vw[None], 4)
         for a, b in zip(one, batch, strict=True):
             np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
+        # ... and an offline prior's window, normalised on a frame inside it
+        centred = np.concatenate([xw[1:], xw[:1]]), np.concatenate([vw[1:], vw[:1]])
+        one, batch = prior_features(*centred, 4, 2), prior_features(centred[0][None], centred[1][None], 4, 2)
+        for a, b in zip(one, batch, strict=True):
+            np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=0, atol=tol.ROUND_OFF)
 
 
 def test_the_compiled_features_are_the_numpy_ones() -> None:
     """The per-frame path's compiled features (prior._features_kernel) and their numpy reference
-    (prior._window_features, _frame_features) agree, errors included. The kernel repeats numpy's
+    (prior._window_features, _frame_features) agree, errors included, normalised on any frame of
+    the window. The kernel repeats numpy's
     operations in numpy's order (0 difference measured on every trial here); the bound is
     round-off, so that a compiler's choices on another CPU cannot fail it and a changed operation
     still does."""
@@ -183,20 +189,21 @@ def test_the_compiled_features_are_the_numpy_ones() -> None:
     rng = np.random.default_rng(4)
     for trial in range(300):
         w = int(rng.integers(1, 6))
+        anchor = int(rng.integers(0, w))
         x = rng.normal(size=(w, 12, 2)) * 10.0 ** rng.uniform(-2, 3) + rng.uniform(-1e3, 1e3)
         vis = rng.random((w, 12)) > rng.uniform(0.0, 0.9)
         x[rng.random((w, 12, 2)) < 0.05] = np.nan
         if trial % 50 == 0:
-            x[-1] = 7.0  # all at one point
+            x[anchor] = 7.0  # all at one point
         ref_vis = vis & np.isfinite(x).all(axis=-1)
         try:
             ref = (prior_module._frame_features(x[0], ref_vis[0]) if w == 1
-                   else prior_module._window_features(x, ref_vis))
+                   else prior_module._window_features(x, ref_vis, anchor))
         except InvalidInputError as exc:
             with pytest.raises(InvalidInputError, match=re.escape(str(exc))):
-                prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
+                prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w, anchor)
             continue
-        got = prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w)
+        got = prior_features(x[0] if w == 1 else x, vis[0] if w == 1 else vis, w, anchor)
         for a, b in zip(got, ref, strict=True):
             assert np.shape(a) == np.shape(b), trial
             assert np.allclose(a, b, rtol=tol.ROUND_OFF_LONG, atol=tol.ROUND_OFF), trial

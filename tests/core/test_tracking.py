@@ -169,6 +169,90 @@ def test_a_temporal_prior_sees_the_tracks_past_frames(
     assert track.past(199, 5) is None
 
 
+def test_an_offline_prior_reads_the_tracks_next_frames(
+        bases: PoseBases, real_frames: tuple[np.ndarray, np.ndarray]) -> None:
+    """A prior of the middle frame of a 3-frame window (random weights: the plumbing) gets the
+    previous frame from ``past`` and the next one from ``future``, a missing next frame padded
+    with this one; the per-track policy hands over the evenly spaced next frames of
+    :class:`FramesAhead` with their visible joints; only a lifter that reads ahead takes the
+    prior, and a causal prior ignores the next frames."""
+    from pose_lifter.core.errors import PriorFileError
+    from pose_lifter.core.tracking import FramesAhead
+
+    rng = np.random.default_rng(1)
+    net = PosePrior((rng.normal(size=(108, 16)) * 0.3, rng.normal(size=(16, 36)) * 0.3),
+                    (np.zeros(16), np.zeros(36)), np.zeros(36), np.ones(36), np.ones((12, 3)), window=3,
+                    metadata={"future_frames": 1})
+    with pytest.raises(PriorFileError, match="offline lift"):
+        _ = Lifter(bases, LifterOptions(mode="learned"), temporal_prior=net).temporal_prior
+    lifter = Lifter(bases, LifterOptions(mode="learned"), temporal_prior=net, reads_ahead=True)
+    x = real_frames[0]
+    vis = np.ones(12, dtype=bool)
+    vis3 = np.ones((3, 12), dtype=bool)
+
+    def lifted(past: np.ndarray, future: np.ndarray | None) -> np.ndarray:
+        ctx = TrackContext(past=(past[None], vis[None]),
+                           future=None if future is None else (future[None], vis[None]))
+        pose = lifter.lift(x[1], track=ctx).prior_pose
+        assert pose is not None
+        return pose
+
+    def predicted(frames: list[np.ndarray], visible: np.ndarray = vis3) -> np.ndarray:
+        return net.predict(np.stack(frames), visible, lifter.options.prior_flip)
+
+    np.testing.assert_array_equal(lifted(x[0], x[2]), predicted([x[0], x[1], x[2]]))
+    np.testing.assert_array_equal(lifted(x[0], None), predicted([x[0], x[1], x[1]]))
+    assert np.abs(predicted([x[0], x[1], x[2]]) - predicted([x[0], x[1], x[1]])).max() > 1e-3
+    # the policy: frame 1 with frames 2 and 3 ahead (evenly spaced), then with an uneven step
+    step = 33_333_333
+    conf = np.ones((4, 12))
+    conf[2, 5] = 0.0  # joint 5 of frame 2 below the confidence threshold
+    for stamps, want in (([2 * step, 3 * step], [x[0], x[1], x[2]]), ([3 * step], [x[0], x[1], x[1]])):
+        policy = TrackPolicy(lifter)
+        policy.lift(0, 0, x[0])
+        ahead = FramesAhead(np.array(stamps, dtype=np.int64), x[2:2 + len(stamps)], conf[2:2 + len(stamps)])
+        got = policy.lift(0, step, x[1], None, None, ahead).result.prior_pose
+        visible = vis3.copy()
+        visible[2, 5] = len(stamps) == 1  # the padded frame is this one, every joint visible
+        np.testing.assert_array_equal(got, predicted(want, visible))
+    # a causal temporal prior (the packaged one) reads no next frame
+    causal = Lifter(bases, LifterOptions(mode="hybrid"))
+    runs = []
+    for given in (None, FramesAhead(np.array([2 * step], dtype=np.int64), x[2:3])):
+        policy = TrackPolicy(causal)
+        policy.lift(0, 0, x[0])
+        runs.append(policy.lift(0, step, x[1], None, None, given).result.pose_camera)
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_the_gate_screens_the_next_frames_an_offline_prior_reads(
+        real_frames: tuple[np.ndarray, np.ndarray]) -> None:
+    """Track.screen_ahead: a person walking on (their own motion and a shift of the image) keeps
+    every joint; a joint one frame moves 2 leg lengths away from the others' motion is dropped
+    on that frame, and the frame after is judged against where the joint was before it."""
+    from pose_lifter.core.track import Track
+
+    x = real_frames[0][:4]
+    scale = 100.0  # pixels per leg length
+    track = Track(None, 0)
+    track.fits.append((0, x[0], scale))
+    ahead = x[1:] + np.array([[[3.0, -2.0]], [[6.0, -4.0]], [[9.0, -6.0]]])
+    vis = np.ones(12, dtype=bool)
+    kept = track.screen_ahead(x[0], vis, x[0], ahead, np.ones((3, 12), dtype=bool), 0.8)
+    assert kept.all()
+    jumped = ahead.copy()
+    jumped[1, 7] += [2.0 * scale, 0.0]
+    kept = track.screen_ahead(x[0], vis, x[0], jumped, np.ones((3, 12), dtype=bool), 0.8)
+    assert kept[[0, 2]].all() and kept[1].tolist() == [j != 7 for j in range(12)]
+    # a joint this frame lacks is judged from where the track predicted it
+    lacking = vis.copy()
+    lacking[7] = False
+    predicted = x[0].copy()
+    predicted[7] += [2.0 * scale, 0.0]
+    kept = track.screen_ahead(x[0], lacking, predicted, ahead, np.ones((3, 12), dtype=bool), 0.8)
+    assert kept[0].tolist() == [j != 7 for j in range(12)]
+
+
 def test_the_packaged_temporal_prior_is_used_on_tracked_frames(
         bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
     """The packaged causal temporal prior (4 frames, training split only) loads without pickle;

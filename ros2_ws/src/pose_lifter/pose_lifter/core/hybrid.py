@@ -24,7 +24,7 @@ from .options import LifterOptions
 from .pose_model import PoseModel
 from .pose_step import PriorRows
 from .prior import PosePrior
-from .results import Camera, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
+from .results import Camera, Frames, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
 from .starts import StartRun, Starts
@@ -149,12 +149,11 @@ class PriorFit:
         lp = np.log(p)
         return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))  # np.mean
 
-    def predict(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
-                past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
-                ) -> Steps[tuple[NDArray[np.float64], PosePrior]]:
+    def predict(self, x: NDArray[np.float64], visible: NDArray[np.bool_], past: Frames | None,
+                future: Frames | None = None) -> Steps[tuple[NDArray[np.float64], PosePrior]]:
         """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
-        temporal prior when the lift has ``past`` frames (padded to its window with the oldest
-        one given), else ``prior`` (a windowed ``prior`` gets this frame repeated).
+        temporal prior when the lift has ``past`` frames, else ``prior`` (its window filled as
+        :meth:`prior_input` says).
 
         A solve (:mod:`pose_lifter.core.batch`): the pose is yielded as a
         :class:`~pose_lifter.core.batch.PriorCall`, so the poses of a frame's people go through
@@ -165,34 +164,50 @@ class PriorFit:
         InvalidInputError
             The prior refuses the input.
         """
-        prior, pts, vis = self.prior_input(x, visible, past)
+        prior, pts, vis = self.prior_input(x, visible, past, future)
         (pose,) = yield [PriorCall(prior, pts, vis, self.options.prior_flip)]
         if isinstance(pose, Exception):
             raise pose
         assert isinstance(pose, np.ndarray)
         return pose, prior
 
-    def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_],
-                    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None
-                    ) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
-        """The prior :meth:`predict` runs and its input: this frame (12, 2), (12,), or its window
-        (W, 12, 2), (W, 12) with the ``past`` frames (see :meth:`predict`; what
-        :class:`~pose_lifter.core.batch.PriorCall` takes)."""
+    def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_], past: Frames | None,
+                    future: Frames | None = None) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
+        """The prior :meth:`predict` runs and its input (what
+        :class:`~pose_lifter.core.batch.PriorCall` takes): this frame (12, 2), (12,), or a window
+        (W, 12, 2), (W, 12).
+
+        A window holds ``W - 1 - F`` frames before this one and ``F`` after it (``F`` the prior's
+        :attr:`~pose_lifter.core.prior.PosePrior.future_frames`): the last of ``past`` and the
+        first of ``future``, the missing ones padded with the oldest past frame given and the
+        latest future frame given (or this frame). The temporal prior runs when ``past`` has a
+        frame; otherwise a windowed ``prior`` gets this frame in every place."""
         prior = self.prior
-        if past is not None and len(past[0]) > 0 and self.temporal_prior is not None:
+        has_past = past is not None and len(past[0]) > 0
+        if has_past and self.temporal_prior is not None:
             prior = self.temporal_prior
         if prior.window == 1:
             return prior, x, visible
-        k = prior.window - 1
+        n_future = prior.future_frames
+        k = prior.window - 1 - n_future  # this frame's place in the window
         pts = np.empty((prior.window, N_JOINTS, 2))
         vis = np.empty((prior.window, N_JOINTS), dtype=bool)
-        if past is not None and len(past[0]) > 0:
+        pts[k], vis[k] = x, visible
+        if has_past:
+            assert past is not None
             n_past = len(past[0])
             rows = [max(n_past - k + i, 0) for i in range(k)]
             pts[:k], vis[:k] = past[0][rows], past[1][rows]
         else:
             pts[:k], vis[:k] = x, visible
-        pts[k], vis[k] = x, visible
+        if n_future:
+            n_given = 0 if future is None else len(future[0])
+            if n_given:
+                assert future is not None
+                rows = [min(i, n_given - 1) for i in range(n_future)]
+                pts[k + 1:], vis[k + 1:] = future[0][rows], future[1][rows]
+            else:
+                pts[k + 1:], vis[k + 1:] = x, visible
         # the prior reads only the visible joints (missing ones are zeros of its input)
         return prior, pts, vis
 
@@ -211,7 +226,7 @@ class PriorFit:
             if add.any():
                 x = np.where(add[:, None], fill[0], x)
                 vis = vis | add
-        pose, used = yield from self.predict(x, vis, track.past)
+        pose, used = yield from self.predict(x, vis, track.past, track.future)
         tw = track.temporal_weight
         blend = previous is not None
         target, status = _target_kernel(
@@ -281,12 +296,12 @@ class PriorFit:
         return Starts(tried, total, n_starts, w, prior_pose)
 
     def learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
-                past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None) -> Steps[LiftResult]:
+                past: Frames | None = None, future: Frames | None = None) -> Steps[LiftResult]:
         """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
         own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
         positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
         error of the visible joints in the normalised units. A solve (:meth:`predict`)."""
-        pose_in, _ = yield from self.predict(x, w > 0, past)
+        pose_in, _ = yield from self.predict(x, w > 0, past, future)
         centred = pose_in - pose_in.mean(axis=0)
         flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
         if not ok or not np.all(np.isfinite(flat)):

@@ -65,7 +65,7 @@ from .models import LifterData
 from .options import LifterOptions, Mode
 from .pose_model import LiftedConstraints, PoseModel
 from .prior import PosePrior
-from .results import Camera, LiftResult, Normalisation, TrackContext, WarmStart
+from .results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart
 from .runs import Runs
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, N_JOINTS, RIGHT_LIMBS, limb_lengths
 from .starts import StartRun, paper_starts
@@ -94,11 +94,18 @@ class Lifter:
     prior, temporal_prior : PosePrior or None
         The learned priors (None: loaded from ``options.prior_file`` /
         ``options.temporal_prior_file`` on first use).
+    reads_ahead : bool
+        The lift knows each track's next frames (an offline lift: the tracks' frames are given
+        with :class:`~pose_lifter.core.tracking.FramesAhead`): a temporal prior that reads frames
+        after the one it lifts is accepted. False (a live lift): such a prior is refused
+        (:class:`~pose_lifter.core.errors.PriorFileError` when it loads).
     """
 
     def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None,
-                 prior: PosePrior | None = None, temporal_prior: PosePrior | None = None) -> None:
+                 prior: PosePrior | None = None, temporal_prior: PosePrior | None = None,
+                 reads_ahead: bool = False) -> None:
         self._options = options if options is not None else LifterOptions()
+        self.reads_ahead = bool(reads_ahead)
         o = self._options
         self._data = (LifterData(bases, prior, temporal_prior, o.prior_file, o.temporal_prior_file)
                       if bases is not None else
@@ -138,11 +145,12 @@ class Lifter:
 
     @property
     def temporal_prior(self) -> PosePrior | None:
-        """The causal temporal prior used on tracked frames (``options.temporal_prior``; loaded from
-        ``options.temporal_prior_file`` on first use), or None when it is off."""
+        """The temporal prior used on tracked frames (``options.temporal_prior``; loaded from
+        ``options.temporal_prior_file`` on first use; causal unless :attr:`reads_ahead`), or None
+        when it is off."""
         if not self._options.temporal_prior:
             return None
-        return self._data.temporal_prior(self._options.temporal_prior_file)
+        return self._data.temporal_prior(self._options.temporal_prior_file, self.reads_ahead)
 
     @property
     def model(self) -> PoseModel:
@@ -274,7 +282,7 @@ class Lifter:
         tc = self._track_context(_NO_TRACK if track is None else track, w)
         fit = self._prior_fit
         if fit is not None and self._options.mode == "learned":
-            return (yield from fit.learned(x, w, norm, tc.past))
+            return (yield from fit.learned(x, w, norm, tc.past, tc.future))
         xn = (x - norm.centre) / norm.spread
         cam0: Camera | None = None
         if warm is not None:
@@ -291,12 +299,14 @@ class Lifter:
                             starts.prior_pose)
 
     def _track_context(self, track: TrackContext, w: NDArray[np.float64]) -> TrackContext:
-        """``track`` checked, as the modes read it: ``past`` without non-finite joints, ``fill``
-        only for the joints this frame lacks (weight 0), ``temporal_weight`` an array (12,) (the
-        hybrid mode's; the paper mode reads none of it)."""
-        past, fill = track.past, track.fill
+        """``track`` checked, as the modes read it: ``past`` and ``future`` without non-finite
+        joints, ``fill`` only for the joints this frame lacks (weight 0), ``temporal_weight`` an
+        array (12,) (the hybrid mode's; the paper mode reads none of it)."""
+        past, future, fill = track.past, track.future, track.fill
         if past is not None:
-            past = _checked_past(past)
+            past = _checked_frames(past)
+        if future is not None:
+            future = _checked_frames(future)
         if fill is not None:
             fp, fv = np.asarray(fill[0], dtype=np.float64), np.asarray(fill[1], dtype=bool)
             if fp.shape != (N_JOINTS, 2) or fv.shape != (N_JOINTS,):
@@ -306,7 +316,7 @@ class Lifter:
             fill = (fp, fv & np.isfinite(fp).all(axis=-1) & ~(w > 0))
         if self._options.mode != "hybrid":
             return TrackContext(track.limb_proportions, track.data_weight, track.temporal_weight, past,
-                                track.gated, fill)
+                                track.gated, fill, future)
         data_weight = track.data_weight
         if not 0.0 < data_weight <= 1.0:
             raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
@@ -315,7 +325,7 @@ class Lifter:
             tw = np.broadcast_to(tw, (N_JOINTS,)).copy()
         if not ((tw >= 0.0) & (tw <= 1e3)).all():
             raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {track.temporal_weight!r}")
-        return TrackContext(track.limb_proportions, data_weight, tw, past, track.gated, fill)
+        return TrackContext(track.limb_proportions, data_weight, tw, past, track.gated, fill, future)
 
     def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
         """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
@@ -404,12 +414,11 @@ def compile_kernels() -> float:
     return time.perf_counter() - start
 
 
-def _checked_past(past: tuple[NDArray[np.float64], NDArray[np.bool_]]
-                  ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """A track's past frames ``(points (k, 12, 2), used (k, 12))`` as the lift reads them: float64,
-    a joint with a non-finite coordinate unused; InvalidInputError for other shapes."""
-    pp, pv = np.asarray(past[0], dtype=np.float64), np.asarray(past[1], dtype=bool)
+def _checked_frames(frames: Frames) -> Frames:
+    """A track's past or next frames ``(points (k, 12, 2), used (k, 12))`` as the lift reads them:
+    float64, a joint with a non-finite coordinate unused; InvalidInputError for other shapes."""
+    pp, pv = np.asarray(frames[0], dtype=np.float64), np.asarray(frames[1], dtype=bool)
     if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
-        raise InvalidInputError(f"past must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), got "
-                                f"{pp.shape} and {pv.shape}")
+        raise InvalidInputError(f"past and future frames must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), "
+                                f"got {pp.shape} and {pv.shape}")
     return pp, pv & np.isfinite(pp).all(axis=-1)

@@ -14,7 +14,7 @@ from .bases import PoseBases, default_bases_path
 from .errors import PriorFileError
 from .options import LimbProportions, Mode
 from .pose_model import PoseModel
-from .prior import DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
+from .prior import DEFAULT_OFFLINE_PRIOR_PATH, DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
 from .skeleton import ANTHROPOMETRIC_PROPORTIONS
 
 __all__ = ["LifterData"]
@@ -41,6 +41,7 @@ class LifterData:
         self._prior_key: str | None = None if prior is None else prior_file
         self._temporal = temporal_prior
         self._temporal_key: str | None = None if temporal_prior is None else temporal_prior_file
+        self._temporal_given = temporal_prior is not None  # stands for its file option's value
         self._model: PoseModel | None = None
         self._model_key: str | None = None
         mp = bases.mean_pose
@@ -70,19 +71,27 @@ class LifterData:
             self._prior_key = path
         return self._prior
 
-    def temporal_prior(self, path: str) -> PosePrior:
-        """The causal temporal prior of ``path`` (``""``: the packaged one)."""
-        if self._temporal is None or self._temporal_key != path:
-            self._temporal = _causal(PosePrior.load(path or DEFAULT_TEMPORAL_PRIOR_PATH), path)
-            self._temporal_key = path
+    def temporal_prior(self, path: str, reads_ahead: bool = False) -> PosePrior:
+        """The temporal prior of ``path``: causal, or with ``reads_ahead`` (a lift that knows each
+        track's next frames) one that may read frames after the one it lifts
+        (:attr:`PosePrior.future_frames`). ``""``: the packaged one, with ``reads_ahead`` the
+        packaged offline prior (:data:`~pose_lifter.core.prior.DEFAULT_OFFLINE_PRIOR_PATH`)."""
+        key = path or ("offline" if reads_ahead else "")
+        kept = self._temporal_key == (path if self._temporal_given else key)
+        if self._temporal is None or not kept:
+            default = DEFAULT_OFFLINE_PRIOR_PATH if reads_ahead else DEFAULT_TEMPORAL_PRIOR_PATH
+            self._temporal = PosePrior.load(path or default)
+            self._temporal_key, self._temporal_given = key, False
+        if not reads_ahead:
+            _causal(self._temporal, path)
         return self._temporal
 
 
 def _causal(prior: PosePrior, path: str) -> PosePrior:
     """``prior`` if it predicts the last frame of its window; a prior trained to read frames after
     the one it lifts (``tools/train_prior.py --future``) cannot run on a live track."""
-    future = prior.metadata.get("future_frames", 0)
-    if future:
-        raise PriorFileError(f"{path or 'the packaged prior'}: a prior of the frame {future} before its "
-                             "window's last (an offline experiment); the lifter reads causal priors only")
+    if prior.future_frames:
+        raise PriorFileError(f"{path or 'the packaged prior'}: a prior of the frame {prior.future_frames} "
+                             "before its window's last, which needs each track's next frames: only an "
+                             "offline lift (pose-lifter lift) reads it")
     return prior

@@ -43,14 +43,18 @@ from ._jit import HAVE_NUMBA, njit
 from .errors import InvalidInputError, PriorFileError
 from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
-__all__ = ["DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "flip_rows", "normalise_2d",
-           "prior_features"]
+__all__ = ["DEFAULT_OFFLINE_PRIOR_PATH", "DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior",
+           "flip_rows", "normalise_2d", "prior_features"]
 
 #: The prior shipped with the package (``make prior``: tools/train_prior.py).
 DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parent.parent / "data" / "prior_mlp.npz"
 #: The causal temporal variant (a window of the track's last 4 frames at 30 Hz, no look-ahead):
 #: ``make prior-temporal``.
 DEFAULT_TEMPORAL_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w4.npz")
+#: The temporal variant of a lift that knows each track's next frames (``pose-lifter lift``): a
+#: window of 7 frames at 30 Hz centred on the lifted one, 3 before and 3 after:
+#: ``make prior-offline``.
+DEFAULT_OFFLINE_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w7c.npz")
 _FORMAT_VERSION: Final[int] = 1
 #: Format of a prior with residual blocks (adds the member ``blocks``).
 _FORMAT_VERSION_RESIDUAL: Final[int] = 2
@@ -96,7 +100,8 @@ def normalise_2d(points: NDArray[np.float64], visible: NDArray[np.bool_]
     return d / radius[..., None, None], centre, radius
 
 
-def prior_features(points: NDArray[np.float64], visible: NDArray[np.bool_], window: int = 1
+def prior_features(points: NDArray[np.float64], visible: NDArray[np.bool_], window: int = 1,
+                   anchor: int | None = None
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Network input of frames or windows.
 
@@ -104,30 +109,35 @@ def prior_features(points: NDArray[np.float64], visible: NDArray[np.bool_], wind
     ----------
     points : ndarray, shape (..., window, 12, 2) (or (..., 12, 2) when ``window == 1``)
     visible : ndarray of bool, shape (..., window, 12) (or (..., 12))
-        The last frame of a window is the current one; it needs >= 2 visible joints. Joints
-        with non-finite coordinates count as missing.
+        The window's frame ``anchor`` needs >= 2 visible joints. Joints with non-finite
+        coordinates count as missing.
     window : int
+    anchor : int, optional
+        The frame every frame of the window is normalised on (the lifted one; default the last).
 
     Returns
     -------
     features : ndarray, shape (..., 36 * window)
     centre : ndarray, shape (..., 2)
     radius : ndarray, shape (...)
-        The current frame's normalisation (:func:`normalise_2d`).
+        The anchor frame's normalisation (:func:`normalise_2d`).
     """
+    a = window - 1 if anchor is None else int(anchor)
+    if not 0 <= a < window:
+        raise InvalidInputError(f"anchor must be in [0, {window}), got {anchor!r}")
     x = np.asarray(points, dtype=np.float64)
     vis = np.asarray(visible, dtype=bool)
     if window == 1 and x.shape == (N_JOINTS, 2) and vis.shape == (N_JOINTS,):
-        return _compiled_features(x[None], vis[None])
+        return _compiled_features(x[None], vis[None], 0)
     if window > 1 and x.shape == (window, N_JOINTS, 2) and vis.shape == (window, N_JOINTS):
-        return _compiled_features(x, vis)
+        return _compiled_features(x, vis, a)
     vis = vis & np.all(np.isfinite(x), axis=-1)
     if window == 1 and (x.ndim < 3 or x.shape[-3] != 1):
         x, vis = x[..., None, :, :], vis[..., None, :]
     if x.shape[-3:] != (window, N_JOINTS, 2) or vis.shape != x.shape[:-1]:
         raise InvalidInputError(f"points must be (..., {window}, {N_JOINTS}, 2) with visibility "
                                 f"(..., {window}, {N_JOINTS}), got {x.shape} and {vis.shape}")
-    _, centre, radius = normalise_2d(x[..., -1, :, :], vis[..., -1, :])
+    _, centre, radius = normalise_2d(x[..., a, :, :], vis[..., a, :])
     xz = np.where(vis[..., None], x, 0.0)
     u = np.where(vis[..., None], (xz - centre[..., None, None, :]) / radius[..., None, None, None], 0.0)
     feats = np.concatenate([u.reshape(*u.shape[:-2], 2 * N_JOINTS), vis.astype(np.float64)], axis=-1)
@@ -155,22 +165,22 @@ def _frame_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
 
 
 @njit
-def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_]
+def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor: int
                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
     """:func:`_window_features` of a window (W, 12, 2) (C-contiguous; W = 1: one frame) with its
-    visibility (W, 12), joints with non-finite coordinates missing: numpy's operations in numpy's
-    order (the centre the visible joints' sum row by row over their count, as ``mean(axis=0)``;
-    the radius's sum of squares numpy's :func:`pairwise_sum`). Returns ``(features (36 W,),
-    centre (2,), radius, visible joints of the last frame)``; the features are zero where
-    :func:`_window_features` raises (fewer than 2 visible joints, a radius not finite or
-    <= 1e-12)."""
+    visibility (W, 12), joints with non-finite coordinates missing, normalised on its frame
+    ``anchor``: numpy's operations in numpy's order (the centre the visible joints' sum row by
+    row over their count, as ``mean(axis=0)``; the radius's sum of squares numpy's
+    :func:`pairwise_sum`). Returns ``(features (36 W,), centre (2,), radius, visible joints of the
+    anchor frame)``; the features are zero where :func:`_window_features` raises (fewer than 2
+    visible joints, a radius not finite or <= 1e-12)."""
     w = x.shape[0]
     nj = x.shape[1]
     vis = np.empty((w, nj), dtype=np.bool_)
     for f in range(w):
         for j in range(nj):
             vis[f, j] = visible[f, j] and math.isfinite(x[f, j, 0]) and math.isfinite(x[f, j, 1])
-    last = w - 1
+    last = anchor
     n = 0
     c0 = 0.0
     c1 = 0.0
@@ -207,13 +217,14 @@ def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_]
     return feats, centre, radius, n
 
 
-def _compiled_features(x: NDArray[np.float64], visible: NDArray[np.bool_]
+def _compiled_features(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor: int
                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """:func:`prior_features` of one window (W, 12, 2) and its visibility (W, 12) (W = 1: a frame,
-    its features (36,)) by :func:`_features_kernel`: the values of :func:`_window_features`
-    (:func:`_frame_features`), the per-frame path of the lifter."""
+    its features (36,)) normalised on its frame ``anchor``, by :func:`_features_kernel`: the
+    values of :func:`_window_features` (:func:`_frame_features`), the per-frame path of the
+    lifter."""
     feats, centre, radius, n = _features_kernel(np.ascontiguousarray(x, dtype=np.float64),
-                                                np.ascontiguousarray(visible, dtype=np.bool_))
+                                                np.ascontiguousarray(visible, dtype=np.bool_), anchor)
     if n < 2:
         raise InvalidInputError("the prior needs at least 2 visible joints")
     if not (math.isfinite(radius) and radius > 1e-12):
@@ -221,17 +232,17 @@ def _compiled_features(x: NDArray[np.float64], visible: NDArray[np.bool_]
     return feats, centre, np.asarray(radius)
 
 
-def _window_features(x: NDArray[np.float64], vis: NDArray[np.bool_]
+def _window_features(x: NDArray[np.float64], vis: NDArray[np.bool_], anchor: int = -1
                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """:func:`prior_features` of one window (W, 12, 2) with its visibility (W, 12) (finite where
-    visible), normalised by its last frame as :func:`_frame_features` does: the same values in a
-    few numpy calls (the per-frame path of a tracked person)."""
-    last, centre, radius = _frame_features(x[-1], vis[-1])
+    visible), normalised on its frame ``anchor`` (default the last) as :func:`_frame_features`
+    does: the same values in a few numpy calls (the reference of :func:`_features_kernel`)."""
+    own, centre, radius = _frame_features(x[anchor], vis[anchor])
     feats = np.zeros((len(x), FRAME_DIM))
     u = feats[:, : 2 * N_JOINTS].reshape(len(x), N_JOINTS, 2)
     u[vis] = (x[vis] - centre) / radius
     feats[:, 2 * N_JOINTS:] = vis
-    feats[-1] = last
+    feats[anchor] = own
     return feats.reshape(FRAME_DIM * len(x)), centre, radius
 
 
@@ -313,12 +324,13 @@ class PosePrior:
     abs_error : ndarray, shape (12, 3)
         Mean absolute error per output on held-out frames (> 0).
     window : int
-        Frames per input (1 = single frame; > 1 the causal temporal variant).
+        Frames per input (1 = single frame; > 1 a temporal variant).
     blocks : int
         Residual blocks (0: a plain MLP). With ``blocks = k`` there are ``2 k + 2`` layers: the
         input layer, two square layers per block, the output layer.
     metadata : dict
-        Training data, augmentation, command, seed, validation figures.
+        Training data, augmentation, command, seed, validation figures; ``future_frames`` (an
+        int, default 0) is :attr:`future_frames`.
     """
 
     weights: tuple[NDArray[np.float64], ...]
@@ -368,9 +380,20 @@ class PosePrior:
                 raise PriorFileError(f"{name} must be finite with shape {shape}, got {arr.shape}")
         if np.any(self.out_scale <= 0) or np.any(self.abs_error <= 0):
             raise PriorFileError("out_scale and abs_error must be positive")
+        future = self.metadata.get("future_frames", 0)
+        if not isinstance(future, int) or isinstance(future, bool) or not 0 <= future < self.window:
+            raise PriorFileError(f"metadata future_frames must be an integer in [0, {self.window}) for a "
+                                 f"window of {self.window}, got {future!r}")
         object.__setattr__(self, "_layers32", tuple(
             (np.ascontiguousarray(w, dtype=np.float32), np.ascontiguousarray(b, dtype=np.float32))
             for w, b in zip(self.weights, self.biases, strict=True)))
+
+    @property
+    def future_frames(self) -> int:
+        """Frames of the window after the one the prior lifts: 0 for a causal prior (its window
+        ends on the lifted frame), ``F > 0`` for an offline one whose window holds ``window - 1 - F``
+        frames before the lifted one and ``F`` after it (``tools/train_prior.py --future``)."""
+        return int(self.metadata.get("future_frames", 0))
 
     # ------------------------------------------------------------------ files
     @classmethod
@@ -463,8 +486,8 @@ class PosePrior:
 
     def features(self, points: NDArray[np.float64], visible: NDArray[np.bool_]
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """:func:`prior_features` with this prior's window."""
-        return prior_features(points, visible, self.window)
+        """:func:`prior_features` with this prior's window, normalised on the frame it lifts."""
+        return prior_features(points, visible, self.window, self.window - 1 - self.future_frames)
 
     def forward(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
         """The network: ``relu`` hidden layers (the residual blocks' outputs added to their

@@ -10,11 +10,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
+from typing import TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._fast import mean_rows
+
+#: Frames of a track's 2D, oldest first: points (k, 12, 2) in input units and which of their
+#: joints are used (k, 12).
+Frames: TypeAlias = tuple[NDArray[np.float64], NDArray[np.bool_]]
 
 __all__ = [
     "AlphaResult",
@@ -22,6 +27,7 @@ __all__ = [
     "Camera",
     "CameraResult",
     "Duals",
+    "Frames",
     "LiftResult",
     "Normalisation",
     "PoseResult",
@@ -209,6 +215,11 @@ class TrackContext:
         their joints were used: the input of a temporal prior (``PosePrior.window > 1``; missing
         history is padded with the oldest frame given, or this one). Ignored by a single-frame
         prior.
+    future : (ndarray (k, 12, 2), ndarray of bool (k, 12)), optional
+        The track's next frames (oldest first, evenly spaced from this one) and which of their
+        joints are visible: read by a temporal prior of a frame inside its window
+        (``PosePrior.future_frames > 0``, an offline lift's; missing frames are padded with the
+        latest one given, or this one). Ignored by a causal prior.
     gated : bool
         The frame was screened by the per-track outlier gate; the outlier pass then uses
         ``options.outlier_threshold_gated`` instead of ``options.outlier_threshold``.
@@ -223,9 +234,10 @@ class TrackContext:
     limb_proportions: NDArray[np.float64] | None = None
     data_weight: float = 1.0
     temporal_weight: float | NDArray[np.float64] = 0.0
-    past: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+    past: Frames | None = None
     gated: bool = False
     fill: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None
+    future: Frames | None = None
 
 
 @dataclass(frozen=True)

@@ -173,6 +173,31 @@ class Track:
         self.gated = np.where(out, self.gated + 1, 0)
         return np.asarray(out, dtype=bool)
 
+    def screen_ahead(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
+                     predicted: NDArray[np.float64], ahead: NDArray[np.float64],
+                     ahead_vis: NDArray[np.bool_], limit: float) -> NDArray[np.bool_]:
+        """The joints of the next frames ``ahead`` (k, 12, 2) the gate keeps, (k, 12): frame by
+        frame from this one (its joints ``vis`` (12,) kept, the others where the track
+        ``predicted`` them), a visible joint farther than ``limit`` leg lengths (or
+        GATE_NOISE_FACTOR times the track's noise) from where the frame before had it, after
+        removing the median motion of the joints seen on both, is dropped: :meth:`gate` over the
+        frames an offline lift reads ahead, whose confident outliers would otherwise reach the
+        prior."""
+        scale = max(self.fits[-1][2], 1e-12)
+        limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())
+        ref = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted)
+        kept = np.array(ahead_vis, dtype=bool)
+        for f in range(len(ahead)):
+            both = kept[f]
+            if not both.any():
+                continue
+            motion = median_rows(ahead[f][both] - ref[both])
+            out = both & (row_norms(ahead[f] - ref - motion) / scale > limit)
+            if int(np.count_nonzero(out)) <= GATE_MAX_FRACTION * int(np.count_nonzero(both)):
+                kept[f] &= ~out
+            ref = np.where(kept[f][:, None], ahead[f], ref + motion)
+        return kept
+
     def predict(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
                 stamp_ns: int) -> NDArray[np.float64] | None:
         """Where each joint (12, 2) should be on this frame: where the last frame had it (its

@@ -45,6 +45,10 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   frame's fit. Every step reads only this and earlier frames (no look-ahead: the node and the
   offline lift publish the same).
 
+* a temporal prior of a frame inside its window (``PosePrior.future_frames > 0``: an offline
+  lift's, which knows each track's next frames) reads the track's next frames too: the caller
+  gives them (:class:`FramesAhead`); the live node's priors are causal.
+
 
 Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
 A track's state and the rules that read it are :mod:`pose_lifter.core.track`.
@@ -64,14 +68,14 @@ from .errors import PoseLifterError
 from .lifter import Lifter
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
-from .results import LiftResult, TrackContext, WarmStart
+from .results import Frames, LiftResult, TrackContext, WarmStart
 from .skeleton import N_JOINTS
 from .smoothing import CausalSmoother
 from .track import NOISE_MIN_WEIGHT, Track
 from .track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 
-__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "OutOfOrderFrameError", "TrackPolicy",
-           "TrackedLift", "perspective_corrected"]
+__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "FramesAhead", "OutOfOrderFrameError",
+           "TrackPolicy", "TrackedLift", "perspective_corrected"]
 
 
 #: Output smoothing (:class:`~pose_lifter.core.smoothing.CausalSmoother`): the fraction of unused
@@ -123,6 +127,25 @@ def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None
         return None
     vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=1))
     return vis if conf is None else vis & (conf >= threshold)
+
+
+@dataclass(frozen=True)
+class FramesAhead:
+    """A track's next frames as its detector gave them (what an offline lift knows of a frame's
+    future; :meth:`TrackPolicy.lift_steps`).
+
+    Attributes
+    ----------
+    stamps_ns : ndarray of int64, shape (n,)
+        Increasing, after the frame lifted.
+    points : ndarray, shape (n, 12, 2)
+        Input units, as the frame's.
+    confidence : ndarray, shape (n, 12), optional
+    """
+
+    stamps_ns: NDArray[np.int64]
+    points: NDArray[np.float64]
+    confidence: NDArray[np.float64] | None = None
 
 
 class OutOfOrderFrameError(PoseLifterError):
@@ -234,13 +257,15 @@ class TrackPolicy:
 
     def lift(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
              confidence: NDArray[np.float64] | None = None,
-             intrinsics: CameraIntrinsics | None = None) -> TrackedLift:
+             intrinsics: CameraIntrinsics | None = None, ahead: FramesAhead | None = None) -> TrackedLift:
         """:meth:`lift_steps` driven alone."""
-        return self.lifter.runs.solve(self.lift_steps(track_id, stamp_ns, points, confidence, intrinsics))
+        return self.lifter.runs.solve(self.lift_steps(track_id, stamp_ns, points, confidence, intrinsics,
+                                                      ahead))
 
     def lift_steps(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
                    confidence: NDArray[np.float64] | None = None,
-                   intrinsics: CameraIntrinsics | None = None) -> Steps[TrackedLift]:
+                   intrinsics: CameraIntrinsics | None = None,
+                   ahead: FramesAhead | None = None) -> Steps[TrackedLift]:
         """Lift one frame of a track (model joints, as :meth:`Lifter.lift`): find the track and its
         warm start, screen the frame (gate, noise), tell the lifter what the track knows, solve
         (cold again when the warm solve degraded), record the frame in the track and publish
@@ -249,6 +274,9 @@ class TrackPolicy:
         With ``intrinsics`` ``((fx, fy), (cx, cy))`` (pixels) the lift reads the 2D corrected for
         perspective by the track's last pose (:func:`perspective_corrected`; hybrid mode, a frame
         that follows its track).
+
+        ``ahead``, the track's next frames, is read by a temporal prior with future frames (see
+        :meth:`_future`); a causal prior ignores it.
 
         A solve (:mod:`pose_lifter.core.batch`): the frames of other tracks may be lifted in the
         same rounds (each track's state is its own).
@@ -266,7 +294,7 @@ class TrackPolicy:
         frame = self._screen(track, warm, stamp_ns, points, confidence)
         seen = self._seen(track, warm, points, intrinsics)
         try:
-            context = self._context(track, warm, stamp_ns, frame, limbs)
+            context = self._context(track, warm, stamp_ns, frame, limbs, points, ahead)
             result, reinit = yield from self._solve(track, warm, seen, frame.confidence, context)
         except PoseLifterError:
             if track is not None:
@@ -320,7 +348,42 @@ class TrackPolicy:
         if track is None or warm is None or self.lifter.options.mode == "paper":
             return None
         temporal = self.lifter.temporal_prior
-        return track.past(stamp_ns, (temporal or self.lifter.prior).window - 1)
+        prior = temporal or self.lifter.prior
+        return track.past(stamp_ns, prior.window - 1 - prior.future_frames)
+
+    def _future(self, track: Track | None, ahead: FramesAhead | None, stamp_ns: int, past: Frames | None,
+                current: NDArray[np.float64], frame: _Screened) -> Frames | None:
+        """The next frames a temporal prior with future frames reads (with ``past``: the frames
+        of ``ahead`` evenly spaced on from ``stamp_ns`` at the step of the track's last frame,
+        within 20 %, as :meth:`Track.past`; each frame's visible joints by the confidence
+        threshold and, on a frame the temporal gate screened, :meth:`Track.screen_ahead` from
+        this frame's 2D ``current`` (12, 2)), or None."""
+        if ahead is None or track is None or past is None:
+            return None
+        temporal = self.lifter.temporal_prior
+        if temporal is None or not temporal.future_frames:
+            return None
+        step = stamp_ns - track.last_stamp_ns
+        threshold = self.lifter.options.confidence_threshold
+        points, visible = [], []
+        earlier = stamp_ns
+        for i in range(min(temporal.future_frames, len(ahead.stamps_ns))):
+            later = int(ahead.stamps_ns[i])
+            conf = None if ahead.confidence is None else ahead.confidence[i]
+            vis = _visible(ahead.points[i], conf, threshold)
+            if vis is None or abs((later - earlier) - step) > 0.2 * step:
+                break
+            points.append(ahead.points[i])
+            visible.append(vis)
+            earlier = later
+        if not points:
+            return None
+        frames, seen = np.array(points, dtype=np.float64), np.array(visible)
+        if frame.gated and frame.visible is not None and frame.predicted is not None:
+            # the temporal gate over the next frames too: their confident outliers stay out
+            seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
+                                      self.lifter.options.outlier_gate)
+        return frames, seen
 
     def _screen(self, track: Track | None, warm: WarmStart | None, stamp_ns: int,
                 points: NDArray[np.float64], confidence: NDArray[np.float64] | None) -> _Screened:
@@ -349,10 +412,12 @@ class TrackPolicy:
         return _Screened(confidence, vis, predicted, screened, track.data_weight() if noisy else 1.0)
 
     def _context(self, track: Track | None, warm: WarmStart | None, stamp_ns: int, frame: _Screened,
-                 limbs: NDArray[np.float64] | None) -> TrackContext:
+                 limbs: NDArray[np.float64] | None, points: NDArray[np.float64],
+                 ahead: FramesAhead | None = None) -> TrackContext:
         """What the track tells the lifter of this frame (:class:`TrackContext`): its limb
         proportions, 2D data weight, the previous pose's weight per joint in the prior's target,
-        its past frames (temporal prior) and the joints it may fill in."""
+        its past and next frames (temporal prior; ``points`` (12, 2) this frame's 2D) and the
+        joints it may fill in."""
         opts = self.lifter.options
         dw = frame.data_weight
         # smoothing only pays with noisy 2D (on clean input it is lag): scaled with the noise
@@ -366,7 +431,8 @@ class TrackPolicy:
             assert track is not None
             if track.fit_is_sound():
                 fill = (frame.predicted, track.unused < opts.fill_missing_frames)
-        return TrackContext(limbs, dw, tw, past, frame.gated, fill)
+        future = self._future(track, ahead, stamp_ns, past, points, frame)
+        return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
 
     def _solve(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
                confidence: NDArray[np.float64] | None, context: TrackContext

@@ -43,7 +43,7 @@ from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera, place_poses
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from pose_lifter.core.tracking import OutOfOrderFrameError, TrackedLift, TrackPolicy
+from pose_lifter.core.tracking import FramesAhead, OutOfOrderFrameError, TrackedLift, TrackPolicy
 from pose_lifter.messages.convert import skeleton2d_to_arrays
 
 __all__ = [
@@ -131,11 +131,15 @@ class SkeletonInput:
         Pixels (missing joints 0).
     confidence : ndarray, shape (12,)
         Clipped into [0, 1].
+    ahead : FramesAhead, optional
+        The track's next frames, when the lift knows them (an offline lift whose temporal prior
+        reads them; :meth:`pose_lifter.core.tracking.TrackPolicy.lift_steps`).
     """
 
     track_id: int
     points: NDArray[np.float64]
     confidence: NDArray[np.float64]
+    ahead: FramesAhead | None = None
 
 
 @dataclass(frozen=True)
@@ -471,7 +475,7 @@ class FramePipeline:
         people and places them together."""
         try:
             tracked = yield from self.policy.lift_steps(inp.track_id, stamp_ns, inp.points, inp.confidence,
-                                                        intrinsics)
+                                                        intrinsics, inp.ahead)
         except Exception as err:
             return _refusal(err, inp.track_id)
         return Solved(inp, tracked)

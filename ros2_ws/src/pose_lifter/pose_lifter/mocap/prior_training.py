@@ -110,8 +110,9 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     ``sequences`` (each (F, 12, 3), metres, Y-up). The target is the window's frame
     ``window - 1 - future``: the last one (a causal prior), or with ``future > 0`` one that has
     ``future`` frames after it in the window (an offline prior that reads past and future). The
-    input is normalised on the last frame (:func:`~pose_lifter.core.prior.prior_features`), the
-    target expressed in that normalisation."""
+    window is centred on the target frame's centroid and its input normalised on that frame
+    (:func:`~pose_lifter.core.prior.prior_features`), the target expressed in that
+    normalisation."""
     if not 0 <= future < window:
         raise ValueError(f"future must be in [0, window), got {future} for a window of {window}")
     lens = np.array([len(s) for s in sequences])
@@ -133,15 +134,16 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     rots = view_rotations(az, el, ro)
     dist = rng.uniform(*aug.distance, n)
     persp = rng.random(n) < aug.p_perspective
-    # the window's frames share a camera; each is centred on the current frame's centroid
+    # the window's frames share a camera; each is centred on the target frame's centroid
+    target = window - 1 - future
     cur = frames.reshape(n, window, N_JOINTS, 3)
-    centroid = cur[:, -1].mean(axis=1)
+    centroid = cur[:, target].mean(axis=1)
     rel = cur - centroid[:, None, None, :]
     cam = np.einsum("nab,nwjb->nwja", rots, rel)
     depth = np.where(persp[:, None, None], cam[..., 2] + dist[:, None, None], dist[:, None, None])
     pts = cam[..., :2] / np.maximum(depth, 0.05)[..., None]
     knee, ankle = LIMBS[RIGHT_LOWER_LEG]  # the noise unit: the leg at the centroid's depth
-    leg = np.linalg.norm(cur[:, -1, knee] - cur[:, -1, ankle], axis=-1) / dist
+    leg = np.linalg.norm(cur[:, target, knee] - cur[:, target, ankle], axis=-1) / dist
     vis = np.ones((n, window, N_JOINTS), dtype=bool)
     for lo in range(0, n, aug.chunk):
         hi = min(lo + aug.chunk, n)
@@ -162,11 +164,11 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
         hips = cut & (rng.random(n) < 1.0 / 3.0)
         vis[np.ix_(cut, np.arange(window), LOWER_LEG_JOINTS)] = False
         vis[np.ix_(hips, np.arange(window), _HIPS)] = False
-    # keep at least min_visible joints in the current frame
-    short = vis[:, -1].sum(axis=1) < aug.min_visible
-    vis[short, -1] = True
-    feats, centre, radius = prior_features(pts, vis, window)
-    cur_cam = cam[:, -1 - future]
+    # keep at least min_visible joints in the target frame
+    short = vis[:, target].sum(axis=1) < aug.min_visible
+    vis[short, target] = True
+    feats, centre, radius = prior_features(pts, vis, window, target)
+    cur_cam = cam[:, target]
     scale = radius * dist  # metres per output unit
     tgt = np.empty((n, N_JOINTS, 3))
     tgt[..., :2] = (cur_cam[..., :2] / dist[:, None, None] - centre[:, None, :]) / radius[:, None, None]

@@ -27,6 +27,7 @@ from pose_lifter.core.lifter import Lifter
 from pose_lifter.core.placement import place_poses
 from pose_lifter.core.skeleton import N_JOINTS
 from pose_lifter.core.smoothing import centred_smoothing
+from pose_lifter.core.tracking import FramesAhead
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -48,6 +49,7 @@ __all__ = [
     "Item",
     "MessageFields",
     "chain_groups",
+    "inputs_ahead",
     "lift_chains",
     "lift_parallel",
     "smooth_chain",
@@ -194,21 +196,22 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
+    inputs = [inputs_ahead(lifter, chain) for chain in chains]
     out: list[list[Done]] = [[] for _ in chains]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
-    steps: dict[int, list[tuple[int, Item]]] = {}
+    steps: dict[int, list[tuple[int, int, Item]]] = {}
     for c, chain in enumerate(chains):
-        for item in chain:
-            steps.setdefault(item.msg_index, []).append((c, item))
+        for k, item in enumerate(chain):
+            steps.setdefault(item.msg_index, []).append((c, k, item))
     for msg_index in sorted(steps):
         step = steps[msg_index]
-        for c, item in step:
+        for c, _, item in step:
             if item.expire_ns is not None:
                 pipelines[c].end_frame(item.expire_ns)
-        together = lift_together(lifter, [(pipelines[c], item.input, item.stamp_ns, item.intrinsics)
-                                          for c, item in step])
-        for (c, item), lifted in zip(step, together, strict=True):
+        together = lift_together(lifter, [(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
+                                          for c, k, item in step])
+        for (c, _, item), lifted in zip(step, together, strict=True):
             if not isinstance(lifted, LiftedSkeleton):
                 out[c].append(Done(item, None, None, False, 0.0, str(lifted)))
                 fits[c].append(None)
@@ -221,6 +224,22 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     if smoothing_s > 0:
         return [smooth_chain(d, f, settings, smoothing_s) for d, f in zip(out, fits, strict=True)]
     return out
+
+
+def inputs_ahead(lifter: Lifter, chain: list[Item]) -> list[SkeletonInput]:
+    """The inputs of ``chain``'s items, each with its track's next frames
+    (``SkeletonInput.ahead``: the prior's ``future_frames`` items after it) when ``lifter`` reads
+    ahead and its temporal prior reads frames after the one it lifts."""
+    temporal = lifter.temporal_prior if lifter.reads_ahead and lifter.options.mode != "paper" else None
+    n_ahead = 0 if temporal is None else temporal.future_frames
+    if not n_ahead or len(chain) < 2:
+        return [it.input for it in chain]
+    stamps = np.array([it.stamp_ns for it in chain], dtype=np.int64)
+    points = np.array([it.input.points for it in chain], dtype=np.float64)
+    confidence = np.array([it.input.confidence for it in chain], dtype=np.float64)
+    return [replace(it.input, ahead=FramesAhead(stamps[i + 1:i + 1 + n_ahead], points[i + 1:i + 1 + n_ahead],
+                                                confidence[i + 1:i + 1 + n_ahead]))
+            for i, it in enumerate(chain)]
 
 
 def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], settings: FrameSettings,

@@ -62,7 +62,8 @@ class LiftSettings:
     keep: list[str] | None = None
     track_timeout: float = DEFAULT_TRACK_TIMEOUT_S
     reinit_ratio: float = DEFAULT_REINIT_RATIO
-    smoothing_s: float = OFFLINE_SMOOTHING_S  # centred, offline only (0: the node's causal poses)
+    # centred, offline only, with the offline prior (0: the node's causal priors and poses)
+    smoothing_s: float = OFFLINE_SMOOTHING_S
     marker_lifetime: float = 0.0
     hri: bool = False  # the node's REP-155 outputs (/humans/bodies/..., /tf) into the output bag
 
@@ -82,13 +83,16 @@ class LiftSettings:
         return hashlib.sha256(text.encode()).hexdigest()
 
     def build_lifter(self) -> Any:
-        """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up)."""
+        """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up).
+        With ``smoothing_s > 0`` the lift reads each track's next frames (``reads_ahead``: its
+        temporal prior is the packaged offline one unless ``temporal_prior_file`` names another)."""
         from pose_lifter.core.bases import PoseBases
         from pose_lifter.core.lifter import Lifter
         from pose_lifter.core.options import LifterOptions
 
         opts = LifterOptions().replace(**self.options)
-        lifter = Lifter(PoseBases.load(self.bases) if self.bases else None, opts)
+        bases = PoseBases.load(self.bases) if self.bases else None
+        lifter = Lifter(bases, opts, reads_ahead=self.smoothing_s > 0)
         if opts.camera_solver == "admm" and opts.pose_solver == "admm":
             lifter.warm_up()
         return lifter
