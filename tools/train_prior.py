@@ -16,8 +16,8 @@ body out of the image on 10 % of samples), seed 0. ``--window 4 --dropout 0.05 -
 dropout 0.25 the temporal variant gained almost nothing from the past frames on held-out runs);
 ``--window 7 --future 3 --dropout 0.05 --out .../data/prior_mlp_w7c.npz`` its offline variant,
 which reads 3 frames before the lifted one and 3 after it (``make prior-offline``; what
-``pose-lifter lift`` reads). Each took 19-22 min on one thread of the loaded 2-core machine. ``--model mlp --augment views
---epochs 30`` is the earlier recipe (scikit-learn MLP 2 x 768, views and corruptions only); the
+``pose-lifter lift`` reads). Each took 11-22 min on one thread of the 2-core machine. ``--model
+mlp --augment views --epochs 30`` is the earlier recipe (scikit-learn MLP 2 x 768, views and corruptions only); the
 cross-action folds (``tools/cross_action.py``, docs/cross_action.md) chose the residual model and
 ``GENERALISE``; ``--aug NAME=VALUE`` changes one field of the augmentation.
 
