@@ -17,9 +17,9 @@ dropout 0.25 the temporal variant gained almost nothing from the past frames on 
 ``--window 7 --future 3 --dropout 0.05 --out .../data/prior_mlp_w7c.npz`` its offline variant,
 which reads 3 frames before the lifted one and 3 after it (``make prior-offline``; what
 ``pose-lifter lift`` reads). Each took 11-22 min on one thread of the 2-core machine. ``--model
-mlp --augment views --epochs 30`` is the earlier recipe (scikit-learn MLP 2 x 768, views and corruptions only); the
-cross-action folds (``tools/cross_action.py``, docs/cross_action.md) chose the residual model and
-``GENERALISE``; ``--aug NAME=VALUE`` changes one field of the augmentation.
+mlp --augment views --epochs 30`` is the earlier recipe (scikit-learn MLP 2 x 768, views and
+corruptions only); the cross-action folds (``tools/cross_action.py``, docs/cross_action.md) chose
+the residual model and ``GENERALISE``; ``--aug NAME=VALUE`` changes one field of the augmentation.
 
 Training trials: :func:`pose_lifter.mocap.cmu.split_trials` ("train": subjects 01, 03, 05, 06 and
 09_01-09_11). Held out of the fit: the action-recognition example's test trials (so that its
