@@ -152,7 +152,8 @@ train-deps: venv
 	$(PY) -c "import torch" 2>/dev/null || $(PY) -m pip install -q 'torch==2.13.0'
 
 # accuracy on motion never trained on: per motion class of the manifest, a prior trained without it
-# and its temporal prior, the lifts knowing the camera's intrinsics (tools/cross_action.py; docs/cross_action.md)
+# and its temporal and offline priors, the lifts knowing the camera's intrinsics (tools/cross_action.py;
+# docs/cross_action.md)
 cross-action: venv train-deps
 	$(PY) tools/cross_action.py --data $(CMU_DATA) --epochs 6 --samples 40000 --frames 60 --segments 6 \
-	  --views 2 --temporal --intrinsics --out out/cross_action
+	  --views 2 --temporal --offline --intrinsics --out out/cross_action

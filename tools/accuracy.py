@@ -119,7 +119,10 @@ def _parse(spec: list[str]) -> dict[str, Any]:
 _STATE: dict[str, Any] = {}
 
 
-def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | None = None) -> None:
+def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | None = None,
+          offline: dict[str, Any] | None = None) -> None:
+    """The lifters of ``methods`` with the options ``settings`` (``offline``: the options the
+    ``-offline`` methods take on top, e.g. their temporal prior)."""
     warnings.simplefilter("ignore")
     lifters = {}
     for m in methods:
@@ -127,8 +130,9 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
             mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t").removesuffix("-offline")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
             # an offline lift knows each track's next frames (pose-lifter lift: its offline prior)
-            lifters[m] = Lifter(bases, LifterOptions(mode=mode).replace(**settings),
-                                reads_ahead=m.endswith("-offline"))
+            ahead = m.endswith("-offline")
+            opts = LifterOptions(mode=mode).replace(**{**settings, **((offline or {}) if ahead else {})})
+            lifters[m] = Lifter(bases, opts, reads_ahead=ahead)
             lifters[m].warm_up()
     _STATE["lifters"] = lifters
     _STATE["mean"] = PoseBases.load().mean_pose  # the mean-pose floor: the paper's bases, as before

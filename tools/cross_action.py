@@ -26,7 +26,9 @@ learned``) and ``hybrid`` (the default mode tracked by
 :class:`pose_lifter.core.tracking.TrackPolicy`, with the fold's prior as its single-frame prior and
 the temporal prior off: the packaged temporal prior has seen every class; with ``--temporal``
 each fold also trains its own temporal prior, ``DIR/<C>_w4.npz``, and every tracked method uses
-it, as the node does).
+it, as the node does; with ``--offline`` also its offline prior, ``DIR/<C>_w7c.npz`` (as ``make
+prior-offline``: 3 frames before the lifted one and 3 after), which the ``-offline`` methods
+read, as ``pose-lifter lift`` does).
 
 The hybrid's pose bases are the packaged ``bases_hybrid_sparse200.npz`` (or ``--bases``); their
 training trials are read from the file and each fold's row says whether they include class C.
@@ -64,8 +66,10 @@ DEFAULT_CONDITIONS = ("detector6m", "detector3m", "clean", "noise0.05", "noise0.
                       "lrswap", "lowercut", "close", "above")
 METHODS = ("flat", "learned", "learned-offline", "hybrid", "hybrid-offline")
 AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
-#: Dropout of a fold's temporal prior (``make prior-temporal``'s).
+#: Dropout of a fold's temporal priors (``make prior-temporal``'s, ``make prior-offline``'s).
 TEMPORAL_DROPOUT = 0.05
+#: A fold's offline prior: its window and the frames of it after the lifted one (``make prior-offline``).
+OFFLINE_WINDOW, OFFLINE_FUTURE = 7, 3
 
 
 def fold_training(args: argparse.Namespace) -> dict[str, Any]:
@@ -81,16 +85,19 @@ def fold_training(args: argparse.Namespace) -> dict[str, Any]:
     return spec
 
 
-def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path, window: int = 1
-               ) -> PosePrior:
+def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path, window: int = 1,
+               future: int = 0) -> PosePrior:
     """Train (or reuse) the prior of the fold without class ``cls``, saved to ``path``; with
-    ``window`` > 1 its causal temporal variant (as ``make prior-temporal``: the track's last
-    ``window`` frames at 30 Hz, dropout 0.05)."""
+    ``window`` > 1 its temporal variant (as ``make prior-temporal``: the track's last ``window``
+    frames at 30 Hz, dropout 0.05; with ``future`` > 0 as ``make prior-offline``, ``future`` of
+    them after the lifted one)."""
     spec = fold_training(args)
     step, dropout = args.step, args.dropout
     if window > 1:
         step, dropout = 4, TEMPORAL_DROPOUT
         spec.update(window=window, frame_step=step, dropout=dropout)
+    if future:
+        spec.update(future=future)
     spec = json.loads(json.dumps(spec))  # as the file's metadata hold it
     if path.is_file():
         try:
@@ -116,7 +123,7 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     if args.model == "residual":
         prior = train_prior_residual(fit, val, width=args.width, blocks=args.blocks, dropout=dropout,
                                      epochs=args.epochs, samples_per_epoch=args.samples, seed=args.seed,
-                                     aug=aug, window=window, log=log)
+                                     aug=aug, window=window, log=log, future=future)
     else:
         prior = train_prior(fit, val, hidden=tuple(args.hidden), epochs=args.epochs,
                             samples_per_epoch=args.samples, window=window, seed=args.seed, aug=aug, log=log)
@@ -161,15 +168,19 @@ def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Name
                                 "temporal_prior": args.temporal}
     if args.temporal:
         settings["temporal_prior_file"] = str(temporal)
+    offline = ({"temporal_prior": True,
+                "temporal_prior_file": str(prior_path.with_name(prior_path.stem + "_w7c.npz"))}
+               if args.offline else None)
     acc._STATE["intrinsics"] = args.intrinsics
     methods = tuple(args.methods)
     jobs = [(t, c, methods) for c in args.conditions for t in tracks]
     if args.workers > 1:
         import multiprocessing as mp
-        with mp.get_context("fork").Pool(args.workers, acc._init, (settings, methods, args.bases)) as pool:
+        init = (settings, methods, args.bases, offline)
+        with mp.get_context("fork").Pool(args.workers, acc._init, init) as pool:
             results = list(pool.imap_unordered(acc._job, jobs, chunksize=1))
     else:
-        acc._init(settings, methods, args.bases)
+        acc._init(settings, methods, args.bases, offline)
         results = [acc._job(j) for j in jobs]
     table: dict[str, dict[str, dict[str, float]]] = {}
     for cond in args.conditions:
@@ -237,6 +248,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
     ap.add_argument("--temporal", action="store_true",
                     help="also train each fold's causal temporal prior and lift with it (as the node does)")
+    ap.add_argument("--offline", action="store_true",
+                    help="also train each fold's offline prior (past and future frames) and lift the "
+                    "-offline methods with it (as pose-lifter lift does)")
     ap.add_argument("--intrinsics", action="store_true",
                     help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
     ap.add_argument("--train-only", action="store_true",
@@ -271,6 +285,9 @@ def main(argv: list[str] | None = None) -> int:
         train_fold(cls, pool, args, path)
         if args.temporal:
             train_fold(cls, pool, args, path.with_name(f"{cls}_w4.npz"), window=4)
+        if args.offline:
+            train_fold(cls, pool, args, path.with_name(f"{cls}_w7c.npz"), window=OFFLINE_WINDOW,
+                       future=OFFLINE_FUTURE)
         if args.train_only:
             continue
         tracks = class_tracks(pool[cls], args)

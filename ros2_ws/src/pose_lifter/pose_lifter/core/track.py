@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._fast import median_rows, row_norms
+from ._jit import njit
 from .errors import PoseLifterError
 from .measurement import MeasurementUpdate
 from .skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, N_JOINTS, RIGHT_LIMBS
@@ -180,23 +181,14 @@ class Track:
         frame from this one (its joints ``vis`` (12,) kept, the others where the track
         ``predicted`` them), a visible joint farther than ``limit`` leg lengths (or
         GATE_NOISE_FACTOR times the track's noise) from where the frame before had it, after
-        removing the median motion of the joints seen on both, is dropped: :meth:`gate` over the
-        frames an offline lift reads ahead, whose confident outliers would otherwise reach the
-        prior."""
+        removing the median motion of the joints seen on both, is dropped (not when that would
+        drop more than GATE_MAX_FRACTION of them): :meth:`gate` over the frames an offline lift
+        reads ahead, whose confident outliers would otherwise reach the prior."""
         scale = max(self.fits[-1][2], 1e-12)
         limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())
         ref = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted)
-        kept = np.array(ahead_vis, dtype=bool)
-        for f in range(len(ahead)):
-            both = kept[f]
-            if not both.any():
-                continue
-            motion = median_rows(ahead[f][both] - ref[both])
-            out = both & (row_norms(ahead[f] - ref - motion) / scale > limit)
-            if int(np.count_nonzero(out)) <= GATE_MAX_FRACTION * int(np.count_nonzero(both)):
-                kept[f] &= ~out
-            ref = np.where(kept[f][:, None], ahead[f], ref + motion)
-        return kept
+        return _screen_ahead_kernel(np.ascontiguousarray(ref), np.ascontiguousarray(ahead, dtype=np.float64),
+                                    np.array(ahead_vis, dtype=np.bool_), limit * scale, GATE_MAX_FRACTION)
 
     def predict(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
                 stamp_ns: int) -> NDArray[np.float64] | None:
@@ -322,3 +314,56 @@ class Track:
     def add_limbs(self, proportions: NDArray[np.float64]) -> None:
         self.limbs[self.n_limbs % LIMB_FRAMES] = proportions
         self.n_limbs += 1
+
+
+@njit
+def _screen_ahead_kernel(ref: NDArray[np.float64], ahead: NDArray[np.float64], kept: NDArray[np.bool_],
+                         limit: float, max_fraction: float) -> NDArray[np.bool_]:
+    """:meth:`Track.screen_ahead`'s loop over the next frames ``ahead`` (k, 12, 2) from the
+    positions ``ref`` (12, 2): ``kept`` (k, 12, visible on entry) with the joints farther than
+    ``limit`` (input units) from the frame before's, after the median motion of the joints seen
+    on both, cleared (in place, and returned)."""
+    nj = ref.shape[0]
+    cur = ref.copy()
+    for f in range(ahead.shape[0]):
+        n = 0
+        for j in range(nj):
+            if kept[f, j]:
+                n += 1
+        if n == 0:
+            continue
+        dx = np.empty(n)
+        dy = np.empty(n)
+        k = 0
+        for j in range(nj):
+            if kept[f, j]:
+                dx[k] = ahead[f, j, 0] - cur[j, 0]
+                dy[k] = ahead[f, j, 1] - cur[j, 1]
+                k += 1
+        mx, my = np.median(dx), np.median(dy)
+        out = np.zeros(nj, dtype=np.bool_)
+        n_out = 0
+        for j in range(nj):
+            if kept[f, j]:
+                ex = ahead[f, j, 0] - cur[j, 0] - mx
+                ey = ahead[f, j, 1] - cur[j, 1] - my
+                if math.sqrt(ex * ex + ey * ey) > limit:
+                    out[j] = True
+                    n_out += 1
+        drop = n_out <= max_fraction * n
+        for j in range(nj):
+            if drop and out[j]:
+                kept[f, j] = False
+            if kept[f, j]:
+                cur[j, 0], cur[j, 1] = ahead[f, j, 0], ahead[f, j, 1]
+            else:
+                cur[j, 0] += mx
+                cur[j, 1] += my
+    return kept
+
+
+def compile_kernels() -> None:
+    """Compile this module's kernel (numba, ``core._jit``) or load it from its cache: one screen
+    of a still frame ahead (an offline track's first frame would otherwise pay for it)."""
+    still = np.zeros((1, N_JOINTS, 2))
+    _screen_ahead_kernel(still[0], still, np.ones((1, N_JOINTS), dtype=np.bool_), 1.0, GATE_MAX_FRACTION)

@@ -72,6 +72,7 @@ from .results import Frames, LiftResult, TrackContext, WarmStart
 from .skeleton import N_JOINTS
 from .smoothing import CausalSmoother
 from .track import NOISE_MIN_WEIGHT, Track
+from .track import compile_kernels as compile_track_kernels
 from .track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 
 __all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "FramesAhead", "OutOfOrderFrameError",
@@ -226,6 +227,7 @@ class TrackPolicy:
         self.smoothed_later = False
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame
+        compile_track_kernels()
 
     def configure(self, lifter: Lifter, track_timeout: float, warm_start: bool, reinit_ratio: float) -> None:
         """Change the lifter or the settings; the tracks are kept (forgotten when ``warm_start``
@@ -364,21 +366,17 @@ class TrackPolicy:
         if temporal is None or not temporal.future_frames:
             return None
         step = stamp_ns - track.last_stamp_ns
-        threshold = self.lifter.options.confidence_threshold
-        points, visible = [], []
-        earlier = stamp_ns
-        for i in range(min(temporal.future_frames, len(ahead.stamps_ns))):
-            later = int(ahead.stamps_ns[i])
-            conf = None if ahead.confidence is None else ahead.confidence[i]
-            vis = _visible(ahead.points[i], conf, threshold)
-            if vis is None or abs((later - earlier) - step) > 0.2 * step:
-                break
-            points.append(ahead.points[i])
-            visible.append(vis)
-            earlier = later
-        if not points:
+        n = min(temporal.future_frames, len(ahead.stamps_ns))
+        gaps = np.diff(np.asarray(ahead.stamps_ns[:n], dtype=np.int64), prepend=stamp_ns)
+        uneven = np.abs(gaps - step) > 0.2 * step
+        n = int(np.argmax(uneven)) if uneven.any() else n  # up to the first uneven step
+        frames = np.asarray(ahead.points[:n], dtype=np.float64)
+        conf = None if ahead.confidence is None else np.asarray(ahead.confidence[:n], dtype=np.float64)
+        if n == 0 or frames.shape != (n, N_JOINTS, 2) or (conf is not None and conf.shape != (n, N_JOINTS)):
             return None
-        frames, seen = np.array(points, dtype=np.float64), np.array(visible)
+        seen = cast("NDArray[np.bool_]", np.isfinite(frames).all(axis=-1))
+        if conf is not None:
+            seen &= conf >= self.lifter.options.confidence_threshold
         if frame.gated and frame.visible is not None and frame.predicted is not None:
             # the temporal gate over the next frames too: their confident outliers stay out
             seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
