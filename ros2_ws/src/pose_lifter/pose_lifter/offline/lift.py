@@ -11,8 +11,10 @@ topics. Where it differs, on purpose:
   (before the first one: the first one), not of the latest received;
 * the input header is copied unchanged (the node's ``frame_id`` parameter fills an empty one);
 * the caps are the node's defaults (a params file's caps are node parameters, not read);
-* ``smoothing_s > 0`` smooths each track's poses with past and future frames
-  (:func:`pose_lifter.offline.chains.smooth_chain`; 0 gives the node's causal poses).
+* ``smoothing_s > 0`` reads each track's next frames into its offline prior
+  (:func:`pose_lifter.offline.chains.inputs_ahead`) and smooths each track's poses with past and
+  future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
+  priors and poses.
 
 The lifted bag is evaluated by :mod:`pose_lifter.offline.evaluate`.
 """
