@@ -190,8 +190,9 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
 
     With a lifter that reads ahead (``Lifter.reads_ahead``), each item carries its track's next
     frames for the offline prior (:func:`inputs_ahead`). Message by message, the chains' items of
-    that message are expired as their chain requires, then lifted together, each in its chain's pipeline (:func:`lift_together`: the prior's
-    networks in one pass, the runs of alternations in one compiled pass per round). A chain's
+    that message are expired as their chain requires, then lifted together, each in its chain's
+    pipeline (:func:`lift_together`: the prior's networks in one pass, the runs of alternations in
+    one compiled pass per round). A chain's
     outcomes are those of lifting it alone: the chains share only the lifter, whose prior's poses
     and runs are bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
