@@ -120,13 +120,13 @@ def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrins
 
 def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
              threshold: float) -> NDArray[np.bool_] | None:
-    """(12,): the joints with finite coordinates and confidence >= ``threshold`` (the lifter's
-    rule), or None when the shapes are wrong."""
+    """(..., 12) of points (..., 12, 2): the joints with finite coordinates and confidence >=
+    ``threshold`` (the lifter's rule), or None when the shapes are wrong."""
     x = np.asarray(points, dtype=np.float64)
     conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
-    if x.shape != (N_JOINTS, 2) or (conf is not None and conf.shape != (N_JOINTS,)):
+    if x.shape[-2:] != (N_JOINTS, 2) or (conf is not None and conf.shape != x.shape[:-1]):
         return None
-    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=1))
+    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=-1))
     return vis if conf is None else vis & (conf >= threshold)
 
 
@@ -371,12 +371,10 @@ class TrackPolicy:
         uneven = np.abs(gaps - step) > 0.2 * step
         n = int(np.argmax(uneven)) if uneven.any() else n  # up to the first uneven step
         frames = np.asarray(ahead.points[:n], dtype=np.float64)
-        conf = None if ahead.confidence is None else np.asarray(ahead.confidence[:n], dtype=np.float64)
-        if n == 0 or frames.shape != (n, N_JOINTS, 2) or (conf is not None and conf.shape != (n, N_JOINTS)):
+        seen = _visible(frames, None if ahead.confidence is None else ahead.confidence[:n],
+                        self.lifter.options.confidence_threshold)
+        if n == 0 or seen is None or frames.ndim != 3:
             return None
-        seen = cast("NDArray[np.bool_]", np.isfinite(frames).all(axis=-1))
-        if conf is not None:
-            seen &= conf >= self.lifter.options.confidence_threshold
         if frame.gated and frame.visible is not None and frame.predicted is not None:
             # the temporal gate over the next frames too: their confident outliers stay out
             seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
