@@ -180,15 +180,14 @@ def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor:
     for f in range(w):
         for j in range(nj):
             vis[f, j] = visible[f, j] and math.isfinite(x[f, j, 0]) and math.isfinite(x[f, j, 1])
-    last = anchor
     n = 0
     c0 = 0.0
     c1 = 0.0
     for j in range(nj):
-        if vis[last, j]:
+        if vis[anchor, j]:
             n += 1
-            c0 += x[last, j, 0]
-            c1 += x[last, j, 1]
+            c0 += x[anchor, j, 0]
+            c1 += x[anchor, j, 1]
     feats = np.zeros(w * 3 * nj)
     centre = np.empty(2)
     if n < 2:
@@ -199,9 +198,9 @@ def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor:
     sq = np.empty(2 * n)
     k = 0
     for j in range(nj):
-        if vis[last, j]:
-            d0 = x[last, j, 0] - c0
-            d1 = x[last, j, 1] - c1
+        if vis[anchor, j]:
+            d0 = x[anchor, j, 0] - c0
+            d1 = x[anchor, j, 1] - c1
             sq[k], sq[k + 1] = d0 * d0, d1 * d1
             k += 2
     radius = math.sqrt(pairwise_sum(sq) / n)
@@ -348,6 +347,8 @@ class PosePrior:
     #: (:meth:`pose_lifter.core.hybrid.PriorFit.rows`; computed once, read only)
     row_weights: dict[tuple[float, float], NDArray[np.float64]] = field(
         init=False, repr=False, compare=False, default_factory=dict)
+    #: the metadata's ``future_frames``, checked (:attr:`future_frames`)
+    _future: int = field(init=False, repr=False, compare=False, default=0)
 
     def __post_init__(self) -> None:
         if not isinstance(self.window, int) or not 1 <= self.window <= MAX_WINDOW:
@@ -384,6 +385,7 @@ class PosePrior:
         if not isinstance(future, int) or isinstance(future, bool) or not 0 <= future < self.window:
             raise PriorFileError(f"metadata future_frames must be an integer in [0, {self.window}) for a "
                                  f"window of {self.window}, got {future!r}")
+        object.__setattr__(self, "_future", future)
         object.__setattr__(self, "_layers32", tuple(
             (np.ascontiguousarray(w, dtype=np.float32), np.ascontiguousarray(b, dtype=np.float32))
             for w, b in zip(self.weights, self.biases, strict=True)))
@@ -393,7 +395,7 @@ class PosePrior:
         """Frames of the window after the one the prior lifts: 0 for a causal prior (its window
         ends on the lifted frame), ``F > 0`` for an offline one whose window holds ``window - 1 - F``
         frames before the lifted one and ``F`` after it (``tools/train_prior.py --future``)."""
-        return int(self.metadata.get("future_frames", 0))
+        return self._future
 
     # ------------------------------------------------------------------ files
     @classmethod
