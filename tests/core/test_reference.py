@@ -187,7 +187,9 @@ def test_alpha_sdp_is_lower_bound_of_local_solutions(bases: PoseBases, seed: int
     assert 0.0 < share <= 1.0
     rng = np.random.default_rng(seed)
     starts = [z_feasible]
-    starts += [np.append(z_feasible[:-1] + 0.5 * rng.normal(size=bases.n_bases), 1.0) for _ in range(3)]
+    # starts within 0.3 of the feasible point: from 0.5 SLSQP stalls on one of seed 5's starts at a
+    # stationary point of the violation (4e-2), trust-constr at 6e-3 (no local solver then applies)
+    starts += [np.append(z_feasible[:-1] + 0.3 * rng.normal(size=bases.n_bases), 1.0) for _ in range(3)]
     for z0 in starts:
         z, f = ref.reference_alpha_local(w_mat, omegas, z0)
         assert z[-1] == 1.0

@@ -141,7 +141,7 @@ def test_signal_during_startup_exits_0(lifter_env: dict[str, str], sig: int,
         out, _ = proc.communicate(timeout=SHUTDOWN_TIMEOUT)
     except subprocess.TimeoutExpired:
         proc.kill()
-        out, _ = proc.communicate()
+        out, _ = proc.communicate(timeout=SHUTDOWN_TIMEOUT)  # killed: its pipe closes
     assert proc.returncode == 0 and "Traceback" not in out, out
 
 

@@ -89,7 +89,7 @@ def _stop(proc: subprocess.Popen[str], sig: int) -> tuple[int, list[str]]:
         out, _ = proc.communicate(timeout=EXIT_TIMEOUT)
     except subprocess.TimeoutExpired:
         proc.kill()
-        out, _ = proc.communicate()
+        out, _ = proc.communicate(timeout=EXIT_TIMEOUT)  # killed: its pipe closes
     return proc.returncode, out.splitlines()
 
 

@@ -375,6 +375,19 @@ def learn_sparse_bases(
     return _finish(x, mean, comps, "sparse", n_starts, seed, sparsity, meta)
 
 
+def _principal_directions(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rows of ``V^T`` of ``x = U S V^T``, shape (min(N, D), D), each signed so that its
+    entry of largest magnitude is positive.
+
+    An SVD fixes each direction only up to its sign, and which sign LAPACK returns depends on the
+    BLAS kernel the machine runs. The convention makes the learned bases (and the start codes and
+    the lifts' alphas expressed in them) the same on every machine.
+    """
+    _, _, vt = np.linalg.svd(x, full_matrices=False)
+    lead = vt[np.arange(vt.shape[0]), np.abs(vt).argmax(axis=1)]
+    return np.asarray(vt * np.where(lead < 0.0, -1.0, 1.0)[:, None])
+
+
 def learn_pca_bases(
     poses: NDArray[np.float64], n_bases: int = 30, n_starts: int = 30, seed: int = 0,
     metadata: dict[str, Any] | None = None,
@@ -382,7 +395,7 @@ def learn_pca_bases(
     """The first ``n_bases`` principal components (at most 36) as bases."""
     x = _as_training_matrix(poses)
     mean = x.mean(axis=0)
-    _, _, vt = np.linalg.svd(x - mean, full_matrices=False)
+    vt = _principal_directions(x - mean)
     k = min(n_bases, vt.shape[0])
     return _finish(x, mean, vt[:k].T.copy(), "pca", n_starts, seed, 0.01, metadata)
 
@@ -407,7 +420,7 @@ def learn_classwise_pca_bases(
         offset = xc.mean(axis=0) - mean
         if np.linalg.norm(offset) > 1e-9:
             cols.append(offset / np.linalg.norm(offset))
-        _, _, vt = np.linalg.svd(xc - xc.mean(axis=0), full_matrices=False)
+        vt = _principal_directions(xc - xc.mean(axis=0))
         cols.extend(vt[: min(n_per_class, vt.shape[0])])
     comps = np.stack(cols, axis=1)
     meta = {"classes": [str(c) for c in np.unique(lab)], "n_per_class": n_per_class, **(metadata or {})}
