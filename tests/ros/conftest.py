@@ -155,9 +155,10 @@ def start_lifter(
         pytest.fail("lifter did not shut down cleanly on SIGINT: " + "\n".join(failures))
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def rclpy_context(ros_domain_id: int) -> Iterator[Any]:
-    """A fresh rclpy Context for the test process, on the test graph's domain."""
+    """A fresh rclpy Context for the test process, on the test graph's domain, shut down (its
+    middleware threads with it) when the graph tests end rather than left to the tests after."""
     _require_build()
     _load_workspace_messages()
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
