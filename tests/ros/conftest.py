@@ -8,6 +8,7 @@ localhost-only discovery, so parallel runs and other machines never see each oth
 from __future__ import annotations
 
 import ctypes
+import gc
 import itertools
 import os
 import random
@@ -171,6 +172,7 @@ def rclpy_context(ros_domain_id: int) -> Iterator[Any]:
     # the test process keeps pytest's own Ctrl-C handling
     rclpy.init(context=ctx, domain_id=ros_domain_id, signal_handler_options=SignalHandlerOptions.NO)
     yield ctx
+    gc.collect()
     rclpy.try_shutdown(context=ctx)
 
 
@@ -324,6 +326,9 @@ def graph(rclpy_context: Any) -> Iterator[GraphClient]:
     executor.remove_node(node)
     node.destroy_node()
     executor.shutdown()
+    # rclpy objects left unreferenced in cycles are destroyed here, between tests, rather than by
+    # whichever later collection runs (in another test, inside other code)
+    gc.collect()
 
 
 def all_finite(msg: Any) -> bool:
