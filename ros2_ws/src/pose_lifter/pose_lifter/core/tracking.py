@@ -366,14 +366,17 @@ class TrackPolicy:
         if temporal is None or not temporal.future_frames:
             return None
         step = stamp_ns - track.last_stamp_ns
-        n = min(temporal.future_frames, len(ahead.stamps_ns))
-        gaps = np.diff(np.asarray(ahead.stamps_ns[:n], dtype=np.int64), prepend=stamp_ns)
-        uneven = np.abs(gaps - step) > 0.2 * step
-        n = int(np.argmax(uneven)) if uneven.any() else n  # up to the first uneven step
+        n, last = 0, stamp_ns  # the next frames up to the first uneven step (a few: plain ints)
+        for t in np.asarray(ahead.stamps_ns[:temporal.future_frames], dtype=np.int64).tolist():
+            if abs(t - last - step) > 0.2 * step:
+                break
+            n, last = n + 1, t
+        if n == 0:
+            return None
         frames = np.asarray(ahead.points[:n], dtype=np.float64)
         seen = _visible(frames, None if ahead.confidence is None else ahead.confidence[:n],
                         self.lifter.options.confidence_threshold)
-        if n == 0 or seen is None or frames.ndim != 3:
+        if seen is None or frames.ndim != 3:
             return None
         if frame.gated and frame.visible is not None and frame.predicted is not None:
             # the temporal gate over the next frames too: their confident outliers stay out
