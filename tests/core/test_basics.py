@@ -125,6 +125,20 @@ def test_bases_round_trip_and_bad_file(tmp_path) -> None:  # type: ignore[no-unt
         PoseBases.load(tmp_path / "bad.npz")
 
 
+def test_pca_bases_are_signed_by_their_convention_not_by_the_svd() -> None:
+    # An SVD fixes each direction only up to its sign, and which sign LAPACK returns changes with
+    # the BLAS kernel: the bases, and every problem and code built on them, must not.
+    poses = np.stack([_pose(i) for i in range(60)])
+    b = learn_pca_bases(poses, n_bases=10, n_starts=5)
+    comps = b.components  # (36, 10)
+    lead = comps[np.abs(comps).argmax(axis=0), np.arange(comps.shape[1])]
+    assert np.all(lead > 0.0)  # each direction's entry of largest magnitude is positive
+    x = poses.reshape(len(poses), -1)
+    _, _, vt = np.linalg.svd(x - x.mean(axis=0), full_matrices=False)
+    # the principal directions themselves, in order: only their signs are chosen
+    np.testing.assert_allclose(np.abs(comps.T @ vt[:10].T), np.eye(10), atol=tol.ROUND_OFF_ACCUMULATED)
+
+
 def test_packaged_bases_match_the_paper_setup() -> None:
     b = PoseBases.load()
     assert b.method == "sparse" and b.n_bases == 200
