@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import shutil
+import signal
+import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
 from lift_compare import assert_same_lift
 from pose_lifter import cli
-from pose_lifter.offline import bags
+from pose_lifter.offline import bags, chains
 from pose_lifter.offline.bags import BagError
 from pose_lifter.offline.collection import ERRORS_NAME, MANIFEST_NAME, expand_inputs, plan_jobs
 
@@ -160,6 +164,7 @@ def test_a_stopped_run_leaves_no_partial_output_and_resumes(workers: str, tmp_pa
     finished = set(outputs(out))
     assert done <= finished and "robot_b/two.mcap" not in finished
     assert not list(out.rglob(".bagwriter-*"))  # no temporary left either
+    assert not multiprocessing.active_children()  # the stopped pool's workers are gone
     for rel in finished:
         assert messages(out / rel)
     monkeypatch.setattr(bags.BagWriter, "write_cdr", write_cdr)
@@ -167,6 +172,23 @@ def test_a_stopped_run_leaves_no_partial_output_and_resumes(workers: str, tmp_pa
     assert cli.main(["lift", str(src), "--out", str(out), "--workers", workers, *FAST]) == 0
     assert f"{3 - len(done)} lifted, {len(done)} skipped" in capsys.readouterr().out
     assert list(outputs(out)) == ["punch.mcap", "robot_b/two.mcap", "walk.mcap"]
+
+
+def _deaf_to_sigterm() -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+def test_stopping_a_pool_ends_workers_that_outlive_sigterm(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A worker may survive SIGTERM (here it ignores it; a task that turns it into an exception is
+    # kept alive by the executor's worker loop): the stop must still end, every worker with it.
+    monkeypatch.setattr(chains, "STOP_TIMEOUT", 0.5)
+    ex = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork"), initializer=_deaf_to_sigterm)
+    running = [ex.submit(time.sleep, 3600) for _ in range(3)]
+    while not any(f.running() for f in running):
+        time.sleep(0.01)
+    workers = list(ex._processes.values())
+    chains.stop_workers(ex)
+    assert workers and not any(p.is_alive() for p in workers)
 
 
 def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() -> None:

@@ -371,10 +371,13 @@ _work: ChainWork | None = None
 
 def _worker_init(work: ChainWork) -> None:
     """Keep the worker's work; Ctrl-C ends a worker silently (the parent reports it once), not
-    with a traceback each."""
+    with a traceback each, and SIGTERM (:func:`stop_workers`) ends it at once: a worker writes
+    nothing, and a handler it inherited from the parent (which may turn SIGTERM into an
+    exception) would leave it alive, the executor's worker loop catching what a task raises."""
     global _work
     _work = work
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _worker_chain(index: int) -> Any:
@@ -382,12 +385,32 @@ def _worker_chain(index: int) -> Any:
     return _work.run(index)
 
 
+#: Seconds a worker has to exit after SIGTERM (a collection's worker discards the bag it was
+#: writing first) before :func:`stop_workers` kills it.
+STOP_TIMEOUT: Final[float] = 10.0
+
+
 def stop_workers(ex: Any) -> None:
-    """Terminate a ProcessPoolExecutor's processes and drop its queued work."""
-    processes = getattr(ex, "_processes", None) or {}  # pid -> Process (no public accessor)
-    for proc in list(processes.values()):
+    """Stop a ProcessPoolExecutor (forked workers) now: its queued work dropped, each worker sent
+    SIGTERM and killed if it has not exited within STOP_TIMEOUT.
+
+    The executor is not waited for: its manager thread ends by itself once its workers are gone
+    (a broken pool). ``shutdown(wait=True)`` after terminating the workers could wait forever: a
+    worker whose task turned SIGTERM into an exception is kept alive by the executor's worker
+    loop, which returns that exception as the task's result and waits for the next task.
+    """
+    import time
+
+    processes = list((getattr(ex, "_processes", None) or {}).values())  # no public accessor
+    ex.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
         proc.terminate()
-    ex.shutdown(wait=True, cancel_futures=True)
+    deadline = time.monotonic() + STOP_TIMEOUT
+    for proc in processes:
+        proc.join(max(deadline - time.monotonic(), 0.0))
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
 
 
 def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any) -> None:

@@ -325,19 +325,28 @@ def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1)
 _POOL: dict[str, Any] = {}
 
 
+class _Stopped(SystemExit):
+    """SIGTERM in a worker of the local pool (the parent stopping it)."""
+
+
 def _pool_init() -> None:
     """Ctrl-C ends a worker silently (the parent reports it); SIGTERM (the parent stopping the
-    pool) unwinds it, so that the bag it was writing is discarded."""
+    pool, :func:`pose_lifter.offline.chains.stop_workers`) unwinds it, so that the bag it was
+    writing is discarded, and then ends it (:func:`_pool_job`)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
     def stop(signum: int, frame: Any) -> None:
-        raise SystemExit(128 + signum)
+        raise _Stopped(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)
 
 
 def _pool_job(job: BagJob) -> BagOutcome:
-    return lift_one(job, _POOL["settings"], _POOL["lifter"])
+    try:
+        return lift_one(job, _POOL["settings"], _POOL["lifter"])
+    except _Stopped as stop:  # unwound (the bag being written discarded): the worker ends here,
+        # not in the executor's worker loop, which would return the exception and wait for more
+        os._exit(int(stop.code) if isinstance(stop.code, int) else 1)
 
 
 def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter: Any | None,
