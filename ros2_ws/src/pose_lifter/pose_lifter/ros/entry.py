@@ -10,6 +10,7 @@ takes over the handlers for the start-up and running phases.
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 import sys
 from types import FrameType
@@ -17,28 +18,23 @@ from types import FrameType
 __all__ = ["action_recognition", "adapter", "lifter", "lifter_lifecycle"]
 
 
-_signalled = False  # a signal arrived during the import
-
-
 def _interrupt(signum: int, frame: FrameType | None) -> None:
-    global _signalled
-    _signalled = True
-    raise KeyboardInterrupt
+    """A signal while the node's modules are imported: nothing runs yet, so exit at once with
+    code 0, outputs flushed. (A KeyboardInterrupt is not enough: raised inside a callback of the
+    import machinery, e.g. a module lock's weakref callback, it is printed as "Exception ignored"
+    and the start-up goes on; inside a C extension's initialisation it comes out as an
+    ImportError.)"""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def _run(module: str) -> None:
-    """Install the handlers, import ``module``, call its ``main()``. A signal during the import
-    exits 0 whatever it interrupted: inside a C extension's initialisation (rclpy's) the
-    KeyboardInterrupt comes out as an ImportError ("initialization failed")."""
+    """Install the handlers, import ``module``, call its ``main()`` (whose run loop takes the
+    handlers over, :class:`pose_lifter.ros.run.PhasedSignals`)."""
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
-    try:
-        main = importlib.import_module(module).main
-    except BaseException:
-        if _signalled:
-            sys.exit(0)
-        raise
-    main()
+    importlib.import_module(module).main()
 
 
 def lifter() -> None:
