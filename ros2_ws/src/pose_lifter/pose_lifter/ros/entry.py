@@ -10,10 +10,10 @@ takes over the handlers for the start-up and running phases.
 from __future__ import annotations
 
 import importlib
-import os
 import signal
-import sys
 from types import FrameType
+
+from pose_lifter.ros.run import exit_now
 
 __all__ = ["action_recognition", "adapter", "lifter", "lifter_lifecycle"]
 
@@ -24,9 +24,7 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
     import machinery, e.g. a module lock's weakref callback, it is printed as "Exception ignored"
     and the start-up goes on; inside a C extension's initialisation it comes out as an
     ImportError.)"""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
+    exit_now()
 
 
 def _run(module: str) -> None:

@@ -25,7 +25,7 @@ from contextlib import contextmanager
 from types import FrameType
 from typing import Any, NoReturn
 
-__all__ = ["PhasedSignals", "fatal", "one_line", "run_node"]
+__all__ = ["PhasedSignals", "exit_now", "fatal", "one_line", "run_node"]
 
 
 def one_line(err: BaseException) -> str:
@@ -64,9 +64,14 @@ class PhasedSignals:
             # Nothing runs yet, so nothing is lost: exit at once with code 0. (A KeyboardInterrupt
             # is not enough: numba's first compile runs ctypes callbacks that swallow it, or
             # leave llvmlite half torn down with tracebacks; numba writes cache files atomically.)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(0)
+            exit_now()
+
+
+def exit_now() -> NoReturn:
+    """Exit with code 0 at once, outputs flushed: a signal while nothing runs yet (start-up)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def fatal(name: str, text: str) -> NoReturn:
