@@ -219,13 +219,20 @@ def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together()
         groups = chain_groups(chains, tasks, workers)
         assert sorted(c for g in groups for c in g) == list(range(len(chains)))
         assert all(1 <= len(g) <= GROUP_CHAINS for g in groups)
-        assert len(groups) >= min(len(chains), tasks * workers)
         sizes = [sum(len(chains[c]) for c in g) for g in groups]
         assert sizes == sorted(sizes, reverse=True)
+        # no group holds more than an equal share of the items, but a group of one chain
+        share = sum(len(c) for c in chains) / min(len(chains), tasks * workers)
+        assert all(s <= share or len(g) == 1 for s, g in zip(sizes, groups, strict=True))
         # a group holds chains that start close in time: the groups' start ranges do not interleave
         spans = sorted((min(chains[c][0].msg_index for c in g), max(chains[c][0].msg_index for c in g))
                        for g in groups)
         assert all(a[1] <= b[0] for a, b in itertools.pairwise(spans))
+    # tracks of one length over 2 workers: two groups of equal work, as large as they can be
+    assert [len(g) for g in chain_groups([chain(0, 30) for _ in range(36)], 1, 2)] == [18, 18]
+    # of different lengths: equal items, not equal counts
+    uneven = [chain(0, 90)] + [chain(0, 10) for _ in range(9)]
+    assert [sum(len(uneven[c]) for c in g) for g in chain_groups(uneven, 1, 2)] == [90, 90]
     # enough groups of people seen together: the halves' tracks are not mixed
     assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
                for g in chain_groups(chains[:20], 1, 1))

@@ -161,20 +161,25 @@ GROUP_CHAINS: Final[int] = 64
 def chain_groups(chains: list[list[Item]], tasks_per_worker: int, workers: int) -> list[list[int]]:
     """The chains (indices) split into groups lifted in step (:func:`lift_chains`): in the order
     of their first message, a group closed when full or when the next chain starts after every
-    chain of the group has ended (so a group's people are seen together); full is at most
-    :data:`GROUP_CHAINS`, and small enough for ``tasks_per_worker * workers`` groups when there
-    are enough chains (the workers stay balanced). The groups with most items first."""
+    chain of the group has ended (so a group's people are seen together). Full is
+    :data:`GROUP_CHAINS` chains, or an equal share of the items (poses) among ``n`` groups (a
+    chain longer than the share is a group alone), ``n`` the larger of ``tasks_per_worker *
+    workers`` (at most one per chain) and what groups of :data:`GROUP_CHAINS` chains need: the
+    groups of a pool's workers carry equal work, each as large as it can be (a round's fixed
+    costs are shared by every person of the group). The groups with most items first."""
     order = sorted(range(len(chains)), key=lambda c: (chains[c][0].msg_index, -len(chains[c])))
     n_groups = max(min(len(chains), tasks_per_worker * workers), -(-len(chains) // GROUP_CHAINS), 1)
-    size = -(-len(chains) // n_groups)
+    share = sum(len(c) for c in chains) / n_groups  # a group's items, at most (but one chain)
     groups: list[list[int]] = []
     current: list[int] = []
-    end = -1
+    items, end = 0, -1
     for c in order:
-        if current and (len(current) >= size or chains[c][0].msg_index > end):
+        if current and (len(current) >= GROUP_CHAINS or items + len(chains[c]) > share * (1.0 + 1e-9)
+                        or chains[c][0].msg_index > end):
             groups.append(current)
-            current, end = [], -1
+            current, items, end = [], 0, -1
         current.append(c)
+        items += len(chains[c])
         end = max(end, chains[c][-1].msg_index)
     if current:
         groups.append(current)

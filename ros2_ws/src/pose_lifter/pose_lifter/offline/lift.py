@@ -81,9 +81,10 @@ __all__ = [
 ]
 
 _MARKER_NS: Final[str] = "pose_lifter"
-#: Groups of chains per worker (:func:`~pose_lifter.offline.chains.chain_groups`): several, so a
-#: worker whose groups are short takes another while the other finishes.
-_TASKS_PER_WORKER: Final[int] = 3
+#: Groups of chains per worker (:func:`~pose_lifter.offline.chains.chain_groups`, groups of equal
+#: items): one, as large as it can be. The 36-track bag on 2 workers (tools/bench_lift.py): 495
+#: poses/s and 24.1 CPU s with 3 groups per worker (6 people a group), 536 and 22.3 with one.
+_TASKS_PER_WORKER: Final[int] = 1
 #: Message types ``lift_bag`` lifts: ours as they are, yolo_ros' through :mod:`pose_lifter.messages.adapters`.
 LIFTABLE_TYPES: Final[tuple[str, ...]] = (SKELETON2D_ARRAY, YOLO_DETECTION_ARRAY)
 
