@@ -292,7 +292,7 @@ class UserOptions(_Validated):
         "from the smoothed pose is not moved to its 2D on that frame.", 0.0, _WEIGHT))
     hybrid_alternations: int = field(default=2, metadata=_meta(
         "Hybrid: alternations of each run at most.", 1, _ITER))
-    hybrid_pose_max_iter: int = field(default=20, metadata=_meta(
+    hybrid_pose_max_iter: int = field(default=10, metadata=_meta(
         "Hybrid: pose-step ADM iterations at most per alternation.", 1, _ITER))
 
     @property
