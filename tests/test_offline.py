@@ -215,27 +215,27 @@ def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together()
     # 20 tracks: 10 in the first half of the bag, 10 in the second; 4 single untracked skeletons
     chains = [chain(0, 50) for _ in range(10)] + [chain(60, 40) for _ in range(10)] + \
         [chain(k, 1) for k in (3, 30, 70, 99)]
-    for tasks, workers in ((1, 1), (3, 2), (100, 2)):
-        groups = chain_groups(chains, tasks, workers)
+    for workers in (1, 6, 200):
+        groups = chain_groups(chains, workers)
         assert sorted(c for g in groups for c in g) == list(range(len(chains)))
         assert all(1 <= len(g) <= GROUP_CHAINS for g in groups)
         sizes = [sum(len(chains[c]) for c in g) for g in groups]
         assert sizes == sorted(sizes, reverse=True)
         # no group holds more than an equal share of the items, but a group of one chain
-        share = sum(len(c) for c in chains) / min(len(chains), tasks * workers)
+        share = sum(len(c) for c in chains) / min(len(chains), workers)
         assert all(s <= share or len(g) == 1 for s, g in zip(sizes, groups, strict=True))
         # a group holds chains that start close in time: the groups' start ranges do not interleave
         spans = sorted((min(chains[c][0].msg_index for c in g), max(chains[c][0].msg_index for c in g))
                        for g in groups)
         assert all(a[1] <= b[0] for a, b in itertools.pairwise(spans))
     # tracks of one length over 2 workers: two groups of equal work, as large as they can be
-    assert [len(g) for g in chain_groups([chain(0, 30) for _ in range(36)], 1, 2)] == [18, 18]
+    assert [len(g) for g in chain_groups([chain(0, 30) for _ in range(36)], 2)] == [18, 18]
     # of different lengths: equal items, not equal counts
     uneven = [chain(0, 90)] + [chain(0, 10) for _ in range(9)]
-    assert [sum(len(uneven[c]) for c in g) for g in chain_groups(uneven, 1, 2)] == [90, 90]
+    assert [sum(len(uneven[c]) for c in g) for g in chain_groups(uneven, 2)] == [90, 90]
     # enough groups of people seen together: the halves' tracks are not mixed
     assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
-               for g in chain_groups(chains[:20], 1, 1))
+               for g in chain_groups(chains[:20], 1))
 
 
 def test_an_offline_lift_reads_each_tracks_next_frames(tmp_path: Path) -> None:

@@ -81,10 +81,6 @@ __all__ = [
 ]
 
 _MARKER_NS: Final[str] = "pose_lifter"
-#: Groups of chains per worker (:func:`~pose_lifter.offline.chains.chain_groups`, groups of equal
-#: items): one, as large as it can be. The 36-track bag on 2 workers (tools/bench_lift.py): 495
-#: poses/s and 24.1 CPU s with 3 groups per worker (6 people a group), 536 and 22.3 with one.
-_TASKS_PER_WORKER: Final[int] = 1
 #: Message types ``lift_bag`` lifts: ours as they are, yolo_ros' through :mod:`pose_lifter.messages.adapters`.
 LIFTABLE_TYPES: Final[tuple[str, ...]] = (SKELETON2D_ARRAY, YOLO_DETECTION_ARRAY)
 
@@ -188,14 +184,14 @@ def lift_messages(
     done: dict[int, Done] = {}  # id(item) -> outcome
     bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
     if workers == 1 or len(chains) < 2:
-        for group in chain_groups(chains, 1, 1):
+        for group in chain_groups(chains, 1):
             # one list of outcomes per chain of the group: the bar advances by that chain's items
             for outcomes in lift_chains(lifter, [chains[c] for c in group], frame, settings.smoothing_s):
                 for d in outcomes:
                     done[id(d.item)] = d
                 bar.update(len(outcomes))
     else:
-        groups = chain_groups(chains, _TASKS_PER_WORKER, workers)
+        groups = chain_groups(chains, workers)
         lift_parallel(ChainWork(lifter, frame, settings.smoothing_s, chains, groups, message_fields_only),
                       workers, done, bar)
     bar.close()
