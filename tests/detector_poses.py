@@ -1,10 +1,10 @@
-"""Test poses in the layouts detectors publish (shared by tests/test_adapters.py and the graph
+"""Test poses in the layouts detectors publish (shared by tests/messages/test_adapters.py and the graph
 tests): one standing person, imaged, and laid out as each layout's own definition says."""
 
 from __future__ import annotations
 
 import numpy as np
-from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.model.layouts import get_layout
 
 # A standing person (metres, y up) in the model's joint order.
 STANDING = np.array([

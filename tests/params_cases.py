@@ -1,5 +1,5 @@
 """A params file of non-default values, one of every parameter type, shared by the node's graph
-test (tests/ros/test_lifter_graph.py) and the offline lift's (tests/test_lift_cli.py): each must
+test (tests/ros/test_lifter_graph.py) and the offline lift's (tests/offline/test_lift_cli.py): each must
 reach the lifter, so code that ignored the file would fail both."""
 
 from __future__ import annotations

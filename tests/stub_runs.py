@@ -1,5 +1,5 @@
 """For the stand-in lifters of the pipeline tests: the ``runs`` whose ``solve`` drives a solve
-(:mod:`pose_lifter.core.batch`) that asks for no runs of the compiled kernel."""
+(:mod:`pose_lifter.core.lift.batch`) that asks for no runs of the compiled kernel."""
 
 from __future__ import annotations
 

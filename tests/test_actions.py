@@ -1,17 +1,17 @@
-"""The downstream example's model (pose_lifter.mocap.actions): features, k-NN, pose history."""
+"""The downstream example's model (pose_lifter.actions): features, k-NN, pose history."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.mocap.actions import (
+from pose_lifter.actions import (
     ActionClassifier,
     PoseHistory,
     keypoint_window_features,
     pose_window_features,
 )
+from pose_lifter.core.errors import InvalidInputError
 from scipy.spatial.transform import Rotation
 
 #: A standing person (metres, y up), paper joint order.

@@ -10,7 +10,7 @@ import pytest
 import tolerances as tol
 from mcap_check import check_mcap
 from pose_lifter import cli
-from pose_lifter.core.bases import PoseBases
+from pose_lifter.core.model.bases import PoseBases
 from pose_lifter.messages import convert as m
 from pose_lifter.mocap import cmu as mocap
 from pose_lifter.mocap import scenes
@@ -91,7 +91,7 @@ def _bag_with_estimates(tmp_path: Path, transform: np.ndarray, offset: np.ndarra
     clip = rng.normal(scale=0.3, size=(5, 12, 3)) + np.array([0.0, 1.0, 0.0])
     sc = scenes.build_scene([clip, clip + 0.01], scenes.SceneOptions(distance=4.0), track_ids=[3, 8])
     path = tmp_path / "in.mcap"
-    scenes.write_scene_bag(sc, path)
+    bags.write_messages(path, scenes.scene_messages(sc))
     t = m.rosbags_types()
     out = tmp_path / "est.mcap"
     with bags.BagWriter(out) as w:

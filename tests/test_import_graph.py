@@ -82,7 +82,7 @@ def test_the_cycle_finder_finds_a_cycle() -> None:
 
 def test_no_module_of_the_package_imports_itself_through_others() -> None:
     graph = import_graph()
-    assert "pose_lifter.cli" in graph and "pose_lifter.core.lifter" in graph["pose_lifter.offline.lift"]
+    assert "pose_lifter.cli" in graph and "pose_lifter.core.lift.lifter" in graph["pose_lifter.offline.lift"]
     assert cycles(graph) == []
 
 
@@ -95,14 +95,15 @@ def test_the_core_never_imports_the_ros_shell() -> None:
 
 def test_the_error_tree_and_the_bag_reader_load_without_the_solver() -> None:
     code = ("import sys, pose_lifter.offline.bags, pose_lifter.core.errors; "
-            "print(sorted(m for m in ('numba', 'scipy', 'pose_lifter.core.lifter') if m in sys.modules))")
+            "print(sorted(m for m in ('numba', 'scipy', 'pose_lifter.core.lift.lifter') "
+            "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 
 
 def test_every_public_core_name_resolves_lazily() -> None:
     import pose_lifter.core as core
-    from pose_lifter.core.lifter import Lifter
+    from pose_lifter.core.lift.lifter import Lifter
 
     assert core.Lifter is Lifter
     for name in core.__all__:
@@ -121,6 +122,57 @@ def test_rclpy_is_imported_only_under_ros() -> None:
     for name, deps in import_graph().items():
         if not name.startswith(("pose_lifter.ros", "pose_lifter.cli")):
             assert not any(d.startswith("pose_lifter.ros") for d in deps), (name, deps)
+
+
+#: The rooms each room of the package may import (the package itself, which holds the version,
+#: any room): the command line over everything; the node over the offline reader, the messages and
+#: the core, never the mocap side (data, training, experiments), which stands beside the offline
+#: lift and reaches its writer only through the command line.
+ROOM_IMPORTS: dict[str, set[str]] = {
+    "cli": {"ros", "mocap", "offline", "messages", "actions", "core"},
+    "ros": {"offline", "messages", "actions", "core"},
+    "mocap": {"messages", "core"},
+    "offline": {"messages", "core"},
+    "messages": {"core"},
+    "actions": {"core"},
+    "core": set(),
+}
+#: The core's parts in the order the walk of one frame goes down them: a part imports only parts
+#: below it (the modules at ``core/``'s top, the errors, options, results and input checks, and the
+#: reference and baseline solvers, are outside this order).
+CORE_PARTS = ("track", "lift", "solve", "model", "numeric")
+
+
+def _room(name: str) -> str | None:
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def _core_part(name: str) -> str | None:
+    parts = name.split(".")
+    return parts[2] if len(parts) > 3 and parts[1] == "core" and parts[2] in CORE_PARTS else None
+
+
+def test_every_arrow_between_rooms_and_between_core_parts_runs_down() -> None:
+    graph = import_graph()
+    rooms_up, parts_up, parts_down = [], [], 0
+    for name, deps in graph.items():
+        for d in deps:
+            a, b = _room(name), _room(d)
+            if a is not None and b is not None and a != b and b not in ROOM_IMPORTS[a]:
+                rooms_up.append((name, d))
+            pa, pb = _core_part(name), _core_part(d)
+            if pa is not None and pb is not None and pa != pb:
+                if CORE_PARTS.index(pb) < CORE_PARTS.index(pa):
+                    parts_up.append((name, d))
+                else:
+                    parts_down += 1
+    assert not rooms_up, rooms_up
+    assert not parts_up, parts_up
+    # the rule reads real arrows: the tracks call the lifter, the lifter the compiled runs
+    assert "pose_lifter.core.lift.lifter" in graph["pose_lifter.core.track.policy"]
+    assert parts_down > 20
+    assert set(ROOM_IMPORTS) == {_room(name) for name in graph} - {None}
 
 
 #: The package's size rules: a module a reader can hold, a call a reader can check.

@@ -15,7 +15,7 @@ NODE_MODULES = [*(f"ros/{p.name}" for p in (PKG / "pose_lifter" / "ros").glob("*
                 "messages/cdr.py", "messages/names.py",
                 *(f"core/{p.name}" for p in (PKG / "pose_lifter" / "core").glob("*.py"))]
 #: Imported only by offline functions the node never calls (basis learning), or optional
-#: (threadpoolctl: without it the node runs, with BLAS's own thread count; core/_threads.py).
+#: (threadpoolctl: without it the node runs, with BLAS's own thread count; core/numeric/threads.py).
 OPTIONAL = {"sklearn", "threadpoolctl"}
 KEYS = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml"}
 

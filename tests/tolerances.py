@@ -51,7 +51,7 @@ FUSED_STEP_REL: Final[float] = 1e-9
 #: (measured worst 6e-11 on the same 24 problems; the final multipliers, which no user sees, are
 #: not compared).
 FUSED_VS_LOOP_REL: Final[float] = 1e-6
-#: The compiled run (core/run_kernel.py) against ``Runs.run``'s Python loop, the same inputs:
+#: The compiled run (core/solve/run_kernel.py) against ``Runs.run``'s Python loop, the same inputs:
 #: both call the same compiled steps and the same compiled objective terms, so they perform the
 #: same floating-point operations on any CPU and BLAS (measured 0 on every replayed run); the
 #: bound leaves room for nothing but a changed operation, which moves a run by far more (a flipped
@@ -111,7 +111,7 @@ def measured_bound(measured: float, floor: float | None = None) -> float:
     return bound if floor is None else min(bound, 0.99 * floor)
 
 
-#: tests/test_bags.py REPLAY (frames 0, 10, 20, 30; 3 cold starts; the hybrid default), per bag:
+#: tests/offline/test_bags.py REPLAY (frames 0, 10, 20, 30; 3 cold starts; the hybrid default), per bag:
 #: (P-MPJPE, MPJPE, flat floor P-MPJPE) mm, measured at 3f1ffe5 with
 #: `.venv/bin/python tools/bag_bands.py` (the floors are the bag's, not the lifter's).
 BAG_REPLAY_MM: Final[dict[str, tuple[float, float, float]]] = {
@@ -127,10 +127,10 @@ NODE_REPLAY_TWO_PEOPLE_MM: Final[tuple[float, float, float]] = (62.1, 75.1, 95.7
 #: The README's core example (normalised P-MPJPE it prints), measured 0.071 at 3f1ffe5
 #: (`pytest -s tests/test_readme.py`).
 README_EXAMPLE_P_MPJPE: Final[float] = measured_bound(0.071)
-#: A yolo_ros DetectionArray adapted and lifted (tests/test_adapters.py, exact input): the
+#: A yolo_ros DetectionArray adapted and lifted (tests/messages/test_adapters.py, exact input): the
 #: reprojection error in pixels, measured 2.77 px (of a 201 px tall person) at 3f1ffe5.
 ADAPTED_REPROJECTION_PX: Final[float] = measured_bound(2.77)
-#: tests/test_experiments.py's worker on the noise-free mean pose seen at 30 degrees: the paper's
+#: tests/mocap/test_experiments.py's worker on the noise-free mean pose seen at 30 degrees: the paper's
 #: normalised error of the lifter and of the pose step with the true camera (the limb
 #: constraints' anthropometric proportions move the pose off the bases' mean), measured 0.586
 #: and 1.115 at 3f1ffe5 (`pytest -s`); the P-MPJPE in mm 51.9 and 116.1.
@@ -139,7 +139,7 @@ WORKER_MEAN_POSE_ERR: Final[dict[str, float]] = {"L1WAWS": measured_bound(0.586)
 WORKER_MEAN_POSE_MM: Final[dict[str, float]] = {"L1WAWS": measured_bound(51.9),
                                                  "GT camera": measured_bound(116.1)}
 
-#: tests/core/test_against_reference.py test_limb_pose_step_is_feasible_local_minimum: how far
+#: tests/core/solve/test_against_reference.py test_limb_pose_step_is_feasible_local_minimum: how far
 #: above the local minimum SLSQP reaches from its result the default pose step (40 ADM
 #: iterations; on its 12-basis model the Riemannian step falls back to the paper's inner ADM) may
 #: end, worst of 6 problems. L1WAWS measured +8.76 % (case 2; the same to 1e-14 with
@@ -151,9 +151,9 @@ DEFAULT_POSE_LOCAL_GAP: Final[dict[str, float]] = {"L1WAWS": measured_bound(0.08
 # These are wider than the solver tolerances above on purpose: the paper's inner ADM never meets
 # its own tolerance in its iteration cap on these problems, and on some it ends in a poorer local
 # minimum. The problems are the same on every machine (the PCA bases they are built on are signed
-# by pose_lifter.core.bases' convention, not by the BLAS kernel's SVD).
+# by pose_lifter.core.model.bases' convention, not by the BLAS kernel's SVD).
 #: How far above the SLSQP polish of its own output the inner ADM alpha-step may end, on every
-#: one of tests/core/test_against_reference.py's 8 problems (within ALPHA_STEP_OBJECTIVE_REL on
+#: one of tests/core/solve/test_against_reference.py's 8 problems (within ALPHA_STEP_OBJECTIVE_REL on
 #: at least ADMM_ALPHA_CASES_WITHIN_TOL of them). Measured: case 3 at +34.3 %, the other 7 within
 #: 0.6 %, the same to 1e-5 with OpenBLAS's Zen, Haswell and Prescott kernels and numba for a
 #: generic x86-64 (the test's assertion messages list the 8 gaps).
@@ -167,7 +167,7 @@ ADMM_POSE_MAX_RATIO: Final[float] = measured_bound(1.268)
 
 # ---------------------------------------------------------------- default options' known gaps (measured)
 # The default iteration caps trade the last digits of the convex steps for speed. Each gap is the
-# largest measured over the reference problems at 3f1ffe5 (tests/core/test_against_reference.py)
+# largest measured over the reference problems at 3f1ffe5 (tests/core/solve/test_against_reference.py)
 # with ACCURACY_MARGIN; run to convergence the same solvers reach the optimum (tested).
 #: The L1 camera ADM at LifterOptions()' cap (100 iterations, tau 10): relative objective gap
 #: to the reference optimum, measured 0.0128 (cases 0-4: 0.0096, 0.0010, 0.0128, 0.0015, 0.0086).
@@ -184,7 +184,7 @@ CONVEX_POSE_DEFAULT_GAP: Final[dict[str, float]] = {
     "L2NANS": 0.0751 * (1 + ACCURACY_MARGIN),
 }
 
-#: `pose-lifter experiments --quick` (tests/test_experiments.py, CMU data): the largest error of
+#: `pose-lifter experiments --quick` (tests/mocap/test_experiments.py, CMU data): the largest error of
 #: any row (any method, floors included) per experiment, (normalised error, P-MPJPE mm), measured
 #: at 2f11496 (exp1: the bases' reconstruction error): the worst single lifts are the paper's
 #: baseline on outliers (Ramakrishna, 6.83) and the convex variant on noise (3.34).

@@ -28,9 +28,9 @@ method, tracked as the node tracks: cold 30-start first frame, then warm + mirro
 ``learned`` (the prior alone, per frame); ``learned-t`` (the prior alone tracked as the node
 runs ``mode: learned``: the causal temporal prior) and ``learned-offline`` (the same smoothed over
 past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked (default mode,
-the node's per-track policy :class:`pose_lifter.core.tracking.TrackPolicy`),
+the node's per-track policy :class:`pose_lifter.core.track.policy.TrackPolicy`),
 ``hybrid-offline`` (the tracks as ``pose-lifter lift`` gives them: without the causal smoothing
-of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.smoothing`) and
+of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.track.smoothing`) and
 ``hybrid-1`` (every frame cold).
 
 Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
@@ -61,12 +61,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
-from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.placement import place_in_camera
-from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
-from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
-from pose_lifter.core.tracking import FramesAhead, TrackPolicy
+from pose_lifter.core.model.bases import default_bases_path
+from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.track.placement import place_in_camera
+from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
+from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.mocap.cmu import load_trial, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -259,7 +259,7 @@ def _tracks(split: str, data: str | None, frames: int, views: int, trials: list[
     elif split == "eval":
         ids = split_trials("eval", data)
     else:  # the prior's held-out training-split trials (tuning)
-        from pose_lifter.core.prior import PosePrior
+        from pose_lifter.core.model.prior import PosePrior
         ids = list(PosePrior.load().metadata.get("validation_trials", []))
     cams = cameras or CAMERAS
     out = []

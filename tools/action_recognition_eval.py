@@ -49,10 +49,10 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from pose_lifter.actions import ActionClassifier
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.tracking import TrackPolicy
-from pose_lifter.mocap.actions import ActionClassifier
+from pose_lifter.core.track.policy import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial, read_manifest, resolve_data_dir
 
 CLASSES = ("walk", "run", "dance", "basketball", "playground")

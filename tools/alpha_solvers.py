@@ -2,7 +2,7 @@
 
     .venv/bin/python tools/alpha_solvers.py
 
-The 6 limb-constrained problems of ``tests/core/test_against_reference.py`` (L1WAWS, theta 0.05,
+The 6 limb-constrained problems of ``tests/core/solve/test_against_reference.py`` (L1WAWS, theta 0.05,
 noisy 2D with an outlier and a missing joint, default options otherwise) on PCA bases of 12
 directions (too few for the Riemannian step's onto limb map: it falls back to the paper's inner
 ADM) and of 30: per solver the mean objective the pose step reaches and its median time per
@@ -20,10 +20,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests" / "core"), str(ROOT / "tests")]
 
-from pose_lifter.core.bases import learn_pca_bases  # noqa: E402
+from pose_lifter.core.model.bases import learn_pca_bases  # noqa: E402
+from pose_lifter.core.model.pose_model import PoseModel  # noqa: E402
 from pose_lifter.core.options import AlphaSolver, LifterOptions  # noqa: E402
-from pose_lifter.core.pose_model import PoseModel  # noqa: E402
-from pose_lifter.core.pose_step import pose_step  # noqa: E402
+from pose_lifter.core.solve.pose_step import pose_step  # noqa: E402
 from synthetic_poses import synthetic_poses  # noqa: E402
 from test_against_reference import _pose_problem  # noqa: E402
 

@@ -42,14 +42,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 from numpy.typing import NDArray
-from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import InvalidInputError, PoseLifterError
-from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.metrics import p_mpjpe
+from pose_lifter.core.lift.lifter import Lifter
+from pose_lifter.core.model.bases import PoseBases, default_bases_path
+from pose_lifter.core.model.metrics import p_mpjpe
+from pose_lifter.core.model.skeleton import normalise_pose
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import LiftResult
-from pose_lifter.core.skeleton import normalise_pose
-from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.core.track.policy import TrackPolicy
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
@@ -111,7 +111,7 @@ def pct(a: Sequence[float], q: float) -> float:
 def lift_track(lifter: Lifter, tr: Track, warm_start: bool = True
                ) -> tuple[list[LiftResult | None], list[float], list[float], list[bool]]:
     """Lift a track frame by frame at 30 Hz through the node's per-track policy
-    (:class:`pose_lifter.core.tracking.TrackPolicy`)."""
+    (:class:`pose_lifter.core.track.policy.TrackPolicy`)."""
     results: list[LiftResult | None] = []
     wall: list[float] = []
     cpu: list[float] = []

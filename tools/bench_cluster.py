@@ -35,7 +35,7 @@ def main() -> int:
     ap.add_argument("--max-messages", type=int, default=None)
     args = ap.parse_args()
     import distributed
-    from pose_lifter.core._threads import one_blas_thread
+    from pose_lifter.core.numeric.threads import one_blas_thread
     from pose_lifter.core.options import LifterOptions
     from pose_lifter.offline.collection import LiftSettings, lift_collection
 

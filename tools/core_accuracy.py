@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, normalise_pose, p_mpjpe
-from pose_lifter.core.skeleton import limb_lengths
+from pose_lifter.core.model.skeleton import limb_lengths
 from pose_lifter.mocap.cmu import load_trial, read_manifest
 from scipy.spatial.transform import Rotation
 from threadpoolctl import threadpool_limits

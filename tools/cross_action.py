@@ -23,7 +23,7 @@ image, a camera at 2 m, a camera 50 degrees above; and every fault of a real det
 2D with zero depth), ``learned`` (the fold's prior alone, per frame), ``learned-offline`` (the
 prior alone tracked and smoothed over past and future frames: ``pose-lifter lift --mode
 learned``) and ``hybrid`` (the default mode tracked by
-:class:`pose_lifter.core.tracking.TrackPolicy`, with the fold's prior as its single-frame prior and
+:class:`pose_lifter.core.track.policy.TrackPolicy`, with the fold's prior as its single-frame prior and
 the temporal prior off: the packaged temporal prior has seen every class; with ``--temporal``
 each fold also trains its own temporal prior, ``DIR/<C>_w4.npz``, and every tracked method uses
 it, as the node does; with ``--offline`` also its offline prior, ``DIR/<C>_w7c.npz`` (as ``make
@@ -56,9 +56,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy as acc
-from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PriorFileError
-from pose_lifter.core.prior import PosePrior
+from pose_lifter.core.model.bases import PoseBases, default_bases_path
+from pose_lifter.core.model.prior import PosePrior
 from pose_lifter.mocap.cmu import load_trial, trials_by_action
 from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 

@@ -22,9 +22,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy as acc
 from pose_lifter.core import p_mpjpe
-from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, limb_lengths
-from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
-from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, limb_lengths
+from pose_lifter.core.track.policy import TrackPolicy
+from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 
 FRAME_NS = 33_333_333
 

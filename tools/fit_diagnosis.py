@@ -40,12 +40,12 @@ from numpy.typing import NDArray
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from accuracy import CENTRE, FOCAL, _parse
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
-from pose_lifter.core import hybrid as hybrid_mod
-from pose_lifter.core.bases import default_bases_path
-from pose_lifter.core.metrics import procrustes_align
+from pose_lifter.core.lift import hybrid as hybrid_mod
+from pose_lifter.core.model.bases import default_bases_path
+from pose_lifter.core.model.metrics import procrustes_align
+from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, limb_lengths, normalise_pose_flat
 from pose_lifter.core.results import StartKind
-from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, limb_lengths, normalise_pose_flat
-from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.core.track.policy import TrackPolicy
 from pose_lifter.mocap.cmu import load_trial
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import film, view_rotation
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     lifter.warm_up()
     hybrid_mod.PriorFit.starts = _wrapped(hybrid_mod.PriorFit.starts)  # type: ignore[method-assign]
     if args.true_limbs:
-        from pose_lifter.core import track as track_mod
+        from pose_lifter.core.track import state as track_mod
         def true_props(self: Any, image: bool = False) -> Any:
             return CAPTURE["true_props"]
         track_mod.Track.limb_proportions = true_props  # type: ignore[method-assign]

@@ -29,9 +29,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
-from pose_lifter.core.bases import learn_sparse_bases
-from pose_lifter.core.prior import PosePrior
-from pose_lifter.core.skeleton import normalise_pose
+from pose_lifter.core.model.bases import learn_sparse_bases
+from pose_lifter.core.model.prior import PosePrior
+from pose_lifter.core.model.skeleton import normalise_pose
 from pose_lifter.mocap.cmu import load_trial, read_manifest
 from pose_lifter.mocap.prior_training import train_prior
 from pose_lifter.mocap.views import limb_scale_factors, scale_limbs

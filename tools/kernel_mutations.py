@@ -23,17 +23,17 @@ CORE = REPO / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter" / "core"
 
 #: (what, file under core/, text, its replacement, the test that must fail)
 MUTATIONS = [
-    ("a sign in the pose ADM's d1", "pose_kernel.py", "d1[i] = c[i] - gi + u1[i]",
-     "d1[i] = c[i] - gi - u1[i]", "tests/core/test_against_reference.py"),
-    ("two Newton steps per alpha-step in the compiled pose step", "pose_step.py",
+    ("a sign in the pose ADM's d1", "solve/pose_kernel.py", "d1[i] = c[i] - gi + u1[i]",
+     "d1[i] = c[i] - gi - u1[i]", "tests/core/solve/test_against_reference.py"),
+    ("two Newton steps per alpha-step in the compiled pose step", "solve/pose_step.py",
      "alpha_max_iter=RIEMANNIAN_MAX_ITER,", "alpha_max_iter=2 * RIEMANNIAN_MAX_ITER,",
-     "tests/core/test_pose_step.py"),
-    ("the sign of ||alpha||_1 in the run's objective", "run_kernel.py",
+     "tests/core/solve/test_pose_step.py"),
+    ("the sign of ||alpha||_1 in the run's objective", "solve/run_kernel.py",
      "obj = cobj + th * _sum_abs(alpha)", "obj = cobj - th * _sum_abs(alpha)",
-     "tests/core/test_run_kernel.py"),
-    ("the compiled run keeps its last alternation, not its best", "run_kernel.py",
+     "tests/core/solve/test_run_kernel.py"),
+    ("the compiled run keeps its last alternation, not its best", "solve/run_kernel.py",
      "if (b_idx < 0 and not continued) or obj < b_obj:",
-     "if (b_idx < 0 and not continued) or obj < b_obj or True:", "tests/core/test_run_kernel.py"),
+     "if (b_idx < 0 and not continued) or obj < b_obj or True:", "tests/core/solve/test_run_kernel.py"),
 ]
 
 

@@ -16,12 +16,12 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   (rotation, scale, translation), the objective, reprojection error, limb violation and the
   alternation counts. Failed skeletons enter with their error message.
 * ``metrics``: the lifted metric joints of both modes against the bags' ground truth (matched
-  by stamp and track id): :func:`~pose_lifter.core.metrics.mpjpe`, ``p_mpjpe``,
+  by stamp and track id): :func:`~pose_lifter.core.model.metrics.mpjpe`, ``p_mpjpe``,
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
   :func:`pose_lifter.offline.lift.evaluate_bag` on each input bag.
-* ``pose_step``: a few :func:`pose_lifter.core.pose_step.pose_step` calls recorded while lifting the
+* ``pose_step``: a few :func:`pose_lifter.core.solve.pose_step.pose_step` calls recorded while lifting the
   first bag in each mode through ``Runs.run``'s Python loop (the compiled run calls no Python
-  ``pose_step``; the loop runs the same steps, ``tests/core/test_run_kernel.py``) (every
+  ``pose_step``; the loop runs the same steps, ``tests/core/solve/test_run_kernel.py``) (every
   ``--record-every``-th call, up to ``--record`` per mode),
   replayed with the recorded settings and with every other alpha-step solver (``"newton"``,
   ``"admm"``, the full ``"admm"`` lifting for a few iterations, and without limb constraints):
@@ -53,15 +53,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 from numpy.typing import NDArray
-from pose_lifter.core import pose_step as pose_module
-from pose_lifter.core import runs as lifter_module
-from pose_lifter.core._jit import HAVE_NUMBA
-from pose_lifter.core.bases import PoseBases, default_bases_path
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
+from pose_lifter.core.lift import runs as lifter_module
+from pose_lifter.core.lift.lifter import Lifter
+from pose_lifter.core.model.bases import PoseBases, default_bases_path
+from pose_lifter.core.model.metrics import mpjpe, normalised_error, p_mpjpe, procrustes_align
+from pose_lifter.core.numeric.jit import HAVE_NUMBA
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import LiftResult, StartKind
+from pose_lifter.core.solve import pose_step as pose_module
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages

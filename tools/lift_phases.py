@@ -7,9 +7,9 @@ Wraps the functions of the offline path with timers (cumulative seconds, nested 
 ``lift_messages`` holds ``split_chains``, ``lift_chains`` and the message building) and prints one
 ``PHASES`` line on stderr at exit. ``lift_chains`` is the per-track solve (the core's time) in
 one process; with workers it runs in the children and is not seen here. Inside it, ``run_kernel``
-(the compiled alternations of a round of lifts, :func:`pose_lifter.core.run_kernel._run_kernel_many`)
+(the compiled alternations of a round of lifts, :func:`pose_lifter.core.solve.run_kernel._run_kernel_many`)
 and ``prior_network`` (the learned prior's network for the poses of a round,
-:meth:`pose_lifter.core.prior.PosePrior._forward_small`);
+:meth:`pose_lifter.core.model.prior.PosePrior._forward_small`);
 the rest of ``lift_chains`` is the Python around them (tracking, the lifter's set-up, results).
 """
 
@@ -46,7 +46,7 @@ def main() -> int:
     import pose_lifter.messages.convert as m
     import pose_lifter.offline.bags as bags
     import pose_lifter.offline.lift as off
-    from pose_lifter.core.lifter import Lifter
+    from pose_lifter.core.lift.lifter import Lifter
 
     acc["import"] = time.perf_counter() - T0
     wrap(Lifter, "warm_up")
@@ -54,8 +54,8 @@ def main() -> int:
     wrap(off, "split_chains")
     wrap(off, "lift_chains")
     try:
-        import pose_lifter.core.run_kernel as rk
-        from pose_lifter.core.prior import PosePrior
+        import pose_lifter.core.solve.run_kernel as rk
+        from pose_lifter.core.model.prior import PosePrior
     except ImportError:  # an older layout
         pass
     else:

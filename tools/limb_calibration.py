@@ -6,7 +6,7 @@
 Held-out training-split tracks (the learned prior's validation trials: never trained on, never
 the evaluation split) have their limbs scaled per person by up to ``--spread``; each is tracked
 at 30 Hz with the hybrid lifter, and the median of the prior's limb proportions over the track
-(the raw estimate, before :data:`pose_lifter.core.track.LIMB_CALIBRATION`) is compared with
+(the raw estimate, before :data:`pose_lifter.core.track.state.LIMB_CALIBRATION`) is compared with
 the person's true proportions. Per bone group (upper arm, forearm, thigh, shin), on the
 log-proportions with the mean over the groups removed, it prints the error of the bases'
 proportions, of the raw and the calibrated estimate, and the least-squares line
@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import accuracy
 from pose_lifter.core import Lifter, LifterOptions
-from pose_lifter.core.bases import PoseBases
-from pose_lifter.core.skeleton import LEFT_LIMBS, RIGHT_LIMBS
-from pose_lifter.core.track import calibrated_limb_proportions
-from pose_lifter.core.tracking import TrackPolicy
+from pose_lifter.core.model.bases import PoseBases
+from pose_lifter.core.model.skeleton import LEFT_LIMBS, RIGHT_LIMBS
+from pose_lifter.core.track.policy import TrackPolicy
+from pose_lifter.core.track.state import calibrated_limb_proportions
 from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
 GROUPS = ("upper arm", "forearm", "thigh", "shin")

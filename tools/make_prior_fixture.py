@@ -1,6 +1,6 @@
 """Write tests/fixtures/prior_torch.npz: a small residual prior trained in torch (fixed seed), its
 unfolded parameters and torch's own outputs, so CI checks the numpy prior against torch without
-torch (tests/test_prior_training.py).
+torch (tests/mocap/test_prior_training.py).
 
 Usage (needs the training extra, ``make train-deps``)::
 
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from pose_lifter.core.synthetic import synthetic_poses
+from pose_lifter.core.model.synthetic import synthetic_poses
 from pose_lifter.mocap import prior_training as pt
 
 OUT = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "prior_torch.npz"

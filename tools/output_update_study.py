@@ -12,7 +12,7 @@ and the track's 2D noise, plus the learned prior alone (``--set measurement_upda
 ignored). ``score`` replays on the recording, without lifting again (the smoothing and the update
 are output-only: the fits do not change): the output smoothing restarted on a re-initialised frame
 (as before) and carried over it (now), the measurement update
-(:class:`pose_lifter.core.measurement.MeasurementUpdate`, as :class:`TrackPolicy` runs it; with
+(:class:`pose_lifter.core.track.measurement.MeasurementUpdate`, as :class:`TrackPolicy` runs it; with
 ``--variant depth=...,gate=...`` other settings too), and ``pose-lifter lift``'s centred
 smoothing of the fit's own poses and of the published ones; it prints P-MPJPE, MPJPE and the
 acceleration error (mm, mm/frame^2) per condition, as ``tools/accuracy.py`` computes them.
@@ -37,10 +37,10 @@ from numpy.typing import NDArray
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy as acc
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
-from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, limb_lengths
-from pose_lifter.core.tracking import TrackPolicy, _prior_camera
+from pose_lifter.core.model.bases import default_bases_path
+from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, limb_lengths
+from pose_lifter.core.track.policy import TrackPolicy, _prior_camera
 
 FIELDS = ("truth", "leg", "pub", "fit", "prior", "learned", "centre", "scale", "px", "conf", "weights",
           "noise", "follows", "ok", "track")
@@ -157,10 +157,10 @@ def early_noise(d: dict[str, NDArray[Any]], lifter: Lifter) -> NDArray[np.float6
 
 def replay_update(d: dict[str, NDArray[Any]], base: NDArray[np.float64], noise: NDArray[np.float64],
                   depth: float = 0.5, gate: float = 0.3) -> NDArray[np.float64]:
-    """:class:`pose_lifter.core.measurement.MeasurementUpdate` on ``base`` (the published poses
+    """:class:`pose_lifter.core.track.measurement.MeasurementUpdate` on ``base`` (the published poses
     before it) track by track, as ``TrackPolicy`` runs it: a new state on a track's first frame
     and after a frame that could not be lifted; no update before the track's first noise sample."""
-    from pose_lifter.core.measurement import MeasurementUpdate, compile_kernels
+    from pose_lifter.core.track.measurement import MeasurementUpdate, compile_kernels
     compile_kernels()
     out = base.copy()
     state = MeasurementUpdate()
@@ -180,11 +180,11 @@ TIMES: list[float] = []
 
 def replay_smoother(d: dict[str, NDArray[Any]], b: float = 0.7, low: float = 0.55, keep: bool = False
                     ) -> NDArray[np.float64]:
-    """The track's output smoother (core.smoothing.CausalSmoother) again on the recorded fits and priors
+    """The track's output smoother (core.track.smoothing.CausalSmoother) again on the recorded fits and priors
     (``keep``: not restarted when a warm track's frame was solved cold)."""
-    from pose_lifter.core import track as tk
-    from pose_lifter.core import tracking as tr
-    from pose_lifter.core.smoothing import CausalSmoother
+    from pose_lifter.core.track import policy as tr
+    from pose_lifter.core.track import state as tk
+    from pose_lifter.core.track.smoothing import CausalSmoother
     out = d["fit"].copy()
     sm = None
     shares: list[float] = []
@@ -216,7 +216,7 @@ def replay_smoother(d: dict[str, NDArray[Any]], b: float = 0.7, low: float = 0.5
 
 def score(args: argparse.Namespace) -> int:
     """Print P-MPJPE / MPJPE / acceleration error per condition for the output rules."""
-    from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
+    from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
     data = np.load(args.recording)
     lifter = Lifter()
     extra = [acc._parse(v.split(",")) for v in args.variant]

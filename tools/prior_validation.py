@@ -25,7 +25,7 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
-from pose_lifter.core.prior import PosePrior
+from pose_lifter.core.model.prior import PosePrior
 from pose_lifter.mocap.cmu import load_trial
 from pose_lifter.mocap.prior_training import Augmentation, _evaluate, make_batch
 from threadpoolctl import threadpool_limits

@@ -170,7 +170,7 @@ class Harness:
 
 def _kinds(t: Any) -> dict[str, Callable[[int], Any]]:
     """Malformed messages by kind: each builds one from a stamp (ns)."""
-    from pose_lifter.core.layouts import get_layout
+    from pose_lifter.core.model.layouts import get_layout
     from pose_lifter.messages.convert import arrays_to_skeleton2d, camera_info, make_header
 
     rng = np.random.default_rng(0)
@@ -238,7 +238,7 @@ def _kinds(t: Any) -> dict[str, Callable[[int], Any]]:
 
 
 def fuzz(args: argparse.Namespace) -> int:
-    from pose_lifter.core.layouts import get_layout
+    from pose_lifter.core.model.layouts import get_layout
     from pose_lifter.messages.convert import arrays_to_skeleton2d, make_header
 
     h = Harness(["n_starts:=1", "max_alternations:=5"], reliable_input=False)

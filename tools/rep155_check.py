@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import body
 from pose_lifter.messages.convert import skeleton3d_to_joints
 from pose_lifter.offline.bags import read_messages

@@ -44,7 +44,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from pose_lifter.core.prior import DEFAULT_PRIOR_PATH
+from pose_lifter.core.model.prior import DEFAULT_PRIOR_PATH
 from pose_lifter.mocap.cmu import load_trial, resolve_data_dir, split_trials
 from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 from threadpoolctl import threadpool_limits

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from pose_lifter.core.synthetic import synthetic_poses
+from pose_lifter.core.model.synthetic import synthetic_poses
 from pose_lifter.mocap.views import film, view_rotation
 
 

@@ -2,14 +2,14 @@
 
 A crude forward-kinematics body: a rigid torso and 8 limbs of the anthropometric lengths,
 each limb pointing in a random direction around a class-specific mean direction. Poses
-are returned normalised (:func:`pose_lifter.core.skeleton.normalise_pose`).
+are returned normalised (:func:`pose_lifter.core.model.skeleton.normalise_pose`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from pose_lifter.core.skeleton import ANTHROPOMETRIC_PROPORTIONS, normalise_pose
+from pose_lifter.core.model.skeleton import ANTHROPOMETRIC_PROPORTIONS, normalise_pose
 
 # torso joints (left sho, right sho, left hip, right hip), x to the subject's left, y up
 _TORSO = {0: (0.75, 2.4, 0.0), 3: (-0.75, 2.4, 0.0), 6: (0.4, 0.0, 0.0), 9: (-0.4, 0.0, 0.0)}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pose_lifter import cli
-from pose_lifter.core import Lifter, camera
+from pose_lifter.core import Lifter
 from pose_lifter.core import reference as ref
 from pose_lifter.core.baselines import ramakrishna as rk
 from pose_lifter.core.errors import (
@@ -16,7 +16,8 @@ from pose_lifter.core.errors import (
     diverged_as_solver_error,
 )
 from pose_lifter.core.options import LifterOptions
-from pose_lifter.core.pose_step import pose_step
+from pose_lifter.core.solve import camera
+from pose_lifter.core.solve.pose_step import pose_step
 from pose_lifter.messages.typestore import TypestoreError
 from pose_lifter.offline import bags
 from pose_lifter.offline.bags import BagError, BagReadError

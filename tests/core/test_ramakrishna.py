@@ -7,11 +7,11 @@ import pytest
 import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core.baselines import ramakrishna as rk
-from pose_lifter.core.bases import PoseBases, learn_classwise_pca_bases
 from pose_lifter.core.errors import InvalidInputError, OptionsError, TooFewJointsError
-from pose_lifter.core.metrics import p_mpjpe
+from pose_lifter.core.model.bases import PoseBases, learn_classwise_pca_bases
+from pose_lifter.core.model.metrics import p_mpjpe
+from pose_lifter.core.model.skeleton import limb_lengths
 from pose_lifter.core.results import Camera
-from pose_lifter.core.skeleton import limb_lengths
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses

@@ -8,12 +8,12 @@ import pytest
 import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
-from pose_lifter.core.bases import PoseBases, learn_pca_bases
 from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.model.bases import PoseBases, learn_pca_bases
+from pose_lifter.core.model.skeleton import limb_lengths, limb_selectors
 from pose_lifter.core.reference import camera as ref_camera
 from pose_lifter.core.reference import pose as ref_pose
 from pose_lifter.core.results import Camera
-from pose_lifter.core.skeleton import limb_lengths, limb_selectors
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
 

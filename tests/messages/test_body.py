@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pose_lifter.core.layouts import get_layout
-from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.core.model.layouts import get_layout
+from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import body, hri
 from pose_lifter.messages.convert import skeleton3d_to_joints
 from pose_lifter.offline.bags import read_messages

@@ -10,9 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pose_lifter.core import Lifter, LifterOptions, PoseBases, batch
-from pose_lifter.core.batch import PriorCall, Steps
+from pose_lifter.core import Lifter, LifterOptions, PoseBases
 from pose_lifter.core.errors import SolverError
+from pose_lifter.core.lift import batch
+from pose_lifter.core.lift.batch import PriorCall, Steps
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.hri import body_id
 from scipy.spatial.transform import Rotation

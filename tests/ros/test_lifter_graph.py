@@ -14,8 +14,8 @@ import pytest
 import tolerances as tol
 import yaml
 from params_cases import NON_DEFAULT_PARAMS
-from pose_lifter.core.layouts import get_layout
-from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.core.model.layouts import get_layout
+from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
 from scipy.spatial.transform import Rotation
 
@@ -373,7 +373,7 @@ BAG_FRAMES = 8
 TWO_PEOPLE_BAND = (tol.measured_bound(tol.NODE_REPLAY_TWO_PEOPLE_MM[0], tol.NODE_REPLAY_TWO_PEOPLE_MM[2]),
                    tol.measured_bound(tol.NODE_REPLAY_TWO_PEOPLE_MM[1]))
 #: Cold starts of the node in this test (and of the offline lift it is compared with): the
-#: band's setting (tests/test_bags.py REPLAY; with n_refine=3 every start is refined).
+#: band's setting (tests/offline/test_bags.py REPLAY; with n_refine=3 every start is refined).
 N_STARTS = 3
 
 

@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.layouts import get_layout
-from pose_lifter.core.placement import place_in_camera
+from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.results import Camera, LiftResult
+from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import SkipSkeleton, check_output, frame_over_cap, skeleton_input
 from pose_lifter.messages.markers import MarkerBook

@@ -3,7 +3,7 @@
 ``pose_lifter_msgs``, must read them as the ``Skeleton3DArray`` built as message objects
 (:func:`pose_lifter.messages.convert.result_to_skeleton3d`), and they must be exactly as long as
 rclpy's own serialisation of it, byte for byte outside the alignment padding (which rclpy leaves
-uninitialised; the writer zeroes it, as rosbags does: ``tests/test_cdr.py`` checks every byte
+uninitialised; the writer zeroes it, as rosbags does: ``tests/messages/test_cdr.py`` checks every byte
 against rosbags)."""
 
 from __future__ import annotations

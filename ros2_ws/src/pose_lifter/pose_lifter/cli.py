@@ -22,8 +22,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from pose_lifter.core.placement import DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
-from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
+from pose_lifter.core.track.placement import DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
+from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
 
 __all__ = ["build_parser", "main", "make_bag"]
@@ -127,6 +127,7 @@ def make_bag(
     """
     from pose_lifter.mocap import cmu as mocap
     from pose_lifter.mocap import scenes
+    from pose_lifter.offline.bags import write_messages
 
     d = mocap.resolve_data_dir(data_dir)
     opts = scenes.SceneOptions(fps=fps, **scene)
@@ -142,7 +143,7 @@ def make_bag(
             raise ValueError(f"trial {t} has no frames after {start} s")
         people.append(clip)
     scene_ = scenes.build_scene(people, opts, source_fps=fps)
-    scenes.write_scene_bag(scene_, out, overwrite=overwrite)
+    write_messages(out, scenes.scene_messages(scene_), overwrite=overwrite)
     return scene_
 
 
@@ -259,7 +260,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from pose_lifter.core.bases import PoseBases
+    from pose_lifter.core.model.bases import PoseBases
     from pose_lifter.offline.evaluate import evaluate_bag, format_evaluation
 
     ev = evaluate_bag(args.bag, PoseBases.load(args.bases))
@@ -312,8 +313,9 @@ def _cmd_experiments(args: argparse.Namespace) -> int:
 
 
 def _cmd_warm_up(args: argparse.Namespace) -> int:
-    from pose_lifter.core._jit import HAVE_NUMBA
-    from pose_lifter.core.lifter import KERNEL_MODES, compile_kernels
+    from pose_lifter.core.lift.lifter import KERNEL_MODES
+    from pose_lifter.core.numeric.jit import HAVE_NUMBA
+    from pose_lifter.core.track.policy import compile_kernels
 
     seconds = compile_kernels()
     state = "compiled or loaded" if HAVE_NUMBA else "not compiled (numba is not installed)"
@@ -516,7 +518,7 @@ def _version() -> str:
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    from pose_lifter.core._threads import one_blas_thread
+    from pose_lifter.core.numeric.threads import one_blas_thread
 
     one_blas_thread()  # small matrices: BLAS threads only contend (worker processes inherit it)
     parser = build_parser()

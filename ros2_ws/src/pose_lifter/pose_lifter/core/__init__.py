@@ -11,7 +11,6 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .bases import PoseBases, learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
     from .errors import (
         BasisFileError,
         InvalidInputError,
@@ -21,9 +20,11 @@ if TYPE_CHECKING:
         TooFewJointsError,
         UnknownLayoutError,
     )
-    from .layouts import LAYOUTS, get_layout, to_model_joints
-    from .lifter import Lifter
-    from .metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
+    from .lift.lifter import Lifter
+    from .model.bases import PoseBases, learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
+    from .model.layouts import LAYOUTS, get_layout, to_model_joints
+    from .model.metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
+    from .model.skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
     from .options import VARIANTS, ExperimentOptions, LifterOptions, UserOptions, Variant, get_variant
     from .results import (
         Camera,
@@ -35,14 +36,13 @@ if TYPE_CHECKING:
         TrackContext,
         WarmStart,
     )
-    from .skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
 
 #: Public name -> the module of this package that defines it.
 _MODULE_OF: dict[str, str] = {
-    "PoseBases": "bases",
-    "learn_classwise_pca_bases": "bases",
-    "learn_pca_bases": "bases",
-    "learn_sparse_bases": "bases",
+    "PoseBases": "model.bases",
+    "learn_classwise_pca_bases": "model.bases",
+    "learn_pca_bases": "model.bases",
+    "learn_sparse_bases": "model.bases",
     "BasisFileError": "errors",
     "InvalidInputError": "errors",
     "OptionsError": "errors",
@@ -50,26 +50,26 @@ _MODULE_OF: dict[str, str] = {
     "SolverError": "errors",
     "TooFewJointsError": "errors",
     "UnknownLayoutError": "errors",
-    "LAYOUTS": "layouts",
-    "get_layout": "layouts",
-    "to_model_joints": "layouts",
-    "Lifter": "lifter",
-    "mpjpe": "metrics",
-    "normalised_error": "metrics",
-    "p_mpjpe": "metrics",
-    "per_joint_error": "metrics",
-    "procrustes_align": "metrics",
+    "LAYOUTS": "model.layouts",
+    "get_layout": "model.layouts",
+    "to_model_joints": "model.layouts",
+    "Lifter": "lift.lifter",
+    "mpjpe": "model.metrics",
+    "normalised_error": "model.metrics",
+    "p_mpjpe": "model.metrics",
+    "per_joint_error": "model.metrics",
+    "procrustes_align": "model.metrics",
     "ExperimentOptions": "options",
     "LifterOptions": "options",
     "UserOptions": "options",
     "VARIANTS": "options",
     "Variant": "options",
     "get_variant": "options",
-    "JOINT_NAMES": "skeleton",
-    "LIMBS": "skeleton",
-    "LIMB_NAMES": "skeleton",
-    "limb_lengths": "skeleton",
-    "normalise_pose": "skeleton",
+    "JOINT_NAMES": "model.skeleton",
+    "LIMBS": "model.skeleton",
+    "LIMB_NAMES": "model.skeleton",
+    "limb_lengths": "model.skeleton",
+    "normalise_pose": "model.skeleton",
     "Camera": "results",
     "CameraResult": "results",
     "LiftResult": "results",

@@ -282,7 +282,7 @@ class UserOptions(_Validated):
         "Hybrid, tracked: the published pose's joints go where the observed 2D puts them (per "
         "joint, weighted by the track's 2D noise; joints the lift did not use or beyond "
         "measurement_gate keep the pose's), and each limb's depth toward its image foreshortening "
-        "(measurement_depth), while the track's 2D is nearly exact (core/measurement.py MAX_NOISE). "
+        "(measurement_depth), while the track's 2D is nearly exact (core/track/measurement.py MAX_NOISE). "
         "Output only."))
     measurement_depth: float = field(default=0.5, metadata=_meta(
         "Hybrid, tracked, with measurement_update: weight of the depth a limb's image length gives "

@@ -15,7 +15,7 @@ from typing import TypeAlias
 import numpy as np
 from numpy.typing import NDArray
 
-from ._fast import mean_rows
+from .numeric.fast import mean_rows
 
 #: Frames of a track's 2D, oldest first: points (k, 12, 2) in input units and which of their
 #: joints are used (k, 12).
@@ -194,7 +194,7 @@ class StartKind(Enum):
 
 @dataclass(frozen=True)
 class TrackContext:
-    """What a track knows about this frame of its person (:class:`pose_lifter.core.tracking.TrackPolicy`
+    """What a track knows about this frame of its person (:class:`pose_lifter.core.track.policy.TrackPolicy`
     fills it; every field is optional). Used by the hybrid mode; the learned mode reads ``past``.
 
     Attributes

@@ -1,6 +1,6 @@
 """Checks of the lifters' inputs: the model joints' 2D points and confidences, once, at the entry.
 
-Both lifters (:class:`pose_lifter.core.lifter.Lifter` and the Ramakrishna et al. baseline) take
+Both lifters (:class:`pose_lifter.core.lift.lifter.Lifter` and the Ramakrishna et al. baseline) take
 one skeleton as ``points_2d`` (12, 2) and an optional ``confidence`` (12,), or a sequence as
 (T, 12, 2) and (T, 12). What a missing joint or a non-finite coordinate means is each lifter's
 own policy; the shapes and the finiteness of the confidences are checked here.
@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InvalidInputError
-from .skeleton import N_JOINTS
+from .model.skeleton import N_JOINTS
 
 __all__ = ["check_keypoint_sequence", "check_keypoints"]
 

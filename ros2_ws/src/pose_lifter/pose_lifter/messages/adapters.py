@@ -21,9 +21,9 @@ from typing import Any, Final
 
 import numpy as np
 
-from pose_lifter.core.detectors import Person2D, sparse_to_model
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.model.layouts import get_layout
+from pose_lifter.messages.detectors import Person2D, sparse_to_model
 from pose_lifter.messages.names import YOLO_DETECTION_ARRAY
 
 __all__ = [
@@ -130,7 +130,7 @@ def hri_skeleton_to_person(msg: Any, image_size: tuple[float, float], track_id: 
     InvalidInputError
         Not 18 points, non-finite values, or a bad image size.
     """
-    from pose_lifter.core.detectors import dense_to_model
+    from pose_lifter.messages.detectors import dense_to_model
 
     pts = list(msg.skeleton)
     xy = np.array([[float(p.x), float(p.y)] for p in pts], dtype=np.float64).reshape(len(pts), 2)

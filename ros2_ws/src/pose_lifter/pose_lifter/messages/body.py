@@ -37,7 +37,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages.convert import quaternions_xyzw
 
 __all__ = [

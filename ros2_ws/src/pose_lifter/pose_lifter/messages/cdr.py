@@ -7,7 +7,7 @@ objects (``Skeleton3D``, 12 ``Point`` and a ``CameraEstimate`` per skeleton, two
 their sub-messages per track) and serialising those costs ~30 ms per 36-person message, more
 than the learned prior's whole solve of those people. This module writes the same bytes
 directly: the message layout is fixed (12 joints, the bones of
-:data:`pose_lifter.core.skeleton.BONES_FOR_DRAWING`), so per skeleton only a few numbers are
+:data:`pose_lifter.core.model.skeleton.BONES_FOR_DRAWING`), so per skeleton only a few numbers are
 packed and the constant parts (joint names, a marker's empty texture and mesh fields) are
 encoded once.
 
@@ -16,7 +16,7 @@ The bytes are those ``typestore.serialize_cdr`` gives for the messages that
 :func:`~pose_lifter.messages.convert.skeletons3d_array`
 and :func:`~pose_lifter.messages.convert.skeleton_markers` build (the node's builders) from the same
 lifts, with the rosbags defaults of :func:`pose_lifter.messages.typestore.message_factory` (a DELETE marker's
-unset orientation is all zeros); ``tests/test_cdr.py`` checks it byte for byte, and
+unset orientation is all zeros); ``tests/messages/test_cdr.py`` checks it byte for byte, and
 :func:`check_definitions` refuses a typestore whose definitions of the two types differ from the
 ones this module was written for.
 
@@ -41,7 +41,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
+from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 from pose_lifter.messages.convert import marker_id, quaternions_xyzw, track_color
 from pose_lifter.messages.names import MARKER_ARRAY, SKELETON2D_ARRAY, SKELETON3D_ARRAY
 
@@ -161,7 +161,7 @@ def check_definitions(store: Any) -> None:
         if got != expected:
             raise RuntimeError(f"pose_lifter.messages.cdr encodes {name} as {expected}, the typestore has "
                                f"{got}: "
-                               "update pose_lifter/messages/cdr.py (tests/test_cdr.py shows the difference)")
+                               "update pose_lifter/messages/cdr.py (tests/messages/test_cdr.py shows the difference)")
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.layouts import Layout, get_layout, to_model_joints
+from pose_lifter.core.model.layouts import Layout, get_layout, to_model_joints
+from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 from pose_lifter.core.results import LiftResult
-from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 from pose_lifter.messages import names
 
 __all__ = [
@@ -145,7 +145,7 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
         one (K, 3) array, as :class:`pose_lifter.messages.cdr.DecodedSkeleton2D` has).
     layout : str or Layout
         The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``, ...), by name
-        or as the :class:`~pose_lifter.core.layouts.Layout` a frame looked up once.
+        or as the :class:`~pose_lifter.core.model.layouts.Layout` a frame looked up once.
 
     Returns
     -------
@@ -216,7 +216,7 @@ def quaternions_xyzw(rotations: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit quaternions (x, y, z, w) of rotation matrices, shape (..., 3, 3) -> (..., 4).
 
     The numbers of ``scipy.spatial.transform.Rotation.from_matrix(r).as_quat()`` bit for bit
-    (scipy 1.17's algorithm, checked against it in ``tests/test_cdr.py``), without importing
+    (scipy 1.17's algorithm, checked against it in ``tests/messages/test_cdr.py``), without importing
     ``scipy.spatial`` (0.3 s) and without its per-call overhead (~0.2 ms): a matrix that is not
     orthogonal to 1e-12 is replaced by the nearest rotation (``U @ Vt`` of its SVD), then
     Shepperd's method picks the largest of the diagonal and the trace, and the result is
@@ -288,7 +288,7 @@ def result_to_skeleton3d(
     warm_started: bool = False,
 ) -> Any:
     """A ``Skeleton3D`` from a lift and its metric joints
-    (see :func:`pose_lifter.core.placement.place_in_camera`).
+    (see :func:`pose_lifter.core.track.placement.place_in_camera`).
 
     Parameters
     ----------

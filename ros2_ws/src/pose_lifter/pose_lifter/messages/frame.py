@@ -12,9 +12,9 @@ what the node publishes for it. One frame:
    :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
 2. :func:`lift_together` (:meth:`FramePipeline.lift_steps` of each skeleton in step): the core's
-   :class:`~pose_lifter.core.tracking.TrackPolicy` (warm starts, re-initialisation,
+   :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
-   placed together, :func:`~pose_lifter.core.placement.place_poses`) and :func:`check_output`
+   placed together, :func:`~pose_lifter.core.track.placement.place_poses`) and :func:`check_output`
    (nothing non-finite leaves).
 3. :meth:`FramePipeline.end_frame`: tracks unseen for ``track_timeout`` are forgotten.
 
@@ -36,14 +36,19 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.batch import Failed, Steps, gather
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.layouts import Layout, get_layout
-from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_in_camera, place_poses
+from pose_lifter.core.lift.batch import Failed, Steps, gather
+from pose_lifter.core.lift.lifter import Lifter
+from pose_lifter.core.model.layouts import Layout, get_layout
 from pose_lifter.core.results import LiftResult
-from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from pose_lifter.core.tracking import FramesAhead, OutOfOrderFrameError, TrackedLift, TrackPolicy
+from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.core.track.placement import (
+    DEFAULT_DISTANCE_M,
+    DEFAULT_LEG_LENGTH_M,
+    place_in_camera,
+    place_poses,
+)
+from pose_lifter.core.track.policy import FramesAhead, OutOfOrderFrameError, TrackedLift, TrackPolicy
 from pose_lifter.messages.convert import skeleton2d_to_arrays
 
 __all__ = [
@@ -76,9 +81,9 @@ class FrameSettings:
     Attributes
     ----------
     warm_start, track_timeout, reinit_ratio
-        The per-track policy (:class:`~pose_lifter.core.tracking.TrackPolicy`).
+        The per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`).
     lower_leg_length, default_distance : float
-        Metres, the placement (:func:`~pose_lifter.core.placement.place_in_camera`).
+        Metres, the placement (:func:`~pose_lifter.core.track.placement.place_in_camera`).
     max_skeletons, max_coordinate, max_frame_id_length, max_layout_length, max_keypoints
         Caps on the input (see the module doc).
     """
@@ -133,7 +138,7 @@ class SkeletonInput:
         Clipped into [0, 1].
     ahead : FramesAhead, optional
         The track's next frames, when the lift knows them (an offline lift whose temporal prior
-        reads them; :meth:`pose_lifter.core.tracking.TrackPolicy.lift_steps`).
+        reads them; :meth:`pose_lifter.core.track.policy.TrackPolicy.lift_steps`).
     """
 
     track_id: int
@@ -158,7 +163,7 @@ class LiftedSkeleton:
         Seconds of the policy's solve.
     fit_pose_camera : ndarray, shape (12, 3), optional
         The fit's own ``pose_camera`` when the track's output smoothing replaced the result's
-        (:class:`~pose_lifter.core.tracking.TrackedLift`), else None.
+        (:class:`~pose_lifter.core.track.policy.TrackedLift`), else None.
     """
 
     input: SkeletonInput
@@ -301,7 +306,7 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
 def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines share ``lifter``): their solves in step (:func:`pose_lifter.core.batch.gather`), each
+    pipelines share ``lifter``): their solves in step (:func:`pose_lifter.core.lift.batch.gather`), each
     round's runs of alternations in one compiled pass and its prior's poses in one pass of each
     prior's network; then the people seen by one camera placed in one pass
     (:func:`place_lifted`). Each person gets what they get lifted alone (their track is theirs;
@@ -341,7 +346,7 @@ class Solved:
 def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, Solved]]
                  ) -> list[LiftedSkeleton | SkipSkeleton]:
     """The metric joints of solved skeletons, each with its pipeline's settings and its camera's
-    intrinsics: those that share them in one :func:`~pose_lifter.core.placement.place_poses`
+    intrinsics: those that share them in one :func:`~pose_lifter.core.track.placement.place_poses`
     pass, then :func:`check_output` per skeleton. A group the pass refuses (a camera scale not
     > 0, or anything unexpected) is placed skeleton by skeleton, so a refusal costs only its own
     skeleton."""
@@ -470,7 +475,7 @@ class FramePipeline:
     def lift_steps(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
                    ) -> Steps[Solved | SkipSkeleton]:
         """Step 2 for one checked skeleton up to its placement, as a solve
-        (:mod:`pose_lifter.core.batch`): through the track's policy, or why not (never raises for
+        (:mod:`pose_lifter.core.lift.batch`): through the track's policy, or why not (never raises for
         bad input or a failed solve). :func:`lift_together` drives it with the frame's other
         people and places them together."""
         try:

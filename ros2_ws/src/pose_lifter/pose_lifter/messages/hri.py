@@ -31,7 +31,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.layouts import get_layout
+from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages import body
 from pose_lifter.messages.cdr import _ENCAPSULATION, _STAMP, _U32, _string_bytes, _Writer
 

@@ -1,6 +1,6 @@
 """Learning the pose bases from CMU mocap (``pose-lifter learn-bases``): the trials of a split, their
 poses normalised, and sparse, PCA or class-wise PCA bases of them
-(:mod:`pose_lifter.core.bases`).
+(:mod:`pose_lifter.core.model.bases`).
 """
 
 from __future__ import annotations
@@ -36,22 +36,22 @@ def learn_bases(
     drawn per frame (:func:`pose_lifter.mocap.views.limb_scale_factors`, upper arm, forearm, thigh and
     shin uniform in ``1 +- limb_spread``, both sides alike; seeded by ``seed``), so the bases
     represent people of other proportions than the CMU subjects. Then every pose is normalised
-    with :func:`pose_lifter.core.skeleton.normalise_pose`. Class-wise PCA uses the trials as
+    with :func:`pose_lifter.core.model.skeleton.normalise_pose`. Class-wise PCA uses the trials as
     classes.
 
     Returns
     -------
     PoseBases
     """
-    from pose_lifter.core.bases import learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
-    from pose_lifter.core.skeleton import normalise_pose
+    from pose_lifter.core.model.bases import learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
+    from pose_lifter.core.model.skeleton import normalise_pose
     from pose_lifter.mocap import cmu as mocap
 
     d = mocap.resolve_data_dir(data_dir)
     if split == "paper":
         trials = sorted({t.trial for t in mocap.read_manifest(d) if t.paper_split == "train"})
     elif split == "prior":
-        from pose_lifter.core.prior import PosePrior
+        from pose_lifter.core.model.prior import PosePrior
 
         trials = sorted(str(t) for t in PosePrior.load().metadata.get("training_trials", []))
         outside = set(trials) - set(mocap.split_trials("train", d))
@@ -77,7 +77,7 @@ def learn_bases(
         "command": command, "training_trials": trials, "frame_step": step, "source_fps": 120,
         "split": split, "limb_spread": limb_spread,
         "data": "CMU Graphics Lab Motion Capture Database, " + CMU_ACKNOWLEDGEMENT,
-        "normalisation": "pose_lifter.core.skeleton.normalise_pose (centroid, body frame, "
+        "normalisation": "pose_lifter.core.model.skeleton.normalise_pose (centroid, body frame, "
                          "right lower leg = 1)",
     }
     with warnings.catch_warnings():

@@ -4,7 +4,7 @@ evaluation split, and each trial as the 12 model joints.
 A trial is loaded from its AMC original where one exists, else from its BVH conversion (the file
 formats and their forward kinematics: :mod:`pose_lifter.mocap.formats`, whose names are also
 importable from here). Joint positions are ``(frames, 12, 3)`` in metres, Y-up world frame, in
-the joint order of :data:`pose_lifter.core.skeleton.JOINT_NAMES`.
+the joint order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMB_NAMES, LIMBS, N_JOINTS
+from pose_lifter.core.model.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMB_NAMES, LIMBS, N_JOINTS
 
 __all__ = ["COCO_SIGMAS", "LOWER_LEG_JOINTS", "REALISTIC", "DetectorModel", "autoregressive", "detect",
            "joint_spreads", "swap_labels"]
@@ -59,7 +59,7 @@ CONFIDENCE_LOST = 0.05
 #: Frames a dropped limb or a raised lower edge lasts (uniform, inclusive).
 DROP_FRAMES = (3, 15)
 #: The joints a dropped limb takes: elbow and wrist, or knee and ankle (the forearms' and shins'
-#: joints, :data:`pose_lifter.core.skeleton.LIMBS`).
+#: joints, :data:`pose_lifter.core.model.skeleton.LIMBS`).
 _DROPPED = tuple(LIMBS[i] for i, name in enumerate(LIMB_NAMES) if name.endswith("lower_arm")
                  or name.endswith("lower_leg"))
 #: Knees and ankles (the shins' joints): what a lower image edge above the knees hides.

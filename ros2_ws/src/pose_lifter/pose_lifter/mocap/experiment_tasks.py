@@ -200,7 +200,7 @@ class Worker:
 
             return np.asarray(ramakrishna_lift(x, conf, self.inputs.classwise).pose)
         if task.solver is LiftSolver.GT_CAMERA:
-            from pose_lifter.core.pose_step import pose_step
+            from pose_lifter.core.solve.pose_step import pose_step
 
             assert task.rotation is not None
             lf = self.lifter("L1WAWS", 1, 1)
@@ -217,7 +217,7 @@ class Worker:
         return np.asarray(lf.lift(x, conf).pose)
 
     def _bases(self, task: BasesTask) -> dict[str, Any]:
-        from pose_lifter.core.bases import (
+        from pose_lifter.core.model.bases import (
             learn_classwise_pca_bases,
             learn_pca_bases,
             learn_sparse_bases,
@@ -246,7 +246,7 @@ class Worker:
 
 
 def _errors(pred: NDArray[np.float64], gt: NDArray[np.float64], leg_mm: float) -> tuple[float, float]:
-    from pose_lifter.core.metrics import normalised_error, p_mpjpe
+    from pose_lifter.core.model.metrics import normalised_error, p_mpjpe
 
     return float(normalised_error(pred, gt)), float(leg_mm * p_mpjpe(pred, gt))
 

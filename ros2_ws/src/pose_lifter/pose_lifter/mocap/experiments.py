@@ -18,7 +18,7 @@ with the headline numbers:
 Inputs are clean weak-perspective projections of normalised test poses (right lower leg = 1,
 body frame); the camera is ``Rx(180 deg) @ Ry(yaw)``, a proper rotation from the y-up body
 frame to the y-down optical frame (never a mirror). Errors: the paper's ``||y - y_hat||_2`` in
-right-lower-leg units (:func:`pose_lifter.core.metrics.normalised_error`) and P-MPJPE in mm
+right-lower-leg units (:func:`pose_lifter.core.model.metrics.normalised_error`) and P-MPJPE in mm
 (each pose's own leg length). Every accuracy table also lists the flat floor (the 2D input with
 zero depth) and the mean-pose floor. Lifts run in a ``multiprocessing`` pool (one BLAS thread
 per worker: :mod:`pose_lifter.mocap.experiment_tasks`); the tables and plots:
@@ -183,7 +183,7 @@ class _Data:
 
 
 def _load_data(data_dir: str | Path | None, cfg: ExperimentConfig, n_bank: int) -> _Data:
-    from pose_lifter.core.skeleton import limb_lengths, normalise_pose
+    from pose_lifter.core.model.skeleton import limb_lengths, normalise_pose
     from pose_lifter.mocap import cmu as mocap
 
     d = mocap.resolve_data_dir(data_dir)
@@ -232,7 +232,7 @@ def _lift_tasks(data: _Data, cfg: ExperimentConfig,
     """All lift tasks of experiments 2-5, plus the floor rows (computed here, cheap; the mean-pose
     floor is ``mean_pose``, shape (12, 3))."""
     from pose_lifter.core.errors import InvalidInputError
-    from pose_lifter.core.metrics import normalised_error, p_mpjpe
+    from pose_lifter.core.model.metrics import normalised_error, p_mpjpe
 
     rng = np.random.default_rng(cfg.seed + 1)
     tasks: list[LiftTask] = []
@@ -344,7 +344,7 @@ def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "o
     from tqdm import tqdm
 
     from pose_lifter.core import PoseBases
-    from pose_lifter.core.bases import learn_classwise_pca_bases
+    from pose_lifter.core.model.bases import learn_classwise_pca_bases
 
     cfg = config or (QUICK if quick else FULL)
     out = Path(out_dir)
@@ -408,8 +408,9 @@ def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "o
         f"90 = profile); {solver}")
     md5, agg5 = lift_output(
         out, "exp5_camera", by_exp["exp5_camera"], ["method"], "5. Camera estimation (Fig. 8)",
-        f"{cfg.n_camera} poses at random yaw. GT camera: the pose step alone (core.pose_step.pose_step, "
-        f"{sparse.n_bases} bases, L1WAWS, mean-pose start, up to 100 ADM iterations) with the true camera; "
+        f"{cfg.n_camera} poses at random yaw. GT camera: the pose step alone "
+        f"(core.solve.pose_step.pose_step, {sparse.n_bases} bases, L1WAWS, mean-pose start, "
+        f"up to 100 ADM iterations) with the true camera; "
         f"estimated: the full alternation (L1WAWS, screened to {cfg.n_refine} starts).")
 
     def c(agg: list[dict[str, Any]], m: str, col: str = "err_mean", **w: Any) -> str:

@@ -2,7 +2,7 @@
 turned into joint positions by forward kinematics.
 
 Every loader returns joint positions of shape ``(frames, 12, 3)`` in metres, Y-up world
-frame, in the joint order of :data:`pose_lifter.core.skeleton.JOINT_NAMES`.
+frame, in the joint order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`.
 
 Joint mapping (see ``shared/data/README.md``):
 
@@ -21,7 +21,7 @@ Units: CMU length unit x 0.0254 / 0.45 = metres.
 No parsing library is used: the PyPI candidates are parse-only (``bvh``), unmaintained
 (``asfamc-parser`` 0.0.2) or per-frame object trees (``bvhio``); forward kinematics here is
 vectorised over frames with numpy and checked against the README's numbers and AMC/BVH
-agreement in ``tests/test_mocap.py``.
+agreement in ``tests/mocap/test_mocap.py``.
 """
 
 from __future__ import annotations

@@ -5,14 +5,14 @@ each person's bone lengths.
   joints swapped, so the result is again a person seen the right way round (a plain reflection
   would be a left-handed body, which no camera films);
 * :func:`transplant_limbs`: arms or legs of another frame, taken torso-relative (in the donor's
-  :func:`~pose_lifter.core.skeleton.body_frame`, put into the receiver's) and re-built with the
+  :func:`~pose_lifter.core.model.skeleton.body_frame`, put into the receiver's) and re-built with the
   receiver's bone lengths (compositional augmentation: poses no trial has);
 * :func:`turn_limbs` / :func:`random_turns`: each limb turned about its root (shoulder or hip)
   and its end (wrist or ankle) about its middle joint (elbow or knee); rotations, so the bone
   lengths are kept.
 
 Poses are arrays of shape (..., 12, 3) in the joint order of
-:data:`pose_lifter.core.skeleton.JOINT_NAMES`, any length unit.
+:data:`pose_lifter.core.model.skeleton.JOINT_NAMES`, any length unit.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from pose_lifter.core.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, N_JOINTS, body_frame
+from pose_lifter.core.model.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, N_JOINTS, body_frame
 
 __all__ = ["CHAINS", "MIRROR_INDEX", "mirror_poses", "random_turns", "transplant_limbs", "turn_limbs"]
 

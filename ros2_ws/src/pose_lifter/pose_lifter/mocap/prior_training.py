@@ -1,4 +1,4 @@
-"""Training of the learned 2D -> 3D prior (:class:`pose_lifter.core.prior.PosePrior`).
+"""Training of the learned 2D -> 3D prior (:class:`pose_lifter.core.model.prior.PosePrior`).
 
 Data: mocap poses of the training split (:func:`pose_lifter.mocap.cmu.split_trials`), re-filmed for
 every sample with a fresh random view and person (augmentation):
@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.metrics import p_mpjpe
-from pose_lifter.core.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
-from pose_lifter.core.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from pose_lifter.core.model.metrics import p_mpjpe
+from pose_lifter.core.model.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
+from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, autoregressive, joint_spreads
 from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -88,7 +88,7 @@ class Augmentation:
 GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0.5, p_lower_cut=0.1)
 
 
-#: Hips (:data:`pose_lifter.core.skeleton.JOINT_NAMES`).
+#: Hips (:data:`pose_lifter.core.model.skeleton.JOINT_NAMES`).
 _HIPS = np.array([6, 9])
 
 
@@ -111,7 +111,7 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     ``window - 1 - future``: the last one (a causal prior), or with ``future > 0`` one that has
     ``future`` frames after it in the window (an offline prior that reads past and future). The
     window is centred on the target frame's centroid and its input normalised on that frame
-    (:func:`~pose_lifter.core.prior.prior_features`), the target expressed in that
+    (:func:`~pose_lifter.core.model.prior.prior_features`), the target expressed in that
     normalisation."""
     if not 0 <= future < window:
         raise ValueError(f"future must be in [0, window), got {future} for a window of {window}")
@@ -261,7 +261,7 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
         Frames per input (causal temporal variant for ``window > 1``).
     future : int
         Frames of the window after the one whose pose is the target (0: causal; > 0: an offline
-        prior, which the lifter refuses, :class:`~pose_lifter.core.models.LifterData`).
+        prior, which the lifter refuses, :class:`~pose_lifter.core.model.loading.LifterData`).
     seed : int
 
     Returns

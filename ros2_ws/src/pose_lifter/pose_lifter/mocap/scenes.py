@@ -11,17 +11,16 @@ a proper rotation (y -> -y AND z -> -z when looking along -Z), never a mirror.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.layouts import get_layout
-from pose_lifter.core.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.model.layouts import get_layout
+from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.messages import names
 
 __all__ = [
@@ -36,8 +35,8 @@ __all__ = [
     "corrupt_2d",
     "look_at",
     "project",
+    "scene_messages",
     "to_coco17",
-    "write_scene_bag",
 ]
 
 IMAGE_WIDTH: Final[int] = 640
@@ -312,25 +311,24 @@ def to_coco17(points: NDArray[np.float64], confidence: NDArray[np.float64]
     return kp, cf
 
 
-def write_scene_bag(scene: Scene, path: str | Path, overwrite: bool = False) -> None:
-    """Write a scene as an MCAP bag: ``/keypoints_2d`` (coco17 pixels),
-    ``/ground_truth/skeletons_3d`` (camera optical frame, metres) and ``/camera_info``."""
+def scene_messages(scene: Scene) -> Iterator[tuple[str, int, Any, str]]:
+    """A scene as the messages of a bag, ``(topic, stamp_ns, message, type name)`` in time order
+    (rosbags messages): ``/keypoints_2d`` (coco17 pixels), ``/ground_truth/skeletons_3d`` (camera
+    optical frame, metres) and ``/camera_info``. The offline writer stores them
+    (:func:`pose_lifter.offline.bags.write_messages`, as ``pose-lifter make-bag`` does)."""
     from pose_lifter.messages import convert as m
-    from pose_lifter.offline.bags import BagWriter
 
     types = m.rosbags_types()
-    with BagWriter(path, overwrite=overwrite) as w:
-        for ti, stamp in enumerate(scene.stamps_ns):
-            header = m.make_header(int(stamp), CAMERA_FRAME, types)
-            skels2d, skels3d = [], []
-            for pi, tid in enumerate(scene.track_ids):
-                kp, cf = to_coco17(scene.points_2d[pi, ti], scene.confidence[pi, ti])
-                skels2d.append(m.arrays_to_skeleton2d(kp, cf, tid, types))
-                skels3d.append(m.skeleton3d_from_joints(tid, scene.joints_camera[pi, ti], types))
-            w.write(names.TOPIC_CAMERA_INFO, int(stamp), m.camera_info(
-                header, IMAGE_WIDTH, IMAGE_HEIGHT, FOCAL_PX, FOCAL_PX, *PRINCIPAL_POINT, types),
-                names.CAMERA_INFO)
-            w.write(names.TOPIC_KEYPOINTS, int(stamp), m.skeleton2d_array(header, "coco17", skels2d, types),
-                    names.SKELETON2D_ARRAY)
-            w.write(names.TOPIC_GROUND_TRUTH, int(stamp), m.skeletons3d_array(header, skels3d, types),
-                    names.SKELETON3D_ARRAY)
+    for ti, stamp in enumerate(scene.stamps_ns):
+        header = m.make_header(int(stamp), CAMERA_FRAME, types)
+        skels2d, skels3d = [], []
+        for pi, tid in enumerate(scene.track_ids):
+            kp, cf = to_coco17(scene.points_2d[pi, ti], scene.confidence[pi, ti])
+            skels2d.append(m.arrays_to_skeleton2d(kp, cf, tid, types))
+            skels3d.append(m.skeleton3d_from_joints(tid, scene.joints_camera[pi, ti], types))
+        info = m.camera_info(header, IMAGE_WIDTH, IMAGE_HEIGHT, FOCAL_PX, FOCAL_PX, *PRINCIPAL_POINT, types)
+        yield (names.TOPIC_CAMERA_INFO, int(stamp), info, names.CAMERA_INFO)
+        yield (names.TOPIC_KEYPOINTS, int(stamp), m.skeleton2d_array(header, "coco17", skels2d, types),
+               names.SKELETON2D_ARRAY)
+        yield (names.TOPIC_GROUND_TRUTH, int(stamp), m.skeletons3d_array(header, skels3d, types),
+               names.SKELETON3D_ARRAY)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import LIMB_GROUPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from pose_lifter.core.model.skeleton import LIMB_GROUPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from pose_lifter.mocap.scenes import look_at
 
 __all__ = ["film", "limb_scale_factors", "scale_limbs", "view_rotation", "view_rotations"]

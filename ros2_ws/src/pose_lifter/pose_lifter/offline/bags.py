@@ -44,6 +44,7 @@ __all__ = [
     "is_rosbag2_dir",
     "read_messages",
     "read_raw",
+    "write_messages",
 ]
 
 #: The file that makes a directory a rosbag2 recording (one bag).
@@ -184,6 +185,19 @@ class RawMessage:
     data: bytes
     msgdef: str
     rihs01: str
+
+
+def write_messages(path: str | Path, messages: Iterable[tuple[str, int, Any, str]], overwrite: bool = False
+                   ) -> int:
+    """Write ``(topic, stamp_ns, message, type name)`` tuples (rosbags messages, e.g. a filmed
+    scene's, :func:`pose_lifter.mocap.scenes.scene_messages`) to the MCAP bag ``path``, in order.
+    Returns the number written."""
+    n = 0
+    with BagWriter(path, overwrite=overwrite) as w:
+        for topic, stamp_ns, msg, msgtype in messages:
+            w.write(topic, stamp_ns, msg, msgtype)
+            n += 1
+    return n
 
 
 def _definition(conn: Any) -> tuple[str, str]:

@@ -7,7 +7,7 @@ not, so each track is a chain. A chain expires its track at the stamps a pipelin
 frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
 node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
 (:func:`lift_chains`), so that the prior's network runs once per step for all of them
-(:func:`~pose_lifter.core.batch.prior_calls`); a chain's outcomes do not depend on its group.
+(:func:`~pose_lifter.core.lift.batch.prior_calls`); a chain's outcomes do not depend on its group.
 """
 
 from __future__ import annotations
@@ -24,11 +24,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.lifter import Lifter
-from pose_lifter.core.placement import place_poses
-from pose_lifter.core.skeleton import N_JOINTS
-from pose_lifter.core.smoothing import centred_smoothing
-from pose_lifter.core.tracking import FramesAhead
+from pose_lifter.core.lift.lifter import Lifter
+from pose_lifter.core.model.skeleton import N_JOINTS
+from pose_lifter.core.track.placement import place_poses
+from pose_lifter.core.track.policy import FramesAhead
+from pose_lifter.core.track.smoothing import centred_smoothing
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -153,7 +153,7 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
 
 #: Chains lifted in step by one task (:func:`chain_groups`): up to this many people's rounds
 #: share one pass of the prior's network and one call of the run kernel
-#: (:mod:`pose_lifter.core.batch`), as the node's frame of up to ``max_skeletons`` (64) people.
+#: (:mod:`pose_lifter.core.lift.batch`), as the node's frame of up to ``max_skeletons`` (64) people.
 #: One process, the 36-track bag (tools/bench_lift.py --workers 1): CPU 12.3 s with groups of
 #: 8, 10.3 with 32, 9.7 with 64 (every track in step).
 GROUP_CHAINS: Final[int] = 64
@@ -255,7 +255,7 @@ def inputs_ahead(lifter: Lifter, chain: list[Item]) -> list[SkeletonInput]:
 def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], settings: FrameSettings,
                   smoothing_s: float) -> list[Done]:
     """A lifted chain with its metric joints smoothed by a centred Gaussian window of
-    ``smoothing_s`` seconds (:func:`pose_lifter.core.smoothing.centred_smoothing`, segments split at
+    ``smoothing_s`` seconds (:func:`pose_lifter.core.track.smoothing.centred_smoothing`, segments split at
     gaps over ``track_timeout``), from the fit's own poses (``fits[i]``; None: from the result's
     pose, the fit's or, with ``measurement_update``, the published one): without the update the
     causal output smoothing of the live node is replaced, not compounded. Each result's ``pose``

@@ -390,7 +390,7 @@ _DASK_LOCAL = threading.local()
 
 def _dask_job(job: BagJob, settings: LiftSettings, digest: str) -> BagOutcome:
     """A bag on a Dask worker: the lifter is built once per worker thread and settings digest."""
-    from pose_lifter.core._threads import one_blas_thread
+    from pose_lifter.core.numeric.threads import one_blas_thread
 
     cache = getattr(_DASK_LOCAL, "lifters", None)
     if cache is None:

@@ -15,10 +15,10 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.skeleton import BONES_FOR_DRAWING, JOINTS_LEFT, JOINTS_RIGHT
+from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINTS_LEFT, JOINTS_RIGHT
 
 if TYPE_CHECKING:
-    from pose_lifter.core.lifter import Lifter
+    from pose_lifter.core.lift.lifter import Lifter
     from pose_lifter.offline.settings import LiftSettings
 
 __all__ = ["DEFAULT_DEMO_BAG", "find_demo_bag", "plot_frames", "run_demo"]

@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.bases import PoseBases
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
-from pose_lifter.core.skeleton import N_JOINTS
+from pose_lifter.core.model.bases import PoseBases
+from pose_lifter.core.model.metrics import mpjpe, normalised_error, p_mpjpe, similarity_normalised_error
+from pose_lifter.core.model.skeleton import N_JOINTS
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS, TOPIC_SKELETONS
 from pose_lifter.offline.bags import read_messages

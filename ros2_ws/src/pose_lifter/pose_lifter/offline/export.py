@@ -31,7 +31,7 @@ from typing import IO, Any, Final
 
 import numpy as np
 
-from pose_lifter.core.skeleton import JOINT_NAMES
+from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.names import SKELETON3D_ARRAY, TOPIC_SKELETONS
 from pose_lifter.offline.bags import BagError, bag_topics, check_output, read_messages

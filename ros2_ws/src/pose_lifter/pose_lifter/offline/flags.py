@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from pose_lifter.core.placement import DEFAULT_DISTANCE_M
+from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M
 from pose_lifter.offline.settings import LiftSettings
 
 __all__ = ["flag_options", "keep_topics", "lift_settings"]

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.lifter import Lifter
+from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.messages import cdr, hri
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import FramePipeline, FrameSettings, SkipSkeleton
@@ -158,7 +158,7 @@ def lift_messages(
         Read here: ``warm_start``, ``track_timeout``, ``reinit_ratio``, ``leg_length_m``,
         ``default_distance_m`` (:func:`frame_settings`) and ``smoothing_s``: 0 gives the node's
         causal poses; ``> 0`` smooths each track's poses with a centred Gaussian window of this
-        standard deviation in seconds, past and future frames alike (:mod:`pose_lifter.core.smoothing`).
+        standard deviation in seconds, past and future frames alike (:mod:`pose_lifter.core.track.smoothing`).
         Its ``options`` and ``bases`` are not read (``lifter`` is the solver).
     progress : bool
         Show a tqdm progress bar (skeletons).

@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pose_lifter.core.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
-from pose_lifter.core.smoothing import OFFLINE_SMOOTHING_S
-from pose_lifter.core.track_defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
 
 __all__ = ["LiftSettings", "file_sha256", "package_version"]
@@ -86,8 +86,8 @@ class LiftSettings:
         """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up).
         With ``smoothing_s > 0`` the lift reads each track's next frames (``reads_ahead``: its
         temporal prior is the packaged offline one unless ``temporal_prior_file`` names another)."""
-        from pose_lifter.core.bases import PoseBases
-        from pose_lifter.core.lifter import Lifter
+        from pose_lifter.core.lift.lifter import Lifter
+        from pose_lifter.core.model.bases import PoseBases
         from pose_lifter.core.options import LifterOptions
 
         opts = LifterOptions().replace(**self.options)

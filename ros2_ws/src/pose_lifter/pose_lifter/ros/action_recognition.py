@@ -6,7 +6,7 @@
 For every tracked person in ``skeletons_3d`` (``pose_lifter_msgs/Skeleton3DArray``) the node
 keeps the last second of 3D poses, assembles a window of ``W`` poses ``step_s`` apart (the
 model's settings) and classifies it with a nearest-neighbour vote over view-normalised CMU
-training windows (:class:`~pose_lifter.mocap.actions.ActionClassifier`). It publishes
+training windows (:class:`~pose_lifter.actions.ActionClassifier`). It publishes
 ``actions`` (``std_msgs/String``, ``"<track_id> <label>"`` per track and frame) and logs when a
 track's action changes. Untracked skeletons (id -1) have no history and are not classified.
 
@@ -24,9 +24,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from pose_lifter.actions import ActionClassifier, PoseHistory
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.messages import convert as messages
-from pose_lifter.mocap.actions import ActionClassifier, PoseHistory
 from pose_lifter.ros.run import run_node
 
 __all__ = ["ActionRecognitionNode", "main"]

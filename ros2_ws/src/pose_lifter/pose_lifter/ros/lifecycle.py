@@ -90,7 +90,7 @@ class LifecycleLifterNode(LifterNode, LifecycleNode):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run pose_lifter lifter_lifecycle`` (exit codes as ``lifter``:
     :func:`pose_lifter.ros.run.run_node`)."""
-    from pose_lifter.core._threads import one_blas_thread
+    from pose_lifter.core.numeric.threads import one_blas_thread
 
     one_blas_thread()  # as the plain node: the solver's matrices are small
 

@@ -9,10 +9,10 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded.
 2. The frame pipeline (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's
    too) checks the frame and each skeleton against the caps and converts it to the paper's 12
-   joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.tracking.TrackPolicy`
+   joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`
    over :class:`~pose_lifter.core.Lifter`): warm-started from the same track's previous solution
    when there is one, cold (multi-start) otherwise, places it in the camera optical frame in
-   metres (:func:`~pose_lifter.core.placement.place_in_camera`: depth from the weak-perspective
+   metres (:func:`~pose_lifter.core.track.placement.place_in_camera`: depth from the weak-perspective
    scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
    checks it finite once.
 3. The lifted skeletons become one ``Skeleton3DArray``, written as CDR from their arrays
@@ -54,10 +54,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, PoseLifterError
-from pose_lifter.core._jit import HAVE_NUMBA
-from pose_lifter.core.bases import default_bases_path
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.lifter import compile_kernels
+from pose_lifter.core.model.bases import default_bases_path
+from pose_lifter.core.numeric.jit import HAVE_NUMBA
+from pose_lifter.core.track.policy import compile_kernels
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
 from pose_lifter.messages.cdr import SkeletonFrame, skeleton3d_array_cdr
@@ -409,7 +409,7 @@ def main(args: list[str] | None = None) -> None:
     if (sys.argv[1:] if args is None else args[1:]) == ["--params-yaml"]:  # config/lifter.yaml
         print(params_yaml(), end="")
         return
-    from pose_lifter.core._threads import one_blas_thread
+    from pose_lifter.core.numeric.threads import one_blas_thread
 
     one_blas_thread()  # the solver's matrices are small: BLAS threads only contend
     if (sys.argv[1:] if args is None else args[1:]) == ["--warm-up"]:

@@ -28,7 +28,7 @@ from typing import Any, Final
 
 from pose_lifter.core.errors import OptionsError
 from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
-from pose_lifter.core.placement import LEG_LENGTH_RANGE_M
+from pose_lifter.core.track.placement import LEG_LENGTH_RANGE_M
 from pose_lifter.messages.frame import FrameSettings
 
 __all__ = [
@@ -273,7 +273,7 @@ class OfflineParams:
     bases_file : str or None
     warm_start, lower_leg_length, default_distance, track_timeout, reinit_ratio : optional
         None when the file does not set them (the last two: the per-track policy,
-        :class:`pose_lifter.core.tracking.TrackPolicy`, as in the node).
+        :class:`pose_lifter.core.track.policy.TrackPolicy`, as in the node).
     ignored : tuple of str
         Unknown parameter names found in the file (node-only ones, :data:`NODE_ONLY`, are not
         listed).

@@ -2,7 +2,7 @@
 Landmarks" (ECCV 2012), as the paper compares against it.
 
 The model is the same linear one as the main method, ``y = mu + B alpha`` (class-wise PCA
-bases, :func:`pose_lifter.core.bases.learn_classwise_pca_bases`), but it is fitted with an
+bases, :func:`pose_lifter.core.model.bases.learn_classwise_pca_bases`), but it is fitted with an
 L2 reprojection loss by *projected matching pursuit*:
 
 1. start from the mean pose; fit the camera;
@@ -30,7 +30,7 @@ Camera: scaled orthographic, ``x_j = s R[:2] y_j + t``, fitted by weighted least
 the translation in closed form; ``(s, R[:2])`` from the nearest scaled-orthographic matrix
 to the affine least-squares solution (SVD), a few majorisation steps, then
 Levenberg-Marquardt on (rotation vector, log s) (see :func:`_fit_camera_ls`). Independent
-of ``camera.py``.
+of ``core/solve/camera.py``.
 
 Input 2D is normalised (weighted centroid, RMS radius) before solving; the returned
 camera is in input units. The input is treated as generic image coordinates: if image y
@@ -46,10 +46,10 @@ from typing import Final, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..bases import PoseBases
 from ..errors import InvalidInputError, OptionsError, TooFewJointsError
+from ..model.bases import PoseBases
+from ..model.skeleton import N_JOINTS, limb_lengths, limb_selectors
 from ..results import Camera, LiftResult, WarmStart
-from ..skeleton import N_JOINTS, limb_lengths, limb_selectors
 from ..validation import check_keypoint_sequence, check_keypoints
 
 __all__ = ["RamakrishnaLifter", "RamakrishnaOptions", "limb_sum_residual", "ramakrishna_lift"]
@@ -418,12 +418,12 @@ def ramakrishna_lift(
 
 
 class RamakrishnaLifter:
-    """The baseline behind the same call shape as :class:`pose_lifter.core.lifter.Lifter`.
+    """The baseline behind the same call shape as :class:`pose_lifter.core.lift.lifter.Lifter`.
 
     Parameters
     ----------
     bases : PoseBases
-        Normally class-wise PCA bases (:func:`pose_lifter.core.bases.learn_classwise_pca_bases`).
+        Normally class-wise PCA bases (:func:`pose_lifter.core.model.bases.learn_classwise_pca_bases`).
     options : RamakrishnaOptions, optional
     target_lengths : ndarray, shape (8,), optional
         See :func:`ramakrishna_lift`.

@@ -1,6 +1,6 @@
 """Independent reference solvers for every subproblem of the method (the paper used CVX).
 
-Each function here solves one subproblem of the fast path (``camera.py``, ``pose.py``) by a
+Each function here solves one subproblem of the fast path (``solve/camera.py``, ``solve/pose_step.py``) by a
 different route, so the two can check each other:
 
 * convex problems are written in cvxpy and solved by Clarabel (LPs and QPs) or SCS (the SDP

@@ -1,4 +1,4 @@
-"""References for the alpha-step of the pose step (``core/alpha/``): in the paper's lifted form
+"""References for the alpha-step of the pose step (``core/solve/alpha/``): in the paper's lifted form
 ``min z^T W z`` s.t. ``z^T Omega_i z = 0`` (the limb constraints, :func:`limb_omegas`) and
 ``z[-1] = 1``, with ``z = [alpha; 1]``.
 
@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidInputError
-from ..skeleton import limb_selectors
+from ..model.skeleton import limb_selectors
 from ._common import TOLERANCES, array, clarabel_kwargs, cvxpy, local_minimize, status_ok
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""Reference for the camera step (``core/camera.py``): the scaled-orthographic camera of a fixed
+"""Reference for the camera step (``core/solve/camera.py``): the scaled-orthographic camera of a fixed
 3D pose, ``min sum_j w_j loss(x_j - s R[:2] y_j - t)`` over ``R in SO(3)``, ``s >= 0``, ``t``.
 
 For a fixed rotation the problem is an LP (L1) or a QP (L2) in ``(s, t)``, solved by cvxpy +

@@ -1,4 +1,4 @@
-"""References for the pose step (``core/pose_step.py``): the basis coefficients ``alpha`` of
+"""References for the pose step (``core/solve/pose_step.py``): the basis coefficients ``alpha`` of
 ``y = mu + B alpha`` for a fixed camera, minimising
 ``sum_j w_j loss(x_j - (M0 y_j + t)) + theta ||alpha||_1`` (:func:`pose_objective`).
 
@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidInputError
+from ..model.skeleton import limb_selectors
 from ..results import Camera
-from ..skeleton import limb_selectors
 from ._common import (
     array,
     check_loss,
@@ -132,7 +132,7 @@ def reference_pose_limbs_local(
     """Full (nonconvex) pose step with the 8 limb constraints: a local SLSQP reference.
 
     Minimises ``sum_j w_j loss(x_j - (M0 y_j + t)) + theta ||alpha||_1`` subject to
-    ``||C_i y||^2 = L_i`` (``C`` from :func:`pose_lifter.core.skeleton.limb_selectors`), in a
+    ``||C_i y||^2 = L_i`` (``C`` from :func:`pose_lifter.core.model.skeleton.limb_selectors`), in a
     smooth form: ``alpha = a_plus - a_minus`` with ``a_plus, a_minus >= 0`` and
     ``||alpha||_1 -> sum(a_plus + a_minus)``; for L1 the absolute residuals become slacks
     ``e >= |r|`` (two linear inequalities per coordinate) minimising ``sum w e``. Analytic

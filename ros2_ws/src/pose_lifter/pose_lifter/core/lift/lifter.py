@@ -1,0 +1,408 @@
+"""The lifter: alternation of camera and pose steps, multi-start and warm start (paper Sec. 3.3).
+
+One solve minimises, over the coefficients ``alpha`` and a scaled-orthographic camera
+``(M0, t)``::
+
+    F = sum_j w_j rho(x_j - M0 y_j - t) + theta ||alpha||_1,   y = mu + B alpha,
+    subject to ||C_i y||^2 = L_i (i = 1..8)
+
+by alternating the camera step and the pose step from a start pose until the relative
+decrease of ``F`` falls below ``alternation_tol`` or ``max_alternations`` is reached. Cold
+solves try ``n_starts`` starts (the mean pose, then k-means centres of the training poses)
+and keep the lowest ``F``; a warm start (previous frame of the same person) replaces them.
+
+Modes (``options.mode``). ``"paper"`` is the above. ``"learned"`` returns the learned prior's pose
+(:mod:`.prior`) alone. ``"hybrid"`` (the default) keeps the prior in the objective::
+
+    F = sum_j w_j |x_j - M0 y_j - t|_1 + theta ||alpha||_1
+        + sum_j p_j |P_j,xy - M0 y_j - t|_1 + sum_j q_j |P_j,z - m3 (y_j - mean_i y_i)|_1,
+    subject to ||C_i y||^2 = L_i,   y = mu + B alpha,   m3 = s r1 x r2,
+
+where ``P`` (12, 3) is the prior's pose for this image (its image positions and relative depths,
+missing joints included) and ``p_j = prior_weight_xy / e_j,xy``, ``q_j = prior_weight_z / e_j,z``
+with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_error``). The pose
+step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
+:class:`.pose_step.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
+paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
+Starts: every frame starts from the prior's pose (with the warm start's camera when tracked),
+``hybrid_alternations`` alternations per run; the depth-mirrored hypothesis is scored on cold
+solves (on warm ones it won no frame: the prior re-initialises the depth on every frame).
+Then up to ``outlier_passes`` outlier passes: visible joints farther than ``outlier_threshold``
+(and ``OUTLIER_MEDIAN_FACTOR`` times the frame's median) from the fit's projection or from the
+prior's image position get weight 0, the prior is re-run without them and the fit is continued
+and restarted from the prior's new pose (the lower objective kept), so a confidently wrong
+detection does not drag the depth. Tracked frames come screened by the per-track policy
+(:mod:`.tracking`: a joint that jumped is missing; a missing joint's prior target takes the previous
+frame's pose, ``temporal_weight`` per joint).
+
+Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
+and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
+mean the same at any image size. Results are mapped back to input units.
+
+Where it lives: this module checks the input once, normalises it, picks the mode's starts and
+maps the winner back (one output check); the bases, pose model and priors are loaded by
+:mod:`.models`, the paper's starts are :mod:`.starts`, a run of alternations is :mod:`.runs`, the
+hybrid and learned modes' prior terms, starts and outlier pass are :mod:`.hybrid`, the steps
+:mod:`.camera` and :mod:`.pose_step`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
+from ..model.bases import PoseBases
+from ..model.loading import LifterData
+from ..model.pose_model import LiftedConstraints, PoseModel
+from ..model.prior import PosePrior
+from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, N_JOINTS, RIGHT_LIMBS, limb_lengths
+from ..numeric.fast import mean_rows, row_norms
+from ..options import LifterOptions, Mode
+from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart
+from ..solve.alpha.lifted_admm import QStepFn
+from ..validation import check_keypoints
+from .batch import Steps
+from .hybrid import PriorFit
+from .runs import Runs
+from .starts import StartRun, paper_starts
+
+__all__ = ["KERNEL_MODES", "Lifter"]
+
+#: The modes whose default paths :func:`pose_lifter.core.track.policy.compile_kernels` runs:
+#: between them, every compiled kernel a default lift calls (``learned`` calls none of its own).
+KERNEL_MODES: tuple[Mode, ...] = ("hybrid", "paper")
+_LEFT_LIMBS = np.array(LEFT_LIMBS)
+_RIGHT_LIMBS = np.array(RIGHT_LIMBS)
+_GROUP_OF = np.array(LIMB_GROUP_OF)
+_NO_TRACK = TrackContext()
+
+
+class Lifter:
+    """Lift 2D keypoints (12 model joints) to a 3D pose and a weak-perspective camera.
+
+    Parameters
+    ----------
+    bases : PoseBases or None
+        None loads the packaged basis file of ``options.mode``
+        (:func:`pose_lifter.core.model.bases.default_bases_path`).
+    options : LifterOptions or None
+    prior, temporal_prior : PosePrior or None
+        The learned priors (None: loaded from ``options.prior_file`` /
+        ``options.temporal_prior_file`` on first use).
+    reads_ahead : bool
+        The lift knows each track's next frames (an offline lift: the tracks' frames are given
+        with :class:`~pose_lifter.core.track.policy.FramesAhead`): a temporal prior that reads frames
+        after the one it lifts is accepted. False (a live lift): such a prior is refused
+        (:class:`~pose_lifter.core.errors.PriorFileError` when it loads).
+    """
+
+    def __init__(self, bases: PoseBases | None = None, options: LifterOptions | None = None,
+                 prior: PosePrior | None = None, temporal_prior: PosePrior | None = None,
+                 reads_ahead: bool = False) -> None:
+        self._options = options if options is not None else LifterOptions()
+        self.reads_ahead = bool(reads_ahead)
+        o = self._options
+        self._data = (LifterData(bases, prior, temporal_prior, o.prior_file, o.temporal_prior_file)
+                      if bases is not None else
+                      LifterData.packaged(o.mode, prior, temporal_prior, o.prior_file, o.temporal_prior_file))
+        self.bases = self._data.bases
+        self._threads = 1
+        self._build()
+
+    @property
+    def threads(self) -> int:
+        """Threads over which each round of runs is split (:mod:`pose_lifter.core.lift.batch`; the
+        compiled kernel releases the GIL): 1 by default; the results do not depend on it."""
+        return self._threads
+
+    @threads.setter
+    def threads(self, value: int) -> None:
+        if int(value) < 1:
+            raise OptionsError(f"threads must be >= 1, got {value}")
+        self._threads = int(value)
+        self._runs.threads = self._threads
+
+    @property
+    def options(self) -> LifterOptions:
+        """Current options; assign a new :class:`LifterOptions` to change them."""
+        return self._options
+
+    @options.setter
+    def options(self, value: LifterOptions) -> None:
+        value.validate()
+        self._options = value
+        self._build()
+
+    @property
+    def prior(self) -> PosePrior:
+        """The learned prior (loaded from ``options.prior_file`` on first use)."""
+        return self._data.prior(self._options.prior_file)
+
+    @property
+    def temporal_prior(self) -> PosePrior | None:
+        """The temporal prior used on tracked frames (``options.temporal_prior``; loaded from
+        ``options.temporal_prior_file`` on first use; causal unless :attr:`reads_ahead`), or None
+        when it is off."""
+        if not self._options.temporal_prior:
+            return None
+        return self._data.temporal_prior(self._options.temporal_prior_file, self.reads_ahead)
+
+    @property
+    def model(self) -> PoseModel:
+        """Precomputed pose-step data of the current bases and limb targets."""
+        return self._model
+
+    def _build(self) -> None:
+        o = self._options
+        self._model = self._data.model(o.limb_proportions)
+        qstep_fn: QStepFn | None = None
+        if o.pose_solver == "cvxpy":
+            from ..reference import reference_qstep
+
+            def _q(w: NDArray[np.float64], cons: LiftedConstraints, p: NDArray[np.float64],
+                   g: NDArray[np.float64], delta: float) -> NDArray[np.float64]:
+                return np.asarray(reference_qstep(w, cons.omegas, p, g, delta))
+
+            qstep_fn = _q
+        self._runs = Runs(self._model, o, qstep_fn)
+        self._runs.threads = self._threads
+        self._prior_fit: PriorFit | None = None
+        if o.mode != "paper":
+            # the priors are loaded (and validated) now, not on the first frame
+            self._prior_fit = PriorFit(o, self.prior, self.temporal_prior, self._model, self._runs)
+            if o.mode == "hybrid" and (o.alpha_solver != "riemannian" or not o.method.limbs
+                                       or self._model.limb_coordinates is None):
+                raise OptionsError("mode 'hybrid' needs alpha_solver='riemannian', a variant with limb "
+                                   "constraints and bases with >= 24 independent directions")
+
+    @property
+    def prior_fit(self) -> PriorFit | None:
+        """The hybrid and learned modes' solve with the learned prior (None in the paper mode)."""
+        return self._prior_fit
+
+    @property
+    def runs(self) -> Runs:
+        """The alternation runs of the current model and options."""
+        return self._runs
+
+    # ------------------------------------------------------------------ helpers
+    def _weights(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        x, conf = check_keypoints(points, confidence)
+        w = np.where(conf >= self._options.confidence_threshold, conf.clip(0.0, 1.0), 0.0)
+        # a joint with non-finite coordinates is missing, whatever its confidence
+        bad = ~np.asarray(np.isfinite(x).all(axis=1))
+        has_bad = bool(bad.any())
+        if has_bad:
+            w[bad] = 0.0
+        n_vis = int(np.count_nonzero(w > 0))
+        if n_vis < self._options.min_visible_joints:
+            raise TooFewJointsError(
+                f"{n_vis} joints visible (confidence >= {self._options.confidence_threshold}); "
+                f"at least {self._options.min_visible_joints} needed"
+            )
+        return (np.where(bad[:, None], 0.0, x) if has_bad else x), w
+
+    def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> Normalisation:
+        total = np.add.reduce(w)  # w.sum()
+        centre = w @ x / total
+        d = x - centre
+        spread = math.sqrt(w @ np.add.reduce(d * d, axis=1) / total)
+        if not math.isfinite(spread) or spread <= 1e-9 * max(1.0, abs(centre[0]), abs(centre[1])):
+            raise InvalidInputError("the visible keypoints are (almost) all at one point")
+        return Normalisation(centre, spread / self._data.mean_spread)
+
+    # ------------------------------------------------------------------ public
+    def warm_up(self) -> float:
+        """Run the solver once (a cold and a warm lift of the mean pose seen from the side) so
+        that compiled kernels (numba, see ``core.numeric.jit``) are compiled or loaded from their cache
+        now rather than on the first real frame. Returns the seconds it took."""
+        t0 = time.perf_counter()
+        mean = self.bases.mean_pose
+        side = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # a profile view, y down
+        points = 100.0 * mean @ side.T + np.array([320.0, 240.0])
+        first = self.lift(points)
+        self.lift(points + 1.0, warm=first.warm_start())
+        return time.perf_counter() - t0
+
+    def lift(
+        self,
+        points_2d: NDArray[np.float64],
+        confidence: NDArray[np.float64] | None = None,
+        warm: WarmStart | None = None,
+        track: TrackContext | None = None,
+    ) -> LiftResult:
+        """Lift one skeleton.
+
+        Parameters
+        ----------
+        points_2d : ndarray, shape (12, 2)
+            Image coordinates of the 12 model joints (any consistent unit, e.g. pixels;
+            image y pointing down gives a camera frame with y down, z forward).
+        confidence : ndarray, shape (12,), optional
+            Per-joint confidence; below ``options.confidence_threshold`` = missing.
+            Non-finite coordinates also count as missing.
+        warm : WarmStart, optional
+            Previous solution of the same person: a single start from it replaces the
+            multi-start (hybrid: its camera starts the prior's pose; see
+            ``TrackContext.temporal_weight``).
+        track : TrackContext, optional
+            What the person's track knows of this frame (hybrid and learned modes; the per-track
+            policy, :class:`pose_lifter.core.track.policy.TrackPolicy`, fills it).
+
+        Returns
+        -------
+        LiftResult
+
+        Raises
+        ------
+        InvalidInputError, TooFewJointsError
+            Bad input (shapes, too few visible joints, a bad ``track`` field).
+        SolverError
+            The solve diverged on valid input.
+        """
+        return self._runs.solve(self.lift_steps(points_2d, confidence, warm, track))
+
+    def lift_steps(
+        self,
+        points_2d: NDArray[np.float64],
+        confidence: NDArray[np.float64] | None = None,
+        warm: WarmStart | None = None,
+        track: TrackContext | None = None,
+    ) -> Steps[LiftResult]:
+        """:meth:`lift` as a solve (:mod:`pose_lifter.core.lift.batch`): its runs are yielded, to go
+        through the compiled kernel with other people's (:func:`pose_lifter.core.lift.batch.gather`)."""
+        x, w = self._weights(points_2d, confidence)
+        norm = self._normalise(x, w)
+        tc = self._track_context(_NO_TRACK if track is None else track, w)
+        fit = self._prior_fit
+        if fit is not None and self._options.mode == "learned":
+            return (yield from fit.learned(x, w, norm, tc.past, tc.future))
+        xn = (x - norm.centre) / norm.spread
+        cam0: Camera | None = None
+        if warm is not None:
+            if warm.alpha.shape != (self.bases.n_bases,):
+                raise InvalidInputError("warm start alpha does not match the bases")
+            cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
+                          (warm.camera.translation - norm.centre) / norm.spread)
+        if fit is not None:  # hybrid
+            starts = yield from fit.starts(x, xn, w * tc.data_weight, norm, warm, cam0, tc)
+            w = starts.weights / tc.data_weight
+        else:
+            starts = yield from paper_starts(self._runs, self.bases, self._options, xn, w, warm, cam0)
+        return self._result(x, w, norm, starts.best(), starts.n_starts, starts.total_alternations,
+                            starts.prior_pose)
+
+    def _track_context(self, track: TrackContext, w: NDArray[np.float64]) -> TrackContext:
+        """``track`` checked, as the modes read it: ``past`` and ``future`` without non-finite
+        joints, ``fill`` only for the joints this frame lacks (weight 0), ``temporal_weight`` an
+        array (12,) (the hybrid mode's; the paper mode reads none of it)."""
+        past, future, fill = track.past, track.future, track.fill
+        if past is not None:
+            past = _checked_frames(past)
+        if future is not None:
+            future = _checked_frames(future)
+        if fill is not None:
+            fp, fv = np.asarray(fill[0], dtype=np.float64), np.asarray(fill[1], dtype=bool)
+            if fp.shape != (N_JOINTS, 2) or fv.shape != (N_JOINTS,):
+                raise InvalidInputError(f"fill must be (({N_JOINTS}, 2), ({N_JOINTS},)), got {fp.shape} "
+                                        f"and {fv.shape}")
+            # only for the joints this frame lacks: one the outlier pass flags stays missing
+            fill = (fp, fv & np.isfinite(fp).all(axis=-1) & ~(w > 0))
+        if self._options.mode != "hybrid":
+            return TrackContext(track.limb_proportions, track.data_weight, track.temporal_weight, past,
+                                track.gated, fill, future)
+        data_weight = track.data_weight
+        if not 0.0 < data_weight <= 1.0:
+            raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
+        tw = np.array(track.temporal_weight, dtype=np.float64)
+        if tw.shape != (N_JOINTS,):
+            tw = np.broadcast_to(tw, (N_JOINTS,)).copy()
+        if not ((tw >= 0.0) & (tw <= 1e3)).all():
+            raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {track.temporal_weight!r}")
+        return TrackContext(track.limb_proportions, data_weight, tw, past, track.gated, fill, future)
+
+    def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
+        """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
+        weighted RMS spread over the mean pose's (see the module docstring)."""
+        x = np.where((weights > 0)[:, None], np.asarray(points, dtype=np.float64), 0.0)
+        return self._normalise(x, np.asarray(weights, dtype=np.float64)).spread
+
+    @staticmethod
+    def limb_proportions_of(pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """A person's limb proportions from a 3D pose (12, 3): the 8 limb lengths with each
+        left/right pair averaged (bones are symmetric; it halves the noise of an estimate),
+        shape (8,), in the pose's units."""
+        lengths = limb_lengths(pose)
+        pairs = 0.5 * (lengths[_LEFT_LIMBS] + lengths[_RIGHT_LIMBS])
+        return np.asarray(pairs[_GROUP_OF])
+
+    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, won: StartRun,
+                n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
+        """The winning run mapped back to input units, checked finite."""
+        run = won.run
+        cam_n = run.camera.camera
+        cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
+        pose = run.pose.pose
+        pose_c = pose - mean_rows(pose)
+        reproj = row_norms(x - cam.project(pose))[w > 0]
+        result = LiftResult(
+            pose=pose,
+            pose_camera=pose_c @ cam.rotation.T,
+            camera=cam,
+            alpha=run.pose.alpha,
+            objective=run.objective,
+            reprojection_error=float(np.add.reduce(reproj) / reproj.size),  # reproj.mean()
+            limb_violation=run.pose.limb_violation,
+            n_iter=run.n_iter,
+            converged=run.converged,
+            n_starts=n_starts,
+            start_index=won.index,
+            weights=w,
+            total_alternations=total,
+            prior_pose=prior_pose,
+            history=run.history,
+            start=won.kind,
+        )
+        for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
+            if not np.isfinite(arr).all():
+                raise SolverError("the solve produced non-finite values for this input")
+        return result
+
+    def lift_many(
+        self,
+        points_2d: NDArray[np.float64],
+        confidence: NDArray[np.float64] | None = None,
+        warm_start: bool = True,
+    ) -> Sequence[LiftResult]:
+        """Lift one person's frames in order, shape (T, 12, 2) (confidence (T, 12)).
+
+        With ``warm_start`` each frame starts from the previous result (cold multi-start on
+        the first frame and after a frame that could not be lifted, which is re-raised).
+        """
+        pts = np.asarray(points_2d, dtype=np.float64)
+        if pts.ndim != 3:
+            raise InvalidInputError(f"points_2d must be (T, {N_JOINTS}, 2), got {pts.shape}")
+        conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+        out: list[LiftResult] = []
+        warm: WarmStart | None = None
+        for i in range(pts.shape[0]):
+            res = self.lift(pts[i], None if conf is None else conf[i], warm)
+            out.append(res)
+            warm = res.warm_start() if warm_start else None
+        return out
+
+
+def _checked_frames(frames: Frames) -> Frames:
+    """A track's past or next frames ``(points (k, 12, 2), used (k, 12))`` as the lift reads them:
+    float64, a joint with a non-finite coordinate unused; InvalidInputError for other shapes."""
+    pp, pv = np.asarray(frames[0], dtype=np.float64), np.asarray(frames[1], dtype=bool)
+    if pp.ndim != 3 or pp.shape[1:] != (N_JOINTS, 2) or pv.shape != pp.shape[:2]:
+        raise InvalidInputError(f"past and future frames must be ((k, {N_JOINTS}, 2), (k, {N_JOINTS})), "
+                                f"got {pp.shape} and {pv.shape}")
+    return pp, pv & np.isfinite(pp).all(axis=-1)

@@ -1,0 +1,336 @@
+"""Runs: camera/pose alternations from one start (paper Sec. 3.3), continued or mirrored.
+
+A run minimises the lifter's objective ``F`` (see :mod:`pose_lifter.core.lift.lifter`) from a start
+pose by alternating the camera step (:func:`pose_lifter.core.solve.camera.camera_step_trusted`) and the
+pose step (:func:`pose_lifter.core.solve.pose_step.pose_step`) until the relative decrease of ``F`` falls
+below ``alternation_tol`` or the alternation cap is reached, and keeps its lowest-``F``
+alternation. A run can be continued (a screened start), and its depth-mirrored copy (the
+weak-perspective ambiguity: the same 2D, reflected depth) started.
+
+With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`); the
+other solvers (the cvxpy references, the lifted ADM and SQP alpha-steps, multipliers carried
+between steps) run in the Python loop of :meth:`Runs.run_steps`, on the same objective terms and
+stopping rule (:func:`pose_lifter.core.solve.run_kernel._run_objective`, ``_alternation_stops``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InvalidInputError, SolverError, diverged_as_solver_error
+from ..model.pose_model import PoseModel
+from ..model.skeleton import N_JOINTS, normalise_pose_flat
+from ..numeric.jit import njit
+from ..numeric.records import StepSettings
+from ..options import LifterOptions
+from ..results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
+from ..solve.alpha.lifted_admm import QStepFn
+from ..solve.camera import camera_step_trusted, initial_camera
+from ..solve.pose_step import PriorRows, pose_step, prior_operands, step_settings
+from ..solve.run_kernel import (
+    CAMERA_DIVERGED,
+    OK,
+    RunCall,
+    RunOut,
+    _alternation_stops,
+    _run_objective,
+    _stack_camera_data,
+)
+from .batch import Steps, solve
+
+__all__ = ["PINV_RCOND", "Run", "Runs"]
+
+T = TypeVar("T")
+
+#: Relative cut-off of the bases' singular values in the minimum-norm coefficients of a start
+#: pose (:func:`_mirror_kernel`, a pseudo-inverse): the packaged bases' smallest singular value is
+#: 2.5e-7 of the largest (the next 2.6e-2); dividing by it gave the prior's poses (not in the
+#: bases' span) coefficients with ||alpha||_1 ~ 2e5: their pose was right but ``theta ||alpha||_1``
+#: dominated the objective. It also moves the paper's mirrored warm start slightly.
+PINV_RCOND = 1e-3
+_EYE3 = np.eye(3)
+
+
+@dataclass(frozen=True)
+class Run:
+    """A run of alternations from one start: its best alternation's steps and objective, the ADM
+    multipliers it ended with (``options.warm_duals``) and its alternations' history."""
+
+    pose: PoseResult
+    camera: CameraResult
+    objective: float
+    n_iter: int
+    converged: bool
+    history: tuple[Alternation, ...] = ()
+
+
+@njit
+def _mirror_kernel(pose: NDArray[np.float64], rot: NDArray[np.float64], mean: NDArray[np.float64],
+                   u: NDArray[np.float64], sig: NDArray[np.float64], v: NDArray[np.float64], flip: bool = True
+                   ) -> tuple[NDArray[np.float64], bool]:
+    """``V ((U^T (normalise_pose(mirror(pose)) - mu)) / S)`` for one pose (12, 3): the pose in
+    the camera frame (``rot`` (3, 3)) with its depth reflected, normalised into its own body
+    frame (:func:`normalise_pose_flat`), then minimum-norm coefficients through the bases' SVD.
+    ``flip`` False: the pose as it is (the hybrid mode's start from the prior's pose).
+    Returns ``(alpha (k,), ok)``; ``ok`` is False for a degenerate leg or body frame."""
+    n = pose.shape[0]
+    cp = np.empty((n, 3))
+    for j in range(n):
+        for a in range(3):
+            cp[j, a] = pose[j, 0] * rot[a, 0] + pose[j, 1] * rot[a, 1] + pose[j, 2] * rot[a, 2]
+        if flip:
+            cp[j, 2] = -cp[j, 2]
+    body, ok = normalise_pose_flat(cp)
+    k = v.shape[0]
+    alpha = np.zeros(k)
+    if not ok:
+        return alpha, False
+    for i in range(3 * n):
+        body[i] -= mean[i]
+    for j in range(sig.size):
+        if sig[j] <= PINV_RCOND * sig[0]:  # the pseudo-inverse: (numerically) null directions add nothing
+            continue
+        c = 0.0
+        for i in range(3 * n):
+            c += u[i, j] * body[i]
+        c /= sig[j]
+        ok = ok and math.isfinite(c)
+        for i in range(k):
+            alpha[i] += v[i, j] * c
+    return alpha, ok
+
+class Runs:
+    """Runs of one lifter's current model and options (rebuilt when they change).
+
+    Parameters
+    ----------
+    model : PoseModel
+    options : LifterOptions
+    qstep_fn : callable, optional
+        The cvxpy reference Q-step (``options.pose_solver == "cvxpy"``).
+    """
+
+    def __init__(self, model: PoseModel, options: LifterOptions, qstep_fn: QStepFn | None = None) -> None:
+        self.model, self.options, self.qstep_fn = model, options, qstep_fn
+        o = options
+        #: whether a run is the compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`): both steps'
+        #: ADMs, the Riemannian alpha-step (on the reduced lifting with an onto limb map) and no
+        #: multipliers carried between steps; otherwise the Python loop of :meth:`run` (the tests
+        #: set it False to run the loop on the kernel's problems as its reference)
+        self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
+                         and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
+                         and model.limb_coordinates is not None and not o.warm_duals)
+        #: the steps' settings as the kernel takes them (made on the first compiled run)
+        self._settings: StepSettings | None = None
+        #: threads over which a round of runs is split (:func:`pose_lifter.core.solve.run_kernel.run_calls`)
+        self.threads = 1
+
+    @property
+    def settings(self) -> StepSettings:
+        """The steps' settings as the compiled kernel takes them."""
+        if self._settings is None:
+            self._settings = step_settings(self.options)
+        return self._settings
+
+    def solve(self, steps: Steps[T]) -> T:
+        """Drive a solve of this model and options to its result
+        (:func:`pose_lifter.core.lift.batch.solve`, over :attr:`threads` threads)."""
+        return solve(steps, self.model.kernel_arrays, self.settings, self.threads)
+
+    def camera_data(self, xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+        """The camera step's 2D points and weights for a run: with a prior term, the prior's
+        image positions are further (pose joint, 2D point) pairs of the L1 fit (then the pose is
+        stacked twice, the returned flag; :func:`pose_lifter.core.solve.run_kernel._stack_camera_data`).
+        Built once per run, not per alternation."""
+        xp, pw, _ = prior_operands(self.model, prior)
+        cx, cw, doubled = _stack_camera_data(np.ascontiguousarray(xn, dtype=np.float64),
+                                             np.ascontiguousarray(w, dtype=np.float64), xp, pw)
+        return cx, cw, bool(doubled)
+
+    def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
+                init: Camera | None, last: CameraResult | None = None) -> CameraResult:
+        """One camera step of a run on its :meth:`camera_data` for ``pose`` (12, 3) (stacked twice
+        with a prior term), from ``init`` (None: the step's own least-squares start), with the
+        previous step's multipliers ``last.duals`` when ``options.warm_duals``."""
+        o = self.options
+        xn, w, doubled = data
+        if doubled:
+            pose = np.concatenate([pose, pose])
+        if o.camera_solver == "cvxpy":
+            from ..reference import reference_camera
+
+            cam, obj = reference_camera(xn, pose, w, o.method.loss,
+                                        rotation_init=None if init is None else init.rotation)
+            return CameraResult(objective=float(obj), n_iter=1, converged=True, camera=cam)
+        duals = last.duals if last is not None and o.warm_duals else None
+        # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
+        return camera_step_trusted(xn, pose, w, o, init, duals)
+
+    def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
+              alpha0: NDArray[np.float64], last: PoseResult | None = None,
+              max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
+        """One pose step of a run for the camera ``cam`` on the normalised 2D ``xn`` (12, 2) and
+        weights ``w`` (12,), from ``alpha0`` (k,); ``max_iter`` None: the mode's cap
+        (``pose_max_iter``, or ``hybrid_pose_max_iter`` with a prior term)."""
+        o = self.options
+        if max_iter is None:
+            max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
+        return pose_step(xn, cam.projection, cam.translation, w, self.model, alpha0, o, max_iter=max_iter,
+                         prior=prior, duals=last.duals if last is not None and o.warm_duals else None,
+                         qstep_fn=self.qstep_fn)
+
+    def run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
+            cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
+            pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Run:
+        """:meth:`run_steps` driven alone."""
+        return self.solve(self.run_steps(xn, w, alpha0, cam0, max_alternations, start, pose_max_iter, prior))
+
+    def run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
+                  cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
+                  pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Steps[Run]:
+        """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
+        continue a previous run ``start``. With ``options.warm_duals`` the ADM multipliers of both
+        steps are carried from one alternation to the next. The run keeps its lowest-objective
+        alternation (the hybrid objective adds the prior's depth rows to the camera step's).
+
+        A solve (:mod:`pose_lifter.core.lift.batch`): the compiled run is yielded as one
+        :class:`~pose_lifter.core.solve.run_kernel.RunCall`; the other solvers' Python loop runs here
+        and yields nothing."""
+        o = self.options
+        n_alt = o.max_alternations if max_alternations is None else max_alternations
+        data = self.camera_data(xn, w, prior)
+        if self.compiled:
+            call = self._compiled_call(w, xn, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
+            (out,) = yield [call]
+            if isinstance(out, Exception):
+                with diverged_as_solver_error("run"):
+                    raise out
+            assert isinstance(out, RunOut)
+            return self._compiled_run(out, start)
+        last_pose: PoseResult | None
+        if start is not None:
+            alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
+            it0, last_pose, history = start.n_iter, start.pose, list(start.history)
+        else:
+            alpha = alpha0
+            cam = self.camera(data, self.model.pose(alpha), cam0)
+            best, prev, it0, last_pose, history = None, np.inf, 0, None, []
+        converged = False
+        it = it0
+        th = o.theta if o.method.sparsity else 0.0
+        xp, pw, _ = prior_operands(self.model, prior)
+        for it in range(it0 + 1, n_alt + 1):
+            pres = self.pose(xn, cam.camera, w, alpha, last_pose, pose_max_iter, prior)
+            alpha, last_pose = pres.alpha, pres
+            cam = self.camera(data, pres.pose, cam.camera, cam)
+            obj = _run_objective(cam.objective, alpha, th, np.ascontiguousarray(pres.pose).reshape(-1),
+                                 np.ascontiguousarray(cam.camera.projection), xp, pw)
+            history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),
+                                       SolveInfo(pres.objective, pres.n_iter, pres.converged)))
+            if best is None or obj < best.objective:
+                best = Run(pres, cam, obj, it, False, tuple(history))
+            if _alternation_stops(float(prev), obj, o.alternation_tol):
+                converged = True
+                break
+            prev = obj
+        assert best is not None
+        return Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
+
+    def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64],
+                       data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
+                       alpha0: NDArray[np.float64], cam0: Camera | None, n_alt: int, start: Run | None,
+                       pose_max_iter: int | None, prior: PriorRows | None) -> RunCall:
+        """The operands of :meth:`run_steps`' compiled run
+        (:func:`pose_lifter.core.solve.run_kernel._run_kernel`)."""
+        o, m = self.options, self.model
+        xp, pw, rad = prior_operands(m, prior)
+        if pose_max_iter is None:
+            pose_max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
+        cx, cw, doubled = data
+        if start is not None:
+            cam = start.camera.camera
+            alpha, y0 = start.pose.alpha, m.mean
+            m_init, t_init = cam.projection, cam.translation
+            obj0, it0 = start.objective, start.n_iter
+        else:
+            alpha, y0 = alpha0, m.mean + m.components @ alpha0
+            if cam0 is None:
+                y = y0.reshape(N_JOINTS, 3)
+                m_init, t_init = initial_camera(cx, np.concatenate([y, y]) if doubled else y, cw)
+            else:
+                m_init, t_init = cam0.projection, cam0.translation
+            obj0, it0 = np.inf, 0
+        cam_init = np.empty((2, 4))  # [M | t]
+        cam_init[:, :3] = m_init
+        cam_init[:, 3] = t_init
+        return RunCall(np.ascontiguousarray(xn, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
+                       xp, pw, rad, np.ascontiguousarray(alpha, dtype=np.float64), y0, cam_init, float(obj0),
+                       int(it0), int(n_alt), int(pose_max_iter))
+
+    @staticmethod
+    def _compiled_run(out: RunOut, start: Run | None) -> Run:
+        """The :class:`Run` of a compiled run's output (its steps' results carry no multipliers)."""
+        if out.status != OK:
+            raise SolverError("camera step diverged (non-finite camera); check the inputs"
+                              if out.status == CAMERA_DIVERGED
+                              else "pose step diverged (non-finite coefficients)")
+        history = [] if start is None else list(start.history)
+        done = out.done
+        for (obj, cobj, pobj), (cit, cconv, pit, pconv) in zip(out.objs[:done].tolist(),
+                                                              out.counts[:done].tolist(), strict=True):
+            history.append(Alternation(obj, SolveInfo(cobj, cit, bool(cconv)),
+                                       SolveInfo(pobj, pit, bool(pconv))))
+        it, converged = int(out.it), bool(out.converged)
+        if out.best_it < 0:
+            assert start is not None
+            return Run(start.pose, start.camera, start.objective, it, converged, tuple(history))
+        pobj, viol, cobj, scale = out.floats.tolist()
+        pit, pconv, ait, cit, cconv = out.ints.tolist()
+        pres = PoseResult(objective=pobj, n_iter=pit, converged=bool(pconv), alpha=out.alpha,
+                          pose=out.pose.reshape(N_JOINTS, 3), limb_violation=viol, alpha_iter=ait)
+        cres = CameraResult(objective=cobj, n_iter=cit, converged=bool(cconv),
+                            camera=Camera(out.rotation, scale, out.translation))
+        return Run(pres, cres, float(out.best_obj), it, converged, tuple(history))
+
+    def mirrored_alpha(self, run: Run) -> NDArray[np.float64]:
+        """Coefficients of the depth-mirrored pose of a run (same projection, depth reflected),
+        re-expressed in its own body frame (:func:`normalise_pose`); minimum-norm coefficients
+        through the bases' SVD."""
+        m = self.model
+        # flip passed, not defaulted: the signature start_alpha compiles (one cached kernel to load)
+        alpha, ok = _mirror_kernel(np.ascontiguousarray(run.pose.pose), run.camera.camera.rotation, m.mean,
+                                   m.u, m.sig, m.v, True)
+        if not ok:
+            raise InvalidInputError("a pose has a degenerate right lower leg")
+        return alpha
+
+
+    def mirrored_run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: Run,
+                           prior: PriorRows | None, max_alternations: int | None = None) -> Steps[Run]:
+        """The depth-mirrored copy of ``run`` as a start: screened by one alternation and continued
+        when it already beats ``run`` (``warm_flip_screen``), or run to convergence (a solve)."""
+        mirrored = self.mirrored_alpha(run)
+        if self.options.warm_flip_screen:
+            # hybrid: a short screening pose step, as for the paper's cold starts
+            short = None if prior is None else self.options.screen_pose_max_iter
+            flip = yield from self.run_steps(xn, w, mirrored, None, max_alternations=1, prior=prior,
+                                             pose_max_iter=short)
+            if flip.objective < run.objective:
+                flip = yield from self.run_steps(xn, w, flip.pose.alpha, None, max_alternations, start=flip,
+                                                 prior=prior)
+            return flip
+        return (yield from self.run_steps(xn, w, mirrored, None, max_alternations, prior=prior))
+
+
+    def start_alpha(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Minimum-norm coefficients of a camera-frame pose (12, 3) in its own body frame (zeros,
+        the mean pose, for a degenerate pose)."""
+        m = self.model
+        alpha, ok = _mirror_kernel(np.ascontiguousarray(pose), _EYE3, m.mean, m.u, m.sig, m.v, False)
+        return alpha if ok else np.zeros(self.model.n_bases)

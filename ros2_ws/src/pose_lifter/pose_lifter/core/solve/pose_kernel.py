@@ -1,0 +1,328 @@
+"""The pose step's compiled pieces: its L1 rows, the ADM's splitting, dual and penalty updates, and
+the pose step with the Riemannian alpha-step as one kernel (:func:`_pose_kernel`, the pose step of
+the default solver; :func:`pose_lifter.core.solve.pose_step.pose_step` calls it, and its Python ADM loop
+calls the same rows and updates around the other alpha-steps)."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..numeric.jit import njit
+from ..numeric.linalg import _axpy_rows
+from ..numeric.records import ModelArrays, StepSettings
+from .alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
+
+
+class PoseOut(NamedTuple):
+    """What :func:`_pose_kernel` returns."""
+
+    alpha: NDArray[np.float64]  #: (k,) the best feasible iterate's coefficients
+    objective: float  #: its objective
+    limb_violation: float  #: its largest limb-length error
+    pose: NDArray[np.float64]  #: (36,) its pose ``mu + B alpha``
+    eta: float  #: the final penalty (the unscaled multipliers are ``eta * u``)
+    n_iter: int  #: ADM iterations
+    converged: bool  #: whether the residuals fell below the tolerance
+    alpha_iter: int  #: Newton steps of the alpha-steps, summed
+
+
+@njit
+def _sum_abs(a: NDArray[np.float64]) -> float:
+    """``||a||_1`` of an (n,) array, summed in order: the sparsity term ``||alpha||_1`` of a run's
+    objective (:func:`pose_lifter.core.solve.run_kernel._run_objective`)."""
+    res = 0.0
+    for i in range(a.size):
+        res += abs(a[i])
+    return res
+
+
+@njit
+def _depth_row(m0: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``m3 = s r3 = s r1 x r2`` (3,) of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row
+    that maps a model pose to depth in the image's units (``||m1|| = s``). The one implementation
+    of :meth:`pose_lifter.core.solve.pose_step.PriorRows.depth_row`."""
+    a0, a1, a2 = m0[0, 0], m0[0, 1], m0[0, 2]
+    b0, b1, b2 = m0[1, 0], m0[1, 1], m0[1, 2]
+    nrm = max(math.sqrt(a0 * a0 + a1 * a1 + a2 * a2), 1e-300)
+    out = np.empty(3)
+    out[0] = (a1 * b2 - a2 * b1) / nrm
+    out[1] = (a2 * b0 - a0 * b2) / nrm
+    out[2] = (a0 * b1 - a1 * b0) / nrm
+    return out
+
+
+@njit
+def _depth_term(y: NDArray[np.float64], m0: NDArray[np.float64], xp: NDArray[np.float64],
+                pw: NDArray[np.float64]) -> float:
+    """The prior's depth rows of the objective, ``sum_j pw[j, 1] |xp[j, 2] - m3 (y_j - mean_l y_l)|``,
+    for the flat pose ``y`` (3n,), ``M0`` (2, 3) (``m3``: :func:`_depth_row`), the prior's target
+    ``xp`` (n, 3) and weights ``pw`` (n, 2). The one implementation of
+    :meth:`pose_lifter.core.solve.pose_step.PriorRows.depth_term`."""
+    nj = xp.shape[0]
+    m3 = _depth_row(m0)
+    c0, c1, c2 = 0.0, 0.0, 0.0
+    for j in range(nj):
+        c0 += y[3 * j]
+        c1 += y[3 * j + 1]
+        c2 += y[3 * j + 2]
+    c0 /= nj
+    c1 /= nj
+    c2 /= nj
+    res = 0.0
+    for j in range(nj):
+        d = (y[3 * j] - c0) * m3[0] + (y[3 * j + 1] - c1) * m3[1] + (y[3 * j + 2] - c2) * m3[2]
+        res += pw[j, 1] * abs(xp[j, 2] - d)
+    return res
+
+
+@njit
+def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDArray[np.float64],
+               theta: float, l1: bool) -> float:
+    """``sum wts rho(resid) + theta ||alpha||_1`` (``l1`` False: squared loss)."""
+    data = np.sum(wts * np.abs(resid)) if l1 else np.sum(wts * resid * resid)
+    return float(data + theta * np.sum(np.abs(alpha)))
+
+
+@njit
+def _adm_split(
+    c: NDArray[np.float64], ax: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+    alpha: NDArray[np.float64], wts: NDArray[np.float64], eta: float, th: float, l1: bool,
+    gamma: NDArray[np.float64], beta: NDArray[np.float64], d1: NDArray[np.float64], d2: NDArray[np.float64],
+) -> None:
+    """gamma- and beta-steps of the pose ADM (``pose_step`` module docstring), written into
+    ``gamma``, ``d1`` (m,) and ``beta``, ``d2`` (k,): ``gamma = prox(c - A alpha + u1)``,
+    ``beta = soft(alpha + u2, th / eta)`` (``th = 0``: no sparsity), ``d1 = c - gamma + u1``,
+    ``d2 = beta - u2``; ``ax = A alpha`` (m,)."""
+    for i in range(c.size):  # gamma-step (prox of the data term)
+        vg = c[i] - ax[i] + u1[i]
+        if l1:
+            gi = math.copysign(max(abs(vg) - wts[i] / eta, 0.0), vg)
+        else:
+            gi = eta * vg / (2.0 * wts[i] + eta)
+        gamma[i] = gi
+        d1[i] = c[i] - gi + u1[i]
+    for i in range(alpha.size):  # beta-step (prox of theta ||.||_1)
+        vb = alpha[i] + u2[i]
+        bi = math.copysign(max(abs(vb) - th / eta, 0.0), vb) if th > 0 else vb
+        beta[i] = bi
+        d2[i] = bi - u2[i]
+
+
+@njit
+def _adm_dual_update(
+    c: NDArray[np.float64], ax: NDArray[np.float64], ax_prev: NDArray[np.float64], gamma: NDArray[np.float64],
+    alpha: NDArray[np.float64], beta: NDArray[np.float64], beta_prev: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64], wts: NDArray[np.float64], th: float, l1: bool,
+    scale_c: float,
+) -> tuple[float, float, float]:
+    """After the alpha-step of the pose ADM (``ax = A alpha`` (m,), ``ax_prev`` before it): the
+    multipliers ``u1`` (m,), ``u2`` (k,) updated in place; returns the objective and the relative
+    primal and dual residuals (sums in order, no temporaries)."""
+    r1sq, dsq, data = 0.0, 0.0, 0.0
+    for i in range(c.size):
+        e = c[i] - ax[i]
+        data += wts[i] * (abs(e) if l1 else e * e)
+        r = e - gamma[i]
+        u1[i] += r
+        r1sq += r * r
+        dsq += (ax[i] - ax_prev[i]) ** 2
+    r2sq, asq, anorm1, dbsq = 0.0, 0.0, 0.0, 0.0
+    for i in range(alpha.size):
+        a = alpha[i]
+        r = a - beta[i]
+        u2[i] += r
+        r2sq += r * r
+        asq += a * a
+        anorm1 += abs(a)
+        dbsq += (beta[i] - beta_prev[i]) ** 2
+    obj = data + th * anorm1
+    an = max(1.0, math.sqrt(asq))
+    primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
+    dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
+    return obj, primal, dual
+
+
+@njit
+def _grow_penalty(eta: float, eta_growth: float, eta_max: float, u1: NDArray[np.float64],
+                  u2: NDArray[np.float64]) -> float:
+    """The pose ADM's penalty schedule: ``eta <- min(eta * eta_growth, eta_max)``, with the
+    scaled multipliers ``u1``, ``u2`` rescaled in place so the unscaled ones are unchanged."""
+    if eta_growth != 1.0 and eta < eta_max:
+        eta_new = min(eta * eta_growth, eta_max)
+        u1 *= eta / eta_new
+        u2 *= eta / eta_new
+        return eta_new
+    return eta
+
+
+@njit
+def _limb_violation_jit(y: NDArray[np.float64], limb_matrix: NDArray[np.float64], rad: NDArray[np.float64]
+                        ) -> float:
+    """:meth:`PoseModel.limb_violation` of the pose ``y`` (36,)."""
+    lv = limb_matrix @ y
+    out = 0.0
+    for i in range(8):
+        n = math.sqrt(lv[3 * i] ** 2 + lv[3 * i + 1] ** 2 + lv[3 * i + 2] ** 2)
+        out = max(out, abs(n - rad[i]))
+    return out
+
+
+@njit
+def _n_rows(pw: NDArray[np.float64]) -> int:
+    """Rows of the pose step's L1 objective for the prior weights ``pw`` (12, 2): 2 per joint, 2 per
+    prior image position (``pw[j, 0] > 0``) and 1 per prior depth (``pw[j, 1] > 0``)."""
+    nj: int = pw.shape[0]
+    m: int = 2 * nj
+    for j in range(nj):
+        m += (2 if pw[j, 0] > 0.0 else 0) + (1 if pw[j, 1] > 0.0 else 0)
+    return m
+
+
+@njit
+def _pose_rows(x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64],
+               w: NDArray[np.float64], km: ModelArrays, xp: NDArray[np.float64], pw: NDArray[np.float64]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The L1 rows of the pose objective ``sum_i wts_i rho(c_i - (M U S s)_i)`` (``s = V^T alpha``)
+    for the camera ``m0`` (2, 3), ``t`` (2,), the 2D ``x`` (12, 2) and weights ``w`` (12,):
+    ``(c (m,), wts (m,), M U S (m, r))``, ``m`` = :func:`_n_rows`.
+
+    2 rows per joint, then the prior's (the hybrid mode's L1 prior term): for each joint ``j`` with
+    ``pw[j, 0] > 0`` two rows ``pw[j, 0] |xp[j, a] - t_a - M_a y_j|`` (the prior's image position,
+    a = x, y), and with ``pw[j, 1] > 0`` one row ``pw[j, 1] |xp[j, 2] - m3 (y_j - mean_i y_i)|``
+    (its depth relative to the joints' mean; ``m3`` = :func:`_depth_row`). ``pw`` all zero: the
+    paper's problem."""
+    mean, u, sig = km.mean, km.u, km.sig
+    r = sig.size
+    nj = x.shape[0]
+    m = _n_rows(pw)
+    wts = np.empty(m)
+    c = np.empty(m)
+    mus = np.empty((m, r))
+    for j in range(nj):
+        for a in range(2):
+            wts[2 * j + a] = w[j]
+            c[2 * j + a] = x[j, a] - t[a] - (m0[a, 0] * mean[3 * j] + m0[a, 1] * mean[3 * j + 1]
+                                             + m0[a, 2] * mean[3 * j + 2])
+            for k in range(r):
+                mus[2 * j + a, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
+                                     + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+    row = 2 * nj
+    for j in range(nj):  # the prior's image positions: rows like the data rows
+        if pw[j, 0] > 0.0:
+            for a in range(2):
+                wts[row] = pw[j, 0]
+                c[row] = xp[j, a] - t[a] - (m0[a, 0] * mean[3 * j] + m0[a, 1] * mean[3 * j + 1]
+                                            + m0[a, 2] * mean[3 * j + 2])
+                for k in range(r):
+                    mus[row, k] = (m0[a, 0] * u[3 * j, k] + m0[a, 1] * u[3 * j + 1, k]
+                                   + m0[a, 2] * u[3 * j + 2, k]) * sig[k]
+                row += 1
+    if (pw[:, 1] > 0.0).any():  # the prior's relative depths: m3 (y_j - mean_i y_i)
+        m3 = _depth_row(m0)
+        ubar = np.zeros((3, r))
+        mbar = np.zeros(3)
+        for j in range(nj):
+            for a in range(3):
+                mbar[a] += mean[3 * j + a] / nj
+                for k in range(r):
+                    ubar[a, k] += u[3 * j + a, k] / nj
+        for j in range(nj):
+            if pw[j, 1] > 0.0:
+                wts[row] = pw[j, 1]
+                c[row] = xp[j, 2] - (m3[0] * (mean[3 * j] - mbar[0]) + m3[1] * (mean[3 * j + 1] - mbar[1])
+                                     + m3[2] * (mean[3 * j + 2] - mbar[2]))
+                for k in range(r):
+                    mus[row, k] = (m3[0] * (u[3 * j, k] - ubar[0, k]) + m3[1] * (u[3 * j + 1, k] - ubar[1, k])
+                                   + m3[2] * (u[3 * j + 2, k] - ubar[2, k])) * sig[k]
+                row += 1
+    return c, wts, mus
+
+
+@njit
+def _riemannian_adm(
+    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], km: ModelArrays,
+    st: StepSettings, rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64],
+    u2: NDArray[np.float64], best_obj: float, max_iter: int,
+) -> tuple[NDArray[np.float64], float, float, int, bool, int]:
+    """The pose ADM (``pose_step`` module docstring) on the rows ``(c, wts, mus)``
+    (:func:`_pose_rows`) with the Riemannian alpha-step (:func:`_riemannian_alpha_kernel`, its
+    quadratic in limb coordinates set up once, :func:`_sphere_setup`); ``V^T alpha`` is carried
+    from step to step. ``u1`` (m,), ``u2`` (k,) are the scaled multipliers, updated in place;
+    ``best_obj`` the objective of ``alpha0`` (k,) if feasible, else ``inf``. Returns ``(best
+    alpha, best objective, final eta, iterations, converged, alpha-step iterations)``."""
+    vt = km.vt
+    th, l1, prox, tol = st.th, st.l1, st.prox, st.pose_tol
+    eta = st.eta
+    r = mus.shape[1]
+    g = mus.T @ mus
+    for j in range(r):
+        g[j, j] += 1.0 + prox
+    q, rmat, s1, s2 = _sphere_setup(g, km.z, km.n)
+    # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
+    geom = (g @ km.s0, q, np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
+            np.ascontiguousarray(s2.T))
+    scale_c = max(1.0, math.sqrt(float(c @ c)))
+    m = c.size
+    k = alpha0.size
+    alpha = alpha0.copy()
+    best_alpha = alpha.copy()
+    beta = alpha.copy()
+    beta_prev = np.empty(k)
+    gamma = np.empty(m)
+    d1 = np.empty(m)
+    d2 = np.empty(k)
+    sk = vt @ alpha
+    ax = mus @ sk
+    converged = False
+    it = 0
+    alpha_it = 0
+    ax_prev = np.empty(m)
+    mus_t = np.ascontiguousarray(mus.T)
+    for it in range(1, max_iter + 1):
+        beta, beta_prev = beta_prev, beta
+        _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
+        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, km, geom, rad, st, alpha, sk)
+        ax, ax_prev = ax_prev, ax
+        ax[:] = 0.0
+        _axpy_rows(mus_t, sk, ax)
+        obj, primal, dual = _adm_dual_update(c, ax, ax_prev, gamma, alpha, beta, beta_prev, u1, u2, wts, th,
+                                             l1, scale_c)
+        eta = _grow_penalty(eta, st.eta_growth, st.eta_max, u1, u2)
+        if obj < best_obj:
+            best_obj = obj
+            best_alpha[:] = alpha
+        if primal < tol and dual < tol:
+            converged = True
+            break
+    if not math.isfinite(best_obj):
+        best_alpha = alpha
+    return best_alpha, best_obj, eta, it, converged, alpha_it
+
+
+@njit
+def _pose_kernel(
+    x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
+    km: ModelArrays, st: StepSettings, max_iter: int, xp: NDArray[np.float64], pw: NDArray[np.float64],
+    rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
+) -> PoseOut:
+    """The pose step with the Riemannian alpha-step: its rows (:func:`_pose_rows`; the prior's
+    target ``xp`` (12, 3) and weights ``pw`` (12, 2), zeros: none), the start's objective if it
+    meets the limb lengths ``rad`` (8,), then the ADM (:func:`_riemannian_adm`) from ``alpha0``
+    (k,) with the scaled multipliers ``u1`` (m,), ``u2`` (k,) (updated in place) and at most
+    ``max_iter`` iterations. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,)."""
+    th, l1 = st.th, st.l1
+    c, wts, mus = _pose_rows(x, m0, t, w, km, xp, pw)
+    best_obj = np.inf
+    if _limb_violation_jit(km.mean + km.comps @ alpha0, km.limb_matrix, rad) < 1e-6:
+        best_obj = _objective(c - mus @ (km.vt @ alpha0), wts, alpha0, th, l1)
+    best_alpha, best_obj, eta, it, converged, alpha_it = _riemannian_adm(
+        c, wts, mus, km, st, rad, alpha0, u1, u2, best_obj, max_iter)
+    if not math.isfinite(best_obj):
+        best_obj = _objective(c - mus @ (km.vt @ best_alpha), wts, best_alpha, th, l1)
+    y = km.mean + km.comps @ best_alpha
+    return PoseOut(best_alpha, best_obj, _limb_violation_jit(y, km.limb_matrix, rad), y, eta, it, converged,
+                   alpha_it)

@@ -1,0 +1,348 @@
+"""Pose step (paper eq. 4 and appendix A): robust sparse coefficients under limb constraints.
+
+Problem, for a fixed camera ``M0`` (2x3) and translation ``t``::
+
+    minimise_alpha  sum_j w_j rho(x_j - t - M0 y_j) + theta ||alpha||_1
+    subject to      ||C_i y||^2 = L_i,  i = 1..8,      y = mu + B alpha
+
+(``rho = |.|`` per coordinate for L1, squared for L2; ``w_j`` per-joint weights, 0 = missing).
+
+ADM of the appendix (scaled form, penalty ``eta``), with ``gamma = c - A alpha`` and
+``beta = alpha`` where ``c = x - t - M mu`` and ``A = M B``::
+
+    gamma <- prox_{rho_w / eta}(c - A alpha + u1)          (soft-threshold)
+    beta  <- soft(alpha + u2, theta / eta)                  (skipped without sparsity)
+    alpha <- argmin ||A alpha - d1||^2 + ||alpha - d2||^2   s.t. limb constraints
+             with d1 = c - gamma + u1, d2 = beta - u2
+    u1 <- u1 + c - A alpha - gamma;   u2 <- u2 + alpha - beta
+
+The alpha-step is the paper's rank-1 lifted problem ``min z^T W z  s.t.  z^T Omega_i z = 0``
+with ``z = [.; 1]``, solved by the inner ADM (Q-step in closed form by projection onto the
+affine set ``{tr(Omega_i Q) = 0, Q[-1,-1] = 1}``; P-step = the paper's lemma, top eigenpair).
+Two exactly equivalent liftings (``alpha_step``):
+
+* ``"full"``: ``z = [alpha; 1]`` of size ``k + 1`` (the paper's).
+* ``"reduced"``: with the thin SVD ``B = U S V^T`` (rank ``r <= 33`` for centred poses), any
+  alpha splits into ``V s`` (``s = V^T alpha``) plus a part in the null space of ``B``; the
+  latter only enters ``||alpha - d2||^2`` and is set to its optimum ``(I - V V^T) d2`` in
+  closed form, leaving ``min ||M U S s - d1||^2 + ||s - V^T d2||^2`` s.t.
+  ``||C_i (mu + U S s)||^2 = L_i``, lifted with ``z = [s; 1]`` of size ``r + 1``. Same
+  minimisers, same conditioning as the paper's lifting, a 34x34 instead of a 201x201 matrix.
+
+After the inner ADM, a few Gauss-Newton projection steps restore the limb constraints to
+``1e-10`` (the ADM meets them only to its tolerance). ``alpha_solver="newton"`` replaces the
+inner ADM by a direct local solver of the same problem (SQP / Newton on the KKT system), and
+``alpha_solver="riemannian"`` (the default) by Riemannian Newton on the product of the 8 limb
+spheres (:mod:`.alpha.sphere_newton`): in the reduced coordinates the limb vectors ``l = C mu + C U S
+s`` are an onto linear image of ``s`` (``PoseModel.limb_coordinates``), so ``s = s0 + Z l + N t``
+with ``t`` free, eliminated in closed form, and the constraints are
+``||l_i|| = sqrt(L_i)``. Inside the ADM it takes one Newton step per iteration with the proximal
+term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM).
+
+Where: with the Riemannian alpha-step (the default) the whole step is one compiled kernel,
+:func:`pose_lifter.core.solve.pose_kernel._pose_kernel`. The other alpha-steps
+(:class:`.alpha.base.AlphaStep`: :mod:`.alpha.lifted_admm`, :mod:`.alpha.sqp`, and the linear solve
+without limbs; the cvxpy Q-step) run in this module's Python ADM loop (:func:`_adm`), which calls the
+kernel's compiled rows, splitting, dual and penalty updates: each is written once.
+
+Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
+numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
+importable and run as the same Python code otherwise. The two agree to round-off, not bit for
+bit: the kernels' products are loops and their small inverses and sums LAPACK calls and
+reductions that numba and numpy make differently. On ``walk_clean`` the first frame's objective
+agrees to ~1e-12 and tracked frames then drift apart (0.4832 vs 0.4740 on the third): the
+warm-started solves are chaotic in round-off (a last-bit change grows ~10x per tracked frame), as
+between machines with different BLAS builds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InvalidInputError, SolverError, diverged_as_solver_error
+from ..model.pose_model import PoseModel
+from ..model.skeleton import N_JOINTS
+from ..numeric.records import StepSettings, settings_record
+from ..options import LifterOptions, Variant
+from ..results import Duals, PoseResult
+from .alpha.base import AlphaStep, Coordinates, LiftedStep, UnconstrainedStep
+from .alpha.lifted_admm import QStepFn
+from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
+from .alpha.sqp import ReducedSQPStep
+from .pose_kernel import (
+    _adm_dual_update,
+    _adm_split,
+    _depth_row,
+    _depth_term,
+    _grow_penalty,
+    _n_rows,
+    _objective,
+    _pose_kernel,
+    _pose_rows,
+)
+
+
+@dataclass(frozen=True)
+class PriorRows:
+    """The learned prior as rows of the pose step's L1 objective (hybrid mode).
+
+    Attributes
+    ----------
+    target : ndarray, shape (12, 3)
+        The prior's pose in the lifter's normalised camera frame: ``x, y`` image positions (same
+        frame as the 2D input), ``z`` depth relative to the joints' mean depth.
+    weights : ndarray, shape (12, 2)
+        Per joint: weight of its two image-position rows and of its depth row (0 = no row).
+    limb_radii : ndarray, shape (8,), optional
+        Limb lengths (right-lower-leg units of the model) that replace the model's own in the
+        8 constraints ``||C_i y|| = limb_radii[i]`` (a person's own proportions); None keeps them.
+    """
+
+    target: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    limb_radii: NDArray[np.float64] | None = None
+
+    @staticmethod
+    def depth_row(projection: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``m3 = s r3`` of a scaled-orthographic ``M0 = s [r1; r2]`` (2, 3): the row that maps a
+        model pose to depth in the same units (``r3 = r1 x r2``;
+        :func:`pose_lifter.core.solve.pose_kernel._depth_row`)."""
+        return _depth_row(np.ascontiguousarray(projection, dtype=np.float64))
+
+    def depth_term(self, pose: NDArray[np.float64], projection: NDArray[np.float64]) -> float:
+        """``sum_j weights[j, 1] |target[j, 2] - m3 (y_j - mean_i y_i)|`` for a pose (12, 3)
+        (:func:`pose_lifter.core.solve.pose_kernel._depth_term`, the compiled run's own)."""
+        return float(_depth_term(np.ascontiguousarray(pose, dtype=np.float64).reshape(-1),
+                                 np.ascontiguousarray(projection, dtype=np.float64),
+                                 np.ascontiguousarray(self.target, dtype=np.float64),
+                                 np.ascontiguousarray(self.weights, dtype=np.float64)))
+
+
+#: The compiled steps' prior operands without a prior: target (12, 3) and weights (12, 2), all
+#: zero (no prior rows).
+NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)))
+#: Cap of the pose ADM's growing penalty ``eta`` (``LifterOptions.eta_growth``).
+ETA_MAX = 1e3
+_DEFAULTS = LifterOptions()
+
+
+def step_settings(options: LifterOptions) -> StepSettings:
+    """The settings of a run's compiled steps for ``options`` (:func:`settings_record`)."""
+    o = options
+    return settings_record(StepSettings(
+        th=o.theta if o.method.sparsity else 0.0, l1=o.method.loss == "l1", eta=o.eta,
+        eta_growth=o.eta_growth, eta_max=ETA_MAX, pose_tol=o.pose_tol, alpha_max_iter=RIEMANNIAN_MAX_ITER,
+        alpha_tol=o.newton_tol, prox=o.alpha_prox, cam_max_iter=o.camera_max_iter, cam_tol=o.camera_tol,
+        tau=o.tau, alt_tol=o.alternation_tol))
+
+
+def prior_operands(model: PoseModel, prior: PriorRows | None
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The compiled steps' prior operands: target (12, 3), weights (12, 2) (zeros without a prior)
+    and the limb lengths in use (8,) (the prior's per-person ones, else the model's)."""
+    rad = model.limb_radii
+    if prior is None:
+        return NO_PRIOR[0], NO_PRIOR[1], rad
+    if prior.limb_radii is not None:
+        rad = np.ascontiguousarray(prior.limb_radii, dtype=np.float64)
+    return (np.ascontiguousarray(prior.target, dtype=np.float64),
+            np.ascontiguousarray(prior.weights, dtype=np.float64), rad)
+
+
+def _riemannian(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
+                weights: NDArray[np.float64], model: PoseModel, options: LifterOptions,
+                alpha: NDArray[np.float64], max_iter: int, duals: Duals | None, prior: PriorRows | None
+                ) -> PoseResult:
+    """:func:`pose_step` with the Riemannian alpha-step: one call of
+    :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`."""
+    xp, pw, rad = prior_operands(model, prior)
+    u1, u2 = _scaled_duals(duals, _n_rows(pw), model.n_bases, options.eta)
+    out = _pose_kernel(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(m0, dtype=np.float64),
+                       np.ascontiguousarray(translation, dtype=np.float64),
+                       np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays,
+                       step_settings(options), int(max_iter), xp, pw, rad, alpha, u1, u2)
+    if not np.all(np.isfinite(out.alpha)):
+        raise SolverError("pose step diverged (non-finite coefficients)")
+    return PoseResult(objective=float(out.objective), n_iter=int(out.n_iter), converged=bool(out.converged),
+                      alpha=out.alpha, pose=out.pose.reshape(N_JOINTS, 3),
+                      limb_violation=float(out.limb_violation), alpha_iter=int(out.alpha_iter),
+                      duals=Duals(out.eta * u1, out.eta * u2))
+
+
+def _scaled_duals(duals: Duals | None, m: int, k: int, eta: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The scaled multipliers ``u1`` (m,), ``u2`` (k,) the ADM starts from (zeros without a warm
+    start of the right size)."""
+    if duals is None or duals.data.shape != (m,):
+        return np.zeros(m), np.zeros(k)
+    return np.asarray(duals.data, dtype=np.float64) / eta, np.asarray(duals.coupling, dtype=np.float64) / eta
+
+
+def pose_step(
+    points: NDArray[np.float64],
+    projection: NDArray[np.float64],
+    translation: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    model: PoseModel,
+    alpha0: NDArray[np.float64],
+    options: LifterOptions | None = None,
+    *,
+    max_iter: int | None = None,
+    prior: PriorRows | None = None,
+    duals: Duals | None = None,
+    qstep_fn: QStepFn | None = None,
+) -> PoseResult:
+    """Solve the pose problem of the module docstring for a fixed camera by ADM.
+
+    With the Riemannian alpha-step one compiled kernel
+    (:func:`pose_lifter.core.solve.pose_kernel._pose_kernel`); with another, the Python ADM loop
+    :func:`_adm` over it
+    (:class:`pose_lifter.core.solve.alpha.base.AlphaStep`).
+
+    Parameters
+    ----------
+    points : ndarray, shape (12, 2)
+    projection : ndarray, shape (2, 3)
+        ``M0``.
+    translation : ndarray, shape (2,)
+    weights : ndarray, shape (12,)
+    model : PoseModel
+    alpha0 : ndarray, shape (k,)
+        Start (warm start: the previous alternation's or frame's coefficients).
+    options : LifterOptions, optional
+        The settings (default ``LifterOptions()``): ``variant`` (loss, limbs, sparsity), ``theta``;
+        the outer ADM's ``pose_max_iter``, ``pose_tol`` (stop when the relative primal and dual
+        residuals are below it), ``eta`` and ``eta_growth`` (the penalty grows by this factor every
+        iteration up to :data:`ETA_MAX`, the paper's ``eta_k``, as in LADMAP [liu2013linearized];
+        the scaled multipliers are rescaled with it); the alpha-step's ``alpha_step``,
+        ``alpha_solver`` (``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map,
+        ``model.limb_coordinates``; otherwise the paper's inner ADM, ``"admm"``, is used: on such
+        bases it ends lower than the SQP, ``tools/alpha_solvers.py``),
+        ``alpha_prox``, ``newton_tol``,
+        and the inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
+    max_iter : int, optional
+        Outer ADM cap instead of ``options.pose_max_iter`` (the hybrid mode's and the screening
+        runs' caps).
+    prior : PriorRows, optional
+        The hybrid mode's L1 prior term (:class:`PriorRows`), added to the objective; needs the
+        Riemannian path (limbs on, reduced lifting, onto limb map).
+    duals : Duals, optional
+        Warm start of the unscaled ADM multipliers of ``gamma = c - A alpha`` and ``beta = alpha``,
+        e.g. the previous alternation's ``PoseResult.duals`` (default zeros).
+    qstep_fn : callable, optional
+        Replaces the closed-form Q-step (the cvxpy reference path).
+
+    Returns
+    -------
+    PoseResult
+        The iterate with the lowest objective among the feasible ones visited, with the final
+        multipliers.
+
+    Raises
+    ------
+    InvalidInputError
+        ``alpha0`` of the wrong shape, or a prior term without the Riemannian path.
+    SolverError
+        The ADM diverged (non-finite coefficients).
+    """
+    o = _DEFAULTS if options is None else options
+    variant = o.method
+    if max_iter is None:
+        max_iter = o.pose_max_iter
+    th = float(o.theta) if variant.sparsity else 0.0
+    x = np.ascontiguousarray(points, dtype=np.float64)
+    m0 = np.ascontiguousarray(projection, dtype=np.float64)
+    k = model.n_bases
+    alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
+    if alpha.shape != (k,):
+        raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
+    riemannian = (o.alpha_solver == "riemannian" and variant.limbs and o.alpha_step != "full"
+                  and model.limb_coordinates is not None)
+    if prior is not None and not riemannian:
+        raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
+                                "lifting and bases whose limb map is onto (>= 24 basis directions)")
+    with diverged_as_solver_error("pose step"):
+        if riemannian:
+            return _riemannian(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
+        xp, pw, _ = prior_operands(model, None)
+        c, wts, mus = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
+                                 np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
+        # "riemannian" where it does not apply (limbs off, the full lifting or a limb map that is not
+        # onto): the paper's inner ADM solves the same problem (the SQP's minima are poorer:
+        # docs/method.md)
+        solver = "admm" if o.alpha_solver == "riemannian" else o.alpha_solver
+        step = _alpha_step(model, variant, m0, mus, o.alpha_step, solver, o, qstep_fn)
+        return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, o, duals)
+
+
+def _alpha_step(model: PoseModel, variant: Variant, m0: NDArray[np.float64], mus: NDArray[np.float64],
+                alpha_step: str, solver: str, o: LifterOptions, qstep_fn: QStepFn | None) -> AlphaStep:
+    """The alpha-step solver of one pose step of the Python loop (see :func:`pose_step`):
+    ``solver`` is ``"newton"`` or ``"admm"``."""
+    if alpha_step == "full":
+        k = model.n_bases
+        a_full = np.einsum("ab,jbk->jak", m0, model.components.reshape(N_JOINTS, 3, k))
+        coords, cons = Coordinates(a_full.reshape(2 * N_JOINTS, k), None), model.full
+    else:
+        if solver == "newton" and variant.limbs:
+            return ReducedSQPStep(model, mus, o.newton_tol)
+        coords, cons = Coordinates(mus, model.v), model.reduced
+    if not variant.limbs:
+        return UnconstrainedStep(coords)
+    return LiftedStep(coords, cons, "newton" if solver == "newton" else "admm", o.delta, o.inner_max_iter,
+                      o.inner_tol, qstep_fn)
+
+
+def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], model: PoseModel,
+         variant: Variant, th: float, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int,
+         o: LifterOptions, duals: Duals | None) -> PoseResult:
+    """The outer pose ADM of the module docstring on the rows ``(c, wts, mus)``
+    (:func:`pose_lifter.core.solve.pose_kernel._pose_rows`) with the alpha-step ``step``, in Python
+    around the compiled updates :func:`~pose_lifter.core.solve.pose_kernel._adm_split`,
+    :func:`~pose_lifter.core.solve.pose_kernel._adm_dual_update` and
+    :func:`~pose_lifter.core.solve.pose_kernel._grow_penalty` (the compiled step's own)."""
+    l1 = variant.loss == "l1"
+    v = model.v
+    k = model.n_bases
+    m = c.size
+    eta = float(o.eta)
+    best_alpha = alpha.copy()
+    best_obj = np.inf
+    if not variant.limbs or model.limb_violation(alpha) < 1e-6:
+        best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
+    u1, u2 = _scaled_duals(duals, m, k, eta)
+    beta, beta_prev = alpha.copy(), np.empty(k)
+    gamma, d1, d2 = np.empty(m), np.empty(m), np.empty(k)
+    converged = False
+    it = 0
+    alpha_it = 0
+    scale_c = max(1.0, float(np.sqrt(c @ c)))
+    ax = np.ascontiguousarray(mus @ (v.T @ alpha))
+    for it in range(1, max_iter + 1):
+        beta, beta_prev = beta_prev, beta
+        _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
+        alpha, n = step(d1, d2, alpha)
+        alpha = np.ascontiguousarray(alpha, dtype=np.float64)
+        alpha_it += n
+        ax_prev, ax = ax, np.ascontiguousarray(mus @ (v.T @ alpha))
+        obj, primal, dual = _adm_dual_update(c, ax, ax_prev, gamma, alpha, beta, beta_prev, u1, u2, wts, th,
+                                             l1, scale_c)
+        eta = _grow_penalty(eta, float(o.eta_growth), ETA_MAX, u1, u2)
+        if obj < best_obj:
+            best_obj, best_alpha = obj, alpha.copy()
+        if primal < o.pose_tol and dual < o.pose_tol:
+            converged = True
+            break
+    if not np.isfinite(best_obj):
+        # no feasible iterate (cannot happen with restore_feasibility unless it failed)
+        best_alpha = alpha
+        best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
+    if not np.all(np.isfinite(best_alpha)):
+        raise SolverError("pose step diverged (non-finite coefficients)")
+    viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
+    return PoseResult(objective=float(best_obj), n_iter=it, converged=converged, alpha=best_alpha,
+                      pose=model.pose(best_alpha), limb_violation=viol, alpha_iter=alpha_it,
+                      duals=Duals(eta * u1, eta * u2))

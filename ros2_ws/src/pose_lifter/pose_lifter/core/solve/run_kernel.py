@@ -1,0 +1,330 @@
+"""A run of camera/pose alternations as one compiled kernel: the run of the default solver
+(:meth:`pose_lifter.core.lift.runs.Runs.run_steps`; every person's runs of a round in one call,
+:func:`run_calls`).
+
+Per alternation ``i`` the kernel minimises, for the current camera, the pose objective (the
+compiled pose step, :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`) and then, for the new
+pose, the camera objective (:func:`pose_lifter.core.solve.camera._camera_solve`), and evaluates the
+run's objective::
+
+    F_i = sum_j cw_j |cx_j - M0 Y_j - t|_1 + theta ||alpha||_1
+          + sum_j q_j |P_j,z - m3 (y_j - mean_l y_l)|_1              (hybrid: the prior's depths)
+
+(``cx``, ``cw``: the 2D points, stacked with the prior's image positions in hybrid mode, ``Y`` the
+pose, stacked twice then); it keeps the lowest-``F`` alternation and stops when
+``F_{i-1} - F_i <= alternation_tol * max(|F_{i-1}|, 1e-12)`` (:func:`_alternation_stops`).
+
+Applies with ``camera_solver == pose_solver == "admm"``, the Riemannian alpha-step and
+``warm_duals`` off (every step starts its multipliers at zero; the kernel keeps none); the other
+solvers run in the Python loop of :meth:`~pose_lifter.core.lift.runs.Runs.run_steps`, which calls the same
+objective terms and stopping rule.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..numeric.jit import njit, njit_nogil
+from ..numeric.records import ModelArrays, StepSettings
+from .camera import _camera_solve
+from .pose_kernel import _depth_term, _n_rows, _pose_kernel, _sum_abs
+
+__all__ = ["CAMERA_DIVERGED", "OK", "POSE_DIVERGED", "RunCall", "RunOut", "run_calls"]
+
+#: Status codes of :func:`_run_kernel`.
+OK, CAMERA_DIVERGED, POSE_DIVERGED = 0, 1, 2
+
+
+class RunOut(NamedTuple):
+    """What :func:`_run_kernel` returns; the ``best_*`` fields are the kept alternation's."""
+
+    status: int  #: :data:`OK`, or :data:`CAMERA_DIVERGED` / :data:`POSE_DIVERGED` (stopped there)
+    done: int  #: alternations done by this call
+    it: int  #: the last alternation's index
+    converged: bool  #: whether the stopping rule ended the run (not the cap)
+    best_it: int  #: the kept alternation's index (-1: none beat the continued run's objective)
+    best_obj: float  #: its ``F``
+    objs: NDArray[np.float64]  #: (n_alt - it0, 3) per alternation: F, camera and pose objectives
+    counts: NDArray[np.int64]  #: (n_alt - it0, 4): camera iterations, converged, pose iterations, converged
+    alpha: NDArray[np.float64]  #: (k,)
+    pose: NDArray[np.float64]  #: (36,)
+    rotation: NDArray[np.float64]  #: (3, 3)
+    translation: NDArray[np.float64]  #: (2,)
+    floats: NDArray[np.float64]  #: (4,) pose objective, limb violation, camera objective, scale
+    #: (5,) pose iterations, converged, alpha-step iterations, camera iterations, converged
+    ints: NDArray[np.int64]
+
+
+class RunCall(NamedTuple):
+    """The operands of one run for :func:`_run_kernel` but the model and the settings, which
+    every run of a lifter shares (see :func:`_run_kernel` for each)."""
+
+    xn: NDArray[np.float64]  #: (12, 2)
+    w: NDArray[np.float64]  #: (12,)
+    xp: NDArray[np.float64]  #: (12, 3)
+    pw: NDArray[np.float64]  #: (12, 2)
+    rad: NDArray[np.float64]  #: (8,)
+    alpha0: NDArray[np.float64]  #: (k,)
+    y0: NDArray[np.float64]  #: (36,)
+    cam0: NDArray[np.float64]  #: (2, 4)
+    obj0: float
+    it0: int
+    n_alt: int
+    pose_max_iter: int
+
+
+@njit
+def _run_objective(cobj: float, alpha: NDArray[np.float64], th: float, y: NDArray[np.float64],
+                   m0: NDArray[np.float64], xp: NDArray[np.float64], pw: NDArray[np.float64]) -> float:
+    """A run's objective ``F`` (module docstring) after an alternation: the camera step's objective
+    ``cobj``, ``th ||alpha||_1`` and the prior's depth rows of the pose ``y`` (36,) under the
+    camera ``m0`` (2, 3) (none when ``pw[:, 1]`` is all zero)."""
+    obj = cobj + th * _sum_abs(alpha)
+    if (pw[:, 1] > 0.0).any():
+        obj += _depth_term(y, m0, xp, pw)
+    return obj
+
+
+@njit
+def _alternation_stops(prev: float, obj: float, tol: float) -> bool:
+    """The run's stopping rule: ``F`` fell by no more than ``tol`` relative to the previous
+    alternation's (``prev``; ``inf`` before the first, which never stops)."""
+    return prev - obj <= tol * max(abs(prev), 1e-12) and math.isfinite(prev)
+
+
+@njit
+def _stack_camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], xp: NDArray[np.float64],
+                       pw: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
+    """The camera step's 2D points and weights: with prior image rows (``pw[:, 0] > 0``) the
+    prior's image positions follow the 2D (n = 24; the pose is then stacked twice, the flag)."""
+    if not (pw[:, 0] > 0.0).any():
+        return xn, w, False
+    nj = xn.shape[0]
+    cx = np.empty((2 * nj, 2))
+    cw = np.empty(2 * nj)
+    for j in range(nj):
+        cx[j, 0], cx[j, 1], cw[j] = xn[j, 0], xn[j, 1], w[j]
+        cx[nj + j, 0], cx[nj + j, 1], cw[nj + j] = xp[j, 0], xp[j, 1], pw[j, 0]
+    return cx, cw, True
+
+
+@njit
+def _run_kernel(
+    xn: NDArray[np.float64], w: NDArray[np.float64], km: ModelArrays, st: StepSettings,
+    xp: NDArray[np.float64], pw: NDArray[np.float64], rad: NDArray[np.float64], alpha0: NDArray[np.float64],
+    y0: NDArray[np.float64], cam0: NDArray[np.float64], obj0: float, it0: int, n_alt: int, pose_max_iter: int,
+) -> RunOut:
+    """Alternations ``it0 + 1 .. n_alt`` of a run (module docstring).
+
+    Parameters
+    ----------
+    xn, w : ndarray, shapes (12, 2), (12,)
+        The normalised 2D points and their weights.
+    km, st : ModelArrays, StepSettings
+        The model and the steps' settings (:mod:`pose_lifter.core.numeric.records`).
+    xp, pw, rad : ndarray, shapes (12, 3), (12, 2), (8,)
+        The prior's target and weights (zeros: none) and the limb lengths in use.
+    alpha0 : ndarray, shape (k,)
+        The first pose step's start.
+    y0, cam0 : ndarray, shapes (36,), (2, 4)
+        A new run (``it0 == 0``): a camera step for the pose ``y0`` from the camera
+        ``cam0 = [M | t]`` comes first. A continued run (``it0 >= 1``, the alternations it has
+        done): ``cam0`` is the camera of the first pose step (``y0`` unused) and ``obj0`` the
+        run's best (and last) ``F``.
+    n_alt, pose_max_iter : int
+        The alternation cap and the pose steps' iteration cap.
+    """
+    continued = it0 > 0
+    cx, cw, doubled = _stack_camera_data(xn, w, xp, pw)
+    k = alpha0.size
+    nj = xn.shape[0]
+    n_rows = _n_rows(pw)  # the pose step's L1 rows (its multipliers' size)
+    nc = cx.shape[0]
+    objs = np.zeros((max(n_alt - it0, 0), 3))
+    counts = np.zeros((max(n_alt - it0, 0), 4), dtype=np.int64)
+    b_alpha = np.zeros(k)
+    b_y = np.zeros(3 * nj)
+    b_rot = np.zeros((3, 3))
+    b_t = np.zeros(2)
+    b_f = np.zeros(4)
+    b_i = np.zeros(5, dtype=np.int64)
+    b_idx = -1
+    b_obj = obj0
+    m0 = np.ascontiguousarray(cam0[:, :3])
+    t = cam0[:, 3].copy()
+    ycam = np.empty((nc, 3))
+    status = OK
+    if not continued:
+        for j in range(nc):
+            jj = j % nj if doubled else j
+            for a in range(3):
+                ycam[j, a] = y0[3 * jj + a]
+        rot, scale, t, _, _, _, ok = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)),
+                                                   st.l1, st.cam_max_iter, st.cam_tol, st.tau)
+        if not ok:
+            return RunOut(CAMERA_DIVERGED, 0, it0, False, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot,
+                          b_t, b_f, b_i)
+        m0 = scale * rot[:2]
+    alpha = alpha0
+    prev = obj0
+    converged = False
+    it = it0
+    done = 0
+    for it in range(it0 + 1, n_alt + 1):
+        p = _pose_kernel(xn, m0, t, w, km, st, pose_max_iter, xp, pw, rad, alpha, np.zeros(n_rows),
+                         np.zeros(k))
+        for i in range(k):
+            if not math.isfinite(p.alpha[i]):
+                status = POSE_DIVERGED
+        if status != OK:
+            break
+        alpha = p.alpha
+        for j in range(nc):
+            jj = j % nj if doubled else j
+            for a in range(3):
+                ycam[j, a] = p.pose[3 * jj + a]
+        rot, scale, t_c, cobj, cit, cconv, ok = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)),
+                                                             np.zeros((2, 3)), st.l1, st.cam_max_iter,
+                                                             st.cam_tol, st.tau)
+        if not ok:
+            status = CAMERA_DIVERGED
+            break
+        m0 = scale * rot[:2]
+        t = t_c
+        obj = _run_objective(cobj, alpha, st.th, p.pose, m0, xp, pw)
+        objs[done, 0], objs[done, 1], objs[done, 2] = obj, cobj, p.objective
+        counts[done, 0], counts[done, 1] = cit, cconv
+        counts[done, 2], counts[done, 3] = p.n_iter, p.converged
+        done += 1
+        if (b_idx < 0 and not continued) or obj < b_obj:
+            b_idx, b_obj = it, obj
+            b_alpha[:] = p.alpha
+            b_y[:] = p.pose
+            b_rot[:] = rot
+            b_t[:] = t_c
+            b_f[0], b_f[1], b_f[2], b_f[3] = p.objective, p.limb_violation, cobj, scale
+            b_i[0], b_i[1], b_i[2], b_i[3], b_i[4] = p.n_iter, p.converged, p.alpha_iter, cit, cconv
+        if _alternation_stops(prev, obj, st.alt_tol):
+            converged = True
+            break
+        prev = obj
+    return RunOut(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f, b_i)
+
+
+@njit_nogil
+def _run_kernel_many(km: ModelArrays, st: StepSettings, ins: tuple[Any, ...], outs: tuple[Any, ...]) -> None:
+    """:func:`_run_kernel` for each of ``B`` runs of one model and settings.
+
+    ``ins``: the operands of :class:`RunCall`, in its order, stacked on a first axis of size
+    ``B`` (``xn`` (B, 12, 2), ..., ``obj0`` (B,), ``it0``, ``n_alt``, ``pose_max_iter`` (B,)
+    int64). ``outs``, written: ``status`` (B,); ``head`` (B, 4): done, it, converged, best_it;
+    ``best_obj`` (B,); ``objs`` (B, L, 3) and ``counts`` (B, L, 4) with ``L`` at least every
+    run's ``n_alt - it0`` (the first ``done`` rows used); then ``alpha``, ``pose``, ``rotation``,
+    ``translation``, ``floats``, ``ints`` as :class:`RunOut`'s with ``B`` in front. Each run is
+    :func:`_run_kernel`'s on its own operands, bit for bit (nothing is shared but ``km`` and
+    ``st``); the kernel releases the GIL, so threads may run parts of a batch in parallel."""
+    xn, w, xp, pw, rad, alpha0, y0, cam0, obj0, it0, n_alt, pose_max_iter = ins
+    status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
+    for b in range(xn.shape[0]):
+        o = _run_kernel(xn[b], w[b], km, st, xp[b], pw[b], rad[b], alpha0[b], y0[b], cam0[b], obj0[b],
+                        it0[b], n_alt[b], pose_max_iter[b])
+        status[b] = o.status
+        head[b, 0], head[b, 1], head[b, 2], head[b, 3] = o.done, o.it, o.converged, o.best_it
+        best_obj[b] = o.best_obj
+        m = o.objs.shape[0]
+        objs[b, :m] = o.objs
+        counts[b, :m] = o.counts
+        alpha[b] = o.alpha
+        pose[b] = o.pose
+        rotation[b] = o.rotation
+        translation[b] = o.translation
+        floats[b] = o.floats
+        ints[b] = o.ints
+
+
+def _stacked(arrays: list[NDArray[Any]], dtype: type) -> NDArray[Any]:
+    return np.ascontiguousarray(np.stack(arrays), dtype=dtype)
+
+
+def run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads: int = 1
+              ) -> list[RunOut | Exception]:
+    """Every run of ``calls`` (one model and settings) in one compiled pass,
+    :func:`_run_kernel_many`, split into ``threads`` contiguous parts run in parallel (the kernel
+    releases the GIL): each run's :class:`RunOut` is the one :func:`_run_kernel` gives it alone,
+    whatever the batch and the thread count. A run whose kernel raises (numpy's ``LinAlgError``
+    on a diverged matrix) gets its exception in its place; the others their results (the batch
+    is then run again one call at a time)."""
+    n = len(calls)
+    if n == 0:
+        return []
+    try:
+        return list(_run_calls(calls, km, st, threads))
+    except Exception:
+        pass
+    out: list[RunOut | Exception] = []
+    for c in calls:
+        try:
+            out.append(_run_kernel(c.xn, c.w, km, st, c.xp, c.pw, c.rad, c.alpha0, c.y0, c.cam0, c.obj0,
+                                   c.it0, c.n_alt, c.pose_max_iter))
+        except Exception as err:
+            out.append(err)
+    return out
+
+
+def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads: int) -> list[RunOut]:
+    """:func:`run_calls` when no kernel raises."""
+    n = len(calls)
+    k = calls[0].alpha0.size
+    length = max(max(c.n_alt - c.it0 for c in calls), 0)
+    xn = _stacked([c.xn for c in calls], np.float64)
+    ins: tuple[Any, ...] = (
+           xn, _stacked([c.w for c in calls], np.float64),
+           _stacked([c.xp for c in calls], np.float64), _stacked([c.pw for c in calls], np.float64),
+           _stacked([c.rad for c in calls], np.float64), _stacked([c.alpha0 for c in calls], np.float64),
+           _stacked([c.y0 for c in calls], np.float64), _stacked([c.cam0 for c in calls], np.float64),
+           np.array([c.obj0 for c in calls], dtype=np.float64),
+           np.array([c.it0 for c in calls], dtype=np.int64),
+           np.array([c.n_alt for c in calls], dtype=np.int64),
+           np.array([c.pose_max_iter for c in calls], dtype=np.int64))
+    outs: tuple[NDArray[Any], ...] = (
+        np.zeros(n, np.int64), np.zeros((n, 4), np.int64), np.zeros(n), np.zeros((n, length, 3)),
+        np.zeros((n, length, 4), np.int64), np.zeros((n, k)), np.zeros((n, xn.shape[1] * 3)),
+        np.zeros((n, 3, 3)), np.zeros((n, 2)), np.zeros((n, 4)), np.zeros((n, 5), np.int64))
+    parts = min(max(threads, 1), n)
+    if parts == 1:
+        _run_kernel_many(km, st, ins, outs)
+    else:
+        edges = [round(i * n / parts) for i in range(parts + 1)]
+
+        def part(i: int) -> None:
+            lo, hi = edges[i], edges[i + 1]
+            _run_kernel_many(km, st, tuple(a[lo:hi] for a in ins), tuple(a[lo:hi] for a in outs))
+
+        list(_pool(parts).map(part, range(parts)))
+    status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
+    out = []
+    for b, c in enumerate(calls):
+        m = max(c.n_alt - c.it0, 0)
+        out.append(RunOut(int(status[b]), int(head[b, 0]), int(head[b, 1]), bool(head[b, 2]), int(head[b, 3]),
+                          float(best_obj[b]), objs[b, :m], counts[b, :m], alpha[b], pose[b], rotation[b],
+                          translation[b], floats[b], ints[b]))
+    return out
+
+
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """This process's pool of ``threads`` threads (a forked child makes its own: the parent's
+    threads do not exist in it)."""
+    key = (os.getpid(), threads)
+    pool = _POOLS.get(key)
+    if pool is None:
+        pool = _POOLS[key] = ThreadPoolExecutor(threads, thread_name_prefix="pose_lifter_runs")
+    return pool

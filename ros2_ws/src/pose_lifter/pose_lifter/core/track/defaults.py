@@ -1,0 +1,18 @@
+"""Defaults of the per-track policy (:class:`pose_lifter.core.track.policy.TrackPolicy`), read by the
+node's parameters, the frame pipeline and the offline lift's settings.
+
+This module imports nothing, so the CLI and the offline settings read the defaults without
+loading the solver.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S"]
+
+#: Seconds of input time a track's warm start stays valid (the node's ``track_timeout``).
+DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
+#: A warm solve whose objective exceeds this times the track's recent median is redone cold
+#: (the node's ``reinit_ratio``).
+DEFAULT_REINIT_RATIO: Final[float] = 2.0

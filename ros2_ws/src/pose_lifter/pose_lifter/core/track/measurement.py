@@ -1,0 +1,382 @@
+"""The per-joint measurement update of a hybrid track's published pose (``LifterOptions.
+measurement_update``): where the observed 2D says where a joint is, the published pose puts it
+there.
+
+The hybrid fit trades the 2D against its prior's depths, so its image positions stay off the 2D
+(on unseen motion a dance fold's output was 60 mm off in x, y; the observed 2D is within ~10 mm
+of the truth, perspective included). Per frame of a track, after the output smoothing
+(:class:`pose_lifter.core.track.policy.TrackPolicy`), on the published pose ``P`` (12, 3: camera
+frame, centred, model units) and the frame's 2D ``x`` (12, 2, input units):
+
+1. **The 2D in the pose's frame**: ``o_j = s (x_j - c)``, the scale ``s`` and image centre ``c``
+   by least squares onto ``P``'s x, y over the joints the lift used, ``s`` averaged over frames
+   in logs (SCALE_SMOOTHING) and ``c`` blended (SHIFT_SMOOTHING) with the last centre moved by the
+   median image motion of the joints used on both frames (a changing set of joints would
+   otherwise shift it).
+2. **Gate**: a used joint farther than ``measurement_gate`` leg lengths (at least
+   GATE_NOISE_FACTOR times the track's 2D noise) from ``P`` is not updated (a confident outlier
+   the lift kept); the alignment is redone without it.
+3. **x, y**: per joint an offset ``d_j`` (``P_j,xy + d_j`` is published) follows ``o_j - P_j,xy``
+   with the gain ``k`` of a random walk (the fit's error, DRIFT per frame) observed through the
+   track's 2D noise ``n`` (``_Track.noise``): ``k = 1`` on clean 2D, ~0.08 at 0.1 leg lengths of
+   noise (the offset then averages the noise over frames). A joint not updated on this frame
+   keeps HOLD of its offset from where the track predicts it (its last published x, y plus
+   HOLD_VELOCITY of its last motion), so a joint that drops out does not jump to the fit's.
+4. **Depth**: each limb (upper arm, forearm, thigh, shin) whose two joints were updated gets the
+   depth its image length says, ``|dz| = sqrt(L^2 - |dxy|^2)`` (sign from ``P``), ``L`` the track's
+   image length of that limb (SPAN_QUANTILE of its aligned 2D lengths over the last SPAN_FRAMES
+   frames, left and right averaged: a limb seen across the image shows its length), blended into
+   ``P``'s ``dz`` with ``measurement_depth * k`` and averaged over frames (DEPTH_SMOOTHING); the
+   shoulders and hips keep ``P``'s depths.
+5. The pose is centred again and its depths follow a constant-velocity (alpha-beta) filter whose
+   gain is ``1 - (1 - DEPTH_GAIN) k`` (the foreshortening depth is noisier than ``P``'s, which is
+   smoothed already).
+
+The update runs while the track's 2D noise is at most MAX_NOISE: the 2D is then nearly exact
+and worth more than the fit's image positions. A real detector's error is correlated from frame
+to frame; the noise estimate (second differences of the 2D, :mod:`pose_lifter.core.track.state`) sees
+only a part of it (about half the standard deviation at a correlation of 0.7), so above it the
+gain of step 3 would follow the detector's slowly changing error (measured in
+docs/accuracy.md, "Under a real detector").
+
+Causal (this and earlier frames only), output-only (the track's fits, warm starts, gate and
+estimates never see it) and cheap (tens of microseconds). Measured in ``docs/tuning.md``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, N_JOINTS, RIGHT_LIMBS
+from ..numeric.jit import njit
+
+__all__ = ["MAX_NOISE", "MeasurementUpdate", "compile_kernels", "kalman_gain"]
+
+LIMB_A = np.array([a for a, _ in LIMBS])
+LIMB_B = np.array([b for _, b in LIMBS])
+#: The limbs whose parent joint is a shoulder or hip, then those whose parent is one of theirs.
+_ORDER = np.array([i for i, (a, _) in enumerate(LIMBS) if a not in LIMB_B]
+                  + [i for i, (a, _) in enumerate(LIMBS) if a in LIMB_B])
+#: The update runs on a track whose 2D noise (``Track.noise_median``, the lifter's normalised
+#: units; about 0.003 on exact 2D, 0.026 with white noise of 0.02 leg lengths) is at most this.
+#: Held-out training-split tracks (tools/accuracy.py --split val --frames 60 --views 2): realistic
+#: detector at 6 / 3 m 62.3 / 65.6 -> 61.0 / 63.1 mm, 20 % outliers 52.0 -> 50.9, clean, missing
+#: joints unchanged, white noise 0.05 50.3 -> 50.5.
+MAX_NOISE = 0.02
+#: Change per frame (model units) of the fit's x, y error, for the gain of step 3.
+DRIFT = 0.01
+#: The gate is at least this many times the track's 2D noise (noisy 2D: its own scale).
+GATE_NOISE_FACTOR = 4.0
+#: A joint not updated keeps this share of its offset from where the track predicts it, which is
+#: its last published x, y plus HOLD_VELOCITY times its last motion.
+HOLD = 0.95
+HOLD_VELOCITY = 0.5
+#: Averaging of the 2D's scale (in logs) and blend of its centre with the predicted one.
+SCALE_SMOOTHING = 0.9
+SHIFT_SMOOTHING = 0.5
+#: Limb lengths from the image: this quantile of the last SPAN_FRAMES frames' aligned 2D lengths,
+#: once SPAN_MIN_FRAMES frames are in (fewer: no depth step), recomputed every SPAN_EVERY frames.
+SPAN_QUANTILE = 0.9
+SPAN_FRAMES = 90
+SPAN_MIN_FRAMES = 5
+SPAN_EVERY = 5
+#: Averaging of the depth step's correction over frames, and the alpha-beta gain of the output's
+#: depths at full trust in the 2D (step 5).
+DEPTH_SMOOTHING = 0.5
+DEPTH_GAIN = 0.6
+
+
+def kalman_gain(q: float, r: float) -> float:
+    """The steady-state Kalman gain of a random walk (variance ``q`` per step) observed with noise
+    of variance ``r``: 1 without noise, about ``sqrt(q / r)`` when the noise dominates."""
+    if r <= 0.0:
+        return 1.0
+    p = 0.5 * (q + math.sqrt(q * q + 4.0 * q * r))
+    return p / (p + r)
+
+
+def _column_quantiles(rows: NDArray[np.float64], q: float) -> NDArray[np.float64]:
+    """Per column of ``rows`` (n, m; NaN = none) the ``q`` quantile (linear) of its finite values,
+    NaN where a column has fewer than SPAN_MIN_FRAMES // 2 of them."""
+    s = np.sort(rows, axis=0)  # NaN last
+    count = np.isfinite(rows).sum(axis=0)
+    pos = q * np.maximum(count - 1, 0)
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, np.maximum(count - 1, 0))
+    cols = np.arange(rows.shape[1])
+    out = s[lo, cols] + (pos - lo) * (s[hi, cols] - s[lo, cols])
+    return np.where(count >= max(SPAN_MIN_FRAMES // 2, 1), out, np.nan)
+
+
+_LEFT, _RIGHT, _GROUP = np.array(LEFT_LIMBS), np.array(RIGHT_LIMBS), np.array(LIMB_GROUP_OF)
+_NO_LIMBS = np.empty(0)
+
+
+@njit
+def _align_kernel(points: NDArray[np.float64], xy: NDArray[np.float64], use: NDArray[np.bool_],
+                  out: NDArray[np.float64]) -> bool:
+    """Least squares ``xy ~ s (points - pc) + qc`` over the joints ``use``; ``out`` = (s, pc_x,
+    pc_y, qc_x, qc_y) (the two centroids). False with fewer than 3 joints or a degenerate fit."""
+    n = 0
+    pcx = pcy = qcx = qcy = 0.0
+    for j in range(N_JOINTS):
+        if use[j]:
+            n += 1
+            pcx += points[j, 0]
+            pcy += points[j, 1]
+            qcx += xy[j, 0]
+            qcy += xy[j, 1]
+    if n < 3:
+        return False
+    pcx /= n
+    pcy /= n
+    qcx /= n
+    qcy /= n
+    den = 0.0
+    num = 0.0
+    for j in range(N_JOINTS):
+        if use[j]:
+            px, py = points[j, 0] - pcx, points[j, 1] - pcy
+            den += px * px + py * py
+            num += px * (xy[j, 0] - qcx) + py * (xy[j, 1] - qcy)
+    if not den > 0.0 or not num > 0.0:
+        return False
+    out[0], out[1], out[2], out[3], out[4] = num / den, pcx, pcy, qcx, qcy
+    return True
+
+
+@njit
+def _xy_kernel(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+               gate: float, k: float, offset: NDArray[np.float64], state: NDArray[np.float64],
+               prev_points: NDArray[np.float64], prev_updated: NDArray[np.bool_],
+               last: NDArray[np.float64], last2: NDArray[np.float64], span_row: NDArray[np.float64],
+               out: NDArray[np.float64], ok: NDArray[np.bool_]) -> bool:
+    """Steps 1-3 of the module docstring: ``out`` (12, 3) = ``pose`` with x, y moved by the new
+    ``offset``; ``ok`` the joints updated; ``span_row`` (8,) this frame's aligned limb lengths (NaN
+    where not both updated). ``state`` = (log scale, centre x, centre y, frames with a centre,
+    published frames before this one). Returns whether anything was updated (a span row made)."""
+    al = np.empty(5)
+    n_used = 0
+    for j in range(N_JOINTS):
+        ok[j] = False
+        n_used += used[j]
+    aligned = _align_kernel(points, pose[:, :2], used, al)
+    if aligned:
+        n_ok = 0
+        for j in range(N_JOINTS):
+            if used[j]:
+                rx = al[0] * (points[j, 0] - al[1]) + al[3] - pose[j, 0]
+                ry = al[0] * (points[j, 1] - al[2]) + al[4] - pose[j, 1]
+                ok[j] = rx * rx + ry * ry <= gate * gate
+                n_ok += ok[j]
+        if n_ok < n_used:
+            aligned = _align_kernel(points, pose[:, :2], ok, al)
+            if not aligned:
+                for j in range(N_JOINTS):
+                    ok[j] = False
+    any_ok = False
+    for j in range(N_JOINTS):
+        any_ok = any_ok or ok[j]
+    # where a joint that is not updated goes: where the track predicts it
+    held = np.empty((N_JOINTS, 2))
+    for j in range(N_JOINTS):
+        for c in range(2):
+            predicted = pose[j, c] + offset[j, c]
+            if state[4] >= 1:
+                predicted = last[j, c]
+                if state[4] >= 2:
+                    predicted += HOLD_VELOCITY * (last[j, c] - last2[j, c])
+            held[j, c] = HOLD * (predicted - pose[j, c])
+    if aligned and any_ok:
+        ls = math.log(al[0])
+        if state[3] > 0:
+            ls = SCALE_SMOOTHING * state[0] + (1.0 - SCALE_SMOOTHING) * ls
+        state[0] = ls
+        scale = math.exp(ls)
+        cx = al[1] - al[3] / scale  # the image point at the pose's origin
+        cy = al[2] - al[4] / scale
+        if state[3] > 0:
+            n_both = 0
+            for j in range(N_JOINTS):
+                n_both += ok[j] and prev_updated[j]
+            if n_both >= 3:
+                mx = np.empty(n_both)
+                my = np.empty(n_both)
+                i = 0
+                for j in range(N_JOINTS):
+                    if ok[j] and prev_updated[j]:
+                        mx[i] = points[j, 0] - prev_points[j, 0]
+                        my[i] = points[j, 1] - prev_points[j, 1]
+                        i += 1
+                cx = SHIFT_SMOOTHING * (state[1] + np.median(mx)) + (1.0 - SHIFT_SMOOTHING) * cx
+                cy = SHIFT_SMOOTHING * (state[2] + np.median(my)) + (1.0 - SHIFT_SMOOTHING) * cy
+        state[1], state[2], state[3] = cx, cy, state[3] + 1
+        obs = np.empty((N_JOINTS, 2))
+        for j in range(N_JOINTS):
+            obs[j, 0] = scale * (points[j, 0] - cx)
+            obs[j, 1] = scale * (points[j, 1] - cy)
+            prev_points[j, 0], prev_points[j, 1] = points[j, 0], points[j, 1]
+            prev_updated[j] = ok[j]
+            for c in range(2):
+                if ok[j]:
+                    offset[j, c] += k * (obs[j, c] - pose[j, c] - offset[j, c])
+                else:
+                    offset[j, c] = held[j, c]
+        for i in range(LIMB_A.shape[0]):
+            a, b = LIMB_A[i], LIMB_B[i]
+            if ok[a] and ok[b]:
+                dx, dy = obs[b, 0] - obs[a, 0], obs[b, 1] - obs[a, 1]
+                span_row[i] = math.sqrt(dx * dx + dy * dy)
+            else:
+                span_row[i] = np.nan
+    else:
+        for j in range(N_JOINTS):
+            offset[j, 0], offset[j, 1] = held[j, 0], held[j, 1]
+    for j in range(N_JOINTS):
+        out[j, 0] = pose[j, 0] + offset[j, 0]
+        out[j, 1] = pose[j, 1] + offset[j, 1]
+        out[j, 2] = pose[j, 2]
+    return aligned and any_ok
+
+
+@njit
+def _depth_kernel(pose: NDArray[np.float64], out: NDArray[np.float64], ok: NDArray[np.bool_],
+                  limbs: NDArray[np.float64], beta: float, gain: float, depth_offset: NDArray[np.float64],
+                  level: NDArray[np.float64], velocity: NDArray[np.float64], state: NDArray[np.float64]
+                  ) -> None:
+    """Steps 4-5: ``out``'s depths (in place, centred after); ``limbs`` (8,) or empty (no depth
+    step); the alpha-beta filter's ``level`` and ``velocity`` start when ``state[5]`` is 0."""
+    prev = depth_offset.copy()
+    for j in range(N_JOINTS):
+        depth_offset[j] = HOLD * prev[j]
+    if limbs.shape[0] > 0:
+        z = np.empty(N_JOINTS)
+        for j in range(N_JOINTS):
+            z[j] = pose[j, 2] + depth_offset[j]
+        for i in _ORDER:  # the upper limbs, then the lower ones from their new depths
+            a, b = LIMB_A[i], LIMB_B[i]
+            if not (ok[a] and ok[b]):
+                continue
+            dz = pose[b, 2] - pose[a, 2]
+            dx, dy = out[b, 0] - out[a, 0], out[b, 1] - out[a, 1]
+            mag = math.sqrt(max(limbs[i] * limbs[i] - dx * dx - dy * dy, 0.0))
+            want = z[a] + (1.0 - beta) * dz + beta * (mag if dz >= 0 else -mag)
+            depth_offset[b] = DEPTH_SMOOTHING * prev[b] + (1.0 - DEPTH_SMOOTHING) * (want - pose[b, 2])
+            z[b] = pose[b, 2] + depth_offset[b]
+    mean = np.zeros(3)
+    for j in range(N_JOINTS):
+        out[j, 2] = pose[j, 2] + depth_offset[j]
+        for c in range(3):
+            mean[c] += out[j, c] / N_JOINTS
+    for j in range(N_JOINTS):
+        for c in range(3):
+            out[j, c] -= mean[c]
+    h = gain * gain / (2.0 - gain)
+    zmean = 0.0
+    for j in range(N_JOINTS):
+        if state[5] == 0:
+            level[j] = out[j, 2]
+            velocity[j] = 0.0
+        else:
+            predicted = level[j] + velocity[j]
+            resid = out[j, 2] - predicted
+            level[j] = predicted + gain * resid
+            velocity[j] += h * resid
+        zmean += level[j] / N_JOINTS
+    state[5] = 1
+    for j in range(N_JOINTS):
+        out[j, 2] = level[j] - zmean
+
+
+class MeasurementUpdate:
+    """One track's state of the measurement update (module docstring); :meth:`update` per frame."""
+
+    def __init__(self) -> None:
+        self.offset = np.zeros((N_JOINTS, 2))
+        self.depth_offset = np.zeros(N_JOINTS)
+        self.spans = np.full((SPAN_FRAMES, len(LIMBS)), np.nan)
+        self.n_spans = 0
+        self.limbs: NDArray[np.float64] | None = None
+        self.limbs_at = -SPAN_EVERY
+        #: log scale, centre x, centre y, frames with a centre, frames published, depth filter on
+        self.state = np.zeros(6)
+        self.prev_points = np.zeros((N_JOINTS, 2))
+        self.prev_updated = np.zeros(N_JOINTS, dtype=bool)
+        self.depth_level = np.zeros(N_JOINTS)
+        self.depth_velocity = np.zeros(N_JOINTS)
+        self.last = np.zeros((N_JOINTS, 3))
+        self.last2 = np.zeros((N_JOINTS, 3))
+        self._row = np.empty(len(LIMBS))
+        self._ok = np.zeros(N_JOINTS, dtype=bool)
+
+    def limb_lengths(self) -> NDArray[np.float64] | None:
+        """The track's limb lengths from the image (8,; left and right averaged; model units), or
+        None before SPAN_MIN_FRAMES frames or with a limb seen too rarely."""
+        if self.n_spans < SPAN_MIN_FRAMES:
+            return None
+        if self.n_spans >= self.limbs_at + SPAN_EVERY:
+            est = _column_quantiles(self.spans[: min(self.n_spans, SPAN_FRAMES)], SPAN_QUANTILE)
+            out = (0.5 * (est[_LEFT] + est[_RIGHT]))[_GROUP]
+            self.limbs = out if np.isfinite(out).all() else None
+            self.limbs_at = self.n_spans
+        return self.limbs
+
+    def update(self, pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+               noise: float, depth: float, gate: float) -> NDArray[np.float64]:
+        """The published pose (12, 3) for this frame.
+
+        Parameters
+        ----------
+        pose : ndarray, shape (12, 3)
+            The pose the track would publish (camera frame, centred, model units).
+        points : ndarray, shape (12, 2)
+            The frame's 2D (input units; only the ``used`` joints are read).
+        used : ndarray of bool, shape (12,)
+            The joints the lift used (``LiftResult.weights > 0``).
+        noise : float
+            The track's 2D noise (model units, >= 0).
+        depth : float
+            ``measurement_depth``: weight of the limbs' image-length depth (0 = ``pose``'s).
+        gate : float
+            ``measurement_gate`` (leg lengths).
+        """
+        pose = np.ascontiguousarray(pose, dtype=np.float64)
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        used = np.ascontiguousarray(used, dtype=np.bool_)
+        k = kalman_gain(DRIFT * DRIFT, noise * noise)
+        out = np.empty((N_JOINTS, 3))
+        ok = self._ok
+        if _xy_kernel(pose, points, used, max(gate, GATE_NOISE_FACTOR * noise), k, self.offset, self.state,
+                      self.prev_points, self.prev_updated, self.last, self.last2, self._row, out, ok):
+            self.spans[self.n_spans % SPAN_FRAMES] = self._row
+            self.n_spans += 1
+        limbs = self.limb_lengths() if depth > 0 else None
+        _depth_kernel(pose, out, ok, _NO_LIMBS if limbs is None else limbs, depth * k,
+                      1.0 - (1.0 - DEPTH_GAIN) * k, self.depth_offset, self.depth_level,
+                      self.depth_velocity, self.state)
+        self.last2, self.last = self.last, out
+        self.state[4] += 1
+        return out
+
+
+
+_COMPILED = False
+
+
+def compile_kernels() -> None:
+    """Compile this module's kernels (numba, ``core.numeric.jit``) or load them from their cache, once
+    per process: one update of a still pose (a track's first frame would otherwise pay for it)."""
+    global _COMPILED
+    if _COMPILED:
+        return
+    update = MeasurementUpdate()
+    pose = np.zeros((N_JOINTS, 3))
+    pose[:, 0] = np.arange(N_JOINTS) % 3
+    pose[:, 1] = np.arange(N_JOINTS) // 3
+    pose -= pose.mean(axis=0)
+    for _ in range(SPAN_MIN_FRAMES + 1):
+        update.update(pose, 100.0 * pose[:, :2], np.ones(N_JOINTS, dtype=bool), 0.01, 0.5, 0.3)
+    _COMPILED = True

@@ -1,0 +1,162 @@
+"""The metric placement of a lifted pose in the camera optical frame, and its defaults.
+
+A lifted pose is in units of its right lower leg; :func:`place_poses` (the people of a frame or
+the frames of a track at once) and :func:`place_in_camera` (one lift) make it metric with a
+leg length and put its centroid at the depth the camera scale gives, or at a default distance
+when no camera intrinsics are known. The node, the offline lift (both through
+:mod:`pose_lifter.messages.frame`) and the CLI use these defaults; the CLI's parser reads them
+without loading numpy or the solver (this module imports nothing until a pose is placed).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Final
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from pose_lifter.core.results import LiftResult
+
+__all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "place_in_camera",
+           "place_poses", "ray_rotation", "ray_rotations"]
+
+#: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
+DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
+#: Accepted leg lengths in metres (the node's ``lower_leg_length`` and ``--leg-length``).
+LEG_LENGTH_RANGE_M: Final[tuple[float, float]] = (0.05, 2.0)
+#: Depth of the pose centroid in metres when no CameraInfo is available.
+DEFAULT_DISTANCE_M: Final[float] = 5.0
+
+
+def place_in_camera(
+    result: LiftResult,
+    leg_length_m: float,
+    focal: tuple[float, float] | None,
+    principal_point: tuple[float, float] | None,
+    default_distance_m: float,
+) -> NDArray[np.float64]:
+    """Metric 3D joints (12, 3) of one lift in the camera optical frame (x right, y down, z
+    forward): :func:`place_poses` of ``result.pose_camera``, ``result.camera.scale`` and
+    ``result.camera.translation``."""
+    import numpy as np
+
+    cam = result.camera
+    placed = place_poses(np.asarray(result.pose_camera, dtype=np.float64)[None],
+                         np.array([float(cam.scale)]),
+                         np.asarray(cam.translation, dtype=np.float64).reshape(1, 2),
+                         leg_length_m, focal, principal_point, default_distance_m)
+    return np.asarray(placed[0], dtype=np.float64)
+
+
+def place_poses(
+    pose_camera: NDArray[np.float64],
+    scale: NDArray[np.float64],
+    translation: NDArray[np.float64],
+    leg_length_m: float,
+    focal: tuple[float, float] | None,
+    principal_point: tuple[float, float] | None,
+    default_distance_m: float,
+) -> NDArray[np.float64]:
+    """Metric 3D joints of ``n`` lifts seen by one camera, in its optical frame (x right, y down,
+    z forward), as arrays (the people of a frame, the frames of a track).
+
+    A lifted pose is centred and in right-lower-leg units; it becomes metric with
+    ``leg_length_m``. The weak-perspective scale fixes the depth of the centroid when the
+    focal length is known: ``Z = f * leg_length_m / scale`` (``f`` = mean of ``fx, fy``), and
+    the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
+    ``Y = (t_y - c_y) Z / f_y``; the pose is then turned from the ray to its centroid into the
+    camera frame (:func:`ray_rotation`: a weak-perspective camera sees a person off the optical
+    axis along that ray). Without camera intrinsics the centroid is put at
+    ``(0, 0, default_distance_m)`` (defaults: :data:`DEFAULT_LEG_LENGTH_M`,
+    :data:`DEFAULT_DISTANCE_M`). The lifts are trusted to be finite (the core checks them); the
+    node checks what it publishes once, after this.
+
+    Parameters
+    ----------
+    pose_camera : ndarray, shape (n, 12, 3)
+        Each pose in the camera frame, centred on its joints' mean (as the core returns it: the
+        centroid is placed, not recomputed), leg units.
+    scale : ndarray, shape (n,)
+        Each camera's scale, pixels per leg unit.
+    translation : ndarray, shape (n, 2)
+        The image position of each pose's centroid (pixels).
+    leg_length_m : float
+        Length of the right lower leg in metres (> 0).
+    focal : (fx, fy) or None
+        Pixels.
+    principal_point : (cx, cy) or None
+        Pixels; None with a focal length puts the centroid on the optical axis.
+    default_distance_m : float
+        Centroid depth when ``focal`` is None (> 0).
+
+    Returns
+    -------
+    ndarray, shape (n, 12, 3)
+        Metres.
+
+    Raises
+    ------
+    InvalidInputError
+        A length, focal length or (with a focal length) a camera scale is not finite and > 0, or
+        the shapes disagree.
+    """
+    import numpy as np
+
+    from pose_lifter.core.errors import InvalidInputError
+    from pose_lifter.core.model.skeleton import N_JOINTS
+
+    if not math.isfinite(leg_length_m) or leg_length_m <= 0:
+        raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
+    pose = np.asarray(pose_camera, dtype=np.float64)
+    n = len(pose)
+    if pose.shape != (n, N_JOINTS, 3):
+        raise InvalidInputError(f"pose_camera must be an (n, {N_JOINTS}, 3) array")
+    local = pose * float(leg_length_m)  # the core's pose_camera is centred on the joints' mean
+    centroid = np.zeros((n, 3))
+    if focal is None:
+        if not math.isfinite(default_distance_m) or default_distance_m <= 0:
+            raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")
+        centroid[:, 2] = float(default_distance_m)
+        return np.asarray(local + centroid[:, None, :])
+    fx, fy = (float(focal[0]), float(focal[1]))
+    s = np.asarray(scale, dtype=np.float64).reshape(n)
+    if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)):
+        raise InvalidInputError(f"focal lengths must be > 0, got {focal!r}")
+    bad = ~(np.isfinite(s) & (s > 0))
+    if bad.any():
+        raise InvalidInputError(f"camera scale must be > 0, got {float(s[np.argmax(bad)])!r}")
+    centroid[:, 2] = 0.5 * (fx + fy) * float(leg_length_m) / s
+    if principal_point is None:
+        return np.asarray(local + centroid[:, None, :])
+    t = np.asarray(translation, dtype=np.float64).reshape(n, 2)
+    centroid[:, 0] = (t[:, 0] - float(principal_point[0])) * centroid[:, 2] / fx
+    centroid[:, 1] = (t[:, 1] - float(principal_point[1])) * centroid[:, 2] / fy
+    return np.asarray(local @ ray_rotations(centroid).transpose(0, 2, 1) + centroid[:, None, :])
+
+
+def ray_rotation(point: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The smallest rotation (3, 3) taking the optical axis (0, 0, 1) onto the ray to ``point``
+    (3,; camera frame, in front of the camera): Rodrigues' formula about ``(0, 0, 1) x d``."""
+    import numpy as np
+
+    return np.asarray(ray_rotations(np.asarray(point, dtype=np.float64).reshape(1, 3))[0], dtype=np.float64)
+
+
+def ray_rotations(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`ray_rotation` of each of ``points`` (n, 3): rotations (n, 3, 3)."""
+    import numpy as np
+
+    p = np.asarray(points, dtype=np.float64)
+    d = p / np.sqrt((p * p).sum(axis=1))[:, None]
+    s = np.sqrt(d[:, 0] ** 2 + d[:, 1] ** 2)  # |(0, 0, 1) x d|
+    on_axis = s < 1e-12
+    s_safe = np.where(on_axis, 1.0, s)
+    kx_, ky_ = -d[:, 1] / s_safe, d[:, 0] / s_safe  # the unit axis (kx, ky, 0)
+    k = np.zeros((len(p), 3, 3))  # its cross-product matrix
+    k[:, 0, 2], k[:, 1, 2] = ky_, -kx_
+    k[:, 2, 0], k[:, 2, 1] = -ky_, kx_
+    out = np.eye(3) + s[:, None, None] * k + (1.0 - d[:, 2])[:, None, None] * (k @ k)
+    out[on_axis] = np.eye(3)
+    return np.asarray(out)

@@ -1,0 +1,547 @@
+"""The per-track policy: one rule for how a tracked person's frames are lifted, used by the ROS node
+and by the offline lift alike (so a bag lifted offline gives what the node would publish).
+
+For each frame of a track (``track_id >= 0``; negative ids are untracked, every frame cold):
+
+* a stamp older than the track's last one by at most ``track_timeout`` is out of order: the frame
+  is refused (:class:`OutOfOrderFrameError`) and the track kept; older still means the input clock
+  jumped back (a looping bag): the track is forgotten and the frame lifted cold;
+* within ``track_timeout`` of the last frame the solve is warm-started from it (paper mode: its
+  pose and camera; hybrid mode: its camera, the prior's pose starting every frame);
+* re-initialisation: when a warm solve's objective exceeds ``reinit_ratio`` times the median of the
+  track's last 15 objectives, the frame is also solved cold and the lower objective kept
+  (the fit has degraded: a wrong depth basin or a lost person);
+* a frame that cannot be lifted drops the track's warm start (the next frame starts cold);
+* per-track limb lengths (bones do not change within a person): the median of the learned prior's
+  limb proportions over the track's last LIMB_FRAMES frames, once it has MIN_LIMB_FRAMES
+  of them, is passed to the lifter for its limb constraints (hybrid mode,
+  ``LifterOptions.prior_limbs``, on by default), after :data:`pose_lifter.core.track.state.LIMB_CALIBRATION`;
+* hybrid mode with ``LifterOptions.noise_smoothing`` (off by default; never when the caller
+  smooths over past and future, :attr:`TrackPolicy.smoothed_later`): the track's 2D noise
+  (NOISE_FRAMES) weights the 2D term down and blends the previous frame's pose into the prior's
+  target (temporal smoothness, up to ``LifterOptions.temporal_weight``);
+* hybrid mode with the camera's intrinsics: a frame that follows its track is lifted from its 2D
+  corrected for perspective by the track's last pose (:func:`perspective_corrected`);
+* hybrid mode, temporal outlier gate (``LifterOptions.outlier_gate``): a visible joint farther
+  than ``outlier_gate`` leg lengths from where the track's last frame had it (relative to the
+  median motion of the joints) is treated as missing for this frame, before the prior sees it (a
+  detection that jumped; a person's joints move far less in one frame); such a joint, like any
+  missing one, takes the previous frame's pose into its prior target with
+  ``LifterOptions.missing_temporal_weight`` (the track carries it over) and, when the track used
+  it on one of its last ``LifterOptions.fill_missing_frames`` frames, enters the learned prior's
+  input where the track predicts it (:meth:`pose_lifter.core.track.state.Track.predict`; the 2D fit
+  still ignores it). Not when it would leave fewer than ``min_visible_joints`` or gate more than
+  GATE_MAX_FRACTION of the visible joints (the prediction, not the detector, is then wrong), and a
+  joint is gated on at most GATE_MAX_FRAMES frames in a row (so the track re-acquires a joint it
+  lost).
+
+* hybrid mode, causal output smoothing (:class:`pose_lifter.core.track.smoothing.CausalSmoother`): the
+  published pose is the prior's pose on this frame plus the fit's correction of it (fit minus
+  prior) averaged over the track's frames (``LifterOptions.correction_smoothing``, exponential);
+  on a disturbed track (joints the lift did not use, or 2D noise with ``noise_smoothing``) the
+  prior's part is also followed by a constant-velocity (alpha-beta) filter whose gain falls to
+  ``LifterOptions.disturbed_smoothing_gain``. Only the output: the track's warm start, limb and
+  noise estimates and gate keep the fit's own pose, so no smoothing feeds back into the next
+  frame's fit. Every step reads only this and earlier frames (no look-ahead: the node and the
+  offline lift publish the same).
+
+* a temporal prior of a frame inside its window (``PosePrior.future_frames > 0``: an offline
+  lift's, which knows each track's next frames) reads the track's next frames too: the caller
+  gives them (:class:`FramesAhead`); the live node's priors are causal.
+
+
+Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
+A track's state and the rules that read it are :mod:`pose_lifter.core.track.state`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import PoseLifterError
+from ..lift.batch import Steps
+from ..lift.lifter import KERNEL_MODES, Lifter
+from ..model.skeleton import N_JOINTS
+from ..numeric.fast import mean_rows
+from ..options import LifterOptions
+from ..results import Frames, LiftResult, TrackContext, WarmStart
+from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from .measurement import MAX_NOISE, MeasurementUpdate
+from .measurement import compile_kernels as compile_measurement_kernels
+from .smoothing import CausalSmoother
+from .state import NOISE_MIN_WEIGHT, Track
+from .state import compile_kernels as compile_track_kernels
+
+__all__ = [
+    "DEFAULT_REINIT_RATIO",
+    "DEFAULT_TRACK_TIMEOUT_S",
+    "FramesAhead",
+    "OutOfOrderFrameError",
+    "TrackPolicy",
+    "TrackedLift",
+    "compile_kernels",
+    "perspective_corrected",
+]
+
+
+#: Output smoothing (:class:`~pose_lifter.core.track.smoothing.CausalSmoother`): the fraction of unused
+#: joints (missing, gated or dropped by the outlier pass) over the track's last
+#: :data:`~pose_lifter.core.track.state.DISTURBANCE_FRAMES` frames, or one minus its 2D data
+#: weight, whichever is larger, is its disturbance; at DISTURBANCE_FULL and above the prior's
+#: alpha-beta gain is ``disturbed_smoothing_gain``, at 0 it is 1 (no filter), linear between.
+DISTURBANCE_FULL = 0.2
+#: ... and 2D noise counts as NOISE_DISTURBANCE times one minus the track's data weight (the fit
+#: already smooths noisy tracks through ``temporal_weight``; measured on 14 unseen-motion tracks
+#: with noise 0.1 and a gain of 0.4: factor 0 / 0.2 / 1 gave 56.6 / 26.3 / 20.2 mm/frame^2 at
+#: P-MPJPE 69.4 / 69.6 / 70.7 mm).
+NOISE_DISTURBANCE = 0.25
+
+#: A pinhole camera's ``((fx, fy), (cx, cy))`` in pixels (its ``camera_info``).
+CameraIntrinsics = tuple[tuple[float, float], tuple[float, float]]
+
+
+def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrinsics,
+                          depths: NDArray[np.float64], scale: float, centre: NDArray[np.float64]
+                          ) -> NDArray[np.float64]:
+    """The 2D (12, 2, pixels) a weak-perspective camera looking at the person would see of a person
+    the pinhole camera ``intrinsics`` ``((fx, fy), (cx, cy))`` filmed as ``points``:
+    ``m + (x_j - m) Z_j / Z_0`` about the person's image centre ``m`` (``centre``, (2,)), with
+    ``Z_j / Z_0 = 1 + z_j s / f`` the depth of joint ``j`` over the centroid's, from the person's
+    depths ``depths`` (12,; centred camera frame, leg units: the track's last pose) and the
+    weak-perspective ``scale`` ``s`` (pixels per leg unit; ``Z_0 = f L / s`` for a leg of ``L``
+    metres, so ``L`` cancels). Exact for a pinhole camera and a person on the optical axis when the
+    depths are right; a person off the axis is seen along its own ray, which the placement turns
+    into the camera frame (:func:`pose_lifter.core.track.placement.place_in_camera`): correcting about
+    the principal point instead would move each joint by the depths' error times its distance from
+    the axis (docs/accuracy.md)."""
+    (fx, fy), _ = intrinsics
+    ratio = 1.0 + np.asarray(depths, dtype=np.float64) * float(scale) / (0.5 * (float(fx) + float(fy)))
+    m = np.asarray(centre, dtype=np.float64)
+    if not (np.isfinite(ratio).all() and (ratio > 0.2).all() and np.isfinite(m).all()):
+        return points
+    x = np.asarray(points, dtype=np.float64)
+    return np.asarray(m + (x - m) * ratio[:, None])
+
+
+def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
+             threshold: float) -> NDArray[np.bool_] | None:
+    """(..., 12) of points (..., 12, 2): the joints with finite coordinates and confidence >=
+    ``threshold`` (the lifter's rule), or None when the shapes are wrong."""
+    x = np.asarray(points, dtype=np.float64)
+    conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+    if x.shape[-2:] != (N_JOINTS, 2) or (conf is not None and conf.shape != x.shape[:-1]):
+        return None
+    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=-1))
+    return vis if conf is None else vis & (conf >= threshold)
+
+
+@dataclass(frozen=True)
+class FramesAhead:
+    """A track's next frames as its detector gave them (what an offline lift knows of a frame's
+    future; :meth:`TrackPolicy.lift_steps`).
+
+    Attributes
+    ----------
+    stamps_ns : ndarray of int64, shape (n,)
+        Increasing, after the frame lifted.
+    points : ndarray, shape (n, 12, 2)
+        Input units, as the frame's.
+    confidence : ndarray, shape (n, 12), optional
+    """
+
+    stamps_ns: NDArray[np.int64]
+    points: NDArray[np.float64]
+    confidence: NDArray[np.float64] | None = None
+
+
+class OutOfOrderFrameError(PoseLifterError):
+    """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
+
+
+def _prior_camera(result: LiftResult) -> NDArray[np.float64] | None:
+    """The prior's pose of ``result`` in the camera frame of ``pose_camera`` (12, 3: centred, in
+    the fit's model units: divided by the camera's scale), or None without one."""
+    prior = result.prior_pose
+    scale = float(result.camera.scale)
+    if prior is None or not scale > 0:
+        return None
+    out = (prior - mean_rows(prior)) / scale
+    return out if np.isfinite(out).all() else None
+
+
+@dataclass(frozen=True)
+class _Screened:
+    """A frame after the track's screening (:meth:`TrackPolicy._screen`)."""
+
+    #: the confidence the lifter reads (a gated joint's set to 0)
+    confidence: NDArray[np.float64] | None
+    #: the joints visible and not gated (12,) (None: malformed input)
+    visible: NDArray[np.bool_] | None
+    #: where the track puts each joint (12, 2), input units (None: not known)
+    predicted: NDArray[np.float64] | None
+    #: the temporal outlier gate screened the frame
+    gated: bool
+    #: the track's 2D data weight (1 but in hybrid mode)
+    data_weight: float
+
+
+@dataclass(frozen=True)
+class TrackedLift:
+    """One lifted frame of a track.
+
+    Attributes
+    ----------
+    result : LiftResult
+    warm_started : bool
+        Solved from the track's previous frame.
+    reinitialised : bool
+        The warm solve had degraded and a cold solve replaced it (its objective was lower).
+    fit_pose_camera : ndarray, shape (12, 3), optional
+        The fit's own ``pose_camera`` when the output smoothing replaced ``result.pose`` and
+        ``result.pose_camera`` (hybrid mode; the rest of ``result`` is the fit's), else None.
+    """
+
+    result: LiftResult
+    warm_started: bool
+    reinitialised: bool
+    fit_pose_camera: NDArray[np.float64] | None = None
+
+
+class TrackPolicy:
+    """Per-track warm starts, re-initialisation and expiry around one :class:`Lifter`.
+
+    Parameters
+    ----------
+    lifter : Lifter
+    track_timeout : float
+        Seconds of input time after which a track's warm start is not used (and, in
+        :meth:`expire`, the track is forgotten).
+    warm_start : bool
+        False: every frame cold (the policy still refuses out-of-order frames).
+    reinit_ratio : float
+        A warm solve whose objective exceeds this times the track's recent median is redone cold
+        (``<= 0``: never).
+    """
+
+    def __init__(self, lifter: Lifter, track_timeout: float = DEFAULT_TRACK_TIMEOUT_S,
+                 warm_start: bool = True, reinit_ratio: float = DEFAULT_REINIT_RATIO) -> None:
+        self._tracks: dict[int, Track] = {}
+        #: The caller smooths each track over past and future frames (the offline lift): the
+        #: causal smoothing of noisy tracks (``LifterOptions.noise_smoothing``: the track's data
+        #: weight, ``temporal_weight``, NOISE_DISTURBANCE) is then off whatever the options say.
+        self.smoothed_later = False
+        self.configure(lifter, track_timeout, warm_start, reinit_ratio)
+        compile_measurement_kernels()  # now, not on a track's first frame
+        compile_track_kernels()
+
+    def configure(self, lifter: Lifter, track_timeout: float, warm_start: bool, reinit_ratio: float) -> None:
+        """Change the lifter or the settings; the tracks are kept (forgotten when ``warm_start``
+        is turned off)."""
+        self.lifter = lifter
+        self.track_timeout_ns = round(float(track_timeout) * 1e9)
+        self.warm_start = bool(warm_start)
+        self.reinit_ratio = float(reinit_ratio)
+        if not self.warm_start:
+            self._tracks.clear()
+
+    def __len__(self) -> int:
+        return len(self._tracks)
+
+    def clear(self) -> None:
+        """Forget every track (e.g. after a change of bases: old coefficients are meaningless)."""
+        self._tracks.clear()
+
+    def restore(self, track_id: int, warm: WarmStart | None, stamp_ns: int) -> None:
+        """Set a track's state (its warm start and last stamp), e.g. carried over from another
+        policy; its objective history starts empty."""
+        self._tracks[track_id] = Track(warm, stamp_ns)
+
+    def expire(self, stamp_ns: int) -> None:
+        """Forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
+        stale = [t for t, s in self._tracks.items() if stamp_ns - s.last_stamp_ns > self.track_timeout_ns]
+        for t in stale:
+            del self._tracks[t]
+
+    def lift(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
+             confidence: NDArray[np.float64] | None = None,
+             intrinsics: CameraIntrinsics | None = None, ahead: FramesAhead | None = None) -> TrackedLift:
+        """:meth:`lift_steps` driven alone."""
+        return self.lifter.runs.solve(self.lift_steps(track_id, stamp_ns, points, confidence, intrinsics,
+                                                      ahead))
+
+    def lift_steps(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
+                   confidence: NDArray[np.float64] | None = None,
+                   intrinsics: CameraIntrinsics | None = None,
+                   ahead: FramesAhead | None = None) -> Steps[TrackedLift]:
+        """Lift one frame of a track (model joints, as :meth:`Lifter.lift`): find the track and its
+        warm start, screen the frame (gate, noise), tell the lifter what the track knows, solve
+        (cold again when the warm solve degraded), record the frame in the track and publish
+        (hybrid: smoothed and measurement-updated).
+
+        With ``intrinsics`` ``((fx, fy), (cx, cy))`` (pixels) the lift reads the 2D corrected for
+        perspective by the track's last pose (:func:`perspective_corrected`; hybrid mode, a frame
+        that follows its track).
+
+        ``ahead``, the track's next frames, is read by a temporal prior with future frames (see
+        :meth:`_future`); a causal prior ignores it.
+
+        A solve (:mod:`pose_lifter.core.lift.batch`): the frames of other tracks may be lifted in the
+        same rounds (each track's state is its own).
+
+        Raises
+        ------
+        OutOfOrderFrameError
+            An out-of-order frame of a known track (the track is kept).
+        InvalidInputError, TooFewJointsError
+            From the lifter; the track's warm start is dropped.
+        """
+        track, warm = self._find(track_id, stamp_ns)
+        opts = self.lifter.options
+        limbs = track.limb_proportions(opts.image_limbs) if track is not None else None
+        frame = self._screen(track, warm, stamp_ns, points, confidence)
+        seen = self._seen(track, warm, points, intrinsics)
+        try:
+            context = self._context(track, warm, stamp_ns, frame, limbs, points, ahead)
+            result, reinit = yield from self._solve(track, warm, seen, frame.confidence, context)
+        except PoseLifterError:
+            if track is not None:
+                track.warm = None
+            raise
+        if track_id < 0:
+            return TrackedLift(result, warm is not None, reinit)
+        track = self._record(track_id, track, stamp_ns, points, result)
+        if opts.mode == "hybrid":
+            # the output's state carries over a re-initialised frame (its jump is smoothed)
+            published = self._smooth(track, result, warm is not None, frame.data_weight)
+            updated = self._measure(track, published or result, seen, warm is not None)
+            out = updated if updated is not None else published
+            if out is not None:
+                return TrackedLift(out, warm is not None, reinit, result.pose_camera)
+        return TrackedLift(result, warm is not None, reinit)
+
+    def _seen(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
+              intrinsics: CameraIntrinsics | None) -> NDArray[np.float64]:
+        """The 2D the lift reads: ``points`` corrected for perspective by the track's last pose
+        (:func:`perspective_corrected`) with ``intrinsics``, on a warm-started frame of the
+        hybrid mode; else ``points``."""
+        if (intrinsics is None or track is None or warm is None or track.depths is None
+                or self.lifter.options.mode != "hybrid"):
+            return points
+        return perspective_corrected(points, intrinsics, *track.depths)
+
+    def _find(self, track_id: int, stamp_ns: int) -> tuple[Track | None, WarmStart | None]:
+        """The frame's track (None: untracked, new, or forgotten because the input clock jumped
+        back) and its warm start (None: cold); raises :class:`OutOfOrderFrameError`."""
+        track = self._tracks.get(track_id) if track_id >= 0 else None
+        if track is None:
+            return None, None
+        age = stamp_ns - track.last_stamp_ns
+        if -self.track_timeout_ns <= age < 0:
+            raise OutOfOrderFrameError(
+                f"track {track_id}: stamp {-age / 1e9:.3f} s older than its last frame")
+        if age < -self.track_timeout_ns:  # the input clock jumped back (e.g. a looping bag)
+            del self._tracks[track_id]
+            return None, None
+        return track, self._warm(track, age)
+
+    def _warm(self, track: Track, age_ns: int) -> WarmStart | None:
+        """The track's warm start for a frame ``age_ns`` >= 0 after its last one (None: cold)."""
+        return track.warm if age_ns <= self.track_timeout_ns and self.warm_start else None
+
+    def _past(self, track: Track | None, warm: WarmStart | None, stamp_ns: int
+              ) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The past frames the learned prior reads (a warm-started frame of the hybrid or learned
+        mode; see :meth:`Track.past`)."""
+        if track is None or warm is None or self.lifter.options.mode == "paper":
+            return None
+        temporal = self.lifter.temporal_prior
+        prior = temporal or self.lifter.prior
+        return track.past(stamp_ns, prior.window - 1 - prior.future_frames)
+
+    def _future(self, track: Track | None, ahead: FramesAhead | None, stamp_ns: int, past: Frames | None,
+                current: NDArray[np.float64], frame: _Screened) -> Frames | None:
+        """The next frames a temporal prior with future frames reads (with ``past``: the frames
+        of ``ahead`` evenly spaced on from ``stamp_ns`` at the step of the track's last frame,
+        within 20 %, as :meth:`Track.past`; each frame's visible joints by the confidence
+        threshold and, on a frame the temporal gate screened, :meth:`Track.screen_ahead` from
+        this frame's 2D ``current`` (12, 2)), or None."""
+        if ahead is None or track is None or past is None:
+            return None
+        temporal = self.lifter.temporal_prior
+        if temporal is None or not temporal.future_frames:
+            return None
+        step = stamp_ns - track.last_stamp_ns
+        n, last = 0, stamp_ns  # the next frames up to the first uneven step (a few: plain ints)
+        for t in np.asarray(ahead.stamps_ns[:temporal.future_frames], dtype=np.int64).tolist():
+            if abs(t - last - step) > 0.2 * step:
+                break
+            n, last = n + 1, t
+        if n == 0:
+            return None
+        frames = np.asarray(ahead.points[:n], dtype=np.float64)
+        seen = _visible(frames, None if ahead.confidence is None else ahead.confidence[:n],
+                        self.lifter.options.confidence_threshold)
+        if seen is None or frames.ndim != 3:
+            return None
+        if frame.gated and frame.visible is not None and frame.predicted is not None:
+            # the temporal gate over the next frames too: their confident outliers stay out
+            seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
+                                      self.lifter.options.outlier_gate)
+        return frames, seen
+
+    def _screen(self, track: Track | None, warm: WarmStart | None, stamp_ns: int,
+                points: NDArray[np.float64], confidence: NDArray[np.float64] | None) -> _Screened:
+        """The hybrid mode's screening of a frame that follows its track's last one: where the
+        track puts each joint, the temporal outlier gate (a gated joint is missing for this frame)
+        and the track's 2D noise estimate."""
+        opts = self.lifter.options
+        hybrid = opts.mode == "hybrid"
+        # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
+        vis = _visible(points, confidence, opts.confidence_threshold)
+        noisy = hybrid and opts.noise_smoothing and not self.smoothed_later
+        if not (hybrid and track is not None and warm is not None and vis is not None):
+            dw = track.data_weight() if noisy and track is not None else 1.0
+            return _Screened(confidence, vis, None, False, dw)
+        # where the track puts each joint on this frame (the gate's and the fill's reference)
+        predicted = track.predict(points, vis, stamp_ns)
+        screened = opts.outlier_gate > 0
+        if screened:
+            gated = track.gate(points, vis, predicted, opts.outlier_gate, opts.min_visible_joints)
+            if gated is not None:  # a gated joint is missing for this frame
+                confidence = np.where(gated, 0.0, np.ones(N_JOINTS) if confidence is None
+                                      else np.asarray(confidence, dtype=np.float64))
+                vis = vis & ~gated
+                predicted = track.predict(points, vis, stamp_ns)  # the motion of the joints kept
+        track.observe_noise(self.lifter, points, vis, stamp_ns)
+        return _Screened(confidence, vis, predicted, screened, track.data_weight() if noisy else 1.0)
+
+    def _context(self, track: Track | None, warm: WarmStart | None, stamp_ns: int, frame: _Screened,
+                 limbs: NDArray[np.float64] | None, points: NDArray[np.float64],
+                 ahead: FramesAhead | None = None) -> TrackContext:
+        """What the track tells the lifter of this frame (:class:`TrackContext`): its limb
+        proportions, 2D data weight, the previous pose's weight per joint in the prior's target,
+        its past and next frames (temporal prior; ``points`` (12, 2) this frame's 2D) and the
+        joints it may fill in."""
+        opts = self.lifter.options
+        dw = frame.data_weight
+        # smoothing only pays with noisy 2D (on clean input it is lag): scaled with the noise
+        tw = np.full(N_JOINTS, opts.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT))
+        if warm is not None and frame.visible is not None and opts.missing_temporal_weight > 0:
+            # a joint the detector lost on this frame is carried over from the track's last pose
+            tw = np.where(frame.visible, tw, np.maximum(tw, opts.missing_temporal_weight))
+        past = self._past(track, warm, stamp_ns)
+        fill = None
+        if frame.predicted is not None and opts.fill_missing_frames > 0:
+            assert track is not None
+            if track.fit_is_sound():
+                fill = (frame.predicted, track.unused < opts.fill_missing_frames)
+        future = self._future(track, ahead, stamp_ns, past, points, frame)
+        return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
+
+    def _solve(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
+               confidence: NDArray[np.float64] | None, context: TrackContext
+               ) -> Steps[tuple[LiftResult, bool]]:
+        """The lift, and whether it was re-initialised: a warm solve whose objective exceeds
+        ``reinit_ratio`` times the track's recent median is solved cold too (the lower kept)."""
+        result = yield from self.lifter.lift_steps(points, confidence, warm=warm, track=context)
+        if (warm is not None and track is not None and self.reinit_ratio > 0 and len(track.objectives) >= 3
+                and result.objective > self.reinit_ratio * track.objective_median()):
+            cold = yield from self.lifter.lift_steps(points, confidence, warm=None, track=context)
+            if cold.objective < result.objective:
+                return cold, True
+        return result, False
+
+    def _record(self, track_id: int, track: Track | None, stamp_ns: int, points: NDArray[np.float64],
+                result: LiftResult) -> Track:
+        """The frame entered into its track (made on its first frame): the warm start, stamp,
+        objective, the prior's limb proportions, the frame's 2D and where each joint was."""
+        if track is None:
+            track = self._tracks[track_id] = Track(None, stamp_ns)
+        track.warm = result.warm_start()
+        cam = result.camera
+        track.depths = (np.array(result.pose_camera[:, 2]), float(cam.scale), np.array(cam.translation))
+        track.last_stamp_ns = stamp_ns
+        used = result.weights > 0
+        track.unused = np.where(used, 0, track.unused + 1)
+        track.add_objective(float(result.objective))
+        if result.prior_pose is not None:
+            track.add_limbs(self.lifter.limb_proportions_of(result.prior_pose))
+        x = np.array(points, dtype=np.float64)  # the track's own copy
+        track.history.append((stamp_ns, x, used))
+        # where each joint was: its detection when the lift used it, else the fit's projection
+        track.fits.append((stamp_ns, np.where(used[:, None], x, cam.project(result.pose)), float(cam.scale)))
+        opts = self.lifter.options
+        if opts.mode == "hybrid" and opts.image_limbs:
+            track.add_spans(x, used, float(cam.scale))
+        return track
+
+    def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool
+                 ) -> LiftResult | None:
+        """``result`` (the fit, smoothed) with its pose replaced by the measurement update's (see
+        :mod:`.measurement`), or None when it is off, the track has no 2D noise estimate yet or
+        its noise is above :data:`~pose_lifter.core.track.measurement.MAX_NOISE`."""
+        opts = self.lifter.options
+        if not opts.measurement_update:
+            track.measurement = None
+            return None
+        if not follows or track.measurement is None:
+            track.measurement = MeasurementUpdate()
+        if not track.noise:  # its first two frames: how far to trust the 2D is not known yet
+            return None
+        noise = track.noise_median()
+        if noise > MAX_NOISE:  # the 2D is no better than the fit's image positions
+            track.measurement = None
+            return None
+        out = track.measurement.update(result.pose_camera, points, result.weights > 0, noise,
+                                       opts.measurement_depth, opts.measurement_gate)
+        if not np.isfinite(out).all():
+            track.measurement = None
+            return None
+        return result.with_camera_pose(out)
+
+    def _smooth(self, track: Track, result: LiftResult, follows: bool, data_weight: float
+                ) -> LiftResult | None:
+        """``result`` with its pose replaced by the track's smoothed one (see
+        :class:`~pose_lifter.core.track.smoothing.CausalSmoother`), or None when smoothing is off or the
+        frame starts the smoother again (a cold solve)."""
+        opts = self.lifter.options
+        track.unused_share.append(float(np.count_nonzero(result.weights <= 0)) / N_JOINTS)
+        if opts.correction_smoothing <= 0 and opts.disturbed_smoothing_gain >= 1:
+            track.smoother = None
+            return None
+        prior = _prior_camera(result)
+        if prior is None:
+            track.smoother = None
+            return None
+        if not follows or track.smoother is None:
+            track.smoother = CausalSmoother()
+        shares = track.unused_share
+        disturbance = max(sum(shares) / len(shares), NOISE_DISTURBANCE * (1.0 - data_weight))
+        gain = 1.0 - min(1.0, disturbance / DISTURBANCE_FULL) * (1.0 - opts.disturbed_smoothing_gain)
+        out = track.smoother.update(result.pose_camera, prior, opts.correction_smoothing, gain)
+        if not np.isfinite(out).all():  # ndarray.all: no numpy wrapper on the per-frame path
+            track.smoother = None
+            return None
+        return result.with_camera_pose(out)
+
+
+def compile_kernels() -> float:
+    """Compile the core's kernels (numba, see ``core.numeric.jit``) into the cache of the place
+    this package is imported from, or load them from it: a warm-up lift
+    (:meth:`~pose_lifter.core.lift.lifter.Lifter.warm_up`) in each of
+    :data:`~pose_lifter.core.lift.lifter.KERNEL_MODES` with the packaged bases and prior, and the
+    tracks' kernels (their screening and the measurement update). The cache lives beside the
+    sources, so an editable source tree and an installed copy each need it once (the Makefile runs
+    it after installing either); a user's first lift then starts as fast as the second. Returns
+    the seconds it took (~25-60 s of CPU to compile, ~1 s to load)."""
+    start = time.perf_counter()
+    for mode in KERNEL_MODES:
+        Lifter(None, LifterOptions(mode=mode)).warm_up()
+    compile_measurement_kernels()
+    compile_track_kernels()
+    return time.perf_counter() - start

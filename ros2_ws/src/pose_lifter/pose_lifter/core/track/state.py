@@ -1,0 +1,369 @@
+"""The state of one tracked person (:class:`Track`) and the rules that read it: the track's 2D
+noise estimate, its limb proportions (from the learned prior's poses, calibrated, and from the
+image), the temporal outlier gate, where each joint should be on the next frame, and the evenly
+spaced past frames a temporal prior reads. :class:`pose_lifter.core.track.policy.TrackPolicy` keeps
+one per track id.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import PoseLifterError
+from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, N_JOINTS, RIGHT_LIMBS
+from ..numeric.fast import median_rows, row_norms
+from ..numeric.jit import njit
+from .measurement import MeasurementUpdate
+from .smoothing import CausalSmoother
+
+if TYPE_CHECKING:
+    from ..lift.lifter import Lifter
+    from ..results import WarmStart
+
+__all__ = ["Track", "calibrated_limb_proportions"]
+
+LIMB_A = np.array([a for a, _ in LIMBS])
+LIMB_B = np.array([b for _, b in LIMBS])
+_LEFT_LIMBS = np.array(LEFT_LIMBS)
+_RIGHT_LIMBS = np.array(RIGHT_LIMBS)
+_GROUP_OF = np.array(LIMB_GROUP_OF)
+_SQRT6 = math.sqrt(6.0)
+
+
+#: Detector noise: per frame, the median over joints of the 2D input's acceleration
+#: ``|x_t - 2 x_{t-1} + x_{t-2}| / sqrt(6)`` (three evenly spaced frames; the lifter's normalised
+#: units), and over the track's last NOISE_FRAMES frames their median: an estimate of the
+#: detector's noise std that motion hardly moves (measured on 18 held-out training-split tracks
+#: at 30 Hz: median 0.003 clean, 0.026 / 0.062 / 0.128 / 0.242 with noise 0.02 / 0.05 / 0.1 /
+#: 0.2 leg lengths). The hybrid 2D term is weighted by NOISE_REFERENCE over it (at most 1, at
+#: least NOISE_MIN_WEIGHT) once NOISE_MIN_FRAMES frames are in: noisy 2D trusts the prior more.
+NOISE_FRAMES = 30
+NOISE_MIN_FRAMES = 5
+NOISE_REFERENCE = 0.02
+NOISE_MIN_WEIGHT = 0.25
+#: Frames of a track whose prior limb proportions are kept, and how many are needed before the
+#: track's estimate replaces the bases' proportions.
+LIMB_FRAMES = 90
+#: Past frames a track keeps: the input of a temporal prior (``PosePrior.window - 1`` of them) and
+#: the last two for the noise estimate.
+MAX_PAST = 8
+MIN_LIMB_FRAMES = 10
+#: Limb proportions from the image (``LifterOptions.image_limbs``): the IMAGE_LIMB_QUANTILE
+#: quantile of each limb's image length over the fit's scale, once IMAGE_LIMB_MIN_FRAMES frames
+#: are in, weighted IMAGE_LIMB_WEIGHT (times the track's data weight) against the prior's median.
+#: Measured on unseen-motion tracks (clean, 90 frames, 3 azimuths; mean |log error| of the 8
+#: proportions): dance (a fold prior) prior's 0.100, image q90 0.043, q95 0.045, max 0.050;
+#: subject 02's jump/punch/swordplay (packaged prior) 0.026 / 0.025 / 0.023 / 0.026.
+IMAGE_LIMB_QUANTILE = 0.9
+IMAGE_LIMB_MIN_FRAMES = 30
+IMAGE_LIMB_WEIGHT = 1.0
+IMAGE_LIMB_EVERY = 10
+#: The prior's limb estimate is biased (a regression to the mean: the packaged priors under-state
+#: how much a person's thighs and shins differ from the mean, slopes > 1). Per bone group (upper
+#: arm, forearm, thigh, shin), the person's log-proportions (mean over the groups removed) are
+#: ``slope * estimate + offset``: least squares over held-out training-split tracks whose limbs
+#: were scaled by up to +-20 % (``tools/limb_calibration.py``, which prints these; fitted to the
+#: packaged priors: re-run it when they change).
+LIMB_CALIBRATION: tuple[NDArray[np.float64], NDArray[np.float64]] = (
+    np.array([0.84, 0.96, 1.28, 1.21]), np.array([-0.011, 0.044, -0.112, -0.099]))
+#: The temporal outlier gate (``LifterOptions.outlier_gate``) leaves a frame alone when it would
+#: gate more than this fraction of its visible joints, and gates one joint on at most
+#: GATE_MAX_FRAMES consecutive frames.
+GATE_MAX_FRACTION = 0.5
+GATE_NOISE_FACTOR = 5.0
+GATE_MAX_FRAMES = 3
+#: ... and only when the track's last fit is at most this old (input stamps).
+GATE_MAX_AGE_NS = 250_000_000
+#: A lost joint is filled in (``LifterOptions.fill_missing_frames``) only while the track's last
+#: objective is at most this many times the median of its last 15: on a track whose fit is being
+#: lost, the fill held stale positions (36 held-out training-split tracks: clean 48.1 -> 47.4 mm
+#: with the guard, 20 % outliers and 15 % missing unchanged at 57.7 and 53.2; 1.2 and 1.5 gave
+#: clean 47.5 with outliers 58.5 and 57.6).
+FILL_MAX_OBJECTIVE_RATIO = 2.0
+#: The fraction of joints the lift did not use is kept over a track's last DISTURBANCE_FRAMES
+#: frames (the output smoothing's disturbance, :data:`pose_lifter.core.track.policy.DISTURBANCE_FULL`).
+DISTURBANCE_FRAMES = 15
+
+
+def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The track's limb proportions (8,) from the median of the prior's (8,), corrected by
+    :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
+    e = np.asarray(estimate, dtype=np.float64)
+    g = np.log(np.maximum(e[_LEFT_LIMBS], 1e-12))
+    m = np.add.reduce(g) / g.size  # g.mean()
+    slope, offset = LIMB_CALIBRATION
+    out = np.exp(m + slope * (g - m) + offset)
+    return np.asarray(out[_GROUP_OF])
+
+
+@dataclass
+class Track:
+    """What the per-track policy keeps of one tracked person: its warm start and last stamp, its
+    recent objectives, limb-proportion estimates, 2D noise, past frames and fits, which joints it
+    gated or did not use, and the state of its published pose's smoothing and measurement update.
+    """
+
+    warm: WarmStart | None
+    last_stamp_ns: int
+    objectives: deque[float] = field(default_factory=lambda: deque(maxlen=15))
+    #: the prior's limb proportions of the track's last LIMB_FRAMES frames (a ring of rows: the
+    #: median needs no order) and how many frames have been added
+    limbs: NDArray[np.float64] = field(default_factory=lambda: np.zeros((LIMB_FRAMES, 8)))
+    n_limbs: int = 0
+    #: the image limb lengths over the fit's scale of the last LIMB_FRAMES frames (a ring, NaN
+    #: where unused) and the last estimate from them (:meth:`image_limb_proportions`)
+    spans: NDArray[np.float64] = field(default_factory=lambda: np.full((LIMB_FRAMES, 8), np.nan))
+    n_spans: int = 0
+    span_estimate: NDArray[np.float64] | None = None
+    noise: deque[float] = field(default_factory=lambda: deque(maxlen=NOISE_FRAMES))
+    history: deque[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = field(
+        default_factory=lambda: deque(maxlen=MAX_PAST))
+    #: (stamp, where each joint was (12, 2): its detection when the lift used it, else the fit's
+    #: projection, in input units; the camera's scale, input units per model unit)
+    fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
+    gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(N_JOINTS, dtype=np.int64))
+    #: consecutive frames each joint was not used by the lift, up to the last one
+    unused: NDArray[np.int64] = field(default_factory=lambda: np.zeros(N_JOINTS, dtype=np.int64))
+    #: the fraction of joints the lift did not use, per frame (the output smoothing's disturbance)
+    unused_share: deque[float] = field(default_factory=lambda: deque(maxlen=DISTURBANCE_FRAMES))
+    smoother: CausalSmoother | None = None
+    #: the last lift's depths (12,; camera frame, centred, leg units), camera scale (input units
+    #: per leg unit) and the image position of its centroid (2,): the perspective correction of
+    #: the next frame
+    depths: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None
+    measurement: MeasurementUpdate | None = None
+    #: the medians of ``noise`` and ``objectives`` while they are unchanged (None: not computed)
+    _noise_median: float | None = None
+    _objective_median: float | None = None
+
+    def add_objective(self, objective: float) -> None:
+        self.objectives.append(objective)
+        self._objective_median = None
+
+    def objective_median(self) -> float:
+        """The median of the track's last objectives (at least one)."""
+        if self._objective_median is None:
+            self._objective_median = float(median_rows(np.asarray(self.objectives)))
+        return self._objective_median
+
+    def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64] | None,
+             limit: float, min_visible: int) -> NDArray[np.bool_] | None:
+        """The visible joints farther than ``limit`` leg lengths (or GATE_NOISE_FACTOR times the
+        track's noise) from where the last frame had them (its detection when the lift used it,
+        else the fit's projection), after removing the median motion of the visible joints; None
+        when nothing is gated (see GATE_MAX_FRACTION). A constant-velocity prediction was
+        measured worse: the fits' jitter doubles in it (7 % of good joints beyond 0.8 leg on
+        held-out tracks with 20 % outliers, against 2 % for the last position)."""
+        if predicted is None:
+            return None
+        scale = self.fits[-1][2]
+        d = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted) - predicted
+        dist = row_norms(d) / max(scale, 1e-12)
+        limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())  # noisy 2D: its own scale
+        out = vis & (dist > limit) & (self.gated < GATE_MAX_FRAMES)
+        n_out, n_vis = int(np.count_nonzero(out)), int(np.count_nonzero(vis))
+        if n_out == 0 or n_vis - n_out < min_visible or n_out > GATE_MAX_FRACTION * n_vis:
+            self.gated[:] = 0
+            return None
+        self.gated = np.where(out, self.gated + 1, 0)
+        return np.asarray(out, dtype=bool)
+
+    def screen_ahead(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
+                     predicted: NDArray[np.float64], ahead: NDArray[np.float64],
+                     ahead_vis: NDArray[np.bool_], limit: float) -> NDArray[np.bool_]:
+        """The joints of the next frames ``ahead`` (k, 12, 2) the gate keeps, (k, 12): frame by
+        frame from this one (its joints ``vis`` (12,) kept, the others where the track
+        ``predicted`` them), a visible joint farther than ``limit`` leg lengths (or
+        GATE_NOISE_FACTOR times the track's noise) from where the frame before had it, after
+        removing the median motion of the joints seen on both, is dropped (not when that would
+        drop more than GATE_MAX_FRACTION of them): :meth:`gate` over the frames an offline lift
+        reads ahead, whose confident outliers would otherwise reach the prior."""
+        scale = max(self.fits[-1][2], 1e-12)
+        limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())
+        ref = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted)
+        return _screen_ahead_kernel(np.ascontiguousarray(ref), np.ascontiguousarray(ahead, dtype=np.float64),
+                                    np.array(ahead_vis, dtype=np.bool_), limit * scale, GATE_MAX_FRACTION)
+
+    def predict(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
+                stamp_ns: int) -> NDArray[np.float64] | None:
+        """Where each joint (12, 2) should be on this frame: where the last frame had it (its
+        detection when the lift used it, else the fit's projection) moved by the median motion of
+        this frame's visible joints since (the person's or the camera's). None without a last
+        frame at most GATE_MAX_AGE_NS old, or without a visible joint."""
+        if not self.fits or not vis.any():
+            return None
+        t1, p1, _ = self.fits[-1]
+        if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
+            return None
+        return np.asarray(p1 + median_rows(np.asarray(points, dtype=np.float64)[vis] - p1[vis]))
+
+    def fit_is_sound(self) -> bool:
+        """False when the last frame's objective exceeds FILL_MAX_OBJECTIVE_RATIO times the median
+        of the track's last ones (the fit is losing the person: its positions are no prediction)."""
+        if len(self.objectives) < 3:
+            return True
+        return self.objectives[-1] <= FILL_MAX_OBJECTIVE_RATIO * self.objective_median()
+
+    def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
+                      stamp_ns: int) -> None:
+        """Add this frame's 2D acceleration (see NOISE_FRAMES) when the last two frames and this
+        one are evenly spaced in time."""
+        if len(self.history) < 2:
+            return
+        (t0, x0, v0), (t1, x1, v1) = self.history[-2], self.history[-1]
+        d1, d2 = t1 - t0, stamp_ns - t1
+        if d1 <= 0 or d2 <= 0 or abs(d2 - d1) > 0.2 * d1:
+            return
+        x = np.asarray(points, dtype=np.float64)
+        vis = v0 & v1 & visible
+        if np.count_nonzero(vis) < 3:
+            return
+        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / _SQRT6
+        try:
+            spread = lifter.input_scale(x, vis.astype(np.float64))
+        except PoseLifterError:
+            return
+        self.noise.append(float(median_rows(acc)) / spread)
+        self._noise_median = None
+
+    def past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+        """The last ``frames`` frames (oldest first, as ``(points (k, 12, 2), used (k, 12))``) that
+        are evenly spaced up to ``stamp_ns`` (within 20 %), or None."""
+        if frames <= 0 or not self.history:
+            return None
+        step = stamp_ns - self.history[-1][0]
+        if step <= 0:
+            return None
+        kept: list[tuple[int, NDArray[np.float64], NDArray[np.bool_]]] = []
+        later = stamp_ns
+        for entry in reversed(self.history):
+            if len(kept) == frames or abs((later - entry[0]) - step) > 0.2 * step:
+                break
+            kept.append(entry)
+            later = entry[0]
+        if not kept:
+            return None
+        kept.reverse()
+        return np.array([k[1] for k in kept]), np.array([k[2] for k in kept])
+
+    def noise_level(self) -> float:
+        """The track's 2D noise estimate (normalised units; 0 before NOISE_MIN_FRAMES frames)."""
+        if len(self.noise) < NOISE_MIN_FRAMES:
+            return 0.0
+        return self.noise_median()
+
+    def noise_median(self) -> float:
+        """The median of the track's last 2D noise estimates (at least one)."""
+        if self._noise_median is None:
+            self._noise_median = float(median_rows(np.asarray(self.noise)))
+        return self._noise_median
+
+    def data_weight(self) -> float:
+        if len(self.noise) < NOISE_MIN_FRAMES:
+            return 1.0
+        level = self.noise_level()
+        return min(max(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT), 1.0)  # np.clip
+
+    def limb_proportions(self, image: bool = False) -> NDArray[np.float64] | None:
+        """The track's limb proportions (8,): the calibrated median of the prior's, and with
+        ``image`` blended (in logs, each at geometric mean 1) with :meth:`image_limb_proportions`
+        by IMAGE_LIMB_WEIGHT times the track's data weight (noisy 2D lengthens the spans)."""
+        if self.n_limbs < MIN_LIMB_FRAMES:
+            return None
+        prior = calibrated_limb_proportions(median_rows(self.limbs[: min(self.n_limbs, LIMB_FRAMES)]))
+        spans = self.image_limb_proportions() if image else None
+        if spans is None:
+            return prior
+        lam = IMAGE_LIMB_WEIGHT * self.data_weight()
+        lp, ls = np.log(prior), np.log(spans)
+        return np.asarray(np.exp((1.0 - lam) * (lp - lp.mean()) + lam * (ls - ls.mean()) + lp.mean()))
+
+    def image_limb_proportions(self) -> NDArray[np.float64] | None:
+        """Per limb (8,; left and right averaged) the IMAGE_LIMB_QUANTILE quantile of its image
+        length over the fit's scale on the track's last LIMB_FRAMES frames (a limb seen across
+        the image plane shows its length: the upper quantile is it, robust to a few bad frames);
+        None before IMAGE_LIMB_MIN_FRAMES frames or with a limb seen on fewer. Recomputed every
+        IMAGE_LIMB_EVERY frames."""
+        if self.n_spans < IMAGE_LIMB_MIN_FRAMES:
+            return None
+        if self.span_estimate is None or self.n_spans % IMAGE_LIMB_EVERY == 0:
+            rows = self.spans[: min(self.n_spans, LIMB_FRAMES)]
+            ok = np.isfinite(rows)
+            if (ok.sum(axis=0) < IMAGE_LIMB_MIN_FRAMES // 2).any():
+                return None
+            est = np.array([np.quantile(rows[ok[:, i], i], IMAGE_LIMB_QUANTILE) for i in range(8)])
+            pairs = 0.5 * (est[_LEFT_LIMBS] + est[_RIGHT_LIMBS])
+            out = pairs[_GROUP_OF]
+            self.span_estimate = out if np.isfinite(out).all() and (out > 0).all() else None
+        return self.span_estimate
+
+    def add_spans(self, points: NDArray[np.float64], used: NDArray[np.bool_], scale: float) -> None:
+        """This frame's image limb lengths over the fit's ``scale`` (NaN where a limb's joint
+        was not used by the lift)."""
+        x = np.asarray(points, dtype=np.float64)
+        row = row_norms(x[LIMB_A] - x[LIMB_B]) / max(scale, 1e-12)
+        self.spans[self.n_spans % LIMB_FRAMES] = np.where(used[LIMB_A] & used[LIMB_B], row, np.nan)
+        self.n_spans += 1
+
+    def add_limbs(self, proportions: NDArray[np.float64]) -> None:
+        self.limbs[self.n_limbs % LIMB_FRAMES] = proportions
+        self.n_limbs += 1
+
+
+@njit
+def _screen_ahead_kernel(ref: NDArray[np.float64], ahead: NDArray[np.float64], kept: NDArray[np.bool_],
+                         limit: float, max_fraction: float) -> NDArray[np.bool_]:
+    """:meth:`Track.screen_ahead`'s loop over the next frames ``ahead`` (k, 12, 2) from the
+    positions ``ref`` (12, 2): ``kept`` (k, 12, visible on entry) with the joints farther than
+    ``limit`` (input units) from the frame before's, after the median motion of the joints seen
+    on both, cleared (in place, and returned)."""
+    nj = ref.shape[0]
+    cur = ref.copy()
+    for f in range(ahead.shape[0]):
+        n = 0
+        for j in range(nj):
+            if kept[f, j]:
+                n += 1
+        if n == 0:
+            continue
+        dx = np.empty(n)
+        dy = np.empty(n)
+        k = 0
+        for j in range(nj):
+            if kept[f, j]:
+                dx[k] = ahead[f, j, 0] - cur[j, 0]
+                dy[k] = ahead[f, j, 1] - cur[j, 1]
+                k += 1
+        mx, my = np.median(dx), np.median(dy)
+        out = np.zeros(nj, dtype=np.bool_)
+        n_out = 0
+        for j in range(nj):
+            if kept[f, j]:
+                ex = ahead[f, j, 0] - cur[j, 0] - mx
+                ey = ahead[f, j, 1] - cur[j, 1] - my
+                if math.sqrt(ex * ex + ey * ey) > limit:
+                    out[j] = True
+                    n_out += 1
+        drop = n_out <= max_fraction * n
+        for j in range(nj):
+            if drop and out[j]:
+                kept[f, j] = False
+            if kept[f, j]:
+                cur[j, 0], cur[j, 1] = ahead[f, j, 0], ahead[f, j, 1]
+            else:
+                cur[j, 0] += mx
+                cur[j, 1] += my
+    return kept
+
+
+def compile_kernels() -> None:
+    """Compile this module's kernel (numba, ``core.numeric.jit``) or load it from its cache: one screen
+    of a still frame ahead (an offline track's first frame would otherwise pay for it)."""
+    still = np.zeros((1, N_JOINTS, 2))
+    _screen_ahead_kernel(still[0], still, np.ones((1, N_JOINTS), dtype=np.bool_), 1.0, GATE_MAX_FRACTION)

@@ -1,0 +1,43 @@
+"""The metric-placement defaults (0.43 m leg, 5 m distance) are one constant for every entry point."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from pose_lifter import cli
+from pose_lifter.core.track import placement
+from pose_lifter.messages.frame import FrameSettings
+from pose_lifter.offline.lift import frame_settings
+from pose_lifter.offline.settings import LiftSettings
+from pose_lifter.ros.params import SPECS, read_params_file
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+def test_offline_and_cli_use_the_placement_defaults() -> None:
+    frame = frame_settings(LiftSettings())
+    assert frame.lower_leg_length == placement.DEFAULT_LEG_LENGTH_M == FrameSettings().lower_leg_length
+    assert frame.default_distance == placement.DEFAULT_DISTANCE_M == FrameSettings().default_distance
+    assert SPECS["lower_leg_length"].default == placement.DEFAULT_LEG_LENGTH_M
+    assert SPECS["default_distance"].default == placement.DEFAULT_DISTANCE_M
+    args = cli.build_parser().parse_args(["lift", "in.mcap", "--out", "out.mcap"])
+    assert args.leg_length == placement.DEFAULT_LEG_LENGTH_M
+
+
+def test_the_node_params_file_states_the_same_defaults() -> None:
+    params = read_params_file(REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml")
+    assert params.lower_leg_length == placement.DEFAULT_LEG_LENGTH_M
+    assert params.default_distance == placement.DEFAULT_DISTANCE_M
+
+
+@pytest.mark.parametrize("module", ["placement", "defaults"])
+def test_the_defaults_modules_load_nothing_else(module: str) -> None:
+    """The CLI's parser and the offline settings read the defaults without numpy or the solver
+    (``pose_lifter.core`` itself imports its members lazily)."""
+    code = (f"import sys, pose_lifter.core.track.{module}; "
+            "print(sorted(m for m in sys.modules if m.startswith(('pose_lifter.', 'numpy'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == f"['pose_lifter.core', 'pose_lifter.core.track', 'pose_lifter.core.track.{module}']"

@@ -1,0 +1,75 @@
+"""tools/accuracy.py's detector and camera faults: what each condition does to the 2D."""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+import numpy as np
+import pytest
+from pose_lifter.core.model.synthetic import synthetic_poses
+from tool_modules import load_tool
+
+
+@pytest.fixture(scope="module")
+def acc() -> ModuleType:
+    return load_tool("accuracy", "accuracy_tool")
+
+
+def _track(acc: ModuleType, camera: tuple[float, float, str] = (45.0, 0.0, "weak")) -> object:
+    return acc.Track("t", synthetic_poses(200, seed=4), camera, 7)
+
+
+def test_left_right_swaps_exchange_the_labels_of_whole_arms_or_legs(acc: ModuleType) -> None:
+    track = _track(acc)
+    clean, _, _, _ = acc.film_track(track, {}, np.random.default_rng(0))
+    px, conf, _, _ = acc.film_track(track, acc.CONDITIONS["lrswap"], np.random.default_rng(0))
+    assert np.all(conf == 1.0)
+    arms = np.all(px[:, [0, 1, 2]] == clean[:, [3, 4, 5]], axis=(1, 2))
+    legs = np.all(px[:, [6, 7, 8]] == clean[:, [9, 10, 11]], axis=(1, 2))
+    same_arms = np.all(px[:, :6] == clean[:, :6], axis=(1, 2))
+    same_legs = np.all(px[:, 6:] == clean[:, 6:], axis=(1, 2))
+    assert np.all(arms ^ same_arms) and np.all(legs ^ same_legs)  # a limb pair swapped whole or kept
+    assert 0.03 < arms.mean() < 0.2 and 0.03 < legs.mean() < 0.2  # ~10 % of frames each
+    assert np.any(arms & ~legs)  # arms and legs swap independently
+
+
+def test_the_lower_body_out_of_the_image_hides_knees_and_ankles_on_every_frame(acc: ModuleType) -> None:
+    _, conf, _, _ = acc.film_track(_track(acc), acc.CONDITIONS["lowercut"], np.random.default_rng(0))
+    assert np.all(conf[:, [7, 8, 10, 11]] == 0.0) and np.all(np.delete(conf, [7, 8, 10, 11], axis=1) == 1.0)
+
+
+def test_a_close_camera_is_in_perspective_and_a_high_one_looks_down(acc: ModuleType) -> None:
+    track = _track(acc)
+    far, _, _, cam_far = acc.film_track(track, {}, np.random.default_rng(0))
+    near, _, _, cam_near = acc.film_track(track, acc.CONDITIONS["close"], np.random.default_rng(0))
+    spread = lambda p: np.linalg.norm(p - p.mean(axis=1, keepdims=True), axis=-1).mean()  # noqa: E731
+    assert spread(near) > 1.4 * spread(far)  # 3 m -> 2 m
+    # perspective: the image is not the weak-perspective image of the same camera-frame pose
+    weak = acc.FOCAL * cam_near[..., :2] / 2.0
+    centred = near - near.mean(axis=1, keepdims=True)
+    assert np.abs(centred - (weak - weak.mean(axis=1, keepdims=True))).max() > 1.0
+    _, _, _, cam_above = acc.film_track(track, acc.CONDITIONS["above"], np.random.default_rng(0))
+    # seen from 50 degrees above, the person's up direction (hips -> shoulders) leans 50 degrees
+    # towards the camera (negative depth) compared with a level camera
+    up = cam_above[:, [0, 3]].mean(axis=1) - cam_above[:, [6, 9]].mean(axis=1)
+    up_level = cam_far[:, [0, 3]].mean(axis=1) - cam_far[:, [6, 9]].mean(axis=1)
+    tilt = np.degrees(np.arctan2(up[:, 2], -up[:, 1])).mean()
+    level = np.degrees(np.arctan2(up_level[:, 2], -up_level[:, 1])).mean()
+    assert tilt - level == pytest.approx(-50.0, abs=8.0)
+
+
+def test_the_detector_conditions_film_every_fault_at_their_distance(acc: ModuleType) -> None:
+    track = _track(acc, (90.0, 0.0, "weak"))
+    clean6, _, _, cam6 = acc.film_track(track, {"distance": 6.0}, np.random.default_rng(0))
+    px6, conf6, _, _ = acc.film_track(track, acc.CONDITIONS["detector6m"], np.random.default_rng(0))
+    clean3, _, _, _ = acc.film_track(track, {"distance": 3.0}, np.random.default_rng(0))
+    px3, _, _, _ = acc.film_track(track, acc.CONDITIONS["detector3m"], np.random.default_rng(0))
+    spread = lambda p: np.linalg.norm(p - p.mean(axis=1, keepdims=True), axis=-1).mean()  # noqa: E731
+    assert spread(clean3) == pytest.approx(2.0 * spread(clean6), rel=0.1)  # perspective at 6 and 3 m
+    seen = conf6 >= 0.1
+    err = np.linalg.norm(px6 - clean6, axis=-1)
+    # noisy everywhere, a few joints lost, and the error in pixels halves with the distance doubled
+    assert np.median(err[seen]) > 0.5 and 0.01 < (~seen).mean() < 0.2
+    ratio = np.median(np.linalg.norm(px3 - clean3, axis=-1)) / np.median(err)
+    assert ratio == pytest.approx(2.0, rel=0.2)
+    assert np.isfinite(px6).all() and np.isfinite(cam6).all()

@@ -1,0 +1,277 @@
+"""pose_lifter.offline.lift.lift_bag plumbing with a stand-in lifter (the real one: test_bags.py)."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import tolerances as tol
+from mcap_check import check_mcap
+from pose_lifter.core.errors import SolverError, TooFewJointsError
+from pose_lifter.core.lift.batch import Steps
+from pose_lifter.core.options import LifterOptions
+from pose_lifter.core.results import Camera, LiftResult, WarmStart
+from pose_lifter.messages import convert as m
+from pose_lifter.mocap import scenes
+from pose_lifter.offline import bags
+from pose_lifter.offline import lift as offline
+from pose_lifter.offline.settings import LiftSettings
+from stub_runs import RUNS_NEEDED_NONE
+
+#: The node's causal poses (no centred smoothing).
+NODE = LiftSettings(smoothing_s=0.0)
+
+
+class EchoLifter:
+    """Returns the mean of the visible 2D points as the camera translation, a fixed pose, and
+    records the warm starts it was given."""
+
+    def __init__(self) -> None:
+        self.warm: list[WarmStart | None] = []
+        self.pose = np.random.default_rng(0).normal(size=(12, 3))
+        self.pose -= self.pose.mean(axis=0)
+
+    options = LifterOptions(mode="paper")
+    reads_ahead = False
+
+    runs = RUNS_NEEDED_NONE
+
+    def lift_steps(self, *args: Any, **kwargs: Any) -> Steps[LiftResult]:
+        """:meth:`lift` as a solve that asks for no runs of the compiled kernel."""
+        return self.lift(*args, **kwargs)
+        yield []  # a generator (unreachable)
+
+    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
+             **per_frame: Any) -> LiftResult:
+        self.warm.append(warm)
+        vis = confidence > 0
+        if vis.sum() < 6:
+            raise TooFewJointsError("too few")
+        cam = Camera(np.eye(3), 100.0, points[vis].mean(axis=0))
+        return LiftResult(self.pose, self.pose, cam, np.zeros(3), 1.0, 0.5, 0.0, 3, True, 1, 0, np.ones(12))
+
+
+def make_input(tmp_path: Path) -> tuple[Path, scenes.Scene]:
+    rng = np.random.default_rng(1)
+    clip = rng.normal(scale=0.3, size=(6, 12, 3)) + np.array([0.0, 1.0, 0.0])
+    sc = scenes.build_scene([clip, clip], scenes.SceneOptions(), track_ids=[0, 5])
+    sc.confidence[1, 3, :8] = 0.0  # track 5 vanishes (too few joints) in frame 3
+    path = tmp_path / "in.mcap"
+    bags.write_messages(path, scenes.scene_messages(sc))
+    return path, sc
+
+
+def test_lift_bag_outputs(tmp_path: Path) -> None:
+    path, sc = make_input(tmp_path)
+    lifter: Any = EchoLifter()
+    out = tmp_path / "out.mcap"
+    summary, frames = offline.lift_bag(path, out, lifter, LiftSettings(leg_length_m=0.5, smoothing_s=0.0),
+                                        progress=False)
+    assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
+    # warm starts: from the second frame of each track on, restarted after the gap of track 5
+    assert summary.n_warm == 11 - 3
+    # the tracks' chains are lifted in step, message by message (track 0, then track 5): cold
+    # first frames, track 5 cold after its failure in frame 3
+    assert [w is None for w in lifter.warm] == [True, True] + [False] * 6 + [False, True] + [False] * 2
+    topics = bags.bag_topics(out)
+    assert check_mcap(out)["/skeletons_3d"] == 6  # the independent reader: summary, index, decoding
+    assert topics["/skeletons_3d"] == "pose_lifter_msgs/msg/Skeleton3DArray"
+    assert topics["/skeleton_markers"] == "visualization_msgs/msg/MarkerArray"
+    assert {"/keypoints_2d", "/camera_info", "/ground_truth/skeletons_3d"} <= set(topics)
+    msgs = list(bags.read_messages(out))
+    est = [x for x in msgs if x.topic == "/skeletons_3d"]
+    kp = [x for x in msgs if x.topic == "/keypoints_2d"]
+    assert [x.stamp_ns for x in est] == [x.stamp_ns for x in kp] == list(sc.stamps_ns)
+    assert [len(x.msg.skeletons) for x in est] == [2, 2, 2, 1, 2, 2]
+    s = est[4].msg.skeletons[1]
+    assert s.track_id == 5 and not s.warm_started and est[5].msg.skeletons[1].warm_started
+    # metric placement: depth = f * leg / scale = 800 * 0.5 / 100, centroid under the 2D mean
+    j = m.skeleton3d_to_joints(est[0].msg.skeletons[0])
+    assert j.mean(axis=0)[2] == pytest.approx(4.0)
+    # the pose seen along the ray to its centroid, turned into the camera frame (core/track/placement.py)
+    from pose_lifter.core.track.placement import ray_rotation
+
+    turn = ray_rotation(j.mean(axis=0))
+    np.testing.assert_allclose(j - j.mean(axis=0), lifter.pose @ turn.T * 0.5, atol=tol.ROUND_OFF_ACCUMULATED)
+    u = 800 * j.mean(axis=0)[0] / 4.0 + 320
+    assert u == pytest.approx(sc.points_2d[0, 0].mean(axis=0)[0])
+    # markers: two per person, after the first message's two DELETEALL (what an earlier run left
+    # on screen goes, as the node does); the vanished track gets DELETE markers
+    mk = [x.msg.markers for x in msgs if x.topic == "/skeleton_markers"]
+    assert [(k.id, k.action) for k in mk[0][:2]] == [(0, 3), (0, 3)]
+    assert [len(a) for a in mk[:3]] == [6, 4, 4]
+    assert [(k.id, k.action) for k in mk[3]] == [(0, 0), (0, 0), (5, 2), (5, 2)]
+    assert len(frames) == 11
+
+
+class DivergingLifter(EchoLifter):
+    """:class:`EchoLifter` whose third solve diverges."""
+
+    def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
+             **per_frame: Any) -> LiftResult:
+        if len(self.warm) == 2:
+            self.warm.append(warm)
+            raise SolverError("pose step diverged (non-finite coefficients)")
+        return super().lift(points, confidence, warm, **per_frame)
+
+
+def test_a_diverged_solve_is_one_failed_skeleton_and_the_track_restarts_cold(tmp_path: Path) -> None:
+    path, _ = make_input(tmp_path)
+    lifter: Any = DivergingLifter()
+    summary, _ = offline.lift_bag(path, tmp_path / "out.mcap", lifter, NODE, progress=False)
+    assert (summary.n_lifted, summary.n_failed) == (10, 2)
+    assert any("pose step diverged" in f for f in summary.failures)
+    # solves in step (track 0, track 5 per message): the third is track 0's second frame, and
+    # that track's next frame (the fifth solve) starts cold
+    assert lifter.warm[3] is not None and lifter.warm[4] is None
+
+
+def test_lift_bag_every_and_max(tmp_path: Path) -> None:
+    path, _ = make_input(tmp_path)
+    out = tmp_path / "out.mcap"
+    settings = LiftSettings(every=2, max_messages=2, smoothing_s=0.0)
+    summary, _ = offline.lift_bag(path, out, EchoLifter(), settings, progress=False)  # type: ignore[arg-type]
+    assert summary.n_messages == 2
+    kp = list(bags.read_messages(out, ["/keypoints_2d"]))
+    est = list(bags.read_messages(out, ["/skeletons_3d"]))
+    assert len(kp) == 4 and [x.stamp_ns for x in est] == [kp[0].stamp_ns, kp[2].stamp_ns]
+    with pytest.raises(bags.BagError):
+        offline.lift_bag(path, out, EchoLifter(), NODE, progress=False)  # type: ignore[arg-type]
+
+
+def test_workers_lift_tracks_in_parallel_with_identical_results(tmp_path: Path) -> None:
+    from pose_lifter.core import Lifter, LifterOptions, PoseBases
+
+    bag = Path(__file__).resolve().parents[2] / "bags" / "five_people.mcap"
+    lifter = Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=2))
+    runs = []
+    for workers in (1, 2):
+        summary, frames = offline.lift_bag(bag, tmp_path / f"w{workers}.mcap", lifter,
+                                           LiftSettings(max_messages=3, smoothing_s=0.0), progress=False,
+                                           workers=workers)
+        assert (summary.n_lifted, summary.n_warm, summary.n_failed) == (15, 10, 0)
+        runs.append(frames)
+    one, two = runs
+    assert [(f.stamp_ns, f.track_id, f.warm_started) for f in one] == [
+        (f.stamp_ns, f.track_id, f.warm_started) for f in two]
+    np.testing.assert_array_equal(np.array([f.joints_m for f in one]), np.array([f.joints_m for f in two]))
+    objectives = [[[s.objective for s in x.msg.skeletons]
+                   for x in bags.read_messages(tmp_path / f"w{w}.mcap", ["/skeletons_3d"])] for w in (1, 2)]
+    assert objectives[0] == objectives[1]
+
+
+def test_centred_smoothing_changes_only_the_poses_and_takes_the_jitter_out(tmp_path: Path) -> None:
+    """``smoothing_s > 0`` (pose-lifter lift's default): each track's joints are averaged over the
+    frames around them, past and future; the fit (camera, objective) is the node's as it was."""
+    from pose_lifter.core import Lifter, LifterOptions
+    from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
+
+    bag = Path(__file__).resolve().parents[2] / "bags" / "two_people.mcap"  # 2D noise
+    lifter = Lifter(options=LifterOptions())  # hybrid, its packaged bases
+    runs = {}
+    for s in (0.0, OFFLINE_SMOOTHING_S):
+        _, frames = offline.lift_bag(bag, tmp_path / f"s{s}.mcap", lifter,
+                                     LiftSettings(max_messages=45, smoothing_s=s), progress=False)
+        runs[s] = frames
+    causal, smooth = runs[0.0], runs[OFFLINE_SMOOTHING_S]
+    assert [(f.stamp_ns, f.track_id) for f in causal] == [(f.stamp_ns, f.track_id) for f in smooth]
+    for s in runs:
+        msgs = list(bags.read_messages(tmp_path / f"s{s}.mcap", ["/skeletons_3d"]))
+        runs[s] = [[(k.objective, tuple(k.camera.projection)) for k in x.msg.skeletons] for x in msgs]
+    assert runs[0.0] == runs[OFFLINE_SMOOTHING_S]  # the same fits, frame by frame
+    jitter = {}
+    for name, frames in (("causal", causal), ("smooth", smooth)):
+        per_track: dict[int, list[np.ndarray]] = {}
+        for f in frames:
+            per_track.setdefault(f.track_id, []).append(f.joints_m - f.joints_m.mean(axis=0))
+        acc = [np.linalg.norm(np.diff(np.array(j), 2, axis=0), axis=-1).mean() for j in per_track.values()]
+        jitter[name] = float(np.mean(acc))
+    assert jitter["smooth"] < 0.7 * jitter["causal"], jitter
+
+
+def test_the_camera_timeline_takes_the_latest_usable_camera_info_as_the_node_would() -> None:
+    from pose_lifter.offline.chains import CameraTimeline
+
+    t = m.rosbags_types()
+
+    def info(f: float) -> Any:
+        return m.camera_info(m.make_header(0, "cam", t), 640, 480, f, f, 320.0, 240.0, t)
+
+    cameras = CameraTimeline([(10, info(500.0)), (20, info(-1.0)), (30, info(700.0))])
+    assert cameras.at(5) == cameras.at(10) == cameras.at(25) == ((500.0, 500.0), (320.0, 240.0))
+    assert cameras.at(30)[0] == (700.0, 700.0)  # type: ignore[index]
+    assert CameraTimeline([(10, info(0.0))]).at(10) is None  # none usable: the default distance
+
+
+def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together() -> None:
+    from pose_lifter.offline.chains import GROUP_CHAINS, Item, chain_groups
+
+    def chain(first: int, n: int) -> list[Item]:
+        return [Item(first + k, first + k, None, None) for k in range(n)]  # type: ignore[arg-type]
+
+    # 20 tracks: 10 in the first half of the bag, 10 in the second; 4 single untracked skeletons
+    chains = [chain(0, 50) for _ in range(10)] + [chain(60, 40) for _ in range(10)] + \
+        [chain(k, 1) for k in (3, 30, 70, 99)]
+    for workers in (1, 6, 200):
+        groups = chain_groups(chains, workers)
+        assert sorted(c for g in groups for c in g) == list(range(len(chains)))
+        assert all(1 <= len(g) <= GROUP_CHAINS for g in groups)
+        sizes = [sum(len(chains[c]) for c in g) for g in groups]
+        assert sizes == sorted(sizes, reverse=True)
+        # no group holds more than an equal share of the items, but a group of one chain
+        share = sum(len(c) for c in chains) / min(len(chains), workers)
+        assert all(s <= share or len(g) == 1 for s, g in zip(sizes, groups, strict=True))
+        # a group holds chains that start close in time: the groups' start ranges do not interleave
+        spans = sorted((min(chains[c][0].msg_index for c in g), max(chains[c][0].msg_index for c in g))
+                       for g in groups)
+        assert all(a[1] <= b[0] for a, b in itertools.pairwise(spans))
+    # tracks of one length over 2 workers: two groups of equal work, as large as they can be
+    assert [len(g) for g in chain_groups([chain(0, 30) for _ in range(36)], 2)] == [18, 18]
+    # of different lengths: equal items, not equal counts
+    uneven = [chain(0, 90)] + [chain(0, 10) for _ in range(9)]
+    assert [sum(len(uneven[c]) for c in g) for g in chain_groups(uneven, 2)] == [90, 90]
+    # enough groups of people seen together: the halves' tracks are not mixed
+    assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
+               for g in chain_groups(chains[:20], 1))
+
+
+def test_an_offline_lift_reads_each_tracks_next_frames(tmp_path: Path) -> None:
+    """With the centred smoothing (``smoothing_s > 0``) the lifter reads ahead: its temporal prior
+    is the packaged offline one, and each item of a chain carries its track's next frames (the
+    prior's ``future_frames`` items after it); at ``smoothing_s = 0`` the node's causal prior, and
+    the items as they are. The next frames change the fits; the lifted skeletons are the same."""
+    from pose_lifter.messages.frame import FramePipeline
+    from pose_lifter.offline.chains import inputs_ahead, split_chains
+
+    ahead, causal = LiftSettings().build_lifter(), NODE.build_lifter()
+    assert ahead.reads_ahead and not causal.reads_ahead
+    assert causal.temporal_prior is not None and causal.temporal_prior.future_frames == 0
+    n_ahead = ahead.temporal_prior.future_frames if ahead.temporal_prior is not None else 0
+    assert n_ahead > 0
+    bag = Path(__file__).resolve().parents[2] / "bags" / "two_people.mcap"
+    msgs = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, ["/keypoints_2d"])][:20]
+    chains, _, _ = split_chains(msgs, [], FramePipeline(causal, offline.frame_settings(NODE)))
+    chain = max(chains, key=len)
+    assert len(chain) > n_ahead + 1
+    kept = inputs_ahead(causal, chain)
+    assert all(x is it.input for x, it in zip(kept, chain, strict=True))
+    for k, inp in enumerate(inputs_ahead(ahead, chain)):
+        nxt = chain[k + 1:k + 1 + n_ahead]
+        assert inp.ahead is not None and inp.ahead.confidence is not None
+        assert inp.ahead.stamps_ns.tolist() == [it.stamp_ns for it in nxt]
+        points = np.array([it.input.points for it in nxt]).reshape(-1, 12, 2)
+        np.testing.assert_array_equal(inp.ahead.points, points)
+        np.testing.assert_array_equal(inp.ahead.confidence,
+                                      np.array([it.input.confidence for it in nxt]).reshape(-1, 12))
+        np.testing.assert_array_equal(inp.points, chain[k].input.points)
+    fits = {}
+    for name, lifter in (("ahead", ahead), ("causal", causal)):
+        _, frames = offline.lift_bag(bag, tmp_path / f"{name}.mcap", lifter, LiftSettings(max_messages=30),
+                                     progress=False)
+        fits[name] = {(f.stamp_ns, f.track_id): f.joints_m for f in frames}
+    assert fits["ahead"].keys() == fits["causal"].keys()
+    moved = [np.abs(fits["ahead"][k] - fits["causal"][k]).max() for k in fits["ahead"]]
+    assert max(moved) > 1e-3
