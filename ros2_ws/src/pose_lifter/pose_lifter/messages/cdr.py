@@ -160,8 +160,8 @@ def check_definitions(store: Any) -> None:
         got = str(store.hash_rihs01(name))
         if got != expected:
             raise RuntimeError(f"pose_lifter.messages.cdr encodes {name} as {expected}, the typestore has "
-                               f"{got}: "
-                               "update pose_lifter/messages/cdr.py (tests/messages/test_cdr.py shows the difference)")
+                               f"{got}: update pose_lifter/messages/cdr.py "
+                               "(tests/messages/test_cdr.py shows the difference)")
 
 
 @dataclass(frozen=True)
