@@ -6,7 +6,7 @@ on subject 01's playground trials only). Prints P-MPJPE (mm, similarity-aligned)
 flat floor (2D with zero depth), the mean-pose floor and the lifter with 1, 10 and 30 starts.
 
     .venv/bin/python tools/core_accuracy.py [--frames-per-trial 3] [--data ../shared/data/cmu]
-        [--starts 1,10,30] [--alpha-solvers riemannian,newton,admm] [--set NAME=VALUE ...]
+        [--starts 1,10,30] [--set NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -28,8 +28,6 @@ def main() -> None:
     ap.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu)")
     ap.add_argument("--frames-per-trial", type=int, default=3)
     ap.add_argument("--starts", default="1,10,30")
-    ap.add_argument("--alpha-solvers", default="riemannian",
-                    help="alpha_solver values to compare, comma-separated (riemannian, newton, admm)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a LifterOptions field (Python literal), e.g. --set eta_growth=1.1")
     args = ap.parse_args()
@@ -58,19 +56,16 @@ def main() -> None:
     print(f"{'flat floor (2D, zero depth)':<28} {np.mean(flat):10.1f} {np.median(flat):8.1f} {'':>8}")
     print(f"{'mean-pose floor':<28} {np.mean(meanp):10.1f} {np.median(meanp):8.1f} {'':>8}")
     with threadpool_limits(1):
-        for solver in args.alpha_solvers.split(","):
-            for n in (int(s) for s in args.starts.split(",")):
-                lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=n, alpha_solver=solver)
-                                .replace(**overrides))
-                lifter.warm_up()  # compile / load the kernels outside the timing
-                t0 = time.perf_counter()
-                results = [lifter.lift(x) for _, _, x in cases]
-                ms = 1000.0 * (time.perf_counter() - t0) / len(cases)
-                errs = [c[1] * float(p_mpjpe(r.pose, c[0])) for r, c in zip(results, cases, strict=True)]
-                default = solver == LifterOptions().alpha_solver
-                name = f"full method, {n} starts" + ("" if default else f" ({solver})")
-                print(f"{name:<28} {np.mean(errs):10.1f} {np.median(errs):8.1f} {ms:8.0f}"
-                      f"   objective mean {np.mean([r.objective for r in results]):.4f}")
+        for n in (int(s) for s in args.starts.split(",")):
+            lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=n).replace(**overrides))
+            lifter.warm_up()  # compile / load the kernels outside the timing
+            t0 = time.perf_counter()
+            results = [lifter.lift(x) for _, _, x in cases]
+            ms = 1000.0 * (time.perf_counter() - t0) / len(cases)
+            errs = [c[1] * float(p_mpjpe(r.pose, c[0])) for r, c in zip(results, cases, strict=True)]
+            name = f"full method, {n} starts"
+            print(f"{name:<28} {np.mean(errs):10.1f} {np.median(errs):8.1f} {ms:8.0f}"
+                  f"   objective mean {np.mean([r.objective for r in results]):.4f}")
 
 
 if __name__ == "__main__":

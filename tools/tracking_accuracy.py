@@ -9,7 +9,7 @@ set, the mean P-MPJPE (mm, similarity-aligned per frame) over all frames, the me
 objective and the time per frame. Deterministic.
 
     .venv/bin/python tools/tracking_accuracy.py [--frames 60] [--step 4] [--data ../shared/data/cmu]
-        [--compare "alpha_solver='newton'" ...]
+        [--compare "pose_max_iter=20" ...]
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=60, help="frames per trial (after --step)")
     ap.add_argument("--step", type=int, default=4, help="keep every step-th mocap frame (120 Hz -> 30 Hz)")
     ap.add_argument("--compare", action="append", default=[],
-                    help="an option set to compare with the defaults, e.g. \"alpha_solver='newton'\"")
+                    help="an option set to compare with the defaults, e.g. \"pose_max_iter=20\"")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     trials = list(dict.fromkeys(t.trial for t in read_manifest(args.data) if t.paper_split == "test"))

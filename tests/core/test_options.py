@@ -87,8 +87,7 @@ def test_the_tolerances_are_open_intervals() -> None:
 def test_choices_are_the_literal_types_and_nothing_else_passes() -> None:
     hints = typing.get_type_hints(LifterOptions)
     literal = {n for n, h in hints.items() if typing.get_origin(h) is typing.Literal}
-    assert literal == {"mode", "alpha_solver", "alpha_step", "camera_solver", "pose_solver",
-                       "limb_proportions"}
+    assert literal == {"mode", "camera_solver", "pose_solver", "limb_proportions"}
     for name in literal:
         meta = OPTION_META[name]
         assert meta.choices == typing.get_args(hints[name]), name
@@ -116,8 +115,8 @@ def test_bools_and_paths() -> None:
 
 
 def test_experiment_options_stand_apart_from_the_user_options() -> None:
-    for name in ("warm_duals", "alpha_step", "camera_solver", "pose_solver", "newton_tol", "inner_max_iter",
-                 "inner_tol", "eta", "delta", "tau", "eta_growth"):
+    for name in ("camera_solver", "pose_solver", "newton_tol", "inner_max_iter", "inner_tol", "eta", "delta",
+                 "tau", "eta_growth"):
         assert name in EXPERIMENT_OPTIONS, name
     assert "theta" not in EXPERIMENT_OPTIONS and "mode" not in EXPERIMENT_OPTIONS
     # every field is a user option (a node parameter) or an experiment option, the users' first

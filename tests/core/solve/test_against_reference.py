@@ -16,15 +16,14 @@ from numpy.typing import NDArray
 from pose_lifter.core import reference as ref
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.bases import PoseBases, learn_pca_bases
-from pose_lifter.core.model.pose_model import PoseModel
+from pose_lifter.core.model.pose_model import LiftedConstraints, PoseModel, _lifted_omegas
 from pose_lifter.core.model.skeleton import limb_selectors
 from pose_lifter.core.options import VARIANTS, LifterOptions, Variant
 from pose_lifter.core.results import Camera
 from pose_lifter.core.solve.alpha.lifted_admm import lifted_alpha_admm, qstep, restore_feasibility
 from pose_lifter.core.solve.alpha.sphere_newton import riemannian_alpha
-from pose_lifter.core.solve.alpha.sqp import newton_alpha
 from pose_lifter.core.solve.camera import camera_step
-from pose_lifter.core.solve.pose_step import pose_step
+from pose_lifter.core.solve.pose_step import PriorRows, pose_step
 from scipy.spatial.transform import Rotation
 from synthetic_poses import synthetic_poses
 
@@ -124,10 +123,16 @@ def test_camera_step_with_default_options_matches_reference(test_poses: Arr, los
 # ---------------------------------------------------------------------------------- Q-step
 
 
+def _full_lifting(model: PoseModel) -> LiftedConstraints:
+    """The limb constraints in the paper's own lifting ``z = [alpha; 1]`` (``d = k + 1``): the
+    problems of the alpha-step tests below are written in it."""
+    return LiftedConstraints.build(_lifted_omegas(model.components, model.mean, model.limb_sq))
+
+
 @pytest.mark.parametrize("lifting", ["reduced", "full"])
 @pytest.mark.parametrize("delta", [0.5, 1.0, 10.0])
 def test_qstep_matches_reference(model: PoseModel, lifting: str, delta: float) -> None:
-    cons = model.reduced if lifting == "reduced" else model.full
+    cons = model.reduced if lifting == "reduced" else _full_lifting(model)
     rng = np.random.default_rng(7)
     d = cons.dim
     w_mat, p_mat, g_mat = (a + a.T for a in rng.normal(size=(3, d, d)))
@@ -163,7 +168,7 @@ def test_alpha_step_admm_feasible_and_above_sdp_bound(
     bases: PoseBases, model: PoseModel, test_poses: Arr, case: int,
 ) -> None:
     w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
-    cons = model.full
+    cons = _full_lifting(model)
     z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).x)
     _, lower = ref.reference_alpha_sdp(w_mat, cons.omegas)
     assert z[-1] == 1.0
@@ -182,29 +187,13 @@ def test_alpha_step_admm_is_a_local_minimum(bases: PoseBases, model: PoseModel, 
     gaps = []
     for case in range(8):
         w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
-        cons = model.full
+        cons = _full_lifting(model)
         z = restore_feasibility(cons, lifted_alpha_admm(w_mat, cons, z0).x)
         f_fast = float(z @ w_mat @ z)
         _, f_polished = ref.reference_alpha_local(w_mat, cons.omegas, z)
         gaps.append((f_fast - tol.ALPHA_STEP_OBJECTIVE_ABS) / f_polished - 1.0)
     assert sum(g <= tol.ALPHA_STEP_OBJECTIVE_REL for g in gaps) >= ADMM_CASES_WITHIN_TOL, gaps
     assert max(gaps) <= ADMM_MAX_GAP, gaps
-
-
-# newton_alpha took the Lagrangian Hessian where it is indefinite on the tangent space and
-# converged to saddles there (4.858 vs SLSQP 4.351, 5.135 vs 4.343 from the same starts); with
-# the compiled kernel's safeguard (2 W there) it reaches the local minimum
-@pytest.mark.parametrize("case", range(2))
-def test_alpha_step_newton_not_worse_than_local_reference(
-    bases: PoseBases, model: PoseModel, test_poses: Arr, case: int,
-) -> None:
-    w_mat, z0 = _alpha_problem(bases, test_poses[case], case)
-    cons = model.full
-    z = newton_alpha(w_mat, cons, z0).x
-    _, f_local = ref.reference_alpha_local(w_mat, cons.omegas, z0)
-    assert np.max(np.abs(cons.violation(z))) <= tol.FEASIBILITY
-    bound = f_local * (1 + tol.ALPHA_STEP_OBJECTIVE_REL) + tol.ALPHA_STEP_OBJECTIVE_ABS
-    assert float(z @ w_mat @ z) <= bound
 
 
 def _reduced_alpha_problem(model: PoseModel, y: Arr, seed: int) -> tuple[Arr, Arr, Arr]:
@@ -259,20 +248,21 @@ def test_riemannian_limb_coordinates_are_exact(wide_model: PoseModel) -> None:
     assert np.allclose(rad**2, model.limb_sq, rtol=1e-14, atol=0)
 
 
-def test_riemannian_falls_back_to_lifted_admm_without_onto_limb_map(
+def test_the_pose_step_takes_the_lifted_admm_without_onto_limb_map(
     bases: PoseBases, model: PoseModel, test_poses: Arr,
 ) -> None:
-    small = bases  # 12 bases: the limb map (24 coordinates) cannot be onto
-    assert model.limb_coordinates is None
+    assert bases.n_bases == 12 and model.limb_coordinates is None  # 24 limb coordinates: not onto
     with pytest.raises(InvalidInputError):
         riemannian_alpha(np.eye(model.sig.size), np.zeros(model.sig.size), model, np.zeros(model.sig.size))
     cam = _camera(0)
     x = cam.project(test_poses[0])
-    opts = LifterOptions(variant="L1WAWS", theta=0.05, alpha_solver="riemannian")
-    a = pose_step(x, cam.projection, cam.translation, np.ones(12), model, np.zeros(small.n_bases), opts)
-    b = pose_step(x, cam.projection, cam.translation, np.ones(12), model, np.zeros(small.n_bases),
-                  opts.replace(alpha_solver="admm"))
-    assert np.array_equal(a.alpha, b.alpha) and a.objective == b.objective
+    opts = LifterOptions(variant="L1WAWS", theta=0.05)
+    res = pose_step(x, cam.projection, cam.translation, np.ones(12), model, np.zeros(bases.n_bases), opts)
+    assert model.limb_violation(res.alpha) <= tol.POSE_STEP_LIMB_VIOLATION
+    assert res.alpha_iter > res.n_iter  # the paper's inner ADM: several iterations per alpha-step
+    with pytest.raises(InvalidInputError, match="onto"):  # the hybrid's prior rows need the kernel
+        pose_step(x, cam.projection, cam.translation, np.ones(12), model, np.zeros(bases.n_bases), opts,
+                  prior=PriorRows(np.zeros((12, 3)), np.ones((12, 2))))
 
 
 # ------------------------------------------------------------------------------- pose step
@@ -359,17 +349,16 @@ _BEST_LOCAL: dict[tuple[str, int], float] = {}
 def _best_local_reference(
     bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, case: int,
 ) -> float:
-    """Lowest objective SLSQP reaches from: the mean pose, both fast solvers' results and a
-    random start (the same set whichever fast solver is being judged)."""
+    """Lowest objective SLSQP reaches from: the mean pose, the pose step's result and a random
+    start."""
     if (name, case) not in _BEST_LOCAL:
         var = VARIANTS[name]
         x, cam, w = _pose_problem(test_poses, case)
         rng = np.random.default_rng(300 + case)
         starts = [np.zeros(bases.n_bases), rng.normal(size=bases.n_bases)]
-        for solver in ("admm", "newton"):
-            opts = LifterOptions(variant=name, theta=0.05, alpha_solver=solver)  # type: ignore[arg-type]
-            starts.append(pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases),
-                                    opts).alpha)
+        opts = LifterOptions(variant=name, theta=0.05)  # type: ignore[arg-type]
+        starts.append(pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases),
+                                opts).alpha)
         _BEST_LOCAL[name, case] = _best_local_value(model, x, cam, w, var, starts)
     return _BEST_LOCAL[name, case]
 
@@ -387,27 +376,19 @@ def _best_local_value(model: PoseModel, x: Arr, cam: Camera, w: Arr, var: Varian
     return min(values)
 
 
-_NEWTON_POOR_MINIMA = pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "known limitation (docs/method.md): with alpha_solver='newton' the pose step ends at local "
-    "minima far above the best local reference (objective ratio, 6 problems, a44827f..2ac609f: "
-    "median 1.5-1.8 / max 3.3 for L1WAWS, median 2.0-3.2 / max 6.6-7.3 for L2WAWS); the lifted "
-    "ADM: median 1.00-1.05 / max 1.10-1.27"))
-
-
 ADMM_POSE_MAX_RATIO = tol.ADMM_POSE_MAX_RATIO
 
 
 @pytest.mark.parametrize("name", ["L1WAWS", "L2WAWS"])
-@pytest.mark.parametrize("solver", ["admm", pytest.param("newton", marks=_NEWTON_POOR_MINIMA)])
 def test_limb_pose_step_close_to_best_local_reference(
-    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str, solver: str,
+    bases: PoseBases, model: PoseModel, test_poses: Arr, name: str,
 ) -> None:
     # Nonconvex, so judged over 4 problems: the ratio of the fast objective to the best
     # local minimum found by SLSQP from several starts, median and worst case.
     ratios = []
     for case in range(4):
         x, cam, w = _pose_problem(test_poses, case)
-        opts = LifterOptions(variant=name, theta=0.05, alpha_solver=solver)  # type: ignore[arg-type]
+        opts = LifterOptions(variant=name, theta=0.05)  # type: ignore[arg-type]
         res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases), opts)
         ratios.append(res.objective / _best_local_reference(bases, model, test_poses, name, case))
     assert np.median(ratios) <= tol.NONCONVEX_MEDIAN_RATIO, ratios
@@ -418,21 +399,19 @@ def test_limb_pose_step_close_to_best_local_reference(
 def test_riemannian_pose_step_close_to_best_local_reference(
     wide_model: PoseModel, test_poses: Arr, name: str,
 ) -> None:
-    # The default alpha-solver (its limb map needs the 30-basis model) judged like the others:
+    # The Riemannian alpha-step (its limb map needs the 30-basis model) judged like the lifted ADM:
     # objective / best local minimum SLSQP reaches from the mean pose, a random start and the
-    # Riemannian and Newton pose steps' results, over 4 problems.
+    # pose step's result, over 4 problems.
     var = VARIANTS[name]
     model = wide_model
     k = model.n_bases
     ratios = []
     for case in range(4):
         x, cam, w = _pose_problem(test_poses, case)
-        opts = LifterOptions(variant=name, theta=0.05, alpha_solver="riemannian")
+        opts = LifterOptions(variant=name, theta=0.05)
         res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(k), opts)
         assert model.limb_violation(res.alpha) <= tol.POSE_STEP_LIMB_VIOLATION
-        newton = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(k),
-                           opts.replace(alpha_solver="newton"))
-        starts = [np.zeros(k), np.random.default_rng(300 + case).normal(size=k), res.alpha, newton.alpha]
+        starts = [np.zeros(k), np.random.default_rng(300 + case).normal(size=k), res.alpha]
         ratios.append(res.objective / _best_local_value(model, x, cam, w, var, starts))
     assert np.median(ratios) <= tol.NONCONVEX_MEDIAN_RATIO, ratios
     assert np.max(ratios) <= tol.NONCONVEX_MAX_RATIO, ratios

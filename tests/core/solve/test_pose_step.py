@@ -9,7 +9,7 @@ import pytest
 import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.model.bases import PoseBases, default_bases_path
+from pose_lifter.core.model.bases import PoseBases, default_bases_path, learn_pca_bases
 from pose_lifter.core.model.pose_model import PoseModel
 from pose_lifter.core.numeric.records import StepSettings, settings_record
 from pose_lifter.core.options import LifterOptions
@@ -20,8 +20,9 @@ from pose_lifter.core.solve.alpha.sphere_newton import (
     _sphere_setup,
 )
 from pose_lifter.core.solve.pose_kernel import _pose_rows
-from pose_lifter.core.solve.pose_step import PriorRows, _adm, pose_step, prior_operands
+from pose_lifter.core.solve.pose_step import PriorRows, _adm, _alpha_step, pose_step, prior_operands
 from scipy.spatial.transform import Rotation
+from synthetic_poses import synthetic_poses
 
 Arr = NDArray[np.float64]
 
@@ -108,7 +109,7 @@ def _loop(x: Arr, m0: Arr, t: Arr, w: Arr, model: PoseModel, alpha0: Arr, opts: 
 def test_compiled_pose_step_is_the_python_loop(model: PoseModel, seed: int, with_prior: bool) -> None:
     x, m0, t, w, pose = _problem(model, seed)
     prior = _prior_rows(model, seed, pose, m0, t) if with_prior else None
-    opts = LifterOptions(theta=0.1, pose_tol=1e-12, alpha_solver="riemannian")
+    opts = LifterOptions(theta=0.1, pose_tol=1e-12)
     if prior is not None:
         # the loop checks feasibility against its model's limb lengths: the person's, here; the
         # compiled step takes them from the prior rows or the model alike
@@ -147,20 +148,26 @@ def test_compiled_pose_step_is_the_python_loop(model: PoseModel, seed: int, with
     assert loop.objective == pytest.approx(compiled.objective, rel=tol.FUSED_VS_LOOP_REL)
     assert np.abs(loop.pose - compiled.pose).max() <= tol.FUSED_VS_LOOP_REL * np.abs(compiled.pose).max()
     assert abs(loop.limb_violation - compiled.limb_violation) <= tol.FUSED_VS_LOOP_REL
-    # the loop is not the kernel by accident: a different alpha-solver gives another answer
-    other = pose_step(x, m0, t, w, model, np.zeros(model.n_bases), opts.replace(alpha_solver="newton"),
-                      max_iter=15)
+    # the loop is not the kernel by accident: the paper's inner ADM as its alpha-step ends elsewhere
     if not with_prior:
+        xp, pw, _ = prior_operands(model, None)
+        c, wts, mus = _pose_rows(x, m0, t, w, model.kernel_arrays, xp, pw)
+        other = _adm(c, wts, mus, model, opts.method, opts.theta, np.zeros(model.n_bases),
+                     _alpha_step(model, opts.method, mus, opts, None), 15, opts, None)
         assert abs(other.objective - compiled.objective) > 1e-6 * compiled.objective
 
 
 def test_every_solver_result_reports_convergence_alike(model: PoseModel) -> None:
     x, m0, t, w, _ = _problem(model, 7)
-    for solver in ("riemannian", "newton", "admm"):
-        opts = LifterOptions(pose_tol=1e-5, alpha_solver=solver)  # type: ignore[arg-type]
-        res = pose_step(x, m0, t, w, model, np.zeros(model.n_bases), opts, max_iter=200)
+    # the Riemannian step on the shipped bases, the paper's inner ADM on 12 PCA bases (no onto limb
+    # map), the linear solve without limbs
+    small = PoseModel.build(learn_pca_bases(synthetic_poses(300, seed=1)[0], n_bases=12, n_starts=3, seed=0),
+                            np.sqrt(model.limb_sq))
+    for m, opts in ((model, LifterOptions(pose_tol=1e-5)), (small, LifterOptions(pose_tol=1e-5)),
+                    (model, LifterOptions(pose_tol=1e-5, variant="L1NAWS"))):
+        res = pose_step(x, m0, t, w, m, np.zeros(m.n_bases), opts, max_iter=200)
         assert isinstance(res, SolveInfo) and res.n_iter <= 200 and res.alpha_iter >= res.n_iter
-        assert res.converged == (res.n_iter < 200), solver
+        assert res.converged == (res.n_iter < 200), (m.n_bases, opts.variant)
 
 
 def test_lift_result_carries_the_alternations(model: PoseModel) -> None:

@@ -113,9 +113,10 @@ def test_compiled_run_is_the_python_loop(mode: str, bag: str) -> None:
 
 def test_the_other_solvers_run_the_python_loop() -> None:
     lifter = Lifter(None, LifterOptions())
-    assert lifter.runs.compiled
-    for opts in (LifterOptions(warm_duals=True), LifterOptions(mode="paper", alpha_solver="newton"),
-                 LifterOptions(mode="paper", alpha_step="full")):
+    assert lifter.runs.compiled and Runs(lifter.model, LifterOptions(mode="paper")).compiled
+    paper = LifterOptions(mode="paper")
+    for opts in (paper.replace(variant="L1NAWS"), paper.replace(camera_solver="cvxpy"),
+                 paper.replace(pose_solver="cvxpy")):
         assert not Runs(lifter.model, opts).compiled
 
 

@@ -28,8 +28,6 @@ __all__ = [
     "NODE_OPTIONS",
     "OPTION_META",
     "VARIANTS",
-    "AlphaSolver",
-    "AlphaStep",
     "ExperimentOptions",
     "LifterOptions",
     "LimbProportions",
@@ -85,8 +83,6 @@ def get_variant(name: str) -> Variant:
 
 
 Mode = Literal["hybrid", "paper", "learned"]
-AlphaSolver = Literal["riemannian", "newton", "admm"]
-AlphaStep = Literal["reduced", "full"]
 SubproblemSolver = Literal["admm", "cvxpy"]
 LimbProportions = Literal["bases", "anthropometric"]
 
@@ -220,11 +216,9 @@ class UserOptions(_Validated):
     limb_proportions: LimbProportions = field(default="bases", metadata=_meta(
         "Limb-length targets: 'bases' (training mean) or 'anthropometric'.",
         choices=get_args(LimbProportions)))
-    alpha_solver: AlphaSolver = field(default="riemannian", metadata=_meta(
-        "Alpha-step solver: 'riemannian' (Newton on the limb spheres), 'newton' (SQP) or 'admm' "
-        "(the paper's lifted inner ADM).", choices=get_args(AlphaSolver)))
     alpha_prox: float = field(default=1.0, metadata=_meta(
-        "Proximal weight of the 'riemannian' alpha-step (0 = none).", 0.0, _WEIGHT))
+        "Proximal weight of the alpha-step (Riemannian Newton on the limb spheres; 0 = none).", 0.0,
+        _WEIGHT))
     mode: Mode = field(default="hybrid", metadata=_meta(
         "'hybrid' (the learned prior inside the paper's robust fit), 'paper' (the paper's method "
         "alone) or 'learned' (the prior alone).", choices=get_args(Mode)))
@@ -303,17 +297,16 @@ class UserOptions(_Validated):
 
 @dataclass(frozen=True)
 class ExperimentOptions(_Validated):
-    """What an experiment sets: the ADM penalties (``eta``, ``eta_growth``, ``delta``, ``tau``) and
-    inner tolerances, the paper's coefficient-space lifting (``alpha_step="full"``, exactly
-    equivalent and slower), the cvxpy reference solvers and carried ADM multipliers
-    (``warm_duals``). For experiments, tests and benchmarks; not node parameters
-    (:data:`EXPERIMENT_OPTIONS`).
+    """What an experiment sets: the ADM penalties (``eta``, ``eta_growth``, ``delta``, ``tau``),
+    the inner tolerances and the cvxpy reference solvers. For experiments, tests and benchmarks;
+    not node parameters (:data:`EXPERIMENT_OPTIONS`).
     """
 
     inner_max_iter: int = field(default=60, metadata=_meta(
-        "Iteration cap of the inner alpha-step ADM (alpha_solver 'admm').", 1, _ITER))
+        "Iteration cap of the paper's inner alpha-step ADM (bases whose limb map is not onto).", 1,
+        _ITER))
     inner_tol: float = field(default=1e-6, metadata=_meta(
-        "Tolerance of the inner alpha-step ADM (alpha_solver 'admm').", 0.0, 1.0, open_low=True,
+        "Tolerance of the paper's inner alpha-step ADM.", 0.0, 1.0, open_low=True,
         open_high=True))
     eta: float = field(default=0.3, metadata=_meta(
         "Initial penalty of the pose ADM.", 1e-6, 1e6))
@@ -323,19 +316,14 @@ class ExperimentOptions(_Validated):
         "Penalty of the inner alpha-step ADM.", 1e-6, 1e6))
     tau: float = field(default=10.0, metadata=_meta(
         "Penalty of the camera ADM (constant).", 1e-6, 1e6))
-    alpha_step: AlphaStep = field(default="reduced", metadata=_meta(
-        "Alpha-step lifting: 'reduced' (36-dim pose space, fast) or 'full' (the paper's "
-        "(k+1)-dim coefficient space, exactly equivalent).", choices=get_args(AlphaStep)))
     camera_solver: SubproblemSolver = field(default="admm", metadata=_meta(
         "Camera step: 'admm' (closed-form ADM) or 'cvxpy' (the reference solver).",
         choices=get_args(SubproblemSolver)))
     pose_solver: SubproblemSolver = field(default="admm", metadata=_meta(
         "Pose step: 'admm' (closed-form ADM) or 'cvxpy' (the reference solver).",
         choices=get_args(SubproblemSolver)))
-    warm_duals: bool = field(default=False, metadata=_meta(
-        "Carry the camera and pose ADM multipliers from one alternation to the next."))
     newton_tol: float = field(default=1e-9, metadata=_meta(
-        "Relative KKT tolerance of each Newton alpha-step inside the pose ADM.", 0.0, 1.0,
+        "Relative tolerance of each Riemannian Newton alpha-step inside the pose ADM.", 0.0, 1.0,
         open_low=True, open_high=True))
 
 

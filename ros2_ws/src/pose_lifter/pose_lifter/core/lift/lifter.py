@@ -175,10 +175,9 @@ class Lifter:
         if o.mode != "paper":
             # the priors are loaded (and validated) now, not on the first frame
             self._prior_fit = PriorFit(o, self.prior, self.temporal_prior, self._model, self._runs)
-            if o.mode == "hybrid" and (o.alpha_solver != "riemannian" or not o.method.limbs
-                                       or self._model.limb_coordinates is None):
-                raise OptionsError("mode 'hybrid' needs alpha_solver='riemannian', a variant with limb "
-                                   "constraints and bases with >= 24 independent directions")
+            if o.mode == "hybrid" and (not o.method.limbs or self._model.limb_coordinates is None):
+                raise OptionsError("mode 'hybrid' needs a variant with limb constraints and bases with "
+                                   ">= 24 independent directions")
 
     @property
     def prior_fit(self) -> PriorFit | None:

@@ -58,8 +58,8 @@ _EYE3 = np.eye(3)
 
 @dataclass(frozen=True)
 class Run:
-    """A run of alternations from one start: its best alternation's steps and objective, the ADM
-    multipliers it ended with (``options.warm_duals``) and its alternations' history."""
+    """A run of alternations from one start: its best alternation's steps and objective and its
+    alternations' history."""
 
     pose: PoseResult
     camera: CameraResult
@@ -119,12 +119,11 @@ class Runs:
         self.model, self.options, self.qstep_fn = model, options, qstep_fn
         o = options
         #: whether a run is the compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`): both steps'
-        #: ADMs, the Riemannian alpha-step (on the reduced lifting with an onto limb map) and no
-        #: multipliers carried between steps; otherwise the Python loop of :meth:`run` (the tests
-        #: set it False to run the loop on the kernel's problems as its reference)
+        #: ADMs and the Riemannian alpha-step (limbs on, an onto limb map); otherwise the Python
+        #: loop of :meth:`run_steps` (the cvxpy references, a variant without limbs, small bases;
+        #: the tests set it False to run the loop on the kernel's problems as its reference)
         self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
-                         and o.alpha_solver == "riemannian" and o.method.limbs and o.alpha_step != "full"
-                         and model.limb_coordinates is not None and not o.warm_duals)
+                         and o.method.limbs and model.limb_coordinates is not None)
         #: the steps' settings as the kernel takes them (made on the first compiled run)
         self._settings: StepSettings | None = None
         #: threads over which a round of runs is split (:func:`pose_lifter.core.solve.run_kernel.run_calls`)
@@ -154,10 +153,9 @@ class Runs:
         return cx, cw, bool(doubled)
 
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
-                init: Camera | None, last: CameraResult | None = None) -> CameraResult:
+                init: Camera | None) -> CameraResult:
         """One camera step of a run on its :meth:`camera_data` for ``pose`` (12, 3) (stacked twice
-        with a prior term), from ``init`` (None: the step's own least-squares start), with the
-        previous step's multipliers ``last.duals`` when ``options.warm_duals``."""
+        with a prior term), from ``init`` (None: the step's own least-squares start)."""
         o = self.options
         xn, w, doubled = data
         if doubled:
@@ -168,13 +166,12 @@ class Runs:
             cam, obj = reference_camera(xn, pose, w, o.method.loss,
                                         rotation_init=None if init is None else init.rotation)
             return CameraResult(objective=float(obj), n_iter=1, converged=True, camera=cam)
-        duals = last.duals if last is not None and o.warm_duals else None
         # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
-        return camera_step_trusted(xn, pose, w, o, init, duals)
+        return camera_step_trusted(xn, pose, w, o, init)
 
     def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
-              alpha0: NDArray[np.float64], last: PoseResult | None = None,
-              max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult:
+              alpha0: NDArray[np.float64], max_iter: int | None = None, prior: PriorRows | None = None
+              ) -> PoseResult:
         """One pose step of a run for the camera ``cam`` on the normalised 2D ``xn`` (12, 2) and
         weights ``w`` (12,), from ``alpha0`` (k,); ``max_iter`` None: the mode's cap
         (``pose_max_iter``, or ``hybrid_pose_max_iter`` with a prior term)."""
@@ -182,8 +179,7 @@ class Runs:
         if max_iter is None:
             max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
         return pose_step(xn, cam.projection, cam.translation, w, self.model, alpha0, o, max_iter=max_iter,
-                         prior=prior, duals=last.duals if last is not None and o.warm_duals else None,
-                         qstep_fn=self.qstep_fn)
+                         prior=prior, qstep_fn=self.qstep_fn)
 
     def run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
             cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
@@ -195,8 +191,7 @@ class Runs:
                   cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
                   pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Steps[Run]:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
-        continue a previous run ``start``. With ``options.warm_duals`` the ADM multipliers of both
-        steps are carried from one alternation to the next. The run keeps its lowest-objective
+        continue a previous run ``start``. The run keeps its lowest-objective
         alternation (the hybrid objective adds the prior's depth rows to the camera step's).
 
         A solve (:mod:`pose_lifter.core.lift.batch`): the compiled run is yielded as one
@@ -213,22 +208,21 @@ class Runs:
                     raise out
             assert isinstance(out, RunOut)
             return self._compiled_run(out, start)
-        last_pose: PoseResult | None
         if start is not None:
             alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
-            it0, last_pose, history = start.n_iter, start.pose, list(start.history)
+            it0, history = start.n_iter, list(start.history)
         else:
             alpha = alpha0
             cam = self.camera(data, self.model.pose(alpha), cam0)
-            best, prev, it0, last_pose, history = None, np.inf, 0, None, []
+            best, prev, it0, history = None, np.inf, 0, []
         converged = False
         it = it0
         th = o.theta if o.method.sparsity else 0.0
         xp, pw, _ = prior_operands(self.model, prior)
         for it in range(it0 + 1, n_alt + 1):
-            pres = self.pose(xn, cam.camera, w, alpha, last_pose, pose_max_iter, prior)
-            alpha, last_pose = pres.alpha, pres
-            cam = self.camera(data, pres.pose, cam.camera, cam)
+            pres = self.pose(xn, cam.camera, w, alpha, pose_max_iter, prior)
+            alpha = pres.alpha
+            cam = self.camera(data, pres.pose, cam.camera)
             obj = _run_objective(cam.objective, alpha, th, np.ascontiguousarray(pres.pose).reshape(-1),
                                  np.ascontiguousarray(cam.camera.projection), xp, pw)
             history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),

@@ -90,9 +90,6 @@ class PoseModel:
         Thin SVD of the components.
     reduced : LiftedConstraints
         Constraints in the reduced lifting (``d = r + 1``, coordinates ``s = V^T alpha``).
-    full : LiftedConstraints
-        Constraints in the paper's lifting (``d = k + 1``): a cached property built on first
-        use (~0.25 s for 200 bases; only ``alpha_step="full"`` needs it).
     limb_cu, limb_cmu, limb_hess : ndarrays, shapes (8, 3, r), (8, 3), (8, r, r)
         ``C_i U S``, ``C_i mu`` and ``2 (C_i U S)^T (C_i U S)``: the limb constraints in the
         reduced coordinates evaluated in joint space (used by the Newton alpha-solver).
@@ -145,8 +142,7 @@ class PoseModel:
 
     @staticmethod
     def build(bases: PoseBases, limb_proportions: NDArray[np.float64]) -> PoseModel:
-        """Precompute the SVD and the reduced lifting's constraint data (the paper's lifting,
-        :attr:`full`, is built on first use).
+        """Precompute the SVD and the reduced lifting's constraint data.
 
         Parameters
         ----------
@@ -173,11 +169,6 @@ class PoseModel:
             limb_cmu=np.einsum("iak,k->ia", c, mu),
             limb_hess=2.0 * np.einsum("iar,ias->irs", cu, cu),
         )
-
-    @functools.cached_property
-    def full(self) -> LiftedConstraints:
-        """Constraints in the paper's lifting (``d = k + 1``), built on first use."""
-        return LiftedConstraints.build(_lifted_omegas(self.components, self.mean, self.limb_sq))
 
     def pose(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(mu + B alpha)`` as (12, 3)."""

@@ -141,7 +141,7 @@ def camera_step(
         scaled-orthographic set.
     duals : Duals, optional
         Warm start of the scaled multipliers ``(U1 (n, 2), U2 (2, 3))``, e.g. the previous camera
-        step's of the same solve (``LifterOptions.warm_duals``; default zeros).
+        step's of the same solve (default zeros).
 
     Returns
     -------

@@ -16,34 +16,32 @@ ADM of the appendix (scaled form, penalty ``eta``), with ``gamma = c - A alpha``
              with d1 = c - gamma + u1, d2 = beta - u2
     u1 <- u1 + c - A alpha - gamma;   u2 <- u2 + alpha - beta
 
-The alpha-step is the paper's rank-1 lifted problem ``min z^T W z  s.t.  z^T Omega_i z = 0``
-with ``z = [.; 1]``, solved by the inner ADM (Q-step in closed form by projection onto the
-affine set ``{tr(Omega_i Q) = 0, Q[-1,-1] = 1}``; P-step = the paper's lemma, top eigenpair).
-Two exactly equivalent liftings (``alpha_step``):
+The alpha-step is solved in reduced coordinates: with the thin SVD ``B = U S V^T`` (rank
+``r <= 33`` for centred poses), any alpha splits into ``V s`` (``s = V^T alpha``) plus a part in
+the null space of ``B``; the latter only enters ``||alpha - d2||^2`` and is set to its optimum
+``(I - V V^T) d2`` in closed form, leaving ``min ||M U S s - d1||^2 + ||s - V^T d2||^2`` s.t.
+``||C_i (mu + U S s)||^2 = L_i`` (the same minimisers as the paper's problem in ``alpha``).
 
-* ``"full"``: ``z = [alpha; 1]`` of size ``k + 1`` (the paper's).
-* ``"reduced"``: with the thin SVD ``B = U S V^T`` (rank ``r <= 33`` for centred poses), any
-  alpha splits into ``V s`` (``s = V^T alpha``) plus a part in the null space of ``B``; the
-  latter only enters ``||alpha - d2||^2`` and is set to its optimum ``(I - V V^T) d2`` in
-  closed form, leaving ``min ||M U S s - d1||^2 + ||s - V^T d2||^2`` s.t.
-  ``||C_i (mu + U S s)||^2 = L_i``, lifted with ``z = [s; 1]`` of size ``r + 1``. Same
-  minimisers, same conditioning as the paper's lifting, a 34x34 instead of a 201x201 matrix.
+Where the bases allow it (the limb vectors ``l = C mu + C U S s`` an onto linear image of ``s``,
+``PoseModel.limb_coordinates``: bases with >= 24 independent directions, as every shipped set),
+the alpha-step is Riemannian Newton on the product of the 8 limb spheres
+(:mod:`.alpha.sphere_newton`): ``s = s0 + Z l + N t`` with ``t`` free, eliminated in closed form,
+and the constraints are ``||l_i|| = sqrt(L_i)``. Inside the ADM it takes one Newton step per
+iteration with the proximal term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM). It is
+the alpha-step because it ends lowest and fastest: docs/method.md measures it against an SQP and
+the paper's inner ADM.
 
-After the inner ADM, a few Gauss-Newton projection steps restore the limb constraints to
-``1e-10`` (the ADM meets them only to its tolerance). ``alpha_solver="newton"`` replaces the
-inner ADM by a direct local solver of the same problem (SQP / Newton on the KKT system), and
-``alpha_solver="riemannian"`` (the default) by Riemannian Newton on the product of the 8 limb
-spheres (:mod:`.alpha.sphere_newton`): in the reduced coordinates the limb vectors ``l = C mu + C U S
-s`` are an onto linear image of ``s`` (``PoseModel.limb_coordinates``), so ``s = s0 + Z l + N t``
-with ``t`` free, eliminated in closed form, and the constraints are
-``||l_i|| = sqrt(L_i)``. Inside the ADM it takes one Newton step per iteration with the proximal
-term ``alpha_prox ||s - s_k||^2`` (an inexact proximal ADM).
+On other bases the alpha-step is the paper's: the rank-1 lifted problem
+``min z^T W z  s.t.  z^T Omega_i z = 0`` with ``z = [s; 1]``, solved by the inner ADM (Q-step in
+closed form by projection onto the affine set ``{tr(Omega_i Q) = 0, Q[-1,-1] = 1}``; P-step =
+the paper's lemma, top eigenpair), then a few Gauss-Newton projection steps that restore the limb
+constraints to ``1e-10`` (the ADM meets them only to its tolerance).
 
-Where: with the Riemannian alpha-step (the default) the whole step is one compiled kernel,
+Where: with the Riemannian alpha-step the whole step is one compiled kernel,
 :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`. The other alpha-steps
-(:class:`.alpha.base.AlphaStep`: :mod:`.alpha.lifted_admm`, :mod:`.alpha.sqp`, and the linear solve
-without limbs; the cvxpy Q-step) run in this module's Python ADM loop (:func:`_adm`), which calls the
-kernel's compiled rows, splitting, dual and penalty updates: each is written once.
+(:class:`.alpha.base.AlphaStep`: the paper's inner ADM of :mod:`.alpha.lifted_admm`, and the
+linear solve without limbs; the cvxpy Q-step) run in this module's Python ADM loop (:func:`_adm`),
+which calls the kernel's compiled rows, splitting, dual and penalty updates: each is written once.
 
 Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
 numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
@@ -71,7 +69,6 @@ from ..results import Duals, PoseResult
 from .alpha.base import AlphaStep, Coordinates, LiftedStep, UnconstrainedStep
 from .alpha.lifted_admm import QStepFn
 from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
-from .alpha.sqp import ReducedSQPStep
 from .pose_kernel import (
     _adm_dual_update,
     _adm_split,
@@ -217,12 +214,9 @@ def pose_step(
         the outer ADM's ``pose_max_iter``, ``pose_tol`` (stop when the relative primal and dual
         residuals are below it), ``eta`` and ``eta_growth`` (the penalty grows by this factor every
         iteration up to :data:`ETA_MAX`, the paper's ``eta_k``, as in LADMAP [liu2013linearized];
-        the scaled multipliers are rescaled with it); the alpha-step's ``alpha_step``,
-        ``alpha_solver`` (``"riemannian"`` needs limbs on, the reduced lifting and an onto limb map,
-        ``model.limb_coordinates``; otherwise the paper's inner ADM, ``"admm"``, is used: on such
-        bases it ends lower than the SQP, ``tools/alpha_solvers.py``),
-        ``alpha_prox``, ``newton_tol``,
-        and the inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
+        the scaled multipliers are rescaled with it); the Riemannian alpha-step's ``alpha_prox``
+        and ``newton_tol`` (with limbs on and an onto limb map, ``model.limb_coordinates``);
+        otherwise the paper's inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
     max_iter : int, optional
         Outer ADM cap instead of ``options.pose_max_iter`` (the hybrid mode's and the screening
         runs' caps).
@@ -259,41 +253,30 @@ def pose_step(
     alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
     if alpha.shape != (k,):
         raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
-    riemannian = (o.alpha_solver == "riemannian" and variant.limbs and o.alpha_step != "full"
-                  and model.limb_coordinates is not None)
+    # the cvxpy reference Q-step (qstep_fn) is a step of the paper's inner ADM
+    riemannian = variant.limbs and model.limb_coordinates is not None and qstep_fn is None
     if prior is not None and not riemannian:
-        raise InvalidInputError("a prior term needs alpha_solver='riemannian' with limbs, the reduced "
-                                "lifting and bases whose limb map is onto (>= 24 basis directions)")
+        raise InvalidInputError("a prior term needs a variant with limbs, bases whose limb map is onto "
+                                "(>= 24 basis directions) and the closed-form Q-step")
     with diverged_as_solver_error("pose step"):
         if riemannian:
             return _riemannian(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
         xp, pw, _ = prior_operands(model, None)
         c, wts, mus = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
                                  np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
-        # "riemannian" where it does not apply (limbs off, the full lifting or a limb map that is not
-        # onto): the paper's inner ADM solves the same problem (the SQP's minima are poorer:
-        # docs/method.md)
-        solver = "admm" if o.alpha_solver == "riemannian" else o.alpha_solver
-        step = _alpha_step(model, variant, m0, mus, o.alpha_step, solver, o, qstep_fn)
+        # limbs off (a linear solve) or a limb map that is not onto: the paper's inner ADM
+        step = _alpha_step(model, variant, mus, o, qstep_fn)
         return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, o, duals)
 
 
-def _alpha_step(model: PoseModel, variant: Variant, m0: NDArray[np.float64], mus: NDArray[np.float64],
-                alpha_step: str, solver: str, o: LifterOptions, qstep_fn: QStepFn | None) -> AlphaStep:
-    """The alpha-step solver of one pose step of the Python loop (see :func:`pose_step`):
-    ``solver`` is ``"newton"`` or ``"admm"``."""
-    if alpha_step == "full":
-        k = model.n_bases
-        a_full = np.einsum("ab,jbk->jak", m0, model.components.reshape(N_JOINTS, 3, k))
-        coords, cons = Coordinates(a_full.reshape(2 * N_JOINTS, k), None), model.full
-    else:
-        if solver == "newton" and variant.limbs:
-            return ReducedSQPStep(model, mus, o.newton_tol)
-        coords, cons = Coordinates(mus, model.v), model.reduced
+def _alpha_step(model: PoseModel, variant: Variant, mus: NDArray[np.float64], o: LifterOptions,
+                qstep_fn: QStepFn | None) -> AlphaStep:
+    """The alpha-step of one pose step of the Python loop (see :func:`pose_step`): a linear solve
+    without limbs, else the paper's inner ADM in the reduced lifting."""
+    coords = Coordinates(mus, model.v)
     if not variant.limbs:
         return UnconstrainedStep(coords)
-    return LiftedStep(coords, cons, "newton" if solver == "newton" else "admm", o.delta, o.inner_max_iter,
-                      o.inner_tol, qstep_fn)
+    return LiftedStep(coords, model.reduced, o.delta, o.inner_max_iter, o.inner_tol, qstep_fn)
 
 
 def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], model: PoseModel,

@@ -14,10 +14,11 @@ run's objective::
 pose, stacked twice then); it keeps the lowest-``F`` alternation and stops when
 ``F_{i-1} - F_i <= alternation_tol * max(|F_{i-1}|, 1e-12)`` (:func:`_alternation_stops`).
 
-Applies with ``camera_solver == pose_solver == "admm"``, the Riemannian alpha-step and
-``warm_duals`` off (every step starts its multipliers at zero; the kernel keeps none); the other
-solvers run in the Python loop of :meth:`~pose_lifter.core.lift.runs.Runs.run_steps`, which calls the same
-objective terms and stopping rule.
+Applies with ``camera_solver == pose_solver == "admm"`` and the Riemannian alpha-step (limbs on,
+bases whose limb map is onto); every step starts its multipliers at zero (the kernel keeps none).
+The cvxpy references, the variants without limbs and smaller bases run in the Python loop of
+:meth:`~pose_lifter.core.lift.runs.Runs.run_steps`, which calls the same objective terms and
+stopping rule.
 """
 
 from __future__ import annotations

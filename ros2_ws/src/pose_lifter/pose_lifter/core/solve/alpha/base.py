@@ -1,17 +1,15 @@
-"""The alpha-step protocol of the pose ADM, the coordinates it is solved in, and the steps that
-need no solver of their own (no limb constraints) or share the lifting (the paper's inner ADM and
-the lifted SQP)."""
+"""The alpha-step protocol of the pose ADM, the coordinates it is solved in, and the steps of its
+Python loop: the linear solve without limb constraints and the paper's inner ADM in the lifting."""
 
 from __future__ import annotations
 
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ...model.pose_model import LiftedConstraints
 from .lifted_admm import QStepFn, lifted_alpha_admm, lifted_quadratic, restore_feasibility
-from .sqp import newton_alpha
 
 
 class AlphaStep(Protocol):
@@ -24,29 +22,26 @@ class AlphaStep(Protocol):
 
 
 class Coordinates:
-    """Where an alpha-step is solved: the paper's coefficients ``alpha`` (``full``, ``A = M B``
-    (m, k)) or the reduced ``s = V^T alpha`` (``A = M U S`` (m, r); the part of ``alpha`` in the
-    null space of ``B`` is set to its optimum in closed form). The step's objective is
-    ``s^T G s - 2 lin^T s + const`` with ``G = A^T A + I``."""
+    """Where an alpha-step is solved: the reduced ``s = V^T alpha`` (``A = M U S`` (m, r), ``V``
+    (k, r); the part of ``alpha`` in the null space of ``B`` is set to its optimum in closed form).
+    The step's objective is ``s^T G s - 2 lin^T s + const`` with ``G = A^T A + I``."""
 
-    def __init__(self, a: NDArray[np.float64], v: NDArray[np.float64] | None) -> None:
+    def __init__(self, a: NDArray[np.float64], v: NDArray[np.float64]) -> None:
         self.a, self.v = a, v
         self.g = a.T @ a + np.eye(a.shape[1])
 
     def quadratic(self, d1: NDArray[np.float64], d2: NDArray[np.float64]
                   ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
         """``(lin, const, V^T d2)`` of the step for ``d1`` (m,), ``d2`` (k,)."""
-        if self.v is None:
-            return self.a.T @ d1 + d2, float(d1 @ d1 + d2 @ d2), d2
         vtd2 = self.v.T @ d2
         return self.a.T @ d1 + vtd2, float(d1 @ d1 + vtd2 @ vtd2), vtd2
 
     def start(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:
-        return alpha if self.v is None else self.v.T @ alpha
+        return np.asarray(self.v.T @ alpha)
 
     def alpha(self, s: NDArray[np.float64], d2: NDArray[np.float64], vtd2: NDArray[np.float64]
               ) -> NDArray[np.float64]:
-        return s if self.v is None else np.asarray(d2 - self.v @ vtd2 + self.v @ s)
+        return np.asarray(d2 - self.v @ vtd2 + self.v @ s)
 
 
 class UnconstrainedStep:
@@ -63,12 +58,11 @@ class UnconstrainedStep:
 
 class LiftedStep:
     """The alpha-step in the rank-1 lifting ``z = [s; 1]``: the paper's inner (Q, P) ADM followed by
-    the Gauss-Newton projection onto the limb constraints (``solver="admm"``), or the SQP on the
-    lifted problem (``"newton"``)."""
+    the Gauss-Newton projection onto the limb constraints."""
 
-    def __init__(self, coords: Coordinates, cons: LiftedConstraints, solver: Literal["admm", "newton"],
-                 delta: float, max_iter: int, tol: float, qstep_fn: QStepFn | None) -> None:
-        self._c, self._cons, self._solver = coords, cons, solver
+    def __init__(self, coords: Coordinates, cons: LiftedConstraints, delta: float, max_iter: int, tol: float,
+                 qstep_fn: QStepFn | None) -> None:
+        self._c, self._cons = coords, cons
         self._delta, self._max_iter, self._tol, self._qstep_fn = delta, max_iter, tol, qstep_fn
 
     def __call__(self, d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
@@ -76,13 +70,8 @@ class LiftedStep:
         lin, const, vtd2 = self._c.quadratic(d1, d2)
         wmat = lifted_quadratic(self._c.g, lin, const)
         z0 = np.append(self._c.start(alpha), 1.0)
-        if self._solver == "newton":
-            res = newton_alpha(wmat, self._cons, z0)
-            z = res.x
-        else:
-            res = lifted_alpha_admm(wmat, self._cons, z0, self._delta, self._max_iter, self._tol,
-                                    self._qstep_fn)
-            z = restore_feasibility(self._cons, res.x)
+        res = lifted_alpha_admm(wmat, self._cons, z0, self._delta, self._max_iter, self._tol, self._qstep_fn)
+        z = restore_feasibility(self._cons, res.x)
         return self._c.alpha(z[:-1], d2, vtd2), res.n_iter
 
 

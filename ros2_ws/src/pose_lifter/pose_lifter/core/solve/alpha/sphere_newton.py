@@ -34,7 +34,7 @@ def riemannian_alpha(
     max_iter: int = 100, tol: float = 1e-10,
 ) -> AlphaResult:
     """The reduced alpha-step ``min s^T G s - 2 lin^T s`` s.t. ``||C_i mu + C_i U S s||^2 = L_i``
-    (the problem of :func:`newton_alpha` on ``model.reduced``) by Riemannian Newton in limb
+    (the lifted problem of ``model.reduced``) by Riemannian Newton in limb
     coordinates: the free directions eliminated in closed form (:func:`_sphere_setup`), then
     :func:`_sphere_newton` on the product of the 8 limb spheres from the limb vectors of ``s0``.
     Shapes: gmat (r, r) positive definite, lin (r,), s0 (r,). Returns ``s`` (``x``) with its
