@@ -12,7 +12,7 @@ import pytest
 from pose_lifter.core import Lifter, LifterOptions
 from pose_lifter.core.errors import SolverError
 from pose_lifter.core.lift.batch import Failed, PriorCall, gather, outcomes, solve
-from pose_lifter.core.solve.run_kernel import RunCall, RunOut, _run_kernel, run_calls
+from pose_lifter.core.solve.run_kernel import RunCall, RunOut, RunStatus, _run_kernel, run_calls
 from pose_lifter.core.track.policy import TrackedLift, TrackPolicy
 from synthetic_poses import synthetic_poses
 
@@ -135,7 +135,7 @@ def test_a_run_that_raises_costs_only_its_own_person() -> None:
     assert not isinstance(out[0], Exception) and not isinstance(out[2], Exception)
     assert np.array_equal(out[0].pose, good[0].pose) and np.array_equal(out[2].pose, good[1].pose)
     # the bad run: an error in its place, or a result its solve refuses (a diverged status)
-    assert isinstance(out[1], Exception) or out[1].status != 0
+    assert isinstance(out[1], Exception) or out[1].status != RunStatus.OK
 
 
 def _solve_of(values: list[int], fail_at: int | None = None) -> Generator[list[Any], list[Any], list[Any]]:

@@ -345,14 +345,8 @@ def _typed_options(argv: Sequence[str] | None, args: argparse.Namespace) -> froz
     return frozenset(k for k, v in vars(again).items() if v is not _NOT_TYPED and k != "cmd")
 
 
-def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
-    """The ``pose-lifter`` parser and its commands' parsers (name -> parser)."""
-    parser = argparse.ArgumentParser(
-        prog="pose-lifter", description="Offline commands: learn bases, make bags, lift bags, evaluate, demo."
-    )
-    parser.add_argument("--version", action="version", version=f"pose-lifter {_version()}")
-    sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
-
+def _learn_bases_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter learn-bases`` command's arguments."""
     p = sub.add_parser("learn-bases", help="learn pose bases from the paper's CMU training split")
     p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
                    "$POSE_LIFTER_CMU_DATA)")
@@ -373,6 +367,9 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
     p.add_argument("--out", required=True, help="output .npz")
     p.set_defaults(func=_cmd_learn_bases)
 
+
+def _make_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter make-bag`` command's arguments."""
     p = sub.add_parser("make-bag", help="film mocap trials with a virtual camera into an MCAP bag")
     p.add_argument("trials", nargs="+", help="one trial id per person, e.g. 07_05 02_05")
     p.add_argument("--out", required=True, help="output .mcap")
@@ -395,6 +392,9 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_make_bag)
 
+
+def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter lift`` command's arguments."""
     p = sub.add_parser("lift", help="lift every /keypoints_2d message of a bag, or of a collection of bags")
     p.add_argument("input", nargs="+",
                    help="input bag: a .mcap file or a rosbag2 directory (a folder with metadata.yaml, "
@@ -441,6 +441,9 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
                    "a flag typed on the command line wins over the file")
     p.set_defaults(func=_cmd_lift)
 
+
+def _export_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter export`` command's arguments."""
     p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
     p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
@@ -449,6 +452,9 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_export)
 
+
+def _play_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter play`` command's arguments."""
     p = sub.add_parser("play", help="publish a bag's topics into the live ROS graph at the bag's rate")
     p.add_argument("bag", help="input bag: .mcap file or rosbag2 directory")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
@@ -460,12 +466,18 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
                    "(default 5; 0: do not wait)")
     p.set_defaults(func=_cmd_play)
 
+
+def _evaluate_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter evaluate`` command's arguments."""
     p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
     p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
     p.add_argument("--bases", default=None, help="bases for the mean-pose floor (default: packaged)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_cmd_evaluate)
 
+
+def _demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter demo`` command's arguments."""
     p = sub.add_parser("demo", help="lift a committed bag, print errors, write out/demo.mcap + out/demo.png")
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
@@ -475,6 +487,9 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
                    metavar="SECONDS", help=f"as for lift (default {OFFLINE_SMOOTHING_S})")
     p.set_defaults(func=_cmd_demo)
 
+
+def _experiments_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter experiments`` command's arguments."""
     p = sub.add_parser("experiments", help="the paper's experiments (Sec. 4) on CMU data -> PNG/CSV/markdown")
     p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
                    "$POSE_LIFTER_CMU_DATA)")
@@ -483,6 +498,23 @@ def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argume
     p.add_argument("--processes", type=_POS_INT, default=2, help="worker processes (default 2)")
     p.set_defaults(func=_cmd_experiments)
 
+
+def _build_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    """The ``pose-lifter`` parser and its commands' parsers (name -> parser)."""
+    parser = argparse.ArgumentParser(
+        prog="pose-lifter", description="Offline commands: learn bases, make bags, lift bags, evaluate, demo."
+    )
+    parser.add_argument("--version", action="version", version=f"pose-lifter {_version()}")
+    sub = parser.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    _learn_bases_parser(sub)
+    _make_bag_parser(sub)
+    _lift_parser(sub)
+    _export_parser(sub)
+    _play_parser(sub)
+    _evaluate_parser(sub)
+    _demo_parser(sub)
+    _experiments_parser(sub)
     p = sub.add_parser("warm-up", help="compile the solver kernels into the package's cache (make venv does)")
     p.set_defaults(func=_cmd_warm_up)
     return parser, dict(sub.choices)

@@ -453,6 +453,20 @@ def _sweep_partial(out_dir: Path) -> None:
             shutil.rmtree(d, ignore_errors=True)
 
 
+def _left_to_lift(planned: list[BagJob], manifest: Manifest, digest: str, version: str, overwrite: bool
+                  ) -> list[BagJob]:
+    """The jobs of ``planned`` to lift: all with ``overwrite``, else those the manifest does not
+    have as done with these settings (``digest``) and this package ``version``; the manifest
+    forgets them (saved)."""
+    todo = []
+    for job in planned:
+        if overwrite or not manifest.is_done(job, digest, version):
+            manifest.forget(job.rel)
+            todo.append(job)
+    manifest.save()
+    return todo
+
+
 def lift_collection(
     inputs: Sequence[str],
     out_dir: str | Path,
@@ -505,14 +519,8 @@ def lift_collection(
     version = package_version()
     digest = settings.digest()
     summary = CollectionSummary(out, n_bags=len(planned))
-    todo = []
-    for job in planned:
-        if not overwrite and manifest.is_done(job, digest, version):
-            summary.n_skipped += 1
-        else:
-            manifest.forget(job.rel)
-            todo.append(job)
-    manifest.save()
+    todo = _left_to_lift(planned, manifest, digest, version, overwrite)
+    summary.n_skipped = len(planned) - len(todo)
     errors_path = out / ERRORS_NAME
     bar = tqdm(total=len(todo), desc="bags", unit="bag", disable=not progress, file=sys.stderr)
 

@@ -61,6 +61,7 @@ from pose_lifter.offline.bags import (
 from pose_lifter.offline.chains import (
     ChainWork,
     Done,
+    Item,
     MessageFields,
     chain_groups,
     lift_chains,
@@ -174,28 +175,12 @@ def lift_messages(
         With ``workers > 1``, ``on_frame`` gets :class:`MessageFields` (what the output messages
         carry) in place of whole ``LiftResult`` s: less to send back from the workers.
     """
-    from tqdm import tqdm
-
     if workers < 1:
         raise ValueError("workers must be >= 1")
     summ = summary if summary is not None else LiftSummary()
     frame = frame_settings(settings)
     chains, per_msg, checked = split_chains(keypoint_msgs, camera_infos, FramePipeline(lifter, frame))
-    done: dict[int, Done] = {}  # id(item) -> outcome
-    bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
-    if workers == 1 or len(chains) < 2:
-        for group in chain_groups(chains, 1):
-            # one list of outcomes per chain of the group: the bar advances by that chain's items
-            for outcomes in lift_chains(lifter, [chains[c] for c in group], frame, settings.smoothing_s):
-                for d in outcomes:
-                    done[id(d.item)] = d
-                bar.update(len(outcomes))
-    else:
-        groups = chain_groups(chains, workers)
-        lift_parallel(ChainWork(lifter, frame, settings.smoothing_s, chains, groups, message_fields_only),
-                      workers, done, bar)
-    bar.close()
-
+    done = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, message_fields_only, progress)
     out: list[FrameLift] = []
     for (stamp, msg), row, frame_check in zip(keypoint_msgs, per_msg, checked, strict=True):
         for skip in frame_check.skipped:
@@ -224,6 +209,29 @@ def lift_messages(
         if on_frame is not None:
             on_frame(stamp, msg, lifted, results)
     return out
+
+
+def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings, smoothing_s: float,
+                 workers: int, message_fields_only: bool, progress: bool) -> dict[int, Done]:
+    """Every chain lifted, in this process (``workers`` 1, or a single chain) or in ``workers``
+    forked processes (one group of chains each, :func:`chain_groups`): ``id(item) -> outcome``."""
+    from tqdm import tqdm
+
+    done: dict[int, Done] = {}
+    bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
+    if workers == 1 or len(chains) < 2:
+        for group in chain_groups(chains, 1):
+            # one list of outcomes per chain of the group: the bar advances by that chain's items
+            for outcomes in lift_chains(lifter, [chains[c] for c in group], frame, smoothing_s):
+                for d in outcomes:
+                    done[id(d.item)] = d
+                bar.update(len(outcomes))
+    else:
+        groups = chain_groups(chains, workers)
+        lift_parallel(ChainWork(lifter, frame, smoothing_s, chains, groups, message_fields_only), workers,
+                      done, bar)
+    bar.close()
+    return done
 
 
 def check_lift_inputs(
@@ -338,23 +346,10 @@ def lift_bag(
         raise ValueError("every must be >= 1")
     camera_info_topic = settings.camera_info_topic
     topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, settings.keep, overwrite)
-    from pose_lifter.messages.adapters import TrackIds
-
     cdr.check_definitions(pose_lifter_typestore())
-    types = m.rosbags_types()
-    ids = TrackIds()
-    wanted = [topic] + ([camera_info_topic] if camera_info_topic in topics else [])
-    kp_all: list[tuple[int, Any]] = []
-    infos: list[tuple[int, Any]] = []
-    for x in read_messages(in_path, wanted, decoders={SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}):
-        if x.topic == topic:
-            if max_messages is not None and len(kp_all) >= max_messages * every:
-                break
-            kp_all.append((x.stamp_ns, _as_skeleton2d(x.msg, x.msgtype, types, ids)))
-        else:
-            infos.append((x.stamp_ns, x.msg))
-    if not kp_all:
-        raise InvalidInputError(f"{in_path} has no {topic} messages")
+    info_topic = camera_info_topic if camera_info_topic in topics else None
+    cap = None if max_messages is None else max_messages * every
+    kp_all, infos = _read_keypoints(in_path, topic, info_topic, cap)
     last = kp_all[-1][0] if max_messages is not None else None
     to_lift = kp_all[::every]
     index_of = {id(msg): i * every for i, (_, msg) in enumerate(to_lift)}
@@ -381,6 +376,40 @@ def lift_bag(
     frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_frame=record,
                            summary=summary, workers=workers, message_fields_only=True)
     kept = set(topics) if settings.keep is None else set(settings.keep)
+    _write_lifted(in_path, out_path, topic, kept, last, outputs, hri_outputs, overwrite)
+    return summary, frames
+
+
+def _read_keypoints(in_path: str | Path, topic: str, camera_info_topic: str | None, max_messages: int | None
+                    ) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
+    """A bag's keypoint messages ``(stamp, Skeleton2DArray)`` of ``topic`` (the first
+    ``max_messages``; YOLO detections converted, their ids made track ids) and its camera infos
+    ``(stamp, CameraInfo)`` of ``camera_info_topic`` (None: none), read in one stream."""
+    from pose_lifter.messages.adapters import TrackIds
+
+    types = m.rosbags_types()
+    ids = TrackIds()
+    wanted = [topic] + ([camera_info_topic] if camera_info_topic is not None else [])
+    kp_all: list[tuple[int, Any]] = []
+    infos: list[tuple[int, Any]] = []
+    for x in read_messages(in_path, wanted, decoders={SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}):
+        if x.topic == topic:
+            if max_messages is not None and len(kp_all) >= max_messages:
+                break
+            kp_all.append((x.stamp_ns, _as_skeleton2d(x.msg, x.msgtype, types, ids)))
+        else:
+            infos.append((x.stamp_ns, x.msg))
+    if not kp_all:
+        raise InvalidInputError(f"{in_path} has no {topic} messages")
+    return kp_all, infos
+
+
+def _write_lifted(in_path: str | Path, out_path: str | Path, topic: str, kept: set[str], last: int | None,
+                  outputs: dict[int, tuple[bytes, bytes]],
+                  hri_outputs: dict[int, list[tuple[str, bytes, str]]], overwrite: bool) -> None:
+    """The output bag: the ``kept`` input topics copied byte for byte up to the stamp ``last``
+    (None: all), each keypoint message of ``topic`` followed by its answers (``outputs``,
+    ``hri_outputs``: the keypoint message's index in the bag -> its CDR)."""
     index = 0
     with BagWriter(out_path, overwrite=overwrite) as w:
         for raw in read_raw(in_path, kept | {topic}):
@@ -396,4 +425,3 @@ def lift_bag(
                     for out_topic, data, msgtype in hri_outputs.pop(index, []):
                         w.write_cdr(out_topic, raw.stamp_ns, data, msgtype)
                 index += 1
-    return summary, frames

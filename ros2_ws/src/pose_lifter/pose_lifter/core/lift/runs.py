@@ -33,10 +33,9 @@ from ..solve.alpha.lifted_admm import QStepFn
 from ..solve.camera import camera_step_trusted, initial_camera
 from ..solve.pose_step import PriorRows, pose_step, prior_operands, step_settings
 from ..solve.run_kernel import (
-    CAMERA_DIVERGED,
-    OK,
     RunCall,
     RunOut,
+    RunStatus,
     _alternation_stops,
     _run_objective,
     _stack_camera_data,
@@ -270,9 +269,9 @@ class Runs:
     @staticmethod
     def _compiled_run(out: RunOut, start: Run | None) -> Run:
         """The :class:`Run` of a compiled run's output (its steps' results carry no multipliers)."""
-        if out.status != OK:
+        if out.status != RunStatus.OK:
             raise SolverError("camera step diverged (non-finite camera); check the inputs"
-                              if out.status == CAMERA_DIVERGED
+                              if out.status == RunStatus.CAMERA_DIVERGED
                               else "pose step diverged (non-finite coefficients)")
         history = [] if start is None else list(start.history)
         done = out.done
@@ -284,12 +283,12 @@ class Runs:
         if out.best_it < 0:
             assert start is not None
             return Run(start.pose, start.camera, start.objective, it, converged, tuple(history))
-        pobj, viol, cobj, scale = out.floats.tolist()
-        pit, pconv, ait, cit, cconv = out.ints.tolist()
-        pres = PoseResult(objective=pobj, n_iter=pit, converged=bool(pconv), alpha=out.alpha,
-                          pose=out.pose.reshape(N_JOINTS, 3), limb_violation=viol, alpha_iter=ait)
-        cres = CameraResult(objective=cobj, n_iter=cit, converged=bool(cconv),
-                            camera=Camera(out.rotation, scale, out.translation))
+        pres = PoseResult(objective=out.pose_objective, n_iter=out.pose_iter, converged=out.pose_converged,
+                          alpha=out.alpha, pose=out.pose.reshape(N_JOINTS, 3),
+                          limb_violation=out.limb_violation, alpha_iter=out.alpha_iter)
+        cam = Camera(out.rotation, out.scale, out.translation)
+        cres = CameraResult(objective=out.camera_objective, n_iter=out.camera_iter,
+                            converged=out.camera_converged, camera=cam)
         return Run(pres, cres, float(out.best_obj), it, converged, tuple(history))
 
     def mirrored_alpha(self, run: Run) -> NDArray[np.float64]:

@@ -32,7 +32,7 @@ The ADM iterations run as a kernel on plain float64 arrays, compiled by numba
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -184,12 +184,11 @@ def camera_step_trusted(
         u1 = np.array(duals.data, dtype=np.float64)
         u2 = np.array(duals.coupling, dtype=np.float64)
     with diverged_as_solver_error("camera step"):
-        rot, scale, t, obj, it, converged, ok = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1",
-                                                              int(max_iter), float(tol), float(tau))
-    if not ok:
+        out = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1", int(max_iter), float(tol), float(tau))
+    if not out.finite:
         raise SolverError("camera step diverged (non-finite camera); check the inputs")
-    return CameraResult(objective=obj, n_iter=it, converged=converged, camera=Camera(rot, scale, t),
-                        duals=Duals(u1, u2))
+    return CameraResult(objective=out.objective, n_iter=out.n_iter, converged=out.converged,
+                        camera=Camera(out.rotation, out.scale, out.translation), duals=Duals(u1, u2))
 
 
 def initial_camera(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64]
@@ -208,15 +207,27 @@ def initial_camera(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np
     return m, t
 
 
+class CameraSolve(NamedTuple):
+    """What :func:`_camera_solve` returns."""
+
+    rotation: NDArray[np.float64]  #: (3, 3)
+    scale: float
+    translation: NDArray[np.float64]  #: (2,)
+    objective: float  #: the camera objective at the returned camera
+    n_iter: int  #: ADM iterations
+    converged: bool  #: whether the stopping rule ended the ADM (not the cap)
+    finite: bool  #: rotation, translation and a positive scale all finite
+
+
 @njit
 def _camera_solve(
     x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], m: NDArray[np.float64],
     t: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int,
     tol: float, tau: float,
-) -> tuple[NDArray[np.float64], float, NDArray[np.float64], float, int, bool, bool]:
+) -> CameraSolve:
     """Set-up, ADM iterations (:func:`_camera_kernel`) and finish (:func:`_camera_finish`) of
     the camera step from ``M`` (2, 3), ``t`` (2,); ``u1`` (n, 2), ``u2`` (2, 3) are updated in
-    place. Returns ``(rotation, scale, t, objective, iterations, converged, finite)``."""
+    place."""
     n = x.shape[0]
     ya = np.ones((n, 4))
     ya[:, :3] = y
@@ -251,7 +262,7 @@ def _camera_solve(
                                               scale_x)
     rot, scale, t_out, obj = _camera_finish(x, y, w, m, l1)
     ok = bool(np.all(np.isfinite(rot)) and np.all(np.isfinite(t_out)) and math.isfinite(scale) and scale > 0)
-    return rot, scale, t_out, obj, it, converged, ok
+    return CameraSolve(rot, scale, t_out, obj, it, converged, ok)
 
 
 @njit

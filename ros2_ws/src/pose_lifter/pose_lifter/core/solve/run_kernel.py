@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from enum import IntEnum
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -36,16 +37,27 @@ from ..numeric.records import ModelArrays, StepSettings
 from .camera import _camera_solve
 from .pose_kernel import _depth_term, _n_rows, _pose_kernel, _sum_abs
 
-__all__ = ["CAMERA_DIVERGED", "OK", "POSE_DIVERGED", "RunCall", "RunOut", "run_calls"]
+__all__ = ["RunCall", "RunOut", "RunStatus", "run_calls"]
 
-#: Status codes of :func:`_run_kernel`.
-OK, CAMERA_DIVERGED, POSE_DIVERGED = 0, 1, 2
+
+class RunStatus(IntEnum):
+    """How a compiled run ended (:attr:`RunOut.status`)."""
+
+    OK = 0  #: every alternation it did finished
+    CAMERA_DIVERGED = 1  #: a camera step gave a non-finite camera (the run stopped there)
+    POSE_DIVERGED = 2  #: a pose step gave non-finite coefficients (the run stopped there)
+
+
+# the codes as the kernel writes them (plain ints: a compile-time constant each)
+_OK = int(RunStatus.OK)
+_CAMERA_DIVERGED = int(RunStatus.CAMERA_DIVERGED)
+_POSE_DIVERGED = int(RunStatus.POSE_DIVERGED)
 
 
 class RunOut(NamedTuple):
     """What :func:`_run_kernel` returns; the ``best_*`` fields are the kept alternation's."""
 
-    status: int  #: :data:`OK`, or :data:`CAMERA_DIVERGED` / :data:`POSE_DIVERGED` (stopped there)
+    status: int  #: a :class:`RunStatus` (its code inside the kernel)
     done: int  #: alternations done by this call
     it: int  #: the last alternation's index
     converged: bool  #: whether the stopping rule ended the run (not the cap)
@@ -57,9 +69,15 @@ class RunOut(NamedTuple):
     pose: NDArray[np.float64]  #: (36,)
     rotation: NDArray[np.float64]  #: (3, 3)
     translation: NDArray[np.float64]  #: (2,)
-    floats: NDArray[np.float64]  #: (4,) pose objective, limb violation, camera objective, scale
-    #: (5,) pose iterations, converged, alpha-step iterations, camera iterations, converged
-    ints: NDArray[np.int64]
+    scale: float  #: the camera's
+    pose_objective: float  #: the kept pose step's objective
+    limb_violation: float  #: its largest limb-length error
+    camera_objective: float  #: the kept camera step's objective
+    pose_iter: int  #: the kept pose step's ADM iterations
+    pose_converged: bool
+    alpha_iter: int  #: its alpha-step iterations, summed
+    camera_iter: int  #: the kept camera step's ADM iterations
+    camera_converged: bool
 
 
 class RunCall(NamedTuple):
@@ -115,6 +133,21 @@ def _stack_camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], xp: NDAr
     return cx, cw, True
 
 
+
+@njit
+def _run_out(status: int, done: int, it: int, converged: bool, best_it: int, best_obj: float,
+             objs: NDArray[np.float64], counts: NDArray[np.int64], alpha: NDArray[np.float64],
+             pose: NDArray[np.float64], rotation: NDArray[np.float64], translation: NDArray[np.float64],
+             floats: NDArray[np.float64], ints: NDArray[np.int64]) -> RunOut:
+    """The :class:`RunOut` of :func:`_run_kernel`'s kept alternation: ``floats`` (4,) its scale,
+    pose objective, limb violation and camera objective, ``ints`` (5,) its pose iterations and
+    convergence, alpha-step iterations, camera iterations and convergence (the order
+    :func:`_run_kernel_many` packs them in)."""
+    return RunOut(status, done, it, converged, best_it, best_obj, objs, counts, alpha, pose, rotation,
+                  translation, floats[0], floats[1], floats[2], floats[3], ints[0], ints[1] != 0, ints[2],
+                  ints[3], ints[4] != 0)
+
+
 @njit
 def _run_kernel(
     xn: NDArray[np.float64], w: NDArray[np.float64], km: ModelArrays, st: StepSettings,
@@ -153,25 +186,26 @@ def _run_kernel(
     b_y = np.zeros(3 * nj)
     b_rot = np.zeros((3, 3))
     b_t = np.zeros(2)
-    b_f = np.zeros(4)
-    b_i = np.zeros(5, dtype=np.int64)
+    b_f = np.zeros(4)  # the kept steps' scale, pose objective, limb violation, camera objective
+    b_i = np.zeros(5, dtype=np.int64)  # pose iterations, converged, alpha iterations, camera's, converged
     b_idx = -1
     b_obj = obj0
     m0 = np.ascontiguousarray(cam0[:, :3])
     t = cam0[:, 3].copy()
     ycam = np.empty((nc, 3))
-    status = OK
+    status = _OK
     if not continued:
         for j in range(nc):
             jj = j % nj if doubled else j
             for a in range(3):
                 ycam[j, a] = y0[3 * jj + a]
-        rot, scale, t, _, _, _, ok = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)),
-                                                   st.l1, st.cam_max_iter, st.cam_tol, st.tau)
-        if not ok:
-            return RunOut(CAMERA_DIVERGED, 0, it0, False, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot,
-                          b_t, b_f, b_i)
-        m0 = scale * rot[:2]
+        c = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)), st.l1, st.cam_max_iter,
+                          st.cam_tol, st.tau)
+        if not c.finite:
+            return _run_out(_CAMERA_DIVERGED, 0, it0, False, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot,
+                            b_t, b_f, b_i)
+        m0 = c.scale * c.rotation[:2]
+        t = c.translation
     alpha = alpha0
     prev = obj0
     converged = False
@@ -182,40 +216,41 @@ def _run_kernel(
                          np.zeros(k))
         for i in range(k):
             if not math.isfinite(p.alpha[i]):
-                status = POSE_DIVERGED
-        if status != OK:
+                status = _POSE_DIVERGED
+        if status != _OK:
             break
         alpha = p.alpha
         for j in range(nc):
             jj = j % nj if doubled else j
             for a in range(3):
                 ycam[j, a] = p.pose[3 * jj + a]
-        rot, scale, t_c, cobj, cit, cconv, ok = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)),
-                                                             np.zeros((2, 3)), st.l1, st.cam_max_iter,
-                                                             st.cam_tol, st.tau)
-        if not ok:
-            status = CAMERA_DIVERGED
+        c = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)), st.l1, st.cam_max_iter,
+                          st.cam_tol, st.tau)
+        if not c.finite:
+            status = _CAMERA_DIVERGED
             break
-        m0 = scale * rot[:2]
-        t = t_c
-        obj = _run_objective(cobj, alpha, st.th, p.pose, m0, xp, pw)
-        objs[done, 0], objs[done, 1], objs[done, 2] = obj, cobj, p.objective
-        counts[done, 0], counts[done, 1] = cit, cconv
+        m0 = c.scale * c.rotation[:2]
+        t = c.translation
+        obj = _run_objective(c.objective, alpha, st.th, p.pose, m0, xp, pw)
+        objs[done, 0], objs[done, 1], objs[done, 2] = obj, c.objective, p.objective
+        counts[done, 0], counts[done, 1] = c.n_iter, c.converged
         counts[done, 2], counts[done, 3] = p.n_iter, p.converged
         done += 1
         if (b_idx < 0 and not continued) or obj < b_obj:
             b_idx, b_obj = it, obj
             b_alpha[:] = p.alpha
             b_y[:] = p.pose
-            b_rot[:] = rot
-            b_t[:] = t_c
-            b_f[0], b_f[1], b_f[2], b_f[3] = p.objective, p.limb_violation, cobj, scale
-            b_i[0], b_i[1], b_i[2], b_i[3], b_i[4] = p.n_iter, p.converged, p.alpha_iter, cit, cconv
+            b_rot[:] = c.rotation
+            b_t[:] = c.translation
+            b_f[0], b_f[1], b_f[2], b_f[3] = c.scale, p.objective, p.limb_violation, c.objective
+            b_i[0], b_i[1], b_i[2] = p.n_iter, p.converged, p.alpha_iter
+            b_i[3], b_i[4] = c.n_iter, c.converged
         if _alternation_stops(prev, obj, st.alt_tol):
             converged = True
             break
         prev = obj
-    return RunOut(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f, b_i)
+    return _run_out(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f,
+                    b_i)
 
 
 @njit_nogil
@@ -227,7 +262,8 @@ def _run_kernel_many(km: ModelArrays, st: StepSettings, ins: tuple[Any, ...], ou
     int64). ``outs``, written: ``status`` (B,); ``head`` (B, 4): done, it, converged, best_it;
     ``best_obj`` (B,); ``objs`` (B, L, 3) and ``counts`` (B, L, 4) with ``L`` at least every
     run's ``n_alt - it0`` (the first ``done`` rows used); then ``alpha``, ``pose``, ``rotation``,
-    ``translation``, ``floats``, ``ints`` as :class:`RunOut`'s with ``B`` in front. Each run is
+    ``translation`` as :class:`RunOut`'s with ``B`` in front, ``floats`` (B, 4) and ``ints``
+    (B, 5) its scalars of the kept steps in :func:`_run_out`'s order. Each run is
     :func:`_run_kernel`'s on its own operands, bit for bit (nothing is shared but ``km`` and
     ``st``); the kernel releases the GIL, so threads may run parts of a batch in parallel."""
     xn, w, xp, pw, rad, alpha0, y0, cam0, obj0, it0, n_alt, pose_max_iter = ins
@@ -245,8 +281,10 @@ def _run_kernel_many(km: ModelArrays, st: StepSettings, ins: tuple[Any, ...], ou
         pose[b] = o.pose
         rotation[b] = o.rotation
         translation[b] = o.translation
-        floats[b] = o.floats
-        ints[b] = o.ints
+        floats[b, 0], floats[b, 1] = o.scale, o.pose_objective
+        floats[b, 2], floats[b, 3] = o.limb_violation, o.camera_objective
+        ints[b, 0], ints[b, 1], ints[b, 2] = o.pose_iter, o.pose_converged, o.alpha_iter
+        ints[b, 3], ints[b, 4] = o.camera_iter, o.camera_converged
 
 
 def _stacked(arrays: list[NDArray[Any]], dtype: type) -> NDArray[Any]:
@@ -271,8 +309,9 @@ def run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads: 
     out: list[RunOut | Exception] = []
     for c in calls:
         try:
-            out.append(_run_kernel(c.xn, c.w, km, st, c.xp, c.pw, c.rad, c.alpha0, c.y0, c.cam0, c.obj0,
-                                   c.it0, c.n_alt, c.pose_max_iter))
+            o = _run_kernel(c.xn, c.w, km, st, c.xp, c.pw, c.rad, c.alpha0, c.y0, c.cam0, c.obj0, c.it0,
+                            c.n_alt, c.pose_max_iter)
+            out.append(o._replace(status=RunStatus(o.status)))
         except Exception as err:
             out.append(err)
     return out
@@ -312,9 +351,11 @@ def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads:
     out = []
     for b, c in enumerate(calls):
         m = max(c.n_alt - c.it0, 0)
-        out.append(RunOut(int(status[b]), int(head[b, 0]), int(head[b, 1]), bool(head[b, 2]), int(head[b, 3]),
-                          float(best_obj[b]), objs[b, :m], counts[b, :m], alpha[b], pose[b], rotation[b],
-                          translation[b], floats[b], ints[b]))
+        f, i = floats[b].tolist(), ints[b].tolist()
+        out.append(RunOut(RunStatus(int(status[b])), int(head[b, 0]), int(head[b, 1]), bool(head[b, 2]),
+                          int(head[b, 3]), float(best_obj[b]), objs[b, :m], counts[b, :m], alpha[b], pose[b],
+                          rotation[b], translation[b], f[0], f[1], f[2], f[3], i[0], bool(i[1]), i[2], i[3],
+                          bool(i[4])))
     return out
 
 
