@@ -68,7 +68,7 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     path, sc = make_input(tmp_path)
     lifter: Any = EchoLifter()
     out = tmp_path / "out.mcap"
-    summary, frames = offline.lift_bag(path, out, lifter, LiftSettings(leg_length_m=0.5, smoothing_s=0.0),
+    summary, frames = offline.lift_bag(path, out, lifter, LiftSettings(lower_leg_length=0.5, smoothing_s=0.0),
                                         progress=False)
     assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
     # warm starts: from the second frame of each track on, restarted after the gap of track 5

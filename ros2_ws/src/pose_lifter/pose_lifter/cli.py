@@ -212,7 +212,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     s = lift_settings(args, _params(args))
     if camera_info and camera_info not in topics:  # the default topic, absent: as the node without it
         print(f"pose-lifter lift: note: {bag} has no {camera_info}: depth at the default distance, "
-              f"{s.default_distance_m:g} m (--camera-info-topic names another topic)", file=sys.stderr)
+              f"{s.default_distance:g} m (--camera-info-topic names another topic)", file=sys.stderr)
     lifter = s.build_lifter()
     summary, _ = lift_bag(bag, args.out, lifter, s, progress=not args.quiet, overwrite=args.overwrite,
                           workers=args.workers or _cores())
@@ -282,7 +282,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     # the lift `pose-lifter lift BAG` does by default (every frame, 30 starts, centred smoothing)
     settings = LiftSettings(options=flag_options(args), bases=args.bases, warm_start=not args.no_warm_start,
-                            leg_length_m=args.leg_length, every=args.every, smoothing_s=args.smoothing)
+                            lower_leg_length=args.leg_length, every=args.every, smoothing_s=args.smoothing)
     return run_demo(settings.build_lifter, settings, args.out, args.bag, workers=_cores())
 
 

@@ -317,74 +317,52 @@ def _bases_tasks(cfg: ExperimentConfig, n_classes: int) -> list[BasesTask]:
 # --------------------------------------------------------------------------- main
 
 
-def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "out/experiments",
-                    quick: bool = False, processes: int = 2, command: str = "",
-                    config: ExperimentConfig | None = None) -> Path:
-    """Run all five experiments and write their outputs to ``out_dir``.
-
-    Parameters
-    ----------
-    data_dir : path, optional
-        CMU data (default ``../shared/data/cmu`` or ``$POSE_LIFTER_CMU_DATA``).
-    out_dir : path
-    quick : bool
-        The tiny :data:`QUICK` configuration (tests) instead of :data:`FULL`.
-    processes : int
-        Worker processes.
-    command : str
-        The command line, recorded in ``summary.md``.
-    config : ExperimentConfig, optional
-        Overrides ``quick``.
-
-    Returns
-    -------
-    Path
-        ``out_dir / "summary.md"``.
-    """
+def _run_tasks(tasks: list[Task], inputs: WorkerInputs, processes: int) -> list[dict[str, Any]]:
+    """Every task's result row, in ``processes`` worker processes (fork on Linux), the costliest
+    first."""
     from tqdm import tqdm
 
-    from pose_lifter.core import PoseBases
-    from pose_lifter.core.model.bases import learn_classwise_pca_bases
-
-    cfg = config or (QUICK if quick else FULL)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    t_start = time.perf_counter()
-    n_bank = max(cfg.n_factors, cfg.n_noise, cfg.n_robust, cfg.n_angle, cfg.n_camera)
-    data = _load_data(data_dir, cfg, n_bank)
-    sparse = PoseBases.load()
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Objective did not converge")
-        classwise = learn_classwise_pca_bases(data.train, data.train_labels, n_per_class=8, n_starts=1)
-    lift_tasks, floors = _lift_tasks(data, cfg, sparse.mean_pose)
-    n_cls = len(np.unique(data.train_labels))
-    tasks: list[Task] = sorted([*_bases_tasks(cfg, n_cls), *lift_tasks], key=cost, reverse=True)
-    results: list[dict[str, Any]] = []
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     ctx = get_context("fork" if platform.system() == "Linux" else "spawn")
-    inputs = WorkerInputs(sparse, classwise, data.train, data.train_labels, data.test_rec,
-                          data.test_rec_leg_mm)
     with ctx.Pool(max(1, processes), initializer=start_worker, initargs=(inputs,)) as pool:
-        results += tqdm(pool.imap_unordered(run_task, tasks), total=len(tasks), desc="experiments",
-                        mininterval=5)
-    t_run = time.perf_counter() - t_start
+        return list(tqdm(pool.imap_unordered(run_task, tasks), total=len(tasks), desc="experiments",
+                         mininterval=5))
 
-    by_exp: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for r in results + floors:
-        by_exp[r["exp"]].append(r)
-    failures = sum(1 for r in results if r["failed"])
-    ns, nr = cfg.n_starts, cfg.n_refine
-    solver = (f"lifter: packaged sparse bases (k={sparse.n_bases}), {ns} cold k-means starts screened "
-              f"to {nr}; "
-              f"Ramakrishna et al. 2012: class-wise PCA bases ({classwise.n_bases} = "
-              f"{n_cls} classes x (1 offset + 8 components)) on the same training data.")
-    n_test, n_train = len(data.test_rec), len(data.train)
-    md1 = exp1_output(out, by_exp["exp1_bases"], n_test, (
-        f"Bases learned on {n_train} training poses (paper split, every {cfg.train_step}th frame); "
-        f"reconstruction of {n_test} unseen test poses (every {cfg.test_step}th frame of the test trials) "
-        f"by L1-regularised least squares (theta = {cfg.theta_rec}). Error = mean ||y - y_hat||_2 over "
-        f"the 36-vector in right-lower-leg units; MPJPE in mm (no alignment). Sparse bases: "
-        f"{cfg.dl_iter} dictionary-learning epochs."))
+
+def _headline_rows(cfg: ExperimentConfig, agg2: list[dict[str, Any]], agg3: list[dict[str, Any]],
+                   agg3b: list[dict[str, Any]], agg4: list[dict[str, Any]]) -> list[str]:
+    """The summary's headline table (markdown rows): each method's error in experiments 2-4 at
+    their extreme settings."""
+
+    def c(agg: list[dict[str, Any]], m: str, col: str = "err_mean", **w: Any) -> str:
+        v = cell(agg, m, col, **w)
+        return "nan" if not np.isfinite(v) else f"{v:.3f}" if col.startswith("err") else f"{v:.0f}"
+
+    hi, lo = max(cfg.noise_levels), min(cfg.noise_levels)
+    head = ["| experiment | setting | " + " | ".join(["L1WAWS (ours)", "L2WAWS", "L1NANS", "L2NANS",
+                                                      "Ramakrishna", "flat floor", "mean-pose floor"]) + " |",
+            "|---|---|" + "---|" * 7]
+    ms = ["L1WAWS", "L2WAWS", "L1NANS", "L2NANS", "Ramakrishna", "flat floor", "mean-pose floor"]
+    head.append(f"| 2 factors (n={cfg.n_factors}) | clean, error (leg) | "
+                + " | ".join(c(agg2, m) for m in ms) + " |")
+    head.append(f"| 2 factors (n={cfg.n_factors}) | clean, P-MPJPE mm | "
+                + " | ".join(c(agg2, m, "pmpjpe_mean") for m in ms) + " |")
+    for lev in (lo, hi):
+        head.append(f"| 3 noise (n={cfg.n_noise}) | std {lev:g}, error (leg) | "
+                    + " | ".join(c(agg3, m, level=lev) for m in ms) + " |")
+    for cond, n in (("outliers", max(cfg.outlier_counts)), ("missing", max(cfg.missing_counts))):
+        head.append(f"| 3b robust (n={cfg.n_robust}) | {n} {cond}, error (leg) | "
+                    + " | ".join(c(agg3b, m, cond=cond, level=float(n)) for m in ms) + " |")
+    for a in (cfg.angles[0], cfg.angles[len(cfg.angles) // 2]):
+        head.append(f"| 4 angle (n={cfg.n_angle}) | yaw {a:g}, error (leg) | "
+                    + " | ".join(c(agg4, m, level=a) for m in ms) + " |")
+    return head
+
+
+def _lift_sections(out: Path, by_exp: dict[str, list[dict[str, Any]]], cfg: ExperimentConfig, solver: str,
+                   n_bases: int) -> tuple[tuple[str, ...], tuple[list[dict[str, Any]], ...]]:
+    """Experiments 2-5 written out (:func:`lift_output`): their markdown sections and aggregated
+    rows, in order."""
     poses = "poses drawn round-robin from the unseen test actions (walk, run, punch), random trial and frame"
     md2, agg2 = lift_output(
         out, "exp2_factors", by_exp["exp2_factors"], ["method"], "2. Three factors (Fig. 4): clean 2D",
@@ -409,32 +387,77 @@ def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "o
     md5, agg5 = lift_output(
         out, "exp5_camera", by_exp["exp5_camera"], ["method"], "5. Camera estimation (Fig. 8)",
         f"{cfg.n_camera} poses at random yaw. GT camera: the pose step alone "
-        f"(core.solve.pose_step.pose_step, {sparse.n_bases} bases, L1WAWS, mean-pose start, "
+        f"(core.solve.pose_step.pose_step, {n_bases} bases, L1WAWS, mean-pose start, "
         f"up to 100 ADM iterations) with the true camera; "
         f"estimated: the full alternation (L1WAWS, screened to {cfg.n_refine} starts).")
 
-    def c(agg: list[dict[str, Any]], m: str, col: str = "err_mean", **w: Any) -> str:
-        v = cell(agg, m, col, **w)
-        return "nan" if not np.isfinite(v) else f"{v:.3f}" if col.startswith("err") else f"{v:.0f}"
+    return (md2, md3, md3b, md4, md5), (agg2, agg3, agg3b, agg4, agg5)
 
-    hi, lo = max(cfg.noise_levels), min(cfg.noise_levels)
-    head = ["| experiment | setting | " + " | ".join(["L1WAWS (ours)", "L2WAWS", "L1NANS", "L2NANS",
-                                                      "Ramakrishna", "flat floor", "mean-pose floor"]) + " |",
-            "|---|---|" + "---|" * 7]
-    ms = ["L1WAWS", "L2WAWS", "L1NANS", "L2NANS", "Ramakrishna", "flat floor", "mean-pose floor"]
-    head.append(f"| 2 factors (n={cfg.n_factors}) | clean, error (leg) | "
-                + " | ".join(c(agg2, m) for m in ms) + " |")
-    head.append(f"| 2 factors (n={cfg.n_factors}) | clean, P-MPJPE mm | "
-                + " | ".join(c(agg2, m, "pmpjpe_mean") for m in ms) + " |")
-    for lev in (lo, hi):
-        head.append(f"| 3 noise (n={cfg.n_noise}) | std {lev:g}, error (leg) | "
-                    + " | ".join(c(agg3, m, level=lev) for m in ms) + " |")
-    for cond, n in (("outliers", max(cfg.outlier_counts)), ("missing", max(cfg.missing_counts))):
-        head.append(f"| 3b robust (n={cfg.n_robust}) | {n} {cond}, error (leg) | "
-                    + " | ".join(c(agg3b, m, cond=cond, level=float(n)) for m in ms) + " |")
-    for a in (cfg.angles[0], cfg.angles[len(cfg.angles) // 2]):
-        head.append(f"| 4 angle (n={cfg.n_angle}) | yaw {a:g}, error (leg) | "
-                    + " | ".join(c(agg4, m, level=a) for m in ms) + " |")
+
+def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "out/experiments",
+                    quick: bool = False, processes: int = 2, command: str = "",
+                    config: ExperimentConfig | None = None) -> Path:
+    """Run all five experiments and write their outputs to ``out_dir``.
+
+    Parameters
+    ----------
+    data_dir : path, optional
+        CMU data (default ``../shared/data/cmu`` or ``$POSE_LIFTER_CMU_DATA``).
+    out_dir : path
+    quick : bool
+        The tiny :data:`QUICK` configuration (tests) instead of :data:`FULL`.
+    processes : int
+        Worker processes.
+    command : str
+        The command line, recorded in ``summary.md``.
+    config : ExperimentConfig, optional
+        Overrides ``quick``.
+
+    Returns
+    -------
+    Path
+        ``out_dir / "summary.md"``.
+    """
+    from pose_lifter.core import PoseBases
+    from pose_lifter.core.model.bases import learn_classwise_pca_bases
+
+    cfg = config or (QUICK if quick else FULL)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    n_bank = max(cfg.n_factors, cfg.n_noise, cfg.n_robust, cfg.n_angle, cfg.n_camera)
+    data = _load_data(data_dir, cfg, n_bank)
+    sparse = PoseBases.load()
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Objective did not converge")
+        classwise = learn_classwise_pca_bases(data.train, data.train_labels, n_per_class=8, n_starts=1)
+    lift_tasks, floors = _lift_tasks(data, cfg, sparse.mean_pose)
+    n_cls = len(np.unique(data.train_labels))
+    tasks: list[Task] = sorted([*_bases_tasks(cfg, n_cls), *lift_tasks], key=cost, reverse=True)
+    inputs = WorkerInputs(sparse, classwise, data.train, data.train_labels, data.test_rec,
+                          data.test_rec_leg_mm)
+    results = _run_tasks(tasks, inputs, processes)
+    t_run = time.perf_counter() - t_start
+
+    by_exp: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in results + floors:
+        by_exp[r["exp"]].append(r)
+    failures = sum(1 for r in results if r["failed"])
+    ns, nr = cfg.n_starts, cfg.n_refine
+    solver = (f"lifter: packaged sparse bases (k={sparse.n_bases}), {ns} cold k-means starts screened "
+              f"to {nr}; "
+              f"Ramakrishna et al. 2012: class-wise PCA bases ({classwise.n_bases} = "
+              f"{n_cls} classes x (1 offset + 8 components)) on the same training data.")
+    n_test, n_train = len(data.test_rec), len(data.train)
+    md1 = exp1_output(out, by_exp["exp1_bases"], n_test, (
+        f"Bases learned on {n_train} training poses (paper split, every {cfg.train_step}th frame); "
+        f"reconstruction of {n_test} unseen test poses (every {cfg.test_step}th frame of the test trials) "
+        f"by L1-regularised least squares (theta = {cfg.theta_rec}). Error = mean ||y - y_hat||_2 over "
+        f"the 36-vector in right-lower-leg units; MPJPE in mm (no alignment). Sparse bases: "
+        f"{cfg.dl_iter} dictionary-learning epochs."))
+    (md2, md3, md3b, md4, md5), (agg2, agg3, agg3b, agg4, agg5) = _lift_sections(out, by_exp, cfg, solver,
+                                                                                 sparse.n_bases)
+    head = _headline_rows(cfg, agg2, agg3, agg3b, agg4)
     cam = [f"\n\nCamera estimation (n={cfg.n_camera}), mean error (leg) / P-MPJPE mm: "
            + "; ".join(f"{r['method']}: {r['err_mean']:.3f} / {r['pmpjpe_mean']:.0f}" for r in agg5) + "."]
     sparse_rows = [r for r in by_exp["exp1_bases"] if not r["failed"]]

@@ -57,7 +57,7 @@ def lift_settings(args: argparse.Namespace, params: Any = None) -> LiftSettings:
                                   smoothing_s=args.smoothing, hri=args.hri)
     if params is None:
         return LiftSettings(options=flag_options(args), bases=args.bases, warm_start=not args.no_warm_start,
-                            leg_length_m=args.leg_length, default_distance_m=DEFAULT_DISTANCE_M, **common)
+                            lower_leg_length=args.leg_length, default_distance=DEFAULT_DISTANCE_M, **common)
     typed: frozenset[str] = getattr(args, "typed", frozenset())
     options = dict(params.options)
     if "variant" in typed:
@@ -80,5 +80,6 @@ def lift_settings(args: argparse.Namespace, params: Any = None) -> LiftSettings:
     defaults = LiftSettings()
     timeout = defaults.track_timeout if params.track_timeout is None else params.track_timeout
     reinit = defaults.reinit_ratio if params.reinit_ratio is None else params.reinit_ratio
-    return LiftSettings(options=full, bases=str(path) if path else None, warm_start=warm, leg_length_m=leg,
-                        default_distance_m=distance, track_timeout=timeout, reinit_ratio=reinit, **common)
+    return LiftSettings(options=full, bases=str(path) if path else None, warm_start=warm,
+                        lower_leg_length=leg, default_distance=distance, track_timeout=timeout,
+                        reinit_ratio=reinit, **common)

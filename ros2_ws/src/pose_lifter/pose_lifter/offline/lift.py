@@ -89,8 +89,8 @@ LIFTABLE_TYPES: Final[tuple[str, ...]] = (SKELETON2D_ARRAY, YOLO_DETECTION_ARRAY
 def frame_settings(settings: LiftSettings) -> FrameSettings:
     """The frame pipeline's settings of an offline lift (the caps: the node's defaults)."""
     return FrameSettings(warm_start=settings.warm_start, track_timeout=settings.track_timeout,
-                         reinit_ratio=settings.reinit_ratio, lower_leg_length=settings.leg_length_m,
-                         default_distance=settings.default_distance_m)
+                         reinit_ratio=settings.reinit_ratio, lower_leg_length=settings.lower_leg_length,
+                         default_distance=settings.default_distance)
 
 
 @dataclass
@@ -156,8 +156,8 @@ def lift_messages(
     camera_infos : list of (stamp_ns, CameraInfo), time-ordered
     lifter : Lifter
     settings : LiftSettings
-        Read here: ``warm_start``, ``track_timeout``, ``reinit_ratio``, ``leg_length_m``,
-        ``default_distance_m`` (:func:`frame_settings`) and ``smoothing_s``: 0 gives the node's
+        Read here: ``warm_start``, ``track_timeout``, ``reinit_ratio``, ``lower_leg_length``,
+        ``default_distance`` (:func:`frame_settings`) and ``smoothing_s``: 0 gives the node's
         causal poses; ``> 0`` smooths each track's poses with a centred Gaussian window of this
         standard deviation in seconds, past and future frames alike (:mod:`pose_lifter.core.track.smoothing`).
         Its ``options`` and ``bases`` are not read (``lifter`` is the solver).

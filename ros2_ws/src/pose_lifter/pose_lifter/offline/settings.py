@@ -53,8 +53,8 @@ class LiftSettings:
     options: dict[str, Any] = field(default_factory=dict)
     bases: str | None = None
     warm_start: bool = True
-    leg_length_m: float = DEFAULT_LEG_LENGTH_M
-    default_distance_m: float = DEFAULT_DISTANCE_M
+    lower_leg_length: float = DEFAULT_LEG_LENGTH_M  #: metres (the node's ``lower_leg_length``)
+    default_distance: float = DEFAULT_DISTANCE_M  #: metres (the node's ``default_distance``)
     every: int = 1
     max_messages: int | None = None
     topic: str = TOPIC_KEYPOINTS
