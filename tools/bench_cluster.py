@@ -45,7 +45,7 @@ def main() -> int:
     src.mkdir(parents=True)
     for i in range(args.copies):
         os.link(args.bag, src / f"bag_{i:02d}.mcap")
-    settings = LiftSettings(options=LiftSettings.options_of(LifterOptions()), max_messages=args.max_messages)
+    settings = LiftSettings(options=LifterOptions(), max_messages=args.max_messages)
     print(f"collection: {args.copies} x {args.bag}; load average {os.getloadavg()[0]:.1f}", flush=True)
     print(f"{'workers':>7s} {'path':6s} {'s':>7s} {'poses':>7s} {'poses/s':>8s}  load", flush=True)
     for w in args.workers:

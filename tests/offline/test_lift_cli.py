@@ -225,7 +225,7 @@ def test_a_typed_flag_wins_over_the_params_file_even_at_its_default(
     assert lift(*base, "--out", str(tmp_path / "b.mcap"), "--starts", "30", "--mode", "hybrid",
                 "--leg-length", "0.43") == 0
     assert lift(*base, "--out=" + str(tmp_path / "c.mcap"), "--start=30") == 0  # an abbreviation
-    got = [(s.options["n_starts"], s.options["mode"], s.lower_leg_length) for s in made]
+    got = [(s.options.n_starts, s.options.mode, s.lower_leg_length) for s in made]
     assert got == [(5, "paper", 0.40), (30, "hybrid", 0.43), (30, "paper", 0.40)]
 
 

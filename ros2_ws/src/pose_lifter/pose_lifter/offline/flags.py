@@ -11,10 +11,13 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M
 from pose_lifter.offline.settings import LiftSettings
+
+if TYPE_CHECKING:
+    from pose_lifter.core.options import LifterOptions
 
 __all__ = ["flag_options", "keep_topics", "lift_settings"]
 
@@ -28,14 +31,23 @@ def keep_topics(values: Sequence[str] | None) -> list[str] | None:
     return list(values)
 
 
-def flag_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The lifter options of the ``--variant``, ``--solver``, ``--starts`` and ``--mode`` flags, as
-    every field of :class:`pose_lifter.core.options.LifterOptions`."""
+def flag_options(args: argparse.Namespace, base: dict[str, Any] | None = None,
+                 typed: frozenset[str] | None = None) -> LifterOptions:
+    """The lifter options of the ``--variant``, ``--solver``, ``--starts`` and ``--mode`` flags
+    over the defaults; with ``base`` (a params file's options) over those, where only the flags
+    named in ``typed`` (typed on the command line) win, and ``--solver`` always."""
     from pose_lifter.core.options import LifterOptions
 
-    options = {"variant": args.variant, "camera_solver": args.solver, "pose_solver": args.solver,
-               "n_starts": args.starts, "mode": "paper" if args.solver == "cvxpy" else args.mode}
-    return LiftSettings.options_of(LifterOptions().replace(**options))
+    flags = {"variant": args.variant, "n_starts": args.starts,
+             "mode": "paper" if args.solver == "cvxpy" else args.mode}
+    names = {"variant": "variant", "n_starts": "starts", "mode": "mode"}
+    options = dict(base or {})
+    for name, value in flags.items():
+        cvxpy_mode = name == "mode" and args.solver == "cvxpy"  # the references run the paper's mode
+        if base is None or names[name] in (typed or frozenset()) or cvxpy_mode:
+            options[name] = value
+    options.update(camera_solver=args.solver, pose_solver=args.solver)
+    return LifterOptions().replace(**options)
 
 
 def lift_settings(args: argparse.Namespace, params: Any = None) -> LiftSettings:
@@ -49,8 +61,6 @@ def lift_settings(args: argparse.Namespace, params: Any = None) -> LiftSettings:
         The ``--params-file`` read: it gives the node's options; a flag typed on the command line
         wins over it, whatever its value.
     """
-    from pose_lifter.core.options import LifterOptions
-
     keep = keep_topics(args.keep)
     common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
                                   camera_info_topic=args.camera_info_topic or None, keep=keep,
@@ -59,15 +69,7 @@ def lift_settings(args: argparse.Namespace, params: Any = None) -> LiftSettings:
         return LiftSettings(options=flag_options(args), bases=args.bases, warm_start=not args.no_warm_start,
                             lower_leg_length=args.leg_length, default_distance=DEFAULT_DISTANCE_M, **common)
     typed: frozenset[str] = getattr(args, "typed", frozenset())
-    options = dict(params.options)
-    if "variant" in typed:
-        options["variant"] = args.variant
-    if "starts" in typed:
-        options["n_starts"] = args.starts
-    if "mode" in typed or args.solver == "cvxpy":
-        options["mode"] = "paper" if args.solver == "cvxpy" else args.mode
-    options.update(camera_solver=args.solver, pose_solver=args.solver)
-    full = LiftSettings.options_of(LifterOptions().replace(**options))
+    full = flag_options(args, dict(params.options), typed)
     path = args.bases or params.bases_file
     warm = False if args.no_warm_start else (True if params.warm_start is None else params.warm_start)
     leg = params.lower_leg_length

@@ -13,12 +13,16 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+
+if TYPE_CHECKING:
+    from pose_lifter.core.lift.lifter import Lifter
+    from pose_lifter.core.options import LifterOptions
 
 __all__ = ["LiftSettings", "file_sha256", "package_version"]
 
@@ -50,7 +54,7 @@ class LiftSettings:
     per-track policy and the output's shape. Picklable (it is what a Dask worker receives) and
     JSON-able (its digest keys the manifest)."""
 
-    options: dict[str, Any] = field(default_factory=dict)
+    options: LifterOptions = field(default_factory=lambda: _default_options())
     bases: str | None = None
     warm_start: bool = True
     lower_leg_length: float = DEFAULT_LEG_LENGTH_M  #: metres (the node's ``lower_leg_length``)
@@ -70,38 +74,39 @@ class LiftSettings:
     def to_json(self) -> dict[str, Any]:
         """The settings as JSON-ready values (options sorted by name)."""
         d = dataclasses.asdict(self)
-        d["options"] = {k: _jsonable(v) for k, v in sorted(self.options.items())}
+        d["options"] = {k: _jsonable(v) for k, v in sorted(d["options"].items())}
         return d
 
     def digest(self) -> str:
         """SHA-256 over the settings, the package version and the bytes of the files they name
         (bases, prior files): a changed file or package changes the digest."""
-        files = [self.bases, self.options.get("prior_file"), self.options.get("temporal_prior_file")]
+        files = [self.bases, self.options.prior_file, self.options.temporal_prior_file]
         named = {str(f): file_sha256(f) for f in files if f and Path(str(f)).is_file()}
         text = json.dumps({"settings": self.to_json(), "version": package_version(), "files": named},
                           sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()
 
-    def build_lifter(self) -> Any:
+    def build_lifter(self) -> Lifter:
         """The :class:`pose_lifter.core.Lifter` of these settings, its kernels loaded (warm-up).
         With ``smoothing_s > 0`` the lift reads each track's next frames (``reads_ahead``: its
         temporal prior is the packaged offline one unless ``temporal_prior_file`` names another)."""
         from pose_lifter.core.lift.lifter import Lifter
         from pose_lifter.core.model.bases import PoseBases
-        from pose_lifter.core.options import LifterOptions
 
-        opts = LifterOptions().replace(**self.options)
+        opts = self.options
         bases = PoseBases.load(self.bases) if self.bases else None
         lifter = Lifter(bases, opts, reads_ahead=self.smoothing_s > 0)
         if opts.camera_solver == "admm" and opts.pose_solver == "admm":
             lifter.warm_up()
         return lifter
 
-    @staticmethod
-    def options_of(options: Any) -> dict[str, Any]:
-        """A :class:`pose_lifter.core.options.LifterOptions` as the ``options`` of
-        :class:`LiftSettings` (every field)."""
-        return {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
+
+
+def _default_options() -> LifterOptions:
+    """The defaults of every lifter option (imported here: the module loads without the solver)."""
+    from pose_lifter.core.options import LifterOptions
+
+    return LifterOptions()
 
 
 def _jsonable(v: Any) -> Any:
