@@ -94,8 +94,7 @@ def test_run_calls_are_each_runs_kernel_alone_at_any_thread_count() -> None:
     lifter = Lifter()
     calls = _calls(lifter, 9)
     km, st = lifter.model.kernel_arrays, lifter.runs.settings
-    alone = [_run_kernel(c.xn, c.w, km, st, c.xp, c.pw, c.rad, c.alpha0, c.y0, c.cam0, c.obj0, c.it0, c.n_alt,
-                         c.pose_max_iter) for c in calls]
+    alone = [_run_kernel(c, km, st) for c in calls]
     for threads in (1, 2, 4, 20):
         for got, want in zip(run_calls(calls, km, st, threads), alone, strict=True):
             assert not isinstance(got, Exception)

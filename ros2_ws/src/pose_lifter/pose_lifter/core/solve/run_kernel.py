@@ -135,45 +135,18 @@ def _stack_camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], xp: NDAr
 
 
 @njit
-def _run_out(status: int, done: int, it: int, converged: bool, best_it: int, best_obj: float,
-             objs: NDArray[np.float64], counts: NDArray[np.int64], alpha: NDArray[np.float64],
-             pose: NDArray[np.float64], rotation: NDArray[np.float64], translation: NDArray[np.float64],
-             floats: NDArray[np.float64], ints: NDArray[np.int64]) -> RunOut:
-    """The :class:`RunOut` of :func:`_run_kernel`'s kept alternation: ``floats`` (4,) its scale,
-    pose objective, limb violation and camera objective, ``ints`` (5,) its pose iterations and
-    convergence, alpha-step iterations, camera iterations and convergence (the order
-    :func:`_run_kernel_many` packs them in)."""
-    return RunOut(status, done, it, converged, best_it, best_obj, objs, counts, alpha, pose, rotation,
-                  translation, floats[0], floats[1], floats[2], floats[3], ints[0], ints[1] != 0, ints[2],
-                  ints[3], ints[4] != 0)
+def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
+    """Alternations ``it0 + 1 .. n_alt`` of the run ``call`` (module docstring; its operands:
+    :class:`RunCall`) with the model ``km`` and the steps' settings ``st``
+    (:mod:`pose_lifter.core.numeric.records`).
 
-
-@njit
-def _run_kernel(
-    xn: NDArray[np.float64], w: NDArray[np.float64], km: ModelArrays, st: StepSettings,
-    xp: NDArray[np.float64], pw: NDArray[np.float64], rad: NDArray[np.float64], alpha0: NDArray[np.float64],
-    y0: NDArray[np.float64], cam0: NDArray[np.float64], obj0: float, it0: int, n_alt: int, pose_max_iter: int,
-) -> RunOut:
-    """Alternations ``it0 + 1 .. n_alt`` of a run (module docstring).
-
-    Parameters
-    ----------
-    xn, w : ndarray, shapes (12, 2), (12,)
-        The normalised 2D points and their weights.
-    km, st : ModelArrays, StepSettings
-        The model and the steps' settings (:mod:`pose_lifter.core.numeric.records`).
-    xp, pw, rad : ndarray, shapes (12, 3), (12, 2), (8,)
-        The prior's target and weights (zeros: none) and the limb lengths in use.
-    alpha0 : ndarray, shape (k,)
-        The first pose step's start.
-    y0, cam0 : ndarray, shapes (36,), (2, 4)
-        A new run (``it0 == 0``): a camera step for the pose ``y0`` from the camera
-        ``cam0 = [M | t]`` comes first. A continued run (``it0 >= 1``, the alternations it has
-        done): ``cam0`` is the camera of the first pose step (``y0`` unused) and ``obj0`` the
-        run's best (and last) ``F``.
-    n_alt, pose_max_iter : int
-        The alternation cap and the pose steps' iteration cap.
+    A new run (``it0 == 0``): a camera step for the pose ``y0`` from the camera ``cam0 = [M | t]``
+    comes first. A continued run (``it0 >= 1``, the alternations it has done): ``cam0`` is the
+    camera of the first pose step (``y0`` unused) and ``obj0`` the run's best (and last) ``F``.
     """
+    xn, w, xp, pw, rad, alpha0 = call.xn, call.w, call.xp, call.pw, call.rad, call.alpha0
+    y0, cam0, obj0, it0 = call.y0, call.cam0, call.obj0, call.it0
+    n_alt, pose_max_iter = call.n_alt, call.pose_max_iter
     continued = it0 > 0
     cx, cw, doubled = _stack_camera_data(xn, w, xp, pw)
     k = alpha0.size
@@ -201,17 +174,17 @@ def _run_kernel(
                 ycam[j, a] = y0[3 * jj + a]
         c = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)), st.l1, st.cam_max_iter,
                           st.cam_tol, st.tau)
-        if not c.finite:
-            return _run_out(_CAMERA_DIVERGED, 0, it0, False, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot,
-                            b_t, b_f, b_i)
-        m0 = c.scale * c.rotation[:2]
-        t = c.translation
+        if c.finite:
+            m0 = c.scale * c.rotation[:2]
+            t = c.translation
+        else:
+            status = _CAMERA_DIVERGED
     alpha = alpha0
     prev = obj0
     converged = False
     it = it0
     done = 0
-    for it in range(it0 + 1, n_alt + 1):
+    for it in range(it0 + 1, n_alt + 1 if status == _OK else it0 + 1):
         p = _pose_kernel(xn, m0, t, w, km, st, pose_max_iter, xp, pw, rad, alpha, np.zeros(n_rows),
                          np.zeros(k))
         for i in range(k):
@@ -249,8 +222,10 @@ def _run_kernel(
             converged = True
             break
         prev = obj
-    return _run_out(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f,
-                    b_i)
+    # the kept alternation's steps (b_f: scale, pose objective, limb violation, camera objective;
+    # b_i: pose iterations and convergence, alpha-step iterations, camera iterations and convergence)
+    return RunOut(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f[0],
+                  b_f[1], b_f[2], b_f[3], b_i[0], b_i[1] != 0, b_i[2], b_i[3], b_i[4] != 0)
 
 
 @njit_nogil
@@ -269,8 +244,8 @@ def _run_kernel_many(km: ModelArrays, st: StepSettings, ins: tuple[Any, ...], ou
     xn, w, xp, pw, rad, alpha0, y0, cam0, obj0, it0, n_alt, pose_max_iter = ins
     status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
     for b in range(xn.shape[0]):
-        o = _run_kernel(xn[b], w[b], km, st, xp[b], pw[b], rad[b], alpha0[b], y0[b], cam0[b], obj0[b],
-                        it0[b], n_alt[b], pose_max_iter[b])
+        o = _run_kernel(RunCall(xn[b], w[b], xp[b], pw[b], rad[b], alpha0[b], y0[b], cam0[b], obj0[b], it0[b],
+                                n_alt[b], pose_max_iter[b]), km, st)
         status[b] = o.status
         head[b, 0], head[b, 1], head[b, 2], head[b, 3] = o.done, o.it, o.converged, o.best_it
         best_obj[b] = o.best_obj
@@ -309,8 +284,7 @@ def run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads: 
     out: list[RunOut | Exception] = []
     for c in calls:
         try:
-            o = _run_kernel(c.xn, c.w, km, st, c.xp, c.pw, c.rad, c.alpha0, c.y0, c.cam0, c.obj0, c.it0,
-                            c.n_alt, c.pose_max_iter)
+            o = _run_kernel(c, km, st)
             out.append(o._replace(status=RunStatus(o.status)))
         except Exception as err:
             out.append(err)
