@@ -207,6 +207,18 @@ def initial_camera(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np
     return m, t
 
 
+class CameraSetup(NamedTuple):
+    """What the camera ADM's iterations (:func:`_camera_kernel`) take from its set-up in
+    :func:`_camera_solve`, for ``n`` points."""
+
+    ya: NDArray[np.float64]  #: (n, 4) the pose's joints with a column of ones
+    hat: NDArray[np.float64]  #: (4, n) ``(Ya^T Ya + D)^-1 Ya^T``: the (N, t) step's data term
+    lhs3: NDArray[np.float64]  #: (4, 3) ``(Ya^T Ya + D)^-1`` on the splitting's columns
+    thr: NDArray[np.float64]  #: (n, 2) the L1 prox thresholds ``w / tau``
+    l2fac: NDArray[np.float64]  #: (n, 2) the L2 prox factors ``tau / (2 w + tau)``
+    scale_x: float  #: the visible points' spread (the stopping rule's residual scale)
+
+
 class CameraSolve(NamedTuple):
     """What :func:`_camera_solve` returns."""
 
@@ -258,8 +270,8 @@ def _camera_solve(
         for c in range(2):
             thr[j, c] = w[j] / tau
             l2fac[j, c] = tau / (2.0 * w[j] + tau)
-    m, u1, u2, it, converged = _camera_kernel(x, ya, hat, lhs3, thr, l2fac, m, t, u1, u2, l1, max_iter, tol,
-                                              scale_x)
+    setup = CameraSetup(ya, hat, lhs3, thr, l2fac, scale_x)
+    m, u1, u2, it, converged = _camera_kernel(x, setup, m, t, u1, u2, l1, max_iter, tol)
     rot, scale, t_out, obj = _camera_finish(x, y, w, m, l1)
     ok = bool(np.all(np.isfinite(rot)) and np.all(np.isfinite(t_out)) and math.isfinite(scale) and scale > 0)
     return CameraSolve(rot, scale, t_out, obj, it, converged, ok)
@@ -335,14 +347,14 @@ def _optimal_translation(x: NDArray[np.float64], y: NDArray[np.float64], w: NDAr
 
 @njit
 def _camera_kernel(
-    x: NDArray[np.float64], ya: NDArray[np.float64], hat: NDArray[np.float64], lhs3: NDArray[np.float64],
-    thr: NDArray[np.float64], l2fac: NDArray[np.float64], m: NDArray[np.float64], t: NDArray[np.float64],
-    u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int, tol: float, scale_x: float,
+    x: NDArray[np.float64], setup: CameraSetup, m: NDArray[np.float64], t: NDArray[np.float64],
+    u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int, tol: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int, bool]:
     """The ADM iterations of :func:`camera_step` on plain arrays (compiled by numba when
-    available): ``(M, U1, U2, iterations, converged)``; ``u1``, ``u2`` are updated in place.
-    Written as loops over the (n, 2) arrays: at these sizes array expressions cost more in
-    temporaries than in arithmetic."""
+    available) for the points ``x`` (n, 2) from ``M`` (2, 3), ``t`` (2,): ``(M, U1, U2,
+    iterations, converged)``; ``u1``, ``u2`` are updated in place. Written as loops over the
+    (n, 2) arrays: at these sizes array expressions cost more in temporaries than in arithmetic."""
+    ya, hat, lhs3, thr, l2fac, scale_x = setup
     n = x.shape[0]
     converged = False
     it = 0

@@ -17,6 +17,19 @@ from ..numeric.records import ModelArrays, StepSettings
 from .alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
 
 
+class PoseProblem(NamedTuple):
+    """A pose step's problem for :func:`_pose_kernel`: the 2D, the fixed camera and the prior's
+    rows (module docstring of :mod:`pose_lifter.core.solve.pose_step`)."""
+
+    points: NDArray[np.float64]  #: (12, 2) the normalised 2D
+    weights: NDArray[np.float64]  #: (12,) per joint (0: missing)
+    projection: NDArray[np.float64]  #: (2, 3) the camera's ``M0``
+    translation: NDArray[np.float64]  #: (2,)
+    target: NDArray[np.float64]  #: (12, 3) the prior's pose in the normalised frame (zeros: none)
+    prior_weights: NDArray[np.float64]  #: (12, 2) its image-position and depth rows' weights
+    radii: NDArray[np.float64]  #: (8,) the limb lengths in use
+
+
 class PoseOut(NamedTuple):
     """What :func:`_pose_kernel` returns."""
 
@@ -304,18 +317,16 @@ def _riemannian_adm(
 
 
 @njit
-def _pose_kernel(
-    x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], w: NDArray[np.float64],
-    km: ModelArrays, st: StepSettings, max_iter: int, xp: NDArray[np.float64], pw: NDArray[np.float64],
-    rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
-) -> PoseOut:
-    """The pose step with the Riemannian alpha-step: its rows (:func:`_pose_rows`; the prior's
-    target ``xp`` (12, 3) and weights ``pw`` (12, 2), zeros: none), the start's objective if it
-    meets the limb lengths ``rad`` (8,), then the ADM (:func:`_riemannian_adm`) from ``alpha0``
-    (k,) with the scaled multipliers ``u1`` (m,), ``u2`` (k,) (updated in place) and at most
-    ``max_iter`` iterations. Shapes: x (12, 2), m0 (2, 3), t (2,), w (12,)."""
+def _pose_kernel(problem: PoseProblem, km: ModelArrays, st: StepSettings, max_iter: int,
+                 alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64]) -> PoseOut:
+    """The pose step of ``problem`` with the Riemannian alpha-step: its rows (:func:`_pose_rows`),
+    the start's objective if it meets the limb lengths, then the ADM (:func:`_riemannian_adm`)
+    from ``alpha0`` (k,) with the scaled multipliers ``u1`` (m,), ``u2`` (k,) (updated in place)
+    and at most ``max_iter`` iterations."""
     th, l1 = st.th, st.l1
-    c, wts, mus = _pose_rows(x, m0, t, w, km, xp, pw)
+    rad = problem.radii
+    c, wts, mus = _pose_rows(problem.points, problem.projection, problem.translation, problem.weights, km,
+                             problem.target, problem.prior_weights)
     best_obj = np.inf
     if _limb_violation_jit(km.mean + km.comps @ alpha0, km.limb_matrix, rad) < 1e-6:
         best_obj = _objective(c - mus @ (km.vt @ alpha0), wts, alpha0, th, l1)

@@ -70,6 +70,7 @@ from .alpha.base import AlphaStep, Coordinates, LiftedStep, UnconstrainedStep
 from .alpha.lifted_admm import QStepFn
 from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
 from .pose_kernel import (
+    PoseProblem,
     _adm_dual_update,
     _adm_split,
     _depth_row,
@@ -157,10 +158,10 @@ def _riemannian(x: NDArray[np.float64], m0: NDArray[np.float64], translation: ND
     :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`."""
     xp, pw, rad = prior_operands(model, prior)
     u1, u2 = _scaled_duals(duals, _n_rows(pw), model.n_bases, options.eta)
-    out = _pose_kernel(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(m0, dtype=np.float64),
-                       np.ascontiguousarray(translation, dtype=np.float64),
-                       np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays,
-                       step_settings(options), int(max_iter), xp, pw, rad, alpha, u1, u2)
+    c64 = np.ascontiguousarray
+    problem = PoseProblem(c64(x, dtype=np.float64), c64(weights, dtype=np.float64), c64(m0, dtype=np.float64),
+                          c64(translation, dtype=np.float64), xp, pw, rad)
+    out = _pose_kernel(problem, model.kernel_arrays, step_settings(options), int(max_iter), alpha, u1, u2)
     if not np.all(np.isfinite(out.alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
     return PoseResult(objective=float(out.objective), n_iter=int(out.n_iter), converged=bool(out.converged),

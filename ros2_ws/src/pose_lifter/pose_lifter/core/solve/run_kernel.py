@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from ..numeric.jit import njit, njit_nogil
 from ..numeric.records import ModelArrays, StepSettings
 from .camera import _camera_solve
-from .pose_kernel import _depth_term, _n_rows, _pose_kernel, _sum_abs
+from .pose_kernel import PoseProblem, _depth_term, _n_rows, _pose_kernel, _sum_abs
 
 __all__ = ["RunCall", "RunOut", "RunStatus", "run_calls"]
 
@@ -185,8 +185,8 @@ def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
     it = it0
     done = 0
     for it in range(it0 + 1, n_alt + 1 if status == _OK else it0 + 1):
-        p = _pose_kernel(xn, m0, t, w, km, st, pose_max_iter, xp, pw, rad, alpha, np.zeros(n_rows),
-                         np.zeros(k))
+        problem = PoseProblem(xn, w, m0, t, xp, pw, rad)
+        p = _pose_kernel(problem, km, st, pose_max_iter, alpha, np.zeros(n_rows), np.zeros(k))
         for i in range(k):
             if not math.isfinite(p.alpha[i]):
                 status = _POSE_DIVERGED
