@@ -15,6 +15,7 @@ from pose_lifter.core.options import (
     EXPERIMENT_OPTIONS,
     NODE_OPTIONS,
     OPTION_META,
+    OPTION_PARTS,
     ExperimentOptions,
     LifterOptions,
     OptionMeta,
@@ -138,3 +139,12 @@ def test_replace_keeps_refusing_unknown_names_and_bad_types() -> None:
         LifterOptions().replace(theta=-1.0)
     with pytest.raises(OptionsError, match="n_starts must be an integer in \\[1, 100000\\]"):
         LifterOptions(n_starts=0)
+
+
+def test_the_user_options_are_thirty_at_most_in_four_parts_in_order() -> None:
+    """A user holds the node's solver parameters by part: the fit, the prior, a track, the
+    published pose; the YAML and docs/node.md list them so."""
+    assert list(OPTION_PARTS) == ["fit", "prior", "track", "output"]
+    listed = [name for names in OPTION_PARTS.values() for name in names]
+    assert listed == list(NODE_OPTIONS) and len(listed) <= 30
+    assert not set(listed) & set(EXPERIMENT_OPTIONS)

@@ -32,8 +32,11 @@ def test_the_yaml_states_each_range_and_default() -> None:
     text = params_yaml()
     values = yaml.safe_load(text)["/**"]["ros__parameters"]
     assert list(values) == [p.name for p in PARAMS]
-    comments = dict(zip([p.name for p in PARAMS], [line.strip() for line in text.splitlines()
-                                                   if line.startswith("    # ")], strict=False))
+    headings = [line.strip() for line in text.splitlines() if line.startswith("    # ---- ")]
+    assert headings == ["# ---- fit", "# ---- prior", "# ---- track", "# ---- output", "# ---- the node"]
+    described = [line.strip() for line in text.splitlines()
+                 if line.startswith("    # ") and not line.startswith("    # ---- ")]
+    comments = dict(zip([p.name for p in PARAMS], described, strict=False))
     for p in PARAMS:
         assert values[p.name] == p.default and type(values[p.name]) is type(p.default), p.name
         assert comments[p.name].startswith(f"# {p.description}"), p.name

@@ -27,6 +27,7 @@ __all__ = [
     "EXPERIMENT_OPTIONS",
     "NODE_OPTIONS",
     "OPTION_META",
+    "OPTION_PARTS",
     "VARIANTS",
     "ExperimentOptions",
     "LifterOptions",
@@ -173,14 +174,16 @@ class _Validated:
 
 @dataclass(frozen=True)
 class UserOptions(_Validated):
-    """What a user sets: the lifting method, its quality and speed, the input's acceptance, the
-    hybrid mode's prior and a track's output. Each field is a parameter of the ROS node (same
-    name, default and range, :data:`NODE_OPTIONS`). Units: 2D input is normalised (see
-    ``Lifter``) so the loss and ``theta`` are in right-lower-leg units whatever the image size.
+    """What a user sets, in four parts (:data:`OPTION_PARTS`): the fit (the paper's method, its
+    starts and the input's acceptance), the learned prior, a track, and the published pose. Each
+    field is a parameter of the ROS node (same name, default and range, :data:`NODE_OPTIONS`).
+    Units: 2D input is normalised (see ``Lifter``) so the loss and ``theta`` are in right-lower-leg
+    units whatever the image size.
     Each field's doc, range or choices are in its metadata (:data:`OPTION_META`); why each default
     is what it is: ``docs/tuning.md``.
     """
 
+    # --- the fit (the paper's method)
     variant: str = field(default="full", metadata=_meta(
         "Paper variant: 'full' (= L1WAWS) or L1WAWS, L1WANS, ..., L2NANS.",
         choices=("full", *VARIANTS), check=lambda v: get_variant(v)))
@@ -193,22 +196,10 @@ class UserOptions(_Validated):
         open_high=True))
     pose_max_iter: int = field(default=40, metadata=_meta(
         "Iteration cap of the pose-step ADM.", 1, _ITER))
-    pose_tol: float = field(default=1e-3, metadata=_meta(
-        "Relative residual tolerance of the pose-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
-    camera_max_iter: int = field(default=100, metadata=_meta(
-        "Iteration cap of the camera-step ADM.", 1, _ITER))
-    camera_tol: float = field(default=1e-4, metadata=_meta(
-        "Tolerance of the camera-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
     n_starts: int = field(default=30, metadata=_meta(
         "Starts of a cold (multi-start) solve; 1 = mean pose only (the paper: 30).", 1, _ITER))
-    n_refine: int = field(default=3, metadata=_meta(
-        "Cold starts continued to convergence after one screening alternation each.", 1, _ITER))
-    screen_pose_max_iter: int = field(default=5, metadata=_meta(
-        "Pose-ADM iteration cap of the screening alternation of cold starts.", 1, _ITER))
     warm_flip: bool = field(default=True, metadata=_meta(
         "Warm solves also try the depth-mirrored previous pose (weak-perspective ambiguity)."))
-    warm_flip_screen: bool = field(default=True, metadata=_meta(
-        "The mirrored start is continued only if one alternation already beats the warm one."))
     confidence_threshold: float = field(default=0.1, metadata=_meta(
         "Keypoints with lower confidence are treated as missing.", 0.0, 1.0))
     min_visible_joints: int = field(default=6, metadata=_meta(
@@ -216,9 +207,12 @@ class UserOptions(_Validated):
     limb_proportions: LimbProportions = field(default="bases", metadata=_meta(
         "Limb-length targets: 'bases' (training mean) or 'anthropometric'.",
         choices=get_args(LimbProportions)))
-    alpha_prox: float = field(default=1.0, metadata=_meta(
-        "Proximal weight of the alpha-step (Riemannian Newton on the limb spheres; 0 = none).", 0.0,
-        _WEIGHT))
+    outlier_threshold: float = field(default=0.6, metadata=_meta(
+        "Hybrid: reprojection residual (leg lengths) above which a visible joint is dropped as a "
+        "confident outlier and the prior re-run without it (0 = off).", 0.0, _WEIGHT))
+    outlier_passes: int = field(default=2, metadata=_meta(
+        "Hybrid: outlier passes at most.", 1, _ITER))
+    # --- the learned prior (hybrid and learned modes)
     mode: Mode = field(default="hybrid", metadata=_meta(
         "'hybrid' (the learned prior inside the paper's robust fit), 'paper' (the paper's method "
         "alone) or 'learned' (the prior alone).", choices=get_args(Mode)))
@@ -234,15 +228,12 @@ class UserOptions(_Validated):
         "Hybrid: weight of the prior's image positions in the L1 objective.", 0.0, _WEIGHT))
     prior_weight_z: float = field(default=0.6, metadata=_meta(
         "Hybrid: weight of the prior's depths in the L1 objective.", 0.0, _WEIGHT))
-    outlier_threshold: float = field(default=0.6, metadata=_meta(
-        "Hybrid: reprojection residual (leg lengths) above which a visible joint is dropped as a "
-        "confident outlier and the prior re-run without it (0 = off).", 0.0, _WEIGHT))
-    outlier_threshold_gated: float = field(default=1.0, metadata=_meta(
-        "Hybrid: outlier_threshold on tracked frames the outlier gate screened.", 0.0, _WEIGHT))
-    outlier_passes: int = field(default=2, metadata=_meta(
-        "Hybrid: outlier passes at most.", 1, _ITER))
     prior_limbs: bool = field(default=True, metadata=_meta(
         "Hybrid, tracked: limb constraints with the track's estimated proportions."))
+    prior_flip: bool = field(default=True, metadata=_meta(
+        "Hybrid and learned: the prior's pose is the mean of its answers for the 2D and for the "
+        "mirrored 2D (mirrored back): test-time flip averaging."))
+    # --- a track (hybrid, tracked)
     temporal_weight: float = field(default=0.3, metadata=_meta(
         "Hybrid, tracked: weight of the previous frame's pose in the prior target (scaled by the "
         "track's 2D noise).", 0.0, _WEIGHT))
@@ -258,16 +249,11 @@ class UserOptions(_Validated):
     image_limbs: bool = field(default=False, metadata=_meta(
         "Hybrid, tracked: the track's limb proportions also from its image limb lengths over the "
         "fit's scale (their upper quantile over frames), with prior_limbs."))
-    prior_flip: bool = field(default=True, metadata=_meta(
-        "Hybrid and learned: the prior's pose is the mean of its answers for the 2D and for the "
-        "mirrored 2D (mirrored back): test-time flip averaging."))
+    # --- the published pose (hybrid, tracked)
     correction_smoothing: float = field(default=0.7, metadata=_meta(
         "Hybrid, tracked: the published pose is the prior's plus the fit's correction of it, "
         "averaged over frames with this factor (causal, exponential; 0 = the fit as it is).",
         0.0, 0.99))
-    disturbed_smoothing_gain: float = field(default=0.55, metadata=_meta(
-        "Hybrid, tracked: gain of the alpha-beta filter on the prior's part of the published "
-        "pose when a track is disturbed (unused joints, 2D noise); 1 = no filter.", 0.05, 1.0))
     noise_smoothing: bool = field(default=False, metadata=_meta(
         "Hybrid, tracked: a track with noisy 2D weighs its 2D term down and smooths its published "
         "pose causally by its noise estimate: about half the jitter, 2-4 mm more error on noisy "
@@ -284,10 +270,6 @@ class UserOptions(_Validated):
     measurement_gate: float = field(default=0.3, metadata=_meta(
         "Hybrid, tracked, with measurement_update: a used joint farther than this (leg lengths) "
         "from the smoothed pose is not moved to its 2D on that frame.", 0.0, _WEIGHT))
-    hybrid_alternations: int = field(default=2, metadata=_meta(
-        "Hybrid: alternations of each run at most.", 1, _ITER))
-    hybrid_pose_max_iter: int = field(default=10, metadata=_meta(
-        "Hybrid: pose-step ADM iterations at most per alternation.", 1, _ITER))
 
     @property
     def method(self) -> Variant:
@@ -298,8 +280,11 @@ class UserOptions(_Validated):
 @dataclass(frozen=True)
 class ExperimentOptions(_Validated):
     """What an experiment sets: the ADM penalties (``eta``, ``eta_growth``, ``delta``, ``tau``),
-    the inner tolerances and the cvxpy reference solvers. For experiments, tests and benchmarks;
-    not node parameters (:data:`EXPERIMENT_OPTIONS`).
+    the inner tolerances, the cvxpy reference solvers, and the fit's and the hybrid mode's
+    internals measured once (tolerances and iteration caps of the steps, the cold starts'
+    screening, the alpha-step's proximal weight, the hybrid's runs, the gated outlier threshold,
+    a disturbed track's smoothing gain; why each default: ``docs/tuning.md``). For experiments,
+    tests and benchmarks; not node parameters (:data:`EXPERIMENT_OPTIONS`).
     """
 
     inner_max_iter: int = field(default=60, metadata=_meta(
@@ -325,6 +310,31 @@ class ExperimentOptions(_Validated):
     newton_tol: float = field(default=1e-9, metadata=_meta(
         "Relative tolerance of each Riemannian Newton alpha-step inside the pose ADM.", 0.0, 1.0,
         open_low=True, open_high=True))
+    # --- solver internals of the fit and the hybrid mode (their defaults: docs/tuning.md)
+    pose_tol: float = field(default=1e-3, metadata=_meta(
+        "Relative residual tolerance of the pose-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
+    camera_max_iter: int = field(default=100, metadata=_meta(
+        "Iteration cap of the camera-step ADM.", 1, _ITER))
+    camera_tol: float = field(default=1e-4, metadata=_meta(
+        "Tolerance of the camera-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
+    n_refine: int = field(default=3, metadata=_meta(
+        "Cold starts continued to convergence after one screening alternation each.", 1, _ITER))
+    screen_pose_max_iter: int = field(default=5, metadata=_meta(
+        "Pose-ADM iteration cap of the screening alternation of cold starts.", 1, _ITER))
+    warm_flip_screen: bool = field(default=True, metadata=_meta(
+        "The mirrored start is continued only if one alternation already beats the warm one."))
+    alpha_prox: float = field(default=1.0, metadata=_meta(
+        "Proximal weight of the alpha-step (Riemannian Newton on the limb spheres; 0 = none).", 0.0,
+        _WEIGHT))
+    outlier_threshold_gated: float = field(default=1.0, metadata=_meta(
+        "Hybrid: outlier_threshold on tracked frames the outlier gate screened.", 0.0, _WEIGHT))
+    disturbed_smoothing_gain: float = field(default=0.55, metadata=_meta(
+        "Hybrid, tracked: gain of the alpha-beta filter on the prior's part of the published "
+        "pose when a track is disturbed (unused joints, 2D noise); 1 = no filter.", 0.05, 1.0))
+    hybrid_alternations: int = field(default=2, metadata=_meta(
+        "Hybrid: alternations of each run at most.", 1, _ITER))
+    hybrid_pose_max_iter: int = field(default=10, metadata=_meta(
+        "Hybrid: pose-step ADM iterations at most per alternation.", 1, _ITER))
 
 
 @dataclass(frozen=True)
@@ -371,5 +381,19 @@ OPTION_META: Final[Mapping[str, OptionMeta]] = MappingProxyType(
 #: The :class:`UserOptions` fields: the ROS node declares them as parameters (same names, defaults
 #: and ranges), in order.
 NODE_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(UserOptions))
+#: The :class:`UserOptions` fields by part, in order: the fit, the learned prior, a track, the
+#: published pose (the node's parameter file and docs/node.md list them so).
+OPTION_PARTS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType({
+    "fit": ("variant", "theta", "max_alternations", "alternation_tol", "pose_max_iter", "n_starts",
+            "warm_flip", "confidence_threshold", "min_visible_joints", "limb_proportions",
+            "outlier_threshold", "outlier_passes"),
+    "prior": ("mode", "prior_file", "temporal_prior", "temporal_prior_file", "prior_weight_xy",
+              "prior_weight_z", "prior_limbs", "prior_flip"),
+    "track": ("temporal_weight", "outlier_gate", "missing_temporal_weight", "fill_missing_frames",
+              "image_limbs"),
+    "output": ("correction_smoothing", "noise_smoothing", "measurement_update", "measurement_depth",
+               "measurement_gate"),
+})
+
 #: The :class:`ExperimentOptions` fields, in order.
 EXPERIMENT_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(ExperimentOptions))

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from pose_lifter.core.errors import OptionsError
-from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, LifterOptions
+from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, OPTION_PARTS, LifterOptions
 from pose_lifter.core.track.placement import LEG_LENGTH_RANGE_M
 from pose_lifter.messages.frame import FrameSettings
 
@@ -248,9 +248,16 @@ def _yaml_value(value: Any) -> str:
 
 
 def params_yaml() -> str:
-    """``config/lifter.yaml``: every parameter with its default, description and range."""
+    """``config/lifter.yaml``: every parameter with its default, description and range; the
+    solver options under a heading per part (:data:`~pose_lifter.core.options.OPTION_PARTS`), the
+    node's own settings after them."""
+    first_of = {names[0]: part for part, names in OPTION_PARTS.items()}
     lines = [_YAML_HEAD]
     for p in PARAMS:
+        if p.name in first_of:
+            lines.append(f"    # ---- {first_of[p.name]}\n")
+        elif p.name == "warm_start":
+            lines.append("    # ---- the node\n")
         note = " ".join(t for t in (p.description, p.range_text()) if t)
         if p.read_only:
             note += " (read-only: set at start-up)"
