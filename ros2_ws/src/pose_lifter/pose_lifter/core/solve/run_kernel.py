@@ -82,7 +82,10 @@ class RunOut(NamedTuple):
 
 class RunCall(NamedTuple):
     """The operands of one run for :func:`_run_kernel` but the model and the settings, which
-    every run of a lifter shares (see :func:`_run_kernel` for each)."""
+    every run of a lifter shares: the normalised 2D and its weights, the prior's target, weights
+    and the limb lengths in use (zeros: no prior), the first pose step's start, the start pose and
+    camera ``[M | t]``, and for a continued run its best objective and alternations done; the
+    alternation cap and the pose steps' iteration cap."""
 
     xn: NDArray[np.float64]  #: (12, 2)
     w: NDArray[np.float64]  #: (12,)
@@ -131,7 +134,6 @@ def _stack_camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], xp: NDAr
         cx[j, 0], cx[j, 1], cw[j] = xn[j, 0], xn[j, 1], w[j]
         cx[nj + j, 0], cx[nj + j, 1], cw[nj + j] = xp[j, 0], xp[j, 1], pw[j, 0]
     return cx, cw, True
-
 
 
 @njit
