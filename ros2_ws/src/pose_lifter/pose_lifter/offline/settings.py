@@ -48,13 +48,20 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
+def _default_options() -> LifterOptions:
+    """The defaults of every lifter option (imported here: the module loads without the solver)."""
+    from pose_lifter.core.options import LifterOptions
+
+    return LifterOptions()
+
+
 @dataclass(frozen=True)
 class LiftSettings:
     """Everything that decides a lifted bag's content: the lifter's options and files, the
     per-track policy and the output's shape. Picklable (it is what a Dask worker receives) and
     JSON-able (its digest keys the manifest)."""
 
-    options: LifterOptions = field(default_factory=lambda: _default_options())
+    options: LifterOptions = field(default_factory=_default_options)
     bases: str | None = None
     warm_start: bool = True
     lower_leg_length: float = DEFAULT_LEG_LENGTH_M  #: metres (the node's ``lower_leg_length``)
@@ -100,13 +107,6 @@ class LiftSettings:
             lifter.warm_up()
         return lifter
 
-
-
-def _default_options() -> LifterOptions:
-    """The defaults of every lifter option (imported here: the module loads without the solver)."""
-    from pose_lifter.core.options import LifterOptions
-
-    return LifterOptions()
 
 
 def _jsonable(v: Any) -> Any:
