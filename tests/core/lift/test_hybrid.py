@@ -27,6 +27,8 @@ def test_modes_are_selectable_and_validated(bases: PoseBases) -> None:
         LifterOptions(mode="magic")
     with pytest.raises(OptionsError):
         Lifter(bases, LifterOptions(mode="hybrid", variant="L1NAWS"))  # the prior rows need limbs
+    with pytest.raises(OptionsError, match="pose_solver"):  # and the compiled pose step
+        Lifter(bases, LifterOptions(mode="hybrid", pose_solver="cvxpy"))
 
 
 def test_hybrid_meets_the_limb_constraints_and_beats_both_parts(

@@ -175,9 +175,10 @@ class Lifter:
         if o.mode != "paper":
             # the priors are loaded (and validated) now, not on the first frame
             self._prior_fit = PriorFit(o, self.prior, self.temporal_prior, self._model, self._runs)
-            if o.mode == "hybrid" and (not o.method.limbs or self._model.limb_coordinates is None):
-                raise OptionsError("mode 'hybrid' needs a variant with limb constraints and bases with "
-                                   ">= 24 independent directions")
+            if o.mode == "hybrid" and (not o.method.limbs or self._model.limb_coordinates is None
+                                       or o.pose_solver != "admm"):
+                raise OptionsError("mode 'hybrid' needs a variant with limb constraints, bases with "
+                                   ">= 24 independent directions and pose_solver 'admm'")
 
     @property
     def prior_fit(self) -> PriorFit | None:
