@@ -2,8 +2,8 @@
 
 Every solver result is a :class:`SolveInfo` (``objective``, ``n_iter``, ``converged``, the same
 meaning everywhere: the objective the solver minimised at the point it returns, its iterations,
-and whether its stopping rule was met before its iteration cap); ADM multipliers carried from one
-step to the next are :class:`Duals`.
+and whether its stopping rule was met before its iteration cap); a step's ADM multipliers (its
+warm start, and what it ends with) are :class:`Duals`.
 """
 
 from __future__ import annotations
@@ -93,7 +93,8 @@ class SolveInfo:
 
 @dataclass(frozen=True)
 class Duals:
-    """Unscaled ADM multipliers of a step, to warm-start the next step of the same solve.
+    """Unscaled ADM multipliers a step ends with, from which another step can start
+    (``pose_step(..., duals=...)``, ``camera_step(..., duals=...)``).
 
     Attributes
     ----------

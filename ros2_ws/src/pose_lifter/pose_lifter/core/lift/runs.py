@@ -7,10 +7,11 @@ below ``alternation_tol`` or the alternation cap is reached, and keeps its lowes
 alternation. A run can be continued (a screened start), and its depth-mirrored copy (the
 weak-perspective ambiguity: the same 2D, reflected depth) started.
 
-With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`); the
-other solvers (the cvxpy references, the lifted ADM and SQP alpha-steps, multipliers carried
-between steps) run in the Python loop of :meth:`Runs.run_steps`, on the same objective terms and
-stopping rule (:func:`pose_lifter.core.solve.run_kernel._run_objective`, ``_alternation_stops``).
+With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`);
+the cvxpy references, the variants without limbs and bases whose limb map is not onto (the
+paper's inner ADM as the alpha-step) run in the Python loop of :meth:`Runs.run_steps`, on the
+same objective terms and stopping rule (:func:`pose_lifter.core.solve.run_kernel._run_objective`,
+``_alternation_stops``).
 """
 
 from __future__ import annotations
