@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from pose_lifter.core.model.bases import PoseBases, learn_pca_bases
 from pose_lifter.core.model.skeleton import ANTHROPOMETRIC_PROPORTIONS, normalise_pose
 
 # torso joints (left sho, right sho, left hip, right hip), x to the subject's left, y up
@@ -45,3 +46,10 @@ def synthetic_poses(
         # a small random torso lean so the body frame varies a little
         poses[p] += 0.05 * rng.normal(size=(1, 3))
     return normalise_pose(poses), labels.astype(np.int64)
+
+
+def small_pca_bases() -> PoseBases:
+    """12 PCA bases of 300 synthetic poses: fewer than the 24 directions the limb map needs to be
+    onto, so a pose step on them runs the Python loop with the paper's inner ADM."""
+    poses, _ = synthetic_poses(300, seed=1)
+    return learn_pca_bases(poses, n_bases=12, n_starts=3, seed=0)

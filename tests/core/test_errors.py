@@ -15,7 +15,6 @@ from pose_lifter.core.errors import (
     SolverError,
     diverged_as_solver_error,
 )
-from pose_lifter.core.model.bases import learn_pca_bases
 from pose_lifter.core.model.pose_model import PoseModel
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.solve import camera
@@ -23,7 +22,7 @@ from pose_lifter.core.solve.pose_step import pose_step
 from pose_lifter.messages.typestore import TypestoreError
 from pose_lifter.offline import bags
 from pose_lifter.offline.bags import BagError, BagReadError
-from synthetic_poses import synthetic_poses
+from synthetic_poses import small_pca_bases
 
 
 @pytest.fixture(scope="module")
@@ -69,8 +68,7 @@ def test_a_diverged_camera_step_is_a_solver_error() -> None:
 def test_a_diverged_pose_step_is_a_solver_error(lifter: Lifter, small: bool) -> None:
     # the compiled step (the shipped bases) and the Python loop with the paper's inner ADM (12 PCA
     # bases: no onto limb map)
-    poses = synthetic_poses(300, seed=1)[0]
-    bases = learn_pca_bases(poses, n_bases=12, n_starts=3, seed=0) if small else None
+    bases = small_pca_bases() if small else None
     model = PoseModel.build(bases, bases.limb_proportions) if bases is not None else lifter.model
     alpha0 = (bases if bases is not None else lifter.bases).start_alphas[0]
     x = np.random.default_rng(0).normal(size=(12, 2))

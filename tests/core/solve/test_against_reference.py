@@ -25,15 +25,14 @@ from pose_lifter.core.solve.alpha.sphere_newton import riemannian_alpha
 from pose_lifter.core.solve.camera import camera_step
 from pose_lifter.core.solve.pose_step import PriorRows, pose_step
 from scipy.spatial.transform import Rotation
-from synthetic_poses import synthetic_poses
+from synthetic_poses import small_pca_bases, synthetic_poses
 
 Arr = NDArray[np.float64]
 
 
 @pytest.fixture(scope="module")
 def bases() -> PoseBases:
-    poses, _ = synthetic_poses(300, seed=1)
-    return learn_pca_bases(poses, n_bases=12, n_starts=3, seed=0)
+    return small_pca_bases()
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 import tolerances as tol
 from numpy.typing import NDArray
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.model.bases import PoseBases, default_bases_path, learn_pca_bases
+from pose_lifter.core.model.bases import PoseBases, default_bases_path
 from pose_lifter.core.model.pose_model import PoseModel
 from pose_lifter.core.numeric.records import StepSettings, settings_record
 from pose_lifter.core.options import LifterOptions
@@ -22,7 +22,7 @@ from pose_lifter.core.solve.alpha.sphere_newton import (
 from pose_lifter.core.solve.pose_kernel import _pose_rows
 from pose_lifter.core.solve.pose_step import PriorRows, _adm, _alpha_step, pose_step, prior_operands
 from scipy.spatial.transform import Rotation
-from synthetic_poses import synthetic_poses
+from synthetic_poses import small_pca_bases
 
 Arr = NDArray[np.float64]
 
@@ -161,8 +161,7 @@ def test_every_solver_result_reports_convergence_alike(model: PoseModel) -> None
     x, m0, t, w, _ = _problem(model, 7)
     # the Riemannian step on the shipped bases, the paper's inner ADM on 12 PCA bases (no onto limb
     # map), the linear solve without limbs
-    small = PoseModel.build(learn_pca_bases(synthetic_poses(300, seed=1)[0], n_bases=12, n_starts=3, seed=0),
-                            np.sqrt(model.limb_sq))
+    small = PoseModel.build(small_pca_bases(), np.sqrt(model.limb_sq))
     for m, opts in ((model, LifterOptions(pose_tol=1e-5)), (small, LifterOptions(pose_tol=1e-5)),
                     (model, LifterOptions(pose_tol=1e-5, variant="L1NAWS"))):
         res = pose_step(x, m0, t, w, m, np.zeros(m.n_bases), opts, max_iter=200)
