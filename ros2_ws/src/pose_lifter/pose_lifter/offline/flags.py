@@ -38,14 +38,16 @@ def flag_options(args: argparse.Namespace, base: dict[str, Any] | None = None,
     named in ``typed`` (typed on the command line) win, and ``--solver`` always."""
     from pose_lifter.core.options import LifterOptions
 
-    flags = {"variant": args.variant, "n_starts": args.starts,
-             "mode": "paper" if args.solver == "cvxpy" else args.mode}
-    names = {"variant": "variant", "n_starts": "starts", "mode": "mode"}
+    def wins(flag: str) -> bool:
+        return base is None or flag in (typed or frozenset())
+
     options = dict(base or {})
-    for name, value in flags.items():
-        cvxpy_mode = name == "mode" and args.solver == "cvxpy"  # the references run the paper's mode
-        if base is None or names[name] in (typed or frozenset()) or cvxpy_mode:
-            options[name] = value
+    if wins("variant"):
+        options["variant"] = args.variant
+    if wins("starts"):
+        options["n_starts"] = args.starts
+    if wins("mode") or args.solver == "cvxpy":  # the cvxpy references run the paper's mode
+        options["mode"] = "paper" if args.solver == "cvxpy" else args.mode
     options.update(camera_solver=args.solver, pose_solver=args.solver)
     return LifterOptions().replace(**options)
 
