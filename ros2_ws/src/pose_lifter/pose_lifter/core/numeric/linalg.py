@@ -1,5 +1,5 @@
-"""Small dense linear algebra for the compiled kernels: LAPACK solves and Cholesky tests, a
-written-out Cholesky solve and a reduction-free ``A^T x``."""
+"""Small dense linear algebra for the compiled kernels: a written-out Cholesky solve and a
+reduction-free ``A^T x``."""
 
 from __future__ import annotations
 
@@ -7,58 +7,8 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dgesv as _dgesv
-from scipy.linalg.lapack import dpotrf as _dpotrf
 
-from .jit import HAVE_NUMBA, njit
-
-_EYE8 = 1e-14 * np.eye(8)
-
-
-def _solve_lapack(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``a^-1 b`` by LAPACK gesv called directly (numpy's wrapper costs more than the solve
-    at these sizes); least squares if ``a`` is singular."""
-    _, _, x, info = _dgesv(a, b)
-    if info != 0:
-        return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])
-    return np.asarray(x)
-
-
-def _pos_def_lapack(a: NDArray[np.float64]) -> bool:
-    """Whether the Cholesky factorisation (LAPACK potrf, lower triangle) of ``a`` succeeds."""
-    return bool(_dpotrf(a, lower=1, clean=0)[1] == 0)
-
-
-@njit
-def _solve_jit(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """:func:`_solve_lapack` inside the compiled kernels: numba's ``solve`` is the same LAPACK
-    gesv (scipy's), raising on a singular ``a``; least squares then (numpy's default rcond)."""
-    try:
-        return np.asarray(np.linalg.solve(a, b), dtype=np.float64)
-    except Exception:  # singular, or non-finite values (gesv propagates them; numba raises)
-        pass
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-        return np.full(b.shape[0], np.nan)
-    return np.asarray(np.linalg.lstsq(a, b, rcond=2.220446049250313e-16 * max(a.shape[0], a.shape[1]))[0],
-                      dtype=np.float64)
-
-
-@njit
-def _pos_def_jit(a: NDArray[np.float64]) -> bool:
-    """:func:`_pos_def_lapack` inside the compiled kernels (numba's ``cholesky``: the same
-    potrf on the lower triangle, raising where the matrix is not positive definite)."""
-    try:
-        np.linalg.cholesky(a)
-    except Exception:
-        return False
-    return True
-
-
-# the compiled kernels call LAPACK through numba; without numba they run as plain Python and call
-# scipy's LAPACK directly
-_solve = _solve_jit if HAVE_NUMBA else _solve_lapack
-_pos_def = _pos_def_jit if HAVE_NUMBA else _pos_def_lapack
-
+from .jit import njit
 
 
 @njit
