@@ -90,9 +90,9 @@ class PoseModel:
         Thin SVD of the components.
     reduced : LiftedConstraints
         Constraints in the reduced lifting (``d = r + 1``, coordinates ``s = V^T alpha``).
-    limb_cu, limb_cmu, limb_hess : ndarrays, shapes (8, 3, r), (8, 3), (8, r, r)
-        ``C_i U S``, ``C_i mu`` and ``2 (C_i U S)^T (C_i U S)``: the limb constraints in the
-        reduced coordinates evaluated in joint space (used by the Newton alpha-solver).
+    limb_cu, limb_cmu : ndarrays, shapes (8, 3, r), (8, 3)
+        ``C_i U S`` and ``C_i mu``: the limb vectors in the reduced coordinates (the Riemannian
+        alpha-step's limb coordinates).
     """
 
     mean: NDArray[np.float64]
@@ -104,18 +104,14 @@ class PoseModel:
     reduced: LiftedConstraints
     limb_cu: NDArray[np.float64]
     limb_cmu: NDArray[np.float64]
-    limb_hess: NDArray[np.float64]
 
     @functools.cached_property
-    def kernel_limbs(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
-                                    NDArray[np.float64]]:
-        """``C_i U S`` (24, r), ``C_i mu`` (24,), the limb Hessians (8, r*r) and ``L_i`` (8,) as
-        C-contiguous arrays for the compiled Newton kernel (made once per model)."""
+    def kernel_limbs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``C_i U S`` (24, r) and ``C_i mu`` (24,) as C-contiguous arrays for the compiled
+        Riemannian alpha-step (made once per model)."""
         r = self.sig.size
         return (np.ascontiguousarray(self.limb_cu.reshape(24, r)),
-                np.ascontiguousarray(self.limb_cmu.reshape(24)),
-                np.ascontiguousarray(self.limb_hess.reshape(8, r * r)),
-                np.ascontiguousarray(self.limb_sq))
+                np.ascontiguousarray(self.limb_cmu.reshape(24)))
 
     @functools.cached_property
     def limb_coordinates(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
@@ -167,7 +163,6 @@ class PoseModel:
             reduced=LiftedConstraints.build(_lifted_omegas(us, mu, limb_sq)),
             limb_cu=cu,
             limb_cmu=np.einsum("iak,k->ia", c, mu),
-            limb_hess=2.0 * np.einsum("iar,ias->irs", cu, cu),
         )
 
     def pose(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:

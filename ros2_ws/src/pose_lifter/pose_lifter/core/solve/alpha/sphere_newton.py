@@ -52,7 +52,7 @@ def riemannian_alpha(
     g = np.ascontiguousarray(gmat, dtype=np.float64)
     q, rmat, s1, s2 = _sphere_setup(g, z, n)
     h = np.asarray(lin, dtype=np.float64) - g @ sz
-    cu24, cmu24 = model.kernel_limbs[:2]
+    cu24, cmu24 = model.kernel_limbs
     lv, it, conv = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ np.asarray(s0, dtype=np.float64), rad,
                                   int(max_iter), float(tol))
     s = sz + s1 @ lv + s2 @ h
