@@ -17,8 +17,12 @@ from pose_lifter.core.options import (
     OPTION_META,
     OPTION_PARTS,
     ExperimentOptions,
+    FitOptions,
     LifterOptions,
     OptionMeta,
+    OutputOptions,
+    PriorOptions,
+    TrackOptions,
     UserOptions,
 )
 
@@ -148,3 +152,26 @@ def test_the_user_options_are_thirty_at_most_in_four_parts_in_order() -> None:
     listed = [name for names in OPTION_PARTS.values() for name in names]
     assert listed == list(NODE_OPTIONS) and len(listed) <= 30
     assert not set(listed) & set(EXPERIMENT_OPTIONS)
+
+
+@pytest.mark.parametrize(("part", "cls", "bad"), [
+    ("fit", FitOptions, {"min_visible_joints": 2}),
+    ("prior", PriorOptions, {"mode": "guess"}),
+    ("track", TrackOptions, {"fill_missing_frames": -1}),
+    ("output", OutputOptions, {"correction_smoothing": 1.0}),
+])
+def test_each_part_is_an_options_class_that_validates_itself(part: str, cls: type, bad: dict[str, Any]
+                                                             ) -> None:
+    """A part holds exactly its fields of :data:`OPTION_PARTS`, refuses a bad value of its own
+    alone, and :meth:`UserOptions.part` gives it with the user's values."""
+    assert tuple(f.name for f in dataclasses.fields(cls)) == OPTION_PARTS[part]
+    assert cls.__doc__ and len(cls.__doc__.split()) >= 10
+    (name,) = bad
+    with pytest.raises(OptionsError, match=name):
+        cls(**bad)
+    with pytest.raises(OptionsError, match=name):
+        LifterOptions(**bad)
+    changed = LifterOptions(theta=0.2, mode="paper", temporal_weight=0.5, measurement_depth=0.25)
+    got = changed.part(part)
+    assert type(got) is cls
+    assert all(getattr(got, n) == getattr(changed, n) for n in OPTION_PARTS[part])

@@ -1,10 +1,13 @@
 """Solver options and the paper's method variants: one table, validated in one place.
 
 The options come in two parts. :class:`UserOptions` is what a user sets: each of its fields is a
-parameter of the ROS node (same name, default and range). :class:`ExperimentOptions` is what an
-experiment sets: the solver's internal penalties and tolerances and the reference solvers, for
-experiments, tests and benchmarks, not node parameters. :class:`LifterOptions` is both, the one
-object the solver reads.
+parameter of the ROS node (same name, default and range). It is made of four parts, each a
+validated options class with its own doc: :class:`FitOptions` (the paper's method),
+:class:`PriorOptions` (the learned prior), :class:`TrackOptions` (a track) and
+:class:`OutputOptions` (the published pose); :data:`OPTION_PARTS` lists their fields.
+:class:`ExperimentOptions` is what an experiment sets: the solver's internal penalties and
+tolerances and the reference solvers, for experiments, tests and benchmarks, not node
+parameters. :class:`LifterOptions` is both, the one object the solver reads.
 
 Every field carries its metadata (:class:`OptionMeta`: a one-line doc, its range or choices). From
 that one table come :meth:`LifterOptions.validate`, the node's parameter descriptors and
@@ -30,11 +33,15 @@ __all__ = [
     "OPTION_PARTS",
     "VARIANTS",
     "ExperimentOptions",
+    "FitOptions",
     "LifterOptions",
     "LimbProportions",
     "Mode",
     "OptionMeta",
+    "OutputOptions",
+    "PriorOptions",
     "SubproblemSolver",
+    "TrackOptions",
     "UserOptions",
     "Variant",
     "get_variant",
@@ -173,17 +180,12 @@ class _Validated:
 
 
 @dataclass(frozen=True)
-class UserOptions(_Validated):
-    """What a user sets, in four parts (:data:`OPTION_PARTS`): the fit (the paper's method, its
-    starts and the input's acceptance), the learned prior, a track, and the published pose. Each
-    field is a parameter of the ROS node (same name, default and range, :data:`NODE_OPTIONS`).
-    Units: 2D input is normalised (see ``Lifter``) so the loss and ``theta`` are in right-lower-leg
-    units whatever the image size.
-    Each field's doc, range or choices are in its metadata (:data:`OPTION_META`); why each default
-    is what it is: ``docs/tuning.md``.
-    """
+class FitOptions(_Validated):
+    """The fit: the paper's method (its variant, sparsity, alternations and cold starts), which 2D
+    joints it accepts, its limb-length targets and the hybrid mode's confident-outlier passes.
+    Units: 2D input is normalised (see ``Lifter``) so the loss, ``theta`` and the outlier
+    threshold are in right-lower-leg units whatever the image size."""
 
-    # --- the fit (the paper's method)
     variant: str = field(default="full", metadata=_meta(
         "Paper variant: 'full' (= L1WAWS) or L1WAWS, L1WANS, ..., L2NANS.",
         choices=("full", *VARIANTS), check=lambda v: get_variant(v)))
@@ -212,7 +214,18 @@ class UserOptions(_Validated):
         "confident outlier and the prior re-run without it (0 = off).", 0.0, _WEIGHT))
     outlier_passes: int = field(default=2, metadata=_meta(
         "Hybrid: outlier passes at most.", 1, _ITER))
-    # --- the learned prior (hybrid and learned modes)
+    @property
+    def method(self) -> Variant:
+        """The :class:`Variant` named by ``variant``."""
+        return get_variant(self.variant)
+
+
+@dataclass(frozen=True)
+class PriorOptions(_Validated):
+    """The learned prior: the mode that decides whether it runs (hybrid, learned) or not (paper),
+    its weights, the temporal prior of tracked frames, its weight in the hybrid fit, its limb
+    proportions and its test-time flip averaging."""
+
     mode: Mode = field(default="hybrid", metadata=_meta(
         "'hybrid' (the learned prior inside the paper's robust fit), 'paper' (the paper's method "
         "alone) or 'learned' (the prior alone).", choices=get_args(Mode)))
@@ -233,7 +246,14 @@ class UserOptions(_Validated):
     prior_flip: bool = field(default=True, metadata=_meta(
         "Hybrid and learned: the prior's pose is the mean of its answers for the 2D and for the "
         "mirrored 2D (mirrored back): test-time flip averaging."))
-    # --- a track (hybrid, tracked)
+
+
+@dataclass(frozen=True)
+class TrackOptions(_Validated):
+    """A track (hybrid mode, tracked people): how much the previous frame's pose holds, the
+    temporal outlier gate, the joints a track fills in, and where its limb proportions come
+    from."""
+
     temporal_weight: float = field(default=0.3, metadata=_meta(
         "Hybrid, tracked: weight of the previous frame's pose in the prior target (scaled by the "
         "track's 2D noise).", 0.0, _WEIGHT))
@@ -249,7 +269,14 @@ class UserOptions(_Validated):
     image_limbs: bool = field(default=False, metadata=_meta(
         "Hybrid, tracked: the track's limb proportions also from its image limb lengths over the "
         "fit's scale (their upper quantile over frames), with prior_limbs."))
-    # --- the published pose (hybrid, tracked)
+
+
+@dataclass(frozen=True)
+class OutputOptions(_Validated):
+    """The published pose (hybrid mode, tracked people): the causal smoothing of the fit's
+    correction and of noisy tracks, and the measurement update that moves its joints toward the
+    observed 2D. Output only: what a track carries into its next frame is the fit's own pose."""
+
     correction_smoothing: float = field(default=0.7, metadata=_meta(
         "Hybrid, tracked: the published pose is the prior's plus the fit's correction of it, "
         "averaged over frames with this factor (causal, exponential; 0 = the fit as it is).",
@@ -271,10 +298,22 @@ class UserOptions(_Validated):
         "Hybrid, tracked, with measurement_update: a used joint farther than this (leg lengths) "
         "from the smoothed pose is not moved to its 2D on that frame.", 0.0, _WEIGHT))
 
-    @property
-    def method(self) -> Variant:
-        """The :class:`Variant` named by ``variant``."""
-        return get_variant(self.variant)
+
+@dataclass(frozen=True)
+class UserOptions(OutputOptions, TrackOptions, PriorOptions, FitOptions):
+    """What a user sets: the fields of its four parts (:data:`OPTION_PARTS`), in the order the fit
+    (:class:`FitOptions`), the learned prior (:class:`PriorOptions`), a track
+    (:class:`TrackOptions`) and the published pose (:class:`OutputOptions`). Each part is a
+    validated options class of its own; each field is a parameter of the ROS node (same name,
+    default and range, :data:`NODE_OPTIONS`). Each field's doc, range or choices are in its
+    metadata (:data:`OPTION_META`); why each default is what it is: ``docs/tuning.md``.
+    """
+
+    def part(self, name: str) -> FitOptions | PriorOptions | TrackOptions | OutputOptions:
+        """The part ``name`` of :data:`OPTION_PARTS` (``"fit"``, ``"prior"``, ``"track"``,
+        ``"output"``) as its own options object, with this object's values."""
+        cls = _PART_CLASSES[name]
+        return cls(**{f.name: getattr(self, f.name) for f in dataclasses.fields(cls)})
 
 
 @dataclass(frozen=True)
@@ -381,19 +420,14 @@ OPTION_META: Final[Mapping[str, OptionMeta]] = MappingProxyType(
 #: The :class:`UserOptions` fields: the ROS node declares them as parameters (same names, defaults
 #: and ranges), in order.
 NODE_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(UserOptions))
+#: The options class of each part of :class:`UserOptions`, in order.
+_PART_CLASSES: Final[Mapping[str, type[FitOptions | PriorOptions | TrackOptions | OutputOptions]]] = (
+    MappingProxyType({"fit": FitOptions, "prior": PriorOptions, "track": TrackOptions,
+                      "output": OutputOptions}))
 #: The :class:`UserOptions` fields by part, in order: the fit, the learned prior, a track, the
 #: published pose (the node's parameter file and docs/node.md list them so).
 OPTION_PARTS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType({
-    "fit": ("variant", "theta", "max_alternations", "alternation_tol", "pose_max_iter", "n_starts",
-            "warm_flip", "confidence_threshold", "min_visible_joints", "limb_proportions",
-            "outlier_threshold", "outlier_passes"),
-    "prior": ("mode", "prior_file", "temporal_prior", "temporal_prior_file", "prior_weight_xy",
-              "prior_weight_z", "prior_limbs", "prior_flip"),
-    "track": ("temporal_weight", "outlier_gate", "missing_temporal_weight", "fill_missing_frames",
-              "image_limbs"),
-    "output": ("correction_smoothing", "noise_smoothing", "measurement_update", "measurement_depth",
-               "measurement_gate"),
-})
+    part: tuple(f.name for f in dataclasses.fields(cls)) for part, cls in _PART_CLASSES.items()})
 
 #: The :class:`ExperimentOptions` fields, in order.
 EXPERIMENT_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(ExperimentOptions))
