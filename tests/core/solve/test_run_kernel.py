@@ -19,18 +19,20 @@ import tolerances as tol
 from pose_lifter.core.lift.batch import Steps
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.lift.runs import Run, Runs
-from pose_lifter.core.options import LifterOptions
+from pose_lifter.core.model.pose_model import PoseModel
+from pose_lifter.core.options import VARIANTS, LifterOptions
 from pose_lifter.core.solve.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.solve.pose_step import PriorRows
 from pose_lifter.core.solve.run_kernel import _run_objective
 from pose_lifter.offline.lift import lift_messages
 from pose_lifter.offline.settings import LiftSettings
+from synthetic_poses import small_pca_bases
 
 REPO = Path(__file__).resolve().parents[3]
 Call = tuple[tuple[Any, ...], dict[str, Any]]
 
 
-def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[Call]]:
+def _recorded_runs(mode: str, bag: str, n_messages: int, variant: str = "full") -> tuple[Lifter, list[Call]]:
     """The runs (``Runs.run_steps`` calls) of a tracked lift of a bag's first messages (through
     the loop)."""
     from pose_lifter.offline.bags import read_messages
@@ -41,7 +43,8 @@ def _recorded_runs(mode: str, bag: str, n_messages: int) -> tuple[Lifter, list[C
             kps.append((x.stamp_ns, x.msg))
         elif x.topic.endswith("camera_info"):
             infos.append((x.stamp_ns, x.msg))
-    lifter = Lifter(None, LifterOptions(mode=mode, n_starts=4) if mode == "paper" else LifterOptions())
+    lifter = Lifter(None, LifterOptions(mode=mode, n_starts=4, variant=variant) if mode == "paper"
+                    else LifterOptions())
     lifter.runs.compiled = False
     calls: list[Call] = []
     original = lifter.runs.run_steps
@@ -82,10 +85,13 @@ def _assert_same(a: Run, b: Run) -> None:
     assert abs(a.pose.limb_violation - b.pose.limb_violation) <= tol.FUSED_RUN_REL
 
 
-@pytest.mark.parametrize(("mode", "bag"), [("hybrid", "punch_outliers.mcap"), ("hybrid", "two_people.mcap"),
-                                           ("paper", "walk_noisy.mcap")])
-def test_compiled_run_is_the_python_loop(mode: str, bag: str) -> None:
-    lifter, calls = _recorded_runs(mode, bag, 6)
+@pytest.mark.parametrize(("mode", "bag", "variant"), [
+    ("hybrid", "punch_outliers.mcap", "full"), ("hybrid", "two_people.mcap", "full"),
+    ("paper", "walk_noisy.mcap", "full"), ("paper", "walk_noisy.mcap", "L1NAWS")])
+def test_compiled_run_is_the_python_loop(mode: str, bag: str, variant: str) -> None:
+    """The compiled run against the Python loop of alternations on a lift's recorded runs, with
+    limbs (the Riemannian alpha-step) and without (the linear one)."""
+    lifter, calls = _recorded_runs(mode, bag, 6, variant)
     loop = Runs(lifter.model, lifter.options)
     loop.compiled = False
     compiled = Runs(lifter.model, lifter.options)
@@ -112,12 +118,19 @@ def test_compiled_run_is_the_python_loop(mode: str, bag: str) -> None:
 
 
 def test_the_other_solvers_run_the_python_loop() -> None:
+    """Every variant runs compiled on the shipped bases; the cvxpy references and the paper's inner
+    ADM (limbs on bases whose limb map is not onto) run the loop."""
     lifter = Lifter(None, LifterOptions())
-    assert lifter.runs.compiled and Runs(lifter.model, LifterOptions(mode="paper")).compiled
+    assert lifter.runs.compiled
     paper = LifterOptions(mode="paper")
-    for opts in (paper.replace(variant="L1NAWS"), paper.replace(camera_solver="cvxpy"),
-                 paper.replace(pose_solver="cvxpy")):
+    for variant in VARIANTS:
+        assert Runs(lifter.model, paper.replace(variant=variant)).compiled, variant
+    for opts in (paper.replace(camera_solver="cvxpy"), paper.replace(pose_solver="cvxpy")):
         assert not Runs(lifter.model, opts).compiled
+    small = PoseModel.build(small_pca_bases(), np.sqrt(lifter.model.limb_sq))
+    assert small.limb_coordinates is None
+    assert not Runs(small, paper).compiled
+    assert Runs(small, paper.replace(variant="L1NAWS")).compiled
 
 
 def test_the_objective_terms_are_their_formulas() -> None:

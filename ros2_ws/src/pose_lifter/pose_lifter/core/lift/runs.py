@@ -7,10 +7,10 @@ below ``alternation_tol`` or the alternation cap is reached, and keeps its lowes
 alternation. A run can be continued (a screened start), and its depth-mirrored copy (the
 weak-perspective ambiguity: the same 2D, reflected depth) started.
 
-With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`);
-the cvxpy references, the variants without limbs and bases whose limb map is not onto (the
-paper's inner ADM as the alpha-step) run in the Python loop of :meth:`Runs.run_steps`, on the
-same objective terms and stopping rule (:func:`pose_lifter.core.solve.run_kernel._run_objective`,
+With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`),
+with or without limbs; the cvxpy references and bases whose limb map is not onto (the paper's
+inner ADM as the alpha-step) run in the Python loop of :meth:`Runs.run_steps`, on the same
+objective terms and stopping rule (:func:`pose_lifter.core.solve.run_kernel._run_objective`,
 ``_alternation_stops``).
 """
 
@@ -119,11 +119,12 @@ class Runs:
         self.model, self.options, self.qstep_fn = model, options, qstep_fn
         o = options
         #: whether a run is the compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`): both steps'
-        #: ADMs and the Riemannian alpha-step (limbs on, an onto limb map); otherwise the Python
-        #: loop of :meth:`run_steps` (the cvxpy references, a variant without limbs, small bases;
-        #: the tests set it False to run the loop on the kernel's problems as its reference)
+        #: ADMs and a compiled alpha-step (the linear one without limbs, the Riemannian one on an
+        #: onto limb map); otherwise the Python loop of :meth:`run_steps` (the cvxpy references,
+        #: the paper's inner ADM on smaller bases; the tests set it False to run the loop on the
+        #: kernel's problems as its reference)
         self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
-                         and o.method.limbs and model.limb_coordinates is not None)
+                         and (not o.method.limbs or model.limb_coordinates is not None))
         #: the steps' settings as the kernel takes them (made on the first compiled run)
         self._settings: StepSettings | None = None
         #: threads over which a round of runs is split (:func:`pose_lifter.core.solve.run_kernel.run_calls`)

@@ -1,5 +1,5 @@
-"""Small dense linear algebra for the compiled kernels: a written-out Cholesky solve and a
-reduction-free ``A^T x``."""
+"""Small dense linear algebra for the compiled kernels: a written-out Cholesky factorisation and
+solve, and a reduction-free ``A^T x``."""
 
 from __future__ import annotations
 
@@ -12,10 +12,9 @@ from .jit import njit
 
 
 @njit
-def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
-    """``a^-1 b`` by a Cholesky factorisation of the symmetric ``a`` (n, n) (lower triangle read);
-    ``(x, True)``, or ``(b, False)`` when ``a`` is not (numerically) positive definite. Written
-    out: at n = 16 a LAPACK call costs more than the arithmetic."""
+def _cholesky(a: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
+    """The lower Cholesky factor (n, n) of the symmetric ``a`` (n, n) (lower triangle read) and
+    True, or a partial factor and False when ``a`` is not (numerically) positive definite."""
     n = a.shape[0]
     lo = np.zeros((n, n))
     for j in range(n):
@@ -23,7 +22,7 @@ def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDA
         for k in range(j):
             d -= lo[j, k] * lo[j, k]
         if not d > 1e-14 * abs(a[j, j]) or not d > 0.0:
-            return b, False
+            return lo, False
         d = math.sqrt(d)
         lo[j, j] = d
         for i in range(j + 1, n):
@@ -31,6 +30,14 @@ def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDA
             for k in range(j):
                 e -= lo[i, k] * lo[j, k]
             lo[i, j] = e / d
+    return lo, True
+
+
+@njit
+def _cholesky_apply(lo: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(L L^T)^-1 b`` (n,) for the lower Cholesky factor ``lo`` (n, n) of :func:`_cholesky`:
+    a forward and a back substitution."""
+    n = lo.shape[0]
     y = np.empty(n)
     for i in range(n):
         e = b[i]
@@ -43,9 +50,18 @@ def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDA
         for k in range(i + 1, n):
             e -= lo[k, i] * x[k]
         x[i] = e / lo[i, i]
-    return x, True
+    return x
 
 
+@njit
+def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
+    """``a^-1 b`` by a Cholesky factorisation of the symmetric ``a`` (n, n) (lower triangle read);
+    ``(x, True)``, or ``(b, False)`` when ``a`` is not (numerically) positive definite. Written
+    out: at n = 16 a LAPACK call costs more than the arithmetic."""
+    lo, ok = _cholesky(a)
+    if not ok:
+        return b, False
+    return _cholesky_apply(lo, b), True
 
 
 @njit

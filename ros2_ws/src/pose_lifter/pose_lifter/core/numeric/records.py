@@ -44,6 +44,7 @@ class StepSettings(NamedTuple):
 
     th: float  #: ``theta`` (0 without sparsity)
     l1: bool  #: the L1 loss (False: squared)
+    limbs: bool  #: the limb-length constraints (False: the alpha-step is a linear solve)
     eta: float  #: the pose ADM's initial penalty
     eta_growth: float  #: its growth factor per iteration
     eta_max: float  #: its cap
@@ -82,28 +83,27 @@ if HAVE_NUMBA:  # pragma: no branch
     _structref.define_proxy(_Settings, _SettingsType, list(StepSettings._fields))
 
     @njit
-    def _new_model(mean: Any, u: Any, sig: Any, vc: Any, vt: Any, comps: Any, limb_matrix: Any, z: Any,
-                   n: Any, s0: Any, cu24_t: Any, cmu24: Any) -> Any:
-        return _Model(mean, u, sig, vc, vt, comps, limb_matrix, z, n, s0, cu24_t, cmu24)
+    def _new_model(a: Any) -> Any:
+        return _Model(a.mean, a.u, a.sig, a.vc, a.vt, a.comps, a.limb_matrix, a.z, a.n, a.s0, a.cu24_t,
+                      a.cmu24)
 
     @njit
-    def _new_settings(th: Any, l1: Any, eta: Any, eta_growth: Any, eta_max: Any, pose_tol: Any,
-                      alpha_max_iter: Any, alpha_tol: Any, prox: Any, cam_max_iter: Any, cam_tol: Any,
-                      tau: Any, alt_tol: Any) -> Any:
-        return _Settings(th, l1, eta, eta_growth, eta_max, pose_tol, alpha_max_iter, alpha_tol, prox,
-                         cam_max_iter, cam_tol, tau, alt_tol)
+    def _new_settings(s: Any) -> Any:
+        return _Settings(s.th, s.l1, s.limbs, s.eta, s.eta_growth, s.eta_max, s.pose_tol, s.alpha_max_iter,
+                         s.alpha_tol, s.prox, s.cam_max_iter, s.cam_tol, s.tau, s.alt_tol)
 
 
 def model_record(arrays: ModelArrays) -> ModelArrays:
     """What the kernels take for ``arrays`` (a StructRef with the same attributes under numba)."""
     arrays = ModelArrays(*(np.ascontiguousarray(a, dtype=np.float64) for a in arrays))
-    return _new_model(*arrays) if HAVE_NUMBA else arrays
+    return _new_model(arrays) if HAVE_NUMBA else arrays
 
 
 def settings_record(settings: StepSettings) -> StepSettings:
-    """What the kernels take for ``settings`` (typed: floats, ``l1`` bool, the caps int)."""
+    """What the kernels take for ``settings`` (typed: floats, ``l1`` and ``limbs`` bool, the caps
+    int)."""
     s = settings
-    typed = StepSettings(float(s.th), bool(s.l1), float(s.eta), float(s.eta_growth), float(s.eta_max),
-                         float(s.pose_tol), int(s.alpha_max_iter), float(s.alpha_tol), float(s.prox),
-                         int(s.cam_max_iter), float(s.cam_tol), float(s.tau), float(s.alt_tol))
-    return _new_settings(*typed) if HAVE_NUMBA else typed
+    typed = StepSettings(float(s.th), bool(s.l1), bool(s.limbs), float(s.eta), float(s.eta_growth),
+                         float(s.eta_max), float(s.pose_tol), int(s.alpha_max_iter), float(s.alpha_tol),
+                         float(s.prox), int(s.cam_max_iter), float(s.cam_tol), float(s.tau), float(s.alt_tol))
+    return _new_settings(typed) if HAVE_NUMBA else typed

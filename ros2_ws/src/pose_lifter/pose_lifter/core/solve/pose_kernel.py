@@ -1,7 +1,8 @@
-"""The pose step's compiled pieces: its L1 rows, the ADM's splitting, dual and penalty updates, and
-the pose step with the Riemannian alpha-step as one kernel (:func:`_pose_kernel`, the pose step of
-the default solver; :func:`pose_lifter.core.solve.pose_step.pose_step` calls it, and its Python ADM loop
-calls the same rows and updates around the other alpha-steps)."""
+"""The pose step's compiled pieces: its L1 rows, the ADM's splitting, dual and penalty updates, the
+alpha-step without limbs, and the pose step as one kernel (:func:`_pose_kernel`) with the
+Riemannian alpha-step (limbs on, an onto limb map) or the linear one (no limbs): the pose step of
+every compiled run. :func:`pose_lifter.core.solve.pose_step.pose_step` calls it; its Python ADM
+loop calls the same rows and updates around the paper's inner ADM and the cvxpy Q-step."""
 
 from __future__ import annotations
 
@@ -12,9 +13,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..numeric.jit import njit
-from ..numeric.linalg import _axpy_rows
+from ..numeric.linalg import _axpy_rows, _cholesky, _cholesky_apply
 from ..numeric.records import ModelArrays, StepSettings
-from .alpha.sphere_newton import _riemannian_alpha_kernel, _sphere_setup
+from .alpha.sphere_newton import SphereStep, _riemannian_alpha_kernel, _sphere_setup
 
 
 class PoseProblem(NamedTuple):
@@ -41,6 +42,32 @@ class PoseOut(NamedTuple):
     n_iter: int  #: ADM iterations
     converged: bool  #: whether the residuals fell below the tolerance
     alpha_iter: int  #: Newton steps of the alpha-steps, summed
+
+
+class PoseRows(NamedTuple):
+    """The L1 rows of a pose step's objective ``sum_i wts_i rho(c_i - (M U S s)_i)`` (``s = V^T
+    alpha``; :func:`_pose_rows`)."""
+
+    c: NDArray[np.float64]  #: (m,)
+    wts: NDArray[np.float64]  #: (m,)
+    mus: NDArray[np.float64]  #: (m, r) ``M U S``
+    scale: float  #: ``max(1, ||c||)``: the scale of the ADM's relative residuals
+
+
+class Multipliers(NamedTuple):
+    """The pose ADM's scaled multipliers (updated in place)."""
+
+    u1: NDArray[np.float64]  #: (m,) of ``gamma = c - A alpha``
+    u2: NDArray[np.float64]  #: (k,) of ``beta = alpha``
+
+
+class Split(NamedTuple):
+    """What the gamma- and beta-steps of an ADM iteration write (:func:`_adm_split`)."""
+
+    gamma: NDArray[np.float64]  #: (m,)
+    beta: NDArray[np.float64]  #: (k,)
+    d1: NDArray[np.float64]  #: (m,) the alpha-step's data target ``c - gamma + u1``
+    d2: NDArray[np.float64]  #: (k,) its coefficient target ``beta - u2``
 
 
 @njit
@@ -101,15 +128,15 @@ def _objective(resid: NDArray[np.float64], wts: NDArray[np.float64], alpha: NDAr
 
 
 @njit
-def _adm_split(
-    c: NDArray[np.float64], ax: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64],
-    alpha: NDArray[np.float64], wts: NDArray[np.float64], eta: float, th: float, l1: bool,
-    gamma: NDArray[np.float64], beta: NDArray[np.float64], d1: NDArray[np.float64], d2: NDArray[np.float64],
-) -> None:
+def _adm_split(rows: PoseRows, ax: NDArray[np.float64], alpha: NDArray[np.float64], u: Multipliers,
+               eta: float, st: StepSettings, out: Split) -> None:
     """gamma- and beta-steps of the pose ADM (``pose_step`` module docstring), written into
-    ``gamma``, ``d1`` (m,) and ``beta``, ``d2`` (k,): ``gamma = prox(c - A alpha + u1)``,
-    ``beta = soft(alpha + u2, th / eta)`` (``th = 0``: no sparsity), ``d1 = c - gamma + u1``,
-    ``d2 = beta - u2``; ``ax = A alpha`` (m,)."""
+    ``out``: ``gamma = prox(c - A alpha + u1)``, ``beta = soft(alpha + u2, th / eta)`` (``th =
+    0``: no sparsity), ``d1 = c - gamma + u1``, ``d2 = beta - u2``; ``ax = A alpha`` (m,), the loss
+    and ``th`` from ``st``."""
+    c, wts, u1, u2 = rows.c, rows.wts, u.u1, u.u2
+    gamma, beta, d1, d2 = out.gamma, out.beta, out.d1, out.d2
+    th, l1 = st.th, st.l1
     for i in range(c.size):  # gamma-step (prox of the data term)
         vg = c[i] - ax[i] + u1[i]
         if l1:
@@ -126,15 +153,15 @@ def _adm_split(
 
 
 @njit
-def _adm_dual_update(
-    c: NDArray[np.float64], ax: NDArray[np.float64], ax_prev: NDArray[np.float64], gamma: NDArray[np.float64],
-    alpha: NDArray[np.float64], beta: NDArray[np.float64], beta_prev: NDArray[np.float64],
-    u1: NDArray[np.float64], u2: NDArray[np.float64], wts: NDArray[np.float64], th: float, l1: bool,
-    scale_c: float,
-) -> tuple[float, float, float]:
-    """After the alpha-step of the pose ADM (``ax = A alpha`` (m,), ``ax_prev`` before it): the
-    multipliers ``u1`` (m,), ``u2`` (k,) updated in place; returns the objective and the relative
-    primal and dual residuals (sums in order, no temporaries)."""
+def _adm_dual_update(rows: PoseRows, ax: NDArray[np.float64], ax_prev: NDArray[np.float64], split: Split,
+                     beta_prev: NDArray[np.float64], alpha: NDArray[np.float64], u: Multipliers,
+                     st: StepSettings) -> tuple[float, float, float]:
+    """After the alpha-step of the pose ADM (``ax = A alpha`` (m,), ``ax_prev`` before it; the
+    iteration's ``split``, ``beta_prev`` (k,) the previous beta): the multipliers ``u`` updated in
+    place; returns the objective and the relative primal and dual residuals (sums in order, no
+    temporaries)."""
+    c, wts, gamma, beta, u1, u2 = rows.c, rows.wts, split.gamma, split.beta, u.u1, u.u2
+    th, l1 = st.th, st.l1
     r1sq, dsq, data = 0.0, 0.0, 0.0
     for i in range(c.size):
         e = c[i] - ax[i]
@@ -154,18 +181,19 @@ def _adm_dual_update(
         dbsq += (beta[i] - beta_prev[i]) ** 2
     obj = data + th * anorm1
     an = max(1.0, math.sqrt(asq))
-    primal = max(math.sqrt(r1sq) / scale_c, math.sqrt(r2sq) / an)
-    dual = max(math.sqrt(dsq) / scale_c, math.sqrt(dbsq) / an)
+    primal = max(math.sqrt(r1sq) / rows.scale, math.sqrt(r2sq) / an)
+    dual = max(math.sqrt(dsq) / rows.scale, math.sqrt(dbsq) / an)
     return obj, primal, dual
 
 
 @njit
-def _grow_penalty(eta: float, eta_growth: float, eta_max: float, u1: NDArray[np.float64],
-                  u2: NDArray[np.float64]) -> float:
-    """The pose ADM's penalty schedule: ``eta <- min(eta * eta_growth, eta_max)``, with the
-    scaled multipliers ``u1``, ``u2`` rescaled in place so the unscaled ones are unchanged."""
+def _grow_penalty(eta: float, st: StepSettings, u: Multipliers) -> float:
+    """The pose ADM's penalty schedule: ``eta <- min(eta * eta_growth, eta_max)`` (``st``), with
+    the scaled multipliers ``u`` rescaled in place so the unscaled ones are unchanged."""
+    eta_growth, eta_max = st.eta_growth, st.eta_max
     if eta_growth != 1.0 and eta < eta_max:
         eta_new = min(eta * eta_growth, eta_max)
+        u1, u2 = u.u1, u.u2
         u1 *= eta / eta_new
         u2 *= eta / eta_new
         return eta_new
@@ -198,10 +226,10 @@ def _n_rows(pw: NDArray[np.float64]) -> int:
 @njit
 def _pose_rows(x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64],
                w: NDArray[np.float64], km: ModelArrays, xp: NDArray[np.float64], pw: NDArray[np.float64]
-               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+               ) -> PoseRows:
     """The L1 rows of the pose objective ``sum_i wts_i rho(c_i - (M U S s)_i)`` (``s = V^T alpha``)
     for the camera ``m0`` (2, 3), ``t`` (2,), the 2D ``x`` (12, 2) and weights ``w`` (12,):
-    ``(c (m,), wts (m,), M U S (m, r))``, ``m`` = :func:`_n_rows`.
+    :class:`PoseRows` with ``m`` = :func:`_n_rows` rows.
 
     2 rows per joint, then the prior's (the hybrid mode's L1 prior term): for each joint ``j`` with
     ``pw[j, 0] > 0`` two rows ``pw[j, 0] |xp[j, a] - t_a - M_a y_j|`` (the prior's image position,
@@ -252,34 +280,75 @@ def _pose_rows(x: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.fl
                     mus[row, k] = (m3[0] * (u[3 * j, k] - ubar[0, k]) + m3[1] * (u[3 * j + 1, k] - ubar[1, k])
                                    + m3[2] * (u[3 * j + 2, k] - ubar[2, k])) * sig[k]
                 row += 1
-    return c, wts, mus
+    return PoseRows(c, wts, mus, max(1.0, math.sqrt(float(c @ c))))
 
 
 @njit
-def _riemannian_adm(
-    c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], km: ModelArrays,
-    st: StepSettings, rad: NDArray[np.float64], alpha0: NDArray[np.float64], u1: NDArray[np.float64],
-    u2: NDArray[np.float64], best_obj: float, max_iter: int,
-) -> tuple[NDArray[np.float64], float, float, int, bool, int]:
-    """The pose ADM (``pose_step`` module docstring) on the rows ``(c, wts, mus)``
-    (:func:`_pose_rows`) with the Riemannian alpha-step (:func:`_riemannian_alpha_kernel`, its
-    quadratic in limb coordinates set up once, :func:`_sphere_setup`); ``V^T alpha`` is carried
-    from step to step. ``u1`` (m,), ``u2`` (k,) are the scaled multipliers, updated in place;
-    ``best_obj`` the objective of ``alpha0`` (k,) if feasible, else ``inf``. Returns ``(best
-    alpha, best objective, final eta, iterations, converged, alpha-step iterations)``."""
-    vt = km.vt
-    th, l1, prox, tol = st.th, st.l1, st.prox, st.pose_tol
-    eta = st.eta
+def _linear_alpha_kernel(d1: NDArray[np.float64], d2: NDArray[np.float64], sk: NDArray[np.float64],
+                         mus: NDArray[np.float64], chol: NDArray[np.float64], km: ModelArrays,
+                         alpha_out: NDArray[np.float64]) -> int:
+    """The alpha-step without limb constraints, ``argmin ||A alpha - d1||^2 + ||alpha - d2||^2``
+    (``A = M U S V^T``), in the reduced coordinates: ``s = G^-1 (mus^T d1 + V^T d2)`` with ``G =
+    mus^T mus + I`` (r, r) given by its Cholesky factor ``chol``, then ``alpha = d2 + V (s - V^T
+    d2)`` (the part of ``alpha`` in the null space of the bases at its optimum). Writes ``alpha``
+    (k,) into ``alpha_out`` and ``s`` (r,) into ``sk``; returns 1 (one solve)."""
+    vc, vt = km.vc, km.vt
+    r = sk.size
+    vtd2 = np.zeros(r)
+    _axpy_rows(vc, d2, vtd2)  # V^T d2
+    lin = vtd2.copy()
+    _axpy_rows(mus, d1, lin)  # + (M U S)^T d1
+    s = _cholesky_apply(chol, lin)
+    for j in range(r):
+        sk[j] = s[j]
+        s[j] -= vtd2[j]
+    alpha_out[:] = d2
+    _axpy_rows(vt, s, alpha_out)  # d2 + V (s - V^T d2)
+    return 1
+
+
+@njit
+def _alpha_setup(mus: NDArray[np.float64], rad: NDArray[np.float64], km: ModelArrays, st: StepSettings
+                 ) -> tuple[SphereStep, NDArray[np.float64]]:
+    """A pose step's alpha-step operands for the rows' matrix ``mus`` (m, r): with limbs
+    (``st.limbs``) the Riemannian step's (:class:`SphereStep`: ``G = mus^T mus + (1 + prox) I``
+    in limb coordinates, :func:`_sphere_setup`) and an empty factor; without, an empty
+    :class:`SphereStep` and the Cholesky factor (r, r) of ``G = mus^T mus + I``
+    (:func:`_linear_alpha_kernel`)."""
     r = mus.shape[1]
     g = mus.T @ mus
+    if not st.limbs:
+        for j in range(r):
+            g[j, j] += 1.0
+        chol, _ = _cholesky(g)  # G >= I: positive definite
+        empty = np.zeros((0, 0))
+        return SphereStep(mus, (np.zeros(0), empty, empty, empty, empty), rad), chol
     for j in range(r):
-        g[j, j] += 1.0 + prox
+        g[j, j] += 1.0 + st.prox
     q, rmat, s1, s2 = _sphere_setup(g, km.z, km.n)
     # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
     geom = (g @ km.s0, q, np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
             np.ascontiguousarray(s2.T))
-    scale_c = max(1.0, math.sqrt(float(c @ c)))
-    m = c.size
+    return SphereStep(mus, geom, rad), np.zeros((0, 0))
+
+
+@njit
+def _pose_adm(rows: PoseRows, km: ModelArrays, st: StepSettings, rad: NDArray[np.float64],
+              alpha0: NDArray[np.float64], u: Multipliers, best_obj: float, max_iter: int
+              ) -> tuple[NDArray[np.float64], float, float, int, bool, int]:
+    """The pose ADM (``pose_step`` module docstring) on ``rows`` (:func:`_pose_rows`) with the
+    Riemannian alpha-step under the limb lengths ``rad`` (8,) (:func:`_riemannian_alpha_kernel`)
+    or, without limbs (``st.limbs`` False), the linear one (:func:`_linear_alpha_kernel`), each
+    set up once (:func:`_alpha_setup`); ``V^T alpha`` is carried from step to step. ``u`` are the
+    scaled multipliers, updated in place; ``best_obj`` the objective of ``alpha0`` (k,) if
+    feasible, else ``inf``. Returns ``(best alpha, best objective, final eta, iterations,
+    converged, alpha-step iterations)``."""
+    mus = rows.mus
+    vt = km.vt
+    tol = st.pose_tol
+    eta = st.eta
+    sphere, chol = _alpha_setup(mus, rad, km, st)
+    m = rows.c.size
     k = alpha0.size
     alpha = alpha0.copy()
     best_alpha = alpha.copy()
@@ -297,14 +366,17 @@ def _riemannian_adm(
     mus_t = np.ascontiguousarray(mus.T)
     for it in range(1, max_iter + 1):
         beta, beta_prev = beta_prev, beta
-        _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
-        alpha_it += _riemannian_alpha_kernel(d1, d2, sk, mus, km, geom, rad, st, alpha, sk)
+        split = Split(gamma, beta, d1, d2)
+        _adm_split(rows, ax, alpha, u, eta, st, split)
+        if st.limbs:
+            alpha_it += _riemannian_alpha_kernel(d1, d2, sk, sphere, km, st, alpha)
+        else:
+            alpha_it += _linear_alpha_kernel(d1, d2, sk, mus, chol, km, alpha)
         ax, ax_prev = ax_prev, ax
         ax[:] = 0.0
         _axpy_rows(mus_t, sk, ax)
-        obj, primal, dual = _adm_dual_update(c, ax, ax_prev, gamma, alpha, beta, beta_prev, u1, u2, wts, th,
-                                             l1, scale_c)
-        eta = _grow_penalty(eta, st.eta_growth, st.eta_max, u1, u2)
+        obj, primal, dual = _adm_dual_update(rows, ax, ax_prev, split, beta_prev, alpha, u, st)
+        eta = _grow_penalty(eta, st, u)
         if obj < best_obj:
             best_obj = obj
             best_alpha[:] = alpha
@@ -318,22 +390,22 @@ def _riemannian_adm(
 
 @njit
 def _pose_kernel(problem: PoseProblem, km: ModelArrays, st: StepSettings, max_iter: int,
-                 alpha0: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64]) -> PoseOut:
-    """The pose step of ``problem`` with the Riemannian alpha-step: its rows (:func:`_pose_rows`),
-    the start's objective if it meets the limb lengths, then the ADM (:func:`_riemannian_adm`)
-    from ``alpha0`` (k,) with the scaled multipliers ``u1`` (m,), ``u2`` (k,) (updated in place)
-    and at most ``max_iter`` iterations."""
+                 alpha0: NDArray[np.float64], u: Multipliers) -> PoseOut:
+    """The pose step of ``problem``: its rows (:func:`_pose_rows`), the start's objective if it
+    meets the limb lengths (always without limbs), then the ADM (:func:`_pose_adm`) from
+    ``alpha0`` (k,) with the scaled multipliers ``u`` (updated in place) and at most ``max_iter``
+    iterations. Without limbs its limb violation is 0 (none is asked for)."""
     th, l1 = st.th, st.l1
     rad = problem.radii
-    c, wts, mus = _pose_rows(problem.points, problem.projection, problem.translation, problem.weights, km,
-                             problem.target, problem.prior_weights)
+    rows = _pose_rows(problem.points, problem.projection, problem.translation, problem.weights, km,
+                      problem.target, problem.prior_weights)
     best_obj = np.inf
-    if _limb_violation_jit(km.mean + km.comps @ alpha0, km.limb_matrix, rad) < 1e-6:
-        best_obj = _objective(c - mus @ (km.vt @ alpha0), wts, alpha0, th, l1)
-    best_alpha, best_obj, eta, it, converged, alpha_it = _riemannian_adm(
-        c, wts, mus, km, st, rad, alpha0, u1, u2, best_obj, max_iter)
+    if not st.limbs or _limb_violation_jit(km.mean + km.comps @ alpha0, km.limb_matrix, rad) < 1e-6:
+        best_obj = _objective(rows.c - rows.mus @ (km.vt @ alpha0), rows.wts, alpha0, th, l1)
+    best_alpha, best_obj, eta, it, converged, alpha_it = _pose_adm(rows, km, st, rad, alpha0, u, best_obj,
+                                                                   max_iter)
     if not math.isfinite(best_obj):
-        best_obj = _objective(c - mus @ (km.vt @ best_alpha), wts, best_alpha, th, l1)
+        best_obj = _objective(rows.c - rows.mus @ (km.vt @ best_alpha), rows.wts, best_alpha, th, l1)
     y = km.mean + km.comps @ best_alpha
-    return PoseOut(best_alpha, best_obj, _limb_violation_jit(y, km.limb_matrix, rad), y, eta, it, converged,
-                   alpha_it)
+    lv = _limb_violation_jit(y, km.limb_matrix, rad) if st.limbs else 0.0
+    return PoseOut(best_alpha, best_obj, lv, y, eta, it, converged, alpha_it)

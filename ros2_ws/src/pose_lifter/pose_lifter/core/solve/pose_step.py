@@ -37,11 +37,14 @@ closed form by projection onto the affine set ``{tr(Omega_i Q) = 0, Q[-1,-1] = 1
 the paper's lemma, top eigenpair), then a few Gauss-Newton projection steps that restore the limb
 constraints to ``1e-10`` (the ADM meets them only to its tolerance).
 
-Where: with the Riemannian alpha-step the whole step is one compiled kernel,
-:func:`pose_lifter.core.solve.pose_kernel._pose_kernel`. The other alpha-steps
-(:class:`.alpha.base.AlphaStep`: the paper's inner ADM of :mod:`.alpha.lifted_admm`, and the
-linear solve without limbs; the cvxpy Q-step) run in this module's Python ADM loop (:func:`_adm`),
-which calls the kernel's compiled rows, splitting, dual and penalty updates: each is written once.
+Without limb constraints (the paper's variants ``..NA..``) the alpha-step is a linear solve:
+``s = G^-1 ((M U S)^T d1 + V^T d2)`` with ``G = (M U S)^T M U S + I`` factorised once per pose step.
+
+Where: with the Riemannian or the linear alpha-step the whole step is one compiled kernel,
+:func:`pose_lifter.core.solve.pose_kernel._pose_kernel`. The paper's inner ADM
+(:class:`.alpha.base.LiftedStep`, of :mod:`.alpha.lifted_admm`, with its closed-form or the cvxpy
+Q-step) runs in this module's Python ADM loop (:func:`_adm`), which calls the kernel's compiled
+rows, splitting, dual and penalty updates: each is written once.
 
 Speed: the alpha-steps and the outer ADM loop are kernels on plain float64 arrays, compiled by
 numba (``njit(cache=True)``: compiled once, then loaded from ``__pycache__``) when numba is
@@ -64,13 +67,16 @@ from ..errors import InvalidInputError, SolverError, diverged_as_solver_error
 from ..model.pose_model import PoseModel
 from ..model.skeleton import N_JOINTS
 from ..numeric.records import StepSettings, settings_record
-from ..options import LifterOptions, Variant
+from ..options import LifterOptions
 from ..results import Duals, PoseResult
-from .alpha.base import AlphaStep, Coordinates, LiftedStep, UnconstrainedStep
+from .alpha.base import AlphaStep, Coordinates, LiftedStep
 from .alpha.lifted_admm import QStepFn
 from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
 from .pose_kernel import (
+    Multipliers,
     PoseProblem,
+    PoseRows,
+    Split,
     _adm_dual_update,
     _adm_split,
     _depth_row,
@@ -131,7 +137,7 @@ def step_settings(options: LifterOptions) -> StepSettings:
     """The settings of a run's compiled steps for ``options`` (:func:`settings_record`)."""
     o = options
     return settings_record(StepSettings(
-        th=o.theta if o.method.sparsity else 0.0, l1=o.method.loss == "l1", eta=o.eta,
+        th=o.theta if o.method.sparsity else 0.0, l1=o.method.loss == "l1", limbs=o.method.limbs, eta=o.eta,
         eta_growth=o.eta_growth, eta_max=ETA_MAX, pose_tol=o.pose_tol, alpha_max_iter=RIEMANNIAN_MAX_ITER,
         alpha_tol=o.newton_tol, prox=o.alpha_prox, cam_max_iter=o.camera_max_iter, cam_tol=o.camera_tol,
         tau=o.tau, alt_tol=o.alternation_tol))
@@ -150,18 +156,19 @@ def prior_operands(model: PoseModel, prior: PriorRows | None
             np.ascontiguousarray(prior.weights, dtype=np.float64), rad)
 
 
-def _riemannian(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
-                weights: NDArray[np.float64], model: PoseModel, options: LifterOptions,
-                alpha: NDArray[np.float64], max_iter: int, duals: Duals | None, prior: PriorRows | None
-                ) -> PoseResult:
-    """:func:`pose_step` with the Riemannian alpha-step: one call of
-    :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`."""
+def _compiled(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
+              weights: NDArray[np.float64], model: PoseModel, options: LifterOptions,
+              alpha: NDArray[np.float64], max_iter: int, duals: Duals | None, prior: PriorRows | None
+              ) -> PoseResult:
+    """:func:`pose_step` with a compiled alpha-step (Riemannian, or linear without limbs): one
+    call of :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`."""
     xp, pw, rad = prior_operands(model, prior)
     u1, u2 = _scaled_duals(duals, _n_rows(pw), model.n_bases, options.eta)
     c64 = np.ascontiguousarray
     problem = PoseProblem(c64(x, dtype=np.float64), c64(weights, dtype=np.float64), c64(m0, dtype=np.float64),
                           c64(translation, dtype=np.float64), xp, pw, rad)
-    out = _pose_kernel(problem, model.kernel_arrays, step_settings(options), int(max_iter), alpha, u1, u2)
+    out = _pose_kernel(problem, model.kernel_arrays, step_settings(options), int(max_iter), alpha,
+                       Multipliers(u1, u2))
     if not np.all(np.isfinite(out.alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
     return PoseResult(objective=float(out.objective), n_iter=int(out.n_iter), converged=bool(out.converged),
@@ -247,74 +254,74 @@ def pose_step(
     variant = o.method
     if max_iter is None:
         max_iter = o.pose_max_iter
-    th = float(o.theta) if variant.sparsity else 0.0
     x = np.ascontiguousarray(points, dtype=np.float64)
     m0 = np.ascontiguousarray(projection, dtype=np.float64)
     k = model.n_bases
     alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
     if alpha.shape != (k,):
         raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
-    # the cvxpy reference Q-step (qstep_fn) is a step of the paper's inner ADM
-    riemannian = variant.limbs and model.limb_coordinates is not None and qstep_fn is None
-    if prior is not None and not riemannian:
+    # compiled: the linear alpha-step (no limbs) or the Riemannian one (limbs on an onto limb map,
+    # unless the cvxpy reference Q-step, qstep_fn, asks for the paper's inner ADM)
+    compiled = not variant.limbs or (model.limb_coordinates is not None and qstep_fn is None)
+    if prior is not None and not (compiled and variant.limbs):
         raise InvalidInputError("a prior term needs a variant with limbs, bases whose limb map is onto "
                                 "(>= 24 basis directions) and the closed-form Q-step")
     with diverged_as_solver_error("pose step"):
-        if riemannian:
-            return _riemannian(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
+        if compiled:
+            return _compiled(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
         xp, pw, _ = prior_operands(model, None)
-        c, wts, mus = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
-                                 np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
-        # limbs off (a linear solve) or a limb map that is not onto: the paper's inner ADM
-        step = _alpha_step(model, variant, mus, o, qstep_fn)
-        return _adm(c, wts, mus, model, variant, th, alpha.copy(), step, max_iter, o, duals)
+        rows = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
+                          np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
+        # limbs on bases whose limb map is not onto, or the cvxpy Q-step: the paper's inner ADM
+        step = _alpha_step(model, rows.mus, o, qstep_fn)
+        return _adm(rows, model, alpha.copy(), step, max_iter, o, duals)
 
 
-def _alpha_step(model: PoseModel, variant: Variant, mus: NDArray[np.float64], o: LifterOptions,
-                qstep_fn: QStepFn | None) -> AlphaStep:
-    """The alpha-step of one pose step of the Python loop (see :func:`pose_step`): a linear solve
-    without limbs, else the paper's inner ADM in the reduced lifting."""
-    coords = Coordinates(mus, model.v)
-    if not variant.limbs:
-        return UnconstrainedStep(coords)
-    return LiftedStep(coords, model.reduced, o.delta, o.inner_max_iter, o.inner_tol, qstep_fn)
+def _alpha_step(model: PoseModel, mus: NDArray[np.float64], o: LifterOptions, qstep_fn: QStepFn | None
+                ) -> AlphaStep:
+    """The alpha-step of one pose step of the Python loop (see :func:`pose_step`): the paper's
+    inner ADM in the reduced lifting (limbs on)."""
+    return LiftedStep(Coordinates(mus, model.v), model.reduced, o.delta, o.inner_max_iter, o.inner_tol,
+                      qstep_fn)
 
 
-def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float64], model: PoseModel,
-         variant: Variant, th: float, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int,
+def _adm(rows: PoseRows, model: PoseModel, alpha: NDArray[np.float64], step: AlphaStep, max_iter: int,
          o: LifterOptions, duals: Duals | None) -> PoseResult:
-    """The outer pose ADM of the module docstring on the rows ``(c, wts, mus)``
+    """The outer pose ADM of the module docstring on ``rows``
     (:func:`pose_lifter.core.solve.pose_kernel._pose_rows`) with the alpha-step ``step``, in Python
     around the compiled updates :func:`~pose_lifter.core.solve.pose_kernel._adm_split`,
     :func:`~pose_lifter.core.solve.pose_kernel._adm_dual_update` and
-    :func:`~pose_lifter.core.solve.pose_kernel._grow_penalty` (the compiled step's own)."""
-    l1 = variant.loss == "l1"
+    :func:`~pose_lifter.core.solve.pose_kernel._grow_penalty` (the compiled step's own); the
+    settings (loss, sparsity, limbs, penalties, tolerance) of ``o``."""
+    st = step_settings(o)  # for the compiled updates (a record Python cannot read under numba)
+    limbs, l1 = o.method.limbs, o.method.loss == "l1"
+    th = float(o.theta) if o.method.sparsity else 0.0
+    c, wts, mus = rows.c, rows.wts, rows.mus
     v = model.v
     k = model.n_bases
     m = c.size
     eta = float(o.eta)
     best_alpha = alpha.copy()
     best_obj = np.inf
-    if not variant.limbs or model.limb_violation(alpha) < 1e-6:
+    if not limbs or model.limb_violation(alpha) < 1e-6:
         best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
-    u1, u2 = _scaled_duals(duals, m, k, eta)
+    u = Multipliers(*_scaled_duals(duals, m, k, eta))
     beta, beta_prev = alpha.copy(), np.empty(k)
     gamma, d1, d2 = np.empty(m), np.empty(m), np.empty(k)
     converged = False
     it = 0
     alpha_it = 0
-    scale_c = max(1.0, float(np.sqrt(c @ c)))
     ax = np.ascontiguousarray(mus @ (v.T @ alpha))
     for it in range(1, max_iter + 1):
         beta, beta_prev = beta_prev, beta
-        _adm_split(c, ax, u1, u2, alpha, wts, eta, th, l1, gamma, beta, d1, d2)
+        split = Split(gamma, beta, d1, d2)
+        _adm_split(rows, ax, alpha, u, eta, st, split)
         alpha, n = step(d1, d2, alpha)
         alpha = np.ascontiguousarray(alpha, dtype=np.float64)
         alpha_it += n
         ax_prev, ax = ax, np.ascontiguousarray(mus @ (v.T @ alpha))
-        obj, primal, dual = _adm_dual_update(c, ax, ax_prev, gamma, alpha, beta, beta_prev, u1, u2, wts, th,
-                                             l1, scale_c)
-        eta = _grow_penalty(eta, float(o.eta_growth), ETA_MAX, u1, u2)
+        obj, primal, dual = _adm_dual_update(rows, ax, ax_prev, split, beta_prev, alpha, u, st)
+        eta = _grow_penalty(eta, st, u)
         if obj < best_obj:
             best_obj, best_alpha = obj, alpha.copy()
         if primal < o.pose_tol and dual < o.pose_tol:
@@ -326,7 +333,7 @@ def _adm(c: NDArray[np.float64], wts: NDArray[np.float64], mus: NDArray[np.float
         best_obj = _objective(c - mus @ (v.T @ alpha), wts, alpha, th, l1)
     if not np.all(np.isfinite(best_alpha)):
         raise SolverError("pose step diverged (non-finite coefficients)")
-    viol = model.limb_violation(best_alpha) if variant.limbs else 0.0
+    viol = model.limb_violation(best_alpha) if limbs else 0.0
     return PoseResult(objective=float(best_obj), n_iter=it, converged=converged, alpha=best_alpha,
                       pose=model.pose(best_alpha), limb_violation=viol, alpha_iter=alpha_it,
-                      duals=Duals(eta * u1, eta * u2))
+                      duals=Duals(eta * u.u1, eta * u.u2))

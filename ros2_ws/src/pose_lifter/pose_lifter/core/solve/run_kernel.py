@@ -14,9 +14,10 @@ run's objective::
 pose, stacked twice then); it keeps the lowest-``F`` alternation and stops when
 ``F_{i-1} - F_i <= alternation_tol * max(|F_{i-1}|, 1e-12)`` (:func:`_alternation_stops`).
 
-Applies with ``camera_solver == pose_solver == "admm"`` and the Riemannian alpha-step (limbs on,
-bases whose limb map is onto); every step starts its multipliers at zero (the kernel keeps none).
-The cvxpy references, the variants without limbs and smaller bases run in the Python loop of
+Applies with ``camera_solver == pose_solver == "admm"`` and a compiled alpha-step: the Riemannian
+one (limbs on, bases whose limb map is onto) or the linear one (the variants without limbs); every
+step starts its multipliers at zero (the kernel keeps none). The cvxpy references and the paper's
+inner ADM (limbs on smaller bases) run in the Python loop of
 :meth:`~pose_lifter.core.lift.runs.Runs.run_steps`, which calls the same objective terms and
 stopping rule.
 """
@@ -35,7 +36,7 @@ from numpy.typing import NDArray
 from ..numeric.jit import njit, njit_nogil
 from ..numeric.records import ModelArrays, StepSettings
 from .camera import _camera_solve
-from .pose_kernel import PoseProblem, _depth_term, _n_rows, _pose_kernel, _sum_abs
+from .pose_kernel import Multipliers, PoseProblem, _depth_term, _n_rows, _pose_kernel, _sum_abs
 
 __all__ = ["RunCall", "RunOut", "RunStatus", "run_calls"]
 
@@ -188,7 +189,7 @@ def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
     done = 0
     for it in range(it0 + 1, n_alt + 1 if status == _OK else it0 + 1):
         problem = PoseProblem(xn, w, m0, t, xp, pw, rad)
-        p = _pose_kernel(problem, km, st, pose_max_iter, alpha, np.zeros(n_rows), np.zeros(k))
+        p = _pose_kernel(problem, km, st, pose_max_iter, alpha, Multipliers(np.zeros(n_rows), np.zeros(k)))
         for i in range(k):
             if not math.isfinite(p.alpha[i]):
                 status = _POSE_DIVERGED

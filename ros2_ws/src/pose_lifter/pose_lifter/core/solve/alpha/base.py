@@ -1,5 +1,5 @@
-"""The alpha-step protocol of the pose ADM, the coordinates it is solved in, and the steps of its
-Python loop: the linear solve without limb constraints and the paper's inner ADM in the lifting."""
+"""The alpha-step protocol of the pose ADM, the coordinates it is solved in, and the step of its
+Python loop: the paper's inner ADM in the lifting."""
 
 from __future__ import annotations
 
@@ -44,18 +44,6 @@ class Coordinates:
         return np.asarray(d2 - self.v @ vtd2 + self.v @ s)
 
 
-class UnconstrainedStep:
-    """The alpha-step without limb constraints: a linear solve."""
-
-    def __init__(self, coords: Coordinates) -> None:
-        self._c = coords
-
-    def __call__(self, d1: NDArray[np.float64], d2: NDArray[np.float64], alpha: NDArray[np.float64]
-                 ) -> tuple[NDArray[np.float64], int]:
-        lin, _, vtd2 = self._c.quadratic(d1, d2)
-        return self._c.alpha(np.asarray(np.linalg.solve(self._c.g, lin), dtype=np.float64), d2, vtd2), 1
-
-
 class LiftedStep:
     """The alpha-step in the rank-1 lifting ``z = [s; 1]``: the paper's inner (Q, P) ADM followed by
     the Gauss-Newton projection onto the limb constraints."""
@@ -75,4 +63,4 @@ class LiftedStep:
         return self._c.alpha(z[:-1], d2, vtd2), res.n_iter
 
 
-__all__ = ["AlphaStep", "Coordinates", "LiftedStep", "UnconstrainedStep"]
+__all__ = ["AlphaStep", "Coordinates", "LiftedStep"]

@@ -4,6 +4,7 @@ limb spheres (the default alpha-solver of the pose ADM)."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -238,41 +239,47 @@ def _sphere_setup(g: NDArray[np.float64], z: NDArray[np.float64], n: NDArray[np.
 
 
 
+class SphereStep(NamedTuple):
+    """A pose step's operands of :func:`_riemannian_alpha_kernel`, fixed over its ADM iterations."""
+
+    mus: NDArray[np.float64]  #: (m, r) ``M U S``, the rows' matrix (C-contiguous)
+    geom: SphereGeometry  #: the quadratic in limb coordinates (:func:`_sphere_setup`)
+    rad: NDArray[np.float64]  #: (8,) the limb lengths in use
+
+
 @njit
-def _riemannian_alpha_kernel(
-    d1: NDArray[np.float64], d2: NDArray[np.float64], sk: NDArray[np.float64], mus: NDArray[np.float64],
-    km: ModelArrays, geom: SphereGeometry, rad: NDArray[np.float64], st: StepSettings,
-    alpha_out: NDArray[np.float64], s_out: NDArray[np.float64],
-) -> int:
+def _riemannian_alpha_kernel(d1: NDArray[np.float64], d2: NDArray[np.float64], sk: NDArray[np.float64],
+                             step: SphereStep, km: ModelArrays, st: StepSettings,
+                             alpha_out: NDArray[np.float64]) -> int:
     """The alpha-step of :func:`pose_step` (limbs on) by :func:`_sphere_newton` in limb
     coordinates (see :func:`_sphere_setup`), started from the limb vectors of the current
-    iterate, whose reduced coordinates are ``sk = V^T alpha_k`` (r,). Writes ``alpha`` (k,) and
-    ``s = V^T alpha`` (r,) into ``alpha_out``, ``s_out`` (which may be ``sk``); returns the
-    Newton iterations (at most ``st.alpha_max_iter``, tolerance ``st.alpha_tol``, proximal weight
-    ``st.prox``; the limb lengths ``rad`` (8,)). Matrices come C-contiguous and transposed where
-    that makes every product a sum of rows (:func:`_axpy_rows`): ``mus = M U S`` (m, r), the
-    model's ``V``, ``V^T``, ``(C U S)^T`` (:class:`pose_lifter.core.numeric.records.ModelArrays`) and the
-    step's ``geom = (G s0, Q, R^T, S1^T, S2^T)`` (:func:`_sphere_setup`)."""
+    iterate, whose reduced coordinates are ``sk = V^T alpha_k`` (r,). Writes ``alpha`` (k,) into
+    ``alpha_out`` and ``s = V^T alpha`` (r,) into ``sk``; returns the Newton iterations (at most
+    ``st.alpha_max_iter``, tolerance ``st.alpha_tol``, proximal weight ``st.prox``). Matrices come
+    C-contiguous and transposed where that makes every product a sum of rows
+    (:func:`_axpy_rows`): ``step.mus = M U S`` (m, r), the model's ``V``, ``V^T``, ``(C U S)^T``
+    (:class:`pose_lifter.core.numeric.records.ModelArrays`) and the step's ``geom = (G s0, Q, R^T,
+    S1^T, S2^T)`` (:func:`_sphere_setup`)."""
     vc, vt, s0, cu24_t, cmu24 = km.vc, km.vt, km.s0, km.cu24_t, km.cmu24
-    gs0, q, rmat_t, s1_t, s2_t = geom
+    gs0, q, rmat_t, s1_t, s2_t = step.geom
     prox = st.prox
     r = sk.size
     vtd2 = np.zeros(r)
     _axpy_rows(vc, d2, vtd2)  # V^T d2
     h = np.zeros(r)
-    _axpy_rows(mus, d1, h)  # (M U S)^T d1
+    _axpy_rows(step.mus, d1, h)  # (M U S)^T d1
     for j in range(r):
         h[j] += vtd2[j] + prox * sk[j] - gs0[j]
     b = np.zeros(24)
     _axpy_rows(rmat_t, h, b)
     l0 = cmu24.copy()
     _axpy_rows(cu24_t, sk, l0)
-    lv, it, _ = _sphere_newton(q, b, l0, rad, st.alpha_max_iter, st.alpha_tol)
+    lv, it, _ = _sphere_newton(q, b, l0, step.rad, st.alpha_max_iter, st.alpha_tol)
     s = s0.copy()
     _axpy_rows(s1_t, lv, s)
     _axpy_rows(s2_t, h, s)
     for j in range(r):
-        s_out[j] = s[j]
+        sk[j] = s[j]
         s[j] -= vtd2[j]
     alpha_out[:] = d2
     _axpy_rows(vt, s, alpha_out)  # d2 + V (s - V^T d2)
