@@ -32,7 +32,7 @@ from ..options import LifterOptions
 from ..results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
 from ..solve.alpha.lifted_admm import QStepFn
 from ..solve.camera import camera_step_trusted, initial_camera
-from ..solve.pose_step import PriorRows, pose_step, prior_operands, step_settings
+from ..solve.pose_step import PriorRows, pose_step, prior_operands
 from ..solve.run_kernel import (
     RunCall,
     RunOut,
@@ -41,6 +41,7 @@ from ..solve.run_kernel import (
     _run_objective,
     _stack_camera_data,
 )
+from ..solve.settings import step_settings
 from .batch import Steps, solve
 
 __all__ = ["PINV_RCOND", "Run", "Runs"]

@@ -39,8 +39,10 @@ from numpy.typing import NDArray
 
 from ..errors import InvalidInputError, SolverError, diverged_as_solver_error
 from ..numeric.jit import njit
+from ..numeric.records import StepSettings
 from ..options import LifterOptions
 from ..results import Camera, CameraResult, Duals
+from .settings import step_settings
 
 _DEFAULTS = LifterOptions()
 
@@ -170,7 +172,6 @@ def camera_step_trusted(
     """:func:`camera_step` on inputs already checked (C-contiguous float64, finite, shapes as
     documented, >= 3 positive weights): the lifter's per-alternation call (its inputs are checked
     once per lift)."""
-    loss, max_iter, tol, tau = options.method.loss, options.camera_max_iter, options.camera_tol, options.tau
     n = x.shape[0]
     if init is None:
         m, t = initial_camera(x, y, w)
@@ -184,7 +185,7 @@ def camera_step_trusted(
         u1 = np.array(duals.data, dtype=np.float64)
         u2 = np.array(duals.coupling, dtype=np.float64)
     with diverged_as_solver_error("camera step"):
-        out = _camera_solve(x, y, w, m, t, u1, u2, loss == "l1", int(max_iter), float(tol), float(tau))
+        out = _camera_solve(CameraProblem(x, y, w), m, t, CameraDuals(u1, u2), step_settings(options))
     if not out.finite:
         raise SolverError("camera step diverged (non-finite camera); check the inputs")
     return CameraResult(objective=out.objective, n_iter=out.n_iter, converged=out.converged,
@@ -205,6 +206,21 @@ def initial_camera(x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np
         m = np.hstack([np.eye(2), np.zeros((2, 1))])
     t = np.asarray(w @ (x - y @ m.T) / w.sum())  # the L2-optimal translation for this M
     return m, t
+
+
+class CameraProblem(NamedTuple):
+    """A camera step's data: ``sum_j w_j rho(x_j - M0 y_j - t)`` over ``n`` points."""
+
+    x: NDArray[np.float64]  #: (n, 2) the 2D points
+    y: NDArray[np.float64]  #: (n, 3) the pose's joints
+    w: NDArray[np.float64]  #: (n,) the weights (0: missing)
+
+
+class CameraDuals(NamedTuple):
+    """The camera ADM's scaled multipliers (updated in place)."""
+
+    u1: NDArray[np.float64]  #: (n, 2) of ``Z = Ya [N; t]^T``
+    u2: NDArray[np.float64]  #: (2, 3) of ``N = M``
 
 
 class CameraSetup(NamedTuple):
@@ -232,14 +248,13 @@ class CameraSolve(NamedTuple):
 
 
 @njit
-def _camera_solve(
-    x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], m: NDArray[np.float64],
-    t: NDArray[np.float64], u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int,
-    tol: float, tau: float,
-) -> CameraSolve:
+def _camera_solve(problem: CameraProblem, m: NDArray[np.float64], t: NDArray[np.float64], u: CameraDuals,
+                  st: StepSettings) -> CameraSolve:
     """Set-up, ADM iterations (:func:`_camera_kernel`) and finish (:func:`_camera_finish`) of
-    the camera step from ``M`` (2, 3), ``t`` (2,); ``u1`` (n, 2), ``u2`` (2, 3) are updated in
-    place."""
+    the camera step of ``problem`` from ``M`` (2, 3), ``t`` (2,), the multipliers ``u`` (updated in
+    place) and the settings ``st`` (the loss, ``cam_max_iter``, ``cam_tol``, ``tau``)."""
+    x, y, w = problem.x, problem.y, problem.w
+    tau = st.tau
     n = x.shape[0]
     ya = np.ones((n, 4))
     ya[:, :3] = y
@@ -271,8 +286,8 @@ def _camera_solve(
             thr[j, c] = w[j] / tau
             l2fac[j, c] = tau / (2.0 * w[j] + tau)
     setup = CameraSetup(ya, hat, lhs3, thr, l2fac, scale_x)
-    m, u1, u2, it, converged = _camera_kernel(x, setup, m, t, u1, u2, l1, max_iter, tol)
-    rot, scale, t_out, obj = _camera_finish(x, y, w, m, l1)
+    m, it, converged = _camera_kernel(x, setup, m, t, u, st)
+    rot, scale, t_out, obj = _camera_finish(x, y, w, m, st.l1)
     ok = bool(np.all(np.isfinite(rot)) and np.all(np.isfinite(t_out)) and math.isfinite(scale) and scale > 0)
     return CameraSolve(rot, scale, t_out, obj, it, converged, ok)
 
@@ -346,15 +361,16 @@ def _optimal_translation(x: NDArray[np.float64], y: NDArray[np.float64], w: NDAr
 
 
 @njit
-def _camera_kernel(
-    x: NDArray[np.float64], setup: CameraSetup, m: NDArray[np.float64], t: NDArray[np.float64],
-    u1: NDArray[np.float64], u2: NDArray[np.float64], l1: bool, max_iter: int, tol: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int, bool]:
+def _camera_kernel(x: NDArray[np.float64], setup: CameraSetup, m: NDArray[np.float64], t: NDArray[np.float64],
+                   u: CameraDuals, st: StepSettings) -> tuple[NDArray[np.float64], int, bool]:
     """The ADM iterations of :func:`camera_step` on plain arrays (compiled by numba when
-    available) for the points ``x`` (n, 2) from ``M`` (2, 3), ``t`` (2,): ``(M, U1, U2,
-    iterations, converged)``; ``u1``, ``u2`` are updated in place. Written as loops over the
-    (n, 2) arrays: at these sizes array expressions cost more in temporaries than in arithmetic."""
+    available) for the points ``x`` (n, 2) from ``M`` (2, 3), ``t`` (2,), the loss, cap and
+    tolerance of ``st``: ``(M, iterations, converged)``; the multipliers ``u`` are updated in
+    place. Written as loops over the (n, 2) arrays: at these sizes array expressions cost more in
+    temporaries than in arithmetic."""
     ya, hat, lhs3, thr, l2fac, scale_x = setup
+    u1, u2 = u.u1, u.u2
+    l1, max_iter, tol = st.l1, st.cam_max_iter, st.cam_tol
     n = x.shape[0]
     converged = False
     it = 0
@@ -418,4 +434,4 @@ def _camera_kernel(
         if res1_sq < tol2 * scale_x * scale_x and res2_sq < tol2 * mn2 and dm2 < tol2 * mn2:
             converged = True
             break
-    return m, u1, u2, it, converged
+    return m, it, converged

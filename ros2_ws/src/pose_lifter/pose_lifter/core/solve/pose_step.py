@@ -66,12 +66,10 @@ from numpy.typing import NDArray
 from ..errors import InvalidInputError, SolverError, diverged_as_solver_error
 from ..model.pose_model import PoseModel
 from ..model.skeleton import N_JOINTS
-from ..numeric.records import StepSettings, settings_record
 from ..options import LifterOptions
 from ..results import Duals, PoseResult
 from .alpha.base import AlphaStep, Coordinates, LiftedStep
 from .alpha.lifted_admm import QStepFn
-from .alpha.sphere_newton import RIEMANNIAN_MAX_ITER
 from .pose_kernel import (
     Multipliers,
     PoseProblem,
@@ -87,6 +85,7 @@ from .pose_kernel import (
     _pose_kernel,
     _pose_rows,
 )
+from .settings import step_settings
 
 
 @dataclass(frozen=True)
@@ -128,19 +127,7 @@ class PriorRows:
 #: The compiled steps' prior operands without a prior: target (12, 3) and weights (12, 2), all
 #: zero (no prior rows).
 NO_PRIOR = (np.zeros((N_JOINTS, 3)), np.zeros((N_JOINTS, 2)))
-#: Cap of the pose ADM's growing penalty ``eta`` (``LifterOptions.eta_growth``).
-ETA_MAX = 1e3
 _DEFAULTS = LifterOptions()
-
-
-def step_settings(options: LifterOptions) -> StepSettings:
-    """The settings of a run's compiled steps for ``options`` (:func:`settings_record`)."""
-    o = options
-    return settings_record(StepSettings(
-        th=o.theta if o.method.sparsity else 0.0, l1=o.method.loss == "l1", limbs=o.method.limbs, eta=o.eta,
-        eta_growth=o.eta_growth, eta_max=ETA_MAX, pose_tol=o.pose_tol, alpha_max_iter=RIEMANNIAN_MAX_ITER,
-        alpha_tol=o.newton_tol, prox=o.alpha_prox, cam_max_iter=o.camera_max_iter, cam_tol=o.camera_tol,
-        tau=o.tau, alt_tol=o.alternation_tol))
 
 
 def prior_operands(model: PoseModel, prior: PriorRows | None
@@ -221,7 +208,8 @@ def pose_step(
         The settings (default ``LifterOptions()``): ``variant`` (loss, limbs, sparsity), ``theta``;
         the outer ADM's ``pose_max_iter``, ``pose_tol`` (stop when the relative primal and dual
         residuals are below it), ``eta`` and ``eta_growth`` (the penalty grows by this factor every
-        iteration up to :data:`ETA_MAX`, the paper's ``eta_k``, as in LADMAP [liu2013linearized];
+        iteration up to :data:`~pose_lifter.core.solve.settings.ETA_MAX`, the paper's ``eta_k``, as in
+        LADMAP [liu2013linearized];
         the scaled multipliers are rescaled with it); the Riemannian alpha-step's ``alpha_prox``
         and ``newton_tol`` (with limbs on and an onto limb map, ``model.limb_coordinates``);
         otherwise the paper's inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.

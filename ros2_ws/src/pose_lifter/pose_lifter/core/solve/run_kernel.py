@@ -35,8 +35,8 @@ from numpy.typing import NDArray
 
 from ..numeric.jit import njit, njit_nogil
 from ..numeric.records import ModelArrays, StepSettings
-from .camera import _camera_solve
-from .pose_kernel import Multipliers, PoseProblem, _depth_term, _n_rows, _pose_kernel, _sum_abs
+from .camera import CameraDuals, CameraProblem, CameraSolve, _camera_solve
+from .pose_kernel import Multipliers, PoseOut, PoseProblem, _depth_term, _n_rows, _pose_kernel, _sum_abs
 
 __all__ = ["RunCall", "RunOut", "RunStatus", "run_calls"]
 
@@ -138,6 +138,36 @@ def _stack_camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], xp: NDAr
 
 
 @njit
+def _camera_for(cx: NDArray[np.float64], cw: NDArray[np.float64], pose: NDArray[np.float64], doubled: bool,
+                ycam: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], st: StepSettings
+                ) -> CameraSolve:
+    """The camera step of a run for the flat pose ``pose`` (36,) from ``[m0 | t]``, its
+    multipliers from zero: the pose's joints written into ``ycam`` (n, 3) (twice, ``doubled``,
+    when ``cx`` (n, 2), ``cw`` (n,) hold the prior's image positions after the 2D)."""
+    nc = cx.shape[0]
+    nj = nc // 2 if doubled else nc
+    for j in range(nc):
+        jj = j % nj if doubled else j
+        for a in range(3):
+            ycam[j, a] = pose[3 * jj + a]
+    duals = CameraDuals(np.zeros((nc, 2)), np.zeros((2, 3)))
+    return _camera_solve(CameraProblem(cx, ycam, cw), m0, t, duals, st)
+
+
+@njit
+def _keep(out: RunOut, it: int, obj: float, p: PoseOut, c: CameraSolve) -> RunOut:
+    """``out`` with alternation ``it`` (its ``F`` ``obj``, pose step ``p``, camera step ``c``) as
+    the kept one: its arrays written in place, its scalars in the returned record."""
+    out.alpha[:] = p.alpha
+    out.pose[:] = p.pose
+    out.rotation[:] = c.rotation
+    out.translation[:] = c.translation
+    return RunOut(out.status, out.done, out.it, out.converged, it, obj, out.objs, out.counts, out.alpha,
+                  out.pose, out.rotation, out.translation, c.scale, p.objective, p.limb_violation,
+                  c.objective, p.n_iter, p.converged, p.alpha_iter, c.n_iter, c.converged)
+
+
+@njit
 def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
     """Alternations ``it0 + 1 .. n_alt`` of the run ``call`` (module docstring; its operands:
     :class:`RunCall`) with the model ``km`` and the steps' settings ``st``
@@ -147,88 +177,59 @@ def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
     comes first. A continued run (``it0 >= 1``, the alternations it has done): ``cam0`` is the
     camera of the first pose step (``y0`` unused) and ``obj0`` the run's best (and last) ``F``.
     """
-    xn, w, xp, pw, rad, alpha0 = call.xn, call.w, call.xp, call.pw, call.rad, call.alpha0
-    y0, cam0, obj0, it0 = call.y0, call.cam0, call.obj0, call.it0
-    n_alt, pose_max_iter = call.n_alt, call.pose_max_iter
+    xn, w, xp, pw, it0, n_alt = call.xn, call.w, call.xp, call.pw, call.it0, call.n_alt
     continued = it0 > 0
     cx, cw, doubled = _stack_camera_data(xn, w, xp, pw)
-    k = alpha0.size
-    nj = xn.shape[0]
+    k = call.alpha0.size
     n_rows = _n_rows(pw)  # the pose step's L1 rows (its multipliers' size)
-    nc = cx.shape[0]
-    objs = np.zeros((max(n_alt - it0, 0), 3))
-    counts = np.zeros((max(n_alt - it0, 0), 4), dtype=np.int64)
-    b_alpha = np.zeros(k)
-    b_y = np.zeros(3 * nj)
-    b_rot = np.zeros((3, 3))
-    b_t = np.zeros(2)
-    b_f = np.zeros(4)  # the kept steps' scale, pose objective, limb violation, camera objective
-    b_i = np.zeros(5, dtype=np.int64)  # pose iterations, converged, alpha iterations, camera's, converged
-    b_idx = -1
-    b_obj = obj0
-    m0 = np.ascontiguousarray(cam0[:, :3])
-    t = cam0[:, 3].copy()
-    ycam = np.empty((nc, 3))
+    length = max(n_alt - it0, 0)
+    # the kept alternation (none yet: index -1, the continued run's objective to beat)
+    kept = RunOut(_OK, 0, it0, False, -1, call.obj0, np.zeros((length, 3)),
+                  np.zeros((length, 4), dtype=np.int64), np.zeros(k), np.zeros(3 * xn.shape[0]),
+                  np.zeros((3, 3)), np.zeros(2), 0.0, 0.0, 0.0, 0.0, 0, False, 0, 0, False)
+    m0 = np.ascontiguousarray(call.cam0[:, :3])
+    t = call.cam0[:, 3].copy()
+    ycam = np.empty((cx.shape[0], 3))
     status = _OK
     if not continued:
-        for j in range(nc):
-            jj = j % nj if doubled else j
-            for a in range(3):
-                ycam[j, a] = y0[3 * jj + a]
-        c = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)), st.l1, st.cam_max_iter,
-                          st.cam_tol, st.tau)
+        c = _camera_for(cx, cw, call.y0, doubled, ycam, m0, t, st)
         if c.finite:
-            m0 = c.scale * c.rotation[:2]
-            t = c.translation
+            m0, t = c.scale * c.rotation[:2], c.translation
         else:
             status = _CAMERA_DIVERGED
-    alpha = alpha0
-    prev = obj0
+    alpha = call.alpha0
+    prev = call.obj0
     converged = False
     it = it0
     done = 0
     for it in range(it0 + 1, n_alt + 1 if status == _OK else it0 + 1):
-        problem = PoseProblem(xn, w, m0, t, xp, pw, rad)
-        p = _pose_kernel(problem, km, st, pose_max_iter, alpha, Multipliers(np.zeros(n_rows), np.zeros(k)))
-        for i in range(k):
-            if not math.isfinite(p.alpha[i]):
-                status = _POSE_DIVERGED
-        if status != _OK:
+        problem = PoseProblem(xn, w, m0, t, xp, pw, call.rad)
+        u = Multipliers(np.zeros(n_rows), np.zeros(k))
+        p = _pose_kernel(problem, km, st, call.pose_max_iter, alpha, u)
+        if not np.all(np.isfinite(p.alpha)):
+            status = _POSE_DIVERGED
             break
         alpha = p.alpha
-        for j in range(nc):
-            jj = j % nj if doubled else j
-            for a in range(3):
-                ycam[j, a] = p.pose[3 * jj + a]
-        c = _camera_solve(cx, ycam, cw, m0, t, np.zeros((nc, 2)), np.zeros((2, 3)), st.l1, st.cam_max_iter,
-                          st.cam_tol, st.tau)
+        c = _camera_for(cx, cw, p.pose, doubled, ycam, m0, t, st)
         if not c.finite:
             status = _CAMERA_DIVERGED
             break
-        m0 = c.scale * c.rotation[:2]
-        t = c.translation
+        m0, t = c.scale * c.rotation[:2], c.translation
         obj = _run_objective(c.objective, alpha, st.th, p.pose, m0, xp, pw)
-        objs[done, 0], objs[done, 1], objs[done, 2] = obj, c.objective, p.objective
-        counts[done, 0], counts[done, 1] = c.n_iter, c.converged
-        counts[done, 2], counts[done, 3] = p.n_iter, p.converged
+        kept.objs[done, 0], kept.objs[done, 1], kept.objs[done, 2] = obj, c.objective, p.objective
+        kept.counts[done, 0], kept.counts[done, 1] = c.n_iter, c.converged
+        kept.counts[done, 2], kept.counts[done, 3] = p.n_iter, p.converged
         done += 1
-        if (b_idx < 0 and not continued) or obj < b_obj:
-            b_idx, b_obj = it, obj
-            b_alpha[:] = p.alpha
-            b_y[:] = p.pose
-            b_rot[:] = c.rotation
-            b_t[:] = c.translation
-            b_f[0], b_f[1], b_f[2], b_f[3] = c.scale, p.objective, p.limb_violation, c.objective
-            b_i[0], b_i[1], b_i[2] = p.n_iter, p.converged, p.alpha_iter
-            b_i[3], b_i[4] = c.n_iter, c.converged
+        if (kept.best_it < 0 and not continued) or obj < kept.best_obj:
+            kept = _keep(kept, it, obj, p, c)
         if _alternation_stops(prev, obj, st.alt_tol):
             converged = True
             break
         prev = obj
-    # the kept alternation's steps (b_f: scale, pose objective, limb violation, camera objective;
-    # b_i: pose iterations and convergence, alpha-step iterations, camera iterations and convergence)
-    return RunOut(status, done, it, converged, b_idx, b_obj, objs, counts, b_alpha, b_y, b_rot, b_t, b_f[0],
-                  b_f[1], b_f[2], b_f[3], b_i[0], b_i[1] != 0, b_i[2], b_i[3], b_i[4] != 0)
+    b = kept
+    return RunOut(status, done, it, converged, b.best_it, b.best_obj, b.objs, b.counts, b.alpha, b.pose,
+                  b.rotation, b.translation, b.scale, b.pose_objective, b.limb_violation, b.camera_objective,
+                  b.pose_iter, b.pose_converged, b.alpha_iter, b.camera_iter, b.camera_converged)
 
 
 @njit_nogil
