@@ -97,6 +97,98 @@ def _quad_into(q: NDArray[np.float64], b: NDArray[np.float64], x: NDArray[np.flo
 
 
 @njit
+def _tangent_gradient(l: NDArray[np.float64], ql: NDArray[np.float64], b: NDArray[np.float64],
+                      rad: NDArray[np.float64], tb: NDArray[np.float64], mu: NDArray[np.float64],
+                      gr: NDArray[np.float64]) -> tuple[float, float]:
+    """At the limb vectors ``l`` (24,) with ``ql = Q l``: the orthonormal tangent bases of the 8
+    spheres into ``tb`` (24, 2; rows 3i..3i+2 hold sphere i's two vectors), the least-squares
+    multipliers into ``mu`` (8,) and the Riemannian gradient in those bases into ``gr`` (16,).
+    Returns the squared norms of the Riemannian and the Euclidean gradient."""
+    egn = 0.0
+    for i in range(24):
+        e = 2.0 * (ql[i] - b[i])
+        egn += e * e
+    gn = 0.0
+    for i in range(8):
+        u0, u1, u2 = l[3 * i] / rad[i], l[3 * i + 1] / rad[i], l[3 * i + 2] / rad[i]
+        g0 = 2.0 * (ql[3 * i] - b[3 * i])  # the Euclidean gradient 2 (Q l - b)
+        g1 = 2.0 * (ql[3 * i + 1] - b[3 * i + 1])
+        g2 = 2.0 * (ql[3 * i + 2] - b[3 * i + 2])
+        # orthonormal completion of u (Duff et al. 2017, "Building an orthonormal basis,
+        # revisited": no branch near the poles)
+        sign = 1.0 if u2 >= 0.0 else -1.0
+        aa = -1.0 / (sign + u2)
+        bb = u0 * u1 * aa
+        e10, e11, e12 = 1.0 + sign * u0 * u0 * aa, sign * bb, -sign * u0
+        e20, e21, e22 = bb, sign + u1 * u1 * aa, -u1
+        tb[3 * i, 0], tb[3 * i + 1, 0], tb[3 * i + 2, 0] = e10, e11, e12
+        tb[3 * i, 1], tb[3 * i + 1, 1], tb[3 * i + 2, 1] = e20, e21, e22
+        mu[i] = -(u0 * g0 + u1 * g1 + u2 * g2) / (2.0 * rad[i])
+        ga = e10 * g0 + e11 * g1 + e12 * g2
+        gb = e20 * g0 + e21 * g1 + e22 * g2
+        gr[2 * i], gr[2 * i + 1] = ga, gb
+        gn += ga * ga + gb * gb
+    return gn, egn
+
+
+@njit
+def _newton_step(q: NDArray[np.float64], tb: NDArray[np.float64], mu: NDArray[np.float64],
+                 gr: NDArray[np.float64], w: NDArray[np.float64], hr: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], bool]:
+    """The modified Newton step (16,) in the tangent bases ``tb``: the Riemannian Hessian ``H =
+    T^T (2 Q) T + 2 diag(mu_i)`` (``w`` (24, 16), ``hr`` (16, 16) its buffers; ``T`` block
+    diagonal, 3 x 2 blocks) shifted by the smallest ``c 4^k`` that makes it positive definite,
+    solved for the gradient ``gr``; False when no shift in 60 did."""
+    for row in range(24):  # W = 2 Q T
+        for j in range(8):
+            q0, q1, q2 = q[row, 3 * j], q[row, 3 * j + 1], q[row, 3 * j + 2]
+            w[row, 2 * j] = 2.0 * (q0 * tb[3 * j, 0] + q1 * tb[3 * j + 1, 0] + q2 * tb[3 * j + 2, 0])
+            w[row, 2 * j + 1] = 2.0 * (q0 * tb[3 * j, 1] + q1 * tb[3 * j + 1, 1] + q2 * tb[3 * j + 2, 1])
+    scale = 0.0
+    for i in range(8):  # H = T^T W + 2 diag(mu_i)
+        for e in range(2):
+            t0, t1, t2 = tb[3 * i, e], tb[3 * i + 1, e], tb[3 * i + 2, e]
+            for col in range(16):
+                hr[2 * i + e, col] = t0 * w[3 * i, col] + t1 * w[3 * i + 1, col] + t2 * w[3 * i + 2, col]
+            hr[2 * i + e, 2 * i + e] += 2.0 * mu[i]
+    for i in range(16):
+        scale = max(scale, abs(hr[i, i]))
+    shift = 0.0
+    ok = False
+    step = gr
+    for _ in range(60):
+        for i in range(16):
+            hr[i, i] += shift
+        step, ok = _cholesky_solve(hr, gr)
+        for i in range(16):
+            hr[i, i] -= shift
+        if ok:
+            break
+        shift = 1e-6 * max(scale, 1e-300) if shift == 0.0 else 4.0 * shift
+    return step, ok
+
+
+@njit
+def _line_search(q: NDArray[np.float64], b: NDArray[np.float64], rad: NDArray[np.float64],
+                 l: NDArray[np.float64], d: NDArray[np.float64], f: float, slope: float,
+                 cand: NDArray[np.float64], qc: NDArray[np.float64]) -> tuple[bool, float]:
+    """Armijo backtracking from the limb vectors ``l`` (24,, objective ``f``) along ``d`` (24,),
+    each trial retracted onto the spheres: the accepted point into ``cand`` (24,) with ``Q cand``
+    into ``qc``; returns whether one was accepted (steps down to 1e-10) and its objective."""
+    a = 1.0
+    fc = f
+    while a > 1e-10:
+        for i in range(24):
+            cand[i] = l[i] + a * d[i]
+        _retract_into(cand, l, rad, cand)
+        fc = _quad_into(q, b, cand, qc)
+        if fc <= f + 1e-4 * a * slope:
+            return True, fc
+        a *= 0.5
+    return False, fc
+
+
+@njit
 def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[np.float64],
                    rad: NDArray[np.float64], max_iter: int, tol: float
                    ) -> tuple[NDArray[np.float64], int, bool]:
@@ -104,15 +196,16 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
     ``||l_i|| = rad_i`` (``l`` = the 8 limb vectors, (24,); ``Q`` (24, 24) positive definite).
 
     Each iteration: the Riemannian gradient (the Euclidean one projected on the tangent
-    spaces, i.e. the KKT residual with least-squares multipliers ``mu_i``), the Riemannian
-    Hessian ``T^T (2 Q + 2 diag(mu_i I_3)) T`` in orthonormal tangent bases ``T`` (24, 16),
-    shifted by a multiple of the identity until it is positive definite (so the step is a
-    descent direction), the step retracted onto the spheres by normalisation, and Armijo
-    backtracking on the objective (every iterate is feasible: no merit function, no Maratos
-    effect). Stops when ``||grad_R|| <= tol * max(1, ||grad||)`` or when the Newton step
-    predicts a decrease below ``1e-13 * max(1, |f|)`` (converged), or when the line search fails
-    (not converged); returns ``(l, iterations, converged)``. Written with scalars and reused
-    buffers (it runs once per pose-ADM iteration).
+    spaces, i.e. the KKT residual with least-squares multipliers ``mu_i``,
+    :func:`_tangent_gradient`), the Riemannian Hessian ``T^T (2 Q + 2 diag(mu_i I_3)) T`` in
+    orthonormal tangent bases ``T`` (24, 16), shifted by a multiple of the identity until it is
+    positive definite (so the step is a descent direction; :func:`_newton_step`), the step
+    retracted onto the spheres by normalisation, and Armijo backtracking on the objective
+    (:func:`_line_search`; every iterate is feasible: no merit function, no Maratos effect). Stops
+    when ``||grad_R|| <= tol * max(1, ||grad||)`` or when the Newton step predicts a decrease below
+    ``1e-13 * max(1, |f|)`` (converged), or when the line search fails (not converged); returns
+    ``(l, iterations, converged)``. Written with scalars and reused buffers (it runs once per
+    pose-ADM iteration).
     """
     l = np.empty(24)
     _retract_into(l0, l0, rad, l)
@@ -121,8 +214,7 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
     cand = np.empty(24)
     qc = np.empty(24)
     d = np.empty(24)
-    eg = np.empty(24)
-    tb = np.empty((24, 2))  # tangent basis: rows 3i..3i+2 hold sphere i's two vectors
+    tb = np.empty((24, 2))
     gr = np.empty(16)
     mu = np.empty(8)
     w = np.empty((24, 16))
@@ -130,60 +222,12 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        egn = 0.0
-        for i in range(24):
-            eg[i] = 2.0 * (ql[i] - b[i])
-            egn += eg[i] * eg[i]
-        gn = 0.0
-        for i in range(8):
-            u0, u1, u2 = l[3 * i] / rad[i], l[3 * i + 1] / rad[i], l[3 * i + 2] / rad[i]
-            g0, g1, g2 = eg[3 * i], eg[3 * i + 1], eg[3 * i + 2]
-            # orthonormal completion of u (Duff et al. 2017, "Building an orthonormal basis,
-            # revisited": no branch near the poles)
-            sign = 1.0 if u2 >= 0.0 else -1.0
-            aa = -1.0 / (sign + u2)
-            bb = u0 * u1 * aa
-            e10, e11, e12 = 1.0 + sign * u0 * u0 * aa, sign * bb, -sign * u0
-            e20, e21, e22 = bb, sign + u1 * u1 * aa, -u1
-            tb[3 * i, 0], tb[3 * i + 1, 0], tb[3 * i + 2, 0] = e10, e11, e12
-            tb[3 * i, 1], tb[3 * i + 1, 1], tb[3 * i + 2, 1] = e20, e21, e22
-            mu[i] = -(u0 * g0 + u1 * g1 + u2 * g2) / (2.0 * rad[i])
-            ga = e10 * g0 + e11 * g1 + e12 * g2
-            gb = e20 * g0 + e21 * g1 + e22 * g2
-            gr[2 * i], gr[2 * i + 1] = ga, gb
-            gn += ga * ga + gb * gb
+        gn, egn = _tangent_gradient(l, ql, b, rad, tb, mu, gr)
         if math.sqrt(gn) <= tol * max(1.0, math.sqrt(egn)):
             converged = True
             it -= 1
             break
-        # W = 2 Q T, then H = T^T W + 2 diag(mu_i): T is block diagonal (3 x 2 blocks)
-        for row in range(24):
-            for j in range(8):
-                q0, q1, q2 = q[row, 3 * j], q[row, 3 * j + 1], q[row, 3 * j + 2]
-                w[row, 2 * j] = 2.0 * (q0 * tb[3 * j, 0] + q1 * tb[3 * j + 1, 0] + q2 * tb[3 * j + 2, 0])
-                w[row, 2 * j + 1] = 2.0 * (q0 * tb[3 * j, 1] + q1 * tb[3 * j + 1, 1] + q2 * tb[3 * j + 2, 1])
-        scale = 0.0
-        for i in range(8):
-            for e in range(2):
-                t0, t1, t2 = tb[3 * i, e], tb[3 * i + 1, e], tb[3 * i + 2, e]
-                for col in range(16):
-                    hr[2 * i + e, col] = t0 * w[3 * i, col] + t1 * w[3 * i + 1, col] + t2 * w[3 * i + 2, col]
-                hr[2 * i + e, 2 * i + e] += 2.0 * mu[i]
-        for i in range(16):
-            scale = max(scale, abs(hr[i, i]))
-        # modified Newton: the smallest shift c * 4^k making it positive definite
-        shift = 0.0
-        ok = False
-        step = gr
-        for _ in range(60):
-            for i in range(16):
-                hr[i, i] += shift
-            step, ok = _cholesky_solve(hr, gr)
-            for i in range(16):
-                hr[i, i] -= shift
-            if ok:
-                break
-            shift = 1e-6 * max(scale, 1e-300) if shift == 0.0 else 4.0 * shift
+        step, ok = _newton_step(q, tb, mu, gr, w, hr)
         if not ok:
             break
         slope = 0.0
@@ -198,18 +242,7 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
             sa, sb = step[2 * i], step[2 * i + 1]
             for p in range(3):
                 d[3 * i + p] = -(tb[3 * i + p, 0] * sa + tb[3 * i + p, 1] * sb)
-        a = 1.0
-        accepted = False
-        fc = f
-        while a > 1e-10:
-            for i in range(24):
-                cand[i] = l[i] + a * d[i]
-            _retract_into(cand, l, rad, cand)
-            fc = _quad_into(q, b, cand, qc)
-            if fc <= f + 1e-4 * a * slope:
-                accepted = True
-                break
-            a *= 0.5
+        accepted, fc = _line_search(q, b, rad, l, d, f, slope, cand, qc)
         if not accepted:
             break
         l, cand = cand, l
