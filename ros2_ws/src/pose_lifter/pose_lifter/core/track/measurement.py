@@ -46,6 +46,7 @@ estimates never see it) and cheap (tens of microseconds). Measured in ``docs/tun
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -148,17 +149,30 @@ def _align_kernel(points: NDArray[np.float64], xy: NDArray[np.float64], use: NDA
     return True
 
 
+class TrackArrays(NamedTuple):
+    """One track's state of the update as its kernels read and write it (in place)."""
+
+    offset: NDArray[np.float64]  #: (12, 2) each joint's x, y offset from the pose
+    #: (6,) log scale, centre x, centre y, frames with a centre, frames published, depth filter on
+    state: NDArray[np.float64]
+    prev_points: NDArray[np.float64]  #: (12, 2) the last centred frame's 2D
+    prev_updated: NDArray[np.bool_]  #: (12,) the joints it updated
+    last: NDArray[np.float64]  #: (12, 3) the last published pose
+    last2: NDArray[np.float64]  #: (12, 3) the one before
+    depth_offset: NDArray[np.float64]  #: (12,) each joint's depth offset from the pose
+    depth_level: NDArray[np.float64]  #: (12,) the depth filter's level
+    depth_velocity: NDArray[np.float64]  #: (12,) and velocity
+    ok: NDArray[np.bool_]  #: (12,) the joints updated on this frame
+    span_row: NDArray[np.float64]  #: (8,) this frame's aligned limb lengths (NaN: not both updated)
+
+
 @njit
-def _xy_kernel(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
-               gate: float, k: float, offset: NDArray[np.float64], state: NDArray[np.float64],
-               prev_points: NDArray[np.float64], prev_updated: NDArray[np.bool_],
-               last: NDArray[np.float64], last2: NDArray[np.float64], span_row: NDArray[np.float64],
-               out: NDArray[np.float64], ok: NDArray[np.bool_]) -> bool:
-    """Steps 1-3 of the module docstring: ``out`` (12, 3) = ``pose`` with x, y moved by the new
-    ``offset``; ``ok`` the joints updated; ``span_row`` (8,) this frame's aligned limb lengths (NaN
-    where not both updated). ``state`` = (log scale, centre x, centre y, frames with a centre,
-    published frames before this one). Returns whether anything was updated (a span row made)."""
-    al = np.empty(5)
+def _gated_alignment(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+                     gate: float, ok: NDArray[np.bool_], al: NDArray[np.float64]) -> bool:
+    """Steps 1-2 of the module docstring: the alignment ``al`` (5,) of the ``used`` 2D ``points``
+    (12, 2) onto ``pose``'s x, y (:func:`_align_kernel`), redone without the joints beyond
+    ``gate``; ``ok`` (12,) the joints kept (none when the alignment fails). Returns whether it
+    succeeded."""
     n_used = 0
     for j in range(N_JOINTS):
         ok[j] = False
@@ -177,78 +191,122 @@ def _xy_kernel(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDA
             if not aligned:
                 for j in range(N_JOINTS):
                     ok[j] = False
-    any_ok = False
-    for j in range(N_JOINTS):
-        any_ok = any_ok or ok[j]
-    # where a joint that is not updated goes: where the track predicts it
+    return aligned
+
+
+@njit
+def _held_offsets(pose: NDArray[np.float64], tr: TrackArrays) -> NDArray[np.float64]:
+    """The offsets (12, 2) of joints not updated on this frame: HOLD of the way from ``pose`` to
+    where the track predicts them (its last published x, y plus HOLD_VELOCITY of its last
+    motion; before any frame, the pose plus its offset)."""
     held = np.empty((N_JOINTS, 2))
+    frames = tr.state[4]
     for j in range(N_JOINTS):
         for c in range(2):
-            predicted = pose[j, c] + offset[j, c]
-            if state[4] >= 1:
-                predicted = last[j, c]
-                if state[4] >= 2:
-                    predicted += HOLD_VELOCITY * (last[j, c] - last2[j, c])
+            predicted = pose[j, c] + tr.offset[j, c]
+            if frames >= 1:
+                predicted = tr.last[j, c]
+                if frames >= 2:
+                    predicted += HOLD_VELOCITY * (tr.last[j, c] - tr.last2[j, c])
             held[j, c] = HOLD * (predicted - pose[j, c])
-    if aligned and any_ok:
-        ls = math.log(al[0])
-        if state[3] > 0:
-            ls = SCALE_SMOOTHING * state[0] + (1.0 - SCALE_SMOOTHING) * ls
-        state[0] = ls
-        scale = math.exp(ls)
-        cx = al[1] - al[3] / scale  # the image point at the pose's origin
-        cy = al[2] - al[4] / scale
-        if state[3] > 0:
-            n_both = 0
-            for j in range(N_JOINTS):
-                n_both += ok[j] and prev_updated[j]
-            if n_both >= 3:
-                mx = np.empty(n_both)
-                my = np.empty(n_both)
-                i = 0
-                for j in range(N_JOINTS):
-                    if ok[j] and prev_updated[j]:
-                        mx[i] = points[j, 0] - prev_points[j, 0]
-                        my[i] = points[j, 1] - prev_points[j, 1]
-                        i += 1
-                cx = SHIFT_SMOOTHING * (state[1] + np.median(mx)) + (1.0 - SHIFT_SMOOTHING) * cx
-                cy = SHIFT_SMOOTHING * (state[2] + np.median(my)) + (1.0 - SHIFT_SMOOTHING) * cy
-        state[1], state[2], state[3] = cx, cy, state[3] + 1
-        obs = np.empty((N_JOINTS, 2))
+    return held
+
+
+@njit
+def _image_frame(points: NDArray[np.float64], al: NDArray[np.float64], tr: TrackArrays
+                 ) -> tuple[float, float, float]:
+    """Step 1's scale and image centre ``(s, c_x, c_y)`` of this frame from its alignment ``al``
+    (5,): the scale averaged in logs over frames (SCALE_SMOOTHING), the centre blended
+    (SHIFT_SMOOTHING) with the last one moved by the median image motion of the joints updated on
+    both frames (at least 3); written into the track's ``state``."""
+    state, ok, prev_updated, prev_points = tr.state, tr.ok, tr.prev_updated, tr.prev_points
+    ls = math.log(al[0])
+    if state[3] > 0:
+        ls = SCALE_SMOOTHING * state[0] + (1.0 - SCALE_SMOOTHING) * ls
+    state[0] = ls
+    scale = math.exp(ls)
+    cx = al[1] - al[3] / scale  # the image point at the pose's origin
+    cy = al[2] - al[4] / scale
+    if state[3] > 0:
+        n_both = 0
         for j in range(N_JOINTS):
-            obs[j, 0] = scale * (points[j, 0] - cx)
-            obs[j, 1] = scale * (points[j, 1] - cy)
-            prev_points[j, 0], prev_points[j, 1] = points[j, 0], points[j, 1]
-            prev_updated[j] = ok[j]
-            for c in range(2):
-                if ok[j]:
-                    offset[j, c] += k * (obs[j, c] - pose[j, c] - offset[j, c])
-                else:
-                    offset[j, c] = held[j, c]
-        for i in range(LIMB_A.shape[0]):
-            a, b = LIMB_A[i], LIMB_B[i]
-            if ok[a] and ok[b]:
-                dx, dy = obs[b, 0] - obs[a, 0], obs[b, 1] - obs[a, 1]
-                span_row[i] = math.sqrt(dx * dx + dy * dy)
+            n_both += ok[j] and prev_updated[j]
+        if n_both >= 3:
+            mx = np.empty(n_both)
+            my = np.empty(n_both)
+            i = 0
+            for j in range(N_JOINTS):
+                if ok[j] and prev_updated[j]:
+                    mx[i] = points[j, 0] - prev_points[j, 0]
+                    my[i] = points[j, 1] - prev_points[j, 1]
+                    i += 1
+            cx = SHIFT_SMOOTHING * (state[1] + np.median(mx)) + (1.0 - SHIFT_SMOOTHING) * cx
+            cy = SHIFT_SMOOTHING * (state[2] + np.median(my)) + (1.0 - SHIFT_SMOOTHING) * cy
+    state[1], state[2], state[3] = cx, cy, state[3] + 1
+    return scale, cx, cy
+
+
+@njit
+def _observe(pose: NDArray[np.float64], points: NDArray[np.float64], k: float, held: NDArray[np.float64],
+             frame: tuple[float, float, float], tr: TrackArrays) -> None:
+    """Step 3 on an aligned frame: each updated joint's offset follows its 2D in the pose's frame
+    (``frame`` = :func:`_image_frame`'s) with the gain ``k``, the others take their ``held``
+    offset; the frame's 2D, updated joints and aligned limb lengths (``span_row``) kept."""
+    scale, cx, cy = frame
+    ok, offset, span_row = tr.ok, tr.offset, tr.span_row
+    obs = np.empty((N_JOINTS, 2))
+    for j in range(N_JOINTS):
+        obs[j, 0] = scale * (points[j, 0] - cx)
+        obs[j, 1] = scale * (points[j, 1] - cy)
+        tr.prev_points[j, 0], tr.prev_points[j, 1] = points[j, 0], points[j, 1]
+        tr.prev_updated[j] = ok[j]
+        for c in range(2):
+            if ok[j]:
+                offset[j, c] += k * (obs[j, c] - pose[j, c] - offset[j, c])
             else:
-                span_row[i] = np.nan
+                offset[j, c] = held[j, c]
+    for i in range(LIMB_A.shape[0]):
+        a, b = LIMB_A[i], LIMB_B[i]
+        if ok[a] and ok[b]:
+            dx, dy = obs[b, 0] - obs[a, 0], obs[b, 1] - obs[a, 1]
+            span_row[i] = math.sqrt(dx * dx + dy * dy)
+        else:
+            span_row[i] = np.nan
+
+
+@njit
+def _xy_kernel(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_], gate: float,
+               k: float, tr: TrackArrays, out: NDArray[np.float64]) -> bool:
+    """Steps 1-3 of the module docstring on the track's arrays ``tr``: ``out`` (12, 3) = ``pose``
+    with x, y moved by the new offsets; ``tr.ok`` the joints updated (gate ``gate``, gain ``k``);
+    ``tr.span_row`` (8,) this frame's aligned limb lengths. Returns whether anything was updated
+    (a span row made)."""
+    al = np.empty(5)
+    aligned = _gated_alignment(pose, points, used, gate, tr.ok, al)
+    any_ok = False
+    for j in range(N_JOINTS):
+        any_ok = any_ok or tr.ok[j]
+    held = _held_offsets(pose, tr)
+    if aligned and any_ok:
+        _observe(pose, points, k, held, _image_frame(points, al, tr), tr)
     else:
         for j in range(N_JOINTS):
-            offset[j, 0], offset[j, 1] = held[j, 0], held[j, 1]
+            tr.offset[j, 0], tr.offset[j, 1] = held[j, 0], held[j, 1]
     for j in range(N_JOINTS):
-        out[j, 0] = pose[j, 0] + offset[j, 0]
-        out[j, 1] = pose[j, 1] + offset[j, 1]
+        out[j, 0] = pose[j, 0] + tr.offset[j, 0]
+        out[j, 1] = pose[j, 1] + tr.offset[j, 1]
         out[j, 2] = pose[j, 2]
     return aligned and any_ok
 
 
 @njit
-def _depth_kernel(pose: NDArray[np.float64], out: NDArray[np.float64], ok: NDArray[np.bool_],
-                  limbs: NDArray[np.float64], beta: float, gain: float, depth_offset: NDArray[np.float64],
-                  level: NDArray[np.float64], velocity: NDArray[np.float64], state: NDArray[np.float64]
-                  ) -> None:
-    """Steps 4-5: ``out``'s depths (in place, centred after); ``limbs`` (8,) or empty (no depth
-    step); the alpha-beta filter's ``level`` and ``velocity`` start when ``state[5]`` is 0."""
+def _depth_kernel(pose: NDArray[np.float64], out: NDArray[np.float64], limbs: NDArray[np.float64],
+                  beta: float, gain: float, tr: TrackArrays) -> None:
+    """Steps 4-5: ``out``'s depths (in place, centred after) for the joints ``tr.ok`` updated;
+    ``limbs`` (8,) or empty (no depth step), ``beta`` the weight of their depth; the alpha-beta
+    filter (gain ``gain``) starts when ``tr.state[5]`` is 0."""
+    ok, depth_offset, state = tr.ok, tr.depth_offset, tr.state
+    level, velocity = tr.depth_level, tr.depth_velocity
     prev = depth_offset.copy()
     for j in range(N_JOINTS):
         depth_offset[j] = HOLD * prev[j]
@@ -295,22 +353,16 @@ class MeasurementUpdate:
     """One track's state of the measurement update (module docstring); :meth:`update` per frame."""
 
     def __init__(self) -> None:
-        self.offset = np.zeros((N_JOINTS, 2))
-        self.depth_offset = np.zeros(N_JOINTS)
+        n = N_JOINTS
+        self.arrays = TrackArrays(
+            offset=np.zeros((n, 2)), state=np.zeros(6), prev_points=np.zeros((n, 2)),
+            prev_updated=np.zeros(n, dtype=bool), last=np.zeros((n, 3)), last2=np.zeros((n, 3)),
+            depth_offset=np.zeros(n), depth_level=np.zeros(n), depth_velocity=np.zeros(n),
+            ok=np.zeros(n, dtype=bool), span_row=np.empty(len(LIMBS)))
         self.spans = np.full((SPAN_FRAMES, len(LIMBS)), np.nan)
         self.n_spans = 0
         self.limbs: NDArray[np.float64] | None = None
         self.limbs_at = -SPAN_EVERY
-        #: log scale, centre x, centre y, frames with a centre, frames published, depth filter on
-        self.state = np.zeros(6)
-        self.prev_points = np.zeros((N_JOINTS, 2))
-        self.prev_updated = np.zeros(N_JOINTS, dtype=bool)
-        self.depth_level = np.zeros(N_JOINTS)
-        self.depth_velocity = np.zeros(N_JOINTS)
-        self.last = np.zeros((N_JOINTS, 3))
-        self.last2 = np.zeros((N_JOINTS, 3))
-        self._row = np.empty(len(LIMBS))
-        self._ok = np.zeros(N_JOINTS, dtype=bool)
 
     def limb_lengths(self) -> NDArray[np.float64] | None:
         """The track's limb lengths from the image (8,; left and right averaged; model units), or
@@ -348,19 +400,17 @@ class MeasurementUpdate:
         used = np.ascontiguousarray(used, dtype=np.bool_)
         k = kalman_gain(DRIFT * DRIFT, noise * noise)
         out = np.empty((N_JOINTS, 3))
-        ok = self._ok
-        if _xy_kernel(pose, points, used, max(gate, GATE_NOISE_FACTOR * noise), k, self.offset, self.state,
-                      self.prev_points, self.prev_updated, self.last, self.last2, self._row, out, ok):
-            self.spans[self.n_spans % SPAN_FRAMES] = self._row
+        tr = self.arrays
+        if _xy_kernel(pose, points, used, max(gate, GATE_NOISE_FACTOR * noise), k, tr, out):
+            self.spans[self.n_spans % SPAN_FRAMES] = tr.span_row
             self.n_spans += 1
         limbs = self.limb_lengths() if depth > 0 else None
-        _depth_kernel(pose, out, ok, _NO_LIMBS if limbs is None else limbs, depth * k,
-                      1.0 - (1.0 - DEPTH_GAIN) * k, self.depth_offset, self.depth_level,
-                      self.depth_velocity, self.state)
-        self.last2, self.last = self.last, out
-        self.state[4] += 1
+        gain = 1.0 - (1.0 - DEPTH_GAIN) * k
+        _depth_kernel(pose, out, _NO_LIMBS if limbs is None else limbs, depth * k, gain, tr)
+        tr.last2[:] = tr.last
+        tr.last[:] = out
+        tr.state[4] += 1
         return out
-
 
 
 _COMPILED = False
