@@ -187,12 +187,10 @@ def pose_step(
     duals: Duals | None = None,
     qstep_fn: QStepFn | None = None,
 ) -> PoseResult:
-    """Solve the pose problem of the module docstring for a fixed camera by ADM.
-
-    With the Riemannian alpha-step one compiled kernel
-    (:func:`pose_lifter.core.solve.pose_kernel._pose_kernel`); with another, the Python ADM loop
-    :func:`_adm` over it
-    (:class:`pose_lifter.core.solve.alpha.base.AlphaStep`).
+    """Solve the pose problem of the module docstring for a fixed camera by ADM: one compiled
+    kernel with the Riemannian or the linear alpha-step
+    (:func:`pose_lifter.core.solve.pose_kernel._pose_kernel`), the Python ADM loop :func:`_adm`
+    around the paper's inner ADM otherwise.
 
     Parameters
     ----------
@@ -205,17 +203,13 @@ def pose_step(
     alpha0 : ndarray, shape (k,)
         Start (warm start: the previous alternation's or frame's coefficients).
     options : LifterOptions, optional
-        The settings (default ``LifterOptions()``): ``variant`` (loss, limbs, sparsity), ``theta``;
-        the outer ADM's ``pose_max_iter``, ``pose_tol`` (stop when the relative primal and dual
-        residuals are below it), ``eta`` and ``eta_growth`` (the penalty grows by this factor every
-        iteration up to :data:`~pose_lifter.core.solve.settings.ETA_MAX`, the paper's ``eta_k``, as in
-        LADMAP [liu2013linearized];
-        the scaled multipliers are rescaled with it); the Riemannian alpha-step's ``alpha_prox``
-        and ``newton_tol`` (with limbs on and an onto limb map, ``model.limb_coordinates``);
-        otherwise the paper's inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
+        The settings (default ``LifterOptions()``): ``variant``, ``theta``; the outer ADM's
+        ``pose_max_iter``, ``pose_tol`` (on the relative primal and dual residuals), ``eta`` and
+        ``eta_growth`` (up to :data:`~pose_lifter.core.solve.settings.ETA_MAX`: the paper's
+        ``eta_k``, as in LADMAP [liu2013linearized]); the Riemannian alpha-step's ``alpha_prox``,
+        ``newton_tol``; the paper's inner ADM's ``delta``, ``inner_max_iter``, ``inner_tol``.
     max_iter : int, optional
-        Outer ADM cap instead of ``options.pose_max_iter`` (the hybrid mode's and the screening
-        runs' caps).
+        Outer ADM cap instead of ``options.pose_max_iter``.
     prior : PriorRows, optional
         The hybrid mode's L1 prior term (:class:`PriorRows`), added to the objective; needs the
         Riemannian path (limbs on, reduced lifting, onto limb map).
@@ -239,7 +233,6 @@ def pose_step(
         The ADM diverged (non-finite coefficients).
     """
     o = _DEFAULTS if options is None else options
-    variant = o.method
     if max_iter is None:
         max_iter = o.pose_max_iter
     x = np.ascontiguousarray(points, dtype=np.float64)
@@ -248,14 +241,8 @@ def pose_step(
     alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
     if alpha.shape != (k,):
         raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
-    # compiled: the linear alpha-step (no limbs) or the Riemannian one (limbs on an onto limb map,
-    # unless the cvxpy reference Q-step, qstep_fn, asks for the paper's inner ADM)
-    compiled = not variant.limbs or (model.limb_coordinates is not None and qstep_fn is None)
-    if prior is not None and not (compiled and variant.limbs):
-        raise InvalidInputError("a prior term needs a variant with limbs, bases whose limb map is onto "
-                                "(>= 24 basis directions) and the closed-form Q-step")
     with diverged_as_solver_error("pose step"):
-        if compiled:
+        if _is_compiled(o, model, qstep_fn, prior is not None):
             return _compiled(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
         xp, pw, _ = prior_operands(model, None)
         rows = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
@@ -263,6 +250,19 @@ def pose_step(
         # limbs on bases whose limb map is not onto, or the cvxpy Q-step: the paper's inner ADM
         step = _alpha_step(model, rows.mus, o, qstep_fn)
         return _adm(rows, model, alpha.copy(), step, max_iter, o, duals)
+
+
+def _is_compiled(o: LifterOptions, model: PoseModel, qstep_fn: QStepFn | None, with_prior: bool) -> bool:
+    """Whether :func:`pose_step` is the compiled kernel: the linear alpha-step (no limbs) or the
+    Riemannian one (limbs on an onto limb map, unless the cvxpy reference Q-step ``qstep_fn`` asks
+    for the paper's inner ADM). Raises :class:`InvalidInputError` for a prior term without the
+    Riemannian step."""
+    limbs = o.method.limbs
+    compiled = not limbs or (model.limb_coordinates is not None and qstep_fn is None)
+    if with_prior and not (compiled and limbs):
+        raise InvalidInputError("a prior term needs a variant with limbs, bases whose limb map is onto "
+                                "(>= 24 basis directions) and the closed-form Q-step")
+    return compiled
 
 
 def _alpha_step(model: PoseModel, mus: NDArray[np.float64], o: LifterOptions, qstep_fn: QStepFn | None
