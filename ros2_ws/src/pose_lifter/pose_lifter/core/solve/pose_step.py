@@ -143,17 +143,11 @@ def prior_operands(model: PoseModel, prior: PriorRows | None
             np.ascontiguousarray(prior.weights, dtype=np.float64), rad)
 
 
-def _compiled(x: NDArray[np.float64], m0: NDArray[np.float64], translation: NDArray[np.float64],
-              weights: NDArray[np.float64], model: PoseModel, options: LifterOptions,
-              alpha: NDArray[np.float64], max_iter: int, duals: Duals | None, prior: PriorRows | None
-              ) -> PoseResult:
+def _compiled(problem: PoseProblem, model: PoseModel, options: LifterOptions, alpha: NDArray[np.float64],
+              max_iter: int, duals: Duals | None) -> PoseResult:
     """:func:`pose_step` with a compiled alpha-step (Riemannian, or linear without limbs): one
     call of :func:`pose_lifter.core.solve.pose_kernel._pose_kernel`."""
-    xp, pw, rad = prior_operands(model, prior)
-    u1, u2 = _scaled_duals(duals, _n_rows(pw), model.n_bases, options.eta)
-    c64 = np.ascontiguousarray
-    problem = PoseProblem(c64(x, dtype=np.float64), c64(weights, dtype=np.float64), c64(m0, dtype=np.float64),
-                          c64(translation, dtype=np.float64), xp, pw, rad)
+    u1, u2 = _scaled_duals(duals, _n_rows(problem.prior_weights), model.n_bases, options.eta)
     out = _pose_kernel(problem, model.kernel_arrays, step_settings(options), int(max_iter), alpha,
                        Multipliers(u1, u2))
     if not np.all(np.isfinite(out.alpha)):
@@ -235,18 +229,19 @@ def pose_step(
     o = _DEFAULTS if options is None else options
     if max_iter is None:
         max_iter = o.pose_max_iter
-    x = np.ascontiguousarray(points, dtype=np.float64)
-    m0 = np.ascontiguousarray(projection, dtype=np.float64)
     k = model.n_bases
     alpha = np.ascontiguousarray(alpha0, dtype=np.float64)
     if alpha.shape != (k,):
         raise InvalidInputError(f"alpha0 must have shape ({k},), got {alpha.shape}")
+    c64 = np.ascontiguousarray
+    xp, pw, rad = prior_operands(model, prior)
+    problem = PoseProblem(c64(points, dtype=np.float64), c64(weights, dtype=np.float64),
+                          c64(projection, dtype=np.float64), c64(translation, dtype=np.float64), xp, pw, rad)
     with diverged_as_solver_error("pose step"):
         if _is_compiled(o, model, qstep_fn, prior is not None):
-            return _compiled(x, m0, translation, weights, model, o, alpha, max_iter, duals, prior)
-        xp, pw, _ = prior_operands(model, None)
-        rows = _pose_rows(x, m0, np.ascontiguousarray(translation, dtype=np.float64),
-                          np.ascontiguousarray(weights, dtype=np.float64), model.kernel_arrays, xp, pw)
+            return _compiled(problem, model, o, alpha, max_iter, duals)
+        p = problem
+        rows = _pose_rows(p.points, p.projection, p.translation, p.weights, model.kernel_arrays, xp, pw)
         # limbs on bases whose limb map is not onto, or the cvxpy Q-step: the paper's inner ADM
         step = _alpha_step(model, rows.mus, o, qstep_fn)
         return _adm(rows, model, alpha.copy(), step, max_iter, o, duals)

@@ -169,12 +169,14 @@ def _newton_step(q: NDArray[np.float64], tb: NDArray[np.float64], mu: NDArray[np
 
 
 @njit
-def _line_search(q: NDArray[np.float64], b: NDArray[np.float64], rad: NDArray[np.float64],
+def _line_search(problem: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
                  l: NDArray[np.float64], d: NDArray[np.float64], f: float, slope: float,
                  cand: NDArray[np.float64], qc: NDArray[np.float64]) -> tuple[bool, float]:
-    """Armijo backtracking from the limb vectors ``l`` (24,, objective ``f``) along ``d`` (24,),
-    each trial retracted onto the spheres: the accepted point into ``cand`` (24,) with ``Q cand``
-    into ``qc``; returns whether one was accepted (steps down to 1e-10) and its objective."""
+    """Armijo backtracking on ``problem = (Q, b, rad)`` from the limb vectors ``l`` (24,,
+    objective ``f``) along ``d`` (24,) with the slope ``slope``, each trial retracted onto the
+    spheres: the accepted point into ``cand`` (24,) with ``Q cand`` into ``qc``; returns whether
+    one was accepted (steps down to 1e-10) and its objective."""
+    q, b, rad = problem
     a = 1.0
     fc = f
     while a > 1e-10:
@@ -242,7 +244,7 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
             sa, sb = step[2 * i], step[2 * i + 1]
             for p in range(3):
                 d[3 * i + p] = -(tb[3 * i + p, 0] * sa + tb[3 * i + p, 1] * sb)
-        accepted, fc = _line_search(q, b, rad, l, d, f, slope, cand, qc)
+        accepted, fc = _line_search((q, b, rad), l, d, f, slope, cand, qc)
         if not accepted:
             break
         l, cand = cand, l
