@@ -8,8 +8,10 @@ Builds :class:`pose_lifter.ros.node.LifterNode` in this process, gives it the ba
 ``camera_info`` and lifts every ``/keypoints_2d`` message as its callback does
 (``lift_frame``), pass after pass
 (each pass's stamps shifted by the bag's duration, so the tracks stay warm). The first two passes
-warm the tracks up; the others are timed: per frame, callback in -> the frame's answers
-published (the solve, the messages, the markers and the REP-155 outputs). With ``--profile N``,
+warm the tracks up; the others are timed: per frame, from its serialised bytes (what the
+middleware hands the node) to the frame's answers published (reading the frame, the solve, the
+messages, the markers and the REP-155 outputs; a node without ``read_frame``, which subscribes to
+rclpy messages, is timed with rclpy's deserialisation of the same bytes). With ``--profile N``,
 prints the N entries of the largest cumulative time of a cProfile of the timed passes instead.
 Run it from two checkouts (``PYTHONPATH=<checkout>/ros2_ws/src/pose_lifter``) to compare them.
 """
@@ -40,7 +42,7 @@ def main() -> None:
         import rclpy
         from pose_lifter_msgs.msg import Skeleton2DArray
         from rclpy.parameter import Parameter
-        from rclpy.serialization import deserialize_message
+        from rclpy.serialization import deserialize_message, serialize_message
         from sensor_msgs.msg import CameraInfo
     except ImportError as err:
         sys.exit(f"{err}: run `make ros` and `source ros2_ws/install/setup.bash`")
@@ -69,12 +71,16 @@ def main() -> None:
     if infos:
         node.on_camera_info(infos[0])
 
+    reads_bytes = hasattr(node, "read_frame")
+
     def one_pass(k: int) -> list[float]:
         times = []
         for f, s in zip(frames, stamps, strict=True):
             f.header.stamp = ns_to_stamp(s + k * span, node._types)
+            data = serialize_message(f)
             t0 = time.perf_counter()
-            node.lift_frame(f, time.perf_counter())
+            node.lift_frame(data if reads_bytes else deserialize_message(data, Skeleton2DArray),
+                            time.perf_counter())
             times.append(time.perf_counter() - t0)
         return times
 

@@ -2,11 +2,14 @@
 
 One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
 
-1. ``keypoints_2d`` (``pose_lifter_msgs/Skeleton2DArray``, sensor-data QoS) arrives; before each
-   lift every frame the subscription holds joins the waiting frames
+1. ``keypoints_2d`` (``pose_lifter_msgs/Skeleton2DArray``, sensor-data QoS) arrives as its
+   serialised bytes; before each lift every frame the subscription holds joins the waiting frames
    (:class:`~pose_lifter.ros.frame_queue.FrameQueue`), and the oldest left is lifted: when the
    input is faster than the lift, a newer frame drops the oldest waiting one whole (at most
-   ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded.
+   ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded. The
+   frame lifted is read into arrays, its keypoints one array per skeleton
+   (:func:`~pose_lifter.messages.cdr.decode_skeleton2d_array`, the offline lift's reader; rclpy
+   deserialises what that reader refuses): a frame dropped is never read.
 2. The frame pipeline (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's
    too) checks the frame and each skeleton against the caps and converts it to the paper's 12
    joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`
@@ -52,6 +55,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.serialization import deserialize_message
 
 from pose_lifter.core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from pose_lifter.core.errors import InvalidInputError
@@ -60,7 +64,12 @@ from pose_lifter.core.numeric.jit import HAVE_NUMBA
 from pose_lifter.core.track.policy import compile_kernels
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
-from pose_lifter.messages.cdr import SkeletonFrame, skeleton3d_array_cdr
+from pose_lifter.messages.cdr import (
+    DecodedHeader,
+    SkeletonFrame,
+    decode_skeleton2d_array,
+    skeleton3d_array_cdr,
+)
 from pose_lifter.messages.frame import FramePipeline, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.hri import LiftedBody
 from pose_lifter.messages.markers import MarkerBook
@@ -160,10 +169,11 @@ class LifterNode(Node):
         self._sub_camera_info = self.create_subscription(
             self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
-        # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only)
+        # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only);
+        # raw: the serialised frame, read into arrays when it is lifted (read_frame)
         self._sub_keypoints = self.create_subscription(
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints,  # type: ignore[arg-type]
-            qos_profile_sensor_data, qos_overriding_options=qos_override)
+            qos_profile_sensor_data, qos_overriding_options=qos_override, raw=True)
         # triggered while frames wait after a lift: the executor comes back for the next one
         # between its other callbacks (camera_info, timers, parameter services)
         self._more = self.create_guard_condition(self._lift_next)
@@ -337,17 +347,32 @@ class LifterNode(Node):
         if len(self._waiting):
             self._more.trigger()
 
-    def lift_frame(self, msg: Any, received: float) -> None:
-        """Lift one frame and publish its answer (always, even when every skeleton is skipped);
-        ``received``: when it arrived (:func:`time.perf_counter`), for its latency."""
+    def read_frame(self, data: Any) -> Any:
+        """A ``Skeleton2DArray`` as the subscription gives it (its serialised bytes) read for the
+        pipeline: its keypoints as arrays (:func:`~pose_lifter.messages.cdr.decode_skeleton2d_array`),
+        or the rclpy message where that reader refuses the bytes (another encoding); a message
+        object is returned as it is."""
+        if not isinstance(data, bytes):
+            return data
+        decoded = decode_skeleton2d_array(data)
+        if decoded is None:
+            return deserialize_message(data, self._types.Skeleton2DArray)
+        return decoded
+
+    def lift_frame(self, data: Any, received: float) -> None:
+        """Lift one frame (:meth:`read_frame`) and publish its answer (always, even when every
+        skeleton is skipped); ``received``: when it arrived (:func:`time.perf_counter`), for its
+        latency."""
+        msg = self.read_frame(data)
         checked = self._pipeline.check(msg, self._on_clipped)
         for skip in checked.skipped:
             self._warn_skip(skip.kind, str(skip))
         if not checked.answered:  # over a cap: skipped, unanswered
             return
-        if not msg.header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
-            msg.header.frame_id = self._settings.frame_id
-        stamp_ns = messages.stamp_to_ns(msg.header.stamp)
+        header = msg.header
+        if not header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
+            header = DecodedHeader(header.stamp, self._settings.frame_id)
+        stamp_ns = messages.stamp_to_ns(header.stamp)
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
         lifted: list[LiftedSkeleton] = []
@@ -361,13 +386,13 @@ class LifterNode(Node):
         frame = SkeletonFrame.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],
                                            [s.result for s in lifted], [s.solve_time for s in lifted],
                                            [s.warm_started for s in lifted])
-        self._pub_skeletons.publish(skeleton3d_array_cdr(msg.header, frame))
+        self._pub_skeletons.publish(skeleton3d_array_cdr(header, frame))
         if self._settings.publish_markers:  # serialised by the offline lift's marker book
             self._pub_markers.publish(self._markers.update(
-                msg.header, frame.track_ids.tolist(), frame.joints_m, self._settings.marker_lifetime))
+                header, frame.track_ids.tolist(), frame.joints_m, self._settings.marker_lifetime))
         if self._hri is not None:  # REP-155 bodies and /tf
             bodies = [LiftedBody(s.track_id, s.joints_m, s.input.points, s.input.confidence) for s in lifted]
-            self._hri.publish(stamp_ns, msg.header.frame_id, bodies, self._image_size)
+            self._hri.publish(stamp_ns, header.frame_id, bodies, self._image_size)
         self._counts.frame(lifted, time.perf_counter() - received)
 
     # ------------------------------------------------------------------ diagnostics
