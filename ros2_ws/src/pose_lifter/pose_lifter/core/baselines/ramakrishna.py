@@ -41,7 +41,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import Final, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -263,6 +263,261 @@ def _constrained_ls(
     return a, abs(float(ell.sum()) - target) <= 1e-8 * (1.0 + target)
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """The normalised fitting problem of one skeleton.
+
+    Attributes
+    ----------
+    x : ndarray, shape (12, 2)
+        Normalised image coordinates (missing joints at 0).
+    w : ndarray, shape (12,)
+        Joint weights, 1 visible, 0 missing.
+    sw : ndarray, shape (24,)
+        Square roots of the weights, one per image coordinate.
+    mu : ndarray, shape (36,)
+        Mean pose.
+    comps : ndarray, shape (36, k)
+        Basis poses.
+    cb_all : ndarray, shape (8, 3, k)
+        Limb vectors of the basis poses.
+    cm : ndarray, shape (8, 3)
+        Limb vectors of the mean pose.
+    tl : ndarray, shape (8,)
+        Target limb lengths.
+    squared : bool
+        Whether the limb condition is on the sum of squared lengths.
+    """
+
+    x: NDArray[np.float64]
+    w: NDArray[np.float64]
+    sw: NDArray[np.float64]
+    mu: NDArray[np.float64]
+    comps: NDArray[np.float64]
+    cb_all: NDArray[np.float64]
+    cm: NDArray[np.float64]
+    tl: NDArray[np.float64]
+    squared: bool
+
+    def error(
+        self, rot: NDArray[np.float64], s: float, t: NDArray[np.float64], y: NDArray[np.float64],
+    ) -> float:
+        """Weighted squared reprojection error of pose ``y`` (12, 3) through camera ``rot`` (3, 3),
+        ``s``, ``t`` (2,)."""
+        r = self.x - (s * y @ rot[:2].T + t)
+        return float(np.sum(self.w * (r * r).sum(axis=1)))
+
+    def coefficients(
+        self, chosen: list[int], rot: NDArray[np.float64], s: float,
+        t: NDArray[np.float64], a_prev: NDArray[np.float64], rounds: int,
+    ) -> tuple[NDArray[np.float64], bool]:
+        """Constrained LS coefficients (len(chosen),) of the ``chosen`` bases for a fixed camera
+        ``rot`` (3, 3), ``s``, ``t`` (2,), warm-started at ``a_prev``; see :func:`_constrained_ls`."""
+        big_m = np.kron(np.eye(N_JOINTS), s * rot[:2])
+        a_mat = self.sw[:, None] * (big_m @ self.comps[:, chosen])
+        b_vec = self.sw * ((self.x - t).reshape(-1) - big_m @ self.mu)
+        return _constrained_ls(a_mat, b_vec, self.cb_all[:, :, chosen], self.cm, self.tl, self.squared,
+                               a_prev, rounds)
+
+
+class _Normalisation(NamedTuple):
+    """The 2D input in normalised units, ``x`` (12, 2) ``= (x_in - centre) / radius``: ``centre``
+    (2,) is the weighted centroid of the visible joints, ``radius`` their RMS distance from it."""
+
+    x: NDArray[np.float64]
+    centre: NDArray[np.float64]
+    radius: float
+
+
+class _State(NamedTuple):
+    """One state of the pursuit: the weighted squared reprojection ``error`` (normalised units),
+    the indices of the bases in use (``chosen``), their coefficients ``alpha`` (len(chosen),), the
+    camera ``rot`` (3, 3), ``s``, ``t`` (2,) in normalised units, and whether the alternation
+    settled and the limb condition holds (``ok``)."""
+
+    error: float
+    chosen: list[int]
+    alpha: NDArray[np.float64]
+    rot: NDArray[np.float64]
+    s: float
+    t: NDArray[np.float64]
+    ok: bool
+
+
+def _checked_input(
+    points_2d: NDArray[np.float64], confidence: NDArray[np.float64] | None, bases: PoseBases,
+    target_lengths: NDArray[np.float64] | None, opts: RamakrishnaOptions,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Validate the input of :func:`ramakrishna_lift`.
+
+    Returns
+    -------
+    x_in : ndarray, shape (12, 2)
+        The 2D joints, missing ones at 0.
+    w : ndarray, shape (12,)
+        Joint weights, 1 visible, 0 missing.
+    tl : ndarray, shape (8,)
+        Target limb lengths.
+    """
+    x_in, conf = check_keypoints(points_2d, confidence)
+    w = (conf >= opts.confidence_threshold).astype(np.float64)
+    if not np.all(np.isfinite(x_in[w > 0])):
+        raise InvalidInputError("points_2d has non-finite values at visible joints")
+    if int(w.sum()) < opts.min_visible_joints:
+        raise TooFewJointsError(f"{int(w.sum())} visible joints, need {opts.min_visible_joints}")
+    x_in = np.where(w[:, None] > 0, x_in, 0.0)
+    tl = np.asarray(bases.limb_proportions if target_lengths is None else target_lengths, dtype=np.float64)
+    if tl.shape != (8,) or not np.all(np.isfinite(tl)) or np.any(tl <= 0):
+        raise InvalidInputError("target_lengths must be 8 positive numbers")
+    return x_in, w, tl
+
+
+def _normalise(x_in: NDArray[np.float64], w: NDArray[np.float64]) -> _Normalisation:
+    """Centre the joints ``x_in`` (12, 2) on their ``w``-weighted (12,) centroid and scale them to
+    unit RMS radius."""
+    centre = (w[:, None] * x_in).sum(axis=0) / w.sum()
+    radius = float(np.sqrt((w * ((x_in - centre) ** 2).sum(axis=1)).sum() / w.sum()))
+    if not radius > 0:
+        raise InvalidInputError("the visible joints are all at one point")
+    return _Normalisation((x_in - centre) / radius, centre, radius)
+
+
+def _problem(x: NDArray[np.float64], w: NDArray[np.float64], bases: PoseBases, tl: NDArray[np.float64],
+             squared: bool) -> _Problem:
+    """The fitting problem of the normalised joints ``x`` (12, 2) with weights ``w`` (12,) and
+    target limb lengths ``tl`` (8,)."""
+    mu, comps = bases.mean, bases.components
+    c = limb_selectors()
+    cb_all = np.einsum("ija,ak->ijk", c, comps)  # (8, 3, k)
+    cm = c @ mu  # (8, 3)
+    sw = np.sqrt(np.repeat(w, 2))
+    return _Problem(x, w, sw, mu, comps, cb_all, cm, tl, squared)
+
+
+def _most_correlated_basis(
+    pb: _Problem, chosen: list[int], rot: NDArray[np.float64], s: float, t: NDArray[np.float64],
+    y: NDArray[np.float64],
+) -> int | None:
+    """Step 2: the unused basis whose image through the camera ``rot`` (3, 3), ``s``, ``t`` (2,)
+    is most correlated with the residual of the pose ``y`` (12, 3); None when none is usable."""
+    big_m = np.kron(np.eye(N_JOINTS), s * rot[:2])  # (24, 36)
+    proj = pb.sw[:, None] * (big_m @ pb.comps)  # (24, k)
+    resid = pb.sw * (pb.x - (s * y @ rot[:2].T + t)).reshape(-1)
+    norms = np.linalg.norm(proj, axis=0)
+    usable = norms > 1e-9 * max(float(norms.max()), 1e-300)
+    score = np.where(usable, np.abs(proj.T @ resid) / np.maximum(norms, 1e-300), -1.0)
+    score[chosen] = -1.0
+    i_new = int(np.argmax(score))
+    if score[i_new] < 0:
+        return None
+    return i_new
+
+
+def _fit_chosen(
+    pb: _Problem, chosen: list[int], alpha_s: NDArray[np.float64], rot: NDArray[np.float64], s: float,
+    t: NDArray[np.float64], opts: RamakrishnaOptions,
+) -> tuple[_State, NDArray[np.float64]]:
+    """Step 3: alternate constrained LS coefficients and LS camera for the ``chosen`` bases.
+
+    For "sum", a few reweighting rounds per alternation, warm-started; an exact solve at the end.
+    ``alpha_s`` (len(chosen),) and the camera ``rot`` (3, 3), ``s``, ``t`` (2,) are the start.
+
+    Returns
+    -------
+    state : _State
+        The fitted state (``chosen`` is the caller's list, not a copy).
+    y : ndarray, shape (12, 3)
+        Its pose.
+    """
+    settled, prev = False, np.inf
+    b_sel = pb.comps[:, chosen]
+    for _ in range(opts.max_alternations):
+        alpha_s, _ = pb.coefficients(chosen, rot, s, t, alpha_s, 3)
+        y = (pb.mu + b_sel @ alpha_s).reshape(N_JOINTS, 3)
+        rot, s, t = _fit_camera_ls(pb.x, y, pb.w, rot_init=rot)
+        e = pb.error(rot, s, t, y)
+        if abs(prev - e) <= opts.alternation_tol * (1.0 + e):
+            settled = True
+            break
+        prev = e
+    alpha_s, feasible = pb.coefficients(chosen, rot, s, t, alpha_s, 200)
+    y = (pb.mu + b_sel @ alpha_s).reshape(N_JOINTS, 3)
+    rot, s, t = _fit_camera_ls(pb.x, y, pb.w, rot_init=rot)
+    e = pb.error(rot, s, t, y)
+    return _State(e, chosen, alpha_s, rot, s, t, feasible and settled), y
+
+
+def _pursue(pb: _Problem, cap: int, opts: RamakrishnaOptions) -> tuple[_State, int]:
+    """Steps 1-4: the projected matching pursuit from the mean pose.
+
+    Returns
+    -------
+    best : _State
+        The kept state (always with >= 1 basis when one was added: the mean pose alone need
+        not meet the constraint).
+    n_added : int
+        The number of bases added.
+    """
+    y = pb.mu.reshape(N_JOINTS, 3)
+    rot, s, t = _fit_camera_ls(pb.x, y, pb.w)
+    best = _State(np.inf, [], np.zeros(0), rot, s, t, False)
+    chosen: list[int] = []
+    alpha_s = np.zeros(0)
+    n_added, stale = 0, 0
+    for _ in range(min(cap, pb.comps.shape[1])):
+        i_new = _most_correlated_basis(pb, chosen, rot, s, t, y)
+        if i_new is None:
+            break
+        chosen.append(i_new)
+        alpha_s = np.append(alpha_s, 0.0)
+        n_added += 1
+        fit, y = _fit_chosen(pb, chosen, alpha_s, rot, s, t, opts)
+        alpha_s, rot, s, t = fit.alpha, fit.rot, fit.s, fit.t
+        # 4: keep the best state; stop when the error is ~0 or has not improved twice running
+        if fit.error < best.error * (1.0 - opts.pursuit_tol) or not best.chosen:
+            best = fit._replace(chosen=list(chosen), alpha=alpha_s.copy())
+            stale = 0
+        else:
+            stale += 1
+        if fit.error <= opts.pursuit_tol or stale >= 2:
+            break
+    return best, n_added
+
+
+def _lift_result(
+    best: _State, n_added: int, pb: _Problem, norm: _Normalisation, x_in: NDArray[np.float64],
+    opts: RamakrishnaOptions,
+) -> LiftResult:
+    """The :class:`LiftResult` of the kept state ``best``, its camera in the units of the input
+    joints ``x_in`` (12, 2)."""
+    e, sel, a_sel, rot, s, t, ok = best
+    alpha = np.zeros(pb.comps.shape[1])
+    alpha[sel] = a_sel
+    pose = (pb.mu + pb.comps @ alpha).reshape(N_JOINTS, 3)
+    camera = Camera(rot, s * norm.radius, t * norm.radius + norm.centre)
+    proj2d = camera.project(pose)
+    vis = pb.w > 0
+    reproj = float(np.linalg.norm(proj2d[vis] - x_in[vis], axis=1).mean())
+    centred = pose - pose.mean(axis=0)
+    if sel:
+        target = float((pb.tl**2).sum() if pb.squared else pb.tl.sum())
+        ok = ok and abs(limb_sum_residual(pose, pb.tl, opts.limb_constraint)) <= 1e-6 * (1.0 + target)
+    return LiftResult(
+        pose=pose,
+        pose_camera=centred @ rot.T,
+        camera=camera,
+        alpha=alpha,
+        objective=float(e),
+        reprojection_error=reproj,
+        limb_violation=float(np.max(np.abs(limb_lengths(pose) - pb.tl))),
+        n_iter=n_added,
+        converged=bool(ok),
+        n_starts=1,
+        start_index=0,
+        weights=pb.w,
+    )
+
+
 def ramakrishna_lift(
     points_2d: NDArray[np.float64],
     confidence: NDArray[np.float64] | None,
@@ -301,120 +556,11 @@ def ramakrishna_lift(
     cap = int(max_bases) if max_bases is not None else opts.max_bases
     if cap < 1:
         raise OptionsError("max_bases must be >= 1")
-    x_in, conf = check_keypoints(points_2d, confidence)
-    w = (conf >= opts.confidence_threshold).astype(np.float64)
-    if not np.all(np.isfinite(x_in[w > 0])):
-        raise InvalidInputError("points_2d has non-finite values at visible joints")
-    if int(w.sum()) < opts.min_visible_joints:
-        raise TooFewJointsError(f"{int(w.sum())} visible joints, need {opts.min_visible_joints}")
-    x_in = np.where(w[:, None] > 0, x_in, 0.0)
-    tl = np.asarray(bases.limb_proportions if target_lengths is None else target_lengths, dtype=np.float64)
-    if tl.shape != (8,) or not np.all(np.isfinite(tl)) or np.any(tl <= 0):
-        raise InvalidInputError("target_lengths must be 8 positive numbers")
-    squared = opts.limb_constraint == "sum_squared"
-    target = float((tl**2).sum() if squared else tl.sum())
-
-    # normalise the 2D input
-    centre = (w[:, None] * x_in).sum(axis=0) / w.sum()
-    radius = float(np.sqrt((w * ((x_in - centre) ** 2).sum(axis=1)).sum() / w.sum()))
-    if not radius > 0:
-        raise InvalidInputError("the visible joints are all at one point")
-    x = (x_in - centre) / radius
-
-    mu, comps = bases.mean, bases.components
-    k = comps.shape[1]
-    c = limb_selectors()
-    cb_all = np.einsum("ija,ak->ijk", c, comps)  # (8, 3, k)
-    cm = c @ mu  # (8, 3)
-    sw = np.sqrt(np.repeat(w, 2))
-
-    def error(rot: NDArray[np.float64], s: float, t: NDArray[np.float64], y: NDArray[np.float64]) -> float:
-        r = x - (s * y @ rot[:2].T + t)
-        return float(np.sum(w * (r * r).sum(axis=1)))
-
-    def coefficients(
-        b_sel: NDArray[np.float64], chosen: list[int], rot: NDArray[np.float64], s: float,
-        t: NDArray[np.float64], a_prev: NDArray[np.float64], rounds: int,
-    ) -> tuple[NDArray[np.float64], bool]:
-        big_m = np.kron(np.eye(N_JOINTS), s * rot[:2])
-        a_mat = sw[:, None] * (big_m @ b_sel)
-        b_vec = sw * ((x - t).reshape(-1) - big_m @ mu)
-        return _constrained_ls(a_mat, b_vec, cb_all[:, :, chosen], cm, tl, squared, a_prev, rounds)
-
-    y = mu.reshape(N_JOINTS, 3)
-    rot, s, t = _fit_camera_ls(x, y, w)
-    # the kept state (always with >= 1 basis: the mean pose alone need not meet the constraint)
-    best: tuple[float, list[int], NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64], bool]
-    best = (np.inf, [], np.zeros(0), rot, s, t, False)
-    chosen: list[int] = []
-    alpha_s = np.zeros(0)
-    n_added, stale = 0, 0
-    for _ in range(min(cap, k)):
-        # 2: the unused basis most correlated with the residual, in the image
-        big_m = np.kron(np.eye(N_JOINTS), s * rot[:2])  # (24, 36)
-        proj = sw[:, None] * (big_m @ comps)  # (24, k)
-        resid = sw * (x - (s * y @ rot[:2].T + t)).reshape(-1)
-        norms = np.linalg.norm(proj, axis=0)
-        usable = norms > 1e-9 * max(float(norms.max()), 1e-300)
-        score = np.where(usable, np.abs(proj.T @ resid) / np.maximum(norms, 1e-300), -1.0)
-        score[chosen] = -1.0
-        i_new = int(np.argmax(score))
-        if score[i_new] < 0:
-            break
-        chosen.append(i_new)
-        alpha_s = np.append(alpha_s, 0.0)
-        n_added += 1
-        # 3: alternate constrained LS coefficients and LS camera (for "sum", a few
-        # reweighting rounds per alternation, warm-started; an exact solve at the end)
-        settled, prev = False, np.inf
-        b_sel = comps[:, chosen]
-        for _ in range(opts.max_alternations):
-            alpha_s, _ = coefficients(b_sel, chosen, rot, s, t, alpha_s, 3)
-            y = (mu + b_sel @ alpha_s).reshape(N_JOINTS, 3)
-            rot, s, t = _fit_camera_ls(x, y, w, rot_init=rot)
-            e = error(rot, s, t, y)
-            if abs(prev - e) <= opts.alternation_tol * (1.0 + e):
-                settled = True
-                break
-            prev = e
-        alpha_s, feasible = coefficients(b_sel, chosen, rot, s, t, alpha_s, 200)
-        y = (mu + b_sel @ alpha_s).reshape(N_JOINTS, 3)
-        rot, s, t = _fit_camera_ls(x, y, w, rot_init=rot)
-        e = error(rot, s, t, y)
-        # 4: keep the best state; stop when the error is ~0 or has not improved twice running
-        if e < best[0] * (1.0 - opts.pursuit_tol) or not best[1]:
-            best = (e, list(chosen), alpha_s.copy(), rot, s, t, feasible and settled)
-            stale = 0
-        else:
-            stale += 1
-        if e <= opts.pursuit_tol or stale >= 2:
-            break
-
-    e, sel, a_sel, rot, s, t, ok = best
-    alpha = np.zeros(k)
-    alpha[sel] = a_sel
-    pose = (mu + comps @ alpha).reshape(N_JOINTS, 3)
-    camera = Camera(rot, s * radius, t * radius + centre)
-    proj2d = camera.project(pose)
-    vis = w > 0
-    reproj = float(np.linalg.norm(proj2d[vis] - x_in[vis], axis=1).mean())
-    centred = pose - pose.mean(axis=0)
-    if sel:
-        ok = ok and abs(limb_sum_residual(pose, tl, opts.limb_constraint)) <= 1e-6 * (1.0 + target)
-    return LiftResult(
-        pose=pose,
-        pose_camera=centred @ rot.T,
-        camera=camera,
-        alpha=alpha,
-        objective=float(e),
-        reprojection_error=reproj,
-        limb_violation=float(np.max(np.abs(limb_lengths(pose) - tl))),
-        n_iter=n_added,
-        converged=bool(ok),
-        n_starts=1,
-        start_index=0,
-        weights=w,
-    )
+    x_in, w, tl = _checked_input(points_2d, confidence, bases, target_lengths, opts)
+    norm = _normalise(x_in, w)
+    pb = _problem(norm.x, w, bases, tl, opts.limb_constraint == "sum_squared")
+    best, n_added = _pursue(pb, cap, opts)
+    return _lift_result(best, n_added, pb, norm, x_in, opts)
 
 
 class RamakrishnaLifter:
