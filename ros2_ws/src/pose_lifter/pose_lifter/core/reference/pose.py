@@ -9,6 +9,7 @@ a local SLSQP reference.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -124,6 +125,132 @@ def reference_pose_convex(
     return a, pose_objective(x, camera, mu, bm, w, theta, lo, a)
 
 
+@dataclass(frozen=True)
+class _SmoothPose:
+    """The pose problem with limb constraints in the smooth form of
+    :func:`reference_pose_limbs_local`, over ``u = (a_plus, a_minus[, e])``.
+
+    Attributes
+    ----------
+    a_mat : ndarray, shape (2n, k)
+    b_vec : ndarray, shape (2n,)
+        Residual ``r = b - A alpha`` (:func:`_pose_linear_map`).
+    w2 : ndarray, shape (2n,)
+        Per-entry weights.
+    cb : ndarray, shape (8, 3, k)
+        Limb vectors of the components.
+    cm : ndarray, shape (8, 3)
+        Limb vectors of the mean.
+    lsq : ndarray, shape (8,)
+        Squared target lengths.
+    th : float
+        ``theta``.
+    l1 : bool
+        L1 loss, with the slacks ``e`` (shape (2n,)) at the end of ``u``.
+    """
+
+    a_mat: NDArray[np.float64]
+    b_vec: NDArray[np.float64]
+    w2: NDArray[np.float64]
+    cb: NDArray[np.float64]
+    cm: NDArray[np.float64]
+    lsq: NDArray[np.float64]
+    th: float
+    l1: bool
+
+    @property
+    def k(self) -> int:
+        """The number of components."""
+        return int(self.a_mat.shape[1])
+
+    @property
+    def nvar(self) -> int:
+        """The length of ``u``."""
+        return 2 * self.k + (self.a_mat.shape[0] if self.l1 else 0)
+
+    def alpha_of(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``alpha = a_plus - a_minus``, shape (k,), of ``u`` (nvar,)."""
+        k = self.k
+        return np.asarray(u[:k] - u[k : 2 * k])
+
+    def fun(self, u: NDArray[np.float64]) -> float:
+        """The smooth objective at ``u`` (nvar,)."""
+        k = self.k
+        reg = self.th * float(u[: 2 * k].sum())
+        if self.l1:
+            return float(self.w2 @ u[2 * k :]) + reg
+        r = self.b_vec - self.a_mat @ self.alpha_of(u)
+        return float(self.w2 @ (r * r)) + reg
+
+    def jac(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The gradient (nvar,) of :meth:`fun` at ``u`` (nvar,)."""
+        k = self.k
+        g = np.zeros(self.nvar)
+        g[: 2 * k] = self.th
+        if self.l1:
+            g[2 * k :] = self.w2
+        else:
+            r = self.b_vec - self.a_mat @ self.alpha_of(u)
+            ga = -2.0 * self.a_mat.T @ (self.w2 * r)
+            g[:k] += ga
+            g[k : 2 * k] -= ga
+        return g
+
+    def limb_fun(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The limb constraints ``||C_i y||^2 - L_i``, shape (8,), at ``u`` (nvar,)."""
+        v = self.cm + self.cb @ self.alpha_of(u)  # (8, 3)
+        return np.asarray((v * v).sum(axis=1) - self.lsq)
+
+    def limb_jac(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The Jacobian (8, nvar) of :meth:`limb_fun` at ``u`` (nvar,)."""
+        k = self.k
+        v = self.cm + self.cb @ self.alpha_of(u)
+        ga = 2.0 * np.einsum("ij,ijk->ik", v, self.cb)  # (8, k)
+        out = np.zeros((self.cb.shape[0], self.nvar))
+        out[:, :k] = ga
+        out[:, k : 2 * k] = -ga
+        return out
+
+    def slack_ineq(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """L1 only: ``e - r >= 0`` and ``e + r >= 0``, shape (4n,), at ``u`` (nvar,)."""
+        r = self.b_vec - self.a_mat @ self.alpha_of(u)
+        e = u[2 * self.k :]
+        return np.concatenate([e - r, e + r])
+
+
+def _smooth_constraints(
+    sp: _SmoothPose, a0: NDArray[np.float64],
+) -> tuple[list[dict[str, Any]], list[tuple[float | None, float | None]], NDArray[np.float64]]:
+    """The constraints, the bounds and the start of :func:`local_minimize` for ``sp``.
+
+    Parameters
+    ----------
+    sp : _SmoothPose
+    a0 : ndarray, shape (k,)
+        The start ``alpha``; the slacks of L1 start at ``|r(a0)|``.
+
+    Returns
+    -------
+    constraints : list of dict
+    bounds : list of (float or None, float or None), length nvar
+    u0 : ndarray, shape (nvar,)
+    """
+    k = sp.k
+    cons: list[dict[str, Any]] = [{"type": "eq", "fun": sp.limb_fun, "jac": sp.limb_jac}]
+    bounds: list[tuple[float | None, float | None]] = [(0.0, None)] * (2 * k)
+    u0 = np.concatenate([np.maximum(a0, 0.0), np.maximum(-a0, 0.0)])
+    if sp.l1:
+        # e - r >= 0 and e + r >= 0 with r = b - A alpha
+        a_mat = sp.a_mat
+        r_dim = a_mat.shape[0]
+        jr = np.hstack([-a_mat, a_mat])  # d r / d (a+, a-)
+        ineq_jac = np.vstack([np.hstack([-jr, np.eye(r_dim)]), np.hstack([jr, np.eye(r_dim)])])
+        cons.append({"type": "ineq", "fun": sp.slack_ineq, "jac": lambda u: ineq_jac})
+        bounds += [(0.0, None)] * r_dim
+        u0 = np.concatenate([u0, np.abs(sp.b_vec - a_mat @ a0)])
+    return cons, bounds, u0
+
+
 def reference_pose_limbs_local(
     points: NDArray[np.float64], camera: Camera, mean: NDArray[np.float64],
     components: NDArray[np.float64], weights: NDArray[np.float64], theta: float, loss: str,
@@ -161,66 +288,13 @@ def reference_pose_limbs_local(
     lo = check_loss(loss)
     x, mu, bm, w = _pose_data(points, mean, components, weights)
     a_mat, b_vec, w2 = _pose_linear_map(x, camera, mu, bm, w)
-    k = bm.shape[1]
-    a0 = array(alpha0, (k,), "alpha0")
+    a0 = array(alpha0, (bm.shape[1],), "alpha0")
     c = limb_selectors()
     lsq = array(limb_sq_lengths, (c.shape[0],), "limb_sq_lengths")
     cb = np.einsum("ija,ak->ijk", c, bm)  # (8, 3, k)
     cm = c @ mu  # (8, 3)
-    r_dim = a_mat.shape[0]
-    nvar = 2 * k + (r_dim if lo == "l1" else 0)
-    th = float(theta)
-
-    def alpha_of(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(u[:k] - u[k : 2 * k])
-
-    def fun(u: NDArray[np.float64]) -> float:
-        reg = th * float(u[: 2 * k].sum())
-        if lo == "l1":
-            return float(w2 @ u[2 * k :]) + reg
-        r = b_vec - a_mat @ alpha_of(u)
-        return float(w2 @ (r * r)) + reg
-
-    def jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        g = np.zeros(nvar)
-        g[: 2 * k] = th
-        if lo == "l1":
-            g[2 * k :] = w2
-        else:
-            r = b_vec - a_mat @ alpha_of(u)
-            ga = -2.0 * a_mat.T @ (w2 * r)
-            g[:k] += ga
-            g[k : 2 * k] -= ga
-        return g
-
-    def limb_fun(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        v = cm + cb @ alpha_of(u)  # (8, 3)
-        return np.asarray((v * v).sum(axis=1) - lsq)
-
-    def limb_jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        v = cm + cb @ alpha_of(u)
-        ga = 2.0 * np.einsum("ij,ijk->ik", v, cb)  # (8, k)
-        out = np.zeros((c.shape[0], nvar))
-        out[:, :k] = ga
-        out[:, k : 2 * k] = -ga
-        return out
-
-    cons: list[dict[str, Any]] = [{"type": "eq", "fun": limb_fun, "jac": limb_jac}]
-    bounds: list[tuple[float | None, float | None]] = [(0.0, None)] * (2 * k)
-    u0 = np.concatenate([np.maximum(a0, 0.0), np.maximum(-a0, 0.0)])
-    if lo == "l1":
-        # e - r >= 0 and e + r >= 0 with r = b - A alpha
-        jr = np.hstack([-a_mat, a_mat])  # d r / d (a+, a-)
-
-        def ineq(u: NDArray[np.float64]) -> NDArray[np.float64]:
-            r = b_vec - a_mat @ alpha_of(u)
-            e = u[2 * k :]
-            return np.concatenate([e - r, e + r])
-
-        ineq_jac = np.vstack([np.hstack([-jr, np.eye(r_dim)]), np.hstack([jr, np.eye(r_dim)])])
-        cons.append({"type": "ineq", "fun": ineq, "jac": lambda u: ineq_jac})
-        bounds += [(0.0, None)] * r_dim
-        u0 = np.concatenate([u0, np.abs(b_vec - a_mat @ a0)])
-    u = local_minimize(fun, u0, jac, cons, bounds, limb_fun, "reference_pose_limbs_local")
-    alpha = alpha_of(u)
-    return alpha, pose_objective(x, camera, mu, bm, w, th, lo, alpha)
+    sp = _SmoothPose(a_mat, b_vec, w2, cb, cm, lsq, float(theta), lo == "l1")
+    cons, bounds, u0 = _smooth_constraints(sp, a0)
+    u = local_minimize(sp.fun, u0, sp.jac, cons, bounds, sp.limb_fun, "reference_pose_limbs_local")
+    alpha = sp.alpha_of(u)
+    return alpha, pose_objective(x, camera, mu, bm, w, sp.th, lo, alpha)
