@@ -9,6 +9,9 @@ rotation is nonconvex: :func:`reference_camera` searches it locally from several
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
@@ -162,6 +165,83 @@ def reference_camera_given_rotation(
     return scale, trans, loss_value(x - scale * p - trans, w, lo)
 
 
+_Inner = Callable[[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+                  tuple[float, NDArray[np.float64], float]]
+
+
+@dataclass(frozen=True)
+class _RotationSearch:
+    """The objective ``f(R)`` of :func:`reference_camera` and its Nelder-Mead search.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n, 2)
+    y : ndarray, shape (n, 3)
+    w : ndarray, shape (n,)
+    inner : callable
+        The exact inner solver in ``(s, t)`` (:func:`_inner_l1_exact` or :func:`_inner_l2_exact`).
+    simplex : ndarray, shape (4, 3)
+        Nelder-Mead's initial simplex around the rotation vector 0.
+    """
+
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    w: NDArray[np.float64]
+    inner: _Inner
+    simplex: NDArray[np.float64]
+
+    def f(self, v: NDArray[np.float64], r0: NDArray[np.float64]) -> float:
+        """``f(exp([v]x) R0)`` for the rotation vector ``v`` (3,) and ``R0`` ``r0`` (3, 3)."""
+        rot = Rotation.from_rotvec(v).as_matrix() @ r0
+        return self.inner(self.x, self.y @ rot[:2].T, self.w)[2]
+
+    def search(
+        self, r0: NDArray[np.float64], xatol: float, fatol: float, rounds: int,
+    ) -> tuple[NDArray[np.float64], float]:
+        """Nelder-Mead from ``r0`` (3, 3), restarted at its result up to ``rounds`` times while it
+        improves by more than ``fatol``; returns (rotation (3, 3), f)."""
+        r, val = r0, self.f(np.zeros(3), r0)
+        for _ in range(rounds):
+            res = minimize(self.f, np.zeros(3), args=(r,), method="Nelder-Mead",
+                           options={"xatol": xatol, "fatol": fatol, "maxiter": 4000,
+                                    "initial_simplex": self.simplex})
+            if res.fun < val - fatol:
+                r = Rotation.from_rotvec(res.x).as_matrix() @ r
+                val = float(res.fun)
+            else:
+                break
+        return r, val
+
+
+def _rotation_starts(
+    rotation_init: NDArray[np.float64] | None, n_restarts: int, seed: int,
+) -> list[NDArray[np.float64]]:
+    """The starting rotations (3, 3) of :func:`reference_camera`: ``rotation_init`` (if given),
+    the identity and ``n_restarts`` random rotations drawn with ``seed``."""
+    starts: list[NDArray[np.float64]] = []
+    if rotation_init is not None:
+        starts.append(array(rotation_init, (3, 3), "rotation_init"))
+    starts.append(np.eye(3))
+    if n_restarts > 0:
+        starts.extend(Rotation.random(int(n_restarts), random_state=seed).as_matrix())
+    return starts
+
+
+def _best_rotation(search: _RotationSearch, starts: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """A coarse search from every start (3, 3), then the two best refined to full accuracy (the
+    runner-up only unless clearly worse); returns the best rotation, shape (3, 3),
+    re-orthonormalised."""
+    coarse = [search.search(r0, 1e-3, 1e-6, 1) for r0 in starts]
+    values = np.array([v for _, v in coarse])
+    order = np.argsort(values, kind="stable")[:2]
+    if len(order) == 2 and values[order[1]] > values[order[0]] * (1 + 1e-3) + 1e-9:
+        order = order[:1]  # the runner-up is clearly worse: refine the best only
+    refined = [search.search(coarse[i][0], TOLERANCES["camera_xatol"], TOLERANCES["camera_fatol"], 2)
+               for i in order]
+    best_rot, _ = min(refined, key=lambda rv: rv[1])
+    return np.asarray(Rotation.from_matrix(best_rot).as_matrix())  # re-orthonormalise
+
+
 def reference_camera(
     points: NDArray[np.float64], pose: NDArray[np.float64], weights: NDArray[np.float64],
     loss: str, rotation_init: NDArray[np.float64] | None = None, n_restarts: int = 8,
@@ -209,44 +289,9 @@ def reference_camera(
     if np.count_nonzero(w) < 3:
         raise InvalidInputError("the camera problem needs at least 3 joints with weight > 0")
     inner = _inner_l1_exact if lo == "l1" else _inner_l2_exact
-
-    starts: list[NDArray[np.float64]] = []
-    if rotation_init is not None:
-        starts.append(array(rotation_init, (3, 3), "rotation_init"))
-    starts.append(np.eye(3))
-    if n_restarts > 0:
-        starts.extend(Rotation.random(int(n_restarts), random_state=seed).as_matrix())
-
-    def f(v: NDArray[np.float64], r0: NDArray[np.float64]) -> float:
-        rot = Rotation.from_rotvec(v).as_matrix() @ r0
-        return inner(x, y @ rot[:2].T, w)[2]
-
-    simplex = 0.2 * np.vstack([np.zeros(3), np.eye(3)])
-
-    def search(
-        r0: NDArray[np.float64], xatol: float, fatol: float, rounds: int,
-    ) -> tuple[NDArray[np.float64], float]:
-        r, val = r0, f(np.zeros(3), r0)
-        for _ in range(rounds):
-            res = minimize(f, np.zeros(3), args=(r,), method="Nelder-Mead",
-                           options={"xatol": xatol, "fatol": fatol, "maxiter": 4000,
-                                    "initial_simplex": simplex})
-            if res.fun < val - fatol:
-                r = Rotation.from_rotvec(res.x).as_matrix() @ r
-                val = float(res.fun)
-            else:
-                break
-        return r, val
-
-    # coarse search from every start, then refine the two best to full accuracy
-    coarse = [search(r0, 1e-3, 1e-6, 1) for r0 in starts]
-    values = np.array([v for _, v in coarse])
-    order = np.argsort(values, kind="stable")[:2]
-    if len(order) == 2 and values[order[1]] > values[order[0]] * (1 + 1e-3) + 1e-9:
-        order = order[:1]  # the runner-up is clearly worse: refine the best only
-    refined = [search(coarse[i][0], TOLERANCES["camera_xatol"], TOLERANCES["camera_fatol"], 2) for i in order]
-    best_rot, _ = min(refined, key=lambda rv: rv[1])
-    rot = Rotation.from_matrix(best_rot).as_matrix()  # re-orthonormalise
+    starts = _rotation_starts(rotation_init, n_restarts, seed)
+    search = _RotationSearch(x, y, w, inner, 0.2 * np.vstack([np.zeros(3), np.eye(3)]))
+    rot = _best_rotation(search, starts)
     s_fast, t_fast, v_fast = inner(x, y @ rot[:2].T, w)
     s_cvx, t_cvx, v_cvx = reference_camera_given_rotation(x, y, w, rot, lo)
     if v_cvx <= v_fast:
