@@ -29,7 +29,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +41,10 @@ from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, autoregressive, j
 from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import limb_scale_factors, scale_limbs, view_rotations
+
+if TYPE_CHECKING:
+    import torch
+    from torch import nn
 
 __all__ = ["GENERALISE", "Augmentation", "TrainingBatch", "augment_poses", "detector_noise", "make_batch",
            "train_prior", "train_prior_residual"]
@@ -237,6 +241,38 @@ def _evaluate(prior: PosePrior, batch: TrainingBatch) -> tuple[float, NDArray[np
     return mm, err
 
 
+class _Start(NamedTuple):
+    """What a training starts from.
+
+    Attributes
+    ----------
+    val : TrainingBatch
+        The validation samples (a generator of their own, seeded ``seed + 1``).
+    first : TrainingBatch
+        The first epoch's samples.
+    out_mean, out_scale : ndarray, shape (36,)
+        The standardisation of the outputs, from ``first``'s targets.
+    """
+
+    val: TrainingBatch
+    first: TrainingBatch
+    out_mean: NDArray[np.float64]
+    out_scale: NDArray[np.float64]
+
+
+def _start(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArray[np.float64]],
+           samples_per_epoch: int, rng: np.random.Generator, seed: int, aug: Augmentation, window: int,
+           future: int) -> _Start:
+    """The validation batch, the first epoch's batch (drawn from ``rng``) and the output
+    standardisation of a training on the sequences ``train`` and ``validation`` (each (F, 12, 3))."""
+    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug,
+                     window, future)
+    first = make_batch(train, samples_per_epoch, rng, aug, window, future)
+    out_mean = first.targets.mean(axis=0)
+    out_scale = first.targets.std(axis=0) + 1e-6
+    return _Start(val, first, out_mean, out_scale)
+
+
 def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArray[np.float64]], *,
                 hidden: tuple[int, ...] = (768, 768), epochs: int = 30, samples_per_epoch: int = 100_000,
                 lr: float = 1e-3, lr_final: float = 5e-5, batch_size: int = 512, l2: float = 1e-5,
@@ -271,11 +307,8 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
     from sklearn.neural_network import MLPRegressor
 
     rng = np.random.default_rng(seed)
-    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug,
-                     window, future)
-    first = make_batch(train, samples_per_epoch, rng, aug, window, future)
-    out_mean = first.targets.mean(axis=0)
-    out_scale = first.targets.std(axis=0) + 1e-6
+    val, first, out_mean, out_scale = _start(train, validation, samples_per_epoch, rng, seed, aug, window,
+                                             future)
     reg = MLPRegressor(hidden_layer_sizes=hidden, activation="relu", solver="adam", alpha=l2,
                        batch_size=batch_size, learning_rate_init=lr, random_state=seed, shuffle=True)
     decay = (lr_final / lr) ** (1.0 / max(1, epochs - 1))
@@ -305,6 +338,73 @@ def train_prior(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArr
             "l2": l2, "batch_size": batch_size, "augmentation": aug.__dict__, "future_frames": future,
             "train_seconds": round(time.perf_counter() - t0, 1)}
     return PosePrior(prior.weights, prior.biases, out_mean, out_scale, np.maximum(err, 1e-6), window, meta)
+
+
+@dataclass(frozen=True)
+class _ResidualNet:
+    """The residual network of :func:`train_prior_residual` (torch modules).
+
+    Attributes
+    ----------
+    stem : torch.nn.Sequential
+        ``Linear -> BatchNorm -> ReLU -> Dropout``, (N, 36 w) -> (N, width).
+    body : torch.nn.ModuleList
+        The residual blocks, two such layers each, (N, width) -> (N, width).
+    head : torch.nn.Linear
+        (N, width) -> (N, 36).
+    modules : torch.nn.ModuleList
+        All three, for their parameters and their training mode.
+    """
+
+    stem: nn.Sequential
+    body: nn.ModuleList
+    head: nn.Linear
+    modules: nn.ModuleList
+
+    @staticmethod
+    def build(n_in: int, width: int, blocks: int, dropout: float) -> _ResidualNet:
+        """A new network of ``n_in`` inputs, initialised from torch's global generator (stem,
+        blocks, head, in this order)."""
+        from torch import nn
+
+        def layer(a: int, b: int) -> list[nn.Module]:
+            return [nn.Linear(a, b), nn.BatchNorm1d(b), nn.ReLU(), nn.Dropout(dropout)]
+
+        stem = nn.Sequential(*layer(n_in, width))
+        body = nn.ModuleList([nn.Sequential(*layer(width, width), *layer(width, width))
+                              for _ in range(blocks)])
+        head = nn.Linear(width, OUT_DIM)
+        return _ResidualNet(stem, body, head, nn.ModuleList([stem, body, head]))
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        """The network's output (N, 36) for the inputs ``x`` (N, 36 w), torch tensors."""
+        h = self.stem(x)
+        for blk in self.body:
+            h = h + blk(h)
+        out: torch.Tensor = self.head(h)
+        return out
+
+
+def _residual_epoch(net: _ResidualNet, opt: torch.optim.Optimizer, gen: torch.Generator, batch: TrainingBatch,
+                    start: _Start, batch_size: int) -> float:
+    """One training epoch of ``net`` over ``batch`` in the random order of the torch generator
+    ``gen``: the whole mini-batches of ``batch_size`` samples, their targets standardised by
+    ``start``. Returns the mean squared error over the epoch's samples."""
+    import torch
+
+    x = torch.from_numpy(batch.features.astype(np.float32))
+    y = torch.from_numpy(((batch.targets - start.out_mean) / start.out_scale).astype(np.float32))
+    net.modules.train()
+    order = torch.randperm(len(x), generator=gen)
+    total = 0.0
+    for lo in range(0, len(x) - batch_size + 1, batch_size):
+        idx = order[lo:lo + batch_size]
+        opt.zero_grad(set_to_none=True)
+        loss = torch.mean((net(x[idx]) - y[idx]) ** 2)
+        loss.backward()
+        opt.step()
+        total += float(loss.detach()) * batch_size
+    return total / max(1, (len(x) // batch_size) * batch_size)
 
 
 def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Sequence[NDArray[np.float64]], *,
@@ -339,64 +439,32 @@ def train_prior_residual(train: Sequence[NDArray[np.float64]], validation: Seque
     PosePrior
     """
     import torch
-    from torch import nn
 
     torch.set_num_threads(1)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    val = make_batch(validation, min(20_000, samples_per_epoch), np.random.default_rng(seed + 1), aug,
-                     window, future)
-    first = make_batch(train, samples_per_epoch, rng, aug, window, future)
-    out_mean = first.targets.mean(axis=0)
-    out_scale = first.targets.std(axis=0) + 1e-6
-    n_in = FRAME_DIM * window
-
-    def layer(a: int, b: int) -> list[nn.Module]:
-        return [nn.Linear(a, b), nn.BatchNorm1d(b), nn.ReLU(), nn.Dropout(dropout)]
-
-    stem = nn.Sequential(*layer(n_in, width))
-    body = nn.ModuleList([nn.Sequential(*layer(width, width), *layer(width, width)) for _ in range(blocks)])
-    head = nn.Linear(width, OUT_DIM)
-    modules = nn.ModuleList([stem, body, head])
-
-    def net(x: torch.Tensor) -> torch.Tensor:
-        h = stem(x)
-        for blk in body:
-            h = h + blk(h)
-        out: torch.Tensor = head(h)
-        return out
-
+    start = _start(train, validation, samples_per_epoch, rng, seed, aug, window, future)
+    net = _ResidualNet.build(FRAME_DIM * window, width, blocks, dropout)
     lr_first, lr_final = lr
-    opt = torch.optim.AdamW(modules.parameters(), lr=lr_first, weight_decay=weight_decay)
+    opt = torch.optim.AdamW(net.modules.parameters(), lr=lr_first, weight_decay=weight_decay)
     decay = (lr_final / lr_first) ** (1.0 / max(1, epochs - 1))
     gen = torch.Generator().manual_seed(seed)
     t0 = time.perf_counter()
-    batch = first
+    batch = start.first
     loss_val = float("nan")
     for ep in range(epochs):
         if ep > 0:
             batch = make_batch(train, samples_per_epoch, rng, aug, window, future)
         for g in opt.param_groups:
             g["lr"] = lr_first * decay ** ep
-        x = torch.from_numpy(batch.features.astype(np.float32))
-        y = torch.from_numpy(((batch.targets - out_mean) / out_scale).astype(np.float32))
-        modules.train()
-        order = torch.randperm(len(x), generator=gen)
-        total = 0.0
-        for lo in range(0, len(x) - batch_size + 1, batch_size):
-            idx = order[lo:lo + batch_size]
-            opt.zero_grad(set_to_none=True)
-            loss = torch.mean((net(x[idx]) - y[idx]) ** 2)
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * batch_size
-        loss_val = total / max(1, (len(x) // batch_size) * batch_size)
+        loss_val = _residual_epoch(net, opt, gen, batch, start, batch_size)
         if log is not None:
-            mm, _ = _evaluate(_fold_residual(stem, body, head, out_mean, out_scale, window), val)
+            mm, _ = _evaluate(_fold_residual(net.stem, net.body, net.head, start.out_mean, start.out_scale,
+                                             window), start.val)
             log(f"epoch {ep + 1}/{epochs}: loss {loss_val:.4f}, validation P-MPJPE {mm:.1f} mm, "
                 f"{time.perf_counter() - t0:.0f} s")
-    prior = _fold_residual(stem, body, head, out_mean, out_scale, window)
-    mm, err = _evaluate(prior, val)
+    prior = _fold_residual(net.stem, net.body, net.head, start.out_mean, start.out_scale, window)
+    mm, err = _evaluate(prior, start.val)
     meta = {"validation_p_mpjpe_mm": round(mm, 2), "model": "residual", "width": width, "blocks": blocks,
             "dropout": dropout, "epochs": epochs, "samples_per_epoch": samples_per_epoch, "seed": seed,
             "lr": lr_first, "lr_final": lr_final, "weight_decay": weight_decay, "batch_size": batch_size,
