@@ -37,7 +37,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,6 +54,9 @@ from pose_lifter.mocap.experiment_tasks import (
     run_task,
     start_worker,
 )
+
+if TYPE_CHECKING:
+    from pose_lifter.core.model.bases import PoseBases
 
 __all__ = ["FULL", "QUICK", "ExperimentConfig", "action_class", "project", "run_experiments"]
 
@@ -394,6 +397,94 @@ def _lift_sections(out: Path, by_exp: dict[str, list[dict[str, Any]]], cfg: Expe
     return (md2, md3, md3b, md4, md5), (agg2, agg3, agg3b, agg4, agg5)
 
 
+@dataclass(frozen=True)
+class _Run:
+    """What :func:`run_experiments` computed, before it writes anything.
+
+    Attributes
+    ----------
+    data : _Data
+    sparse : PoseBases
+        The lifter's (the packaged sparse bases).
+    classwise : PoseBases
+        Ramakrishna's: class-wise PCA bases learned on ``data.train``.
+    n_classes : int
+        Action classes of the training poses.
+    n_tasks : int
+    by_exp : dict of str to list of dict
+        The result rows and floor rows of each experiment.
+    failures : int
+        Failed solves among the result rows.
+    seconds : float
+        Run time from loading the data to the last result.
+    """
+
+    data: _Data
+    sparse: PoseBases
+    classwise: PoseBases
+    n_classes: int
+    n_tasks: int
+    by_exp: dict[str, list[dict[str, Any]]]
+    failures: int
+    seconds: float
+
+
+def _run(data_dir: str | Path | None, cfg: ExperimentConfig, processes: int) -> _Run:
+    """Load the data, learn Ramakrishna's bases and run every task of the five experiments in
+    ``processes`` worker processes."""
+    from pose_lifter.core import PoseBases
+    from pose_lifter.core.model.bases import learn_classwise_pca_bases
+
+    t_start = time.perf_counter()
+    n_bank = max(cfg.n_factors, cfg.n_noise, cfg.n_robust, cfg.n_angle, cfg.n_camera)
+    data = _load_data(data_dir, cfg, n_bank)
+    sparse = PoseBases.load()
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Objective did not converge")
+        classwise = learn_classwise_pca_bases(data.train, data.train_labels, n_per_class=8, n_starts=1)
+    lift_tasks, floors = _lift_tasks(data, cfg, sparse.mean_pose)
+    n_cls = len(np.unique(data.train_labels))
+    tasks: list[Task] = sorted([*_bases_tasks(cfg, n_cls), *lift_tasks], key=cost, reverse=True)
+    inputs = WorkerInputs(sparse, classwise, data.train, data.train_labels, data.test_rec,
+                          data.test_rec_leg_mm)
+    results = _run_tasks(tasks, inputs, processes)
+    t_run = time.perf_counter() - t_start
+
+    by_exp: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in results + floors:
+        by_exp[r["exp"]].append(r)
+    failures = sum(1 for r in results if r["failed"])
+    return _Run(data, sparse, classwise, n_cls, len(tasks), by_exp, failures, t_run)
+
+
+def _summary(cfg: ExperimentConfig, run: _Run, command: str, processes: int, headline: str,
+             sections: list[str]) -> str:
+    """``summary.md``: the run, the best basis of each kind, the ``headline`` table and the
+    experiments' markdown ``sections``."""
+    sparse_rows = [r for r in run.by_exp["exp1_bases"] if not r["failed"]]
+    best = {m: min((r for r in sparse_rows if r["method"] == m), key=lambda r: r["err"], default=None)
+            for m in ("sparse", "PCA", "class-wise PCA")}
+    b1 = "; ".join(f"{m} {r['err']:.3f} at k={r['k']} ({r['active_mean']:.1f} active)"
+                   for m, r in best.items() if r is not None)
+    return (
+        "# The paper's experiments on CMU mocap (Wang et al. 2014, Sec. 4)\n\n"
+        f"Command: `{command or 'pose-lifter experiments'}`"
+        f"{' (QUICK: tiny sample sizes)' if cfg is QUICK else ''}. "
+        f"Runtime {run.seconds:.0f} s with {processes} worker processes; {run.n_tasks} tasks, "
+        f"{run.failures} failed solves "
+        "(counted in the tables' `failed` column, excluded from the means).\n\n"
+        "Errors: the paper's ||y - y_hat||_2 (36-vector, right lower leg = 1, rotation-aligned) and "
+        "P-MPJPE in mm "
+        "(similarity-aligned). Training: CMU subject 01 playground trials ("
+        f"{', '.join(run.data.train_trials)}); testing: unseen walk/run/punch trials. Clean "
+        "weak-perspective 2D unless stated.\n\n## Headline\n\n"
+        f"Basis learning (lowest reconstruction error per method): {b1}.\n\n"
+        + headline + "\n\n"
+        + "\n".join(sections)
+        + "\n## Configuration\n\n```json\n" + json.dumps(asdict(cfg), indent=1) + "\n```\n"
+    )
+
+
 def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "out/experiments",
                     quick: bool = False, processes: int = 2, command: str = "",
                     config: ExperimentConfig | None = None) -> Path:
@@ -418,71 +509,30 @@ def run_experiments(data_dir: str | Path | None = None, out_dir: str | Path = "o
     Path
         ``out_dir / "summary.md"``.
     """
-    from pose_lifter.core import PoseBases
-    from pose_lifter.core.model.bases import learn_classwise_pca_bases
-
     cfg = config or (QUICK if quick else FULL)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    t_start = time.perf_counter()
-    n_bank = max(cfg.n_factors, cfg.n_noise, cfg.n_robust, cfg.n_angle, cfg.n_camera)
-    data = _load_data(data_dir, cfg, n_bank)
-    sparse = PoseBases.load()
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Objective did not converge")
-        classwise = learn_classwise_pca_bases(data.train, data.train_labels, n_per_class=8, n_starts=1)
-    lift_tasks, floors = _lift_tasks(data, cfg, sparse.mean_pose)
-    n_cls = len(np.unique(data.train_labels))
-    tasks: list[Task] = sorted([*_bases_tasks(cfg, n_cls), *lift_tasks], key=cost, reverse=True)
-    inputs = WorkerInputs(sparse, classwise, data.train, data.train_labels, data.test_rec,
-                          data.test_rec_leg_mm)
-    results = _run_tasks(tasks, inputs, processes)
-    t_run = time.perf_counter() - t_start
-
-    by_exp: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for r in results + floors:
-        by_exp[r["exp"]].append(r)
-    failures = sum(1 for r in results if r["failed"])
+    run = _run(data_dir, cfg, processes)
     ns, nr = cfg.n_starts, cfg.n_refine
-    solver = (f"lifter: packaged sparse bases (k={sparse.n_bases}), {ns} cold k-means starts screened "
+    solver = (f"lifter: packaged sparse bases (k={run.sparse.n_bases}), {ns} cold k-means starts screened "
               f"to {nr}; "
-              f"Ramakrishna et al. 2012: class-wise PCA bases ({classwise.n_bases} = "
-              f"{n_cls} classes x (1 offset + 8 components)) on the same training data.")
-    n_test, n_train = len(data.test_rec), len(data.train)
-    md1 = exp1_output(out, by_exp["exp1_bases"], n_test, (
+              f"Ramakrishna et al. 2012: class-wise PCA bases ({run.classwise.n_bases} = "
+              f"{run.n_classes} classes x (1 offset + 8 components)) on the same training data.")
+    n_test, n_train = len(run.data.test_rec), len(run.data.train)
+    md1 = exp1_output(out, run.by_exp["exp1_bases"], n_test, (
         f"Bases learned on {n_train} training poses (paper split, every {cfg.train_step}th frame); "
         f"reconstruction of {n_test} unseen test poses (every {cfg.test_step}th frame of the test trials) "
         f"by L1-regularised least squares (theta = {cfg.theta_rec}). Error = mean ||y - y_hat||_2 over "
         f"the 36-vector in right-lower-leg units; MPJPE in mm (no alignment). Sparse bases: "
         f"{cfg.dl_iter} dictionary-learning epochs."))
-    (md2, md3, md3b, md4, md5), (agg2, agg3, agg3b, agg4, agg5) = _lift_sections(out, by_exp, cfg, solver,
-                                                                                 sparse.n_bases)
+    (md2, md3, md3b, md4, md5), (agg2, agg3, agg3b, agg4, agg5) = _lift_sections(
+        out, run.by_exp, cfg, solver, run.sparse.n_bases)
     head = _headline_rows(cfg, agg2, agg3, agg3b, agg4)
     cam = [f"\n\nCamera estimation (n={cfg.n_camera}), mean error (leg) / P-MPJPE mm: "
            + "; ".join(f"{r['method']}: {r['err_mean']:.3f} / {r['pmpjpe_mean']:.0f}" for r in agg5) + "."]
-    sparse_rows = [r for r in by_exp["exp1_bases"] if not r["failed"]]
-    best = {m: min((r for r in sparse_rows if r["method"] == m), key=lambda r: r["err"], default=None)
-            for m in ("sparse", "PCA", "class-wise PCA")}
-    b1 = "; ".join(f"{m} {r['err']:.3f} at k={r['k']} ({r['active_mean']:.1f} active)"
-                   for m, r in best.items() if r is not None)
-    summary = (
-        "# The paper's experiments on CMU mocap (Wang et al. 2014, Sec. 4)\n\n"
-        f"Command: `{command or 'pose-lifter experiments'}`"
-        f"{' (QUICK: tiny sample sizes)' if cfg is QUICK else ''}. "
-        f"Runtime {t_run:.0f} s with {processes} worker processes; {len(tasks)} tasks, {failures} failed "
-        "solves "
-        "(counted in the tables' `failed` column, excluded from the means).\n\n"
-        "Errors: the paper's ||y - y_hat||_2 (36-vector, right lower leg = 1, rotation-aligned) and "
-        "P-MPJPE in mm "
-        "(similarity-aligned). Training: CMU subject 01 playground trials ("
-        f"{', '.join(data.train_trials)}); testing: unseen walk/run/punch trials. Clean weak-perspective 2D "
-        "unless stated.\n\n## Headline\n\n"
-        f"Basis learning (lowest reconstruction error per method): {b1}.\n\n"
-        + "\n".join(head) + "".join(cam) + "\n\n"
-        + "\n".join([md1, md2, md3, md3b, md4, md5])
-        + "\n## Configuration\n\n```json\n" + json.dumps(asdict(cfg), indent=1) + "\n```\n"
-    )
+    summary = _summary(cfg, run, command, processes, "\n".join(head) + "".join(cam),
+                       [md1, md2, md3, md3b, md4, md5])
     path = out / "summary.md"
     path.write_text(summary)
-    print(f"experiments: {len(tasks)} tasks ({failures} failed) in {t_run:.0f} s -> {out}")
+    print(f"experiments: {run.n_tasks} tasks ({run.failures} failed) in {run.seconds:.0f} s -> {out}")
     return path
