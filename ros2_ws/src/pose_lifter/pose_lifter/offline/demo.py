@@ -18,6 +18,10 @@ from numpy.typing import NDArray
 from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINTS_LEFT, JOINTS_RIGHT
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from mpl_toolkits.mplot3d.axes3d import Axes3D
+
     from pose_lifter.core.lift.lifter import Lifter
     from pose_lifter.offline.settings import LiftSettings
 
@@ -82,8 +86,6 @@ def plot_frames(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-    from matplotlib.ticker import MaxNLocator
 
     from pose_lifter.messages.convert import track_color
 
@@ -98,42 +100,73 @@ def plot_frames(
         everything = []
         for person in fr["people"]:
             tracks.add(int(person["track_id"]))
-            colour = track_color(int(person["track_id"]))
-            pts, conf = person["points_2d"], person["confidence"]
-            for a, b in BONES_FOR_DRAWING:
-                if conf[a] > 0 and conf[b] > 0:
-                    ax2.plot([pts[a, 0], pts[b, 0]], [pts[a, 1], pts[b, 1]], lw=2,
-                             color=_lighter(colour, _side_shade(a, b)))
-            vis = conf > 0
-            ax2.scatter(pts[vis, 0], pts[vis, 1], s=10, color=colour)
-            for key, style in (("truth", "--"), ("lifted", "-")):
-                if person.get(key) is None:
-                    continue
-                q = _to_plot(person[key])
-                everything.append(q)
-                for a, b in BONES_FOR_DRAWING:
-                    base = (0.3, 0.3, 0.3) if key == "truth" else colour
-                    ax3.plot(*zip(q[a], q[b], strict=True), ls=style, lw=1.2 if style == "--" else 2.4,
-                             color=_lighter(base, _side_shade(a, b)))
-        ax2.set_xlim(0, image_size[0])
-        ax2.set_ylim(image_size[1], 0)
-        ax2.set_aspect("equal")
-        ax2.set_title(f"2D input (pixels), t = {t:.2f} s", fontsize=9)
-        if everything:
-            allp = np.concatenate(everything)
-            centre = 0.5 * (allp.max(axis=0) + allp.min(axis=0))
-            half = 0.55 * float(np.max(allp.max(axis=0) - allp.min(axis=0)))
-            for setter, c in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), centre, strict=True):
-                setter(c - half, c + half)
-        ax3.set_box_aspect((1, 1, 1), zoom=1.1)
-        ax3.view_init(elev=15, azim=-78)
-        for axis in (ax3.xaxis, ax3.yaxis, ax3.zaxis):
-            axis.set_major_locator(MaxNLocator(4))
-        ax3.set_xlabel("x (m)", fontsize=8)
-        ax3.set_ylabel("depth (m)", fontsize=8)
-        ax3.set_zlabel("up (m)", fontsize=8)
-        ax3.tick_params(labelsize=7)
-        ax3.set_title(f"lifted 3D vs ground truth (camera frame), t = {t:.2f} s", fontsize=9)
+            everything += _draw_person(ax2, ax3, person, track_color(int(person["track_id"])))
+        _frame_axes(ax2, ax3, everything, image_size, t)
+    _legend_and_layout(fig, tracks, title)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _draw_person(ax2: Axes, ax3: Axes3D, person: dict[str, Any], colour: tuple[float, ...]
+                 ) -> list[NDArray[np.float64]]:
+    """One person of a frame: the bones and visible joints of ``points_2d`` (12, 2) in ``ax2``, the
+    skeletons ``truth`` (dashed) and ``lifted`` (12, 3 each, camera frame) in ``ax3``. Returns those
+    skeletons in plot axes, each (12, 3)."""
+    drawn = []
+    pts, conf = person["points_2d"], person["confidence"]
+    for a, b in BONES_FOR_DRAWING:
+        if conf[a] > 0 and conf[b] > 0:
+            ax2.plot([pts[a, 0], pts[b, 0]], [pts[a, 1], pts[b, 1]], lw=2,
+                     color=_lighter(colour, _side_shade(a, b)))
+    vis = conf > 0
+    ax2.scatter(pts[vis, 0], pts[vis, 1], s=10, color=colour)
+    for key, style in (("truth", "--"), ("lifted", "-")):
+        if person.get(key) is None:
+            continue
+        q = _to_plot(person[key])
+        drawn.append(q)
+        for a, b in BONES_FOR_DRAWING:
+            base = (0.3, 0.3, 0.3) if key == "truth" else colour
+            ax3.plot(*zip(q[a], q[b], strict=True), ls=style, lw=1.2 if style == "--" else 2.4,
+                     color=_lighter(base, _side_shade(a, b)))
+    return drawn
+
+
+def _frame_axes(ax2: Axes, ax3: Axes3D, everything: list[NDArray[np.float64]], image_size: tuple[int, int],
+                t: float) -> None:
+    """Limits, labels and titles of one frame's axes: ``ax2`` the image of ``image_size`` (width,
+    height), ``ax3`` a cube around the skeletons ``everything`` (each (12, 3), plot axes); ``t`` is
+    the frame's time in seconds."""
+    from matplotlib.ticker import MaxNLocator
+
+    ax2.set_xlim(0, image_size[0])
+    ax2.set_ylim(image_size[1], 0)
+    ax2.set_aspect("equal")
+    ax2.set_title(f"2D input (pixels), t = {t:.2f} s", fontsize=9)
+    if everything:
+        allp = np.concatenate(everything)
+        centre = 0.5 * (allp.max(axis=0) + allp.min(axis=0))
+        half = 0.55 * float(np.max(allp.max(axis=0) - allp.min(axis=0)))
+        for setter, c in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), centre, strict=True):
+            setter(c - half, c + half)
+    ax3.set_box_aspect((1, 1, 1), zoom=1.1)
+    ax3.view_init(elev=15, azim=-78)
+    for axis in (ax3.xaxis, ax3.yaxis, ax3.zaxis):
+        axis.set_major_locator(MaxNLocator(4))
+    ax3.set_xlabel("x (m)", fontsize=8)
+    ax3.set_ylabel("depth (m)", fontsize=8)
+    ax3.set_zlabel("up (m)", fontsize=8)
+    ax3.tick_params(labelsize=7)
+    ax3.set_title(f"lifted 3D vs ground truth (camera frame), t = {t:.2f} s", fontsize=9)
+
+
+def _legend_and_layout(fig: Figure, tracks: set[int], title: str) -> None:
+    """The legend (a colour per track in ``tracks``, the limb sides, the ground truth), the title
+    and the margins of ``fig``."""
+    from matplotlib.lines import Line2D
+
+    from pose_lifter.messages.convert import track_color
+
     handles = [Line2D([], [], color=track_color(k), lw=2.4, label=f"track {k}") for k in sorted(tracks)]
     grey = (0.3, 0.3, 0.3)
     handles += [Line2D([], [], color=grey, lw=2.4, label="left limbs"),
@@ -146,8 +179,6 @@ def plot_frames(
     height = fig.get_figheight()
     fig.subplots_adjust(left=0.05, right=0.96, bottom=0.3 / height, top=1.0 - 1.0 / height, wspace=0.08,
                         hspace=0.22)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def run_demo(make_lifter: Callable[[], Lifter], settings: LiftSettings, out: str | Path,
