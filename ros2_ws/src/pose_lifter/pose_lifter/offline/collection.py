@@ -467,6 +467,31 @@ def _left_to_lift(planned: list[BagJob], manifest: Manifest, digest: str, versio
     return todo
 
 
+def _recorder(manifest: Manifest, settings: LiftSettings, digest: str, version: str,
+              summary: CollectionSummary, bar: Any, t0: float) -> Callable[[BagOutcome], None]:
+    """What is done as each bag ends: its outcome recorded in ``manifest`` (saved, with ``settings``,
+    their ``digest`` and the package ``version``) and in ``summary``, the error file in
+    ``summary.out_dir`` rewritten if it failed, the progress ``bar`` (tqdm) moved on, its rate
+    counted from ``t0`` (``time.perf_counter``)."""
+    errors_path = summary.out_dir / ERRORS_NAME
+
+    def on_done(o: BagOutcome) -> None:
+        manifest.record(o, digest, settings, version)
+        manifest.save()
+        if o.ok:
+            summary.n_lifted += 1
+            summary.n_poses += o.n_lifted
+            summary.n_failed_skeletons += o.n_failed
+        else:
+            summary.failed.append(o)
+            _write_errors(errors_path, summary.failed)
+        bar.update(1)
+        rate = summary.n_poses / max(1e-9, time.perf_counter() - t0)
+        bar.set_postfix_str(f"{summary.n_poses} poses, {rate:.0f}/s, {len(summary.failed)} failed")
+
+    return on_done
+
+
 def lift_collection(
     inputs: Sequence[str],
     out_dir: str | Path,
@@ -523,21 +548,7 @@ def lift_collection(
     summary.n_skipped = len(planned) - len(todo)
     errors_path = out / ERRORS_NAME
     bar = tqdm(total=len(todo), desc="bags", unit="bag", disable=not progress, file=sys.stderr)
-
-    def on_done(o: BagOutcome) -> None:
-        manifest.record(o, digest, settings, version)
-        manifest.save()
-        if o.ok:
-            summary.n_lifted += 1
-            summary.n_poses += o.n_lifted
-            summary.n_failed_skeletons += o.n_failed
-        else:
-            summary.failed.append(o)
-            _write_errors(errors_path, summary.failed)
-        bar.update(1)
-        rate = summary.n_poses / max(1e-9, time.perf_counter() - t0)
-        bar.set_postfix_str(f"{summary.n_poses} poses, {rate:.0f}/s, {len(summary.failed)} failed")
-
+    on_done = _recorder(manifest, settings, digest, version, summary, bar, t0)
     try:
         if todo:
             if scheduler:
