@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -245,6 +245,150 @@ _S2: Final[NDArray[np.float64]] = _CHAIN_AXES[:, 1, 0]
 _S3: Final[NDArray[np.float64]] = np.where(_CHAIN_ARM, _CHAIN_AXES[:, 2, 2], _CHAIN_AXES[:, 2, 1])
 
 
+class _BodyFrames(NamedTuple):
+    """The body frames of B skeletons (NaN or 0 norms where a skeleton is degenerate).
+
+    Attributes
+    ----------
+    origin : ndarray, shape (B, 3)
+        The hip midpoints.
+    ny, nz : ndarray, shape (B,)
+        Lengths of the hip line and of the torso's up direction made orthogonal to it.
+    rb : ndarray, shape (B, 3, 3)
+        The frames' rotations, columns x, y, z.
+    local : ndarray, shape (B, 12, 3)
+        The joints in the body frame.
+    torso : ndarray, shape (B,)
+        Height of the shoulder midpoint in the body frame.
+    """
+
+    origin: NDArray[np.float64]
+    ny: NDArray[np.float64]
+    nz: NDArray[np.float64]
+    rb: NDArray[np.float64]
+    local: NDArray[np.float64]
+    torso: NDArray[np.float64]
+
+
+class _Limbs(NamedTuple):
+    """The four limb chains (paper order of ``_CHAINS``) of B skeletons in their body frames.
+
+    Attributes
+    ----------
+    root : ndarray, shape (B, 4, 3)
+        Each chain's first joint (shoulder, hip).
+    len1, len2 : ndarray, shape (B, 4)
+        Lengths of its upper and lower segments.
+    rot : ndarray, shape (B, 4, 3, 3)
+        The upper segment's link frame (columns x, y, z; the segment along -z).
+    hinge : ndarray, shape (B, 4)
+        The elbow or knee angle.
+    """
+
+    root: NDArray[np.float64]
+    len1: NDArray[np.float64]
+    len2: NDArray[np.float64]
+    rot: NDArray[np.float64]
+    hinge: NDArray[np.float64]
+
+
+def _body_frames(j: NDArray[np.float64]) -> _BodyFrames:
+    """The body frames (module docstring) of the skeletons ``j`` (B, 12, 3); the caller ignores
+    the floating-point warnings of degenerate ones."""
+    lh, rh = j[:, _J["left_hip"]], j[:, _J["right_hip"]]
+    ls, rs = j[:, _J["left_shoulder"]], j[:, _J["right_shoulder"]]
+    origin = 0.5 * (lh + rh)
+    y = lh - rh
+    ny = np.sqrt(_rows_dot(y, y))
+    y = y / ny[:, None]
+    up = 0.5 * (ls + rs) - origin
+    z = up - _rows_dot(up, y)[:, None] * y
+    nz = np.sqrt(_rows_dot(z, z))
+    z = z / nz[:, None]
+    rb = np.stack([_cross_rows(y, z), y, z], axis=-1)  # (B, 3, 3), columns x, y, z
+    local = np.einsum("bjk,bkl->bjl", j - origin[:, None], rb)
+    torso = 0.5 * (local[:, _J["left_shoulder"], 2] + local[:, _J["right_shoulder"], 2])
+    return _BodyFrames(origin, ny, nz, rb, local, torso)
+
+
+def _limbs(local: NDArray[np.float64]) -> _Limbs:
+    """The limb chains of the skeletons ``local`` (B, 12, 3, body frames); the caller ignores the
+    floating-point warnings of degenerate ones."""
+    a, b, c = (local[:, _CHAIN_JOINTS[:, k]] for k in range(3))  # (B, 4, 3)
+    seg1, seg2 = b - a, c - b
+    len1, len2 = np.sqrt(_rows_dot(seg1, seg1)), np.sqrt(_rows_dot(seg2, seg2))
+    d1, d2 = seg1 / len1[..., None], seg2 / len2[..., None]
+    zl = -d1
+    perp = d2 - _rows_dot(d2, d1)[..., None] * d1
+    nperp = np.sqrt(_rows_dot(perp, perp))
+    # a straight limb has no bending plane: x from the body's forward axis (or any normal)
+    ex = np.array([1.0, 0.0, 0.0])
+    fallback = ex - zl[..., 0:1] * zl
+    other = _cross_rows(zl, np.where(np.abs(zl[..., 0:1]) < 0.9, ex, np.array([0.0, 1.0, 0.0])))
+    fallback = np.where((_rows_dot(fallback, fallback) < 1e-18)[..., None], other, fallback)
+    xl = np.where((nperp > 1e-9)[..., None], _CHAIN_SIGN[:, None] * perp / nperp[..., None],
+                  fallback / np.sqrt(_rows_dot(fallback, fallback))[..., None])
+    rot = np.stack([xl, _cross_rows(zl, xl), zl], axis=-1)  # (B, 4, 3, 3)
+    hinge = np.arctan2(_rows_dot(d2, xl), -_rows_dot(d2, zl))
+    return _Limbs(a, len1, len2, rot, hinge)
+
+
+def _chain_angles(rot: NDArray[np.float64], hinge: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The four joint angles (B, 4, 4) of each chain: the Euler angles of its link frames ``rot``
+    (B, 4, 3, 3) about the chain's yaw, pitch and roll axes, and its ``hinge`` (B, 4); the caller
+    ignores the floating-point warnings of degenerate skeletons."""
+    # arms: R = Rz(p1) Rx(p2) Rz(p3), the branch q2 = s2 p2 >= 0
+    q2_arm = np.arccos(np.clip(rot[..., 2, 2], -1.0, 1.0))
+    p2_arm = _S2 * q2_arm
+    sb = np.sin(p2_arm)
+    sing = np.abs(sb) < _SINGULAR
+    sbs = np.where(sing, 1.0, sb)
+    p1_arm = np.where(sing, 0.0, np.arctan2(rot[..., 0, 2] / sbs, -rot[..., 1, 2] / sbs))
+    p3_arm = np.where(sing, np.arctan2(np.where(np.cos(p2_arm) > 0, rot[..., 1, 0], -rot[..., 1, 0]),
+                                       rot[..., 0, 0]),
+                      np.arctan2(rot[..., 2, 0] / sbs, rot[..., 2, 1] / sbs))
+    # legs: R = Rz(p1) Rx(p2) Ry(p3)
+    p2_leg = np.arcsin(np.clip(rot[..., 2, 1], -1.0, 1.0))
+    cb = np.cos(p2_leg)
+    sing = np.abs(cb) < _SINGULAR
+    cbs = np.where(sing, 1.0, cb)
+    p1_leg = np.where(sing, 0.0, np.arctan2(-rot[..., 0, 1] / cbs, rot[..., 1, 1] / cbs))
+    p3_leg = np.where(sing, np.arctan2(rot[..., 0, 2], rot[..., 0, 0]),
+                      np.arctan2(-rot[..., 2, 0] / cbs, rot[..., 2, 2] / cbs))
+    out: NDArray[np.float64] = np.stack([_S1 * np.where(_CHAIN_ARM, p1_arm, p1_leg),
+                                         np.where(_CHAIN_ARM, q2_arm, _S2 * p2_leg),
+                                         _S3 * np.where(_CHAIN_ARM, p3_arm, p3_leg), hinge], axis=-1)
+    return out
+
+
+def _link_arrays(frames: _BodyFrames, limbs: _Limbs, q: NDArray[np.float64], head_offset: float
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Every link's translation (B, len(LINKS), 3) and quaternion (B, len(LINKS), 4) from its
+    parent, and the joint angles (B, len(REVOLUTE_JOINTS)), from the body ``frames``, the
+    ``limbs`` and their joint angles ``q`` (B, 4, 4); the body links' rotations are left at the
+    identity."""
+    n = q.shape[0]
+    n_links = len(LINKS)
+    trans = np.zeros((n, n_links, 3))
+    quats = np.zeros((n, n_links, 4))
+    quats[..., 3] = 1.0
+    trans[:, 0] = frames.origin
+    trans[:, 2, 2] = frames.torso
+    trans[:, 3, 2] = head_offset
+    chain_rows = _HEAD_ROWS + 5 * np.arange(len(_CHAINS))
+    base = np.where(_CHAIN_ARM[:, None], np.array([0.0, 0.0, 1.0]) * frames.torso[:, None, None], 0.0)
+    trans[:, chain_rows] = limbs.root - base
+    trans[:, chain_rows + 3, 2] = -limbs.len1
+    trans[:, chain_rows + 4, 2] = -limbs.len2
+    half = 0.5 * q  # single-axis rotations: (axis sin(q/2), cos(q/2)) for y, p, r and the hinge
+    rows = chain_rows[:, None] + np.arange(4)  # (4, 4)
+    quats[:, rows, :3] = _CHAIN_AXES * np.sin(half)[..., None]
+    quats[:, rows, 3] = np.cos(half)
+    angles = np.zeros((n, len(REVOLUTE_JOINTS)))
+    angles[:, 1 + len(HEAD_JOINTS):] = q.reshape(n, -1)
+    return trans, quats, angles
+
+
 def body_poses(joints: NDArray[np.float64], head_offset: float = 0.0) -> list[BodyPose | None]:
     """:func:`body_pose` of several skeletons at once (shape (B, 12, 3)), None for a skeleton
     the model cannot be fitted to (non-finite, no hip line, torso or limb segment)."""
@@ -252,79 +396,16 @@ def body_poses(joints: NDArray[np.float64], head_offset: float = 0.0) -> list[Bo
     if j.ndim != 3 or j.shape[1:] != (len(JOINT_NAMES), 3):
         raise ValueError(f"joints must have shape (B, {len(JOINT_NAMES)}, 3), got {j.shape}")
     n = j.shape[0]
-    lh, rh = j[:, _J["left_hip"]], j[:, _J["right_hip"]]
-    ls, rs = j[:, _J["left_shoulder"]], j[:, _J["right_shoulder"]]
     with np.errstate(invalid="ignore", divide="ignore"):
-        origin = 0.5 * (lh + rh)
-        y = lh - rh
-        ny = np.sqrt(_rows_dot(y, y))
-        y = y / ny[:, None]
-        up = 0.5 * (ls + rs) - origin
-        z = up - _rows_dot(up, y)[:, None] * y
-        nz = np.sqrt(_rows_dot(z, z))
-        z = z / nz[:, None]
-        rb = np.stack([_cross_rows(y, z), y, z], axis=-1)  # (B, 3, 3), columns x, y, z
-        local = np.einsum("bjk,bkl->bjl", j - origin[:, None], rb)
-        torso = 0.5 * (local[:, _J["left_shoulder"], 2] + local[:, _J["right_shoulder"], 2])
-        a, b, c = (local[:, _CHAIN_JOINTS[:, k]] for k in range(3))  # (B, 4, 3)
-        seg1, seg2 = b - a, c - b
-        len1, len2 = np.sqrt(_rows_dot(seg1, seg1)), np.sqrt(_rows_dot(seg2, seg2))
-        d1, d2 = seg1 / len1[..., None], seg2 / len2[..., None]
-        zl = -d1
-        perp = d2 - _rows_dot(d2, d1)[..., None] * d1
-        nperp = np.sqrt(_rows_dot(perp, perp))
-        # a straight limb has no bending plane: x from the body's forward axis (or any normal)
-        ex = np.array([1.0, 0.0, 0.0])
-        fallback = ex - zl[..., 0:1] * zl
-        other = _cross_rows(zl, np.where(np.abs(zl[..., 0:1]) < 0.9, ex, np.array([0.0, 1.0, 0.0])))
-        fallback = np.where((_rows_dot(fallback, fallback) < 1e-18)[..., None], other, fallback)
-        xl = np.where((nperp > 1e-9)[..., None], _CHAIN_SIGN[:, None] * perp / nperp[..., None],
-                      fallback / np.sqrt(_rows_dot(fallback, fallback))[..., None])
-        rot = np.stack([xl, _cross_rows(zl, xl), zl], axis=-1)  # (B, 4, 3, 3)
-        hinge = np.arctan2(_rows_dot(d2, xl), -_rows_dot(d2, zl))
-        # arms: R = Rz(p1) Rx(p2) Rz(p3), the branch q2 = s2 p2 >= 0
-        q2_arm = np.arccos(np.clip(rot[..., 2, 2], -1.0, 1.0))
-        p2_arm = _S2 * q2_arm
-        sb = np.sin(p2_arm)
-        sing = np.abs(sb) < _SINGULAR
-        sbs = np.where(sing, 1.0, sb)
-        p1_arm = np.where(sing, 0.0, np.arctan2(rot[..., 0, 2] / sbs, -rot[..., 1, 2] / sbs))
-        p3_arm = np.where(sing, np.arctan2(np.where(np.cos(p2_arm) > 0, rot[..., 1, 0], -rot[..., 1, 0]),
-                                           rot[..., 0, 0]),
-                          np.arctan2(rot[..., 2, 0] / sbs, rot[..., 2, 1] / sbs))
-        # legs: R = Rz(p1) Rx(p2) Ry(p3)
-        p2_leg = np.arcsin(np.clip(rot[..., 2, 1], -1.0, 1.0))
-        cb = np.cos(p2_leg)
-        sing = np.abs(cb) < _SINGULAR
-        cbs = np.where(sing, 1.0, cb)
-        p1_leg = np.where(sing, 0.0, np.arctan2(-rot[..., 0, 1] / cbs, rot[..., 1, 1] / cbs))
-        p3_leg = np.where(sing, np.arctan2(rot[..., 0, 2], rot[..., 0, 0]),
-                          np.arctan2(-rot[..., 2, 0] / cbs, rot[..., 2, 2] / cbs))
-        q = np.stack([_S1 * np.where(_CHAIN_ARM, p1_arm, p1_leg),
-                      np.where(_CHAIN_ARM, q2_arm, _S2 * p2_leg),
-                      _S3 * np.where(_CHAIN_ARM, p3_arm, p3_leg), hinge], axis=-1)  # (B, 4, 4)
-    ok = (np.isfinite(j).all(axis=(1, 2)) & (ny > 1e-12) & (nz > 1e-12)
-          & (len1 > 1e-12).all(axis=1) & (len2 > 1e-12).all(axis=1) & np.isfinite(q).all(axis=(1, 2)))
-    n_links = len(LINKS)
-    trans = np.zeros((n, n_links, 3))
-    quats = np.zeros((n, n_links, 4))
-    quats[..., 3] = 1.0
-    trans[:, 0] = origin
-    trans[:, 2, 2] = torso
-    trans[:, 3, 2] = head_offset
-    chain_rows = _HEAD_ROWS + 5 * np.arange(len(_CHAINS))
-    base = np.where(_CHAIN_ARM[:, None], np.array([0.0, 0.0, 1.0]) * torso[:, None, None], 0.0)
-    trans[:, chain_rows] = a - base
-    trans[:, chain_rows + 3, 2] = -len1
-    trans[:, chain_rows + 4, 2] = -len2
-    half = 0.5 * q  # single-axis rotations: (axis sin(q/2), cos(q/2)) for y, p, r and the hinge
-    rows = chain_rows[:, None] + np.arange(4)  # (4, 4)
-    quats[:, rows, :3] = _CHAIN_AXES * np.sin(half)[..., None]
-    quats[:, rows, 3] = np.cos(half)
-    angles = np.zeros((n, len(REVOLUTE_JOINTS)))
-    angles[:, 1 + len(HEAD_JOINTS):] = q.reshape(n, -1)
+        frames = _body_frames(j)
+        limbs = _limbs(frames.local)
+        q = _chain_angles(limbs.rot, limbs.hinge)
+    ok = (np.isfinite(j).all(axis=(1, 2)) & (frames.ny > 1e-12) & (frames.nz > 1e-12)
+          & (limbs.len1 > 1e-12).all(axis=1) & (limbs.len2 > 1e-12).all(axis=1)
+          & np.isfinite(q).all(axis=(1, 2)))
+    trans, quats, angles = _link_arrays(frames, limbs, q, head_offset)
     if ok.any():  # the body frames' rotations, one conversion for the frame's bodies
-        quats[ok, 0] = quaternions_xyzw(rb[ok])
+        quats[ok, 0] = quaternions_xyzw(frames.rb[ok])
     return [BodyPose(trans[k], quats[k], angles[k]) if ok[k] else None for k in range(n)]
 
 
