@@ -45,6 +45,7 @@ import json
 import sys
 import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -251,7 +252,8 @@ def binomial_se(p: float, n: int) -> float:
     return float(np.sqrt(p * (1.0 - p) / n)) if n > 0 else float("nan")
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line (the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
                     "$POSE_LIFTER_CMU_DATA)")
@@ -283,22 +285,40 @@ def main(argv: list[str] | None = None) -> int:
                     choices=["paper", "learned", "hybrid"], help="lifter modes compared (the last one "
                     "lifts the training windows)")
     ap.add_argument("--json", default=None, help="write the results as JSON here")
-    args = ap.parse_args(argv)
+    return ap
 
-    if args.model_input == "lifted" and args.lifted_train <= 0:
-        ap.error("--model-input lifted needs --lifted-train > 0")
-    data = resolve_data_dir(args.data)
-    rng = np.random.default_rng(args.seed)
+
+@dataclass(frozen=True)
+class _Windows:
+    """The training and test data of every class.
+
+    Attributes
+    ----------
+    train_windows : ndarray, shape (N, W, 12, 3)
+        The true 3D training windows (world frame, metres).
+    labels : ndarray, shape (N,)
+        Their classes.
+    train_clips : dict of str to list of ndarray, shape (F, 12, 3)
+        Each class's training trials at 30 Hz.
+    tests : list of (str, str, ndarray (F, 12, 3), list of int)
+        Class, trial, clip and window end frames of each test trial.
+    dropped : list of str
+        Held-out trials left untested: a lifter's prior was trained on them.
+    """
+
+    train_windows: NDArray[np.float64]
+    labels: NDArray[np.str_]
+    train_clips: dict[str, list[NDArray[np.float64]]]
+    tests: list[tuple[str, str, NDArray[np.float64], list[int]]]
+    dropped: list[str]
+
+
+def _load_windows(args: argparse.Namespace, data: Path, per_class: dict[str, list[str]], seen: set[str]
+                  ) -> _Windows:
+    """Every class's training windows and test windows (:func:`split`, :func:`test_windows_of`);
+    the held-out trials in ``seen`` are not tested."""
     step = round(120.0 / FPS)
     max_frames = int(MAX_SECONDS * FPS)
-    lead_in = round(args.lead_in * FPS)
-    segment = max(round(args.segment * FPS), WINDOW * round(STEP_S * FPS))
-    per_class = trials_by_class(data)
-    command = " ".join(["tools/action_recognition_eval.py", *(argv if argv is not None else sys.argv[1:])])
-
-    lifters = {mode: Lifter(options=LifterOptions(mode=mode, n_starts=args.n_starts)) for mode in args.modes}
-    lifter = lifters[args.modes[-1]]
-    seen = prior_trials(list(lifters.values()))
     dropped: list[str] = []
     train_w: list[NDArray[np.float64]] = []
     train_y: list[str] = []
@@ -321,18 +341,42 @@ def main(argv: list[str] | None = None) -> int:
                 ends = [e for k, e in picks if k == i]
                 if ends:
                     tests.append((cls, trial, clips[i], ends))
-    train_windows = np.concatenate(train_w)
-    labels = np.asarray(train_y)
+    return _Windows(np.concatenate(train_w), np.asarray(train_y), train_clips, tests, dropped)
+
+
+@dataclass(frozen=True)
+class _Models:
+    """The classifiers: ``model_3d`` trained on true 3D, ``model_2d`` on its projections,
+    ``lifted`` (``--lifted-train``) on lifted training windows, lifted in ``train_lift_s`` seconds."""
+
+    model_3d: ActionClassifier
+    model_2d: ActionClassifier
+    lifted: ActionClassifier | None
+    train_lift_s: float
+
+    def chosen(self, model_input: str) -> ActionClassifier:
+        """The 3D model ``--model-out`` writes: trained on ``model_input`` ("true" or "lifted") 3D."""
+        chosen = self.lifted if model_input == "lifted" else self.model_3d
+        assert chosen is not None
+        return chosen
+
+
+def _train_models(args: argparse.Namespace, win: _Windows, lifter: Lifter, rng: np.random.Generator,
+                  command: str) -> _Models:
+    """The classifiers of :class:`_Models`; the 2D training views draw their (zero) noise from
+    ``rng``, the lifted training windows from a generator of their own."""
+    lead_in = round(args.lead_in * FPS)
+    segment = max(round(args.segment * FPS), WINDOW * round(STEP_S * FPS))
 
     def classifier(trained_on: str) -> ActionClassifier:
         return ActionClassifier("3d", WINDOW, STEP_S, args.neighbors, args.depth_weight, metadata={
             "classes": list(CLASSES), "fps": FPS, "trained_on": trained_on, "command": command})
 
-    model_3d = classifier("true 3D").fit(train_windows, labels)
+    model_3d = classifier("true 3D").fit(win.train_windows, win.labels)
     rots = [camera(a) for a in TRAIN_AZIMUTHS]
-    train_2d = np.concatenate([film(train_windows, r, rng, 0.0) for r in rots])
+    train_2d = np.concatenate([film(win.train_windows, r, rng, 0.0) for r in rots])
     model_2d = ActionClassifier("2d", WINDOW, STEP_S, args.neighbors_2d).fit(
-        train_2d, np.tile(labels, len(rots)))
+        train_2d, np.tile(win.labels, len(rots)))
 
     model_lifted = None
     train_lift_s = 0.0
@@ -340,24 +384,36 @@ def main(argv: list[str] | None = None) -> int:
         # a 3D model trained on lifted training windows: it shares the lifter's errors
         t0 = time.perf_counter()
         rng_train = np.random.default_rng(args.seed + 1)  # the test views stay those of other runs
-        lw = [lift_training(lifter, train_clips[cls], args.lifted_train, segment, lead_in, rng_train,
+        lw = [lift_training(lifter, win.train_clips[cls], args.lifted_train, segment, lead_in, rng_train,
                             args.noise_px, args.lift) for cls in CLASSES]
         model_lifted = classifier(f"{args.lifted_train} lifted windows per class ({args.modes[-1]} mode, "
                                   f"--lift {args.lift})")
         model_lifted.fit(np.concatenate(lw), np.repeat(np.asarray(CLASSES), [len(w) for w in lw]))
         train_lift_s = time.perf_counter() - t0
+    return _Models(model_3d, model_2d, model_lifted, train_lift_s)
 
-    if not tests:
-        if args.model_out:
-            chosen = model_lifted if args.model_input == "lifted" else model_3d
-            assert chosen is not None
-            chosen.save(args.model_out)
-            print(f"train: {len(labels)} windows {dict(Counter(labels.tolist()))}; wrote {args.model_out} "
-                  f"({args.model_input} 3D)")
-        return 0
 
+@dataclass(frozen=True)
+class _Predictions:
+    """Every test window's class by each input (``pred``, in window order), the true classes
+    (``truth``), each mode's lifted P-MPJPE per window (metres), the trials' votes and the seconds
+    the lifts took."""
+
+    pred: dict[str, list[str]]
+    truth: list[str]
+    lift_err: dict[str, list[float]]
+    per_trial: list[dict[str, object]]
+    lift_s: float
+
+
+def _classify_tests(args: argparse.Namespace, tests: list[tuple[str, str, NDArray[np.float64], list[int]]],
+                    lifters: dict[str, Lifter], lifter: Lifter, models: _Models, rng: np.random.Generator
+                    ) -> _Predictions:
+    """Film every test window from a random azimuth (drawn from ``rng``), lift it in each mode
+    (the same 2D for every mode) and classify it every way."""
+    lead_in = round(args.lead_in * FPS)
     pred: dict[str, list[str]] = {"2d": [], **{f"3d-lift/{mode}": [] for mode in args.modes}, "3d-true": []}
-    if model_lifted is not None:
+    if models.lifted is not None:
         pred["3d-lift/lifted-train"] = []
     truth: list[str] = []
     lift_err: dict[str, list[float]] = {mode: [] for mode in args.modes}
@@ -369,65 +425,124 @@ def main(argv: list[str] | None = None) -> int:
             rot = camera(float(rng.uniform(0.0, 360.0)))
             state = rng.bit_generator.state  # every mode sees the same 2D
             window = clip[window_index(end)]
-            got: dict[str, str] = {"3d-true": str(model_3d.predict(window[None])[0])}
+            got: dict[str, str] = {"3d-true": str(models.model_3d.predict(window[None])[0])}
             for mode, lf in lifters.items():
                 rng.bit_generator.state = state
                 pts, lifted = lift_test_window(lf, clip, end, rot, rng, args.noise_px, lead_in, args.lift)
-                got[f"3d-lift/{mode}"] = str(model_3d.predict(lifted[None])[0])
+                got[f"3d-lift/{mode}"] = str(models.model_3d.predict(lifted[None])[0])
                 lift_err[mode].append(float(np.mean(p_mpjpe(lifted, window))))
-                if model_lifted is not None and lf is lifter:
-                    got["3d-lift/lifted-train"] = str(model_lifted.predict(lifted[None])[0])
-            got["2d"] = str(model_2d.predict(pts[None])[0])
+                if models.lifted is not None and lf is lifter:
+                    got["3d-lift/lifted-train"] = str(models.lifted.predict(lifted[None])[0])
+            got["2d"] = str(models.model_2d.predict(pts[None])[0])
             truth.append(cls)
             for k, v in got.items():
                 pred[k].append(v)
                 votes[k][v] += 1
         per_trial.append({"class": cls, "trial": trial, "windows": len(ends),
                           **{k: v.most_common(1)[0][0] for k, v in votes.items()}})
-    lift_s = time.perf_counter() - t0
+    return _Predictions(pred, truth, lift_err, per_trial, time.perf_counter() - t0)
 
-    y = np.asarray(truth)
+
+@dataclass(frozen=True)
+class _Scores:
+    """The accuracies of each input (``pred``'s keys): per window (``acc``), per trial vote
+    (``votes_acc``) and per class (``per_cls``); each mode's mean lifted P-MPJPE in mm; each
+    input's accuracy minus the 2D baseline's with its paired standard error (``vs_2d``); the
+    number of test windows ``n``."""
+
+    acc: dict[str, float]
+    votes_acc: dict[str, float]
+    per_cls: dict[str, dict[str, float]]
+    lift_err_mm: dict[str, float]
+    vs_2d: dict[str, tuple[float, float]]
+    n: int
+
+
+def _score(preds: _Predictions) -> _Scores:
+    """The accuracies of :class:`_Scores`."""
+    pred, per_trial = preds.pred, preds.per_trial
+    y = np.asarray(preds.truth)
     acc = {k: float(np.mean(np.asarray(v) == y)) for k, v in pred.items()}
     votes_acc = {k: float(np.mean([t[k] == t["class"] for t in per_trial])) for k in pred}
     per_cls = {k: {c: float(np.mean(np.asarray(v)[y == c] == c)) for c in CLASSES} for k, v in pred.items()}
-    lift_err_mm = {mode: 1e3 * float(np.mean(v)) for mode, v in lift_err.items()}
+    lift_err_mm = {mode: 1e3 * float(np.mean(v)) for mode, v in preds.lift_err.items()}
     right = {k: np.asarray(v) == y for k, v in pred.items()}
     vs_2d = {k: (acc[k] - acc["2d"], paired_se(right[k], right["2d"])) for k in pred if k != "2d"}
-    result: dict[str, object] = {
+    return _Scores(acc, votes_acc, per_cls, lift_err_mm, vs_2d, len(y))
+
+
+def _result(args: argparse.Namespace, command: str, win: _Windows, preds: _Predictions, scores: _Scores,
+            models: _Models) -> dict[str, object]:
+    """The results as ``--json`` writes them."""
+    labels, per_trial, acc = win.labels, preds.per_trial, scores.acc
+    return {
         "command": command, "classes": list(CLASSES), "train_windows": len(labels),
         "train_windows_per_class": dict(Counter(labels.tolist())),
         "test_trials": {c: [str(t["trial"]) for t in per_trial if t["class"] == c] for c in CLASSES},
-        "test_trials_dropped_prior_trained": dropped,
-        "test_windows": len(y), "noise_px": args.noise_px, "n_starts": args.n_starts, "lift": args.lift,
+        "test_trials_dropped_prior_trained": win.dropped,
+        "test_windows": scores.n, "noise_px": args.noise_px, "n_starts": args.n_starts, "lift": args.lift,
         "lead_in_s": args.lead_in, "window": WINDOW, "step_s": STEP_S, "neighbors": args.neighbors,
         "neighbors_2d": args.neighbors_2d, "depth_weight": args.depth_weight, "seed": args.seed,
         "window_accuracy": acc,
-        "window_accuracy_se": {k: binomial_se(v, len(y)) for k, v in acc.items()},
-        "minus_2d": {k: {"difference": d, "paired_se": se} for k, (d, se) in vs_2d.items()},
-        "per_class_window_accuracy": per_cls,
-        "trial_vote_accuracy": votes_acc,
+        "window_accuracy_se": {k: binomial_se(v, scores.n) for k, v in acc.items()},
+        "minus_2d": {k: {"difference": d, "paired_se": se} for k, (d, se) in scores.vs_2d.items()},
+        "per_class_window_accuracy": scores.per_cls,
+        "trial_vote_accuracy": scores.votes_acc,
         "per_trial": per_trial,
-        "lift_seconds": lift_s, "train_lift_seconds": train_lift_s,
-        "lifted_p_mpjpe_mm": lift_err_mm,
+        "lift_seconds": preds.lift_s, "train_lift_seconds": models.train_lift_s,
+        "lifted_p_mpjpe_mm": scores.lift_err_mm,
         "lifted_train_windows_per_class": args.lifted_train,
     }
-    print(f"train: {len(labels)} windows {dict(Counter(labels.tolist()))}"
-          + (f"; {args.lifted_train} lifted per class in {train_lift_s:.0f} s" if model_lifted else ""))
-    if dropped:
-        print(f"held-out trials not tested (the lifter's prior was trained on them): {' '.join(dropped)}")
-    print(f"test: {len(y)} windows from {len(per_trial)} unseen trials, random azimuth, noise "
+
+
+def _print_report(args: argparse.Namespace, win: _Windows, preds: _Predictions, scores: _Scores,
+                  models: _Models) -> None:
+    """The training and test set-up and the accuracy table."""
+    labels, acc, vs_2d, lift_s = win.labels, scores.acc, scores.vs_2d, preds.lift_s
+    lifted = f"; {args.lifted_train} lifted per class in {models.train_lift_s:.0f} s" if models.lifted else ""
+    print(f"train: {len(labels)} windows {dict(Counter(labels.tolist()))}" + lifted)
+    if win.dropped:
+        print(f"held-out trials not tested (the lifter's prior was trained on them): {' '.join(win.dropped)}")
+    print(f"test: {scores.n} windows from {len(preds.per_trial)} unseen trials, random azimuth, noise "
           f"{args.noise_px} px, --lift {args.lift} (lead-in {args.lead_in} s); lifted in {lift_s:.0f} s, "
-          "lifted P-MPJPE " + ", ".join(f"{k} {v:.1f} mm" for k, v in lift_err_mm.items()))
+          "lifted P-MPJPE " + ", ".join(f"{k} {v:.1f} mm" for k, v in scores.lift_err_mm.items()))
     print(f"{'input':22s}{'window acc':>16s}{'minus 2d':>18s}{'trial vote acc':>16s}   per class")
-    for k in pred:
-        cls_txt = " ".join(f"{c}={per_cls[k][c]:.2f}" for c in CLASSES)
+    for k in preds.pred:
+        cls_txt = " ".join(f"{c}={scores.per_cls[k][c]:.2f}" for c in CLASSES)
         diff = f"{vs_2d[k][0]:+9.3f} +-{vs_2d[k][1]:.3f}" if k in vs_2d else " " * 16
-        se = binomial_se(acc[k], len(y))
-        print(f"{k:22s}{acc[k]:9.3f} +-{se:.3f}  {diff}{votes_acc[k]:16.3f}   {cls_txt}")
+        se = binomial_se(acc[k], scores.n)
+        print(f"{k:22s}{acc[k]:9.3f} +-{se:.3f}  {diff}{scores.votes_acc[k]:16.3f}   {cls_txt}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _parser()
+    args = ap.parse_args(argv)
+
+    if args.model_input == "lifted" and args.lifted_train <= 0:
+        ap.error("--model-input lifted needs --lifted-train > 0")
+    data = resolve_data_dir(args.data)
+    rng = np.random.default_rng(args.seed)
+    per_class = trials_by_class(data)
+    command = " ".join(["tools/action_recognition_eval.py", *(argv if argv is not None else sys.argv[1:])])
+
+    lifters = {mode: Lifter(options=LifterOptions(mode=mode, n_starts=args.n_starts)) for mode in args.modes}
+    lifter = lifters[args.modes[-1]]
+    win = _load_windows(args, data, per_class, prior_trials(list(lifters.values())))
+    models = _train_models(args, win, lifter, rng, command)
+    if not win.tests:
+        if args.model_out:
+            models.chosen(args.model_input).save(args.model_out)
+            labels = win.labels
+            print(f"train: {len(labels)} windows {dict(Counter(labels.tolist()))}; wrote {args.model_out} "
+                  f"({args.model_input} 3D)")
+        return 0
+
+    preds = _classify_tests(args, win.tests, lifters, lifter, models, rng)
+    scores = _score(preds)
+    result = _result(args, command, win, preds, scores, models)
+    _print_report(args, win, preds, scores, models)
     if args.model_out:
-        chosen = model_lifted if args.model_input == "lifted" else model_3d
-        assert chosen is not None
-        chosen.save(args.model_out)
+        models.chosen(args.model_input).save(args.model_out)
         print(f"wrote {args.model_out} ({args.model_input} 3D)")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
