@@ -222,7 +222,8 @@ def render(record: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line (the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=None)
     ap.add_argument("--classes", nargs="+", default=None, help="default: every class with usable trials")
@@ -258,13 +259,53 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
                     help="no training or lifting: join runs' cross_action.json (same settings) into --out")
     ap.add_argument("--out", type=Path, default=Path("out/cross_action"))
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _merge(paths: list[Path], out: Path) -> int:
+    """Join runs' ``cross_action.json`` (same settings) into ``out``: their folds, the first run's
+    settings."""
+    recs = [json.loads(p.read_text()) for p in paths]
+    record = dict(recs[0])
+    record["folds"] = {c: f for r in recs for c, f in r["folds"].items()}
+    record["header"] = recs[0]["header"] + " (merged: " + ", ".join(str(p) for p in paths) + ")"
+    return _write(record, out)
+
+
+def _train_fold_priors(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path) -> None:
+    """Train (or reuse) the priors of the fold without ``cls``: the single-frame one at ``path``, and
+    with ``--temporal`` / ``--offline`` its temporal and offline variants beside it."""
+    train_fold(cls, pool, args, path)
+    if args.temporal:
+        train_fold(cls, pool, args, path.with_name(f"{cls}_w4.npz"), window=4)
+    if args.offline:
+        train_fold(cls, pool, args, path.with_name(f"{cls}_w7c.npz"), window=OFFLINE_WINDOW,
+                   future=OFFLINE_FUTURE)
+
+
+def _evaluate_class(cls: str, trials: list[str], args: argparse.Namespace, path: Path, bases_trials: set[str],
+                    tf: float) -> dict[str, Any]:
+    """The fold of ``cls`` lifted with its prior at ``path`` (:func:`evaluate_fold`): its record
+    (its training time counted from ``tf``, ``time.perf_counter``, to the start of the lifts), its
+    row printed."""
+    tracks = class_tracks(trials, args)
+    te = time.perf_counter()
+    table = evaluate_fold(tracks, path, args)
+    fold = {
+        "trials": trials, "tracks": len(tracks), "frames": sum(len(t.world) for t in tracks),
+        "bases_saw_class": bool(set(trials) & bases_trials), "prior": str(path), "table": table,
+        "train_seconds": round(te - tf, 1), "lift_seconds": round(time.perf_counter() - te, 1)}
+    row = ", ".join(f"{k} " + "/".join(f"{table[k][m]['p_mpjpe']:.1f}" for m in args.methods)
+                    for k in args.conditions)
+    print(f"[{cls}] P-MPJPE ({'/'.join(args.methods)}): {row}; {time.perf_counter() - te:.0f} s",
+          flush=True)
+    return fold
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     if args.merge:
-        recs = [json.loads(p.read_text()) for p in args.merge]
-        record = dict(recs[0])
-        record["folds"] = {c: f for r in recs for c, f in r["folds"].items()}
-        record["header"] = recs[0]["header"] + " (merged: " + ", ".join(str(p) for p in args.merge) + ")"
-        return _write(record, args.out)
+        return _merge(args.merge, args.out)
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
     pool = trials_by_action(args.data)
@@ -282,25 +323,10 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"no usable trials of class {cls!r} (classes: {sorted(pool)})")
         path = folds_dir / f"{cls}.npz"
         tf = time.perf_counter()
-        train_fold(cls, pool, args, path)
-        if args.temporal:
-            train_fold(cls, pool, args, path.with_name(f"{cls}_w4.npz"), window=4)
-        if args.offline:
-            train_fold(cls, pool, args, path.with_name(f"{cls}_w7c.npz"), window=OFFLINE_WINDOW,
-                       future=OFFLINE_FUTURE)
+        _train_fold_priors(cls, pool, args, path)
         if args.train_only:
             continue
-        tracks = class_tracks(pool[cls], args)
-        te = time.perf_counter()
-        table = evaluate_fold(tracks, path, args)
-        record["folds"][cls] = {
-            "trials": pool[cls], "tracks": len(tracks), "frames": sum(len(t.world) for t in tracks),
-            "bases_saw_class": bool(set(pool[cls]) & bases_trials), "prior": str(path), "table": table,
-            "train_seconds": round(te - tf, 1), "lift_seconds": round(time.perf_counter() - te, 1)}
-        row = ", ".join(f"{k} " + "/".join(f"{table[k][m]['p_mpjpe']:.1f}" for m in args.methods)
-                        for k in args.conditions)
-        print(f"[{cls}] P-MPJPE ({'/'.join(args.methods)}): {row}; {time.perf_counter() - te:.0f} s",
-              flush=True)
+        record["folds"][cls] = _evaluate_class(cls, pool[cls], args, path, bases_trials, tf)
         _write(record, args.out, quiet=True)
     if args.train_only:
         return 0
