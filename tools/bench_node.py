@@ -33,7 +33,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -58,15 +59,19 @@ def _memory_kb(pid: int) -> dict[str, int]:
     return out
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
+    """The command line (the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bag", default=str(REPO / "bags" / "five_people.mcap"))
     ap.add_argument("--rate", type=float, default=30.0, help="publishing rate, Hz")
     ap.add_argument("--loops", type=int, default=3, help="passes over the bag")
     ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
                     help="extra lifter parameter (repeatable), e.g. n_starts:=10")
-    args = ap.parse_args()
+    return ap
 
+
+def _ros() -> SimpleNamespace:
+    """rclpy and the message classes the benchmark uses; exits with how to get them when missing."""
     try:
         import rclpy
         from pose_lifter_msgs.msg import Skeleton2DArray, Skeleton3DArray
@@ -75,25 +80,47 @@ def main() -> None:
         from sensor_msgs.msg import CameraInfo
     except ImportError as err:
         sys.exit(f"{err}: run `make ros` and `source ros2_ws/install/setup.bash` (make bench-node does)")
-    from pose_lifter.messages.convert import make_header, ns_to_stamp, rclpy_types, stamp_to_ns
+    return SimpleNamespace(rclpy=rclpy, Skeleton2DArray=Skeleton2DArray, Skeleton3DArray=Skeleton3DArray,
+                           QoSProfile=QoSProfile, ReliabilityPolicy=ReliabilityPolicy,
+                           qos_profile_sensor_data=qos_profile_sensor_data,
+                           deserialize_message=deserialize_message, CameraInfo=CameraInfo)
+
+
+class _Bag(NamedTuple):
+    """The bag's keypoint frames as rclpy messages, its first camera info (if any), the most people
+    in a frame, and the stamp shift of one loop over the bag (ns)."""
+
+    kp_msgs: list[Any]
+    info_msg: Any
+    n_people: int
+    span_ns: int
+
+
+def _load_bag(path: str, rate: float, ros: SimpleNamespace) -> _Bag:
+    """The ``/keypoints_2d`` and ``/camera_info`` messages of the bag at ``path``, replayed at
+    ``rate`` Hz."""
     from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
     from pose_lifter.messages.typestore import pose_lifter_typestore
     from pose_lifter.offline.bags import read_messages
 
     store = pose_lifter_typestore()
-    types = rclpy_types()
-    recorded = [x for x in read_messages(args.bag) if x.topic in (TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO)]
+    recorded = [x for x in read_messages(path) if x.topic in (TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO)]
     frames = [x for x in recorded if x.topic == TOPIC_KEYPOINTS]
     infos = [x for x in recorded if x.topic == TOPIC_CAMERA_INFO]
-    span_ns = frames[-1].stamp_ns - frames[0].stamp_ns + round(1e9 / args.rate)
+    span_ns = frames[-1].stamp_ns - frames[0].stamp_ns + round(1e9 / rate)
 
     def rclpy_msg(x: Any, cls: Any) -> Any:
-        return deserialize_message(bytes(store.serialize_cdr(x.msg, x.msgtype)), cls)
+        return ros.deserialize_message(bytes(store.serialize_cdr(x.msg, x.msgtype)), cls)
 
-    kp_msgs = [rclpy_msg(x, Skeleton2DArray) for x in frames]
-    info_msg = rclpy_msg(infos[0], CameraInfo) if infos else None
+    kp_msgs = [rclpy_msg(x, ros.Skeleton2DArray) for x in frames]
+    info_msg = rclpy_msg(infos[0], ros.CameraInfo) if infos else None
     n_people = max(len(m.skeletons) for m in kp_msgs)
+    return _Bag(kp_msgs, info_msg, n_people, span_ns)
 
+
+def _start_lifter(params: list[str]) -> tuple[subprocess.Popen[bytes], Any, int]:
+    """Start the installed lifter (extra ``params``) on a random private ROS domain, which this
+    process joins too; returns the process, its log file (stdout and stderr) and the domain."""
     domain = random.SystemRandom().randint(1, 101)
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
            "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"}
@@ -101,79 +128,81 @@ def main() -> None:
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
     log = tempfile.NamedTemporaryFile("w+b", suffix=".log", delete=False)
     cmd = [str(LIFTER), "--ros-args", "-p", "stats_period:=1.0"]
-    for p in args.param:
+    for p in params:
         cmd += ["-p", p]
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
+    return proc, log, domain
 
-    rclpy.init(domain_id=domain)
-    node = rclpy.create_node("bench_node_client")
-    answers: dict[int, tuple[float, Any]] = {}
 
-    def on_answer(msg: Any) -> None:
-        answers[stamp_to_ns(msg.header.stamp)] = (time.perf_counter(), msg)
+def _handshake(ros: SimpleNamespace, node: Any, pub: Any, answers: dict[int, tuple[float, Any]],
+               proc: subprocess.Popen[bytes], log: Any, types: Any) -> None:
+    """Discovery, then empty frames until one is answered (the node's reader matched); the answers
+    are then cleared."""
+    from pose_lifter.messages.convert import make_header
 
-    pub = node.create_publisher(Skeleton2DArray, "keypoints_2d", qos_profile_sensor_data)
-    pub_info = node.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
-    node.create_subscription(Skeleton3DArray, "skeletons_3d", on_answer,
-                             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-    try:
-        # discovery, then a handshake: empty frames until one is answered (the node's reader matched)
-        deadline = time.monotonic() + 120.0
-        probe = 1
-        while not answers:
-            if time.monotonic() > deadline or proc.poll() is not None:
-                sys.exit(f"the lifter did not answer; log:\n{Path(log.name).read_text()}")
-            if pub.get_subscription_count() > 0:
-                pub.publish(Skeleton2DArray(header=make_header(probe, "handshake", types), layout="coco17"))
-                probe += 1
-            rclpy.spin_once(node, timeout_sec=0.2)
-        answers.clear()
+    deadline = time.monotonic() + 120.0
+    probe = 1
+    while not answers:
+        if time.monotonic() > deadline or proc.poll() is not None:
+            sys.exit(f"the lifter did not answer; log:\n{Path(log.name).read_text()}")
+        if pub.get_subscription_count() > 0:
+            pub.publish(ros.Skeleton2DArray(header=make_header(probe, "handshake", types), layout="coco17"))
+            probe += 1
+        ros.rclpy.spin_once(node, timeout_sec=0.2)
+    answers.clear()
 
-        # real-time replay
-        period = 1.0 / args.rate
-        sent: dict[int, float] = {}
-        start = time.perf_counter()
-        i = 0
-        for loop in range(args.loops):
-            for msg in kp_msgs:
-                target = start + i * period
-                while (now := time.perf_counter()) < target:
-                    rclpy.spin_once(node, timeout_sec=max(0.0, min(target - now, 0.005)))
-                stamp = stamp_to_ns(msg.header.stamp) + loop * span_ns
-                msg.header.stamp = ns_to_stamp(stamp, types)
-                if info_msg is not None:
-                    info_msg.header.stamp = msg.header.stamp
-                    pub_info.publish(info_msg)
-                pub.publish(msg)
-                sent[stamp] = time.perf_counter()
-                msg.header.stamp = ns_to_stamp(stamp - loop * span_ns, types)
-                i += 1
-        # the last frames in flight
-        end = time.perf_counter() + 30.0
-        last = max(sent)
-        while last not in answers and time.perf_counter() < end:
-            rclpy.spin_once(node, timeout_sec=0.05)
-        time.sleep(1.5)  # one more statistics line
-        rclpy.spin_once(node, timeout_sec=0.05)
-        mem = _memory_kb(proc.pid)
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-        node.destroy_node()
-        rclpy.try_shutdown()
 
+def _replay(ros: SimpleNamespace, node: Any, pub: Any, pub_info: Any, bag: _Bag, rate: float, loops: int,
+            types: Any) -> dict[int, float]:
+    """Publish the bag's frames (each with the camera info) at ``rate`` Hz in real time, ``loops``
+    times, each loop's stamps shifted by the bag's span; returns each stamp's publishing time
+    (``time.perf_counter``)."""
+    from pose_lifter.messages.convert import ns_to_stamp, stamp_to_ns
+
+    period = 1.0 / rate
+    sent: dict[int, float] = {}
+    start = time.perf_counter()
+    i = 0
+    for loop in range(loops):
+        for msg in bag.kp_msgs:
+            target = start + i * period
+            while (now := time.perf_counter()) < target:
+                ros.rclpy.spin_once(node, timeout_sec=max(0.0, min(target - now, 0.005)))
+            stamp = stamp_to_ns(msg.header.stamp) + loop * bag.span_ns
+            msg.header.stamp = ns_to_stamp(stamp, types)
+            if bag.info_msg is not None:
+                bag.info_msg.header.stamp = msg.header.stamp
+                pub_info.publish(bag.info_msg)
+            pub.publish(msg)
+            sent[stamp] = time.perf_counter()
+            msg.header.stamp = ns_to_stamp(stamp - loop * bag.span_ns, types)
+            i += 1
+    return sent
+
+
+def _stop(proc: subprocess.Popen[bytes], node: Any, ros: SimpleNamespace) -> None:
+    """SIGINT to the lifter (killed if it has not ended in 10 s); this process leaves ROS."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    node.destroy_node()
+    ros.rclpy.try_shutdown()
+
+
+def _report(args: argparse.Namespace, bag: _Bag, answers: dict[int, tuple[float, Any]],
+            sent: dict[int, float], log: Any, mem: dict[str, int]) -> None:
+    """Print the frames answered, the solve times, the latencies and the node's memory."""
     text = Path(log.name).read_text(errors="replace")
     warm = [s.solve_time * 1e3 for _, a in answers.values() for s in a.skeletons if s.warm_started]
     cold = [s.solve_time * 1e3 for _, a in answers.values() for s in a.skeletons if not s.warm_started]
     e2e = [(t - sent[k]) * 1e3 for k, (t, _) in answers.items() if k in sent]
     stats = [line for line in text.splitlines() if "frames (" in line]
     cb = [float(v) for line in stats for v in re.findall(r"latency median ([\d.]+) ms", line)]
-    print(f"bag {Path(args.bag).name}: {len(kp_msgs)} frames x {args.loops} loops at {args.rate:g} Hz, "
-          f"{n_people} people per frame; lifter params {args.param or 'defaults'}")
+    print(f"bag {Path(args.bag).name}: {len(bag.kp_msgs)} frames x {args.loops} loops at {args.rate:g} Hz, "
+          f"{bag.n_people} people per frame; lifter params {args.param or 'defaults'}")
     print(f"frames answered: {len(answers)} of {len(sent)} published "
           f"({len(warm) + len(cold)} person-frames lifted)")
     print(f"solve per person-frame, warm:  {_percentiles(warm)}")
@@ -185,6 +214,42 @@ def main() -> None:
         print("  " + line.split("]: ", 1)[-1])
     print(f"node memory: peak RSS {mem.get('VmHWM', 0) / 1024:.0f} MB, RSS at the end "
           f"{mem.get('VmRSS', 0) / 1024:.0f} MB")
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    ros = _ros()
+    from pose_lifter.messages.convert import rclpy_types, stamp_to_ns
+
+    types = rclpy_types()
+    bag = _load_bag(args.bag, args.rate, ros)
+    proc, log, domain = _start_lifter(args.param)
+
+    ros.rclpy.init(domain_id=domain)
+    node = ros.rclpy.create_node("bench_node_client")
+    answers: dict[int, tuple[float, Any]] = {}
+
+    def on_answer(msg: Any) -> None:
+        answers[stamp_to_ns(msg.header.stamp)] = (time.perf_counter(), msg)
+
+    pub = node.create_publisher(ros.Skeleton2DArray, "keypoints_2d", ros.qos_profile_sensor_data)
+    pub_info = node.create_publisher(ros.CameraInfo, "camera_info", ros.qos_profile_sensor_data)
+    node.create_subscription(ros.Skeleton3DArray, "skeletons_3d", on_answer,
+                             ros.QoSProfile(depth=100, reliability=ros.ReliabilityPolicy.RELIABLE))
+    try:
+        _handshake(ros, node, pub, answers, proc, log, types)
+        sent = _replay(ros, node, pub, pub_info, bag, args.rate, args.loops, types)
+        # the last frames in flight
+        end = time.perf_counter() + 30.0
+        last = max(sent)
+        while last not in answers and time.perf_counter() < end:
+            ros.rclpy.spin_once(node, timeout_sec=0.05)
+        time.sleep(1.5)  # one more statistics line
+        ros.rclpy.spin_once(node, timeout_sec=0.05)
+        mem = _memory_kb(proc.pid)
+    finally:
+        _stop(proc, node, ros)
+    _report(args, bag, answers, sent, log, mem)
 
 
 if __name__ == "__main__":
