@@ -2,7 +2,7 @@
 
     git worktree add --detach /tmp/before <commit>
     OMP_NUM_THREADS=1 .venv/bin/python tools/bench_lift.py out/many36.mcap \\
-        --before /tmp/before --reps 3 [--modes learned hybrid] [--workers 1 0]
+        --before /tmp/before --reps 3 [--modes learned hybrid] [--workers 1 0] [--variant L1NAWS]
 
 Runs the installed ``pose-lifter`` of this virtualenv with ``PYTHONPATH`` pointing at the
 ``before`` checkout's package (its code, this environment) and at this checkout's, alternating
@@ -28,10 +28,11 @@ from pathlib import Path
 PACKAGE = Path("ros2_ws/src/pose_lifter")
 
 
-def run(package: Path, bag: str, mode: str, workers: int) -> tuple[float, float, int]:
-    """(wall seconds, CPU seconds, poses lifted) of one ``pose-lifter lift`` of ``bag``."""
+def run(package: Path, bag: str, mode: str, workers: int, variant: str = "full") -> tuple[float, float, int]:
+    """(wall seconds, CPU seconds, poses lifted) of one ``pose-lifter lift`` of ``bag`` (the paper's
+    ``variant``)."""
     cmd = [str(Path(sys.executable).parent / "pose-lifter"), "lift", bag, "--out", "/tmp/bench_lift.mcap",
-           "--overwrite", "--quiet", "--mode", mode]
+           "--overwrite", "--quiet", "--mode", mode, "--variant", variant]
     if workers:
         cmd += ["--workers", str(workers)]
     env = dict(os.environ, PYTHONPATH=str(package), OMP_NUM_THREADS="1")
@@ -53,12 +54,13 @@ def main() -> int:
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--modes", nargs="+", default=["learned", "hybrid"])
     ap.add_argument("--workers", nargs="+", type=int, default=[1, 0])
+    ap.add_argument("--variant", default="full", help="the paper's variant (the paper mode's ablations)")
     ap.add_argument("--no-warm-up", action="store_true")
     args = ap.parse_args()
     codes = {"before": args.before / PACKAGE, "after": args.after / PACKAGE}
     if not args.no_warm_up:
         for package in codes.values():
-            run(package, args.bag, args.modes[0], 1)  # compiles the checkout's kernels if needed
+            run(package, args.bag, args.modes[0], 1, args.variant)  # compiles its kernels if needed
     print(f"{'mode':8s} {'workers':>7s} {'code':6s} {'median s':>9s} {'poses/s':>8s} {'CPU s':>7s}  runs (s)",
           flush=True)
     for mode in args.modes:
@@ -68,7 +70,7 @@ def main() -> int:
             poses = 0
             for _ in range(args.reps):
                 for key, package in codes.items():
-                    wall, cpu, poses = run(package, args.bag, mode, workers)
+                    wall, cpu, poses = run(package, args.bag, mode, workers, args.variant)
                     times[key].append(wall)
                     cpus[key].append(cpu)
             for key in codes:
