@@ -6,13 +6,14 @@ Usage (ROS sourced: ``source ros2_ws/install/setup.bash``)::
     .venv/bin/python tools/node_outputs.py dump OUT.json [--src DIR] [--frames 40]
     .venv/bin/python tools/node_outputs.py compare A.json B.json
 
-``dump`` runs :class:`pose_lifter.ros.node.LifterNode` in-process (``--src``: the directory that holds
-the ``pose_lifter`` package to import, e.g. an old commit's ``ros2_ws/src/pose_lifter`` from
-``git archive``), feeds it the first ``--frames`` keypoint frames (and the camera_info) of every
-committed bag in ``mode`` hybrid and paper through its callbacks, and writes every
-``Skeleton3DArray`` and ``MarkerArray`` it publishes as JSON, field by field, floats as exact hex
-strings (``solve_time`` zeroed: a timing). ``compare`` walks two dumps field by field, floats by
-bit pattern (-0.0 is not 0.0), prints the first differences and the largest float difference.
+``dump`` runs :class:`pose_lifter.ros.node.LifterNode` in-process (``--src``: the directory that
+holds the ``pose_lifter`` package to import, e.g. an old commit's ``ros2_ws/src/pose_lifter`` from
+``git archive``), feeds it the first ``--frames`` keypoint frames (serialised, as its
+subscription hands them over; and the camera_info) of every committed bag in ``mode`` hybrid and
+paper through its callbacks, and writes every ``Skeleton3DArray`` and ``MarkerArray`` it
+publishes as JSON, field by field, floats as exact hex strings (``solve_time`` zeroed: a timing).
+``compare`` walks two dumps field by field, floats by bit pattern (-0.0 is not 0.0), prints the
+first differences and the largest float difference.
 (The serialised CDR bytes are no proof: rclpy leaves the alignment padding uninitialised, so two
 runs of one build differ there.)
 """
@@ -70,7 +71,12 @@ def dump(out: Path, src: Path | None, frames: int) -> None:
                 elif raw.msgtype == "pose_lifter_msgs/msg/Skeleton2DArray":
                     if n == frames:
                         break
-                    node.lift_frame(deserialize_message(raw.data, types.Skeleton2DArray), time.perf_counter())
+                    # the serialised frame, as the subscription hands it to a node that reads it
+                    # (LifterNode.read_frame); else the rclpy message it subscribes to
+                    data = bytes(raw.data)
+                    frame = (data if hasattr(node, "read_frame")
+                             else deserialize_message(data, types.Skeleton2DArray))
+                    node.lift_frame(frame, time.perf_counter())
                     n += 1
             node.destroy_node()
     for _, kind, msg in published:
