@@ -9,9 +9,8 @@ weak-perspective ambiguity: the same 2D, reflected depth) started.
 
 With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`),
 with or without limbs; the cvxpy references and bases whose limb map is not onto (the paper's
-inner ADM as the alpha-step) run in the Python loop of :meth:`Runs.run_steps`, on the same
-objective terms and stopping rule (:func:`pose_lifter.core.solve.run_kernel._run_objective`,
-``_alternation_stops``).
+inner ADM as the alpha-step) run the Python loop of :mod:`pose_lifter.core.reference.runs`, the
+kernel's reference, on the same objective terms and stopping rule.
 """
 
 from __future__ import annotations
@@ -29,6 +28,7 @@ from ..model.skeleton import N_JOINTS, normalise_pose_flat
 from ..numeric.jit import njit
 from ..numeric.records import StepSettings
 from ..options import LifterOptions
+from ..reference.runs import alternation_loop
 from ..results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
 from ..solve.alpha.lifted_admm import QStepFn
 from ..solve.camera import camera_step_trusted, initial_camera
@@ -37,8 +37,6 @@ from ..solve.run_kernel import (
     RunCall,
     RunOut,
     RunStatus,
-    _alternation_stops,
-    _run_objective,
     _stack_camera_data,
 )
 from ..solve.settings import step_settings
@@ -197,8 +195,8 @@ class Runs:
         alternation (the hybrid objective adds the prior's depth rows to the camera step's).
 
         A solve (:mod:`pose_lifter.core.lift.batch`): the compiled run is yielded as one
-        :class:`~pose_lifter.core.solve.run_kernel.RunCall`; the other solvers' Python loop runs here
-        and yields nothing."""
+        :class:`~pose_lifter.core.solve.run_kernel.RunCall`; the other solvers' run is the Python
+        loop (:func:`pose_lifter.core.reference.runs.alternation_loop`), which yields nothing."""
         o = self.options
         n_alt = o.max_alternations if max_alternations is None else max_alternations
         data = self.camera_data(xn, w, prior)
@@ -210,33 +208,9 @@ class Runs:
                     raise out
             assert isinstance(out, RunOut)
             return self._compiled_run(out, start)
-        if start is not None:
-            alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
-            it0, history = start.n_iter, list(start.history)
-        else:
-            alpha = alpha0
-            cam = self.camera(data, self.model.pose(alpha), cam0)
-            best, prev, it0, history = None, np.inf, 0, []
-        converged = False
-        it = it0
-        th = o.theta if o.method.sparsity else 0.0
-        xp, pw, _ = prior_operands(self.model, prior)
-        for it in range(it0 + 1, n_alt + 1):
-            pres = self.pose(xn, cam.camera, w, alpha, pose_max_iter, prior)
-            alpha = pres.alpha
-            cam = self.camera(data, pres.pose, cam.camera)
-            obj = _run_objective(cam.objective, alpha, th, np.ascontiguousarray(pres.pose).reshape(-1),
-                                 np.ascontiguousarray(cam.camera.projection), xp, pw)
-            history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),
-                                       SolveInfo(pres.objective, pres.n_iter, pres.converged)))
-            if best is None or obj < best.objective:
-                best = Run(pres, cam, obj, it, False, tuple(history))
-            if _alternation_stops(float(prev), obj, o.alternation_tol):
-                converged = True
-                break
-            prev = obj
-        assert best is not None
-        return Run(best.pose, best.camera, best.objective, it, converged, tuple(history))
+        loop = alternation_loop(self, xn, w, data, (alpha0, cam0) if start is None else start, n_alt,
+                                pose_max_iter, prior)
+        return Run(*loop)
 
     def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64],
                        data: tuple[NDArray[np.float64], NDArray[np.float64], bool],

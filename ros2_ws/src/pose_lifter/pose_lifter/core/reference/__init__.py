@@ -17,7 +17,8 @@ or ``"l2"`` (weighted squared Euclidean norms). The camera is scaled orthographi
 
 One module per subproblem: :mod:`.camera` (the camera step), :mod:`.alpha` (the Q-step, the
 SDP relaxation and a local solver of the alpha-step), :mod:`.pose` (the pose step, convex and
-limb-constrained); :mod:`._common` holds what they share, among it the solvers' settings
+limb-constrained), :mod:`.runs` (a run of alternations in Python around the steps, the compiled
+run's reference); :mod:`._common` holds what they share, among it the solvers' settings
 (:data:`TOLERANCES`). cvxpy is imported inside the functions: the core imports without it.
 The tests' tolerances (fast path vs these references) are in ``tests/tolerances.py``.
 """
