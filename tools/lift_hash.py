@@ -20,12 +20,12 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
   :func:`pose_lifter.offline.lift.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.solve.pose_step.pose_step` calls recorded while lifting the
-  first bag in each mode through ``Runs.run``'s Python loop (the compiled run calls no Python
+  first bag in each mode through the Python run loop (``Runs.compiled`` False:
+  :func:`pose_lifter.core.reference.runs.alternation_loop`; the compiled run calls no Python
   ``pose_step``; the loop runs the same steps, ``tests/core/solve/test_run_kernel.py``) (every
-  ``--record-every``-th call, up to ``--record`` per mode),
-  replayed with the recorded settings, without the prior's rows and without limb constraints (the
-  Python loop's linear alpha-step): their objectives, limb violations, iteration counts and
-  coefficients.
+  ``--record-every``-th call, up to ``--record`` per mode), replayed with the recorded settings,
+  without the prior's rows and without limb constraints (the compiled linear alpha-step): their
+  objectives, limb violations, iteration counts and coefficients.
 
 Run it before a refactor and after it, on one machine and install: the lines must be identical.
 It is a before/after tool, not a reference: the tracked solves are chaotic in round-off (a

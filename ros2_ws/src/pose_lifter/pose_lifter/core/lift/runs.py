@@ -119,9 +119,9 @@ class Runs:
         o = options
         #: whether a run is the compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`): both steps'
         #: ADMs and a compiled alpha-step (the linear one without limbs, the Riemannian one on an
-        #: onto limb map); otherwise the Python loop of :meth:`run_steps` (the cvxpy references,
-        #: the paper's inner ADM on smaller bases; the tests set it False to run the loop on the
-        #: kernel's problems as its reference)
+        #: onto limb map); otherwise the Python loop (:mod:`pose_lifter.core.reference.runs`: the
+        #: cvxpy references, the paper's inner ADM on smaller bases; the tests set it False to run
+        #: the loop on the kernel's problems as its reference)
         self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
                          and (not o.method.limbs or model.limb_coordinates is not None))
         #: the steps' settings as the kernel takes them (made on the first compiled run)
