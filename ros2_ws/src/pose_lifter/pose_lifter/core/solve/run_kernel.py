@@ -17,9 +17,9 @@ pose, stacked twice then); it keeps the lowest-``F`` alternation and stops when
 Applies with ``camera_solver == pose_solver == "admm"`` and a compiled alpha-step: the Riemannian
 one (limbs on, bases whose limb map is onto) or the linear one (the variants without limbs); every
 step starts its multipliers at zero (the kernel keeps none). The cvxpy references and the paper's
-inner ADM (limbs on smaller bases) run in the Python loop of
-:meth:`~pose_lifter.core.lift.runs.Runs.run_steps`, which calls the same objective terms and
-stopping rule.
+inner ADM (limbs on smaller bases) run in the Python loop,
+:func:`pose_lifter.core.reference.runs.alternation_loop` (the kernel's reference), which calls the
+same objective terms and stopping rule.
 """
 
 from __future__ import annotations
