@@ -28,11 +28,11 @@ from ..model.skeleton import N_JOINTS, normalise_pose_flat
 from ..numeric.jit import njit
 from ..numeric.records import StepSettings
 from ..options import LifterOptions
-from ..reference.runs import alternation_loop
+from ..reference.runs import ColdStart, alternation_loop
 from ..results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
 from ..solve.alpha.lifted_admm import QStepFn
 from ..solve.camera import camera_step_trusted, initial_camera
-from ..solve.pose_step import PriorRows, pose_step, prior_operands
+from ..solve.pose_step import PriorRows, compiled_pose_step, pose_step, prior_operands
 from ..solve.run_kernel import (
     RunCall,
     RunOut,
@@ -122,8 +122,8 @@ class Runs:
         #: onto limb map); otherwise the Python loop (:mod:`pose_lifter.core.reference.runs`: the
         #: cvxpy references, the paper's inner ADM on smaller bases; the tests set it False to run
         #: the loop on the kernel's problems as its reference)
-        self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm" and qstep_fn is None
-                         and (not o.method.limbs or model.limb_coordinates is not None))
+        self.compiled = (o.camera_solver == "admm" and o.pose_solver == "admm"
+                         and compiled_pose_step(o, model, qstep_fn))
         #: the steps' settings as the kernel takes them (made on the first compiled run)
         self._settings: StepSettings | None = None
         #: threads over which a round of runs is split (:func:`pose_lifter.core.solve.run_kernel.run_calls`)
@@ -208,7 +208,7 @@ class Runs:
                     raise out
             assert isinstance(out, RunOut)
             return self._compiled_run(out, start)
-        loop = alternation_loop(self, xn, w, data, (alpha0, cam0) if start is None else start, n_alt,
+        loop = alternation_loop(self, xn, w, data, ColdStart(alpha0, cam0) if start is None else start, n_alt,
                                 pose_max_iter, prior)
         return Run(*loop)
 

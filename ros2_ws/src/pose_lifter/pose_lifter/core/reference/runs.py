@@ -8,23 +8,24 @@ as the kernel (:func:`~pose_lifter.core.solve.run_kernel._run_objective`,
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..model.pose_model import PoseModel
 from ..options import LifterOptions
 from ..results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
 from ..solve.pose_step import PriorRows, prior_operands
 from ..solve.run_kernel import _alternation_stops, _run_objective
 
-__all__ = ["AlternationSteps", "LoopRun", "alternation_loop"]
+__all__ = ["AlternationSteps", "ColdStart", "ContinuedRun", "LoopRun", "alternation_loop"]
 
 
 class AlternationSteps(Protocol):
     """What the loop runs: a lifter's camera and pose steps (:class:`pose_lifter.core.lift.runs.Runs`)."""
 
-    model: Any
+    model: PoseModel
     options: LifterOptions
 
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
@@ -32,6 +33,28 @@ class AlternationSteps(Protocol):
 
     def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64], alpha0: NDArray[np.float64],
              max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult: ...
+
+
+class ColdStart(NamedTuple):
+    """A new run's start: coefficients and, optionally, a camera (else the camera step's own)."""
+
+    alpha0: NDArray[np.float64]  #: (k,)
+    cam0: Camera | None
+
+
+class ContinuedRun(Protocol):
+    """A run to continue (:class:`pose_lifter.core.lift.runs.Run`, :class:`LoopRun`)."""
+
+    @property
+    def pose(self) -> PoseResult: ...
+    @property
+    def camera(self) -> CameraResult: ...
+    @property
+    def objective(self) -> float: ...
+    @property
+    def n_iter(self) -> int: ...
+    @property
+    def history(self) -> tuple[Alternation, ...]: ...
 
 
 class LoopRun(NamedTuple):
@@ -47,21 +70,22 @@ class LoopRun(NamedTuple):
 
 
 def alternation_loop(steps: AlternationSteps, xn: NDArray[np.float64], w: NDArray[np.float64],
-                     data: tuple[NDArray[np.float64], NDArray[np.float64], bool], start: Any,
-                     n_alt: int, pose_max_iter: int | None, prior: PriorRows | None) -> LoopRun:
+                     data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
+                     start: ColdStart | ContinuedRun, n_alt: int, pose_max_iter: int | None,
+                     prior: PriorRows | None) -> LoopRun:
     """Alternations up to ``n_alt`` of ``steps`` on the normalised 2D ``xn`` (12, 2), weights
     ``w`` (12,) and the camera step's ``data`` (``Runs.camera_data``), minimising the run's
     objective ``F`` (the camera step's objective + ``theta ||alpha||_1`` + the prior's depth rows,
-    the compiled run's): from ``start``, either ``(alpha0 (k,), cam0 or None)`` (a camera step
-    for ``alpha0``'s pose first) or a previous run to continue (a ``Run``: its best alternation,
-    objective and history). Keeps the lowest-``F`` alternation; stops when ``F`` no longer falls by
-    ``alternation_tol`` relative (converged) or at the cap."""
+    the compiled run's): from ``start``, a :class:`ColdStart` (a camera step for ``alpha0``'s
+    pose first) or a previous run to continue (its best alternation, objective and history).
+    Keeps the lowest-``F`` alternation; stops when ``F`` no longer falls by ``alternation_tol``
+    relative (converged) or at the cap."""
     o = steps.options
-    if isinstance(start, tuple):
-        alpha, cam0 = start
-        cam = steps.camera(data, steps.model.pose(alpha), cam0)
-        best: LoopRun | None = None
-        prev, it0, history = np.inf, 0, []
+    best: ContinuedRun | None
+    if isinstance(start, ColdStart):
+        alpha = start.alpha0
+        cam = steps.camera(data, steps.model.pose(alpha), start.cam0)
+        best, prev, it0, history = None, np.inf, 0, []
     else:
         alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
         it0, history = start.n_iter, list(start.history)

@@ -238,7 +238,10 @@ def pose_step(
     problem = PoseProblem(c64(points, dtype=np.float64), c64(weights, dtype=np.float64),
                           c64(projection, dtype=np.float64), c64(translation, dtype=np.float64), xp, pw, rad)
     with diverged_as_solver_error("pose step"):
-        if _is_compiled(o, model, qstep_fn, prior is not None):
+        if prior is not None and not (o.method.limbs and compiled_pose_step(o, model, qstep_fn)):
+            raise InvalidInputError("a prior term needs a variant with limbs, bases whose limb map is onto "
+                                    "(>= 24 basis directions) and the closed-form Q-step")
+        if compiled_pose_step(o, model, qstep_fn):
             return _compiled(problem, model, o, alpha, max_iter, duals)
         p = problem
         rows = _pose_rows(p.points, p.projection, p.translation, p.weights, model.kernel_arrays, xp, pw)
@@ -247,17 +250,12 @@ def pose_step(
         return _adm(rows, model, alpha.copy(), step, max_iter, o, duals)
 
 
-def _is_compiled(o: LifterOptions, model: PoseModel, qstep_fn: QStepFn | None, with_prior: bool) -> bool:
-    """Whether :func:`pose_step` is the compiled kernel: the linear alpha-step (no limbs) or the
-    Riemannian one (limbs on an onto limb map, unless the cvxpy reference Q-step ``qstep_fn`` asks
-    for the paper's inner ADM). Raises :class:`InvalidInputError` for a prior term without the
-    Riemannian step."""
-    limbs = o.method.limbs
-    compiled = not limbs or (model.limb_coordinates is not None and qstep_fn is None)
-    if with_prior and not (compiled and limbs):
-        raise InvalidInputError("a prior term needs a variant with limbs, bases whose limb map is onto "
-                                "(>= 24 basis directions) and the closed-form Q-step")
-    return compiled
+def compiled_pose_step(options: LifterOptions, model: PoseModel, qstep_fn: QStepFn | None = None) -> bool:
+    """Whether the pose step of ``options`` on ``model`` is the compiled kernel (:func:`pose_step`,
+    and the compiled run's): the linear alpha-step (no limbs) or the Riemannian one (limbs on an
+    onto limb map, unless the cvxpy reference Q-step ``qstep_fn`` asks for the paper's inner ADM,
+    which runs in the Python loop)."""
+    return not options.method.limbs or (model.limb_coordinates is not None and qstep_fn is None)
 
 
 def _alpha_step(model: PoseModel, mus: NDArray[np.float64], o: LifterOptions, qstep_fn: QStepFn | None
