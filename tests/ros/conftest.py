@@ -32,6 +32,11 @@ PARAMS_YAML = INSTALL / "pose_lifter" / "share" / "pose_lifter" / "config" / "li
 DISCOVERY_TIMEOUT = 120.0
 ANSWER_TIMEOUT = 180.0
 SHUTDOWN_TIMEOUT = 10.0
+#: Seconds after which an idempotent service call is sent again. A server may drop its response
+#: when it has not yet discovered the client's response reader (rmw_fastrtps: "failed to send
+#: response (timeout): client will not receive response", ros2/ros2#1253); the client then waits
+#: for ever, although ``service_is_ready()`` was true.
+RESEND_AFTER = 5.0
 #: frame_id of the empty frames of the start-up handshake (see GraphClient._handshake).
 HANDSHAKE_FRAME = "pose_lifter_test_handshake"
 
@@ -296,19 +301,32 @@ class GraphClient:
 
         req = SetParameters.Request(parameters=[Parameter(k, value=v).to_parameter_msg()
                                                 for k, v in values.items()])
-        return list(self._call(self.set_client, req).results)
+        return list(self.call(self.set_client, req).results)
 
     def get_parameters(self, *names: str) -> dict[str, Any]:
         from rcl_interfaces.srv import GetParameters
         from rclpy.parameter import parameter_value_to_python
 
-        resp = self._call(self.get_client, GetParameters.Request(names=list(names)))
+        resp = self.call(self.get_client, GetParameters.Request(names=list(names)))
         return {n: parameter_value_to_python(v) for n, v in zip(names, resp.values, strict=True)}
 
-    def _call(self, client: Any, request: Any) -> Any:
-        future = client.call_async(request)
-        self.spin_until(future.done, ANSWER_TIMEOUT, f"service {client.srv_name}")
-        return future.result()
+    def call(self, client: Any, request: Any, *, idempotent: bool = True) -> Any:
+        """The first answer to ``request``; idempotent requests are sent again every
+        ``RESEND_AFTER`` s until one is answered (see ``RESEND_AFTER``)."""
+        futures = [client.call_async(request)]
+        deadline = time.monotonic() + ANSWER_TIMEOUT
+        resend = time.monotonic() + RESEND_AFTER
+        while not any(f.done() for f in futures):
+            now = time.monotonic()
+            if now > deadline:
+                log = self.lifter.log()[-3000:] if self.lifter is not None else ""
+                pytest.fail(f"timed out after {ANSWER_TIMEOUT} s waiting for service {client.srv_name} "
+                            f"({len(futures)} requests sent); lifter log tail:\n{log}")
+            if idempotent and now > resend:
+                futures.append(client.call_async(request))
+                resend = now + RESEND_AFTER
+            self.executor.spin_once(timeout_sec=0.05)
+        return next(f for f in futures if f.done()).result()
 
 
 @pytest.fixture

@@ -8,12 +8,21 @@ from __future__ import annotations
 import signal
 import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 
-from .conftest import DISCOVERY_TIMEOUT, INSTALL, REPO, SHUTDOWN_TIMEOUT, GraphClient, LifterProcess
+from .conftest import (
+    ANSWER_TIMEOUT,
+    DISCOVERY_TIMEOUT,
+    INSTALL,
+    REPO,
+    RESEND_AFTER,
+    SHUTDOWN_TIMEOUT,
+    GraphClient,
+    LifterProcess,
+)
 from .test_lifter_graph import CHEAP, good_frame
 
 pytestmark = pytest.mark.ros
@@ -57,23 +66,38 @@ class Lifecycle:
     def state(self) -> str:
         from lifecycle_msgs.srv import GetState
 
-        return str(self.graph._call(self.get, GetState.Request()).current_state.label)
+        return str(self.graph.call(self.get, GetState.Request()).current_state.label)
 
     def transition(self, label: str) -> bool:
+        """Request one transition; True when it succeeded.
+
+        A transition is not sent twice. When its answer is late, the state is read instead: a
+        server may drop an answer (see ``conftest.RESEND_AFTER``), and reaching the transition's
+        goal state is its success."""
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState
 
         ids = {"configure": Transition.TRANSITION_CONFIGURE, "activate": Transition.TRANSITION_ACTIVATE,
                "deactivate": Transition.TRANSITION_DEACTIVATE, "cleanup": Transition.TRANSITION_CLEANUP,
                "shutdown": Transition.TRANSITION_INACTIVE_SHUTDOWN}
+        goal = {"configure": "inactive", "activate": "active", "deactivate": "inactive",
+                "cleanup": "unconfigured", "shutdown": "finalized"}
         req = ChangeState.Request()
         req.transition.id = ids[label]
-        return bool(self.graph._call(self.change, req).success)
+        future = self.change.call_async(req)
+        deadline = time.monotonic() + ANSWER_TIMEOUT
+        while not future.done():
+            if time.monotonic() > deadline:
+                pytest.fail(f"no answer to the {label} transition after {ANSWER_TIMEOUT} s")
+            settle(self.graph, RESEND_AFTER, until=future.done)
+            if not future.done() and self.state() == goal[label]:
+                return True
+        return bool(future.result().success)
 
 
-def settle(graph: GraphClient, seconds: float) -> None:
+def settle(graph: GraphClient, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
     end = time.monotonic() + seconds
-    while time.monotonic() < end:
+    while time.monotonic() < end and not until():
         graph.executor.spin_once(timeout_sec=0.05)
 
 

@@ -121,7 +121,7 @@ def test_declared_descriptors_are_the_option_metadata(start_lifter: Any, graph: 
     client = graph.node.create_client(DescribeParameters, f"{graph.lifter_name}/describe_parameters")
     graph.spin_until(client.service_is_ready, 30.0, "describe_parameters")
     names = list(NODE_OPTIONS)
-    described = graph._call(client, DescribeParameters.Request(names=names)).descriptors
+    described = graph.call(client, DescribeParameters.Request(names=names)).descriptors
     defaults = {f.name: f.default for f in dataclasses.fields(LifterOptions)}
     ros_type = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
                 float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
