@@ -1,8 +1,8 @@
 """CPU cost of the lifter node's frame callback, in process, without transport or queueing.
 
     source ros2_ws/install/setup.bash
-    .venv/bin/python tools/node_callback.py [--bag out/crowd30.mcap] [--passes 4] [--profile N]
-        [--param NAME:=VALUE ...]
+    .venv/bin/python tools/node_callback.py [--bag out/crowd30.mcap] [--passes 4]
+        [--profile N [--sort tottime]] [--param NAME:=VALUE ...]
 
 Builds :class:`pose_lifter.ros.node.LifterNode` in this process, gives it the bag's first
 ``camera_info`` and lifts every ``/keypoints_2d`` message as its callback does
@@ -12,7 +12,8 @@ warm the tracks up; the others are timed: per frame, from its serialised bytes (
 middleware hands the node) to the frame's answers published (reading the frame, the solve, the
 messages, the markers and the REP-155 outputs; a node without ``read_frame``, which subscribes to
 rclpy messages, is timed with rclpy's deserialisation of the same bytes). With ``--profile N``,
-prints the N entries of the largest cumulative time of a cProfile of the timed passes instead.
+prints the N entries of the largest cumulative time (``--sort tottime``: time in the function
+itself) of a cProfile of the timed passes too.
 Run it from two checkouts (``PYTHONPATH=<checkout>/ros2_ws/src/pose_lifter``) to compare them.
 """
 
@@ -36,6 +37,8 @@ def main() -> None:
     ap.add_argument("--bag", default=str(REPO / "bags" / "five_people.mcap"))
     ap.add_argument("--passes", type=int, default=4, help="passes over the bag, 2 of them warm-up")
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="print a profile's top N")
+    ap.add_argument("--sort", choices=("cumtime", "tottime"), default="cumtime",
+                    help="the profile's order: time with callees, or in the function itself")
     ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE")
     args = ap.parse_args()
     try:
@@ -92,7 +95,7 @@ def main() -> None:
     times = [t for k in range(2, args.passes) for t in one_pass(k)]
     if profiler is not None:
         profiler.disable()
-        pstats.Stats(profiler).sort_stats("cumtime").print_stats(args.profile)
+        pstats.Stats(profiler).sort_stats(args.sort).print_stats(args.profile)
     people = max(len(f.skeletons) for f in frames)
     ms = 1e3 * np.asarray(times)
     print(f"{Path(args.bag).name}: {people} people, {ms.size} frames timed: callback median "
