@@ -56,25 +56,23 @@ START_CODES = {StartKind.WARM: -1, StartKind.MIRRORED: -2, StartKind.PRIOR: -3, 
 
 
 def _wrapped(orig: Any) -> Any:
-    def starts(fit: Any, x: Any, xn: Any, w: Any, norm: Any, warm: Any, cam0: Any, track: Any) -> Any:
-        out = yield from orig(fit, x, xn, w, norm, warm, cam0, track)  # a solve: its calls pass through
+    def starts_people(fit: Any, people: Any) -> Any:
+        out = yield from orig(fit, people)  # a solve: its calls pass through
+        p = people[-1]  # this tool lifts one person at a time
         CAPTURE["fit"] = fit
-        CAPTURE["args"] = (x, xn, w, norm, warm, cam0, track)
-        CAPTURE["out"] = out
+        CAPTURE["person"] = p
+        CAPTURE["args"] = (p.x, p.xn, p.w, p.norm, p.warm, p.cam0, p.track)
+        CAPTURE["out"] = out[-1]
         return out
-    return starts
+    return starts_people
 
 
 def _oracle(lifter: Lifter, truth_c: NDArray[np.float64], scale_px: float) -> dict[str, float]:
     """The truth's start under the frame's captured prior rows: objectives at the default caps and
     at convergence, and their errors."""
-    x, xn, _, norm, warm, cam0, track = CAPTURE["args"]
+    _, xn, _, norm, _, cam0, _ = CAPTURE["args"]
     w_after = CAPTURE["out"].weights
-    prev = None
-    if warm is not None and cam0 is not None:
-        pv = lifter.model.pose(warm.alpha)
-        prev = np.column_stack([cam0.project(pv), cam0.scale * (pv - pv.mean(0)) @ cam0.rotation[2]])
-    prior, _ = lifter.runs.solve(CAPTURE["fit"].rows(x, w_after, norm, track, prev))
+    prior, _ = lifter.runs.solve(CAPTURE["fit"].rows_steps(CAPTURE["person"], w_after))
     # the truth in the normalised frame: its image positions there, depth at the same scale
     target = np.empty((12, 3))
     target[:, :2] = xn
@@ -135,7 +133,7 @@ def _diagnosed_lifter(args: argparse.Namespace, opts: LifterOptions) -> Lifter:
     proportions (``CAPTURE["true_props"]``)."""
     lifter = Lifter(PoseBases.load(args.bases or default_bases_path("hybrid")), opts)
     lifter.warm_up()
-    hybrid_mod.PriorFit.starts = _wrapped(hybrid_mod.PriorFit.starts)  # type: ignore[method-assign]
+    hybrid_mod.PriorFit.starts_people = _wrapped(hybrid_mod.PriorFit.starts_people)  # type: ignore[method-assign]
     if args.true_limbs:
         from pose_lifter.core.track import state as track_mod
         def true_props(self: Any, image: bool = False) -> Any:

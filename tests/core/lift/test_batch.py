@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions
 from pose_lifter.core.errors import SolverError
-from pose_lifter.core.lift.batch import Failed, PriorCall, gather, outcomes, solve
+from pose_lifter.core.lift.batch import Failed, LiftCall, PriorCall, gather, outcomes, solve
 from pose_lifter.core.solve.run_kernel import RunCall, RunOut, RunStatus, _run_kernel, run_calls
 from pose_lifter.core.track.policy import TrackedLift, TrackPolicy
 from synthetic_poses import synthetic_poses
@@ -80,7 +80,7 @@ def _calls(lifter: Lifter, n: int) -> list[RunCall]:
     km, st = lifter.model.kernel_arrays, lifter.runs.settings
     calls: list[RunCall] = []
     for p in range(n):
-        steps = lifter.lift_steps(points[0, p], conf[0, p])
+        steps = lifter.people_steps([LiftCall(lifter, points[0, p], conf[0, p], None, None)])
         first = next(steps)
         assert [type(c) for c in first] == [PriorCall]
         batch = steps.send(outcomes(first, km, st))

@@ -10,6 +10,7 @@ changed sign, bound or index breaks by far more than FUSED_RUN_REL."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import pytest
 import tolerances as tol
 from pose_lifter.core.lift.batch import Steps
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.lift.runs import Run, Runs
+from pose_lifter.core.lift.runs import Run, Runs, RunSpec
 from pose_lifter.core.model.pose_model import PoseModel
 from pose_lifter.core.options import VARIANTS, LifterOptions
 from pose_lifter.core.solve.pose_kernel import _depth_row, _depth_term, _sum_abs
@@ -33,8 +34,8 @@ Call = tuple[tuple[Any, ...], dict[str, Any]]
 
 
 def _recorded_runs(mode: str, bag: str, n_messages: int, variant: str = "full") -> tuple[Lifter, list[Call]]:
-    """The runs (``Runs.run_steps`` calls) of a tracked lift of a bag's first messages (through
-    the loop)."""
+    """The runs (``Runs.runs_steps``' specs, as ``Runs.run`` arguments) of a tracked lift of a
+    bag's first messages (through the loop)."""
     from pose_lifter.offline.bags import read_messages
 
     kps, infos = [], []
@@ -47,13 +48,15 @@ def _recorded_runs(mode: str, bag: str, n_messages: int, variant: str = "full") 
                     else LifterOptions())
     lifter.runs.compiled = False
     calls: list[Call] = []
-    original = lifter.runs.run_steps
+    original = lifter.runs.runs_steps
 
-    def recorded(*args: Any, **kwargs: Any) -> Steps[Run]:
-        calls.append((args, kwargs))
-        return original(*args, **kwargs)
+    def recorded(specs: Sequence[RunSpec]) -> Steps[list[Run | Exception]]:
+        calls.extend(((sp.xn, sp.w, sp.alpha0, sp.cam0),
+                      {"max_alternations": sp.max_alternations, "start": sp.start,
+                       "pose_max_iter": sp.pose_max_iter, "prior": sp.prior}) for sp in specs)
+        return original(specs)
 
-    lifter.runs.run_steps = recorded  # type: ignore[method-assign]
+    lifter.runs.runs_steps = recorded  # type: ignore[method-assign]
     lift_messages(kps[:n_messages], infos, lifter, LiftSettings(smoothing_s=0.0))
     return lifter, calls
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Generator, Sequence
 from dataclasses import dataclass
-from typing import Any, Final, TypeVar
+from typing import Any, Final, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,9 +38,11 @@ from ..model.prior import PosePrior, flip_rows
 from ..model.skeleton import N_JOINTS
 from ..numeric.jit import HAVE_NUMBA
 from ..numeric.records import ModelArrays, StepSettings
+from ..results import LiftResult, TrackContext, WarmStart
 from ..solve.run_kernel import RunCall, RunOut, run_calls
 
-__all__ = ["Call", "Failed", "Outcome", "PriorCall", "Steps", "gather", "outcomes", "prior_calls", "solve"]
+__all__ = ["Call", "Failed", "LiftCall", "Outcome", "PeopleLifter", "PriorCall", "Steps", "gather",
+           "outcomes", "prior_calls", "solve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,13 +66,34 @@ class PriorCall:
     flip: bool
 
 
+class PeopleLifter(Protocol):
+    """What lifts the people of a round's :class:`LiftCall` s together
+    (:meth:`pose_lifter.core.lift.lifter.Lifter.lift_people`)."""
+
+    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]: ...
+
+
+@dataclass(frozen=True, eq=False)
+class LiftCall:
+    """One person's lift a solve asks of a lifter (``lifter.lift(points, confidence, warm,
+    track)``), lifted with the other people of its round who ask the same lifter
+    (:meth:`PeopleLifter.lift_people`): the tracks of a frame, or offline the chains of a step,
+    go through the lifter's checks, prior, starts and runs as one batch."""
+
+    lifter: PeopleLifter
+    points: NDArray[np.float64]  #: (12, 2)
+    confidence: NDArray[np.float64] | None  #: (12,)
+    warm: WarmStart | None
+    track: TrackContext | None
+
+
 T = TypeVar("T")
 
-#: What a solve asks for: a run of alternations or a pose of the learned prior.
-Call = RunCall | PriorCall
-#: What it is sent back for it: the run's result, the prior's pose (12, 3), or the exception the
-#: kernel or the prior raised, which the solve raises.
-Outcome = RunOut | NDArray[np.float64] | Exception
+#: What a solve asks for: a run of alternations, a pose of the learned prior, or a person's lift.
+Call = RunCall | PriorCall | LiftCall
+#: What it is sent back for it: the run's result, the prior's pose (12, 3), the lift's result, or
+#: the exception the kernel, the prior or the lift raised, which the solve raises.
+Outcome = RunOut | NDArray[np.float64] | LiftResult | Exception
 #: A solve: yields the calls it needs, is sent their outcomes in order, returns its result.
 Steps = Generator[list[Call], list[Outcome], T]
 
@@ -141,14 +164,28 @@ def solve(steps: Steps[T], km: ModelArrays, st: StepSettings, threads: int = 1) 
 def outcomes(calls: list[Call], km: ModelArrays, st: StepSettings, threads: int = 1) -> list[Outcome]:
     """The outcomes of a round's ``calls``, in order: the runs through one
     :func:`~pose_lifter.core.solve.run_kernel.run_calls`, the prior calls through one
-    :func:`prior_calls`."""
+    :func:`prior_calls`, the lifts of each lifter through one :meth:`PeopleLifter.lift_people`."""
     runs = [c for c in calls if isinstance(c, RunCall)]
     if len(runs) == len(calls):
         return list(run_calls(runs, km, st, threads))
-    priors = [c for c in calls if isinstance(c, PriorCall)]
+    out: list[Outcome] = []
     done_runs = iter(run_calls(runs, km, st, threads))
-    done_priors = iter(prior_calls(priors))
-    return [next(done_runs) if isinstance(c, RunCall) else next(done_priors) for c in calls]
+    done_priors = iter(prior_calls([c for c in calls if isinstance(c, PriorCall)]))
+    lifts: dict[int, list[LiftCall]] = {}
+    for c in calls:
+        if isinstance(c, LiftCall):
+            lifts.setdefault(id(c.lifter), []).append(c)
+    lifted: dict[int, LiftResult | Exception] = {}
+    for group in lifts.values():
+        lifted.update(zip(map(id, group), group[0].lifter.lift_people(group), strict=True))
+    for c in calls:
+        if isinstance(c, RunCall):
+            out.append(next(done_runs))
+        elif isinstance(c, PriorCall):
+            out.append(next(done_priors))
+        else:
+            out.append(lifted[id(c)])
+    return out
 
 
 def prior_calls(calls: list[PriorCall]) -> list[NDArray[np.float64] | Exception]:

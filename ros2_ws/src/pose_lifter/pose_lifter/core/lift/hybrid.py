@@ -11,6 +11,8 @@ its runs); the lifter makes one per setting.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numpy as np
@@ -25,11 +27,11 @@ from ..numeric.jit import njit
 from ..options import LifterOptions
 from ..results import Camera, Frames, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
 from ..solve.pose_step import PriorRows
-from .batch import PriorCall, Steps, gather
-from .runs import Runs
+from .batch import Call, PriorCall, Steps
+from .runs import Run, Runs, RunSpec
 from .starts import StartRun, Starts
 
-__all__ = ["OUTLIER_MEDIAN_FACTOR", "PriorFit", "TargetStatus"]
+__all__ = ["OUTLIER_MEDIAN_FACTOR", "Person", "PriorFit", "TargetStatus"]
 
 #: The hybrid outlier pass flags a joint only beyond this many times the median disagreement of
 #: the frame's visible joints as well as beyond ``outlier_threshold`` (under heavy Gaussian noise
@@ -38,6 +40,12 @@ OUTLIER_MEDIAN_FACTOR = 3.0
 
 
 _NO_POSE = np.zeros((N_JOINTS, 3))
+
+
+def _target(f: _Fitting) -> NDArray[np.float64]:
+    """The prior rows' target (12, 3) of a person whose rows are made."""
+    assert f.prior is not None
+    return f.prior.target
 _NO_WEIGHTS = np.zeros(N_JOINTS)
 
 
@@ -55,8 +63,8 @@ class TargetStatus(IntEnum):
 def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], spread: float,
                    previous: NDArray[np.float64], temporal_weight: NDArray[np.float64],
                    visible: NDArray[np.bool_], blend: bool) -> tuple[NDArray[np.float64], int]:
-    """The prior rows' target (12, 3) of :meth:`PriorFit.rows`: the prior's ``pose`` (12, 3, input
-    units) in the normalised frame (``(x - centre) / spread``, depth ``/ spread``), and with
+    """The prior rows' target (12, 3) of :meth:`PriorFit._prior_rows`: the prior's ``pose`` (12, 3,
+    input units) in the normalised frame (``(x - centre) / spread``, depth ``/ spread``), and with
     ``blend`` the previous frame's pose ``P`` (12, 3, same frame), its image positions moved by
     the median over the ``visible`` joints of the target's minus its own (numpy's median: the
     middle of the sorted values, or the mean of the two middle ones), blended in by
@@ -116,6 +124,51 @@ def _prior_weights(prior: PosePrior, weight_xy: float, weight_z: float) -> NDArr
         rel = prior.relative_weights
         cache[key] = np.ascontiguousarray(np.column_stack([weight_xy * rel[:, 0], weight_z * rel[:, 1]]))
     return cache[key]
+
+@dataclass(frozen=True)
+class Person:
+    """One person of a batch of lifts (:meth:`pose_lifter.core.lift.lifter.Lifter.people_steps`),
+    checked and normalised.
+
+    Attributes
+    ----------
+    x : ndarray, shape (12, 2)
+        The 2D in input units (missing joints at 0).
+    xn : ndarray, shape (12, 2)
+        The same normalised by ``norm``.
+    w : ndarray, shape (12,)
+        The 2D term's weights (hybrid: times the track's ``data_weight``).
+    norm : Normalisation
+    warm : WarmStart or None
+    cam0 : Camera or None
+        The warm start's camera in the normalised units.
+    track : TrackContext
+        As the modes read it (``temporal_weight`` an array (12,)).
+    """
+
+    x: NDArray[np.float64]
+    xn: NDArray[np.float64]
+    w: NDArray[np.float64]
+    norm: Normalisation
+    warm: WarmStart | None
+    cam0: Camera | None
+    track: TrackContext
+
+
+@dataclass(eq=False)
+class _Fitting:
+    """A person's hybrid starts while :meth:`PriorFit.starts_people` runs them."""
+
+    person: Person
+    w: NDArray[np.float64]  #: the 2D weights in use (the outlier pass zeroes some)
+    previous: NDArray[np.float64] | None  #: the warm start's pose in this frame's units (12, 3)
+    prior: PriorRows | None = None
+    prior_pose: NDArray[np.float64] | None = None
+    tried: list[StartRun] = field(default_factory=list)
+    total: int = 0
+    n_starts: int = 0
+    error: Exception | None = None
+
 
 class PriorFit:
     """The hybrid and learned modes' solve with one setting of the lifter.
@@ -211,27 +264,69 @@ class PriorFit:
         # the prior reads only the visible joints (missing ones are zeros of its input)
         return prior, pts, vis
 
-    def rows(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, track: TrackContext,
-             previous: NDArray[np.float64] | None) -> Steps[tuple[PriorRows, NDArray[np.float64]]]:
-        """The prior's pose for the joints with ``w > 0`` as rows of the hybrid objective, in the
-        normalised frame of ``norm``, blended with the previous frame's pose ``previous`` (12, 3,
-        same frame) by the track's ``temporal_weight`` (12,); limb radii from its
-        ``limb_proportions`` (``options.prior_limbs``). Returns the rows and the prior's pose in
-        input units. Joints without weight take the track's ``fill`` position where it allows
-        (see :class:`TrackContext`) in the prior's input. A solve (:meth:`predict`)."""
-        vis = w > 0
-        fill = track.fill
+    def _previous(self, p: Person) -> NDArray[np.float64] | None:
+        """The warm start's pose (12, 3) in this frame's normalised units: its image positions by
+        the warm camera, its depths relative to the joints' mean; None on a cold frame."""
+        warm, cam0 = p.warm, p.cam0
+        if warm is None or cam0 is None:
+            return None
+        prev = self.model.pose(warm.alpha)
+        previous = np.empty((N_JOINTS, 3))
+        previous[:, :2] = cam0.project(prev)
+        previous[:, 2] = cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]
+        return previous
+
+    def _rows_people(self, fits: Sequence[_Fitting]) -> Steps[None]:
+        """Each person's prior rows (:meth:`_prior_rows`) for the joints their weights keep, the
+        poses of all of them in one round of :class:`~pose_lifter.core.lift.batch.PriorCall` s
+        (:meth:`predict`); a person the prior or the rows refuse gets the error."""
+        calls: list[Call] = []
+        asked: list[tuple[_Fitting, PosePrior]] = []
+        for f in fits:
+            try:
+                x, vis = self._filled(f)
+                track = f.person.track
+                prior, pts, v = self.prior_input(x, vis, track.past, track.future)
+                calls.append(PriorCall(prior, pts, v, self.options.prior_flip))
+                asked.append((f, prior))
+            except Exception as err:
+                f.error = err
+        if not calls:
+            return
+        poses = yield calls
+        for (f, prior), pose in zip(asked, poses, strict=True):
+            try:
+                if isinstance(pose, Exception):
+                    raise pose
+                assert isinstance(pose, np.ndarray)
+                f.prior, f.prior_pose = self._prior_rows(f, pose, prior), pose
+            except Exception as err:
+                f.error = err
+
+    @staticmethod
+    def _filled(f: _Fitting) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """The 2D (12, 2) and visible joints (12,) the prior reads: the joints with weight, and
+        those without that the track's ``fill`` gives a position (see :class:`TrackContext`)."""
+        x, vis = f.person.x, f.w > 0
+        fill = f.person.track.fill
         if fill is not None:
             add = fill[1] & ~vis
             if add.any():
                 x = np.where(add[:, None], fill[0], x)
                 vis = vis | add
-        pose, used = yield from self.predict(x, vis, track.past, track.future)
+        return x, vis
+
+    def _prior_rows(self, f: _Fitting, pose: NDArray[np.float64], used: PosePrior) -> PriorRows:
+        """The prior's ``pose`` (12, 3, input units) by the prior ``used`` as rows of the hybrid
+        objective in the person's normalised frame, blended with the warm start's pose by the
+        track's ``temporal_weight`` (12,); limb radii from its ``limb_proportions``
+        (``options.prior_limbs``)."""
+        track, norm, previous = f.person.track, f.person.norm, f.previous
         tw = track.temporal_weight
         blend = previous is not None
         target, status = _target_kernel(
             pose, norm.centre, float(norm.spread), _NO_POSE if previous is None else previous,
-            np.ascontiguousarray(tw, dtype=np.float64) if blend else _NO_WEIGHTS, w > 0, blend)
+            np.ascontiguousarray(tw, dtype=np.float64) if blend else _NO_WEIGHTS, f.w > 0, blend)
         if status == TargetStatus.NOT_FINITE:
             raise InvalidInputError("the learned prior gave non-finite values for this input")
         if status == TargetStatus.NO_JOINT:
@@ -241,59 +336,118 @@ class PriorFit:
         radii = None
         if o.prior_limbs and track.limb_proportions is not None:
             radii = self.limb_radii(track.limb_proportions)
-        return PriorRows(np.ascontiguousarray(target), weights, radii), pose
+        return PriorRows(np.ascontiguousarray(target), weights, radii)
 
-    def starts(self, x: NDArray[np.float64], xn: NDArray[np.float64], w: NDArray[np.float64],
-               norm: Normalisation, warm: WarmStart | None, cam0: Camera | None, track: TrackContext
-               ) -> Steps[Starts]:
-        """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring) on the
-        2D ``x`` (12, 2, input units; ``xn`` normalised by ``norm``) with weights ``w`` (12,), the
-        warm start and its camera ``cam0`` (normalised) and the track's context (its
-        ``temporal_weight`` an array (12,)). A solve (:mod:`pose_lifter.core.lift.batch`): an outlier
-        pass's two runs go in one round; the prior's poses are yielded too (:meth:`predict`)."""
+    def rows_steps(self, person: Person, w: NDArray[np.float64]
+                   ) -> Steps[tuple[PriorRows, NDArray[np.float64]]]:
+        """The prior rows the starts of ``person`` use with the 2D weights ``w`` (12,), and the
+        prior's pose (12, 3, input units). A solve (one round of the prior's pose)."""
+        f = _Fitting(person, w, self._previous(person))
+        yield from self._rows_people([f])
+        if f.error is not None:
+            raise f.error
+        assert f.prior is not None and f.prior_pose is not None
+        return f.prior, f.prior_pose
+
+    def starts_people(self, people: Sequence[Person]) -> Steps[list[Starts | Exception]]:
+        """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring) of
+        several people as one batch: each round's prior poses and runs of all of them together.
+        Per person: every frame starts from the prior's pose (with the warm start's camera when
+        tracked); a cold frame also tries the depth-mirrored run; then up to ``outlier_passes``
+        passes each drop the joints that disagree with the image and run the fit again. Returns
+        each person's :class:`Starts`, or the error their solve raised. A solve
+        (:mod:`pose_lifter.core.lift.batch`)."""
         o, runs = self.options, self.runs
-        previous = None
-        if warm is not None and cam0 is not None:  # the previous frame's pose, this frame's units
-            prev = self.model.pose(warm.alpha)
-            previous = np.empty((N_JOINTS, 3))
-            previous[:, :2] = cam0.project(prev)
-            previous[:, 2] = cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]
-        prior, prior_pose = yield from self.rows(x, w, norm, track, previous)
-        a_prior = runs.start_alpha(prior.target)
+        fits = [_Fitting(p, p.w, self._previous(p)) for p in people]
+        yield from self._rows_people(fits)
         # every frame starts from the prior's pose (with the previous frame's camera when tracked):
         # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
         n_alt = o.hybrid_alternations
-        first = yield from runs.run_steps(xn, w, a_prior, cam0, n_alt, prior=prior)
-        tried = [StartRun(StartKind.PRIOR, -1, first)]
-        if o.warm_flip and warm is None:
-            flip = yield from runs.mirrored_run_steps(xn, w, first, prior, n_alt)
-            tried.append(StartRun(StartKind.MIRRORED, -1, flip))
-        total = sum(r.run.n_iter for r in tried)
-        n_starts = len(tried)
-        threshold = o.outlier_threshold_gated if track.gated else o.outlier_threshold
-        for _ in range(o.outlier_passes if threshold > 0 else 0):
-            best = min(tried, key=lambda r: r.run.objective)
-            run = best.run
-            cam = run.camera.camera
-            # a joint disagrees with the image when it is far from the fit's projection or from
-            # the prior's image position (the prior is trained with confident outliers)
-            resid = np.maximum(row_norms(xn - cam.project(run.pose.pose)),
-                               row_norms(xn - prior.target[:, :2]))
-            vis = w > 0
-            limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
-            out = vis & (resid > limit)
-            if not out.any() or int(np.count_nonzero(vis & ~out)) < o.min_visible_joints:
+        live = [f for f in fits if f.error is None]
+        firsts = yield from runs.runs_steps([RunSpec(f.person.xn, f.w, runs.start_alpha(_target(f)),
+                                                     f.person.cam0, n_alt, prior=f.prior) for f in live])
+        for f, run in zip(live, firsts, strict=True):
+            self._tried(f, [(StartKind.PRIOR, -1, run)])
+        if o.warm_flip:
+            cold = [f for f in fits if f.error is None and f.person.warm is None]
+            flips = yield from runs.mirrored_runs_steps(
+                [(f.person.xn, f.w, f.tried[0].run, f.prior) for f in cold], n_alt)
+            for f, run in zip(cold, flips, strict=True):
+                self._tried(f, [(f.tried[0].kind, -1, f.tried[0].run), (StartKind.MIRRORED, -1, run)])
+        for f in fits:
+            f.total, f.n_starts = sum(r.run.n_iter for r in f.tried), len(f.tried)
+        yield from self._outlier_passes(fits)
+        return [f.error if f.error is not None else Starts(f.tried, f.total, f.n_starts, f.w, f.prior_pose)
+                for f in fits]
+
+    @staticmethod
+    def _tried(f: _Fitting, runs: list[tuple[StartKind, int, Run | Exception]]) -> None:
+        """``f``'s runs tried become ``runs``, or its error the first of them that failed."""
+        tried = []
+        for kind, index, run in runs:
+            if isinstance(run, Exception):
+                f.error = run
+                return
+            tried.append(StartRun(kind, index, run))
+        f.tried = tried
+
+    def _outlier_passes(self, fits: Sequence[_Fitting]) -> Steps[None]:
+        """Up to ``outlier_passes`` passes over ``fits`` (module docstring): a person whose best
+        run leaves joints disagreeing with the image has them dropped, the prior re-run without
+        them, and the fit continued and started again from the prior's new pose (the lower
+        objective kept); a person's passes end when none is flagged."""
+        o, runs = self.options, self.runs
+        n_alt = o.hybrid_alternations
+        active = [f for f in fits if f.error is None]
+        for k in range(o.outlier_passes):
+            flagged = [f for f in active if k < self._passes(f) and self._drop_outliers(f)]
+            yield from self._rows_people(flagged)
+            flagged = [f for f in flagged if f.error is None]
+            best = [min(f.tried, key=lambda r: r.run.objective) for f in flagged]
+            specs = []
+            for f, b in zip(flagged, best, strict=True):
+                xn = f.person.xn
+                specs += [RunSpec(xn, f.w, b.run.pose.alpha, b.run.camera.camera, n_alt, prior=f.prior),
+                          RunSpec(xn, f.w, runs.start_alpha(_target(f)), None, n_alt, prior=f.prior)]
+            done = yield from runs.runs_steps(specs)
+            for j, (f, b) in enumerate(zip(flagged, best, strict=True)):
+                cont, fresh = done[2 * j], done[2 * j + 1]
+                self._tried(f, [(b.kind, b.index, cont), (StartKind.PRIOR, -1, fresh)])
+                if f.error is None:
+                    f.total += f.tried[0].run.n_iter + f.tried[1].run.n_iter
+            active = [f for f in flagged if f.error is None]
+            if not active:
                 break
-            w = w.copy()
-            w[out] = 0.0
-            prior, prior_pose = yield from self.rows(x, w, norm, track, previous)
-            # continue the fit, and start again from the prior's new pose: the lower objective
-            cont, fresh = yield from gather([
-                runs.run_steps(xn, w, run.pose.alpha, cam, n_alt, prior=prior),
-                runs.run_steps(xn, w, runs.start_alpha(prior.target), None, n_alt, prior=prior)])
-            tried = [StartRun(best.kind, best.index, cont), StartRun(StartKind.PRIOR, -1, fresh)]
-            total += cont.n_iter + fresh.n_iter
-        return Starts(tried, total, n_starts, w, prior_pose)
+
+    def _passes(self, f: _Fitting) -> int:
+        """The outlier passes a person's frame gets (its threshold: the gated one on a frame the
+        track screened; none with a threshold of 0)."""
+        o = self.options
+        return o.outlier_passes if self._threshold(f) > 0 else 0
+
+    def _threshold(self, f: _Fitting) -> float:
+        o = self.options
+        return o.outlier_threshold_gated if f.person.track.gated else o.outlier_threshold
+
+    def _drop_outliers(self, f: _Fitting) -> bool:
+        """Zero the weights of ``f``'s joints that disagree with the image (far from the best
+        run's projection or from the prior's image position, beyond the threshold and
+        ``OUTLIER_MEDIAN_FACTOR`` times the median); False (nothing changed) when none does or
+        fewer than ``min_visible_joints`` would be left."""
+        run = min(f.tried, key=lambda r: r.run.objective).run
+        cam = run.camera.camera
+        xn, w = f.person.xn, f.w
+        # a joint disagrees with the image when it is far from the fit's projection or from
+        # the prior's image position (the prior is trained with confident outliers)
+        resid = np.maximum(row_norms(xn - cam.project(run.pose.pose)), row_norms(xn - _target(f)[:, :2]))
+        vis = w > 0
+        limit = max(self._threshold(f), OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
+        out = vis & (resid > limit)
+        if not out.any() or int(np.count_nonzero(vis & ~out)) < self.options.min_visible_joints:
+            return False
+        f.w = w.copy()
+        f.w[out] = 0.0
+        return True
 
     def learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
                 past: Frames | None = None, future: Frames | None = None) -> Steps[LiftResult]:

@@ -66,10 +66,10 @@ from ..options import LifterOptions, Mode
 from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart
 from ..solve.alpha.lifted_admm import QStepFn
 from ..validation import check_keypoints
-from .batch import Steps
-from .hybrid import PriorFit
+from .batch import Failed, LiftCall, Steps, gather
+from .hybrid import Person, PriorFit
 from .runs import Runs
-from .starts import StartRun, paper_starts
+from .starts import StartRun, Starts, paper_starts
 
 __all__ = ["KERNEL_MODES", "Lifter"]
 
@@ -80,6 +80,8 @@ _LEFT_LIMBS = np.array(LEFT_LIMBS)
 _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
 _NO_TRACK = TrackContext()
+#: A place in :meth:`Lifter.people_steps`' results before its person is lifted.
+_NOT_LIFTED = RuntimeError("person not lifted")
 
 
 class Lifter:
@@ -275,28 +277,74 @@ class Lifter:
         warm: WarmStart | None = None,
         track: TrackContext | None = None,
     ) -> Steps[LiftResult]:
-        """:meth:`lift` as a solve (:mod:`pose_lifter.core.lift.batch`): its runs are yielded, to go
-        through the compiled kernel with other people's (:func:`pose_lifter.core.lift.batch.gather`)."""
-        x, w = self._weights(points_2d, confidence)
+        """:meth:`lift` as a solve (:mod:`pose_lifter.core.lift.batch`): a
+        :class:`~pose_lifter.core.lift.batch.LiftCall`, lifted with the other people of its round
+        (:meth:`lift_people`)."""
+        (out,) = yield [LiftCall(self, points_2d, confidence, warm, track)]
+        if isinstance(out, Exception):
+            raise out
+        assert isinstance(out, LiftResult)
+        return out
+
+    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
+        """Several people's lifts (:meth:`lift` each) as one batch, in order: the result of each,
+        or the error it raised (:meth:`people_steps` driven to its end)."""
+        return self._runs.solve(self.people_steps(calls))
+
+    def people_steps(self, calls: Sequence[LiftCall]) -> Steps[list[LiftResult | Exception]]:
+        """:meth:`lift_people` as a solve: every person's input checked and normalised, their
+        starts in common rounds (the hybrid mode's as one batch, :meth:`PriorFit.starts_people`),
+        each winner mapped back to input units. A person's result is what they get lifted alone."""
+        out: list[LiftResult | Exception] = [_NOT_LIFTED] * len(calls)
+        ready: list[tuple[int, Person]] = []
+        for i, c in enumerate(calls):
+            try:
+                ready.append((i, self._person(c)))
+            except Exception as err:
+                out[i] = err
+        fit, mode = self._prior_fit, self._options.mode
+        if fit is not None and mode == "learned":
+            learned = yield from gather([fit.learned(p.x, p.w, p.norm, p.track.past, p.track.future)
+                                         for _, p in ready], capture=True)
+            for (i, _), r in zip(ready, learned, strict=True):
+                out[i] = r.error if isinstance(r, Failed) else r
+            return out
+        starts: list[Starts | Exception]
+        if fit is not None:  # hybrid
+            starts = yield from fit.starts_people([p for _, p in ready])
+        else:
+            tried = yield from gather([paper_starts(self._runs, self.bases, self._options, p.xn, p.w, p.warm,
+                                                    p.cam0) for _, p in ready], capture=True)
+            starts = [t.error if isinstance(t, Failed) else t for t in tried]
+        for (i, p), st in zip(ready, starts, strict=True):
+            if isinstance(st, Exception):
+                out[i] = st
+                continue
+            try:
+                w = st.weights / p.track.data_weight if fit is not None else st.weights
+                out[i] = self._result(p.x, w, p.norm, st.best(), st.n_starts, st.total_alternations,
+                                      st.prior_pose)
+            except Exception as err:
+                out[i] = err
+        return out
+
+    def _person(self, call: LiftCall) -> Person:
+        """A person's input checked and normalised for :meth:`people_steps` (the hybrid mode's 2D
+        weights times the track's ``data_weight``)."""
+        x, w = self._weights(call.points, call.confidence)
         norm = self._normalise(x, w)
-        tc = self._track_context(_NO_TRACK if track is None else track, w)
-        fit = self._prior_fit
-        if fit is not None and self._options.mode == "learned":
-            return (yield from fit.learned(x, w, norm, tc.past, tc.future))
+        tc = self._track_context(_NO_TRACK if call.track is None else call.track, w)
         xn = (x - norm.centre) / norm.spread
-        cam0: Camera | None = None
-        if warm is not None:
+        warm, cam0 = call.warm, None
+        learned = self._prior_fit is not None and self._options.mode == "learned"
+        if warm is not None and not learned:
             if warm.alpha.shape != (self.bases.n_bases,):
                 raise InvalidInputError("warm start alpha does not match the bases")
             cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
                           (warm.camera.translation - norm.centre) / norm.spread)
-        if fit is not None:  # hybrid
-            starts = yield from fit.starts(x, xn, w * tc.data_weight, norm, warm, cam0, tc)
-            w = starts.weights / tc.data_weight
-        else:
-            starts = yield from paper_starts(self._runs, self.bases, self._options, xn, w, warm, cam0)
-        return self._result(x, w, norm, starts.best(), starts.n_starts, starts.total_alternations,
-                            starts.prior_pose)
+        if self._prior_fit is not None and self._options.mode == "hybrid":
+            w = w * tc.data_weight
+        return Person(x, xn, w, norm, warm, cam0, tc)
 
     def _track_context(self, track: TrackContext, w: NDArray[np.float64]) -> TrackContext:
         """``track`` checked, as the modes read it: ``past`` and ``future`` without non-finite

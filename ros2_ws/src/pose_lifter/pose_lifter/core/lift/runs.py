@@ -16,6 +16,7 @@ kernel's reference, on the same objective terms and stopping rule.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -40,9 +41,9 @@ from ..solve.run_kernel import (
     _stack_camera_data,
 )
 from ..solve.settings import step_settings
-from .batch import Steps, solve
+from .batch import Call, Steps, solve
 
-__all__ = ["PINV_RCOND", "Run", "Runs"]
+__all__ = ["PINV_RCOND", "Run", "RunSpec", "Runs"]
 
 T = TypeVar("T")
 
@@ -53,6 +54,8 @@ T = TypeVar("T")
 #: dominated the objective. It also moves the paper's mirrored warm start slightly.
 PINV_RCOND = 1e-3
 _EYE3 = np.eye(3)
+#: A place in :meth:`Runs.runs_steps`' results before its run is known.
+_NOT_RUN = RuntimeError("run not computed")
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,20 @@ class Run:
     n_iter: int
     converged: bool
     history: tuple[Alternation, ...] = ()
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a round (:meth:`Runs.runs_steps`): the arguments of :meth:`Runs.run_steps`."""
+
+    xn: NDArray[np.float64]  #: (12, 2) the normalised 2D
+    w: NDArray[np.float64]  #: (12,) its weights
+    alpha0: NDArray[np.float64]  #: (k,) the start's coefficients
+    cam0: Camera | None  #: the start's camera (None: the first camera step's own start)
+    max_alternations: int | None = None
+    start: Run | None = None  #: a run to continue
+    pose_max_iter: int | None = None
+    prior: PriorRows | None = None
 
 
 @njit
@@ -194,23 +211,55 @@ class Runs:
         continue a previous run ``start``. The run keeps its lowest-objective
         alternation (the hybrid objective adds the prior's depth rows to the camera step's).
 
-        A solve (:mod:`pose_lifter.core.lift.batch`): the compiled run is yielded as one
-        :class:`~pose_lifter.core.solve.run_kernel.RunCall`; the other solvers' run is the Python
-        loop (:func:`pose_lifter.core.reference.runs.alternation_loop`), which yields nothing."""
+        A solve (:mod:`pose_lifter.core.lift.batch`), a round of one run (:meth:`runs_steps`)."""
+        spec = RunSpec(xn, w, alpha0, cam0, max_alternations, start, pose_max_iter, prior)
+        (run,) = yield from self.runs_steps([spec])
+        if isinstance(run, Exception):
+            raise run
+        return run
+
+    def runs_steps(self, specs: Sequence[RunSpec]) -> Steps[list[Run | Exception]]:
+        """The runs of ``specs`` (:meth:`run_steps` each), in order, or the error each raised.
+
+        A solve (:mod:`pose_lifter.core.lift.batch`): the compiled runs are yielded as one round of
+        :class:`~pose_lifter.core.solve.run_kernel.RunCall` s; the other solvers' runs are the
+        Python loop (:func:`pose_lifter.core.reference.runs.alternation_loop`), which yields
+        nothing."""
         o = self.options
-        n_alt = o.max_alternations if max_alternations is None else max_alternations
-        data = self.camera_data(xn, w, prior)
-        if self.compiled:
-            call = self._compiled_call(w, xn, data, alpha0, cam0, n_alt, start, pose_max_iter, prior)
-            (out,) = yield [call]
+        out: list[Run | Exception] = [_NOT_RUN] * len(specs)
+        calls: list[Call] = []
+        which: list[int] = []
+        for i, sp in enumerate(specs):
+            n_alt = o.max_alternations if sp.max_alternations is None else sp.max_alternations
+            try:
+                data = self.camera_data(sp.xn, sp.w, sp.prior)
+                if not self.compiled:
+                    start = ColdStart(sp.alpha0, sp.cam0) if sp.start is None else sp.start
+                    out[i] = Run(*alternation_loop(self, sp.xn, sp.w, data, start, n_alt, sp.pose_max_iter,
+                                                   sp.prior))
+                    continue
+                calls.append(self._compiled_call(sp.w, sp.xn, data, sp.alpha0, sp.cam0, n_alt, sp.start,
+                                                 sp.pose_max_iter, sp.prior))
+                which.append(i)
+            except Exception as err:
+                out[i] = err
+        if calls:
+            done = yield calls
+            for i, d in zip(which, done, strict=True):
+                out[i] = self._run_of(d, specs[i].start)
+        return out
+
+    def _run_of(self, out: object, start: Run | None) -> Run | Exception:
+        """The :class:`Run` of a compiled run's outcome, or the error it stands for (numpy's
+        ``LinAlgError`` of a diverged run as :class:`SolverError`)."""
+        try:
             if isinstance(out, Exception):
                 with diverged_as_solver_error("run"):
                     raise out
             assert isinstance(out, RunOut)
             return self._compiled_run(out, start)
-        loop = alternation_loop(self, xn, w, data, ColdStart(alpha0, cam0) if start is None else start, n_alt,
-                                pose_max_iter, prior)
-        return Run(*loop)
+        except Exception as err:
+            return err
 
     def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64],
                        data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
@@ -283,20 +332,49 @@ class Runs:
 
     def mirrored_run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: Run,
                            prior: PriorRows | None, max_alternations: int | None = None) -> Steps[Run]:
-        """The depth-mirrored copy of ``run`` as a start: screened by one alternation and continued
-        when it already beats ``run`` (``warm_flip_screen``), or run to convergence (a solve)."""
-        mirrored = self.mirrored_alpha(run)
-        if self.options.warm_flip_screen:
-            # hybrid: a short screening pose step, as for the paper's cold starts
-            short = None if prior is None else self.options.screen_pose_max_iter
-            flip = yield from self.run_steps(xn, w, mirrored, None, max_alternations=1, prior=prior,
-                                             pose_max_iter=short)
-            if flip.objective < run.objective:
-                flip = yield from self.run_steps(xn, w, flip.pose.alpha, None, max_alternations, start=flip,
-                                                 prior=prior)
-            return flip
-        return (yield from self.run_steps(xn, w, mirrored, None, max_alternations, prior=prior))
+        """The depth-mirrored copy of ``run`` as a start (:meth:`mirrored_runs_steps` of one)."""
+        (flip,) = yield from self.mirrored_runs_steps([(xn, w, run, prior)], max_alternations)
+        if isinstance(flip, Exception):
+            raise flip
+        return flip
 
+    def mirrored_runs_steps(self, items: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], Run,
+                                                        PriorRows | None]],
+                            max_alternations: int | None = None) -> Steps[list[Run | Exception]]:
+        """For each ``(xn, w, run, prior)``, the depth-mirrored copy of ``run`` as a start: screened
+        by one alternation and continued when it already beats ``run`` (``warm_flip_screen``), or
+        run to convergence; the error where it failed. A solve: the screens in one round, the
+        continued runs in the next."""
+        o = self.options
+        out: list[Run | Exception] = [_NOT_RUN] * len(items)
+        specs: list[RunSpec] = []
+        which: list[int] = []
+        for i, (xn, w, run, prior) in enumerate(items):
+            try:
+                mirrored = self.mirrored_alpha(run)
+            except Exception as err:
+                out[i] = err
+                continue
+            if o.warm_flip_screen:
+                # hybrid: a short screening pose step, as for the paper's cold starts
+                short = None if prior is None else o.screen_pose_max_iter
+                specs.append(RunSpec(xn, w, mirrored, None, 1, prior=prior, pose_max_iter=short))
+            else:
+                specs.append(RunSpec(xn, w, mirrored, None, max_alternations, prior=prior))
+            which.append(i)
+        firsts = yield from self.runs_steps(specs)
+        more: list[RunSpec] = []
+        continued: list[int] = []
+        for i, flip in zip(which, firsts, strict=True):
+            out[i] = flip
+            xn, w, run, prior = items[i]
+            if o.warm_flip_screen and not isinstance(flip, Exception) and flip.objective < run.objective:
+                more.append(RunSpec(xn, w, flip.pose.alpha, None, max_alternations, start=flip, prior=prior))
+                continued.append(i)
+        done = yield from self.runs_steps(more)
+        for i, flip in zip(continued, done, strict=True):
+            out[i] = flip
+        return out
 
     def start_alpha(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """Minimum-norm coefficients of a camera-frame pose (12, 3) in its own body frame (zeros,

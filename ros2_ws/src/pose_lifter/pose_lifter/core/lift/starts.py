@@ -1,7 +1,8 @@
 """The starts of a solve: the runs of alternations a mode tried, and the paper's choice of them.
 
-A mode's solve (paper: :func:`paper_starts`; hybrid: :meth:`pose_lifter.core.lift.hybrid.PriorFit.starts`)
-returns :class:`Starts`: its runs, each tagged with where it began (:class:`StartRun`), and
+A mode's solve (paper: :func:`paper_starts`; hybrid:
+:meth:`pose_lifter.core.lift.hybrid.PriorFit.starts_people`, for a batch of people) returns
+:class:`Starts` per person: its runs, each tagged with where it began (:class:`StartRun`), and
 what the lift reports of the solve's work; the lifter keeps the run of the lowest objective.
 """
 

@@ -344,7 +344,7 @@ class PosePrior:
     _layers32: tuple[tuple[NDArray[np.float32], NDArray[np.float32]], ...] = field(
         init=False, repr=False, compare=False, default=())
     #: the hybrid lifter's prior-row weights (12, 2) per (xy, z) weight pair
-    #: (:meth:`pose_lifter.core.lift.hybrid.PriorFit.rows`; computed once, read only)
+    #: (:meth:`pose_lifter.core.lift.hybrid.PriorFit._prior_rows`; computed once, read only)
     row_weights: dict[tuple[float, float], NDArray[np.float64]] = field(
         init=False, repr=False, compare=False, default_factory=dict)
     #: the metadata's ``future_frames``, checked (:attr:`future_frames`)
