@@ -123,3 +123,66 @@ def test_the_hybrid_pose_step_has_its_own_iteration_cap(
     assert res.history and {a.pose.n_iter for a in res.history} == {paper.pose_max_iter}
     with pytest.raises(OptionsError):
         LifterOptions(hybrid_pose_max_iter=0)
+
+
+def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> None:
+    """PriorFit._drop_outliers over a batch of people as arrays against the per-person rule it
+    replaced (the best run's projection and the prior's image position, a joint beyond the
+    threshold and OUTLIER_MEDIAN_FACTOR times the median of the visible joints; nobody left with
+    fewer than min_visible_joints), on random fits with odd and even visible counts, gated and
+    not: the same joints dropped, exactly."""
+    from pose_lifter.core.lift.hybrid import OUTLIER_MEDIAN_FACTOR, Person, _Fitting
+    from pose_lifter.core.lift.runs import Run
+    from pose_lifter.core.lift.starts import StartRun
+    from pose_lifter.core.numeric.fast import median_rows, row_norms
+    from pose_lifter.core.results import (
+        Camera,
+        CameraResult,
+        Normalisation,
+        PoseResult,
+        StartKind,
+        TrackContext,
+    )
+    from pose_lifter.core.solve.pose_step import PriorRows
+    from scipy.spatial.transform import Rotation
+
+    # thresholds below the residuals' median: the median's term of the limit decides
+    lifter = Lifter(None, LifterOptions(mode="hybrid", outlier_threshold=0.02, outlier_threshold_gated=0.01))
+    fit, o = lifter.prior_fit, lifter.options
+    assert fit is not None
+    rng = np.random.default_rng(11)
+    fits, want = [], []
+    for i in range(200):
+        pose = rng.normal(size=(12, 3))
+        cam = Camera(Rotation.random(random_state=i).as_matrix(), float(rng.uniform(0.5, 2.0)),
+                     rng.normal(size=2))
+        xn = cam.project(pose) + rng.normal(scale=0.05, size=(12, 2))
+        xn[rng.random(12) < 0.15] += rng.normal(scale=2.0, size=2)  # a few joints far off
+        w = np.where(rng.random(12) < rng.uniform(0.0, 0.5), 0.0, 1.0)
+        w[i % 12] = 1.0
+        target = np.column_stack([cam.project(pose) + rng.normal(scale=0.05, size=(12, 2)), pose[:, 2]])
+        moved = [pose + rng.normal(scale=0.01 * k, size=(12, 3)) for k in range(3)]
+        runs = [Run(PoseResult(1.0, 1, True, np.zeros(3), p, 0.0), CameraResult(1.0, 1, True, cam),
+                    float(obj), 1, True) for p, obj in zip(moved, rng.permutation(3), strict=True)]
+        track = TrackContext(gated=bool(i % 3 == 0))
+        person = Person(xn, xn, w, Normalisation(np.zeros(2), 1.0), None, None, track)
+        fits.append(_Fitting(person, w, None, PriorRows(target, np.ones((12, 2))),
+                             tried=[StartRun(StartKind.PRIOR, -1, r) for r in runs]))
+        # the per-person rule
+        best = min(runs, key=lambda r: r.objective)
+        resid = np.maximum(row_norms(xn - best.camera.camera.project(best.pose.pose)),
+                           row_norms(xn - target[:, :2]))
+        vis = w > 0
+        threshold = o.outlier_threshold_gated if track.gated else o.outlier_threshold
+        limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
+        out = vis & (resid > limit)
+        drops = bool(out.any()) and int(np.count_nonzero(vis & ~out)) >= o.min_visible_joints
+        want.append(np.where(out, 0.0, w) if drops else None)
+    flagged = {id(f) for f in fit._drop_outliers(fits)}
+    n_dropped = 0
+    for f, w_want in zip(fits, want, strict=True):
+        assert (id(f) in flagged) == (w_want is not None)
+        if w_want is not None:
+            n_dropped += 1
+            np.testing.assert_array_equal(f.w, w_want)
+    assert 20 <= n_dropped <= 180, n_dropped  # the rule both drops and keeps on these fits

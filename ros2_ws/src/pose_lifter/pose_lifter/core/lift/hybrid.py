@@ -22,7 +22,7 @@ from ..errors import InvalidInputError
 from ..model.pose_model import PoseModel
 from ..model.prior import PosePrior
 from ..model.skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
-from ..numeric.fast import mean_rows, median_rows, row_norms
+from ..numeric.fast import mean_rows
 from ..numeric.jit import njit
 from ..options import LifterOptions
 from ..results import Camera, Frames, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
@@ -400,7 +400,7 @@ class PriorFit:
         n_alt = o.hybrid_alternations
         active = [f for f in fits if f.error is None]
         for k in range(o.outlier_passes):
-            flagged = [f for f in active if k < self._passes(f) and self._drop_outliers(f)]
+            flagged = self._drop_outliers([f for f in active if k < self._passes(f)])
             yield from self._rows_people(flagged)
             flagged = [f for f in flagged if f.error is None]
             best = [min(f.tried, key=lambda r: r.run.objective) for f in flagged]
@@ -429,25 +429,44 @@ class PriorFit:
         o = self.options
         return o.outlier_threshold_gated if f.person.track.gated else o.outlier_threshold
 
-    def _drop_outliers(self, f: _Fitting) -> bool:
-        """Zero the weights of ``f``'s joints that disagree with the image (far from the best
-        run's projection or from the prior's image position, beyond the threshold and
-        ``OUTLIER_MEDIAN_FACTOR`` times the median); False (nothing changed) when none does or
-        fewer than ``min_visible_joints`` would be left."""
-        run = min(f.tried, key=lambda r: r.run.objective).run
-        cam = run.camera.camera
-        xn, w = f.person.xn, f.w
+    def _drop_outliers(self, fits: Sequence[_Fitting]) -> list[_Fitting]:
+        """Zero the weights of the joints of ``fits`` that disagree with the image (far from their
+        best run's projection or from the prior's image position, beyond the threshold and
+        ``OUTLIER_MEDIAN_FACTOR`` times the median over the visible joints), all people as
+        arrays. Returns the people whose weights changed: not those without such a joint or who
+        would keep fewer than ``min_visible_joints``."""
+        if not fits:
+            return []
+        runs = [min(f.tried, key=lambda r: r.run.objective).run for f in fits]
+        xn = np.array([f.person.xn for f in fits])  # (n, 12, 2)
+        pose = np.array([r.pose.pose for r in runs])  # (n, 12, 3)
+        proj = np.array([r.camera.camera.projection for r in runs])  # (n, 2, 3)
+        t = np.array([r.camera.camera.translation for r in runs])  # (n, 2)
         # a joint disagrees with the image when it is far from the fit's projection or from
         # the prior's image position (the prior is trained with confident outliers)
-        resid = np.maximum(row_norms(xn - cam.project(run.pose.pose)), row_norms(xn - _target(f)[:, :2]))
-        vis = w > 0
-        limit = max(self._threshold(f), OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
-        out = vis & (resid > limit)
-        if not out.any() or int(np.count_nonzero(vis & ~out)) < self.options.min_visible_joints:
-            return False
-        f.w = w.copy()
-        f.w[out] = 0.0
-        return True
+        fit_err = xn - (pose @ proj.transpose(0, 2, 1) + t[:, None, :])  # Camera.project, per person
+        prior_err = xn - np.array([_target(f)[:, :2] for f in fits])
+        resid = np.maximum(np.sqrt(np.add.reduce(fit_err * fit_err, axis=2)),
+                           np.sqrt(np.add.reduce(prior_err * prior_err, axis=2)))  # row_norms
+        vis = np.array([f.w for f in fits]) > 0  # (n, 12)
+        n_vis = np.count_nonzero(vis, axis=1)
+        # the median over each person's visible joints (median_rows): the middle of the sorted
+        # values, or the mean of the two middle ones
+        ranked = np.sort(np.where(vis, resid, np.inf), axis=1)
+        rows, mid = np.arange(len(fits)), n_vis // 2
+        upper = ranked[rows, mid]
+        median = np.where(n_vis % 2 == 1, upper, (ranked[rows, mid - 1] + upper) / 2.0)
+        threshold = np.array([self._threshold(f) for f in fits])
+        limit = np.maximum(threshold, OUTLIER_MEDIAN_FACTOR * median)
+        out = vis & (resid > limit[:, None])
+        drop = out.any(axis=1) & (np.count_nonzero(vis & ~out, axis=1) >= self.options.min_visible_joints)
+        flagged = []
+        for f, o, d in zip(fits, out, drop.tolist(), strict=True):
+            if d:
+                f.w = f.w.copy()
+                f.w[o] = 0.0
+                flagged.append(f)
+        return flagged
 
     def learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
                 past: Frames | None = None, future: Frames | None = None) -> Steps[LiftResult]:

@@ -61,7 +61,6 @@ from ..model.loading import LifterData
 from ..model.pose_model import LiftedConstraints, PoseModel
 from ..model.prior import PosePrior
 from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, N_JOINTS, RIGHT_LIMBS, limb_lengths
-from ..numeric.fast import mean_rows, row_norms
 from ..options import LifterOptions, Mode
 from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart
 from ..solve.alpha.lifted_admm import QStepFn
@@ -69,7 +68,7 @@ from ..validation import check_keypoints
 from .batch import Failed, LiftCall, Steps, gather
 from .hybrid import Person, PriorFit
 from .runs import Runs
-from .starts import StartRun, Starts, paper_starts
+from .starts import Starts, paper_starts
 
 __all__ = ["KERNEL_MODES", "Lifter"]
 
@@ -316,16 +315,16 @@ class Lifter:
             tried = yield from gather([paper_starts(self._runs, self.bases, self._options, p.xn, p.w, p.warm,
                                                     p.cam0) for _, p in ready], capture=True)
             starts = [t.error if isinstance(t, Failed) else t for t in tried]
+        won: list[tuple[int, Person, Starts]] = []
         for (i, p), st in zip(ready, starts, strict=True):
             if isinstance(st, Exception):
                 out[i] = st
-                continue
-            try:
-                w = st.weights / p.track.data_weight if fit is not None else st.weights
-                out[i] = self._result(p.x, w, p.norm, st.best(), st.n_starts, st.total_alternations,
-                                      st.prior_pose)
-            except Exception as err:
-                out[i] = err
+            else:
+                won.append((i, p, st))
+        if won:
+            results = self._results([(p, st) for _, p, st in won], scaled=fit is not None)
+            for (i, _, _), r in zip(won, results, strict=True):
+                out[i] = r
         return out
 
     def _person(self, call: LiftCall) -> Person:
@@ -390,37 +389,54 @@ class Lifter:
         pairs = 0.5 * (lengths[_LEFT_LIMBS] + lengths[_RIGHT_LIMBS])
         return np.asarray(pairs[_GROUP_OF])
 
-    def _result(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation, won: StartRun,
-                n_starts: int, total: int, prior_pose: NDArray[np.float64] | None) -> LiftResult:
-        """The winning run mapped back to input units, checked finite."""
-        run = won.run
-        cam_n = run.camera.camera
-        cam = Camera(cam_n.rotation, cam_n.scale * norm.spread, norm.centre + norm.spread * cam_n.translation)
-        pose = run.pose.pose
-        pose_c = pose - mean_rows(pose)
-        reproj = row_norms(x - cam.project(pose))[w > 0]
-        result = LiftResult(
-            pose=pose,
-            pose_camera=pose_c @ cam.rotation.T,
-            camera=cam,
-            alpha=run.pose.alpha,
-            objective=run.objective,
-            reprojection_error=float(np.add.reduce(reproj) / reproj.size),  # reproj.mean()
-            limb_violation=run.pose.limb_violation,
-            n_iter=run.n_iter,
-            converged=run.converged,
-            n_starts=n_starts,
-            start_index=won.index,
-            weights=w,
-            total_alternations=total,
-            prior_pose=prior_pose,
-            history=run.history,
-            start=won.kind,
-        )
-        for arr in (result.pose, result.alpha, result.camera.rotation, result.camera.translation):
-            if not np.isfinite(arr).all():
-                raise SolverError("the solve produced non-finite values for this input")
-        return result
+    def _results(self, won: Sequence[tuple[Person, Starts]], scaled: bool) -> list[LiftResult | Exception]:
+        """Each person's winning run (of their :class:`Starts`) mapped back to input units and
+        checked finite, the people's arrays together (the 2D term's weights divided by the
+        track's ``data_weight`` when ``scaled``: the hybrid mode multiplied them by it)."""
+        best = [st.best() for _, st in won]
+        runs = [b.run for b in best]
+        cams = [r.camera.camera for r in runs]
+        spread = np.array([p.norm.spread for p, _ in won])
+        centre = np.array([p.norm.centre for p, _ in won])  # (n, 2)
+        translation = centre + spread[:, None] * np.array([c.translation for c in cams])  # (n, 2)
+        rotation = np.array([c.rotation for c in cams])  # (n, 3, 3)
+        pose = np.array([r.pose.pose for r in runs])  # (n, 12, 3)
+        pose_c = pose - np.add.reduce(pose, axis=1)[:, None, :] / pose.shape[1]  # mean_rows, per person
+        pose_camera = pose_c @ rotation.transpose(0, 2, 1)
+        cam = [Camera(c.rotation, c.scale * s, t) for c, s, t in zip(cams, spread.tolist(), translation,
+                                                                        strict=True)]
+        proj = np.array([c.projection for c in cam])  # (n, 2, 3)
+        err = np.array([p.x for p, _ in won]) - (pose @ proj.transpose(0, 2, 1) + translation[:, None, :])
+        reproj_all = np.sqrt(np.add.reduce(err * err, axis=2))  # row_norms, per person (n, 12)
+        alpha = np.array([r.pose.alpha for r in runs])
+        finite = (np.isfinite(pose).all(axis=(1, 2)) & np.isfinite(alpha).all(axis=1)
+                  & np.isfinite(rotation).all(axis=(1, 2)) & np.isfinite(translation).all(axis=1)).tolist()
+        out: list[LiftResult | Exception] = []
+        for k, ((p, st), b, run) in enumerate(zip(won, best, runs, strict=True)):
+            if not finite[k]:
+                out.append(SolverError("the solve produced non-finite values for this input"))
+                continue
+            w = st.weights / p.track.data_weight if scaled else st.weights
+            reproj = reproj_all[k][w > 0]
+            out.append(LiftResult(
+                pose=run.pose.pose,
+                pose_camera=pose_camera[k],
+                camera=cam[k],
+                alpha=run.pose.alpha,
+                objective=run.objective,
+                reprojection_error=float(np.add.reduce(reproj) / reproj.size),  # reproj.mean()
+                limb_violation=run.pose.limb_violation,
+                n_iter=run.n_iter,
+                converged=run.converged,
+                n_starts=st.n_starts,
+                start_index=b.index,
+                weights=w,
+                total_alternations=st.total_alternations,
+                prior_pose=st.prior_pose,
+                history=run.history,
+                start=b.kind,
+            ))
+        return out
 
     def lift_many(
         self,
