@@ -192,23 +192,6 @@ class Lifter:
         return self._runs
 
     # ------------------------------------------------------------------ helpers
-    def _weights(self, points: NDArray[np.float64], confidence: NDArray[np.float64] | None
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        x, conf = check_keypoints(points, confidence)
-        w = np.where(conf >= self._options.confidence_threshold, conf.clip(0.0, 1.0), 0.0)
-        # a joint with non-finite coordinates is missing, whatever its confidence
-        bad = ~np.asarray(np.isfinite(x).all(axis=1))
-        has_bad = bool(bad.any())
-        if has_bad:
-            w[bad] = 0.0
-        n_vis = int(np.count_nonzero(w > 0))
-        if n_vis < self._options.min_visible_joints:
-            raise TooFewJointsError(
-                f"{n_vis} joints visible (confidence >= {self._options.confidence_threshold}); "
-                f"at least {self._options.min_visible_joints} needed"
-            )
-        return (np.where(bad[:, None], 0.0, x) if has_bad else x), w
-
     def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> Normalisation:
         total = np.add.reduce(w)  # w.sum()
         centre = w @ x / total
@@ -296,11 +279,11 @@ class Lifter:
         each winner mapped back to input units. A person's result is what they get lifted alone."""
         out: list[LiftResult | Exception] = [_NOT_LIFTED] * len(calls)
         ready: list[tuple[int, Person]] = []
-        for i, c in enumerate(calls):
-            try:
-                ready.append((i, self._person(c)))
-            except Exception as err:
-                out[i] = err
+        for i, p in enumerate(self._people(calls)):
+            if isinstance(p, Exception):
+                out[i] = p
+            else:
+                ready.append((i, p))
         fit, mode = self._prior_fit, self._options.mode
         if fit is not None and mode == "learned":
             learned = yield from gather([fit.learned(p.x, p.w, p.norm, p.track.past, p.track.future)
@@ -327,10 +310,43 @@ class Lifter:
                 out[i] = r
         return out
 
-    def _person(self, call: LiftCall) -> Person:
-        """A person's input checked and normalised for :meth:`people_steps` (the hybrid mode's 2D
-        weights times the track's ``data_weight``)."""
-        x, w = self._weights(call.points, call.confidence)
+    def _people(self, calls: Sequence[LiftCall]) -> list[Person | Exception]:
+        """Each person's input checked and normalised for :meth:`people_steps`, or why it is
+        refused: the confidences below ``confidence_threshold`` and the joints with non-finite
+        coordinates missing (weight 0), at least ``min_visible_joints`` left, as arrays over the
+        people; then :meth:`_person` each."""
+        out: list[Person | Exception] = [_NOT_LIFTED] * len(calls)
+        checked: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]] = []
+        for i, c in enumerate(calls):
+            try:
+                checked.append((i, *check_keypoints(c.points, c.confidence)))
+            except Exception as err:
+                out[i] = err
+        if not checked:
+            return out
+        o = self._options
+        points = np.array([x for _, x, _ in checked])  # (n, 12, 2)
+        conf = np.array([c for _, _, c in checked])  # (n, 12)
+        weights = np.where(conf >= o.confidence_threshold, conf.clip(0.0, 1.0), 0.0)
+        # a joint with non-finite coordinates is missing, whatever its confidence
+        bad = ~np.isfinite(points).all(axis=2)
+        weights[bad] = 0.0
+        points = np.where(bad[:, :, None], 0.0, points)
+        n_vis = np.count_nonzero(weights > 0, axis=1).tolist()
+        for k, (i, _, _) in enumerate(checked):
+            try:
+                if n_vis[k] < o.min_visible_joints:
+                    raise TooFewJointsError(
+                        f"{n_vis[k]} joints visible (confidence >= {o.confidence_threshold}); "
+                        f"at least {o.min_visible_joints} needed")
+                out[i] = self._person(calls[i], points[k], weights[k])
+            except Exception as err:
+                out[i] = err
+        return out
+
+    def _person(self, call: LiftCall, x: NDArray[np.float64], w: NDArray[np.float64]) -> Person:
+        """A person of :meth:`_people` with its 2D ``x`` (12, 2) and weights ``w`` (12,) checked:
+        normalised, its track's context checked, its warm start's camera in normalised units."""
         norm = self._normalise(x, w)
         tc = self._track_context(_NO_TRACK if call.track is None else call.track, w)
         xn = (x - norm.centre) / norm.spread

@@ -327,13 +327,14 @@ def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads:
         list(_pool(parts).map(part, range(parts)))
     status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
     out = []
-    for b, c in enumerate(calls):
+    # the scalars as Python numbers, each array's once
+    rows = zip(calls, status.tolist(), head.tolist(), best_obj.tolist(), floats.tolist(), ints.tolist(),
+               strict=True)
+    for b, (c, code, (done, it, conv, best_it), obj, f, i) in enumerate(rows):
         m = max(c.n_alt - c.it0, 0)
-        f, i = floats[b].tolist(), ints[b].tolist()
-        out.append(RunOut(RunStatus(int(status[b])), int(head[b, 0]), int(head[b, 1]), bool(head[b, 2]),
-                          int(head[b, 3]), float(best_obj[b]), objs[b, :m], counts[b, :m], alpha[b], pose[b],
-                          rotation[b], translation[b], f[0], f[1], f[2], f[3], i[0], bool(i[1]), i[2], i[3],
-                          bool(i[4])))
+        out.append(RunOut(RunStatus(code), done, it, bool(conv), best_it, obj, objs[b, :m], counts[b, :m],
+                          alpha[b], pose[b], rotation[b], translation[b], f[0], f[1], f[2], f[3], i[0],
+                          bool(i[1]), i[2], i[3], bool(i[4])))
     return out
 
 
