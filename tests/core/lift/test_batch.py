@@ -173,3 +173,26 @@ def test_a_lift_driven_alone_is_a_batch_of_one() -> None:
     driven = solve(lifter.lift_steps(points[0, 0], conf[0, 0]), lifter.model.kernel_arrays,
                    lifter.runs.settings, threads=3)
     assert np.array_equal(direct.pose, driven.pose) and direct.objective == driven.objective
+
+
+def test_a_batch_that_fails_is_lifted_person_by_person(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A failure of the batch itself (not a person's refusal) costs only the people it belongs
+    to: each is lifted again alone and gets what they get alone."""
+    lifter = Lifter()
+    points, conf = _crowd(5)
+    calls = [LiftCall(lifter, points[0, p], conf[0, p], None, None) for p in range(3)]
+    alone = [lifter.lift(points[0, p], conf[0, p]) for p in range(3)]
+    original = Lifter._results
+
+    def only_alone(self: Lifter, won: Any, scaled: bool) -> Any:
+        if len(won) > 1 or won[0][0].x[0, 0] == points[0, 1, 0, 0]:
+            raise RuntimeError("a bug of the batch")
+        return original(self, won, scaled)
+
+    monkeypatch.setattr(Lifter, "_results", only_alone)
+    got = lifter.lift_people(calls)
+    assert isinstance(got[1], RuntimeError)  # the person whose lift fails alone too
+    for p in (0, 2):
+        r = got[p]
+        assert not isinstance(r, Exception)
+        assert np.array_equal(r.pose, alone[p].pose) and r.objective == alone[p].objective

@@ -270,8 +270,15 @@ class Lifter:
 
     def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
         """Several people's lifts (:meth:`lift` each) as one batch, in order: the result of each,
-        or the error it raised (:meth:`people_steps` driven to its end)."""
-        return self._runs.solve(self.people_steps(calls))
+        or the error it raised (:meth:`people_steps` driven to its end). Should the batch itself
+        fail (a bug: each person's refusals are theirs), each person is lifted again alone, so
+        the failure costs only the people it belongs to."""
+        try:
+            return self._runs.solve(self.people_steps(calls))
+        except Exception as err:
+            if len(calls) == 1:
+                return [err]
+        return [self.lift_people([c])[0] for c in calls]
 
     def people_steps(self, calls: Sequence[LiftCall]) -> Steps[list[LiftResult | Exception]]:
         """:meth:`lift_people` as a solve: every person's input checked and normalised, their
