@@ -5,6 +5,7 @@ bad input is refused with a kind and a reason that name what was wrong."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,7 @@ import pytest
 from pose_lifter.core import Lifter, LifterOptions, PoseBases
 from pose_lifter.core.errors import SolverError
 from pose_lifter.core.lift import batch
-from pose_lifter.core.lift.batch import PriorCall, Steps
+from pose_lifter.core.lift.batch import LiftCall, PriorCall
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (
@@ -29,7 +30,7 @@ from pose_lifter.offline import bags
 from pose_lifter.offline.lift import FrameLift, LiftSummary, frame_settings, lift_messages
 from pose_lifter.offline.settings import LiftSettings
 from pose_lifter.ros.params import PARAMS, NodeSettings
-from stub_runs import RUNS_NEEDED_NONE
+from stub_runs import RUNS_NEEDED_NONE, lift_each
 
 REPO = Path(__file__).resolve().parents[2]
 T = m.rosbags_types()
@@ -197,10 +198,9 @@ class StubLifter:
 
     runs = RUNS_NEEDED_NONE
 
-    def lift_steps(self, *args: Any, **kwargs: Any) -> Steps[LiftResult]:
-        """:meth:`lift` as a solve that asks for no runs of the compiled kernel."""
-        return self.lift(*args, **kwargs)
-        yield []  # a generator (unreachable)
+    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
+        """:meth:`lift` of each call (the lifter's batch of a round), or the error it raised."""
+        return lift_each(self, calls)
 
     def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
              **per_frame: Any) -> LiftResult:

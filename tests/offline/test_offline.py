@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,7 @@ import pytest
 import tolerances as tol
 from mcap_check import check_mcap
 from pose_lifter.core.errors import SolverError, TooFewJointsError
-from pose_lifter.core.lift.batch import Steps
+from pose_lifter.core.lift.batch import LiftCall
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
@@ -19,7 +20,7 @@ from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline import lift as offline
 from pose_lifter.offline.settings import LiftSettings
-from stub_runs import RUNS_NEEDED_NONE
+from stub_runs import RUNS_NEEDED_NONE, lift_each
 
 #: The node's causal poses (no centred smoothing).
 NODE = LiftSettings(smoothing_s=0.0)
@@ -39,10 +40,9 @@ class EchoLifter:
 
     runs = RUNS_NEEDED_NONE
 
-    def lift_steps(self, *args: Any, **kwargs: Any) -> Steps[LiftResult]:
-        """:meth:`lift` as a solve that asks for no runs of the compiled kernel."""
-        return self.lift(*args, **kwargs)
-        yield []  # a generator (unreachable)
+    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
+        """:meth:`lift` of each call (the lifter's batch of a round), or the error it raised."""
+        return lift_each(self, calls)
 
     def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
              **per_frame: Any) -> LiftResult:

@@ -4,6 +4,7 @@ malformed frames and the track's limb proportions."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -11,7 +12,7 @@ import pytest
 import tolerances as tol
 from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, StartKind, TrackContext, p_mpjpe
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.lift.batch import Steps
+from pose_lifter.core.lift.batch import LiftCall
 from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.prior import PosePrior
 from pose_lifter.core.track.policy import OutOfOrderFrameError, TrackPolicy
@@ -99,13 +100,13 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     conf[np.ix_(lost, [2, 8])] = 0.0  # the left wrist and ankle lost for 2 frames, 3 times
     conf[5:15, 5] = 0.0  # the right wrist lost for 10 frames: filled on its first 3 only
     seen: list[np.ndarray | None] = []
-    lift = Lifter.lift_steps
+    lift = Lifter.lift_people
 
-    def spy(self: Lifter, *args: object, **kwargs: object) -> Steps[LiftResult]:
-        track = kwargs.get("track")
-        f = None if track is None else track.fill  # type: ignore[attr-defined]
-        seen.append(None if f is None else np.asarray(f[1]).copy())
-        return lift(self, *args, **kwargs)  # type: ignore[arg-type]
+    def spy(self: Lifter, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
+        for c in calls:
+            f = None if c.track is None else c.track.fill
+            seen.append(None if f is None else np.asarray(f[1]).copy())
+        return lift(self, calls)
 
     errs = []
     for n in (3, 0):
@@ -114,9 +115,9 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
         # on: 0.955-0.964; off: 0.914-0.929, measured under both floating-point set-ups)
         opts = LifterOptions(fill_missing_frames=n, missing_temporal_weight=0.0, measurement_update=False)
         if n:
-            monkeypatch.setattr(Lifter, "lift_steps", spy)
+            monkeypatch.setattr(Lifter, "lift_people", spy)
         res = _track(Lifter(bases, opts), x, conf)
-        monkeypatch.setattr(Lifter, "lift_steps", lift)
+        monkeypatch.setattr(Lifter, "lift_people", lift)
         errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in lost]))
     assert errs[0] < 0.97 * errs[1], errs
     assert seen[0] is None  # the first frame has no track to predict from
@@ -130,13 +131,13 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     for i in range(5):
         policy.lift(0, i * 33_333_333, x[i])
     seen.clear()
-    monkeypatch.setattr(Lifter, "lift_steps", spy)
+    monkeypatch.setattr(Lifter, "lift_people", spy)
     policy.lift(0, 5 * 33_333_333, x[5], conf[10])
     assert seen[-1] is not None
     policy._tracks[0].objectives.append(1e6)
     policy.lift(0, 6 * 33_333_333, x[6], conf[10])
     assert seen[-1] is None
-    monkeypatch.setattr(Lifter, "lift_steps", lift)
+    monkeypatch.setattr(Lifter, "lift_people", lift)
 
 
 def test_a_temporal_prior_sees_the_tracks_past_frames(
@@ -390,19 +391,18 @@ def test_noisy_2d_weighs_the_fit_down_only_with_noise_smoothing(
     for smoothing in (True, False):
         options = LifterOptions(noise_smoothing=smoothing)
         lifter = Lifter(PoseBases.load(default_bases_path("hybrid")), options)
-        original = lifter.lift_steps
+        original = lifter.lift_people
         for name, pts in (("clean", x), ("noisy", noisy)):
             for later in (False, True):
                 weights: list[float] = []
 
-                def spy(*args: object, _w: list[float] = weights, _f: object = original,
-                        **kwargs: object) -> Steps[LiftResult]:
-                    track = kwargs.get("track")
-                    if isinstance(track, TrackContext):
-                        _w.append(track.data_weight)
-                    return _f(*args, **kwargs)  # type: ignore[operator,no-any-return]
+                def spy(calls: Sequence[LiftCall], _w: list[float] = weights,
+                        _f: Callable[[Sequence[LiftCall]], list[LiftResult | Exception]] = original
+                        ) -> list[LiftResult | Exception]:
+                    _w.extend(c.track.data_weight for c in calls if isinstance(c.track, TrackContext))
+                    return _f(calls)
 
-                lifter.lift_steps = spy  # type: ignore[method-assign]
+                lifter.lift_people = spy  # type: ignore[method-assign]
                 policy = TrackPolicy(lifter)
                 policy.smoothed_later = later
                 for i in range(min(len(pts), 20)):

@@ -11,7 +11,8 @@ what the node publishes for it. One frame:
    lifted (:func:`largest_first`), the others skipped; each skeleton is checked by
    :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
-2. :func:`lift_together` (:meth:`FramePipeline.lift_steps` of each skeleton in step): the core's
+2. :func:`lift_together` (the skeletons together, each through its pipeline's track policy,
+   :func:`~pose_lifter.core.track.policy.lift_tracks_steps`): the core's
    :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
    placed together, :func:`~pose_lifter.core.track.placement.place_poses`) and :func:`check_output`
@@ -37,7 +38,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import PoseLifterError
-from pose_lifter.core.lift.batch import Failed, Steps, gather
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.model.layouts import Layout, get_layout
 from pose_lifter.core.results import LiftResult
@@ -48,7 +48,14 @@ from pose_lifter.core.track.placement import (
     place_in_camera,
     place_poses,
 )
-from pose_lifter.core.track.policy import FramesAhead, OutOfOrderFrameError, TrackedLift, TrackPolicy
+from pose_lifter.core.track.policy import (
+    FramesAhead,
+    OutOfOrderFrameError,
+    TrackedLift,
+    TrackFrame,
+    TrackPolicy,
+    lift_tracks_steps,
+)
 from pose_lifter.messages.convert import skeleton2d_to_arrays
 
 __all__ = [
@@ -306,28 +313,27 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
 def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines share ``lifter``): their solves in step (:func:`pose_lifter.core.lift.batch.gather`), each
-    round's runs of alternations in one compiled pass and its prior's poses in one pass of each
-    prior's network; then the people seen by one camera placed in one pass
+    pipelines share ``lifter``): their frames through their tracks' policies in common rounds
+    (:func:`~pose_lifter.core.track.policy.lift_tracks_steps`: the lifts of a round as one batch
+    of the lifter, its runs of alternations in one compiled pass and its prior's poses in one pass
+    of each prior's network); then the people seen by one camera placed in one pass
     (:func:`place_lifted`). Each person gets what they get lifted alone (their track is theirs;
     the kernel solves each run on its own operands, the network's rows do not mix). Their
     ``solve_time`` is the whole lift's time divided among them."""
     if not frames:
         return []
     start = time.perf_counter()
-    steps = gather([pipeline.lift_steps(inp, stamp, intrinsics)
-                    for pipeline, inp, stamp, intrinsics in frames], capture=True)
-    done = lifter.runs.solve(steps)
+    done = lifter.runs.solve(lift_tracks_steps([
+        TrackFrame(pipeline.policy, inp.track_id, stamp, inp.points, inp.confidence, intrinsics, inp.ahead)
+        for pipeline, inp, stamp, intrinsics in frames]))
     out: list[LiftedSkeleton | SkipSkeleton | None] = []
     solved: list[tuple[int, FramePipeline, Intrinsics, Solved]] = []
     for k, ((pipeline, inp, _, intrinsics), d) in enumerate(zip(frames, done, strict=True)):
-        if isinstance(d, Failed):  # lift_steps refuses what it can; anything else is a bug
-            out.append(_refusal(d.error, inp.track_id))
-        elif isinstance(d, SkipSkeleton):
-            out.append(d)
+        if isinstance(d, Exception):  # a refusal, or anything else (a bug) costs only its skeleton
+            out.append(_refusal(d, inp.track_id))
         else:
             out.append(None)  # placed below
-            solved.append((k, pipeline, intrinsics, d))
+            solved.append((k, pipeline, intrinsics, Solved(inp, d)))
     placed = place_lifted([(p.settings, i, d) for _, p, i, d in solved])
     share = (time.perf_counter() - start) / len(frames)
     for (k, _, _, _), lifted in zip(solved, placed, strict=True):
@@ -337,7 +343,7 @@ def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
 
 @dataclass(frozen=True)
 class Solved:
-    """A skeleton through the track's policy, before its placement (:meth:`FramePipeline.lift_steps`)."""
+    """A skeleton through the track's policy, before its placement (:func:`lift_together`)."""
 
     input: SkeletonInput
     tracked: TrackedLift
@@ -471,19 +477,6 @@ class FramePipeline:
             skipped = (SkipSkeleton("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
                                     f"lifting the {st.max_skeletons} largest (max_skeletons)"),)
         return CheckedFrame(True, tuple(out), skipped, n_left_out)
-
-    def lift_steps(self, inp: SkeletonInput, stamp_ns: int, intrinsics: Intrinsics
-                   ) -> Steps[Solved | SkipSkeleton]:
-        """Step 2 for one checked skeleton up to its placement, as a solve
-        (:mod:`pose_lifter.core.lift.batch`): through the track's policy, or why not (never raises for
-        bad input or a failed solve). :func:`lift_together` drives it with the frame's other
-        people and places them together."""
-        try:
-            tracked = yield from self.policy.lift_steps(inp.track_id, stamp_ns, inp.points, inp.confidence,
-                                                        intrinsics, inp.ahead)
-        except Exception as err:
-            return _refusal(err, inp.track_id)
-        return Solved(inp, tracked)
 
     def end_frame(self, stamp_ns: int) -> None:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""

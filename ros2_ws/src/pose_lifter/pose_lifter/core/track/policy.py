@@ -57,6 +57,7 @@ A track's state and the rules that read it are :mod:`pose_lifter.core.track.stat
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -64,7 +65,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import PoseLifterError
-from ..lift.batch import Steps
+from ..lift.batch import Call, LiftCall, Steps
 from ..lift.lifter import KERNEL_MODES, Lifter
 from ..model.skeleton import N_JOINTS
 from ..numeric.fast import mean_rows
@@ -82,9 +83,11 @@ __all__ = [
     "DEFAULT_TRACK_TIMEOUT_S",
     "FramesAhead",
     "OutOfOrderFrameError",
+    "TrackFrame",
     "TrackPolicy",
     "TrackedLift",
     "compile_kernels",
+    "lift_tracks_steps",
     "perspective_corrected",
 ]
 
@@ -212,6 +215,94 @@ class TrackedLift:
     fit_pose_camera: NDArray[np.float64] | None = None
 
 
+@dataclass(frozen=True)
+class TrackFrame:
+    """One person's frame for :func:`lift_tracks_steps`: :meth:`TrackPolicy.lift_steps`'
+    arguments and the policy of its track."""
+
+    policy: TrackPolicy
+    track_id: int
+    stamp_ns: int
+    points: NDArray[np.float64]  #: (12, 2)
+    confidence: NDArray[np.float64] | None = None  #: (12,)
+    intrinsics: CameraIntrinsics | None = None
+    ahead: FramesAhead | None = None
+
+
+@dataclass(frozen=True)
+class _Pending:
+    """A frame between its screening and its lift (:meth:`TrackPolicy._before`)."""
+
+    frame: TrackFrame
+    track: Track | None
+    warm: WarmStart | None
+    screened: _Screened
+    seen: NDArray[np.float64]  #: the 2D the lift reads (12, 2)
+    context: TrackContext
+
+    def call(self, warm: WarmStart | None) -> LiftCall:
+        """The lift of this frame, from ``warm`` (None: cold)."""
+        lifter = self.frame.policy.lifter
+        return LiftCall(lifter, self.seen, self.screened.confidence, warm, self.context)
+
+
+def lift_tracks_steps(frames: Sequence[TrackFrame]) -> Steps[list[TrackedLift | Exception]]:
+    """Several people's frames (:meth:`TrackPolicy.lift_steps` each, each through its own
+    track's policy) in common rounds: every frame screened by its track, the lifts of all of them
+    in one round (:class:`~pose_lifter.core.lift.batch.LiftCall`: one batch per lifter), the cold
+    solves of the re-initialised ones in the next, then each entered into its track. Returns each
+    frame's :class:`TrackedLift`, or the error it raised (a lift's error drops the track's warm
+    start). A solve (:mod:`pose_lifter.core.lift.batch`)."""
+    out: list[TrackedLift | Exception] = [_NOT_TRACKED] * len(frames)
+    pending: list[tuple[int, _Pending]] = []
+    for k, f in enumerate(frames):
+        try:
+            pending.append((k, f.policy._before(f)))
+        except Exception as err:
+            out[k] = err
+    calls: list[Call] = [p.call(p.warm) for _, p in pending]
+    results = (yield calls) if calls else []
+    solved: list[tuple[int, _Pending, LiftResult, bool]] = []
+    again: list[tuple[int, _Pending, LiftResult]] = []
+    for (k, p), r in zip(pending, results, strict=True):
+        if isinstance(r, Exception):
+            out[k] = _dropped_warm(p, r)
+            continue
+        assert isinstance(r, LiftResult)
+        if p.frame.policy._reinit(p, r):
+            again.append((k, p, r))
+        else:
+            solved.append((k, p, r, False))
+    cold_calls: list[Call] = [p.call(None) for _, p, _ in again]
+    colds = (yield cold_calls) if cold_calls else []
+    for (k, p, warm_result), cold in zip(again, colds, strict=True):
+        if isinstance(cold, Exception):
+            out[k] = _dropped_warm(p, cold)
+            continue
+        assert isinstance(cold, LiftResult)
+        if cold.objective < warm_result.objective:
+            solved.append((k, p, cold, True))
+        else:
+            solved.append((k, p, warm_result, False))
+    for k, p, r, reinit in solved:
+        try:
+            out[k] = p.frame.policy._after(p, r, reinit)
+        except Exception as err:
+            out[k] = err
+    return out
+
+
+def _dropped_warm(p: _Pending, err: Exception) -> Exception:
+    """A lift's error: a refusal (:class:`PoseLifterError`) drops the track's warm start."""
+    if isinstance(err, PoseLifterError) and p.track is not None:
+        p.track.warm = None
+    return err
+
+
+#: A place in :func:`lift_tracks_steps`' results before its frame is lifted.
+_NOT_TRACKED = RuntimeError("frame not lifted")
+
+
 class TrackPolicy:
     """Per-track warm starts, re-initialisation and expiry around one :class:`Lifter`.
 
@@ -290,8 +381,7 @@ class TrackPolicy:
         ``ahead``, the track's next frames, is read by a temporal prior with future frames (see
         :meth:`_future`); a causal prior ignores it.
 
-        A solve (:mod:`pose_lifter.core.lift.batch`): the frames of other tracks may be lifted in the
-        same rounds (each track's state is its own).
+        A solve (:mod:`pose_lifter.core.lift.batch`): :func:`lift_tracks_steps` of this frame alone.
 
         Raises
         ------
@@ -300,25 +390,46 @@ class TrackPolicy:
         InvalidInputError, TooFewJointsError
             From the lifter; the track's warm start is dropped.
         """
-        track, warm = self._find(track_id, stamp_ns)
-        opts = self.lifter.options
-        limbs = track.limb_proportions(opts.image_limbs) if track is not None else None
-        frame = self._screen(track, warm, stamp_ns, points, confidence)
-        seen = self._seen(track, warm, points, intrinsics)
+        frame = TrackFrame(self, track_id, stamp_ns, points, confidence, intrinsics, ahead)
+        (out,) = yield from lift_tracks_steps([frame])
+        if isinstance(out, Exception):
+            raise out
+        return out
+
+    def _before(self, f: TrackFrame) -> _Pending:
+        """A frame up to its lift: its track and warm start, its screening, the 2D the lift reads
+        and the track's context (an error of the context drops the warm start)."""
+        track, warm = self._find(f.track_id, f.stamp_ns)
+        limbs = track.limb_proportions(self.lifter.options.image_limbs) if track is not None else None
+        frame = self._screen(track, warm, f.stamp_ns, f.points, f.confidence)
+        seen = self._seen(track, warm, f.points, f.intrinsics)
         try:
-            context = self._context(track, warm, stamp_ns, frame, limbs, points, ahead)
-            result, reinit = yield from self._solve(track, warm, seen, frame.confidence, context)
+            context = self._context(track, warm, f.stamp_ns, frame, limbs, f.points, f.ahead)
         except PoseLifterError:
             if track is not None:
                 track.warm = None
             raise
-        if track_id < 0:
+        return _Pending(f, track, warm, frame, seen, context)
+
+    def _reinit(self, p: _Pending, result: LiftResult) -> bool:
+        """A warm solve whose objective exceeds ``reinit_ratio`` times the track's recent median
+        is solved cold too (the lower kept)."""
+        track = p.track
+        if p.warm is None or track is None or self.reinit_ratio <= 0 or len(track.objectives) < 3:
+            return False
+        return result.objective > self.reinit_ratio * track.objective_median()
+
+    def _after(self, p: _Pending, result: LiftResult, reinit: bool) -> TrackedLift:
+        """The lifted frame entered into its track and published (hybrid: smoothed and
+        measurement-updated)."""
+        f, track, warm = p.frame, p.track, p.warm
+        if f.track_id < 0:
             return TrackedLift(result, warm is not None, reinit)
-        track = self._record(track_id, track, stamp_ns, points, result)
-        if opts.mode == "hybrid":
+        track = self._record(f.track_id, track, f.stamp_ns, f.points, result)
+        if self.lifter.options.mode == "hybrid":
             # the output's state carries over a re-initialised frame (its jump is smoothed)
-            published = self._smooth(track, result, warm is not None, frame.data_weight)
-            updated = self._measure(track, published or result, seen, warm is not None)
+            published = self._smooth(track, result, warm is not None, p.screened.data_weight)
+            updated = self._measure(track, published or result, p.seen, warm is not None)
             out = updated if updated is not None else published
             if out is not None:
                 return TrackedLift(out, warm is not None, reinit, result.pose_camera)
@@ -442,19 +553,6 @@ class TrackPolicy:
                 fill = (frame.predicted, track.unused < opts.fill_missing_frames)
         future = self._future(track, ahead, stamp_ns, past, points, frame)
         return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
-
-    def _solve(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
-               confidence: NDArray[np.float64] | None, context: TrackContext
-               ) -> Steps[tuple[LiftResult, bool]]:
-        """The lift, and whether it was re-initialised: a warm solve whose objective exceeds
-        ``reinit_ratio`` times the track's recent median is solved cold too (the lower kept)."""
-        result = yield from self.lifter.lift_steps(points, confidence, warm=warm, track=context)
-        if (warm is not None and track is not None and self.reinit_ratio > 0 and len(track.objectives) >= 3
-                and result.objective > self.reinit_ratio * track.objective_median()):
-            cold = yield from self.lifter.lift_steps(points, confidence, warm=None, track=context)
-            if cold.objective < result.objective:
-                return cold, True
-        return result, False
 
     def _record(self, track_id: int, track: Track | None, stamp_ns: int, points: NDArray[np.float64],
                 result: LiftResult) -> Track:
