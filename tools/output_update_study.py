@@ -40,7 +40,8 @@ from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, limb_lengths
-from pose_lifter.core.track.policy import TrackPolicy, _prior_camera
+from pose_lifter.core.track.policy import TrackPolicy
+from pose_lifter.core.track.smoothing import prior_in_camera
 
 FIELDS = ("truth", "leg", "pub", "fit", "prior", "learned", "centre", "scale", "px", "conf", "weights",
           "noise", "follows", "ok", "track")
@@ -95,7 +96,7 @@ def record(args: argparse.Namespace) -> int:
                     continue
                 r = tl.result
                 st = policy._tracks[0]
-                prior = _prior_camera(r)
+                prior = prior_in_camera(r)
                 row.update(pub=r.pose_camera, fit=tl.fit_pose_camera if tl.fit_pose_camera is not None
                            else r.pose_camera, prior=nan3 if prior is None else prior,
                            centre=r.camera.project(r.pose).mean(axis=0), scale=float(r.camera.scale),

@@ -418,7 +418,7 @@ def test_the_perspective_correction_gives_the_weak_perspective_image_of_the_pers
     on the optical axis becomes the weak-perspective image about the centroid's depth (exact); a
     distant person's image is left as it was (perspective and weak perspective agree)."""
     from pose_lifter.core.model.synthetic import synthetic_poses
-    from pose_lifter.core.track.policy import perspective_corrected
+    from pose_lifter.core.track.placement import perspective_corrected
 
     pose = synthetic_poses(1, seed=3)[0]  # (12, 3), leg units
     pose = pose - pose.mean(axis=0)

@@ -1,4 +1,5 @@
-"""The metric placement of a lifted pose in the camera optical frame, and its defaults.
+"""The metric placement of a lifted pose in the camera optical frame, its defaults, and the 2D of a
+pinhole camera corrected to the weak-perspective image the fit reads (:func:`perspective_corrected`).
 
 A lifted pose is in units of its right lower leg; :func:`place_poses` (the people of a frame or
 the frames of a track at once) and :func:`place_in_camera` (one lift) make it metric with a
@@ -19,8 +20,8 @@ if TYPE_CHECKING:
 
     from pose_lifter.core.results import LiftResult
 
-__all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "place_in_camera",
-           "place_poses", "ray_rotation", "ray_rotations"]
+__all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "CameraIntrinsics",
+           "perspective_corrected", "place_in_camera", "place_poses", "ray_rotation", "ray_rotations"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -28,6 +29,35 @@ DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
 LEG_LENGTH_RANGE_M: Final[tuple[float, float]] = (0.05, 2.0)
 #: Depth of the pose centroid in metres when no CameraInfo is available.
 DEFAULT_DISTANCE_M: Final[float] = 5.0
+
+
+#: A pinhole camera's ``((fx, fy), (cx, cy))`` in pixels (its ``camera_info``).
+CameraIntrinsics = tuple[tuple[float, float], tuple[float, float]]
+
+
+def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrinsics,
+                          depths: NDArray[np.float64], scale: float, centre: NDArray[np.float64]
+                          ) -> NDArray[np.float64]:
+    """The 2D (12, 2, pixels) a weak-perspective camera looking at the person would see of a person
+    the pinhole camera ``intrinsics`` ``((fx, fy), (cx, cy))`` filmed as ``points``:
+    ``m + (x_j - m) Z_j / Z_0`` about the person's image centre ``m`` (``centre``, (2,)), with
+    ``Z_j / Z_0 = 1 + z_j s / f`` the depth of joint ``j`` over the centroid's, from the person's
+    depths ``depths`` (12,; centred camera frame, leg units: the track's last pose) and the
+    weak-perspective ``scale`` ``s`` (pixels per leg unit; ``Z_0 = f L / s`` for a leg of ``L``
+    metres, so ``L`` cancels). Exact for a pinhole camera and a person on the optical axis when the
+    depths are right; a person off the axis is seen along its own ray, which the placement turns
+    into the camera frame (:func:`pose_lifter.core.track.placement.place_in_camera`): correcting about
+    the principal point instead would move each joint by the depths' error times its distance from
+    the axis (docs/accuracy.md)."""
+    import numpy as np
+
+    (fx, fy), _ = intrinsics
+    ratio = 1.0 + np.asarray(depths, dtype=np.float64) * float(scale) / (0.5 * (float(fx) + float(fy)))
+    m = np.asarray(centre, dtype=np.float64)
+    if not (np.isfinite(ratio).all() and (ratio > 0.2).all() and np.isfinite(m).all()):
+        return points
+    x = np.asarray(points, dtype=np.float64)
+    return np.asarray(m + (x - m) * ratio[:, None])
 
 
 def place_in_camera(

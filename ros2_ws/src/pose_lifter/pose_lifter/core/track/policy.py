@@ -59,7 +59,6 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,14 +67,14 @@ from ..errors import PoseLifterError
 from ..lift.batch import Call, LiftCall, Steps
 from ..lift.lifter import KERNEL_MODES, Lifter
 from ..model.skeleton import N_JOINTS
-from ..numeric.fast import mean_rows
 from ..options import LifterOptions
 from ..results import Frames, LiftResult, TrackContext, WarmStart
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
-from .smoothing import CausalSmoother
-from .state import NOISE_MIN_WEIGHT, Track
+from .placement import CameraIntrinsics, perspective_corrected
+from .smoothing import CausalSmoother, prior_in_camera
+from .state import NOISE_MIN_WEIGHT, Track, visible_joints
 from .state import compile_kernels as compile_track_kernels
 
 __all__ = [
@@ -88,7 +87,6 @@ __all__ = [
     "TrackedLift",
     "compile_kernels",
     "lift_tracks_steps",
-    "perspective_corrected",
 ]
 
 
@@ -103,45 +101,6 @@ DISTURBANCE_FULL = 0.2
 #: with noise 0.1 and a gain of 0.4: factor 0 / 0.2 / 1 gave 56.6 / 26.3 / 20.2 mm/frame^2 at
 #: P-MPJPE 69.4 / 69.6 / 70.7 mm).
 NOISE_DISTURBANCE = 0.25
-
-#: A pinhole camera's ``((fx, fy), (cx, cy))`` in pixels (its ``camera_info``).
-CameraIntrinsics = tuple[tuple[float, float], tuple[float, float]]
-
-
-def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrinsics,
-                          depths: NDArray[np.float64], scale: float, centre: NDArray[np.float64]
-                          ) -> NDArray[np.float64]:
-    """The 2D (12, 2, pixels) a weak-perspective camera looking at the person would see of a person
-    the pinhole camera ``intrinsics`` ``((fx, fy), (cx, cy))`` filmed as ``points``:
-    ``m + (x_j - m) Z_j / Z_0`` about the person's image centre ``m`` (``centre``, (2,)), with
-    ``Z_j / Z_0 = 1 + z_j s / f`` the depth of joint ``j`` over the centroid's, from the person's
-    depths ``depths`` (12,; centred camera frame, leg units: the track's last pose) and the
-    weak-perspective ``scale`` ``s`` (pixels per leg unit; ``Z_0 = f L / s`` for a leg of ``L``
-    metres, so ``L`` cancels). Exact for a pinhole camera and a person on the optical axis when the
-    depths are right; a person off the axis is seen along its own ray, which the placement turns
-    into the camera frame (:func:`pose_lifter.core.track.placement.place_in_camera`): correcting about
-    the principal point instead would move each joint by the depths' error times its distance from
-    the axis (docs/accuracy.md)."""
-    (fx, fy), _ = intrinsics
-    ratio = 1.0 + np.asarray(depths, dtype=np.float64) * float(scale) / (0.5 * (float(fx) + float(fy)))
-    m = np.asarray(centre, dtype=np.float64)
-    if not (np.isfinite(ratio).all() and (ratio > 0.2).all() and np.isfinite(m).all()):
-        return points
-    x = np.asarray(points, dtype=np.float64)
-    return np.asarray(m + (x - m) * ratio[:, None])
-
-
-def _visible(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
-             threshold: float) -> NDArray[np.bool_] | None:
-    """(..., 12) of points (..., 12, 2): the joints with finite coordinates and confidence >=
-    ``threshold`` (the lifter's rule), or None when the shapes are wrong."""
-    x = np.asarray(points, dtype=np.float64)
-    conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
-    if x.shape[-2:] != (N_JOINTS, 2) or (conf is not None and conf.shape != x.shape[:-1]):
-        return None
-    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=-1))
-    return vis if conf is None else vis & (conf >= threshold)
-
 
 @dataclass(frozen=True)
 class FramesAhead:
@@ -164,17 +123,6 @@ class FramesAhead:
 
 class OutOfOrderFrameError(PoseLifterError):
     """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
-
-
-def _prior_camera(result: LiftResult) -> NDArray[np.float64] | None:
-    """The prior's pose of ``result`` in the camera frame of ``pose_camera`` (12, 3: centred, in
-    the fit's model units: divided by the camera's scale), or None without one."""
-    prior = result.prior_pose
-    scale = float(result.camera.scale)
-    if prior is None or not scale > 0:
-        return None
-    out = (prior - mean_rows(prior)) / scale
-    return out if np.isfinite(out).all() else None
 
 
 @dataclass(frozen=True)
@@ -495,7 +443,7 @@ class TrackPolicy:
         if n == 0:
             return None
         frames = np.asarray(ahead.points[:n], dtype=np.float64)
-        seen = _visible(frames, None if ahead.confidence is None else ahead.confidence[:n],
+        seen = visible_joints(frames, None if ahead.confidence is None else ahead.confidence[:n],
                         self.lifter.options.confidence_threshold)
         if seen is None or frames.ndim != 3:
             return None
@@ -513,7 +461,7 @@ class TrackPolicy:
         opts = self.lifter.options
         hybrid = opts.mode == "hybrid"
         # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
-        vis = _visible(points, confidence, opts.confidence_threshold)
+        vis = visible_joints(points, confidence, opts.confidence_threshold)
         noisy = hybrid and opts.noise_smoothing and not self.smoothed_later
         if not (hybrid and track is not None and warm is not None and vis is not None):
             dw = track.data_weight() if noisy and track is not None else 1.0
@@ -612,7 +560,7 @@ class TrackPolicy:
         if opts.correction_smoothing <= 0 and opts.disturbed_smoothing_gain >= 1:
             track.smoother = None
             return None
-        prior = _prior_camera(result)
+        prior = prior_in_camera(result)
         if prior is None:
             track.smoother = None
             return None

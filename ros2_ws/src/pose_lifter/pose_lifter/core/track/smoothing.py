@@ -16,7 +16,10 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing"]
+from ..numeric.fast import mean_rows
+from ..results import LiftResult
+
+__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "prior_in_camera"]
 
 #: Standard deviation (seconds of input time) of the Gaussian window ``pose-lifter lift`` applies
 #: by default: 1.2 frames at 30 Hz (the window spans +-3 standard deviations). Chosen on the
@@ -129,3 +132,14 @@ class CausalSmoother:
         self.level = predicted + gain * resid
         self.velocity = self.velocity + (gain * gain / (2.0 - gain)) * resid
         return np.asarray(self.level + self.correction)
+
+
+def prior_in_camera(result: LiftResult) -> NDArray[np.float64] | None:
+    """The prior's pose of ``result`` in the camera frame of ``pose_camera`` (12, 3: centred, in
+    the fit's model units: divided by the camera's scale), or None without one."""
+    prior = result.prior_pose
+    scale = float(result.camera.scale)
+    if prior is None or not scale > 0:
+        return None
+    out = (prior - mean_rows(prior)) / scale
+    return out if np.isfinite(out).all() else None

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from ..lift.lifter import Lifter
     from ..results import WarmStart
 
-__all__ = ["Track", "calibrated_limb_proportions"]
+__all__ = ["Track", "calibrated_limb_proportions", "visible_joints"]
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
@@ -367,3 +367,15 @@ def compile_kernels() -> None:
     of a still frame ahead (an offline track's first frame would otherwise pay for it)."""
     still = np.zeros((1, N_JOINTS, 2))
     _screen_ahead_kernel(still[0], still, np.ones((1, N_JOINTS), dtype=np.bool_), 1.0, GATE_MAX_FRACTION)
+
+
+def visible_joints(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
+             threshold: float) -> NDArray[np.bool_] | None:
+    """(..., 12) of points (..., 12, 2): the joints with finite coordinates and confidence >=
+    ``threshold`` (the lifter's rule), or None when the shapes are wrong."""
+    x = np.asarray(points, dtype=np.float64)
+    conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+    if x.shape[-2:] != (N_JOINTS, 2) or (conf is not None and conf.shape != x.shape[:-1]):
+        return None
+    vis = cast("NDArray[np.bool_]", np.isfinite(x).all(axis=-1))
+    return vis if conf is None else vis & (conf >= threshold)
