@@ -11,13 +11,13 @@ every condition, most with outliers and 2D noise.
 
 from __future__ import annotations
 
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..numeric.fast import mean_rows
-from ..results import LiftResult
+if TYPE_CHECKING:
+    from ..results import LiftResult
 
 __all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "prior_in_camera"]
 
@@ -137,6 +137,9 @@ class CausalSmoother:
 def prior_in_camera(result: LiftResult) -> NDArray[np.float64] | None:
     """The prior's pose of ``result`` in the camera frame of ``pose_camera`` (12, 3: centred, in
     the fit's model units: divided by the camera's scale), or None without one."""
+    # imported here: the CLI reads this module's default without loading numba (fast's kernels)
+    from ..numeric.fast import mean_rows
+
     prior = result.prior_pose
     scale = float(result.camera.scale)
     if prior is None or not scale > 0:
