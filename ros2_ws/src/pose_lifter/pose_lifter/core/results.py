@@ -8,6 +8,7 @@ warm start, and what it ends with) are :class:`Duals`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import TypeAlias
@@ -70,6 +71,14 @@ class Camera:
     def project(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """Project a pose (12, 3) -> (12, 2)."""
         return np.asarray(pose @ self.projection.T + self.translation)
+
+
+def project_each(poses: NDArray[np.float64], cameras: Sequence[Camera]) -> NDArray[np.float64]:
+    """Each pose (n, 12, 3) projected by its camera: (n, 12, 2), each one what
+    :meth:`Camera.project` gives it (the same product per pose)."""
+    proj = np.array([c.projection for c in cameras])  # (n, 2, 3)
+    t = np.array([c.translation for c in cameras])  # (n, 2)
+    return np.asarray(poses @ proj.transpose(0, 2, 1) + t[:, None, :])
 
 
 @dataclass(frozen=True)

@@ -22,10 +22,19 @@ from ..errors import InvalidInputError
 from ..model.pose_model import PoseModel
 from ..model.prior import PosePrior
 from ..model.skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
-from ..numeric.fast import mean_rows
+from ..numeric.fast import mean_rows, row_norms
 from ..numeric.jit import njit
 from ..options import LifterOptions
-from ..results import Camera, Frames, LiftResult, Normalisation, StartKind, TrackContext, WarmStart
+from ..results import (
+    Camera,
+    Frames,
+    LiftResult,
+    Normalisation,
+    StartKind,
+    TrackContext,
+    WarmStart,
+    project_each,
+)
 from ..solve.pose_step import PriorRows
 from .batch import Call, PriorCall, Steps
 from .runs import Run, Runs, RunSpec
@@ -439,15 +448,11 @@ class PriorFit:
             return []
         runs = [min(f.tried, key=lambda r: r.run.objective).run for f in fits]
         xn = np.array([f.person.xn for f in fits])  # (n, 12, 2)
-        pose = np.array([r.pose.pose for r in runs])  # (n, 12, 3)
-        proj = np.array([r.camera.camera.projection for r in runs])  # (n, 2, 3)
-        t = np.array([r.camera.camera.translation for r in runs])  # (n, 2)
+        fits_2d = project_each(np.array([r.pose.pose for r in runs]), [r.camera.camera for r in runs])
         # a joint disagrees with the image when it is far from the fit's projection or from
         # the prior's image position (the prior is trained with confident outliers)
-        fit_err = xn - (pose @ proj.transpose(0, 2, 1) + t[:, None, :])  # Camera.project, per person
-        prior_err = xn - np.array([_target(f)[:, :2] for f in fits])
-        resid = np.maximum(np.sqrt(np.add.reduce(fit_err * fit_err, axis=2)),
-                           np.sqrt(np.add.reduce(prior_err * prior_err, axis=2)))  # row_norms
+        prior_2d = np.array([_target(f)[:, :2] for f in fits])
+        resid = np.maximum(row_norms(xn - fits_2d), row_norms(xn - prior_2d))
         vis = np.array([f.w for f in fits]) > 0  # (n, 12)
         n_vis = np.count_nonzero(vis, axis=1)
         # the median over each person's visible joints (median_rows): the middle of the sorted

@@ -61,8 +61,9 @@ from ..model.loading import LifterData
 from ..model.pose_model import LiftedConstraints, PoseModel
 from ..model.prior import PosePrior
 from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, N_JOINTS, RIGHT_LIMBS, limb_lengths
+from ..numeric.fast import row_norms
 from ..options import LifterOptions, Mode
-from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart
+from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart, project_each
 from ..solve.alpha.lifted_admm import QStepFn
 from ..validation import check_keypoints
 from .batch import Failed, LiftCall, Steps, gather
@@ -428,9 +429,7 @@ class Lifter:
         pose_camera = pose_c @ rotation.transpose(0, 2, 1)
         cam = [Camera(c.rotation, c.scale * s, t) for c, s, t in zip(cams, spread.tolist(), translation,
                                                                         strict=True)]
-        proj = np.array([c.projection for c in cam])  # (n, 2, 3)
-        err = np.array([p.x for p, _ in won]) - (pose @ proj.transpose(0, 2, 1) + translation[:, None, :])
-        reproj_all = np.sqrt(np.add.reduce(err * err, axis=2))  # row_norms, per person (n, 12)
+        reproj_all = row_norms(np.array([p.x for p, _ in won]) - project_each(pose, cam))  # (n, 12)
         alpha = np.array([r.pose.alpha for r in runs])
         finite = (np.isfinite(pose).all(axis=(1, 2)) & np.isfinite(alpha).all(axis=1)
                   & np.isfinite(rotation).all(axis=(1, 2)) & np.isfinite(translation).all(axis=1)).tolist()

@@ -25,9 +25,10 @@ def mean_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def row_norms(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``np.linalg.norm(a, axis=1)`` of a small real (n, d) array (~1 us less a call): numpy's own
-    special case, ``sqrt`` of the row sums of ``a * a``."""
-    return np.asarray(np.sqrt(np.add.reduce(a * a, axis=1)))
+    """``np.linalg.norm(a, axis=-1)`` of a small real (..., d) array, e.g. (n, d) -> (n,) or (m, n,
+    d) -> (m, n) (~1 us less a call): numpy's own special case, ``sqrt`` of the row sums of
+    ``a * a``."""
+    return np.asarray(np.sqrt(np.add.reduce(a * a, axis=-1)))
 
 
 def median_rows(a: NDArray[np.float64]) -> NDArray[np.float64]:
