@@ -41,6 +41,8 @@ def main() -> None:
                     help="the profile's order: time with callees, or in the function itself")
     ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE")
     args = ap.parse_args()
+    if args.passes < 3:
+        ap.error("--passes must be at least 3: the first two warm the tracks up")
     try:
         import rclpy
         from pose_lifter_msgs.msg import Skeleton2DArray

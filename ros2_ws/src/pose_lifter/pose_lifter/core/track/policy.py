@@ -29,7 +29,7 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   missing one, takes the previous frame's pose into its prior target with
   ``LifterOptions.missing_temporal_weight`` (the track carries it over) and, when the track used
   it on one of its last ``LifterOptions.fill_missing_frames`` frames, enters the learned prior's
-  input where the track predicts it (:meth:`pose_lifter.core.track.state.Track.predict`; the 2D fit
+  input where the track predicts it (:mod:`pose_lifter.core.track.screening`; the 2D fit
   still ignores it). Not when it would leave fewer than ``min_visible_joints`` or gate more than
   GATE_MAX_FRACTION of the visible joints (the prediction, not the detector, is then wrong), and a
   joint is gated on at most GATE_MAX_FRAMES frames in a row (so the track re-acquires a joint it
@@ -73,6 +73,8 @@ from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
 from .placement import CameraIntrinsics, perspective_corrected
+from .screening import Screened, ToScreen, screen_frames
+from .screening import compile_kernels as compile_screening_kernels
 from .smoothing import CausalSmoother, prior_in_camera
 from .state import NOISE_MIN_WEIGHT, Track, visible_joints
 from .state import compile_kernels as compile_track_kernels
@@ -126,22 +128,6 @@ class OutOfOrderFrameError(PoseLifterError):
 
 
 @dataclass(frozen=True)
-class _Screened:
-    """A frame after the track's screening (:meth:`TrackPolicy._screen`)."""
-
-    #: the confidence the lifter reads (a gated joint's set to 0)
-    confidence: NDArray[np.float64] | None
-    #: the joints visible and not gated (12,) (None: malformed input)
-    visible: NDArray[np.bool_] | None
-    #: where the track puts each joint (12, 2), input units (None: not known)
-    predicted: NDArray[np.float64] | None
-    #: the temporal outlier gate screened the frame
-    gated: bool
-    #: the track's 2D data weight (1 but in hybrid mode)
-    data_weight: float
-
-
-@dataclass(frozen=True)
 class TrackedLift:
     """One lifted frame of a track.
 
@@ -177,14 +163,26 @@ class TrackFrame:
     ahead: FramesAhead | None = None
 
 
-@dataclass(frozen=True)
-class _Pending:
-    """A frame between its screening and its lift (:meth:`TrackPolicy._before`)."""
+@dataclass
+class _Found:
+    """A frame with its track (None: untracked or new), warm start (None: cold) and the track's
+    limb proportions, then its screening."""
 
     frame: TrackFrame
     track: Track | None
     warm: WarmStart | None
-    screened: _Screened
+    limbs: NDArray[np.float64] | None
+    screened: Screened | None = None
+
+
+@dataclass(frozen=True)
+class _Pending:
+    """A frame between its screening and its lift (:meth:`TrackPolicy._pending`)."""
+
+    frame: TrackFrame
+    track: Track | None
+    warm: WarmStart | None
+    screened: Screened
     seen: NDArray[np.float64]  #: the 2D the lift reads (12, 2)
     context: TrackContext
 
@@ -203,9 +201,9 @@ def lift_tracks_steps(frames: Sequence[TrackFrame]) -> Steps[list[TrackedLift | 
     start). A solve (:mod:`pose_lifter.core.lift.batch`)."""
     out: list[TrackedLift | Exception] = [_NOT_TRACKED] * len(frames)
     pending: list[tuple[int, _Pending]] = []
-    for k, f in enumerate(frames):
+    for k, found in _before(frames, out):
         try:
-            pending.append((k, f.policy._before(f)))
+            pending.append((k, found.frame.policy._pending(found)))
         except Exception as err:
             out[k] = err
     calls: list[Call] = [p.call(p.warm) for _, p in pending]
@@ -238,6 +236,32 @@ def lift_tracks_steps(frames: Sequence[TrackFrame]) -> Steps[list[TrackedLift | 
         except Exception as err:
             out[k] = err
     return out
+
+
+def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) -> list[tuple[int, _Found]]:
+    """Each frame's track, warm start and limb proportions, then the frames screened together
+    (:func:`~pose_lifter.core.track.screening.screen_frames`; a track's second frame in one call
+    in a later screening); a frame's error (an out-of-order frame) goes to ``out``."""
+    found: list[tuple[int, _Found]] = []
+    for k, f in enumerate(frames):
+        try:
+            found.append((k, f.policy._found(f)))
+        except Exception as err:
+            out[k] = err
+    todo = [p for _, p in found]
+    while todo:
+        batch: list[_Found] = []
+        later: list[_Found] = []
+        tracks: set[int] = set()
+        for p in todo:
+            (later if p.track is not None and id(p.track) in tracks else batch).append(p)
+            tracks.add(id(p.track))
+        rows = [ToScreen(p.track, p.warm is not None, p.frame.policy.lifter, p.frame.policy.smoothed_later,
+                         p.frame.points, p.frame.confidence, p.frame.stamp_ns) for p in batch]
+        for p, screened in zip(batch, screen_frames(rows), strict=True):
+            p.screened = screened
+        todo = later
+    return found
 
 
 def _dropped_warm(p: _Pending, err: Exception) -> Exception:
@@ -277,6 +301,7 @@ class TrackPolicy:
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame
         compile_track_kernels()
+        compile_screening_kernels()
 
     def configure(self, lifter: Lifter, track_timeout: float, warm_start: bool, reinit_ratio: float) -> None:
         """Change the lifter or the settings; the tracks are kept (forgotten when ``warm_start``
@@ -344,15 +369,20 @@ class TrackPolicy:
             raise out
         return out
 
-    def _before(self, f: TrackFrame) -> _Pending:
-        """A frame up to its lift: its track and warm start, its screening, the 2D the lift reads
-        and the track's context (an error of the context drops the warm start)."""
+    def _found(self, f: TrackFrame) -> _Found:
+        """A frame's track, warm start and limb proportions (before the frame's screening)."""
         track, warm = self._find(f.track_id, f.stamp_ns)
         limbs = track.limb_proportions(self.lifter.options.image_limbs) if track is not None else None
-        frame = self._screen(track, warm, f.stamp_ns, f.points, f.confidence)
+        return _Found(f, track, warm, limbs)
+
+    def _pending(self, p: _Found) -> _Pending:
+        """A screened frame up to its lift: the 2D the lift reads and the track's context (an
+        error of the context drops the warm start)."""
+        f, track, warm, frame = p.frame, p.track, p.warm, p.screened
+        assert frame is not None
         seen = self._seen(track, warm, f.points, f.intrinsics)
         try:
-            context = self._context(track, warm, f.stamp_ns, frame, limbs, f.points, f.ahead)
+            context = self._context(track, warm, f.stamp_ns, frame, p.limbs, f.points, f.ahead)
         except PoseLifterError:
             if track is not None:
                 track.warm = None
@@ -423,7 +453,7 @@ class TrackPolicy:
         return track.past(stamp_ns, prior.window - 1 - prior.future_frames)
 
     def _future(self, track: Track | None, ahead: FramesAhead | None, stamp_ns: int, past: Frames | None,
-                current: NDArray[np.float64], frame: _Screened) -> Frames | None:
+                current: NDArray[np.float64], frame: Screened) -> Frames | None:
         """The next frames a temporal prior with future frames reads (with ``past``: the frames
         of ``ahead`` evenly spaced on from ``stamp_ns`` at the step of the track's last frame,
         within 20 %, as :meth:`Track.past`; each frame's visible joints by the confidence
@@ -453,33 +483,7 @@ class TrackPolicy:
                                       self.lifter.options.outlier_gate)
         return frames, seen
 
-    def _screen(self, track: Track | None, warm: WarmStart | None, stamp_ns: int,
-                points: NDArray[np.float64], confidence: NDArray[np.float64] | None) -> _Screened:
-        """The hybrid mode's screening of a frame that follows its track's last one: where the
-        track puts each joint, the temporal outlier gate (a gated joint is missing for this frame)
-        and the track's 2D noise estimate."""
-        opts = self.lifter.options
-        hybrid = opts.mode == "hybrid"
-        # the frame's visible joints (None for malformed input: the lifter refuses it with the reason)
-        vis = visible_joints(points, confidence, opts.confidence_threshold)
-        noisy = hybrid and opts.noise_smoothing and not self.smoothed_later
-        if not (hybrid and track is not None and warm is not None and vis is not None):
-            dw = track.data_weight() if noisy and track is not None else 1.0
-            return _Screened(confidence, vis, None, False, dw)
-        # where the track puts each joint on this frame (the gate's and the fill's reference)
-        predicted = track.predict(points, vis, stamp_ns)
-        screened = opts.outlier_gate > 0
-        if screened:
-            gated = track.gate(points, vis, predicted, opts.outlier_gate, opts.min_visible_joints)
-            if gated is not None:  # a gated joint is missing for this frame
-                confidence = np.where(gated, 0.0, np.ones(N_JOINTS) if confidence is None
-                                      else np.asarray(confidence, dtype=np.float64))
-                vis = vis & ~gated
-                predicted = track.predict(points, vis, stamp_ns)  # the motion of the joints kept
-        track.observe_noise(self.lifter, points, vis, stamp_ns)
-        return _Screened(confidence, vis, predicted, screened, track.data_weight() if noisy else 1.0)
-
-    def _context(self, track: Track | None, warm: WarmStart | None, stamp_ns: int, frame: _Screened,
+    def _context(self, track: Track | None, warm: WarmStart | None, stamp_ns: int, frame: Screened,
                  limbs: NDArray[np.float64] | None, points: NDArray[np.float64],
                  ahead: FramesAhead | None = None) -> TrackContext:
         """What the track tells the lifter of this frame (:class:`TrackContext`): its limb
@@ -590,4 +594,5 @@ def compile_kernels() -> float:
         Lifter(None, LifterOptions(mode=mode)).warm_up()
     compile_measurement_kernels()
     compile_track_kernels()
+    compile_screening_kernels()
     return time.perf_counter() - start

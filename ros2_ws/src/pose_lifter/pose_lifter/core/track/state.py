@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import PoseLifterError
 from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, N_JOINTS, RIGHT_LIMBS
 from ..numeric.fast import median_rows, row_norms
 from ..numeric.jit import njit
@@ -23,7 +22,6 @@ from .measurement import MeasurementUpdate
 from .smoothing import CausalSmoother
 
 if TYPE_CHECKING:
-    from ..lift.lifter import Lifter
     from ..results import WarmStart
 
 __all__ = ["Track", "calibrated_limb_proportions", "visible_joints"]
@@ -33,7 +31,6 @@ LIMB_B = np.array([b for _, b in LIMBS])
 _LEFT_LIMBS = np.array(LEFT_LIMBS)
 _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
-_SQRT6 = math.sqrt(6.0)
 
 
 #: Detector noise: per frame, the median over joints of the 2D input's acceleration
@@ -152,28 +149,6 @@ class Track:
             self._objective_median = float(median_rows(np.asarray(self.objectives)))
         return self._objective_median
 
-    def gate(self, points: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64] | None,
-             limit: float, min_visible: int) -> NDArray[np.bool_] | None:
-        """The visible joints farther than ``limit`` leg lengths (or GATE_NOISE_FACTOR times the
-        track's noise) from where the last frame had them (its detection when the lift used it,
-        else the fit's projection), after removing the median motion of the visible joints; None
-        when nothing is gated (see GATE_MAX_FRACTION). A constant-velocity prediction was
-        measured worse: the fits' jitter doubles in it (7 % of good joints beyond 0.8 leg on
-        held-out tracks with 20 % outliers, against 2 % for the last position)."""
-        if predicted is None:
-            return None
-        scale = self.fits[-1][2]
-        d = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted) - predicted
-        dist = row_norms(d) / max(scale, 1e-12)
-        limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())  # noisy 2D: its own scale
-        out = vis & (dist > limit) & (self.gated < GATE_MAX_FRAMES)
-        n_out, n_vis = int(np.count_nonzero(out)), int(np.count_nonzero(vis))
-        if n_out == 0 or n_vis - n_out < min_visible or n_out > GATE_MAX_FRACTION * n_vis:
-            self.gated[:] = 0
-            return None
-        self.gated = np.where(out, self.gated + 1, 0)
-        return np.asarray(out, dtype=bool)
-
     def screen_ahead(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
                      predicted: NDArray[np.float64], ahead: NDArray[np.float64],
                      ahead_vis: NDArray[np.bool_], limit: float) -> NDArray[np.bool_]:
@@ -190,47 +165,12 @@ class Track:
         return _screen_ahead_kernel(np.ascontiguousarray(ref), np.ascontiguousarray(ahead, dtype=np.float64),
                                     np.array(ahead_vis, dtype=np.bool_), limit * scale, GATE_MAX_FRACTION)
 
-    def predict(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
-                stamp_ns: int) -> NDArray[np.float64] | None:
-        """Where each joint (12, 2) should be on this frame: where the last frame had it (its
-        detection when the lift used it, else the fit's projection) moved by the median motion of
-        this frame's visible joints since (the person's or the camera's). None without a last
-        frame at most GATE_MAX_AGE_NS old, or without a visible joint."""
-        if not self.fits or not vis.any():
-            return None
-        t1, p1, _ = self.fits[-1]
-        if not 0 < stamp_ns - t1 <= GATE_MAX_AGE_NS:
-            return None
-        return np.asarray(p1 + median_rows(np.asarray(points, dtype=np.float64)[vis] - p1[vis]))
-
     def fit_is_sound(self) -> bool:
         """False when the last frame's objective exceeds FILL_MAX_OBJECTIVE_RATIO times the median
         of the track's last ones (the fit is losing the person: its positions are no prediction)."""
         if len(self.objectives) < 3:
             return True
         return self.objectives[-1] <= FILL_MAX_OBJECTIVE_RATIO * self.objective_median()
-
-    def observe_noise(self, lifter: Lifter, points: NDArray[np.float64], visible: NDArray[np.bool_],
-                      stamp_ns: int) -> None:
-        """Add this frame's 2D acceleration (see NOISE_FRAMES) when the last two frames and this
-        one are evenly spaced in time."""
-        if len(self.history) < 2:
-            return
-        (t0, x0, v0), (t1, x1, v1) = self.history[-2], self.history[-1]
-        d1, d2 = t1 - t0, stamp_ns - t1
-        if d1 <= 0 or d2 <= 0 or abs(d2 - d1) > 0.2 * d1:
-            return
-        x = np.asarray(points, dtype=np.float64)
-        vis = v0 & v1 & visible
-        if np.count_nonzero(vis) < 3:
-            return
-        acc = row_norms(x[vis] - 2.0 * x1[vis] + x0[vis]) / _SQRT6
-        try:
-            spread = lifter.input_scale(x, vis.astype(np.float64))
-        except PoseLifterError:
-            return
-        self.noise.append(float(median_rows(acc)) / spread)
-        self._noise_median = None
 
     def past(self, stamp_ns: int, frames: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
         """The last ``frames`` frames (oldest first, as ``(points (k, 12, 2), used (k, 12))``) that

@@ -1,0 +1,126 @@
+"""The screening of a frame's tracked people (``core/track/screening.py``) in one compiled pass
+against the per-person rule written plainly in numpy: where the track puts each joint, the
+temporal outlier gate and the 2D noise observation, on random tracks with jumping joints."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+from pose_lifter.core import Lifter, LifterOptions
+from pose_lifter.core.track.screening import ToScreen, screen_frames
+from pose_lifter.core.track.state import (
+    GATE_MAX_AGE_NS,
+    GATE_MAX_FRACTION,
+    GATE_MAX_FRAMES,
+    GATE_NOISE_FACTOR,
+    Track,
+)
+
+STEP_NS = 33_333_333
+
+
+def _reference(track: Track, lifter: Lifter, x: np.ndarray, vis: np.ndarray, stamp: int
+               ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, float | None]:
+    """One person's screening as a plain numpy rule: (joints kept, joints gated or None,
+    prediction or None, the noise observation or None); updates ``track.gated``."""
+    opts = lifter.options
+
+    def predict(v: np.ndarray) -> np.ndarray | None:
+        if not track.fits or not v.any():
+            return None
+        t1, p1, _ = track.fits[-1]
+        if not 0 < stamp - t1 <= GATE_MAX_AGE_NS:
+            return None
+        return p1 + np.median(x[v] - p1[v], axis=0)
+
+    predicted, gated = predict(vis), None
+    if predicted is not None:
+        d = np.linalg.norm(np.where(vis[:, None], x, predicted) - predicted, axis=1) / track.fits[-1][2]
+        limit = max(opts.outlier_gate, GATE_NOISE_FACTOR * track.noise_level())
+        out = vis & (d > limit) & (track.gated < GATE_MAX_FRAMES)
+        n_out, n_vis = out.sum(), vis.sum()
+        if n_out == 0 or n_vis - n_out < opts.min_visible_joints or n_out > GATE_MAX_FRACTION * n_vis:
+            track.gated[:] = 0
+        else:
+            track.gated = np.where(out, track.gated + 1, 0)
+            gated, vis = out, vis & ~out
+            predicted = predict(vis)
+    noise = None
+    (t0, x0, v0), (t1, x1, v1) = track.history[-2], track.history[-1]
+    seen = v0 & v1 & vis
+    if abs((stamp - t1) - (t1 - t0)) <= 0.2 * (t1 - t0) and seen.sum() >= 3:
+        acc = np.linalg.norm(x[seen] - 2.0 * x1[seen] + x0[seen], axis=1) / np.sqrt(6.0)
+        noise = float(np.median(acc)) / lifter.input_scale(x, seen.astype(float))
+    return vis, gated, predicted, noise
+
+
+def _tracks(rng: np.random.Generator, n: int) -> tuple[list[Track], np.ndarray, np.ndarray, list[int]]:
+    """n tracks with two past frames and a last fit, and this frame's 2D (some joints jumped, some
+    missing, some frames too late for a prediction or unevenly spaced)."""
+    tracks, points, vis, stamps = [], [], [], []
+    for i in range(n):
+        base = rng.normal(scale=60.0, size=(12, 2)) + 300.0
+        t = 10 * STEP_NS * (i + 1)
+        track = Track(None, t)
+        for k, dt in ((2, 2 * STEP_NS), (1, STEP_NS)):
+            track.history.append((t - dt, base + rng.normal(scale=1.5 * k, size=(12, 2)),
+                                  rng.random(12) > 0.1))
+        track.fits.append((t - STEP_NS, base + rng.normal(scale=1.0, size=(12, 2)), 80.0))
+        for _ in range(int(rng.integers(0, 8))):  # a noise history: the gate's own scale
+            track.noise.append(float(rng.uniform(0.0, 0.1)))
+        track.gated = rng.integers(0, GATE_MAX_FRAMES + 1, size=12)
+        x = base + rng.normal(scale=2.0, size=(12, 2)) + rng.normal(scale=5.0, size=2)  # and a motion
+        jumped = rng.random(12) < rng.choice([0.0, 0.15, 0.6])
+        x[jumped] += rng.normal(scale=150.0, size=(int(jumped.sum()), 2))
+        late = rng.random() < 0.1
+        uneven = rng.random() < 0.1
+        tracks.append(track)
+        points.append(x)
+        vis.append(rng.random(12) > 0.15)
+        stamps.append(t + (GATE_MAX_AGE_NS if late else 0) + (STEP_NS // 2 if uneven else 0))
+    return tracks, np.array(points), np.array(vis), stamps
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_one_pass_screens_each_person_as_the_per_person_rule(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    lifter = Lifter(None, LifterOptions())
+    tracks, points, vis, stamps = _tracks(rng, 40)
+    copies, _, _, _ = _tracks(np.random.default_rng(seed), 40)  # the same tracks, for the reference
+    got = screen_frames([ToScreen(t, True, lifter, False, x, np.where(v, 1.0, 0.0), s)
+                         for t, x, v, s in zip(tracks, points, vis, stamps, strict=True)])
+    n_gated = n_noise = 0
+    for i, (t, x, v, s) in enumerate(zip(copies, points, vis, stamps, strict=True)):
+        kept, gated, predicted, noise = _reference(t, lifter, x, v, s)
+        assert got[i].visible is not None and (got[i].visible == kept).all()
+        assert (got[i].confidence == 0.0).sum() == (~kept).sum()
+        assert (tracks[i].gated == t.gated).all()
+        assert got[i].gated  # the gate was on
+        if predicted is None:
+            assert got[i].predicted is None
+        else:
+            assert got[i].predicted is not None
+            np.testing.assert_allclose(got[i].predicted, predicted, rtol=0, atol=1e-9)
+        assert len(tracks[i].noise) == len(t.noise) + (noise is not None)
+        if noise is not None:
+            assert tracks[i].noise[-1] == pytest.approx(noise, rel=1e-12)
+            n_noise += 1
+        n_gated += gated is not None
+    # the cases were there: people gated, not gated, without a prediction, noise observed
+    assert 3 <= n_gated <= 37 and n_noise >= 20
+    assert any(g.predicted is None for g in got)
+
+
+def test_a_frame_that_does_not_follow_its_track_is_not_screened() -> None:
+    lifter = Lifter(None, LifterOptions())
+    tracks, points, vis, stamps = _tracks(np.random.default_rng(3), 3)
+    before = [len(t.noise) for t in tracks]
+    rows: Sequence[ToScreen] = [ToScreen(tracks[0], False, lifter, False, points[0], None, stamps[0]),
+                                ToScreen(None, False, lifter, False, points[1], None, stamps[1]),
+                                ToScreen(tracks[2], True, Lifter(None, LifterOptions(mode="paper")), False,
+                                         points[2], None, stamps[2])]
+    got = screen_frames(rows)
+    assert [g.predicted is None and not g.gated for g in got] == [True, True, True]
+    assert [len(t.noise) for t in tracks] == before
