@@ -128,3 +128,34 @@ def test_image_limbs_read_a_persons_proportions_off_the_image(walker: tuple[np.n
     prior_only = track.limb_proportions(image=False)
     assert blended is not None and prior_only is not None
     assert np.linalg.norm(shape(blended) - true) < np.linalg.norm(shape(prior_only) - true)
+
+
+def test_the_smoothers_of_a_frames_tracks_update_together_as_the_recurrence() -> None:
+    """``smooth_tracks`` (a frame's tracks as arrays) gives each track the smoother's recurrence
+    (``CausalSmoother``'s docstring) written plainly per track, over frames where tracks start,
+    run on and change their gains."""
+    from pose_lifter.core.track.smoothing import CausalSmoother, smooth_tracks
+
+    rng = np.random.default_rng(4)
+    n = 7
+    together = [CausalSmoother() for _ in range(n)]
+    state: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = [None] * n  # c, level, velocity
+    for frame in range(6):
+        fits, priors = rng.normal(size=(2, n, 12, 3))
+        b, gain = rng.uniform(0.0, 0.95, n), rng.uniform(0.2, 1.0, n)
+        if frame == 3:  # two tracks start again (a cold frame)
+            together[1], together[4] = CausalSmoother(), CausalSmoother()
+            state[1] = state[4] = None
+        got = smooth_tracks(together, fits, priors, b, gain)
+        for i in range(n):
+            st = state[i]
+            if st is None:
+                state[i], want = (fits[i] - priors[i], priors[i], np.zeros((12, 3))), fits[i]
+            else:
+                c = b[i] * st[0] + (1.0 - b[i]) * (fits[i] - priors[i])
+                resid = priors[i] - (st[1] + st[2])
+                level = st[1] + st[2] + gain[i] * resid
+                velocity = st[2] + gain[i] ** 2 / (2.0 - gain[i]) * resid
+                state[i], want = (c, level, velocity), level + c
+            np.testing.assert_allclose(got[i], want, rtol=0, atol=1e-12)
+            assert np.array_equal(got[i], together[i].level + together[i].correction) or st is None

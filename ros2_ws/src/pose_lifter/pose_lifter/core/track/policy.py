@@ -59,6 +59,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,9 +74,10 @@ from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
 from .placement import CameraIntrinsics, perspective_corrected
+from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
 from .screening import Screened, ToScreen, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
-from .smoothing import CausalSmoother, prior_in_camera
+from .smoothing import CausalSmoother, prior_in_camera, smooth_tracks
 from .state import NOISE_MIN_WEIGHT, Track, visible_joints
 from .state import compile_kernels as compile_track_kernels
 
@@ -103,51 +105,6 @@ DISTURBANCE_FULL = 0.2
 #: with noise 0.1 and a gain of 0.4: factor 0 / 0.2 / 1 gave 56.6 / 26.3 / 20.2 mm/frame^2 at
 #: P-MPJPE 69.4 / 69.6 / 70.7 mm).
 NOISE_DISTURBANCE = 0.25
-
-@dataclass(frozen=True)
-class FramesAhead:
-    """A track's next frames as its detector gave them (what an offline lift knows of a frame's
-    future; :meth:`TrackPolicy.lift_steps`).
-
-    Attributes
-    ----------
-    stamps_ns : ndarray of int64, shape (n,)
-        Increasing, after the frame lifted.
-    points : ndarray, shape (n, 12, 2)
-        Input units, as the frame's.
-    confidence : ndarray, shape (n, 12), optional
-    """
-
-    stamps_ns: NDArray[np.int64]
-    points: NDArray[np.float64]
-    confidence: NDArray[np.float64] | None = None
-
-
-class OutOfOrderFrameError(PoseLifterError):
-    """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
-
-
-@dataclass(frozen=True)
-class TrackedLift:
-    """One lifted frame of a track.
-
-    Attributes
-    ----------
-    result : LiftResult
-    warm_started : bool
-        Solved from the track's previous frame.
-    reinitialised : bool
-        The warm solve had degraded and a cold solve replaced it (its objective was lower).
-    fit_pose_camera : ndarray, shape (12, 3), optional
-        The fit's own ``pose_camera`` when the output smoothing replaced ``result.pose`` and
-        ``result.pose_camera`` (hybrid mode; the rest of ``result`` is the fit's), else None.
-    """
-
-    result: LiftResult
-    warm_started: bool
-    reinitialised: bool
-    fit_pose_camera: NDArray[np.float64] | None = None
-
 
 @dataclass(frozen=True)
 class TrackFrame:
@@ -230,11 +187,7 @@ def lift_tracks_steps(frames: Sequence[TrackFrame]) -> Steps[list[TrackedLift | 
             solved.append((k, p, cold, True))
         else:
             solved.append((k, p, warm_result, False))
-    for k, p, r, reinit in solved:
-        try:
-            out[k] = p.frame.policy._after(p, r, reinit)
-        except Exception as err:
-            out[k] = err
+    _after(solved, out)
     return out
 
 
@@ -262,6 +215,81 @@ def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) ->
             p.screened = screened
         todo = later
     return found
+
+
+def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[TrackedLift | Exception]
+           ) -> None:
+    """The lifted frames entered into their tracks and published into ``out`` (hybrid: smoothed,
+    as arrays over the frames, and measurement-updated); a frame's error goes to ``out``."""
+    hybrid: list[tuple[int, _Pending, LiftResult, bool, Track]] = []
+    for k, p, r, reinit in solved:
+        f = p.frame
+        try:
+            if f.track_id < 0:
+                out[k] = TrackedLift(r, p.warm is not None, reinit)
+                continue
+            track = f.policy._record(f.track_id, p.track, f.stamp_ns, f.points, r)
+        except Exception as err:
+            out[k] = err
+            continue
+        if f.policy.lifter.options.mode == "hybrid":
+            hybrid.append((k, p, r, reinit, track))
+        else:
+            out[k] = TrackedLift(r, p.warm is not None, reinit)
+    # the output's state carries over a re-initialised frame (its jump is smoothed)
+    published: Sequence[LiftResult | Exception | None]
+    try:
+        published = _smoothed([(p, r, t) for _, p, r, _, t in hybrid])
+    except Exception as err:  # a bug, not a refusal: every frame of the batch reports it
+        published = [err] * len(hybrid)
+    for (k, p, r, reinit, track), smoothed in zip(hybrid, published, strict=True):
+        follows = p.warm is not None
+        if isinstance(smoothed, Exception):
+            out[k] = smoothed
+            continue
+        try:
+            updated = p.frame.policy._measure(track, smoothed or r, p.seen, follows)
+        except Exception as err:
+            out[k] = err
+            continue
+        o = updated if updated is not None else smoothed
+        out[k] = TrackedLift(r, follows, reinit) if o is None else TrackedLift(o, follows, reinit,
+                                                                                r.pose_camera)
+
+
+def _smoothed(rows: Sequence[tuple[_Pending, LiftResult, Track]]) -> list[LiftResult | None]:
+    """Each hybrid result with its pose replaced by its track's smoothed one (see
+    :class:`~pose_lifter.core.track.smoothing.CausalSmoother`; the tracks' smoothers updated as
+    arrays, :func:`~pose_lifter.core.track.smoothing.smooth_tracks`), or None where smoothing is
+    off or starts again (a cold solve)."""
+    out: list[LiftResult | None] = [None] * len(rows)
+    go: list[tuple[int, NDArray[np.float64], float, float]] = []
+    for i, (p, r, track) in enumerate(rows):
+        opts = p.frame.policy.lifter.options
+        track.unused_share.append(float(np.count_nonzero(r.weights <= 0)) / N_JOINTS)
+        prior = prior_in_camera(r)
+        if prior is None or (opts.correction_smoothing <= 0 and opts.disturbed_smoothing_gain >= 1):
+            track.smoother = None
+            continue
+        if p.warm is None or track.smoother is None:
+            track.smoother = CausalSmoother()
+        shares = track.unused_share
+        disturbance = max(sum(shares) / len(shares), NOISE_DISTURBANCE * (1.0 - p.screened.data_weight))
+        gain = 1.0 - min(1.0, disturbance / DISTURBANCE_FULL) * (1.0 - opts.disturbed_smoothing_gain)
+        go.append((i, prior, opts.correction_smoothing, gain))
+    if not go:
+        return out
+    tracks = [rows[i][2] for i, _, _, _ in go]
+    poses = smooth_tracks([cast(CausalSmoother, t.smoother) for t in tracks],
+                          np.array([rows[i][1].pose_camera for i, _, _, _ in go]),
+                          np.array([prior for _, prior, _, _ in go]),
+                          np.array([b for _, _, b, _ in go]), np.array([g for _, _, _, g in go]))
+    for (i, _, _, _), track, pose in zip(go, tracks, poses, strict=True):
+        if np.isfinite(pose).all():  # ndarray.all: no numpy wrapper on the per-frame path
+            out[i] = rows[i][1].with_camera_pose(pose)
+        else:
+            track.smoother = None
+    return out
 
 
 def _dropped_warm(p: _Pending, err: Exception) -> Exception:
@@ -397,22 +425,6 @@ class TrackPolicy:
             return False
         return result.objective > self.reinit_ratio * track.objective_median()
 
-    def _after(self, p: _Pending, result: LiftResult, reinit: bool) -> TrackedLift:
-        """The lifted frame entered into its track and published (hybrid: smoothed and
-        measurement-updated)."""
-        f, track, warm = p.frame, p.track, p.warm
-        if f.track_id < 0:
-            return TrackedLift(result, warm is not None, reinit)
-        track = self._record(f.track_id, track, f.stamp_ns, f.points, result)
-        if self.lifter.options.mode == "hybrid":
-            # the output's state carries over a re-initialised frame (its jump is smoothed)
-            published = self._smooth(track, result, warm is not None, p.screened.data_weight)
-            updated = self._measure(track, published or result, p.seen, warm is not None)
-            out = updated if updated is not None else published
-            if out is not None:
-                return TrackedLift(out, warm is not None, reinit, result.pose_camera)
-        return TrackedLift(result, warm is not None, reinit)
-
     def _seen(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
               intrinsics: CameraIntrinsics | None) -> NDArray[np.float64]:
         """The 2D the lift reads: ``points`` corrected for perspective by the track's last pose
@@ -539,43 +551,20 @@ class TrackPolicy:
         if not opts.measurement_update:
             track.measurement = None
             return None
-        if not follows or track.measurement is None:
-            track.measurement = MeasurementUpdate()
+        if not follows:
+            track.measurement = None
         if not track.noise:  # its first two frames: how far to trust the 2D is not known yet
             return None
         noise = track.noise_median()
         if noise > MAX_NOISE:  # the 2D is no better than the fit's image positions
             track.measurement = None
             return None
+        if track.measurement is None:
+            track.measurement = MeasurementUpdate()
         out = track.measurement.update(result.pose_camera, points, result.weights > 0, noise,
                                        opts.measurement_depth, opts.measurement_gate)
         if not np.isfinite(out).all():
             track.measurement = None
-            return None
-        return result.with_camera_pose(out)
-
-    def _smooth(self, track: Track, result: LiftResult, follows: bool, data_weight: float
-                ) -> LiftResult | None:
-        """``result`` with its pose replaced by the track's smoothed one (see
-        :class:`~pose_lifter.core.track.smoothing.CausalSmoother`), or None when smoothing is off or the
-        frame starts the smoother again (a cold solve)."""
-        opts = self.lifter.options
-        track.unused_share.append(float(np.count_nonzero(result.weights <= 0)) / N_JOINTS)
-        if opts.correction_smoothing <= 0 and opts.disturbed_smoothing_gain >= 1:
-            track.smoother = None
-            return None
-        prior = prior_in_camera(result)
-        if prior is None:
-            track.smoother = None
-            return None
-        if not follows or track.smoother is None:
-            track.smoother = CausalSmoother()
-        shares = track.unused_share
-        disturbance = max(sum(shares) / len(shares), NOISE_DISTURBANCE * (1.0 - data_weight))
-        gain = 1.0 - min(1.0, disturbance / DISTURBANCE_FULL) * (1.0 - opts.disturbed_smoothing_gain)
-        out = track.smoother.update(result.pose_camera, prior, opts.correction_smoothing, gain)
-        if not np.isfinite(out).all():  # ndarray.all: no numpy wrapper on the per-frame path
-            track.smoother = None
             return None
         return result.with_camera_pose(out)
 

@@ -11,6 +11,7 @@ every condition, most with outliers and 2D noise.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from ..results import LiftResult
 
-__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "prior_in_camera"]
+__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "prior_in_camera", "smooth_tracks"]
 
 #: Standard deviation (seconds of input time) of the Gaussian window ``pose-lifter lift`` applies
 #: by default: 1.2 frames at 30 Hz (the window spans +-3 standard deviations). Chosen on the
@@ -122,16 +123,52 @@ class CausalSmoother:
     def update(self, fit: NDArray[np.float64], prior: NDArray[np.float64], b: float, gain: float
                ) -> NDArray[np.float64]:
         """The smoothed pose (12, 3) for this frame's fit and prior poses (12, 3)."""
-        corr = fit - prior
-        if self.correction is None or self.level is None or self.velocity is None:
-            self.correction, self.level, self.velocity = corr, prior.copy(), np.zeros_like(prior)
-            return np.asarray(fit, dtype=np.float64).copy()
-        self.correction = b * self.correction + (1.0 - b) * corr
-        predicted = self.level + self.velocity
-        resid = prior - predicted
-        self.level = predicted + gain * resid
-        self.velocity = self.velocity + (gain * gain / (2.0 - gain)) * resid
-        return np.asarray(self.level + self.correction)
+        fits = np.asarray(fit, dtype=np.float64)[None]
+        priors = np.asarray(prior, dtype=np.float64)[None]
+        return np.asarray(smooth_tracks([self], fits, priors, np.array([b]), np.array([gain]))[0])
+
+
+def smooth_tracks(smoothers: Sequence[CausalSmoother], fits: NDArray[np.float64], priors: NDArray[np.float64],
+                  b: NDArray[np.float64], gain: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:meth:`CausalSmoother.update` of n tracks' smoothers at once, as arrays over the tracks
+    (elementwise: each row is what its smoother alone gives, bit for bit).
+
+    Parameters
+    ----------
+    smoothers : sequence of n CausalSmoother
+        Updated in place (a new one starts from this frame).
+    fits, priors : ndarray, shape (n, 12, 3)
+        This frame's fit and prior poses (camera frame, centred, model units).
+    b, gain : ndarray, shape (n,)
+        Each track's ``correction_smoothing`` and alpha-beta gain.
+
+    Returns
+    -------
+    ndarray, shape (n, 12, 3)
+        The smoothed poses (a new smoother's: its fit).
+    """
+    corr = fits - priors
+    out = np.array(fits, dtype=np.float64)
+    going = [i for i, sm in enumerate(smoothers) if sm.correction is not None]
+    for i, sm in enumerate(smoothers):
+        if sm.correction is None or sm.level is None or sm.velocity is None:
+            sm.correction, sm.level, sm.velocity = corr[i], priors[i].copy(), np.zeros_like(priors[i])
+    if not going:
+        return out
+    idx = np.array(going)
+    c = np.array([smoothers[i].correction for i in going])
+    level = np.array([smoothers[i].level for i in going])
+    velocity = np.array([smoothers[i].velocity for i in going])
+    bb, g = b[idx][:, None, None], gain[idx][:, None, None]
+    c = bb * c + (1.0 - bb) * corr[idx]
+    predicted = level + velocity
+    resid = priors[idx] - predicted
+    level = predicted + g * resid
+    velocity = velocity + (g * g / (2.0 - g)) * resid
+    out[idx] = level + c
+    for r, i in enumerate(going):
+        smoothers[i].correction, smoothers[i].level, smoothers[i].velocity = c[r], level[r], velocity[r]
+    return out
 
 
 def prior_in_camera(result: LiftResult) -> NDArray[np.float64] | None:
