@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pose_lifter import cli
 from pose_lifter.core.track import placement
@@ -41,3 +42,26 @@ def test_the_defaults_modules_load_nothing_else(module: str) -> None:
             "print(sorted(m for m in sys.modules if m.startswith(('pose_lifter.', 'numpy'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == f"['pose_lifter.core', 'pose_lifter.core.track', 'pose_lifter.core.track.{module}']"
+
+
+def test_a_frames_people_are_corrected_for_perspective_as_each_alone() -> None:
+    """perspective_corrected_rows: each row is what ``m + (x - m)(1 + z s / f)`` gives it, and a
+    row whose depths would put a joint behind the camera (or are not finite) keeps its 2D."""
+    from pose_lifter.core.track.placement import perspective_corrected_rows
+
+    rng = np.random.default_rng(2)
+    n = 5
+    x = rng.normal(300.0, 50.0, (n, 12, 2))
+    depths = rng.normal(0.0, 0.5, (n, 12))
+    scale, focal = rng.uniform(50.0, 200.0, n), rng.uniform(500.0, 900.0, n)
+    centre = x.mean(axis=1)
+    depths[1, 3] = -0.95 * focal[1] / scale[1]  # the joint's depth a twentieth of the centroid's
+    depths[3, 0] = np.nan
+    got = perspective_corrected_rows(x, focal, depths, scale, centre)
+    for i in range(n):
+        if i in (1, 3):
+            assert np.array_equal(got[i], x[i])
+            continue
+        ratio = 1.0 + depths[i] * scale[i] / focal[i]
+        np.testing.assert_allclose(got[i], centre[i] + (x[i] - centre[i]) * ratio[:, None], rtol=1e-14)
+        assert not np.allclose(got[i], x[i])

@@ -115,7 +115,7 @@ def test_one_pass_screens_each_person_as_the_per_person_rule(seed: int) -> None:
 
 def test_a_frame_that_does_not_follow_its_track_is_not_screened() -> None:
     lifter = Lifter(None, LifterOptions())
-    tracks, points, vis, stamps = _tracks(np.random.default_rng(3), 3)
+    tracks, points, _, stamps = _tracks(np.random.default_rng(3), 3)
     before = [len(t.noise) for t in tracks]
     rows: Sequence[ToScreen] = [ToScreen(tracks[0], False, lifter, False, points[0], None, stamps[0]),
                                 ToScreen(None, False, lifter, False, points[1], None, stamps[1]),

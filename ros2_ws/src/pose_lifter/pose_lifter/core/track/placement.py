@@ -21,7 +21,8 @@ if TYPE_CHECKING:
     from pose_lifter.core.results import LiftResult
 
 __all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "CameraIntrinsics",
-           "perspective_corrected", "place_in_camera", "place_poses", "ray_rotation", "ray_rotations"]
+           "perspective_corrected", "perspective_corrected_rows", "place_in_camera", "place_poses",
+           "ray_rotation", "ray_rotations"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -52,12 +53,29 @@ def perspective_corrected(points: NDArray[np.float64], intrinsics: CameraIntrins
     import numpy as np
 
     (fx, fy), _ = intrinsics
-    ratio = 1.0 + np.asarray(depths, dtype=np.float64) * float(scale) / (0.5 * (float(fx) + float(fy)))
-    m = np.asarray(centre, dtype=np.float64)
-    if not (np.isfinite(ratio).all() and (ratio > 0.2).all() and np.isfinite(m).all()):
-        return points
-    x = np.asarray(points, dtype=np.float64)
-    return np.asarray(m + (x - m) * ratio[:, None])
+    out = perspective_corrected_rows(np.asarray(points, dtype=np.float64)[None],
+                                     np.array([0.5 * (float(fx) + float(fy))]),
+                                     np.asarray(depths, dtype=np.float64)[None], np.array([float(scale)]),
+                                     np.asarray(centre, dtype=np.float64)[None])
+    return np.asarray(out[0])
+
+
+def perspective_corrected_rows(points: NDArray[np.float64], focal: NDArray[np.float64],
+                               depths: NDArray[np.float64], scale: NDArray[np.float64],
+                               centre: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`perspective_corrected` of n people at once, as arrays (elementwise: each row what
+    it gives alone): their 2D ``points`` (n, 12, 2), each camera's mean focal length ``focal``
+    (n,; pixels), the last poses' ``depths`` (n, 12), ``scale`` (n,) and image ``centre`` (n, 2).
+    A row whose correction is not finite or would shrink a joint's depth below a fifth of the
+    centroid's keeps its 2D."""
+    import numpy as np
+
+    x = np.array(points, dtype=np.float64)
+    ratio = 1.0 + depths * scale[:, None] / focal[:, None]
+    m = centre[:, None, :]
+    ok = np.isfinite(ratio).all(axis=1) & (ratio > 0.2).all(axis=1) & np.isfinite(centre).all(axis=1)
+    x[ok] = (m + (x - m) * ratio[:, :, None])[ok]
+    return x
 
 
 def place_in_camera(

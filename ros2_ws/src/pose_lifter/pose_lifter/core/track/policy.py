@@ -21,7 +21,7 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   (NOISE_FRAMES) weights the 2D term down and blends the previous frame's pose into the prior's
   target (temporal smoothness, up to ``LifterOptions.temporal_weight``);
 * hybrid mode with the camera's intrinsics: a frame that follows its track is lifted from its 2D
-  corrected for perspective by the track's last pose (:func:`perspective_corrected`);
+  corrected for perspective by the track's last pose (:mod:`.placement`);
 * hybrid mode, temporal outlier gate (``LifterOptions.outlier_gate``): a visible joint farther
   than ``outlier_gate`` leg lengths from where the track's last frame had it (relative to the
   median motion of the joints) is treated as missing for this frame, before the prior sees it (a
@@ -69,16 +69,16 @@ from ..lift.batch import Call, LiftCall, Steps
 from ..lift.lifter import KERNEL_MODES, Lifter
 from ..model.skeleton import N_JOINTS
 from ..options import LifterOptions
-from ..results import Frames, LiftResult, TrackContext, WarmStart
+from ..results import LiftResult, TrackContext, WarmStart
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
-from .placement import CameraIntrinsics, perspective_corrected
+from .placement import CameraIntrinsics, perspective_corrected_rows
 from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
-from .screening import Screened, ToScreen, screen_frames
+from .screening import Screened, ToScreen, next_frames, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
 from .smoothing import CausalSmoother, prior_in_camera, smooth_tracks
-from .state import NOISE_MIN_WEIGHT, Track, visible_joints
+from .state import NOISE_MIN_WEIGHT, Track
 from .state import compile_kernels as compile_track_kernels
 
 __all__ = [
@@ -130,6 +130,7 @@ class _Found:
     warm: WarmStart | None
     limbs: NDArray[np.float64] | None
     screened: Screened | None = None
+    seen: NDArray[np.float64] | None = None  #: the 2D the lift reads (12, 2)
 
 
 @dataclass(frozen=True)
@@ -214,7 +215,30 @@ def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) ->
         for p, screened in zip(batch, screen_frames(rows), strict=True):
             p.screened = screened
         todo = later
+    _seen([p for _, p in found])
     return found
+
+
+def _seen(found: Sequence[_Found]) -> None:
+    """Sets the 2D each frame's lift reads: corrected for perspective by its track's last pose
+    (:func:`~pose_lifter.core.track.placement.perspective_corrected_rows`, as arrays over the
+    frames) on a warm-started hybrid frame whose camera intrinsics are known, else its 2D."""
+    rows: list[tuple[_Found, tuple[NDArray[np.float64], float, NDArray[np.float64]]]] = []
+    for p in found:
+        f, p.seen = p.frame, p.frame.points
+        if (f.intrinsics is not None and p.track is not None and p.warm is not None
+                and p.track.depths is not None and f.policy.lifter.options.mode == "hybrid"
+                and np.shape(f.points) == (N_JOINTS, 2)):
+            rows.append((p, p.track.depths))
+    if not rows:
+        return
+    focal = [0.5 * (float(fx) + float(fy)) for (fx, fy), _ in (cast(CameraIntrinsics, p.frame.intrinsics)
+                                                               for p, _ in rows)]
+    seen = perspective_corrected_rows(np.array([p.frame.points for p, _ in rows], dtype=np.float64),
+                                      np.array(focal), np.array([d[0] for _, d in rows]),
+                                      np.array([d[1] for _, d in rows]), np.array([d[2] for _, d in rows]))
+    for (p, _), x in zip(rows, seen, strict=True):
+        p.seen = x
 
 
 def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[TrackedLift | Exception]
@@ -376,11 +400,11 @@ class TrackPolicy:
         (hybrid: smoothed and measurement-updated).
 
         With ``intrinsics`` ``((fx, fy), (cx, cy))`` (pixels) the lift reads the 2D corrected for
-        perspective by the track's last pose (:func:`perspective_corrected`; hybrid mode, a frame
-        that follows its track).
+        perspective by the track's last pose (:mod:`.placement`; hybrid mode, a frame that follows
+        its track).
 
         ``ahead``, the track's next frames, is read by a temporal prior with future frames (see
-        :meth:`_future`); a causal prior ignores it.
+        :func:`~pose_lifter.core.track.screening.next_frames`); a causal prior ignores it.
 
         A solve (:mod:`pose_lifter.core.lift.batch`): :func:`lift_tracks_steps` of this frame alone.
 
@@ -406,9 +430,8 @@ class TrackPolicy:
     def _pending(self, p: _Found) -> _Pending:
         """A screened frame up to its lift: the 2D the lift reads and the track's context (an
         error of the context drops the warm start)."""
-        f, track, warm, frame = p.frame, p.track, p.warm, p.screened
-        assert frame is not None
-        seen = self._seen(track, warm, f.points, f.intrinsics)
+        f, track, warm, frame, seen = p.frame, p.track, p.warm, p.screened, p.seen
+        assert frame is not None and seen is not None
         try:
             context = self._context(track, warm, f.stamp_ns, frame, p.limbs, f.points, f.ahead)
         except PoseLifterError:
@@ -424,16 +447,6 @@ class TrackPolicy:
         if p.warm is None or track is None or self.reinit_ratio <= 0 or len(track.objectives) < 3:
             return False
         return result.objective > self.reinit_ratio * track.objective_median()
-
-    def _seen(self, track: Track | None, warm: WarmStart | None, points: NDArray[np.float64],
-              intrinsics: CameraIntrinsics | None) -> NDArray[np.float64]:
-        """The 2D the lift reads: ``points`` corrected for perspective by the track's last pose
-        (:func:`perspective_corrected`) with ``intrinsics``, on a warm-started frame of the
-        hybrid mode; else ``points``."""
-        if (intrinsics is None or track is None or warm is None or track.depths is None
-                or self.lifter.options.mode != "hybrid"):
-            return points
-        return perspective_corrected(points, intrinsics, *track.depths)
 
     def _find(self, track_id: int, stamp_ns: int) -> tuple[Track | None, WarmStart | None]:
         """The frame's track (None: untracked, new, or forgotten because the input clock jumped
@@ -464,37 +477,6 @@ class TrackPolicy:
         prior = temporal or self.lifter.prior
         return track.past(stamp_ns, prior.window - 1 - prior.future_frames)
 
-    def _future(self, track: Track | None, ahead: FramesAhead | None, stamp_ns: int, past: Frames | None,
-                current: NDArray[np.float64], frame: Screened) -> Frames | None:
-        """The next frames a temporal prior with future frames reads (with ``past``: the frames
-        of ``ahead`` evenly spaced on from ``stamp_ns`` at the step of the track's last frame,
-        within 20 %, as :meth:`Track.past`; each frame's visible joints by the confidence
-        threshold and, on a frame the temporal gate screened, :meth:`Track.screen_ahead` from
-        this frame's 2D ``current`` (12, 2)), or None."""
-        if ahead is None or track is None or past is None:
-            return None
-        temporal = self.lifter.temporal_prior
-        if temporal is None or not temporal.future_frames:
-            return None
-        step = stamp_ns - track.last_stamp_ns
-        n, last = 0, stamp_ns  # the next frames up to the first uneven step (a few: plain ints)
-        for t in np.asarray(ahead.stamps_ns[:temporal.future_frames], dtype=np.int64).tolist():
-            if abs(t - last - step) > 0.2 * step:
-                break
-            n, last = n + 1, t
-        if n == 0:
-            return None
-        frames = np.asarray(ahead.points[:n], dtype=np.float64)
-        seen = visible_joints(frames, None if ahead.confidence is None else ahead.confidence[:n],
-                        self.lifter.options.confidence_threshold)
-        if seen is None or frames.ndim != 3:
-            return None
-        if frame.gated and frame.visible is not None and frame.predicted is not None:
-            # the temporal gate over the next frames too: their confident outliers stay out
-            seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
-                                      self.lifter.options.outlier_gate)
-        return frames, seen
-
     def _context(self, track: Track | None, warm: WarmStart | None, stamp_ns: int, frame: Screened,
                  limbs: NDArray[np.float64] | None, points: NDArray[np.float64],
                  ahead: FramesAhead | None = None) -> TrackContext:
@@ -515,7 +497,7 @@ class TrackPolicy:
             assert track is not None
             if track.fit_is_sound():
                 fill = (frame.predicted, track.unused < opts.fill_missing_frames)
-        future = self._future(track, ahead, stamp_ns, past, points, frame)
+        future = next_frames(self.lifter, track, ahead, stamp_ns, past, points, frame)
         return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
 
     def _record(self, track_id: int, track: Track | None, stamp_ns: int, points: NDArray[np.float64],

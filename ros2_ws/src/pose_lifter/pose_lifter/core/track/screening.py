@@ -2,8 +2,9 @@
 its track's last one), as one compiled pass over the frame's people: where each track puts the
 joints on this frame, the temporal outlier gate (``LifterOptions.outlier_gate``: a joint that
 jumped is missing for this frame) and each track's 2D noise estimate
-(:data:`~pose_lifter.core.track.state.NOISE_FRAMES`). :mod:`pose_lifter.core.track.policy` screens a
-frame's people with :func:`screen_frames`.
+(:data:`~pose_lifter.core.track.state.NOISE_FRAMES`); and the next frames an offline lift's prior
+reads, screened by the same gate (:func:`next_frames`). :mod:`pose_lifter.core.track.policy`
+screens a frame's people with :func:`screen_frames`.
 """
 
 from __future__ import annotations
@@ -30,8 +31,10 @@ from .state import (
 
 if TYPE_CHECKING:
     from ..lift.lifter import Lifter
+    from ..results import Frames
+    from .records import FramesAhead
 
-__all__ = ["Screened", "ToScreen", "compile_kernels", "screen_frames"]
+__all__ = ["Screened", "ToScreen", "compile_kernels", "next_frames", "screen_frames"]
 
 _SQRT6 = math.sqrt(6.0)
 
@@ -99,6 +102,38 @@ def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
                               opts.outlier_gate > 0, f.track.data_weight() if noisy else 1.0)
     return [x for x in out if x is not None]
 
+
+
+def next_frames(lifter: Lifter, track: Track | None, ahead: FramesAhead | None, stamp_ns: int,
+                past: Frames | None, current: NDArray[np.float64], frame: Screened) -> Frames | None:
+    """The next frames a temporal prior with future frames reads (``lifter``'s; with ``past``: the
+    frames of ``ahead`` evenly spaced on from ``stamp_ns`` at the step of the track's last frame,
+    within 20 %, as :meth:`Track.past`; each frame's visible joints by the confidence threshold
+    and, on a frame the temporal gate screened, :meth:`Track.screen_ahead` from this frame's 2D
+    ``current`` (12, 2)), or None."""
+    if ahead is None or track is None or past is None:
+        return None
+    temporal = lifter.temporal_prior
+    if temporal is None or not temporal.future_frames:
+        return None
+    step = stamp_ns - track.last_stamp_ns
+    n, last = 0, stamp_ns  # the next frames up to the first uneven step (a few: plain ints)
+    for t in np.asarray(ahead.stamps_ns[:temporal.future_frames], dtype=np.int64).tolist():
+        if abs(t - last - step) > 0.2 * step:
+            break
+        n, last = n + 1, t
+    if n == 0:
+        return None
+    frames = np.asarray(ahead.points[:n], dtype=np.float64)
+    seen = visible_joints(frames, None if ahead.confidence is None else ahead.confidence[:n],
+                          lifter.options.confidence_threshold)
+    if seen is None or frames.ndim != 3:
+        return None
+    if frame.gated and frame.visible is not None and frame.predicted is not None:
+        # the temporal gate over the next frames too: their confident outliers stay out
+        seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
+                                  lifter.options.outlier_gate)
+    return frames, seen
 
 class _Screening(NamedTuple):
     """:func:`_screen_tracks`' answer: one row per frame of a tracked person (n rows)."""
