@@ -406,12 +406,12 @@ class Lifter:
 
     @staticmethod
     def limb_proportions_of(pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        """A person's limb proportions from a 3D pose (12, 3): the 8 limb lengths with each
+        """A person's limb proportions from a 3D pose (..., 12, 3): the 8 limb lengths with each
         left/right pair averaged (bones are symmetric; it halves the noise of an estimate),
-        shape (8,), in the pose's units."""
+        shape (..., 8), in the pose's units."""
         lengths = limb_lengths(pose)
-        pairs = 0.5 * (lengths[_LEFT_LIMBS] + lengths[_RIGHT_LIMBS])
-        return np.asarray(pairs[_GROUP_OF])
+        pairs = 0.5 * (lengths[..., _LEFT_LIMBS] + lengths[..., _RIGHT_LIMBS])
+        return np.asarray(pairs[..., _GROUP_OF])
 
     def _results(self, won: Sequence[tuple[Person, Starts]], scaled: bool) -> list[LiftResult | Exception]:
         """Each person's winning run (of their :class:`Starts`) mapped back to input units and

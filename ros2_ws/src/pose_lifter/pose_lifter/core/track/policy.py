@@ -69,7 +69,7 @@ from ..lift.batch import Call, LiftCall, Steps
 from ..lift.lifter import KERNEL_MODES, Lifter
 from ..model.skeleton import N_JOINTS
 from ..options import LifterOptions
-from ..results import LiftResult, TrackContext, WarmStart
+from ..results import LiftResult, TrackContext, WarmStart, project_each
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
@@ -78,7 +78,7 @@ from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
 from .screening import Screened, ToScreen, next_frames, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
 from .smoothing import CausalSmoother, prior_in_camera, smooth_tracks
-from .state import NOISE_MIN_WEIGHT, Track
+from .state import NOISE_MIN_WEIGHT, Track, image_spans
 from .state import compile_kernels as compile_track_kernels
 
 __all__ = [
@@ -246,17 +246,18 @@ def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[T
     """The lifted frames entered into their tracks and published into ``out`` (hybrid: smoothed,
     as arrays over the frames, and measurement-updated); a frame's error goes to ``out``."""
     hybrid: list[tuple[int, _Pending, LiftResult, bool, Track]] = []
+    tracked = [(k, p, r, reinit) for k, p, r, reinit in solved if p.frame.track_id >= 0]
     for k, p, r, reinit in solved:
-        f = p.frame
-        try:
-            if f.track_id < 0:
-                out[k] = TrackedLift(r, p.warm is not None, reinit)
-                continue
-            track = f.policy._record(f.track_id, p.track, f.stamp_ns, f.points, r)
-        except Exception as err:
-            out[k] = err
-            continue
-        if f.policy.lifter.options.mode == "hybrid":
+        if p.frame.track_id < 0:
+            out[k] = TrackedLift(r, p.warm is not None, reinit)
+    try:
+        tracks: Sequence[Track | Exception] = _record([(p.frame, p.track, r) for _, p, r, _ in tracked])
+    except Exception as err:  # a bug, not a refusal: every frame of the batch reports it
+        tracks = [err] * len(tracked)
+    for (k, p, r, reinit), track in zip(tracked, tracks, strict=True):
+        if isinstance(track, Exception):
+            out[k] = track
+        elif p.frame.policy.lifter.options.mode == "hybrid":
             hybrid.append((k, p, r, reinit, track))
         else:
             out[k] = TrackedLift(r, p.warm is not None, reinit)
@@ -279,6 +280,44 @@ def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[T
         o = updated if updated is not None else smoothed
         out[k] = TrackedLift(r, follows, reinit) if o is None else TrackedLift(o, follows, reinit,
                                                                                 r.pose_camera)
+
+
+def _record(rows: Sequence[tuple[TrackFrame, Track | None, LiftResult]]) -> list[Track | Exception]:
+    """Each lifted frame entered into its track (made on its first frame): the warm start, stamp,
+    objective, the prior's limb proportions, the frame's 2D, where each joint was and its image
+    limb lengths, the arrays of all of them computed together."""
+    if not rows:
+        return []
+    results = [r for _, _, r in rows]
+    priors = [i for i, r in enumerate(results) if r.prior_pose is not None]
+    limbs = {} if not priors else dict(zip(priors, Lifter.limb_proportions_of(
+        np.array([results[i].prior_pose for i in priors])), strict=True))
+    x = np.array([f.points for f, _, _ in rows], dtype=np.float64)  # the tracks' own copies
+    used = np.array([r.weights > 0 for r in results])
+    scale = np.array([float(r.camera.scale) for r in results])
+    # where each joint was: its detection when the lift used it, else the fit's projection
+    where = np.where(used[..., None], x, project_each(np.array([r.pose for r in results]),
+                                                     [r.camera for r in results]))
+    spans = image_spans(x, used, scale)
+    out: list[Track | Exception] = []
+    for i, (f, track, result) in enumerate(rows):
+        if track is None:
+            track = f.policy._tracks[f.track_id] = Track(None, f.stamp_ns)
+        track.warm = result.warm_start()
+        track.depths = (np.array(result.pose_camera[:, 2]), float(scale[i]),
+                        np.array(result.camera.translation))
+        track.last_stamp_ns = f.stamp_ns
+        track.unused = np.where(used[i], 0, track.unused + 1)
+        track.add_objective(float(result.objective))
+        if i in limbs:
+            track.add_limbs(limbs[i])
+        track.history.append((f.stamp_ns, x[i], used[i]))
+        track.fits.append((f.stamp_ns, where[i], float(scale[i])))
+        opts = f.policy.lifter.options
+        if opts.mode == "hybrid" and opts.image_limbs:
+            track.add_spans(spans[i])
+        out.append(track)
+    return out
 
 
 def _smoothed(rows: Sequence[tuple[_Pending, LiftResult, Track]]) -> list[LiftResult | None]:
@@ -499,30 +538,6 @@ class TrackPolicy:
                 fill = (frame.predicted, track.unused < opts.fill_missing_frames)
         future = next_frames(self.lifter, track, ahead, stamp_ns, past, points, frame)
         return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
-
-    def _record(self, track_id: int, track: Track | None, stamp_ns: int, points: NDArray[np.float64],
-                result: LiftResult) -> Track:
-        """The frame entered into its track (made on its first frame): the warm start, stamp,
-        objective, the prior's limb proportions, the frame's 2D and where each joint was."""
-        if track is None:
-            track = self._tracks[track_id] = Track(None, stamp_ns)
-        track.warm = result.warm_start()
-        cam = result.camera
-        track.depths = (np.array(result.pose_camera[:, 2]), float(cam.scale), np.array(cam.translation))
-        track.last_stamp_ns = stamp_ns
-        used = result.weights > 0
-        track.unused = np.where(used, 0, track.unused + 1)
-        track.add_objective(float(result.objective))
-        if result.prior_pose is not None:
-            track.add_limbs(self.lifter.limb_proportions_of(result.prior_pose))
-        x = np.array(points, dtype=np.float64)  # the track's own copy
-        track.history.append((stamp_ns, x, used))
-        # where each joint was: its detection when the lift used it, else the fit's projection
-        track.fits.append((stamp_ns, np.where(used[:, None], x, cam.project(result.pose)), float(cam.scale)))
-        opts = self.lifter.options
-        if opts.mode == "hybrid" and opts.image_limbs:
-            track.add_spans(x, used, float(cam.scale))
-        return track
 
     def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool
                  ) -> LiftResult | None:

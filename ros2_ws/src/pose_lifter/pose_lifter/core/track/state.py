@@ -24,7 +24,7 @@ from .smoothing import CausalSmoother
 if TYPE_CHECKING:
     from ..results import WarmStart
 
-__all__ = ["Track", "calibrated_limb_proportions", "visible_joints"]
+__all__ = ["Track", "calibrated_limb_proportions", "image_spans", "visible_joints"]
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
@@ -243,17 +243,23 @@ class Track:
             self.span_estimate = out if np.isfinite(out).all() and (out > 0).all() else None
         return self.span_estimate
 
-    def add_spans(self, points: NDArray[np.float64], used: NDArray[np.bool_], scale: float) -> None:
-        """This frame's image limb lengths over the fit's ``scale`` (NaN where a limb's joint
-        was not used by the lift)."""
-        x = np.asarray(points, dtype=np.float64)
-        row = row_norms(x[LIMB_A] - x[LIMB_B]) / max(scale, 1e-12)
-        self.spans[self.n_spans % LIMB_FRAMES] = np.where(used[LIMB_A] & used[LIMB_B], row, np.nan)
+    def add_spans(self, row: NDArray[np.float64]) -> None:
+        """This frame's image limb lengths over the fit's scale (8,; NaN where a limb's joint was
+        not used by the lift: :func:`image_spans`)."""
+        self.spans[self.n_spans % LIMB_FRAMES] = row
         self.n_spans += 1
 
     def add_limbs(self, proportions: NDArray[np.float64]) -> None:
         self.limbs[self.n_limbs % LIMB_FRAMES] = proportions
         self.n_limbs += 1
+
+
+def image_spans(points: NDArray[np.float64], used: NDArray[np.bool_], scale: NDArray[np.float64]
+                ) -> NDArray[np.float64]:
+    """n frames' image limb lengths (n, 8) over their fits' ``scale`` (n,) from their 2D ``points``
+    (n, 12, 2); NaN where a limb's joint was not ``used`` (n, 12) by the lift."""
+    row = row_norms(points[:, LIMB_A] - points[:, LIMB_B]) / np.maximum(scale, 1e-12)[:, None]
+    return np.where(used[:, LIMB_A] & used[:, LIMB_B], row, np.nan)
 
 
 @njit
