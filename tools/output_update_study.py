@@ -147,11 +147,9 @@ def early_noise(d: dict[str, NDArray[Any]], lifter: Lifter) -> NDArray[np.float6
             if v.sum() >= 3:
                 x0, x1, x = d["px"][i - 2], d["px"][i - 1], d["px"][i]
                 a = np.linalg.norm(x[v] - 2 * x1[v] + x0[v], axis=1) / np.sqrt(6.0)
-                try:
-                    sample = float(np.median(a)) / lifter.input_scale(x, v.astype(float))
-                    samples = [*samples, sample][-30:]
-                except PoseLifterError:
-                    pass
+                spread = float(lifter.input_scales(x[None], v[None].astype(float))[0])
+                if not np.isnan(spread):
+                    samples = [*samples, float(np.median(a)) / spread][-30:]
         out[i] = float(np.median(samples)) if samples else 0.0
     return out
 

@@ -52,7 +52,7 @@ def _reference(track: Track, lifter: Lifter, x: np.ndarray, vis: np.ndarray, sta
     seen = v0 & v1 & vis
     if abs((stamp - t1) - (t1 - t0)) <= 0.2 * (t1 - t0) and seen.sum() >= 3:
         acc = np.linalg.norm(x[seen] - 2.0 * x1[seen] + x0[seen], axis=1) / np.sqrt(6.0)
-        noise = float(np.median(acc)) / lifter.input_scale(x, seen.astype(float))
+        noise = float(np.median(acc)) / float(lifter.input_scales(x[None], seen[None].astype(float))[0])
     return vis, gated, predicted, noise
 
 

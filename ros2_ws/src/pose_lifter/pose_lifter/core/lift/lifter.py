@@ -48,7 +48,6 @@ hybrid and learned modes' prior terms, starts and outlier pass are :mod:`.hybrid
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 
@@ -193,14 +192,19 @@ class Lifter:
         return self._runs
 
     # ------------------------------------------------------------------ helpers
-    def _normalise(self, x: NDArray[np.float64], w: NDArray[np.float64]) -> Normalisation:
-        total = np.add.reduce(w)  # w.sum()
-        centre = w @ x / total
-        d = x - centre
-        spread = math.sqrt(w @ np.add.reduce(d * d, axis=1) / total)
-        if not math.isfinite(spread) or spread <= 1e-9 * max(1.0, abs(centre[0]), abs(centre[1])):
-            raise InvalidInputError("the visible keypoints are (almost) all at one point")
-        return Normalisation(centre, spread / self._data.mean_spread)
+    def _normalised(self, x: NDArray[np.float64], w: NDArray[np.float64]
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """The 2D normalisation of n people, as arrays (each row what it is alone): their 2D ``x``
+        (n, 12, 2) and weights ``w`` (n, 12) give the weighted centres (n, 2) and the weighted RMS
+        spreads over the mean pose's (n,; input units per normalised unit), and which rows have a
+        spread (finite, not (almost) 0: the visible joints are not all at one point)."""
+        with np.errstate(divide="ignore", invalid="ignore"):  # a row without weight: refused
+            total = np.add.reduce(w, axis=1)  # each row's w.sum()
+            centre = (w[:, None, :] @ x)[:, 0, :] / total[:, None]
+            d = x - centre[:, None, :]
+            spread = np.sqrt((w[:, None, :] @ np.add.reduce(d * d, axis=2)[:, :, None])[:, 0, 0] / total)
+            ok = np.isfinite(spread) & (spread > 1e-9 * np.maximum(1.0, np.abs(centre).max(axis=1)))
+        return centre, spread / self._data.mean_spread, ok
 
     # ------------------------------------------------------------------ public
     def warm_up(self) -> float:
@@ -341,23 +345,29 @@ class Lifter:
         weights[bad] = 0.0
         points = np.where(bad[:, :, None], 0.0, points)
         n_vis = np.count_nonzero(weights > 0, axis=1).tolist()
+        centre, spread, ok = self._normalised(points, weights)
+        with np.errstate(divide="ignore", invalid="ignore"):  # the rows refused below
+            xn = (points - centre[:, None, :]) / spread[:, None, None]
         for k, (i, _, _) in enumerate(checked):
             try:
                 if n_vis[k] < o.min_visible_joints:
                     raise TooFewJointsError(
                         f"{n_vis[k]} joints visible (confidence >= {o.confidence_threshold}); "
                         f"at least {o.min_visible_joints} needed")
-                out[i] = self._person(calls[i], points[k], weights[k])
+                if not ok[k]:
+                    raise InvalidInputError("the visible keypoints are (almost) all at one point")
+                norm = Normalisation(centre[k], float(spread[k]))
+                out[i] = self._person(calls[i], points[k], weights[k], norm, xn[k])
             except Exception as err:
                 out[i] = err
         return out
 
-    def _person(self, call: LiftCall, x: NDArray[np.float64], w: NDArray[np.float64]) -> Person:
-        """A person of :meth:`_people` with its 2D ``x`` (12, 2) and weights ``w`` (12,) checked:
-        normalised, its track's context checked, its warm start's camera in normalised units."""
-        norm = self._normalise(x, w)
+    def _person(self, call: LiftCall, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
+                xn: NDArray[np.float64]) -> Person:
+        """A person of :meth:`_people` with its 2D ``x`` (12, 2), weights ``w`` (12,), normalisation
+        and normalised 2D ``xn`` (12, 2): its track's context checked, its warm start's camera in
+        normalised units."""
         tc = self._track_context(_NO_TRACK if call.track is None else call.track, w)
-        xn = (x - norm.centre) / norm.spread
         warm, cam0 = call.warm, None
         learned = self._prior_fit is not None and self._options.mode == "learned"
         if warm is not None and not learned:
@@ -398,11 +408,13 @@ class Lifter:
             raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {track.temporal_weight!r}")
         return TrackContext(track.limb_proportions, data_weight, tw, past, track.gated, fill, future)
 
-    def input_scale(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
-        """The unit of the lifter's normalised 2D for these points (12, 2) and weights (12,): their
-        weighted RMS spread over the mean pose's (see the module docstring)."""
-        x = np.where((weights > 0)[:, None], np.asarray(points, dtype=np.float64), 0.0)
-        return self._normalise(x, np.asarray(weights, dtype=np.float64)).spread
+    def input_scales(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The unit of the lifter's normalised 2D for n people's points (n, 12, 2) and weights (n,
+        12): their weighted RMS spread over the mean pose's (see the module docstring), (n,); NaN
+        where the joints with weight are (almost) all at one point."""
+        x = np.where((weights > 0)[..., None], np.asarray(points, dtype=np.float64), 0.0)
+        _, spread, ok = self._normalised(x, np.asarray(weights, dtype=np.float64))
+        return np.where(ok, spread, np.nan)
 
     @staticmethod
     def limb_proportions_of(pose: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import PoseLifterError
 from ..model.skeleton import N_JOINTS
 from ..numeric.jit import njit
 from .state import (
@@ -210,16 +209,17 @@ def _screen_tracks(tracks: Sequence[Track], lifters: Sequence[Lifter], points: N
                 flags[i, 2] = True
     kept, gated, predicted, has_prediction, acc, noise_vis = _screen_kernel(
         pts, masks, rows, flags, counters, np.array([GATE_MAX_FRACTION, GATE_MAX_FRAMES]))
+    spread = np.full(n, np.nan)
+    for lifter in {id(x): x for x in lifters}.values():  # the frames of each lifter together
+        rows = np.array([i for i, x in enumerate(lifters) if x is lifter and not math.isnan(acc[i])],
+                        dtype=np.int64)
+        if rows.size:
+            spread[rows] = lifter.input_scales(pts[rows, 0], noise_vis[rows].astype(np.float64))
     for i, track in enumerate(tracks):
         track.gated = counters[i]
-        if math.isnan(acc[i]):
-            continue
-        try:
-            spread = lifters[i].input_scale(pts[i, 0], noise_vis[i].astype(np.float64))
-        except PoseLifterError:
-            continue
-        track.noise.append(float(acc[i]) / spread)
-        track._noise_median = None
+        if not math.isnan(acc[i]) and not math.isnan(spread[i]):
+            track.noise.append(float(acc[i]) / float(spread[i]))
+            track._noise_median = None
     return _Screening(kept, gated, predicted, has_prediction)
 
 
