@@ -16,8 +16,6 @@ from typing import TypeAlias
 import numpy as np
 from numpy.typing import NDArray
 
-from .numeric.fast import mean_rows
-
 #: Frames of a track's 2D, oldest first: points (k, 12, 2) in input units and which of their
 #: joints are used (k, 12).
 Frames: TypeAlias = tuple[NDArray[np.float64], NDArray[np.bool_]]
@@ -36,6 +34,7 @@ __all__ = [
     "StartKind",
     "TrackContext",
     "WarmStart",
+    "with_camera_poses",
 ]
 
 
@@ -334,5 +333,14 @@ class LiftResult:
         its body-frame pose derived for the same camera and centre (``pose_camera = (pose -
         mean) R^T``, so ``pose = pose_camera R + mean``): what the output smoothing, the
         measurement update and the offline centred smoothing publish."""
-        pose = pose_camera @ self.camera.rotation + mean_rows(self.pose)
-        return self.with_pose(np.ascontiguousarray(pose), np.ascontiguousarray(pose_camera))
+        return with_camera_poses([self], np.asarray(pose_camera, dtype=np.float64)[None])[0]
+
+
+def with_camera_poses(results: Sequence[LiftResult], poses_camera: NDArray[np.float64]) -> list[LiftResult]:
+    """:meth:`LiftResult.with_camera_pose` of n results and their new camera-frame poses
+    ``poses_camera`` (n, 12, 3), the body-frame poses computed as arrays over the n (each what
+    it is alone)."""
+    rotations = np.array([r.camera.rotation for r in results])  # (n, 3, 3)
+    body = np.array([r.pose for r in results])  # (n, 12, 3)
+    poses = poses_camera @ rotations + (np.add.reduce(body, axis=1) / body.shape[1])[:, None, :]
+    return [r.with_pose(poses[i], np.ascontiguousarray(poses_camera[i])) for i, r in enumerate(results)]

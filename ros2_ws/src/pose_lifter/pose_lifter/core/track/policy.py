@@ -69,7 +69,7 @@ from ..lift.batch import Call, LiftCall, Steps
 from ..lift.lifter import KERNEL_MODES, Lifter
 from ..model.skeleton import N_JOINTS
 from ..options import LifterOptions
-from ..results import LiftResult, TrackContext, WarmStart, project_each
+from ..results import LiftResult, TrackContext, WarmStart, project_each, with_camera_poses
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .measurement import compile_kernels as compile_measurement_kernels
@@ -77,7 +77,7 @@ from .placement import CameraIntrinsics, perspective_corrected_rows
 from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
 from .screening import Screened, ToScreen, next_frames, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
-from .smoothing import CausalSmoother, prior_in_camera, smooth_tracks
+from .smoothing import CausalSmoother, priors_in_camera, smooth_tracks
 from .state import NOISE_MIN_WEIGHT, Track, image_spans
 from .state import compile_kernels as compile_track_kernels
 
@@ -327,11 +327,12 @@ def _smoothed(rows: Sequence[tuple[_Pending, LiftResult, Track]]) -> list[LiftRe
     off or starts again (a cold solve)."""
     out: list[LiftResult | None] = [None] * len(rows)
     go: list[tuple[int, NDArray[np.float64], float, float]] = []
+    priors, has_prior = priors_in_camera([r for _, r, _ in rows])
     for i, (p, r, track) in enumerate(rows):
         opts = p.frame.policy.lifter.options
         track.unused_share.append(float(np.count_nonzero(r.weights <= 0)) / N_JOINTS)
-        prior = prior_in_camera(r)
-        if prior is None or (opts.correction_smoothing <= 0 and opts.disturbed_smoothing_gain >= 1):
+        prior = priors[i]
+        if not has_prior[i] or (opts.correction_smoothing <= 0 and opts.disturbed_smoothing_gain >= 1):
             track.smoother = None
             continue
         if p.warm is None or track.smoother is None:
@@ -347,11 +348,14 @@ def _smoothed(rows: Sequence[tuple[_Pending, LiftResult, Track]]) -> list[LiftRe
                           np.array([rows[i][1].pose_camera for i, _, _, _ in go]),
                           np.array([prior for _, prior, _, _ in go]),
                           np.array([b for _, _, b, _ in go]), np.array([g for _, _, _, g in go]))
-    for (i, _, _, _), track, pose in zip(go, tracks, poses, strict=True):
-        if np.isfinite(pose).all():  # ndarray.all: no numpy wrapper on the per-frame path
-            out[i] = rows[i][1].with_camera_pose(pose)
-        else:
-            track.smoother = None
+    finite = np.asarray(np.isfinite(poses).all(axis=(1, 2)))
+    kept = [k for k in range(len(go)) if finite[k]]
+    for k in range(len(go)):
+        if not finite[k]:
+            tracks[k].smoother = None
+    published = with_camera_poses([rows[go[k][0]][1] for k in kept], poses[kept]) if kept else []
+    for k, res in zip(kept, published, strict=True):
+        out[go[k][0]] = res
     return out
 
 

@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from ..results import LiftResult
 
-__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "prior_in_camera", "smooth_tracks"]
+__all__ = ["OFFLINE_SMOOTHING_S", "CausalSmoother", "centred_smoothing", "prior_in_camera",
+           "priors_in_camera", "smooth_tracks"]
 
 #: Standard deviation (seconds of input time) of the Gaussian window ``pose-lifter lift`` applies
 #: by default: 1.2 frames at 30 Hz (the window spans +-3 standard deviations). Chosen on the
@@ -174,12 +175,21 @@ def smooth_tracks(smoothers: Sequence[CausalSmoother], fits: NDArray[np.float64]
 def prior_in_camera(result: LiftResult) -> NDArray[np.float64] | None:
     """The prior's pose of ``result`` in the camera frame of ``pose_camera`` (12, 3: centred, in
     the fit's model units: divided by the camera's scale), or None without one."""
-    # imported here: the CLI reads this module's default without loading numba (fast's kernels)
-    from ..numeric.fast import mean_rows
+    poses, ok = priors_in_camera([result])
+    return poses[0] if ok[0] else None
 
-    prior = result.prior_pose
-    scale = float(result.camera.scale)
-    if prior is None or not scale > 0:
-        return None
-    out = (prior - mean_rows(prior)) / scale
-    return out if np.isfinite(out).all() else None
+
+def priors_in_camera(results: Sequence[LiftResult]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`prior_in_camera` of n results as arrays over them: the poses (n, 12, 3) and which
+    rows have one (n,; the others NaN): a prior's pose, a positive camera scale, finite values."""
+    n = len(results)
+    out = np.full((n, 12, 3), np.nan)
+    ok = np.zeros(n, dtype=np.bool_)
+    rows = [i for i, r in enumerate(results) if r.prior_pose is not None and float(r.camera.scale) > 0]
+    if rows:
+        prior = np.array([results[i].prior_pose for i in rows])
+        scale = np.array([float(results[i].camera.scale) for i in rows])
+        x = (prior - (np.add.reduce(prior, axis=1) / prior.shape[1])[:, None, :]) / scale[:, None, None]
+        out[rows] = x
+        ok[rows] = np.isfinite(x).all(axis=(1, 2))
+    return out, ok
