@@ -1,6 +1,7 @@
-"""The screening of a frame's tracked people (``core/track/screening.py``) in one compiled pass
-against the per-person rule written plainly in numpy: where the track puts each joint, the
-temporal outlier gate and the 2D noise observation, on random tracks with jumping joints."""
+"""The per-track rules run as arrays over a frame's tracks, against each rule written plainly per
+track: the screening (``core/track/screening.py``, one compiled pass: where the track puts each
+joint, the temporal outlier gate and the 2D noise observation, on random tracks with jumping
+joints) and the tracks' limb proportions (``core/track/state.py``)."""
 
 from __future__ import annotations
 
@@ -124,3 +125,45 @@ def test_a_frame_that_does_not_follow_its_track_is_not_screened() -> None:
     got = screen_frames(rows)
     assert [g.predicted is None and not g.gated for g in got] == [True, True, True]
     assert [len(t.noise) for t in tracks] == before
+
+
+def test_the_tracks_limb_proportions_together_are_the_per_track_rule() -> None:
+    """``tracks_limb_proportions`` over tracks of different ages, with and without the image
+    spans, against the rule written per track: the calibrated median of the prior's proportions,
+    blended in logs with the image's by the track's data weight."""
+    from pose_lifter.core.track.state import (
+        IMAGE_LIMB_MIN_FRAMES,
+        LIMB_FRAMES,
+        MIN_LIMB_FRAMES,
+        calibrated_limb_proportions,
+        tracks_limb_proportions,
+    )
+
+    rng = np.random.default_rng(5)
+    tracks, image = [], []
+    for n in (3, MIN_LIMB_FRAMES, 11, 11, 40, LIMB_FRAMES, LIMB_FRAMES + 7, 200):
+        t = Track(None, 0)
+        for _ in range(n):
+            t.add_limbs(rng.uniform(0.8, 1.2, 8))
+            t.add_spans(rng.uniform(0.7, 1.3, 8))
+        for _ in range(int(rng.integers(0, 9))):
+            t.noise.append(float(rng.uniform(0.0, 0.1)))
+        tracks.append(t)
+        image.append(bool(rng.random() < 0.6) or n == 200)
+    got = tracks_limb_proportions(tracks, image)
+    blended = 0
+    for t, img, g in zip(tracks, image, got, strict=True):
+        if t.n_limbs < MIN_LIMB_FRAMES:
+            assert g is None
+            continue
+        prior = calibrated_limb_proportions(np.median(t.limbs[:min(t.n_limbs, LIMB_FRAMES)], axis=0))
+        spans = t.image_limb_proportions() if img and t.n_spans >= IMAGE_LIMB_MIN_FRAMES else None
+        want = prior
+        if spans is not None:
+            lam = t.data_weight()
+            lp, ls = np.log(prior), np.log(spans)
+            want = np.exp((1.0 - lam) * (lp - lp.mean()) + lam * (ls - ls.mean()) + lp.mean())
+            blended += 1
+        assert g is not None
+        np.testing.assert_allclose(g, want, rtol=1e-13)
+    assert blended >= 2

@@ -78,7 +78,7 @@ from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
 from .screening import Screened, ToScreen, next_frames, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
 from .smoothing import CausalSmoother, priors_in_camera, smooth_tracks
-from .state import NOISE_MIN_WEIGHT, Track, image_spans
+from .state import NOISE_MIN_WEIGHT, Track, image_spans, tracks_limb_proportions
 from .state import compile_kernels as compile_track_kernels
 
 __all__ = [
@@ -128,7 +128,7 @@ class _Found:
     frame: TrackFrame
     track: Track | None
     warm: WarmStart | None
-    limbs: NDArray[np.float64] | None
+    limbs: NDArray[np.float64] | None = None
     screened: Screened | None = None
     seen: NDArray[np.float64] | None = None  #: the 2D the lift reads (12, 2)
 
@@ -202,6 +202,11 @@ def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) ->
             found.append((k, f.policy._found(f)))
         except Exception as err:
             out[k] = err
+    known = [p for _, p in found if p.track is not None]
+    limbs = tracks_limb_proportions([cast(Track, p.track) for p in known],
+                                    [p.frame.policy.lifter.options.image_limbs for p in known])
+    for p, proportions in zip(known, limbs, strict=True):
+        p.limbs = proportions
     todo = [p for _, p in found]
     while todo:
         batch: list[_Found] = []
@@ -465,10 +470,8 @@ class TrackPolicy:
         return out
 
     def _found(self, f: TrackFrame) -> _Found:
-        """A frame's track, warm start and limb proportions (before the frame's screening)."""
-        track, warm = self._find(f.track_id, f.stamp_ns)
-        limbs = track.limb_proportions(self.lifter.options.image_limbs) if track is not None else None
-        return _Found(f, track, warm, limbs)
+        """A frame's track and warm start."""
+        return _Found(f, *self._find(f.track_id, f.stamp_ns))
 
     def _pending(self, p: _Found) -> _Pending:
         """A screened frame up to its lift: the 2D the lift reads and the track's context (an

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, cast
 
@@ -24,7 +25,7 @@ from .smoothing import CausalSmoother
 if TYPE_CHECKING:
     from ..results import WarmStart
 
-__all__ = ["Track", "calibrated_limb_proportions", "image_spans", "visible_joints"]
+__all__ = ["Track", "calibrated_limb_proportions", "image_spans", "tracks_limb_proportions", "visible_joints"]
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
@@ -89,14 +90,43 @@ DISTURBANCE_FRAMES = 15
 
 
 def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The track's limb proportions (8,) from the median of the prior's (8,), corrected by
+    """The track's limb proportions (..., 8) from the median of the prior's (..., 8), corrected by
     :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
     e = np.asarray(estimate, dtype=np.float64)
-    g = np.log(np.maximum(e[_LEFT_LIMBS], 1e-12))
-    m = np.add.reduce(g) / g.size  # g.mean()
+    g = np.log(np.maximum(e[..., _LEFT_LIMBS], 1e-12))
+    m = np.add.reduce(g, axis=-1, keepdims=True) / g.shape[-1]  # g.mean()
     slope, offset = LIMB_CALIBRATION
     out = np.exp(m + slope * (g - m) + offset)
-    return np.asarray(out[_GROUP_OF])
+    return np.asarray(out[..., _GROUP_OF])
+
+
+def tracks_limb_proportions(tracks: Sequence[Track], image: Sequence[bool]
+                            ) -> list[NDArray[np.float64] | None]:
+    """Each track's limb proportions (8,), as arrays over the tracks: the calibrated median of the
+    prior's over its last LIMB_FRAMES frames, and with ``image`` blended (in logs, each at
+    geometric mean 1) with :meth:`Track.image_limb_proportions` by IMAGE_LIMB_WEIGHT times the
+    track's data weight (noisy 2D lengthens the spans); None before MIN_LIMB_FRAMES frames."""
+    out: list[NDArray[np.float64] | None] = [None] * len(tracks)
+    by_count: dict[int, list[int]] = {}  # the tracks by their number of frames kept
+    for i, t in enumerate(tracks):
+        if t.n_limbs >= MIN_LIMB_FRAMES:
+            by_count.setdefault(min(t.n_limbs, LIMB_FRAMES), []).append(i)
+    for k, rows in by_count.items():
+        s = np.array([tracks[i].limbs[:k] for i in rows])  # (m, k, 8)
+        s.sort(axis=1)
+        median = s[:, k // 2] if k % 2 else (s[:, k // 2 - 1] + s[:, k // 2]) / 2.0
+        for i, prior in zip(rows, calibrated_limb_proportions(median), strict=True):
+            out[i] = prior
+    blend = [(i, spans) for i, t in enumerate(tracks) if out[i] is not None and image[i]
+             and (spans := t.image_limb_proportions()) is not None]
+    if blend:
+        lp = np.log(np.array([out[i] for i, _ in blend]))
+        ls = np.log(np.array([spans for _, spans in blend]))
+        lam = IMAGE_LIMB_WEIGHT * np.array([tracks[i].data_weight() for i, _ in blend])[:, None]
+        lpm, lsm = np.mean(lp, axis=1, keepdims=True), np.mean(ls, axis=1, keepdims=True)
+        for (i, _), row in zip(blend, np.exp((1.0 - lam) * (lp - lpm) + lam * (ls - lsm) + lpm), strict=True):
+            out[i] = row
+    return out
 
 
 @dataclass
@@ -211,18 +241,8 @@ class Track:
         return min(max(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT), 1.0)  # np.clip
 
     def limb_proportions(self, image: bool = False) -> NDArray[np.float64] | None:
-        """The track's limb proportions (8,): the calibrated median of the prior's, and with
-        ``image`` blended (in logs, each at geometric mean 1) with :meth:`image_limb_proportions`
-        by IMAGE_LIMB_WEIGHT times the track's data weight (noisy 2D lengthens the spans)."""
-        if self.n_limbs < MIN_LIMB_FRAMES:
-            return None
-        prior = calibrated_limb_proportions(median_rows(self.limbs[: min(self.n_limbs, LIMB_FRAMES)]))
-        spans = self.image_limb_proportions() if image else None
-        if spans is None:
-            return prior
-        lam = IMAGE_LIMB_WEIGHT * self.data_weight()
-        lp, ls = np.log(prior), np.log(spans)
-        return np.asarray(np.exp((1.0 - lam) * (lp - lp.mean()) + lam * (ls - ls.mean()) + lp.mean()))
+        """The track's limb proportions (8,): :func:`tracks_limb_proportions` of this track."""
+        return tracks_limb_proportions([self], [image])[0]
 
     def image_limb_proportions(self) -> NDArray[np.float64] | None:
         """Per limb (8,; left and right averaged) the IMAGE_LIMB_QUANTILE quantile of its image
