@@ -102,7 +102,6 @@ def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
     return [x for x in out if x is not None]
 
 
-
 def next_frames(lifter: Lifter, track: Track | None, ahead: FramesAhead | None, stamp_ns: int,
                 past: Frames | None, current: NDArray[np.float64], frame: Screened) -> Frames | None:
     """The next frames a temporal prior with future frames reads (``lifter``'s; with ``past``: the
