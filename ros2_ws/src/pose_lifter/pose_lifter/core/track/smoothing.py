@@ -150,10 +150,12 @@ def smooth_tracks(smoothers: Sequence[CausalSmoother], fits: NDArray[np.float64]
     """
     corr = fits - priors
     out = np.array(fits, dtype=np.float64)
-    going = [i for i, sm in enumerate(smoothers) if sm.correction is not None]
+    going: list[int] = []
     for i, sm in enumerate(smoothers):
-        if sm.correction is None or sm.level is None or sm.velocity is None:
+        if sm.correction is None or sm.level is None or sm.velocity is None:  # starts: its fit
             sm.correction, sm.level, sm.velocity = corr[i], priors[i].copy(), np.zeros_like(priors[i])
+        else:
+            going.append(i)
     if not going:
         return out
     idx = np.array(going)
@@ -183,7 +185,7 @@ def priors_in_camera(results: Sequence[LiftResult]) -> tuple[NDArray[np.float64]
     """:func:`prior_in_camera` of n results as arrays over them: the poses (n, 12, 3) and which
     rows have one (n,; the others NaN): a prior's pose, a positive camera scale, finite values."""
     n = len(results)
-    out = np.full((n, 12, 3), np.nan)
+    out = np.full((n, *np.shape(results[0].pose_camera)) if n else (0, 0, 3), np.nan)
     ok = np.zeros(n, dtype=np.bool_)
     rows = [i for i, r in enumerate(results) if r.prior_pose is not None and float(r.camera.scale) > 0]
     if rows:
