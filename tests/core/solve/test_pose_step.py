@@ -20,6 +20,7 @@ from pose_lifter.core.solve.alpha.sphere_newton import (
     SphereStep,
     _riemannian_alpha_kernel,
     _sphere_setup,
+    newton_work,
 )
 from pose_lifter.core.solve.pose_kernel import _pose_rows
 from pose_lifter.core.solve.pose_step import PriorRows, _adm, _alpha_step, pose_step, prior_operands
@@ -86,7 +87,8 @@ class _RiemannianStep:
         q, rmat, s1, s2 = _sphere_setup(g, z, n)
         c64 = np.ascontiguousarray
         geom = (g @ s0, q, c64(rmat.T), c64(s1.T), c64(s2.T))
-        self._step = SphereStep(mus, geom, np.ascontiguousarray(radii, dtype=np.float64))
+        self._step = SphereStep(mus, geom, np.ascontiguousarray(radii, dtype=np.float64),
+                                newton_work(mus.shape[1]))
         self._sk = model.v.T @ alpha0
 
     def __call__(self, d1: Arr, d2: Arr, alpha: Arr) -> tuple[Arr, int]:

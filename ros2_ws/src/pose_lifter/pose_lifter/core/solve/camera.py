@@ -67,6 +67,15 @@ def project_scaled_orthographic(n: NDArray[np.float64]) -> NDArray[np.float64]:
 @njit
 def _project_so(n: NDArray[np.float64]) -> NDArray[np.float64]:
     """:func:`project_scaled_orthographic` of a C-contiguous (2, 3) float64 array."""
+    out = np.empty((2, 3))
+    _project_so_into(n, out)
+    return out
+
+
+@njit
+def _project_so_into(n: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """:func:`project_scaled_orthographic` of a C-contiguous (2, 3) float64 array, written into
+    ``out`` (2, 3) (not ``n``)."""
     a0, a1, a2 = n[0, 0], n[0, 1], n[0, 2]
     b0, b1, b2 = n[1, 0], n[1, 1], n[1, 2]
     a = a0 * a0 + a1 * a1 + a2 * a2
@@ -77,12 +86,11 @@ def _project_so(n: NDArray[np.float64]) -> NDArray[np.float64]:
         sd = math.sqrt(det)
         f = 0.5 / sd
         p, q, r = f * (c + sd), -f * b, f * (a + sd)
-        out = np.empty((2, 3))
         out[0, 0], out[0, 1], out[0, 2] = p * a0 + q * b0, p * a1 + q * b1, p * a2 + q * b2
         out[1, 0], out[1, 1], out[1, 2] = q * a0 + r * b0, q * a1 + r * b1, q * a2 + r * b2
-        return out
+        return
     u, s, vt = np.linalg.svd(n, full_matrices=False)
-    return np.asarray(s.mean() * (u @ vt))
+    out[:] = s.mean() * (u @ vt)
 
 
 def weighted_median(values: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
@@ -385,6 +393,7 @@ def _camera_kernel(x: NDArray[np.float64], setup: CameraSetup, m: NDArray[np.flo
     z = np.empty((n, 2))
     r = np.empty((n, 2))
     nmat = np.empty((2, 3))
+    m_bufs = (np.empty((2, 3)), np.empty((2, 3)))  # the projections, written in turn (never the caller's M)
     tol2 = tol * tol
     for it in range(1, max_iter + 1):
         for j in range(n):
@@ -410,7 +419,8 @@ def _camera_kernel(x: NDArray[np.float64], setup: CameraSetup, m: NDArray[np.flo
             for b in range(3):
                 nmat[c, b] = sol[b, c] + u2[c, b]
         m_prev = m
-        m = _project_so(nmat)
+        m = m_bufs[it % 2]
+        _project_so_into(nmat, m)
         res1_sq = 0.0
         for j in range(n):
             for c in range(2):

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from ..numeric.jit import njit
 from ..numeric.linalg import _axpy_rows, _cholesky, _cholesky_apply
 from ..numeric.records import ModelArrays, StepSettings
-from .alpha.sphere_newton import SphereStep, _riemannian_alpha_kernel, _sphere_setup
+from .alpha.sphere_newton import SphereStep, _riemannian_alpha_kernel, _sphere_setup, newton_work
 
 
 class PoseProblem(NamedTuple):
@@ -322,14 +322,14 @@ def _alpha_setup(mus: NDArray[np.float64], rad: NDArray[np.float64], km: ModelAr
             g[j, j] += 1.0
         chol, _ = _cholesky(g)  # G >= I: positive definite
         empty = np.zeros((0, 0))
-        return SphereStep(mus, (np.zeros(0), empty, empty, empty, empty), rad), chol
+        return SphereStep(mus, (np.zeros(0), empty, empty, empty, empty), rad, newton_work(0)), chol
     for j in range(r):
         g[j, j] += 1.0 + st.prox
     q, rmat, s1, s2 = _sphere_setup(g, km.z, km.n)
     # C-contiguous operands in the orientation _axpy_rows wants (camera-dependent: per pose step)
     geom = (g @ km.s0, q, np.ascontiguousarray(rmat.T), np.ascontiguousarray(s1.T),
             np.ascontiguousarray(s2.T))
-    return SphereStep(mus, geom, rad), np.zeros((0, 0))
+    return SphereStep(mus, geom, rad, newton_work(r)), np.zeros((0, 0))
 
 
 @njit

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from ...errors import InvalidInputError
 from ...model.pose_model import PoseModel
 from ...numeric.jit import njit
-from ...numeric.linalg import _axpy_rows, _cholesky_solve
+from ...numeric.linalg import _axpy_rows, _cholesky_apply_into, _cholesky_into
 from ...numeric.records import ModelArrays, StepSettings
 from ...results import AlphaResult
 
@@ -21,6 +21,40 @@ from ...results import AlphaResult
 #: S2^T (r, r))``, C-contiguous.
 SphereGeometry = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                        NDArray[np.float64]]
+
+class NewtonWork(NamedTuple):
+    """The buffers of :func:`_sphere_newton` and :func:`_riemannian_alpha_kernel`, made once per
+    pose step (:func:`newton_work`) and written by every alpha-step of its ADM: the solver's
+    inner loop allocates nothing."""
+
+    l: NDArray[np.float64]  #: (24,) the iterate's limb vectors
+    ql: NDArray[np.float64]  #: (24,) ``Q l``
+    cand: NDArray[np.float64]  #: (24,) the line search's trial point
+    qc: NDArray[np.float64]  #: (24,) ``Q cand``
+    d: NDArray[np.float64]  #: (24,) the step in limb coordinates
+    tb: NDArray[np.float64]  #: (24, 2) the spheres' tangent bases
+    gr: NDArray[np.float64]  #: (16,) the Riemannian gradient in them
+    mu: NDArray[np.float64]  #: (8,) the multipliers
+    w: NDArray[np.float64]  #: (24, 16) ``2 Q T``
+    hr: NDArray[np.float64]  #: (16, 16) the Riemannian Hessian
+    lo: NDArray[np.float64]  #: (16, 16) its Cholesky factor
+    y: NDArray[np.float64]  #: (16,) the forward substitution
+    step: NDArray[np.float64]  #: (16,) the Newton step
+    vtd2: NDArray[np.float64]  #: (r,) ``V^T d2``
+    h: NDArray[np.float64]  #: (r,) the linear term in reduced coordinates
+    b: NDArray[np.float64]  #: (24,) its limb part ``R h``
+    l0: NDArray[np.float64]  #: (24,) the start's limb vectors
+    s: NDArray[np.float64]  #: (r,) the reduced coordinates of the result
+
+
+@njit
+def newton_work(r: int) -> NewtonWork:
+    """Fresh :class:`NewtonWork` for bases of rank ``r``."""
+    return NewtonWork(np.empty(24), np.empty(24), np.empty(24), np.empty(24), np.empty(24), np.empty((24, 2)),
+                      np.empty(16), np.empty(8), np.empty((24, 16)), np.empty((16, 16)), np.empty((16, 16)),
+                      np.empty(16), np.empty(16), np.empty(r), np.empty(r), np.empty(24), np.empty(24),
+                      np.empty(r))
+
 
 #: Iteration cap of each Riemannian Newton alpha-step inside the pose ADM (an inexact, proximal
 #: ADM). Measured on 190 recorded warm lifts of 5 committed bags, pose_max_iter 30: 1, 2, 3 Newton
@@ -55,7 +89,7 @@ def riemannian_alpha(
     h = np.asarray(lin, dtype=np.float64) - g @ sz
     cu24, cmu24 = model.kernel_limbs
     lv, it, conv = _sphere_newton(q, rmat @ h, cmu24 + cu24 @ np.asarray(s0, dtype=np.float64), rad,
-                                  int(max_iter), float(tol))
+                                  int(max_iter), float(tol), newton_work(g.shape[0]))
     s = sz + s1 @ lv + s2 @ h
     lin = np.asarray(lin, dtype=np.float64)
     return AlphaResult(objective=float(s @ g @ s - 2.0 * lin @ s), n_iter=int(it), converged=bool(conv), x=s)
@@ -132,13 +166,13 @@ def _tangent_gradient(l: NDArray[np.float64], ql: NDArray[np.float64], b: NDArra
 
 
 @njit
-def _newton_step(q: NDArray[np.float64], tb: NDArray[np.float64], mu: NDArray[np.float64],
-                 gr: NDArray[np.float64], w: NDArray[np.float64], hr: NDArray[np.float64]
-                 ) -> tuple[NDArray[np.float64], bool]:
-    """The modified Newton step (16,) in the tangent bases ``tb``: the Riemannian Hessian ``H =
-    T^T (2 Q) T + 2 diag(mu_i)`` (``w`` (24, 16), ``hr`` (16, 16) its buffers; ``T`` block
-    diagonal, 3 x 2 blocks) shifted by the smallest ``c 4^k`` that makes it positive definite,
-    solved for the gradient ``gr``; False when no shift in 60 did."""
+def _newton_step(q: NDArray[np.float64], wk: NewtonWork) -> bool:
+    """The modified Newton step (16,) in the tangent bases ``wk.tb``, written into ``wk.step``:
+    the Riemannian Hessian ``H = T^T (2 Q) T + 2 diag(mu_i)`` (``wk.mu``; ``wk.w`` (24, 16) and
+    ``wk.hr`` (16, 16) its buffers; ``T`` block diagonal, 3 x 2 blocks) shifted by the smallest ``c
+    4^k`` that makes it positive definite, solved for the gradient ``wk.gr``; False when no shift in
+    60 did."""
+    tb, mu, gr, w, hr = wk.tb, wk.mu, wk.gr, wk.w, wk.hr
     for row in range(24):  # W = 2 Q T
         for j in range(8):
             q0, q1, q2 = q[row, 3 * j], q[row, 3 * j + 1], q[row, 3 * j + 2]
@@ -154,18 +188,17 @@ def _newton_step(q: NDArray[np.float64], tb: NDArray[np.float64], mu: NDArray[np
     for i in range(16):
         scale = max(scale, abs(hr[i, i]))
     shift = 0.0
-    ok = False
-    step = gr
     for _ in range(60):
         for i in range(16):
             hr[i, i] += shift
-        step, ok = _cholesky_solve(hr, gr)
+        ok = _cholesky_into(hr, wk.lo)
         for i in range(16):
             hr[i, i] -= shift
         if ok:
-            break
+            _cholesky_apply_into(wk.lo, gr, wk.y, wk.step)
+            return True
         shift = 1e-6 * max(scale, 1e-300) if shift == 0.0 else 4.0 * shift
-    return step, ok
+    return False
 
 
 @njit
@@ -192,7 +225,7 @@ def _line_search(problem: tuple[NDArray[np.float64], NDArray[np.float64], NDArra
 
 @njit
 def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[np.float64],
-                   rad: NDArray[np.float64], max_iter: int, tol: float
+                   rad: NDArray[np.float64], max_iter: int, tol: float, wk: NewtonWork
                    ) -> tuple[NDArray[np.float64], int, bool]:
     """Riemannian Newton for ``min_l l^T Q l - 2 b^T l`` over the product of 8 spheres
     ``||l_i|| = rad_i`` (``l`` = the 8 limb vectors, (24,); ``Q`` (24, 24) positive definite).
@@ -206,21 +239,13 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
     (:func:`_line_search`; every iterate is feasible: no merit function, no Maratos effect). Stops
     when ``||grad_R|| <= tol * max(1, ||grad||)`` or when the Newton step predicts a decrease below
     ``1e-13 * max(1, |f|)`` (converged), or when the line search fails (not converged); returns
-    ``(l, iterations, converged)``. Written with scalars and reused buffers (it runs once per
-    pose-ADM iteration).
+    ``(l, iterations, converged)``, ``l`` one of the buffers of ``wk`` (:class:`NewtonWork`; ``l0``
+    may be ``wk.l0``). Written with scalars and the caller's buffers (it runs once per pose-ADM
+    iteration).
     """
-    l = np.empty(24)
+    l, ql, cand, qc, d, tb, gr, mu = wk.l, wk.ql, wk.cand, wk.qc, wk.d, wk.tb, wk.gr, wk.mu
     _retract_into(l0, l0, rad, l)
-    ql = np.empty(24)
     f = _quad_into(q, b, l, ql)
-    cand = np.empty(24)
-    qc = np.empty(24)
-    d = np.empty(24)
-    tb = np.empty((24, 2))
-    gr = np.empty(16)
-    mu = np.empty(8)
-    w = np.empty((24, 16))
-    hr = np.empty((16, 16))
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
@@ -229,9 +254,9 @@ def _sphere_newton(q: NDArray[np.float64], b: NDArray[np.float64], l0: NDArray[n
             converged = True
             it -= 1
             break
-        step, ok = _newton_step(q, tb, mu, gr, w, hr)
-        if not ok:
+        if not _newton_step(q, wk):
             break
+        step = wk.step
         slope = 0.0
         for i in range(16):
             slope -= gr[i] * step[i]
@@ -280,6 +305,7 @@ class SphereStep(NamedTuple):
     mus: NDArray[np.float64]  #: (m, r) ``M U S``, the rows' matrix (C-contiguous)
     geom: SphereGeometry  #: the quadratic in limb coordinates (:func:`_sphere_setup`)
     rad: NDArray[np.float64]  #: (8,) the limb lengths in use
+    work: NewtonWork  #: the alpha-steps' buffers (:func:`newton_work`)
 
 
 @njit
@@ -298,19 +324,21 @@ def _riemannian_alpha_kernel(d1: NDArray[np.float64], d2: NDArray[np.float64], s
     vc, vt, s0, cu24_t, cmu24 = km.vc, km.vt, km.s0, km.cu24_t, km.cmu24
     gs0, q, rmat_t, s1_t, s2_t = step.geom
     prox = st.prox
+    wk = step.work
+    vtd2, h, b, l0, s = wk.vtd2, wk.h, wk.b, wk.l0, wk.s
     r = sk.size
-    vtd2 = np.zeros(r)
+    vtd2[:] = 0.0
     _axpy_rows(vc, d2, vtd2)  # V^T d2
-    h = np.zeros(r)
+    h[:] = 0.0
     _axpy_rows(step.mus, d1, h)  # (M U S)^T d1
     for j in range(r):
         h[j] += vtd2[j] + prox * sk[j] - gs0[j]
-    b = np.zeros(24)
+    b[:] = 0.0
     _axpy_rows(rmat_t, h, b)
-    l0 = cmu24.copy()
+    l0[:] = cmu24
     _axpy_rows(cu24_t, sk, l0)
-    lv, it, _ = _sphere_newton(q, b, l0, step.rad, st.alpha_max_iter, st.alpha_tol)
-    s = s0.copy()
+    lv, it, _ = _sphere_newton(q, b, l0, step.rad, st.alpha_max_iter, st.alpha_tol, wk)
+    s[:] = s0
     _axpy_rows(s1_t, lv, s)
     _axpy_rows(s2_t, h, s)
     for j in range(r):
