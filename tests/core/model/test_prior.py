@@ -236,6 +236,35 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
 
 
+def test_the_rows_split_over_threads_are_each_rows_own_bit_for_bit(
+        prior: PosePrior, monkeypatch: pytest.MonkeyPatch) -> None:
+    """PosePrior.forward_rows: the rows split into contiguous parts run by threads give what
+    one pass gives, bit for bit, in order; a part has at least _ROWS_PER_THREAD rows."""
+    from pose_lifter.core.model import prior as prior_module
+
+    rng = np.random.default_rng(12)
+    d = prior._layers32[0][0].shape[0]
+    x = np.maximum(rng.normal(size=(37, d)), 0.0).astype(np.float32)
+    one = prior._forward_small(x)
+    passes: list[int] = []
+    forward = PosePrior._forward_small
+
+    def counted(self: PosePrior, rows: np.ndarray) -> np.ndarray:
+        passes.append(len(rows))
+        return forward(self, rows)
+
+    with monkeypatch.context() as mp:
+        mp.setattr(PosePrior, "_forward_small", counted)
+        for threads, parts in ((1, 1), (2, 2), (3, 3), (8, 37 // prior_module._ROWS_PER_THREAD)):
+            passes.clear()
+            np.testing.assert_array_equal(prior.forward_rows(x, threads), one)
+            assert len(passes) == parts and sum(passes) == 37, threads
+        passes.clear()
+        few = x[:2 * prior_module._ROWS_PER_THREAD - 1]
+        np.testing.assert_array_equal(prior.forward_rows(few, 4), one[:len(few)])
+        assert passes == [len(few)]  # too few rows to split
+
+
 def test_prior_calls_are_each_poses_own_bit_for_bit(prior: PosePrior,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     """prior_calls: the poses of many people, of two priors and both flip settings, are one by

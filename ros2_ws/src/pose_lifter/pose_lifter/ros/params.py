@@ -134,9 +134,10 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               1, 10000),
     ParamSpec("max_coordinate", _FRAME.max_coordinate, "Keypoints farther than this from the image origin "
               "(pixels) are absurd: the skeleton is skipped.", 1.0, 1.0e9),
-    ParamSpec("solver_threads", 1, "Threads over which each round of a frame's runs of alternations is "
-              "split (the compiled kernel releases the GIL; results do not depend on it); 0 = one per "
-              "CPU core the node may use. More pay only with cores to spare beside the detector.",
+    ParamSpec("solver_threads", 1, "Threads over which each round of a frame's runs of alternations and "
+              "the prior's rows are split (the compiled kernels release the GIL; results do not depend on "
+              "it); 0 = one per CPU core the node may use. More pay only with cores to spare beside the "
+              "detector.",
               0, 256, read_only=True),
     ParamSpec("max_waiting_frames", 1, "Frames that may wait to be lifted; a newer frame drops the oldest "
               "waiting one whole (counted in /diagnostics), so an answer is never more than this many "

@@ -150,8 +150,8 @@ def gather(solves: Sequence[Steps[Any]], capture: bool = False) -> Steps[list[An
 
 def solve(steps: Steps[T], km: ModelArrays, st: StepSettings, threads: int = 1) -> T:
     """Drive ``steps`` to its result: each round's runs in one
-    :func:`~pose_lifter.core.solve.run_kernel.run_calls` of the model ``km`` and settings ``st`` (over
-    ``threads`` threads), its prior calls in one :func:`prior_calls`."""
+    :func:`~pose_lifter.core.solve.run_kernel.run_calls` of the model ``km`` and settings ``st``, its
+    prior calls in one :func:`prior_calls` (each over ``threads`` threads)."""
     try:
         calls = next(steps)
         while True:
@@ -164,13 +164,14 @@ def solve(steps: Steps[T], km: ModelArrays, st: StepSettings, threads: int = 1) 
 def outcomes(calls: list[Call], km: ModelArrays, st: StepSettings, threads: int = 1) -> list[Outcome]:
     """The outcomes of a round's ``calls``, in order: the runs through one
     :func:`~pose_lifter.core.solve.run_kernel.run_calls`, the prior calls through one
-    :func:`prior_calls`, the lifts of each lifter through one :meth:`PeopleLifter.lift_people`."""
+    :func:`prior_calls` (each over ``threads`` threads), the lifts of each lifter through one
+    :meth:`PeopleLifter.lift_people`."""
     runs = [c for c in calls if isinstance(c, RunCall)]
     if len(runs) == len(calls):
         return list(run_calls(runs, km, st, threads))
     out: list[Outcome] = []
     done_runs = iter(run_calls(runs, km, st, threads))
-    done_priors = iter(prior_calls([c for c in calls if isinstance(c, PriorCall)]))
+    done_priors = iter(prior_calls([c for c in calls if isinstance(c, PriorCall)], threads))
     lifts: dict[int, list[LiftCall]] = {}
     for c in calls:
         if isinstance(c, LiftCall):
@@ -188,9 +189,10 @@ def outcomes(calls: list[Call], km: ModelArrays, st: StepSettings, threads: int 
     return out
 
 
-def prior_calls(calls: list[PriorCall]) -> list[NDArray[np.float64] | Exception]:
+def prior_calls(calls: list[PriorCall], threads: int = 1) -> list[NDArray[np.float64] | Exception]:
     """The poses (12, 3) of ``calls``, in order, each prior's network in one pass over its
-    weights for all of its calls.
+    weights for all of its calls (its rows split over ``threads`` threads,
+    :meth:`PosePrior.forward_rows`).
 
     A prior's weights (4 MB) are no longer in the cache when the next person needs them, so one
     pose alone costs the reading of the weights from memory; the poses of a frame's people read
@@ -223,7 +225,7 @@ def prior_calls(calls: list[PriorCall]) -> list[NDArray[np.float64] | Exception]
         # PosePrior.input_rows and .poses give each alone)
         rows = flip_rows(np.stack([f for _, f, _, _ in members]), flip)  # (n, [2,] d)
         h = np.ascontiguousarray(rows.reshape(-1, rows.shape[-1]), dtype=np.float32)
-        y = prior._forward_small(h).reshape(*rows.shape[:-1], N_JOINTS, 3)
+        y = prior.forward_rows(h, threads).reshape(*rows.shape[:-1], N_JOINTS, 3)
         poses = prior.poses(y, np.stack([c for _, _, c, _ in members]),
                             np.stack([r for _, _, _, r in members]), flip)  # (n, 12, 3)
         for (i, _, _, _), pose in zip(members, poses, strict=True):

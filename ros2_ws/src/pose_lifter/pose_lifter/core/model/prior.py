@@ -40,7 +40,8 @@ from numpy.typing import NDArray
 
 from ..errors import InvalidInputError, PriorFileError
 from ..numeric.fast import pairwise_sum
-from ..numeric.jit import HAVE_NUMBA, njit
+from ..numeric.jit import HAVE_NUMBA, njit, njit_nogil
+from ..numeric.threads import thread_pool
 from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
 
 __all__ = ["DEFAULT_OFFLINE_PRIOR_PATH", "DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior",
@@ -281,13 +282,18 @@ def mirror_pose(pose: NDArray[np.float64]) -> NDArray[np.float64]:
 #: Rows up to which :meth:`PosePrior.forward` runs the compiled layer pass instead of BLAS.
 SMALL_BATCH: Final[int] = 8
 
+#: Rows a thread of :meth:`PosePrior.forward_rows` takes at least: a part reads every layer's
+#: weights (4 MB), which a few rows do not repay.
+_ROWS_PER_THREAD: Final[int] = 8
 
-@njit
+
+@njit_nogil
 def _affine_rows(h: NDArray[np.float32], w: NDArray[np.float32], b: NDArray[np.float32], relu: bool
                  ) -> NDArray[np.float32]:
     """``h @ w + b`` (then ``max(., 0)`` with ``relu``) for a few rows ``h`` (n, d), ``w`` (d, m),
     ``b`` (m,), in float32: each weight row is read once for all rows of ``h``, the sums run
-    over ``d`` in order (rows of ``h`` at 0, a ReLU's zeros, add nothing and are skipped)."""
+    over ``d`` in order (rows of ``h`` at 0, a ReLU's zeros, add nothing and are skipped). It
+    releases the GIL: threads may run parts of the rows (:meth:`PosePrior.forward_rows`)."""
     n, d = h.shape
     m = w.shape[1]
     out = np.empty((n, m), dtype=np.float32)
@@ -527,6 +533,18 @@ class PosePrior:
             h = h @ layers[-1][0] + layers[-1][1]
         y = h.astype(np.float64) * self.out_scale + self.out_mean
         return y.reshape(*y.shape[:-1], N_JOINTS, 3)
+
+    def forward_rows(self, x: NDArray[np.float32], threads: int = 1) -> NDArray[np.float64]:
+        """:meth:`_forward_small` of the rows ``x`` (n, 36 * window), split into ``threads``
+        contiguous parts run in parallel (:func:`pose_lifter.core.numeric.threads.thread_pool`;
+        the compiled pass releases the GIL): (n, 12, 3), each row's the same bit for bit whatever
+        the split."""
+        parts = min(max(threads, 1), x.shape[0] // _ROWS_PER_THREAD)
+        if parts <= 1:
+            return self._forward_small(x)
+        edges = [round(i * x.shape[0] / parts) for i in range(parts + 1)]
+        done = thread_pool(parts).map(lambda i: self._forward_small(x[edges[i]:edges[i + 1]]), range(parts))
+        return np.concatenate(list(done))
 
     def _forward_small(self, x: NDArray[np.float32]) -> NDArray[np.float64]:
         """:meth:`forward` through the compiled layer pass (:meth:`forward` sends it 1 to

@@ -25,8 +25,6 @@ same objective terms and stopping rule.
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from enum import IntEnum
 from typing import Any, NamedTuple
 
@@ -35,6 +33,7 @@ from numpy.typing import NDArray
 
 from ..numeric.jit import njit, njit_nogil
 from ..numeric.records import ModelArrays, StepSettings
+from ..numeric.threads import thread_pool
 from .camera import CameraDuals, CameraProblem, CameraSolve, _camera_solve
 from .pose_kernel import Multipliers, PoseOut, PoseProblem, _depth_term, _n_rows, _pose_kernel, _sum_abs
 
@@ -324,7 +323,7 @@ def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads:
             lo, hi = edges[i], edges[i + 1]
             _run_kernel_many(km, st, tuple(a[lo:hi] for a in ins), tuple(a[lo:hi] for a in outs))
 
-        list(_pool(parts).map(part, range(parts)))
+        list(thread_pool(parts).map(part, range(parts)))
     status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
     out = []
     # the scalars as Python numbers, each array's once
@@ -336,16 +335,3 @@ def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads:
                           alpha[b], pose[b], rotation[b], translation[b], f[0], f[1], f[2], f[3], i[0],
                           bool(i[1]), i[2], i[3], bool(i[4])))
     return out
-
-
-_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
-
-
-def _pool(threads: int) -> ThreadPoolExecutor:
-    """This process's pool of ``threads`` threads (a forked child makes its own: the parent's
-    threads do not exist in it)."""
-    key = (os.getpid(), threads)
-    pool = _POOLS.get(key)
-    if pool is None:
-        pool = _POOLS[key] = ThreadPoolExecutor(threads, thread_name_prefix="pose_lifter_runs")
-    return pool
