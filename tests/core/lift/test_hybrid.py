@@ -109,20 +109,31 @@ def test_the_hybrid_mode_has_its_own_packaged_bases() -> None:
     assert not trained & set(PosePrior.load().metadata["validation_trials"])
 
 
-def test_the_hybrid_pose_step_has_its_own_iteration_cap(
+def test_the_hybrid_steps_have_their_own_iteration_caps(
         bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
-    """``hybrid_pose_max_iter`` caps the hybrid runs' pose steps; the paper's mode keeps
-    ``pose_max_iter`` (its results stay the paper's). A tolerance no step meets makes every pose
-    step run to its cap (seen in ``LiftResult.history``)."""
+    """``hybrid_pose_max_iter`` and ``hybrid_camera_max_iter`` cap the hybrid runs' pose and camera
+    steps; the paper's mode keeps ``pose_max_iter`` and ``camera_max_iter`` (its results stay the
+    paper's). Tolerances no step meets make every step run to its cap (seen in
+    ``LiftResult.history``), in the compiled runs and in the Python loop alike."""
     x, _ = walk_track
-    hybrid = LifterOptions(mode="hybrid", hybrid_pose_max_iter=7, warm_flip=False, pose_tol=1e-15)
-    res = Lifter(bases, hybrid).lift(x[0])
-    assert res.history and {a.pose.n_iter for a in res.history} == {7}
-    paper = LifterOptions(mode="paper", n_starts=1, hybrid_pose_max_iter=7, pose_tol=1e-15)
+    never = {"pose_tol": 1e-15, "camera_tol": 1e-15}
+    hybrid = LifterOptions(mode="hybrid", hybrid_pose_max_iter=7, hybrid_camera_max_iter=9, warm_flip=False,
+                           **never)
+    for compiled in (True, False):
+        lifter = Lifter(bases, hybrid)
+        lifter.runs.compiled = compiled
+        res = lifter.lift(x[0])
+        assert res.history and {a.pose.n_iter for a in res.history} == {7}, compiled
+        assert {a.camera.n_iter for a in res.history} == {9}, compiled
+    paper = LifterOptions(mode="paper", n_starts=1, hybrid_pose_max_iter=7, hybrid_camera_max_iter=9,
+                          **never)
     res = Lifter(bases, paper).lift(x[0])
     assert res.history and {a.pose.n_iter for a in res.history} == {paper.pose_max_iter}
+    assert {a.camera.n_iter for a in res.history} == {paper.camera_max_iter}
     with pytest.raises(OptionsError):
         LifterOptions(hybrid_pose_max_iter=0)
+    with pytest.raises(OptionsError):
+        LifterOptions(hybrid_camera_max_iter=0)
 
 
 def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> None:

@@ -81,7 +81,7 @@ class _RiemannianStep:
         self._st = settings_record(StepSettings(
             th=0.0, l1=True, limbs=True, eta=1.0, eta_growth=1.0, eta_max=1.0, pose_tol=0.0,
             alpha_max_iter=RIEMANNIAN_MAX_ITER, alpha_tol=opts.newton_tol, prox=opts.alpha_prox,
-            cam_max_iter=0, cam_tol=0.0, tau=0.0, alt_tol=0.0))
+            cam_tol=0.0, tau=0.0, alt_tol=0.0))
         mus = np.ascontiguousarray(mus)
         g = mus.T @ mus + (1.0 + opts.alpha_prox) * np.eye(model.sig.size)
         q, rmat, s1, s2 = _sphere_setup(g, z, n)

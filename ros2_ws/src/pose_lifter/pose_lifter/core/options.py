@@ -374,6 +374,8 @@ class ExperimentOptions(_Validated):
         "Hybrid: alternations of each run at most.", 1, _ITER))
     hybrid_pose_max_iter: int = field(default=10, metadata=_meta(
         "Hybrid: pose-step ADM iterations at most per alternation.", 1, _ITER))
+    hybrid_camera_max_iter: int = field(default=15, metadata=_meta(
+        "Hybrid: camera-step ADM iterations at most per alternation.", 1, _ITER))
 
 
 @dataclass(frozen=True)

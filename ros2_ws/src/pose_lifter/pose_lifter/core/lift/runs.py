@@ -169,10 +169,17 @@ class Runs:
                                              np.ascontiguousarray(w, dtype=np.float64), xp, pw)
         return cx, cw, bool(doubled)
 
+    def camera_max_iter(self, prior: PriorRows | None) -> int:
+        """The camera step's iteration cap in a run: ``camera_max_iter``, or
+        ``hybrid_camera_max_iter`` with a prior term."""
+        o = self.options
+        return o.camera_max_iter if prior is None else o.hybrid_camera_max_iter
+
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
-                init: Camera | None) -> CameraResult:
+               init: Camera | None, prior: PriorRows | None = None) -> CameraResult:
         """One camera step of a run on its :meth:`camera_data` for ``pose`` (12, 3) (stacked twice
-        with a prior term), from ``init`` (None: the step's own least-squares start)."""
+        with a prior term), from ``init`` (None: the step's own least-squares start), at most
+        :meth:`camera_max_iter` iterations for the run's ``prior`` term."""
         o = self.options
         xn, w, doubled = data
         if doubled:
@@ -184,7 +191,7 @@ class Runs:
                                         rotation_init=None if init is None else init.rotation)
             return CameraResult(objective=float(obj), n_iter=1, converged=True, camera=cam)
         # inputs checked once per lift (finite, shapes, >= min_visible_joints weights)
-        return camera_step_trusted(xn, pose, w, o, init)
+        return camera_step_trusted(xn, pose, w, o, init, max_iter=self.camera_max_iter(prior))
 
     def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64],
               alpha0: NDArray[np.float64], max_iter: int | None = None, prior: PriorRows | None = None
@@ -290,7 +297,7 @@ class Runs:
         cam_init[:, 3] = t_init
         return RunCall(np.ascontiguousarray(xn, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
                        xp, pw, rad, np.ascontiguousarray(alpha, dtype=np.float64), y0, cam_init, float(obj0),
-                       int(it0), int(n_alt), int(pose_max_iter))
+                       int(it0), int(n_alt), int(pose_max_iter), self.camera_max_iter(prior))
 
     @staticmethod
     def _compiled_run(out: RunOut, start: Run | None) -> Run:

@@ -52,7 +52,6 @@ class StepSettings(NamedTuple):
     alpha_max_iter: int  #: Riemannian Newton steps per alpha-step
     alpha_tol: float  #: their tolerance (``newton_tol``)
     prox: float  #: the alpha-step's proximal weight (``alpha_prox``)
-    cam_max_iter: int  #: the camera ADM's cap
     cam_tol: float  #: its tolerance
     tau: float  #: its penalty
     alt_tol: float  #: a run's relative-decrease tolerance (``alternation_tol``)
@@ -90,7 +89,7 @@ if HAVE_NUMBA:  # pragma: no branch
     @njit
     def _new_settings(s: Any) -> Any:
         return _Settings(s.th, s.l1, s.limbs, s.eta, s.eta_growth, s.eta_max, s.pose_tol, s.alpha_max_iter,
-                         s.alpha_tol, s.prox, s.cam_max_iter, s.cam_tol, s.tau, s.alt_tol)
+                         s.alpha_tol, s.prox, s.cam_tol, s.tau, s.alt_tol)
 
 
 def model_record(arrays: ModelArrays) -> ModelArrays:
@@ -105,5 +104,5 @@ def settings_record(settings: StepSettings) -> StepSettings:
     s = settings
     typed = StepSettings(float(s.th), bool(s.l1), bool(s.limbs), float(s.eta), float(s.eta_growth),
                          float(s.eta_max), float(s.pose_tol), int(s.alpha_max_iter), float(s.alpha_tol),
-                         float(s.prox), int(s.cam_max_iter), float(s.cam_tol), float(s.tau), float(s.alt_tol))
+                         float(s.prox), float(s.cam_tol), float(s.tau), float(s.alt_tol))
     return _new_settings(typed) if HAVE_NUMBA else typed

@@ -29,7 +29,7 @@ class AlternationSteps(Protocol):
     options: LifterOptions
 
     def camera(self, data: tuple[NDArray[np.float64], NDArray[np.float64], bool], pose: NDArray[np.float64],
-               init: Camera | None) -> CameraResult: ...
+               init: Camera | None, prior: PriorRows | None = None) -> CameraResult: ...
 
     def pose(self, xn: NDArray[np.float64], cam: Camera, w: NDArray[np.float64], alpha0: NDArray[np.float64],
              max_iter: int | None = None, prior: PriorRows | None = None) -> PoseResult: ...
@@ -84,7 +84,7 @@ def alternation_loop(steps: AlternationSteps, xn: NDArray[np.float64], w: NDArra
     best: ContinuedRun | None
     if isinstance(start, ColdStart):
         alpha = start.alpha0
-        cam = steps.camera(data, steps.model.pose(alpha), start.cam0)
+        cam = steps.camera(data, steps.model.pose(alpha), start.cam0, prior)
         best, prev, it0, history = None, np.inf, 0, []
     else:
         alpha, cam, best, prev = start.pose.alpha, start.camera, start, start.objective
@@ -96,7 +96,7 @@ def alternation_loop(steps: AlternationSteps, xn: NDArray[np.float64], w: NDArra
     for it in range(it0 + 1, n_alt + 1):
         pres = steps.pose(xn, cam.camera, w, alpha, pose_max_iter, prior)
         alpha = pres.alpha
-        cam = steps.camera(data, pres.pose, cam.camera)
+        cam = steps.camera(data, pres.pose, cam.camera, prior)
         obj = _run_objective(cam.objective, alpha, th, np.ascontiguousarray(pres.pose).reshape(-1),
                              np.ascontiguousarray(cam.camera.projection), xp, pw)
         history.append(Alternation(obj, SolveInfo(cam.objective, cam.n_iter, cam.converged),

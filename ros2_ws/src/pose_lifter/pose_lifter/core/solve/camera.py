@@ -175,11 +175,11 @@ def camera_step(
 
 def camera_step_trusted(
     x: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64], options: LifterOptions,
-    init: Camera | None = None, duals: Duals | None = None,
+    init: Camera | None = None, duals: Duals | None = None, max_iter: int | None = None,
 ) -> CameraResult:
     """:func:`camera_step` on inputs already checked (C-contiguous float64, finite, shapes as
     documented, >= 3 positive weights): the lifter's per-alternation call (its inputs are checked
-    once per lift)."""
+    once per lift), at most ``max_iter`` ADM iterations (None: ``options.camera_max_iter``)."""
     n = x.shape[0]
     if init is None:
         m, t = initial_camera(x, y, w)
@@ -193,7 +193,8 @@ def camera_step_trusted(
         u1 = np.array(duals.data, dtype=np.float64)
         u2 = np.array(duals.coupling, dtype=np.float64)
     with diverged_as_solver_error("camera step"):
-        out = _camera_solve(CameraProblem(x, y, w), m, t, CameraDuals(u1, u2), step_settings(options))
+        out = _camera_solve(CameraProblem(x, y, w), m, t, CameraDuals(u1, u2), step_settings(options),
+                            options.camera_max_iter if max_iter is None else max_iter)
     if not out.finite:
         raise SolverError("camera step diverged (non-finite camera); check the inputs")
     return CameraResult(objective=out.objective, n_iter=out.n_iter, converged=out.converged,
@@ -257,10 +258,10 @@ class CameraSolve(NamedTuple):
 
 @njit
 def _camera_solve(problem: CameraProblem, m: NDArray[np.float64], t: NDArray[np.float64], u: CameraDuals,
-                  st: StepSettings) -> CameraSolve:
-    """Set-up, ADM iterations (:func:`_camera_kernel`) and finish (:func:`_camera_finish`) of
-    the camera step of ``problem`` from ``M`` (2, 3), ``t`` (2,), the multipliers ``u`` (updated in
-    place) and the settings ``st`` (the loss, ``cam_max_iter``, ``cam_tol``, ``tau``)."""
+                  st: StepSettings, max_iter: int) -> CameraSolve:
+    """Set-up, ADM iterations (:func:`_camera_kernel`, at most ``max_iter``) and finish
+    (:func:`_camera_finish`) of the camera step of ``problem`` from ``M`` (2, 3), ``t`` (2,), the
+    multipliers ``u`` (updated in place) and the settings ``st`` (the loss, ``cam_tol``, ``tau``)."""
     x, y, w = problem.x, problem.y, problem.w
     tau = st.tau
     n = x.shape[0]
@@ -294,7 +295,7 @@ def _camera_solve(problem: CameraProblem, m: NDArray[np.float64], t: NDArray[np.
             thr[j, c] = w[j] / tau
             l2fac[j, c] = tau / (2.0 * w[j] + tau)
     setup = CameraSetup(ya, hat, lhs3, thr, l2fac, scale_x)
-    m, it, converged = _camera_kernel(x, setup, m, t, u, st)
+    m, it, converged = _camera_kernel(x, setup, m, t, u, st, max_iter)
     rot, scale, t_out, obj = _camera_finish(x, y, w, m, st.l1)
     ok = bool(np.all(np.isfinite(rot)) and np.all(np.isfinite(t_out)) and math.isfinite(scale) and scale > 0)
     return CameraSolve(rot, scale, t_out, obj, it, converged, ok)
@@ -370,15 +371,15 @@ def _optimal_translation(x: NDArray[np.float64], y: NDArray[np.float64], w: NDAr
 
 @njit
 def _camera_kernel(x: NDArray[np.float64], setup: CameraSetup, m: NDArray[np.float64], t: NDArray[np.float64],
-                   u: CameraDuals, st: StepSettings) -> tuple[NDArray[np.float64], int, bool]:
+                   u: CameraDuals, st: StepSettings, max_iter: int) -> tuple[NDArray[np.float64], int, bool]:
     """The ADM iterations of :func:`camera_step` on plain arrays (compiled by numba when
-    available) for the points ``x`` (n, 2) from ``M`` (2, 3), ``t`` (2,), the loss, cap and
-    tolerance of ``st``: ``(M, iterations, converged)``; the multipliers ``u`` are updated in
-    place. Written as loops over the (n, 2) arrays: at these sizes array expressions cost more in
-    temporaries than in arithmetic."""
+    available) for the points ``x`` (n, 2) from ``M`` (2, 3), ``t`` (2,), the loss and tolerance of
+    ``st``, at most ``max_iter`` iterations: ``(M, iterations, converged)``; the multipliers ``u``
+    are updated in place. Written as loops over the (n, 2) arrays: at these sizes array expressions
+    cost more in temporaries than in arithmetic."""
     ya, hat, lhs3, thr, l2fac, scale_x = setup
     u1, u2 = u.u1, u.u2
-    l1, max_iter, tol = st.l1, st.cam_max_iter, st.cam_tol
+    l1, tol = st.l1, st.cam_tol
     n = x.shape[0]
     converged = False
     it = 0

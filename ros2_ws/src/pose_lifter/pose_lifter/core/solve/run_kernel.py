@@ -85,7 +85,7 @@ class RunCall(NamedTuple):
     every run of a lifter shares: the normalised 2D and its weights, the prior's target, weights
     and the limb lengths in use (zeros: no prior), the first pose step's start, the start pose and
     camera ``[M | t]``, and for a continued run its best objective and alternations done; the
-    alternation cap and the pose steps' iteration cap."""
+    alternation cap and the pose and camera steps' iteration caps."""
 
     xn: NDArray[np.float64]  #: (12, 2)
     w: NDArray[np.float64]  #: (12,)
@@ -99,6 +99,7 @@ class RunCall(NamedTuple):
     it0: int
     n_alt: int
     pose_max_iter: int
+    camera_max_iter: int
 
 
 @njit
@@ -138,11 +139,12 @@ def _stack_camera_data(xn: NDArray[np.float64], w: NDArray[np.float64], xp: NDAr
 
 @njit
 def _camera_for(cx: NDArray[np.float64], cw: NDArray[np.float64], pose: NDArray[np.float64], doubled: bool,
-                ycam: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], st: StepSettings
-                ) -> CameraSolve:
+                ycam: NDArray[np.float64], m0: NDArray[np.float64], t: NDArray[np.float64], st: StepSettings,
+                max_iter: int) -> CameraSolve:
     """The camera step of a run for the flat pose ``pose`` (36,) from ``[m0 | t]``, its
-    multipliers from zero: the pose's joints written into ``ycam`` (n, 3) (twice, ``doubled``,
-    when ``cx`` (n, 2), ``cw`` (n,) hold the prior's image positions after the 2D)."""
+    multipliers from zero, at most ``max_iter`` iterations: the pose's joints written into
+    ``ycam`` (n, 3) (twice, ``doubled``, when ``cx`` (n, 2), ``cw`` (n,) hold the prior's image
+    positions after the 2D)."""
     nc = cx.shape[0]
     nj = nc // 2 if doubled else nc
     for j in range(nc):
@@ -150,7 +152,7 @@ def _camera_for(cx: NDArray[np.float64], cw: NDArray[np.float64], pose: NDArray[
         for a in range(3):
             ycam[j, a] = pose[3 * jj + a]
     duals = CameraDuals(np.zeros((nc, 2)), np.zeros((2, 3)))
-    return _camera_solve(CameraProblem(cx, ycam, cw), m0, t, duals, st)
+    return _camera_solve(CameraProblem(cx, ycam, cw), m0, t, duals, st, max_iter)
 
 
 @njit
@@ -191,7 +193,7 @@ def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
     ycam = np.empty((cx.shape[0], 3))
     status = _OK
     if not continued:
-        c = _camera_for(cx, cw, call.y0, doubled, ycam, m0, t, st)
+        c = _camera_for(cx, cw, call.y0, doubled, ycam, m0, t, st, call.camera_max_iter)
         if c.finite:
             m0, t = c.scale * c.rotation[:2], c.translation
         else:
@@ -209,7 +211,7 @@ def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
             status = _POSE_DIVERGED
             break
         alpha = p.alpha
-        c = _camera_for(cx, cw, p.pose, doubled, ycam, m0, t, st)
+        c = _camera_for(cx, cw, p.pose, doubled, ycam, m0, t, st, call.camera_max_iter)
         if not c.finite:
             status = _CAMERA_DIVERGED
             break
@@ -235,20 +237,20 @@ def _run_kernel(call: RunCall, km: ModelArrays, st: StepSettings) -> RunOut:
 def _run_kernel_many(km: ModelArrays, st: StepSettings, ins: tuple[Any, ...], outs: tuple[Any, ...]) -> None:
     """:func:`_run_kernel` for each of ``B`` runs of one model and settings.
 
-    ``ins``: the operands of :class:`RunCall`, in its order, stacked on a first axis of size
-    ``B`` (``xn`` (B, 12, 2), ..., ``obj0`` (B,), ``it0``, ``n_alt``, ``pose_max_iter`` (B,)
-    int64). ``outs``, written: ``status`` (B,); ``head`` (B, 4): done, it, converged, best_it;
-    ``best_obj`` (B,); ``objs`` (B, L, 3) and ``counts`` (B, L, 4) with ``L`` at least every
-    run's ``n_alt - it0`` (the first ``done`` rows used); then ``alpha``, ``pose``, ``rotation``,
-    ``translation`` as :class:`RunOut`'s with ``B`` in front, ``floats`` (B, 4) and ``ints``
-    (B, 5) its scalars of the kept steps in :func:`_run_out`'s order. Each run is
-    :func:`_run_kernel`'s on its own operands, bit for bit (nothing is shared but ``km`` and
-    ``st``); the kernel releases the GIL, so threads may run parts of a batch in parallel."""
-    xn, w, xp, pw, rad, alpha0, y0, cam0, obj0, it0, n_alt, pose_max_iter = ins
+    ``ins``: the operands of :class:`RunCall`, in its order, stacked on a first axis of size ``B``
+    (``xn`` (B, 12, 2), ..., ``obj0`` (B,), ``it0``, ``n_alt``, ``pose_max_iter``, ``camera_max_iter``
+    (B,) int64). ``outs``, written: ``status`` (B,); ``head`` (B, 4): done, it, converged, best_it;
+    ``best_obj`` (B,); ``objs`` (B, L, 3) and ``counts`` (B, L, 4) with ``L`` at least every run's
+    ``n_alt - it0`` (the first ``done`` rows used); then ``alpha``, ``pose``, ``rotation``,
+    ``translation`` as :class:`RunOut`'s with ``B`` in front, ``floats`` (B, 4) and ``ints`` (B, 5) its
+    scalars of the kept steps in :func:`_run_out`'s order. Each run is :func:`_run_kernel`'s on its own
+    operands, bit for bit (nothing is shared but ``km`` and ``st``); the kernel releases the GIL, so
+    threads may run parts of a batch in parallel."""
+    xn, w, xp, pw, rad, alpha0, y0, cam0, obj0, it0, n_alt, pose_max_iter, camera_max_iter = ins
     status, head, best_obj, objs, counts, alpha, pose, rotation, translation, floats, ints = outs
     for b in range(xn.shape[0]):
         o = _run_kernel(RunCall(xn[b], w[b], xp[b], pw[b], rad[b], alpha0[b], y0[b], cam0[b], obj0[b], it0[b],
-                                n_alt[b], pose_max_iter[b]), km, st)
+                                n_alt[b], pose_max_iter[b], camera_max_iter[b]), km, st)
         status[b] = o.status
         head[b, 0], head[b, 1], head[b, 2], head[b, 3] = o.done, o.it, o.converged, o.best_it
         best_obj[b] = o.best_obj
@@ -308,7 +310,8 @@ def _run_calls(calls: list[RunCall], km: ModelArrays, st: StepSettings, threads:
            np.array([c.obj0 for c in calls], dtype=np.float64),
            np.array([c.it0 for c in calls], dtype=np.int64),
            np.array([c.n_alt for c in calls], dtype=np.int64),
-           np.array([c.pose_max_iter for c in calls], dtype=np.int64))
+           np.array([c.pose_max_iter for c in calls], dtype=np.int64),
+           np.array([c.camera_max_iter for c in calls], dtype=np.int64))
     outs: tuple[NDArray[Any], ...] = (
         np.zeros(n, np.int64), np.zeros((n, 4), np.int64), np.zeros(n), np.zeros((n, length, 3)),
         np.zeros((n, length, 4), np.int64), np.zeros((n, k)), np.zeros((n, xn.shape[1] * 3)),

@@ -25,5 +25,5 @@ def step_settings(options: LifterOptions) -> StepSettings:
     return settings_record(StepSettings(
         th=o.theta if o.method.sparsity else 0.0, l1=o.method.loss == "l1", limbs=o.method.limbs, eta=o.eta,
         eta_growth=o.eta_growth, eta_max=ETA_MAX, pose_tol=o.pose_tol, alpha_max_iter=RIEMANNIAN_MAX_ITER,
-        alpha_tol=o.newton_tol, prox=o.alpha_prox, cam_max_iter=o.camera_max_iter, cam_tol=o.camera_tol,
+        alpha_tol=o.newton_tol, prox=o.alpha_prox, cam_tol=o.camera_tol,
         tau=o.tau, alt_tol=o.alternation_tol))
