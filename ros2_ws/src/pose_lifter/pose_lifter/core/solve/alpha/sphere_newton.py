@@ -22,6 +22,7 @@ from ...results import AlphaResult
 SphereGeometry = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                        NDArray[np.float64]]
 
+
 class NewtonWork(NamedTuple):
     """The buffers of :func:`_sphere_newton` and :func:`_riemannian_alpha_kernel`, made once per
     pose step (:func:`newton_work`) and written by every alpha-step of its ADM: the solver's
@@ -171,18 +172,20 @@ def _newton_step(q: NDArray[np.float64], wk: NewtonWork) -> bool:
     the Riemannian Hessian ``H = T^T (2 Q) T + 2 diag(mu_i)`` (``wk.mu``; ``wk.w`` (24, 16) and
     ``wk.hr`` (16, 16) its buffers; ``T`` block diagonal, 3 x 2 blocks) shifted by the smallest ``c
     4^k`` that makes it positive definite, solved for the gradient ``wk.gr``; False when no shift in
-    60 did."""
+    60 did. Only the lower triangle of ``H`` is formed (the factorisation reads no other), from
+    the part of ``W`` it needs."""
     tb, mu, gr, w, hr = wk.tb, wk.mu, wk.gr, wk.w, wk.hr
-    for row in range(24):  # W = 2 Q T
-        for j in range(8):
-            q0, q1, q2 = q[row, 3 * j], q[row, 3 * j + 1], q[row, 3 * j + 2]
-            w[row, 2 * j] = 2.0 * (q0 * tb[3 * j, 0] + q1 * tb[3 * j + 1, 0] + q2 * tb[3 * j + 2, 0])
-            w[row, 2 * j + 1] = 2.0 * (q0 * tb[3 * j, 1] + q1 * tb[3 * j + 1, 1] + q2 * tb[3 * j + 2, 1])
+    for i in range(8):  # W = 2 Q T: the rows of sphere i, the columns of spheres 0..i
+        for row in range(3 * i, 3 * i + 3):
+            for j in range(i + 1):
+                q0, q1, q2 = q[row, 3 * j], q[row, 3 * j + 1], q[row, 3 * j + 2]
+                w[row, 2 * j] = 2.0 * (q0 * tb[3 * j, 0] + q1 * tb[3 * j + 1, 0] + q2 * tb[3 * j + 2, 0])
+                w[row, 2 * j + 1] = 2.0 * (q0 * tb[3 * j, 1] + q1 * tb[3 * j + 1, 1] + q2 * tb[3 * j + 2, 1])
     scale = 0.0
-    for i in range(8):  # H = T^T W + 2 diag(mu_i)
+    for i in range(8):  # H = T^T W + 2 diag(mu_i), lower triangle
         for e in range(2):
             t0, t1, t2 = tb[3 * i, e], tb[3 * i + 1, e], tb[3 * i + 2, e]
-            for col in range(16):
+            for col in range(2 * i + e + 1):
                 hr[2 * i + e, col] = t0 * w[3 * i, col] + t1 * w[3 * i + 1, col] + t2 * w[3 * i + 2, col]
             hr[2 * i + e, 2 * i + e] += 2.0 * mu[i]
     for i in range(16):
