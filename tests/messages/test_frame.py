@@ -159,15 +159,16 @@ def test_a_frames_people_share_one_pass_of_the_prior_and_get_their_own_poses(
     runs: dict[str, tuple[np.ndarray, np.ndarray, list[int]]] = {}
     together = batch.prior_calls
 
-    def alone(calls: list[PriorCall]) -> list[Any]:
-        return [together([c])[0] for c in calls]
+    def alone(calls: list[PriorCall], threads: int = 1) -> list[Any]:
+        return [together([c], threads)[0] for c in calls]
 
     for name, how in (("together", together), ("alone", alone)):
         sizes: list[int] = []
 
-        def counted(calls: list[PriorCall], how: Any = how, sizes: list[int] = sizes) -> list[Any]:
+        def counted(calls: list[PriorCall], threads: int = 1, how: Any = how,
+                    sizes: list[int] = sizes) -> list[Any]:
             sizes.append(len(calls))
-            return how(calls)
+            return how(calls, threads)
 
         with monkeypatch.context() as mp:
             mp.setattr(batch, "prior_calls", counted)
