@@ -236,6 +236,20 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
 
 
+def _counting_passes(mp: pytest.MonkeyPatch) -> list[int]:
+    """``PosePrior._forward_small`` patched (inside ``mp``) to record each compiled pass's row
+    count in the returned list."""
+    passes: list[int] = []
+    forward = PosePrior._forward_small
+
+    def counted(self: PosePrior, rows: np.ndarray) -> np.ndarray:
+        passes.append(len(rows))
+        return forward(self, rows)
+
+    mp.setattr(PosePrior, "_forward_small", counted)
+    return passes
+
+
 def test_the_rows_split_over_threads_are_each_rows_own_bit_for_bit(
         prior: PosePrior, monkeypatch: pytest.MonkeyPatch) -> None:
     """PosePrior.forward_rows: the rows split into contiguous parts run by threads give what
@@ -246,15 +260,8 @@ def test_the_rows_split_over_threads_are_each_rows_own_bit_for_bit(
     d = prior._layers32[0][0].shape[0]
     x = np.maximum(rng.normal(size=(37, d)), 0.0).astype(np.float32)
     one = prior._forward_small(x)
-    passes: list[int] = []
-    forward = PosePrior._forward_small
-
-    def counted(self: PosePrior, rows: np.ndarray) -> np.ndarray:
-        passes.append(len(rows))
-        return forward(self, rows)
-
     with monkeypatch.context() as mp:
-        mp.setattr(PosePrior, "_forward_small", counted)
+        passes = _counting_passes(mp)
         for threads, parts in ((1, 1), (2, 2), (3, 3), (8, 37 // prior_module._ROWS_PER_THREAD)):
             passes.clear()
             np.testing.assert_array_equal(prior.forward_rows(x, threads), one)
@@ -283,15 +290,8 @@ def test_prior_calls_are_each_poses_own_bit_for_bit(prior: PosePrior,
              + [PriorCall(temporal, x, v, True) for x, v in windows] + [PriorCall(prior, x, v, False)
                                                                         for x, v in people[4:]]
              + [PriorCall(other, *people[0], True)])
-    passes: list[int] = []
-    forward = PosePrior._forward_small
-
-    def counted(self: PosePrior, x: np.ndarray) -> np.ndarray:
-        passes.append(len(x))
-        return forward(self, x)
-
     with monkeypatch.context() as mp:
-        mp.setattr(PosePrior, "_forward_small", counted)
+        passes = _counting_passes(mp)
         out = prior_calls(calls)
     assert len(out) == len(calls)
     for c, pose in zip(calls, out, strict=True):
