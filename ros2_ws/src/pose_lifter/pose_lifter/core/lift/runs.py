@@ -239,13 +239,13 @@ class Runs:
         for i, sp in enumerate(specs):
             n_alt = o.max_alternations if sp.max_alternations is None else sp.max_alternations
             try:
-                data = self.camera_data(sp.xn, sp.w, sp.prior)
                 if not self.compiled:
                     start = ColdStart(sp.alpha0, sp.cam0) if sp.start is None else sp.start
+                    data = self.camera_data(sp.xn, sp.w, sp.prior)
                     out[i] = Run(*alternation_loop(self, sp.xn, sp.w, data, start, n_alt, sp.pose_max_iter,
                                                    sp.prior))
                     continue
-                calls.append(self._compiled_call(sp.w, sp.xn, data, sp.alpha0, sp.cam0, n_alt, sp.start,
+                calls.append(self._compiled_call(sp.w, sp.xn, sp.alpha0, sp.cam0, n_alt, sp.start,
                                                  sp.pose_max_iter, sp.prior))
                 which.append(i)
             except Exception as err:
@@ -268,17 +268,16 @@ class Runs:
         except Exception as err:
             return err
 
-    def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64],
-                       data: tuple[NDArray[np.float64], NDArray[np.float64], bool],
-                       alpha0: NDArray[np.float64], cam0: Camera | None, n_alt: int, start: Run | None,
-                       pose_max_iter: int | None, prior: PriorRows | None) -> RunCall:
+    def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64], alpha0: NDArray[np.float64],
+                       cam0: Camera | None, n_alt: int, start: Run | None, pose_max_iter: int | None,
+                       prior: PriorRows | None) -> RunCall:
         """The operands of :meth:`run_steps`' compiled run
-        (:func:`pose_lifter.core.solve.run_kernel._run_kernel`)."""
+        (:func:`pose_lifter.core.solve.run_kernel._run_kernel`; the kernel stacks the camera step's
+        data itself, :meth:`camera_data` is needed here only for a new run's cold camera)."""
         o, m = self.options, self.model
         xp, pw, rad = prior_operands(m, prior)
         if pose_max_iter is None:
             pose_max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
-        cx, cw, doubled = data
         if start is not None:
             cam = start.camera.camera
             alpha, y0 = start.pose.alpha, m.mean
@@ -287,6 +286,7 @@ class Runs:
         else:
             alpha, y0 = alpha0, m.mean + m.components @ alpha0
             if cam0 is None:
+                cx, cw, doubled = self.camera_data(xn, w, prior)
                 y = y0.reshape(N_JOINTS, 3)
                 m_init, t_init = initial_camera(cx, np.concatenate([y, y]) if doubled else y, cw)
             else:
