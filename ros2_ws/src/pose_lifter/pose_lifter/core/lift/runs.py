@@ -169,6 +169,12 @@ class Runs:
                                              np.ascontiguousarray(w, dtype=np.float64), xp, pw)
         return cx, cw, bool(doubled)
 
+    def pose_max_iter(self, prior: PriorRows | None) -> int:
+        """The pose step's iteration cap in a run: ``pose_max_iter``, or ``hybrid_pose_max_iter``
+        with a prior term."""
+        o = self.options
+        return o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
+
     def camera_max_iter(self, prior: PriorRows | None) -> int:
         """The camera step's iteration cap in a run: ``camera_max_iter``, or
         ``hybrid_camera_max_iter`` with a prior term."""
@@ -199,11 +205,10 @@ class Runs:
         """One pose step of a run for the camera ``cam`` on the normalised 2D ``xn`` (12, 2) and
         weights ``w`` (12,), from ``alpha0`` (k,); ``max_iter`` None: the mode's cap
         (``pose_max_iter``, or ``hybrid_pose_max_iter`` with a prior term)."""
-        o = self.options
         if max_iter is None:
-            max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
-        return pose_step(xn, cam.projection, cam.translation, w, self.model, alpha0, o, max_iter=max_iter,
-                         prior=prior, qstep_fn=self.qstep_fn)
+            max_iter = self.pose_max_iter(prior)
+        return pose_step(xn, cam.projection, cam.translation, w, self.model, alpha0, self.options,
+                         max_iter=max_iter, prior=prior, qstep_fn=self.qstep_fn)
 
     def run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
             cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
@@ -274,10 +279,10 @@ class Runs:
         """The operands of :meth:`run_steps`' compiled run
         (:func:`pose_lifter.core.solve.run_kernel._run_kernel`; the kernel stacks the camera step's
         data itself, :meth:`camera_data` is needed here only for a new run's cold camera)."""
-        o, m = self.options, self.model
+        m = self.model
         xp, pw, rad = prior_operands(m, prior)
         if pose_max_iter is None:
-            pose_max_iter = o.pose_max_iter if prior is None else o.hybrid_pose_max_iter
+            pose_max_iter = self.pose_max_iter(prior)
         if start is not None:
             cam = start.camera.camera
             alpha, y0 = start.pose.alpha, m.mean
