@@ -53,20 +53,23 @@ def test_weighted_median_minimises_weighted_l1_with_ties_and_zero_weights() -> N
         assert float(np.sum(w * np.abs(v - m))) <= best + tol.ROUND_OFF
 
 
-def test_cholesky_solve_solves_or_refuses() -> None:
-    from pose_lifter.core.numeric.linalg import _cholesky_solve
+def test_cholesky_into_solves_or_refuses() -> None:
+    """The written-out Cholesky factorisation and solve of the Newton step, into the caller's
+    buffers: it solves a positive definite system and refuses an indefinite one."""
+    from pose_lifter.core.numeric.linalg import _cholesky_apply_into, _cholesky_into
 
     rng = np.random.default_rng(2)
+    lo, y, x = np.empty((16, 16)), np.empty(16), np.empty(16)
     for _ in range(200):
         a = rng.normal(size=(16, 16))
         spd = a @ a.T + 1e-3 * np.eye(16)
         b = rng.normal(size=16)
-        x, ok = _cholesky_solve(spd, b)
-        assert ok
+        assert _cholesky_into(spd, lo)
+        _cholesky_apply_into(lo, b, y, x)
         np.testing.assert_allclose(spd @ x, b, atol=1e-8 * np.abs(b).max() * np.linalg.cond(spd))
         sym = 0.5 * (a + a.T)  # indefinite (almost surely)
         if np.linalg.eigvalsh(sym)[0] < -1e-8:
-            assert not _cholesky_solve(sym, b)[1]
+            assert not _cholesky_into(sym, lo)
 
 
 def test_mirrored_start_kernel_equals_normalise_pose() -> None:

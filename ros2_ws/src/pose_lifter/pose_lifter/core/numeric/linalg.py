@@ -73,17 +73,6 @@ def _cholesky_apply(lo: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[
 
 
 @njit
-def _cholesky_solve(a: NDArray[np.float64], b: NDArray[np.float64]) -> tuple[NDArray[np.float64], bool]:
-    """``a^-1 b`` by a Cholesky factorisation of the symmetric ``a`` (n, n) (lower triangle read);
-    ``(x, True)``, or ``(b, False)`` when ``a`` is not (numerically) positive definite. Written
-    out: at n = 16 a LAPACK call costs more than the arithmetic."""
-    lo, ok = _cholesky(a)
-    if not ok:
-        return b, False
-    return _cholesky_apply(lo, b), True
-
-
-@njit
 def _axpy_rows(at: NDArray[np.float64], x: NDArray[np.float64], out: NDArray[np.float64]) -> None:
     """``out += at.T @ x`` as a sum of the rows of ``at`` (n, m) (C-contiguous): each step is a
     vectorisable axpy over m, with no floating-point reduction chain (which LLVM may not
