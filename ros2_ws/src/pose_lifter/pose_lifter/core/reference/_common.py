@@ -1,7 +1,9 @@
 """What every reference solver shares: its settings, input checks, the loss, cvxpy + Clarabel,
 and the SLSQP / trust-constr local search of the nonconvex references.
 
-cvxpy is imported on first use (:func:`cvxpy`): the core imports without it.
+cvxpy is imported on first use (:func:`cvxpy`): the core imports without it; scipy's optimisers
+and rotations where a reference runs, so importing the lift (which imports this package for its
+Python run loop) does not pay for them.
 """
 
 from __future__ import annotations
@@ -10,7 +12,6 @@ from typing import Any, Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import Bounds, NonlinearConstraint, minimize
 
 from ..errors import InvalidInputError, SolverError
 
@@ -119,6 +120,8 @@ def local_minimize(
     """SLSQP; if it stops without success or infeasible, SLSQP again from its own end point
     and then scipy's ``trust-constr`` (same analytic derivatives). Raises
     :class:`ReferenceSolverError` when no attempt ends feasible."""
+    from scipy.optimize import Bounds, NonlinearConstraint, minimize
+
     feas = TOLERANCES["feasibility"]
     opts = {"ftol": TOLERANCES["slsqp_ftol"], "maxiter": 3000}
     tried: list[str] = []

@@ -14,8 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
-from scipy.spatial.transform import Rotation
 
 from ..errors import InvalidInputError
 from ..results import Camera
@@ -192,6 +190,8 @@ class _RotationSearch:
 
     def f(self, v: NDArray[np.float64], r0: NDArray[np.float64]) -> float:
         """``f(exp([v]x) R0)`` for the rotation vector ``v`` (3,) and ``R0`` ``r0`` (3, 3)."""
+        from scipy.spatial.transform import Rotation
+
         rot = Rotation.from_rotvec(v).as_matrix() @ r0
         return self.inner(self.x, self.y @ rot[:2].T, self.w)[2]
 
@@ -200,6 +200,9 @@ class _RotationSearch:
     ) -> tuple[NDArray[np.float64], float]:
         """Nelder-Mead from ``r0`` (3, 3), restarted at its result up to ``rounds`` times while it
         improves by more than ``fatol``; returns (rotation (3, 3), f)."""
+        from scipy.optimize import minimize
+        from scipy.spatial.transform import Rotation
+
         r, val = r0, self.f(np.zeros(3), r0)
         for _ in range(rounds):
             res = minimize(self.f, np.zeros(3), args=(r,), method="Nelder-Mead",
@@ -218,6 +221,8 @@ def _rotation_starts(
 ) -> list[NDArray[np.float64]]:
     """The starting rotations (3, 3) of :func:`reference_camera`: ``rotation_init`` (if given),
     the identity and ``n_restarts`` random rotations drawn with ``seed``."""
+    from scipy.spatial.transform import Rotation
+
     starts: list[NDArray[np.float64]] = []
     if rotation_init is not None:
         starts.append(array(rotation_init, (3, 3), "rotation_init"))
@@ -231,6 +236,8 @@ def _best_rotation(search: _RotationSearch, starts: list[NDArray[np.float64]]) -
     """A coarse search from every start (3, 3), then the two best refined to full accuracy (the
     runner-up only unless clearly worse); returns the best rotation, shape (3, 3),
     re-orthonormalised."""
+    from scipy.spatial.transform import Rotation
+
     coarse = [search.search(r0, 1e-3, 1e-6, 1) for r0 in starts]
     values = np.array([v for _, v in coarse])
     order = np.argsort(values, kind="stable")[:2]

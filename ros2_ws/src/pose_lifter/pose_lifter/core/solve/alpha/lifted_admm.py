@@ -7,7 +7,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from ...model.pose_model import LiftedConstraints
@@ -44,6 +43,8 @@ def top_eigenpair(s: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
     if d <= 64:
         vals, vecs = np.linalg.eigh(s)
         return float(vals[-1]), vecs[:, -1]
+    import scipy.linalg
+
     vals, vecs = scipy.linalg.eigh(s, subset_by_index=[d - 1, d - 1], check_finite=False)
     return float(vals[0]), vecs[:, 0]
 
