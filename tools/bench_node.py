@@ -46,7 +46,7 @@ def _percentiles(values_ms: list[float]) -> str:
     if not values_ms:
         return "n/a"
     a = np.asarray(values_ms)
-    return (f"median {np.median(a):7.1f} ms  p95 {np.percentile(a, 95):7.1f} ms  max {a.max():7.1f} ms"
+    return (f"median {np.median(a):7.2f} ms  p95 {np.percentile(a, 95):7.2f} ms  max {a.max():7.2f} ms"
             f"  (n={a.size})")
 
 
