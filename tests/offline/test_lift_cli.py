@@ -496,3 +496,14 @@ def test_a_params_file_of_non_default_values_reaches_the_offline_lift(tmp_path: 
 
     shins = [np.linalg.norm(np.subtract(*skeleton3d_to_joints(s)[[10, 11]])) for s in skeletons]
     np.testing.assert_allclose(shins, 0.41, rtol=0.01)  # the metric scale is the file's
+
+
+def test_the_lift_imports_none_of_the_references_scipy() -> None:
+    """scipy's optimisers and rotations serve the reference solvers only (and ``scipy.linalg``
+    the lifted ADMM on large bases): importing the lift and the node's core must not load them
+    (~0.2 s of every ``pose-lifter lift`` and node start-up)."""
+    code = ("import sys, pose_lifter.offline.lift, pose_lifter.offline.settings, pose_lifter.core.reference; "
+            "print(sorted(m for m in ('scipy.optimize', 'scipy.spatial', 'scipy.linalg') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
