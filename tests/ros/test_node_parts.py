@@ -219,3 +219,33 @@ def test_the_frame_queue_drops_the_oldest_whole_frame() -> None:
     assert q.put(5) is None and q.clear() == 1 and len(q) == 0
     one: FrameQueue[int] = FrameQueue()  # the default: only the newest frame waits
     assert [one.put(i) for i in range(4)] == [None, 0, 1, 2] and one.pop() == 3
+
+
+def test_freeze_long_lived_frees_what_an_earlier_freeze_kept_and_freezes_the_rest() -> None:
+    """The node freezes its start-up objects once a lifter is built (a full collection then walks
+    only what the frames make); built again (a lifecycle re-configure, a new ``bases_file``), the
+    replaced lifter's reference cycles must be freed, not stay frozen, and what is still held must
+    be frozen again."""
+    import gc
+    import weakref
+
+    from pose_lifter.ros.node import freeze_long_lived
+
+    class Held:
+        def __init__(self) -> None:
+            self.me = self  # a reference cycle: only the collector frees it
+
+    old, kept = Held(), Held()
+    freeze_long_lived()  # the first lifter: both held
+    assert gc.get_freeze_count() > 0
+    gone = weakref.ref(old)
+    del old  # the lifter replaced: its cycle is garbage, but frozen
+    gc.collect()
+    assert gone() is not None  # a frozen cycle is not collected
+    try:
+        freeze_long_lived()  # the new lifter built
+        assert gone() is None
+        assert any(o is kept for o in gc.get_objects()) is False  # frozen: not in the generations
+        assert weakref.ref(kept)() is kept
+    finally:
+        gc.unfreeze()
