@@ -4,6 +4,7 @@ Usage (``make bench-node`` sources the workspace first)::
 
     source ros2_ws/install/setup.bash
     .venv/bin/python tools/bench_node.py [--bag bags/five_people.mcap] [--rate 30] [--loops 3]
+        [--checkout ../before]
 
 Starts ``ros2_ws/install/pose_lifter/lib/pose_lifter/lifter`` (what ``ros2 run`` executes) as a
 separate process on a private ROS domain, publishes the bag's ``/keypoints_2d`` (and
@@ -28,6 +29,7 @@ import gc
 import os
 import random
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -72,6 +74,10 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--loops", type=int, default=3, help="passes over the bag")
     ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
                     help="extra lifter parameter (repeatable), e.g. n_starts:=10")
+    ap.add_argument("--checkout", type=Path, default=REPO,
+                    help="the checkout whose installed lifter runs (its ros2_ws/install, with the "
+                         "environment its setup.bash gives): another commit measured by this same "
+                         "client, for figures side by side (default: this one)")
     return ap
 
 
@@ -123,16 +129,35 @@ def _load_bag(path: str, rate: float, ros: SimpleNamespace) -> _Bag:
     return _Bag(kp_msgs, info_msg, n_people, span_ns)
 
 
-def _start_lifter(params: list[str]) -> tuple[subprocess.Popen[bytes], Any, int]:
-    """Start the installed lifter (extra ``params``) on a random private ROS domain, which this
-    process joins too; returns the process, its log file (stdout and stderr) and the domain."""
+def _checkout_env(checkout: Path) -> dict[str, str]:
+    """The environment ``checkout``'s lifter runs in: this one's for this checkout, else what
+    sourcing that checkout's ``ros2_ws/install/setup.bash`` gives (its packages, its venv's
+    paths)."""
+    if checkout.resolve() == REPO:
+        return dict(os.environ)
+    setup = checkout / "ros2_ws" / "install" / "setup.bash"
+    if not setup.is_file():
+        sys.exit(f"{setup} is missing: run `make ros` in {checkout}")
+    out = subprocess.run(["bash", "-c", f"source {shlex.quote(str(setup))} && env -0"], check=True,
+                         capture_output=True, env=dict(os.environ)).stdout
+    return dict(line.split("=", 1) for line in out.decode().split("\0") if "=" in line)
+
+
+def _start_lifter(params: list[str], checkout: Path) -> tuple[subprocess.Popen[bytes], Any, int]:
+    """Start ``checkout``'s installed lifter (extra ``params``) on a random private ROS domain,
+    which this process joins too; returns the process, its log file (stdout and stderr) and the
+    domain."""
     domain = random.SystemRandom().randint(1, 101)
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-           "PYTHONUNBUFFERED": "1", "RCUTILS_COLORIZED_OUTPUT": "0"}
+    env = {**_checkout_env(checkout), "ROS_DOMAIN_ID": str(domain),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PYTHONUNBUFFERED": "1",
+           "RCUTILS_COLORIZED_OUTPUT": "0"}
     env.pop("ROS_LOCALHOST_ONLY", None)
     os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")})
     log = tempfile.NamedTemporaryFile("w+b", suffix=".log", delete=False)
-    cmd = [str(LIFTER), "--ros-args", "-p", "stats_period:=1.0"]
+    lifter = checkout / LIFTER.relative_to(REPO)
+    if not lifter.is_file():
+        sys.exit(f"{lifter} is missing: run `make ros` in {checkout}")
+    cmd = [str(lifter), "--ros-args", "-p", "stats_period:=1.0"]
     for p in params:
         cmd += ["-p", p]
     proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
@@ -207,7 +232,8 @@ def _report(args: argparse.Namespace, bag: _Bag, answers: dict[int, tuple[float,
     stats = [line for line in text.splitlines() if "frames (" in line]
     cb = [float(v) for line in stats for v in re.findall(r"latency median ([\d.]+) ms", line)]
     print(f"bag {Path(args.bag).name}: {len(bag.kp_msgs)} frames x {args.loops} loops at {args.rate:g} Hz, "
-          f"{bag.n_people} people per frame; lifter params {args.param or 'defaults'}")
+          f"{bag.n_people} people per frame; lifter params {args.param or 'defaults'}; "
+          f"the lifter of {args.checkout}")
     print(f"frames answered: {len(answers)} of {len(sent)} published "
           f"({len(warm) + len(cold)} person-frames lifted)")
     # where the unanswered frames fall: a loop's first frames follow the people's jump back to
@@ -235,7 +261,7 @@ def main() -> None:
 
     types = rclpy_types()
     bag = _load_bag(args.bag, args.rate, ros)
-    proc, log, domain = _start_lifter(args.param)
+    proc, log, domain = _start_lifter(args.param, args.checkout)
 
     ros.rclpy.init(domain_id=domain)
     node = ros.rclpy.create_node("bench_node_client")
