@@ -237,7 +237,7 @@ def _report(args: argparse.Namespace, bag: _Bag, answers: dict[int, tuple[float,
     print(f"frames answered: {len(answers)} of {len(sent)} published "
           f"({len(warm) + len(cold)} person-frames lifted)")
     # where the unanswered frames fall: a loop's first frames follow the people's jump back to
-    # where the bag starts (their tracks' warm starts fail and are solved cold), a camera never does
+    # where the bag starts, a jump no camera shows (those frames take longer to lift)
     places = [i % len(bag.kp_msgs) for i, k in enumerate(sent) if k not in answers]
     if places:
         first = sum(p < LOOP_START_FRAMES for p in places)
