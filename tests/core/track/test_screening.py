@@ -1,7 +1,8 @@
 """The per-track rules run as arrays over a frame's tracks, against each rule written plainly per
 track: the screening (``core/track/screening.py``, one compiled pass: where the track puts each
-joint, the temporal outlier gate and the 2D noise observation, on random tracks with jumping
-joints) and the tracks' limb proportions (``core/track/state.py``)."""
+joint, the left/right label check, the temporal outlier gate and the 2D noise observation, on
+random tracks with jumping joints and swapped labels) and the tracks' limb proportions
+(``core/track/state.py``)."""
 
 from __future__ import annotations
 
@@ -16,17 +17,27 @@ from pose_lifter.core.track.state import (
     GATE_MAX_FRACTION,
     GATE_MAX_FRAMES,
     GATE_NOISE_FACTOR,
+    SWAP_MARGIN,
+    SWAP_MAX_FRAMES,
+    SWAP_RATIO,
     Track,
 )
 
 STEP_NS = 33_333_333
 
 
+#: The arms' and the legs' joints, left then right (JOINT_NAMES), and their counterparts.
+GROUPS = [np.array([0, 1, 2, 3, 4, 5]), np.array([6, 7, 8, 9, 10, 11])]
+OTHER = [np.array([3, 4, 5, 0, 1, 2]), np.array([9, 10, 11, 6, 7, 8])]
+
+
 def _reference(track: Track, lifter: Lifter, x: np.ndarray, vis: np.ndarray, stamp: int
-               ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, float | None]:
+               ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, float | None, np.ndarray]:
     """One person's screening as a plain numpy rule: (joints kept, joints gated or None,
-    prediction or None, the noise observation or None); updates ``track.gated``."""
+    prediction or None, the noise observation or None, the 2D with its labels swapped back);
+    updates ``track.gated`` and ``track.swapped``."""
     opts = lifter.options
+    x, vis = x.copy(), vis.copy()
 
     def predict(v: np.ndarray) -> np.ndarray | None:
         if not track.fits or not v.any():
@@ -38,6 +49,18 @@ def _reference(track: Track, lifter: Lifter, x: np.ndarray, vis: np.ndarray, sta
 
     predicted, gated = predict(vis), None
     if predicted is not None:
+        for g, (both, other) in enumerate(zip(GROUPS, OTHER, strict=True)):
+            v = vis[both]
+            given = np.linalg.norm(x[both] - predicted[both], axis=1)[v].sum()
+            swapped = np.linalg.norm(x[both] - predicted[other], axis=1)[v].sum()
+            if (v.sum() >= 2 and track.swapped[g] < SWAP_MAX_FRAMES and swapped <= SWAP_RATIO * given
+                    and given - swapped > v.sum() * SWAP_MARGIN * track.fits[-1][2]):
+                x[both], vis[both] = x[other], vis[other]
+                track.swapped[g] += 1
+                predicted = predict(vis)
+            else:
+                track.swapped[g] = 0
+        assert predicted is not None
         d = np.linalg.norm(np.where(vis[:, None], x, predicted) - predicted, axis=1) / track.fits[-1][2]
         limit = max(opts.outlier_gate, GATE_NOISE_FACTOR * track.noise_level())
         out = vis & (d > limit) & (track.gated < GATE_MAX_FRAMES)
@@ -54,7 +77,7 @@ def _reference(track: Track, lifter: Lifter, x: np.ndarray, vis: np.ndarray, sta
     if abs((stamp - t1) - (t1 - t0)) <= 0.2 * (t1 - t0) and seen.sum() >= 3:
         acc = np.linalg.norm(x[seen] - 2.0 * x1[seen] + x0[seen], axis=1) / np.sqrt(6.0)
         noise = float(np.median(acc)) / float(lifter.input_scales(x[None], seen[None].astype(float))[0])
-    return vis, gated, predicted, noise
+    return vis, gated, predicted, noise, x
 
 
 def _tracks(rng: np.random.Generator, n: int) -> tuple[list[Track], np.ndarray, np.ndarray, list[int]]:
@@ -72,7 +95,11 @@ def _tracks(rng: np.random.Generator, n: int) -> tuple[list[Track], np.ndarray, 
         for _ in range(int(rng.integers(0, 8))):  # a noise history: the gate's own scale
             track.noise.append(float(rng.uniform(0.0, 0.1)))
         track.gated = rng.integers(0, GATE_MAX_FRAMES + 1, size=12)
+        track.swapped = rng.integers(0, SWAP_MAX_FRAMES + 1, size=2)
         x = base + rng.normal(scale=2.0, size=(12, 2)) + rng.normal(scale=5.0, size=2)  # and a motion
+        for both, other in zip(GROUPS, OTHER, strict=True):  # a detector's swapped labels
+            if rng.random() < 0.3:
+                x[both] = x[other]
         jumped = rng.random(12) < rng.choice([0.0, 0.15, 0.6])
         x[jumped] += rng.normal(scale=150.0, size=(int(jumped.sum()), 2))
         late = rng.random() < 0.1
@@ -92,12 +119,19 @@ def test_one_pass_screens_each_person_as_the_per_person_rule(seed: int) -> None:
     copies, _, _, _ = _tracks(np.random.default_rng(seed), 40)  # the same tracks, for the reference
     got = screen_frames([ToScreen(t, True, lifter, False, x, np.where(v, 1.0, 0.0), s)
                          for t, x, v, s in zip(tracks, points, vis, stamps, strict=True)])
-    n_gated = n_noise = 0
+    n_gated = n_noise = n_swapped = 0
     for i, (t, x, v, s) in enumerate(zip(copies, points, vis, stamps, strict=True)):
-        kept, gated, predicted, noise = _reference(t, lifter, x, v, s)
+        kept, gated, predicted, noise, labelled = _reference(t, lifter, x, v, s)
         assert got[i].visible is not None and (got[i].visible == kept).all()
-        assert (got[i].confidence == 0.0).sum() == (~kept).sum()
+        assert got[i].confidence is not None
+        assert ((got[i].confidence == 0.0) == ~kept).all()
         assert (tracks[i].gated == t.gated).all()
+        assert (tracks[i].swapped == t.swapped).all()
+        if (labelled == x).all():
+            assert got[i].points is None
+        else:
+            assert got[i].points is not None and (got[i].points == labelled).all()
+            n_swapped += 1
         assert got[i].gated  # the gate was on
         if predicted is None:
             assert got[i].predicted is None
@@ -110,8 +144,39 @@ def test_one_pass_screens_each_person_as_the_per_person_rule(seed: int) -> None:
             n_noise += 1
         n_gated += gated is not None
     # the cases were there: people gated, not gated, without a prediction, noise observed
-    assert 3 <= n_gated <= 37 and n_noise >= 20
+    assert 3 <= n_gated <= 37 and n_noise >= 20 and 3 <= n_swapped <= 30
     assert any(g.predicted is None for g in got)
+
+
+def test_swapped_labels_are_swapped_back_for_at_most_a_few_frames_in_a_row() -> None:
+    """A track whose detector swaps the arms' labels: the screening gives the 2D with them swapped
+    back (and the confidence with them) for SWAP_MAX_FRAMES frames in a row; on the next the
+    detector's labels win, and the track follows them from then on. Without
+    ``label_swaps`` the labels are the detector's."""
+    rng = np.random.default_rng(7)
+    base = rng.normal(scale=60.0, size=(12, 2)) + 300.0
+    conf = np.linspace(0.5, 1.0, 12)
+    for on in (True, False):
+        lifter = Lifter(None, LifterOptions(label_swaps=on))
+        track = Track(None, 0)
+        for t in range(2):
+            track.history.append((t * STEP_NS, base.copy(), np.ones(12, dtype=bool)))
+        track.fits.append((STEP_NS, base.copy(), 80.0))
+        swapped = base.copy()
+        swapped[GROUPS[0]] = base[OTHER[0]]
+        for k in range(SWAP_MAX_FRAMES + 2):
+            stamp = (k + 2) * STEP_NS
+            given_conf = conf[OTHER[0].tolist() + list(range(6, 12))]
+            (got,) = screen_frames([ToScreen(track, True, lifter, False, swapped, given_conf, stamp)])
+            seen = swapped if got.points is None else got.points
+            if on and k < SWAP_MAX_FRAMES:
+                assert (seen == base).all() and got.confidence is not None
+                np.testing.assert_array_equal(got.confidence, conf)
+            else:
+                assert got.points is None and (seen == swapped).all()
+            # the track as the policy leaves it: this frame's 2D, used, is where its joints were
+            track.history.append((stamp, seen.copy(), np.ones(12, dtype=bool)))
+            track.fits.append((stamp, seen.copy(), 80.0))
 
 
 def test_a_frame_that_does_not_follow_its_track_is_not_screened() -> None:

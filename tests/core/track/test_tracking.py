@@ -69,6 +69,28 @@ def test_the_temporal_gate_drops_a_jumping_detection_before_the_prior_sees_it(
     assert err[0] < 0.97 * err[1], err
 
 
+def test_a_track_swaps_back_the_labels_its_detector_swapped(
+        bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
+    """A walker whose detector swaps the arms' left and right labels on two single frames and
+    the legs' on two frames in a row: with ``label_swaps`` (default) the track lifts exactly what
+    it lifts from the right labels, every frame; without, the swapped frames are lifted on the
+    wrong sides."""
+    x, truth = walk_track
+    bad = x.copy()
+    for i in (10, 20):
+        bad[i, :6] = x[i, [3, 4, 5, 0, 1, 2]]
+    for i in (15, 16):
+        bad[i, 6:] = x[i, [9, 10, 11, 6, 7, 8]]
+    clean = _track(Lifter(bases, LifterOptions()), x)
+    checked = _track(Lifter(bases, LifterOptions()), bad)
+    plain = _track(Lifter(bases, LifterOptions(label_swaps=False)), bad)
+    for a, b in zip(clean, checked, strict=True):
+        np.testing.assert_array_equal(a.pose_camera, b.pose_camera)
+    hit = [10, 15, 16, 20]
+    err = [np.mean([p_mpjpe(r[i].pose_camera, truth[i]) for i in hit]) for r in (clean, plain)]
+    assert err[1] > 1.4 * err[0], err
+
+
 def test_a_missing_joint_is_carried_over_by_the_track(
         bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
     x, truth = walk_track
@@ -244,19 +266,42 @@ def test_the_gate_screens_the_next_frames_an_offline_prior_reads(
     track.fits.append((0, x[0], scale))
     ahead = x[1:] + np.array([[[3.0, -2.0]], [[6.0, -4.0]], [[9.0, -6.0]]])
     vis = np.ones(12, dtype=bool)
-    kept = track.screen_ahead(x[0], vis, x[0], ahead, np.ones((3, 12), dtype=bool), 0.8)
-    assert kept.all()
+    frames, kept = track.screen_ahead(x[0], vis, x[0], ahead, np.ones((3, 12), dtype=bool), 0.8)
+    assert kept.all() and (frames == ahead).all()
     jumped = ahead.copy()
     jumped[1, 7] += [2.0 * scale, 0.0]
-    kept = track.screen_ahead(x[0], vis, x[0], jumped, np.ones((3, 12), dtype=bool), 0.8)
+    frames, kept = track.screen_ahead(x[0], vis, x[0], jumped, np.ones((3, 12), dtype=bool), 0.8)
     assert kept[[0, 2]].all() and kept[1].tolist() == [j != 7 for j in range(12)]
+    assert (frames == jumped).all()
     # a joint this frame lacks is judged from where the track predicted it
     lacking = vis.copy()
     lacking[7] = False
     predicted = x[0].copy()
     predicted[7] += [2.0 * scale, 0.0]
-    kept = track.screen_ahead(x[0], lacking, predicted, ahead, np.ones((3, 12), dtype=bool), 0.8)
+    _, kept = track.screen_ahead(x[0], lacking, predicted, ahead, np.ones((3, 12), dtype=bool), 0.8)
     assert kept[0].tolist() == [j != 7 for j in range(12)]
+
+
+def test_the_label_check_screens_the_next_frames_an_offline_prior_reads() -> None:
+    """Track.screen_ahead with ``check_labels``: a next frame whose legs' left and right labels
+    the detector swapped is read with them swapped back (the others as given, the caller's array
+    untouched); without the check, as given."""
+    from pose_lifter.core.track.state import Track
+
+    rng = np.random.default_rng(1)
+    x0 = rng.normal(scale=60.0, size=(12, 2)) + 300.0  # joints far apart: a swap is plain
+    track = Track(None, 0)
+    track.fits.append((0, x0, 60.0))
+    ahead = x0 + np.array([[[3.0, -2.0]], [[6.0, -4.0]], [[9.0, -6.0]]])
+    swapped = ahead.copy()
+    swapped[1, 6:] = ahead[1, [9, 10, 11, 6, 7, 8]]
+    given = swapped.copy()
+    vis = np.ones(12, dtype=bool)
+    frames, kept = track.screen_ahead(x0, vis, x0, swapped, np.ones((3, 12), dtype=bool), 0.8)
+    assert (frames == ahead).all() and kept.all() and (swapped == given).all()
+    frames, kept = track.screen_ahead(x0, vis, x0, swapped, np.ones((3, 12), dtype=bool), 0.8,
+                                      check_labels=False)
+    assert (frames == swapped).all()
 
 
 def test_the_packaged_temporal_prior_is_used_on_tracked_frames(

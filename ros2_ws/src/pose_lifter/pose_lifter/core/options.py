@@ -322,7 +322,8 @@ class ExperimentOptions(_Validated):
     the inner tolerances, the cvxpy reference solvers, and the fit's and the hybrid mode's
     internals measured once (tolerances and iteration caps of the steps, the cold starts'
     screening, the alpha-step's proximal weight, the hybrid's runs, the gated outlier threshold,
-    a disturbed track's smoothing gain; why each default: ``docs/tuning.md``). For experiments,
+    a track's left/right label check, a disturbed track's smoothing gain; why each default:
+    ``docs/tuning.md``). For experiments,
     tests and benchmarks; not node parameters (:data:`EXPERIMENT_OPTIONS`).
     """
 
@@ -367,6 +368,10 @@ class ExperimentOptions(_Validated):
         _WEIGHT))
     outlier_threshold_gated: float = field(default=1.0, metadata=_meta(
         "Hybrid: outlier_threshold on tracked frames the outlier gate screened.", 0.0, _WEIGHT))
+    label_swaps: bool = field(default=True, metadata=_meta(
+        "Hybrid, tracked: an arm's or a leg's left and right labels that the track puts far better "
+        "swapped are swapped back for that frame, before the outlier gate (core/track/state.py "
+        "SWAP_RATIO)."))
     disturbed_smoothing_gain: float = field(default=0.55, metadata=_meta(
         "Hybrid, tracked: gain of the alpha-beta filter on the prior's part of the published "
         "pose when a track is disturbed (unused joints, 2D noise); 1 = no filter.", 0.05, 1.0))

@@ -22,6 +22,11 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   target (temporal smoothness, up to ``LifterOptions.temporal_weight``);
 * hybrid mode with the camera's intrinsics: a frame that follows its track is lifted from its 2D
   corrected for perspective by the track's last pose (:mod:`.placement`);
+* hybrid mode, left/right labels (``LifterOptions.label_swaps``): before the gate, an arm's or a
+  leg's left and right labels that the track puts far better swapped (its joints much nearer
+  where the track puts the other side's) are swapped back for this frame, on at most
+  SWAP_MAX_FRAMES frames in a row (:mod:`pose_lifter.core.track.screening`); the lift, the track
+  and the published pose then read the 2D with the labels as the track has them;
 * hybrid mode, temporal outlier gate (``LifterOptions.outlier_gate``): a visible joint farther
   than ``outlier_gate`` leg lengths from where the track's last frame had it (relative to the
   median motion of the joints) is treated as missing for this frame, before the prior sees it (a
@@ -58,7 +63,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import cast
 
 import numpy as np
@@ -219,6 +224,8 @@ def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) ->
                          p.frame.points, p.frame.confidence, p.frame.stamp_ns) for p in batch]
         for p, screened in zip(batch, screen_frames(rows), strict=True):
             p.screened = screened
+            if screened.points is not None:  # the labels as the track has them, from here on
+                p.frame = replace(p.frame, points=screened.points)
         todo = later
     _seen([p for _, p in found])
     return found

@@ -21,10 +21,11 @@ from ..model.skeleton import N_JOINTS
 from ..numeric.jit import njit
 from .state import (
     GATE_MAX_AGE_NS,
-    GATE_MAX_FRACTION,
-    GATE_MAX_FRAMES,
     GATE_NOISE_FACTOR,
+    SCREEN_LIMITS,
     Track,
+    label_check,
+    swap_back,
     visible_joints,
 )
 
@@ -64,6 +65,9 @@ class Screened:
     gated: bool
     #: the track's 2D data weight (1 but in hybrid mode with causal noise smoothing)
     data_weight: float
+    #: the 2D (12, 2) with an arm's or a leg's left and right labels swapped back
+    #: (``LifterOptions.label_swaps``; None: the frame's own labels)
+    points: NDArray[np.float64] | None = None
 
 
 def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
@@ -89,16 +93,21 @@ def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
                            np.array([f.points for f in got], dtype=np.float64),
                            np.array([v for _, v in rows]), [f.stamp_ns for f in got],
                            [f.lifter.options.outlier_gate for f in got],
-                           [f.lifter.options.min_visible_joints for f in got])
+                           [f.lifter.options.min_visible_joints for f in got],
+                           [f.lifter.options.label_swaps for f in got])
         for r, ((i, _), f) in enumerate(zip(rows, got, strict=True)):
             opts, confidence = f.lifter.options, f.confidence
+            points = None
+            if s.swapped[r].any():  # the labels as the track has them
+                points = swap_back(f.points, s.swapped[r])
+                confidence = None if confidence is None else swap_back(confidence, s.swapped[r])
             if s.gated[r].any():  # a gated joint is missing for this frame
                 confidence = np.where(s.gated[r], 0.0, np.ones(N_JOINTS) if confidence is None
                                       else np.asarray(confidence, dtype=np.float64))
             noisy = opts.noise_smoothing and not f.smoothed_later
             assert f.track is not None
             out[i] = Screened(confidence, s.visible[r], s.predicted[r] if s.has_prediction[r] else None,
-                              opts.outlier_gate > 0, f.track.data_weight() if noisy else 1.0)
+                              opts.outlier_gate > 0, f.track.data_weight() if noisy else 1.0, points)
     return [x for x in out if x is not None]
 
 
@@ -128,9 +137,10 @@ def next_frames(lifter: Lifter, track: Track | None, ahead: FramesAhead | None, 
     if seen is None or frames.ndim != 3:
         return None
     if frame.gated and frame.visible is not None and frame.predicted is not None:
-        # the temporal gate over the next frames too: their confident outliers stay out
-        seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
-                                  lifter.options.outlier_gate)
+        # the label check and the temporal gate over the next frames too: their swaps and
+        # confident outliers stay out
+        frames, seen = track.screen_ahead(current, frame.visible, frame.predicted, frames, seen,
+                                          lifter.options.outlier_gate, lifter.options.label_swaps)
     return frames, seen
 
 class _Screening(NamedTuple):
@@ -147,14 +157,24 @@ class _Screening(NamedTuple):
     predicted: NDArray[np.float64]
     #: (n,) the row has a prediction
     has_prediction: NDArray[np.bool_]
+    #: (n, 2) the arms' and the legs' labels were swapped back (``visible``, ``gated`` and
+    #: ``predicted`` are of the 2D with them swapped)
+    swapped: NDArray[np.bool_]
 
 
 def _screen_tracks(tracks: Sequence[Track], lifters: Sequence[Lifter], points: NDArray[np.float64],
                   visible: NDArray[np.bool_], stamps_ns: Sequence[int], gate_limits: Sequence[float],
-                  min_visible: Sequence[int]) -> _Screening:
+                  min_visible: Sequence[int], label_swaps: Sequence[bool]) -> _Screening:
     """The temporal screening of n tracked people's frames, each following its track's last one
-    (distinct tracks), in one compiled pass: where each track puts the joints, the temporal
-    outlier gate, and the track's 2D noise (see NOISE_FRAMES).
+    (distinct tracks), in one compiled pass: where each track puts the joints, the left/right
+    label check, the temporal outlier gate, and the track's 2D noise (see NOISE_FRAMES).
+
+    The label check (rows with ``label_swaps[i]`` and a prediction): an arm's or a leg's left
+    and right labels are swapped back when the track puts its joints far better swapped
+    (SWAP_RATIO, SWAP_MARGIN; at most SWAP_MAX_FRAMES frames in a row). A detector confuses a
+    person's sides now and then (a limb crossing the other, a person seen from behind); a
+    swapped arm near the other one passes the gate and would be lifted on the wrong side. The
+    prediction, the gate and the noise then read the 2D with the labels swapped back.
 
     The gate (row ``i`` with ``gate_limits[i] > 0``): the visible joints farther than
     ``gate_limits[i]`` leg lengths (or GATE_NOISE_FACTOR times the track's noise) from where the
@@ -175,20 +195,23 @@ def _screen_tracks(tracks: Sequence[Track], lifters: Sequence[Lifter], points: N
         The frames' 2D, input units.
     visible : ndarray of bool, shape (n, 12)
         Their visible joints (finite, confident).
-    stamps_ns, gate_limits, min_visible : sequences of n
-        The frames' stamps; the gate's limit in leg lengths (<= 0: no gate) and the fewest
-        joints it may leave (the policy's options).
+    stamps_ns, gate_limits, min_visible, label_swaps : sequences of n
+        The frames' stamps; the gate's limit in leg lengths (<= 0: no gate), the fewest joints it
+        may leave and whether the labels are checked (the policy's options).
     """
     n = len(tracks)
     pts = np.zeros((n, 4, N_JOINTS, 2))  # this frame, the last fit's positions, the last two frames
     masks = np.zeros((n, 3, N_JOINTS), dtype=np.bool_)  # visible; the last two frames' joints used
     rows = np.zeros((n, 3))  # the last fit's scale, the gate's limit, the fewest joints it leaves
-    flags = np.zeros((n, 3), dtype=np.bool_)  # a last fit to predict from, gate, observe the noise
-    counters = np.empty((n, N_JOINTS), dtype=np.int64)
+    # a last fit to predict from, gate, observe the noise, check the labels
+    flags = np.zeros((n, 4), dtype=np.bool_)
+    counters = np.empty((n, N_JOINTS + 2), dtype=np.int64)  # frames gated, then swapped, in a row
     pts[:, 0] = points
     masks[:, 0] = visible
+    flags[:, 3] = label_swaps
     for i, (track, stamp) in enumerate(zip(tracks, stamps_ns, strict=True)):
-        counters[i] = track.gated
+        counters[i, :N_JOINTS] = track.gated
+        counters[i, N_JOINTS:] = track.swapped
         if track.fits:
             t1, p1, scale = track.fits[-1]
             if 0 < stamp - t1 <= GATE_MAX_AGE_NS:
@@ -206,8 +229,8 @@ def _screen_tracks(tracks: Sequence[Track], lifters: Sequence[Lifter], points: N
                 pts[i, 2], pts[i, 3] = x1, x0
                 masks[i, 1], masks[i, 2] = v1, v0
                 flags[i, 2] = True
-    kept, gated, predicted, has_prediction, acc, noise_vis = _screen_kernel(
-        pts, masks, rows, flags, counters, np.array([GATE_MAX_FRACTION, GATE_MAX_FRAMES]))
+    kept, gated, predicted, has_prediction, swapped, acc, noise_vis = _screen_kernel(
+        pts, masks, rows, flags, counters, SCREEN_LIMITS)
     spread = np.full(n, np.nan)
     for lifter in {id(x): x for x in lifters}.values():  # the frames of each lifter together
         rows = np.array([i for i, x in enumerate(lifters) if x is lifter and not math.isnan(acc[i])],
@@ -215,41 +238,48 @@ def _screen_tracks(tracks: Sequence[Track], lifters: Sequence[Lifter], points: N
         if rows.size:
             spread[rows] = lifter.input_scales(pts[rows, 0], noise_vis[rows].astype(np.float64))
     for i, track in enumerate(tracks):
-        track.gated = counters[i]
+        track.gated = counters[i, :N_JOINTS]
+        track.swapped = counters[i, N_JOINTS:]
         if not math.isnan(acc[i]) and not math.isnan(spread[i]):
             track.noise.append(float(acc[i]) / float(spread[i]))
             track._noise_median = None
-    return _Screening(kept, gated, predicted, has_prediction)
+    return _Screening(kept, gated, predicted, has_prediction, swapped)
 
 
 @njit
 def _screen_kernel(pts: NDArray[np.float64], masks: NDArray[np.bool_], rows: NDArray[np.float64],
                    flags: NDArray[np.bool_], counters: NDArray[np.int64], limits: NDArray[np.float64]
                    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.float64], NDArray[np.bool_],
-                              NDArray[np.float64], NDArray[np.bool_]]:
+                              NDArray[np.bool_], NDArray[np.float64], NDArray[np.bool_]]:
     """:func:`_screen_tracks`' pass over its rows (its arrays, named there; ``limits``: the gate's
-    largest fraction and its most frames in a row). Updates ``counters`` (n, 12; each joint's
-    frames gated in a row) in place; returns the joints kept (n, 12), those gated (n, 12), the
-    predictions (n, 12, 2) and which rows have one (n,), and each row's noise observation (n,;
-    NaN: none) with the joints it was taken over (n, 12)."""
+    largest fraction and its most frames in a row, the label check's most frames in a row, ratio
+    and margin). Swaps the labels of ``pts[:, 0]`` in place where the check says so; updates
+    ``counters`` (n, 14: each joint's frames gated in a row, then the arms' and the legs' frames
+    swapped in a row) in place; returns the joints kept (n, 12), those gated (n, 12), the
+    predictions (n, 12, 2) and which rows have one (n,), the groups swapped (n, 2), and each
+    row's noise observation (n,; NaN: none) with the joints it was taken over (n, 12)."""
     n, nj = pts.shape[0], pts.shape[2]
     kept = masks[:, 0].copy()
     gated = np.zeros((n, nj), dtype=np.bool_)
     predicted = np.full((n, nj, 2), np.nan)
     has_prediction = np.zeros(n, dtype=np.bool_)
+    swapped = np.zeros((n, 2), dtype=np.bool_)
     acc = np.full(n, np.nan)
     noise_vis = np.zeros((n, nj), dtype=np.bool_)
     for i in range(n):
         x = pts[i, 0]
         if flags[i, 0] and _predict(x, kept[i], pts[i, 1], predicted[i]):
             has_prediction[i] = True
-            if flags[i, 1] and _gate(x, kept[i], predicted[i], rows[i], counters[i], gated[i], limits):
+            if flags[i, 3] and label_check(x, kept[i], predicted[i], rows[i, 0], counters[i, nj:], swapped[i],
+                                           limits):
+                _predict(x, kept[i], pts[i, 1], predicted[i])
+            if flags[i, 1] and _gate(x, kept[i], predicted[i], rows[i], counters[i, :nj], gated[i], limits):
                 for j in range(nj):
                     kept[i, j] = kept[i, j] and not gated[i, j]
                 has_prediction[i] = _predict(x, kept[i], pts[i, 1], predicted[i])
         if flags[i, 2]:
             acc[i] = _acceleration(pts[i], masks[i], kept[i], noise_vis[i])
-    return kept, gated, predicted, has_prediction, acc, noise_vis
+    return kept, gated, predicted, has_prediction, swapped, acc, noise_vis
 
 
 @njit
@@ -338,5 +368,5 @@ def compile_kernels() -> None:
     screening of one still frame (a node's first tracked frame would otherwise pay for it)."""
     still = np.zeros((1, 4, N_JOINTS, 2))
     masks = np.ones((1, 3, N_JOINTS), dtype=np.bool_)
-    _screen_kernel(still, masks, np.array([[1.0, 1.0, 6.0]]), np.ones((1, 3), dtype=np.bool_),
-                   np.zeros((1, N_JOINTS), dtype=np.int64), np.array([GATE_MAX_FRACTION, GATE_MAX_FRAMES]))
+    _screen_kernel(still, masks, np.array([[1.0, 1.0, 6.0]]), np.ones((1, 4), dtype=np.bool_),
+                   np.zeros((1, N_JOINTS + 2), dtype=np.int64), SCREEN_LIMITS)

@@ -16,7 +16,15 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, LIMBS, N_JOINTS, RIGHT_LIMBS
+from ..model.skeleton import (
+    JOINTS_LEFT,
+    JOINTS_RIGHT,
+    LEFT_LIMBS,
+    LIMB_GROUP_OF,
+    LIMBS,
+    N_JOINTS,
+    RIGHT_LIMBS,
+)
 from ..numeric.fast import median_rows, row_norms
 from ..numeric.jit import njit
 from .measurement import MeasurementUpdate
@@ -25,7 +33,8 @@ from .smoothing import CausalSmoother
 if TYPE_CHECKING:
     from ..results import WarmStart
 
-__all__ = ["Track", "calibrated_limb_proportions", "image_spans", "tracks_limb_proportions", "visible_joints"]
+__all__ = ["Track", "calibrated_limb_proportions", "image_spans", "label_check", "swap_back",
+           "tracks_limb_proportions", "visible_joints"]
 
 LIMB_A = np.array([a for a, _ in LIMBS])
 LIMB_B = np.array([b for _, b in LIMBS])
@@ -78,6 +87,32 @@ GATE_NOISE_FACTOR = 5.0
 GATE_MAX_FRAMES = 3
 #: ... and only when the track's last fit is at most this old (input stamps).
 GATE_MAX_AGE_NS = 250_000_000
+#: The left/right label check (``LifterOptions.label_swaps``), before the gate: an arm's
+#: (shoulder, elbow, wrist) or a leg's (hip, knee, ankle) left and right labels are swapped back
+#: when, summed over its visible joints, their distances from where the track puts the joints
+#: with the labels swapped are at most SWAP_RATIO times those with the labels as given, and
+#: shorter by more than SWAP_MARGIN leg lengths per joint (at least two joints); on at most
+#: SWAP_MAX_FRAMES frames in a row (a longer swap is the track's error: the detector's labels win).
+SWAP_RATIO = 0.5
+SWAP_MARGIN = 0.2
+SWAP_MAX_FRAMES = 3
+#: The gate's and the label check's limits, as the compiled screenings read them.
+SCREEN_LIMITS = np.array([GATE_MAX_FRACTION, GATE_MAX_FRAMES, SWAP_MAX_FRAMES, SWAP_RATIO, SWAP_MARGIN])
+#: Each joint's counterpart on the other side (left and right exchanged).
+_OTHER = np.array([JOINTS_RIGHT[JOINTS_LEFT.index(j)] if j in JOINTS_LEFT
+                   else JOINTS_LEFT[JOINTS_RIGHT.index(j)] for j in range(N_JOINTS)], dtype=np.int64)
+#: The groups whose labels the check swaps: the arms' joints, the legs' (their left joints).
+_GROUPS = np.array([JOINTS_LEFT[:3], JOINTS_LEFT[3:]], dtype=np.int64)
+
+
+def swap_back(values: NDArray[np.float64], swapped: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """``values`` (12, ...) with the left and right rows of the arms (``swapped[0]``) and of the
+    legs (``swapped[1]``) exchanged (a copy)."""
+    order = np.arange(N_JOINTS)
+    for g in np.flatnonzero(swapped):
+        both = np.concatenate([_GROUPS[g], _OTHER[_GROUPS[g]]])
+        order[both] = _OTHER[both]
+    return np.asarray(values, dtype=np.float64)[order]
 #: A lost joint is filled in (``LifterOptions.fill_missing_frames``) only while the track's last
 #: objective is at most this many times the median of its last 15: on a track whose fit is being
 #: lost, the fill held stale positions (36 held-out training-split tracks: clean 48.1 -> 47.4 mm
@@ -155,6 +190,8 @@ class Track:
     #: projection, in input units; the camera's scale, input units per model unit)
     fits: deque[tuple[int, NDArray[np.float64], float]] = field(default_factory=lambda: deque(maxlen=2))
     gated: NDArray[np.int64] = field(default_factory=lambda: np.zeros(N_JOINTS, dtype=np.int64))
+    #: consecutive frames the arms' and the legs' labels were swapped back, up to the last one (2,)
+    swapped: NDArray[np.int64] = field(default_factory=lambda: np.zeros(2, dtype=np.int64))
     #: consecutive frames each joint was not used by the lift, up to the last one
     unused: NDArray[np.int64] = field(default_factory=lambda: np.zeros(N_JOINTS, dtype=np.int64))
     #: the fraction of joints the lift did not use, per frame (the output smoothing's disturbance)
@@ -181,19 +218,26 @@ class Track:
 
     def screen_ahead(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
                      predicted: NDArray[np.float64], ahead: NDArray[np.float64],
-                     ahead_vis: NDArray[np.bool_], limit: float) -> NDArray[np.bool_]:
-        """The joints of the next frames ``ahead`` (k, 12, 2) the gate keeps, (k, 12): frame by
-        frame from this one (its joints ``vis`` (12,) kept, the others where the track
-        ``predicted`` them), a visible joint farther than ``limit`` leg lengths (or
-        GATE_NOISE_FACTOR times the track's noise) from where the frame before had it, after
-        removing the median motion of the joints seen on both, is dropped (not when that would
-        drop more than GATE_MAX_FRACTION of them): :meth:`gate` over the frames an offline lift
-        reads ahead, whose confident outliers would otherwise reach the prior."""
+                     ahead_vis: NDArray[np.bool_], limit: float, check_labels: bool = True
+                     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """The next frames ``ahead`` (k, 12, 2) as the track screens them: frame by frame from
+        this one (its joints ``vis`` (12,) kept, the others where the track ``predicted`` them),
+        with ``check_labels`` an arm's or a leg's labels swapped back as :func:`label_check` says
+        from where the frame before had its joints (moved by the median motion; at most
+        SWAP_MAX_FRAMES in a row, counting this frame's), then a visible joint farther than
+        ``limit`` leg lengths (or GATE_NOISE_FACTOR times the track's noise) from where the frame
+        before had it, after removing the median motion of the joints seen on both, dropped (not
+        when that would drop more than GATE_MAX_FRACTION of them): the label check and the gate
+        over the frames an offline lift reads ahead, whose swaps and confident outliers would
+        otherwise reach the prior. Returns the frames (a copy, labels as the track has them) and
+        the joints kept (k, 12)."""
         scale = max(self.fits[-1][2], 1e-12)
         limit = max(limit, GATE_NOISE_FACTOR * self.noise_level())
         ref = np.where(vis[:, None], np.asarray(points, dtype=np.float64), predicted)
-        return _screen_ahead_kernel(np.ascontiguousarray(ref), np.ascontiguousarray(ahead, dtype=np.float64),
-                                    np.array(ahead_vis, dtype=np.bool_), limit * scale, GATE_MAX_FRACTION)
+        frames = np.array(ahead, dtype=np.float64)
+        kept = _screen_ahead_kernel(np.ascontiguousarray(ref), frames, np.array(ahead_vis, dtype=np.bool_),
+                                    limit * scale, scale, self.swapped.copy(), check_labels, SCREEN_LIMITS)
+        return frames, kept
 
     def fit_is_sound(self) -> bool:
         """False when the last frame's objective exceeds FILL_MAX_OBJECTIVE_RATIO times the median
@@ -283,30 +327,87 @@ def image_spans(points: NDArray[np.float64], used: NDArray[np.bool_], scale: NDA
 
 
 @njit
+def label_check(x: NDArray[np.float64], vis: NDArray[np.bool_], predicted: NDArray[np.float64], scale: float,
+                counters: NDArray[np.int64], swapped: NDArray[np.bool_], limits: NDArray[np.float64]) -> bool:
+    """The left/right label check of one frame (SWAP_RATIO; ``scale``: the track's last fit's,
+    input units per leg length; ``limits``: SCREEN_LIMITS): swaps the arms' and the legs' left
+    and right rows of ``x`` (12, 2) and ``vis`` (12,) in place where their visible joints are far
+    nearer ``predicted`` (12, 2) swapped; sets ``swapped`` (2,) and ``counters`` (2,, the groups'
+    frames swapped in a row); True when a group was swapped."""
+    margin = limits[4] * max(scale, 1e-12)
+    out = False
+    for g in range(_GROUPS.shape[0]):
+        given, other, m = 0.0, 0.0, 0
+        for k in range(_GROUPS.shape[1]):
+            for j in (_GROUPS[g, k], _OTHER[_GROUPS[g, k]]):
+                if vis[j]:
+                    o = _OTHER[j]
+                    given += math.hypot(x[j, 0] - predicted[j, 0], x[j, 1] - predicted[j, 1])
+                    other += math.hypot(x[j, 0] - predicted[o, 0], x[j, 1] - predicted[o, 1])
+                    m += 1
+        if (m >= 2 and counters[g] < limits[2] and other <= limits[3] * given
+                and given - other > m * margin):
+            for k in range(_GROUPS.shape[1]):
+                a = _GROUPS[g, k]
+                b = _OTHER[a]
+                x[a, 0], x[b, 0] = x[b, 0], x[a, 0]
+                x[a, 1], x[b, 1] = x[b, 1], x[a, 1]
+                vis[a], vis[b] = vis[b], vis[a]
+            counters[g] += 1
+            swapped[g] = True
+            out = True
+        else:
+            counters[g] = 0
+    return out
+
+
+@njit
+def _median_motion(x: NDArray[np.float64], vis: NDArray[np.bool_], cur: NDArray[np.float64]
+                   ) -> tuple[float, float]:
+    """The median over the joints ``vis`` (12,; at least one) of ``x - cur`` (12, 2), per axis."""
+    n = 0
+    for j in range(vis.size):
+        if vis[j]:
+            n += 1
+    dx = np.empty(n)
+    dy = np.empty(n)
+    k = 0
+    for j in range(vis.size):
+        if vis[j]:
+            dx[k] = x[j, 0] - cur[j, 0]
+            dy[k] = x[j, 1] - cur[j, 1]
+            k += 1
+    return np.median(dx), np.median(dy)
+
+
+@njit
 def _screen_ahead_kernel(ref: NDArray[np.float64], ahead: NDArray[np.float64], kept: NDArray[np.bool_],
-                         limit: float, max_fraction: float) -> NDArray[np.bool_]:
+                         limit: float, scale: float, counters: NDArray[np.int64], check_labels: bool,
+                         limits: NDArray[np.float64]) -> NDArray[np.bool_]:
     """:meth:`Track.screen_ahead`'s loop over the next frames ``ahead`` (k, 12, 2) from the
-    positions ``ref`` (12, 2): ``kept`` (k, 12, visible on entry) with the joints farther than
-    ``limit`` (input units) from the frame before's, after the median motion of the joints seen
-    on both, cleared (in place, and returned)."""
+    positions ``ref`` (12, 2): with ``check_labels``, a frame's labels swapped back where the
+    positions of the frame before, moved by the median motion, say so (:func:`label_check`,
+    ``counters`` (2,) its frames in a row, in place; ``ahead`` changed in place); then ``kept``
+    (k, 12, visible on entry) with the joints farther than ``limit`` (input units) from the frame
+    before's, after the median motion of the joints seen on both, cleared (in place, and
+    returned; ``limits``: SCREEN_LIMITS)."""
     nj = ref.shape[0]
     cur = ref.copy()
+    predicted = np.empty_like(cur)
+    swapped = np.zeros(2, dtype=np.bool_)
     for f in range(ahead.shape[0]):
+        if not kept[f].any():
+            continue
+        mx, my = _median_motion(ahead[f], kept[f], cur)
+        if check_labels:
+            for j in range(nj):
+                predicted[j, 0], predicted[j, 1] = cur[j, 0] + mx, cur[j, 1] + my
+            if label_check(ahead[f], kept[f], predicted, scale, counters, swapped, limits):
+                mx, my = _median_motion(ahead[f], kept[f], cur)
         n = 0
         for j in range(nj):
             if kept[f, j]:
                 n += 1
-        if n == 0:
-            continue
-        dx = np.empty(n)
-        dy = np.empty(n)
-        k = 0
-        for j in range(nj):
-            if kept[f, j]:
-                dx[k] = ahead[f, j, 0] - cur[j, 0]
-                dy[k] = ahead[f, j, 1] - cur[j, 1]
-                k += 1
-        mx, my = np.median(dx), np.median(dy)
         out = np.zeros(nj, dtype=np.bool_)
         n_out = 0
         for j in range(nj):
@@ -316,7 +417,7 @@ def _screen_ahead_kernel(ref: NDArray[np.float64], ahead: NDArray[np.float64], k
                 if math.sqrt(ex * ex + ey * ey) > limit:
                     out[j] = True
                     n_out += 1
-        drop = n_out <= max_fraction * n
+        drop = n_out <= limits[0] * n
         for j in range(nj):
             if drop and out[j]:
                 kept[f, j] = False
@@ -332,7 +433,8 @@ def compile_kernels() -> None:
     """Compile this module's kernel (numba, ``core.numeric.jit``) or load it from its cache: one screen
     of a still frame ahead (an offline track's first frame would otherwise pay for it)."""
     still = np.zeros((1, N_JOINTS, 2))
-    _screen_ahead_kernel(still[0], still, np.ones((1, N_JOINTS), dtype=np.bool_), 1.0, GATE_MAX_FRACTION)
+    _screen_ahead_kernel(still[0], still, np.ones((1, N_JOINTS), dtype=np.bool_), 1.0, 1.0,
+                         np.zeros(2, dtype=np.int64), True, SCREEN_LIMITS)
 
 
 def visible_joints(points: NDArray[np.float64], confidence: NDArray[np.float64] | None,
