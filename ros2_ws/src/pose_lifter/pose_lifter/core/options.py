@@ -263,7 +263,7 @@ class TrackOptions(_Validated):
     missing_temporal_weight: float = field(default=1.0, metadata=_meta(
         "Hybrid, tracked: weight of the previous frame's pose in the prior target of a joint "
         "missing on this frame (0 = as the others).", 0.0, _WEIGHT))
-    fill_missing_frames: int = field(default=3, metadata=_meta(
+    fill_missing_frames: int = field(default=6, metadata=_meta(
         "Hybrid, tracked: a joint missing for at most this many frames in a row is given to the "
         "learned prior where the track predicts it (0 = off).", 0, 1000))
     image_limbs: bool = field(default=False, metadata=_meta(
