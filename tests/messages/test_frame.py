@@ -38,13 +38,21 @@ STEP_NS = 100_000_000  # 10 Hz
 N_FRAMES = 23
 #: Frames of track 1's absence (1.2 s > track_timeout): the node forgets it before it returns.
 GAP = range(8, 20)
+#: The frame whose track 0 the detector gave with the arms' left and right labels swapped (COCO-17:
+#: shoulders 5, 6, elbows 7, 8, wrists 9, 10).
+SWAPPED = 12
+COCO_ARMS, COCO_ARMS_SWAPPED = [5, 6, 7, 8, 9, 10], [6, 5, 8, 7, 10, 9]
+#: that skeleton as the bag has it (the right labels), kept by :func:`sequence`
+UNSWAPPED: dict[str, Any] = {}
 
 
 def _skeleton(skel: Any, track_id: int | None = None, scale: float = 1.0,
-              confidence: float | None = None) -> Any:
+              confidence: float | None = None, order: list[int] | None = None) -> Any:
     kp = np.array([[k.x, k.y] for k in skel.keypoints]) * scale
     cf = np.array([k.confidence for k in skel.keypoints]) if confidence is None else \
         np.full(len(skel.keypoints), confidence)
+    if order is not None:  # keypoints relabelled: keypoint i is the input's order[i]
+        kp, cf = kp[order], cf[order]
     return m.arrays_to_skeleton2d(kp, cf, int(skel.track_id) if track_id is None else track_id, T)
 
 
@@ -71,6 +79,11 @@ def sequence() -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
             layout = "no_such_layout"
         if i == 6:
             skels.append(_skeleton(skels[1], track_id=-1, scale=1.1))  # untracked
+        if i == SWAPPED:
+            UNSWAPPED["skeleton"] = skels[0]
+            order = list(range(len(skels[0].keypoints)))
+            order[COCO_ARMS[0]:COCO_ARMS[-1] + 1] = COCO_ARMS_SWAPPED
+            skels[0] = _skeleton(skels[0], confidence=None, order=order)
         if i == 21:
             skels[0] = _skeleton(skels[0], scale=1e6)  # absurd coordinates
         if i == 22:
@@ -104,9 +117,10 @@ def lifter() -> Lifter:
     return Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=3))  # hybrid
 
 
-@pytest.mark.parametrize(("warm_start", "workers"), [(True, 1), (True, 2), (False, 1)])
+@pytest.mark.parametrize(("warm_start", "workers", "fields_only"),
+                         [(True, 1, False), (True, 2, False), (True, 2, True), (False, 1, False)])
 def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, warm_start: bool,
-                                                             workers: int) -> None:
+                                                             workers: int, fields_only: bool) -> None:
     seq, infos = sequence()
     settings = LiftSettings(warm_start=warm_start, smoothing_s=0.0)
     intrinsics = m.intrinsics_from_camera_info(infos[0][1])
@@ -125,7 +139,8 @@ def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, war
     def on_frame(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
         answered.append(stamp)
 
-    offline = lift_messages(seq, infos, lifter, settings, on_frame=on_frame, summary=summary, workers=workers)
+    offline = lift_messages(seq, infos, lifter, settings, on_frame=on_frame, summary=summary, workers=workers,
+                            message_fields_only=fields_only)
     lifted = [(s, x) for s, x in node if isinstance(x, LiftedSkeleton)]
     assert answered == [s for i, (s, _) in enumerate(seq) if i != 4]
     assert summary.n_lifted == len(offline) == len(lifted)
@@ -136,9 +151,22 @@ def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, war
     # bit for bit: the same solves in the same order per track
     np.testing.assert_array_equal(np.array([f.joints_m for f in offline]),
                                   np.array([x.joints_m for _, x in lifted]))
+    # the 2D each output carries is labelled as its 3D joints: the node's (REP-155 skeleton2d) and
+    # the offline lift's alike; the frame whose arms' labels the detector swapped, swapped back
+    np.testing.assert_array_equal(np.array([f.points_2d for f in offline]),
+                                  np.array([x.labelled_2d()[0] for _, x in lifted]))
     np.testing.assert_array_equal(np.array([f.confidence for f in offline]),
-                                  np.array([x.input.confidence for _, x in lifted]))
+                                  np.array([x.labelled_2d()[1] for _, x in lifted]))
     assert max(f.confidence.max() for f in offline) <= 1.0
+    swapped = [(s, x.track_id) for s, x in lifted if x.swapped is not None]
+    assert swapped == ([(seq[SWAPPED][0], 0)] if warm_start else [])  # a cold frame has no track to check
+    if warm_start:  # the arms swapped back: the 2D as the detector should have labelled it
+        (x,) = [x for s, x in lifted if x.swapped is not None]
+        assert x.swapped is not None and x.swapped.tolist() == [True, False]
+        right = m.skeleton2d_to_arrays(UNSWAPPED["skeleton"], "coco17")
+        assert not np.array_equal(x.input.points, right[0])
+        np.testing.assert_array_equal(x.labelled_2d()[0], right[0])
+        np.testing.assert_array_equal(x.labelled_2d()[1], right[1])
 
 
 def test_expiry_stamps_are_the_latest_answered_stamp_since_the_tracks_last_frame() -> None:

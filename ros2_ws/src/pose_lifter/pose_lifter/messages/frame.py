@@ -56,6 +56,7 @@ from pose_lifter.core.track.policy import (
     TrackPolicy,
     lift_tracks_steps,
 )
+from pose_lifter.core.track.state import swap_back
 from pose_lifter.messages.convert import skeleton2d_to_arrays
 
 __all__ = [
@@ -171,6 +172,9 @@ class LiftedSkeleton:
     fit_pose_camera : ndarray, shape (12, 3), optional
         The fit's own ``pose_camera`` when the track's output smoothing replaced the result's
         (:class:`~pose_lifter.core.track.policy.TrackedLift`), else None.
+    swapped : ndarray of bool, shape (2,), optional
+        The arms' and the legs' left/right labels its track swapped back on this frame
+        (:class:`~pose_lifter.core.track.policy.TrackedLift`; None: none).
     """
 
     input: SkeletonInput
@@ -179,14 +183,30 @@ class LiftedSkeleton:
     warm_started: bool
     solve_time: float
     fit_pose_camera: NDArray[np.float64] | None = None
+    swapped: NDArray[np.bool_] | None = None
 
     @property
     def track_id(self) -> int:
         return self.input.track_id
 
+    def labelled_2d(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The input's 2D (12, 2) and confidence (12,) with the left/right labels its track gave
+        them (:func:`labelled_2d`): what the lift read, labelled as the 3D joints are."""
+        return labelled_2d(self.input.points, self.input.confidence, self.swapped)
+
     def timed(self, solve_time: float) -> LiftedSkeleton:
         """This skeleton with ``solve_time`` (seconds)."""
         return replace(self, solve_time=solve_time)
+
+
+def labelled_2d(points: NDArray[np.float64], confidence: NDArray[np.float64],
+                swapped: NDArray[np.bool_] | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A skeleton's 2D (12, 2) and confidence (12,) with the arms' and the legs' left/right labels
+    exchanged where its track swapped them back (``swapped`` (2,); None: as given): the labels of
+    its lifted 3D joints, for the outputs that carry the 2D too (REP-155 ``skeleton2d``)."""
+    if swapped is None or not np.any(swapped):
+        return points, confidence
+    return swap_back(points, swapped), swap_back(confidence, swapped)
 
 
 @dataclass(frozen=True)
@@ -380,7 +400,8 @@ def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, Solved]]
             except Exception as err:
                 out[k] = _refusal(err, track_id)
                 continue
-            out[k] = LiftedSkeleton(d.input, res, j, d.tracked.warm_started, 0.0, d.tracked.fit_pose_camera)
+            out[k] = LiftedSkeleton(d.input, res, j, d.tracked.warm_started, 0.0, d.tracked.fit_pose_camera,
+                                    d.tracked.swapped)
     return [x for x in out if x is not None]
 
 

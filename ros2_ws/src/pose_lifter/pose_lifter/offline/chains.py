@@ -113,6 +113,8 @@ class Done:
     warm_started: bool
     solve_time: float
     failure: str | None
+    #: the left/right label groups its track swapped back (2,; None: none; ``LiftedSkeleton.swapped``)
+    swapped: NDArray[np.bool_] | None = None
 
 
 def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, Any]],
@@ -227,7 +229,7 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
                 fits[c].append(None)
                 continue
             out[c].append(Done(item, lifted.result, lifted.joints_m, lifted.warm_started, lifted.solve_time,
-                               None))
+                               None, lifted.swapped))
             # the centred smoothing starts from the fit's own pose; with the measurement update,
             # from the published one (which has read each frame's 2D; docs/tuning.md)
             fits[c].append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
@@ -287,7 +289,7 @@ def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], setti
         d = done[i]
         assert d.result is not None
         res = d.result.with_camera_pose((smooth[r] - smooth[r].mean(axis=0)) / leg)
-        out[i] = Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None)
+        out[i] = Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None, d.swapped)
     return out
 
 
@@ -325,6 +327,8 @@ def _columns(done: list[Done]) -> tuple[list[tuple[bool, float, str | None, int]
         "converged": np.array([r.converged for r in res], dtype=bool),
         "weights": np.array([r.weights for r in res], dtype=np.float64).reshape(-1, N_JOINTS),
         "joints_m": np.array([d.joints_m for d in ok], dtype=np.float64).reshape(-1, N_JOINTS, 3),
+        "swapped": np.array([np.zeros(2, dtype=bool) if d.swapped is None else d.swapped for d in ok],
+                            dtype=bool).reshape(-1, 2),
     }
     return items, cols
 
@@ -343,7 +347,9 @@ def _from_columns(chain: list[Item], items: list[tuple[bool, float, str | None, 
         fields = MessageFields(cam, float(cols["objective"][i]), float(cols["reprojection_error"][i]),
                                int(cols["total_alternations"][i]), bool(cols["converged"][i]),
                                cols["weights"][i])
-        out.append(Done(item, fields, cols["joints_m"][i], warm, dt, None))
+        swapped = cols["swapped"][i]
+        out.append(Done(item, fields, cols["joints_m"][i], warm, dt, None,
+                        swapped if swapped.any() else None))
     return out
 
 
@@ -369,7 +375,8 @@ class ChainWork:
             if self.message_fields_only:
                 out.append(_columns(done))
             else:
-                out.append([(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure) for d in done])
+                out.append([(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure, d.swapped)
+                            for d in done])
         return out
 
 
@@ -443,8 +450,8 @@ def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any
                             done[id(d.item)] = d
                         bar.update(len(chain))
                         continue
-                    for item, (res, joints, warm, dt, failure) in zip(chain, outcomes, strict=True):
-                        done[id(item)] = Done(item, res, joints, warm, dt, failure)
+                    for item, (res, joints, warm, dt, failure, swapped) in zip(chain, outcomes, strict=True):
+                        done[id(item)] = Done(item, res, joints, warm, dt, failure, swapped)
                         bar.update(1)
         except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
             stop_workers(ex)

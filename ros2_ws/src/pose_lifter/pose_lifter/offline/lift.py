@@ -33,7 +33,7 @@ from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.messages import cdr, hri
 from pose_lifter.messages import convert as m
-from pose_lifter.messages.frame import FramePipeline, FrameSettings, SkipSkeleton
+from pose_lifter.messages.frame import FramePipeline, FrameSettings, SkipSkeleton, labelled_2d
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.names import (
     CAMERA_INFO,
@@ -120,7 +120,8 @@ class LiftSummary:
 @dataclass(frozen=True)
 class FrameLift:
     """One lifted skeleton (for plots and tests): its input (confidences clipped into [0, 1], as
-    the pipeline lifted them) and its metric joints."""
+    the pipeline lifted them, its left/right labels as its track gave them) and its metric
+    joints."""
 
     stamp_ns: int
     track_id: int
@@ -202,8 +203,9 @@ def lift_messages(
             summ.n_lifted += 1
             summ.n_warm += int(d.warm_started)
             summ.solve_time_s += d.solve_time
-            lifted.append(FrameLift(stamp, x.track_id, x.input.points, x.input.confidence, d.joints_m,
-                                    d.warm_started, d.solve_time))
+            points, confidence = labelled_2d(x.input.points, x.input.confidence, d.swapped)
+            lifted.append(FrameLift(stamp, x.track_id, points, confidence, d.joints_m, d.warm_started,
+                                    d.solve_time))
             results.append(d.result)
         out.extend(lifted)
         if on_frame is not None:

@@ -408,7 +408,7 @@ class LifterNode(Node):
             self._pub_markers.publish(self._markers.update(
                 header, frame.track_ids.tolist(), frame.joints_m, self._settings.marker_lifetime))
         if self._hri is not None:  # REP-155 bodies and /tf
-            bodies = [LiftedBody(s.track_id, s.joints_m, s.input.points, s.input.confidence) for s in lifted]
+            bodies = [LiftedBody(s.track_id, s.joints_m, *s.labelled_2d()) for s in lifted]
             self._hri.publish(stamp_ns, header.frame_id, bodies, self._image_size)
         self._counts.frame(lifted, time.perf_counter() - received)
 

@@ -261,7 +261,7 @@ def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[T
     tracked = [(k, p, r, reinit) for k, p, r, reinit in solved if p.frame.track_id >= 0]
     for k, p, r, reinit in solved:
         if p.frame.track_id < 0:
-            out[k] = TrackedLift(r, p.warm is not None, reinit)
+            out[k] = TrackedLift(r, p.warm is not None, reinit, swapped=p.screened.swapped)
     try:
         tracks: Sequence[Track | Exception] = _record([(p.frame, p.track, r) for _, p, r, _ in tracked])
     except Exception as err:  # a bug, not a refusal: every frame of the batch reports it
@@ -272,7 +272,7 @@ def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[T
         elif p.frame.policy.lifter.options.mode == "hybrid":
             hybrid.append((k, p, r, reinit, track))
         else:
-            out[k] = TrackedLift(r, p.warm is not None, reinit)
+            out[k] = TrackedLift(r, p.warm is not None, reinit, swapped=p.screened.swapped)
     # the output's state carries over a re-initialised frame (its jump is smoothed)
     published: Sequence[LiftResult | Exception | None]
     try:
@@ -290,8 +290,8 @@ def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[T
             out[k] = err
             continue
         o = updated if updated is not None else smoothed
-        out[k] = TrackedLift(r, follows, reinit) if o is None else TrackedLift(o, follows, reinit,
-                                                                                r.pose_camera)
+        out[k] = (TrackedLift(r, follows, reinit, swapped=p.screened.swapped) if o is None
+                  else TrackedLift(o, follows, reinit, r.pose_camera, p.screened.swapped))
 
 
 def _record(rows: Sequence[tuple[TrackFrame, Track | None, LiftResult]]) -> list[Track | Exception]:

@@ -52,9 +52,14 @@ class TrackedLift:
     fit_pose_camera : ndarray, shape (12, 3), optional
         The fit's own ``pose_camera`` when the output smoothing replaced ``result.pose`` and
         ``result.pose_camera`` (hybrid mode; the rest of ``result`` is the fit's), else None.
+    swapped : ndarray of bool, shape (2,), optional
+        The arms' and the legs' left/right labels the track swapped back on this frame
+        (``LifterOptions.label_swaps``): the lift read the frame's 2D and confidence with them
+        exchanged (:func:`pose_lifter.core.track.state.swap_back`); None: as given.
     """
 
     result: LiftResult
     warm_started: bool
     reinitialised: bool
     fit_pose_camera: NDArray[np.float64] | None = None
+    swapped: NDArray[np.bool_] | None = None
