@@ -68,12 +68,14 @@ class Lifecycle:
 
         return str(self.graph.call(self.get, GetState.Request()).current_state.label)
 
-    def transition(self, label: str) -> bool:
+    def transition(self, label: str, failed: Callable[[], bool] | None = None) -> bool:
         """Request one transition; True when it succeeded.
 
         A transition is not sent twice. When its answer is late, the state is read instead: a
         server may drop an answer (see ``conftest.RESEND_AFTER``), and reaching the transition's
-        goal state is its success."""
+        goal state is its success; a transition expected to fail is judged by ``failed`` (e.g. the
+        node logged its failure), since the state it stays in does not tell a failure from a
+        transition not yet processed."""
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState
 
@@ -92,6 +94,8 @@ class Lifecycle:
             settle(self.graph, RESEND_AFTER, until=future.done)
             if not future.done() and self.state() == goal[label]:
                 return True
+            if not future.done() and failed is not None and failed():
+                return False
         return bool(future.result().success)
 
 
@@ -146,7 +150,7 @@ def test_configure_with_a_bad_basis_file_fails_with_the_reason(graph: GraphClien
     bad.write_bytes(b"not a basis file")
     proc = managed(f"bases_file:={bad}")
     lc = Lifecycle(graph)
-    assert not lc.transition("configure")
+    assert not lc.transition("configure", failed=lambda: "configure failed:" in proc.log())
     assert lc.state() == "unconfigured" and proc.alive()
     assert "configure failed:" in proc.log()
 
