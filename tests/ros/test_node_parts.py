@@ -4,6 +4,7 @@ the ``/diagnostics`` values; rosbags message types stand in for rclpy's)."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -186,6 +187,25 @@ def test_diagnostics_values_and_levels_of_a_window() -> None:
     assert status_level(1, 4, 2) == (1, "2 inputs skipped")
     assert status_level(3, 0, 3) == (2, "no skeleton could be lifted (3 skipped)")
     assert dict(values(FrameStats()))["warm share"] == "nan"
+
+
+def test_swapped_back_labels_are_counted_in_the_line_and_the_diagnostics() -> None:
+    """A lifted skeleton whose track swapped back its detector's left/right labels
+    (``LiftedSkeleton.swapped``) is counted once per report; one as given is not."""
+    counter = FrameCounter()
+    counter.open("line")
+    counter.open("diagnostics")
+    plain = SimpleNamespace(warm_started=True, solve_time=0.001, swapped=None)
+    relabelled = SimpleNamespace(warm_started=True, solve_time=0.001, swapped=np.array([True, False]))
+    counter.frame([plain, relabelled], 0.01)
+    counter.frame([relabelled, skeleton3d(0, 0.004, True)], 0.01)
+    line = counter.take("line")
+    assert line.relabelled == 2 and "left/right labels swapped back in 2 skeletons" in line.line()
+    assert dict(values(counter.take("diagnostics")))["labels swapped back"] == "2"
+    counter.frame([plain], 0.01)
+    line = counter.take("line")
+    assert line.frames == 1 and "labels swapped back" not in line.line()
+    assert dict(values(counter.take("diagnostics")))["labels swapped back"] == "0"
 
 
 def test_dropped_frames_are_counted_in_the_line_and_the_diagnostics() -> None:

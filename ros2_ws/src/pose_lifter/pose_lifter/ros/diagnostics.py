@@ -15,6 +15,7 @@ key                       value
 ``cold share``            fraction solved cold (multi-start)
 ``latency median (ms)``   per frame, received -> answer published (also ``p95``)
 ``solve median (ms)``     per skeleton (also ``p95``)
+``labels swapped back``   skeletons whose track swapped back their detector's left/right labels
 ``skipped total``         skeletons or frames left out, and ``skipped: <kind>`` per kind
 ========================  ===============================================================
 
@@ -72,6 +73,7 @@ def values(window: FrameStats) -> list[tuple[str, str]]:
         ("cold share", f"{(window.lifted - window.warm) / n:.3f}" if window.lifted else "nan"),
         ("latency median (ms)", ms(lat, 50)), ("latency p95 (ms)", ms(lat, 95)),
         ("solve median (ms)", ms(solve, 50)), ("solve p95 (ms)", ms(solve, 95)),
+        ("labels swapped back", str(window.relabelled)),
         ("skipped total", str(sum(window.skipped.values()))),
     ]
     out += [(f"skipped: {k}", str(v)) for k, v in sorted(window.skipped.items())]

@@ -7,8 +7,9 @@ the statistics line (:meth:`FrameStats.line`) and ``/diagnostics``
 
 Every ``stats_period`` s the node logs the frame rate, the latency per frame (frame received ->
 answer published: median, p95, max), the solve time per person-frame (median, p95), the frames
-dropped while it was busy, the skeletons lifted with clipped confidences and the skipped inputs
-by kind.
+dropped while it was busy, the skeletons lifted with clipped confidences, those whose track
+swapped back their detector's left/right labels (a detector's side confusions, how often) and
+the skipped inputs by kind.
 """
 
 from __future__ import annotations
@@ -37,12 +38,15 @@ class FrameStats:
     skipped: Counter[str] = field(default_factory=Counter)
     clipped: int = 0  # skeletons lifted with confidences clipped into [0, 1]
     dropped: int = 0  # whole frames dropped unanswered while the node was busy (the oldest first)
+    relabelled: int = 0  # skeletons whose track swapped back their detector's left/right labels
 
     def frame(self, lifted: Sequence[Any], latency: float) -> None:
-        """Count one answered frame: its Skeleton3D messages and its latency (s)."""
+        """Count one answered frame: its lifted skeletons (``warm_started``, ``solve_time`` and,
+        of a :class:`~pose_lifter.messages.frame.LiftedSkeleton`, ``swapped``) and its latency (s)."""
         self.frames += 1
         self.lifted += len(lifted)
         self.warm += sum(1 for s in lifted if s.warm_started)
+        self.relabelled += sum(1 for s in lifted if getattr(s, "swapped", None) is not None)
         self.solve_times.extend(float(s.solve_time) for s in lifted)
         self.latencies.append(latency)
 
@@ -68,6 +72,8 @@ class FrameStats:
             text += f", {self.dropped} frames dropped (the node was busy)"
         if self.clipped:
             text += f", confidences clipped in {self.clipped} skeletons"
+        if self.relabelled:
+            text += f", left/right labels swapped back in {self.relabelled} skeletons"
         if self.skipped:
             text += ", skipped: " + ", ".join(f"{k} {n}" for k, n in sorted(self.skipped.items()))
         return text
@@ -98,8 +104,7 @@ class FrameCounter:
         return window
 
     def frame(self, lifted: Sequence[Any], latency: float) -> None:
-        """One answered frame: its lifted skeletons (``warm_started``, ``solve_time``) and its
-        latency (s)."""
+        """One answered frame: its lifted skeletons (:meth:`FrameStats.frame`) and its latency (s)."""
         for window in self._windows.values():
             window.frame(lifted, latency)
 
