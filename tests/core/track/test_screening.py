@@ -21,6 +21,7 @@ from pose_lifter.core.track.state import (
     SWAP_MAX_FRAMES,
     SWAP_RATIO,
     Track,
+    swap_back,
 )
 
 STEP_NS = 33_333_333
@@ -128,9 +129,9 @@ def test_one_pass_screens_each_person_as_the_per_person_rule(seed: int) -> None:
         assert (tracks[i].gated == t.gated).all()
         assert (tracks[i].swapped == t.swapped).all()
         if (labelled == x).all():
-            assert got[i].points is None
+            assert got[i].swapped is None
         else:
-            assert got[i].points is not None and (got[i].points == labelled).all()
+            assert got[i].swapped is not None and (swap_back(x, got[i].swapped) == labelled).all()
             n_swapped += 1
         assert got[i].gated  # the gate was on
         if predicted is None:
@@ -168,12 +169,12 @@ def test_swapped_labels_are_swapped_back_for_at_most_a_few_frames_in_a_row() -> 
             stamp = (k + 2) * STEP_NS
             given_conf = conf[OTHER[0].tolist() + list(range(6, 12))]
             (got,) = screen_frames([ToScreen(track, True, lifter, False, swapped, given_conf, stamp)])
-            seen = swapped if got.points is None else got.points
+            seen = swapped if got.swapped is None else swap_back(swapped, got.swapped)
             if on and k < SWAP_MAX_FRAMES:
                 assert (seen == base).all() and got.confidence is not None
                 np.testing.assert_array_equal(got.confidence, conf)
             else:
-                assert got.points is None and (seen == swapped).all()
+                assert got.swapped is None and (seen == swapped).all()
             # the track as the policy leaves it: this frame's 2D, used, is where its joints were
             track.history.append((stamp, seen.copy(), np.ones(12, dtype=bool)))
             track.fits.append((stamp, seen.copy(), 80.0))

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from pose_lifter.core.model.skeleton import JOINTS_LEFT, JOINTS_RIGHT, LIMBS, N_JOINTS, body_frame
+from pose_lifter.core.model.skeleton import COUNTERPART, LIMBS, body_frame
 
 __all__ = ["CHAINS", "MIRROR_INDEX", "mirror_poses", "random_turns", "transplant_limbs", "turn_limbs"]
 
@@ -31,9 +31,7 @@ __all__ = ["CHAINS", "MIRROR_INDEX", "mirror_poses", "random_turns", "transplant
 CHAINS: Final[tuple[tuple[int, int, int], ...]] = tuple(
     (LIMBS[2 * i][0], LIMBS[2 * i][1], LIMBS[2 * i + 1][1]) for i in range(len(LIMBS) // 2))
 #: Joint order of the mirrored person: each joint's left/right counterpart.
-MIRROR_INDEX: Final[tuple[int, ...]] = tuple(
-    {**dict(zip(JOINTS_LEFT, JOINTS_RIGHT, strict=True)),
-     **dict(zip(JOINTS_RIGHT, JOINTS_LEFT, strict=True))}[j] for j in range(N_JOINTS))
+MIRROR_INDEX: Final[tuple[int, ...]] = COUNTERPART
 
 
 def mirror_poses(poses: NDArray[np.float64]) -> NDArray[np.float64]:

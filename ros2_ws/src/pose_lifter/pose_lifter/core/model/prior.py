@@ -42,7 +42,7 @@ from ..errors import InvalidInputError, PriorFileError
 from ..numeric.fast import pairwise_sum
 from ..numeric.jit import HAVE_NUMBA, njit, njit_nogil
 from ..numeric.threads import thread_pool
-from .skeleton import JOINTS_LEFT, JOINTS_RIGHT, N_JOINTS
+from .skeleton import COUNTERPART, N_JOINTS
 
 __all__ = ["DEFAULT_OFFLINE_PRIOR_PATH", "DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior",
            "flip_rows", "normalise_2d", "prior_features"]
@@ -247,9 +247,7 @@ def _window_features(x: NDArray[np.float64], vis: NDArray[np.bool_], anchor: int
 
 
 #: Joint order of the mirror image: left and right swapped (``_MIRROR[j]`` is ``j``'s counterpart).
-_MIRROR: Final[NDArray[np.intp]] = np.arange(N_JOINTS)
-_MIRROR[list(JOINTS_LEFT)] = JOINTS_RIGHT
-_MIRROR[list(JOINTS_RIGHT)] = JOINTS_LEFT
+_MIRROR: Final[NDArray[np.intp]] = np.array(COUNTERPART, dtype=np.intp)
 _FLIP_X: Final[NDArray[np.float64]] = np.array([-1.0, 1.0, 1.0])
 
 

@@ -19,6 +19,7 @@ from ..numeric.jit import njit
 __all__ = [
     "ANTHROPOMETRIC_PROPORTIONS",
     "BONES_FOR_DRAWING",
+    "COUNTERPART",
     "JOINTS_LEFT",
     "JOINTS_RIGHT",
     "JOINT_NAMES",
@@ -54,6 +55,11 @@ JOINT_NAMES: Final[tuple[str, ...]] = (
 N_JOINTS: Final[int] = len(JOINT_NAMES)
 JOINTS_LEFT: Final[tuple[int, ...]] = (0, 1, 2, 6, 7, 8)
 JOINTS_RIGHT: Final[tuple[int, ...]] = (3, 4, 5, 9, 10, 11)
+#: Each joint's counterpart on the other side (left and right exchanged): the joint order of a
+#: mirror image, and of a detection whose left and right labels are swapped.
+COUNTERPART: Final[tuple[int, ...]] = tuple(
+    {**dict(zip(JOINTS_LEFT, JOINTS_RIGHT, strict=True)),
+     **dict(zip(JOINTS_RIGHT, JOINTS_LEFT, strict=True))}[j] for j in range(N_JOINTS))
 
 #: The paper's eight limbs as (joint, joint) index pairs, in this order.
 LIMBS: Final[tuple[tuple[int, int], ...]] = (

@@ -83,7 +83,7 @@ from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
 from .screening import Screened, ToScreen, next_frames, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
 from .smoothing import CausalSmoother, priors_in_camera, smooth_tracks
-from .state import NOISE_MIN_WEIGHT, Track, image_spans, tracks_limb_proportions
+from .state import NOISE_MIN_WEIGHT, Track, image_spans, swap_back, tracks_limb_proportions
 from .state import compile_kernels as compile_track_kernels
 
 __all__ = [
@@ -224,8 +224,8 @@ def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) ->
                          p.frame.points, p.frame.confidence, p.frame.stamp_ns) for p in batch]
         for p, screened in zip(batch, screen_frames(rows), strict=True):
             p.screened = screened
-            if screened.points is not None:  # the labels as the track has them, from here on
-                p.frame = replace(p.frame, points=screened.points)
+            if screened.swapped is not None:  # the labels as the track has them, from here on
+                p.frame = replace(p.frame, points=swap_back(p.frame.points, screened.swapped))
         todo = later
     _seen([p for _, p in found])
     return found

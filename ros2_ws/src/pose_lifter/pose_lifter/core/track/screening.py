@@ -65,10 +65,8 @@ class Screened:
     gated: bool
     #: the track's 2D data weight (1 but in hybrid mode with causal noise smoothing)
     data_weight: float
-    #: the 2D (12, 2) with an arm's or a leg's left and right labels swapped back
-    #: (``LifterOptions.label_swaps``; None: the frame's own labels)
-    points: NDArray[np.float64] | None = None
-    #: which were: the arms', the legs' (2,) (None: none)
+    #: the arms' and the legs' left and right labels swapped back (2,; ``LifterOptions.label_swaps``;
+    #: None: the frame's own labels): the lift reads :func:`~.state.swap_back` of the frame's 2D
     swapped: NDArray[np.bool_] | None = None
 
 
@@ -99,17 +97,17 @@ def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
                            [f.lifter.options.label_swaps for f in got])
         for r, ((i, _), f) in enumerate(zip(rows, got, strict=True)):
             opts, confidence = f.lifter.options, f.confidence
-            points, swapped = None, None
+            swapped = None
             if s.swapped[r].any():  # the labels as the track has them
-                points, swapped = swap_back(f.points, s.swapped[r]), s.swapped[r].copy()
-                confidence = None if confidence is None else swap_back(confidence, s.swapped[r])
+                swapped = s.swapped[r].copy()
+                confidence = None if confidence is None else swap_back(confidence, swapped)
             if s.gated[r].any():  # a gated joint is missing for this frame
                 confidence = np.where(s.gated[r], 0.0, np.ones(N_JOINTS) if confidence is None
                                       else np.asarray(confidence, dtype=np.float64))
             noisy = opts.noise_smoothing and not f.smoothed_later
             assert f.track is not None
             out[i] = Screened(confidence, s.visible[r], s.predicted[r] if s.has_prediction[r] else None,
-                              opts.outlier_gate > 0, f.track.data_weight() if noisy else 1.0, points, swapped)
+                              opts.outlier_gate > 0, f.track.data_weight() if noisy else 1.0, swapped)
     return [x for x in out if x is not None]
 
 

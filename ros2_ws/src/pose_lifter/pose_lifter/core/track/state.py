@@ -17,8 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..model.skeleton import (
+    COUNTERPART,
     JOINTS_LEFT,
-    JOINTS_RIGHT,
     LEFT_LIMBS,
     LIMB_GROUP_OF,
     LIMBS,
@@ -98,9 +98,7 @@ SWAP_MARGIN = 0.2
 SWAP_MAX_FRAMES = 3
 #: The gate's and the label check's limits, as the compiled screenings read them.
 SCREEN_LIMITS = np.array([GATE_MAX_FRACTION, GATE_MAX_FRAMES, SWAP_MAX_FRAMES, SWAP_RATIO, SWAP_MARGIN])
-#: Each joint's counterpart on the other side (left and right exchanged).
-_OTHER = np.array([JOINTS_RIGHT[JOINTS_LEFT.index(j)] if j in JOINTS_LEFT
-                   else JOINTS_LEFT[JOINTS_RIGHT.index(j)] for j in range(N_JOINTS)], dtype=np.int64)
+_OTHER = np.array(COUNTERPART, dtype=np.int64)  # as the compiled check reads it
 #: The groups whose labels the check swaps: the arms' joints, the legs' (their left joints).
 _GROUPS = np.array([JOINTS_LEFT[:3], JOINTS_LEFT[3:]], dtype=np.int64)
 
