@@ -95,6 +95,14 @@ POSE_STEP_LIMB_VIOLATION: Final[float] = 1e-3
 NONCONVEX_MEDIAN_RATIO: Final[float] = 1.05
 NONCONVEX_MAX_RATIO: Final[float] = 1.3
 
+#: The offline 2D smoother's recursive passes (Rauch-Tung-Striebel) against the batch least
+#: squares they solve: the smoothed positions (relative and absolute, values of order 1) ...
+SMOOTHER_AGREEMENT: Final[float] = 1e-9
+#: ... and their variances (relative): a frame before a series' second measurement has its
+#: variance from a barely determined velocity, which the recursive and the batch solutions (and
+#: a plain 2 x 2 matrix version of the recursion) compute to ~1e-6 of each other.
+SMOOTHER_VARIANCE_AGREEMENT: Final[float] = 1e-5
+
 # ---------------------------------------------------------------- accuracy bounds from measurements
 # Each bound below is the value it guards, measured on this code (the command and commit named),
 # times (1 + ACCURACY_MARGIN), and never above the flat floor of the same frames (no depth at

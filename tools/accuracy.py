@@ -231,6 +231,10 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                 if perspective:  # the node's placement with the focal length and the person's true leg
                     z = place_in_camera(r, float(leg_m[i]), (FOCAL, FOCAL), None, dist_m).mean(axis=0)[2]
                     depth[i] = 100.0 * abs(z - dist_m) / dist_m
+            if policy is not None and policy.smoothed_later:  # the offline measurement update
+                index = {int(s): i for i, s in enumerate(stamps)}
+                for (_, stamp), pose in policy.measured_later().items():
+                    fit[index[stamp]] = pose * leg_m[index[stamp]]
             if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))
                 preds[:] = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)

@@ -155,3 +155,23 @@ def test_the_fit_beats_the_prior_alone_on_the_detector_like_bag(tmp_path: Path) 
                  LiftSettings(max_messages=60), progress=False)
         err[mode] = evaluate_bag(out, bases).table()["lifter"]["p_mpjpe_mm"]
     assert err["hybrid"] < err["learned"] - 10.0, err
+
+
+def test_offline_the_measurement_update_reads_the_tracks_smoothed_2d(tmp_path: Path) -> None:
+    """bags/punch_outliers.mcap (noise 0.05, outliers, missing joints: above the live update's
+    MAX_NOISE) lifted as `pose-lifter lift` lifts it, 90 frames: each track's 2D smoothed over
+    past and future frames, the measurement update runs and brings the published poses closer
+    to the truth than the fits alone (`measurement_update: false`), by 4.4 mm when measured
+    (50.0 against 54.4)."""
+    from pose_lifter.core import Lifter, LifterOptions, PoseBases
+    from pose_lifter.offline.evaluate import evaluate_bag
+    from pose_lifter.offline.lift import lift_bag
+    from pose_lifter.offline.settings import LiftSettings
+
+    err = {}
+    for update in (True, False):
+        out = tmp_path / f"{update}.mcap"
+        lift_bag(BAGS / "punch_outliers.mcap", out, Lifter(options=LifterOptions(measurement_update=update)),
+                 LiftSettings(max_messages=90), progress=False)
+        err[update] = evaluate_bag(out, PoseBases.load()).table()["lifter"]["p_mpjpe_mm"]
+    assert err[True] < err[False] - 2.0, err

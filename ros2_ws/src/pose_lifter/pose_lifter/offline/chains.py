@@ -53,6 +53,7 @@ __all__ = [
     "inputs_ahead",
     "lift_chains",
     "lift_parallel",
+    "measured_later",
     "smooth_chain",
     "split_chains",
     "stop_workers",
@@ -234,7 +235,25 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
             # from the published one (which has read each frame's 2D; docs/tuning.md)
             fits[c].append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
     if smoothing_s > 0:
+        out = [measured_later(d, p) for d, p in zip(out, pipelines, strict=True)]
         return [smooth_chain(d, f, settings, smoothing_s) for d, f in zip(out, fits, strict=True)]
+    return out
+
+
+def measured_later(done: list[Done], pipeline: FramePipeline) -> list[Done]:
+    """A lifted chain with the offline measurement update of its hybrid frames
+    (:meth:`pose_lifter.core.track.policy.TrackPolicy.measured_later`: each track's 2D smoothed over
+    past and future frames, then the update at every noise level): each updated result's
+    ``pose_camera`` becomes the updated pose (its metric joints are placed again by
+    :func:`smooth_chain`)."""
+    updated = pipeline.policy.measured_later()
+    if not updated:
+        return done
+    out = list(done)
+    for i, d in enumerate(done):
+        pose = None if d.result is None else updated.get((d.item.track_id, d.item.stamp_ns))
+        if pose is not None and d.result is not None:
+            out[i] = replace(d, result=d.result.with_camera_pose(pose))
     return out
 
 

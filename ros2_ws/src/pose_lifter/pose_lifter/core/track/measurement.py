@@ -32,15 +32,25 @@ frame, centred, model units) and the frame's 2D ``x`` (12, 2, input units):
    gain is ``1 - (1 - DEPTH_GAIN) k`` (the foreshortening depth is noisier than ``P``'s, which is
    smoothed already).
 
-The update runs while the track's 2D noise is at most MAX_NOISE: the 2D is then nearly exact
-and worth more than the fit's image positions. A real detector's error is correlated from frame
-to frame; the noise estimate (second differences of the 2D, :mod:`pose_lifter.core.track.state`) sees
-only a part of it (about half the standard deviation at a correlation of 0.7), so above it the
-gain of step 3 would follow the detector's slowly changing error (measured in
-docs/accuracy.md, "Under a real detector").
+Live (the node), the update runs while the track's 2D noise is at most MAX_NOISE: the 2D is then
+nearly exact and worth more than the fit's image positions. A real detector's error is correlated
+from frame to frame; the noise estimate (second differences of the 2D,
+:mod:`pose_lifter.core.track.state`) sees only a part of it (about half the standard deviation at
+a correlation of 0.7), so above it the gain of step 3 would follow the detector's slowly changing
+error (measured in docs/accuracy.md, "Under a real detector").
 
-Causal (this and earlier frames only), output-only (the track's fits, warm starts, gate and
-estimates never see it) and cheap (tens of microseconds). Measured in ``docs/tuning.md``.
+Offline (``pose-lifter lift``: :attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`),
+a track's whole 2D is known before its update runs (:mod:`.later`): the 2D the update reads
+is first smoothed over past and future frames (a Rauch-Tung-Striebel
+smoother of a constant-velocity model per joint and axis, over the joints the lift used), and the
+update runs at every noise level with the smoothed 2D's own noise (the track's noise times the
+smoother's ratio of posterior to measurement standard deviation). Smoothed, white 2D noise of
+0.05 leg lengths is about halved; a detector's frame-correlated error is not, and the smoother's
+ratio, estimated for white noise, leaves the gain where it was.
+
+Live it is causal (this and earlier frames only); both ways it is output-only (the track's fits,
+warm starts, gate and estimates never see it) and cheap (tens of microseconds a frame). Measured
+in ``docs/tuning.md`` and docs/accuracy.md.
 """
 
 from __future__ import annotations

@@ -76,7 +76,8 @@ from ..model.skeleton import N_JOINTS
 from ..options import LifterOptions
 from ..results import LiftResult, TrackContext, WarmStart, project_each, with_camera_poses
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from .measurement import MAX_NOISE, MeasurementUpdate
+from .later import LaterFrame, update_tracks_later
+from .later import compile_kernels as compile_later_kernels
 from .measurement import compile_kernels as compile_measurement_kernels
 from .placement import CameraIntrinsics, perspective_corrected_rows
 from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
@@ -285,7 +286,7 @@ def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[T
             out[k] = smoothed
             continue
         try:
-            updated = p.frame.policy._measure(track, smoothed or r, p.seen, follows)
+            updated = p.frame.policy._measure(track, smoothed or r, p.seen, follows, p.frame)
         except Exception as err:
             out[k] = err
             continue
@@ -405,8 +406,12 @@ class TrackPolicy:
         #: causal smoothing of noisy tracks (``LifterOptions.noise_smoothing``: the track's data
         #: weight, ``temporal_weight``, NOISE_DISTURBANCE) is then off whatever the options say.
         self.smoothed_later = False
+        #: With :attr:`smoothed_later`, each hybrid track's frames for the offline measurement
+        #: update (:meth:`measured_later`), by track id.
+        self._later: dict[int, list[LaterFrame]] = {}
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame
+        compile_later_kernels()
         compile_track_kernels()
         compile_screening_kernels()
 
@@ -553,31 +558,26 @@ class TrackPolicy:
         future = next_frames(self.lifter, track, ahead, stamp_ns, past, points, frame)
         return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
 
-    def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool
-                 ) -> LiftResult | None:
-        """``result`` (the fit, smoothed) with its pose replaced by the measurement update's (see
-        :mod:`.measurement`), or None when it is off, the track has no 2D noise estimate yet or
-        its noise is above :data:`~pose_lifter.core.track.measurement.MAX_NOISE`."""
+    def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool,
+                 frame: TrackFrame | None = None) -> LiftResult | None:
+        """``result`` (the fit, smoothed) with its pose replaced by the measurement update's
+        (:meth:`Track.measured`), or None; with :attr:`smoothed_later` the frame (``frame``:
+        its track id and stamp) is kept for the offline update (:meth:`measured_later`) instead."""
         opts = self.lifter.options
-        if not opts.measurement_update:
-            track.measurement = None
+        if self.smoothed_later and frame is not None and opts.measurement_update:
+            self._later.setdefault(frame.track_id, []).append(
+                LaterFrame.of(track, result, points, follows, frame.stamp_ns))
             return None
-        if not follows:
-            track.measurement = None
-        if not track.noise:  # its first two frames: how far to trust the 2D is not known yet
-            return None
-        noise = track.noise_median()
-        if noise > MAX_NOISE:  # the 2D is no better than the fit's image positions
-            track.measurement = None
-            return None
-        if track.measurement is None:
-            track.measurement = MeasurementUpdate()
-        out = track.measurement.update(result.pose_camera, points, result.weights > 0, noise,
-                                       opts.measurement_depth, opts.measurement_gate)
-        if not np.isfinite(out).all():
-            track.measurement = None
-            return None
-        return result.with_camera_pose(out)
+        return track.measured(result, points, follows, opts.measurement_update, opts.measurement_depth,
+                              opts.measurement_gate)
+
+    def measured_later(self) -> dict[tuple[int, int], NDArray[np.float64]]:
+        """The offline measurement update (:mod:`.later`) of the frames kept since the last call
+        (:attr:`smoothed_later`): the published pose (12, 3) by (track id, stamp) of each frame
+        it updates; the kept frames are then forgotten."""
+        kept, self._later = self._later, {}
+        opts = self.lifter.options
+        return update_tracks_later(kept, opts.measurement_depth, opts.measurement_gate)
 
 
 def compile_kernels() -> float:
@@ -593,6 +593,7 @@ def compile_kernels() -> float:
     for mode in KERNEL_MODES:
         Lifter(None, LifterOptions(mode=mode)).warm_up()
     compile_measurement_kernels()
+    compile_later_kernels()
     compile_track_kernels()
     compile_screening_kernels()
     return time.perf_counter() - start

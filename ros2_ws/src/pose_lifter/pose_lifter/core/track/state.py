@@ -27,11 +27,11 @@ from ..model.skeleton import (
 )
 from ..numeric.fast import median_rows, row_norms
 from ..numeric.jit import njit
-from .measurement import MeasurementUpdate
+from .measurement import MAX_NOISE, MeasurementUpdate
 from .smoothing import CausalSmoother
 
 if TYPE_CHECKING:
-    from ..results import WarmStart
+    from ..results import LiftResult, WarmStart
 
 __all__ = ["Track", "calibrated_limb_proportions", "image_spans", "label_check", "swap_back",
            "tracks_limb_proportions", "visible_joints"]
@@ -236,6 +236,29 @@ class Track:
         kept = _screen_ahead_kernel(np.ascontiguousarray(ref), frames, np.array(ahead_vis, dtype=np.bool_),
                                     limit * scale, scale, self.swapped.copy(), check_labels, SCREEN_LIMITS)
         return frames, kept
+
+    def measured(self, result: LiftResult, points: NDArray[np.float64], follows: bool, on: bool,
+                 depth: float, gate: float) -> LiftResult | None:
+        """A live frame of this (hybrid) track: ``result`` (the fit, smoothed) with its pose replaced
+        by the track's measurement update (:mod:`.measurement`; restarted on a frame that does not
+        ``follow`` the track), or None when the update is off (``on``: ``measurement_update``), the
+        track has no 2D noise estimate yet or its noise is above MAX_NOISE. ``points`` (12, 2) the
+        2D the lift read; ``depth``, ``gate``: :meth:`MeasurementUpdate.update`'s."""
+        if not on or not follows:
+            self.measurement = None
+        if not on or not self.noise:  # its first two frames: how far to trust the 2D is not known yet
+            return None
+        noise = self.noise_median()
+        if noise > MAX_NOISE:  # the 2D is no better than the fit's image positions
+            self.measurement = None
+            return None
+        if self.measurement is None:
+            self.measurement = MeasurementUpdate()
+        out = self.measurement.update(result.pose_camera, points, result.weights > 0, noise, depth, gate)
+        if not np.isfinite(out).all():
+            self.measurement = None
+            return None
+        return result.with_camera_pose(out)
 
     def fit_is_sound(self) -> bool:
         """False when the last frame's objective exceeds FILL_MAX_OBJECTIVE_RATIO times the median

@@ -1,0 +1,260 @@
+"""The offline measurement update (``pose-lifter lift``,
+:attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`): a track's frames are kept as it
+is lifted, and after its last frame its 2D is smoothed over past and future frames and the
+measurement update (:mod:`.measurement`) runs over them from the smoothed 2D, at every noise
+level.
+
+Live, the update stops above ``MAX_NOISE``: per frame, the 2D noise a detector has is worth less
+than the fit's image positions. Offline each joint's 2D (the joints the lift used) is first
+smoothed by a Rauch-Tung-Striebel smoother of a constant-velocity model, which halves white 2D
+noise of 0.05 leg lengths, and the update's gain and depth step follow the smoothed 2D's noise
+(the track's noise times the smoother's ratio of posterior to measurement standard deviation).
+A detector's frame-correlated error is not halved; the smoother's ratio, estimated for white
+noise, then leaves the gain where the track's noise puts it. Output-only, as live: the track's
+fits never see it. Measured in docs/accuracy.md (lever 8) and docs/cross_action.md.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..model.skeleton import N_JOINTS
+from ..numeric.jit import njit
+from .measurement import MeasurementUpdate
+
+if TYPE_CHECKING:
+    from ..results import LiftResult
+    from .state import Track
+
+__all__ = ["LaterFrame", "compile_kernels", "smooth_track_2d", "update_later", "update_tracks_later"]
+
+#: Offline smoothing of the 2D (:func:`smooth_track_2d`): the constant-velocity model's random
+#: acceleration, per frame^2 at 30 Hz, as a share of the track's 2D size (the median over frames of
+#: the RMS distance of its joints from their centre). Clean mocap of the held-out training-split
+#: tracks: median 0.012, 90th percentile 0.045; 0.025 halves white 2D noise of 0.05 leg lengths
+#: (0.015 and 0.04 lifted within 0.3 mm of it on the cross-action folds).
+SMOOTH_ACCEL = 0.025
+#: The frame period the acceleration is given at (s).
+SMOOTH_FRAME_S = 1.0 / 30.0
+#: The smoothed 2D's measurement noise is at least this share of the track's 2D size.
+SMOOTH_NOISE_FLOOR = 0.001
+#: The smoother's prior variance of a series' first position and velocity (in the track's 2D
+#: size, squared): uninformative against the measurements' (at most ~0.01), and small enough
+#: that the passes lose no digits to it.
+SMOOTH_PRIOR_VAR = 100.0
+
+
+@njit
+def _rts_kernel(z: NDArray[np.float64], seen: NDArray[np.bool_], dt: NDArray[np.float64], q: float, r: float,
+                out: NDArray[np.float64], var: NDArray[np.float64]) -> None:
+    """Per column of ``z`` (T, S; read where ``seen``) the Rauch-Tung-Striebel smoothed position of
+    a constant-velocity model: position and velocity (prior N(0, SMOOTH_PRIOR_VAR) each), a random
+    acceleration of variance ``q`` per unit step (``dt`` (T,) the steps, ``dt[0]`` unused),
+    measurement variance ``r``. ``out`` and ``var`` (T, S): the smoothed positions and their
+    variances (NaN for a column never seen)."""
+    n, m = z.shape
+    xf = np.empty((n, 2))
+    pf = np.empty((n, 3))  # p00, p01, p11
+    xp = np.empty((n, 2))
+    pp = np.empty((n, 3))
+    for s in range(m):
+        x0 = x1 = 0.0
+        p00 = p11 = SMOOTH_PRIOR_VAR
+        p01 = 0.0
+        any_seen = False
+        for t in range(n):
+            if t > 0:
+                h = dt[t]
+                x0 = x0 + h * x1
+                a00 = p00 + 2.0 * h * p01 + h * h * p11
+                a01 = p01 + h * p11
+                p00 = a00 + q * h ** 4 / 4.0
+                p01 = a01 + q * h ** 3 / 2.0
+                p11 = p11 + q * h * h
+            xp[t, 0], xp[t, 1] = x0, x1
+            pp[t, 0], pp[t, 1], pp[t, 2] = p00, p01, p11
+            if seen[t, s]:
+                any_seen = True
+                gs = p00 + r
+                k0, k1 = p00 / gs, p01 / gs
+                innov = z[t, s] - x0
+                x0 += k0 * innov
+                x1 += k1 * innov
+                p11 = p11 - k1 * p01
+                p01 = p01 - k0 * p01
+                p00 = p00 - k0 * p00
+            xf[t, 0], xf[t, 1] = x0, x1
+            pf[t, 0], pf[t, 1], pf[t, 2] = p00, p01, p11
+        if not any_seen:
+            for t in range(n):
+                out[t, s] = np.nan
+                var[t, s] = np.nan
+            continue
+        s0, s1 = xf[n - 1, 0], xf[n - 1, 1]
+        q00, q01, q11 = pf[n - 1, 0], pf[n - 1, 1], pf[n - 1, 2]
+        out[n - 1, s], var[n - 1, s] = s0, q00
+        for t in range(n - 2, -1, -1):
+            h = dt[t + 1]
+            f00, f01, f11 = pf[t, 0], pf[t, 1], pf[t, 2]
+            # C = Pf F' Pp^-1 (2 x 2), F = [[1, h], [0, 1]]
+            b00, b01 = f00 + h * f01, f01
+            b10, b11 = f01 + h * f11, f11
+            e00, e01, e11 = pp[t + 1, 0], pp[t + 1, 1], pp[t + 1, 2]
+            det = e00 * e11 - e01 * e01
+            i00, i01, i11 = e11 / det, -e01 / det, e00 / det
+            c00, c01 = b00 * i00 + b01 * i01, b00 * i01 + b01 * i11
+            c10, c11 = b10 * i00 + b11 * i01, b10 * i01 + b11 * i11
+            d0, d1 = s0 - xp[t + 1, 0], s1 - xp[t + 1, 1]
+            n0 = xf[t, 0] + c00 * d0 + c01 * d1
+            n1 = xf[t, 1] + c10 * d0 + c11 * d1
+            g00, g01, g11 = q00 - e00, q01 - e01, q11 - e11
+            # C G C'
+            t00 = c00 * g00 + c01 * g01
+            t01 = c00 * g01 + c01 * g11
+            t10 = c10 * g00 + c11 * g01
+            t11 = c10 * g01 + c11 * g11
+            q00 = f00 + t00 * c00 + t01 * c01
+            q01 = f01 + t00 * c10 + t01 * c11
+            q11 = f11 + t10 * c10 + t11 * c11
+            s0, s1 = n0, n1
+            out[t, s], var[t, s] = s0, q00
+
+
+def smooth_track_2d(points: NDArray[np.float64], used: NDArray[np.bool_], stamps_ns: NDArray[np.int64]
+                    ) -> tuple[NDArray[np.float64], float]:
+    """One track's 2D smoothed over its past and future frames (the offline update's input).
+
+    Per joint and axis, the Rauch-Tung-Striebel smoother of a constant-velocity model: a random
+    acceleration of SMOOTH_ACCEL of the track's 2D size per frame^2 at 30 Hz (scaled to the
+    frames' own steps), a white measurement noise estimated from the 2D (the median absolute
+    second difference over three consecutive used frames, less the model's acceleration; at
+    least SMOOTH_NOISE_FLOOR of the size), the joints the lift used as its measurements. It
+    minimises, per series, the sum of the squared measurement residuals over the noise variance
+    and the squared accelerations over their variance (the exact solution of that least-squares
+    problem, in two passes).
+
+    Parameters
+    ----------
+    points : ndarray, shape (T, 12, 2)
+        The 2D of the track's frames, in time order (input units).
+    used : ndarray of bool, shape (T, 12)
+        The joints the lift used on each frame.
+    stamps_ns : ndarray of int, shape (T,)
+        The frames' stamps (increasing).
+
+    Returns
+    -------
+    smoothed : ndarray, shape (T, 12, 2)
+        The smoothed 2D (NaN for a joint never used).
+    ratio : float
+        The median over used joints and frames of the smoothed position's standard deviation over
+        the measurement noise's (in (0, 1]; 1 with fewer than 3 frames, nothing smoothed then).
+    """
+    n = points.shape[0]
+    if n < 3 or not used.any():
+        return np.where(used[..., None], points, np.nan), 1.0
+    z = np.where(used[..., None], points, np.nan)
+    count = used.sum(axis=1)
+    if not (count > 1).any():
+        return z, 1.0
+    w = used[..., None].astype(np.float64)
+    x = np.where(used[..., None], points, 0.0)
+    centre = (x * w).sum(axis=1, keepdims=True) / np.maximum(count, 1)[:, None, None]
+    spread = np.sqrt((((x - centre) ** 2).sum(axis=2) * used).sum(axis=1) / np.maximum(count, 1))
+    size = float(np.median(spread[count > 1]))  # the track's 2D size
+    if not size > 0.0:
+        return z, 1.0
+    zs = (x / size).reshape(n, -1)
+    seen = np.repeat(used, 2, axis=1)
+    steps = np.diff(np.asarray(stamps_ns, dtype=np.float64)) / (SMOOTH_FRAME_S * 1e9)
+    dt = np.concatenate([[1.0], np.maximum(steps, 1e-3)])
+    both = seen[2:] & seen[1:-1] & seen[:-2]
+    d2 = (zs[2:] - 2.0 * zs[1:-1] + zs[:-2])[both]
+    q = SMOOTH_ACCEL ** 2
+    sig2 = (1.4826 * float(np.median(np.abs(d2)))) ** 2 / 6.0 if d2.size else 0.0
+    r = max(sig2 - q / 6.0, SMOOTH_NOISE_FLOOR ** 2)
+    out = np.empty((n, zs.shape[1]))
+    var = np.empty((n, zs.shape[1]))
+    _rts_kernel(np.ascontiguousarray(zs), np.ascontiguousarray(seen), dt, q, r, out, var)
+    ratio = float(np.sqrt(np.median(var[seen]) / r))
+    return (out * size).reshape(n, N_JOINTS, 2), min(ratio, 1.0)
+
+
+class LaterFrame(NamedTuple):
+    """What the offline update (:func:`update_later`) reads of one lifted frame of a track."""
+
+    stamp_ns: int
+    pose: NDArray[np.float64]  #: (12, 3) the pose the track would publish
+    points: NDArray[np.float64]  #: (12, 2) the 2D the lift read
+    used: NDArray[np.bool_]  #: (12,) the joints the lift used
+    noise: float | None  #: the track's 2D noise then (None: not known yet, no update)
+    follows: bool  #: the frame follows the track's last one (False: the update starts again)
+
+    @classmethod
+    def of(cls, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool,
+           stamp_ns: int) -> LaterFrame:
+        """The frame a hybrid track just lifted (``result``: the fit, smoothed; ``points`` (12, 2)
+        the 2D the lift read), copied."""
+        noise = track.noise_median() if track.noise else None
+        return cls(stamp_ns, np.array(result.pose_camera, dtype=np.float64),
+                   np.array(points, dtype=np.float64), result.weights > 0, noise, follows)
+
+
+def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[NDArray[np.float64] | None]:
+    """The offline measurement update of one track's frames (in time order): each run of frames
+    that follow one another has its 2D smoothed (:func:`smooth_track_2d`), then each frame is
+    updated as live (:meth:`MeasurementUpdate.update`) from the smoothed 2D, at every noise level,
+    with the track's noise times the smoother's ratio. Returns each frame's published pose (12, 3),
+    or None where the live rule publishes the fit's (no noise known yet, or a non-finite
+    update)."""
+    out: list[NDArray[np.float64] | None] = [None] * len(frames)
+    starts = [i for i, f in enumerate(frames) if i == 0 or not f.follows] + [len(frames)]
+    for a, b in itertools.pairwise(starts):
+        run = frames[a:b]
+        smoothed, ratio = smooth_track_2d(np.array([f.points for f in run], dtype=np.float64),
+                                          np.array([f.used for f in run], dtype=bool),
+                                          np.array([f.stamp_ns for f in run], dtype=np.int64))
+        state: MeasurementUpdate | None = None
+        for i, f in enumerate(run):
+            if f.noise is None:
+                continue
+            if state is None:
+                state = MeasurementUpdate()
+            points = np.where(np.isfinite(smoothed[i]), smoothed[i], f.points)
+            pose = state.update(f.pose, points, f.used, f.noise * ratio, depth, gate)
+            if not np.isfinite(pose).all():
+                state = None
+                continue
+            out[a + i] = pose
+    return out
+
+
+def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate: float
+                        ) -> dict[tuple[int, int], NDArray[np.float64]]:
+    """:func:`update_later` of each track's kept frames (by track id): the published pose (12, 3)
+    by (track id, stamp) for the frames it updates (the others publish the fit's)."""
+    out: dict[tuple[int, int], NDArray[np.float64]] = {}
+    for track_id, kept in frames.items():
+        for f, pose in zip(kept, update_later(kept, depth, gate), strict=True):
+            if pose is not None:
+                out[(track_id, f.stamp_ns)] = pose
+    return out
+
+
+_COMPILED = False
+
+
+def compile_kernels() -> None:
+    """Compile this module's kernel (numba, ``core.numeric.jit``) or load it from its cache, once
+    per process."""
+    global _COMPILED
+    if _COMPILED:
+        return
+    z = np.zeros((3, 2))
+    _rts_kernel(z, np.ones((3, 2), dtype=np.bool_), np.ones(3), 1e-4, 1e-4, np.empty((3, 2)),
+                np.empty((3, 2)))
+    _COMPILED = True
