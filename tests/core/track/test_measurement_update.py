@@ -350,7 +350,7 @@ def _offline(options: LifterOptions, x: np.ndarray, conf: np.ndarray) -> tuple[l
 def test_offline_the_update_runs_on_noisy_2d_from_its_smoothed_2d() -> None:
     """The punch (never trained on) with white noise of 0.05 leg lengths, above MAX_NOISE: live
     the update does not run; offline it runs from the smoothed 2D and the published pose is
-    closer to the truth (measured 65.2 / 65.8 against 68.5 / 69.5 mm, seeds 5 / 6), the fits
+    closer to the truth (measured 64.1 / 64.4 against 68.5 / 69.5 mm, seeds 5 / 6), the fits
     themselves unchanged (output-only)."""
     x, truth = _person("punch_clean", 90)
     leg = limb_lengths(truth)[:, RIGHT_LOWER_LEG]
@@ -365,5 +365,28 @@ def test_offline_the_update_runs_on_noisy_2d_from_its_smoothed_2d() -> None:
     def err(p: np.ndarray) -> float:
         return 1000.0 * float(np.mean(p_mpjpe(p * leg[:, None, None], truth)))
 
-    assert err(poses) < err(off_poses) - 1.5, (err(poses), err(off_poses))
+    assert err(poses) < err(off_poses) - 2.0, (err(poses), err(off_poses))
     assert np.isfinite(poses).all()
+
+
+def test_offline_the_update_runs_both_ways_in_time_and_does_not_lag() -> None:
+    """A still pose whose 2D puts the left wrist 0.2 leg lengths off, on a track noisy enough for
+    a low gain: the forward pass alone would reach the 2D's wrist only after some frames (its
+    first updated frame moves it by the gain's share); the mean of the forward and backward passes
+    moves it as far on the track's first frames as on its last, and the frames whose noise the
+    track did not know yet are published too."""
+    from pose_lifter.core.track.later import LaterFrame, update_later
+
+    pose = _pose()
+    points = 100.0 * pose[:, :2] + 320.0
+    points[2] += [20.0, 0.0]  # the wrist 0.2 leg lengths right in the image
+    used = np.ones(12, dtype=bool)
+    frames = [LaterFrame(i * 33_333_333, pose, points, used, None if i < 2 else 0.05, i > 0)
+              for i in range(40)]
+    out = update_later(frames, 0.0, 10.0)
+    assert all(p is not None for p in out)
+    moved = np.array([p[2, 0] - pose[2, 0] for p in out if p is not None])
+    # measured: 0.107 on the first frame both passes update and on the last (the forward pass
+    # alone: 0.035 on its first), 0.18 on the two frames only the backward pass updates
+    assert moved.min() > 0.09
+    assert abs(moved[2] - moved[-1]) < 0.01

@@ -206,11 +206,14 @@ class LaterFrame(NamedTuple):
 
 def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[NDArray[np.float64] | None]:
     """The offline measurement update of one track's frames (in time order): each run of frames
-    that follow one another has its 2D smoothed (:func:`smooth_track_2d`), then each frame is
-    updated as live (:meth:`MeasurementUpdate.update`) from the smoothed 2D, at every noise level,
-    with the track's noise times the smoother's ratio. Returns each frame's published pose (12, 3),
-    or None where the live rule publishes the fit's (no noise known yet, or a non-finite
-    update)."""
+    that follow one another has its 2D smoothed (:func:`smooth_track_2d`), then the update
+    (:meth:`MeasurementUpdate.update`) runs over the run from the smoothed 2D, at every noise
+    level, with the track's noise times the smoother's ratio, once forward and once backward in
+    time, and each frame publishes the mean of the two: each direction's filters (the x, y
+    offsets' gain, the depths' alpha-beta filter) lag the motion their own way, their mean does
+    not. The backward pass reads the run's first frames, whose noise the track did not know yet,
+    at its first known noise. Returns each frame's published pose (12, 3), or None where neither
+    pass updated it (the fit's is published)."""
     out: list[NDArray[np.float64] | None] = [None] * len(frames)
     starts = [i for i, f in enumerate(frames) if i == 0 or not f.follows] + [len(frames)]
     for a, b in itertools.pairwise(starts):
@@ -218,18 +221,39 @@ def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[ND
         smoothed, ratio = smooth_track_2d(np.array([f.points for f in run], dtype=np.float64),
                                           np.array([f.used for f in run], dtype=bool),
                                           np.array([f.stamp_ns for f in run], dtype=np.int64))
-        state: MeasurementUpdate | None = None
-        for i, f in enumerate(run):
-            if f.noise is None:
-                continue
-            if state is None:
-                state = MeasurementUpdate()
-            points = np.where(np.isfinite(smoothed[i]), smoothed[i], f.points)
-            pose = state.update(f.pose, points, f.used, f.noise * ratio, depth, gate)
-            if not np.isfinite(pose).all():
-                state = None
-                continue
-            out[a + i] = pose
+        fwd = _pass(run, smoothed, ratio, depth, gate, range(len(run)))
+        known = [f.noise for f in run if f.noise is not None]
+        if not known:
+            continue
+        # backward in time too, the run's first frames (no noise known yet then) at its first noise
+        filled = [f if f.noise is not None else f._replace(noise=known[0]) for f in run]
+        bwd = _pass(filled, smoothed, ratio, depth, gate, range(len(run) - 1, -1, -1))
+        for i, (p, q) in enumerate(zip(fwd, bwd, strict=True)):
+            fwd[i] = q if p is None else p if q is None else 0.5 * (p + q)
+        out[a:b] = fwd
+    return out
+
+
+def _pass(run: list[LaterFrame], smoothed: NDArray[np.float64], ratio: float, depth: float, gate: float,
+          order: range) -> list[NDArray[np.float64] | None]:
+    """One pass of the update over a run of frames in ``order`` (forward or backward in time), from
+    the ``smoothed`` 2D (T, 12, 2) at the frames' noise times ``ratio``: each frame's published
+    pose, None where it was not updated (no noise known, or a non-finite update, after which the
+    pass starts again)."""
+    out: list[NDArray[np.float64] | None] = [None] * len(run)
+    state: MeasurementUpdate | None = None
+    for i in order:
+        f = run[i]
+        if f.noise is None:
+            continue
+        if state is None:
+            state = MeasurementUpdate()
+        points = np.where(np.isfinite(smoothed[i]), smoothed[i], f.points)
+        pose = state.update(f.pose, points, f.used, f.noise * ratio, depth, gate)
+        if not np.isfinite(pose).all():
+            state = None
+            continue
+        out[i] = pose
     return out
 
 
