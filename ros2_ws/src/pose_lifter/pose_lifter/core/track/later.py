@@ -2,7 +2,7 @@
 :attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`): a track's frames are kept as it
 is lifted, and after its last frame its 2D is smoothed over past and future frames and the
 measurement update (:mod:`.measurement`) runs over them from the smoothed 2D, at every noise
-level.
+level, forward and backward in time (each frame publishes the mean of the two passes).
 
 Live, the update stops above ``MAX_NOISE``: per frame, the 2D noise a detector has is worth less
 than the fit's image positions. Offline each joint's 2D (the joints the lift used) is first
@@ -10,8 +10,10 @@ smoothed by a Rauch-Tung-Striebel smoother of a constant-velocity model, which h
 noise of 0.05 leg lengths, and the update's gain and depth step follow the smoothed 2D's noise
 (the track's noise times the smoother's ratio of posterior to measurement standard deviation).
 A detector's frame-correlated error is not halved; the smoother's ratio, estimated for white
-noise, then leaves the gain where the track's noise puts it. Output-only, as live: the track's
-fits never see it. Measured in docs/accuracy.md (lever 8) and docs/cross_action.md.
+noise, then leaves the gain where the track's noise puts it. The update's filters (its offsets'
+gain, its depths' alpha-beta filter) lag the motion; run backward in time they lag the other
+way, and the mean of the two passes does not. Output-only, as live: the track's fits never see
+it. Measured in docs/accuracy.md (lever 8) and docs/cross_action.md.
 """
 
 from __future__ import annotations

@@ -40,15 +40,11 @@ a correlation of 0.7), so above it the gain of step 3 would follow the detector'
 error (measured in docs/accuracy.md, "Under a real detector").
 
 Offline (``pose-lifter lift``: :attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`),
-a track's whole 2D is known before its update runs (:mod:`.later`): the 2D the update reads
-is first smoothed over past and future frames (a Rauch-Tung-Striebel
-smoother of a constant-velocity model per joint and axis, over the joints the lift used), and the
-update runs at every noise level with the smoothed 2D's own noise (the track's noise times the
-smoother's ratio of posterior to measurement standard deviation). Smoothed, white 2D noise of
-0.05 leg lengths is about halved; a detector's frame-correlated error is not, and the smoother's
-ratio, estimated for white noise, leaves the gain where it was.
+a track's whole 2D is known before its update runs (:mod:`.later`): the update then reads the 2D
+smoothed over past and future frames (which halves white 2D noise of 0.05 leg lengths), runs at
+every noise level with that smoothed 2D's own noise, and runs forward and backward in time.
 
-Live it is causal (this and earlier frames only); both ways it is output-only (the track's fits,
+Live it is causal (this and earlier frames only); live and offline it is output-only (the track's fits,
 warm starts, gate and estimates never see it) and cheap (tens of microseconds a frame). Measured
 in ``docs/tuning.md`` and docs/accuracy.md.
 """
