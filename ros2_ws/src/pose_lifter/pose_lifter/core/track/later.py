@@ -4,10 +4,11 @@ is lifted, and after its last frame its 2D is smoothed over past and future fram
 measurement update (:mod:`.measurement`) runs over them from the smoothed 2D, at every noise
 level, forward and backward in time (each frame publishes the mean of the two passes).
 
-Live, the update stops above ``MAX_NOISE``: per frame, the 2D noise a detector has is worth less
-than the fit's image positions. Offline each joint's 2D (the joints the lift used) is first
-smoothed by a Rauch-Tung-Striebel smoother of a constant-velocity model, which halves white 2D
-noise of 0.05 leg lengths, and the update's gain and depth step follow the smoothed 2D's noise
+Live, the update stops above ``MAX_NOISE`` (:mod:`.measurement`: its causal gain would follow a
+detector's noise, and its frame-correlated error most). Offline each joint's 2D (the joints the
+lift used) is first smoothed by a Rauch-Tung-Striebel smoother of a constant-velocity model,
+which halves white 2D noise of 0.05 leg lengths, and the update's gain and depth step follow the
+smoothed 2D's noise
 (the track's noise times the smoother's ratio of posterior to measurement standard deviation).
 A detector's frame-correlated error is not halved; the smoother's ratio, estimated for white
 noise, then leaves the gain where the track's noise puts it. The update's filters (its offsets'

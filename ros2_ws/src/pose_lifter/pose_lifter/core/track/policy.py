@@ -404,11 +404,10 @@ class TrackPolicy:
         self._tracks: dict[int, Track] = {}
         #: The caller smooths each track over past and future frames (the offline lift): the
         #: causal smoothing of noisy tracks (``LifterOptions.noise_smoothing``: the track's data
-        #: weight, ``temporal_weight``, NOISE_DISTURBANCE) is then off whatever the options say.
+        #: weight, ``temporal_weight``, NOISE_DISTURBANCE) is then off whatever the options say,
+        #: and the measurement update waits for :meth:`measured_later` (after the tracks' frames).
         self.smoothed_later = False
-        #: With :attr:`smoothed_later`, each hybrid track's frames for the offline measurement
-        #: update (:meth:`measured_later`), by track id.
-        self._later: dict[int, list[LaterFrame]] = {}
+        self._later: dict[int, list[LaterFrame]] = {}  # the frames kept for it, by track id
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
         compile_measurement_kernels()  # now, not on a track's first frame
         compile_later_kernels()
