@@ -39,7 +39,7 @@ __all__ = ["LaterFrame", "compile_kernels", "smooth_track_2d", "update_later", "
 #: acceleration, per frame^2 at 30 Hz, as a share of the track's 2D size (the median over frames of
 #: the RMS distance of its joints from their centre). Clean mocap of the held-out training-split
 #: tracks: median 0.012, 90th percentile 0.045; 0.025 halves white 2D noise of 0.05 leg lengths
-#: (0.015 and 0.04 lifted within 0.3 mm of it on the cross-action folds).
+#: (0.015 and 0.04 lifted within 0.2 mm of it on the cross-action folds, 0.4 on val).
 SMOOTH_ACCEL = 0.025
 #: The frame period the acceleration is given at (s).
 SMOOTH_FRAME_S = 1.0 / 30.0
