@@ -20,15 +20,15 @@ accuracy.py's 32 cameras), the conditions of accuracy.py (clean, noise, confiden
 missing joints, and the detector / camera faults: left/right swaps, the lower body out of the
 image, a camera at 2 m, a camera 50 degrees above; and every fault of a real detector together,
 ``detector6m`` / ``detector3m``: :mod:`pose_lifter.mocap.detector_model`). Methods: ``flat`` (the
-2D with zero depth), ``learned`` (the fold's prior alone, per frame), ``learned-offline`` (the
-prior alone tracked and smoothed over past and future frames: ``pose-lifter lift --mode
-learned``) and ``hybrid`` (the default mode tracked by
-:class:`pose_lifter.core.track.policy.TrackPolicy`, with the fold's prior as its single-frame prior and
-the temporal prior off: the packaged temporal prior has seen every class; with ``--temporal``
-each fold also trains its own temporal prior, ``DIR/<C>_w4.npz``, and every tracked method uses
-it, as the node does; with ``--offline`` also its offline prior, ``DIR/<C>_w7c.npz`` (as ``make
-prior-offline``: 3 frames before the lifted one and 3 after), which the ``-offline`` methods
-read, as ``pose-lifter lift`` does).
+2D with zero depth), ``learned`` (the fold's prior alone, per frame), ``learned-t`` (the prior
+alone tracked, as the node runs ``mode: learned``), ``learned-offline`` (the prior alone tracked
+and smoothed over past and future frames: ``pose-lifter lift --mode learned``) and ``hybrid``
+(the default mode tracked by :class:`pose_lifter.core.track.policy.TrackPolicy`, with the fold's
+prior as its single-frame prior and the temporal prior off: the packaged temporal prior has seen
+every class; with ``--temporal`` each fold also trains its own temporal prior,
+``DIR/<C>_w4.npz``, and every tracked method uses it, as the node does; with ``--offline`` also
+its offline prior, ``DIR/<C>_w7c.npz`` (as ``make prior-offline``: 3 frames before the lifted
+one and 3 after), which the ``-offline`` methods read, as ``pose-lifter lift`` does).
 
 The hybrid's pose bases are the packaged ``bases_hybrid_sparse200.npz`` (or ``--bases``); their
 training trials are read from the file and each fold's row says whether they include class C.
@@ -64,7 +64,7 @@ from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_pri
 
 DEFAULT_CONDITIONS = ("detector6m", "detector3m", "clean", "noise0.05", "noise0.1", "outliers20", "missing15",
                       "lrswap", "lowercut", "close", "above")
-METHODS = ("flat", "learned", "learned-offline", "hybrid", "hybrid-offline")
+METHODS = ("flat", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-offline")
 AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
 #: Dropout of a fold's temporal priors (``make prior-temporal``'s, ``make prior-offline``'s).
 TEMPORAL_DROPOUT = 0.05
