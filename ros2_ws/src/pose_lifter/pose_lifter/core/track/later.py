@@ -158,19 +158,13 @@ def smooth_track_2d(points: NDArray[np.float64], used: NDArray[np.bool_], stamps
         the measurement noise's (in (0, 1]; 1 with fewer than 3 frames, nothing smoothed then).
     """
     n = points.shape[0]
-    if n < 3 or not used.any():
-        return np.where(used[..., None], points, np.nan), 1.0
-    z = np.where(used[..., None], points, np.nan)
     count = used.sum(axis=1)
-    if not (count > 1).any():
-        return z, 1.0
-    w = used[..., None].astype(np.float64)
     x = np.where(used[..., None], points, 0.0)
-    centre = (x * w).sum(axis=1, keepdims=True) / np.maximum(count, 1)[:, None, None]
+    centre = x.sum(axis=1, keepdims=True) / np.maximum(count, 1)[:, None, None]
     spread = np.sqrt((((x - centre) ** 2).sum(axis=2) * used).sum(axis=1) / np.maximum(count, 1))
-    size = float(np.median(spread[count > 1]))  # the track's 2D size
-    if not size > 0.0:
-        return z, 1.0
+    size = float(np.median(spread[count > 1])) if n >= 3 and (count > 1).any() else 0.0
+    if not size > 0.0:  # too few frames or joints to smooth: the 2D as given
+        return np.where(used[..., None], points, np.nan), 1.0
     zs = (x / size).reshape(n, -1)
     seen = np.repeat(used, 2, axis=1)
     steps = np.diff(np.asarray(stamps_ns, dtype=np.float64)) / (SMOOTH_FRAME_S * 1e9)

@@ -558,12 +558,12 @@ class TrackPolicy:
         return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
 
     def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool,
-                 frame: TrackFrame | None = None) -> LiftResult | None:
+                 frame: TrackFrame) -> LiftResult | None:
         """``result`` (the fit, smoothed) with its pose replaced by the measurement update's
         (:meth:`Track.measured`), or None; with :attr:`smoothed_later` the frame (``frame``:
         its track id and stamp) is kept for the offline update (:meth:`measured_later`) instead."""
         opts = self.lifter.options
-        if self.smoothed_later and frame is not None and opts.measurement_update:
+        if self.smoothed_later and opts.measurement_update:
             self._later.setdefault(frame.track_id, []).append(
                 LaterFrame.of(track, result, points, follows, frame.stamp_ns))
             return None
