@@ -233,7 +233,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     depth[i] = 100.0 * abs(z - dist_m) / dist_m
             if policy is not None and policy.smoothed_later:  # the offline measurement update
                 index = {int(s): i for i, s in enumerate(stamps)}
-                for (_, stamp), pose in policy.measured_later().items():
+                for (_, stamp, _), pose in policy.measured_later().items():
                     fit[index[stamp]] = pose * leg_m[index[stamp]]
             if m in ("hybrid-offline", "learned-offline"):
                 ok = np.all(np.isfinite(fit), axis=(1, 2))

@@ -340,7 +340,7 @@ def _offline(options: LifterOptions, x: np.ndarray, conf: np.ndarray) -> tuple[l
     policy.smoothed_later = True
     out = [policy.lift(0, i * 33_333_333, x[i], conf[i]) for i in range(len(x))]
     poses = np.array([t.result.pose_camera for t in out])
-    for (track_id, stamp), pose in policy.measured_later().items():
+    for (track_id, stamp, _), pose in policy.measured_later().items():
         assert track_id == 0
         poses[stamp // 33_333_333] = pose
     assert policy.measured_later() == {}  # the kept frames are used once

@@ -17,6 +17,7 @@ import gc
 import os
 import signal
 import time
+from collections import Counter
 from dataclasses import dataclass, replace
 from typing import Any, Final
 
@@ -250,9 +251,14 @@ def measured_later(done: list[Done], pipeline: FramePipeline) -> list[Done]:
     if not updated:
         return done
     out = list(done)
+    seen: Counter[tuple[int, int]] = Counter()  # a stamp the input clock replayed comes again
     for i, d in enumerate(done):
-        pose = None if d.result is None else updated.get((d.item.track_id, d.item.stamp_ns))
-        if pose is not None and d.result is not None:
+        if d.result is None:
+            continue
+        key = (d.item.track_id, d.item.stamp_ns)
+        pose = updated.get((*key, seen[key]))
+        seen[key] += 1
+        if pose is not None:
             out[i] = replace(d, result=d.result.with_camera_pose(pose))
     return out
 

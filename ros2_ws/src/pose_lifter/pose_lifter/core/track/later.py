@@ -20,6 +20,7 @@ it. Measured in docs/accuracy.md (lever 8) and docs/cross_action.md.
 from __future__ import annotations
 
 import itertools
+from collections import Counter
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -255,14 +256,19 @@ def _pass(run: list[LaterFrame], smoothed: NDArray[np.float64], ratio: float, de
 
 
 def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate: float
-                        ) -> dict[tuple[int, int], NDArray[np.float64]]:
+                        ) -> dict[tuple[int, int, int], NDArray[np.float64]]:
     """:func:`update_later` of each track's kept frames (by track id): the published pose (12, 3)
-    by (track id, stamp) for the frames it updates (the others publish the fit's)."""
-    out: dict[tuple[int, int], NDArray[np.float64]] = {}
+    of each frame it updates (the others publish the fit's), by (track id, stamp, k), ``k`` the
+    number of the track's earlier kept frames with the same stamp (0 unless the input clock
+    jumped back and replayed it, e.g. a looped recording)."""
+    out: dict[tuple[int, int, int], NDArray[np.float64]] = {}
     for track_id, kept in frames.items():
+        seen: Counter[int] = Counter()
         for f, pose in zip(kept, update_later(kept, depth, gate), strict=True):
+            k = seen[f.stamp_ns]
+            seen[f.stamp_ns] += 1
             if pose is not None:
-                out[(track_id, f.stamp_ns)] = pose
+                out[(track_id, f.stamp_ns, k)] = pose
     return out
 
 

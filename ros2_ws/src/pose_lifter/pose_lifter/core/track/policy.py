@@ -570,10 +570,10 @@ class TrackPolicy:
         return track.measured(result, points, follows, opts.measurement_update, opts.measurement_depth,
                               opts.measurement_gate)
 
-    def measured_later(self) -> dict[tuple[int, int], NDArray[np.float64]]:
+    def measured_later(self) -> dict[tuple[int, int, int], NDArray[np.float64]]:
         """The offline measurement update (:mod:`.later`) of the frames kept since the last call
-        (:attr:`smoothed_later`): the published pose (12, 3) by (track id, stamp) of each frame
-        it updates; the kept frames are then forgotten."""
+        (:attr:`smoothed_later`): the published pose (12, 3) by (track id, stamp, k) of each frame
+        it updates (:func:`~.later.update_tracks_later`); the kept frames are then forgotten."""
         kept, self._later = self._later, {}
         opts = self.lifter.options
         return update_tracks_later(kept, opts.measurement_depth, opts.measurement_gate)

@@ -37,8 +37,9 @@ def centred_smoothing(poses: NDArray[np.float64], stamps_ns: NDArray[np.int64], 
 
     ``out[i] = sum_k w_ik poses[k] / sum_k w_ik`` with ``w_ik = exp(-(t_k - t_i)^2 / (2 sigma^2))``
     over the valid frames ``k`` within ``3 sigma`` of frame ``i`` and in the same segment: a gap of
-    more than ``gap_s`` between consecutive valid frames (the track was forgotten, as the node's
-    ``track_timeout`` forgets it) starts a new segment, and no window crosses it. Near a segment's
+    more than ``gap_s`` between consecutive valid frames, or a step back in time (the input clock
+    jumped back, e.g. a looped recording; either way the node's policy forgets the track), starts
+    a new segment, and no window crosses it. Near a segment's
     ends the window is one-sided (it is truncated, not padded).
 
     Parameters
@@ -46,7 +47,8 @@ def centred_smoothing(poses: NDArray[np.float64], stamps_ns: NDArray[np.int64], 
     poses : ndarray, shape (T, J, 3)
         A track's poses in one frame of reference (e.g. the camera frame, centred), in time order.
     stamps_ns : ndarray of int, shape (T,)
-        Their stamps (nanoseconds), non-decreasing.
+        Their stamps (nanoseconds), in the order the frames came (non-decreasing within a
+        segment).
     valid : ndarray of bool, shape (T,)
         Frames that hold a pose; the others are neither used nor changed.
     sigma_s : float
@@ -73,9 +75,7 @@ def centred_smoothing(poses: NDArray[np.float64], stamps_ns: NDArray[np.int64], 
         raise ValueError("a valid frame holds a non-finite pose")
     t = stamps[idx].astype(np.float64) * 1e-9
     dt = np.diff(t)
-    if np.any(dt < 0):
-        raise ValueError("stamps must be non-decreasing")
-    segment = np.concatenate([[0], np.cumsum(dt > gap_s)])
+    segment = np.concatenate([[0], np.cumsum((dt > gap_s) | (dt < 0))])
     positive = dt[dt > 0]
     step = float(positive.min()) if len(positive) else 3.0 * sigma_s
     half = int(min(_MAX_HALF_WIDTH, np.ceil(3.0 * sigma_s / step)))
