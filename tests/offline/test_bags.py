@@ -204,4 +204,4 @@ def test_a_looping_clock_keeps_each_loops_own_offline_update() -> None:
     assert [f.stamp_ns for f in both] == [f.stamp_ns for f in alone[0] + alone[1]]
     assert len(alone[0]) > 0.9 * n
     for a, b in zip(alone[0] + alone[1], both, strict=True):
-        np.testing.assert_allclose(b.joints_m, a.joints_m, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(b.joints_m, a.joints_m, rtol=0, atol=tol.ROUND_OFF_ACCUMULATED)
