@@ -432,23 +432,34 @@ STOP_TIMEOUT: Final[float] = 10.0
 
 def stop_workers(ex: Any) -> None:
     """Stop a ProcessPoolExecutor (forked workers) now: its queued work dropped, each worker sent
-    SIGTERM and killed if it has not exited within STOP_TIMEOUT.
+    SIGTERM and killed if it has not exited within STOP_TIMEOUT; on return every worker has been
+    reaped.
 
-    The executor is not waited for: its manager thread ends by itself once its workers are gone
-    (a broken pool). ``shutdown(wait=True)`` after terminating the workers could wait forever: a
-    worker whose task turned SIGTERM into an exception is kept alive by the executor's worker
-    loop, which returns that exception as the task's result and waits for the next task.
+    The executor is not shut down with ``wait=True``: a worker whose task turned SIGTERM into an
+    exception is kept alive by the executor's worker loop, which returns that exception as the
+    task's result and waits for the next task, so that could wait forever. Its manager thread,
+    which reaps the workers of a broken pool itself, is joined once they are gone and before they
+    are joined here: two threads waiting for the same child race (the loser's wait finds no child
+    and leaves the process marked alive).
     """
+    import multiprocessing.connection
+
     processes = list((getattr(ex, "_processes", None) or {}).values())  # no public accessor
+    manager = getattr(ex, "_executor_manager_thread", None)  # (shutdown forgets both)
     ex.shutdown(wait=False, cancel_futures=True)
     for proc in processes:
         proc.terminate()
     deadline = time.monotonic() + STOP_TIMEOUT
+    running = {proc.sentinel: proc for proc in processes}  # ready once its process has exited
+    while running and (left := deadline - time.monotonic()) > 0:
+        for sentinel in multiprocessing.connection.wait(list(running), left):
+            del running[sentinel]
+    for proc in running.values():
+        proc.kill()
+    if manager is not None:
+        manager.join(STOP_TIMEOUT)
     for proc in processes:
-        proc.join(max(deadline - time.monotonic(), 0.0))
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
+        proc.join()
 
 
 def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any) -> None:
