@@ -195,8 +195,6 @@ def test_stopping_a_pool_ends_workers_that_outlive_sigterm(monkeypatch: pytest.M
     assert not multiprocessing.active_children()
 
 
-
-
 def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() -> None:
     import subprocess
     import sys

@@ -39,8 +39,8 @@ def centred_smoothing(poses: NDArray[np.float64], stamps_ns: NDArray[np.int64], 
     over the valid frames ``k`` within ``3 sigma`` of frame ``i`` and in the same segment: a gap of
     more than ``gap_s`` between consecutive valid frames, or a step back in time (the input clock
     jumped back, e.g. a looped recording; either way the node's policy forgets the track), starts
-    a new segment, and no window crosses it. Near a segment's
-    ends the window is one-sided (it is truncated, not padded).
+    a new segment, and no window crosses it. Near a segment's ends the window is one-sided (it is
+    truncated, not padded).
 
     Parameters
     ----------
