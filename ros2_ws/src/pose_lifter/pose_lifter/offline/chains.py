@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.model.skeleton import N_JOINTS
+from pose_lifter.core.results import LiftResult, with_camera_poses
 from pose_lifter.core.track.placement import place_poses
 from pose_lifter.core.track.policy import FramesAhead
 from pose_lifter.core.track.smoothing import centred_smoothing
@@ -250,7 +251,9 @@ def measured_later(done: list[Done], pipeline: FramePipeline) -> list[Done]:
     updated = pipeline.policy.measured_later()
     if not updated:
         return done
-    out = list(done)
+    rows: list[int] = []
+    results: list[LiftResult] = []
+    poses: list[NDArray[np.float64]] = []
     seen: Counter[tuple[int, int]] = Counter()  # a stamp the input clock replayed comes again
     for i, d in enumerate(done):
         if d.result is None:
@@ -259,7 +262,14 @@ def measured_later(done: list[Done], pipeline: FramePipeline) -> list[Done]:
         pose = updated.get((*key, seen[key]))
         seen[key] += 1
         if pose is not None:
-            out[i] = replace(d, result=d.result.with_camera_pose(pose))
+            rows.append(i)
+            results.append(d.result)
+            poses.append(pose)
+    if not rows:
+        return done
+    out = list(done)
+    for i, res in zip(rows, with_camera_poses(results, np.array(poses)), strict=True):
+        out[i] = replace(done[i], result=res)
     return out
 
 
