@@ -29,6 +29,8 @@ method, tracked as the node tracks: cold 30-start first frame, then warm + mirro
 runs ``mode: learned``: the causal temporal prior) and ``learned-offline`` (the same smoothed over
 past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked (default mode,
 the node's per-track policy :class:`pose_lifter.core.track.policy.TrackPolicy`),
+``hybrid-lag`` (the node with ``output_lag`` ``--lag`` frames, 3 by default: each frame's pose
+refined over the next frames, :mod:`pose_lifter.core.track.lagged`),
 ``hybrid-offline`` (the tracks as ``pose-lifter lift`` gives them: without the causal smoothing
 of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.track.smoothing`) and
 ``hybrid-1`` (every frame cold).
@@ -64,6 +66,7 @@ from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.track.lagged import LaggedPoses
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
@@ -91,7 +94,7 @@ CONDITIONS: dict[str, dict[str, float]] = {
     "detector3m": {"detector": 1.0, "distance": 3.0},
 }
 METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "learned-offline", "hybrid",
-           "hybrid-offline", "hybrid-1")
+           "hybrid-lag", "hybrid-offline", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
 ELEVATIONS = (0.0, 30.0)
 PROJECTIONS = ("weak", "perspective")
@@ -126,7 +129,8 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
     warnings.simplefilter("ignore")
     lifters = {}
     for m in methods:
-        if m in ("paper", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-offline", "hybrid-1"):
+        if m in ("paper", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-lag", "hybrid-offline",
+                 "hybrid-1"):
             mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t").removesuffix("-offline")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
             # an offline lift knows each track's next frames (pose-lifter lift: its offline prior)
@@ -200,10 +204,17 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             preds[:] = np.einsum("jb,nba->nja", _STATE["mean"], body_frame(truth_c)) * leg_m[:, None, None]
         else:
             lifter: Lifter = _STATE["lifters"][m]
-            tracked = m in ("hybrid", "hybrid-offline", "learned-t", "learned-offline")
+            tracked = m in ("hybrid", "hybrid-lag", "hybrid-offline", "learned-t", "learned-offline")
             policy = TrackPolicy(lifter, track_timeout=1e9) if tracked else None
             if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
                 policy.smoothed_later = True
+            # the node with output_lag (pose_lifter.messages.lagged): each frame refined lag frames late
+            lag = int(_STATE.get("lag", 3))
+            lagged = None
+            if policy is not None and m == "hybrid-lag":
+                policy.smoothed_later = True
+                o = lifter.options
+                lagged = LaggedPoses(OFFLINE_SMOOTHING_S, 1.0, o.measurement_depth, o.measurement_gate)
             fit = np.full((n, 12, 3), np.nan)
             depth = np.full(n, np.nan)  # the centroid's depth error (%) on a perspective track
             warm = None
@@ -228,10 +239,17 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                     warm = None
                     continue
                 preds[i] = r.pose_camera * leg_m[i]
+                if lagged is not None and policy is not None:
+                    kept = policy.kept_later().get(0, [])
+                    lagged.add(0, int(stamps[i]), r.pose_camera, kept[-1] if kept else None)
+                    _lag_out(lagged, stamps, leg_m, preds, i - lag)
                 if perspective:  # the node's placement with the focal length and the person's true leg
                     z = place_in_camera(r, float(leg_m[i]), (FOCAL, FOCAL), None, dist_m).mean(axis=0)[2]
                     depth[i] = 100.0 * abs(z - dist_m) / dist_m
-            if policy is not None and policy.smoothed_later:  # the offline measurement update
+            if lagged is not None:  # the input stopped: the frames held are published
+                for k in range(max(0, n - lag), n):
+                    _lag_out(lagged, stamps, leg_m, preds, k)
+            elif policy is not None and policy.smoothed_later:  # the offline measurement update
                 index = {int(s): i for i, s in enumerate(stamps)}
                 for (_, stamp, _), pose in policy.measured_later().items():
                     fit[index[stamp]] = pose * leg_m[index[stamp]]
@@ -254,6 +272,16 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
         if m not in ("flat", "mean-pose") and perspective:
             out[m]["depth_pct"] = depth.tolist()
     return {"track": track.name, "cond": cond, "camera": track.camera, "n": n, "methods": out}
+
+
+def _lag_out(lagged: LaggedPoses, stamps: NDArray[np.int64], leg_m: NDArray[np.float64],
+             preds: NDArray[np.float64], k: int) -> None:
+    """Frame ``k``'s lagged pose into ``preds`` (metres), when the frame was lifted."""
+    if k < 0 or not np.isfinite(preds[k]).all():
+        return
+    pose = lagged.pose(0, int(stamps[k]))
+    if pose is not None:
+        preds[k] = pose * leg_m[k]
 
 
 def _tracks(split: str, data: str | None, frames: int, views: int, trials: list[str] | None = None,
@@ -301,6 +329,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="only these azimuths (degrees, elevation 0, --projection): cameras rotate over them")
     ap.add_argument("--projection", choices=PROJECTIONS, default="perspective",
                     help="the projection of the --azimuths cameras")
+    ap.add_argument("--lag", type=int, default=3, help="hybrid-lag: the node's output_lag (frames)")
     ap.add_argument("--intrinsics", action="store_true",
                     help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
@@ -330,6 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     settings = _parse(args.set)
     _STATE["distance"] = args.distance
     _STATE["intrinsics"] = args.intrinsics
+    _STATE["lag"] = args.lag
     if args.workers > 1:
         with mp.get_context("fork").Pool(args.workers, _init, (settings, methods, args.bases)) as pool:
             results = list(pool.imap_unordered(_job, jobs, chunksize=1))

@@ -64,7 +64,7 @@ from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_pri
 
 DEFAULT_CONDITIONS = ("detector6m", "detector3m", "clean", "noise0.05", "noise0.1", "outliers20", "missing15",
                       "lrswap", "lowercut", "close", "above")
-METHODS = ("flat", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-offline")
+METHODS = ("flat", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-lag", "hybrid-offline")
 AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
 #: Dropout of a fold's temporal priors (``make prior-temporal``'s, ``make prior-offline``'s).
 TEMPORAL_DROPOUT = 0.05
@@ -213,7 +213,7 @@ def render(record: dict[str, Any]) -> str:
         mean = [np.mean([folds[c]["table"][k][m]["p_mpjpe"] for c in classes]) for k in conds]
         lines.append("| **mean over classes** | | | " + " | ".join(f"**{v:.1f}**" for v in mean) + " |")
         lines.append("")
-    for m in ("hybrid", "hybrid-offline"):
+    for m in ("hybrid", "hybrid-lag", "hybrid-offline"):
         if m in methods:
             head = f"jitter (mean acceleration error, mm per frame^2), {m}, mean over classes: "
             lines += [head + ", ".join(

@@ -22,8 +22,10 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    (:func:`~pose_lifter.messages.cdr.skeleton3d_array_cdr`, the offline lift's writer; rclpy
    reads them as the message built field by field, ``tests/ros/test_rclpy_bytes.py``).
 4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
-   frame), then ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
-   :class:`~pose_lifter.messages.markers.MarkerBook`, the offline lift's too: the same bytes).
+   frame) at once, or with ``output_lag`` N after the next N frames, each skeleton's pose refined
+   over them (:class:`~pose_lifter.messages.lagged.LaggedFrames`), then ``skeleton_markers``
+   (``visualization_msgs/MarkerArray``, :class:`~pose_lifter.messages.markers.MarkerBook`, the
+   offline lift's too: the same bytes).
 5. With ``publish_hri`` (default), the tracked people as REP-155 bodies
    (:class:`~pose_lifter.ros.hri.HriOutputs`): ``/humans/bodies/tracked``, per body
    ``skeleton2d``, ``roi``, ``joint_states`` and the latched ``urdf``, and their frames on ``/tf``
@@ -73,6 +75,7 @@ from pose_lifter.messages.cdr import (
 )
 from pose_lifter.messages.frame import FramePipeline, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.hri import LiftedBody
+from pose_lifter.messages.lagged import LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
@@ -90,6 +93,10 @@ STATS_LINE: Final[str] = "stats line"  # the statistics line's window in the nod
 #: A frame's receive stamp older than this (s) is taken as another clock's: its latency counts from
 #: its callback instead.
 MAX_RECEIVE_AGE_S: Final[float] = 10.0
+#: With ``output_lag``, the frames held for it are published when no frame has come for this long
+#: (s): the input stopped or paused. Checked every LAG_CHECK_S.
+LAG_IDLE_S: Final[float] = 0.5
+LAG_CHECK_S: Final[float] = 0.1
 
 
 class StartupError(Exception):
@@ -155,6 +162,11 @@ class LifterNode(Node):
         freeze_long_lived()
 
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
+        lag = int(self._param("output_lag"))
+        # answers held for output_lag frames, (header, stamp, arrival) each
+        self._lagged: LaggedFrames[tuple[Any, float]] | None = (
+            LaggedFrames(self._pipeline, lag) if lag > 0 else None)
+        self._last_frame = time.perf_counter()
         self._markers = MarkerBook(MARKER_NS)
         self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
         self._counts = FrameCounter()  # one counter, a window per report (stats line, /diagnostics)
@@ -191,6 +203,8 @@ class LifterNode(Node):
         # triggered while frames wait after a lift: the executor comes back for the next one
         # between its other callbacks (camera_info, timers, parameter services)
         self._more = self.create_guard_condition(self._lift_next)
+        self._lag_timer = (self.create_timer(LAG_CHECK_S, self._publish_idle) if self._lagged is not None
+                           else None)
         period = float(self._param("stats_period"))
         self._stats_timer = None
         if period > 0:
@@ -201,6 +215,7 @@ class LifterNode(Node):
             f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
             f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}, "
             f"mode {options.mode}, weak perspective until camera_info arrives"
+            + (f", answers {self._lagged.lag} frames late (output_lag)" if self._lagged is not None else "")
         )
 
     def _hri_outputs(self) -> HriOutputs | None:
@@ -218,8 +233,12 @@ class LifterNode(Node):
 
     def deactivate_lifter(self) -> None:
         """Unsubscribe (the solver and the publishers stay: activating again is immediate); the
-        frames still waiting are dropped."""
+        frames still waiting are dropped, the answers held for ``output_lag`` published."""
         self._waiting.clear()
+        if self._lag_timer is not None:
+            self.destroy_timer(self._lag_timer)
+            self._lag_timer = None
+        self._publish_idle(force=True)
         self.destroy_guard_condition(self._more)
         for entity in (self._sub_keypoints, self._sub_camera_info):
             self.destroy_subscription(entity)
@@ -233,6 +252,8 @@ class LifterNode(Node):
 
     def cleanup_lifter(self) -> None:
         """Destroy the publishers and the diagnostics (back to the state after the constructor)."""
+        if self._lagged is not None:
+            self._lagged.clear()
         self._diagnostics.close()
         for pub in (self._pub_skeletons, self._pub_markers):
             self.destroy_publisher(pub)
@@ -398,6 +419,25 @@ class LifterNode(Node):
                 self._warn_skip(out.kind, f"skeleton skipped: {out}")
             else:
                 lifted.append(out)
+        if self._lagged is None:
+            self._publish(header, stamp_ns, lifted, received)
+            return
+        self._last_frame = time.perf_counter()
+        for f in self._lagged.push((header, received), stamp_ns, self._intrinsics, lifted):
+            self._publish(f.token[0], f.stamp_ns, f.lifted, f.token[1])
+
+    def _publish_idle(self, force: bool = False) -> None:
+        """Publish the answers held for ``output_lag`` when no frame has come for LAG_IDLE_S (or
+        ``force``): the input stopped, and nothing later will refine them."""
+        if self._lagged is None or not len(self._lagged):
+            return
+        if force or time.perf_counter() - self._last_frame > LAG_IDLE_S:
+            for f in self._lagged.flush():
+                self._publish(f.token[0], f.stamp_ns, f.lifted, f.token[1])
+
+    def _publish(self, header: Any, stamp_ns: int, lifted: list[LiftedSkeleton], received: float) -> None:
+        """A frame's answer on every output: ``skeletons_3d``, the markers, the REP-155 bodies;
+        ``received``: when its input arrived (its latency)."""
         # the frame's answer in CDR straight from the arrays, by the offline lift's writer
         # (messages/cdr.py; rclpy message objects cost ~0.5 ms more a skeleton: tools/node_callback.py)
         frame = SkeletonFrame.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],

@@ -28,6 +28,7 @@ from typing import Any, Final
 
 from pose_lifter.core.errors import OptionsError
 from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, OPTION_PARTS, LifterOptions
+from pose_lifter.core.track.lagged import MAX_LAG
 from pose_lifter.core.track.placement import LEG_LENGTH_RANGE_M
 from pose_lifter.messages.frame import FrameSettings
 
@@ -126,6 +127,12 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "the metric scale.", *LEG_LENGTH_RANGE_M, offline=True),
     ParamSpec("default_distance", _FRAME.default_distance, "Depth of the skeleton centroid in metres "
               "when no camera_info has been received.", 0.01, 1000.0, offline=True),
+    ParamSpec("output_lag", 0, "Frames each answer waits before it is published (0 = none, at once). "
+              "Waiting, each skeleton's pose is refined over the frames that came after it, as "
+              "pose-lifter lift refines a recording (the measurement update of the smoothed 2D, a "
+              "centred window): 3 frames (0.1 s at 30 Hz) take most of the offline accuracy "
+              "(docs/node.md). Held answers are published when the input stops.", 0, MAX_LAG,
+              read_only=True),
     ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
     ParamSpec("publish_hri", True, "Publish the tracked people as REP-155 bodies (/humans/bodies/...) and "
               "their frames on /tf.", read_only=True),

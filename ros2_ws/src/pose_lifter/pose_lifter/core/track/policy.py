@@ -39,7 +39,6 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   GATE_MAX_FRACTION of the visible joints (the prediction, not the detector, is then wrong), and a
   joint is gated on at most GATE_MAX_FRAMES frames in a row (so the track re-acquires a joint it
   lost).
-
 * hybrid mode, causal output smoothing (:class:`pose_lifter.core.track.smoothing.CausalSmoother`): the
   published pose is the prior's pose on this frame plus the fit's correction of it (fit minus
   prior) averaged over the track's frames (``LifterOptions.correction_smoothing``, exponential);
@@ -49,11 +48,9 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   noise estimates and gate keep the fit's own pose, so no smoothing feeds back into the next
   frame's fit. Every step reads only this and earlier frames (no look-ahead: the node and the
   offline lift publish the same).
-
 * a temporal prior of a frame inside its window (``PosePrior.future_frames > 0``: an offline
   lift's, which knows each track's next frames) reads the track's next frames too: the caller
   gives them (:class:`FramesAhead`); the live node's priors are causal.
-
 
 Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
 A track's state and the rules that read it are :mod:`pose_lifter.core.track.state`.
@@ -570,13 +567,18 @@ class TrackPolicy:
         return track.measured(result, points, follows, opts.measurement_update, opts.measurement_depth,
                               opts.measurement_gate)
 
+    def kept_later(self) -> dict[int, list[LaterFrame]]:
+        """The frames kept for the offline update since the last call (:attr:`smoothed_later`), by
+        track id, in the order lifted; then forgotten here."""
+        kept, self._later = self._later, {}
+        return kept
+
     def measured_later(self) -> dict[tuple[int, int, int], NDArray[np.float64]]:
         """The offline measurement update (:mod:`.later`) of the frames kept since the last call
-        (:attr:`smoothed_later`): the published pose (12, 3) by (track id, stamp, k) of each frame
-        it updates (:func:`~.later.update_tracks_later`); the kept frames are then forgotten."""
-        kept, self._later = self._later, {}
+        (:meth:`kept_later`): the published pose (12, 3) by (track id, stamp, k) of each frame it
+        updates (:func:`~.later.update_tracks_later`)."""
         opts = self.lifter.options
-        return update_tracks_later(kept, opts.measurement_depth, opts.measurement_gate)
+        return update_tracks_later(self.kept_later(), opts.measurement_depth, opts.measurement_gate)
 
 
 def compile_kernels() -> float:
