@@ -1,17 +1,23 @@
 """Each track's published pose a few frames late (the node's ``output_lag``).
 
-``pose-lifter lift`` refines a track's poses with its whole recording: the measurement update
-of the 2D smoothed over past and future frames, run both ways in time (:mod:`.later`), then a
-centred Gaussian window over the poses (:func:`.smoothing.centred_smoothing`). A live node knows
-no future, but a node that publishes each frame ``lag`` frames after it arrived knows that many.
-:class:`LaggedPoses` keeps each track's last WINDOW lifted frames and gives a frame's pose as
-that offline refinement over them, read at the frame: a fixed-lag smoother. With a lag of 3
-frames (0.1 s at 30 Hz) the window's centred smoothing (+-3 frames) is whole and the 2D
-smoother's future is mostly there; the track's earlier frames beyond the window change a
-frame's pose by little (measured in docs/accuracy.md, "A node that publishes late").
+``pose-lifter lift`` refines a track's poses with its whole recording (:mod:`.later`): the
+measurement update of the 2D smoothed over past and future frames, run forward and backward in
+time (each frame the mean of the two passes), then a centred Gaussian window over the poses
+(:func:`.smoothing.centred_smoothing`). A live node knows no future, but a node that publishes
+each frame ``lag`` frames after it arrived knows that many. :class:`LaggedPoses` gives a frame's
+pose as that refinement over the frames known then, a fixed-lag smoother:
 
-The lift itself is the node's: causal, each frame lifted when it arrives; only the published
-pose waits. Output-only: nothing of it feeds back into the track's next fits.
+* the track's 2D smoothed over its newest WINDOW frames (:func:`.later.smooth_track_2d`);
+* the forward pass of the update carried over the whole track, each frame taken once, when its
+  pose is asked for (its 2D then smoothed with ``lag`` frames of future), and continued over
+  the frames after it on a copy;
+* the backward pass started at the newest frame, as the offline one starts at a track's last;
+* the centred window over the mean of the two passes.
+
+With a lag of 3 frames (0.1 s at 30 Hz) the window (+-3 frames) is whole. The lift itself is the
+node's (causal, each frame lifted when it arrives); only the published pose waits, and nothing
+of it feeds back into the track's fits. Measured in docs/accuracy.md ("A node that publishes
+late").
 """
 
 from __future__ import annotations
@@ -23,80 +29,54 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from .later import LaterFrame, update_later
-from .smoothing import centred_smoothing
+from .later import LaterFrame, smooth_track_2d
+from .measurement import MeasurementUpdate
 
-__all__ = ["MAX_LAG", "WINDOW", "LaggedPoses", "lagged_pose"]
+__all__ = ["MAX_LAG", "WINDOW", "LaggedPoses"]
 
-#: Frames of a track that a lagged pose reads at most (the newest ones): 20 (0.67 s at 30 Hz)
-#: lifts within 0.2 mm of the whole past on val (docs/accuracy.md; 10 frames: 0.7 mm worse).
+#: The newest frames of a track whose 2D is smoothed for a lagged pose: 20 (0.67 s at 30 Hz);
+#: its backward pass and window read at most these.
 WINDOW: Final[int] = 20
-#: The largest lag (frames): the lagged frame must be inside the window, with past frames to read.
+#: The largest lag (frames): the lagged frame and its window must be inside WINDOW.
 MAX_LAG: Final[int] = 10
 
 
-def lagged_pose(stamps_ns: NDArray[np.int64], poses: NDArray[np.float64], later: list[LaterFrame | None],
-                at: int, smoothing_s: float, gap_s: float, depth: float, gate: float) -> NDArray[np.float64]:
-    """The pose of frame ``at`` of a track's frames refined as ``pose-lifter lift`` refines a whole
-    track: the offline measurement update (:func:`~.later.update_later`: the 2D smoothed over the
-    frames given, the update at every noise level, forward and backward in time) of the frames
-    that have one, then the centred Gaussian window (:func:`~.smoothing.centred_smoothing`) over
-    the poses. Nothing here minimises beyond what those two do (each states its objective).
+@dataclass
+class _Frame:
+    """One kept frame of a track."""
 
-    Parameters
-    ----------
-    stamps_ns : ndarray of int, shape (T,)
-        The frames' stamps, in the order they came.
-    poses : ndarray, shape (T, 12, 3)
-        Each frame's published pose without the update (camera frame, centred, model units).
-    later : list of LaterFrame or None, length T
-        What the offline update reads of each frame (None: the frame has no update; e.g. a
-        learned-mode track, or ``measurement_update`` off).
-    at : int
-        The frame whose pose is wanted (0 <= at < T).
-    smoothing_s : float
-        The window's standard deviation (seconds); 0: no window.
-    gap_s : float
-        A gap over this (seconds) splits the window (the track was forgotten there).
-    depth, gate : float
-        The update's ``measurement_depth`` and ``measurement_gate``.
+    stamp_ns: int
+    pose: NDArray[np.float64]  #: (12, 3) the published pose without the update
+    later: LaterFrame | None  #: what the update reads of it (None: no update)
+    forward: NDArray[np.float64] | None = None  #: the forward pass's pose, once taken
+    taken: bool = False  #: the forward pass has taken it
 
-    Returns
-    -------
-    ndarray, shape (12, 3)
-        Finite (a non-finite update or window leaves frame ``at``'s pose as given).
-    """
-    out = np.array(poses, dtype=np.float64)
-    rows = [k for k, f in enumerate(later) if f is not None]
-    if rows:
-        updated = update_later([later[k] for k in rows], depth, gate)  # type: ignore[misc]
-        for k, pose in zip(rows, updated, strict=True):
-            if pose is not None and np.isfinite(pose).all():
-                out[k] = pose
-    smooth: NDArray[np.float64] = centred_smoothing(out, np.asarray(stamps_ns, dtype=np.int64),
-                                                    np.ones(len(out), dtype=bool), smoothing_s, gap_s)[at]
-    if not np.isfinite(smooth).all():
-        return np.array(poses[at], dtype=np.float64)
-    return smooth
+
+def _later(f: _Frame) -> LaterFrame:
+    """What the update reads of a frame that has one."""
+    assert f.later is not None
+    return f.later
 
 
 @dataclass
 class _Track:
-    """One track's kept frames (the newest WINDOW)."""
+    """One track's newest WINDOW frames and its forward pass."""
 
-    stamps: deque[int] = field(default_factory=lambda: deque(maxlen=WINDOW))
-    poses: deque[NDArray[np.float64]] = field(default_factory=lambda: deque(maxlen=WINDOW))
-    later: deque[LaterFrame | None] = field(default_factory=lambda: deque(maxlen=WINDOW))
+    frames: deque[_Frame] = field(default_factory=lambda: deque(maxlen=WINDOW))
+    forward: MeasurementUpdate | None = None  #: the forward pass's state (None: starts again)
 
 
 class LaggedPoses:
-    """The tracks' kept frames and their lagged poses (:func:`lagged_pose`).
+    """The tracks' kept frames and their lagged poses (module docstring).
 
     Parameters
     ----------
-    smoothing_s, gap_s, depth, gate : float
-        As :func:`lagged_pose` (the offline lift's window, the track timeout, the lifter's
-        ``measurement_depth`` and ``measurement_gate``).
+    smoothing_s : float
+        The centred window's standard deviation (seconds; ``pose-lifter lift``'s).
+    gap_s : float
+        A gap over this (seconds) splits the window (the track's timeout: it was forgotten).
+    depth, gate : float
+        The update's ``measurement_depth`` and ``measurement_gate`` (the lifter's options).
     """
 
     def __init__(self, smoothing_s: float, gap_s: float, depth: float, gate: float) -> None:
@@ -111,27 +91,112 @@ class LaggedPoses:
         reads of it (None: none). A stamp before the track's last one (the input clock jumped
         back) starts the track again."""
         t = self._tracks.get(track_id)
-        if t is None or (t.stamps and stamp_ns < t.stamps[-1]):
+        if t is None or (t.frames and stamp_ns < t.frames[-1].stamp_ns):
             t = self._tracks[track_id] = _Track()
-        t.stamps.append(int(stamp_ns))
-        t.poses.append(np.array(pose, dtype=np.float64))
-        t.later.append(later)
+        t.frames.append(_Frame(int(stamp_ns), np.array(pose, dtype=np.float64), later))
 
     def pose(self, track_id: int, stamp_ns: int) -> NDArray[np.float64] | None:
-        """The lagged pose (12, 3) of the track's kept frame at ``stamp_ns`` (the latest kept frame
-        with that stamp), read over the frames kept now; None when it is no longer kept."""
+        """The lagged pose (12, 3; finite) of the track's kept frame at ``stamp_ns`` (the latest
+        with that stamp), refined over the frames kept now; None when it is no longer kept. Ask
+        for a track's frames in time order: each is taken by the forward pass when first asked."""
         t = self._tracks.get(track_id)
         if t is None:
             return None
-        at = [k for k, s in enumerate(t.stamps) if s == stamp_ns]
-        if not at:
+        frames = list(t.frames)
+        at = next((k for k in range(len(frames) - 1, -1, -1) if frames[k].stamp_ns == stamp_ns), None)
+        if at is None:
             return None
-        return lagged_pose(np.array(t.stamps, dtype=np.int64), np.array(t.poses), list(t.later), at[-1],
-                           self.smoothing_s, self.gap_s, self.depth, self.gate)
+        # the update's run holding the frame (a frame that does not follow its track's last starts one)
+        rows = [k for k, f in enumerate(frames) if f.later is not None]
+        starts = [k for k in rows if not _later(frames[k]).follows]
+        first = max([k for k in starts if k <= at], default=0)
+        end = min([k for k in starts if k > at], default=len(frames))
+        run = [k for k in rows if first <= k < end]
+        refined = [f.pose for f in frames[first:end]]
+        if run:
+            self._update(t, frames, run, at, first, refined)
+        out = self._window(np.array([f.stamp_ns for f in frames[first:end]], dtype=np.int64), refined,
+                           at - first)
+        return out if np.isfinite(out).all() else np.array(frames[at].pose, dtype=np.float64)
+
+    def _window(self, stamps_ns: NDArray[np.int64], poses: list[NDArray[np.float64]], at: int
+                ) -> NDArray[np.float64]:
+        """Row ``at`` of :func:`.smoothing.centred_smoothing` of ``poses`` (the frames' stamps
+        increasing): the Gaussian-weighted mean of the frames within 3 standard deviations of it
+        and no gap over ``gap_s`` away."""
+        if self.smoothing_s <= 0:
+            return np.array(poses[at], dtype=np.float64)
+        t = (stamps_ns - stamps_ns[at]) * 1e-9
+        gaps = np.diff(t) > self.gap_s
+        segment = np.concatenate([[0], np.cumsum(gaps)])
+        near = (segment == segment[at]) & (np.abs(t) <= 3.0 * self.smoothing_s)
+        w = np.exp(-0.5 * (t[near] / self.smoothing_s) ** 2)
+        rows = np.flatnonzero(near)
+        return np.asarray(np.einsum("k,kjc->jc", w, np.array([poses[k] for k in rows])) / w.sum(),
+                          dtype=np.float64)
+
+    def _update(self, t: _Track, frames: list[_Frame], run: list[int], at: int, first: int,
+                refined: list[NDArray[np.float64]]) -> None:
+        """The update's two passes over the ``run`` (indices into ``frames`` of the frames with an
+        update) around frame ``at``, into ``refined`` (the poses of ``frames[first:]``)."""
+        later = [_later(frames[k]) for k in run]
+        smoothed, ratio = smooth_track_2d(np.array([f.points for f in later]),
+                                          np.array([f.used for f in later]),
+                                          np.array([f.stamp_ns for f in later], dtype=np.int64))
+        # forward: the track's state takes each frame up to this one once; the later ones on a copy
+        fwd: dict[int, NDArray[np.float64] | None] = {}
+        state = t.forward
+        for j, k in enumerate(run):
+            f = frames[k]
+            if k > at:
+                break
+            if not f.taken:
+                start = state if later[j].follows else None  # a new run starts the pass again
+                state, f.forward = self._step(start, later[j], smoothed[j], ratio, None)
+                f.taken = True
+            fwd[k] = f.forward
+        t.forward = state
+        state = None if state is None else state.copy()
+        for j, k in enumerate(run):
+            if k > at:
+                state, fwd[k] = self._step(state, later[j], smoothed[j], ratio, None)
+        # backward: from the newest frame down to the first the window around this one reads
+        reach = self.smoothing_s * 3e9
+        known = [f.noise for f in later if f.noise is not None]
+        back: MeasurementUpdate | None = None
+        for j in range(len(run) - 1, -1, -1):
+            k = run[j]
+            if frames[k].stamp_ns < frames[at].stamp_ns - reach:
+                break
+            back, bwd = self._step(back, later[j], smoothed[j], ratio, known[0] if known else None)
+            p = fwd.get(k)
+            if p is not None and bwd is not None:
+                refined[k - first] = 0.5 * (p + bwd)
+            elif p is not None:
+                refined[k - first] = p
+            elif bwd is not None:
+                refined[k - first] = bwd
+
+    def _step(self, state: MeasurementUpdate | None, f: LaterFrame, smoothed: NDArray[np.float64],
+              ratio: float, fill: float | None
+              ) -> tuple[MeasurementUpdate | None, NDArray[np.float64] | None]:
+        """One frame of a pass (:func:`.later.update_later`'s): the new state and the frame's
+        pose, None where the frame has no noise known (``fill``: the noise then) or the update
+        is not finite (the pass then starts again)."""
+        noise = f.noise if f.noise is not None else fill
+        if noise is None:
+            return state, None
+        if state is None:
+            state = MeasurementUpdate()
+        points = np.where(np.isfinite(smoothed), smoothed, f.points)
+        pose = state.update(f.pose, points, f.used, noise * ratio, self.depth, self.gate)
+        if not np.isfinite(pose).all():
+            return None, None
+        return state, pose
 
     def forget(self, before_ns: int) -> None:
         """Forget the tracks whose newest frame is older than ``before_ns``."""
-        for track_id in [k for k, t in self._tracks.items() if t.stamps[-1] < before_ns]:
+        for track_id in [k for k, t in self._tracks.items() if t.frames[-1].stamp_ns < before_ns]:
             del self._tracks[track_id]
 
     def clear(self) -> None:

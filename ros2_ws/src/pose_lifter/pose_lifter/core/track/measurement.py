@@ -51,6 +51,7 @@ in ``docs/tuning.md`` and docs/accuracy.md.
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import NamedTuple
 
@@ -369,6 +370,14 @@ class MeasurementUpdate:
         self.n_spans = 0
         self.limbs: NDArray[np.float64] | None = None
         self.limbs_at = -SPAN_EVERY
+
+    def copy(self) -> MeasurementUpdate:
+        """An independent copy of the state (its arrays copied)."""
+        out = MeasurementUpdate.__new__(MeasurementUpdate)
+        out.arrays = copy.deepcopy(self.arrays)
+        out.spans = self.spans.copy()
+        out.n_spans, out.limbs, out.limbs_at = self.n_spans, self.limbs, self.limbs_at
+        return out
 
     def limb_lengths(self) -> NDArray[np.float64] | None:
         """The track's limb lengths from the image (8,; left and right averaged; model units), or

@@ -1,11 +1,13 @@
-"""A track's lagged poses (core.track.lagged): the window of frames they read, a clock that jumps
-back, forgetting idle tracks, and the pose without an update (the centred window alone)."""
+"""A track's lagged poses (core.track.lagged): without an update, the centred window over the
+frames kept (checked against the offline lift's smoothing and the weights written out); the
+window of frames kept, a clock that jumps back, forgetting idle tracks; with the update, the
+forward pass of a frame is taken once."""
 
 from __future__ import annotations
 
 import numpy as np
 import tolerances as tol
-from pose_lifter.core.track.lagged import WINDOW, LaggedPoses, lagged_pose
+from pose_lifter.core.track.lagged import WINDOW, LaggedPoses
 from pose_lifter.core.track.smoothing import centred_smoothing
 
 STEP = 33_333_333
@@ -17,18 +19,20 @@ def _poses(n: int, seed: int = 0) -> np.ndarray:
     return p - p.mean(axis=1, keepdims=True)
 
 
-def test_without_an_update_the_lagged_pose_is_the_centred_window_over_the_frames_given() -> None:
+def test_without_an_update_the_lagged_pose_is_the_offline_window_over_the_frames_kept() -> None:
     poses = _poses(12)
     stamps = np.arange(12, dtype=np.int64) * STEP
+    stamps[9:] += 2 * 10**9  # a gap over the timeout: frames 9-11 are another segment
+    kept = LaggedPoses(0.04, 1.0, 0.5, 0.3)
+    for s, p in zip(stamps, poses, strict=True):
+        kept.add(3, int(s), p, None)
     # the independent reference: the Gaussian weights written out for frame 5 (+-3 frames at 0.04 s)
     w = np.exp(-0.5 * ((np.arange(2, 9) - 5) * STEP * 1e-9 / 0.04) ** 2)
     expect = np.einsum("k,kjc->jc", w, poses[2:9]) / w.sum()
-    got = lagged_pose(stamps, poses, [None] * 12, 5, 0.04, 1.0, 0.5, 0.3)
-    np.testing.assert_allclose(got, expect, rtol=0, atol=tol.ROUND_OFF)
-    # truncated where the frames end: frame 10 reads 7..11 only
-    got = lagged_pose(stamps, poses, [None] * 12, 10, 0.04, 1.0, 0.5, 0.3)
-    np.testing.assert_allclose(got, centred_smoothing(poses, stamps, np.ones(12, bool), 0.04, 1.0)[10],
-                               rtol=0, atol=tol.ROUND_OFF)
+    np.testing.assert_allclose(kept.pose(3, int(stamps[5])), expect, rtol=0, atol=tol.ROUND_OFF)
+    offline = centred_smoothing(poses, stamps, np.ones(12, dtype=bool), 0.04, 1.0)
+    for k in (0, 7, 8, 9, 11):  # truncated at the ends and at the gap, as pose-lifter lift truncates
+        np.testing.assert_allclose(kept.pose(3, int(stamps[k])), offline[k], rtol=0, atol=tol.ROUND_OFF)
 
 
 def test_a_track_keeps_its_newest_window_forgets_when_idle_and_restarts_when_the_clock_jumps_back() -> None:
