@@ -226,9 +226,11 @@ def _report(args: argparse.Namespace, bag: _Bag, answers: dict[int, tuple[float,
             sent: dict[int, float], log: Any, mem: dict[str, int]) -> None:
     """Print the frames answered, the solve times, the latencies and the node's memory."""
     text = Path(log.name).read_text(errors="replace")
+    # the bag's frames only (a lagged node, output_lag, answers late handshake probes too)
+    answers = {k: v for k, v in answers.items() if k in sent}
     warm = [s.solve_time * 1e3 for _, a in answers.values() for s in a.skeletons if s.warm_started]
     cold = [s.solve_time * 1e3 for _, a in answers.values() for s in a.skeletons if not s.warm_started]
-    e2e = [(t - sent[k]) * 1e3 for k, (t, _) in answers.items() if k in sent]
+    e2e = [(t - sent[k]) * 1e3 for k, (t, _) in answers.items()]
     stats = [line for line in text.splitlines() if "frames (" in line]
     cb = [float(v) for line in stats for v in re.findall(r"latency median ([\d.]+) ms", line)]
     print(f"bag {Path(args.bag).name}: {len(bag.kp_msgs)} frames x {args.loops} loops at {args.rate:g} Hz, "

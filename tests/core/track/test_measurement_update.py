@@ -390,3 +390,23 @@ def test_offline_the_update_runs_both_ways_in_time_and_does_not_lag() -> None:
     # alone: 0.035 on its first), 0.18 on the two frames only the backward pass updates
     assert moved.min() > 0.09
     assert abs(moved[2] - moved[-1]) < 0.01
+
+
+def test_a_copy_of_the_state_goes_on_as_the_original_and_leaves_it_alone() -> None:
+    """The lagged node (core/track/lagged.py) continues a track's forward pass on a copy."""
+    pose = _pose()
+    rng = np.random.default_rng(3)
+    frames = [(pose + rng.normal(scale=0.02, size=pose.shape),
+               100.0 * pose[:, :2] + rng.normal(scale=2.0, size=(12, 2))) for _ in range(12)]
+    used = np.ones(12, dtype=bool)
+
+    def run(update: MeasurementUpdate, part: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+        return np.array([update.update(p, x, used, 0.01, 0.5, 0.3) for p, x in part])
+
+    original, reference = MeasurementUpdate(), MeasurementUpdate()
+    run(original, frames[:8])  # past SPAN_MIN_FRAMES: the copy carries the limb lengths too
+    run(reference, frames[:8])
+    expected = run(reference, frames[8:])
+    copied = original.copy()
+    np.testing.assert_array_equal(run(copied, frames[8:]), expected)
+    np.testing.assert_array_equal(run(original, frames[8:]), expected)  # the copy's steps left it alone
