@@ -119,3 +119,32 @@ def test_lagged_answers_are_nearer_the_truth_on_the_detector_like_bag(lifter: Li
 def test_a_lag_out_of_range_is_refused(lifter: Lifter, lag: int) -> None:
     with pytest.raises(ValueError, match=f"lag must be 1 to {MAX_LAG} frames"):
         LaggedFrames(FramePipeline(lifter, FrameSettings()), lag)
+
+
+def test_the_offline_lift_with_a_lag_gives_the_lagged_nodes_answers(lifter: Lifter) -> None:
+    """`pose-lifter lift --smoothing 0 --lag 3`: what the node publishes with output_lag 3, message
+    for message (the same lift, the same refinement, the last frames as the node gives them when
+    its input stops)."""
+    from pose_lifter.offline.lift import lift_messages
+    from pose_lifter.offline.settings import LiftSettings
+
+    frames, _, intrinsics = _bag("two_people.mcap", 30)
+    recorded = list(read_messages(BAGS / "two_people.mcap", [TOPIC_CAMERA_INFO]))
+    infos = [(x.stamp_ns, x.msg) for x in recorded]
+    node = [(frames[i][0], s) for i, _, lifted in _answers(lifter, frames, intrinsics, LAG) for s in lifted]
+    offline = lift_messages(frames, infos, lifter, LiftSettings(smoothing_s=0.0, output_lag=LAG), workers=2)
+    assert [(f.stamp_ns, f.track_id) for f in offline] == [(s, x.track_id) for s, x in node]
+    np.testing.assert_array_equal(np.array([f.joints_m for f in offline]),
+                                  np.array([x.joints_m for _, x in node]))
+    # not the unlagged answers
+    plain = lift_messages(frames, infos, lifter, LiftSettings(smoothing_s=0.0))
+    assert not np.allclose(np.array([f.joints_m for f in plain]), np.array([f.joints_m for f in offline]))
+
+
+def test_a_lag_with_the_offline_smoothing_is_refused() -> None:
+    from pose_lifter.offline.settings import LiftSettings
+
+    with pytest.raises(ValueError, match="--lag N --smoothing 0"):
+        LiftSettings(output_lag=LAG)
+    with pytest.raises(ValueError, match="output_lag must be 0 to"):
+        LiftSettings(smoothing_s=0.0, output_lag=MAX_LAG + 1)

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
+from pose_lifter.core.track.defaults import MAX_LAG
 from pose_lifter.core.track.placement import DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
@@ -414,6 +415,9 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                    help="each track's poses smoothed by a centred Gaussian window of this standard "
                    "deviation, past and future frames alike (offline only; default "
                    f"{OFFLINE_SMOOTHING_S}); 0: the live node's causal poses, message for message")
+    p.add_argument("--lag", type=_number(int, 0, MAX_LAG), default=0, metavar="FRAMES",
+                   help="with --smoothing 0: the node's answers with output_lag:=FRAMES, each pose "
+                   "refined over the frames after it, message for message (one process per bag)")
     p.add_argument("--hri", action="store_true",
                    help="also write the node's REP-155 outputs: /humans/bodies/tracked, per body "
                    "skeleton2d, roi, joint_states, urdf, and /tf (Foxglove and RViz show the bodies as "
@@ -589,7 +593,6 @@ def _library_errors() -> tuple[type[BaseException], ...]:
     from pose_lifter.core.errors import PoseLifterError
 
     return (PoseLifterError, OSError, ValueError)
-
 
 
 if __name__ == "__main__":

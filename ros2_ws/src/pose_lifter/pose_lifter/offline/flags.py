@@ -66,7 +66,8 @@ def lift_settings(args: argparse.Namespace, params: Any = None) -> LiftSettings:
     keep = keep_topics(args.keep)
     common: dict[str, Any] = dict(every=args.every, max_messages=args.max_messages, topic=args.topic,
                                   camera_info_topic=args.camera_info_topic or None, keep=keep,
-                                  smoothing_s=args.smoothing, hri=args.hri)
+                                  smoothing_s=args.smoothing, output_lag=getattr(args, "lag", 0),
+                                  hri=args.hri)
     if params is None:
         return LiftSettings(options=flag_options(args), bases=args.bases, warm_start=not args.no_warm_start,
                             lower_leg_length=args.leg_length, default_distance=DEFAULT_DISTANCE_M, **common)

@@ -14,7 +14,8 @@ topics. Where it differs, on purpose:
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.offline.chains.inputs_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
-  priors and poses.
+  priors and poses, and with ``output_lag`` N the node's answers with ``output_lag:=N``
+  (:class:`pose_lifter.messages.lagged.LaggedFrames`, the messages in order in one process).
 
 The lifted bag is evaluated by :mod:`pose_lifter.offline.evaluate`.
 """
@@ -33,7 +34,15 @@ from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.messages import cdr, hri
 from pose_lifter.messages import convert as m
-from pose_lifter.messages.frame import FramePipeline, FrameSettings, SkipSkeleton, labelled_2d
+from pose_lifter.messages.frame import (
+    CheckedFrame,
+    FramePipeline,
+    FrameSettings,
+    LiftedSkeleton,
+    SkipSkeleton,
+    labelled_2d,
+)
+from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.names import (
     CAMERA_INFO,
@@ -160,7 +169,8 @@ def lift_messages(
         Read here: ``warm_start``, ``track_timeout``, ``reinit_ratio``, ``lower_leg_length``,
         ``default_distance`` (:func:`frame_settings`) and ``smoothing_s``: 0 gives the node's
         causal poses; ``> 0`` smooths each track's poses with a centred Gaussian window of this
-        standard deviation in seconds, past and future frames alike (:mod:`pose_lifter.core.track.smoothing`).
+        standard deviation in seconds, past and future frames alike (:mod:`pose_lifter.core.track.smoothing`);
+        ``output_lag`` (with ``smoothing_s`` 0): the node's lagged answers (``workers`` unused).
         Its ``options`` and ``bases`` are not read (``lifter`` is the solver).
     progress : bool
         Show a tqdm progress bar (skeletons).
@@ -181,7 +191,11 @@ def lift_messages(
     summ = summary if summary is not None else LiftSummary()
     frame = frame_settings(settings)
     chains, per_msg, checked = split_chains(keypoint_msgs, camera_infos, FramePipeline(lifter, frame))
-    done = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, message_fields_only, progress)
+    if settings.output_lag:
+        done = _lift_lagged(lifter, keypoint_msgs, per_msg, checked, frame, settings.output_lag)
+    else:
+        done = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, message_fields_only,
+                            progress)
     out: list[FrameLift] = []
     for (stamp, msg), row, frame_check in zip(keypoint_msgs, per_msg, checked, strict=True):
         for skip in frame_check.skipped:
@@ -211,6 +225,42 @@ def lift_messages(
         if on_frame is not None:
             on_frame(stamp, msg, lifted, results)
     return out
+
+
+def _lift_lagged(lifter: Lifter, keypoint_msgs: list[tuple[int, Any]],
+                 per_msg: list[list[Item | SkipSkeleton]], checked: list[CheckedFrame], frame: FrameSettings,
+                 lag: int) -> dict[int, Done]:
+    """The node's answers with ``output_lag`` = ``lag``: every answered message through one frame
+    pipeline, in order, as the node lifts it, and its skeletons refined when ``lag`` later messages
+    have been lifted (:class:`~pose_lifter.messages.lagged.LaggedFrames`; the last ``lag`` when the
+    messages end, as the node publishes them when its input stops). One process:
+    ``id(item) -> outcome``."""
+    pipeline = FramePipeline(lifter, frame)
+    lagged: LaggedFrames[int] = LaggedFrames(pipeline, lag)
+    held: dict[int, list[tuple[Item, LiftedSkeleton | SkipSkeleton]]] = {}
+    done: dict[int, Done] = {}
+
+    def release(f: LaggedFrame[int]) -> None:
+        refined = iter(f.lifted)
+        for item, x in held.pop(f.token):
+            if isinstance(x, SkipSkeleton):
+                done[id(item)] = Done(item, None, None, False, 0.0, str(x))
+                continue
+            s = next(refined)
+            done[id(item)] = Done(item, s.result, s.joints_m, s.warm_started, s.solve_time, None, s.swapped)
+
+    for i, ((stamp, _), row, check) in enumerate(zip(keypoint_msgs, per_msg, checked, strict=True)):
+        if not check.answered:
+            continue
+        items = [x for x in row if isinstance(x, Item)]
+        intrinsics = items[0].intrinsics if items else None
+        outs = pipeline.frame(check, stamp, intrinsics)  # one per checked skeleton, as ``row``
+        held[i] = [(x, o) for x, o in zip(row, outs, strict=True) if isinstance(x, Item)]
+        for f in lagged.push(i, stamp, intrinsics, [o for _, o in held[i] if isinstance(o, LiftedSkeleton)]):
+            release(f)
+    for f in lagged.flush():
+        release(f)
+    return done
 
 
 def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings, smoothing_s: float,

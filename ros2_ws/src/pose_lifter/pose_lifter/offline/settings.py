@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
+from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S, MAX_LAG
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
@@ -75,8 +75,17 @@ class LiftSettings:
     reinit_ratio: float = DEFAULT_REINIT_RATIO
     # centred, offline only, with the offline prior (0: the node's causal priors and poses)
     smoothing_s: float = OFFLINE_SMOOTHING_S
+    # with smoothing_s 0: the node's answers with output_lag (frames), each refined over the next
+    output_lag: int = 0
     marker_lifetime: float = 0.0
     hri: bool = False  # the node's REP-155 outputs (/humans/bodies/..., /tf) into the output bag
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.output_lag <= MAX_LAG:
+            raise ValueError(f"output_lag must be 0 to {MAX_LAG} frames, got {self.output_lag}")
+        if self.output_lag and self.smoothing_s > 0:
+            raise ValueError("a lag gives the live node's lagged answers, whose lift is causal: use it "
+                             "without the offline smoothing (--lag N --smoothing 0)")
 
     def to_json(self) -> dict[str, Any]:
         """The settings as JSON-ready values (options sorted by name)."""

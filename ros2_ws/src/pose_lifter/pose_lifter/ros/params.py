@@ -28,7 +28,7 @@ from typing import Any, Final
 
 from pose_lifter.core.errors import OptionsError
 from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, OPTION_PARTS, LifterOptions
-from pose_lifter.core.track.lagged import MAX_LAG
+from pose_lifter.core.track.defaults import MAX_LAG
 from pose_lifter.core.track.placement import LEG_LENGTH_RANGE_M
 from pose_lifter.messages.frame import FrameSettings
 

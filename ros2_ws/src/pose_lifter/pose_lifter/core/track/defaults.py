@@ -9,10 +9,13 @@ from __future__ import annotations
 
 from typing import Final
 
-__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S"]
+__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "MAX_LAG"]
 
 #: Seconds of input time a track's warm start stays valid (the node's ``track_timeout``).
 DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: A warm solve whose objective exceeds this times the track's recent median is redone cold
 #: (the node's ``reinit_ratio``).
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
+#: The largest ``output_lag`` (frames) of the node and ``pose-lifter lift --lag``: a lagged frame
+#: and its window fit in the frames a track keeps for it (:data:`.lagged.WINDOW`).
+MAX_LAG: Final[int] = 10

@@ -29,6 +29,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from .defaults import MAX_LAG
 from .later import LaterFrame, smooth_track_2d
 from .measurement import MeasurementUpdate
 
@@ -37,8 +38,6 @@ __all__ = ["MAX_LAG", "WINDOW", "LaggedPoses"]
 #: The newest frames of a track whose 2D is smoothed for a lagged pose: 20 (0.67 s at 30 Hz);
 #: its backward pass and window read at most these.
 WINDOW: Final[int] = 20
-#: The largest lag (frames): the lagged frame and its window must be inside WINDOW.
-MAX_LAG: Final[int] = 10
 
 
 @dataclass
