@@ -148,3 +148,21 @@ def test_a_lag_with_the_offline_smoothing_is_refused() -> None:
         LiftSettings(output_lag=LAG)
     with pytest.raises(ValueError, match="output_lag must be 0 to"):
         LiftSettings(smoothing_s=0.0, output_lag=MAX_LAG + 1)
+
+
+def test_untracked_people_are_answered_as_lifted(lifter: Lifter) -> None:
+    """Skeletons without a track id (-1) have no past or future of their own: a frame of two
+    untracked people gets, lag frames late, exactly the unlagged answers."""
+    frames, _, intrinsics = _bag("two_people.mcap", 8)
+    untracked = []
+    for stamp, msg in frames:
+        skeletons = [type(s)(**{**{f: getattr(s, f) for f in s.__dataclass_fields__}, "track_id": -1})
+                     for s in msg.skeletons]
+        untracked.append((stamp, type(msg)(**{**{f: getattr(msg, f) for f in msg.__dataclass_fields__},
+                                              "skeletons": skeletons})))
+    now = _answers(lifter, untracked, intrinsics, 0)
+    late = _answers(lifter, untracked, intrinsics, LAG)
+    for (_, _, a), (_, _, b) in zip(now, late, strict=True):
+        assert len(a) == len(b) == 2
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x.joints_m, y.joints_m)

@@ -84,6 +84,8 @@ class LaggedFrames(Generic[T]):
         self._poses.gap_s = self.pipeline.settings.track_timeout
         kept = self.pipeline.policy.kept_later()
         for s in lifted:
+            if s.track_id < 0:  # untracked: no past, no future; published as lifted
+                continue
             frames = [f for f in kept.get(s.track_id, []) if f.stamp_ns == stamp_ns]
             later: LaterFrame | None = frames[-1] if frames else None
             self._poses.add(s.track_id, stamp_ns, s.result.pose_camera, later)
@@ -108,11 +110,11 @@ class LaggedFrames(Generic[T]):
         self.pipeline.policy.kept_later()
 
     def _refined(self, frame: LaggedFrame[T]) -> LaggedFrame[T]:
-        """``frame`` with each skeleton's pose refined (:class:`LaggedPoses`) and placed again;
-        a skeleton whose refined pose cannot be placed keeps the pose it was lifted with."""
+        """``frame`` with each tracked skeleton's pose refined (:class:`LaggedPoses`) and placed
+        again; a skeleton whose refined pose cannot be placed keeps the pose it was lifted with."""
         rows, poses = [], []
         for k, s in enumerate(frame.lifted):
-            pose = self._poses.pose(s.track_id, frame.stamp_ns)
+            pose = self._poses.pose(s.track_id, frame.stamp_ns) if s.track_id >= 0 else None
             if pose is not None:
                 rows.append(k)
                 poses.append(pose)
