@@ -51,7 +51,6 @@ in ``docs/tuning.md`` and docs/accuracy.md.
 
 from __future__ import annotations
 
-import copy
 import math
 from typing import NamedTuple
 
@@ -374,7 +373,7 @@ class MeasurementUpdate:
     def copy(self) -> MeasurementUpdate:
         """An independent copy of the state (its arrays copied)."""
         out = MeasurementUpdate.__new__(MeasurementUpdate)
-        out.arrays = copy.deepcopy(self.arrays)
+        out.arrays = TrackArrays._make(a.copy() for a in self.arrays)
         out.spans = self.spans.copy()
         out.n_spans, out.limbs, out.limbs_at = self.n_spans, self.limbs, self.limbs_at
         return out
