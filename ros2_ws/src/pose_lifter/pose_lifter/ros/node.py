@@ -163,7 +163,7 @@ class LifterNode(Node):
 
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
         lag = int(self._param("output_lag"))
-        # answers held for output_lag frames, (header, stamp, arrival) each
+        # answers held for output_lag frames: (header, arrival time) each
         self._lagged: LaggedFrames[tuple[Any, float]] | None = (
             LaggedFrames(self._pipeline, lag) if lag > 0 else None)
         self._last_frame = time.perf_counter()
