@@ -30,7 +30,8 @@ runs ``mode: learned``: the causal temporal prior) and ``learned-offline`` (the 
 past and future frames: ``pose-lifter lift --mode learned``); ``hybrid`` tracked (default mode,
 the node's per-track policy :class:`pose_lifter.core.track.policy.TrackPolicy`),
 ``hybrid-lag`` (the node with ``output_lag`` ``--lag`` frames, 3 by default: each frame's pose
-refined over the next frames, :mod:`pose_lifter.core.track.lagged`),
+refined over the next frames, :mod:`pose_lifter.core.track.lagged`; from 6 frames its lift reads
+3 frames ahead, :mod:`pose_lifter.messages.lagged`),
 ``hybrid-offline`` (the tracks as ``pose-lifter lift`` gives them: without the causal smoothing
 of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.track.smoothing`) and
 ``hybrid-1`` (every frame cold).
@@ -66,10 +67,12 @@ from pose_lifter.core import Lifter, LifterOptions, PoseBases, p_mpjpe
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
+from pose_lifter.core.track.defaults import AHEAD_LAG
 from pose_lifter.core.track.lagged import LaggedPoses
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
+from pose_lifter.messages.lagged import frames_ahead
 from pose_lifter.mocap.cmu import load_trial, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -134,7 +137,8 @@ def _init(settings: dict[str, Any], methods: tuple[str, ...], bases_file: str | 
             mode = "hybrid" if m.startswith("hybrid") else m.removesuffix("-t").removesuffix("-offline")
             bases = PoseBases.load(bases_file or default_bases_path(mode))
             # an offline lift knows each track's next frames (pose-lifter lift: its offline prior)
-            ahead = m.endswith("-offline")
+            # the lagged node reads ahead from AHEAD_LAG on (pose_lifter.messages.lagged)
+            ahead = m.endswith("-offline") or (m == "hybrid-lag" and int(_STATE.get("lag", 3)) >= AHEAD_LAG)
             opts = LifterOptions(mode=mode).replace(**{**settings, **((offline or {}) if ahead else {})})
             lifters[m] = Lifter(bases, opts, reads_ahead=ahead)
             lifters[m].warm_up()
@@ -209,7 +213,8 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
                 policy.smoothed_later = True
             # the node with output_lag (pose_lifter.messages.lagged): each frame refined lag frames late
-            lag = int(_STATE.get("lag", 3))
+            lag = int(_STATE.get("lag", 3))  # frames of refinement: the rest of the lag, after the lift's
+            lag -= frames_ahead(lifter) if m == "hybrid-lag" else 0
             lagged = None
             if policy is not None and m == "hybrid-lag":
                 policy.smoothed_later = True

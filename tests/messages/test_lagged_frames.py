@@ -13,7 +13,7 @@ import pytest
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import FramePipeline, FrameSettings, Intrinsics, LiftedSkeleton
-from pose_lifter.messages.lagged import MAX_LAG, LaggedFrames
+from pose_lifter.messages.lagged import AHEAD_LAG, MAX_LAG, LaggedFrames
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
 
@@ -40,17 +40,22 @@ def _answers(lifter: Lifter, frames: list[tuple[int, Any]], intrinsics: Intrinsi
     lagged: LaggedFrames[int] | None = LaggedFrames(pipeline, lag) if lag else None
     out: list[tuple[int, int, list[LiftedSkeleton]]] = []
     for i, (stamp, msg) in enumerate(frames):
-        lifted = [x for x in pipeline.frame(pipeline.check(msg), stamp, intrinsics)
-                  if isinstance(x, LiftedSkeleton)]
+        checked = pipeline.check(msg)
         if lagged is None:
-            out.append((i, i, lifted))
+            out.append((i, i, [x for x in pipeline.frame(checked, stamp, intrinsics)
+                               if isinstance(x, LiftedSkeleton)]))
             continue
-        out += [(f.token, i, f.lifted) for f in lagged.push(i, stamp, intrinsics, lifted)]
+        out += [(f.token, i, f.lifted) for f in lagged.lift(i, stamp, intrinsics, checked)]
     if lagged is not None:
         assert len(lagged) == min(lag, len(frames))
         out += [(f.token, len(frames), f.lifted) for f in lagged.flush()]
         assert len(lagged) == 0
     return out
+
+
+def _lifter(lag: int) -> Lifter:
+    """The node's lifter for ``lag``: from AHEAD_LAG on it reads ahead (the offline prior)."""
+    return Lifter(options=LifterOptions(), reads_ahead=lag >= AHEAD_LAG)
 
 
 @pytest.fixture(scope="module")
@@ -80,18 +85,21 @@ def test_every_frame_is_answered_once_in_order_lag_frames_late(lifter: Lifter) -
     assert changed > 0.9 * 2 * len(frames)
 
 
-def test_a_lagged_answer_reads_no_frame_after_its_lag(lifter: Lifter) -> None:
+@pytest.mark.parametrize("lag", [LAG, AHEAD_LAG])
+def test_a_lagged_answer_reads_no_frame_after_its_lag(lag: int) -> None:
     """Two inputs equal up to frame K and different after it (the second's 2D from later in the
     bag): every answer published before frame K + 1 arrived is the same, bit for bit; the one
-    published when frame K + 1 arrived (frame K + 1 - LAG) reads it and differs."""
+    published when frame K + 1 arrived (frame K + 1 - lag) reads it and differs. From AHEAD_LAG
+    on the lift itself reads the frames ahead."""
+    lifter = _lifter(lag)
     frames, _, intrinsics = _bag("punch_outliers.mcap", 60)
     k = 20
     other = frames[: k + 1] + [(stamp, msg) for (stamp, _), (_, msg) in zip(frames[k + 1:30], frames[40:],
                                                                             strict=False)]
-    a = _answers(lifter, frames[:30], intrinsics, LAG)
-    b = _answers(lifter, other, intrinsics, LAG)
+    a = _answers(lifter, frames[:30], intrinsics, lag)
+    b = _answers(lifter, other, intrinsics, lag)
     before = [(x, y) for x, y in zip(a, b, strict=True) if x[1] <= k]
-    assert len(before) == k + 1 - LAG
+    assert len(before) == k + 1 - lag
     for (_, _, xa), (_, _, xb) in before:
         for s, t in zip(xa, xb, strict=True):
             np.testing.assert_array_equal(s.joints_m, t.joints_m)
@@ -121,23 +129,28 @@ def test_a_lag_out_of_range_is_refused(lifter: Lifter, lag: int) -> None:
         LaggedFrames(FramePipeline(lifter, FrameSettings()), lag)
 
 
-def test_the_offline_lift_with_a_lag_gives_the_lagged_nodes_answers(lifter: Lifter) -> None:
-    """`pose-lifter lift --smoothing 0 --lag 3`: what the node publishes with output_lag 3, message
+@pytest.mark.parametrize("lag", [LAG, AHEAD_LAG])
+def test_the_offline_lift_with_a_lag_gives_the_lagged_nodes_answers(lag: int) -> None:
+    """`pose-lifter lift --smoothing 0 --lag N`: what the node publishes with output_lag N, message
     for message (the same lift, the same refinement, the last frames as the node gives them when
     its input stops)."""
     from pose_lifter.offline.lift import lift_messages
     from pose_lifter.offline.settings import LiftSettings
 
+    settings = LiftSettings(smoothing_s=0.0, output_lag=lag)
+    lifter = settings.build_lifter()
+    assert lifter.reads_ahead == (lag >= AHEAD_LAG)
     frames, _, intrinsics = _bag("two_people.mcap", 30)
     recorded = list(read_messages(BAGS / "two_people.mcap", [TOPIC_CAMERA_INFO]))
     infos = [(x.stamp_ns, x.msg) for x in recorded]
-    node = [(frames[i][0], s) for i, _, lifted in _answers(lifter, frames, intrinsics, LAG) for s in lifted]
-    offline = lift_messages(frames, infos, lifter, LiftSettings(smoothing_s=0.0, output_lag=LAG), workers=2)
+    node = [(frames[i][0], s) for i, _, lifted in _answers(_lifter(lag), frames, intrinsics, lag)
+            for s in lifted]
+    offline = lift_messages(frames, infos, lifter, settings, workers=2)
     assert [(f.stamp_ns, f.track_id) for f in offline] == [(s, x.track_id) for s, x in node]
     np.testing.assert_array_equal(np.array([f.joints_m for f in offline]),
                                   np.array([x.joints_m for _, x in node]))
     # not the unlagged answers
-    plain = lift_messages(frames, infos, lifter, LiftSettings(smoothing_s=0.0))
+    plain = lift_messages(frames, infos, _lifter(0), LiftSettings(smoothing_s=0.0))
     assert not np.allclose(np.array([f.joints_m for f in plain]), np.array([f.joints_m for f in offline]))
 
 

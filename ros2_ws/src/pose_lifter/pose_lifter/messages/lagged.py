@@ -1,16 +1,21 @@
 """A frame pipeline's answers published a few frames late (the node's ``output_lag``).
 
-:class:`LaggedFrames` holds each lifted frame until ``lag`` later frames have been lifted, then
-gives it with each skeleton's pose refined over the frames then known
+:class:`LaggedFrames` takes each checked frame and gives it back lifted ``lag`` frames later,
+each tracked skeleton's pose refined over the frames then known
 (:class:`~pose_lifter.core.track.lagged.LaggedPoses`: the offline lift's measurement update of
 the smoothed 2D and its centred window, over the track's newest frames) and placed again in the
-camera frame. The lift is the pipeline's own, each frame lifted when it arrives; the pipeline's
-policy keeps what the update reads of each frame (:attr:`TrackPolicy.smoothed_later`) instead of
-running the node's causal update.
+camera frame. The pipeline's policy keeps what the update reads of each frame
+(:attr:`TrackPolicy.smoothed_later`) instead of running the node's causal update.
 
-Frames leave in the order they came, each once: a frame answered unlagged today is answered
-``lag`` frames later, none is dropped (:meth:`LaggedFrames.flush` gives the ones still held, e.g.
-when the input stops). No rclpy: the node publishes what this gives.
+Below AHEAD_LAG frames each frame is lifted when it arrives, by the node's causal priors. From
+AHEAD_LAG on, the pipeline's lifter reads ahead (``Lifter.reads_ahead``: the offline prior) and
+each frame is lifted once its prior's future frames have come, with its track's next frames
+(:class:`~pose_lifter.core.track.policy.FramesAhead`, from the frames held), as ``pose-lifter
+lift`` lifts it; the rest of the lag refines it.
+
+Frames leave in the order they came, each once; :meth:`LaggedFrames.flush` gives the ones still
+held (the input stopped), lifted and refined over what is known. No rclpy: the node publishes
+what this gives.
 """
 
 from __future__ import annotations
@@ -21,14 +26,25 @@ from typing import Final, Generic, NamedTuple, TypeVar
 
 import numpy as np
 
+from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import with_camera_poses
-from pose_lifter.core.track.lagged import MAX_LAG, LaggedPoses
+from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
+from pose_lifter.core.track.lagged import LaggedPoses
 from pose_lifter.core.track.later import LaterFrame
 from pose_lifter.core.track.placement import place_poses
+from pose_lifter.core.track.policy import FramesAhead
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
-from pose_lifter.messages.frame import FramePipeline, Intrinsics, LiftedSkeleton, check_output
+from pose_lifter.messages.frame import (
+    CheckedFrame,
+    FramePipeline,
+    Intrinsics,
+    LiftedSkeleton,
+    SkeletonInput,
+    SkipSkeleton,
+    check_output,
+)
 
-__all__ = ["MAX_LAG", "LaggedFrame", "LaggedFrames"]
+__all__ = ["AHEAD_LAG", "MAX_LAG", "LaggedFrame", "LaggedFrames", "frames_ahead"]
 
 T = TypeVar("T")
 
@@ -36,24 +52,36 @@ T = TypeVar("T")
 LAG_SMOOTHING_S: Final[float] = OFFLINE_SMOOTHING_S
 
 
+def frames_ahead(lifter: Lifter) -> int:
+    """Frames after the lifted one that ``lifter``'s temporal prior reads (0: causal)."""
+    temporal = lifter.temporal_prior if lifter.reads_ahead and lifter.options.mode != "paper" else None
+    return 0 if temporal is None else int(temporal.future_frames)
+
+
 class LaggedFrame(NamedTuple, Generic[T]):
     """A frame held for the lag: the caller's ``token`` (e.g. its header and arrival time), its
-    stamp, intrinsics and lifted skeletons."""
+    stamp, intrinsics and, per checked skeleton in order, what lifting it gave."""
 
     token: T
     stamp_ns: int
     intrinsics: Intrinsics
-    lifted: list[LiftedSkeleton]
+    outcomes: list[LiftedSkeleton | SkipSkeleton]
+
+    @property
+    def lifted(self) -> list[LiftedSkeleton]:
+        """The lifted skeletons, in order."""
+        return [x for x in self.outcomes if isinstance(x, LiftedSkeleton)]
 
 
 class LaggedFrames(Generic[T]):
-    """The frames of one :class:`FramePipeline`, each given ``lag`` frames after it was lifted.
+    """The frames of one :class:`FramePipeline`, each given ``lag`` frames after it came.
 
     Parameters
     ----------
     pipeline : FramePipeline
         Its policy keeps the frames for the offline update from now on
-        (:attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`).
+        (:attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`); its lifter reads
+        ahead from a lag of AHEAD_LAG on (build it with ``reads_ahead=lag >= AHEAD_LAG``).
     lag : int
         Frames (1 to :data:`MAX_LAG`).
     """
@@ -63,8 +91,14 @@ class LaggedFrames(Generic[T]):
             raise ValueError(f"lag must be 1 to {MAX_LAG} frames, got {lag}")
         self.pipeline, self.lag = pipeline, lag
         pipeline.policy.smoothed_later = True
-        self._held: deque[LaggedFrame[T]] = deque()
+        self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame]] = deque()  # waiting to be lifted
+        self._held: deque[LaggedFrame[T]] = deque()  # lifted, waiting to be refined
         self._poses = self._new_poses()
+
+    @property
+    def ahead(self) -> int:
+        """Frames each frame waits before it is lifted (its prior's future frames; 0: none)."""
+        return frames_ahead(self.pipeline.lifter) if self.lag >= AHEAD_LAG else 0
 
     def _new_poses(self) -> LaggedPoses:
         opts = self.pipeline.lifter.options
@@ -73,55 +107,83 @@ class LaggedFrames(Generic[T]):
 
     def __len__(self) -> int:
         """Frames held."""
-        return len(self._held)
+        return len(self._inputs) + len(self._held)
 
-    def push(self, token: T, stamp_ns: int, intrinsics: Intrinsics, lifted: list[LiftedSkeleton]
+    def lift(self, token: T, stamp_ns: int, intrinsics: Intrinsics, checked: CheckedFrame
              ) -> list[LaggedFrame[T]]:
-        """A frame the pipeline just lifted (``lifted``: its skeletons, in order); returns the
-        frames now ``lag`` frames old (at most one), their skeletons refined."""
-        opts = self.pipeline.lifter.options  # the node may have changed them since
-        self._poses.depth, self._poses.gate = opts.measurement_depth, opts.measurement_gate
-        self._poses.gap_s = self.pipeline.settings.track_timeout
-        kept = self.pipeline.policy.kept_later()
-        for s in lifted:
-            if s.track_id < 0:  # untracked: no past, no future; published as lifted
-                continue
-            frames = [f for f in kept.get(s.track_id, []) if f.stamp_ns == stamp_ns]
-            later: LaterFrame | None = frames[-1] if frames else None
-            self._poses.add(s.track_id, stamp_ns, s.result.pose_camera, later)
-        self._held.append(LaggedFrame(token, stamp_ns, intrinsics, lifted))
-        out = []
-        while len(self._held) > self.lag:
-            out.append(self._refined(self._held.popleft()))
-        # tracks unseen for the timeout are forgotten, as the policy forgets them
-        self._poses.forget(stamp_ns - round(self.pipeline.settings.track_timeout * 1e9))
+        """A checked, answered frame (:meth:`FramePipeline.check`): lifted now or, reading ahead,
+        once its prior's future frames have come; returns the frames now ``lag`` frames old (at
+        most one), their tracked skeletons refined."""
+        self._inputs.append((token, stamp_ns, intrinsics, checked))
+        out: list[LaggedFrame[T]] = []
+        while len(self._inputs) > self.ahead:
+            out += self._lift_oldest()
         return out
 
     def flush(self) -> list[LaggedFrame[T]]:
-        """Every frame still held, refined over the frames known now (the input stopped)."""
-        out = [self._refined(f) for f in self._held]
+        """Every frame still held, lifted and refined over the frames known now (the input
+        stopped)."""
+        out: list[LaggedFrame[T]] = []
+        while self._inputs:
+            out += self._lift_oldest()
+        out += [self._refined(f) for f in self._held]
         self._held.clear()
         return out
 
     def clear(self) -> None:
         """Forget the held frames and the tracks (unpublished: e.g. a lifecycle cleanup)."""
+        self._inputs.clear()
         self._held.clear()
         self._poses = self._new_poses()
         self.pipeline.policy.kept_later()
 
+    def _lift_oldest(self) -> list[LaggedFrame[T]]:
+        """Lift the oldest waiting frame (with its tracks' next frames from the frames waiting
+        after it) and keep it for the refinement; the frames then refinement-lag old, refined."""
+        token, stamp_ns, intrinsics, checked = self._inputs.popleft()
+        if self.ahead:
+            checked = _with_ahead(checked, [c for _, _, _, c in self._inputs],
+                                  [s for _, s, _, _ in self._inputs], self.ahead)
+        outcomes = self.pipeline.frame(checked, stamp_ns, intrinsics)
+        return self._hold(LaggedFrame(token, stamp_ns, intrinsics, outcomes))
+
+    def _hold(self, frame: LaggedFrame[T]) -> list[LaggedFrame[T]]:
+        """Keep a lifted frame's tracked poses and the frame; give the frames now lifted ``lag -
+        ahead`` frames before it, refined."""
+        opts = self.pipeline.lifter.options  # the node may have changed them since
+        self._poses.depth, self._poses.gate = opts.measurement_depth, opts.measurement_gate
+        self._poses.gap_s = self.pipeline.settings.track_timeout
+        kept = self.pipeline.policy.kept_later()
+        for s in frame.lifted:
+            if s.track_id < 0:  # untracked: no past, no future; published as lifted
+                continue
+            frames = [f for f in kept.get(s.track_id, []) if f.stamp_ns == frame.stamp_ns]
+            later: LaterFrame | None = frames[-1] if frames else None
+            self._poses.add(s.track_id, frame.stamp_ns, s.result.pose_camera, later)
+        self._held.append(frame)
+        out = []
+        while len(self._held) > self.lag - self.ahead:
+            out.append(self._refined(self._held.popleft()))
+        # tracks unseen for the timeout are forgotten, as the policy forgets them
+        self._poses.forget(frame.stamp_ns - round(self.pipeline.settings.track_timeout * 1e9))
+        return out
+
     def _refined(self, frame: LaggedFrame[T]) -> LaggedFrame[T]:
         """``frame`` with each tracked skeleton's pose refined (:class:`LaggedPoses`) and placed
         again; a skeleton whose refined pose cannot be placed keeps the pose it was lifted with."""
-        rows, poses = [], []
-        for k, s in enumerate(frame.lifted):
-            pose = self._poses.pose(s.track_id, frame.stamp_ns) if s.track_id >= 0 else None
+        rows: list[tuple[int, LiftedSkeleton]] = []
+        poses = []
+        for k, s in enumerate(frame.outcomes):
+            if not isinstance(s, LiftedSkeleton) or s.track_id < 0:
+                continue
+            pose = self._poses.pose(s.track_id, frame.stamp_ns)
             if pose is not None:
-                rows.append(k)
+                rows.append((k, s))
                 poses.append(pose)
         if not rows:
             return frame
         st = self.pipeline.settings
-        results = with_camera_poses([frame.lifted[k].result for k in rows], np.array(poses))
+        results = with_camera_poses([s.result for _, s in rows], np.array(poses))
         focal, centre = frame.intrinsics if frame.intrinsics is not None else (None, None)
         try:
             joints = place_poses(np.array(poses), np.array([float(r.camera.scale) for r in results]),
@@ -129,11 +191,30 @@ class LaggedFrames(Generic[T]):
                                  focal, centre, st.default_distance)
         except Exception:  # the lifted poses were placed: keep them
             return frame
-        lifted = list(frame.lifted)
-        for m, (k, res) in enumerate(zip(rows, results, strict=True)):
+        outcomes = list(frame.outcomes)
+        for m, ((k, s), res) in enumerate(zip(rows, results, strict=True)):
             try:
-                check_output(lifted[k].track_id, res, joints[m])
+                check_output(s.track_id, res, joints[m])
             except Exception:
                 continue
-            lifted[k] = replace(lifted[k], result=res, joints_m=joints[m])
-        return frame._replace(lifted=lifted)
+            outcomes[k] = replace(s, result=res, joints_m=joints[m])
+        return frame._replace(outcomes=outcomes)
+
+
+def _with_ahead(checked: CheckedFrame, after: list[CheckedFrame], stamps: list[int], n: int) -> CheckedFrame:
+    """``checked`` with each tracked skeleton's next frames (:class:`FramesAhead`: at most ``n`` of
+    the same track id, from the ``after`` frames in order, stamped ``stamps``)."""
+    skeletons: list[SkeletonInput | SkipSkeleton] = []
+    for x in checked.skeletons:
+        if isinstance(x, SkipSkeleton) or x.track_id < 0:
+            skeletons.append(x)
+            continue
+        nxt = [(s, y) for s, c in zip(stamps, after, strict=True) for y in c.skeletons
+               if isinstance(y, SkeletonInput) and y.track_id == x.track_id][:n]
+        if not nxt:
+            skeletons.append(x)
+            continue
+        skeletons.append(replace(x, ahead=FramesAhead(np.array([s for s, _ in nxt], dtype=np.int64),
+                                                      np.array([y.points for _, y in nxt]),
+                                                      np.array([y.confidence for _, y in nxt]))))
+    return replace(checked, skeletons=tuple(skeletons))

@@ -38,7 +38,6 @@ from pose_lifter.messages.frame import (
     CheckedFrame,
     FramePipeline,
     FrameSettings,
-    LiftedSkeleton,
     SkipSkeleton,
     labelled_2d,
 )
@@ -237,26 +236,22 @@ def _lift_lagged(lifter: Lifter, keypoint_msgs: list[tuple[int, Any]],
     ``id(item) -> outcome``."""
     pipeline = FramePipeline(lifter, frame)
     lagged: LaggedFrames[int] = LaggedFrames(pipeline, lag)
-    held: dict[int, list[tuple[Item, LiftedSkeleton | SkipSkeleton]]] = {}
     done: dict[int, Done] = {}
 
     def release(f: LaggedFrame[int]) -> None:
-        refined = iter(f.lifted)
-        for item, x in held.pop(f.token):
-            if isinstance(x, SkipSkeleton):
-                done[id(item)] = Done(item, None, None, False, 0.0, str(x))
+        for x, s in zip(per_msg[f.token], f.outcomes, strict=True):  # one per checked skeleton
+            if not isinstance(x, Item):
                 continue
-            s = next(refined)
-            done[id(item)] = Done(item, s.result, s.joints_m, s.warm_started, s.solve_time, None, s.swapped)
+            if isinstance(s, SkipSkeleton):
+                done[id(x)] = Done(x, None, None, False, 0.0, str(s))
+            else:
+                done[id(x)] = Done(x, s.result, s.joints_m, s.warm_started, s.solve_time, None, s.swapped)
 
     for i, ((stamp, _), row, check) in enumerate(zip(keypoint_msgs, per_msg, checked, strict=True)):
         if not check.answered:
             continue
         items = [x for x in row if isinstance(x, Item)]
-        intrinsics = items[0].intrinsics if items else None
-        outs = pipeline.frame(check, stamp, intrinsics)  # one per checked skeleton, as ``row``
-        held[i] = [(x, o) for x, o in zip(row, outs, strict=True) if isinstance(x, Item)]
-        for f in lagged.push(i, stamp, intrinsics, [o for _, o in held[i] if isinstance(o, LiftedSkeleton)]):
+        for f in lagged.lift(i, stamp, items[0].intrinsics if items else None, check):
             release(f)
     for f in lagged.flush():
         release(f)

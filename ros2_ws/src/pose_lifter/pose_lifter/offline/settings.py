@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S, MAX_LAG
+from pose_lifter.core.track.defaults import AHEAD_LAG, DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S, MAX_LAG
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
@@ -111,7 +111,7 @@ class LiftSettings:
 
         opts = self.options
         bases = PoseBases.load(self.bases) if self.bases else None
-        lifter = Lifter(bases, opts, reads_ahead=self.smoothing_s > 0)
+        lifter = Lifter(bases, opts, reads_ahead=self.smoothing_s > 0 or self.output_lag >= AHEAD_LAG)
         if opts.camera_solver == "admm" and opts.pose_solver == "admm":
             lifter.warm_up()
         return lifter

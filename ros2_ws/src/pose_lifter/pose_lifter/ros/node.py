@@ -64,6 +64,7 @@ from pose_lifter.core import Lifter, LifterOptions, PoseBases, PoseLifterError
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.numeric.jit import HAVE_NUMBA
+from pose_lifter.core.track.defaults import AHEAD_LAG
 from pose_lifter.core.track.policy import compile_kernels
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
@@ -150,7 +151,9 @@ class LifterNode(Node):
         # Invalid start-up values are fatal with the core's message (there is nothing to run).
         options = _DEFAULT_OPTIONS.replace(**{p.name: self._param(p.name) for p in PARAMS if p.option})
         self._bases = self._load_bases(self._param("bases_file"), options.mode)
-        self._lifter = Lifter(self._bases, options)
+        lag = int(self._param("output_lag"))
+        # from AHEAD_LAG on the lift reads its tracks' next frames (the offline prior) as it waits
+        self._lifter = Lifter(self._bases, options, reads_ahead=lag >= AHEAD_LAG)
         self._lifter.threads = self._solver_threads()
         # compile (first start after an install: ~25 s) or load the solver kernels before the
         # topics exist, so the first frame is not the one that pays for it
@@ -162,7 +165,6 @@ class LifterNode(Node):
         freeze_long_lived()
 
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
-        lag = int(self._param("output_lag"))
         # answers held for output_lag frames: (header, arrival time) each
         self._lagged: LaggedFrames[tuple[Any, float]] | None = (
             LaggedFrames(self._pipeline, lag) if lag > 0 else None)
@@ -299,8 +301,8 @@ class LifterNode(Node):
                     f"n_starts={options.n_starts} but the bases carry {bases.start_alphas.shape[0]} starts")
             # built here, not in the post-set callback: whatever the new bases and options
             # refuse (e.g. limb targets) is refused now, and the running solver stays as it was
-            lifter = (Lifter(bases, options) if bases is not self._lifter.bases
-                      or options != self._lifter.options else self._lifter)
+            lifter = (Lifter(bases, options, reads_ahead=self._lifter.reads_ahead)
+                      if bases is not self._lifter.bases or options != self._lifter.options else self._lifter)
             lifter.threads = self._lifter.threads
         except Exception as err:  # nothing may raise out of a parameter callback (it kills the node)
             self._pending = None
@@ -413,18 +415,13 @@ class LifterNode(Node):
         stamp_ns = messages.stamp_to_ns(header.stamp)
         if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
             stamp_ns = self.get_clock().now().nanoseconds
-        lifted: list[LiftedSkeleton] = []
-        for out in self._pipeline.frame(checked, stamp_ns, self._intrinsics):
-            if isinstance(out, SkipSkeleton):
-                self._warn_skip(out.kind, f"skeleton skipped: {out}")
-            else:
-                lifted.append(out)
         if self._lagged is None:
-            self._publish(header, stamp_ns, lifted, received)
+            outcomes = self._pipeline.frame(checked, stamp_ns, self._intrinsics)
+            self._publish(header, stamp_ns, outcomes, received)
             return
         self._last_frame = time.perf_counter()
-        for f in self._lagged.push((header, received), stamp_ns, self._intrinsics, lifted):
-            self._publish(f.token[0], f.stamp_ns, f.lifted, f.token[1])
+        for f in self._lagged.lift((header, received), stamp_ns, self._intrinsics, checked):
+            self._publish(f.token[0], f.stamp_ns, f.outcomes, f.token[1])
 
     def _publish_idle(self, force: bool = False) -> None:
         """Publish the answers held for ``output_lag`` when no frame has come for LAG_IDLE_S (or
@@ -433,11 +430,19 @@ class LifterNode(Node):
             return
         if force or time.perf_counter() - self._last_frame > LAG_IDLE_S:
             for f in self._lagged.flush():
-                self._publish(f.token[0], f.stamp_ns, f.lifted, f.token[1])
+                self._publish(f.token[0], f.stamp_ns, f.outcomes, f.token[1])
 
-    def _publish(self, header: Any, stamp_ns: int, lifted: list[LiftedSkeleton], received: float) -> None:
-        """A frame's answer on every output: ``skeletons_3d``, the markers, the REP-155 bodies;
-        ``received``: when its input arrived (its latency)."""
+    def _publish(self, header: Any, stamp_ns: int, outcomes: list[LiftedSkeleton | SkipSkeleton],
+                 received: float) -> None:
+        """A frame's answer on every output: ``skeletons_3d``, the markers, the REP-155 bodies, from
+        what lifting each skeleton gave (the refusals warned); ``received``: when its input
+        arrived (its latency)."""
+        lifted: list[LiftedSkeleton] = []
+        for out in outcomes:
+            if isinstance(out, SkipSkeleton):
+                self._warn_skip(out.kind, f"skeleton skipped: {out}")
+            else:
+                lifted.append(out)
         # the frame's answer in CDR straight from the arrays, by the offline lift's writer
         # (messages/cdr.py; rclpy message objects cost ~0.5 ms more a skeleton: tools/node_callback.py)
         frame = SkeletonFrame.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],

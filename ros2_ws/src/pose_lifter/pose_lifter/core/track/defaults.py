@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Final
 
-__all__ = ["DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "MAX_LAG"]
+__all__ = ["AHEAD_LAG", "DEFAULT_REINIT_RATIO", "DEFAULT_TRACK_TIMEOUT_S", "MAX_LAG"]
 
 #: Seconds of input time a track's warm start stays valid (the node's ``track_timeout``).
 DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
@@ -19,3 +19,6 @@ DEFAULT_REINIT_RATIO: Final[float] = 2.0
 #: The largest ``output_lag`` (frames) of the node and ``pose-lifter lift --lag``: a lagged frame
 #: and its window fit in the frames a track keeps for it (:data:`.lagged.WINDOW`).
 MAX_LAG: Final[int] = 10
+#: From this ``output_lag`` on, the lift itself waits for the frames its offline prior reads ahead
+#: (3) and reads them, as ``pose-lifter lift``; the rest of the lag refines it.
+AHEAD_LAG: Final[int] = 6
