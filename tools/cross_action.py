@@ -172,6 +172,7 @@ def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Name
                 "temporal_prior_file": str(prior_path.with_name(prior_path.stem + "_w7c.npz"))}
                if args.offline else None)
     acc._STATE["intrinsics"] = args.intrinsics
+    acc._STATE["lag"] = args.lag
     methods = tuple(args.methods)
     jobs = [(t, c, methods) for c in args.conditions for t in tracks]
     if args.workers > 1:
@@ -227,6 +228,7 @@ def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=None)
     ap.add_argument("--classes", nargs="+", default=None, help="default: every class with usable trials")
+    ap.add_argument("--lag", type=int, default=3, help="hybrid-lag: the node's output_lag (frames)")
     ap.add_argument("--model", choices=("residual", "mlp"), default="residual")
     ap.add_argument("--augment", choices=tuple(AUGMENTATIONS), default="generalise")
     ap.add_argument("--epochs", type=int, default=8)
