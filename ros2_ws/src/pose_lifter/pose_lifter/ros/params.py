@@ -130,7 +130,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("output_lag", 0, "Frames each answer waits before it is published (0 = none, at once). "
               "Waiting, each skeleton's pose is refined over the frames that came after it, as "
               "pose-lifter lift refines a recording (the measurement update of the smoothed 2D, a "
-              "centred window): 3 frames (0.1 s at 30 Hz) take most of the offline accuracy "
+              "centred window); from 6 frames the lift itself also reads the next 3 (the offline "
+              "prior). 3 frames (0.1 s at 30 Hz) take most of the offline accuracy, 6 all of it "
               "(docs/node.md). Held answers are published when the input stops.", 0, MAX_LAG,
               read_only=True),
     ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
