@@ -169,3 +169,29 @@ def test_signal_during_configure_exits_0(graph: GraphClient, managed: Any, sig: 
     proc.proc.send_signal(sig)
     assert proc.proc.wait(SHUTDOWN_TIMEOUT) == 0, proc.log()  # exits 0 on its own, mid-configure or after
     assert "Traceback" not in proc.log()
+
+
+def test_deactivation_publishes_the_answers_held_for_the_lag(graph: GraphClient, managed: Any) -> None:
+    """With ``output_lag`` the answers held when the node is deactivated are published then, each
+    once and in order (not lost with the input). Were deactivation to drop them, a deactivation
+    sooner than the node's 0.5 s idle flush would leave them unanswered."""
+    from pose_lifter.messages.convert import stamp_to_ns
+
+    proc = managed("output_lag:=3", "max_waiting_frames:=100",
+                   "qos_overrides./keypoints_2d.subscription.reliability:=reliable",
+                   "qos_overrides./keypoints_2d.subscription.depth:=100")
+    lc = Lifecycle(graph)
+    graph.lifter = proc
+    assert lc.transition("configure") and lc.transition("activate")
+    graph.wait_for_lifter(proc)
+    frames = [good_frame(graph.types, i) for i in range(5)]
+    for f in frames:
+        graph.pub_keypoints.publish(f)
+    graph.spin_until(lambda: len(graph.skeletons) >= 2, ANSWER_TIMEOUT, "the first two answers")
+    assert len(graph.skeletons) == 2  # frames 2-4 held for the lag
+    assert lc.transition("deactivate")
+    graph.spin_until(lambda: len(graph.skeletons) >= 5, 10.0, "the held answers")
+    settle(graph, 0.5)
+    assert [stamp_to_ns(a.header.stamp) for a in graph.skeletons] == [
+        stamp_to_ns(f.header.stamp) for f in frames]
+    assert all(len(a.skeletons) == 1 for a in graph.skeletons)
