@@ -72,7 +72,6 @@ from pose_lifter.core.track.lagged import LaggedPoses
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
-from pose_lifter.messages.lagged import frames_ahead
 from pose_lifter.mocap.cmu import load_trial, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -214,7 +213,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
                 policy.smoothed_later = True
             # the node with output_lag (pose_lifter.messages.lagged): each frame refined lag frames late
             lag = int(_STATE.get("lag", 3))  # frames of refinement: the rest of the lag, after the lift's
-            lag -= frames_ahead(lifter) if m == "hybrid-lag" else 0
+            lag -= lifter.frames_ahead if m == "hybrid-lag" else 0
             lagged = None
             if policy is not None and m == "hybrid-lag":
                 policy.smoothed_later = True
@@ -223,8 +222,7 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             fit = np.full((n, 12, 3), np.nan)
             depth = np.full(n, np.nan)  # the centroid's depth error (%) on a perspective track
             warm = None
-            temporal = lifter.temporal_prior if lifter.reads_ahead else None
-            n_ahead = 0 if temporal is None else temporal.future_frames
+            n_ahead = lifter.frames_ahead
             for i in range(n):
                 try:
                     if policy is not None:

@@ -37,6 +37,7 @@ class EchoLifter:
 
     options = LifterOptions(mode="paper")
     reads_ahead = False
+    frames_ahead = 0  # a causal lift (Lifter.frames_ahead)
 
     runs = RUNS_NEEDED_NONE
 

@@ -26,7 +26,6 @@ from typing import Final, Generic, NamedTuple, TypeVar
 
 import numpy as np
 
-from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.lagged import LaggedPoses
@@ -44,18 +43,12 @@ from pose_lifter.messages.frame import (
     check_output,
 )
 
-__all__ = ["AHEAD_LAG", "MAX_LAG", "LaggedFrame", "LaggedFrames", "frames_ahead"]
+__all__ = ["AHEAD_LAG", "MAX_LAG", "LaggedFrame", "LaggedFrames"]
 
 T = TypeVar("T")
 
 #: The lag's window (seconds): the offline lift's centred smoothing.
 LAG_SMOOTHING_S: Final[float] = OFFLINE_SMOOTHING_S
-
-
-def frames_ahead(lifter: Lifter) -> int:
-    """Frames after the lifted one that ``lifter``'s temporal prior reads (0: causal)."""
-    temporal = lifter.temporal_prior if lifter.reads_ahead and lifter.options.mode != "paper" else None
-    return 0 if temporal is None else int(temporal.future_frames)
 
 
 class LaggedFrame(NamedTuple, Generic[T]):
@@ -98,7 +91,7 @@ class LaggedFrames(Generic[T]):
     @property
     def ahead(self) -> int:
         """Frames each frame waits before it is lifted (its prior's future frames; 0: none)."""
-        return frames_ahead(self.pipeline.lifter) if self.lag >= AHEAD_LAG else 0
+        return self.pipeline.lifter.frames_ahead if self.lag >= AHEAD_LAG else 0
 
     def _new_poses(self) -> LaggedPoses:
         opts = self.pipeline.lifter.options

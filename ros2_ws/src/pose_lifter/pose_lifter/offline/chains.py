@@ -119,6 +119,14 @@ class Done:
     #: the left/right label groups its track swapped back (2,; None: none; ``LiftedSkeleton.swapped``)
     swapped: NDArray[np.bool_] | None = None
 
+    @classmethod
+    def of(cls, item: Item, outcome: LiftedSkeleton | SkipSkeleton) -> Done:
+        """What the frame pipeline gave for ``item``: its lifted skeleton, or the refusal."""
+        if isinstance(outcome, SkipSkeleton):
+            return cls(item, None, None, False, 0.0, str(outcome))
+        return cls(item, outcome.result, outcome.joints_m, outcome.warm_started, outcome.solve_time, None,
+                   outcome.swapped)
+
 
 def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, Any]],
                  pipeline: FramePipeline
@@ -227,12 +235,10 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
         together = lift_together(lifter, [(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
                                           for c, k, item in step])
         for (c, _, item), lifted in zip(step, together, strict=True):
+            out[c].append(Done.of(item, lifted))
             if not isinstance(lifted, LiftedSkeleton):
-                out[c].append(Done(item, None, None, False, 0.0, str(lifted)))
                 fits[c].append(None)
                 continue
-            out[c].append(Done(item, lifted.result, lifted.joints_m, lifted.warm_started, lifted.solve_time,
-                               None, lifted.swapped))
             # the centred smoothing starts from the fit's own pose; with the measurement update,
             # from the published one (which has read each frame's 2D; docs/tuning.md)
             fits[c].append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
@@ -277,8 +283,7 @@ def inputs_ahead(lifter: Lifter, chain: list[Item]) -> list[SkeletonInput]:
     """The inputs of ``chain``'s items, each with its track's next frames
     (``SkeletonInput.ahead``: the prior's ``future_frames`` items after it) when ``lifter`` reads
     ahead and its temporal prior reads frames after the one it lifts."""
-    temporal = lifter.temporal_prior if lifter.reads_ahead and lifter.options.mode != "paper" else None
-    n_ahead = 0 if temporal is None else temporal.future_frames
+    n_ahead = lifter.frames_ahead
     if not n_ahead or len(chain) < 2:
         return [it.input for it in chain]
     stamps = np.array([it.stamp_ns for it in chain], dtype=np.int64)

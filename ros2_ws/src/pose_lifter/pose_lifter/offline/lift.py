@@ -240,12 +240,8 @@ def _lift_lagged(lifter: Lifter, keypoint_msgs: list[tuple[int, Any]],
 
     def release(f: LaggedFrame[int]) -> None:
         for x, s in zip(per_msg[f.token], f.outcomes, strict=True):  # one per checked skeleton
-            if not isinstance(x, Item):
-                continue
-            if isinstance(s, SkipSkeleton):
-                done[id(x)] = Done(x, None, None, False, 0.0, str(s))
-            else:
-                done[id(x)] = Done(x, s.result, s.joints_m, s.warm_started, s.solve_time, None, s.swapped)
+            if isinstance(x, Item):
+                done[id(x)] = Done.of(x, s)
 
     for i, ((stamp, _), row, check) in enumerate(zip(keypoint_msgs, per_msg, checked, strict=True)):
         if not check.answered:

@@ -154,6 +154,13 @@ class Lifter:
         return self._data.temporal_prior(self._options.temporal_prior_file, self.reads_ahead)
 
     @property
+    def frames_ahead(self) -> int:
+        """Frames after the lifted one that a tracked lift reads (its temporal prior's
+        ``future_frames`` when it reads ahead; 0: causal, and always in the paper's mode)."""
+        temporal = self.temporal_prior if self.reads_ahead and self._options.mode != "paper" else None
+        return 0 if temporal is None else int(temporal.future_frames)
+
+    @property
     def model(self) -> PoseModel:
         """Precomputed pose-step data of the current bases and limb targets."""
         return self._model
