@@ -104,20 +104,22 @@ bags: venv
 	bash tools/make_bags.sh $(CMU_DATA)
 
 # the learned 2D->3D prior, trained on the training split (tools/train_prior.py defaults: residual
-# MLP, the augmentation GENERALISE, 24 x 100k samples, seed 0, one thread; PyTorch for training only)
+# MLP, the augmentation GENERALISE, 24 x 100k samples, seed 0, one thread; PyTorch for training only),
+# its cameras 1.5-10 m from the person (PRIOR_AUG; docs/accuracy.md, the priors' distances)
+PRIOR_AUG := --aug 'distance=(1.5,10.0)'
 prior: venv train-deps
-	$(PY) tools/train_prior.py --data $(CMU_DATA)
+	$(PY) tools/train_prior.py --data $(CMU_DATA) $(PRIOR_AUG)
 
 # the causal temporal variant (the track's last 4 frames at 30 Hz) used on tracked frames: the same
 # recipe with dropout 0.05 (at 0.25 it drew almost nothing from the past frames; docs/cross_action.md)
 prior-temporal: venv train-deps
-	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 4 --dropout 0.05 \
+	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 4 --dropout 0.05 $(PRIOR_AUG) \
 	  --out $(PKG)/pose_lifter/data/prior_mlp_w4.npz
 
 # the offline variant pose-lifter lift reads (7 frames at 30 Hz, 3 before the lifted one and 3
 # after; normalised on the lifted frame): the same recipe with --future 3 (docs/accuracy.md)
 prior-offline: venv train-deps
-	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 7 --future 3 --dropout 0.05 \
+	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 7 --future 3 --dropout 0.05 $(PRIOR_AUG) \
 	  --out $(PKG)/pose_lifter/data/prior_mlp_w7c.npz
 
 # the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12; the

@@ -256,8 +256,10 @@ class LiftResult:
     Attributes
     ----------
     pose : ndarray, shape (12, 3)
-        3D pose in the model frame, right lower leg = 1 (multiply by a leg length in metres
-        for metric output).
+        3D pose in the model frame, in the bases' units: their mean right lower leg is 1 (a
+        tracked hybrid lift gives the person its track's limb proportions at the bases' mean
+        limb size, so its own leg is within a few per cent of 1). Multiply by a leg length in
+        metres for metric output.
     pose_camera : ndarray, shape (12, 3)
         The same pose rotated into the camera frame (x right, y down, z forward), centred,
         same units.

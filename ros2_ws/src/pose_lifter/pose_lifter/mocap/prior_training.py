@@ -4,7 +4,8 @@ Data: mocap poses of the training split (:func:`pose_lifter.mocap.cmu.split_tria
 every sample with a fresh random view and person (augmentation):
 
 * azimuth uniform in [0, 360) degrees, elevation uniform in [-30, 45], camera roll N(0, 5);
-* perspective at 2.5-10 m (half the samples) or weak perspective;
+* perspective at 2.5-10 m (half the samples; the packaged priors: 1.5-10 m, ``make prior``'s
+  ``--aug 'distance=(1.5,10.0)'``) or weak perspective;
 * limb lengths changed per person by up to +-20 % (:func:`pose_lifter.mocap.views.scale_limbs`);
 * Gaussian 2D noise (std up to 0.15 right-lower-leg lengths), missing joints (up to 20 %,
   visibility 0) and confident outliers (up to 25 % of joints displaced by 1-3 leg lengths,

@@ -110,7 +110,8 @@ def place_poses(
     """Metric 3D joints of ``n`` lifts seen by one camera, in its optical frame (x right, y down,
     z forward), as arrays (the people of a frame, the frames of a track).
 
-    A lifted pose is centred and in right-lower-leg units; it becomes metric with
+    A lifted pose is centred and in the bases' units (right lower leg about 1:
+    :attr:`~pose_lifter.core.results.LiftResult.pose`); it becomes metric with
     ``leg_length_m``. The weak-perspective scale fixes the depth of the centroid when the
     focal length is known: ``Z = f * leg_length_m / scale`` (``f`` = mean of ``fx, fy``), and
     the image position of the centroid gives ``X = (t_x - c_x) Z / f_x``,
