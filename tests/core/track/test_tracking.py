@@ -14,6 +14,7 @@ from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, Start
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.batch import LiftCall
 from pose_lifter.core.model.bases import default_bases_path
+from pose_lifter.core.model.metrics import procrustes_align
 from pose_lifter.core.model.prior import PosePrior
 from pose_lifter.core.track.policy import OutOfOrderFrameError, TrackPolicy
 from pose_lifter.mocap.views import scale_limbs
@@ -98,20 +99,24 @@ def test_a_missing_joint_is_carried_over_by_the_track(
     conf[10:25, [2, 8]] = 0.0  # the left wrist and left ankle lost for half a second
     frames = range(10, 25)
     errs = []
+    lost = [2, 8]
     for w in (3.0, 0.0):
         # the single-frame prior: the carry-over alone (the temporal prior sees the past frames
         # too, and the flip-averaged prior guesses this walker's lost joints within 1.3 % of it;
         # the output's measurement update holds a lost joint where the track had it as well).
         # The carry-over moves the prior rows' target; the pose step follows its rows the further
-        # the more iterations it runs: at 20 the lost joints' share shows on this short track
-        # (ratio 0.963), at the default 10 it is 0.987 here (the default configuration's gain:
-        # docs/tuning.md, missing_temporal_weight)
+        # the more iterations it runs (the default configuration's gain: docs/tuning.md,
+        # missing_temporal_weight). The lost joints' error after aligning the whole pose, with
+        # the carry-over over without: 0.949 with the packaged prior, 0.959 with the one trained
+        # 2.5-10 m away (whose whole-pose ratio was 0.965 against 0.983 now: what the prior
+        # guesses of the other joints moves that one, the carried-over joints' own error less)
         res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w, temporal_prior=False,
                                                  fill_missing_frames=0, prior_flip=False,
                                                  measurement_update=False, hybrid_pose_max_iter=20)),
                      x, conf)
-        errs.append(np.mean([p_mpjpe(res[i].pose_camera, truth[i]) for i in frames]))
-    assert errs[0] < 0.97 * errs[1], errs
+        errs.append(np.mean([np.linalg.norm(procrustes_align(res[i].pose_camera, truth[i])[lost]
+                                            - truth[i][lost], axis=-1) for i in frames]))
+    assert errs[0] < 0.975 * errs[1], errs
 
 
 def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
