@@ -76,7 +76,7 @@ from pose_lifter.messages.cdr import (
 )
 from pose_lifter.messages.frame import FramePipeline, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.hri import LiftedBody
-from pose_lifter.messages.lagged import LaggedFrames
+from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
@@ -420,8 +420,7 @@ class LifterNode(Node):
             self._publish(header, stamp_ns, outcomes, received)
             return
         self._last_frame = time.perf_counter()
-        for f in self._lagged.lift((header, received), stamp_ns, self._intrinsics, checked):
-            self._publish(f.token[0], f.stamp_ns, f.outcomes, f.token[1])
+        self._publish_lagged(self._lagged.lift((header, received), stamp_ns, self._intrinsics, checked))
 
     def _publish_idle(self, force: bool = False) -> None:
         """Publish the answers held for ``output_lag`` when no frame has come for LAG_IDLE_S (or
@@ -429,8 +428,12 @@ class LifterNode(Node):
         if self._lagged is None or not len(self._lagged):
             return
         if force or time.perf_counter() - self._last_frame > LAG_IDLE_S:
-            for f in self._lagged.flush():
-                self._publish(f.token[0], f.stamp_ns, f.outcomes, f.token[1])
+            self._publish_lagged(self._lagged.flush())
+
+    def _publish_lagged(self, frames: list[LaggedFrame[tuple[Any, float]]]) -> None:
+        """The answers ``output_lag`` releases, in order, each with its input's header and arrival."""
+        for f in frames:
+            self._publish(f.token[0], f.stamp_ns, f.outcomes, f.token[1])
 
     def _publish(self, header: Any, stamp_ns: int, outcomes: list[LiftedSkeleton | SkipSkeleton],
                  received: float) -> None:
