@@ -410,3 +410,40 @@ def test_a_copy_of_the_state_goes_on_as_the_original_and_leaves_it_alone() -> No
     copied = original.copy()
     np.testing.assert_array_equal(run(copied, frames[8:]), expected)
     np.testing.assert_array_equal(run(original, frames[8:]), expected)  # the copy's steps left it alone
+
+
+def test_a_run_of_frames_is_the_update_frame_by_frame() -> None:
+    """``MeasurementUpdate.run`` (one call over a sequence, as the offline and lagged passes use it)
+    gives what :meth:`update` gives frame by frame: a frame without a noise is skipped and leaves
+    the state alone, a restart or a non-finite update starts the state again, and the frames are
+    taken in the order given."""
+    pose = _pose()
+    rng = np.random.default_rng(5)
+    n = 24
+    poses = pose + rng.normal(scale=0.02, size=(n, 12, 3))
+    points = 100.0 * poses[..., :2] + rng.normal(scale=2.0, size=(n, 12, 2))
+    used = rng.random((n, 12)) > 0.1
+    noise = np.full(n, 0.01)
+    noise[[3, 4]] = np.nan  # not known then
+    restart = np.zeros(n, dtype=bool)
+    restart[15] = True
+    poses[19, 2, 2] = np.nan  # a non-finite update
+    order = np.array(list(range(12)) + list(range(n - 1, 11, -1)))  # forward, then backward
+
+    out, done = MeasurementUpdate().run(poses, points, used, noise, order, 0.5, 0.3, restart)
+
+    state = MeasurementUpdate()
+    expected_done = np.zeros(n, dtype=bool)
+    for i in order:
+        if restart[i]:
+            state = MeasurementUpdate()
+        if np.isnan(noise[i]):
+            continue
+        got = state.update(poses[i], points[i], used[i], noise[i], 0.5, 0.3)
+        if not np.isfinite(got).all():
+            state = MeasurementUpdate()
+            continue
+        expected_done[i] = True
+        np.testing.assert_array_equal(out[i], got)
+    np.testing.assert_array_equal(done, expected_done)
+    assert not done[[3, 4, 19]].any() and done.sum() == n - 3

@@ -22,6 +22,7 @@ late").
 
 from __future__ import annotations
 
+import itertools
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Final
@@ -30,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .defaults import MAX_LAG
-from .later import LaterFrame, smooth_track_2d
+from .later import LaterFrame, RunArrays
 from .measurement import MeasurementUpdate
 
 __all__ = ["MAX_LAG", "WINDOW", "LaggedPoses"]
@@ -139,59 +140,44 @@ class LaggedPoses:
         """The update's two passes over the ``run`` (indices into ``frames`` of the frames with an
         update) around frame ``at``, into ``refined`` (the poses of ``frames[first:]``)."""
         later = [_later(frames[k]) for k in run]
-        smoothed, ratio = smooth_track_2d(np.array([f.points for f in later]),
-                                          np.array([f.used for f in later]),
-                                          np.array([f.stamp_ns for f in later], dtype=np.int64))
+        arrays = RunArrays.of(later)
+        restart = np.array([not f.follows for f in later])  # a new run starts the pass again
+        upto = sum(k <= at for k in run)  # run[:upto] are at or before the frame
         # forward: the track's state takes each frame up to this one once; the later ones on a copy
-        fwd: dict[int, NDArray[np.float64] | None] = {}
-        state = t.forward
-        for j, k in enumerate(run):
-            f = frames[k]
-            if k > at:
-                break
-            if not f.taken:
-                start = state if later[j].follows else None  # a new run starts the pass again
-                state, f.forward = self._step(start, later[j], smoothed[j], ratio, None)
-                f.taken = True
-            fwd[k] = f.forward
-        t.forward = state
-        state = None if state is None else state.copy()
-        for j, k in enumerate(run):
-            if k > at:
-                state, fwd[k] = self._step(state, later[j], smoothed[j], ratio, None)
-        # backward: from the newest frame down to the first the window around this one reads
-        reach = self.smoothing_s * 3e9
-        known = [f.noise for f in later if f.noise is not None]
-        back: MeasurementUpdate | None = None
-        for j in range(len(run) - 1, -1, -1):
+        new = [j for j in range(upto) if not frames[run[j]].taken]
+        if t.forward is None:
+            t.forward = MeasurementUpdate()
+        if new:
+            out, done = t.forward.run(arrays.poses, arrays.points, arrays.used, arrays.noise, np.array(new),
+                                      self.depth, self.gate, restart)
+            for j in new:
+                f = frames[run[j]]
+                f.forward, f.taken = (out[j] if done[j] else None), True
+        fwd: dict[int, NDArray[np.float64] | None] = {run[j]: frames[run[j]].forward for j in range(upto)}
+        if upto < len(run):
+            out, done = t.forward.copy().run(arrays.poses, arrays.points, arrays.used, arrays.noise,
+                                             np.arange(upto, len(run)), self.depth, self.gate, restart)
+            fwd.update({run[j]: out[j] if done[j] else None for j in range(upto, len(run))})
+        # backward: from the newest frame down to the first the window around this one reads, the
+        # frames whose noise was not known yet at the run's first known noise
+        known = arrays.noise[np.isfinite(arrays.noise)]
+        if not known.size:  # no frame of the run has a noise: neither pass updated one
+            return
+        reach = frames[at].stamp_ns - self.smoothing_s * 3e9
+        back = list(itertools.takewhile(lambda j: frames[run[j]].stamp_ns >= reach,
+                                        range(len(run) - 1, -1, -1)))
+        filled = np.where(np.isfinite(arrays.noise), arrays.noise, known[0])
+        bwd, bdone = MeasurementUpdate().run(arrays.poses, arrays.points, arrays.used, filled, np.array(back),
+                                             self.depth, self.gate)
+        for j in back:
             k = run[j]
-            if frames[k].stamp_ns < frames[at].stamp_ns - reach:
-                break
-            back, bwd = self._step(back, later[j], smoothed[j], ratio, known[0] if known else None)
-            p = fwd.get(k)
-            if p is not None and bwd is not None:
-                refined[k - first] = 0.5 * (p + bwd)
+            p, q = fwd.get(k), (bwd[j] if bdone[j] else None)
+            if p is not None and q is not None:
+                refined[k - first] = 0.5 * (p + q)
             elif p is not None:
                 refined[k - first] = p
-            elif bwd is not None:
-                refined[k - first] = bwd
-
-    def _step(self, state: MeasurementUpdate | None, f: LaterFrame, smoothed: NDArray[np.float64],
-              ratio: float, fill: float | None
-              ) -> tuple[MeasurementUpdate | None, NDArray[np.float64] | None]:
-        """One frame of a pass (:func:`.later.update_later`'s): the new state and the frame's
-        pose, None where the frame has no noise known (``fill``: the noise then) or the update
-        is not finite (the pass then starts again)."""
-        noise = f.noise if f.noise is not None else fill
-        if noise is None:
-            return state, None
-        if state is None:
-            state = MeasurementUpdate()
-        points = np.where(np.isfinite(smoothed), smoothed, f.points)
-        pose = state.update(f.pose, points, f.used, noise * ratio, self.depth, self.gate)
-        if not np.isfinite(pose).all():
-            return None, None
-        return state, pose
+            elif q is not None:
+                refined[k - first] = q
 
     def forget(self, before_ns: int) -> None:
         """Forget the tracks whose newest frame is older than ``before_ns``."""

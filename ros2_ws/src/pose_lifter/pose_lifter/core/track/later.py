@@ -20,6 +20,7 @@ it. Measured in docs/accuracy.md (lever 8) and docs/cross_action.md.
 from __future__ import annotations
 
 import itertools
+import math
 from collections import Counter
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -34,7 +35,8 @@ if TYPE_CHECKING:
     from ..results import LiftResult
     from .state import Track
 
-__all__ = ["LaterFrame", "compile_kernels", "smooth_track_2d", "update_later", "update_tracks_later"]
+__all__ = ["LaterFrame", "RunArrays", "compile_kernels", "smooth_track_2d", "update_later",
+           "update_tracks_later"]
 
 #: Offline smoothing of the 2D (:func:`smooth_track_2d`): the constant-velocity model's random
 #: acceleration, per frame^2 at 30 Hz, as a share of the track's 2D size (the median over frames of
@@ -159,27 +161,92 @@ def smooth_track_2d(points: NDArray[np.float64], used: NDArray[np.bool_], stamps
         the measurement noise's (in (0, 1]; 1 with fewer than 3 frames, nothing smoothed then).
     """
     n = points.shape[0]
-    count = used.sum(axis=1)
-    x = np.where(used[..., None], points, 0.0)
-    centre = x.sum(axis=1, keepdims=True) / np.maximum(count, 1)[:, None, None]
-    spread = np.sqrt((((x - centre) ** 2).sum(axis=2) * used).sum(axis=1) / np.maximum(count, 1))
-    size = float(np.median(spread[count > 1])) if n >= 3 and (count > 1).any() else 0.0
+    out = np.empty((n, N_JOINTS, 2))
+    ratio = _smooth_kernel(np.ascontiguousarray(points, dtype=np.float64),
+                           np.ascontiguousarray(used, dtype=np.bool_),
+                           np.asarray(stamps_ns, dtype=np.float64), out)
+    return out, ratio
+
+
+@njit
+def _track_size(points: NDArray[np.float64], used: NDArray[np.bool_]) -> float:
+    """:func:`smooth_track_2d`'s size of a track: the median over its frames with at least two used
+    joints of their RMS distance from the frame's centre (0 with fewer than 3 frames or none).
+    Sums in numpy's order (``sum(axis=...)``: 8 partial sums for 8 or more terms)."""
+    n = points.shape[0]
+    spread = np.empty(n)
+    m = 0
+    for t in range(n):
+        count = 0
+        cx = cy = 0.0
+        for j in range(N_JOINTS):
+            if used[t, j]:
+                count += 1
+                cx += points[t, j, 0]
+                cy += points[t, j, 1]
+        if count <= 1:
+            continue
+        cx, cy = cx / count, cy / count
+        d = np.zeros(N_JOINTS)
+        for j in range(N_JOINTS):
+            if used[t, j]:
+                d[j] = (points[t, j, 0] - cx) ** 2 + (points[t, j, 1] - cy) ** 2
+        total = ((d[0] + d[1]) + (d[2] + d[3])) + ((d[4] + d[5]) + (d[6] + d[7]))
+        for j in range(8, N_JOINTS):
+            total += d[j]
+        spread[m] = math.sqrt(total / count)
+        m += 1
+    return float(np.median(spread[:m])) if n >= 3 and m > 0 else 0.0
+
+
+@njit
+def _smooth_kernel(points: NDArray[np.float64], used: NDArray[np.bool_], stamps_ns: NDArray[np.float64],
+                   out: NDArray[np.float64]) -> float:
+    """:func:`smooth_track_2d` (its arguments; ``out`` (T, 12, 2) the smoothed 2D): returns the
+    ratio."""
+    n = points.shape[0]
+    size = _track_size(points, used)
     if not size > 0.0:  # too few frames or joints to smooth: the 2D as given
-        return np.where(used[..., None], points, np.nan), 1.0
-    zs = (x / size).reshape(n, -1)
-    seen = np.repeat(used, 2, axis=1)
-    steps = np.diff(np.asarray(stamps_ns, dtype=np.float64)) / (SMOOTH_FRAME_S * 1e9)
-    dt = np.concatenate([[1.0], np.maximum(steps, 1e-3)])
-    both = seen[2:] & seen[1:-1] & seen[:-2]
-    d2 = (zs[2:] - 2.0 * zs[1:-1] + zs[:-2])[both]
+        for t in range(n):
+            for j in range(N_JOINTS):
+                for c in range(2):
+                    out[t, j, c] = points[t, j, c] if used[t, j] else np.nan
+        return 1.0
+    m = 2 * N_JOINTS
+    zs = np.empty((n, m))
+    seen = np.empty((n, m), dtype=np.bool_)
+    for t in range(n):
+        for j in range(N_JOINTS):
+            for c in range(2):
+                zs[t, 2 * j + c] = (points[t, j, c] if used[t, j] else 0.0) / size
+                seen[t, 2 * j + c] = used[t, j]
+    dt = np.empty(n)
+    dt[0] = 1.0
+    for t in range(1, n):
+        dt[t] = max((stamps_ns[t] - stamps_ns[t - 1]) / (SMOOTH_FRAME_S * 1e9), 1e-3)
+    d2 = np.empty(max(n - 2, 0) * m)
+    k = 0
+    for t in range(n - 2):
+        for s in range(m):
+            if seen[t + 2, s] and seen[t + 1, s] and seen[t, s]:
+                d2[k] = abs(zs[t + 2, s] - 2.0 * zs[t + 1, s] + zs[t, s])
+                k += 1
     q = SMOOTH_ACCEL ** 2
-    sig2 = (1.4826 * float(np.median(np.abs(d2)))) ** 2 / 6.0 if d2.size else 0.0
+    sd = 1.4826 * np.median(d2[:k]) if k else 0.0  # the robust standard deviation
+    sig2 = sd * sd / 6.0
     r = max(sig2 - q / 6.0, SMOOTH_NOISE_FLOOR ** 2)
-    out = np.empty((n, zs.shape[1]))
-    var = np.empty((n, zs.shape[1]))
-    _rts_kernel(np.ascontiguousarray(zs), np.ascontiguousarray(seen), dt, q, r, out, var)
-    ratio = float(np.sqrt(np.median(var[seen]) / r))
-    return (out * size).reshape(n, N_JOINTS, 2), min(ratio, 1.0)
+    smooth = np.empty((n, m))
+    var = np.empty((n, m))
+    _rts_kernel(zs, seen, dt, q, r, smooth, var)
+    kept = np.empty(n * m)
+    k = 0
+    for t in range(n):
+        for s in range(m):
+            out[t, s // 2, s % 2] = smooth[t, s] * size
+            if seen[t, s]:
+                kept[k] = var[t, s]
+                k += 1
+    return min(math.sqrt(np.median(kept[:k]) / r), 1.0)
 
 
 class LaterFrame(NamedTuple):
@@ -215,44 +282,42 @@ def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[ND
     out: list[NDArray[np.float64] | None] = [None] * len(frames)
     starts = [i for i, f in enumerate(frames) if i == 0 or not f.follows] + [len(frames)]
     for a, b in itertools.pairwise(starts):
-        run = frames[a:b]
-        smoothed, ratio = smooth_track_2d(np.array([f.points for f in run], dtype=np.float64),
-                                          np.array([f.used for f in run], dtype=bool),
-                                          np.array([f.stamp_ns for f in run], dtype=np.int64))
-        fwd = _pass(run, smoothed, ratio, depth, gate, range(len(run)))
-        known = [f.noise for f in run if f.noise is not None]
-        if not known:
+        run = RunArrays.of(frames[a:b])
+        known = run.noise[np.isfinite(run.noise)]
+        if not known.size:
             continue
+        forward = range(b - a)
+        fwd, fdone = MeasurementUpdate().run(run.poses, run.points, run.used, run.noise, np.array(forward),
+                                             depth, gate)
         # backward in time too, the run's first frames (no noise known yet then) at its first noise
-        filled = [f if f.noise is not None else f._replace(noise=known[0]) for f in run]
-        bwd = _pass(filled, smoothed, ratio, depth, gate, range(len(run) - 1, -1, -1))
-        for i, (p, q) in enumerate(zip(fwd, bwd, strict=True)):
-            fwd[i] = q if p is None else p if q is None else 0.5 * (p + q)
-        out[a:b] = fwd
+        filled = np.where(np.isfinite(run.noise), run.noise, known[0])
+        bwd, bdone = MeasurementUpdate().run(run.poses, run.points, run.used, filled, np.array(forward[::-1]),
+                                             depth, gate)
+        for i in forward:
+            p = fwd[i] if fdone[i] else None
+            q = bwd[i] if bdone[i] else None
+            out[a + i] = q if p is None else p if q is None else 0.5 * (p + q)
     return out
 
 
-def _pass(run: list[LaterFrame], smoothed: NDArray[np.float64], ratio: float, depth: float, gate: float,
-          order: range) -> list[NDArray[np.float64] | None]:
-    """One pass of the update over a run of frames in ``order`` (forward or backward in time), from
-    the ``smoothed`` 2D (T, 12, 2) at the frames' noise times ``ratio``: each frame's published
-    pose, None where it was not updated (no noise known, or a non-finite update, after which the
-    pass starts again)."""
-    out: list[NDArray[np.float64] | None] = [None] * len(run)
-    state: MeasurementUpdate | None = None
-    for i in order:
-        f = run[i]
-        if f.noise is None:
-            continue
-        if state is None:
-            state = MeasurementUpdate()
-        points = np.where(np.isfinite(smoothed[i]), smoothed[i], f.points)
-        pose = state.update(f.pose, points, f.used, f.noise * ratio, depth, gate)
-        if not np.isfinite(pose).all():
-            state = None
-            continue
-        out[i] = pose
-    return out
+class RunArrays(NamedTuple):
+    """A run of a track's frames that follow one another, as the update reads them."""
+
+    poses: NDArray[np.float64]  #: (T, 12, 3) the poses the track would publish
+    points: NDArray[np.float64]  #: (T, 12, 2) the 2D smoothed (:func:`smooth_track_2d`), as read where not
+    used: NDArray[np.bool_]  #: (T, 12) the joints the lifts used
+    #: (T,) each frame's noise times the smoother's ratio (NaN: not known then)
+    noise: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, run: list[LaterFrame]) -> RunArrays:
+        """The arrays of ``run`` (at least one frame, in time order), its 2D smoothed."""
+        raw = np.array([f.points for f in run], dtype=np.float64)
+        used = np.array([f.used for f in run], dtype=bool)
+        smoothed, ratio = smooth_track_2d(raw, used, np.array([f.stamp_ns for f in run], dtype=np.int64))
+        noise = np.array([np.nan if f.noise is None else f.noise * ratio for f in run])
+        return cls(np.array([f.pose for f in run], dtype=np.float64),
+                   np.where(np.isfinite(smoothed), smoothed, raw), used, noise)
 
 
 def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate: float

@@ -96,6 +96,7 @@ DEPTH_SMOOTHING = 0.5
 DEPTH_GAIN = 0.6
 
 
+@njit
 def kalman_gain(q: float, r: float) -> float:
     """The steady-state Kalman gain of a random walk (variance ``q`` per step) observed with noise
     of variance ``r``: 1 without noise, about ``sqrt(q / r)`` when the noise dominates."""
@@ -105,21 +106,26 @@ def kalman_gain(q: float, r: float) -> float:
     return p / (p + r)
 
 
-def _column_quantiles(rows: NDArray[np.float64], q: float) -> NDArray[np.float64]:
-    """Per column of ``rows`` (n, m; NaN = none) the ``q`` quantile (linear) of its finite values,
-    NaN where a column has fewer than SPAN_MIN_FRAMES // 2 of them."""
-    s = np.sort(rows, axis=0)  # NaN last
-    count = np.isfinite(rows).sum(axis=0)
-    pos = q * np.maximum(count - 1, 0)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, np.maximum(count - 1, 0))
-    cols = np.arange(rows.shape[1])
-    out = s[lo, cols] + (pos - lo) * (s[hi, cols] - s[lo, cols])
-    return np.where(count >= max(SPAN_MIN_FRAMES // 2, 1), out, np.nan)
+@njit
+def _column_quantile(rows: NDArray[np.float64], col: int, q: float) -> float:
+    """The ``q`` quantile (linear) of the finite values of column ``col`` of ``rows`` (n, m; NaN =
+    none), NaN with fewer than SPAN_MIN_FRAMES // 2 of them."""
+    values = np.empty(rows.shape[0])
+    count = 0
+    for i in range(rows.shape[0]):
+        if np.isfinite(rows[i, col]):
+            values[count] = rows[i, col]
+            count += 1
+    if count < max(SPAN_MIN_FRAMES // 2, 1):
+        return np.nan
+    s = np.sort(values[:count])
+    pos = q * (count - 1)
+    lo = math.floor(pos)
+    hi = min(lo + 1, count - 1)
+    return float(s[lo] + (pos - lo) * (s[hi] - s[lo]))
 
 
 _LEFT, _RIGHT, _GROUP = np.array(LEFT_LIMBS), np.array(RIGHT_LIMBS), np.array(LIMB_GROUP_OF)
-_NO_LIMBS = np.empty(0)
 
 
 @njit
@@ -170,6 +176,10 @@ class TrackArrays(NamedTuple):
     depth_velocity: NDArray[np.float64]  #: (12,) and velocity
     ok: NDArray[np.bool_]  #: (12,) the joints updated on this frame
     span_row: NDArray[np.float64]  #: (8,) this frame's aligned limb lengths (NaN: not both updated)
+    spans: NDArray[np.float64]  #: (SPAN_FRAMES, 8) the last frames' span rows, a ring (NaN: none)
+    #: (3,) span rows kept, ``spans`` count when ``limbs`` was last estimated, ``limbs`` valid (1/0)
+    meta: NDArray[np.float64]
+    limbs: NDArray[np.float64]  #: (8,) the track's limb lengths from the image (:func:`_limb_lengths`)
 
 
 @njit
@@ -355,40 +365,112 @@ def _depth_kernel(pose: NDArray[np.float64], out: NDArray[np.float64], limbs: ND
         out[j, 2] = level[j] - zmean
 
 
+@njit
+def _reset(tr: TrackArrays) -> None:
+    """The state of a track not updated yet, in place."""
+    for a in (tr.offset, tr.prev_points, tr.last, tr.last2):
+        a[:] = 0.0
+    for b in (tr.depth_offset, tr.depth_level, tr.depth_velocity, tr.state):
+        b[:] = 0.0
+    tr.prev_updated[:] = False
+    tr.ok[:] = False
+    tr.spans[:] = np.nan
+    tr.meta[0], tr.meta[1], tr.meta[2] = 0.0, -SPAN_EVERY, 0.0
+
+
+@njit
+def _limb_lengths(tr: TrackArrays) -> bool:
+    """Whether the track has limb lengths from the image (``tr.limbs``): the SPAN_QUANTILE of each
+    limb's span rows, left and right averaged, re-estimated every SPAN_EVERY rows; none before
+    SPAN_MIN_FRAMES rows or with a limb seen too rarely."""
+    n_spans = int(tr.meta[0])
+    if n_spans < SPAN_MIN_FRAMES:
+        return False
+    if n_spans >= tr.meta[1] + SPAN_EVERY:
+        rows = tr.spans[: min(n_spans, SPAN_FRAMES)]
+        est = np.empty(len(LIMBS))
+        for i in range(len(LIMBS)):
+            est[i] = _column_quantile(rows, i, SPAN_QUANTILE)
+        valid = True
+        for i in range(len(LIMBS)):
+            g = _GROUP[i]
+            tr.limbs[i] = 0.5 * (est[_LEFT[g]] + est[_RIGHT[g]])
+            valid = valid and np.isfinite(tr.limbs[i])
+        tr.meta[1], tr.meta[2] = n_spans, 1.0 if valid else 0.0
+    return bool(tr.meta[2] > 0.0)
+
+
+@njit
+def _update_frame(pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+                  noise: float, depth: float, gate: float, tr: TrackArrays, out: NDArray[np.float64]) -> None:
+    """One frame of the update (:meth:`MeasurementUpdate.update`, its arguments) on the track's
+    arrays ``tr``: ``out`` (12, 3) the published pose."""
+    k = kalman_gain(DRIFT * DRIFT, noise * noise)
+    if _xy_kernel(pose, points, used, max(gate, GATE_NOISE_FACTOR * noise), k, tr, out):
+        tr.spans[int(tr.meta[0]) % SPAN_FRAMES] = tr.span_row
+        tr.meta[0] += 1
+    has_limbs = _limb_lengths(tr) if depth > 0 else False
+    gain = 1.0 - (1.0 - DEPTH_GAIN) * k
+    _depth_kernel(pose, out, tr.limbs if has_limbs else tr.limbs[:0], depth * k, gain, tr)
+    tr.last2[:] = tr.last
+    tr.last[:] = out
+    tr.state[4] += 1
+
+
+@njit
+def _run_kernel(poses: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+                noise: NDArray[np.float64], restart: NDArray[np.bool_], order: NDArray[np.int64],
+                depth: float, gate: float, tr: TrackArrays, out: NDArray[np.float64], done: NDArray[np.bool_]
+                ) -> None:
+    """:meth:`MeasurementUpdate.run`'s frames in ``order`` on the track's arrays ``tr``."""
+    for i in order:
+        done[i] = False
+        if restart[i]:
+            _reset(tr)
+        if not np.isfinite(noise[i]):
+            continue
+        _update_frame(poses[i], points[i], used[i], noise[i], depth, gate, tr, out[i])
+        if np.isfinite(out[i]).all():
+            done[i] = True
+        else:
+            _reset(tr)
+
+
+def _f64(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _bool(a: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    return np.ascontiguousarray(a, dtype=np.bool_)
+
+
 class MeasurementUpdate:
-    """One track's state of the measurement update (module docstring); :meth:`update` per frame."""
+    """One track's state of the measurement update (module docstring): :meth:`update` per frame,
+    :meth:`run` over a sequence of frames."""
 
     def __init__(self) -> None:
-        n = N_JOINTS
+        n, m = N_JOINTS, len(LIMBS)
         self.arrays = TrackArrays(
             offset=np.zeros((n, 2)), state=np.zeros(6), prev_points=np.zeros((n, 2)),
             prev_updated=np.zeros(n, dtype=bool), last=np.zeros((n, 3)), last2=np.zeros((n, 3)),
             depth_offset=np.zeros(n), depth_level=np.zeros(n), depth_velocity=np.zeros(n),
-            ok=np.zeros(n, dtype=bool), span_row=np.empty(len(LIMBS)))
-        self.spans = np.full((SPAN_FRAMES, len(LIMBS)), np.nan)
-        self.n_spans = 0
-        self.limbs: NDArray[np.float64] | None = None
-        self.limbs_at = -SPAN_EVERY
+            ok=np.zeros(n, dtype=bool), span_row=np.empty(m), spans=np.full((SPAN_FRAMES, m), np.nan),
+            meta=np.array([0.0, -SPAN_EVERY, 0.0]), limbs=np.full(m, np.nan))
 
     def copy(self) -> MeasurementUpdate:
         """An independent copy of the state (its arrays copied)."""
         out = MeasurementUpdate.__new__(MeasurementUpdate)
         out.arrays = TrackArrays._make(a.copy() for a in self.arrays)
-        out.spans = self.spans.copy()
-        out.n_spans, out.limbs, out.limbs_at = self.n_spans, self.limbs, self.limbs_at
         return out
+
+    def reset(self) -> None:
+        """Forget every frame: the state of a track not updated yet."""
+        _reset(self.arrays)
 
     def limb_lengths(self) -> NDArray[np.float64] | None:
         """The track's limb lengths from the image (8,; left and right averaged; model units), or
         None before SPAN_MIN_FRAMES frames or with a limb seen too rarely."""
-        if self.n_spans < SPAN_MIN_FRAMES:
-            return None
-        if self.n_spans >= self.limbs_at + SPAN_EVERY:
-            est = _column_quantiles(self.spans[: min(self.n_spans, SPAN_FRAMES)], SPAN_QUANTILE)
-            out = (0.5 * (est[_LEFT] + est[_RIGHT]))[_GROUP]
-            self.limbs = out if np.isfinite(out).all() else None
-            self.limbs_at = self.n_spans
-        return self.limbs
+        return self.arrays.limbs.copy() if _limb_lengths(self.arrays) else None
 
     def update(self, pose: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
                noise: float, depth: float, gate: float) -> NDArray[np.float64]:
@@ -409,22 +491,45 @@ class MeasurementUpdate:
         gate : float
             ``measurement_gate`` (leg lengths).
         """
-        pose = np.ascontiguousarray(pose, dtype=np.float64)
-        points = np.ascontiguousarray(points, dtype=np.float64)
-        used = np.ascontiguousarray(used, dtype=np.bool_)
-        k = kalman_gain(DRIFT * DRIFT, noise * noise)
         out = np.empty((N_JOINTS, 3))
-        tr = self.arrays
-        if _xy_kernel(pose, points, used, max(gate, GATE_NOISE_FACTOR * noise), k, tr, out):
-            self.spans[self.n_spans % SPAN_FRAMES] = tr.span_row
-            self.n_spans += 1
-        limbs = self.limb_lengths() if depth > 0 else None
-        gain = 1.0 - (1.0 - DEPTH_GAIN) * k
-        _depth_kernel(pose, out, _NO_LIMBS if limbs is None else limbs, depth * k, gain, tr)
-        tr.last2[:] = tr.last
-        tr.last[:] = out
-        tr.state[4] += 1
+        _update_frame(_f64(pose), _f64(points), _bool(used), float(noise), float(depth), float(gate),
+                      self.arrays, out)
         return out
+
+    def run(self, poses: NDArray[np.float64], points: NDArray[np.float64], used: NDArray[np.bool_],
+            noise: NDArray[np.float64], order: NDArray[np.int64], depth: float, gate: float,
+            restart: NDArray[np.bool_] | None = None) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """:meth:`update` of a sequence of frames in one call, in ``order``.
+
+        Parameters
+        ----------
+        poses, points, used : ndarray, shapes (T, 12, 3), (T, 12, 2), (T, 12)
+            Per frame, :meth:`update`'s ``pose``, ``points`` and ``used``.
+        noise : ndarray, shape (T,)
+            Per frame its noise; NaN: not known, the frame is skipped (the state unchanged).
+        order : ndarray of int, shape (K,)
+            The frames to take, in the order taken (e.g. backward in time).
+        depth, gate : float
+            As :meth:`update`.
+        restart : ndarray of bool, shape (T,), optional
+            Frames before which the state starts again (:meth:`reset`).
+
+        Returns
+        -------
+        out : ndarray, shape (T, 12, 3)
+            Each frame's published pose (rows of frames not done undefined).
+        done : ndarray of bool, shape (T,)
+            The frames updated: taken, with a noise, and finite. A non-finite update starts
+            the state again (the next frame is the first of a new track).
+        """
+        n = poses.shape[0]
+        out = np.empty((n, N_JOINTS, 3))
+        done = np.zeros(n, dtype=np.bool_)
+        _run_kernel(_f64(poses), _f64(points), _bool(used), _f64(noise),
+                    np.zeros(n, dtype=np.bool_) if restart is None else _bool(restart),
+                    np.ascontiguousarray(order, dtype=np.int64), float(depth), float(gate), self.arrays, out,
+                    done)
+        return out, done
 
 
 _COMPILED = False
