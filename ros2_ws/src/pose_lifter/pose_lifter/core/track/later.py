@@ -341,12 +341,11 @@ _COMPILED = False
 
 
 def compile_kernels() -> None:
-    """Compile this module's kernel (numba, ``core.numeric.jit``) or load it from its cache, once
-    per process."""
+    """Compile this module's kernels (numba, ``core.numeric.jit``) or load them from their cache,
+    once per process: the smoother of a short track."""
     global _COMPILED
     if _COMPILED:
         return
-    z = np.zeros((3, 2))
-    _rts_kernel(z, np.ones((3, 2), dtype=np.bool_), np.ones(3), 1e-4, 1e-4, np.empty((3, 2)),
-                np.empty((3, 2)))
+    points = np.arange(4 * N_JOINTS * 2, dtype=np.float64).reshape(4, N_JOINTS, 2) % 7.0
+    smooth_track_2d(points, np.ones((4, N_JOINTS), dtype=bool), np.arange(4, dtype=np.int64) * 33_333_333)
     _COMPILED = True

@@ -537,7 +537,8 @@ _COMPILED = False
 
 def compile_kernels() -> None:
     """Compile this module's kernels (numba, ``core.numeric.jit``) or load them from their cache, once
-    per process: one update of a still pose (a track's first frame would otherwise pay for it)."""
+    per process: updates of a still pose, frame by frame and as a run (a track's first frame
+    would otherwise pay for it)."""
     global _COMPILED
     if _COMPILED:
         return
@@ -548,4 +549,6 @@ def compile_kernels() -> None:
     pose -= pose.mean(axis=0)
     for _ in range(SPAN_MIN_FRAMES + 1):
         update.update(pose, 100.0 * pose[:, :2], np.ones(N_JOINTS, dtype=bool), 0.01, 0.5, 0.3)
+    update.run(pose[None], 100.0 * pose[None, :, :2], np.ones((1, N_JOINTS), dtype=bool), np.array([0.01]),
+               np.zeros(1, dtype=np.int64), 0.5, 0.3)
     _COMPILED = True
