@@ -45,7 +45,7 @@ smoothed over past and future frames (which halves white 2D noise of 0.05 leg le
 every noise level with that smoothed 2D's own noise, and runs forward and backward in time.
 
 Live it is causal (this and earlier frames only); live and offline it is output-only (the track's fits,
-warm starts, gate and estimates never see it) and cheap (tens of microseconds a frame). Measured
+warm starts, gate and estimates never see it) and cheap (a few microseconds a frame). Measured
 in ``docs/tuning.md`` and docs/accuracy.md.
 """
 
