@@ -21,7 +21,9 @@ image: knees and ankles missing on every frame), ``close`` (a perspective camera
 fault of a real detector together (:data:`pose_lifter.mocap.detector_model.REALISTIC`: per-joint
 noise scaled like the COCO sigmas and correlated over frames, a confidence that falls with the
 error, confident outliers, misses, dropped limbs, swaps, the lower body cut, joints outside the
-640x480 image lost), a perspective camera at 6 m / 3 m.
+640x480 image lost), a perspective camera at 6 m / 3 m. Not run unless named (diagnostics of the
+realistic detector at 6 m): ``detnoise6m`` its noise alone (no other fault), ``detwhite6m`` the
+same noise independent from frame to frame, ``detfaults6m`` its faults without the noise.
 
 Methods: ``flat`` (the 2D with zero depth) and ``mean-pose`` floors; ``paper`` (the paper's
 method, tracked as the node tracks: cold 30-start first frame, then warm + mirrored starts);
@@ -39,6 +41,8 @@ of noisy tracks, then smoothed by the centred window of :mod:`pose_lifter.core.t
 Figures: P-MPJPE (mm, similarity-aligned per frame), MPJPE (mm, camera frame, centred on the
 joints' centroid, the prediction scaled by the subject's true right-lower-leg length, no
 rotation alignment) and jitter (mean acceleration error, mm per frame^2, on the MPJPE poses).
+With ``--axes`` also the P-MPJPE of each method's poses with the true x, y put in (their depths
+kept) and with the true depths put in (their x, y kept), camera frame: where the error lies.
 Writes ``accuracy.json``, ``accuracy.md`` (the table) and ``accuracy.png`` to ``--out``.
 Deterministic (seeded corruption, one BLAS thread per worker).
 """
@@ -53,7 +57,7 @@ import os
 import sys
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -73,7 +77,7 @@ from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
 from pose_lifter.mocap.cmu import load_trial, split_trials
-from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, detect, swap_labels
+from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, DetectorModel, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
 from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_rotation
 
@@ -95,6 +99,14 @@ CONDITIONS: dict[str, dict[str, float]] = {
     "detector6m": {"detector": 1.0, "distance": 6.0},
     "detector3m": {"detector": 1.0, "distance": 3.0},
 }
+#: Diagnostics of the realistic detector (not run unless named): its noise alone, the same noise
+#: independent over frames, its faults without the noise; a perspective camera at 6 m.
+DIAGNOSTIC_CONDITIONS: dict[str, dict[str, float]] = {
+    "detnoise6m": {"detector": 1.0, "distance": 6.0, "faults": 0.0},
+    "detwhite6m": {"detector": 1.0, "distance": 6.0, "faults": 0.0, "correlation": 0.0},
+    "detfaults6m": {"detector": 1.0, "distance": 6.0, "detector_noise": 0.0},
+}
+ALL_CONDITIONS = {**CONDITIONS, **DIAGNOSTIC_CONDITIONS}
 METHODS = ("flat", "mean-pose", "paper", "learned", "learned-t", "learned-offline", "hybrid",
            "hybrid-lag", "hybrid-offline", "hybrid-1")
 AZIMUTHS = tuple(range(0, 360, 45))
@@ -172,7 +184,7 @@ def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
     pts, cam_pose, leg = film(world, rots, np.full(n, dist), np.full(n, proj == "perspective"))
     px = FOCAL * pts + CENTRE
     if spec.get("detector", 0.0) > 0:
-        return (*detect(px, FOCAL * leg, REALISTIC, rng, IMAGE_SIZE), world, cam_pose)
+        return (*detect(px, FOCAL * leg, detector_model(spec), rng, IMAGE_SIZE), world, cam_pose)
     px, conf = corrupt_2d(px, FOCAL * leg, spec.get("noise", 0.0),
                           spec.get("outliers", 0.0), spec.get("missing", 0.0), rng)
     if spec.get("swap", 0.0) > 0:  # a detector's left/right label swaps (arms, legs apart)
@@ -183,18 +195,30 @@ def film_track(track: Track, spec: dict[str, float], rng: np.random.Generator
     return px, conf, world, cam_pose
 
 
+def detector_model(spec: dict[str, float]) -> DetectorModel:
+    """The realistic detector, or a diagnostic part of it (:data:`DIAGNOSTIC_CONDITIONS`)."""
+    model = REALISTIC
+    if spec.get("faults", 1.0) == 0.0:
+        model = replace(model, outliers=0.0, missing=0.0, limb_drop=0.0, swap=0.0, lower_cut=0.0)
+    if "correlation" in spec:
+        model = replace(model, correlation=spec["correlation"])
+    if "detector_noise" in spec:
+        model = replace(model, noise=spec["detector_noise"])
+    return model
+
+
 def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
     track, cond, methods = args
     rng = np.random.default_rng(track.seed)
-    px, conf, world, cam_pose = film_track(track, CONDITIONS[cond], rng)
+    px, conf, world, cam_pose = film_track(track, ALL_CONDITIONS[cond], rng)
     n = len(world)
     leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
     truth_c = cam_pose - cam_pose.mean(axis=1, keepdims=True)
     out: dict[str, Any] = {}
     stamps = np.arange(n, dtype=np.int64) * 33_333_333
     # the camera's intrinsics, given to the lift of a perspective track with --intrinsics
-    perspective = track.camera[2] == "perspective" or "distance" in CONDITIONS[cond]
-    dist_m = CONDITIONS[cond].get("distance", _STATE.get("distance", DISTANCE))
+    perspective = track.camera[2] == "perspective" or "distance" in ALL_CONDITIONS[cond]
+    dist_m = ALL_CONDITIONS[cond].get("distance", _STATE.get("distance", DISTANCE))
     intrinsics = ((FOCAL, FOCAL), (float(CENTRE[0]), float(CENTRE[1]))) if (
         perspective and _STATE.get("intrinsics")) else None
     for m in methods:
@@ -272,6 +296,12 @@ def _job(args: tuple[Track, str, tuple[str, ...]]) -> dict[str, Any]:
             at = truth_c[2:] - 2 * truth_c[1:-1] + truth_c[:-2]
             acc[1:-1] = 1000.0 * np.linalg.norm(ap - at, axis=-1).mean(axis=-1)
         out[m] = {"p_mpjpe": pm.tolist(), "mpjpe": mp_.tolist(), "jitter": acc.tolist(), "ms": ms}
+        for key, axes in (("true_xy", slice(0, 2)), ("true_depth", slice(2, 3))):  # --axes
+            swapped = preds.copy()
+            swapped[..., axes] = truth_c[..., axes]
+            vals = np.full(n, np.nan)
+            vals[ok] = 1000.0 * np.asarray(p_mpjpe(swapped[ok], truth_c[ok]))
+            out[m][key] = vals.tolist()
         if m not in ("flat", "mean-pose") and perspective:
             out[m]["depth_pct"] = depth.tolist()
     return {"track": track.name, "cond": cond, "camera": track.camera, "n": n, "methods": out}
@@ -318,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=120, help="frames per track at 30 Hz")
     ap.add_argument("--views", type=int, default=4, help="cameras per trial (of 32)")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
-    ap.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(CONDITIONS))
+    ap.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(ALL_CONDITIONS))
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
     ap.add_argument("--bases", default=None, help="basis file (default: each mode's packaged one)")
@@ -337,6 +367,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="tracked lifts of perspective tracks know the camera's intrinsics (camera_info)")
     ap.add_argument("--merge", type=Path, nargs="+", default=None,
                     help="no lifting: join these runs' accuracy.json into one table in --out")
+    ap.add_argument("--axes", action="store_true",
+                    help="also P-MPJPE with the true x, y and with the true depths put in")
     ap.add_argument("--out", type=Path, default=Path("out/accuracy"))
     args = ap.parse_args(argv)
     if args.merge:
@@ -375,14 +407,18 @@ def main(argv: list[str] | None = None) -> int:
         table[cond] = {}
         for m in methods:
             vals = {k: _nanmean([v for r in rows for v in r["methods"][m][k]])
-                    for k in ("p_mpjpe", "mpjpe", "jitter")}
+                    for k in ("p_mpjpe", "mpjpe", "jitter", "true_xy", "true_depth")}
             vals["ms"] = float(np.mean([r["methods"][m]["ms"] for r in rows]))
             vals["lifted"] = float(np.mean([np.isfinite(r["methods"][m]["p_mpjpe"]).mean() for r in rows]))
             vals["depth_pct"] = _nanmean([v for r in rows for v in r["methods"][m].get("depth_pct", [])])
             table[cond][m] = vals
+    axes = [f"{c} {m} {row[m]['p_mpjpe']:.1f} / {row[m]['true_xy']:.1f} / {row[m]['true_depth']:.1f}"
+            for c, row in table.items() for m in methods if m not in ("flat", "mean-pose")]
+    footer = ("P-MPJPE (mm) as lifted / with the true x, y / with the true depths: " + ", ".join(axes) + "\n"
+              if args.axes else "") + f"wall time {time.perf_counter() - t0:.0f} s"
     header = (f"{args.split} split, {len(tracks)} tracks, {n_frames} frames per condition "
               f"(`tools/accuracy.py {' '.join(argv if argv is not None else sys.argv[1:])}`)")
-    _write(table, methods, header, f"wall time {time.perf_counter() - t0:.0f} s", args.out,
+    _write(table, methods, header, footer, args.out,
            {"table": table, "settings": settings, "split": args.split if not trials else "trials",
             "trials": trials, "distance": args.distance, "cameras": cameras})
     return 0

@@ -9,9 +9,9 @@ gives, back-projected at the joint's true depth (a joint without 2D keeps its tr
 the truth: P-MPJPE (mm). A lift that knew every depth and followed the 2D would score this. Twice:
 with the 2D as given, and with each track's 2D first smoothed over past and future frames by
 :func:`pose_lifter.core.track.later.smooth_track_2d` (what ``pose-lifter lift``'s measurement
-update reads). Besides :data:`accuracy.CONDITIONS`, the realistic detector's noise alone
-(``detnoise6m``: its per-joint noise correlated over frames, no other fault) and the same noise
-independent from frame to frame (``detwhite6m``), both at 6 m.
+update reads). The conditions are ``tools/accuracy.py``'s, its diagnostics of the realistic
+detector included (``detnoise6m``: its per-joint noise correlated over frames, no other fault;
+``detwhite6m``: the same noise independent from frame to frame).
 """
 
 from __future__ import annotations
@@ -27,26 +27,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy as acc
 from pose_lifter.core import p_mpjpe
 from pose_lifter.core.track.later import smooth_track_2d
-from pose_lifter.mocap.detector_model import REALISTIC, DetectorModel
 
 FRAME_NS = 33_333_333
-#: The realistic detector's noise alone, correlated over frames as the detector's, or not.
-NOISE_ONLY = {
-    "detnoise6m": DetectorModel(outliers=0.0, missing=0.0, limb_drop=0.0, swap=0.0, lower_cut=0.0),
-    "detwhite6m": DetectorModel(correlation=0.0, outliers=0.0, missing=0.0, limb_drop=0.0, swap=0.0,
-                                lower_cut=0.0),
-}
 
 
 def floors(track: acc.Track, cond: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per frame of ``track`` the P-MPJPE (mm) of the true pose with the x, y of condition
     ``cond``'s 2D, as given and smoothed."""
-    spec = {"detector": 1.0, "distance": 6.0} if cond in NOISE_ONLY else acc.CONDITIONS[cond]
-    acc.REALISTIC = NOISE_ONLY.get(cond, REALISTIC)  # what film_track's detector condition uses
-    try:
-        px, conf, _, cam = acc.film_track(track, spec, np.random.default_rng(track.seed))
-    finally:
-        acc.REALISTIC = REALISTIC
+    spec = acc.ALL_CONDITIONS[cond]
+    px, conf, _, cam = acc.film_track(track, spec, np.random.default_rng(track.seed))
     perspective = track.camera[2] == "perspective" or "distance" in spec
     dist = spec.get("distance", acc.DISTANCE)
     depth = cam[..., 2] + dist if perspective else np.full(cam.shape[:2], dist)
@@ -69,8 +58,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", choices=("val", "eval"), default="eval")
     ap.add_argument("--frames", type=int, default=90)
     ap.add_argument("--views", type=int, default=4)
-    ap.add_argument("--conditions", nargs="+", choices=[*acc.CONDITIONS, *NOISE_ONLY],
-                    default=["clean", "noise0.05", "noise0.1", "detector6m", "detector3m", *NOISE_ONLY])
+    ap.add_argument("--conditions", nargs="+", choices=list(acc.ALL_CONDITIONS),
+                    default=["clean", "noise0.05", "noise0.1", "detector6m", "detector3m", "detnoise6m",
+                             "detwhite6m", "detfaults6m"])
     args = ap.parse_args(argv)
     tracks = acc._tracks(args.split, args.data, args.frames, args.views)
     print(f"{args.split}: {len(tracks)} tracks, {sum(len(t.world) for t in tracks)} frames per condition; "
