@@ -6,6 +6,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+from pose_lifter.core.model.skeleton import LIMBS, RIGHT_LOWER_LEG
 from pose_lifter.core.model.synthetic import synthetic_poses
 from tool_modules import load_tool
 
@@ -73,3 +74,30 @@ def test_the_detector_conditions_film_every_fault_at_their_distance(acc: ModuleT
     ratio = np.median(np.linalg.norm(px3 - clean3, axis=-1)) / np.median(err)
     assert ratio == pytest.approx(2.0, rel=0.2)
     assert np.isfinite(px6).all() and np.isfinite(cam6).all()
+
+
+def test_the_detector_diagnostics_split_its_noise_from_its_faults(acc: ModuleType) -> None:
+    """detnoise6m: the detector's noise alone (nothing lost, swapped or displaced far), correlated
+    over frames; detwhite6m: the same noise independent over frames; detfaults6m: its faults on
+    exact 2D (most joints exactly where the camera puts them, the others lost, swapped or
+    displaced)."""
+    track = _track(acc, (90.0, 0.0, "weak"))
+    clean, _, _, _ = acc.film_track(track, {"distance": 6.0}, np.random.default_rng(0))
+    knee, ankle = LIMBS[RIGHT_LOWER_LEG]
+    leg = np.linalg.norm(clean[:, knee] - clean[:, ankle], axis=-1).mean()  # the right shin, px
+    errors = {}
+    for cond in ("detnoise6m", "detwhite6m", "detfaults6m"):
+        px, conf, _, _ = acc.film_track(track, acc.ALL_CONDITIONS[cond], np.random.default_rng(0))
+        errors[cond] = (px - clean, conf)
+    noise, conf = errors["detnoise6m"]
+    white, white_conf = errors["detwhite6m"]
+    assert np.all(conf > 0) and np.all(white_conf > 0)  # nothing lost
+    assert np.abs(noise).max() < leg and np.abs(white).max() < leg  # no outliers, no swaps
+    # as large as each other (~0.05 leg per axis), correlated 0.7 from frame to frame or not
+    assert np.std(noise) == pytest.approx(np.std(white), rel=0.2)
+    lag1 = lambda e: np.corrcoef(e[1:].ravel(), e[:-1].ravel())[0, 1]  # noqa: E731
+    assert lag1(noise) == pytest.approx(0.7, abs=0.1) and abs(lag1(white)) < 0.1
+    faults, fconf = errors["detfaults6m"]
+    exact = np.all(np.abs(faults) < 1e-9, axis=-1) & (fconf > 0)
+    assert 0.8 < exact.mean() < 0.99 and np.abs(faults).max() > leg  # confident outliers among them
+    assert "detnoise6m" not in acc.CONDITIONS  # run only when named
