@@ -172,7 +172,8 @@ def smooth_track_2d(points: NDArray[np.float64], used: NDArray[np.bool_], stamps
 def _track_size(points: NDArray[np.float64], used: NDArray[np.bool_]) -> float:
     """:func:`smooth_track_2d`'s size of a track: the median over its frames with at least two used
     joints of their RMS distance from the frame's centre (0 with fewer than 3 frames or none).
-    Sums in numpy's order (``sum(axis=...)``: 8 partial sums for 8 or more terms)."""
+    The squared distances are summed in numpy's pairwise order (8 partial sums, then the rest), so
+    the size is numpy's ``sum(axis=...)`` to the last bit."""
     n = points.shape[0]
     spread = np.empty(n)
     m = 0
@@ -272,7 +273,7 @@ class LaterFrame(NamedTuple):
 def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[NDArray[np.float64] | None]:
     """The offline measurement update of one track's frames (in time order): each run of frames
     that follow one another has its 2D smoothed (:func:`smooth_track_2d`), then the update
-    (:meth:`MeasurementUpdate.update`) runs over the run from the smoothed 2D, at every noise
+    (:meth:`MeasurementUpdate.run`) runs over the run from the smoothed 2D, at every noise
     level, with the track's noise times the smoother's ratio, once forward and once backward in
     time, and each frame publishes the mean of the two: each direction's filters (the x, y
     offsets' gain, the depths' alpha-beta filter) lag the motion their own way, their mean does
