@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
-from pose_lifter.core.model.skeleton import LIMBS, RIGHT_LOWER_LEG, limb_lengths
+from pose_lifter.core.model.skeleton import LIMB_NAMES, LIMBS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.track.measurement import MeasurementUpdate, kalman_gain
 from pose_lifter.core.track.policy import TrackedLift, TrackPolicy
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -447,3 +447,24 @@ def test_a_run_of_frames_is_the_update_frame_by_frame() -> None:
         np.testing.assert_array_equal(out[i], got)
     np.testing.assert_array_equal(done, expected_done)
     assert not done[[3, 4, 19]].any() and done.sum() == n - 3
+
+
+def test_a_limb_never_seen_across_the_image_keeps_its_depth() -> None:
+    """Seen from above, a standing person's shins are foreshortened on every frame (0.64 of their
+    length in the image, the rest in depth): the image's length of the shin underrates it, and the
+    depth step must not flatten a shin the pose has at its true depth (its length is at least
+    OWN_LIMB_SHARE of the pose's own)."""
+    truth = _pose()
+    for knee, ankle in (LIMBS[RIGHT_LOWER_LEG], LIMBS[LIMB_NAMES.index("left_lower_leg")]):
+        truth[ankle] = truth[knee] + np.array([0.0, 0.64, 0.768])  # 1.0 long, away from the camera
+    truth -= truth.mean(axis=0)
+    points = 100.0 * truth[:, :2] + 320.0
+    update = MeasurementUpdate()
+    out = _run(update, truth, points, 20, depth=1.0)
+    est = update.limb_lengths()
+    assert est is not None and est[RIGHT_LOWER_LEG] < 0.7  # the image's shin: 0.64
+    knee, ankle = LIMBS[RIGHT_LOWER_LEG]
+    dz = out[ankle, 2] - out[knee, 2]
+    # from the image's length alone the step would take the depth to 0; the pose's own shin
+    # (1.0, at least 0.9 of it) keeps it: sqrt(0.9^2 - 0.64^2) = 0.63 or more, towards 0.768
+    assert 0.6 < dz <= 0.768 + 1e-9
