@@ -344,8 +344,8 @@ def _depth_kernel(pose: NDArray[np.float64], out: NDArray[np.float64], limbs: ND
                 continue
             dz = pose[b, 2] - pose[a, 2]
             dx, dy = out[b, 0] - out[a, 0], out[b, 1] - out[a, 1]
-            ex, ey, ez = pose[b, 0] - pose[a, 0], pose[b, 1] - pose[a, 1], pose[b, 2] - pose[a, 2]
-            length = max(limbs[i], OWN_LIMB_SHARE * math.sqrt(ex * ex + ey * ey + ez * ez))
+            ex, ey = pose[b, 0] - pose[a, 0], pose[b, 1] - pose[a, 1]  # the pose's own limb: (ex, ey, dz)
+            length = max(limbs[i], OWN_LIMB_SHARE * math.sqrt(ex * ex + ey * ey + dz * dz))
             mag = math.sqrt(max(length * length - dx * dx - dy * dy, 0.0))
             want = z[a] + (1.0 - beta) * dz + beta * (mag if dz >= 0 else -mag)
             depth_offset[b] = DEPTH_SMOOTHING * prev[b] + (1.0 - DEPTH_SMOOTHING) * (want - pose[b, 2])
