@@ -96,20 +96,19 @@ def test_a_missing_joint_is_carried_over_by_the_track(
         bases: PoseBases, walk_track: tuple[np.ndarray, np.ndarray]) -> None:
     x, truth = walk_track
     conf = np.ones(x.shape[:2])
-    conf[10:25, [2, 8]] = 0.0  # the left wrist and left ankle lost for half a second
+    lost = [2, 8]  # the left wrist and left ankle, lost for half a second
+    conf[10:25, lost] = 0.0
     frames = range(10, 25)
     errs = []
-    lost = [2, 8]
     for w in (3.0, 0.0):
         # the single-frame prior: the carry-over alone (the temporal prior sees the past frames
         # too, and the flip-averaged prior guesses this walker's lost joints within 1.3 % of it;
         # the output's measurement update holds a lost joint where the track had it as well).
         # The carry-over moves the prior rows' target; the pose step follows its rows the further
         # the more iterations it runs (the default configuration's gain: docs/tuning.md,
-        # missing_temporal_weight). The lost joints' error after aligning the whole pose, with
-        # the carry-over over without: 0.949 with the packaged prior, 0.959 with the one trained
-        # 2.5-10 m away (whose whole-pose ratio was 0.965 against 0.983 now: what the prior
-        # guesses of the other joints moves that one, the carried-over joints' own error less)
+        # missing_temporal_weight). Measured on the lost joints' own error after aligning the
+        # whole pose (with the carry-over over without: 0.949 with the packaged prior); the
+        # whole pose's error moves more with what the prior guesses of the other joints
         res = _track(Lifter(bases, LifterOptions(missing_temporal_weight=w, temporal_prior=False,
                                                  fill_missing_frames=0, prior_flip=False,
                                                  measurement_update=False, hybrid_pose_max_iter=20)),

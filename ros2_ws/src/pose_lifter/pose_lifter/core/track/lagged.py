@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .defaults import MAX_LAG
-from .later import LaterFrame, RunArrays
+from .later import LaterFrame, RunArrays, mean_of_passes
 from .measurement import MeasurementUpdate
 
 __all__ = ["MAX_LAG", "WINDOW", "LaggedPoses"]
@@ -148,36 +148,28 @@ class LaggedPoses:
         if t.forward is None:
             t.forward = MeasurementUpdate()
         if new:
-            out, done = t.forward.run(arrays.poses, arrays.points, arrays.used, arrays.noise, np.array(new),
-                                      self.depth, self.gate, restart)
+            out, done = arrays.update(t.forward, np.array(new), self.depth, self.gate, restart)
             for j in new:
                 f = frames[run[j]]
                 f.forward, f.taken = (out[j] if done[j] else None), True
         fwd: dict[int, NDArray[np.float64] | None] = {run[j]: frames[run[j]].forward for j in range(upto)}
         if upto < len(run):
-            out, done = t.forward.copy().run(arrays.poses, arrays.points, arrays.used, arrays.noise,
-                                             np.arange(upto, len(run)), self.depth, self.gate, restart)
+            after = np.arange(upto, len(run))
+            out, done = arrays.update(t.forward.copy(), after, self.depth, self.gate, restart)
             fwd.update({run[j]: out[j] if done[j] else None for j in range(upto, len(run))})
-        # backward: from the newest frame down to the first the window around this one reads, the
-        # frames whose noise was not known yet at the run's first known noise
-        known = arrays.noise[np.isfinite(arrays.noise)]
-        if not known.size:  # no frame of the run has a noise: neither pass updated one
+        # backward: from the newest frame down to the first the window around this one reads
+        noise = arrays.backward_noise()
+        if noise is None:  # no frame of the run has a noise: neither pass updated one
             return
         reach = frames[at].stamp_ns - self.smoothing_s * 3e9
         back = list(itertools.takewhile(lambda j: frames[run[j]].stamp_ns >= reach,
                                         range(len(run) - 1, -1, -1)))
-        filled = np.where(np.isfinite(arrays.noise), arrays.noise, known[0])
-        bwd, bdone = MeasurementUpdate().run(arrays.poses, arrays.points, arrays.used, filled, np.array(back),
-                                             self.depth, self.gate)
+        bwd, bdone = arrays.update(MeasurementUpdate(), np.array(back, dtype=np.int64), self.depth, self.gate,
+                                   noise=noise)
         for j in back:
-            k = run[j]
-            p, q = fwd.get(k), (bwd[j] if bdone[j] else None)
-            if p is not None and q is not None:
-                refined[k - first] = 0.5 * (p + q)
-            elif p is not None:
-                refined[k - first] = p
-            elif q is not None:
-                refined[k - first] = q
+            pose = mean_of_passes(fwd.get(run[j]), bwd[j] if bdone[j] else None)
+            if pose is not None:
+                refined[run[j] - first] = pose
 
     def forget(self, before_ns: int) -> None:
         """Forget the tracks whose newest frame is older than ``before_ns``."""

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from ..results import LiftResult
     from .state import Track
 
-__all__ = ["LaterFrame", "RunArrays", "compile_kernels", "smooth_track_2d", "update_later",
+__all__ = ["LaterFrame", "RunArrays", "compile_kernels", "mean_of_passes", "smooth_track_2d", "update_later",
            "update_tracks_later"]
 
 #: Offline smoothing of the 2D (:func:`smooth_track_2d`): the constant-velocity model's random
@@ -284,21 +284,24 @@ def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[ND
     starts = [i for i, f in enumerate(frames) if i == 0 or not f.follows] + [len(frames)]
     for a, b in itertools.pairwise(starts):
         run = RunArrays.of(frames[a:b])
-        known = run.noise[np.isfinite(run.noise)]
-        if not known.size:
+        backward = run.backward_noise()
+        if backward is None:
             continue
-        forward = range(b - a)
-        fwd, fdone = MeasurementUpdate().run(run.poses, run.points, run.used, run.noise, np.array(forward),
-                                             depth, gate)
-        # backward in time too, the run's first frames (no noise known yet then) at its first noise
-        filled = np.where(np.isfinite(run.noise), run.noise, known[0])
-        bwd, bdone = MeasurementUpdate().run(run.poses, run.points, run.used, filled, np.array(forward[::-1]),
-                                             depth, gate)
+        forward = np.arange(b - a)
+        fwd, fdone = run.update(MeasurementUpdate(), forward, depth, gate)
+        bwd, bdone = run.update(MeasurementUpdate(), forward[::-1], depth, gate, noise=backward)
         for i in forward:
-            p = fwd[i] if fdone[i] else None
-            q = bwd[i] if bdone[i] else None
-            out[a + i] = q if p is None else p if q is None else 0.5 * (p + q)
+            out[a + i] = mean_of_passes(fwd[i] if fdone[i] else None, bwd[i] if bdone[i] else None)
     return out
+
+
+def mean_of_passes(forward: NDArray[np.float64] | None, backward: NDArray[np.float64] | None
+                   ) -> NDArray[np.float64] | None:
+    """A frame's published pose (12, 3) from the update's two passes: their mean, the one that
+    updated it, or None when neither did."""
+    if forward is None or backward is None:
+        return backward if forward is None else forward
+    return 0.5 * (forward + backward)
 
 
 class RunArrays(NamedTuple):
@@ -319,6 +322,21 @@ class RunArrays(NamedTuple):
         noise = np.array([np.nan if f.noise is None else f.noise * ratio for f in run])
         return cls(np.array([f.pose for f in run], dtype=np.float64),
                    np.where(np.isfinite(smoothed), smoothed, raw), used, noise)
+
+    def backward_noise(self) -> NDArray[np.float64] | None:
+        """The noise (T,) of the backward pass: each frame's, the run's first known one for its
+        first frames (the track did not know it yet then); None when no frame has one."""
+        known = self.noise[np.isfinite(self.noise)]
+        return np.where(np.isfinite(self.noise), self.noise, known[0]) if known.size else None
+
+    def update(self, state: MeasurementUpdate, order: NDArray[np.int64], depth: float, gate: float,
+               restart: NDArray[np.bool_] | None = None, noise: NDArray[np.float64] | None = None
+               ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """:meth:`MeasurementUpdate.run` of ``state`` over this run's frames in ``order`` (at
+        ``noise``, default the frames' own): each frame's pose (T, 12, 3) and whether it was
+        updated (T,)."""
+        return state.run(self.poses, self.points, self.used, self.noise if noise is None else noise, order,
+                         depth, gate, restart)
 
 
 def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate: float

@@ -473,10 +473,6 @@ class MeasurementUpdate:
         out.arrays = TrackArrays._make(a.copy() for a in self.arrays)
         return out
 
-    def reset(self) -> None:
-        """Forget every frame: the state of a track not updated yet."""
-        _reset(self.arrays)
-
     def limb_lengths(self) -> NDArray[np.float64] | None:
         """The track's limb lengths from the image (8,; left and right averaged; model units), or
         None before SPAN_MIN_FRAMES frames or with a limb seen too rarely."""
@@ -522,7 +518,7 @@ class MeasurementUpdate:
         depth, gate : float
             As :meth:`update`.
         restart : ndarray of bool, shape (T,), optional
-            Frames before which the state starts again (:meth:`reset`).
+            Frames before which the state starts again (as a new ``MeasurementUpdate``).
 
         Returns
         -------
