@@ -18,7 +18,7 @@ Four sections, each a sha256 of float64 values rounded to ``1e-9`` (``--decimals
 * ``metrics``: the lifted metric joints of both modes against the bags' ground truth (matched
   by stamp and track id): :func:`~pose_lifter.core.model.metrics.mpjpe`, ``p_mpjpe``,
   ``normalised_error`` and ``procrustes_align`` per skeleton, and the floors of
-  :func:`pose_lifter.offline.lift.evaluate_bag` on each input bag.
+  :func:`pose_lifter.offline.evaluate.evaluate_bag` on each input bag.
 * ``pose_step``: a few :func:`pose_lifter.core.solve.pose_step.pose_step` calls recorded while lifting the
   first bag in each mode through the Python run loop (``Runs.compiled`` False:
   :func:`pose_lifter.core.reference.runs.alternation_loop`; the compiled run calls no Python

@@ -5,7 +5,7 @@ The reference (``_Reference`` below) is the message building of ``lift_bag`` as 
 ``pose_lifter.messages.cdr`` (commit 2a5a7f0): rosbags message classes filled field by field from the
 typestore's field definitions, orientations from ``scipy.spatial.transform.Rotation``, then
 ``typestore.serialize_cdr``. It is kept here verbatim in behaviour, independent of
-``pose_lifter.messages.convert`` and ``pose_lifter.offline.typestore.message_factory`` (both may change).
+``pose_lifter.messages.convert`` and ``pose_lifter.messages.typestore.message_factory`` (both may change).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ _NUMPY = {"bool": "bool", "byte": "uint8", "char": "uint8", "int8": "int8", "uin
 
 
 class _Reference:
-    """The previous builders: ``bags._default_message`` and ``messages.result_to_skeleton3d`` /
+    """The previous builders: ``bags._default_message`` and ``messages.convert.result_to_skeleton3d`` /
     ``skeleton_markers`` / ``skeletons3d_array`` of commit 2a5a7f0, with the node's marker book
     (DELETEALL first, DELETE for untracked positions no longer used) written out here again."""
 
@@ -259,7 +259,7 @@ def test_lift_bag_writes_the_reference_bytes_with_vanishing_and_untracked_people
 @pytest.mark.parametrize("frame_id", ["", "c", "ca", "cam", "came", "camer", "camera", "camera_",
                                       "virtual_camera_optical_frame", "kamera_ü"])
 def test_encoders_equal_the_node_builders_for_every_alignment(frame_id: str) -> None:
-    """The encoders against the node's builders (``messages.result_to_skeleton3d``,
+    """The encoders against the node's builders (``messages.convert.result_to_skeleton3d``,
     ``skeleton_markers``) through rosbags: the frame id's length shifts every later field's
     alignment, so each length modulo 8 is a different layout."""
     rng = np.random.default_rng(len(frame_id))
@@ -322,7 +322,7 @@ def test_check_definitions_refuses_another_skeleton3d_layout(tmp_path: Path) -> 
 
 def test_message_factory_builds_what_the_previous_factory_built() -> None:
     """``typestore.message_factory`` (field plans read once per type) against the reference's
-    field-by-field construction: every type of ``messages.MESSAGE_TYPES`` with no fields and
+    field-by-field construction: every type of ``messages.convert.MESSAGE_TYPES`` with no fields and
     with list-valued numeric fields; defaults are fresh objects; an unknown field is refused."""
     store = typestore.pose_lifter_typestore()
     ref = _Reference(store)

@@ -11,8 +11,8 @@ Every input the solvers cannot use raises one of these, never a NaN result::
         PriorFileError (OSError)          a learned-prior weights file
         SolverError (RuntimeError)        a solve diverged (non-finite result) on valid input
 
-Other modules add their own leaves (``mocap.MocapDataError``, ``reference.ReferenceSolverError``
-under :class:`SolverError`, ``tracking.OutOfOrderFrameError``, ``adapter_node.AdapterError``,
+Other modules add their own leaves (``mocap.formats.MocapDataError``, ``reference.ReferenceSolverError``
+under :class:`SolverError`, ``track.records.OutOfOrderFrameError``, ``adapter_node.AdapterError``,
 ``offline.bags.BagError`` and its ``BagReadError``, ``messages.typestore.TypestoreError``),
 so ``except PoseLifterError`` catches every error the package raises on purpose.
 """

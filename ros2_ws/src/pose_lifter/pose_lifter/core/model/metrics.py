@@ -120,7 +120,7 @@ def normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDAr
 def similarity_normalised_error(pred: NDArray[np.float64], gt: NDArray[np.float64]) -> NDArray[np.float64]:
     """``||procrustes_align(pred, gt) - gt||_2`` over the stacked 3n-vector, in units of the
     truth's right lower leg, shape ``(...)``: the paper's criterion for estimates whose own leg
-    means nothing (the floors of :func:`pose_lifter.offline.lift.evaluate_bag`: flat 2D, mean pose)."""
+    means nothing (the floors of :func:`pose_lifter.offline.evaluate.evaluate_bag`: flat 2D, mean pose)."""
     g = np.asarray(gt, dtype=np.float64)
     leg = limb_lengths(g)[..., RIGHT_LOWER_LEG]
     return np.asarray(_stacked_norm(procrustes_align(pred, g) - g) / leg)

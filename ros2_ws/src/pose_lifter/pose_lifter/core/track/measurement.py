@@ -18,7 +18,7 @@ frame, centred, model units) and the frame's 2D ``x`` (12, 2, input units):
    the lift kept); the alignment is redone without it.
 3. **x, y**: per joint an offset ``d_j`` (``P_j,xy + d_j`` is published) follows ``o_j - P_j,xy``
    with the gain ``k`` of a random walk (the fit's error, DRIFT per frame) observed through the
-   track's 2D noise ``n`` (``_Track.noise``): ``k = 1`` on clean 2D, ~0.08 at 0.1 leg lengths of
+   track's 2D noise ``n`` (``state.Track.noise_level``): ``k = 1`` on clean 2D, ~0.08 at 0.1 leg lengths of
    noise (the offset then averages the noise over frames). A joint not updated on this frame
    keeps HOLD of its offset from where the track predicts it (its last published x, y plus
    HOLD_VELOCITY of its last motion), so a joint that drops out does not jump to the fit's.
