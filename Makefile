@@ -105,7 +105,7 @@ bags: venv
 
 # the learned 2D->3D prior, trained on the training split (tools/train_prior.py defaults: residual
 # MLP, the augmentation GENERALISE, 24 x 100k samples, seed 0, one thread; PyTorch for training only),
-# its cameras 1.5-10 m from the person (PRIOR_AUG; docs/accuracy.md, lever 9)
+# its cameras 1.5-10 m from the person (PRIOR_AUG; docs/accuracy.md, its decisions)
 PRIOR_AUG := --aug 'distance=(1.5,10.0)'
 prior: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA) $(PRIOR_AUG)

@@ -16,8 +16,7 @@ pose as that refinement over the frames known then, a fixed-lag smoother:
 
 With a lag of 3 frames (0.1 s at 30 Hz) the window (+-3 frames) is whole. The lift itself is the
 node's (causal, each frame lifted when it arrives); only the published pose waits, and nothing
-of it feeds back into the track's fits. Measured in docs/accuracy.md ("A node that publishes
-late").
+of it feeds back into the track's fits. Measured in docs/accuracy.md (the table's hybrid-lag columns).
 """
 
 from __future__ import annotations

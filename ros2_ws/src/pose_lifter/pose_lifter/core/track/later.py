@@ -14,7 +14,7 @@ A detector's frame-correlated error is not halved; the smoother's ratio, estimat
 noise, then leaves the gain where the track's noise puts it. The update's filters (its offsets'
 gain, its depths' alpha-beta filter) lag the motion; run backward in time they lag the other
 way, and the mean of the two passes does not. Output-only, as live: the track's fits never see
-it. Measured in docs/accuracy.md (lever 8) and docs/cross_action.md.
+it. Measured in docs/accuracy.md and docs/cross_action.md (their decisions).
 """
 
 from __future__ import annotations

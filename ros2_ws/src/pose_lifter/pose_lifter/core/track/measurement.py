@@ -38,7 +38,7 @@ nearly exact and worth more than the fit's image positions. A real detector's er
 from frame to frame; the noise estimate (second differences of the 2D,
 :mod:`pose_lifter.core.track.state`) sees only a part of it (about half the standard deviation at
 a correlation of 0.7), so above it the gain of step 3 would follow the detector's slowly changing
-error (measured in docs/accuracy.md, "Under a real detector").
+error (measured in docs/accuracy.md, its decisions).
 
 Offline (``pose-lifter lift``: :attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`),
 a track's whole 2D is known before its update runs (:mod:`.later`): the update then reads the 2D
@@ -100,7 +100,7 @@ DEPTH_GAIN = 0.6
 #: degrees above, a standing person's thighs and shins are foreshortened on every frame), and the
 #: share leaves room for the lift's limb proportions being off. Evaluation split, the node /
 #: pose-lifter lift, without -> with it: above 43.6 / 39.6 -> 37.1 / 33.3 mm, clean 36.8 / 33.8
-#: -> 36.3 / 33.4, every other condition within 0.1 or better (docs/accuracy.md, lever 10).
+#: -> 36.3 / 33.4, every other condition within 0.1 or better (docs/accuracy.md, its decisions).
 OWN_LIMB_SHARE = 0.9
 
 
