@@ -28,10 +28,19 @@ def test_readme_make_targets_exist() -> None:
     assert named <= targets, sorted(named - targets)
 
 
+def test_readme_package_modules_exist() -> None:
+    """The layout and the walk of one frame name modules and folders of the package that exist."""
+    package = ROOT / "ros2_ws" / "src" / "pose_lifter" / "pose_lifter"
+    named = set(re.findall(r"`((?:core|messages|ros|offline|mocap)/[\w/.]*)`", README))
+    assert named, "the README names no module of the package"
+    missing = sorted(p for p in named if not (package / p).exists())
+    assert not missing, missing
+
+
 def test_readme_files_and_links_exist() -> None:
     links = re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", README)
     paths = re.findall(r"`((?:tools|docs|bags|tests|ros2_ws)/[\w./-]+)`", README)
-    commands = re.findall(r"(?:^|\s)(tools/\w+\.py)", README, re.M)
+    commands = re.findall(r"(?:^|[\s`(])(tools/\w+\.py)", README, re.M)
     named = {p for p in [*links, *paths, *commands] if not p.startswith("http")}
     assert named, "the README names no file"
     missing = sorted(p for p in named if not (ROOT / p).exists())
