@@ -40,6 +40,14 @@ DEFAULT_MODEL_PATH: Final[Path] = Path(__file__).resolve().parent / "data" / "ac
 FeatureKind = Literal["3d", "2d"]
 
 
+def _windows(x: Any, dims: int, what: str) -> NDArray[np.float64]:
+    """``x`` as float64 windows of shape (..., W, 12, ``dims``); ``what`` names them in the error."""
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim < 3 or arr.shape[-2:] != (N_JOINTS, dims):
+        raise InvalidInputError(f"{what} windows must be (..., W, {N_JOINTS}, {dims}), got {arr.shape}")
+    return arr
+
+
 def pose_window_features(poses: NDArray[np.float64], depth_weight: float = 1.0) -> NDArray[np.float64]:
     """View-normalised 3D features of pose windows.
 
@@ -54,9 +62,7 @@ def pose_window_features(poses: NDArray[np.float64], depth_weight: float = 1.0) 
     -------
     ndarray, shape (..., W * 36)
     """
-    arr = np.asarray(poses, dtype=np.float64)
-    if arr.ndim < 3 or arr.shape[-2:] != (N_JOINTS, 3):
-        raise InvalidInputError(f"pose windows must be (..., W, {N_JOINTS}, 3), got {arr.shape}")
+    arr = _windows(poses, 3, "pose")
     if not 0.0 <= depth_weight <= 1.0:
         raise InvalidInputError(f"depth_weight must be in [0, 1], got {depth_weight}")
     norm = normalise_pose(arr) * np.array([1.0, 1.0, depth_weight])
@@ -74,9 +80,7 @@ def keypoint_window_features(points: NDArray[np.float64]) -> NDArray[np.float64]
     -------
     ndarray, shape (..., W * 24)
     """
-    arr = np.asarray(points, dtype=np.float64)
-    if arr.ndim < 3 or arr.shape[-2:] != (N_JOINTS, 2):
-        raise InvalidInputError(f"keypoint windows must be (..., W, {N_JOINTS}, 2), got {arr.shape}")
+    arr = _windows(points, 2, "keypoint")
     centred = arr - arr.mean(axis=-2, keepdims=True)
     spread = np.sqrt(np.mean(np.sum(centred**2, axis=-1), axis=-1))[..., None, None]
     if np.any(spread <= 0) or not np.all(np.isfinite(spread)):

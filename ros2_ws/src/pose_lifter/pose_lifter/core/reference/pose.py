@@ -41,13 +41,8 @@ def pose_objective(
 
     Parameters
     ----------
-    points : ndarray, shape (n, 2)
-    camera : Camera
-    mean : ndarray, shape (3n,)
-    components : ndarray, shape (3n, k)
-    weights : ndarray, shape (n,)
-    theta : float
-    loss : {"l1", "l2"}
+    points, camera, mean, components, weights, theta, loss
+        As in :func:`reference_pose_convex`.
     alpha : ndarray, shape (k,)
     """
     x, mu, b, w = _pose_data(points, mean, components, weights)
