@@ -155,3 +155,21 @@ def test_a_run_is_stamped_with_its_commit_and_cpu(tmp_path: Path) -> None:
     assert stamp.startswith("commit ") and ", CPU " in stamp and "unknown" not in stamp.split(",")[0]
     assert ev.run_stamp(tmp_path).startswith("commit unknown, CPU ")  # not a checkout
     assert ev.parse_settings(["n_starts=3", " mode = 'paper'"]) == {"n_starts": 3, "mode": "paper"}
+
+
+def test_the_accuracy_tool_writes_a_merged_table_stamped_with_where_it_was_measured(tmp_path: Path) -> None:
+    from tool_modules import load_tool
+
+    tool = load_tool("accuracy", "accuracy_tool")
+    figures = {k: 1.0 for k in ("p_mpjpe", "mpjpe", "jitter", "ms", "lifted")}
+    runs = []
+    for i, method in enumerate(("paper", "hybrid")):
+        run = tmp_path / f"run{i}.json"
+        run.write_text(json.dumps({"split": "eval", "measured_at": f"commit c{i}, CPU x",
+                                   "table": {"clean": {method: figures}}}))
+        runs.append(str(run))
+    assert tool.main(["--merge", *runs, "--out", str(tmp_path / "out")]) == 0
+    text = (tmp_path / "out" / "accuracy.md").read_text()
+    assert text.splitlines()[0].endswith("measured at commit c0, CPU x and commit c1, CPU x")
+    assert "| clean | 1.0 / 1.0 / 1.0 | 1.0 / 1.0 / 1.0 |" in text
+    assert (tmp_path / "out" / "accuracy.png").stat().st_size > 0
