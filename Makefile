@@ -15,7 +15,9 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast test-fp2 lint demo bench bench-node fuzz soak experiments bases bags prior prior-temporal prior-offline accuracy lock clean ros cross-action train-deps
+.PHONY: help venv test test-fast test-fp2 lint demo bench bench-node bench-lag bench-lift bench-collection \
+  lift-hash mutants fuzz soak experiments bases bags bag-bands prior prior-temporal prior-offline prior-fixture \
+  actions-model accuracy lock clean ros cross-action train-deps
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
@@ -32,7 +34,15 @@ help:
 	@echo "make cross-action  leave-one-class-out accuracy on unseen motion -> out/cross_action (~1 h)"
 	@echo "make prior-temporal  re-train its causal temporal variant (data/prior_mlp_w4.npz, ~25 min loaded)"
 	@echo "make prior-offline   re-train the offline variant, past and future (data/prior_mlp_w7c.npz, ~15 min)"
-	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy (~25 min)"
+	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy/accuracy.md (~25 min)"
+	@echo "make bench-lag   what the node's output_lag costs per person-frame (bags/five_people.mcap)"
+	@echo "make bench-lift BEFORE=DIR BAG=FILE      pose-lifter lift of this checkout vs DIR's, side by side"
+	@echo "make bench-collection BEFORE=DIR BAG=FILE  the same over a collection of copies of BAG"
+	@echo "make lift-hash   a hash of every committed bag's lifts: equal before and after a refactor (same machine)"
+	@echo "make mutants     every planted regression of tests/mutants must fail its tests (kernel plants: minutes each)"
+	@echo "make bag-bands   the committed bags' errors at the tests' replay settings (tests/tolerances.py BAG_REPLAY_MM)"
+	@echo "make actions-model   re-train the action example's model (data/actions_knn.npz) and print its accuracy"
+	@echo "make prior-fixture   regenerate tests/fixtures/prior_torch.npz (torch's outputs of a small prior)"
 
 $(VENV)/.stamp: requirements.lock $(PKG)/setup.py $(PKG)/setup.cfg
 	@test -x $(PY) || $(PY_BOOT) -m venv $(VENV)
@@ -86,6 +96,29 @@ bench: venv ros
 bench-node: venv ros
 	source ros2_ws/install/setup.bash && $(PY) tools/bench_node.py
 
+# the frame pipeline as the node runs it, without an output lag and with one (tools/bench_lag.py)
+bench-lag: venv
+	$(PY) tools/bench_lag.py $(BENCH_LAG_ARGS)
+
+# end-to-end `pose-lifter lift` of this checkout against the checkout BEFORE (e.g. `git worktree add
+# --detach ../before main`), alternating, on BAG; bench-collection: a collection of copies of BAG
+BEFORE ?= ../before
+BAG ?= bags/five_people.mcap
+bench-lift: venv
+	$(PY) tools/bench_lift.py $(BAG) --before $(BEFORE) $(BENCH_LIFT_ARGS)
+
+bench-collection: venv
+	$(PY) tools/bench_collection.py $(BAG) --before $(BEFORE) --work out/bench_collection $(BENCH_COLLECTION_ARGS)
+
+# a refactor that changes no result keeps these hashes (on one machine and install; tools/lift_hash.py)
+lift-hash: venv
+	$(PY) tools/lift_hash.py $(LIFT_HASH_ARGS)
+
+# each plant of tests/mutants/plants.py applied to a copy of the package; its tests must fail.
+# MUTANTS_ARGS='--only SUBSTRING' runs some of them.
+mutants: venv
+	$(PY) tests/mutants/run.py $(MUTANTS_ARGS)
+
 # issue 10's long runs against the installed node (tools/reliability_node.py; CI runs short
 # versions in tests/ros/test_long_runs.py). FUZZ_ARGS / SOAK_ARGS pass options through.
 fuzz: venv ros
@@ -102,6 +135,10 @@ bases: venv
 
 bags: venv
 	bash tools/make_bags.sh $(CMU_DATA)
+
+# the error bands of tests/offline/test_bags.py (tests/tolerances.py BAG_REPLAY_MM, bags/README.md)
+bag-bands: venv
+	$(PY) tools/bag_bands.py $(BAG_BANDS_ARGS)
 
 # the learned 2D->3D prior, trained on the training split (tools/train_prior.py defaults: residual
 # MLP, the augmentation GENERALISE, 24 x 100k samples, seed 0, one thread; PyTorch for training only),
@@ -122,8 +159,18 @@ prior-offline: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 7 --future 3 --dropout 0.05 $(PRIOR_AUG) \
 	  --out $(PKG)/pose_lifter/data/prior_mlp_w7c.npz
 
-# the accuracy table and plot of the README (evaluation split: subjects 02, 07, 08 and 09_12; the
-# perspective tracks' lifts know the camera's intrinsics, as the node with camera_info)
+# the action example's k-NN model on lifted windows (hybrid mode, tracked), and its accuracy against 2D
+actions-model: venv
+	$(PY) tools/action_recognition_eval.py --data $(CMU_DATA) --lifted-train 3000 --model-input lifted \
+	  --model-out $(PKG)/pose_lifter/data/actions_knn.npz --json out/actions.json
+
+# torch's outputs of a small trained prior, which tests/mocap/test_prior_training.py checks the numpy prior against
+prior-fixture: venv train-deps
+	$(PY) tests/fixtures/make_prior_torch.py
+
+# the accuracy table (out/accuracy/accuracy.md, stamped with the commit and the CPU model) and plot
+# (evaluation split: subjects 02, 07, 08 and 09_12; the perspective tracks' lifts know the camera's
+# intrinsics, as the node with camera_info)
 accuracy: venv
 	$(PY) tools/accuracy.py --data $(CMU_DATA) --frames 90 --views 4 --workers 2 --intrinsics --out out/accuracy
 

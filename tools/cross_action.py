@@ -14,9 +14,9 @@ playground, other; a class whose only trial is reserved has no fold), a prior is
 usable trial *not* of class C (every 8th of them, sorted, held out of the fit for its validation
 figure and per-joint uncertainty), seeded, at the fixed budget given, and saved as
 ``DIR/<C>.npz`` (reused when its metadata match the requested training). Class C is then lifted
-as ``tools/accuracy.py`` lifts the evaluation split: tracks at 30 Hz of at most ``--frames``
-frames (``--segments`` segments spread over C's trials, each filmed from ``--views`` of
-accuracy.py's 32 cameras), the conditions of accuracy.py (clean, noise, confident outliers,
+as ``make accuracy`` lifts the evaluation split (:mod:`pose_lifter.mocap.evaluation`): tracks at
+30 Hz of at most ``--frames`` frames (``--segments`` segments spread over C's trials, each filmed
+from ``--views`` of its 32 cameras), its conditions (clean, noise, confident outliers,
 missing joints, and the detector / camera faults: left/right swaps, the lower body out of the
 image, a camera at 2 m, a camera 50 degrees above; and every fault of a real detector together,
 ``detector6m`` / ``detector3m``: :mod:`pose_lifter.mocap.detector_model`). Methods: ``flat`` (the
@@ -54,11 +54,10 @@ import numpy as np
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import accuracy as acc
 from pose_lifter.core.errors import PriorFileError
 from pose_lifter.core.model.bases import PoseBases, default_bases_path
 from pose_lifter.core.model.prior import PosePrior
+from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.cmu import load_trial, trials_by_action
 from pose_lifter.mocap.prior_training import GENERALISE, Augmentation, train_prior, train_prior_residual
 
@@ -140,7 +139,7 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     return prior
 
 
-def class_tracks(trials: list[str], args: argparse.Namespace) -> list[acc.Track]:
+def class_tracks(trials: list[str], args: argparse.Namespace) -> list[ev.Track]:
     """``--segments`` segments of at most ``--frames`` frames at 30 Hz, spread evenly over the
     non-overlapping segments of ``trials``, each filmed from ``--views`` cameras."""
     segs = []
@@ -155,43 +154,27 @@ def class_tracks(trials: list[str], args: argparse.Namespace) -> list[acc.Track]
     for k, i in enumerate(pick):
         name, world = segs[i]
         for v in range(args.views):
-            cam = acc.CAMERAS[(k * args.views + v) % len(acc.CAMERAS)]
-            out.append(acc.Track(f"{name}@{cam[0]:.0f}/{cam[1]:.0f}/{cam[2]}", world, cam, 1000 * k + v))
+            cam = ev.CAMERAS[(k * args.views + v) % len(ev.CAMERAS)]
+            out.append(ev.Track(f"{name}@{cam[0]:.0f}/{cam[1]:.0f}/{cam[2]}", world, cam, 1000 * k + v))
     return out
 
 
-def evaluate_fold(tracks: list[acc.Track], prior_path: Path, args: argparse.Namespace
+def evaluate_fold(tracks: list[ev.Track], prior_path: Path, args: argparse.Namespace
                   ) -> dict[str, dict[str, dict[str, float]]]:
     """Per condition and method: mean P-MPJPE, MPJPE, jitter over the frames of ``tracks``."""
     temporal = prior_path.with_name(prior_path.stem + "_w4.npz")
-    settings: dict[str, Any] = {**acc._parse(args.set), "prior_file": str(prior_path),
+    settings: dict[str, Any] = {**ev.parse_settings(args.set), "prior_file": str(prior_path),
                                 "temporal_prior": args.temporal}
     if args.temporal:
         settings["temporal_prior_file"] = str(temporal)
     offline = ({"temporal_prior": True,
                 "temporal_prior_file": str(prior_path.with_name(prior_path.stem + "_w7c.npz"))}
                if args.offline else None)
-    acc._STATE["intrinsics"] = args.intrinsics
-    acc._STATE["lag"] = args.lag
     methods = tuple(args.methods)
-    jobs = [(t, c, methods) for c in args.conditions for t in tracks]
-    if args.workers > 1:
-        import multiprocessing as mp
-        init = (settings, methods, args.bases, offline)
-        with mp.get_context("fork").Pool(args.workers, acc._init, init) as pool:
-            results = list(pool.imap_unordered(acc._job, jobs, chunksize=1))
-    else:
-        acc._init(settings, methods, args.bases, offline)
-        results = [acc._job(j) for j in jobs]
-    table: dict[str, dict[str, dict[str, float]]] = {}
-    for cond in args.conditions:
-        rows = [r for r in results if r["cond"] == cond]
-        table[cond] = {m: {k: acc._nanmean([v for r in rows for v in r["methods"][m][k]])
-                           for k in ("p_mpjpe", "mpjpe", "jitter")} for m in methods}
-        for m in methods:
-            table[cond][m]["lifted"] = float(np.mean([np.isfinite(r["methods"][m]["p_mpjpe"]).mean()
-                                                      for r in rows]))
-    return table
+    jobs = [(t, c) for c in args.conditions for t in tracks]
+    results = ev.evaluate_jobs(jobs, methods, settings, ev.Setup(intrinsics=args.intrinsics, lag=args.lag),
+                               args.bases, offline, args.workers)
+    return ev.summarise(results, args.conditions, methods)
 
 
 def render(record: dict[str, Any]) -> str:
@@ -242,7 +225,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--frames", type=int, default=90)
     ap.add_argument("--views", type=int, default=2)
     ap.add_argument("--segments", type=int, default=8)
-    ap.add_argument("--conditions", nargs="+", default=list(DEFAULT_CONDITIONS), choices=list(acc.CONDITIONS))
+    ap.add_argument("--conditions", nargs="+", default=list(DEFAULT_CONDITIONS), choices=list(ev.CONDITIONS))
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
@@ -318,7 +301,8 @@ def main(argv: list[str] | None = None) -> int:
     command = " ".join(sys.argv[1:] if argv is None else argv)
     record: dict[str, Any] = {
         "header": (f"Cross-action folds (`tools/cross_action.py {command}`): "
-                   f"training {json.dumps(fold_training(args))}; bases `{bases_path.name}`"),
+                   f"training {json.dumps(fold_training(args))}; bases `{bases_path.name}`; "
+                   f"measured at {ev.run_stamp(Path(__file__).resolve().parents[1])}"),
         "methods": list(args.methods), "conditions": list(args.conditions), "folds": {}}
     for cls in classes:
         if cls not in pool:

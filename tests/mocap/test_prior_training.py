@@ -168,7 +168,7 @@ def test_a_damaged_residual_prior_file_is_refused(tmp_path: Path, defect: str) -
     assert str(path) in str(err.value)
 
 
-#: torch's outputs of a small trained prior (tools/make_prior_fixture.py, torch 2.13 on CPU).
+#: torch's outputs of a small trained prior (tests/fixtures/make_prior_torch.py, torch 2.13 on CPU).
 TORCH_FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "prior_torch.npz"
 
 

@@ -2,8 +2,10 @@
 
 Both lifters (:class:`pose_lifter.core.lift.lifter.Lifter` and the Ramakrishna et al. baseline) take
 one skeleton as ``points_2d`` (12, 2) and an optional ``confidence`` (12,), or a sequence as
-(T, 12, 2) and (T, 12). What a missing joint or a non-finite coordinate means is each lifter's
-own policy; the shapes and the finiteness of the confidences are checked here.
+(T, 12, 2) and (T, 12). The shapes and the finiteness of the confidences are checked here.
+:func:`joint_weights` is the paper lifter's reading of the checked input: which joints count,
+with what weight, and a missing joint's coordinates replaced, so that nothing downstream reads
+what a detector put there.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InvalidInputError
 from .model.skeleton import N_JOINTS
 
-__all__ = ["check_keypoint_sequence", "check_keypoints"]
+__all__ = ["check_keypoint_sequence", "check_keypoints", "joint_weights"]
 
 
 def check_keypoints(points_2d: ArrayLike, confidence: ArrayLike | None
@@ -69,3 +71,40 @@ def check_keypoint_sequence(points_2d: ArrayLike, confidence: ArrayLike | None
     if conf is not None and conf.shape != pts.shape[:2]:
         raise InvalidInputError(f"confidence must have shape {pts.shape[:2]}, got {conf.shape}")
     return pts, conf
+
+
+def joint_weights(points: NDArray[np.float64], confidence: NDArray[np.float64], threshold: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The weights the lift gives n people's joints, and their points with every missing joint
+    at one canonical place.
+
+    A joint is missing (weight 0) when its confidence is below ``threshold`` or a coordinate is
+    not finite, whatever its confidence; the others weigh their confidence clipped to [0, 1].
+    A missing joint is moved to the weighted centroid of its person's joints with weight (0 when
+    there is none), so the lift is a function of the joints that count: where a detector put a
+    joint it did not see (0, 0, NaN or anywhere) cannot reach the fit, not even through the
+    round-off of its solver steps, which a multi-start would turn into another winning start.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 12, 2)
+        Checked by :func:`check_keypoints`; may hold non-finite values.
+    confidence : ndarray, shape (n, 12)
+        Finite.
+    threshold : float
+        The lowest confidence of a joint that counts.
+
+    Returns
+    -------
+    points : ndarray, shape (n, 12, 2)
+        Finite.
+    weights : ndarray, shape (n, 12)
+        In [0, 1].
+    """
+    weights = np.where(confidence >= threshold, confidence.clip(0.0, 1.0), 0.0)
+    bad = np.asarray(~np.isfinite(points).all(axis=2))
+    weights[bad] = 0.0
+    held = np.where(bad[:, :, None], 0.0, points)
+    total = weights.sum(axis=1)  # (n,)
+    centroid = (weights[:, None, :] @ held)[:, 0, :] / np.where(total > 0.0, total, 1.0)[:, None]
+    return np.where((weights > 0.0)[:, :, None], held, centroid[:, None, :]), weights

@@ -28,7 +28,7 @@ a detector such as YOLO-pose, RTMPose or OpenPose gives of them, with every faul
   behind a desk): knees and ankles are lost.
 
 Deterministic for a generator's state. The conditions ``detector3m`` / ``detector6m`` of
-``tools/accuracy.py`` and ``tools/cross_action.py`` film tracks through :data:`REALISTIC`.
+:mod:`pose_lifter.mocap.evaluation` film tracks through :data:`REALISTIC`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Virtual views of mocap poses: cameras at an azimuth / elevation / roll, weak-perspective or
 perspective projection, per-person limb-length changes. Shared by the prior's training
-(:mod:`pose_lifter.mocap.prior_training`) and the accuracy evaluation (``tools/accuracy.py``) so both
-film people the same way; :func:`pose_lifter.mocap.scenes.corrupt_2d` adds detector-like errors.
+(:mod:`pose_lifter.mocap.prior_training`) and the accuracy evaluation (:mod:`pose_lifter.mocap.evaluation`)
+so both film people the same way; :func:`pose_lifter.mocap.scenes.corrupt_2d` adds detector-like errors.
 
 Units: poses in metres, world Y-up; 2D in "focal units" (focal length 1, principal point 0),
 which any pixel camera reaches by an affine map that the lifter's normalisation removes.

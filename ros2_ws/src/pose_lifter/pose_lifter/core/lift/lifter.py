@@ -64,7 +64,7 @@ from ..numeric.fast import row_norms
 from ..options import LifterOptions, Mode
 from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart, project_each
 from ..solve.alpha.lifted_admm import QStepFn
-from ..validation import check_keypoints
+from ..validation import check_keypoints, joint_weights
 from .batch import Failed, LiftCall, Steps, gather
 from .hybrid import Person, PriorFit
 from .runs import Runs
@@ -346,11 +346,7 @@ class Lifter:
         o = self._options
         points = np.array([x for _, x, _ in checked])  # (n, 12, 2)
         conf = np.array([c for _, _, c in checked])  # (n, 12)
-        weights = np.where(conf >= o.confidence_threshold, conf.clip(0.0, 1.0), 0.0)
-        # a joint with non-finite coordinates is missing, whatever its confidence
-        bad = ~np.isfinite(points).all(axis=2)
-        weights[bad] = 0.0
-        points = np.where(bad[:, :, None], 0.0, points)
+        points, weights = joint_weights(points, conf, o.confidence_threshold)
         n_vis = np.count_nonzero(weights > 0, axis=1).tolist()
         centre, spread, ok = self._normalised(points, weights)
         with np.errstate(divide="ignore", invalid="ignore"):  # the rows refused below
