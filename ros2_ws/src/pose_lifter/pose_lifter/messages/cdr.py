@@ -50,11 +50,13 @@ __all__ = [
     "DecodedSkeleton2D",
     "DecodedSkeleton2DArray",
     "DecodedStamp",
+    "header_cdr",
     "SkeletonFrame",
     "check_definitions",
     "decode_skeleton2d_array",
     "marker_array_cdr",
     "skeleton3d_array_cdr",
+    "stamp_cdr",
 ]
 
 #: RIHS01 hashes of the definitions this module encodes (``typestore.hash_rihs01``).
@@ -120,6 +122,22 @@ def _string_bytes(text: str) -> bytes:
     return _U32.pack(len(data) + 1) + data + b"\x00"
 
 
+def stamp_cdr(stamp_ns: int) -> bytes:
+    """A ``builtin_interfaces/Time`` (sec, nanosec) of ``stamp_ns``."""
+    return _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
+
+
+def header_cdr(stamp: bytes, frame_id: str) -> bytes:
+    """A ``std_msgs/Header`` for a 4-aligned position: ``stamp`` (a ``builtin_interfaces/Time``,
+    e.g. :func:`stamp_cdr`), then ``frame_id``; the one header writer of every message here."""
+    return stamp + _string_bytes(frame_id)
+
+
+def _message_header(header: Any) -> bytes:
+    """:func:`header_cdr` of a message's ``header`` (``stamp.sec``, ``stamp.nanosec``, ``frame_id``)."""
+    return header_cdr(_STAMP.pack(int(header.stamp.sec), int(header.stamp.nanosec)), str(header.frame_id))
+
+
 def _constant(parts: Sequence[tuple[str, Any]]) -> bytes:
     """Bytes of fields with at most 4-byte alignment, written at a 4-aligned position."""
     w = _Writer(header=False)
@@ -128,9 +146,9 @@ def _constant(parts: Sequence[tuple[str, Any]]) -> bytes:
             w.u32(value)
         elif kind == "string":
             w.string(value)
-        elif kind == "stamp":
+        elif kind == "header":
             w.align(4)
-            w.buf += _STAMP.pack(*value)
+            w.buf += header_cdr(bytes(_STAMP.size), value)
         else:  # "bool"
             w.buf += struct.pack("<?", value)
     return bytes(w.buf)
@@ -142,7 +160,7 @@ _JOINT_NAMES: Final[bytes] = _constant([("u32", N_JOINTS)] + [("string", n) for 
 #: (CompressedImage: header, format, data), uv_coordinates, text, mesh_resource, mesh_file
 #: (filename, data), mesh_use_embedded_materials. No field needs more than 4-byte alignment.
 _MARKER_TAIL: Final[bytes] = _constant([
-    ("u32", 0), ("string", ""), ("stamp", (0, 0)), ("string", ""), ("string", ""), ("u32", 0),
+    ("u32", 0), ("string", ""), ("header", ""), ("string", ""), ("u32", 0),
     ("u32", 0), ("string", ""), ("string", ""), ("string", ""), ("u32", 0), ("bool", False),
 ])
 
@@ -226,24 +244,11 @@ class SkeletonFrame:
         return len(self.track_ids)
 
 
-def _header(w: _Writer, header: Any) -> None:
-    """A std_msgs/Header (stamp, frame_id) at a 4-aligned position."""
-    w.align(4)
-    w.buf += _STAMP.pack(int(header.stamp.sec), int(header.stamp.nanosec))
-    w.string(str(header.frame_id))
-
-
-def _header_bytes(header: Any) -> bytes:
-    w = _Writer(header=False)
-    _header(w, header)
-    return bytes(w.buf)
-
-
 def skeleton3d_array_cdr(header: Any, frame: SkeletonFrame) -> bytes:
     """A serialised ``pose_lifter_msgs/Skeleton3DArray`` of ``header`` (``stamp.sec``,
     ``stamp.nanosec``, ``frame_id``) and the skeletons of ``frame``."""
     w = _Writer()
-    _header(w, header)
+    w.buf += _message_header(header)
     n = len(frame)
     w.u32(n)
     buf = w.buf
@@ -318,7 +323,7 @@ def marker_array_cdr(
     joints = np.asarray(joints_m, dtype="<f8").reshape(len(track_ids), N_JOINTS, 3)
     deleted = [int(t) for t in deleted_track_ids if t >= 0]
     positions = [int(p) for p in deleted_untracked]
-    hb = _header_bytes(header)
+    hb = _message_header(header)
     ns_joints, ns_bones = _string_bytes(f"{ns}/joints"), _string_bytes(f"{ns}/bones")
     ns_sec, ns_nsec = divmod(max(0, round(float(lifetime) * 1e9)), 1_000_000_000)
     identity = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # position, orientation (x, y, z, w)

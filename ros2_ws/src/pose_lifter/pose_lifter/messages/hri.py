@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages import body
-from pose_lifter.messages.cdr import _ENCAPSULATION, _STAMP, _U32, _string_bytes, _Writer
+from pose_lifter.messages.cdr import _ENCAPSULATION, _STAMP, _U32, _string_bytes, _Writer, header_cdr, stamp_cdr
 
 __all__ = [
     "BODIES_NS",
@@ -114,22 +114,17 @@ def body_id(track_id: int) -> str:
     return "".join(letters)
 
 
-def _stamp(stamp_ns: int) -> bytes:
-    """A ``builtin_interfaces/Time`` (sec, nanosec) of ``stamp_ns``."""
-    return _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
-
-
 def _header_block(stamp: bytes, frame_id: str) -> bytes:
-    """The encapsulation and a std_msgs/Header (``stamp`` from :func:`_stamp`) padded to 4: the
-    start of every message here whose header is followed by 4-aligned fields, shared by the
-    frame's messages that have the input's frame."""
-    data = _ENCAPSULATION + stamp + _string_bytes(frame_id)
+    """The encapsulation and a std_msgs/Header (:func:`~pose_lifter.messages.cdr.header_cdr`)
+    padded to 4: the start of every message here whose header is followed by 4-aligned fields,
+    shared by the frame's messages that have the input's frame."""
+    data = _ENCAPSULATION + header_cdr(stamp, frame_id)
     return data + b"\x00" * (-len(data) % 4)
 
 
 def ids_list_cdr(stamp_ns: int, frame_id: str, ids: Sequence[str]) -> bytes:
     """``hri_msgs/IdsList`` of ``ids``."""
-    buf = bytearray(_header_block(_stamp(stamp_ns), frame_id))
+    buf = bytearray(_header_block(stamp_cdr(stamp_ns), frame_id))
     buf += _U32.pack(len(ids))
     for i in ids:
         buf += b"\x00" * (-len(buf) % 4)
@@ -177,16 +172,15 @@ class _TfBlock:
 
 
 @lru_cache(maxsize=1024)
-def _tf_block(bid: str, root: bytes, phase: int) -> _TfBlock:
+def _tf_block(bid: str, root: str, phase: int) -> _TfBlock:
     """The :class:`_TfBlock` of body ``bid`` starting at a CDR offset of ``phase`` modulo 8, its
-    ``body_<id>`` a child of the CDR string ``root`` (the input's frame)."""
+    ``body_<id>`` a child of ``root`` (the input's frame)."""
     buf = bytearray(phase)  # offsets in buf have the message's alignment
     stamps, values = [], []
     for parent, child in body.LINKS:
-        buf += b"\x00" * (-len(buf) % 4)  # the header: stamp, frame_id
+        buf += b"\x00" * (-len(buf) % 4)  # the header: stamp (written per frame), frame_id
         stamps.append(len(buf) - phase)
-        buf += bytes(_STAMP.size)
-        buf += _string_bytes(f"{parent}_{bid}") if parent else root
+        buf += header_cdr(bytes(_STAMP.size), f"{parent}_{bid}" if parent else root)
         buf += b"\x00" * (-len(buf) % 4)  # child_frame_id
         buf += _string_bytes(f"{child}_{bid}")
         buf += b"\x00" * (-len(buf) % 8)  # translation, rotation: float64
@@ -209,19 +203,18 @@ def tf_message_cdr(stamp_ns: int, frame_id: str, bodies: Sequence[tuple[str, bod
     rotations = np.array([pose.quaternions for _, pose in bodies], dtype=np.float64)
     if translations.shape != (len(bodies), n_links, 3) or rotations.shape != (len(bodies), n_links, 4):
         raise ValueError(f"each pose needs {n_links} translations (3) and quaternions (4)")
-    root = _string_bytes(frame_id)
     # 4 bytes ahead of the message: its float64 (at CDR offsets multiple of 8) aligned in memory
     buf = bytearray(4) + head
     groups: dict[_TfLayout, tuple[list[int], list[int]]] = {}  # layout -> (bodies, CDR offsets)
     for k, (bid, _) in enumerate(bodies):
-        block = _tf_block(bid, root, 4 if k == 0 else 0)
+        block = _tf_block(bid, frame_id, 4 if k == 0 else 0)
         ks, starts = groups.setdefault(block.layout, ([], []))
         ks.append(k)
         starts.append(len(buf) - 8)
         buf += block.data
     words = np.frombuffer(buf, dtype="<u4")  # CDR offset c: word (c + 8) / 4
     doubles = np.frombuffer(buf, dtype="<f8", offset=8)  # CDR offset c: double c / 8
-    sec, nanosec = np.frombuffer(_stamp(stamp_ns), dtype="<u4")
+    sec, nanosec = np.frombuffer(stamp_cdr(stamp_ns), dtype="<u4")
     for layout, (ks, starts) in groups.items():
         at = np.array(starts, dtype=np.intp)[:, None]
         stamp_at = (at + 8) // 4 + layout.stamp_words
@@ -239,8 +232,7 @@ def _joint_state_names(bid: str, n_angles: int) -> bytes:
     frame_id, the names ``<joint>_<id>``, the positions' count and padding; constant per body, as
     the empty frame_id fixes every offset."""
     w = _Writer()
-    w.buf += bytes(_STAMP.size)
-    w.string("")
+    w.buf += header_cdr(bytes(_STAMP.size), "")
     w.u32(len(body.REVOLUTE_JOINTS))
     for name in body.REVOLUTE_JOINTS:
         w.string(f"{name}_{bid}")
@@ -254,7 +246,7 @@ _NO_VELOCITY_EFFORT: Final[bytes] = bytes(8)
 
 
 def _joint_state(stamp: bytes, bid: str, angles: NDArray[np.float64]) -> bytes:
-    """:func:`joint_state_cdr` with the stamp as :func:`_stamp` bytes."""
+    """:func:`joint_state_cdr` with the stamp as :func:`~pose_lifter.messages.cdr.stamp_cdr` bytes."""
     positions = np.ascontiguousarray(angles, dtype="<f8")
     return b"".join((_ENCAPSULATION, stamp, _joint_state_names(bid, len(positions)), positions.tobytes(),
                      _NO_VELOCITY_EFFORT))
@@ -263,7 +255,7 @@ def _joint_state(stamp: bytes, bid: str, angles: NDArray[np.float64]) -> bytes:
 def joint_state_cdr(stamp_ns: int, bid: str, pose: body.BodyPose) -> bytes:
     """``sensor_msgs/JointState`` of one body: the REP-155 joint angles (radians), names
     ``<joint>_<id>`` in the order of :data:`body.REVOLUTE_JOINTS`, no velocity or effort."""
-    return _joint_state(_stamp(stamp_ns), bid, pose.angles)
+    return _joint_state(stamp_cdr(stamp_ns), bid, pose.angles)
 
 
 def string_cdr(text: str) -> bytes:
@@ -354,7 +346,7 @@ def skeleton2d_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], co
     at the shoulders' midpoint; the points the model has no joint for (nose, eyes, ears) have
     confidence 0."""
     skeletons, _ = _skeleton2d_and_roi([points], [confidence], image_size)
-    return _header_block(_stamp(stamp_ns), frame_id) + bytes(skeletons[0].tobytes())
+    return _header_block(stamp_cdr(stamp_ns), frame_id) + bytes(skeletons[0].tobytes())
 
 
 def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidence: NDArray[np.float64],
@@ -362,7 +354,7 @@ def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidenc
     """``hri_msgs/NormalizedRegionOfInterest2D``: the box of the observed joints (confidence > 0),
     normalised; ``c`` their mean confidence (an empty box with c = 0 when none is observed)."""
     _, boxes = _skeleton2d_and_roi([points], [confidence], image_size)
-    return _header_block(_stamp(stamp_ns), frame_id) + bytes(boxes[0].tobytes())
+    return _header_block(stamp_cdr(stamp_ns), frame_id) + bytes(boxes[0].tobytes())
 
 
 @dataclass(frozen=True)
@@ -478,7 +470,7 @@ class BodyBook:
         gone = sorted(self._bodies.pop(tid) for tid in stale)
         for tid in stale:
             del self._seen[tid]
-        stamp = _stamp(stamp_ns)
+        stamp = stamp_cdr(stamp_ns)
         outputs = {bid: {"joint_states": _joint_state(stamp, bid, pose.angles)} for bid, pose, _ in shown}
         if shown and image_size is not None:
             header = _header_block(stamp, frame_id)
