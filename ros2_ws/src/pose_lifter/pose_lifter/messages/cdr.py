@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import lru_cache
 from typing import Any, Final
 
@@ -50,10 +50,10 @@ __all__ = [
     "DecodedSkeleton2D",
     "DecodedSkeleton2DArray",
     "DecodedStamp",
-    "header_cdr",
     "SkeletonFrame",
     "check_definitions",
     "decode_skeleton2d_array",
+    "header_cdr",
     "marker_array_cdr",
     "skeleton3d_array_cdr",
     "stamp_cdr",
@@ -184,10 +184,13 @@ def check_definitions(store: Any) -> None:
 
 @dataclass(frozen=True)
 class SkeletonFrame:
-    """The lifted skeletons of one message, as arrays (``n`` skeletons), in message order.
+    """Lifted skeletons as arrays, one row each (``n``): the columnar record of the answers of a
+    frame (in message order), or of a track's frames (what an offline worker sends back).
 
-    Fields are those of ``pose_lifter_msgs/Skeleton3D`` as
-    :func:`pose_lifter.messages.convert.result_to_skeleton3d` fills them.
+    The fields are those of ``pose_lifter_msgs/Skeleton3D`` as
+    :func:`pose_lifter.messages.convert.result_to_skeleton3d` fills them, and the 2D input with
+    the left/right labels its track gave it (:meth:`pose_lifter.messages.frame.LiftedSkeleton.labelled_2d`;
+    the REP-155 ``skeleton2d`` and ``roi``).
     """
 
     track_ids: NDArray[np.int64]
@@ -203,14 +206,17 @@ class SkeletonFrame:
     solve_time: NDArray[np.float64]
     warm_started: NDArray[np.bool_]
     weights: NDArray[np.float64]  # (n, 12)
+    points: NDArray[np.float64]  # (n, 12, 2) pixels
+    confidence: NDArray[np.float64]  # (n, 12)
 
     @classmethod
     def from_results(cls, track_ids: Sequence[int], joints_m: Sequence[NDArray[np.float64]],
                      results: Sequence[Any], solve_times: Sequence[float],
-                     warm_started: Sequence[bool]) -> SkeletonFrame:
+                     warm_started: Sequence[bool], points: Sequence[NDArray[np.float64]] | None = None,
+                     confidence: Sequence[NDArray[np.float64]] | None = None) -> SkeletonFrame:
         """From the lifts of one message (``LiftResult``-like: ``camera``, ``objective``,
-        ``reprojection_error``, ``total_alternations``, ``converged``, ``weights``) and their
-        metric joints; the orientations of all of them in one
+        ``reprojection_error``, ``total_alternations``, ``converged``, ``weights``), their
+        metric joints and their 2D (None: zeros); the orientations of all of them in one
         :func:`pose_lifter.messages.convert.quaternions_xyzw` call."""
         n = len(results)
         if not (len(track_ids) == len(joints_m) == len(solve_times) == len(warm_started) == n):
@@ -218,7 +224,8 @@ class SkeletonFrame:
         if n == 0:
             return cls(np.zeros(0, np.int64), np.zeros((0, N_JOINTS, 3)), np.zeros((0, 6)), np.zeros(0),
                        np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
-                       np.zeros(0, bool), np.zeros(0), np.zeros(0, bool), np.zeros((0, N_JOINTS)))
+                       np.zeros(0, bool), np.zeros(0), np.zeros(0, bool), np.zeros((0, N_JOINTS)),
+                       np.zeros((0, N_JOINTS, 2)), np.zeros((0, N_JOINTS)))
         cams = [r.camera for r in results]
         rotations = np.array([np.asarray(c.rotation, dtype=np.float64) for c in cams]).reshape(n, 3, 3)
         joints = np.array([np.asarray(j, dtype=np.float64) for j in joints_m])
@@ -238,7 +245,29 @@ class SkeletonFrame:
             solve_time=np.array([float(t) for t in solve_times]),
             warm_started=np.array([bool(w) for w in warm_started]),
             weights=np.array([np.asarray(r.weights, dtype=np.float64).reshape(N_JOINTS) for r in results]),
+            points=(np.zeros((n, N_JOINTS, 2)) if points is None
+                    else np.array(points, dtype=np.float64).reshape(n, N_JOINTS, 2)),
+            confidence=(np.zeros((n, N_JOINTS)) if confidence is None
+                        else np.array(confidence, dtype=np.float64).reshape(n, N_JOINTS)),
         )
+
+    @classmethod
+    def of(cls, lifted: Sequence[Any]) -> SkeletonFrame:
+        """From lifted skeletons (:class:`pose_lifter.messages.frame.LiftedSkeleton`), in order."""
+        labelled = [s.labelled_2d() for s in lifted]
+        return cls.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],
+                                [s.result for s in lifted], [s.solve_time for s in lifted],
+                                [s.warm_started for s in lifted], [p for p, _ in labelled],
+                                [c for _, c in labelled])
+
+    @classmethod
+    def concat(cls, frames: Sequence[SkeletonFrame]) -> SkeletonFrame:
+        """The rows of ``frames``, one after the other (at least one frame)."""
+        return cls(*(np.concatenate([getattr(f, x.name) for f in frames]) for x in fields(cls)))
+
+    def take(self, rows: NDArray[np.intp]) -> SkeletonFrame:
+        """These rows, in this order."""
+        return type(self)(*(getattr(self, x.name)[rows] for x in fields(self)))
 
     def __len__(self) -> int:
         return len(self.track_ids)

@@ -33,7 +33,16 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages import body
-from pose_lifter.messages.cdr import _ENCAPSULATION, _STAMP, _U32, _string_bytes, _Writer, header_cdr, stamp_cdr
+from pose_lifter.messages.cdr import (
+    _ENCAPSULATION,
+    _STAMP,
+    _U32,
+    SkeletonFrame,
+    _string_bytes,
+    _Writer,
+    header_cdr,
+    stamp_cdr,
+)
 
 __all__ = [
     "BODIES_NS",
@@ -42,7 +51,6 @@ __all__ = [
     "TF_TOPIC",
     "BodyBook",
     "BodyFrame",
-    "LiftedBody",
     "body_id",
     "ids_list_cdr",
     "joint_state_cdr",
@@ -358,26 +366,6 @@ def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidenc
 
 
 @dataclass(frozen=True)
-class LiftedBody:
-    """One lifted skeleton as :meth:`BodyBook.frame` takes it.
-
-    Attributes
-    ----------
-    track_id : int
-    joints_m : ndarray, shape (12, 3)
-        Metres, in the frame's ``frame_id``.
-    points : ndarray, shape (12, 2)
-        The 2D input, pixels.
-    confidence : ndarray, shape (12,)
-    """
-
-    track_id: int
-    joints_m: NDArray[np.float64]
-    points: NDArray[np.float64]
-    confidence: NDArray[np.float64]
-
-
-@dataclass(frozen=True)
 class BodyFrame:
     """The REP-155 outputs of one frame (:meth:`BodyBook.frame`), serialised (CDR).
 
@@ -443,29 +431,31 @@ class BodyBook:
         self._seen.clear()
         return gone
 
-    def frame(self, stamp_ns: int, frame_id: str, lifted: Sequence[LiftedBody],
+    def frame(self, stamp_ns: int, frame_id: str, lifted: SkeletonFrame,
               image_size: tuple[float, float] | None) -> BodyFrame:
         """The outputs of one frame.
 
         Parameters
         ----------
         stamp_ns, frame_id : the input's stamp and frame (the joints' frame)
-        lifted : the frame's lifted skeletons
+        lifted : the frame's lifted skeletons (read: ``track_ids``, ``joints_m`` in metres in
+            ``frame_id``, the 2D ``points`` in pixels and their ``confidence``)
         image_size : (width, height) in pixels, or None (no ``skeleton2d`` / ``roi``)
         """
         new: dict[str, bytes] = {}
-        shown: list[tuple[str, body.BodyPose, LiftedBody]] = []
-        tracked = [p for p in lifted if p.track_id >= 0]
-        poses = body.body_poses(np.stack([p.joints_m for p in tracked])) if tracked else []
-        for person, pose in zip(tracked, poses, strict=True):
+        shown: list[tuple[str, body.BodyPose, int]] = []  # body id, pose, row of lifted
+        tracked = np.flatnonzero(lifted.track_ids >= 0)
+        poses = body.body_poses(lifted.joints_m[tracked]) if tracked.size else []
+        for k, pose in zip(tracked.tolist(), poses, strict=True):
             if pose is None:  # a degenerate skeleton: no body this frame
                 continue
-            if person.track_id not in self._bodies:
-                bid = body_id(person.track_id)
-                self._bodies[person.track_id] = bid
-                new[bid] = string_cdr(body.body_urdf(bid, body.body_dimensions(person.joints_m)))
-            self._seen[person.track_id] = stamp_ns
-            shown.append((self._bodies[person.track_id], pose, person))
+            track_id = int(lifted.track_ids[k])
+            if track_id not in self._bodies:
+                bid = body_id(track_id)
+                self._bodies[track_id] = bid
+                new[bid] = string_cdr(body.body_urdf(bid, body.body_dimensions(lifted.joints_m[k])))
+            self._seen[track_id] = stamp_ns
+            shown.append((self._bodies[track_id], pose, k))
         stale = [tid for tid, seen in self._seen.items() if stamp_ns - seen > self.timeout_ns]
         gone = sorted(self._bodies.pop(tid) for tid in stale)
         for tid in stale:
@@ -474,8 +464,9 @@ class BodyBook:
         outputs = {bid: {"joint_states": _joint_state(stamp, bid, pose.angles)} for bid, pose, _ in shown}
         if shown and image_size is not None:
             header = _header_block(stamp, frame_id)
-            skeletons, boxes = _skeleton2d_and_roi([p.points for _, _, p in shown],
-                                                   [p.confidence for _, _, p in shown], image_size)
+            rows = [k for _, _, k in shown]
+            skeletons, boxes = _skeleton2d_and_roi(list(lifted.points[rows]), list(lifted.confidence[rows]),
+                                                   image_size)
             for (bid, _, _), skeleton, box in zip(shown, skeletons, boxes, strict=True):
                 outputs[bid]["skeleton2d"] = header + skeleton.tobytes()
                 outputs[bid]["roi"] = header + box.tobytes()

@@ -15,6 +15,8 @@ import math
 from typing import TYPE_CHECKING, Final
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     import numpy as np
     from numpy.typing import NDArray
 
@@ -22,7 +24,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "CameraIntrinsics",
            "perspective_corrected", "perspective_corrected_rows", "place_in_camera", "place_poses",
-           "ray_rotation", "ray_rotations"]
+           "place_results", "ray_rotation", "ray_rotations"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -96,6 +98,25 @@ def place_in_camera(
                          np.asarray(cam.translation, dtype=np.float64).reshape(1, 2),
                          leg_length_m, focal, principal_point, default_distance_m)
     return np.asarray(placed[0], dtype=np.float64)
+
+
+def place_results(
+    poses: NDArray[np.float64],
+    results: Sequence[LiftResult],
+    leg_length_m: float,
+    intrinsics: CameraIntrinsics | None,
+    default_distance_m: float,
+) -> NDArray[np.float64]:
+    """Metric 3D joints (n, 12, 3) of ``n`` lifts seen by one camera (``intrinsics``; None: at the
+    default distance): :func:`place_poses` of ``poses`` (n, 12, 3; each lift's ``pose_camera``,
+    or a refinement of it) with each lift's camera scale and translation. The one placement of
+    the node, the lagged node and the offline lift."""
+    import numpy as np
+
+    focal, centre = intrinsics if intrinsics is not None else (None, None)
+    return place_poses(poses, np.array([float(r.camera.scale) for r in results], dtype=np.float64),
+                       np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2),
+                       leg_length_m, focal, centre, default_distance_m)
 
 
 def place_poses(
