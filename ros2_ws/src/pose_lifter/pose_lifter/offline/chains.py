@@ -8,6 +8,8 @@ frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes
 node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
 (:func:`lift_chains`), so that the prior's network runs once per step for all of them
 (:func:`~pose_lifter.core.lift.batch.prior_calls`); a chain's outcomes do not depend on its group.
+What a chain gave comes back as columns (:class:`ChainLift`: its lifted skeletons as one
+:class:`~pose_lifter.messages.cdr.SkeletonFrame`), from a worker as from this process.
 """
 
 from __future__ import annotations

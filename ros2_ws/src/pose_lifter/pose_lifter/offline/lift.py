@@ -3,8 +3,9 @@
 ``lift_bag`` is what the node does, frame by frame, without ROS: each message goes through the
 node's frame pipeline (:mod:`pose_lifter.messages.frame`: the input caps and checks, the
 confidence clipping, per-track warm starts and expiry, metric placement from ``/camera_info``,
-the output check), and ``/skeletons_3d`` and ``/skeleton_markers`` are written next to the input
-topics. Where it differs, on purpose:
+the output check), and each message's answer (:func:`pose_lifter.messages.answer.frame_answer`,
+what the node publishes: ``/skeletons_3d``, ``/skeleton_markers`` and the REP-155 bodies) is
+written next to the input topics. Where it differs, on purpose:
 
 * the stamp of a message is its bag time (when it was recorded), not its header's;
 * the camera intrinsics are those of the latest ``/camera_info`` at or before the message
@@ -12,7 +13,7 @@ topics. Where it differs, on purpose:
 * the input header is copied unchanged (the node's ``frame_id`` parameter fills an empty one);
 * the caps are the node's defaults (a params file's caps are node parameters, not read);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
-  (:func:`pose_lifter.offline.chains.inputs_ahead`) and smooths each track's poses with past and
+  (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
   priors and poses, and with ``output_lag`` N the node's answers with ``output_lag:=N``
   (:class:`pose_lifter.messages.lagged.LaggedFrames`, the messages in order in one process).

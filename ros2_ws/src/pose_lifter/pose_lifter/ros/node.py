@@ -15,7 +15,7 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`
    over :class:`~pose_lifter.core.Lifter`): warm-started from the same track's previous solution
    when there is one, cold (multi-start) otherwise, places it in the camera optical frame in
-   metres (:func:`~pose_lifter.core.track.placement.place_in_camera`: depth from the weak-perspective
+   metres (:func:`~pose_lifter.core.track.placement.place_results`: depth from the weak-perspective
    scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
    checks it finite once.
 3. The frame's answer (:func:`~pose_lifter.messages.answer.frame_answer`, what the offline lift

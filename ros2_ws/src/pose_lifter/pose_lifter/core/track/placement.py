@@ -2,7 +2,8 @@
 pinhole camera corrected to the weak-perspective image the fit reads (:func:`perspective_corrected`).
 
 A lifted pose is in units of its right lower leg; :func:`place_poses` (the people of a frame or
-the frames of a track at once) and :func:`place_in_camera` (one lift) make it metric with a
+the frames of a track at once; :func:`place_results` of lifts, the node's and the offline lift's
+placement) and :func:`place_in_camera` (one lift) make it metric with a
 leg length and put its centroid at the depth the camera scale gives, or at a default distance
 when no camera intrinsics are known. The node, the offline lift (both through
 :mod:`pose_lifter.messages.frame`) and the CLI use these defaults; the CLI's parser reads them
