@@ -443,7 +443,7 @@ class LifterNode(Node):
             else:
                 lifted.append(out)
         # the offline lift's answer (messages/answer.py), CDR straight from the arrays (rclpy
-        # message objects cost ~0.5 ms more a skeleton: tools/node_callback.py)
+        # message objects cost ~0.5 ms more a skeleton)
         answer = frame_answer(header, stamp_ns, SkeletonFrame.of(lifted),
                               markers=self._markers if self._settings.publish_markers else None,
                               marker_lifetime=self._settings.marker_lifetime,
