@@ -10,14 +10,17 @@ goings.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import body, hri
+from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.convert import skeleton3d_to_joints
 from pose_lifter.offline.bags import read_messages
 
@@ -187,7 +190,27 @@ def test_cdr_bytes_are_rosbags_serialisation_of_the_same_messages() -> None:
     np.testing.assert_array_equal(js.position, pose.angles)
 
 
-def crowd(rng: np.random.Generator, n: int) -> list[hri.LiftedBody]:
+class Person(NamedTuple):
+    """One lifted skeleton as a body book reads it."""
+
+    track_id: int
+    joints_m: NDArray[np.float64]  #: (12, 3) metres
+    points: NDArray[np.float64]  #: (12, 2) pixels
+    confidence: NDArray[np.float64]  #: (12,)
+
+
+def bodies(people: Sequence[Person]) -> SkeletonFrame:
+    """``people`` as the columns a body book reads (the fields it does not read zero)."""
+    n, z = len(people), np.zeros
+    return SkeletonFrame(np.array([p.track_id for p in people], dtype=np.int64),
+                         np.array([p.joints_m for p in people], dtype=np.float64).reshape(n, 12, 3),
+                         z((n, 6)), z(n), z((n, 4)), z((n, 2)), z(n), z(n), z(n, np.int64), z(n, bool), z(n),
+                         z(n, bool), z((n, 12)),
+                         np.array([p.points for p in people], dtype=np.float64).reshape(n, 12, 2),
+                         np.array([p.confidence for p in people], dtype=np.float64).reshape(n, 12))
+
+
+def crowd(rng: np.random.Generator, n: int) -> list[Person]:
     """``n`` plausible people: mocap poses turned and moved at random (metres, in front of the
     camera), their 2D input partly outside a 640 x 480 image (boxes clipped at 0 and 1), some
     joints missing; one person with no joint seen, one without shoulders (no neck), one with a
@@ -206,11 +229,11 @@ def crowd(rng: np.random.Generator, n: int) -> list[hri.LiftedBody]:
             conf[[0, 3]] = 0.0
         elif k == 3:
             points[4, 0], conf[4] = -0.0, 0.7
-        out.append(hri.LiftedBody(100 + 7 * k, joints, points, conf))
+        out.append(Person(100 + 7 * k, joints, points, conf))
     return out
 
 
-def expected_messages(store: Any, stamp_ns: int, frame_id: str, people: list[hri.LiftedBody],
+def expected_messages(store: Any, stamp_ns: int, frame_id: str, people: list[Person],
                       image_size: tuple[float, float] | None, ids: list[str],
                       new: set[str]) -> dict[str, tuple[Any, str]]:
     """Every message of a body book's frame of ``people`` (all tracked, none degenerate) built as
@@ -283,7 +306,7 @@ def test_crowd_frames_are_rosbags_serialisation_of_messages_built_from_their_fie
         steps = [(people, (640.0, 480.0)), (people[::-1][:25], None), (people[5:], (1280, 720))]
         for step, (shown, size) in enumerate(steps):
             stamp_ns = 1_700_000_000 * 10**9 + 123_456_789 * step + length
-            out = book.frame(stamp_ns, frame_id, shown, size)
+            out = book.frame(stamp_ns, frame_id, bodies(shown), size)
             bids = [hri.body_id(p.track_id) for p in shown]
             new = set(bids) - alive
             alive |= new
@@ -305,13 +328,13 @@ def test_book_messages_and_bodies_coming_and_going() -> None:
     conf = np.full(12, 0.8)
     conf[2] = 0.0  # the left wrist is missing
 
-    def lifted(tid: int, k: int) -> hri.LiftedBody:
-        return hri.LiftedBody(tid, poses[k], points, conf)
+    def lifted(tid: int, k: int) -> Person:
+        return Person(tid, poses[k], points, conf)
 
     def decode(data: bytes, name: str) -> Any:
         return store.deserialize_cdr(data, name)
 
-    out = book.frame(10**9, "cam", [lifted(3, 0), lifted(8, 1), lifted(-1, 2)], (640.0, 480.0))
+    out = book.frame(10**9, "cam", bodies([lifted(3, 0), lifted(8, 1), lifted(-1, 2)]), (640.0, 480.0))
     a, b = hri.body_id(3), hri.body_id(8)
     tracked = decode(out.tracked, "hri_msgs/msg/IdsList")
     assert sorted(tracked.ids) == sorted([a, b]) and set(out.new) == {a, b} and out.gone == []
@@ -335,18 +358,18 @@ def test_book_messages_and_bodies_coming_and_going() -> None:
     assert (box.xmin, box.ymax) == pytest.approx((seen[:, 0].min() / 640, seen[:, 1].max() / 480))
 
     # track 8 stops: still tracked within the timeout, gone after it; no URDF twice
-    out = book.frame(int(1.4e9), "cam", [lifted(3, 0)], None)
+    out = book.frame(int(1.4e9), "cam", bodies([lifted(3, 0)]), None)
     assert sorted(decode(out.tracked, "hri_msgs/msg/IdsList").ids) == sorted([a, b])
     assert out.new == {} and set(out.bodies) == {a}
     assert "skeleton2d" not in out.bodies[a]  # no image size: no normalised 2D
-    out = book.frame(int(1.6e9), "cam", [lifted(3, 0)], None)
+    out = book.frame(int(1.6e9), "cam", bodies([lifted(3, 0)]), None)
     assert list(decode(out.tracked, "hri_msgs/msg/IdsList").ids) == [a] and out.gone == [b]
     assert not any(tr.child_frame_id.endswith(b)
                    for tr in decode(out.tf, "tf2_msgs/msg/TFMessage").transforms)
-    out = book.frame(int(3.0e9), "cam", [], None)
+    out = book.frame(int(3.0e9), "cam", bodies([]), None)
     assert list(decode(out.tracked, "hri_msgs/msg/IdsList").ids) == [] and out.gone == [a] and out.tf is None
     # a degenerate skeleton (both hips at one point) has no body, the frame goes on
     flat = poses[0].copy()
     flat[9] = flat[6]
-    out = book.frame(int(3.1e9), "cam", [hri.LiftedBody(5, flat, points, conf)], None)
+    out = book.frame(int(3.1e9), "cam", bodies([Person(5, flat, points, conf)]), None)
     assert out.tf is None and len(book) == 0

@@ -113,7 +113,7 @@ def test_place_poses_places_a_crowd_as_each_alone() -> None:
     > 0 refused. Through :func:`place_lifted`, that refusal costs only its own person."""
     from pose_lifter.core.track.placement import place_poses
     from pose_lifter.core.track.policy import TrackedLift
-    from pose_lifter.messages.frame import FrameSettings, SkeletonInput, SkipSkeleton, Solved, place_lifted
+    from pose_lifter.messages.frame import FrameSettings, SkeletonInput, SkipSkeleton, place_lifted
 
     fx, fy, cx, cy, leg = 600.0, 580.0, 320.0, 240.0, 0.43
     rng = np.random.default_rng(4)
@@ -149,10 +149,10 @@ def test_place_poses_places_a_crowd_as_each_alone() -> None:
     with pytest.raises(InvalidInputError, match="scale"):
         place_poses(poses, bad, trans, leg, (fx, fy), (cx, cy), 5.0)
     # in the frame pipeline, the person with the bad scale is refused and the others placed
-    solved = [Solved(SkeletonInput(i, np.zeros((12, 2)), np.ones(12)),
-                     TrackedLift(fake_result(rots[i], float(bad[i]), trans[i], seed=i), False, False))
+    solved = [(SkeletonInput(i, np.zeros((12, 2)), np.ones(12)),
+               TrackedLift(fake_result(rots[i], float(bad[i]), trans[i], seed=i), False, False))
               for i in range(n)]
-    out = place_lifted([(FrameSettings(lower_leg_length=leg), ((fx, fy), (cx, cy)), s) for s in solved])
+    out = place_lifted([(FrameSettings(lower_leg_length=leg), ((fx, fy), (cx, cy)), *s) for s in solved])
     assert [isinstance(o, SkipSkeleton) for o in out] == [i == 2 for i in range(n)]
     for i, o in enumerate(out):
         if i != 2:

@@ -17,6 +17,7 @@ from pose_lifter.core.lift import batch
 from pose_lifter.core.lift.batch import LiftCall, PriorCall
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
     CROWD_SCAN,
     FramePipeline,
@@ -117,10 +118,10 @@ def lifter() -> Lifter:
     return Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=3))  # hybrid
 
 
-@pytest.mark.parametrize(("warm_start", "workers", "fields_only"),
-                         [(True, 1, False), (True, 2, False), (True, 2, True), (False, 1, False)])
+@pytest.mark.parametrize(("warm_start", "workers", "results"),
+                         [(True, 1, True), (True, 2, True), (True, 2, False), (False, 1, True)])
 def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, warm_start: bool,
-                                                             workers: int, fields_only: bool) -> None:
+                                                             workers: int, results: bool) -> None:
     seq, infos = sequence()
     settings = LiftSettings(warm_start=warm_start, smoothing_s=0.0)
     intrinsics = m.intrinsics_from_camera_info(infos[0][1])
@@ -134,15 +135,30 @@ def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, war
                                     "out-of-order stamp", "out-of-order stamp"]), skips
 
     answered: list[int] = []
+    columns: list[SkeletonFrame] = []
     summary = LiftSummary()
 
     def on_frame(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
+        assert len(results) == len(lifted)
         answered.append(stamp)
 
-    offline = lift_messages(seq, infos, lifter, settings, on_frame=on_frame, summary=summary, workers=workers,
-                            message_fields_only=fields_only)
+    def on_answer(stamp: int, msg: Any, lifted: SkeletonFrame) -> None:
+        columns.append(lifted)
+        if not results:  # the workers send back columns only
+            answered.append(stamp)
+
+    offline = lift_messages(seq, infos, lifter, settings, on_frame=on_frame if results else None,
+                            on_answer=on_answer, summary=summary, workers=workers)
     lifted = [(s, x) for s, x in node if isinstance(x, LiftedSkeleton)]
     assert answered == [s for i, (s, _) in enumerate(seq) if i != 4]
+    # each message's columns are its answer's: what the node builds of its lifted skeletons
+    node_columns = SkeletonFrame.of([x for _, x in lifted])
+    offline_columns = SkeletonFrame.concat(columns)
+    for name in ("track_ids", "joints_m", "projection", "scale", "orientation_xyzw", "translation",
+                 "objective", "reprojection_error", "iterations", "converged", "warm_started", "weights",
+                 "points", "confidence"):
+        np.testing.assert_array_equal(getattr(offline_columns, name), getattr(node_columns, name),
+                                      err_msg=name)
     assert summary.n_lifted == len(offline) == len(lifted)
     assert summary.n_failed == len(skips) + 2  # and frame 5's two skeletons (unknown layout)
     assert [(f.stamp_ns, f.track_id, f.warm_started) for f in offline] == [

@@ -244,8 +244,8 @@ def test_an_offline_lift_reads_each_tracks_next_frames(tmp_path: Path) -> None:
     is the packaged offline one, and each item of a chain carries its track's next frames (the
     prior's ``future_frames`` items after it); at ``smoothing_s = 0`` the node's causal prior, and
     the items as they are. The next frames change the fits; the lifted skeletons are the same."""
-    from pose_lifter.messages.frame import FramePipeline
-    from pose_lifter.offline.chains import inputs_ahead, split_chains
+    from pose_lifter.messages.frame import FramePipeline, with_frames_ahead
+    from pose_lifter.offline.chains import split_chains
 
     ahead, causal = LiftSettings().build_lifter(), NODE.build_lifter()
     assert ahead.reads_ahead and not causal.reads_ahead
@@ -257,9 +257,10 @@ def test_an_offline_lift_reads_each_tracks_next_frames(tmp_path: Path) -> None:
     chains, _, _ = split_chains(msgs, [], FramePipeline(causal, offline.frame_settings(NODE)))
     chain = max(chains, key=len)
     assert len(chain) > n_ahead + 1
-    kept = inputs_ahead(causal, chain)
+    track = [(it.stamp_ns, it.input) for it in chain]
+    kept = with_frames_ahead(track, causal.frames_ahead)
     assert all(x is it.input for x, it in zip(kept, chain, strict=True))
-    for k, inp in enumerate(inputs_ahead(ahead, chain)):
+    for k, inp in enumerate(with_frames_ahead(track, ahead.frames_ahead)):
         nxt = chain[k + 1:k + 1 + n_ahead]
         assert inp.ahead is not None and inp.ahead.confidence is not None
         assert inp.ahead.stamps_ns.tolist() == [it.stamp_ns for it in nxt]

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import lru_cache
 from typing import Any, Final
 
@@ -53,8 +53,10 @@ __all__ = [
     "SkeletonFrame",
     "check_definitions",
     "decode_skeleton2d_array",
+    "header_cdr",
     "marker_array_cdr",
     "skeleton3d_array_cdr",
+    "stamp_cdr",
 ]
 
 #: RIHS01 hashes of the definitions this module encodes (``typestore.hash_rihs01``).
@@ -120,6 +122,22 @@ def _string_bytes(text: str) -> bytes:
     return _U32.pack(len(data) + 1) + data + b"\x00"
 
 
+def stamp_cdr(stamp_ns: int) -> bytes:
+    """A ``builtin_interfaces/Time`` (sec, nanosec) of ``stamp_ns``."""
+    return _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
+
+
+def header_cdr(stamp: bytes, frame_id: str) -> bytes:
+    """A ``std_msgs/Header`` for a 4-aligned position: ``stamp`` (a ``builtin_interfaces/Time``,
+    e.g. :func:`stamp_cdr`), then ``frame_id``; the one header writer of every message here."""
+    return stamp + _string_bytes(frame_id)
+
+
+def _message_header(header: Any) -> bytes:
+    """:func:`header_cdr` of a message's ``header`` (``stamp.sec``, ``stamp.nanosec``, ``frame_id``)."""
+    return header_cdr(_STAMP.pack(int(header.stamp.sec), int(header.stamp.nanosec)), str(header.frame_id))
+
+
 def _constant(parts: Sequence[tuple[str, Any]]) -> bytes:
     """Bytes of fields with at most 4-byte alignment, written at a 4-aligned position."""
     w = _Writer(header=False)
@@ -128,9 +146,9 @@ def _constant(parts: Sequence[tuple[str, Any]]) -> bytes:
             w.u32(value)
         elif kind == "string":
             w.string(value)
-        elif kind == "stamp":
+        elif kind == "header":
             w.align(4)
-            w.buf += _STAMP.pack(*value)
+            w.buf += header_cdr(bytes(_STAMP.size), value)
         else:  # "bool"
             w.buf += struct.pack("<?", value)
     return bytes(w.buf)
@@ -142,7 +160,7 @@ _JOINT_NAMES: Final[bytes] = _constant([("u32", N_JOINTS)] + [("string", n) for 
 #: (CompressedImage: header, format, data), uv_coordinates, text, mesh_resource, mesh_file
 #: (filename, data), mesh_use_embedded_materials. No field needs more than 4-byte alignment.
 _MARKER_TAIL: Final[bytes] = _constant([
-    ("u32", 0), ("string", ""), ("stamp", (0, 0)), ("string", ""), ("string", ""), ("u32", 0),
+    ("u32", 0), ("string", ""), ("header", ""), ("string", ""), ("u32", 0),
     ("u32", 0), ("string", ""), ("string", ""), ("string", ""), ("u32", 0), ("bool", False),
 ])
 
@@ -166,10 +184,13 @@ def check_definitions(store: Any) -> None:
 
 @dataclass(frozen=True)
 class SkeletonFrame:
-    """The lifted skeletons of one message, as arrays (``n`` skeletons), in message order.
+    """Lifted skeletons as arrays, one row each (``n``): the columnar record of the answers of a
+    frame (in message order), or of a track's frames (what an offline worker sends back).
 
-    Fields are those of ``pose_lifter_msgs/Skeleton3D`` as
-    :func:`pose_lifter.messages.convert.result_to_skeleton3d` fills them.
+    The fields are those of ``pose_lifter_msgs/Skeleton3D`` as
+    :func:`pose_lifter.messages.convert.result_to_skeleton3d` fills them, and the 2D input with
+    the left/right labels its track gave it (:meth:`pose_lifter.messages.frame.LiftedSkeleton.labelled_2d`;
+    the REP-155 ``skeleton2d`` and ``roi``).
     """
 
     track_ids: NDArray[np.int64]
@@ -185,14 +206,17 @@ class SkeletonFrame:
     solve_time: NDArray[np.float64]
     warm_started: NDArray[np.bool_]
     weights: NDArray[np.float64]  # (n, 12)
+    points: NDArray[np.float64]  # (n, 12, 2) pixels
+    confidence: NDArray[np.float64]  # (n, 12)
 
     @classmethod
     def from_results(cls, track_ids: Sequence[int], joints_m: Sequence[NDArray[np.float64]],
                      results: Sequence[Any], solve_times: Sequence[float],
-                     warm_started: Sequence[bool]) -> SkeletonFrame:
+                     warm_started: Sequence[bool], points: Sequence[NDArray[np.float64]] | None = None,
+                     confidence: Sequence[NDArray[np.float64]] | None = None) -> SkeletonFrame:
         """From the lifts of one message (``LiftResult``-like: ``camera``, ``objective``,
-        ``reprojection_error``, ``total_alternations``, ``converged``, ``weights``) and their
-        metric joints; the orientations of all of them in one
+        ``reprojection_error``, ``total_alternations``, ``converged``, ``weights``), their
+        metric joints and their 2D (None: zeros); the orientations of all of them in one
         :func:`pose_lifter.messages.convert.quaternions_xyzw` call."""
         n = len(results)
         if not (len(track_ids) == len(joints_m) == len(solve_times) == len(warm_started) == n):
@@ -200,7 +224,8 @@ class SkeletonFrame:
         if n == 0:
             return cls(np.zeros(0, np.int64), np.zeros((0, N_JOINTS, 3)), np.zeros((0, 6)), np.zeros(0),
                        np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
-                       np.zeros(0, bool), np.zeros(0), np.zeros(0, bool), np.zeros((0, N_JOINTS)))
+                       np.zeros(0, bool), np.zeros(0), np.zeros(0, bool), np.zeros((0, N_JOINTS)),
+                       np.zeros((0, N_JOINTS, 2)), np.zeros((0, N_JOINTS)))
         cams = [r.camera for r in results]
         rotations = np.array([np.asarray(c.rotation, dtype=np.float64) for c in cams]).reshape(n, 3, 3)
         joints = np.array([np.asarray(j, dtype=np.float64) for j in joints_m])
@@ -220,30 +245,39 @@ class SkeletonFrame:
             solve_time=np.array([float(t) for t in solve_times]),
             warm_started=np.array([bool(w) for w in warm_started]),
             weights=np.array([np.asarray(r.weights, dtype=np.float64).reshape(N_JOINTS) for r in results]),
+            points=(np.zeros((n, N_JOINTS, 2)) if points is None
+                    else np.array(points, dtype=np.float64).reshape(n, N_JOINTS, 2)),
+            confidence=(np.zeros((n, N_JOINTS)) if confidence is None
+                        else np.array(confidence, dtype=np.float64).reshape(n, N_JOINTS)),
         )
+
+    @classmethod
+    def of(cls, lifted: Sequence[Any]) -> SkeletonFrame:
+        """From lifted skeletons (:class:`pose_lifter.messages.frame.LiftedSkeleton`), in order."""
+        labelled = [s.labelled_2d() for s in lifted]
+        return cls.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],
+                                [s.result for s in lifted], [s.solve_time for s in lifted],
+                                [s.warm_started for s in lifted], [p for p, _ in labelled],
+                                [c for _, c in labelled])
+
+    @classmethod
+    def concat(cls, frames: Sequence[SkeletonFrame]) -> SkeletonFrame:
+        """The rows of ``frames``, one after the other (at least one frame)."""
+        return cls(*(np.concatenate([getattr(f, x.name) for f in frames]) for x in fields(cls)))
+
+    def take(self, rows: NDArray[np.intp]) -> SkeletonFrame:
+        """These rows, in this order."""
+        return type(self)(*(getattr(self, x.name)[rows] for x in fields(self)))
 
     def __len__(self) -> int:
         return len(self.track_ids)
-
-
-def _header(w: _Writer, header: Any) -> None:
-    """A std_msgs/Header (stamp, frame_id) at a 4-aligned position."""
-    w.align(4)
-    w.buf += _STAMP.pack(int(header.stamp.sec), int(header.stamp.nanosec))
-    w.string(str(header.frame_id))
-
-
-def _header_bytes(header: Any) -> bytes:
-    w = _Writer(header=False)
-    _header(w, header)
-    return bytes(w.buf)
 
 
 def skeleton3d_array_cdr(header: Any, frame: SkeletonFrame) -> bytes:
     """A serialised ``pose_lifter_msgs/Skeleton3DArray`` of ``header`` (``stamp.sec``,
     ``stamp.nanosec``, ``frame_id``) and the skeletons of ``frame``."""
     w = _Writer()
-    _header(w, header)
+    w.buf += _message_header(header)
     n = len(frame)
     w.u32(n)
     buf = w.buf
@@ -318,7 +352,7 @@ def marker_array_cdr(
     joints = np.asarray(joints_m, dtype="<f8").reshape(len(track_ids), N_JOINTS, 3)
     deleted = [int(t) for t in deleted_track_ids if t >= 0]
     positions = [int(p) for p in deleted_untracked]
-    hb = _header_bytes(header)
+    hb = _message_header(header)
     ns_joints, ns_bones = _string_bytes(f"{ns}/joints"), _string_bytes(f"{ns}/bones")
     ns_sec, ns_nsec = divmod(max(0, round(float(lifetime) * 1e9)), 1_000_000_000)
     identity = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # position, orientation (x, y, z, w)

@@ -52,7 +52,6 @@ __all__ = [
     "skeleton3d_from_joints",
     "skeleton3d_to_joints",
     "skeleton_markers",
-    "skeleton_markers_from_points",
     "skeletons3d_array",
     "stamp_to_ns",
     "track_color",
@@ -272,7 +271,7 @@ def camera_estimate(result: LiftResult, types: Any) -> Any:
 
 def joint_points(joints_m: NDArray[np.float64], types: Any) -> list[Any]:
     """The 12 ``geometry_msgs/Point`` of metric joints (12, 3): a ``Skeleton3D``'s ``joints``,
-    and the points of its markers (:func:`skeleton_markers_from_points`)."""
+    and the points of its markers (:func:`skeleton_markers`)."""
     j = np.asarray(joints_m, dtype=np.float64)
     if j.shape != (N_JOINTS, 3):
         raise InvalidInputError(f"joints must be ({N_JOINTS}, 3), got {j.shape}")
@@ -385,22 +384,6 @@ def skeleton_markers(
     joint_diameter: float = 0.05,
     line_width: float = 0.02,
 ) -> Any:
-    """``MarkerArray`` of metric joints: :func:`skeleton_markers_from_points` with ``tracks`` of
-    (track_id, joints (12, 3) metres)."""
-    return skeleton_markers_from_points(header, ((t, joint_points(j, types)) for t, j in tracks), ns,
-                                        lifetime, types, deleted_track_ids, joint_diameter, line_width)
-
-
-def skeleton_markers_from_points(
-    header: Any,
-    tracks: Iterable[tuple[int, Sequence[Any]]],
-    ns: str,
-    lifetime: float,
-    types: Any,
-    deleted_track_ids: Iterable[int] = (),
-    joint_diameter: float = 0.05,
-    line_width: float = 0.02,
-) -> Any:
     """``MarkerArray``: per track a SPHERE_LIST of joints (namespace ``{ns}/joints``) and a
     LINE_LIST of bones (``{ns}/bones``, :data:`BONES_FOR_DRAWING`), both with id = track id
     (untracked skeletons get ids -1, -2, ... by position), coloured per track.
@@ -409,9 +392,8 @@ def skeleton_markers_from_points(
     ----------
     header : Header
         Frame of the joints (camera optical frame) and stamp.
-    tracks : iterable of (track_id, points)
-        ``points``: the 12 ``geometry_msgs/Point`` of a skeleton (:func:`joint_points`; the node
-        passes its ``Skeleton3D``'s ``joints``, built once for both messages).
+    tracks : iterable of (track_id, joints)
+        ``joints``: a skeleton's metric joints (12, 3) (:func:`joint_points`).
     ns : str
         Marker namespace prefix.
     lifetime : float
@@ -422,7 +404,8 @@ def skeleton_markers_from_points(
     """
     markers: list[Any] = []
     untracked = 0
-    for track_id, pts in tracks:
+    for track_id, joints in tracks:
+        pts = joint_points(joints, types)
         mid = marker_id(int(track_id), untracked)
         if track_id < 0:
             untracked += 1

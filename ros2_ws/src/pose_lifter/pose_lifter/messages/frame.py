@@ -15,7 +15,7 @@ what the node publishes for it. One frame:
    :func:`~pose_lifter.core.track.policy.lift_tracks_steps`): the core's
    :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
-   placed together, :func:`~pose_lifter.core.track.placement.place_poses`) and :func:`check_output`
+   placed together, :func:`~pose_lifter.core.track.placement.place_results`) and :func:`check_output`
    (nothing non-finite leaves).
 3. :meth:`FramePipeline.end_frame`: tracks unseen for ``track_timeout`` are forgotten.
 
@@ -40,14 +40,9 @@ from numpy.typing import NDArray
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.model.layouts import Layout, get_layout
-from pose_lifter.core.results import LiftResult
+from pose_lifter.core.results import LiftResult, with_camera_poses
 from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from pose_lifter.core.track.placement import (
-    DEFAULT_DISTANCE_M,
-    DEFAULT_LEG_LENGTH_M,
-    place_in_camera,
-    place_poses,
-)
+from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_results
 from pose_lifter.core.track.policy import (
     FramesAhead,
     OutOfOrderFrameError,
@@ -67,13 +62,14 @@ __all__ = [
     "LiftedSkeleton",
     "SkeletonInput",
     "SkipSkeleton",
-    "Solved",
     "check_output",
     "expiry_stamps",
     "frame_over_cap",
     "lift_together",
     "place_lifted",
+    "placed_again",
     "skeleton_input",
+    "with_frames_ahead",
 ]
 
 #: Camera intrinsics ((fx, fy), (cx, cy)) in pixels, or None (the default distance).
@@ -91,7 +87,7 @@ class FrameSettings:
     warm_start, track_timeout, reinit_ratio
         The per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`).
     lower_leg_length, default_distance : float
-        Metres, the placement (:func:`~pose_lifter.core.track.placement.place_in_camera`).
+        Metres, the placement (:func:`~pose_lifter.core.track.placement.place_results`).
     max_skeletons, max_coordinate, max_frame_id_length, max_layout_length, max_keypoints
         Caps on the input (see the module doc).
     """
@@ -347,62 +343,90 @@ def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
         TrackFrame(pipeline.policy, inp.track_id, stamp, inp.points, inp.confidence, intrinsics, inp.ahead)
         for pipeline, inp, stamp, intrinsics in frames]))
     out: list[LiftedSkeleton | SkipSkeleton | None] = []
-    solved: list[tuple[int, FramePipeline, Intrinsics, Solved]] = []
+    solved: list[tuple[int, FramePipeline, Intrinsics, SkeletonInput, TrackedLift]] = []
     for k, ((pipeline, inp, _, intrinsics), d) in enumerate(zip(frames, done, strict=True)):
         if isinstance(d, Exception):  # a refusal, or anything else (a bug) costs only its skeleton
             out.append(_refusal(d, inp.track_id))
         else:
             out.append(None)  # placed below
-            solved.append((k, pipeline, intrinsics, Solved(inp, d)))
-    placed = place_lifted([(p.settings, i, d) for _, p, i, d in solved])
+            solved.append((k, pipeline, intrinsics, inp, d))
+    placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved])
     share = (time.perf_counter() - start) / len(frames)
-    for (k, _, _, _), lifted in zip(solved, placed, strict=True):
+    for (k, *_), lifted in zip(solved, placed, strict=True):
         out[k] = lifted if isinstance(lifted, SkipSkeleton) else lifted.timed(share)
     return [x for x in out if x is not None]
 
 
-@dataclass(frozen=True)
-class Solved:
-    """A skeleton through the track's policy, before its placement (:func:`lift_together`)."""
-
-    input: SkeletonInput
-    tracked: TrackedLift
-
-
-def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, Solved]]
+def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]]
                  ) -> list[LiftedSkeleton | SkipSkeleton]:
-    """The metric joints of solved skeletons, each with its pipeline's settings and its camera's
-    intrinsics: those that share them in one :func:`~pose_lifter.core.track.placement.place_poses`
-    pass, then :func:`check_output` per skeleton. A group the pass refuses (a camera scale not
-    > 0, or anything unexpected) is placed skeleton by skeleton, so a refusal costs only its own
-    skeleton."""
+    """The lifted skeletons of skeletons through their tracks' policies, each with its pipeline's
+    settings and its camera's intrinsics: those that share them placed in one
+    :func:`~pose_lifter.core.track.placement.place_results` pass, then :func:`check_output` per
+    skeleton. A group the pass refuses (a camera scale not > 0, or anything unexpected) is
+    placed skeleton by skeleton, so a refusal costs only its own skeleton."""
     out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
     groups: dict[tuple[float, float, Intrinsics], list[int]] = {}
-    for k, (st, intrinsics, _) in enumerate(solved):
+    for k, (st, intrinsics, _, _) in enumerate(solved):
         groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics), []).append(k)
     for (leg, distance, intrinsics), members in groups.items():
-        focal, centre = intrinsics if intrinsics is not None else (None, None)
-        results = [solved[k][2].tracked.result for k in members]
+        results = [solved[k][3].result for k in members]
         try:
-            joints = place_poses(np.array([r.pose_camera for r in results], dtype=np.float64),
-                                 np.array([float(r.camera.scale) for r in results], dtype=np.float64),
-                                 np.array([r.camera.translation for r in results], dtype=np.float64),
-                                 leg, focal, centre, distance)
+            joints = place_results(np.array([r.pose_camera for r in results], dtype=np.float64), results, leg,
+                                   intrinsics, distance)
         except Exception:  # placed one by one below, where a refusal costs only its own skeleton
             joints = None
         for m, k in enumerate(members):
-            d = solved[k][2]
-            track_id, res = d.input.track_id, d.tracked.result
+            inp, tracked = solved[k][2], solved[k][3]
+            res = tracked.result
             try:
                 j = (joints[m] if joints is not None
-                     else place_in_camera(res, leg, focal, centre, distance))
-                check_output(track_id, res, j)
+                     else place_results(np.array([res.pose_camera], dtype=np.float64), [res], leg, intrinsics,
+                                        distance)[0])
+                check_output(inp.track_id, res, j)
             except Exception as err:
-                out[k] = _refusal(err, track_id)
+                out[k] = _refusal(err, inp.track_id)
                 continue
-            out[k] = LiftedSkeleton(d.input, res, j, d.tracked.warm_started, 0.0, d.tracked.fit_pose_camera,
-                                    d.tracked.swapped)
+            out[k] = LiftedSkeleton(inp, res, j, tracked.warm_started, 0.0, tracked.fit_pose_camera,
+                                    tracked.swapped)
     return [x for x in out if x is not None]
+
+
+def placed_again(lifted: Sequence[LiftedSkeleton], poses: NDArray[np.float64], settings: FrameSettings,
+                 intrinsics: Intrinsics) -> list[LiftedSkeleton | None]:
+    """Lifted skeletons of one camera with refined poses (``poses`` (n, 12, 3), camera frame,
+    centred, leg units): each result's pose replaced
+    (:func:`~pose_lifter.core.results.with_camera_poses`) and placed again in one
+    :func:`~pose_lifter.core.track.placement.place_results` pass; None for a skeleton whose
+    placement is refused or not finite (:func:`check_output`), or for all when the pass is."""
+    results = with_camera_poses([s.result for s in lifted], poses)
+    try:
+        joints = place_results(poses, results, settings.lower_leg_length, intrinsics,
+                               settings.default_distance)
+    except Exception:  # e.g. a camera scale not > 0
+        return [None] * len(lifted)
+    out: list[LiftedSkeleton | None] = []
+    for s, res, j in zip(lifted, results, joints, strict=True):
+        try:
+            check_output(s.track_id, res, j)
+        except SkipSkeleton:
+            out.append(None)
+            continue
+        out.append(replace(s, result=res, joints_m=j))
+    return out
+
+
+def with_frames_ahead(track: Sequence[tuple[int, SkeletonInput]], n: int) -> list[SkeletonInput]:
+    """The inputs of one track's frames (``(stamp_ns, input)`` in time order), each with its
+    track's next frames (``SkeletonInput.ahead``: at most ``n`` of those after it; the last frame
+    an empty one); as given when ``n`` is 0 or there is one frame."""
+    if not n or len(track) < 2:
+        return [x for _, x in track]
+    stamps = np.array([s for s, _ in track], dtype=np.int64)
+    points = np.array([x.points for _, x in track], dtype=np.float64)
+    confidence = np.array([x.confidence for _, x in track], dtype=np.float64)
+    return [replace(x, ahead=FramesAhead(stamps[i + 1:i + 1 + n], points[i + 1:i + 1 + n],
+                                         confidence[i + 1:i + 1 + n]))
+            for i, (_, x) in enumerate(track)]
 
 
 def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:

@@ -33,7 +33,16 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages import body
-from pose_lifter.messages.cdr import _ENCAPSULATION, _STAMP, _U32, _string_bytes, _Writer
+from pose_lifter.messages.cdr import (
+    _ENCAPSULATION,
+    _STAMP,
+    _U32,
+    SkeletonFrame,
+    _string_bytes,
+    _Writer,
+    header_cdr,
+    stamp_cdr,
+)
 
 __all__ = [
     "BODIES_NS",
@@ -42,7 +51,6 @@ __all__ = [
     "TF_TOPIC",
     "BodyBook",
     "BodyFrame",
-    "LiftedBody",
     "body_id",
     "ids_list_cdr",
     "joint_state_cdr",
@@ -114,22 +122,17 @@ def body_id(track_id: int) -> str:
     return "".join(letters)
 
 
-def _stamp(stamp_ns: int) -> bytes:
-    """A ``builtin_interfaces/Time`` (sec, nanosec) of ``stamp_ns``."""
-    return _STAMP.pack(*divmod(int(stamp_ns), 1_000_000_000))
-
-
 def _header_block(stamp: bytes, frame_id: str) -> bytes:
-    """The encapsulation and a std_msgs/Header (``stamp`` from :func:`_stamp`) padded to 4: the
-    start of every message here whose header is followed by 4-aligned fields, shared by the
-    frame's messages that have the input's frame."""
-    data = _ENCAPSULATION + stamp + _string_bytes(frame_id)
+    """The encapsulation and a std_msgs/Header (:func:`~pose_lifter.messages.cdr.header_cdr`)
+    padded to 4: the start of every message here whose header is followed by 4-aligned fields,
+    shared by the frame's messages that have the input's frame."""
+    data = _ENCAPSULATION + header_cdr(stamp, frame_id)
     return data + b"\x00" * (-len(data) % 4)
 
 
 def ids_list_cdr(stamp_ns: int, frame_id: str, ids: Sequence[str]) -> bytes:
     """``hri_msgs/IdsList`` of ``ids``."""
-    buf = bytearray(_header_block(_stamp(stamp_ns), frame_id))
+    buf = bytearray(_header_block(stamp_cdr(stamp_ns), frame_id))
     buf += _U32.pack(len(ids))
     for i in ids:
         buf += b"\x00" * (-len(buf) % 4)
@@ -177,16 +180,15 @@ class _TfBlock:
 
 
 @lru_cache(maxsize=1024)
-def _tf_block(bid: str, root: bytes, phase: int) -> _TfBlock:
+def _tf_block(bid: str, root: str, phase: int) -> _TfBlock:
     """The :class:`_TfBlock` of body ``bid`` starting at a CDR offset of ``phase`` modulo 8, its
-    ``body_<id>`` a child of the CDR string ``root`` (the input's frame)."""
+    ``body_<id>`` a child of ``root`` (the input's frame)."""
     buf = bytearray(phase)  # offsets in buf have the message's alignment
     stamps, values = [], []
     for parent, child in body.LINKS:
-        buf += b"\x00" * (-len(buf) % 4)  # the header: stamp, frame_id
+        buf += b"\x00" * (-len(buf) % 4)  # the header: stamp (written per frame), frame_id
         stamps.append(len(buf) - phase)
-        buf += bytes(_STAMP.size)
-        buf += _string_bytes(f"{parent}_{bid}") if parent else root
+        buf += header_cdr(bytes(_STAMP.size), f"{parent}_{bid}" if parent else root)
         buf += b"\x00" * (-len(buf) % 4)  # child_frame_id
         buf += _string_bytes(f"{child}_{bid}")
         buf += b"\x00" * (-len(buf) % 8)  # translation, rotation: float64
@@ -209,19 +211,18 @@ def tf_message_cdr(stamp_ns: int, frame_id: str, bodies: Sequence[tuple[str, bod
     rotations = np.array([pose.quaternions for _, pose in bodies], dtype=np.float64)
     if translations.shape != (len(bodies), n_links, 3) or rotations.shape != (len(bodies), n_links, 4):
         raise ValueError(f"each pose needs {n_links} translations (3) and quaternions (4)")
-    root = _string_bytes(frame_id)
     # 4 bytes ahead of the message: its float64 (at CDR offsets multiple of 8) aligned in memory
     buf = bytearray(4) + head
     groups: dict[_TfLayout, tuple[list[int], list[int]]] = {}  # layout -> (bodies, CDR offsets)
     for k, (bid, _) in enumerate(bodies):
-        block = _tf_block(bid, root, 4 if k == 0 else 0)
+        block = _tf_block(bid, frame_id, 4 if k == 0 else 0)
         ks, starts = groups.setdefault(block.layout, ([], []))
         ks.append(k)
         starts.append(len(buf) - 8)
         buf += block.data
     words = np.frombuffer(buf, dtype="<u4")  # CDR offset c: word (c + 8) / 4
     doubles = np.frombuffer(buf, dtype="<f8", offset=8)  # CDR offset c: double c / 8
-    sec, nanosec = np.frombuffer(_stamp(stamp_ns), dtype="<u4")
+    sec, nanosec = np.frombuffer(stamp_cdr(stamp_ns), dtype="<u4")
     for layout, (ks, starts) in groups.items():
         at = np.array(starts, dtype=np.intp)[:, None]
         stamp_at = (at + 8) // 4 + layout.stamp_words
@@ -239,8 +240,7 @@ def _joint_state_names(bid: str, n_angles: int) -> bytes:
     frame_id, the names ``<joint>_<id>``, the positions' count and padding; constant per body, as
     the empty frame_id fixes every offset."""
     w = _Writer()
-    w.buf += bytes(_STAMP.size)
-    w.string("")
+    w.buf += header_cdr(bytes(_STAMP.size), "")
     w.u32(len(body.REVOLUTE_JOINTS))
     for name in body.REVOLUTE_JOINTS:
         w.string(f"{name}_{bid}")
@@ -254,7 +254,7 @@ _NO_VELOCITY_EFFORT: Final[bytes] = bytes(8)
 
 
 def _joint_state(stamp: bytes, bid: str, angles: NDArray[np.float64]) -> bytes:
-    """:func:`joint_state_cdr` with the stamp as :func:`_stamp` bytes."""
+    """:func:`joint_state_cdr` with the stamp as :func:`~pose_lifter.messages.cdr.stamp_cdr` bytes."""
     positions = np.ascontiguousarray(angles, dtype="<f8")
     return b"".join((_ENCAPSULATION, stamp, _joint_state_names(bid, len(positions)), positions.tobytes(),
                      _NO_VELOCITY_EFFORT))
@@ -263,7 +263,7 @@ def _joint_state(stamp: bytes, bid: str, angles: NDArray[np.float64]) -> bytes:
 def joint_state_cdr(stamp_ns: int, bid: str, pose: body.BodyPose) -> bytes:
     """``sensor_msgs/JointState`` of one body: the REP-155 joint angles (radians), names
     ``<joint>_<id>`` in the order of :data:`body.REVOLUTE_JOINTS`, no velocity or effort."""
-    return _joint_state(_stamp(stamp_ns), bid, pose.angles)
+    return _joint_state(stamp_cdr(stamp_ns), bid, pose.angles)
 
 
 def string_cdr(text: str) -> bytes:
@@ -354,7 +354,7 @@ def skeleton2d_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], co
     at the shoulders' midpoint; the points the model has no joint for (nose, eyes, ears) have
     confidence 0."""
     skeletons, _ = _skeleton2d_and_roi([points], [confidence], image_size)
-    return _header_block(_stamp(stamp_ns), frame_id) + bytes(skeletons[0].tobytes())
+    return _header_block(stamp_cdr(stamp_ns), frame_id) + bytes(skeletons[0].tobytes())
 
 
 def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidence: NDArray[np.float64],
@@ -362,27 +362,7 @@ def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidenc
     """``hri_msgs/NormalizedRegionOfInterest2D``: the box of the observed joints (confidence > 0),
     normalised; ``c`` their mean confidence (an empty box with c = 0 when none is observed)."""
     _, boxes = _skeleton2d_and_roi([points], [confidence], image_size)
-    return _header_block(_stamp(stamp_ns), frame_id) + bytes(boxes[0].tobytes())
-
-
-@dataclass(frozen=True)
-class LiftedBody:
-    """One lifted skeleton as :meth:`BodyBook.frame` takes it.
-
-    Attributes
-    ----------
-    track_id : int
-    joints_m : ndarray, shape (12, 3)
-        Metres, in the frame's ``frame_id``.
-    points : ndarray, shape (12, 2)
-        The 2D input, pixels.
-    confidence : ndarray, shape (12,)
-    """
-
-    track_id: int
-    joints_m: NDArray[np.float64]
-    points: NDArray[np.float64]
-    confidence: NDArray[np.float64]
+    return _header_block(stamp_cdr(stamp_ns), frame_id) + bytes(boxes[0].tobytes())
 
 
 @dataclass(frozen=True)
@@ -451,39 +431,42 @@ class BodyBook:
         self._seen.clear()
         return gone
 
-    def frame(self, stamp_ns: int, frame_id: str, lifted: Sequence[LiftedBody],
+    def frame(self, stamp_ns: int, frame_id: str, lifted: SkeletonFrame,
               image_size: tuple[float, float] | None) -> BodyFrame:
         """The outputs of one frame.
 
         Parameters
         ----------
         stamp_ns, frame_id : the input's stamp and frame (the joints' frame)
-        lifted : the frame's lifted skeletons
+        lifted : the frame's lifted skeletons (read: ``track_ids``, ``joints_m`` in metres in
+            ``frame_id``, the 2D ``points`` in pixels and their ``confidence``)
         image_size : (width, height) in pixels, or None (no ``skeleton2d`` / ``roi``)
         """
         new: dict[str, bytes] = {}
-        shown: list[tuple[str, body.BodyPose, LiftedBody]] = []
-        tracked = [p for p in lifted if p.track_id >= 0]
-        poses = body.body_poses(np.stack([p.joints_m for p in tracked])) if tracked else []
-        for person, pose in zip(tracked, poses, strict=True):
+        shown: list[tuple[str, body.BodyPose, int]] = []  # body id, pose, row of lifted
+        tracked = np.flatnonzero(lifted.track_ids >= 0)
+        poses = body.body_poses(lifted.joints_m[tracked]) if tracked.size else []
+        for k, pose in zip(tracked.tolist(), poses, strict=True):
             if pose is None:  # a degenerate skeleton: no body this frame
                 continue
-            if person.track_id not in self._bodies:
-                bid = body_id(person.track_id)
-                self._bodies[person.track_id] = bid
-                new[bid] = string_cdr(body.body_urdf(bid, body.body_dimensions(person.joints_m)))
-            self._seen[person.track_id] = stamp_ns
-            shown.append((self._bodies[person.track_id], pose, person))
+            track_id = int(lifted.track_ids[k])
+            if track_id not in self._bodies:
+                bid = body_id(track_id)
+                self._bodies[track_id] = bid
+                new[bid] = string_cdr(body.body_urdf(bid, body.body_dimensions(lifted.joints_m[k])))
+            self._seen[track_id] = stamp_ns
+            shown.append((self._bodies[track_id], pose, k))
         stale = [tid for tid, seen in self._seen.items() if stamp_ns - seen > self.timeout_ns]
         gone = sorted(self._bodies.pop(tid) for tid in stale)
         for tid in stale:
             del self._seen[tid]
-        stamp = _stamp(stamp_ns)
+        stamp = stamp_cdr(stamp_ns)
         outputs = {bid: {"joint_states": _joint_state(stamp, bid, pose.angles)} for bid, pose, _ in shown}
         if shown and image_size is not None:
             header = _header_block(stamp, frame_id)
-            skeletons, boxes = _skeleton2d_and_roi([p.points for _, _, p in shown],
-                                                   [p.confidence for _, _, p in shown], image_size)
+            rows = [k for _, _, k in shown]
+            skeletons, boxes = _skeleton2d_and_roi(list(lifted.points[rows]), list(lifted.confidence[rows]),
+                                                   image_size)
             for (bid, _, _), skeleton, box in zip(shown, skeletons, boxes, strict=True):
                 outputs[bid]["skeleton2d"] = header + skeleton.tobytes()
                 outputs[bid]["roi"] = header + box.tobytes()

@@ -10,7 +10,7 @@ camera frame. The pipeline's policy keeps what the update reads of each frame
 Below AHEAD_LAG frames each frame is lifted when it arrives, by the node's causal priors. From
 AHEAD_LAG on, the pipeline's lifter reads ahead (``Lifter.reads_ahead``: the offline prior) and
 each frame is lifted once its prior's future frames have come, with its track's next frames
-(:class:`~pose_lifter.core.track.policy.FramesAhead`, from the frames held), as ``pose-lifter
+(:func:`~pose_lifter.messages.frame.with_frames_ahead`, from the frames held), as ``pose-lifter
 lift`` lifts it; the rest of the lag refines it.
 
 Frames leave in the order they came, each once; :meth:`LaggedFrames.flush` gives the ones still
@@ -26,12 +26,9 @@ from typing import Final, Generic, NamedTuple, TypeVar
 
 import numpy as np
 
-from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.lagged import LaggedPoses
 from pose_lifter.core.track.later import LaterFrame
-from pose_lifter.core.track.placement import place_poses
-from pose_lifter.core.track.policy import FramesAhead
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -40,7 +37,8 @@ from pose_lifter.messages.frame import (
     LiftedSkeleton,
     SkeletonInput,
     SkipSkeleton,
-    check_output,
+    placed_again,
+    with_frames_ahead,
 )
 
 __all__ = ["AHEAD_LAG", "MAX_LAG", "LaggedFrame", "LaggedFrames"]
@@ -175,28 +173,17 @@ class LaggedFrames(Generic[T]):
                 poses.append(pose)
         if not rows:
             return frame
-        st = self.pipeline.settings
-        results = with_camera_poses([s.result for _, s in rows], np.array(poses))
-        focal, centre = frame.intrinsics if frame.intrinsics is not None else (None, None)
-        try:
-            joints = place_poses(np.array(poses), np.array([float(r.camera.scale) for r in results]),
-                                 np.array([r.camera.translation for r in results]), st.lower_leg_length,
-                                 focal, centre, st.default_distance)
-        except Exception:  # the lifted poses were placed: keep them
-            return frame
+        placed = placed_again([s for _, s in rows], np.array(poses), self.pipeline.settings, frame.intrinsics)
         outcomes = list(frame.outcomes)
-        for m, ((k, s), res) in enumerate(zip(rows, results, strict=True)):
-            try:
-                check_output(s.track_id, res, joints[m])
-            except Exception:
-                continue
-            outcomes[k] = replace(s, result=res, joints_m=joints[m])
+        for (k, _), again in zip(rows, placed, strict=True):
+            if again is not None:  # else the pose it was lifted with is kept
+                outcomes[k] = again
         return frame._replace(outcomes=outcomes)
 
 
 def _with_ahead(checked: CheckedFrame, after: list[CheckedFrame], stamps: list[int], n: int) -> CheckedFrame:
-    """``checked`` with each tracked skeleton's next frames (:class:`FramesAhead`: at most ``n`` of
-    the same track id, from the ``after`` frames in order, stamped ``stamps``)."""
+    """``checked`` with each tracked skeleton's next frames (:func:`with_frames_ahead`: at most
+    ``n`` of the same track id, from the ``after`` frames in order, stamped ``stamps``)."""
     skeletons: list[SkeletonInput | SkipSkeleton] = []
     for x in checked.skeletons:
         if isinstance(x, SkipSkeleton) or x.track_id < 0:
@@ -204,10 +191,5 @@ def _with_ahead(checked: CheckedFrame, after: list[CheckedFrame], stamps: list[i
             continue
         nxt = [(s, y) for s, c in zip(stamps, after, strict=True) for y in c.skeletons
                if isinstance(y, SkeletonInput) and y.track_id == x.track_id][:n]
-        if not nxt:
-            skeletons.append(x)
-            continue
-        skeletons.append(replace(x, ahead=FramesAhead(np.array([s for s, _ in nxt], dtype=np.int64),
-                                                      np.array([y.points for _, y in nxt]),
-                                                      np.array([y.confidence for _, y in nxt]))))
+        skeletons.append(with_frames_ahead([(0, x), *nxt], n)[0] if nxt else x)
     return replace(checked, skeletons=tuple(skeletons))

@@ -8,6 +8,8 @@ frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes
 node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
 (:func:`lift_chains`), so that the prior's network runs once per step for all of them
 (:func:`~pose_lifter.core.lift.batch.prior_calls`); a chain's outcomes do not depend on its group.
+What a chain gave comes back as columns (:class:`ChainLift`: its lifted skeletons as one
+:class:`~pose_lifter.messages.cdr.SkeletonFrame`), from a worker as from this process.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import os
 import signal
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Final
 
@@ -28,10 +31,10 @@ from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.model.skeleton import N_JOINTS
 from pose_lifter.core.results import LiftResult, with_camera_poses
-from pose_lifter.core.track.placement import place_poses
-from pose_lifter.core.track.policy import FramesAhead
+from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.smoothing import centred_smoothing
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
     CheckedFrame,
     FramePipeline,
@@ -42,17 +45,16 @@ from pose_lifter.messages.frame import (
     SkipSkeleton,
     expiry_stamps,
     lift_together,
+    with_frames_ahead,
 )
 
 __all__ = [
     "GROUP_CHAINS",
     "CameraTimeline",
+    "ChainLift",
     "ChainWork",
-    "Done",
     "Item",
-    "MessageFields",
     "chain_groups",
-    "inputs_ahead",
     "lift_chains",
     "lift_parallel",
     "measured_later",
@@ -107,25 +109,31 @@ class Item:
 
 
 @dataclass(frozen=True)
-class Done:
-    """What lifting one :class:`Item` gave: the result and metric joints, or the failure."""
+class ChainLift:
+    """What lifting a chain (or any list of items) gave, as columns: what a worker sends back
+    (a few arrays, one pickle each, not one object tree per pose).
 
-    item: Item
-    result: Any | None
-    joints_m: NDArray[np.float64] | None
-    warm_started: bool
-    solve_time: float
-    failure: str | None
-    #: the left/right label groups its track swapped back (2,; None: none; ``LiftedSkeleton.swapped``)
-    swapped: NDArray[np.bool_] | None = None
+    Attributes
+    ----------
+    failures : list of str or None
+        Per item, in order: why it was not lifted, or None (lifted: its row in ``lifted`` is the
+        number of items lifted before it).
+    lifted : SkeletonFrame
+        The lifted items' rows, in order.
+    results : list of LiftResult, optional
+        Per row, the whole lift (None: not kept, only what the messages carry).
+    """
+
+    failures: list[str | None]
+    lifted: SkeletonFrame
+    results: list[LiftResult] | None = None
 
     @classmethod
-    def of(cls, item: Item, outcome: LiftedSkeleton | SkipSkeleton) -> Done:
-        """What the frame pipeline gave for ``item``: its lifted skeleton, or the refusal."""
-        if isinstance(outcome, SkipSkeleton):
-            return cls(item, None, None, False, 0.0, str(outcome))
-        return cls(item, outcome.result, outcome.joints_m, outcome.warm_started, outcome.solve_time, None,
-                   outcome.swapped)
+    def of(cls, outcomes: Sequence[LiftedSkeleton | SkipSkeleton], keep_results: bool = True) -> ChainLift:
+        """The columns of what the frame pipeline gave for each item, in order."""
+        lifted = [x for x in outcomes if isinstance(x, LiftedSkeleton)]
+        failures = [str(x) if isinstance(x, SkipSkeleton) else None for x in outcomes]
+        return cls(failures, SkeletonFrame.of(lifted), [x.result for x in lifted] if keep_results else None)
 
 
 def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, Any]],
@@ -203,24 +211,27 @@ def chain_groups(chains: list[list[Item]], workers: int) -> list[list[int]]:
 
 
 def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSettings, smoothing_s: float = 0.0
-                ) -> list[list[Done]]:
+                ) -> list[list[LiftedSkeleton | SkipSkeleton]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
-    each chain's poses are then smoothed centred (:func:`smooth_chain`), and the policy's causal
-    smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
+    each chain's poses are then refined over its whole track (:func:`measured_later`, then
+    :func:`smooth_chain`), and the policy's causal smoothing of noisy tracks is off
+    (:attr:`TrackPolicy.smoothed_later`). Returns per chain, per item, the lifted skeleton or why
+    not.
 
     With a lifter that reads ahead (``Lifter.reads_ahead``), each item carries its track's next
-    frames for the offline prior (:func:`inputs_ahead`). Message by message, the chains' items of
-    that message are expired as their chain requires, then lifted together, each in its chain's
-    pipeline (:func:`lift_together`: the prior's networks in one pass, the runs of alternations in
-    one compiled pass per round). A chain's
-    outcomes are those of lifting it alone: the chains share only the lifter, whose prior's poses
-    and runs are bit for bit those computed alone."""
+    frames for the offline prior (:func:`~pose_lifter.messages.frame.with_frames_ahead`). Message
+    by message, the chains' items of that message are expired as their chain requires, then
+    lifted together, each in its chain's pipeline (:func:`lift_together`: the prior's networks in
+    one pass, the runs of alternations in one compiled pass per round). A chain's outcomes are
+    those of lifting it alone: the chains share only the lifter, whose prior's poses and runs are
+    bit for bit those computed alone."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
-    inputs = [inputs_ahead(lifter, chain) for chain in chains]
-    out: list[list[Done]] = [[] for _ in chains]
+    inputs = [with_frames_ahead([(it.stamp_ns, it.input) for it in chain], lifter.frames_ahead)
+              for chain in chains]
+    out: list[list[LiftedSkeleton | SkipSkeleton]] = [[] for _ in chains]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
     steps: dict[int, list[tuple[int, int, Item]]] = {}
@@ -234,21 +245,21 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
                 pipelines[c].end_frame(item.expire_ns)
         together = lift_together(lifter, [(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
                                           for c, k, item in step])
-        for (c, _, item), lifted in zip(step, together, strict=True):
-            out[c].append(Done.of(item, lifted))
-            if not isinstance(lifted, LiftedSkeleton):
-                fits[c].append(None)
-                continue
+        for (c, _, _), lifted in zip(step, together, strict=True):
+            out[c].append(lifted)
             # the centred smoothing starts from the fit's own pose; with the measurement update,
             # from the published one (which has read each frame's 2D; docs/tuning.md)
-            fits[c].append(None if lifter.options.measurement_update else lifted.fit_pose_camera)
+            fits[c].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
+                           and not lifter.options.measurement_update else None)
     if smoothing_s > 0:
-        out = [measured_later(d, p) for d, p in zip(out, pipelines, strict=True)]
-        return [smooth_chain(d, f, settings, smoothing_s) for d, f in zip(out, fits, strict=True)]
+        out = [measured_later(chain, d, p) for chain, d, p in zip(chains, out, pipelines, strict=True)]
+        return [smooth_chain(chain, d, f, settings, smoothing_s)
+                for chain, d, f in zip(chains, out, fits, strict=True)]
     return out
 
 
-def measured_later(done: list[Done], pipeline: FramePipeline) -> list[Done]:
+def measured_later(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton], pipeline: FramePipeline
+                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """A lifted chain with the offline measurement update of its hybrid frames
     (:meth:`pose_lifter.core.track.policy.TrackPolicy.measured_later`: each track's 2D smoothed over
     past and future frames, then the update at every noise level): each updated result's
@@ -256,140 +267,62 @@ def measured_later(done: list[Done], pipeline: FramePipeline) -> list[Done]:
     :func:`smooth_chain`)."""
     updated = pipeline.policy.measured_later()
     if not updated:
-        return done
+        return outcomes
     rows: list[int] = []
-    results: list[LiftResult] = []
+    lifted: list[LiftedSkeleton] = []
     poses: list[NDArray[np.float64]] = []
     seen: Counter[tuple[int, int]] = Counter()  # a stamp the input clock replayed comes again
-    for i, d in enumerate(done):
-        if d.result is None:
+    for i, (item, d) in enumerate(zip(chain, outcomes, strict=True)):
+        if not isinstance(d, LiftedSkeleton):
             continue
-        key = (d.item.track_id, d.item.stamp_ns)
+        key = (item.track_id, item.stamp_ns)
         pose = updated.get((*key, seen[key]))
         seen[key] += 1
         if pose is not None:
             rows.append(i)
-            results.append(d.result)
+            lifted.append(d)
             poses.append(pose)
     if not rows:
-        return done
-    out = list(done)
-    for i, res in zip(rows, with_camera_poses(results, np.array(poses)), strict=True):
-        out[i] = replace(done[i], result=res)
+        return outcomes
+    out = list(outcomes)
+    results = with_camera_poses([s.result for s in lifted], np.array(poses))
+    for i, s, res in zip(rows, lifted, results, strict=True):
+        out[i] = replace(s, result=res)
     return out
 
 
-def inputs_ahead(lifter: Lifter, chain: list[Item]) -> list[SkeletonInput]:
-    """The inputs of ``chain``'s items, each with its track's next frames
-    (``SkeletonInput.ahead``: the prior's ``future_frames`` items after it) when ``lifter`` reads
-    ahead and its temporal prior reads frames after the one it lifts."""
-    n_ahead = lifter.frames_ahead
-    if not n_ahead or len(chain) < 2:
-        return [it.input for it in chain]
-    stamps = np.array([it.stamp_ns for it in chain], dtype=np.int64)
-    points = np.array([it.input.points for it in chain], dtype=np.float64)
-    confidence = np.array([it.input.confidence for it in chain], dtype=np.float64)
-    return [replace(it.input, ahead=FramesAhead(stamps[i + 1:i + 1 + n_ahead], points[i + 1:i + 1 + n_ahead],
-                                                confidence[i + 1:i + 1 + n_ahead]))
-            for i, it in enumerate(chain)]
-
-
-def smooth_chain(done: list[Done], fits: list[NDArray[np.float64] | None], settings: FrameSettings,
-                  smoothing_s: float) -> list[Done]:
+def smooth_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton],
+                 fits: list[NDArray[np.float64] | None], settings: FrameSettings, smoothing_s: float
+                 ) -> list[LiftedSkeleton | SkipSkeleton]:
     """A lifted chain with its metric joints smoothed by a centred Gaussian window of
-    ``smoothing_s`` seconds (:func:`pose_lifter.core.track.smoothing.centred_smoothing`, segments split at
-    gaps over ``track_timeout``), from the fit's own poses (``fits[i]``; None: from the result's
-    pose, the fit's or, with ``measurement_update``, the published one): without the update the
-    causal output smoothing of the live node is replaced, not compounded. Each result's ``pose``
-    and ``pose_camera`` become the smoothed pose (camera and the rest kept)."""
-    rows = [i for i, d in enumerate(done) if d.result is not None and d.joints_m is not None]
+    ``smoothing_s`` seconds (:func:`pose_lifter.core.track.smoothing.centred_smoothing`, segments
+    split at gaps over ``track_timeout``), from the fit's own poses (``fits[i]``; None: from the
+    result's pose, the fit's or, with ``measurement_update``, the published one) placed by
+    :func:`~pose_lifter.core.track.placement.place_results`: without the update the causal
+    output smoothing of the live node is replaced, not compounded. Each result's ``pose`` and
+    ``pose_camera`` become the smoothed pose (camera and the rest kept)."""
+    rows = [i for i, d in enumerate(outcomes) if isinstance(d, LiftedSkeleton)]
+    lifted = [d for d in outcomes if isinstance(d, LiftedSkeleton)]
     if len(rows) < 2:
-        return done
+        return outcomes
     leg = settings.lower_leg_length
     placed = np.empty((len(rows), N_JOINTS, 3))
     by_camera: dict[Intrinsics, list[int]] = {}  # the rows seen with each camera's intrinsics
     for r, i in enumerate(rows):
-        by_camera.setdefault(done[i].item.intrinsics, []).append(r)
+        by_camera.setdefault(chain[i].intrinsics, []).append(r)
     for intrinsics, members in by_camera.items():
-        poses = np.empty((len(members), N_JOINTS, 3))
-        scales, translations = np.empty(len(members)), np.empty((len(members), 2))
-        for j, r in enumerate(members):
-            res, fit = done[rows[r]].result, fits[rows[r]]
-            assert res is not None
-            poses[j] = res.pose_camera if fit is None else fit
-            scales[j], translations[j] = float(res.camera.scale), res.camera.translation
-        focal, centre = intrinsics if intrinsics is not None else (None, None)
-        placed[members] = place_poses(poses, scales, translations, leg, focal, centre,
-                                      settings.default_distance)
-    stamps = np.array([done[i].item.stamp_ns for i in rows], dtype=np.int64)
+        fit = [fits[rows[r]] for r in members]
+        poses = np.array([lifted[r].result.pose_camera if f is None else f
+                          for r, f in zip(members, fit, strict=True)], dtype=np.float64)
+        placed[members] = place_results(poses, [lifted[r].result for r in members], leg, intrinsics,
+                                        settings.default_distance)
+    stamps = np.array([chain[i].stamp_ns for i in rows], dtype=np.int64)
     smooth = centred_smoothing(placed, stamps, np.ones(len(rows), dtype=bool), smoothing_s,
                                settings.track_timeout)
-    out = list(done)
-    for r, i in enumerate(rows):
-        d = done[i]
-        assert d.result is not None
-        res = d.result.with_camera_pose((smooth[r] - smooth[r].mean(axis=0)) / leg)
-        out[i] = Done(d.item, res, smooth[r], d.warm_started, d.solve_time, None, d.swapped)
-    return out
-
-
-@dataclass(frozen=True)
-class MessageFields:
-    """The part of a ``LiftResult`` that the output messages carry
-    (:meth:`pose_lifter.messages.cdr.SkeletonFrame.from_results`): what a worker of :func:`lift_bag` sends
-    back instead of the whole result (its history, prior pose, ...), as columns of a chain
-    (:func:`_columns`)."""
-
-    camera: Any
-    objective: float
-    reprojection_error: float
-    total_alternations: int
-    converged: bool
-    weights: NDArray[np.float64]
-
-
-def _columns(done: list[Done]) -> tuple[list[tuple[bool, float, str | None, int]],
-                                        dict[str, NDArray[Any]]]:
-    """A chain's outcomes as a few arrays (one pickle each, not one object tree per pose): per
-    item (warm_started, solve_time, failure, row of its lift or -1), and the rows' message fields."""
-    ok = [d for d in done if d.failure is None and d.result is not None and d.joints_m is not None]
-    row = {id(d): i for i, d in enumerate(ok)}
-    items = [(d.warm_started, d.solve_time, d.failure, row.get(id(d), -1)) for d in done]
-    res: list[Any] = [d.result for d in ok]
-    cams = [r.camera for r in res]
-    cols: dict[str, NDArray[Any]] = {
-        "rotation": np.array([c.rotation for c in cams], dtype=np.float64).reshape(-1, 3, 3),
-        "scale": np.array([c.scale for c in cams], dtype=np.float64),
-        "translation": np.array([c.translation for c in cams], dtype=np.float64).reshape(-1, 2),
-        "objective": np.array([r.objective for r in res], dtype=np.float64),
-        "reprojection_error": np.array([r.reprojection_error for r in res], dtype=np.float64),
-        "total_alternations": np.array([r.total_alternations for r in res], dtype=np.int64),
-        "converged": np.array([r.converged for r in res], dtype=bool),
-        "weights": np.array([r.weights for r in res], dtype=np.float64).reshape(-1, N_JOINTS),
-        "joints_m": np.array([d.joints_m for d in ok], dtype=np.float64).reshape(-1, N_JOINTS, 3),
-        "swapped": np.array([np.zeros(2, dtype=bool) if d.swapped is None else d.swapped for d in ok],
-                            dtype=bool).reshape(-1, 2),
-    }
-    return items, cols
-
-
-def _from_columns(chain: list[Item], items: list[tuple[bool, float, str | None, int]],
-                  cols: dict[str, NDArray[Any]]) -> list[Done]:
-    """The :class:`Done` s of a chain from :func:`_columns` (results as :class:`MessageFields`)."""
-    from pose_lifter.core.results import Camera
-
-    out = []
-    for item, (warm, dt, failure, i) in zip(chain, items, strict=True):
-        if i < 0:
-            out.append(Done(item, None, None, warm, dt, failure))
-            continue
-        cam = Camera(cols["rotation"][i], float(cols["scale"][i]), cols["translation"][i])
-        fields = MessageFields(cam, float(cols["objective"][i]), float(cols["reprojection_error"][i]),
-                               int(cols["total_alternations"][i]), bool(cols["converged"][i]),
-                               cols["weights"][i])
-        swapped = cols["swapped"][i]
-        out.append(Done(item, fields, cols["joints_m"][i], warm, dt, None,
-                        swapped if swapped.any() else None))
+    out = list(outcomes)
+    for r, (i, s) in enumerate(zip(rows, lifted, strict=True)):
+        res = s.result.with_camera_pose((smooth[r] - smooth[r].mean(axis=0)) / leg)
+        out[i] = replace(s, result=res, joints_m=smooth[r])
     return out
 
 
@@ -398,26 +331,20 @@ class ChainWork:
     """What the worker processes of :func:`lift_messages` lift: handed to each worker by the pool
     initialiser (:func:`_worker_init`; inherited through fork, not pickled), so a task is only the
     index of a group of chains (:func:`chain_groups`), and only the outcomes come back (the
-    parent holds the items): whole results, or only their message fields as columns
-    (:func:`_columns`)."""
+    parent holds the items), as columns (:class:`ChainLift`; the whole results too when
+    ``keep_results``)."""
 
     lifter: Lifter
     settings: FrameSettings
     smoothing_s: float
     chains: list[list[Item]]
     groups: list[list[int]]
-    message_fields_only: bool
+    keep_results: bool
 
-    def run(self, index: int) -> list[Any]:
+    def run(self, index: int) -> list[ChainLift]:
         group = [self.chains[c] for c in self.groups[index]]
-        out: list[Any] = []
-        for done in lift_chains(self.lifter, group, self.settings, self.smoothing_s):
-            if self.message_fields_only:
-                out.append(_columns(done))
-            else:
-                out.append([(d.result, d.joints_m, d.warm_started, d.solve_time, d.failure, d.swapped)
-                            for d in done])
-        return out
+        return [ChainLift.of(outcomes, self.keep_results)
+                for outcomes in lift_chains(self.lifter, group, self.settings, self.smoothing_s)]
 
 
 #: The work of this worker process (set by :func:`_worker_init`; None in the parent).
@@ -435,7 +362,7 @@ def _worker_init(work: ChainWork) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _worker_chain(index: int) -> Any:
+def _worker_chain(index: int) -> list[ChainLift]:
     assert _work is not None, "called outside a worker of lift_messages"
     return _work.run(index)
 
@@ -477,12 +404,13 @@ def stop_workers(ex: Any) -> None:
         proc.join()
 
 
-def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any) -> None:
-    """Lift ``work.groups`` of ``work.chains`` on ``workers`` forked processes into ``done``
-    (id(item) -> outcome)."""
+def lift_parallel(work: ChainWork, workers: int, bar: Any) -> list[ChainLift]:
+    """Lift ``work.groups`` of ``work.chains`` on ``workers`` forked processes: per chain, what
+    lifting it gave."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
+    out: list[ChainLift | None] = [None] * len(work.chains)
     # never more processes than groups or cores (1000 workers for 5 tracks forked 1000)
     n_proc = min(workers, len(work.groups), os.cpu_count() or 1)
     # the workers inherit every object of this process (the bag's messages too): frozen, the
@@ -494,19 +422,13 @@ def lift_parallel(work: ChainWork, workers: int, done: dict[int, Done], bar: Any
         try:
             outcomes_of = ex.map(_worker_chain, range(len(work.groups)))
             for group, per_chain in zip(work.groups, outcomes_of, strict=True):
-                for c, outcomes in zip(group, per_chain, strict=True):
-                    chain = work.chains[c]
-                    if work.message_fields_only:
-                        for d in _from_columns(chain, *outcomes):
-                            done[id(d.item)] = d
-                        bar.update(len(chain))
-                        continue
-                    for item, (res, joints, warm, dt, failure, swapped) in zip(chain, outcomes, strict=True):
-                        done[id(item)] = Done(item, res, joints, warm, dt, failure, swapped)
-                        bar.update(1)
+                for c, lifted in zip(group, per_chain, strict=True):
+                    out[c] = lifted
+                    bar.update(len(work.chains[c]))
         except BaseException:  # Ctrl-C or a failure: stop the workers now, not after their chains
             stop_workers(ex)
             raise
         ex.shutdown()
     finally:
         gc.unfreeze()
+    return [x for x in out if x is not None]

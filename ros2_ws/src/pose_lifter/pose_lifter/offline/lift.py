@@ -3,8 +3,9 @@
 ``lift_bag`` is what the node does, frame by frame, without ROS: each message goes through the
 node's frame pipeline (:mod:`pose_lifter.messages.frame`: the input caps and checks, the
 confidence clipping, per-track warm starts and expiry, metric placement from ``/camera_info``,
-the output check), and ``/skeletons_3d`` and ``/skeleton_markers`` are written next to the input
-topics. Where it differs, on purpose:
+the output check), and each message's answer (:func:`pose_lifter.messages.answer.frame_answer`,
+what the node publishes: ``/skeletons_3d``, ``/skeleton_markers`` and the REP-155 bodies) is
+written next to the input topics. Where it differs, on purpose:
 
 * the stamp of a message is its bag time (when it was recorded), not its header's;
 * the camera intrinsics are those of the latest ``/camera_info`` at or before the message
@@ -12,7 +13,7 @@ topics. Where it differs, on purpose:
 * the input header is copied unchanged (the node's ``frame_id`` parameter fills an empty one);
 * the caps are the node's defaults (a params file's caps are node parameters, not read);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
-  (:func:`pose_lifter.offline.chains.inputs_ahead`) and smooths each track's poses with past and
+  (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
   priors and poses, and with ``output_lag`` N the node's answers with ``output_lag:=N``
   (:class:`pose_lifter.messages.lagged.LaggedFrames`, the messages in order in one process).
@@ -32,26 +33,25 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
+from pose_lifter.core.results import LiftResult
 from pose_lifter.messages import cdr, hri
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.answer import FrameAnswer, frame_answer
+from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
     CheckedFrame,
     FramePipeline,
     FrameSettings,
+    LiftedSkeleton,
     SkipSkeleton,
-    labelled_2d,
 )
 from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.names import (
     CAMERA_INFO,
-    MARKER_ARRAY,
     SKELETON2D_ARRAY,
-    SKELETON3D_ARRAY,
     TOPIC_CAMERA_INFO,
     TOPIC_KEYPOINTS,
-    TOPIC_MARKERS,
-    TOPIC_SKELETONS,
     YOLO_DETECTION_ARRAY,
 )
 from pose_lifter.messages.typestore import pose_lifter_typestore
@@ -67,10 +67,9 @@ from pose_lifter.offline.bags import (
     read_raw,
 )
 from pose_lifter.offline.chains import (
+    ChainLift,
     ChainWork,
-    Done,
     Item,
-    MessageFields,
     chain_groups,
     lift_chains,
     lift_parallel,
@@ -82,7 +81,6 @@ __all__ = [
     "LIFTABLE_TYPES",
     "FrameLift",
     "LiftSummary",
-    "MessageFields",
     "check_lift_inputs",
     "frame_settings",
     "lift_bag",
@@ -147,10 +145,10 @@ def lift_messages(
     settings: LiftSettings,
     *,
     progress: bool = False,
-    on_frame: Callable[[int, Any, list[FrameLift], list[Any]], None] | None = None,
+    on_frame: Callable[[int, Any, list[FrameLift], list[LiftResult]], None] | None = None,
+    on_answer: Callable[[int, Any, SkeletonFrame], None] | None = None,
     summary: LiftSummary | None = None,
     workers: int = 1,
-    message_fields_only: bool = False,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order through the node's frame pipeline.
 
@@ -167,8 +165,9 @@ def lift_messages(
     settings : LiftSettings
         Read here: ``warm_start``, ``track_timeout``, ``reinit_ratio``, ``lower_leg_length``,
         ``default_distance`` (:func:`frame_settings`) and ``smoothing_s``: 0 gives the node's
-        causal poses; ``> 0`` smooths each track's poses with a centred Gaussian window of this
-        standard deviation in seconds, past and future frames alike (:mod:`pose_lifter.core.track.smoothing`);
+        causal poses; ``> 0`` refines each track's poses over its whole recording (the offline
+        measurement update, then a centred Gaussian window of this standard deviation in
+        seconds, :func:`pose_lifter.offline.chains.lift_chains`);
         ``output_lag`` (with ``smoothing_s`` 0): the node's lagged answers (``workers`` unused).
         Its ``options`` and ``bases`` are not read (``lifter`` is the solver).
     progress : bool
@@ -176,25 +175,35 @@ def lift_messages(
     on_frame : callable, optional
         ``on_frame(stamp_ns, msg, lifted, results)`` for each answered message (not one over a
         cap), in order, after the lifting (``results`` holds the LiftResult of each lifted
-        skeleton, in the order of ``lifted``).
+        skeleton, in the order of ``lifted``; the workers send them back only when this is given).
+    on_answer : callable, optional
+        ``on_answer(stamp_ns, msg, lifted)`` for each answered message, in order, with its lifted
+        skeletons as columns (:class:`~pose_lifter.messages.cdr.SkeletonFrame`: what its
+        answer carries, :func:`~pose_lifter.messages.answer.frame_answer`).
     summary : LiftSummary, optional
         Filled in place.
     workers : int
         Processes (fork) lifting the chains; 1 lifts in this process.
-    message_fields_only : bool
-        With ``workers > 1``, ``on_frame`` gets :class:`MessageFields` (what the output messages
-        carry) in place of whole ``LiftResult`` s: less to send back from the workers.
     """
     if workers < 1:
         raise ValueError("workers must be >= 1")
     summ = summary if summary is not None else LiftSummary()
     frame = frame_settings(settings)
     chains, per_msg, checked = split_chains(keypoint_msgs, camera_infos, FramePipeline(lifter, frame))
+    keep_results = on_frame is not None
     if settings.output_lag:
-        done = _lift_lagged(lifter, keypoint_msgs, per_msg, checked, frame, settings.output_lag)
+        parts = _lift_lagged(lifter, keypoint_msgs, per_msg, checked, frame, settings.output_lag,
+                             keep_results)
     else:
-        done = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, message_fields_only,
-                            progress)
+        parts = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, keep_results, progress)
+    columns = SkeletonFrame.concat([p.lifted for _, p in parts]) if parts else SkeletonFrame.of([])
+    results = [r for _, p in parts for r in (p.results or [])]
+    row_of: dict[int, int | str] = {}  # id(item) -> its row of columns, or why it was not lifted
+    base = 0
+    for items, part in parts:
+        for item, failure in zip(items, part.failures, strict=True):
+            row_of[id(item)] = failure if failure is not None else base
+            base += failure is None
     out: list[FrameLift] = []
     for (stamp, msg), row, frame_check in zip(keypoint_msgs, per_msg, checked, strict=True):
         for skip in frame_check.skipped:
@@ -203,78 +212,79 @@ def lift_messages(
             continue
         summ.n_messages += 1
         summ.n_skeletons += len(row) + frame_check.n_left_out
-        lifted: list[FrameLift] = []
-        results: list[Any] = []
+        rows: list[int] = []
         for x in row:
-            if isinstance(x, SkipSkeleton):
-                summ.fail(stamp, f"track {x.track_id}: {x}")
-                continue
-            d = done[id(x)]
-            if d.failure is not None or d.result is None or d.joints_m is None:
-                summ.fail(stamp, f"track {x.track_id}: {d.failure}")
-                continue
-            summ.n_lifted += 1
-            summ.n_warm += int(d.warm_started)
-            summ.solve_time_s += d.solve_time
-            points, confidence = labelled_2d(x.input.points, x.input.confidence, d.swapped)
-            lifted.append(FrameLift(stamp, x.track_id, points, confidence, d.joints_m, d.warm_started,
-                                    d.solve_time))
-            results.append(d.result)
-        out.extend(lifted)
+            r = str(x) if isinstance(x, SkipSkeleton) else row_of[id(x)]
+            if isinstance(r, str):
+                summ.fail(stamp, f"track {x.track_id}: {r}")
+            else:
+                rows.append(r)
+        lifted = columns.take(np.array(rows, dtype=np.intp))
+        summ.n_lifted += len(rows)
+        summ.n_warm += int(lifted.warm_started.sum())
+        summ.solve_time_s += float(lifted.solve_time.sum())
+        frames = [FrameLift(stamp, t, p, c, j, w, dt) for t, p, c, j, w, dt in zip(
+            lifted.track_ids.tolist(), lifted.points, lifted.confidence, lifted.joints_m,
+            lifted.warm_started.tolist(), lifted.solve_time.tolist(), strict=True)]
+        out.extend(frames)
         if on_frame is not None:
-            on_frame(stamp, msg, lifted, results)
+            on_frame(stamp, msg, frames, [results[r] for r in rows])
+        if on_answer is not None:
+            on_answer(stamp, msg, lifted)
     return out
 
 
 def _lift_lagged(lifter: Lifter, keypoint_msgs: list[tuple[int, Any]],
                  per_msg: list[list[Item | SkipSkeleton]], checked: list[CheckedFrame], frame: FrameSettings,
-                 lag: int) -> dict[int, Done]:
+                 lag: int, keep_results: bool) -> list[tuple[list[Item], ChainLift]]:
     """The node's answers with ``output_lag`` = ``lag``: every answered message through one frame
     pipeline, in order, as the node lifts it, and its skeletons refined when ``lag`` later messages
     have been lifted (:class:`~pose_lifter.messages.lagged.LaggedFrames`; the last ``lag`` when the
-    messages end, as the node publishes them when its input stops). One process:
-    ``id(item) -> outcome``."""
+    messages end, as the node publishes them when its input stops). One process; the items
+    with what lifting them gave."""
     pipeline = FramePipeline(lifter, frame)
     lagged: LaggedFrames[int] = LaggedFrames(pipeline, lag)
-    done: dict[int, Done] = {}
+    items: list[Item] = []
+    outcomes: list[LiftedSkeleton | SkipSkeleton] = []
 
     def release(f: LaggedFrame[int]) -> None:
         for x, s in zip(per_msg[f.token], f.outcomes, strict=True):  # one per checked skeleton
             if isinstance(x, Item):
-                done[id(x)] = Done.of(x, s)
+                items.append(x)
+                outcomes.append(s)
 
     for i, ((stamp, _), row, check) in enumerate(zip(keypoint_msgs, per_msg, checked, strict=True)):
         if not check.answered:
             continue
-        items = [x for x in row if isinstance(x, Item)]
-        for f in lagged.lift(i, stamp, items[0].intrinsics if items else None, check):
+        first = next((x for x in row if isinstance(x, Item)), None)
+        for f in lagged.lift(i, stamp, first.intrinsics if first is not None else None, check):
             release(f)
     for f in lagged.flush():
         release(f)
-    return done
+    return [(items, ChainLift.of(outcomes, keep_results))]
 
 
 def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings, smoothing_s: float,
-                 workers: int, message_fields_only: bool, progress: bool) -> dict[int, Done]:
+                 workers: int, keep_results: bool, progress: bool) -> list[tuple[list[Item], ChainLift]]:
     """Every chain lifted, in this process (``workers`` 1, or a single chain) or in ``workers``
-    forked processes (one group of chains each, :func:`chain_groups`): ``id(item) -> outcome``."""
+    forked processes (one group of chains each, :func:`chain_groups`): each chain's items with
+    what lifting them gave."""
     from tqdm import tqdm
 
-    done: dict[int, Done] = {}
     bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
     if workers == 1 or len(chains) < 2:
+        parts: list[tuple[list[Item], ChainLift]] = []
         for group in chain_groups(chains, 1):
             # one list of outcomes per chain of the group: the bar advances by that chain's items
-            for outcomes in lift_chains(lifter, [chains[c] for c in group], frame, smoothing_s):
-                for d in outcomes:
-                    done[id(d.item)] = d
+            for c, outcomes in zip(group, lift_chains(lifter, [chains[c] for c in group], frame, smoothing_s),
+                                   strict=True):
+                parts.append((chains[c], ChainLift.of(outcomes, keep_results)))
                 bar.update(len(outcomes))
     else:
-        groups = chain_groups(chains, workers)
-        lift_parallel(ChainWork(lifter, frame, smoothing_s, chains, groups, message_fields_only), workers,
-                      done, bar)
+        work = ChainWork(lifter, frame, smoothing_s, chains, chain_groups(chains, workers), keep_results)
+        parts = list(zip(chains, lift_parallel(work, workers, bar), strict=True))
     bar.close()
-    return done
+    return parts
 
 
 def check_lift_inputs(
@@ -328,19 +338,6 @@ def _as_skeleton2d(msg: Any, msgtype: str, types: Any, track_ids: Any) -> Any:
 
     people, _ = adapters.yolo_detections_to_people(msg, track_ids)
     return adapters.people_to_skeleton2d_array(msg.header, people, types)
-
-
-def _hri_messages(book: hri.BodyBook, stamp: int, header: Any, lifted: list[FrameLift],
-                  sizes: list[tuple[int, tuple[float, float]]]) -> list[tuple[str, bytes, str]]:
-    """The node's REP-155 outputs of one frame as (topic, CDR, type): the new bodies' URDFs, then
-    each body's messages, ``/tf`` and ``tracked`` (the node's order). The header stamp times the
-    bodies (the bag stamp when it is 0, as the node's arrival time); the image size is the last
-    ``camera_info``'s at or before the frame."""
-    stamp_ns = m.stamp_to_ns(header.stamp) or stamp
-    size = next((wh for s, wh in reversed(sizes) if s <= stamp), None)
-    people = [hri.LiftedBody(f.track_id, f.joints_m, f.points_2d, f.confidence) for f in lifted]
-    out = book.frame(stamp_ns, str(header.frame_id), people, size)
-    return out.messages()
 
 
 def lift_bag(
@@ -397,29 +394,24 @@ def lift_bag(
     to_lift = kp_all[::every]
     index_of = {id(msg): i * every for i, (_, msg) in enumerate(to_lift)}
     summary = LiftSummary()
-    outputs: dict[int, tuple[bytes, bytes]] = {}  # index of the keypoint message -> its answers (CDR)
-    marker_book = MarkerBook(_MARKER_NS)
+    answers: dict[int, FrameAnswer] = {}  # index of the keypoint message -> its answer
+    markers = MarkerBook(_MARKER_NS)
     bodies = hri.BodyBook(settings.track_timeout) if settings.hri else None
-    hri_outputs: dict[int, list[tuple[str, bytes, str]]] = {}  # -> (topic, CDR, type) of REP-155
     sizes = [(s, (float(i.width), float(i.height))) for s, i in infos if i.width > 0 and i.height > 0]
 
-    def record(stamp: int, msg: Any, lifted: list[FrameLift], results: list[Any]) -> None:
-        # serialised here, straight from the arrays: the bytes of the node's builders
-        # (messages.result_to_skeleton3d through rosbags, see pose_lifter.messages.cdr; the
-        # node's own MarkerBook for the markers)
-        frame = cdr.SkeletonFrame.from_results([f.track_id for f in lifted], [f.joints_m for f in lifted],
-                                               results, [f.solve_time for f in lifted],
-                                               [f.warm_started for f in lifted])
-        markers = marker_book.update(msg.header, frame.track_ids.tolist(), frame.joints_m,
-                                     settings.marker_lifetime)
-        outputs[index_of[id(msg)]] = (cdr.skeleton3d_array_cdr(msg.header, frame), markers)
-        if bodies is not None:
-            hri_outputs[index_of[id(msg)]] = _hri_messages(bodies, stamp, msg.header, lifted, sizes)
+    def record(stamp: int, msg: Any, lifted: SkeletonFrame) -> None:
+        # the node's answer (messages/answer.py): the REP-155 bodies timed by the header stamp (the
+        # bag stamp when it is 0, as the node's arrival time), with the image size of the last
+        # camera_info at or before the frame
+        size = next((wh for s, wh in reversed(sizes) if s <= stamp), None)
+        answers[index_of[id(msg)]] = frame_answer(
+            msg.header, m.stamp_to_ns(msg.header.stamp) or stamp, lifted, markers=markers,
+            marker_lifetime=settings.marker_lifetime, bodies=bodies, image_size=size)
 
-    frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_frame=record,
-                           summary=summary, workers=workers, message_fields_only=True)
+    frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_answer=record,
+                           summary=summary, workers=workers)
     kept = set(topics) if settings.keep is None else set(settings.keep)
-    _write_lifted(in_path, out_path, topic, kept, last, outputs, hri_outputs, overwrite)
+    _write_lifted(in_path, out_path, topic, kept, last, answers, overwrite)
     return summary, frames
 
 
@@ -448,11 +440,10 @@ def _read_keypoints(in_path: str | Path, topic: str, camera_info_topic: str | No
 
 
 def _write_lifted(in_path: str | Path, out_path: str | Path, topic: str, kept: set[str], last: int | None,
-                  outputs: dict[int, tuple[bytes, bytes]],
-                  hri_outputs: dict[int, list[tuple[str, bytes, str]]], overwrite: bool) -> None:
+                  answers: dict[int, FrameAnswer], overwrite: bool) -> None:
     """The output bag: the ``kept`` input topics copied byte for byte up to the stamp ``last``
-    (None: all), each keypoint message of ``topic`` followed by its answers (``outputs``,
-    ``hri_outputs``: the keypoint message's index in the bag -> its CDR)."""
+    (None: all), each keypoint message of ``topic`` followed by its answer (``answers``: the
+    keypoint message's index in the bag -> its answer)."""
     index = 0
     with BagWriter(out_path, overwrite=overwrite) as w:
         for raw in read_raw(in_path, kept | {topic}):
@@ -461,10 +452,7 @@ def _write_lifted(in_path: str | Path, out_path: str | Path, topic: str, kept: s
             if raw.topic in kept:
                 w.write_raw(raw)
             if raw.topic == topic:
-                if index in outputs:
-                    skels, markers = outputs.pop(index)
-                    w.write_cdr(TOPIC_SKELETONS, raw.stamp_ns, skels, SKELETON3D_ARRAY)
-                    w.write_cdr(TOPIC_MARKERS, raw.stamp_ns, markers, MARKER_ARRAY)
-                    for out_topic, data, msgtype in hri_outputs.pop(index, []):
-                        w.write_cdr(out_topic, raw.stamp_ns, data, msgtype)
+                answer = answers.pop(index, None)
+                for out_topic, data, msgtype in answer.messages() if answer is not None else []:
+                    w.write_cdr(out_topic, raw.stamp_ns, data, msgtype)
                 index += 1

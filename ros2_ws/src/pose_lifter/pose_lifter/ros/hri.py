@@ -10,7 +10,6 @@ graph with it.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Sequence
 from types import SimpleNamespace
 from typing import Any, Final
 
@@ -72,11 +71,9 @@ class HriOutputs:
         self._pubs: dict[str, Any] = dict(self._shared)  # topic -> its publisher
         self._bodies: dict[str, list[str]] = {}  # body id -> its topics
 
-    def publish(self, stamp_ns: int, frame_id: str, lifted: Sequence[hri.LiftedBody],
-                image_size: tuple[float, float] | None) -> None:
-        """Publish the frame (:meth:`hri.BodyFrame.messages`, new bodies' publishers created
-        first); the publishers of bodies that left are destroyed."""
-        out = self.book.frame(stamp_ns, frame_id, lifted, image_size)
+    def publish(self, out: hri.BodyFrame) -> None:
+        """Publish a frame's bodies (built by :attr:`book`: :meth:`hri.BodyFrame.messages`, new
+        bodies' publishers created first); the publishers of bodies that left are destroyed."""
         for bid in out.gone:
             self._drop(bid)
         for bid in out.new:

@@ -15,12 +15,13 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`
    over :class:`~pose_lifter.core.Lifter`): warm-started from the same track's previous solution
    when there is one, cold (multi-start) otherwise, places it in the camera optical frame in
-   metres (:func:`~pose_lifter.core.track.placement.place_in_camera`: depth from the weak-perspective
+   metres (:func:`~pose_lifter.core.track.placement.place_results`: depth from the weak-perspective
    scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
    checks it finite once.
-3. The lifted skeletons become one ``Skeleton3DArray``, written as CDR from their arrays
-   (:func:`~pose_lifter.messages.cdr.skeleton3d_array_cdr`, the offline lift's writer; rclpy
-   reads them as the message built field by field, ``tests/ros/test_rclpy_bytes.py``).
+3. The frame's answer (:func:`~pose_lifter.messages.answer.frame_answer`, what the offline lift
+   writes): one ``Skeleton3DArray``, its markers and its REP-155 bodies, written as CDR from the
+   lifted skeletons' arrays (:class:`~pose_lifter.messages.cdr.SkeletonFrame`; rclpy reads them as
+   the message built field by field, ``tests/ros/test_rclpy_bytes.py``).
 4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
    frame) at once, or with ``output_lag`` N after the next N frames, each skeleton's pose refined
    over them (:class:`~pose_lifter.messages.lagged.LaggedFrames`), then ``skeleton_markers``
@@ -68,14 +69,9 @@ from pose_lifter.core.track.defaults import AHEAD_LAG
 from pose_lifter.core.track.policy import compile_kernels
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
-from pose_lifter.messages.cdr import (
-    DecodedHeader,
-    SkeletonFrame,
-    decode_skeleton2d_array,
-    skeleton3d_array_cdr,
-)
+from pose_lifter.messages.answer import frame_answer
+from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, decode_skeleton2d_array
 from pose_lifter.messages.frame import FramePipeline, LiftedSkeleton, SkipSkeleton
-from pose_lifter.messages.hri import LiftedBody
 from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
@@ -446,18 +442,18 @@ class LifterNode(Node):
                 self._warn_skip(out.kind, f"skeleton skipped: {out}")
             else:
                 lifted.append(out)
-        # the frame's answer in CDR straight from the arrays, by the offline lift's writer
-        # (messages/cdr.py; rclpy message objects cost ~0.5 ms more a skeleton: tools/node_callback.py)
-        frame = SkeletonFrame.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],
-                                           [s.result for s in lifted], [s.solve_time for s in lifted],
-                                           [s.warm_started for s in lifted])
-        self._pub_skeletons.publish(skeleton3d_array_cdr(header, frame))
-        if self._settings.publish_markers:  # serialised by the offline lift's marker book
-            self._pub_markers.publish(self._markers.update(
-                header, frame.track_ids.tolist(), frame.joints_m, self._settings.marker_lifetime))
-        if self._hri is not None:  # REP-155 bodies and /tf
-            bodies = [LiftedBody(s.track_id, s.joints_m, *s.labelled_2d()) for s in lifted]
-            self._hri.publish(stamp_ns, header.frame_id, bodies, self._image_size)
+        # the offline lift's answer (messages/answer.py), CDR straight from the arrays (rclpy
+        # message objects cost ~0.5 ms more a skeleton)
+        answer = frame_answer(header, stamp_ns, SkeletonFrame.of(lifted),
+                              markers=self._markers if self._settings.publish_markers else None,
+                              marker_lifetime=self._settings.marker_lifetime,
+                              bodies=self._hri.book if self._hri is not None else None,
+                              image_size=self._image_size)
+        self._pub_skeletons.publish(answer.skeletons)
+        if answer.markers is not None:
+            self._pub_markers.publish(answer.markers)
+        if self._hri is not None and answer.bodies is not None:  # REP-155 bodies and /tf
+            self._hri.publish(answer.bodies)
         self._counts.frame(lifted, time.perf_counter() - received)
 
     # ------------------------------------------------------------------ diagnostics

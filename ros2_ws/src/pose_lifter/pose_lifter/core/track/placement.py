@@ -2,7 +2,8 @@
 pinhole camera corrected to the weak-perspective image the fit reads (:func:`perspective_corrected`).
 
 A lifted pose is in units of its right lower leg; :func:`place_poses` (the people of a frame or
-the frames of a track at once) and :func:`place_in_camera` (one lift) make it metric with a
+the frames of a track at once; :func:`place_results` of lifts, the node's and the offline lift's
+placement) and :func:`place_in_camera` (one lift) make it metric with a
 leg length and put its centroid at the depth the camera scale gives, or at a default distance
 when no camera intrinsics are known. The node, the offline lift (both through
 :mod:`pose_lifter.messages.frame`) and the CLI use these defaults; the CLI's parser reads them
@@ -15,6 +16,8 @@ import math
 from typing import TYPE_CHECKING, Final
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     import numpy as np
     from numpy.typing import NDArray
 
@@ -22,7 +25,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "CameraIntrinsics",
            "perspective_corrected", "perspective_corrected_rows", "place_in_camera", "place_poses",
-           "ray_rotation", "ray_rotations"]
+           "place_results", "ray_rotation", "ray_rotations"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -96,6 +99,25 @@ def place_in_camera(
                          np.asarray(cam.translation, dtype=np.float64).reshape(1, 2),
                          leg_length_m, focal, principal_point, default_distance_m)
     return np.asarray(placed[0], dtype=np.float64)
+
+
+def place_results(
+    poses: NDArray[np.float64],
+    results: Sequence[LiftResult],
+    leg_length_m: float,
+    intrinsics: CameraIntrinsics | None,
+    default_distance_m: float,
+) -> NDArray[np.float64]:
+    """Metric 3D joints (n, 12, 3) of ``n`` lifts seen by one camera (``intrinsics``; None: at the
+    default distance): :func:`place_poses` of ``poses`` (n, 12, 3; each lift's ``pose_camera``,
+    or a refinement of it) with each lift's camera scale and translation. The one placement of
+    the node, the lagged node and the offline lift."""
+    import numpy as np
+
+    focal, centre = intrinsics if intrinsics is not None else (None, None)
+    return place_poses(poses, np.array([float(r.camera.scale) for r in results], dtype=np.float64),
+                       np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2),
+                       leg_length_m, focal, centre, default_distance_m)
 
 
 def place_poses(
