@@ -6,8 +6,12 @@ from __future__ import annotations
 
 from typing import Any, Final
 
-#: The node's section of the file (as ``ros2 run ... --params-file`` and ``--params-file`` take it).
+#: The node's section of the file (as ``ros2 run ... --params-file`` and ``--params-file`` take it):
+#: parameters the offline lift honours too.
 NON_DEFAULT_PARAMS: Final[dict[str, Any]] = {
-    "warm_start": False, "n_starts": 3, "variant": "L1WANS", "default_distance": 4.25,
-    "lower_leg_length": 0.41, "frame_id": "yaml_frame", "publish_markers": False,
+    "warm_start": False, "outlier_passes": 1, "variant": "L1WANS", "default_distance": 4.25,
+    "lower_leg_length": 0.41, "max_keypoints": 100,
 }
+#: Parameters of the live node only, at non-default values: the node takes them, the offline
+#: lift refuses each by name (it cannot honour it).
+LIVE_ONLY_PARAMS: Final[dict[str, Any]] = {"frame_id": "yaml_frame", "publish_markers": False}

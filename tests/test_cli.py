@@ -146,3 +146,47 @@ def test_demo_plot_writes_png(tmp_path: Path) -> None:
     out = tmp_path / "demo.png"
     plot_frames(picked, out, title="test")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def test_the_node_s_parameters_and_the_lift_s_flags_are_one_table() -> None:
+    """Every parameter the offline lift honours is a ``pose-lifter lift`` flag of the node's name
+    (``--`` + the name with ``_`` -> ``-``), default and range; the live node's own are no flag;
+    ``lift`` and ``demo`` take the same flags."""
+    from pose_lifter.ros.params import OFFLINE_PARAMS, PARAMS
+
+    commands = cli._build_parsers()[1]
+    for command in ("lift", "demo"):
+        actions = {a.dest: a for a in commands[command]._actions}
+        for spec in OFFLINE_PARAMS:
+            action = actions[spec.name]
+            assert spec.flag in action.option_strings, (command, spec.name)
+            assert action.default == spec.default and type(action.default) is type(spec.default), spec.name
+            assert spec.description.replace("%", "%%") in (action.help or ""), spec.name
+            if isinstance(spec.default, bool):
+                assert "--no-" + spec.flag[2:] in action.option_strings, spec.name
+        for spec in PARAMS:
+            if spec.live_only:
+                assert spec.name not in actions and spec.flag not in commands[command]._option_string_actions
+    defaults = vars(cli.build_parser().parse_args(["lift", "in.mcap", "--out", "o.mcap"]))
+    assert {p.name: defaults[p.name] for p in OFFLINE_PARAMS} == {p.name: p.default for p in OFFLINE_PARAMS}
+    # the names the flags had before are gone: the node's names only
+    for old in ("--starts", "--leg-length", "--lag", "--hri", "--bases"):
+        assert old not in commands["lift"]._option_string_actions, old
+    assert defaults["publish_hri"] is True and defaults["marker_lifetime"] == 1.0
+
+
+def test_a_flag_out_of_the_node_s_range_or_of_another_mode_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = Path(__file__).resolve().parents[1] / "bags" / "walk_clean.mcap"
+    out = tmp_path / "o.mcap"
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["lift", str(bag), "--out", str(out), "--max-skeletons", "0"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --max-skeletons: max_skeletons must be an int in [1, 10000], got 0" in err
+    # an option only the paper mode reads, with the hybrid mode: the core's reason, one line, exit 2
+    assert cli.main(["lift", str(bag), "--out", str(out), "--n-starts", "5", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("pose-lifter lift: error: n_starts = 5 is read only in paper mode, not in 'hybrid' mode: "
+                   "leave it at its default (30) or set mode to 'paper'\n")
+    assert not out.exists()

@@ -39,7 +39,8 @@ def test_broken_bag_is_a_data_error(kind: str, tmp_path: Path, capsys: pytest.Ca
 
 
 @pytest.mark.parametrize("option", ["--workers=0", "--workers=-1", "--every=0", "--max-messages=0",
-                                    "--leg-length=-1", "--leg-length=nan", "--starts=0", "--workers=x"])
+                                    "--lower-leg-length=-1", "--lower-leg-length=nan", "--n-starts=0",
+                                    "--max-keypoints=0", "--workers=x"])
 def test_out_of_range_option_is_a_usage_error(option: str, tmp_path: Path,
                                               capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out.mcap"
@@ -60,7 +61,7 @@ def test_out_naming_a_directory_is_refused(tmp_path: Path, capsys: pytest.Captur
 def test_bad_basis_file_is_a_data_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     empty = tmp_path / "empty.npz"
     empty.write_bytes(b"")
-    assert cli.main(["lift", str(BAG), "--out", str(tmp_path / "o.mcap"), "--bases", str(empty)]) == 1
+    assert cli.main(["lift", str(BAG), "--out", str(tmp_path / "o.mcap"), "--bases-file", str(empty)]) == 1
     assert "not an .npz" in capsys.readouterr().err
     assert not (tmp_path / "o.mcap").exists()
 
@@ -79,7 +80,7 @@ def test_workers_are_capped_by_tracks_and_cores(tmp_path: Path, monkeypatch: pyt
     monkeypatch.setattr(futures, "ProcessPoolExecutor", Counting)
     out = tmp_path / "o.mcap"
     assert cli.main(["lift", str(FIVE), "--out", str(out), "--workers", "1000", "--max-messages", "2",
-                     "--starts", "1", "--quiet"]) == 0
+                     "--quiet"]) == 0
     assert sizes == [min(5, os.cpu_count() or 1)] and out.is_file()
 
 

@@ -525,7 +525,10 @@ def main(argv: list[str] | None = None) -> int:
     per_class = trials_by_class(data)
     command = " ".join(["tools/action_recognition_eval.py", *(argv if argv is not None else sys.argv[1:])])
 
-    lifters = {mode: Lifter(options=LifterOptions(mode=mode, n_starts=args.n_starts)) for mode in args.modes}
+    # n_starts is the paper mode's own (refused in another mode)
+    lifters = {mode: Lifter(options=LifterOptions(mode=mode, **({"n_starts": args.n_starts} if mode == "paper"
+                                                                else {})))
+               for mode in args.modes}
     lifter = lifters[args.modes[-1]]
     win = _load_windows(args, data, per_class, prior_trials(list(lifters.values())))
     models = _train_models(args, win, lifter, rng, command)

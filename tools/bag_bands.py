@@ -25,7 +25,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--every", type=int, default=10)
     ap.add_argument("--max-messages", type=int, default=4)
-    ap.add_argument("--starts", type=int, default=3)
+    ap.add_argument("--starts", type=int, default=3, help="n_starts of the paper mode (--mode paper)")
     ap.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid")
     args = ap.parse_args()
     bases = PoseBases.load()
@@ -33,7 +33,9 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for bag in sorted((REPO / "bags").glob("*.mcap")):
-            lifter = Lifter(None, LifterOptions(mode=args.mode, n_starts=args.starts))  # the mode's bases
+            # the mode's bases; n_starts is the paper mode's own (refused in another mode)
+            starts = {"n_starts": args.starts} if args.mode == "paper" else {}
+            lifter = Lifter(None, LifterOptions(mode=args.mode, **starts))
             out = Path(tmp) / bag.name
             settings = LiftSettings(every=args.every, max_messages=args.max_messages, smoothing_s=0.0)
             lift_bag(bag, out, lifter, settings, progress=False)

@@ -151,8 +151,9 @@ def lift_bags(bags: Iterable[Path], mode: str, starts: int | None,
     original = lifter_module.pose_step
     for i, bag in enumerate(bags):
         opts = LifterOptions(mode=mode)
+        # n_starts is the paper mode's own (refused in another mode)
         lifter = Lifter(PoseBases.load(default_bases_path(mode)),
-                        opts if starts is None else opts.replace(n_starts=starts))
+                        opts if starts is None or mode != "paper" else opts.replace(n_starts=starts))
         kps, infos = _keypoints(bag)
         if max_messages is not None:
             kps = kps[:max_messages]
@@ -274,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bags", nargs="*", default=sorted(glob.glob(str(REPO / "bags" / "*.mcap"))))
     ap.add_argument("--max-messages", type=int, default=None, help="lift only the first N messages of a bag")
     ap.add_argument("--starts", type=int, default=None,
-                    help="n_starts of the cold solves (default: the LifterOptions default)")
+                    help="n_starts of the paper mode's cold solves (default: the LifterOptions default)")
     ap.add_argument("--decimals", type=int, default=9, help="round to 10**-decimals before hashing")
     ap.add_argument("--record", type=int, default=6, help="pose_step calls recorded per mode")
     ap.add_argument("--record-every", type=int, default=25, help="record every N-th pose_step call")

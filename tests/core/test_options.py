@@ -13,6 +13,7 @@ import pytest
 from pose_lifter.core.errors import OptionsError
 from pose_lifter.core.options import (
     EXPERIMENT_OPTIONS,
+    MODE_OPTIONS,
     NODE_OPTIONS,
     OPTION_META,
     OPTION_PARTS,
@@ -21,6 +22,7 @@ from pose_lifter.core.options import (
     LifterOptions,
     OptionMeta,
     OutputOptions,
+    PaperOptions,
     PriorOptions,
     TrackOptions,
     UserOptions,
@@ -30,9 +32,15 @@ FIELDS = {f.name: f for f in dataclasses.fields(LifterOptions)}
 NUMBERS = [n for n, f in FIELDS.items() if type(f.default) in (int, float)]
 
 
+def in_its_mode(name: str) -> LifterOptions:
+    """The default options in a mode that reads ``name``."""
+    modes = OPTION_META[name].modes
+    return LifterOptions(mode=modes[0]) if modes else LifterOptions()  # type: ignore[arg-type]
+
+
 def accepted(name: str, value: Any) -> bool:
     try:
-        LifterOptions().replace(**{name: value})
+        in_its_mode(name).replace(**{name: value})
     except OptionsError:
         return False
     return True
@@ -78,7 +86,7 @@ def test_numbers_refuse_just_outside_the_range_and_take_the_closed_bounds(name: 
     else:
         assert not accepted(name, float(meta.low + 1))  # an int field takes no float
     with pytest.raises(OptionsError, match=f"{name} must be an? [a-z]+ in {re.escape(meta.range_text())}"):
-        LifterOptions().replace(**{name: above})
+        in_its_mode(name).replace(**{name: above})
 
 
 def test_the_tolerances_are_open_intervals() -> None:
@@ -142,13 +150,13 @@ def test_replace_keeps_refusing_unknown_names_and_bad_types() -> None:
     with pytest.raises(OptionsError, match="theta must be a number in \\[0, 1e\\+06\\]"):
         LifterOptions().replace(theta=-1.0)
     with pytest.raises(OptionsError, match="n_starts must be an integer in \\[1, 100000\\]"):
-        LifterOptions(n_starts=0)
+        LifterOptions(mode="paper", n_starts=0)
 
 
-def test_the_user_options_are_thirty_at_most_in_four_parts_in_order() -> None:
-    """A user holds the node's solver parameters by part: the fit, the prior, a track, the
-    published pose; the YAML and docs/node.md list them so."""
-    assert list(OPTION_PARTS) == ["fit", "prior", "track", "output"]
+def test_the_user_options_are_thirty_at_most_in_five_parts_in_order() -> None:
+    """A user holds the node's solver parameters by part: the fit, the paper mode's own, the
+    prior, a track, the published pose; the YAML and docs/node.md list them so."""
+    assert list(OPTION_PARTS) == ["fit", "paper", "prior", "track", "output"]
     listed = [name for names in OPTION_PARTS.values() for name in names]
     assert listed == list(NODE_OPTIONS) and len(listed) <= 30
     assert not set(listed) & set(EXPERIMENT_OPTIONS)
@@ -156,6 +164,7 @@ def test_the_user_options_are_thirty_at_most_in_four_parts_in_order() -> None:
 
 @pytest.mark.parametrize(("part", "cls", "bad"), [
     ("fit", FitOptions, {"min_visible_joints": 2}),
+    ("paper", PaperOptions, {"n_starts": 0}),
     ("prior", PriorOptions, {"mode": "guess"}),
     ("track", TrackOptions, {"fill_missing_frames": -1}),
     ("output", OutputOptions, {"correction_smoothing": 1.0}),
@@ -171,7 +180,30 @@ def test_each_part_is_an_options_class_that_validates_itself(part: str, cls: typ
         cls(**bad)
     with pytest.raises(OptionsError, match=name):
         LifterOptions(**bad)
-    changed = LifterOptions(theta=0.2, mode="paper", temporal_weight=0.5, measurement_depth=0.25)
+    changed = LifterOptions(theta=0.2, mode="paper", n_starts=5, outlier_gate=0.5, measurement_depth=0.25)
     got = changed.part(part)
     assert type(got) is cls
     assert all(getattr(got, n) == getattr(changed, n) for n in OPTION_PARTS[part])
+
+
+def test_the_paper_modes_own_options_are_refused_in_another_mode_unless_at_their_default() -> None:
+    """Every option is read in the mode that runs: one only the paper mode reads (n_starts,
+    max_alternations, pose_max_iter; the experiments' n_refine) is grouped as such (its part,
+    its metadata, its doc) and refused with the reason in the hybrid and learned modes."""
+    assert MODE_OPTIONS == {"max_alternations": ("paper",), "pose_max_iter": ("paper",),
+                            "n_starts": ("paper",), "n_refine": ("paper",)}
+    assert set(OPTION_PARTS["paper"]) == set(MODE_OPTIONS) - {"n_refine"}
+    changed = {"n_starts": 5, "max_alternations": 3, "pose_max_iter": 7, "n_refine": 2}
+    for name, value in changed.items():
+        assert OPTION_META[name].doc.startswith("Paper mode only: "), name
+        assert getattr(LifterOptions(mode="paper", **{name: value}), name) == value
+        for mode in ("hybrid", "learned"):
+            with pytest.raises(OptionsError, match=f"{name} = {value} is read only in paper mode, not in "
+                               f"'{mode}' mode: leave it at its default"):
+                LifterOptions(mode=mode, **{name: value})  # type: ignore[arg-type]
+            # at its default it is accepted (the node declares every parameter)
+            assert LifterOptions(mode=mode).replace(**{name: getattr(LifterOptions(), name)})  # type: ignore[arg-type]
+    # a change of mode is refused too while a paper option is set, and a part alone has no mode
+    with pytest.raises(OptionsError, match="n_starts = 5 is read only in paper mode"):
+        LifterOptions(mode="paper", n_starts=5).replace(mode="hybrid")
+    assert PaperOptions(n_starts=5).n_starts == 5

@@ -115,7 +115,7 @@ def node_path(lifter: Lifter, settings: FrameSettings, seq: list[tuple[int, Any]
 
 @pytest.fixture(scope="module")
 def lifter() -> Lifter:
-    return Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=3))  # hybrid
+    return Lifter(PoseBases.load(), LifterOptions())  # hybrid
 
 
 @pytest.mark.parametrize(("warm_start", "workers", "results"),
@@ -123,7 +123,7 @@ def lifter() -> Lifter:
 def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, warm_start: bool,
                                                              workers: int, results: bool) -> None:
     seq, infos = sequence()
-    settings = LiftSettings(warm_start=warm_start, smoothing_s=0.0)
+    settings = LiftSettings(frame=FrameSettings(warm_start=warm_start), smoothing_s=0.0)
     intrinsics = m.intrinsics_from_camera_info(infos[0][1])
     node, seen = node_path(lifter, frame_settings(settings), seq, intrinsics)
     # the scenario exercised what it means to

@@ -131,7 +131,7 @@ def test_a_lag_out_of_range_is_refused(lifter: Lifter, lag: int) -> None:
 
 @pytest.mark.parametrize("lag", [LAG, AHEAD_LAG])
 def test_the_offline_lift_with_a_lag_gives_the_lagged_nodes_answers(lag: int) -> None:
-    """`pose-lifter lift --smoothing 0 --lag N`: what the node publishes with output_lag N, message
+    """`pose-lifter lift --smoothing 0 --output-lag N`: what the node publishes with output_lag N, message
     for message (the same lift, the same refinement, the last frames as the node gives them when
     its input stops)."""
     from pose_lifter.offline.lift import lift_messages
@@ -157,7 +157,7 @@ def test_the_offline_lift_with_a_lag_gives_the_lagged_nodes_answers(lag: int) ->
 def test_a_lag_with_the_offline_smoothing_is_refused() -> None:
     from pose_lifter.offline.settings import LiftSettings
 
-    with pytest.raises(ValueError, match="--lag N --smoothing 0"):
+    with pytest.raises(ValueError, match="--output-lag N --smoothing 0"):
         LiftSettings(output_lag=LAG)
     with pytest.raises(ValueError, match="output_lag must be 0 to"):
         LiftSettings(smoothing_s=0.0, output_lag=MAX_LAG + 1)

@@ -90,8 +90,8 @@ def test_write_read_roundtrip(tmp_path: Path) -> None:
 
 BAGS = REPO / "bags"
 #: Replay settings of the tests (the README's bands are for these; `pose-lifter lift` runs
-#: every frame with 30 starts): frames 0, 10, 20, 30 (1 s), 3 cold starts, warm starts on.
-REPLAY = {"every": 10, "max_messages": 4, "n_starts": 3}
+#: every frame): frames 0, 10, 20, 30 (1 s), warm starts on, the default (hybrid) options.
+REPLAY = {"every": 10, "max_messages": 4}
 #: bag -> (P-MPJPE mm upper band, MPJPE mm upper band): measured with REPLAY, with the stated
 #: margin and below the bag's flat floor (tests/tolerances.py BAG_REPLAY_MM). Three bags keep the
 #: suite short; bags/README.md lists all six.
@@ -108,7 +108,7 @@ def replay(name: str, tmp_path: Path) -> tuple[Any, Any]:
     from pose_lifter.offline.settings import LiftSettings
 
     bases = PoseBases.load()
-    lifter = Lifter(bases, LifterOptions(n_starts=REPLAY["n_starts"]))
+    lifter = Lifter(bases, LifterOptions())
     out = tmp_path / f"{name}.mcap"
     settings = LiftSettings(every=REPLAY["every"], max_messages=REPLAY["max_messages"], smoothing_s=0.0)
     summary, _ = lift_bag(BAGS / f"{name}.mcap", out, lifter, settings, progress=False)

@@ -209,6 +209,6 @@ def test_the_collection_path_loads_neither_dask_nor_the_solver_until_it_lifts() 
     from pose_lifter.offline.settings import LiftSettings
 
     s = LiftSettings()
-    assert s.track_timeout == track_defaults.DEFAULT_TRACK_TIMEOUT_S == FrameSettings().track_timeout
-    assert s.reinit_ratio == track_defaults.DEFAULT_REINIT_RATIO == FrameSettings().reinit_ratio
+    assert s.frame.track_timeout == track_defaults.DEFAULT_TRACK_TIMEOUT_S == FrameSettings().track_timeout
+    assert s.frame.reinit_ratio == track_defaults.DEFAULT_REINIT_RATIO == FrameSettings().reinit_ratio
     assert s.digest() == LiftSettings().digest() != LiftSettings(every=2).digest()

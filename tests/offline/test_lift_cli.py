@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from detector_poses import coco17, model_xy
 from mcap_check import check_mcap
-from params_cases import NON_DEFAULT_PARAMS
+from params_cases import LIVE_ONLY_PARAMS, NON_DEFAULT_PARAMS
 from pose_lifter import cli
 from pose_lifter.messages import typestore
 from pose_lifter.offline import bags
@@ -46,7 +46,8 @@ def test_lift_topic_camera_info_topic_and_keep(tmp_path: Path, capsys: pytest.Ca
                                                 "/camera_info": "/cam/camera_info"})
     out = tmp_path / "out.mcap"
     assert lift(str(bag), "--out", str(out), "--topic", "/detector/pose", "--camera-info-topic",
-                "/cam/camera_info", "--keep", "/cam/camera_info", "--max-messages", "10") == 0
+                "/cam/camera_info", "--keep", "/cam/camera_info", "--max-messages", "10",
+                "--no-publish-hri") == 0
     counts = check_mcap(out)
     assert set(counts) == {"/cam/camera_info", "/skeletons_3d", "/skeleton_markers"}
     assert counts["/skeletons_3d"] == 10
@@ -203,7 +204,8 @@ def test_the_progress_bar_counts_each_skeleton_once(workers: str, monkeypatch: p
 def test_a_typed_flag_wins_over_the_params_file_even_at_its_default(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The file sets 5 starts, paper mode and a 0.40 m leg; flags typed with the parser's defaults
-    (30, hybrid, 0.43) still win; flags not typed leave the file's values."""
+    (30, paper, 0.43) still win; flags not typed leave the file's values; a typed flag that leaves
+    the file's paper option in another mode is refused with the reason."""
     text = PARAMS.read_text()
     for old, new in (("n_starts: 30", "n_starts: 5"), ('mode: "hybrid"', 'mode: "paper"'),
                      ("lower_leg_length: 0.43", "lower_leg_length: 0.40")):
@@ -222,11 +224,13 @@ def test_a_typed_flag_wins_over_the_params_file_even_at_its_default(
     monkeypatch.setattr(flags, "lift_settings", recorded)
     base = [str(WALK), "--params-file", str(tmp_path / "p.yaml"), "--max-messages", "1"]
     assert lift(*base, "--out", str(tmp_path / "a.mcap")) == 0
-    assert lift(*base, "--out", str(tmp_path / "b.mcap"), "--starts", "30", "--mode", "hybrid",
-                "--leg-length", "0.43") == 0
-    assert lift(*base, "--out=" + str(tmp_path / "c.mcap"), "--start=30") == 0  # an abbreviation
-    got = [(s.options.n_starts, s.options.mode, s.lower_leg_length) for s in made]
+    assert lift(*base, "--out", str(tmp_path / "b.mcap"), "--n-starts", "30", "--mode", "hybrid",
+                "--lower-leg-length", "0.43") == 0
+    assert lift(*base, "--out=" + str(tmp_path / "c.mcap"), "--n-start=30") == 0  # an abbreviation
+    got = [(s.options.n_starts, s.options.mode, s.frame.lower_leg_length) for s in made]
     assert got == [(5, "paper", 0.40), (30, "hybrid", 0.43), (30, "paper", 0.40)]
+    assert lift(*base, "--out", str(tmp_path / "d.mcap"), "--mode", "hybrid") == 2
+    assert not (tmp_path / "d.mcap").exists()
 
 
 def test_play_waits_by_default() -> None:
@@ -425,9 +429,10 @@ def test_the_command_line_answers_a_bare_call_a_version_request_and_a_closed_rea
 
 
 def test_lift_hri_writes_the_node_s_rep155_bodies_and_tf(tmp_path: Path) -> None:
-    """``lift --hri``: per keypoint message the node's REP-155 outputs (tracked, each body's
-    joint_states / skeleton2d / roi, /tf), each body's URDF once; the TF joint links land on
-    /skeletons_3d's joints; without --hri none of it."""
+    """``lift`` (``--publish-hri``, on by default as the node's ``publish_hri``): per keypoint
+    message the node's REP-155 outputs (tracked, each body's joint_states / skeleton2d / roi, /tf),
+    each body's URDF once; the TF joint links land on /skeletons_3d's joints; with
+    ``--no-publish-hri`` none of it."""
     from pose_lifter.core.model.skeleton import JOINT_NAMES
     from pose_lifter.messages import body, hri
     from pose_lifter.messages.convert import skeleton3d_to_joints
@@ -435,7 +440,7 @@ def test_lift_hri_writes_the_node_s_rep155_bodies_and_tf(tmp_path: Path) -> None
 
     src = REPO / "bags" / "two_people.mcap"
     out = tmp_path / "hri.mcap"
-    assert lift(str(src), "--out", str(out), "--hri", "--max-messages", "6") == 0
+    assert lift(str(src), "--out", str(out), "--max-messages", "6") == 0
     check_mcap(out)
     msgs = list(bags.read_messages(out))
     skeletons = [x for x in msgs if x.topic == "/skeletons_3d"]
@@ -470,24 +475,23 @@ def test_lift_hri_writes_the_node_s_rep155_bodies_and_tf(tmp_path: Path) -> None
             got = np.array([pose(f"{links[n]}_{bid}")[:3, 3] for n in JOINT_NAMES])
             np.testing.assert_allclose(got, skeleton3d_to_joints(s), atol=1e-9)
     plain = tmp_path / "plain.mcap"
-    assert lift(str(src), "--out", str(plain), "--max-messages", "2") == 0
+    assert lift(str(src), "--out", str(plain), "--max-messages", "2", "--no-publish-hri") == 0
     assert not [t for t in bags.bag_topics(plain) if t.startswith("/humans") or t == "/tf"]
 
 
-def test_a_params_file_of_non_default_values_reaches_the_offline_lift(tmp_path: Path) -> None:
-    """The node's file, read offline: every lifter value it sets is used (the node-only ones,
-    frame_id and publish_markers, are accepted and ignored)."""
+def test_a_params_file_of_non_default_values_reaches_the_offline_lift(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The node's file, read offline: every value it sets is used (the caps too); a parameter of
+    the live node only at another value than its default is an error naming it, and so is an
+    option of the paper mode with the hybrid mode."""
     import yaml
     from pose_lifter.ros.params import SPECS, read_params_file
 
-    for name, value in NON_DEFAULT_PARAMS.items():
+    for name, value in {**NON_DEFAULT_PARAMS, **LIVE_ONLY_PARAMS}.items():
         assert value != SPECS[name].default and type(value) is type(SPECS[name].default), name
     path = tmp_path / "params.yaml"
     path.write_text(yaml.safe_dump({"pose_lifter": {"ros__parameters": NON_DEFAULT_PARAMS}}))
-    read = read_params_file(path)
-    assert (read.options["n_starts"], read.options["variant"]) == (3, "L1WANS")
-    assert (read.warm_start, read.default_distance, read.lower_leg_length) == (False, 4.25, 0.41)
-    assert read.ignored == ()
+    assert read_params_file(path) == NON_DEFAULT_PARAMS
     out = tmp_path / "out.mcap"
     assert lift(str(WALK), "--out", str(out), "--params-file", str(path), "--max-messages", "4") == 0
     skeletons = [s for x in bags.read_messages(out, ["/skeletons_3d"]) for s in x.msg.skeletons]
@@ -496,6 +500,24 @@ def test_a_params_file_of_non_default_values_reaches_the_offline_lift(tmp_path: 
 
     shins = [np.linalg.norm(np.subtract(*skeleton3d_to_joints(s)[[10, 11]])) for s in skeletons]
     np.testing.assert_allclose(shins, 0.41, rtol=0.01)  # the metric scale is the file's
+    # a cap the file sets is the offline lift's (it was dropped before): 17 keypoints > 10
+    capped = tmp_path / "capped.yaml"
+    capped.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"max_keypoints": 10}}}))
+    assert lift(str(WALK), "--out", str(tmp_path / "capped.mcap"), "--params-file", str(capped),
+                "--max-messages", "2") == 0
+    assert "lifted 0 of 2 skeletons" in capsys.readouterr().out
+    for name, value in LIVE_ONLY_PARAMS.items():
+        bad = tmp_path / f"{name}.yaml"
+        bad.write_text(yaml.safe_dump({"/**": {"ros__parameters": {**NON_DEFAULT_PARAMS, name: value}}}))
+        assert lift(str(WALK), "--out", str(tmp_path / "no.mcap"), "--params-file", str(bad)) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("pose-lifter lift: error: params file") and err.count("\n") == 1, err
+        assert f"{name} = {value!r} cannot be honoured offline" in err
+    hybrid = tmp_path / "hybrid.yaml"
+    hybrid.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"n_starts": 3}}}))
+    assert lift(str(WALK), "--out", str(tmp_path / "no.mcap"), "--params-file", str(hybrid)) == 2
+    assert "n_starts = 3 is read only in paper mode, not in 'hybrid' mode" in capsys.readouterr().err
+    assert not (tmp_path / "no.mcap").exists()
 
 
 def test_the_lift_imports_none_of_the_references_scipy() -> None:

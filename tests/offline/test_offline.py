@@ -16,6 +16,7 @@ from pose_lifter.core.lift.batch import LiftCall
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import Camera, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.settings import FrameSettings
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline import lift as offline
@@ -69,8 +70,8 @@ def test_lift_bag_outputs(tmp_path: Path) -> None:
     path, sc = make_input(tmp_path)
     lifter: Any = EchoLifter()
     out = tmp_path / "out.mcap"
-    summary, frames = offline.lift_bag(path, out, lifter, LiftSettings(lower_leg_length=0.5, smoothing_s=0.0),
-                                        progress=False)
+    settings = LiftSettings(frame=FrameSettings(lower_leg_length=0.5), smoothing_s=0.0)
+    summary, frames = offline.lift_bag(path, out, lifter, settings, progress=False)
     assert (summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed) == (6, 12, 11, 1)
     # warm starts: from the second frame of each track on, restarted after the gap of track 5
     assert summary.n_warm == 11 - 3
@@ -147,7 +148,7 @@ def test_workers_lift_tracks_in_parallel_with_identical_results(tmp_path: Path) 
     from pose_lifter.core import Lifter, LifterOptions, PoseBases
 
     bag = Path(__file__).resolve().parents[2] / "bags" / "five_people.mcap"
-    lifter = Lifter(PoseBases.load(), LifterOptions(n_starts=2, max_alternations=2))
+    lifter = Lifter(PoseBases.load(), LifterOptions())
     runs = []
     for workers in (1, 2):
         summary, frames = offline.lift_bag(bag, tmp_path / f"w{workers}.mcap", lifter,

@@ -195,3 +195,31 @@ def test_deactivation_publishes_the_answers_held_for_the_lag(graph: GraphClient,
     assert [stamp_to_ns(a.header.stamp) for a in graph.skeletons] == [
         stamp_to_ns(f.header.stamp) for f in frames]
     assert all(len(a.skeletons) == 1 for a in graph.skeletons)
+
+
+def test_an_option_of_the_paper_mode_is_refused_in_the_hybrid_mode(graph: GraphClient, managed: Any) -> None:
+    """The parameter callback validates through the core's options: an option only the paper
+    mode reads (n_starts) is refused, with the reason, while the node runs the hybrid mode; with
+    the paper mode it is taken, and another mode is then refused while it is set."""
+    proc = managed()
+    lc = Lifecycle(graph)
+    graph.lifter = proc
+    assert lc.transition("configure") and lc.transition("activate")
+    graph.wait_for_lifter(proc)
+    (r,) = graph.set_parameters(n_starts=3)
+    assert not r.successful and "n_starts = 3 is read only in paper mode, not in 'hybrid' mode" in r.reason
+    assert graph.get_parameters("n_starts", "mode") == {"n_starts": 30, "mode": "hybrid"}
+    assert [r.successful for r in graph.set_parameters(mode="paper", n_starts=3)] == [True, True]
+    (r,) = graph.set_parameters(mode="learned")
+    assert not r.successful and "n_starts = 3 is read only in paper mode" in r.reason
+    assert graph.get_parameters("n_starts", "mode") == {"n_starts": 3, "mode": "paper"}
+    assert len(graph.send(good_frame(graph.types, 1)).skeletons.skeletons) == 1  # lifting, in paper mode
+
+
+def test_configure_with_an_option_of_another_mode_fails_with_the_reason(graph: GraphClient, managed: Any
+                                                                        ) -> None:
+    proc = managed("n_starts:=3")  # the hybrid mode (the default) does not read it
+    lc = Lifecycle(graph)
+    assert not lc.transition("configure", failed=lambda: "configure failed:" in proc.log())
+    assert lc.state() == "unconfigured" and proc.alive()
+    assert "n_starts = 3 is read only in paper mode" in proc.log()

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import tolerances as tol
 import yaml
-from params_cases import NON_DEFAULT_PARAMS
+from params_cases import LIVE_ONLY_PARAMS, NON_DEFAULT_PARAMS
 from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
@@ -24,7 +24,9 @@ from .conftest import PARAMS_YAML, REPO, SHUTDOWN_TIMEOUT, GraphClient, all_fini
 pytestmark = pytest.mark.ros
 
 #: Solver settings for tests that check the node's plumbing, not accuracy: cheap solves.
-CHEAP = {"n_starts": 1, "max_alternations": 1}
+#: Start-up parameters of the tests that only need answers: the default hybrid lift (the paper mode's
+#: starts and caps, which made the paper's solves cheap, are refused in it).
+CHEAP: dict[str, Any] = {}
 
 #: A standing person (metres; x to the subject's left, y up, z forward), paper joint order.
 STANDING = np.array([
@@ -83,13 +85,14 @@ def test_a_params_file_of_non_default_values_reaches_the_node(start_lifter: Any,
                                                               tmp_path: Any) -> None:
     from pose_lifter.ros.params import SPECS
 
-    for name, value in NON_DEFAULT_PARAMS.items():  # every value differs from its default
+    values = {**NON_DEFAULT_PARAMS, **LIVE_ONLY_PARAMS}
+    for name, value in values.items():  # every value differs from its default
         assert value != SPECS[name].default and type(value) is type(SPECS[name].default), name
     path = tmp_path / "params.yaml"
-    path.write_text(yaml.safe_dump({"pose_lifter": {"ros__parameters": NON_DEFAULT_PARAMS}}))
+    path.write_text(yaml.safe_dump({"pose_lifter": {"ros__parameters": values}}))
     lifter = start_lifter(params_file=path)
     graph.wait_for_lifter(lifter)
-    assert graph.get_parameters(*NON_DEFAULT_PARAMS) == NON_DEFAULT_PARAMS
+    assert graph.get_parameters(*values) == values
     # and the node runs with them: the empty frame_id becomes the file's, the untracked person
     # stands at the file's distance, cold (no warm starts), no markers
     t = graph.types
@@ -203,10 +206,17 @@ def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: 
     lifter = start_lifter()
     graph.wait_for_lifter(lifter)
 
-    ok = graph.set_parameters(theta=0.2, n_starts=3, warm_start=False)
+    ok = graph.set_parameters(theta=0.2, warm_start=False)
     assert all(r.successful for r in ok), [r.reason for r in ok]
-    assert graph.get_parameters("theta", "n_starts", "warm_start") == {
-        "theta": 0.2, "n_starts": 3, "warm_start": False}
+    assert graph.get_parameters("theta", "warm_start") == {"theta": 0.2, "warm_start": False}
+    # an option only the paper mode reads: refused in the hybrid mode, with the reason; taken
+    # with the paper mode, which cannot then be left while it is set
+    (r,) = graph.set_parameters(n_starts=3)
+    assert not r.successful and "n_starts = 3 is read only in paper mode" in r.reason
+    ok = graph.set_parameters(mode="paper", n_starts=3)
+    assert all(r.successful for r in ok), [r.reason for r in ok]
+    (r,) = graph.set_parameters(mode="hybrid")
+    assert not r.successful and "n_starts = 3 is read only in paper mode" in r.reason
 
     # out of the descriptor's range: refused by rclpy before our callback
     (r,) = graph.set_parameters(confidence_threshold=1.5)
@@ -232,6 +242,7 @@ def test_runtime_parameters_validated_by_core_options(start_lifter: Any, graph: 
 
     defaults = {p.name: p.default for p in PARAMS}
     assert graph.get_parameters(*names) == {**{n: defaults[n] for n in names}, "n_starts": 3}
+    assert graph.get_parameters("mode") == {"mode": "paper"}
     assert lifter.alive()
 
 
@@ -372,8 +383,8 @@ BAG_FRAMES = 8
 #: (tests/tolerances.py NODE_REPLAY_TWO_PEOPLE_MM).
 TWO_PEOPLE_BAND = (tol.measured_bound(tol.NODE_REPLAY_TWO_PEOPLE_MM[0], tol.NODE_REPLAY_TWO_PEOPLE_MM[2]),
                    tol.measured_bound(tol.NODE_REPLAY_TWO_PEOPLE_MM[1]))
-#: Cold starts of the node in this test (and of the offline lift it is compared with): the
-#: band's setting (tests/offline/test_bags.py REPLAY; with n_refine=3 every start is refined).
+#: Cold starts of the node in this test's paper mode (and of the offline lift it is compared with):
+#: the band's setting (tests/offline/test_bags.py REPLAY; with n_refine=3 every start is refined).
 N_STARTS = 3
 
 
@@ -407,7 +418,7 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     def raw(x: Any) -> bytes:  # replay the recorded bytes, as `ros2 bag play` would
         return bytes(store.serialize_cdr(x.msg, x.msgtype))
 
-    lifter = start_lifter(params={"n_starts": N_STARTS})
+    lifter = start_lifter()
     graph.wait_for_lifter(lifter)
     t = graph.types
     # camera_info is best effort: wait until the lifter demonstrably uses it (an untracked probe)
@@ -455,7 +466,7 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     # the node computes what the offline lift computes (same options and bases, same warm starts)
     offline = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],
                             [(x.stamp_ns, x.msg) for x in camera_infos],
-                            Lifter(None, LifterOptions(n_starts=N_STARTS)), LiftSettings(smoothing_s=0.0))
+                            Lifter(None, LifterOptions()), LiftSettings(smoothing_s=0.0))
     node_joints = np.array([m.skeleton3d_to_joints(s) for a in warm for s in a.skeletons.skeletons])
     np.testing.assert_allclose(node_joints, np.array([f.joints_m for f in offline]), atol=1e-6)
     # and publishes the offline lift's markers, message for message (one marker book for both;
@@ -465,7 +476,7 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
     from rclpy.serialization import serialize_message
 
     lifted = tmp_path / "offline.mcap"
-    lift_bag(BAG, lifted, Lifter(None, LifterOptions(n_starts=N_STARTS)),
+    lift_bag(BAG, lifted, Lifter(None, LifterOptions()),
              LiftSettings(smoothing_s=0.0, marker_lifetime=1.0, max_messages=BAG_FRAMES), progress=False)
     offline_markers = [r.data for r in read_raw(lifted, ["/skeleton_markers"])]
     kind = "visualization_msgs/msg/MarkerArray"
@@ -502,7 +513,7 @@ def test_bag_replay_answers_every_frame_like_the_offline_lift(
 
     # switched live to the paper's mode, the node takes the paper's packaged bases (bases_file is
     # empty) and forgets its tracks: it answers as the offline paper-mode lift does
-    assert all(r.successful for r in graph.set_parameters(mode="paper", warm_start=True))
+    assert all(r.successful for r in graph.set_parameters(mode="paper", n_starts=N_STARTS, warm_start=True))
     paper = replay(BAG_FRAMES)
     paper_lifter = Lifter(None, LifterOptions(mode="paper", n_starts=N_STARTS))
     offline_paper = lift_messages([(x.stamp_ns, x.msg) for x in keypoints],

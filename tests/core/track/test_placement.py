@@ -25,13 +25,13 @@ def test_offline_and_cli_use_the_placement_defaults() -> None:
     assert SPECS["lower_leg_length"].default == placement.DEFAULT_LEG_LENGTH_M
     assert SPECS["default_distance"].default == placement.DEFAULT_DISTANCE_M
     args = cli.build_parser().parse_args(["lift", "in.mcap", "--out", "out.mcap"])
-    assert args.leg_length == placement.DEFAULT_LEG_LENGTH_M
+    assert args.lower_leg_length == placement.DEFAULT_LEG_LENGTH_M
 
 
 def test_the_node_params_file_states_the_same_defaults() -> None:
     params = read_params_file(REPO / "ros2_ws" / "src" / "pose_lifter" / "config" / "lifter.yaml")
-    assert params.lower_leg_length == placement.DEFAULT_LEG_LENGTH_M
-    assert params.default_distance == placement.DEFAULT_DISTANCE_M
+    assert params["lower_leg_length"] == placement.DEFAULT_LEG_LENGTH_M
+    assert params["default_distance"] == placement.DEFAULT_DISTANCE_M
 
 
 @pytest.mark.parametrize("module", ["placement", "defaults"])

@@ -118,7 +118,7 @@ def test_one_pass_screens_each_person_as_the_per_person_rule(seed: int) -> None:
     lifter = Lifter(None, LifterOptions())
     tracks, points, vis, stamps = _tracks(rng, 40)
     copies, _, _, _ = _tracks(np.random.default_rng(seed), 40)  # the same tracks, for the reference
-    got = screen_frames([ToScreen(t, True, lifter, False, x, np.where(v, 1.0, 0.0), s)
+    got = screen_frames([ToScreen(t, True, lifter, x, np.where(v, 1.0, 0.0), s)
                          for t, x, v, s in zip(tracks, points, vis, stamps, strict=True)])
     n_gated = n_noise = n_swapped = 0
     for i, (t, x, v, s) in enumerate(zip(copies, points, vis, stamps, strict=True)):
@@ -168,7 +168,7 @@ def test_swapped_labels_are_swapped_back_for_at_most_a_few_frames_in_a_row() -> 
         for k in range(SWAP_MAX_FRAMES + 2):
             stamp = (k + 2) * STEP_NS
             given_conf = conf[OTHER[0].tolist() + list(range(6, 12))]
-            (got,) = screen_frames([ToScreen(track, True, lifter, False, swapped, given_conf, stamp)])
+            (got,) = screen_frames([ToScreen(track, True, lifter, swapped, given_conf, stamp)])
             seen = swapped if got.swapped is None else swap_back(swapped, got.swapped)
             if on and k < SWAP_MAX_FRAMES:
                 assert (seen == base).all() and got.confidence is not None
@@ -184,9 +184,9 @@ def test_a_frame_that_does_not_follow_its_track_is_not_screened() -> None:
     lifter = Lifter(None, LifterOptions())
     tracks, points, _, stamps = _tracks(np.random.default_rng(3), 3)
     before = [len(t.noise) for t in tracks]
-    rows: Sequence[ToScreen] = [ToScreen(tracks[0], False, lifter, False, points[0], None, stamps[0]),
-                                ToScreen(None, False, lifter, False, points[1], None, stamps[1]),
-                                ToScreen(tracks[2], True, Lifter(None, LifterOptions(mode="paper")), False,
+    rows: Sequence[ToScreen] = [ToScreen(tracks[0], False, lifter, points[0], None, stamps[0]),
+                                ToScreen(None, False, lifter, points[1], None, stamps[1]),
+                                ToScreen(tracks[2], True, Lifter(None, LifterOptions(mode="paper")),
                                          points[2], None, stamps[2])]
     got = screen_frames(rows)
     assert [g.predicted is None and not g.gated for g in got] == [True, True, True]

@@ -22,8 +22,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from pose_lifter.core.track.defaults import MAX_LAG
-from pose_lifter.core.track.placement import DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
 
@@ -167,8 +165,8 @@ def _cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def _params(args: argparse.Namespace) -> Any:
-    """The ``--params-file`` read (:class:`pose_lifter.ros.params.OfflineParams`), or None."""
+def _params(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``--params-file`` read (:func:`pose_lifter.ros.params.read_params_file`), or None."""
     from pose_lifter.ros.params import read_params_file
 
     return read_params_file(args.params_file) if args.params_file else None
@@ -213,7 +211,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     s = lift_settings(args, _params(args))
     if camera_info and camera_info not in topics:  # the default topic, absent: as the node without it
         print(f"pose-lifter lift: note: {bag} has no {camera_info}: depth at the default distance, "
-              f"{s.default_distance:g} m (--camera-info-topic names another topic)", file=sys.stderr)
+              f"{s.frame.default_distance:g} m (--camera-info-topic names another topic)", file=sys.stderr)
     lifter = s.build_lifter()
     summary, _ = lift_bag(bag, args.out, lifter, s, progress=not args.quiet, overwrite=args.overwrite,
                           workers=args.workers or _cores())
@@ -278,32 +276,78 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from pose_lifter.offline.demo import run_demo
-    from pose_lifter.offline.flags import flag_options
-    from pose_lifter.offline.settings import LiftSettings
+    from pose_lifter.offline.flags import lift_settings
 
-    # the lift `pose-lifter lift BAG` does by default (every frame, 30 starts, centred smoothing)
-    settings = LiftSettings(options=flag_options(args), bases=args.bases, warm_start=not args.no_warm_start,
-                            lower_leg_length=args.leg_length, every=args.every, smoothing_s=args.smoothing)
+    # the lift `pose-lifter lift BAG` does by default (every frame, the node's settings, centred
+    # smoothing)
+    settings = lift_settings(args)
     return run_demo(settings.build_lifter, settings, args.out, args.bag, workers=_cores())
 
 
 # --------------------------------------------------------------------------- parser
 
 
-def _add_lifter_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bases", default=None, help="basis file (.npz); default: the packaged bases of --mode "
-                   "(paper: subject 01 playground; hybrid: the training split, varied limb proportions)")
-    p.add_argument("--variant", default="full", help="paper variant: full (= L1WAWS) or L1NAWS, L2WANS, ...")
+#: What a flag's help adds to its parameter's description offline.
+_OFFLINE_NOTES: Final[dict[str, str]] = {
+    "output_lag": "offline with --smoothing 0: the node's lagged answers, message for message (one "
+                  "process per bag)",
+    "mode": "--solver cvxpy implies paper",
+}
+
+
+def _parameter_type(spec: Any) -> Any:
+    """An argparse ``type`` of a number parameter: its kind, checked by its table entry (the node's
+    range; :class:`~pose_lifter.core.errors.OptionsError`'s reason as argparse's message)."""
+    from pose_lifter.core.errors import OptionsError
+
+    kind = type(spec.default)
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a{'n integer' if kind is int else ' number'}: {text!r}") \
+                from None
+        try:
+            return spec.checked(value)
+        except OptionsError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    parse.__name__ = kind.__name__  # argparse names the type in its messages
+    return parse
+
+
+def _add_parameter_flags(p: argparse.ArgumentParser) -> None:
+    """The flags of the node's parameters the offline lift honours, from the settings table
+    (:data:`pose_lifter.ros.params.OFFLINE_PARAMS`): ``--`` + the name with ``_`` -> ``-``, the
+    node's default and range (a bool: ``--name`` / ``--no-name``), ``dest`` the name; and
+    ``--solver`` (not a node parameter)."""
+    from pose_lifter.ros.params import OFFLINE_PARAMS
+
+    g = p.add_argument_group("the node's parameters (the same names, defaults and ranges; "
+                             "docs/node.md, config/lifter.yaml)")
+    for spec in OFFLINE_PARAMS:
+        text = " ".join(t for t in (spec.description, spec.range_text(), _OFFLINE_NOTES.get(spec.name, ""))
+                        if t)
+        kind = type(spec.default)
+        if kind is bool:
+            g.add_argument(spec.flag, dest=spec.name, action=argparse.BooleanOptionalAction,
+                           default=spec.default, help=_help(text + " (default: %(default)s)"))
+        elif kind is str:
+            g.add_argument(spec.flag, dest=spec.name, default=spec.default, choices=spec.choices or None,
+                           metavar=(None if spec.choices
+                                    else "PATH" if spec.name.endswith("_file") else "TEXT"),
+                           help=_help(text + (" (default: %(default)r)" if spec.default else "")))
+        else:
+            g.add_argument(spec.flag, dest=spec.name, type=_parameter_type(spec), default=spec.default,
+                           help=_help(text + " (default: %(default)s)"))
     p.add_argument("--solver", choices=("admm", "cvxpy"), default="admm",
-                   help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference")
-    p.add_argument("--starts", type=_number(int, 1, 10_000), default=30,
-                   help="cold-start multi-start count (1 = mean pose)")
-    p.add_argument("--no-warm-start", action="store_true", help="solve every frame cold")
-    p.add_argument("--mode", choices=("hybrid", "paper", "learned"), default="hybrid",
-                   help="hybrid: the learned prior inside the paper's robust fit (default); paper: the "
-                        "paper's method alone (--solver cvxpy implies it); learned: the prior alone")
-    p.add_argument("--leg-length", type=_number(float, *LEG_LENGTH_RANGE_M), default=DEFAULT_LEG_LENGTH_M,
-                   help="right lower leg in metres, to make the lifted pose metric")
+                   help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference "
+                   "(which runs the paper mode)")
+
+
+def _help(text: str) -> str:
+    """``text`` as an argparse help string (its own ``%`` escaped, argparse's kept)."""
+    return text.replace("%", "%%").replace("%%(default)", "%(default)")
 
 
 def _cmd_experiments(args: argparse.Namespace) -> int:
@@ -336,7 +380,7 @@ _NOT_TYPED: Final[object] = object()
 
 def _typed_options(argv: Sequence[str] | None, args: argparse.Namespace) -> frozenset[str]:
     """The options (``dest`` names) typed on the command line of ``args.cmd``, whatever their
-    value: ``--starts 30`` is typed even where 30 is the default (so it wins over a params file).
+    value: ``--n-starts 30`` is typed even where 30 is the default (so it wins over a params file).
 
     The command line is parsed again with every default of the command set to a marker; argparse
     resolves abbreviations and ``--opt=value`` forms as in the first parse."""
@@ -407,7 +451,7 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                    "one rosbag2 directory and --out not a .mcap) a directory: one output per input "
                    "(a rosbag2 directory NAME: NAME.mcap) with the inputs' relative layout, a manifest "
                    "(pose_lifter_manifest.json) that lets a stopped run resume")
-    _add_lifter_options(p)
+    _add_parameter_flags(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
     p.add_argument("--max-messages", type=_POS_INT, default=None, help="stop after N lifted messages")
     p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
@@ -415,13 +459,6 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                    help="each track's poses smoothed by a centred Gaussian window of this standard "
                    "deviation, past and future frames alike (offline only; default "
                    f"{OFFLINE_SMOOTHING_S}); 0: the live node's causal poses, message for message")
-    p.add_argument("--lag", type=_number(int, 0, MAX_LAG), default=0, metavar="FRAMES",
-                   help="with --smoothing 0: the node's answers with output_lag:=FRAMES, each pose "
-                   "refined over the frames after it, message for message (one process per bag)")
-    p.add_argument("--hri", action="store_true",
-                   help="also write the node's REP-155 outputs: /humans/bodies/tracked, per body "
-                   "skeleton2d, roi, joint_states, urdf, and /tf (Foxglove and RViz show the bodies as "
-                   "TF frames)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the output; for a collection: lift again the bags already done")
@@ -441,8 +478,10 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.add_argument("--keep", nargs="+", default=None, metavar="TOPIC",
                    help="input topics copied to the output: 'all' (default), 'none', or topic names")
     p.add_argument("--params-file", default=None,
-                   help="the node's params YAML (config/lifter.yaml): lift with the live node's options; "
-                   "a flag typed on the command line wins over the file")
+                   help="the node's params YAML (config/lifter.yaml): lift with the live node's parameters; "
+                   "a flag typed on the command line wins over the file; a key the offline lift cannot "
+                   "honour (a parameter of the live node only, at another value than its default, or an "
+                   "unknown name) is an error")
     p.set_defaults(func=_cmd_lift)
 
 
@@ -485,7 +524,7 @@ def _demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p = sub.add_parser("demo", help="lift a committed bag, print errors, write out/demo.mcap + out/demo.png")
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
-    _add_lifter_options(p)
+    _add_parameter_flags(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th frame (default 1: all)")
     p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
                    metavar="SECONDS", help=f"as for lift (default {OFFLINE_SMOOTHING_S})")

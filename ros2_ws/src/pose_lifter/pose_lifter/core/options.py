@@ -1,10 +1,11 @@
 """Solver options and the paper's method variants: one table, validated in one place.
 
 The options come in two parts. :class:`UserOptions` is what a user sets: each of its fields is a
-parameter of the ROS node (same name, default and range). It is made of four parts, each a
+parameter of the ROS node (same name, default and range). It is made of five parts, each a
 validated options class with its own doc: :class:`FitOptions` (the paper's method),
-:class:`PriorOptions` (the learned prior), :class:`TrackOptions` (a track) and
-:class:`OutputOptions` (the published pose); :data:`OPTION_PARTS` lists their fields.
+:class:`PaperOptions` (what only the paper mode reads), :class:`PriorOptions` (the learned
+prior), :class:`TrackOptions` (a track) and :class:`OutputOptions` (the published pose);
+:data:`OPTION_PARTS` lists their fields.
 :class:`ExperimentOptions` is what an experiment sets: the solver's internal penalties and
 tolerances and the reference solvers, for experiments, tests and benchmarks, not node
 parameters. :class:`LifterOptions` is both, the one object the solver reads.
@@ -13,7 +14,12 @@ Every field carries its metadata (:class:`OptionMeta`: a one-line doc, its range
 that one table come :meth:`LifterOptions.validate`, the node's parameter descriptors and
 ``config/lifter.yaml`` (:mod:`pose_lifter.ros.params`), so a range cannot differ between the core
 and the node. The node also validates every live parameter change through
-:meth:`LifterOptions.replace`. Why the defaults are what they are: ``docs/tuning.md``.
+:meth:`LifterOptions.replace`.
+
+An option that only some modes read says so in its metadata (:attr:`OptionMeta.modes`,
+:data:`MODE_OPTIONS`); set to anything but its default while another mode runs, it is refused
+(:meth:`LifterOptions.validate`), so every option a user sets is read. Why the defaults are
+what they are: ``docs/tuning.md``.
 """
 
 from __future__ import annotations
@@ -28,7 +34,9 @@ from .errors import OptionsError
 
 __all__ = [
     "EXPERIMENT_OPTIONS",
+    "MODE_OPTIONS",
     "NODE_OPTIONS",
+    "OPTION_DEFAULTS",
     "OPTION_META",
     "OPTION_PARTS",
     "VARIANTS",
@@ -39,11 +47,13 @@ __all__ = [
     "Mode",
     "OptionMeta",
     "OutputOptions",
+    "PaperOptions",
     "PriorOptions",
     "SubproblemSolver",
     "TrackOptions",
     "UserOptions",
     "Variant",
+    "check_option",
     "get_variant",
 ]
 
@@ -119,6 +129,9 @@ class OptionMeta:
     check : callable or None
         Extra check of the value, raising :class:`OptionsError` (``variant``: case-insensitive
         names and ``"full"``).
+    modes : tuple of str
+        The modes that read the option (``()``: every mode). In another mode any value but the
+        default is refused.
     """
 
     doc: str
@@ -129,6 +142,7 @@ class OptionMeta:
     choices: tuple[str, ...] = ()
     max_length: int | None = None
     check: Callable[[Any], object] | None = None
+    modes: tuple[str, ...] = ()
 
     def range_text(self) -> str:
         """``"[0, 1e+06]"``, ``"(0, 1)"``, ... (``""`` without a range)."""
@@ -158,9 +172,14 @@ class OptionMeta:
 
 def _meta(doc: str, low: float | None = None, high: float | None = None, *, open_low: bool = False,
           open_high: bool = False, choices: tuple[str, ...] = (), max_length: int | None = None,
-          check: Callable[[Any], object] | None = None) -> dict[str, OptionMeta]:
+          check: Callable[[Any], object] | None = None, modes: tuple[str, ...] = ()
+          ) -> dict[str, OptionMeta]:
     """The ``metadata`` of an option field (key ``"option"``)."""
-    return {"option": OptionMeta(doc, low, high, open_low, open_high, choices, max_length, check)}
+    return {"option": OptionMeta(doc, low, high, open_low, open_high, choices, max_length, check, modes)}
+
+
+#: The metadata of an option that only the paper mode reads.
+_PAPER: Final[tuple[str, ...]] = ("paper",)
 
 
 _ITER = 100_000  # the cap of every iteration / start count
@@ -174,9 +193,22 @@ class _Validated:
         self.validate()
 
     def validate(self) -> None:
-        """Raise :class:`OptionsError` on any value its field's :class:`OptionMeta` refuses."""
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+        """Raise :class:`OptionsError` on any value its field's :class:`OptionMeta` refuses, and
+        (with a ``mode`` field) on an option that the mode does not read set to anything but its
+        default."""
+        fields = dataclasses.fields(self)  # type: ignore[arg-type]
+        for f in fields:
             _check(f.name, type(f.default), f.metadata["option"], getattr(self, f.name))
+        mode = getattr(self, "mode", None)
+        if mode is None:
+            return
+        for f in fields:
+            modes = f.metadata["option"].modes
+            value = getattr(self, f.name)
+            if modes and mode not in modes and value != f.default:
+                raise OptionsError(
+                    f"{f.name} = {value!r} is read only in {' or '.join(modes)} mode, not in {mode!r} "
+                    f"mode: leave it at its default ({f.default!r}) or set mode to {modes[0]!r}")
 
 
 @dataclass(frozen=True)
@@ -191,17 +223,13 @@ class FitOptions(_Validated):
         choices=("full", *VARIANTS), check=lambda v: get_variant(v)))
     theta: float = field(default=0.1, metadata=_meta(
         "Weight of ||alpha||_1 (sparsity), right-lower-leg units.", 0.0, 1e6))
-    max_alternations: int = field(default=10, metadata=_meta(
-        "Camera/pose alternations per solve (the paper: 20).", 1, _ITER))
     alternation_tol: float = field(default=1e-3, metadata=_meta(
         "Stop alternating below this relative objective decrease.", 0.0, 1.0, open_low=True,
         open_high=True))
-    pose_max_iter: int = field(default=40, metadata=_meta(
-        "Iteration cap of the pose-step ADM.", 1, _ITER))
-    n_starts: int = field(default=30, metadata=_meta(
-        "Starts of a cold (multi-start) solve; 1 = mean pose only (the paper: 30).", 1, _ITER))
     warm_flip: bool = field(default=True, metadata=_meta(
-        "Warm solves also try the depth-mirrored previous pose (weak-perspective ambiguity)."))
+        "Also try the depth-mirrored pose (the weak-perspective ambiguity): paper mode on a warm "
+        "solve (the previous pose mirrored), hybrid mode on a cold frame (the prior's run "
+        "mirrored; a warm frame restarts from the prior)."))
     confidence_threshold: float = field(default=0.1, metadata=_meta(
         "Keypoints with lower confidence are treated as missing.", 0.0, 1.0))
     min_visible_joints: int = field(default=6, metadata=_meta(
@@ -218,6 +246,22 @@ class FitOptions(_Validated):
     def method(self) -> Variant:
         """The :class:`Variant` named by ``variant``."""
         return get_variant(self.variant)
+
+
+@dataclass(frozen=True)
+class PaperOptions(_Validated):
+    """What only the paper mode reads: its cold solve's starts and its runs' caps (the hybrid
+    mode's runs have their own, ``hybrid_alternations`` and ``hybrid_pose_max_iter``, and start
+    from the prior's pose; the learned mode runs none). With another mode, any value but the
+    default is refused (:attr:`OptionMeta.modes`)."""
+
+    max_alternations: int = field(default=10, metadata=_meta(
+        "Paper mode only: camera/pose alternations per solve (the paper: 20).", 1, _ITER, modes=_PAPER))
+    pose_max_iter: int = field(default=40, metadata=_meta(
+        "Paper mode only: iteration cap of the pose-step ADM.", 1, _ITER, modes=_PAPER))
+    n_starts: int = field(default=30, metadata=_meta(
+        "Paper mode only: starts of a cold (multi-start) solve; 1 = mean pose only (the paper: 30).",
+        1, _ITER, modes=_PAPER))
 
 
 @dataclass(frozen=True)
@@ -250,13 +294,10 @@ class PriorOptions(_Validated):
 
 @dataclass(frozen=True)
 class TrackOptions(_Validated):
-    """A track (hybrid mode, tracked people): how much the previous frame's pose holds, the
-    temporal outlier gate, the joints a track fills in, and where its limb proportions come
-    from."""
+    """A track (hybrid mode, tracked people): the temporal outlier gate, how much the previous
+    frame's pose holds a joint the frame lacks, the joints a track fills in, and where its limb
+    proportions come from."""
 
-    temporal_weight: float = field(default=0.3, metadata=_meta(
-        "Hybrid, tracked: weight of the previous frame's pose in the prior target (scaled by the "
-        "track's 2D noise).", 0.0, _WEIGHT))
     outlier_gate: float = field(default=1.0, metadata=_meta(
         "Hybrid, tracked: a joint farther than this (leg lengths) from where the track puts it is "
         "missing for that frame (0 = off).", 0.0, _WEIGHT))
@@ -274,17 +315,13 @@ class TrackOptions(_Validated):
 @dataclass(frozen=True)
 class OutputOptions(_Validated):
     """The published pose (hybrid mode, tracked people): the causal smoothing of the fit's
-    correction and of noisy tracks, and the measurement update that moves its joints toward the
-    observed 2D. Output only: what a track carries into its next frame is the fit's own pose."""
+    correction, and the measurement update that moves its joints toward the observed 2D. Output
+    only: what a track carries into its next frame is the fit's own pose."""
 
     correction_smoothing: float = field(default=0.7, metadata=_meta(
         "Hybrid, tracked: the published pose is the prior's plus the fit's correction of it, "
         "averaged over frames with this factor (causal, exponential; 0 = the fit as it is).",
         0.0, 0.99))
-    noise_smoothing: bool = field(default=False, metadata=_meta(
-        "Hybrid, tracked: a track with noisy 2D weighs its 2D term down and smooths its published "
-        "pose causally by its noise estimate: about half the jitter, 2-4 mm more error on noisy "
-        "2D (docs/accuracy.md). The offline lift's centred smoothing replaces it."))
     measurement_update: bool = field(default=True, metadata=_meta(
         "Hybrid, tracked: the published pose's joints go where the observed 2D puts them (per "
         "joint, weighted by the track's 2D noise; joints the lift did not use or beyond "
@@ -299,19 +336,24 @@ class OutputOptions(_Validated):
         "from the smoothed pose is not moved to its 2D on that frame.", 0.0, _WEIGHT))
 
 
+#: One part of :class:`UserOptions`.
+_Part = FitOptions | PaperOptions | PriorOptions | TrackOptions | OutputOptions
+
+
 @dataclass(frozen=True)
-class UserOptions(OutputOptions, TrackOptions, PriorOptions, FitOptions):
-    """What a user sets: the fields of its four parts (:data:`OPTION_PARTS`), in the order the fit
-    (:class:`FitOptions`), the learned prior (:class:`PriorOptions`), a track
-    (:class:`TrackOptions`) and the published pose (:class:`OutputOptions`). Each part is a
+class UserOptions(OutputOptions, TrackOptions, PriorOptions, PaperOptions, FitOptions):
+    """What a user sets: the fields of its five parts (:data:`OPTION_PARTS`), in the order the fit
+    (:class:`FitOptions`), the paper mode's own (:class:`PaperOptions`), the learned prior
+    (:class:`PriorOptions`), a track (:class:`TrackOptions`) and the published pose
+    (:class:`OutputOptions`). Each part is a
     validated options class of its own; each field is a parameter of the ROS node (same name,
     default and range, :data:`NODE_OPTIONS`). Each field's doc, range or choices are in its
     metadata (:data:`OPTION_META`); why each default is what it is: ``docs/tuning.md``.
     """
 
-    def part(self, name: str) -> FitOptions | PriorOptions | TrackOptions | OutputOptions:
-        """The part ``name`` of :data:`OPTION_PARTS` (``"fit"``, ``"prior"``, ``"track"``,
-        ``"output"``) as its own options object, with this object's values."""
+    def part(self, name: str) -> _Part:
+        """The part ``name`` of :data:`OPTION_PARTS` (``"fit"``, ``"paper"``, ``"prior"``,
+        ``"track"``, ``"output"``) as its own options object, with this object's values."""
         cls = _PART_CLASSES[name]
         return cls(**{f.name: getattr(self, f.name) for f in dataclasses.fields(cls)})
 
@@ -358,7 +400,8 @@ class ExperimentOptions(_Validated):
     camera_tol: float = field(default=1e-4, metadata=_meta(
         "Tolerance of the camera-step ADM.", 0.0, 1.0, open_low=True, open_high=True))
     n_refine: int = field(default=3, metadata=_meta(
-        "Cold starts continued to convergence after one screening alternation each.", 1, _ITER))
+        "Paper mode only: cold starts continued to convergence after one screening alternation "
+        "each.", 1, _ITER, modes=_PAPER))
     screen_pose_max_iter: int = field(default=5, metadata=_meta(
         "Pose-ADM iteration cap of the screening alternation of cold starts.", 1, _ITER))
     warm_flip_screen: bool = field(default=True, metadata=_meta(
@@ -374,7 +417,7 @@ class ExperimentOptions(_Validated):
         "SWAP_RATIO)."))
     disturbed_smoothing_gain: float = field(default=0.55, metadata=_meta(
         "Hybrid, tracked: gain of the alpha-beta filter on the prior's part of the published "
-        "pose when a track is disturbed (unused joints, 2D noise); 1 = no filter.", 0.05, 1.0))
+        "pose when a track is disturbed (joints the lift did not use); 1 = no filter.", 0.05, 1.0))
     hybrid_alternations: int = field(default=2, metadata=_meta(
         "Hybrid: alternations of each run at most.", 1, _ITER))
     hybrid_pose_max_iter: int = field(default=10, metadata=_meta(
@@ -421,20 +464,35 @@ def _check(name: str, kind: type, meta: OptionMeta, v: Any) -> None:
         meta.check(v)
 
 
+def check_option(name: str, value: Any) -> None:
+    """Raise :class:`OptionsError` unless ``value`` is a valid value of the option ``name`` by
+    itself (its kind and range; whether the mode reads it is :meth:`LifterOptions.validate`'s)."""
+    if name not in OPTION_META:
+        raise OptionsError(f"unknown option: {name!r}")
+    _check(name, type(OPTION_DEFAULTS[name]), OPTION_META[name], value)
+
+
 #: Each :class:`LifterOptions` field's metadata, in declaration order (the user options first).
 OPTION_META: Final[Mapping[str, OptionMeta]] = MappingProxyType(
     {f.name: f.metadata["option"] for f in dataclasses.fields(LifterOptions)})
+#: Each :class:`LifterOptions` field's default.
+OPTION_DEFAULTS: Final[Mapping[str, Any]] = MappingProxyType(
+    {f.name: f.default for f in dataclasses.fields(LifterOptions)})
 #: The :class:`UserOptions` fields: the ROS node declares them as parameters (same names, defaults
 #: and ranges), in order.
 NODE_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(UserOptions))
 #: The options class of each part of :class:`UserOptions`, in order.
-_PART_CLASSES: Final[Mapping[str, type[FitOptions | PriorOptions | TrackOptions | OutputOptions]]] = (
-    MappingProxyType({"fit": FitOptions, "prior": PriorOptions, "track": TrackOptions,
-                      "output": OutputOptions}))
-#: The :class:`UserOptions` fields by part, in order: the fit, the learned prior, a track, the
-#: published pose (the node's parameter file and docs/node.md list them so).
+_PART_CLASSES: Final[Mapping[str, type[_Part]]] = MappingProxyType({
+    "fit": FitOptions, "paper": PaperOptions, "prior": PriorOptions, "track": TrackOptions,
+    "output": OutputOptions})
+#: The :class:`UserOptions` fields by part, in order: the fit, the paper mode's own, the learned
+#: prior, a track, the published pose (the node's parameter file and docs/node.md list them so).
 OPTION_PARTS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType({
     part: tuple(f.name for f in dataclasses.fields(cls)) for part, cls in _PART_CLASSES.items()})
+
+#: The options that only some modes read (:attr:`OptionMeta.modes`): name -> those modes.
+MODE_OPTIONS: Final[Mapping[str, tuple[str, ...]]] = MappingProxyType(
+    {name: meta.modes for name, meta in OPTION_META.items() if meta.modes})
 
 #: The :class:`ExperimentOptions` fields, in order.
 EXPERIMENT_OPTIONS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(ExperimentOptions))

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Final
 
 import numpy as np
@@ -41,8 +41,7 @@ from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.model.layouts import Layout, get_layout
 from pose_lifter.core.results import LiftResult, with_camera_poses
-from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_results
+from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.policy import (
     FramesAhead,
     OutOfOrderFrameError,
@@ -53,6 +52,7 @@ from pose_lifter.core.track.policy import (
 )
 from pose_lifter.core.track.state import swap_back
 from pose_lifter.messages.convert import skeleton2d_to_arrays
+from pose_lifter.messages.settings import FrameSettings
 
 __all__ = [
     "CheckedFrame",
@@ -76,38 +76,7 @@ __all__ = [
 Intrinsics = tuple[tuple[float, float], tuple[float, float]] | None
 
 _NO_CLIP: Final[Callable[[str], Any]] = lambda text: None  # noqa: E731
-
-
-@dataclass(frozen=True)
-class FrameSettings:
-    """The pipeline's settings: node parameters of the same names (their defaults are these).
-
-    Attributes
-    ----------
-    warm_start, track_timeout, reinit_ratio
-        The per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`).
-    lower_leg_length, default_distance : float
-        Metres, the placement (:func:`~pose_lifter.core.track.placement.place_results`).
-    max_skeletons, max_coordinate, max_frame_id_length, max_layout_length, max_keypoints
-        Caps on the input (see the module doc).
-    """
-
-    warm_start: bool = True
-    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S
-    reinit_ratio: float = DEFAULT_REINIT_RATIO
-    lower_leg_length: float = DEFAULT_LEG_LENGTH_M
-    default_distance: float = DEFAULT_DISTANCE_M
-    max_skeletons: int = 64
-    max_coordinate: float = 1.0e5
-    max_frame_id_length: int = 256
-    max_layout_length: int = 64
-    max_keypoints: int = 512
-
-    @classmethod
-    def read(cls, get: Callable[[str], Any]) -> FrameSettings:
-        """From parameter values (``get(name)``), converted to each field's type."""
-        kinds = {"bool": bool, "int": int, "float": float, "str": str}
-        return cls(**{f.name: kinds[str(f.type)](get(f.name)) for f in fields(cls)})
+_DEFAULTS: Final[FrameSettings] = FrameSettings()
 
 
 class SkipSkeleton(Exception):
@@ -469,7 +438,7 @@ class FramePipeline:
     settings : FrameSettings
     """
 
-    def __init__(self, lifter: Lifter, settings: FrameSettings = FrameSettings()) -> None:
+    def __init__(self, lifter: Lifter, settings: FrameSettings = _DEFAULTS) -> None:
         self.settings = settings
         self.policy = TrackPolicy(lifter, settings.track_timeout, settings.warm_start, settings.reinit_ratio)
 

@@ -10,8 +10,8 @@ written next to the input topics. Where it differs, on purpose:
 * the stamp of a message is its bag time (when it was recorded), not its header's;
 * the camera intrinsics are those of the latest ``/camera_info`` at or before the message
   (before the first one: the first one), not of the latest received;
-* the input header is copied unchanged (the node's ``frame_id`` parameter fills an empty one);
-* the caps are the node's defaults (a params file's caps are node parameters, not read);
+* the node's ``publish_markers`` and ``frame_id`` are not offline settings (markers are always
+  written; the headers are copied unchanged);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
@@ -93,10 +93,8 @@ LIFTABLE_TYPES: Final[tuple[str, ...]] = (SKELETON2D_ARRAY, YOLO_DETECTION_ARRAY
 
 
 def frame_settings(settings: LiftSettings) -> FrameSettings:
-    """The frame pipeline's settings of an offline lift (the caps: the node's defaults)."""
-    return FrameSettings(warm_start=settings.warm_start, track_timeout=settings.track_timeout,
-                         reinit_ratio=settings.reinit_ratio, lower_leg_length=settings.lower_leg_length,
-                         default_distance=settings.default_distance)
+    """The frame pipeline's settings of an offline lift."""
+    return settings.frame
 
 
 @dataclass
@@ -163,11 +161,11 @@ def lift_messages(
     camera_infos : list of (stamp_ns, CameraInfo), time-ordered
     lifter : Lifter
     settings : LiftSettings
-        Read here: ``warm_start``, ``track_timeout``, ``reinit_ratio``, ``lower_leg_length``,
-        ``default_distance`` (:func:`frame_settings`) and ``smoothing_s``: 0 gives the node's
-        causal poses; ``> 0`` refines each track's poses over its whole recording (the offline
-        measurement update, then a centred Gaussian window of this standard deviation in
-        seconds, :func:`pose_lifter.offline.chains.lift_chains`);
+        Read here: ``frame`` (the per-track policy, the placement and the caps,
+        :func:`frame_settings`) and ``smoothing_s``: 0 gives the node's causal poses; ``> 0``
+        refines each track's poses over its whole recording (the offline measurement update, then
+        a centred Gaussian window of this standard deviation in seconds,
+        :func:`pose_lifter.offline.chains.lift_chains`);
         ``output_lag`` (with ``smoothing_s`` 0): the node's lagged answers (``workers`` unused).
         Its ``options`` and ``bases`` are not read (``lifter`` is the solver).
     progress : bool
@@ -396,7 +394,7 @@ def lift_bag(
     summary = LiftSummary()
     answers: dict[int, FrameAnswer] = {}  # index of the keypoint message -> its answer
     markers = MarkerBook(_MARKER_NS)
-    bodies = hri.BodyBook(settings.track_timeout) if settings.hri else None
+    bodies = hri.BodyBook(settings.frame.track_timeout) if settings.publish_hri else None
     sizes = [(s, (float(i.width), float(i.height))) for s, i in infos if i.width > 0 and i.height > 0]
 
     def record(stamp: int, msg: Any, lifted: SkeletonFrame) -> None:

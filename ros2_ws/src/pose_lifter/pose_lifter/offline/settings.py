@@ -2,8 +2,10 @@
 
 :class:`LiftSettings` is what :func:`pose_lifter.offline.lift.lift_bag` and
 :func:`~pose_lifter.offline.lift.lift_messages` take, and what a collection's manifest keys its
-outputs by (:mod:`pose_lifter.offline.collection`). Its defaults are the node's (the per-track
-policy's, the placement's, the topics'). This module imports neither numpy nor the solver.
+outputs by (:mod:`pose_lifter.offline.collection`). Its defaults are the node's: the parameters
+the offline lift honours (:data:`pose_lifter.ros.params.OFFLINE_PARAMS`, the one settings table
+of the node and of ``pose-lifter lift``'s flags; :meth:`LiftSettings.from_parameters` builds the
+settings of their values). This module imports neither the solver nor ROS.
 """
 
 from __future__ import annotations
@@ -11,14 +13,16 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
-from pose_lifter.core.track.defaults import AHEAD_LAG, DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S, MAX_LAG
-from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M
+from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+from pose_lifter.messages.settings import FrameSettings
+from pose_lifter.ros.params import OFFLINE_PARAMS, SPECS
 
 if TYPE_CHECKING:
     from pose_lifter.core.lift.lifter import Lifter
@@ -62,30 +66,51 @@ class LiftSettings:
     JSON-able (its digest keys the manifest)."""
 
     options: LifterOptions = field(default_factory=_default_options)
-    bases: str | None = None
-    warm_start: bool = True
-    lower_leg_length: float = DEFAULT_LEG_LENGTH_M  #: metres (the node's ``lower_leg_length``)
-    default_distance: float = DEFAULT_DISTANCE_M  #: metres (the node's ``default_distance``)
+    bases: str | None = None  #: the node's ``bases_file`` (None: the packaged bases of the mode)
+    #: the frame pipeline's: the per-track policy, the placement, the input caps (node parameters)
+    frame: FrameSettings = field(default_factory=FrameSettings)
     every: int = 1
     max_messages: int | None = None
     topic: str = TOPIC_KEYPOINTS
     camera_info_topic: str | None = TOPIC_CAMERA_INFO
     keep: list[str] | None = None
-    track_timeout: float = DEFAULT_TRACK_TIMEOUT_S
-    reinit_ratio: float = DEFAULT_REINIT_RATIO
     # centred, offline only, with the offline prior (0: the node's causal priors and poses)
     smoothing_s: float = OFFLINE_SMOOTHING_S
     # with smoothing_s 0: the node's answers with output_lag (frames), each refined over the next
-    output_lag: int = 0
-    marker_lifetime: float = 0.0
-    hri: bool = False  # the node's REP-155 outputs (/humans/bodies/..., /tf) into the output bag
+    output_lag: int = SPECS["output_lag"].default
+    marker_lifetime: float = SPECS["marker_lifetime"].default
+    #: the node's REP-155 outputs (/humans/bodies/..., /tf) into the output bag
+    publish_hri: bool = SPECS["publish_hri"].default
 
     def __post_init__(self) -> None:
         if not 0 <= self.output_lag <= MAX_LAG:
             raise ValueError(f"output_lag must be 0 to {MAX_LAG} frames, got {self.output_lag}")
         if self.output_lag and self.smoothing_s > 0:
             raise ValueError("a lag gives the live node's lagged answers, whose lift is causal: use it "
-                             "without the offline smoothing (--lag N --smoothing 0)")
+                             "without the offline smoothing (--output-lag N --smoothing 0)")
+
+    @classmethod
+    def from_parameters(cls, values: Mapping[str, Any], solver: str = "admm", **rest: Any) -> LiftSettings:
+        """The settings of the node parameters ``values`` (names of
+        :data:`~pose_lifter.ros.params.OFFLINE_PARAMS`; the others take their defaults), with
+        ``solver`` the camera and pose steps' (``"cvxpy"``: the references, in the paper mode)
+        and ``rest`` the other fields (``every``, ``topic``, ``smoothing_s``, ...).
+
+        Raises
+        ------
+        OptionsError
+            The options refuse a value, or a value of a mode's own option with another mode.
+        """
+        from pose_lifter.core.options import NODE_OPTIONS, LifterOptions
+
+        given = {p.name: values[p.name] for p in OFFLINE_PARAMS if p.name in values}
+        options = {name: given[name] for name in NODE_OPTIONS if name in given}
+        if solver == "cvxpy":  # the cvxpy references run the paper's mode
+            options["mode"] = "paper"
+        frame = {name: given[name] for name in _FRAME_FIELDS if name in given}
+        own = {name: given[name] for name in _OWN if name in given}
+        return cls(options=LifterOptions().replace(camera_solver=solver, pose_solver=solver, **options),
+                   bases=given.get("bases_file") or None, frame=FrameSettings(**frame), **own, **rest)
 
     def to_json(self) -> dict[str, Any]:
         """The settings as JSON-ready values (options sorted by name)."""
@@ -116,6 +141,12 @@ class LiftSettings:
             lifter.warm_up()
         return lifter
 
+
+
+#: The node parameters that are fields of :class:`LiftSettings` itself.
+_OWN: Final[tuple[str, ...]] = ("output_lag", "marker_lifetime", "publish_hri")
+#: The fields of :class:`FrameSettings` (each a node parameter of that name).
+_FRAME_FIELDS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(FrameSettings))
 
 
 def _jsonable(v: Any) -> Any:

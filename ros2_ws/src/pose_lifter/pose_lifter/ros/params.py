@@ -1,21 +1,31 @@
-"""The node's parameters in one table: their declarations, ``config/lifter.yaml``, and reading
-that file offline.
+"""The settings table: the node's parameters and ``pose-lifter lift``'s flags, in one table.
 
 :data:`PARAMS` is every parameter of the lifter node. The solver options among them are
 :class:`~pose_lifter.core.options.LifterOptions` fields and take their default, description and
 range from the field's metadata (:data:`~pose_lifter.core.options.OPTION_META`), so the node
-and the core accept the same values; the node's own settings (:class:`NodeSettings`) are
-declared here. :func:`params_yaml` writes ``config/lifter.yaml`` from the table
-(``python -m pose_lifter.ros.node --params-yaml``).
+and the core accept the same values; the node's own settings (the frame pipeline's,
+:class:`~pose_lifter.messages.settings.FrameSettings`, and :class:`NodeSettings`) are declared
+here. From this one table come:
 
-``pose-lifter lift BAG --out OUT --params-file config/lifter.yaml`` reads the same file as
-``ros2 run pose_lifter lifter --ros-args --params-file config/lifter.yaml``
-(:func:`read_params_file`): the section of the node (``/**``, ``pose_lifter`` or
-``/pose_lifter``, each with ``ros__parameters``) is merged in that order, like rcl does for a
-node named ``pose_lifter``.
+* the node's parameter declarations (:meth:`ParamSpec.descriptor`) and ``config/lifter.yaml``
+  (:func:`params_yaml`, ``python -m pose_lifter.ros.node --params-yaml``);
+* ``pose-lifter lift``'s flags (:mod:`pose_lifter.cli`): each parameter the offline lift honours
+  (:data:`OFFLINE_PARAMS`) is the flag ``--`` + its name with ``_`` -> ``-`` (a bool also has its
+  ``--no-`` form), with the node's default and range;
+* the offline read of a node params file (:func:`read_params_file`): ``pose-lifter lift BAG
+  --out OUT --params-file config/lifter.yaml`` reads the same file as ``ros2 run pose_lifter
+  lifter --ros-args --params-file config/lifter.yaml``; the section of the node (``/**``,
+  ``pose_lifter`` or ``/pose_lifter``, each with ``ros__parameters``) is merged in that order,
+  like rcl does for a node named ``pose_lifter``. A key the offline lift cannot honour (a
+  parameter of the live node only, :attr:`ParamSpec.live_only`, set to another value than its
+  default; an unknown name) is an error naming it.
 
-Nothing here imports ROS (the descriptors' message classes are imported when one is built), so
-the offline CLI reads parameter files without a ROS install.
+An option that only the paper mode reads (:data:`~pose_lifter.core.options.MODE_OPTIONS`) says
+so in its description, and the core refuses it in another mode (the node's parameter callback
+and the CLI alike).
+
+Nothing here imports ROS (the descriptors' message classes are imported when one is built) or
+the solver, so the offline CLI builds its flags and reads parameter files without either.
 """
 
 from __future__ import annotations
@@ -27,17 +37,22 @@ from pathlib import Path
 from typing import Any, Final
 
 from pose_lifter.core.errors import OptionsError
-from pose_lifter.core.options import NODE_OPTIONS, OPTION_META, OPTION_PARTS, LifterOptions
+from pose_lifter.core.options import (
+    NODE_OPTIONS,
+    OPTION_DEFAULTS,
+    OPTION_META,
+    OPTION_PARTS,
+    check_option,
+)
 from pose_lifter.core.track.defaults import MAX_LAG
 from pose_lifter.core.track.placement import LEG_LENGTH_RANGE_M
-from pose_lifter.messages.frame import FrameSettings
+from pose_lifter.messages.settings import FrameSettings
 
 __all__ = [
-    "NODE_ONLY",
+    "OFFLINE_PARAMS",
     "PARAMS",
     "SPECS",
     "NodeSettings",
-    "OfflineParams",
     "ParamSpec",
     "params_yaml",
     "read_params_file",
@@ -47,7 +62,8 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class ParamSpec:
-    """A node parameter: default, description and range.
+    """A node parameter: default, description and range; a ``pose-lifter lift`` flag unless
+    ``live_only``.
 
     Attributes
     ----------
@@ -64,8 +80,9 @@ class ParamSpec:
         A :class:`LifterOptions` field: live changes are validated by ``LifterOptions.replace``.
     read_only : bool
         Set at start-up only.
-    offline : bool
-        A node setting an offline lift reads from a params file too (:func:`read_params_file`).
+    live_only : str
+        Why the offline lift has no such setting (``""``: it honours the parameter, a flag of
+        ``pose-lifter lift`` and a key of its params file).
     """
 
     name: str
@@ -76,20 +93,51 @@ class ParamSpec:
     constraints: str = ""
     option: bool = False
     read_only: bool = False
-    offline: bool = False
+    live_only: str = ""
 
     @classmethod
     def from_option(cls, name: str) -> ParamSpec:
         """The parameter of the :class:`LifterOptions` field ``name``, from its metadata."""
         meta = OPTION_META[name]
-        default = next(f.default for f in dataclasses.fields(LifterOptions) if f.name == name)
-        return cls(name, default, meta.doc, meta.low, meta.high, meta.constraint_text(), option=True)
+        return cls(name, OPTION_DEFAULTS[name], meta.doc, meta.low, meta.high, meta.constraint_text(),
+                   option=True)
+
+    @property
+    def flag(self) -> str:
+        """Its ``pose-lifter lift`` flag: ``--`` + the name with ``_`` -> ``-``."""
+        return "--" + self.name.replace("_", "-")
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        """The values a choice option takes, exactly as written (``()``: not a choice, or one
+        checked otherwise, as ``variant``'s case-insensitive names)."""
+        meta = OPTION_META[self.name] if self.option else None
+        return meta.choices if meta is not None and meta.check is None else ()
 
     def range_text(self) -> str:
         """``"[0, 1]"``, ``"(0, 1)"``, ... (``""`` without a range)."""
         if self.option:
             return OPTION_META[self.name].range_text()
         return "" if self.low is None or self.high is None else f"[{self.low:g}, {self.high:g}]"
+
+    def checked(self, value: Any) -> Any:
+        """``value`` as the parameter's type (an int where a float is due becomes one), or
+        :class:`OptionsError` naming the parameter when its type or range refuses it."""
+        kind = type(self.default)
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if self.option:
+            check_option(self.name, value)
+            return value
+        ok = isinstance(value, kind) and not (kind is not bool and isinstance(value, bool))
+        if ok and kind in (int, float):
+            ok = (value == value and (self.low is None or value >= self.low)
+                  and (self.high is None or value <= self.high))
+        if not ok:
+            what = f"a{'n' if kind is int else ''} {kind.__name__}"
+            raise OptionsError(f"{self.name} must be {what}"
+                               f"{' in ' + self.range_text() if self.range_text() else ''}, got {value!r}")
+        return value
 
     def descriptor(self) -> Any:
         """The ``rcl_interfaces/ParameterDescriptor`` the node declares it with."""
@@ -110,23 +158,21 @@ class ParamSpec:
 _FRAME: Final[FrameSettings] = FrameSettings()
 
 #: Every parameter of the node, in the order of ``config/lifter.yaml``: the bases, the solver
-#: options (:data:`~pose_lifter.core.options.NODE_OPTIONS`), then the node's own settings (the
-#: frame pipeline's, :class:`~pose_lifter.messages.frame.FrameSettings`, take their defaults from it).
+#: options (:data:`~pose_lifter.core.options.NODE_OPTIONS`), then the node's own settings (the frame
+#: pipeline's, :class:`~pose_lifter.messages.settings.FrameSettings`, take their defaults from it).
 PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("bases_file", "", "Pose basis file (.npz, PoseBases.save); empty = the packaged bases of "
-              "the mode (paper: subject 01 playground; hybrid: training split, varied proportions).",
-              offline=True),
+              "the mode (paper: subject 01 playground; hybrid: training split, varied proportions)."),
     *(ParamSpec.from_option(name) for name in NODE_OPTIONS),
-    ParamSpec("warm_start", _FRAME.warm_start, "Start each tracked person's solve from its previous frame.",
-              offline=True),
+    ParamSpec("warm_start", _FRAME.warm_start, "Start each tracked person's solve from its previous frame."),
     ParamSpec("track_timeout", _FRAME.track_timeout, "Seconds (input stamps) after which an unseen track is "
-              "forgotten.", 0.0, 3600.0, offline=True),
+              "forgotten.", 0.0, 3600.0),
     ParamSpec("reinit_ratio", _FRAME.reinit_ratio, "A warm solve whose objective exceeds this times the "
-              "track's recent median is redone cold (0 = never).", 0.0, 1000.0, offline=True),
+              "track's recent median is redone cold (0 = never).", 0.0, 1000.0),
     ParamSpec("lower_leg_length", _FRAME.lower_leg_length, "Right lower-leg (knee-ankle) length in metres: "
-              "the metric scale.", *LEG_LENGTH_RANGE_M, offline=True),
+              "the metric scale.", *LEG_LENGTH_RANGE_M),
     ParamSpec("default_distance", _FRAME.default_distance, "Depth of the skeleton centroid in metres "
-              "when no camera_info has been received.", 0.01, 1000.0, offline=True),
+              "when no camera_info has been received.", 0.01, 1000.0),
     ParamSpec("output_lag", 0, "Frames each answer waits before it is published (0 = none, at once). "
               "Waiting, each skeleton's pose is refined over the frames that came after it, as "
               "pose-lifter lift refines a recording (the measurement update of the smoothed 2D, a "
@@ -134,7 +180,8 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "prior). 3 frames (0.1 s at 30 Hz) take most of the offline accuracy, 6 all of it "
               "(docs/node.md). Held answers are published when the input stops.", 0, MAX_LAG,
               read_only=True),
-    ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
+    ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray).",
+              live_only="the offline lift always writes /skeleton_markers"),
     ParamSpec("publish_hri", True, "Publish the tracked people as REP-155 bodies (/humans/bodies/...) and "
               "their frames on /tf.", read_only=True),
     ParamSpec("max_skeletons", _FRAME.max_skeletons, "People lifted per frame at most: of a larger crowd "
@@ -146,18 +193,21 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "the prior's rows are split (the compiled kernels release the GIL; results do not depend on "
               "it); 0 = one per CPU core the node may use. More pay only with cores to spare beside the "
               "detector.",
-              0, 256, read_only=True),
+              0, 256, read_only=True,
+              live_only="the offline lift splits its work over processes (pose-lifter lift --workers)"),
     ParamSpec("max_waiting_frames", 1, "Frames that may wait to be lifted; a newer frame drops the oldest "
               "waiting one whole (counted in /diagnostics), so an answer is never more than this many "
-              "lifts behind its frame.", 1, 1000, read_only=True),
+              "lifts behind its frame.", 1, 1000, read_only=True,
+              live_only="the offline lift answers every frame: none waits"),
     ParamSpec("stats_period", 10.0, "Seconds between statistics log lines (0 = never).", 0.0, 3600.0,
-              read_only=True),
+              read_only=True, live_only="the live node's log; the offline lift prints a summary"),
     ParamSpec("frame_id", "camera_optical_frame", "frame_id of the outputs of an input whose header has an "
-              "empty one (RViz cannot show an empty frame)."),
+              "empty one (RViz cannot show an empty frame).",
+              live_only="the offline lift copies each input header as it is"),
     ParamSpec("marker_lifetime", 1.0, "Seconds a skeleton marker stays on screen without an update "
               "(0 = until deleted: markers outlive the node).", 0.0, 3600.0),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics updates (0 = none).", 0.0, 3600.0,
-              read_only=True),
+              read_only=True, live_only="the live node's /diagnostics"),
     # caps on what reaches an output or a log: over-cap input is skipped with a warning
     ParamSpec("max_frame_id_length", _FRAME.max_frame_id_length, "Input header.frame_id longer than this "
               "(characters): the frame is skipped, unanswered (it would be copied into every output "
@@ -167,13 +217,16 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("max_keypoints", _FRAME.max_keypoints, "Skeletons with more keypoints than this are skipped.",
               1, 100000),
     ParamSpec("strict_parameters", False, "Refuse to start when a parameter given at start-up is not one "
-              "of the node's (a misspelt name); false: a warning.", read_only=True),
+              "of the node's (a misspelt name); false: a warning.", read_only=True,
+              live_only="the offline lift always refuses an unknown name"),
 )
 #: :data:`PARAMS` by name.
 SPECS: Final[dict[str, ParamSpec]] = {p.name: p for p in PARAMS}
-#: Node parameters that have no meaning offline (accepted and ignored by :func:`read_params_file`).
-NODE_ONLY: Final[frozenset[str]] = frozenset(
-    {p.name for p in PARAMS if not p.option and not p.offline} | {"qos_overrides", "use_sim_time"})
+#: The parameters the offline lift honours: ``pose-lifter lift``'s flags and the keys of its
+#: params file, in the order of :data:`PARAMS`.
+OFFLINE_PARAMS: Final[tuple[ParamSpec, ...]] = tuple(p for p in PARAMS if not p.live_only)
+#: Names a ROS params file may hold besides the node's parameters (rcl's own).
+_ROS_NAMES: Final[frozenset[str]] = frozenset({"qos_overrides", "use_sim_time"})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -256,6 +309,11 @@ def _yaml_value(value: Any) -> str:
     return str(value)
 
 
+#: What a heading of :func:`params_yaml` adds to a part's name.
+_PART_NOTES: Final[dict[str, str]] = {
+    "paper": " (read only in paper mode: another value than the default is refused in another mode)"}
+
+
 def params_yaml() -> str:
     """``config/lifter.yaml``: every parameter with its default, description and range; the
     solver options under a heading per part (:data:`~pose_lifter.core.options.OPTION_PARTS`), the
@@ -264,12 +322,14 @@ def params_yaml() -> str:
     lines = [_YAML_HEAD]
     for p in PARAMS:
         if p.name in first_of:
-            lines.append(f"    # ---- {first_of[p.name]}\n")
+            lines.append(f"    # ---- {first_of[p.name]}{_PART_NOTES.get(first_of[p.name], '')}\n")
         elif p.name == "warm_start":
             lines.append("    # ---- the node\n")
         note = " ".join(t for t in (p.description, p.range_text()) if t)
         if p.read_only:
             note += " (read-only: set at start-up)"
+        if p.live_only:
+            note += f" (live only: {p.live_only})"
         lines.append(f"    # {note}\n    {p.name}: {_yaml_value(p.default)}\n")
     lines.append(_YAML_TAIL)
     return "".join(lines)
@@ -278,47 +338,25 @@ def params_yaml() -> str:
 # --------------------------------------------------------------------------- offline
 
 
-@dataclasses.dataclass(frozen=True)
-class OfflineParams:
-    """What a params file sets for an offline lift.
-
-    Attributes
-    ----------
-    options : dict
-        :class:`LifterOptions` fields.
-    bases_file : str or None
-    warm_start, lower_leg_length, default_distance, track_timeout, reinit_ratio : optional
-        None when the file does not set them (the last two: the per-track policy,
-        :class:`pose_lifter.core.track.policy.TrackPolicy`, as in the node).
-    ignored : tuple of str
-        Unknown parameter names found in the file (node-only ones, :data:`NODE_ONLY`, are not
-        listed).
-    """
-
-    options: dict[str, Any]
-    bases_file: str | None = None
-    warm_start: bool | None = None
-    lower_leg_length: float | None = None
-    default_distance: float | None = None
-    ignored: tuple[str, ...] = ()
-    track_timeout: float | None = None
-    reinit_ratio: float | None = None
-
-
 _SECTIONS: Final[tuple[str, ...]] = ("/**", "pose_lifter", "/pose_lifter")
 
 
-#: The option parameters a params file may set (the experiment options are not parameters).
-_OPTIONS: Final[frozenset[str]] = frozenset(NODE_OPTIONS)
+def read_params_file(path: str | Path) -> dict[str, Any]:
+    """Read a node params YAML for an offline lift (see the module doc).
 
-
-def read_params_file(path: str | Path) -> OfflineParams:
-    """Read a node params YAML (see the module doc).
+    Returns
+    -------
+    dict
+        The parameters of :data:`OFFLINE_PARAMS` the file sets, each checked by its
+        :class:`ParamSpec` (type and range; whether the mode reads an option is checked when the
+        options are built, with the command line's flags).
 
     Raises
     ------
     OptionsError
-        Unreadable file, no ``pose_lifter`` section, or a value the core refuses.
+        Unreadable file, no ``pose_lifter`` section, a value a parameter refuses, an unknown
+        name, or a parameter of the live node only set to another value than its default (the
+        offline lift cannot honour it).
     """
     import yaml
 
@@ -338,24 +376,21 @@ def read_params_file(path: str | Path) -> OfflineParams:
             found = True
     if not found:
         raise OptionsError(f"params file {p} has no {' / '.join(_SECTIONS)} section with ros__parameters")
-    options = {k: v for k, v in merged.items() if k in _OPTIONS}
-    try:
-        LifterOptions().replace(**options)  # refuse now, with the core's reason
-    except OptionsError as exc:
-        raise OptionsError(f"params file {p}: {exc}") from None
-    own = {s.name for s in PARAMS if s.offline}
-    ignored = tuple(sorted(k for k in merged if k not in _OPTIONS and k not in own and k not in NODE_ONLY))
-
-    def get(name: str, kind: type) -> Any:
-        if name not in merged:
-            return None
+    unknown = unknown_parameters(k for k in merged if k not in _ROS_NAMES)
+    if unknown:
+        raise OptionsError(f"params file {p}: {unknown}")
+    values: dict[str, Any] = {}
+    for name, value in merged.items():
+        spec = SPECS.get(name)
+        if spec is None:  # rcl's own
+            continue
         try:
-            return kind(merged[name])
-        except (TypeError, ValueError):
-            raise OptionsError(
-                f"params file {p}: {name} = {merged[name]!r} is not a {kind.__name__}") from None
-
-    bases = get("bases_file", str)
-    return OfflineParams(options, bases or None, get("warm_start", bool), get("lower_leg_length", float),
-                         get("default_distance", float), ignored, get("track_timeout", float),
-                         get("reinit_ratio", float))
+            value = spec.checked(value)
+        except OptionsError as exc:
+            raise OptionsError(f"params file {p}: {exc}") from None
+        if not spec.live_only:
+            values[name] = value
+        elif value != spec.default:
+            raise OptionsError(f"params file {p}: {name} = {value!r} cannot be honoured offline "
+                               f"({spec.live_only}); remove it or set it to its default {spec.default!r}")
+    return values

@@ -16,7 +16,7 @@ DEFAULT_TRACK_TIMEOUT_S: Final[float] = 1.0
 #: A warm solve whose objective exceeds this times the track's recent median is redone cold
 #: (the node's ``reinit_ratio``).
 DEFAULT_REINIT_RATIO: Final[float] = 2.0
-#: The largest ``output_lag`` (frames) of the node and ``pose-lifter lift --lag``: a lagged frame
+#: The largest ``output_lag`` (frames) of the node and ``pose-lifter lift --output-lag``: a lagged frame
 #: and its window fit in the frames a track keeps for it (:data:`.lagged.WINDOW`).
 MAX_LAG: Final[int] = 10
 #: From this ``output_lag`` on, the lift itself waits for the frames its offline prior reads ahead

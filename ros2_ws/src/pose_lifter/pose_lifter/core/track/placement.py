@@ -29,7 +29,7 @@ __all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
-#: Accepted leg lengths in metres (the node's ``lower_leg_length`` and ``--leg-length``).
+#: Accepted leg lengths in metres (the node's ``lower_leg_length``, ``pose-lifter lift --lower-leg-length``).
 LEG_LENGTH_RANGE_M: Final[tuple[float, float]] = (0.05, 2.0)
 #: Depth of the pose centroid in metres when no CameraInfo is available.
 DEFAULT_DISTANCE_M: Final[float] = 5.0

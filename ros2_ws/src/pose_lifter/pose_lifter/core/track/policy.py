@@ -16,10 +16,6 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   limb proportions over the track's last LIMB_FRAMES frames, once it has MIN_LIMB_FRAMES
   of them, is passed to the lifter for its limb constraints (hybrid mode,
   ``LifterOptions.prior_limbs``, on by default), after :data:`pose_lifter.core.track.state.LIMB_CALIBRATION`;
-* hybrid mode with ``LifterOptions.noise_smoothing`` (off by default; never when the caller
-  smooths over past and future, :attr:`TrackPolicy.smoothed_later`): the track's 2D noise
-  (NOISE_FRAMES) weights the 2D term down and blends the previous frame's pose into the prior's
-  target (temporal smoothness, up to ``LifterOptions.temporal_weight``);
 * hybrid mode with the camera's intrinsics: a frame that follows its track is lifted from its 2D
   corrected for perspective by the track's last pose (:mod:`.placement`);
 * hybrid mode, left/right labels (``LifterOptions.label_swaps``): before the gate, an arm's or a
@@ -42,7 +38,7 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
 * hybrid mode, causal output smoothing (:class:`pose_lifter.core.track.smoothing.CausalSmoother`): the
   published pose is the prior's pose on this frame plus the fit's correction of it (fit minus
   prior) averaged over the track's frames (``LifterOptions.correction_smoothing``, exponential);
-  on a disturbed track (joints the lift did not use, or 2D noise with ``noise_smoothing``) the
+  on a disturbed track (joints the lift did not use) the
   prior's part is also followed by a constant-velocity (alpha-beta) filter whose gain falls to
   ``LifterOptions.disturbed_smoothing_gain``. Only the output: the track's warm start, limb and
   noise estimates and gate keep the fit's own pose, so no smoothing feeds back into the next
@@ -81,7 +77,7 @@ from .records import FramesAhead, OutOfOrderFrameError, TrackedLift
 from .screening import Screened, ToScreen, next_frames, screen_frames
 from .screening import compile_kernels as compile_screening_kernels
 from .smoothing import CausalSmoother, priors_in_camera, smooth_tracks
-from .state import NOISE_MIN_WEIGHT, Track, image_spans, swap_back, tracks_limb_proportions
+from .state import Track, image_spans, swap_back, tracks_limb_proportions
 from .state import compile_kernels as compile_track_kernels
 
 __all__ = [
@@ -99,15 +95,10 @@ __all__ = [
 
 #: Output smoothing (:class:`~pose_lifter.core.track.smoothing.CausalSmoother`): the fraction of unused
 #: joints (missing, gated or dropped by the outlier pass) over the track's last
-#: :data:`~pose_lifter.core.track.state.DISTURBANCE_FRAMES` frames, or one minus its 2D data
-#: weight, whichever is larger, is its disturbance; at DISTURBANCE_FULL and above the prior's
-#: alpha-beta gain is ``disturbed_smoothing_gain``, at 0 it is 1 (no filter), linear between.
+#: :data:`~pose_lifter.core.track.state.DISTURBANCE_FRAMES` frames is its disturbance; at
+#: DISTURBANCE_FULL and above the prior's alpha-beta gain is ``disturbed_smoothing_gain``, at 0 it
+#: is 1 (no filter), linear between.
 DISTURBANCE_FULL = 0.2
-#: ... and 2D noise counts as NOISE_DISTURBANCE times one minus the track's data weight (the fit
-#: already smooths noisy tracks through ``temporal_weight``; measured on 14 unseen-motion tracks
-#: with noise 0.1 and a gain of 0.4: factor 0 / 0.2 / 1 gave 56.6 / 26.3 / 20.2 mm/frame^2 at
-#: P-MPJPE 69.4 / 69.6 / 70.7 mm).
-NOISE_DISTURBANCE = 0.25
 
 @dataclass(frozen=True)
 class TrackFrame:
@@ -218,8 +209,8 @@ def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) ->
         for p in todo:
             (later if p.track is not None and id(p.track) in tracks else batch).append(p)
             tracks.add(id(p.track))
-        rows = [ToScreen(p.track, p.warm is not None, p.frame.policy.lifter, p.frame.policy.smoothed_later,
-                         p.frame.points, p.frame.confidence, p.frame.stamp_ns) for p in batch]
+        rows = [ToScreen(p.track, p.warm is not None, p.frame.policy.lifter, p.frame.points,
+                         p.frame.confidence, p.frame.stamp_ns) for p in batch]
         for p, screened in zip(batch, screen_frames(rows), strict=True):
             p.screened = screened
             if screened.swapped is not None:  # the labels as the track has them, from here on
@@ -348,7 +339,7 @@ def _smoothed(rows: Sequence[tuple[_Pending, LiftResult, Track]]) -> list[LiftRe
         if p.warm is None or track.smoother is None:
             track.smoother = CausalSmoother()
         shares = track.unused_share
-        disturbance = max(sum(shares) / len(shares), NOISE_DISTURBANCE * (1.0 - p.screened.data_weight))
+        disturbance = sum(shares) / len(shares)
         gain = 1.0 - min(1.0, disturbance / DISTURBANCE_FULL) * (1.0 - opts.disturbed_smoothing_gain)
         go.append((i, prior, opts.correction_smoothing, gain))
     if not go:
@@ -400,9 +391,7 @@ class TrackPolicy:
                  warm_start: bool = True, reinit_ratio: float = DEFAULT_REINIT_RATIO) -> None:
         self._tracks: dict[int, Track] = {}
         #: The caller smooths each track over past and future frames (the offline lift): the
-        #: causal smoothing of noisy tracks (``LifterOptions.noise_smoothing``: the track's data
-        #: weight, ``temporal_weight``, NOISE_DISTURBANCE) is then off whatever the options say,
-        #: and the measurement update waits for :meth:`measured_later` (after the tracks' frames).
+        #: measurement update waits for :meth:`measured_later` (after the tracks' frames).
         self.smoothed_later = False
         self._later: dict[int, list[LaterFrame]] = {}  # the frames kept for it, by track id
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
@@ -535,13 +524,12 @@ class TrackPolicy:
                  limbs: NDArray[np.float64] | None, points: NDArray[np.float64],
                  ahead: FramesAhead | None = None) -> TrackContext:
         """What the track tells the lifter of this frame (:class:`TrackContext`): its limb
-        proportions, 2D data weight, the previous pose's weight per joint in the prior's target,
+        proportions, the previous pose's weight per joint in the prior's target (a joint the frame
+        lacks: ``missing_temporal_weight``, the others 0),
         its past and next frames (temporal prior; ``points`` (12, 2) this frame's 2D) and the
         joints it may fill in."""
         opts = self.lifter.options
-        dw = frame.data_weight
-        # smoothing only pays with noisy 2D (on clean input it is lag): scaled with the noise
-        tw = np.full(N_JOINTS, opts.temporal_weight * (1.0 - dw) / (1.0 - NOISE_MIN_WEIGHT))
+        tw = np.zeros(N_JOINTS)
         if warm is not None and frame.visible is not None and opts.missing_temporal_weight > 0:
             # a joint the detector lost on this frame is carried over from the track's last pose
             tw = np.where(frame.visible, tw, np.maximum(tw, opts.missing_temporal_weight))
@@ -552,7 +540,7 @@ class TrackPolicy:
             if track.fit_is_sound():
                 fill = (frame.predicted, track.unused < opts.fill_missing_frames)
         future = next_frames(self.lifter, track, ahead, stamp_ns, past, points, frame)
-        return TrackContext(limbs, dw, tw, past, frame.gated, fill, future)
+        return TrackContext(limbs, 1.0, tw, past, frame.gated, fill, future)
 
     def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool,
                  frame: TrackFrame) -> LiftResult | None:

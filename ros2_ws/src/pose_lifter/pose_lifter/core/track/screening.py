@@ -45,7 +45,6 @@ class ToScreen(NamedTuple):
     track: Track | None  #: its track (None: untracked or new)
     follows: bool  #: the frame is warm-started from its track's last one
     lifter: Lifter  #: the lifter of its track's policy (options, the noise's normalised units)
-    smoothed_later: bool  #: the caller smooths over past and future (no causal noise smoothing)
     points: NDArray[np.float64]  #: (12, 2), input units
     confidence: NDArray[np.float64] | None  #: (12,)
     stamp_ns: int
@@ -63,8 +62,6 @@ class Screened:
     predicted: NDArray[np.float64] | None
     #: the temporal outlier gate screened the frame
     gated: bool
-    #: the track's 2D data weight (1 but in hybrid mode with causal noise smoothing)
-    data_weight: float
     #: the arms' and the legs' left and right labels swapped back (2,; ``LifterOptions.label_swaps``;
     #: None: the frame's own labels): the lift reads :func:`~.state.swap_back` of the frame's 2D
     swapped: NDArray[np.bool_] | None = None
@@ -84,9 +81,7 @@ def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
         if hybrid and f.track is not None and f.follows and vis is not None:
             rows.append((i, vis))
             continue
-        noisy = hybrid and opts.noise_smoothing and not f.smoothed_later
-        out[i] = Screened(f.confidence, vis, None, False,
-                          f.track.data_weight() if noisy and f.track is not None else 1.0)
+        out[i] = Screened(f.confidence, vis, None, False)
     if rows:
         got = [frames[i] for i, _ in rows]
         s = _screen_tracks([f.track for f in got if f.track is not None], [f.lifter for f in got],
@@ -104,10 +99,8 @@ def screen_frames(frames: Sequence[ToScreen]) -> list[Screened]:
             if s.gated[r].any():  # a gated joint is missing for this frame
                 confidence = np.where(s.gated[r], 0.0, np.ones(N_JOINTS) if confidence is None
                                       else np.asarray(confidence, dtype=np.float64))
-            noisy = opts.noise_smoothing and not f.smoothed_later
-            assert f.track is not None
             out[i] = Screened(confidence, s.visible[r], s.predicted[r] if s.has_prediction[r] else None,
-                              opts.outlier_gate > 0, f.track.data_weight() if noisy else 1.0, swapped)
+                              opts.outlier_gate > 0, swapped)
     return [x for x in out if x is not None]
 
 

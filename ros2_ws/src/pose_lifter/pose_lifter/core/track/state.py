@@ -48,8 +48,9 @@ _GROUP_OF = np.array(LIMB_GROUP_OF)
 #: units), and over the track's last NOISE_FRAMES frames their median: an estimate of the
 #: detector's noise std that motion hardly moves (measured on 18 held-out training-split tracks
 #: at 30 Hz: median 0.003 clean, 0.026 / 0.062 / 0.128 / 0.242 with noise 0.02 / 0.05 / 0.1 /
-#: 0.2 leg lengths). The hybrid 2D term is weighted by NOISE_REFERENCE over it (at most 1, at
-#: least NOISE_MIN_WEIGHT) once NOISE_MIN_FRAMES frames are in: noisy 2D trusts the prior more.
+#: 0.2 leg lengths). A track's data weight is NOISE_REFERENCE over it (at most 1, at least
+#: NOISE_MIN_WEIGHT) once NOISE_MIN_FRAMES frames are in: how far its image limb lengths are
+#: trusted (``image_limbs``); the measurement update reads the noise itself.
 NOISE_FRAMES = 30
 NOISE_MIN_FRAMES = 5
 NOISE_REFERENCE = 0.02
