@@ -214,10 +214,11 @@ def test_lift_bag_writes_the_reference_bytes_on_a_committed_bag(
     /skeleton_markers message is the reference's, byte for byte."""
     from pose_lifter.core import Lifter, LifterOptions, PoseBases
 
-    expected = _reference_outputs(monkeypatch, 0.0)
+    settings = LiftSettings(max_messages=40, smoothing_s=0.0)  # the node's marker_lifetime
+    expected = _reference_outputs(monkeypatch, settings.marker_lifetime)
     out = tmp_path / "out.mcap"
-    summary, _ = offline.lift_bag(BAGS / bag, out, Lifter(PoseBases.load(), LifterOptions()),
-                                  LiftSettings(max_messages=40, smoothing_s=0.0), progress=False)
+    summary, _ = offline.lift_bag(BAGS / bag, out, Lifter(PoseBases.load(), LifterOptions()), settings,
+                                  progress=False)
     assert summary.n_lifted == n_lifted and len(expected) == 40
     _assert_same(_written(out), expected)
     if bag == "punch_outliers.mcap":

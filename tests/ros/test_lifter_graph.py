@@ -147,6 +147,8 @@ def test_declared_descriptors_are_the_option_metadata(start_lifter: Any, graph: 
             below, above = int(meta.low) - 1, int(meta.high) + 1
         else:
             below, above = math.nextafter(meta.low, -math.inf), math.nextafter(meta.high, math.inf)
+        if meta.modes:  # an option of another mode: tried in its mode (the default one refuses it)
+            assert graph.set_parameters(mode=meta.modes[0])[0].successful
         for value in (below, above):
             (r,) = graph.set_parameters(**{name: value})
             assert not r.successful, (name, value)
@@ -155,6 +157,8 @@ def test_declared_descriptors_are_the_option_metadata(start_lifter: Any, graph: 
             assert r.successful is not refused, (name, value, r.reason)
         (r,) = graph.set_parameters(**{name: defaults[name]})
         assert r.successful, (name, r.reason)
+        if meta.modes:
+            assert graph.set_parameters(mode=defaults["mode"])[0].successful
     assert graph.get_parameters(*names) == {n: defaults[n] for n in names}
     assert lifter.alive()
 

@@ -166,8 +166,8 @@ def _cores() -> int:
 
 
 def _params(args: argparse.Namespace) -> dict[str, Any] | None:
-    """The ``--params-file`` read (:func:`pose_lifter.ros.params.read_params_file`), or None."""
-    from pose_lifter.ros.params import read_params_file
+    """The ``--params-file`` read (:func:`pose_lifter.messages.settings.read_params_file`), or None."""
+    from pose_lifter.messages.settings import read_params_file
 
     return read_params_file(args.params_file) if args.params_file else None
 
@@ -287,69 +287,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- parser
 
 
-#: What a flag's help adds to its parameter's description offline.
-_OFFLINE_NOTES: Final[dict[str, str]] = {
-    "output_lag": "offline with --smoothing 0: the node's lagged answers, message for message (one "
-                  "process per bag)",
-    "mode": "--solver cvxpy implies paper",
-}
-
-
-def _parameter_type(spec: Any) -> Any:
-    """An argparse ``type`` of a number parameter: its kind, checked by its table entry (the node's
-    range; :class:`~pose_lifter.core.errors.OptionsError`'s reason as argparse's message)."""
-    from pose_lifter.core.errors import OptionsError
-
-    kind = type(spec.default)
-
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a{'n integer' if kind is int else ' number'}: {text!r}") \
-                from None
-        try:
-            return spec.checked(value)
-        except OptionsError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-    parse.__name__ = kind.__name__  # argparse names the type in its messages
-    return parse
-
-
-def _add_parameter_flags(p: argparse.ArgumentParser) -> None:
-    """The flags of the node's parameters the offline lift honours, from the settings table
-    (:data:`pose_lifter.ros.params.OFFLINE_PARAMS`): ``--`` + the name with ``_`` -> ``-``, the
-    node's default and range (a bool: ``--name`` / ``--no-name``), ``dest`` the name; and
-    ``--solver`` (not a node parameter)."""
-    from pose_lifter.ros.params import OFFLINE_PARAMS
-
-    g = p.add_argument_group("the node's parameters (the same names, defaults and ranges; "
-                             "docs/node.md, config/lifter.yaml)")
-    for spec in OFFLINE_PARAMS:
-        text = " ".join(t for t in (spec.description, spec.range_text(), _OFFLINE_NOTES.get(spec.name, ""))
-                        if t)
-        kind = type(spec.default)
-        if kind is bool:
-            g.add_argument(spec.flag, dest=spec.name, action=argparse.BooleanOptionalAction,
-                           default=spec.default, help=_help(text + " (default: %(default)s)"))
-        elif kind is str:
-            g.add_argument(spec.flag, dest=spec.name, default=spec.default, choices=spec.choices or None,
-                           metavar=(None if spec.choices
-                                    else "PATH" if spec.name.endswith("_file") else "TEXT"),
-                           help=_help(text + (" (default: %(default)r)" if spec.default else "")))
-        else:
-            g.add_argument(spec.flag, dest=spec.name, type=_parameter_type(spec), default=spec.default,
-                           help=_help(text + " (default: %(default)s)"))
-    p.add_argument("--solver", choices=("admm", "cvxpy"), default="admm",
-                   help="camera and pose subproblems: closed-form ADMM (fast) or the cvxpy reference "
-                   "(which runs the paper mode)")
-
-
-def _help(text: str) -> str:
-    """``text`` as an argparse help string (its own ``%`` escaped, argparse's kept)."""
-    return text.replace("%", "%%").replace("%%(default)", "%(default)")
-
-
 def _cmd_experiments(args: argparse.Namespace) -> int:
     from pose_lifter.mocap.experiments import run_experiments
 
@@ -440,6 +377,8 @@ def _make_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
 
 def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``pose-lifter lift`` command's arguments."""
+    from pose_lifter.offline.flags import add_parameter_flags
+
     p = sub.add_parser("lift", help="lift every /keypoints_2d message of a bag, or of a collection of bags")
     p.add_argument("input", nargs="+",
                    help="input bag: a .mcap file or a rosbag2 directory (a folder with metadata.yaml, "
@@ -451,7 +390,7 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                    "one rosbag2 directory and --out not a .mcap) a directory: one output per input "
                    "(a rosbag2 directory NAME: NAME.mcap) with the inputs' relative layout, a manifest "
                    "(pose_lifter_manifest.json) that lets a stopped run resume")
-    _add_parameter_flags(p)
+    add_parameter_flags(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
     p.add_argument("--max-messages", type=_POS_INT, default=None, help="stop after N lifted messages")
     p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
@@ -521,10 +460,12 @@ def _evaluate_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
 
 def _demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``pose-lifter demo`` command's arguments."""
+    from pose_lifter.offline.flags import add_parameter_flags
+
     p = sub.add_parser("demo", help="lift a committed bag, print errors, write out/demo.mcap + out/demo.png")
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
-    _add_parameter_flags(p)
+    add_parameter_flags(p)
     p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th frame (default 1: all)")
     p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
                    metavar="SECONDS", help=f"as for lift (default {OFFLINE_SMOOTHING_S})")

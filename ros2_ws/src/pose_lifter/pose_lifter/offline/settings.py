@@ -3,7 +3,7 @@
 :class:`LiftSettings` is what :func:`pose_lifter.offline.lift.lift_bag` and
 :func:`~pose_lifter.offline.lift.lift_messages` take, and what a collection's manifest keys its
 outputs by (:mod:`pose_lifter.offline.collection`). Its defaults are the node's: the parameters
-the offline lift honours (:data:`pose_lifter.ros.params.OFFLINE_PARAMS`, the one settings table
+the offline lift honours (:data:`pose_lifter.messages.settings.OFFLINE_PARAMS`, the one settings table
 of the node and of ``pose-lifter lift``'s flags; :meth:`LiftSettings.from_parameters` builds the
 settings of their values). This module imports neither the solver nor ROS.
 """
@@ -21,8 +21,7 @@ from typing import TYPE_CHECKING, Any, Final
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
-from pose_lifter.messages.settings import FrameSettings
-from pose_lifter.ros.params import OFFLINE_PARAMS, SPECS
+from pose_lifter.messages.settings import OFFLINE_PARAMS, SPECS, FrameSettings
 
 if TYPE_CHECKING:
     from pose_lifter.core.lift.lifter import Lifter
@@ -92,7 +91,7 @@ class LiftSettings:
     @classmethod
     def from_parameters(cls, values: Mapping[str, Any], solver: str = "admm", **rest: Any) -> LiftSettings:
         """The settings of the node parameters ``values`` (names of
-        :data:`~pose_lifter.ros.params.OFFLINE_PARAMS`; the others take their defaults), with
+        :data:`~pose_lifter.messages.settings.OFFLINE_PARAMS`; the others take their defaults), with
         ``solver`` the camera and pose steps' (``"cvxpy"``: the references, in the paper mode)
         and ``rest`` the other fields (``every``, ``topic``, ``smoothing_s``, ...).
 

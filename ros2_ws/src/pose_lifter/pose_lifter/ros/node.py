@@ -78,7 +78,7 @@ from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
 from pose_lifter.ros.frame_queue import FrameQueue
 from pose_lifter.ros.hri import HriOutputs, message_classes
-from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, params_yaml, unknown_parameters
+from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, descriptor, params_yaml, unknown_parameters
 from pose_lifter.ros.run import run_node
 from pose_lifter.ros.stats import FrameCounter
 
@@ -128,7 +128,7 @@ class LifterNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self._types = messages.rclpy_types()
         for spec in PARAMS:
-            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+            self.declare_parameter(spec.name, spec.default, descriptor(spec))
         self._throttle = WarningThrottle(self.get_logger().warning)
         self._check_unknown_parameters()
         self._callbacks_added = False
