@@ -10,8 +10,8 @@ from typing import Any, Final
 #: parameters the offline lift honours too.
 NON_DEFAULT_PARAMS: Final[dict[str, Any]] = {
     "warm_start": False, "outlier_passes": 1, "variant": "L1WANS", "default_distance": 4.25,
-    "lower_leg_length": 0.41, "max_keypoints": 100,
+    "lower_leg_length": 0.41, "max_keypoints": 100, "publish_markers": False,
 }
 #: Parameters of the live node only, at non-default values: the node takes them, the offline
 #: lift refuses each by name (it cannot honour it).
-LIVE_ONLY_PARAMS: Final[dict[str, Any]] = {"frame_id": "yaml_frame", "publish_markers": False}
+LIVE_ONLY_PARAMS: Final[dict[str, Any]] = {"frame_id": "yaml_frame"}

@@ -496,6 +496,7 @@ def test_a_params_file_of_non_default_values_reaches_the_offline_lift(
     assert lift(str(WALK), "--out", str(out), "--params-file", str(path), "--max-messages", "4") == 0
     skeletons = [s for x in bags.read_messages(out, ["/skeletons_3d"]) for s in x.msg.skeletons]
     assert len(skeletons) == 4 and not any(s.warm_started for s in skeletons)
+    assert "/skeleton_markers" not in bags.bag_topics(out)  # publish_markers: false
     from pose_lifter.messages.convert import skeleton3d_to_joints
 
     shins = [np.linalg.norm(np.subtract(*skeleton3d_to_joints(s)[[10, 11]])) for s in skeletons]

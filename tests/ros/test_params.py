@@ -75,8 +75,8 @@ def test_the_committed_yaml_is_the_generated_one() -> None:
 def test_offline_read_of_the_node_yaml_keeps_every_parameter_it_honours() -> None:
     assert read_params_file(CONFIG) == {p.name: p.default for p in OFFLINE_PARAMS}
     live = {p.name for p in PARAMS if p.live_only}
-    assert live == {"publish_markers", "solver_threads", "max_waiting_frames", "stats_period", "frame_id",
-                    "diagnostics_period", "strict_parameters"}
+    assert live == {"solver_threads", "max_waiting_frames", "stats_period", "frame_id", "diagnostics_period",
+                    "strict_parameters"}
     assert not live & set(OPTION_META)
     # the caps are honoured offline (they were dropped before)
     assert {"max_skeletons", "max_coordinate", "max_frame_id_length", "max_layout_length",

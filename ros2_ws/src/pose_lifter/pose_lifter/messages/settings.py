@@ -188,8 +188,7 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "prior). 3 frames (0.1 s at 30 Hz) take most of the offline accuracy, 6 all of it "
               "(docs/node.md). Held answers are published when the input stops.", 0, MAX_LAG,
               read_only=True),
-    ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray).",
-              live_only="the offline lift always writes /skeleton_markers"),
+    ParamSpec("publish_markers", True, "Publish skeleton_markers (visualization_msgs/MarkerArray)."),
     ParamSpec("publish_hri", True, "Publish the tracked people as REP-155 bodies (/humans/bodies/...) and "
               "their frames on /tf.", read_only=True),
     ParamSpec("max_skeletons", _FRAME.max_skeletons, "People lifted per frame at most: of a larger crowd "

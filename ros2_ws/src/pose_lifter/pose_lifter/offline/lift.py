@@ -10,8 +10,7 @@ written next to the input topics. Where it differs, on purpose:
 * the stamp of a message is its bag time (when it was recorded), not its header's;
 * the camera intrinsics are those of the latest ``/camera_info`` at or before the message
   (before the first one: the first one), not of the latest received;
-* the node's ``publish_markers`` and ``frame_id`` are not offline settings (markers are always
-  written; the headers are copied unchanged);
+* the node's ``frame_id`` is not an offline setting (the headers are copied unchanged);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
@@ -393,7 +392,7 @@ def lift_bag(
     index_of = {id(msg): i * every for i, (_, msg) in enumerate(to_lift)}
     summary = LiftSummary()
     answers: dict[int, FrameAnswer] = {}  # index of the keypoint message -> its answer
-    markers = MarkerBook(_MARKER_NS)
+    markers = MarkerBook(_MARKER_NS) if settings.publish_markers else None
     bodies = hri.BodyBook(settings.frame.track_timeout) if settings.publish_hri else None
     sizes = [(s, (float(i.width), float(i.height))) for s, i in infos if i.width > 0 and i.height > 0]
 

@@ -77,6 +77,7 @@ class LiftSettings:
     smoothing_s: float = OFFLINE_SMOOTHING_S
     # with smoothing_s 0: the node's answers with output_lag (frames), each refined over the next
     output_lag: int = SPECS["output_lag"].default
+    publish_markers: bool = SPECS["publish_markers"].default
     marker_lifetime: float = SPECS["marker_lifetime"].default
     #: the node's REP-155 outputs (/humans/bodies/..., /tf) into the output bag
     publish_hri: bool = SPECS["publish_hri"].default
@@ -143,7 +144,7 @@ class LiftSettings:
 
 
 #: The node parameters that are fields of :class:`LiftSettings` itself.
-_OWN: Final[tuple[str, ...]] = ("output_lag", "marker_lifetime", "publish_hri")
+_OWN: Final[tuple[str, ...]] = ("output_lag", "publish_markers", "marker_lifetime", "publish_hri")
 #: The fields of :class:`FrameSettings` (each a node parameter of that name).
 _FRAME_FIELDS: Final[tuple[str, ...]] = tuple(f.name for f in dataclasses.fields(FrameSettings))
 
