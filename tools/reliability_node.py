@@ -241,7 +241,7 @@ def fuzz(args: argparse.Namespace) -> int:
     from pose_lifter.core.model.layouts import get_layout
     from pose_lifter.messages.convert import arrays_to_skeleton2d, make_header
 
-    h = Harness(["n_starts:=1", "max_alternations:=5"], reliable_input=False)
+    h = Harness([], reliable_input=False)
     t = h.t
     kinds = _kinds(t)
     names = list(kinds)

@@ -76,8 +76,8 @@ IMAGE_LIMB_EVERY = 10
 #: how much a person's thighs and shins differ from the mean, slopes > 1). Per bone group (upper
 #: arm, forearm, thigh, shin), the person's log-proportions (mean over the groups removed) are
 #: ``slope * estimate + offset``: least squares over held-out training-split tracks whose limbs
-#: were scaled by up to +-20 % (``tools/limb_calibration.py``, which prints these; fitted to the
-#: packaged priors: re-run it when they change).
+#: were scaled by up to +-20 % (printed by ``tools/limb_calibration.py`` at commit 1b0676e, fitted
+#: to the packaged priors: fit again when they change).
 LIMB_CALIBRATION: tuple[NDArray[np.float64], NDArray[np.float64]] = (
     np.array([0.84, 0.96, 1.28, 1.21]), np.array([-0.011, 0.044, -0.112, -0.099]))
 #: The temporal outlier gate (``LifterOptions.outlier_gate``) leaves a frame alone when it would
