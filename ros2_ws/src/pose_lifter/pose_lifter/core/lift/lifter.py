@@ -115,7 +115,7 @@ class Lifter:
         ``options.temporal_prior_file`` on first use).
     reads_ahead : bool
         The lift knows each track's next frames (an offline lift: the tracks' frames are given
-        with :class:`~pose_lifter.core.track.policy.FramesAhead`): a temporal prior that reads frames
+        with :class:`~pose_lifter.core.track.records.FramesAhead`): a temporal prior that reads frames
         after the one it lifts is accepted. False (a live lift): such a prior is refused
         (:class:`~pose_lifter.core.errors.PriorFileError` when it loads).
     """
