@@ -1,39 +1,32 @@
-"""For the stand-in lifters of the pipeline tests: the ``runs`` whose ``solve`` drives a solve
-(:mod:`pose_lifter.core.lift.batch`) that asks for lifts of a stand-in lifter (its
-``lift_people``) and for no runs of the compiled kernel."""
+"""For the stand-in lifters of the pipeline tests: their ``lift_people`` (each row's ``lift``,
+with its status) and their ``runs``, which nothing may read (the track policy hands a lifter its
+rows through ``lift_people`` alone)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
-from pose_lifter.core.lift.batch import LiftCall, outcomes
+from pose_lifter.core.lift.batch import LiftRow
+from pose_lifter.core.results import Failure, LiftOutcome
 
 
 class NoRuns:
-    """``Runs.solve`` for solves whose rounds ask only for lifts (:class:`LiftCall`), answered by
-    :func:`~pose_lifter.core.lift.batch.outcomes` (each lifter's calls in one ``lift_people``)."""
+    """A stand-in lifter's ``runs``: reading any of it fails the test."""
 
-    def solve(self, steps: Any) -> Any:
-        try:
-            calls = next(steps)
-            while True:
-                if not all(isinstance(c, LiftCall) for c in calls):
-                    raise AssertionError("a stand-in lifter's solve asked for runs or prior poses")
-                calls = steps.send(outcomes(calls, None, None))  # type: ignore[arg-type]
-        except StopIteration as done:
-            return done.value
+    def __getattr__(self, name: str) -> NoReturn:
+        raise AssertionError(f"a stand-in lifter's runs were read ({name})")
 
 
 RUNS_NEEDED_NONE = NoRuns()
 
 
-def lift_each(lifter: Any, calls: Sequence[LiftCall]) -> list[Any]:
-    """A stand-in lifter's ``lift_people``: its ``lift`` of each call, or the error it raised."""
-    out: list[Any] = []
-    for c in calls:
+def lift_each(lifter: Any, rows: Sequence[LiftRow]) -> list[LiftOutcome]:
+    """A stand-in lifter's ``lift_people``: its ``lift`` of each row, or the failure it raised."""
+    out: list[LiftOutcome] = []
+    for r in rows:
         try:
-            out.append(lifter.lift(c.points, c.confidence, c.warm))
+            out.append(LiftOutcome.solved(lifter.lift(r.points, r.confidence, r.warm)))
         except Exception as err:
-            out.append(err)
+            out.append(LiftOutcome.failed(Failure.of(err)))
     return out

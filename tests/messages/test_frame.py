@@ -14,8 +14,8 @@ import pytest
 from pose_lifter.core import Lifter, LifterOptions, PoseBases
 from pose_lifter.core.errors import SolverError
 from pose_lifter.core.lift import batch
-from pose_lifter.core.lift.batch import LiftCall, PriorCall
-from pose_lifter.core.results import Camera, LiftResult, WarmStart
+from pose_lifter.core.lift.batch import LiftRow, PriorCall
+from pose_lifter.core.results import Camera, LiftOutcome, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
@@ -243,9 +243,9 @@ class StubLifter:
 
     runs = RUNS_NEEDED_NONE
 
-    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
-        """:meth:`lift` of each call (the lifter's batch of a round), or the error it raised."""
-        return lift_each(self, calls)
+    def lift_people(self, rows: Sequence[LiftRow]) -> list[LiftOutcome]:
+        """:meth:`lift` of each row (the lifter's batch), with its status."""
+        return lift_each(self, rows)
 
     def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
              **per_frame: Any) -> LiftResult:

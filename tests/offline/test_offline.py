@@ -12,9 +12,9 @@ import pytest
 import tolerances as tol
 from mcap_check import check_mcap
 from pose_lifter.core.errors import SolverError, TooFewJointsError
-from pose_lifter.core.lift.batch import LiftCall
+from pose_lifter.core.lift.batch import LiftRow
 from pose_lifter.core.options import LifterOptions
-from pose_lifter.core.results import Camera, LiftResult, WarmStart
+from pose_lifter.core.results import Camera, LiftOutcome, LiftResult, WarmStart
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.settings import FrameSettings
 from pose_lifter.mocap import scenes
@@ -42,9 +42,9 @@ class EchoLifter:
 
     runs = RUNS_NEEDED_NONE
 
-    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
-        """:meth:`lift` of each call (the lifter's batch of a round), or the error it raised."""
-        return lift_each(self, calls)
+    def lift_people(self, rows: Sequence[LiftRow]) -> list[LiftOutcome]:
+        """:meth:`lift` of each row (the lifter's batch), with its status."""
+        return lift_each(self, rows)
 
     def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
              **per_frame: Any) -> LiftResult:

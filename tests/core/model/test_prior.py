@@ -21,6 +21,7 @@ from pose_lifter.core.model.prior import (
 )
 from pose_lifter.core.model.synthetic import synthetic_poses
 from pose_lifter.core.numeric.jit import HAVE_NUMBA
+from pose_lifter.core.results import Failure, LiftStatus
 from pose_lifter.mocap.views import scale_limbs
 
 #: Tolerances of this file, stated once.
@@ -276,7 +277,7 @@ def test_prior_calls_are_each_poses_own_bit_for_bit(prior: PosePrior,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     """prior_calls: the poses of many people, of two priors and both flip settings, are one by
     one those of each pose computed alone (the rows of the compiled pass do not mix), each
-    prior's network in one pass over its weights; an input the prior refuses gets its error in
+    prior's network in one pass over its weights; an input the prior refuses gets its failure in
     its place and costs nobody else."""
     temporal = PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH)
     other = PosePrior(tuple(w * 1.01 for w in prior.weights), prior.biases, prior.out_mean,
@@ -296,7 +297,7 @@ def test_prior_calls_are_each_poses_own_bit_for_bit(prior: PosePrior,
     assert len(out) == len(calls)
     for c, pose in zip(calls, out, strict=True):
         if c.points is refused[0]:
-            assert isinstance(pose, InvalidInputError)
+            assert isinstance(pose, Failure) and pose.status == LiftStatus.INVALID_INPUT
             continue
         assert isinstance(pose, np.ndarray)
         np.testing.assert_array_equal(pose, c.prior.predict(c.points, c.visible, c.flip))

@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter.core.lift.batch import Steps
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.lift.runs import Run, Runs, RunSpec
 from pose_lifter.core.model.pose_model import PoseModel
 from pose_lifter.core.options import VARIANTS, LifterOptions
+from pose_lifter.core.results import Failure
 from pose_lifter.core.solve.pose_kernel import _depth_row, _depth_term, _sum_abs
 from pose_lifter.core.solve.pose_step import PriorRows
 from pose_lifter.core.solve.run_kernel import _run_objective
@@ -34,7 +34,7 @@ Call = tuple[tuple[Any, ...], dict[str, Any]]
 
 
 def _recorded_runs(mode: str, bag: str, n_messages: int, variant: str = "full") -> tuple[Lifter, list[Call]]:
-    """The runs (``Runs.runs_steps``' specs, as ``Runs.run`` arguments) of a tracked lift of a
+    """The runs (``Runs.run_all``'s specs, as ``Runs.run`` arguments) of a tracked lift of a
     bag's first messages (through the loop)."""
     from pose_lifter.offline.bags import read_messages
 
@@ -48,15 +48,15 @@ def _recorded_runs(mode: str, bag: str, n_messages: int, variant: str = "full") 
                     else LifterOptions())
     lifter.runs.compiled = False
     calls: list[Call] = []
-    original = lifter.runs.runs_steps
+    original = lifter.runs.run_all
 
-    def recorded(specs: Sequence[RunSpec]) -> Steps[list[Run | Exception]]:
+    def recorded(specs: Sequence[RunSpec]) -> list[Run | Failure]:
         calls.extend(((sp.xn, sp.w, sp.alpha0, sp.cam0),
                       {"max_alternations": sp.max_alternations, "start": sp.start,
                        "pose_max_iter": sp.pose_max_iter, "prior": sp.prior}) for sp in specs)
         return original(specs)
 
-    lifter.runs.runs_steps = recorded  # type: ignore[method-assign]
+    lifter.runs.run_all = recorded  # type: ignore[method-assign]
     lift_messages(kps[:n_messages], infos, lifter, LiftSettings(smoothing_s=0.0))
     return lifter, calls
 

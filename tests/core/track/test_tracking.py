@@ -10,9 +10,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import tolerances as tol
-from pose_lifter.core import Lifter, LifterOptions, LiftResult, PoseBases, StartKind, TrackContext, p_mpjpe
+from pose_lifter.core import (
+    Lifter,
+    LifterOptions,
+    LiftOutcome,
+    LiftResult,
+    PoseBases,
+    StartKind,
+    TrackContext,
+    p_mpjpe,
+)
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.lift.batch import LiftCall
+from pose_lifter.core.lift.batch import LiftRow
 from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.metrics import procrustes_align
 from pose_lifter.core.model.prior import PosePrior
@@ -128,7 +137,7 @@ def test_a_lost_joint_is_given_to_the_prior_where_the_track_predicts_it(
     seen: list[np.ndarray | None] = []
     lift = Lifter.lift_people
 
-    def spy(self: Lifter, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
+    def spy(self: Lifter, calls: Sequence[LiftRow]) -> list[LiftOutcome]:
         for c in calls:
             f = None if c.track is None else c.track.fill
             seen.append(None if f is None else np.asarray(f[1]).copy())
@@ -441,9 +450,9 @@ def test_noisy_2d_keeps_its_weight_and_the_previous_pose_holds_only_lost_joints(
     for later in (False, True):
         tracks: list[TrackContext] = []
 
-        def spy(calls: Sequence[LiftCall], _t: list[TrackContext] = tracks,
-                _f: Callable[[Sequence[LiftCall]], list[LiftResult | Exception]] = original
-                ) -> list[LiftResult | Exception]:
+        def spy(calls: Sequence[LiftRow], _t: list[TrackContext] = tracks,
+                _f: Callable[[Sequence[LiftRow]], list[LiftOutcome]] = original
+                ) -> list[LiftOutcome]:
             _t.extend(c.track for c in calls if isinstance(c.track, TrackContext))
             return _f(calls)
 

@@ -10,9 +10,10 @@ Every input the solvers cannot use raises one of these, never a NaN result::
         BasisFileError (OSError)          a basis file
         PriorFileError (OSError)          a learned-prior weights file
         SolverError (RuntimeError)        a solve diverged (non-finite result) on valid input
+        OutOfOrderFrameError              a tracked frame older than its track's last one
 
 Other modules add their own leaves (``mocap.formats.MocapDataError``, ``reference.ReferenceSolverError``
-under :class:`SolverError`, ``track.records.OutOfOrderFrameError``, ``adapter_node.AdapterError``,
+under :class:`SolverError`, ``adapter_node.AdapterError``,
 ``offline.bags.BagError`` and its ``BagReadError``, ``messages.typestore.TypestoreError``),
 so ``except PoseLifterError`` catches every error the package raises on purpose.
 """
@@ -28,6 +29,7 @@ __all__ = [
     "BasisFileError",
     "InvalidInputError",
     "OptionsError",
+    "OutOfOrderFrameError",
     "PoseLifterError",
     "PriorFileError",
     "SolverError",
@@ -70,6 +72,10 @@ class OptionsError(PoseLifterError, ValueError):
 
 class SolverError(PoseLifterError, RuntimeError):
     """A solve diverged (non-finite iterates or result) although its input passed the checks."""
+
+
+class OutOfOrderFrameError(PoseLifterError):
+    """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
 
 
 class _DivergedAsSolverError:

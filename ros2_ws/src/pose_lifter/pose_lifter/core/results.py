@@ -3,22 +3,28 @@
 Every solver result is a :class:`SolveInfo` (``objective``, ``n_iter``, ``converged``, the same
 meaning everywhere: the objective the solver minimised at the point it returns, its iterations,
 and whether its stopping rule was met before its iteration cap); a step's ADM multipliers (its
-warm start, and what it ends with) are :class:`Duals`.
+warm start, and what it ends with) are :class:`Duals`. A lift of a batch gives each row a
+:class:`Outcome`: its :class:`LiftStatus` and reason, and its :class:`LiftResult` when solved
+(as osqp's ``info.status``); a row that stopped short of a result carries a :class:`Failure`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from enum import Enum
-from typing import TypeAlias
+from enum import Enum, IntEnum
+from typing import Generic, Self, TypeAlias, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import InvalidInputError, OutOfOrderFrameError, PoseLifterError, SolverError, TooFewJointsError
+
 #: Frames of a track's 2D, oldest first: points (k, 12, 2) in input units and which of their
 #: joints are used (k, 12).
 Frames: TypeAlias = tuple[NDArray[np.float64], NDArray[np.bool_]]
+#: What an :class:`Outcome` carries when solved.
+R = TypeVar("R")
 
 __all__ = [
     "AlphaResult",
@@ -26,9 +32,13 @@ __all__ = [
     "Camera",
     "CameraResult",
     "Duals",
+    "Failure",
     "Frames",
+    "LiftOutcome",
     "LiftResult",
+    "LiftStatus",
     "Normalisation",
+    "Outcome",
     "PoseResult",
     "SolveInfo",
     "StartKind",
@@ -346,3 +356,98 @@ def with_camera_poses(results: Sequence[LiftResult], poses_camera: NDArray[np.fl
     body = np.array([r.pose for r in results])  # (n, 12, 3)
     poses = poses_camera @ rotations + (np.add.reduce(body, axis=1) / body.shape[1])[:, None, :]
     return [r.with_pose(poses[i], np.ascontiguousarray(poses_camera[i])) for i, r in enumerate(results)]
+
+
+class LiftStatus(IntEnum):
+    """How one row of a batch lift ended (:attr:`LiftOutcome.status`)."""
+
+    #: Lifted: the row has its :class:`LiftResult`.
+    SOLVED = 0
+    #: The input cannot be lifted (:class:`~pose_lifter.core.errors.InvalidInputError`): a shape,
+    #: non-finite confidences, the visible joints at one point, a bad track field, or an input the
+    #: learned prior refuses.
+    INVALID_INPUT = 1
+    #: Fewer joints visible than ``min_visible_joints``
+    #: (:class:`~pose_lifter.core.errors.TooFewJointsError`).
+    TOO_FEW_JOINTS = 2
+    #: The solve gave non-finite values on valid input (:class:`~pose_lifter.core.errors.SolverError`).
+    DIVERGED = 3
+    #: A tracked frame older than its track's last one
+    #: (:class:`~pose_lifter.core.errors.OutOfOrderFrameError`; the track is kept).
+    OUT_OF_ORDER = 4
+    #: An unexpected error (a bug); the reason names it. It costs only its own row.
+    FAILED = 5
+
+
+#: The refusal each status but ``FAILED`` stands for (:meth:`Failure.error`), most specific first
+#: (:meth:`Failure.of`).
+_REFUSALS: dict[LiftStatus, type[PoseLifterError]] = {
+    LiftStatus.TOO_FEW_JOINTS: TooFewJointsError,
+    LiftStatus.INVALID_INPUT: InvalidInputError,
+    LiftStatus.DIVERGED: SolverError,
+    LiftStatus.OUT_OF_ORDER: OutOfOrderFrameError,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Failure:
+    """Why a row of a batch has no result: its status (never ``SOLVED``) and the reason."""
+
+    status: LiftStatus
+    reason: str
+
+    @classmethod
+    def of(cls, err: Exception) -> Failure:
+        """The failure an error stands for: the package's refusals by their status and message;
+        anything else (a bug) ``FAILED``, named by its type."""
+        for status, kind in _REFUSALS.items():
+            if isinstance(err, kind):
+                return cls(status, str(err))
+        return cls(LiftStatus.FAILED, f"{type(err).__name__}: {err}")
+
+    def error(self) -> Exception:
+        """The error to raise for it: its status's refusal, or ``RuntimeError`` for ``FAILED``,
+        with the reason as its message."""
+        return _REFUSALS.get(self.status, RuntimeError)(self.reason)
+
+
+@dataclass(frozen=True)
+class Outcome(Generic[R]):
+    """How one row of a batch ended, as osqp's ``info.status``: a lifter's row
+    (:data:`LiftOutcome`, :meth:`pose_lifter.core.lift.lifter.Lifter.lift_people`) or a track's
+    frame (:data:`pose_lifter.core.track.policy.TrackOutcome`).
+
+    Attributes
+    ----------
+    status : LiftStatus
+    reason : str
+        Why the row has no result ("" when it has).
+    result : LiftResult, TrackedLift or None
+        With ``status`` SOLVED, else None.
+    """
+
+    status: LiftStatus
+    reason: str = ""
+    result: R | None = None
+
+    @classmethod
+    def solved(cls, result: R) -> Self:
+        return cls(LiftStatus.SOLVED, "", result)
+
+    @classmethod
+    def failed(cls, failure: Failure) -> Self:
+        return cls(failure.status, failure.reason)
+
+    def error(self) -> Exception:
+        """The error the row's status stands for (:meth:`Failure.error`)."""
+        return Failure(self.status, self.reason).error()
+
+    def unwrap(self) -> R:
+        """The result; raises :meth:`error` when there is none."""
+        if self.result is None:
+            raise self.error()
+        return self.result
+
+
+#: A lifter's row (:meth:`pose_lifter.core.lift.lifter.Lifter.lift_people`).
+LiftOutcome: TypeAlias = Outcome[LiftResult]

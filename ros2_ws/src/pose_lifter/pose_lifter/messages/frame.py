@@ -48,7 +48,7 @@ from pose_lifter.core.track.policy import (
     TrackedLift,
     TrackFrame,
     TrackPolicy,
-    lift_tracks_steps,
+    lift_tracks,
 )
 from pose_lifter.core.track.state import swap_back
 from pose_lifter.messages.convert import skeleton2d_to_arrays
@@ -308,9 +308,9 @@ def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, Skeleton
     if not frames:
         return []
     start = time.perf_counter()
-    done = lifter.runs.solve(lift_tracks_steps([
+    done = [o.result if o.result is not None else o.error() for o in lift_tracks([
         TrackFrame(pipeline.policy, inp.track_id, stamp, inp.points, inp.confidence, intrinsics, inp.ahead)
-        for pipeline, inp, stamp, intrinsics in frames]))
+        for pipeline, inp, stamp, intrinsics in frames])]
     out: list[LiftedSkeleton | SkipSkeleton | None] = []
     solved: list[tuple[int, FramePipeline, Intrinsics, SkeletonInput, TrackedLift]] = []
     for k, ((pipeline, inp, _, intrinsics), d) in enumerate(zip(frames, done, strict=True)):

@@ -1,5 +1,5 @@
-"""One frame of one person: the input checks and the modes (``lifter``: paper, hybrid, learned),
-the hybrid fit with the learned prior (``hybrid``), the starts of each mode (``starts``), the
-alternation runs (``runs``), and the rounds that hand a frame's runs and prior poses to one
-compiled pass each (``batch``).
+"""One frame of a batch of people, as stages over the batch's rows: the input checks and the modes
+(``lifter``: paper, hybrid, learned), the batch's rows and the prior's pass over them (``batch``),
+the hybrid fit with the learned prior (``hybrid``), the paper's starts (``starts``) and the
+alternation runs, each stage's in one compiled call (``runs``).
 """

@@ -5,7 +5,10 @@ The hybrid objective (see :mod:`pose_lifter.core.lift.lifter`) adds to the paper
 ``sum_j p_j |P_j,xy - M0 y_j - t|_1 + sum_j q_j |P_j,z - m3 (y_j - mean_i y_i)|_1`` where ``P``
 (12, 3) is the prior's pose for this image (:class:`pose_lifter.core.solve.pose_step.PriorRows`).
 :class:`PriorFit` holds what these modes solve with (the options, the priors, the pose model and
-its runs); the lifter makes one per setting.
+its runs); the lifter makes one per setting. Its stages take a batch's rows
+(:class:`~pose_lifter.core.lift.batch.Person`) together: the prior's poses of all of them in one
+pass of the network (:func:`~pose_lifter.core.lift.batch.prior_calls`), their runs in one compiled
+call (:meth:`~pose_lifter.core.lift.runs.Runs.run_all`).
 """
 
 from __future__ import annotations
@@ -25,22 +28,14 @@ from ..model.skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths
 from ..numeric.fast import mean_rows, row_norms
 from ..numeric.jit import njit
 from ..options import LifterOptions
-from ..results import (
-    Camera,
-    Frames,
-    LiftResult,
-    Normalisation,
-    StartKind,
-    TrackContext,
-    WarmStart,
-    project_each,
-)
+from ..results import Camera, Failure, Frames, LiftResult, StartKind, project_each
 from ..solve.pose_step import PriorRows
-from .batch import Call, PriorCall, Steps
+from . import batch
+from .batch import Person, PriorCall
 from .runs import Run, Runs, RunSpec
 from .starts import StartRun, Starts
 
-__all__ = ["OUTLIER_MEDIAN_FACTOR", "Person", "PriorFit", "TargetStatus"]
+__all__ = ["OUTLIER_MEDIAN_FACTOR", "PriorFit", "TargetStatus"]
 
 #: The hybrid outlier pass flags a joint only beyond this many times the median disagreement of
 #: the frame's visible joints as well as beyond ``outlier_threshold`` (under heavy Gaussian noise
@@ -49,13 +44,13 @@ OUTLIER_MEDIAN_FACTOR = 3.0
 
 
 _NO_POSE = np.zeros((N_JOINTS, 3))
+_NO_WEIGHTS = np.zeros(N_JOINTS)
 
 
 def _target(f: _Fitting) -> NDArray[np.float64]:
     """The prior rows' target (12, 3) of a person whose rows are made."""
     assert f.prior is not None
     return f.prior.target
-_NO_WEIGHTS = np.zeros(N_JOINTS)
 
 
 class TargetStatus(IntEnum):
@@ -134,39 +129,11 @@ def _prior_weights(prior: PosePrior, weight_xy: float, weight_z: float) -> NDArr
         cache[key] = np.ascontiguousarray(np.column_stack([weight_xy * rel[:, 0], weight_z * rel[:, 1]]))
     return cache[key]
 
-@dataclass(frozen=True)
-class Person:
-    """One person of a batch of lifts (:meth:`pose_lifter.core.lift.lifter.Lifter.people_steps`),
-    checked and normalised.
-
-    Attributes
-    ----------
-    x : ndarray, shape (12, 2)
-        The 2D in input units (missing joints at 0).
-    xn : ndarray, shape (12, 2)
-        The same normalised by ``norm``.
-    w : ndarray, shape (12,)
-        The 2D term's weights (hybrid: times the track's ``data_weight``).
-    norm : Normalisation
-    warm : WarmStart or None
-    cam0 : Camera or None
-        The warm start's camera in the normalised units.
-    track : TrackContext
-        As the modes read it (``temporal_weight`` an array (12,)).
-    """
-
-    x: NDArray[np.float64]
-    xn: NDArray[np.float64]
-    w: NDArray[np.float64]
-    norm: Normalisation
-    warm: WarmStart | None
-    cam0: Camera | None
-    track: TrackContext
-
 
 @dataclass(eq=False)
 class _Fitting:
-    """A person's hybrid starts while :meth:`PriorFit.starts_people` runs them."""
+    """A person's hybrid starts while :meth:`PriorFit.starts_people` runs them (``failure``: why
+    the person stopped short of a result, after which no stage takes them)."""
 
     person: Person
     w: NDArray[np.float64]  #: the 2D weights in use (the outlier pass zeroes some)
@@ -176,7 +143,7 @@ class _Fitting:
     tried: list[StartRun] = field(default_factory=list)
     total: int = 0
     n_starts: int = 0
-    error: Exception | None = None
+    failure: Failure | None = None
 
 
 class PriorFit:
@@ -211,32 +178,11 @@ class PriorFit:
         lp = np.log(p)
         return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))  # np.mean
 
-    def predict(self, x: NDArray[np.float64], visible: NDArray[np.bool_], past: Frames | None,
-                future: Frames | None = None) -> Steps[tuple[NDArray[np.float64], PosePrior]]:
-        """The prior's pose (12, 3) in input units for this frame, and the prior that gave it: the
-        temporal prior when the lift has ``past`` frames, else ``prior`` (its window filled as
-        :meth:`prior_input` says).
-
-        A solve (:mod:`pose_lifter.core.lift.batch`): the pose is yielded as a
-        :class:`~pose_lifter.core.lift.batch.PriorCall`, so the poses of a frame's people go through
-        the network in one pass.
-
-        Raises
-        ------
-        InvalidInputError
-            The prior refuses the input.
-        """
-        prior, pts, vis = self.prior_input(x, visible, past, future)
-        (pose,) = yield [PriorCall(prior, pts, vis, self.options.prior_flip)]
-        if isinstance(pose, Exception):
-            raise pose
-        assert isinstance(pose, np.ndarray)
-        return pose, prior
-
     def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_], past: Frames | None,
                     future: Frames | None = None) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
-        """The prior :meth:`predict` runs and its input (what
-        :class:`~pose_lifter.core.lift.batch.PriorCall` takes): this frame (12, 2), (12,), or a window
+        """The prior a row's pose comes from and its input (what
+        :class:`~pose_lifter.core.lift.batch.PriorCall` takes): the temporal prior when the lift has
+        ``past`` frames, else the single-frame one; this frame (12, 2), (12,), or a window
         (W, 12, 2), (W, 12).
 
         A window holds ``W - 1 - F`` frames before this one and ``F`` after it (``F`` the prior's
@@ -285,32 +231,34 @@ class PriorFit:
         previous[:, 2] = cam0.scale * (prev - mean_rows(prev)) @ cam0.rotation[2]
         return previous
 
-    def _rows_people(self, fits: Sequence[_Fitting]) -> Steps[None]:
-        """Each person's prior rows (:meth:`_prior_rows`) for the joints their weights keep, the
-        poses of all of them in one round of :class:`~pose_lifter.core.lift.batch.PriorCall` s
-        (:meth:`predict`); a person the prior or the rows refuse gets the error."""
-        calls: list[Call] = []
-        asked: list[tuple[_Fitting, PosePrior]] = []
+    def _prior_stage(self, fits: Sequence[_Fitting], rows: bool = True) -> None:
+        """The prior stage: each person's prior pose for the joints their weights keep, the poses of
+        all of them in one pass of each prior's network (:func:`~pose_lifter.core.lift.batch.prior_calls`,
+        over the runs' threads), and with ``rows`` their prior rows (:meth:`_prior_rows`; the
+        learned mode's pose alone reads neither the rows nor the track's ``fill``); a person the
+        prior or the rows refuse gets the failure."""
+        calls: list[PriorCall] = []
+        asked: list[_Fitting] = []
         for f in fits:
             try:
-                x, vis = self._filled(f)
+                x, vis = self._filled(f) if rows else (f.person.x, f.w > 0)
                 track = f.person.track
                 prior, pts, v = self.prior_input(x, vis, track.past, track.future)
                 calls.append(PriorCall(prior, pts, v, self.options.prior_flip))
-                asked.append((f, prior))
+                asked.append(f)
             except Exception as err:
-                f.error = err
+                f.failure = Failure.of(err)
         if not calls:
             return
-        poses = yield calls
-        for (f, prior), pose in zip(asked, poses, strict=True):
+        poses = batch.prior_calls(calls, self.runs.threads)
+        for f, c, pose in zip(asked, calls, poses, strict=True):
+            if isinstance(pose, Failure):
+                f.failure = pose
+                continue
             try:
-                if isinstance(pose, Exception):
-                    raise pose
-                assert isinstance(pose, np.ndarray)
-                f.prior, f.prior_pose = self._prior_rows(f, pose, prior), pose
+                f.prior, f.prior_pose = (self._prior_rows(f, pose, c.prior) if rows else None), pose
             except Exception as err:
-                f.error = err
+                f.failure = Failure.of(err)
 
     @staticmethod
     def _filled(f: _Fitting) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -347,84 +295,76 @@ class PriorFit:
             radii = self.limb_radii(track.limb_proportions)
         return PriorRows(np.ascontiguousarray(target), weights, radii)
 
-    def rows_steps(self, person: Person, w: NDArray[np.float64]
-                   ) -> Steps[tuple[PriorRows, NDArray[np.float64]]]:
-        """The prior rows the starts of ``person`` use with the 2D weights ``w`` (12,), and the
-        prior's pose (12, 3, input units). A solve (one round of the prior's pose)."""
-        f = _Fitting(person, w, self._previous(person))
-        yield from self._rows_people([f])
-        if f.error is not None:
-            raise f.error
-        assert f.prior is not None and f.prior_pose is not None
-        return f.prior, f.prior_pose
-
-    def starts_people(self, people: Sequence[Person]) -> Steps[list[Starts | Exception]]:
-        """The hybrid mode's starts, mirrored hypothesis and outlier pass (module docstring) of
-        several people as one batch: each round's prior poses and runs of all of them together.
-        Per person: every frame starts from the prior's pose (with the warm start's camera when
-        tracked); a cold frame also tries the depth-mirrored run; then up to ``outlier_passes``
-        passes each drop the joints that disagree with the image and run the fit again. Returns
-        each person's :class:`Starts`, or the error their solve raised. A solve
-        (:mod:`pose_lifter.core.lift.batch`)."""
+    def starts_people(self, people: Sequence[Person]) -> list[Starts | Failure]:
+        """The hybrid mode's stages (module docstring) over a batch of people, in order: the prior
+        (every person's pose in one pass of the network), the runs from the prior's poses (one
+        compiled call), the depth-mirrored hypotheses of the cold frames, and up to
+        ``outlier_passes`` outlier passes, each dropping the joints that disagree with the image and
+        running the fit again (a prior pass and a compiled call each). Every frame starts from the
+        prior's pose (with the warm start's camera when tracked): the prior re-initialises the
+        depth on every frame, so a track cannot stay in a wrong basin. Returns each person's
+        :class:`Starts`, or the failure that stopped them."""
         o, runs = self.options, self.runs
         fits = [_Fitting(p, p.w, self._previous(p)) for p in people]
-        yield from self._rows_people(fits)
-        # every frame starts from the prior's pose (with the previous frame's camera when tracked):
-        # the prior re-initialises the depth on every frame, so a track cannot stay in a wrong basin
-        n_alt = o.hybrid_alternations
-        live = [f for f in fits if f.error is None]
-        firsts = yield from runs.runs_steps([RunSpec(f.person.xn, f.w, runs.start_alpha(_target(f)),
-                                                     f.person.cam0, n_alt, prior=f.prior) for f in live])
+        self._prior_stage(fits)
+        live = [f for f in fits if f.failure is None]
+        firsts = runs.run_all([RunSpec(f.person.xn, f.w, runs.start_alpha(_target(f)), f.person.cam0,
+                                       o.hybrid_alternations, prior=f.prior) for f in live])
         for f, run in zip(live, firsts, strict=True):
             self._tried(f, [(StartKind.PRIOR, -1, run)])
         if o.warm_flip:
-            cold = [f for f in fits if f.error is None and f.person.warm is None]
-            flips = yield from runs.mirrored_runs_steps(
-                [(f.person.xn, f.w, f.tried[0].run, f.prior) for f in cold], n_alt)
-            for f, run in zip(cold, flips, strict=True):
-                self._tried(f, [(f.tried[0].kind, -1, f.tried[0].run), (StartKind.MIRRORED, -1, run)])
+            self._mirrored_stage([f for f in fits if f.failure is None and f.person.warm is None])
         for f in fits:
             f.total, f.n_starts = sum(r.run.n_iter for r in f.tried), len(f.tried)
-        yield from self._outlier_passes(fits)
-        return [f.error if f.error is not None else Starts(f.tried, f.total, f.n_starts, f.w, f.prior_pose)
+        self._outlier_passes(fits)
+        return [Starts(f.tried, f.total, f.n_starts, f.w, f.prior_pose) if f.failure is None else f.failure
                 for f in fits]
 
+    def _mirrored_stage(self, cold: Sequence[_Fitting]) -> None:
+        """The mirrored hypotheses of the cold frames: the depth-mirrored copy of each one's run
+        from the prior's pose, tried beside it (:meth:`~pose_lifter.core.lift.runs.Runs.mirrored_runs`)."""
+        flips = self.runs.mirrored_runs([(f.person.xn, f.w, f.tried[0].run, f.prior) for f in cold],
+                                        self.options.hybrid_alternations)
+        for f, run in zip(cold, flips, strict=True):
+            self._tried(f, [(f.tried[0].kind, -1, f.tried[0].run), (StartKind.MIRRORED, -1, run)])
+
     @staticmethod
-    def _tried(f: _Fitting, runs: list[tuple[StartKind, int, Run | Exception]]) -> None:
-        """``f``'s runs tried become ``runs``, or its error the first of them that failed."""
+    def _tried(f: _Fitting, runs: list[tuple[StartKind, int, Run | Failure]]) -> None:
+        """``f``'s runs tried become ``runs``, or its failure the first of them that failed."""
         tried = []
         for kind, index, run in runs:
-            if isinstance(run, Exception):
-                f.error = run
+            if isinstance(run, Failure):
+                f.failure = run
                 return
             tried.append(StartRun(kind, index, run))
         f.tried = tried
 
-    def _outlier_passes(self, fits: Sequence[_Fitting]) -> Steps[None]:
+    def _outlier_passes(self, fits: Sequence[_Fitting]) -> None:
         """Up to ``outlier_passes`` passes over ``fits`` (module docstring): a person whose best
         run leaves joints disagreeing with the image has them dropped, the prior re-run without
-        them, and the fit continued and started again from the prior's new pose (the lower
-        objective kept); a person's passes end when none is flagged."""
+        them (one prior stage), and the fit continued and started again from the prior's new pose
+        (one compiled call; the lower objective kept); a person's passes end when none is
+        flagged."""
         o, runs = self.options, self.runs
         n_alt = o.hybrid_alternations
-        active = [f for f in fits if f.error is None]
+        active = [f for f in fits if f.failure is None]
         for k in range(o.outlier_passes):
             flagged = self._drop_outliers([f for f in active if k < self._passes(f)])
-            yield from self._rows_people(flagged)
-            flagged = [f for f in flagged if f.error is None]
+            self._prior_stage(flagged)
+            flagged = [f for f in flagged if f.failure is None]
             best = [min(f.tried, key=lambda r: r.run.objective) for f in flagged]
             specs = []
             for f, b in zip(flagged, best, strict=True):
                 xn = f.person.xn
                 specs += [RunSpec(xn, f.w, b.run.pose.alpha, b.run.camera.camera, n_alt, prior=f.prior),
                           RunSpec(xn, f.w, runs.start_alpha(_target(f)), None, n_alt, prior=f.prior)]
-            done = yield from runs.runs_steps(specs)
+            done = runs.run_all(specs)
             for j, (f, b) in enumerate(zip(flagged, best, strict=True)):
                 cont, fresh = done[2 * j], done[2 * j + 1]
                 self._tried(f, [(b.kind, b.index, cont), (StartKind.PRIOR, -1, fresh)])
-                if f.error is None:
+                if f.failure is None:
                     f.total += f.tried[0].run.n_iter + f.tried[1].run.n_iter
-            active = [f for f in flagged if f.error is None]
+            active = [f for f in flagged if f.failure is None]
             if not active:
                 break
 
@@ -473,13 +413,29 @@ class PriorFit:
                 flagged.append(f)
         return flagged
 
-    def learned(self, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
-                past: Frames | None = None, future: Frames | None = None) -> Steps[LiftResult]:
-        """The prior's pose alone (``mode="learned"``) as a :class:`LiftResult`: the pose in its
-        own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
-        positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection
-        error of the visible joints in the normalised units. A solve (:meth:`predict`)."""
-        pose_in, _ = yield from self.predict(x, w > 0, past, future)
+    def learned_people(self, people: Sequence[Person]) -> list[LiftResult | Failure]:
+        """The prior's pose alone (``mode="learned"``) of each person, as a :class:`LiftResult`: the
+        poses of all of them in one pass of the network (the prior stage), then each one's pose in
+        its own body frame (right lower leg = 1) with the camera that maps it onto the prior's image
+        positions; ``alpha`` its minimum-norm coefficients, ``objective`` the L1 reprojection error
+        of the visible joints in the normalised units."""
+        fits = [_Fitting(p, p.w, None) for p in people]
+        self._prior_stage(fits, rows=False)
+        out: list[LiftResult | Failure] = []
+        for f in fits:
+            if f.failure is None:
+                assert f.prior_pose is not None
+                try:
+                    out.append(self._learned(f.person, f.prior_pose))
+                    continue
+                except Exception as err:
+                    f.failure = Failure.of(err)
+            out.append(f.failure)
+        return out
+
+    def _learned(self, p: Person, pose_in: NDArray[np.float64]) -> LiftResult:
+        """A person's :meth:`learned_people` result from the prior's pose (12, 3, input units)."""
+        x, w = p.x, p.w
         centred = pose_in - pose_in.mean(axis=0)
         flat, ok = normalise_pose_flat(np.ascontiguousarray(centred))
         if not ok or not np.all(np.isfinite(flat)):
@@ -494,7 +450,7 @@ class PriorFit:
         lv = np.abs(limb_lengths(body) - np.sqrt(self.model.limb_sq))
         return LiftResult(
             pose=body, pose_camera=body @ cam.rotation.T, camera=cam, alpha=alpha,
-            objective=float(w @ np.abs(x - cam.project(body)).sum(axis=1)) / norm.spread,
+            objective=float(w @ np.abs(x - cam.project(body)).sum(axis=1)) / p.norm.spread,
             reprojection_error=float(reproj[vis].mean()), limb_violation=float(lv.max()), n_iter=0,
             converged=True, n_starts=1, start_index=-1, weights=w, total_alternations=0, prior_pose=pose_in,
             start=StartKind.LEARNED)

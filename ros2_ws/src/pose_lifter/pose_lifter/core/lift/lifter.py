@@ -12,7 +12,7 @@ solves try ``n_starts`` starts (the mean pose, then k-means centres of the train
 and keep the lowest ``F``; a warm start (previous frame of the same person) replaces them.
 
 Modes (``options.mode``). ``"paper"`` is the above. ``"learned"`` returns the learned prior's pose
-(:mod:`.prior`) alone. ``"hybrid"`` (the default) keeps the prior in the objective::
+(:mod:`pose_lifter.core.model.prior`) alone. ``"hybrid"`` (the default) keeps the prior in the objective::
 
     F = sum_j w_j |x_j - M0 y_j - t|_1 + theta ||alpha||_1
         + sum_j p_j |P_j,xy - M0 y_j - t|_1 + sum_j q_j |P_j,z - m3 (y_j - mean_i y_i)|_1,
@@ -22,8 +22,9 @@ where ``P`` (12, 3) is the prior's pose for this image (its image positions and 
 missing joints included) and ``p_j = prior_weight_xy / e_j,xy``, ``q_j = prior_weight_z / e_j,z``
 with ``e`` the prior's per-joint error relative to its mean (``PosePrior.abs_error``). The pose
 step minimises ``F`` exactly as the paper's (the prior terms are further L1 rows of its ADM,
-:class:`.pose_step.PriorRows`); the camera step minimises all but the depth term (the camera ADM of the
-paper on the 2D plus the prior's image positions) and every alternation keeps the lowest ``F``.
+:class:`pose_lifter.core.solve.pose_step.PriorRows`); the camera step minimises all but the depth
+term (the camera ADM of the paper on the 2D plus the prior's image positions) and every
+alternation keeps the lowest ``F``.
 Starts: every frame starts from the prior's pose (with the warm start's camera when tracked),
 ``hybrid_alternations`` alternations per run; the depth-mirrored hypothesis is scored on cold
 solves (on warm ones it won no frame: the prior re-initialises the depth on every frame).
@@ -32,18 +33,27 @@ Then up to ``outlier_passes`` outlier passes: visible joints farther than ``outl
 prior's image position get weight 0, the prior is re-run without them and the fit is continued
 and restarted from the prior's new pose (the lower objective kept), so a confidently wrong
 detection does not drag the depth. Tracked frames come screened by the per-track policy
-(:mod:`.tracking`: a joint that jumped is missing; a missing joint's prior target takes the previous
-frame's pose, ``temporal_weight`` per joint).
+(:mod:`pose_lifter.core.track.policy`: a joint that jumped is missing; a missing joint's prior
+target takes the previous frame's pose, ``temporal_weight`` per joint).
 
 Input normalisation: the 2D points are centred on the weighted centroid of the visible joints
 and divided by their RMS spread over that of the mean pose, so ``theta`` and the tolerances
 mean the same at any image size. Results are mapped back to input units.
 
-Where it lives: this module checks the input once, normalises it, picks the mode's starts and
-maps the winner back (one output check); the bases, pose model and priors are loaded by
-:mod:`.models`, the paper's starts are :mod:`.starts`, a run of alternations is :mod:`.runs`, the
-hybrid and learned modes' prior terms, starts and outlier pass are :mod:`.hybrid`, the steps
-:mod:`.camera` and :mod:`.pose_step`.
+A lift is a batch (:meth:`Lifter.lift_people`; :meth:`Lifter.lift` is a batch of one). Its stages
+run in order over all its rows, each one call of the compiled kernels or of the prior's network
+over the rows it concerns: the input checks and normalisation (as arrays over the rows), the
+prior, the runs, the mirrored hypotheses, the outlier passes (:mod:`.hybrid`; the paper's
+multi-start: :mod:`.starts`), then each row's winning run mapped back to input units (one output
+check). Each row ends with a :class:`~pose_lifter.core.results.LiftOutcome`: its
+:class:`~pose_lifter.core.results.LiftStatus` and reason, and its result when solved.
+
+Where it lives: this module checks the input, normalises it, runs the mode's stages and maps the
+winners back; the bases, pose model and priors are loaded by :mod:`pose_lifter.core.model.loading`,
+a batch's rows and the prior's pass are :mod:`.batch`, the paper's starts :mod:`.starts`, the runs
+of alternations :mod:`.runs`, the hybrid and learned modes' prior terms, starts and outlier pass
+:mod:`.hybrid`, the steps :mod:`pose_lifter.core.solve.camera` and
+:mod:`pose_lifter.core.solve.pose_step`.
 """
 
 from __future__ import annotations
@@ -54,7 +64,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError, OptionsError, SolverError, TooFewJointsError
+from ..errors import InvalidInputError, OptionsError
 from ..model.bases import PoseBases
 from ..model.loading import LifterData
 from ..model.pose_model import LiftedConstraints, PoseModel
@@ -62,11 +72,22 @@ from ..model.prior import PosePrior
 from ..model.skeleton import LEFT_LIMBS, LIMB_GROUP_OF, N_JOINTS, RIGHT_LIMBS, limb_lengths
 from ..numeric.fast import row_norms
 from ..options import LifterOptions, Mode
-from ..results import Camera, Frames, LiftResult, Normalisation, TrackContext, WarmStart, project_each
+from ..results import (
+    Camera,
+    Failure,
+    Frames,
+    LiftOutcome,
+    LiftResult,
+    LiftStatus,
+    Normalisation,
+    TrackContext,
+    WarmStart,
+    project_each,
+)
 from ..solve.alpha.lifted_admm import QStepFn
 from ..validation import check_keypoints, joint_weights
-from .batch import Failed, LiftCall, Steps, gather
-from .hybrid import Person, PriorFit
+from .batch import NO_TRACK, LiftRow, Person
+from .hybrid import PriorFit
 from .runs import Runs
 from .starts import Starts, paper_starts
 
@@ -78,9 +99,6 @@ KERNEL_MODES: tuple[Mode, ...] = ("hybrid", "paper")
 _LEFT_LIMBS = np.array(LEFT_LIMBS)
 _RIGHT_LIMBS = np.array(RIGHT_LIMBS)
 _GROUP_OF = np.array(LIMB_GROUP_OF)
-_NO_TRACK = TrackContext()
-#: A place in :meth:`Lifter.people_steps`' results before its person is lifted.
-_NOT_LIFTED = RuntimeError("person not lifted")
 
 
 class Lifter:
@@ -97,7 +115,7 @@ class Lifter:
         ``options.temporal_prior_file`` on first use).
     reads_ahead : bool
         The lift knows each track's next frames (an offline lift: the tracks' frames are given
-        with :class:`~pose_lifter.core.track.policy.FramesAhead`): a temporal prior that reads frames
+        with :class:`~pose_lifter.core.track.records.FramesAhead`): a temporal prior that reads frames
         after the one it lifts is accepted. False (a live lift): such a prior is refused
         (:class:`~pose_lifter.core.errors.PriorFileError` when it loads).
     """
@@ -117,8 +135,9 @@ class Lifter:
 
     @property
     def threads(self) -> int:
-        """Threads over which each round of runs is split (:mod:`pose_lifter.core.lift.batch`; the
-        compiled kernel releases the GIL): 1 by default; the results do not depend on it."""
+        """Threads over which each stage's runs are split
+        (:func:`pose_lifter.core.solve.run_kernel.run_calls`; the compiled kernel releases the GIL):
+        1 by default; the results do not depend on it."""
         return self._threads
 
     @threads.setter
@@ -261,117 +280,99 @@ class Lifter:
             Bad input (shapes, too few visible joints, a bad ``track`` field).
         SolverError
             The solve diverged on valid input.
+        RuntimeError
+            An unexpected error (a bug), named in its message.
         """
-        return self._runs.solve(self.lift_steps(points_2d, confidence, warm, track))
+        return self.lift_people([LiftRow(points_2d, confidence, warm, track)])[0].unwrap()
 
-    def lift_steps(
-        self,
-        points_2d: NDArray[np.float64],
-        confidence: NDArray[np.float64] | None = None,
-        warm: WarmStart | None = None,
-        track: TrackContext | None = None,
-    ) -> Steps[LiftResult]:
-        """:meth:`lift` as a solve (:mod:`pose_lifter.core.lift.batch`): a
-        :class:`~pose_lifter.core.lift.batch.LiftCall`, lifted with the other people of its round
-        (:meth:`lift_people`)."""
-        (out,) = yield [LiftCall(self, points_2d, confidence, warm, track)]
-        if isinstance(out, Exception):
-            raise out
-        assert isinstance(out, LiftResult)
-        return out
-
-    def lift_people(self, calls: Sequence[LiftCall]) -> list[LiftResult | Exception]:
-        """Several people's lifts (:meth:`lift` each) as one batch, in order: the result of each,
-        or the error it raised (:meth:`people_steps` driven to its end). Should the batch itself
-        fail (a bug: each person's refusals are theirs), each person is lifted again alone, so
-        the failure costs only the people it belongs to."""
+    def lift_people(self, rows: Sequence[LiftRow]) -> list[LiftOutcome]:
+        """Several people's lifts (:meth:`lift` each) as one batch, in order: each row's
+        :class:`~pose_lifter.core.results.LiftOutcome` (its status and reason, its result when
+        solved). A row's result is what it gets lifted alone. Should the batch itself fail (a bug:
+        each row's refusals are its own), each row is lifted again alone, so the failure costs only
+        the rows it belongs to (``FAILED``, the error as the reason)."""
         try:
-            return self._runs.solve(self.people_steps(calls))
+            return self._stages(rows)
         except Exception as err:
-            if len(calls) == 1:
-                return [err]
-        return [self.lift_people([c])[0] for c in calls]
+            if len(rows) == 1:
+                return [LiftOutcome.failed(Failure.of(err))]
+        return [self.lift_people([r])[0] for r in rows]
 
-    def people_steps(self, calls: Sequence[LiftCall]) -> Steps[list[LiftResult | Exception]]:
-        """:meth:`lift_people` as a solve: every person's input checked and normalised, their
-        starts in common rounds (the hybrid mode's as one batch, :meth:`PriorFit.starts_people`),
-        each winner mapped back to input units. A person's result is what they get lifted alone."""
-        out: list[LiftResult | Exception] = [_NOT_LIFTED] * len(calls)
+    def _stages(self, rows: Sequence[LiftRow]) -> list[LiftOutcome]:
+        """:meth:`lift_people`'s stages in order: every row's input checked and normalised (as
+        arrays over the rows, :meth:`_people`); the mode's stages over the rows that passed (hybrid:
+        :meth:`PriorFit.starts_people`, the prior, the runs, the mirrored hypotheses, the outlier
+        passes; paper: :func:`~pose_lifter.core.lift.starts.paper_starts`; learned:
+        :meth:`PriorFit.learned_people`); each winner mapped back to input units (:meth:`_results`)."""
+        out: dict[int, LiftOutcome] = {}
         ready: list[tuple[int, Person]] = []
-        for i, p in enumerate(self._people(calls)):
-            if isinstance(p, Exception):
-                out[i] = p
+        for i, p in enumerate(self._people(rows)):
+            if isinstance(p, Failure):
+                out[i] = LiftOutcome.failed(p)
             else:
                 ready.append((i, p))
-        fit, mode = self._prior_fit, self._options.mode
+        fit, mode, people = self._prior_fit, self._options.mode, [p for _, p in ready]
         if fit is not None and mode == "learned":
-            learned = yield from gather([fit.learned(p.x, p.w, p.norm, p.track.past, p.track.future)
-                                         for _, p in ready], capture=True)
-            for (i, _), r in zip(ready, learned, strict=True):
-                out[i] = r.error if isinstance(r, Failed) else r
-            return out
-        starts: list[Starts | Exception]
-        if fit is not None:  # hybrid
-            starts = yield from fit.starts_people([p for _, p in ready])
-        else:
-            tried = yield from gather([paper_starts(self._runs, self.bases, self._options, p.xn, p.w, p.warm,
-                                                    p.cam0) for _, p in ready], capture=True)
-            starts = [t.error if isinstance(t, Failed) else t for t in tried]
+            for (i, _), r in zip(ready, fit.learned_people(people), strict=True):
+                out[i] = LiftOutcome.failed(r) if isinstance(r, Failure) else LiftOutcome.solved(r)
+            return [out[i] for i in range(len(rows))]
+        starts = (fit.starts_people(people) if fit is not None
+                  else paper_starts(self._runs, self.bases, self._options, people))
         won: list[tuple[int, Person, Starts]] = []
         for (i, p), st in zip(ready, starts, strict=True):
-            if isinstance(st, Exception):
-                out[i] = st
+            if isinstance(st, Failure):
+                out[i] = LiftOutcome.failed(st)
             else:
                 won.append((i, p, st))
         if won:
             results = self._results([(p, st) for _, p, st in won], scaled=fit is not None)
-            for (i, _, _), r in zip(won, results, strict=True):
-                out[i] = r
-        return out
+            out.update((i, lifted) for (i, _, _), lifted in zip(won, results, strict=True))
+        return [out[i] for i in range(len(rows))]
 
-    def _people(self, calls: Sequence[LiftCall]) -> list[Person | Exception]:
-        """Each person's input checked and normalised for :meth:`people_steps`, or why it is
-        refused: the confidences below ``confidence_threshold`` and the joints with non-finite
-        coordinates missing (weight 0), at least ``min_visible_joints`` left, as arrays over the
-        people; then :meth:`_person` each."""
-        out: list[Person | Exception] = [_NOT_LIFTED] * len(calls)
+    def _people(self, rows: Sequence[LiftRow]) -> list[Person | Failure]:
+        """The input checks stage: each row's input checked and normalised for :meth:`_stages`, or
+        why it is refused: the confidences below ``confidence_threshold`` and the joints with
+        non-finite coordinates missing (weight 0), at least ``min_visible_joints`` left, as arrays
+        over the rows; then :meth:`_person` each."""
+        out: dict[int, Person | Failure] = {}
         checked: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]] = []
-        for i, c in enumerate(calls):
+        for i, r in enumerate(rows):
             try:
-                checked.append((i, *check_keypoints(c.points, c.confidence)))
+                checked.append((i, *check_keypoints(r.points, r.confidence)))
             except Exception as err:
-                out[i] = err
-        if not checked:
-            return out
-        o = self._options
-        points = np.array([x for _, x, _ in checked])  # (n, 12, 2)
-        conf = np.array([c for _, _, c in checked])  # (n, 12)
-        points, weights = joint_weights(points, conf, o.confidence_threshold)
-        n_vis = np.count_nonzero(weights > 0, axis=1).tolist()
-        centre, spread, ok = self._normalised(points, weights)
-        with np.errstate(divide="ignore", invalid="ignore"):  # the rows refused below
-            xn = (points - centre[:, None, :]) / spread[:, None, None]
-        for k, (i, _, _) in enumerate(checked):
-            try:
+                out[i] = Failure.of(err)
+        if checked:
+            o = self._options
+            points = np.array([x for _, x, _ in checked])  # (n, 12, 2)
+            conf = np.array([c for _, _, c in checked])  # (n, 12)
+            points, weights = joint_weights(points, conf, o.confidence_threshold)
+            n_vis = np.count_nonzero(weights > 0, axis=1).tolist()
+            centre, spread, ok = self._normalised(points, weights)
+            with np.errstate(divide="ignore", invalid="ignore"):  # the rows refused below
+                xn = (points - centre[:, None, :]) / spread[:, None, None]
+            for k, (i, _, _) in enumerate(checked):
                 if n_vis[k] < o.min_visible_joints:
-                    raise TooFewJointsError(
-                        f"{n_vis[k]} joints visible (confidence >= {o.confidence_threshold}); "
-                        f"at least {o.min_visible_joints} needed")
-                if not ok[k]:
-                    raise InvalidInputError("the visible keypoints are (almost) all at one point")
-                norm = Normalisation(centre[k], float(spread[k]))
-                out[i] = self._person(calls[i], points[k], weights[k], norm, xn[k])
-            except Exception as err:
-                out[i] = err
-        return out
+                    out[i] = Failure(LiftStatus.TOO_FEW_JOINTS,
+                                     f"{n_vis[k]} joints visible (confidence >= {o.confidence_threshold}); "
+                                     f"at least {o.min_visible_joints} needed")
+                elif not ok[k]:
+                    out[i] = Failure(LiftStatus.INVALID_INPUT,
+                                     "the visible keypoints are (almost) all at one point")
+                else:
+                    try:
+                        norm = Normalisation(centre[k], float(spread[k]))
+                        out[i] = self._person(rows[i], points[k], weights[k], norm, xn[k])
+                    except Exception as err:
+                        out[i] = Failure.of(err)
+        return [out[i] for i in range(len(rows))]
 
-    def _person(self, call: LiftCall, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
+    def _person(self, row: LiftRow, x: NDArray[np.float64], w: NDArray[np.float64], norm: Normalisation,
                 xn: NDArray[np.float64]) -> Person:
         """A person of :meth:`_people` with its 2D ``x`` (12, 2), weights ``w`` (12,), normalisation
         and normalised 2D ``xn`` (12, 2): its track's context checked, its warm start's camera in
         normalised units."""
-        tc = self._track_context(_NO_TRACK if call.track is None else call.track, w)
-        warm, cam0 = call.warm, None
+        tc = self._track_context(NO_TRACK if row.track is None else row.track, w)
+        warm, cam0 = row.warm, None
         learned = self._prior_fit is not None and self._options.mode == "learned"
         if warm is not None and not learned:
             if warm.alpha.shape != (self.bases.n_bases,):
@@ -428,7 +429,7 @@ class Lifter:
         pairs = 0.5 * (lengths[..., _LEFT_LIMBS] + lengths[..., _RIGHT_LIMBS])
         return np.asarray(pairs[..., _GROUP_OF])
 
-    def _results(self, won: Sequence[tuple[Person, Starts]], scaled: bool) -> list[LiftResult | Exception]:
+    def _results(self, won: Sequence[tuple[Person, Starts]], scaled: bool) -> list[LiftOutcome]:
         """Each person's winning run (of their :class:`Starts`) mapped back to input units and
         checked finite, the people's arrays together (the 2D term's weights divided by the
         track's ``data_weight`` when ``scaled``: the hybrid mode multiplied them by it)."""
@@ -448,14 +449,15 @@ class Lifter:
         alpha = np.array([r.pose.alpha for r in runs])
         finite = (np.isfinite(pose).all(axis=(1, 2)) & np.isfinite(alpha).all(axis=1)
                   & np.isfinite(rotation).all(axis=(1, 2)) & np.isfinite(translation).all(axis=1)).tolist()
-        out: list[LiftResult | Exception] = []
+        out: list[LiftOutcome] = []
         for k, ((p, st), b, run) in enumerate(zip(won, best, runs, strict=True)):
             if not finite[k]:
-                out.append(SolverError("the solve produced non-finite values for this input"))
+                out.append(LiftOutcome(LiftStatus.DIVERGED,
+                                       "the solve produced non-finite values for this input"))
                 continue
             w = st.weights / p.track.data_weight if scaled else st.weights
             reproj = reproj_all[k][w > 0]
-            out.append(LiftResult(
+            out.append(LiftOutcome.solved(LiftResult(
                 pose=run.pose.pose,
                 pose_camera=pose_camera[k],
                 camera=cam[k],
@@ -472,7 +474,7 @@ class Lifter:
                 prior_pose=st.prior_pose,
                 history=run.history,
                 start=b.kind,
-            ))
+            )))
         return out
 
     def lift_many(

@@ -5,12 +5,14 @@ pose by alternating the camera step (:func:`pose_lifter.core.solve.camera.camera
 pose step (:func:`pose_lifter.core.solve.pose_step.pose_step`) until the relative decrease of ``F`` falls
 below ``alternation_tol`` or the alternation cap is reached, and keeps its lowest-``F``
 alternation. A run can be continued (a screened start), and its depth-mirrored copy (the
-weak-perspective ambiguity: the same 2D, reflected depth) started.
+weak-perspective ambiguity: the same 2D, reflected depth) started. The runs of a stage, every row's,
+are one call (:meth:`Runs.run_all`).
 
-With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`),
-with or without limbs; the cvxpy references and bases whose limb map is not onto (the paper's
-inner ADM as the alpha-step) run the Python loop of :mod:`pose_lifter.core.reference.runs`, the
-kernel's reference, on the same objective terms and stopping rule.
+With the default solvers a run is one compiled kernel (:mod:`pose_lifter.core.solve.run_kernel`;
+a stage's runs in one :func:`~pose_lifter.core.solve.run_kernel.run_calls`), with or without
+limbs; the cvxpy references and bases whose limb map is not onto (the paper's inner ADM as the
+alpha-step) run the Python loop of :mod:`pose_lifter.core.reference.runs`, the kernel's
+reference, on the same objective terms and stopping rule.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,22 +31,14 @@ from ..numeric.jit import njit
 from ..numeric.records import StepSettings
 from ..options import LifterOptions
 from ..reference.runs import ColdStart, alternation_loop
-from ..results import Alternation, Camera, CameraResult, PoseResult, SolveInfo
+from ..results import Alternation, Camera, CameraResult, Failure, PoseResult, SolveInfo
 from ..solve.alpha.lifted_admm import QStepFn
 from ..solve.camera import camera_step_trusted, initial_camera
 from ..solve.pose_step import PriorRows, compiled_pose_step, pose_step, prior_operands
-from ..solve.run_kernel import (
-    RunCall,
-    RunOut,
-    RunStatus,
-    _stack_camera_data,
-)
+from ..solve.run_kernel import RunCall, RunOut, RunStatus, _stack_camera_data, run_calls
 from ..solve.settings import step_settings
-from .batch import Call, Steps, solve
 
 __all__ = ["PINV_RCOND", "Run", "RunSpec", "Runs"]
-
-T = TypeVar("T")
 
 #: Relative cut-off of the bases' singular values in the minimum-norm coefficients of a start
 #: pose (:func:`_mirror_kernel`, a pseudo-inverse): the packaged bases' smallest singular value is
@@ -54,8 +47,6 @@ T = TypeVar("T")
 #: dominated the objective. It also moves the paper's mirrored warm start slightly.
 PINV_RCOND = 1e-3
 _EYE3 = np.eye(3)
-#: A place in :meth:`Runs.runs_steps`' results before its run is known.
-_NOT_RUN = RuntimeError("run not computed")
 
 
 @dataclass(frozen=True)
@@ -73,7 +64,7 @@ class Run:
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run of a round (:meth:`Runs.runs_steps`): the arguments of :meth:`Runs.run_steps`."""
+    """One run of a stage (:meth:`Runs.run_all`): the arguments of :meth:`Runs.run`."""
 
     xn: NDArray[np.float64]  #: (12, 2) the normalised 2D
     w: NDArray[np.float64]  #: (12,) its weights
@@ -143,7 +134,7 @@ class Runs:
                          and compiled_pose_step(o, model, qstep_fn))
         #: the steps' settings as the kernel takes them (made on the first compiled run)
         self._settings: StepSettings | None = None
-        #: threads over which a round of runs is split (:func:`pose_lifter.core.solve.run_kernel.run_calls`)
+        #: threads over which a stage's runs are split (:func:`pose_lifter.core.solve.run_kernel.run_calls`)
         self.threads = 1
 
     @property
@@ -152,11 +143,6 @@ class Runs:
         if self._settings is None:
             self._settings = step_settings(self.options)
         return self._settings
-
-    def solve(self, steps: Steps[T]) -> T:
-        """Drive a solve of this model and options to its result
-        (:func:`pose_lifter.core.lift.batch.solve`, over :attr:`threads` threads)."""
-        return solve(steps, self.model.kernel_arrays, self.settings, self.threads)
 
     def camera_data(self, xn: NDArray[np.float64], w: NDArray[np.float64], prior: PriorRows | None
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
@@ -213,70 +199,66 @@ class Runs:
     def run(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
             cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
             pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Run:
-        """:meth:`run_steps` driven alone."""
-        return self.solve(self.run_steps(xn, w, alpha0, cam0, max_alternations, start, pose_max_iter, prior))
-
-    def run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], alpha0: NDArray[np.float64],
-                  cam0: Camera | None, max_alternations: int | None = None, start: Run | None = None,
-                  pose_max_iter: int | None = None, prior: PriorRows | None = None) -> Steps[Run]:
         """Alternate camera and pose steps from ``alpha0`` (and optionally a camera), or
         continue a previous run ``start``. The run keeps its lowest-objective
         alternation (the hybrid objective adds the prior's depth rows to the camera step's).
-
-        A solve (:mod:`pose_lifter.core.lift.batch`), a round of one run (:meth:`runs_steps`)."""
-        spec = RunSpec(xn, w, alpha0, cam0, max_alternations, start, pose_max_iter, prior)
-        (run,) = yield from self.runs_steps([spec])
-        if isinstance(run, Exception):
-            raise run
+        :meth:`run_all` of one run; raises its failure's error."""
+        (run,) = self.run_all([RunSpec(xn, w, alpha0, cam0, max_alternations, start, pose_max_iter, prior)])
+        if isinstance(run, Failure):
+            raise run.error()
         return run
 
-    def runs_steps(self, specs: Sequence[RunSpec]) -> Steps[list[Run | Exception]]:
-        """The runs of ``specs`` (:meth:`run_steps` each), in order, or the error each raised.
-
-        A solve (:mod:`pose_lifter.core.lift.batch`): the compiled runs are yielded as one round of
-        :class:`~pose_lifter.core.solve.run_kernel.RunCall` s; the other solvers' runs are the
-        Python loop (:func:`pose_lifter.core.reference.runs.alternation_loop`), which yields
-        nothing."""
+    def run_all(self, specs: Sequence[RunSpec]) -> list[Run | Failure]:
+        """The runs of ``specs`` (:meth:`run` each), in order, or the failure of each that failed:
+        the compiled runs in one :func:`~pose_lifter.core.solve.run_kernel.run_calls` (over
+        :attr:`threads` threads); the other solvers' runs one by one in the Python loop
+        (:func:`pose_lifter.core.reference.runs.alternation_loop`)."""
+        if not self.compiled:
+            return [self._loop_run(sp) for sp in specs]
         o = self.options
-        out: list[Run | Exception] = [_NOT_RUN] * len(specs)
-        calls: list[Call] = []
+        out: dict[int, Run | Failure] = {}
+        calls: list[RunCall] = []
         which: list[int] = []
         for i, sp in enumerate(specs):
             n_alt = o.max_alternations if sp.max_alternations is None else sp.max_alternations
             try:
-                if not self.compiled:
-                    start = ColdStart(sp.alpha0, sp.cam0) if sp.start is None else sp.start
-                    data = self.camera_data(sp.xn, sp.w, sp.prior)
-                    out[i] = Run(*alternation_loop(self, sp.xn, sp.w, data, start, n_alt, sp.pose_max_iter,
-                                                   sp.prior))
-                    continue
                 calls.append(self._compiled_call(sp.w, sp.xn, sp.alpha0, sp.cam0, n_alt, sp.start,
                                                  sp.pose_max_iter, sp.prior))
                 which.append(i)
             except Exception as err:
-                out[i] = err
+                out[i] = Failure.of(err)
         if calls:
-            done = yield calls
+            done = run_calls(calls, self.model.kernel_arrays, self.settings, self.threads)
             for i, d in zip(which, done, strict=True):
                 out[i] = self._run_of(d, specs[i].start)
-        return out
+        return [out[i] for i in range(len(specs))]
 
-    def _run_of(self, out: object, start: Run | None) -> Run | Exception:
-        """The :class:`Run` of a compiled run's outcome, or the error it stands for (numpy's
+    def _loop_run(self, sp: RunSpec) -> Run | Failure:
+        """A run of ``sp`` in the Python loop, or its failure."""
+        o = self.options
+        n_alt = o.max_alternations if sp.max_alternations is None else sp.max_alternations
+        try:
+            start = ColdStart(sp.alpha0, sp.cam0) if sp.start is None else sp.start
+            data = self.camera_data(sp.xn, sp.w, sp.prior)
+            return Run(*alternation_loop(self, sp.xn, sp.w, data, start, n_alt, sp.pose_max_iter, sp.prior))
+        except Exception as err:
+            return Failure.of(err)
+
+    def _run_of(self, out: RunOut | Exception, start: Run | None) -> Run | Failure:
+        """The :class:`Run` of a compiled run's outcome, or the failure it stands for (numpy's
         ``LinAlgError`` of a diverged run as :class:`SolverError`)."""
         try:
             if isinstance(out, Exception):
                 with diverged_as_solver_error("run"):
                     raise out
-            assert isinstance(out, RunOut)
             return self._compiled_run(out, start)
         except Exception as err:
-            return err
+            return Failure.of(err)
 
     def _compiled_call(self, w: NDArray[np.float64], xn: NDArray[np.float64], alpha0: NDArray[np.float64],
                        cam0: Camera | None, n_alt: int, start: Run | None, pose_max_iter: int | None,
                        prior: PriorRows | None) -> RunCall:
-        """The operands of :meth:`run_steps`' compiled run
+        """The operands of a compiled run
         (:func:`pose_lifter.core.solve.run_kernel._run_kernel`; the kernel stacks the camera step's
         data itself, :meth:`camera_data` is needed here only for a new run's cold camera)."""
         m = self.model
@@ -342,30 +324,22 @@ class Runs:
         return alpha
 
 
-    def mirrored_run_steps(self, xn: NDArray[np.float64], w: NDArray[np.float64], run: Run,
-                           prior: PriorRows | None, max_alternations: int | None = None) -> Steps[Run]:
-        """The depth-mirrored copy of ``run`` as a start (:meth:`mirrored_runs_steps` of one)."""
-        (flip,) = yield from self.mirrored_runs_steps([(xn, w, run, prior)], max_alternations)
-        if isinstance(flip, Exception):
-            raise flip
-        return flip
-
-    def mirrored_runs_steps(self, items: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], Run,
-                                                        PriorRows | None]],
-                            max_alternations: int | None = None) -> Steps[list[Run | Exception]]:
-        """For each ``(xn, w, run, prior)``, the depth-mirrored copy of ``run`` as a start: screened
-        by one alternation and continued when it already beats ``run`` (``warm_flip_screen``), or
-        run to convergence; the error where it failed. A solve: the screens in one round, the
-        continued runs in the next."""
+    def mirrored_runs(self, items: Sequence[tuple[NDArray[np.float64], NDArray[np.float64], Run,
+                                                  PriorRows | None]],
+                      max_alternations: int | None = None) -> list[Run | Failure]:
+        """The mirrored hypotheses: for each ``(xn, w, run, prior)``, the depth-mirrored copy of
+        ``run`` as a start, screened by one alternation and continued when it already beats ``run``
+        (``warm_flip_screen``), or run to convergence; the failure where it failed. The screens of
+        every item in one call (:meth:`run_all`), the continued runs in a second."""
         o = self.options
-        out: list[Run | Exception] = [_NOT_RUN] * len(items)
+        out: dict[int, Run | Failure] = {}
         specs: list[RunSpec] = []
         which: list[int] = []
         for i, (xn, w, run, prior) in enumerate(items):
             try:
                 mirrored = self.mirrored_alpha(run)
             except Exception as err:
-                out[i] = err
+                out[i] = Failure.of(err)
                 continue
             if o.warm_flip_screen:
                 # hybrid: a short screening pose step, as for the paper's cold starts
@@ -374,19 +348,17 @@ class Runs:
             else:
                 specs.append(RunSpec(xn, w, mirrored, None, max_alternations, prior=prior))
             which.append(i)
-        firsts = yield from self.runs_steps(specs)
         more: list[RunSpec] = []
         continued: list[int] = []
-        for i, flip in zip(which, firsts, strict=True):
+        for i, flip in zip(which, self.run_all(specs), strict=True):
             out[i] = flip
             xn, w, run, prior = items[i]
-            if o.warm_flip_screen and not isinstance(flip, Exception) and flip.objective < run.objective:
+            if o.warm_flip_screen and isinstance(flip, Run) and flip.objective < run.objective:
                 more.append(RunSpec(xn, w, flip.pose.alpha, None, max_alternations, start=flip, prior=prior))
                 continued.append(i)
-        done = yield from self.runs_steps(more)
-        for i, flip in zip(continued, done, strict=True):
+        for i, flip in zip(continued, self.run_all(more), strict=True):
             out[i] = flip
-        return out
+        return [out[i] for i in range(len(items))]
 
     def start_alpha(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """Minimum-norm coefficients of a camera-frame pose (12, 3) in its own body frame (zeros,

@@ -2,7 +2,7 @@
 reference (:func:`pose_lifter.core.solve.run_kernel._run_kernel`, checked against it in
 ``tests/core/solve/test_run_kernel.py``) and the run of the settings the kernel does not take,
 the cvxpy reference steps and the paper's inner ADM on bases whose limb map is not onto
-(:meth:`pose_lifter.core.lift.runs.Runs.run_steps`). The same objective terms and stopping rule
+(:meth:`pose_lifter.core.lift.runs.Runs.run_all`). The same objective terms and stopping rule
 as the kernel (:func:`~pose_lifter.core.solve.run_kernel._run_objective`,
 :func:`~pose_lifter.core.solve.run_kernel._alternation_stops`)."""
 

@@ -1,5 +1,5 @@
 """A run of camera/pose alternations as one compiled kernel: the run of the default solver
-(:meth:`pose_lifter.core.lift.runs.Runs.run_steps`; every person's runs of a round in one call,
+(:meth:`pose_lifter.core.lift.runs.Runs.run_all`; every person's runs of a stage in one call,
 :func:`run_calls`).
 
 Per alternation ``i`` the kernel minimises, for the current camera, the pose objective (the

@@ -48,6 +48,11 @@ For each frame of a track (``track_id >= 0``; negative ids are untracked, every 
   lift's, which knows each track's next frames) reads the track's next frames too: the caller
   gives them (:class:`FramesAhead`); the live node's priors are causal.
 
+The frames of several tracks are lifted together (:func:`lift_tracks`): the policy hands every
+frame's row to its lifter once (:meth:`~pose_lifter.core.lift.lifter.Lifter.lift_people`, one batch
+per lifter), and once more the rows of the frames it re-initialises (their cold lifts). Each frame
+ends with a :class:`TrackOutcome`: its status and reason, and its :class:`TrackedLift` when lifted.
+
 Tracks unseen for longer than ``track_timeout`` (input stamps) are forgotten by :meth:`expire`.
 A track's state and the rules that read it are :mod:`pose_lifter.core.track.state`.
 """
@@ -57,17 +62,27 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import cast
+from typing import TypeAlias, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import PoseLifterError
-from ..lift.batch import Call, LiftCall, Steps
+from ..lift.batch import LiftRow
 from ..lift.lifter import KERNEL_MODES, Lifter
 from ..model.skeleton import N_JOINTS
 from ..options import LifterOptions
-from ..results import LiftResult, TrackContext, WarmStart, project_each, with_camera_poses
+from ..results import (
+    Failure,
+    LiftOutcome,
+    LiftResult,
+    LiftStatus,
+    Outcome,
+    TrackContext,
+    WarmStart,
+    project_each,
+    with_camera_poses,
+)
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
 from .later import LaterFrame, update_tracks_later
 from .later import compile_kernels as compile_later_kernels
@@ -86,10 +101,11 @@ __all__ = [
     "FramesAhead",
     "OutOfOrderFrameError",
     "TrackFrame",
+    "TrackOutcome",
     "TrackPolicy",
     "TrackedLift",
     "compile_kernels",
-    "lift_tracks_steps",
+    "lift_tracks",
 ]
 
 
@@ -100,10 +116,11 @@ __all__ = [
 #: is 1 (no filter), linear between.
 DISTURBANCE_FULL = 0.2
 
+
 @dataclass(frozen=True)
 class TrackFrame:
-    """One person's frame for :func:`lift_tracks_steps`: :meth:`TrackPolicy.lift_steps`'
-    arguments and the policy of its track."""
+    """One person's frame for :func:`lift_tracks`: :meth:`TrackPolicy.lift`'s arguments and the
+    policy of its track."""
 
     policy: TrackPolicy
     track_id: int
@@ -138,64 +155,68 @@ class _Pending:
     seen: NDArray[np.float64]  #: the 2D the lift reads (12, 2)
     context: TrackContext
 
-    def call(self, warm: WarmStart | None) -> LiftCall:
-        """The lift of this frame, from ``warm`` (None: cold)."""
-        lifter = self.frame.policy.lifter
-        return LiftCall(lifter, self.seen, self.screened.confidence, warm, self.context)
+
+#: How one frame of :func:`lift_tracks` ended: ``SOLVED`` with its :class:`TrackedLift`, the lift's
+#: refusal, ``OUT_OF_ORDER`` (the track is kept), or ``FAILED`` (a bug).
+TrackOutcome: TypeAlias = Outcome[TrackedLift]
 
 
-def lift_tracks_steps(frames: Sequence[TrackFrame]) -> Steps[list[TrackedLift | Exception]]:
-    """Several people's frames (:meth:`TrackPolicy.lift_steps` each, each through its own
-    track's policy) in common rounds: every frame screened by its track, the lifts of all of them
-    in one round (:class:`~pose_lifter.core.lift.batch.LiftCall`: one batch per lifter), the cold
-    solves of the re-initialised ones in the next, then each entered into its track. Returns each
-    frame's :class:`TrackedLift`, or the error it raised (a lift's error drops the track's warm
-    start). A solve (:mod:`pose_lifter.core.lift.batch`)."""
-    out: list[TrackedLift | Exception] = [_NOT_TRACKED] * len(frames)
+def lift_tracks(frames: Sequence[TrackFrame]) -> list[TrackOutcome]:
+    """Several people's frames (:meth:`TrackPolicy.lift` each, each through its own track's
+    policy) together, in order: every frame screened by its track; the rows of all of them lifted
+    at once (one :meth:`~pose_lifter.core.lift.lifter.Lifter.lift_people` per lifter); the rows of
+    the frames re-initialised lifted again, cold, at once; then each frame entered into its track.
+    Returns each frame's :class:`TrackOutcome` (a refused lift drops the track's warm start)."""
+    out: dict[int, TrackOutcome] = {}
     pending: list[tuple[int, _Pending]] = []
     for k, found in _before(frames, out):
         try:
             pending.append((k, found.frame.policy._pending(found)))
         except Exception as err:
-            out[k] = err
-    calls: list[Call] = [p.call(p.warm) for _, p in pending]
-    results = (yield calls) if calls else []
+            out[k] = TrackOutcome.failed(Failure.of(err))
     solved: list[tuple[int, _Pending, LiftResult, bool]] = []
     again: list[tuple[int, _Pending, LiftResult]] = []
-    for (k, p), r in zip(pending, results, strict=True):
-        if isinstance(r, Exception):
+    for (k, p), r in zip(pending, _lift_rows([(p, p.warm) for _, p in pending]), strict=True):
+        if r.result is None:
             out[k] = _dropped_warm(p, r)
-            continue
-        assert isinstance(r, LiftResult)
-        if p.frame.policy._reinit(p, r):
-            again.append((k, p, r))
+        elif p.frame.policy._reinit(p, r.result):
+            again.append((k, p, r.result))
         else:
-            solved.append((k, p, r, False))
-    cold_calls: list[Call] = [p.call(None) for _, p, _ in again]
-    colds = (yield cold_calls) if cold_calls else []
-    for (k, p, warm_result), cold in zip(again, colds, strict=True):
-        if isinstance(cold, Exception):
+            solved.append((k, p, r.result, False))
+    for (k, p, warm_result), cold in zip(again, _lift_rows([(p, None) for _, p, _ in again]), strict=True):
+        if cold.result is None:
             out[k] = _dropped_warm(p, cold)
-            continue
-        assert isinstance(cold, LiftResult)
-        if cold.objective < warm_result.objective:
-            solved.append((k, p, cold, True))
+        elif cold.result.objective < warm_result.objective:
+            solved.append((k, p, cold.result, True))
         else:
             solved.append((k, p, warm_result, False))
     _after(solved, out)
-    return out
+    return [out[k] for k in range(len(frames))]
 
 
-def _before(frames: Sequence[TrackFrame], out: list[TrackedLift | Exception]) -> list[tuple[int, _Found]]:
+def _lift_rows(items: Sequence[tuple[_Pending, WarmStart | None]]) -> list[LiftOutcome]:
+    """The lifts of frames (the 2D each reads), each from its warm start (None: cold), in order: the
+    rows of each lifter in one :meth:`~pose_lifter.core.lift.lifter.Lifter.lift_people`."""
+    by_lifter: dict[int, list[int]] = {}
+    for i, (p, _) in enumerate(items):
+        by_lifter.setdefault(id(p.frame.policy.lifter), []).append(i)
+    out: dict[int, LiftOutcome] = {}
+    for which in by_lifter.values():
+        rows = [LiftRow(p.seen, p.screened.confidence, w, p.context) for p, w in (items[i] for i in which)]
+        out.update(zip(which, items[which[0]][0].frame.policy.lifter.lift_people(rows), strict=True))
+    return [out[i] for i in range(len(items))]
+
+
+def _before(frames: Sequence[TrackFrame], out: dict[int, TrackOutcome]) -> list[tuple[int, _Found]]:
     """Each frame's track, warm start and limb proportions, then the frames screened together
     (:func:`~pose_lifter.core.track.screening.screen_frames`; a track's second frame in one call
-    in a later screening); a frame's error (an out-of-order frame) goes to ``out``."""
+    in a later screening); a frame's refusal (an out-of-order frame) goes to ``out``."""
     found: list[tuple[int, _Found]] = []
     for k, f in enumerate(frames):
         try:
             found.append((k, f.policy._found(f)))
         except Exception as err:
-            out[k] = err
+            out[k] = TrackOutcome.failed(Failure.of(err))
     known = [p for _, p in found if p.track is not None]
     limbs = tracks_limb_proportions([cast(Track, p.track) for p in known],
                                     [p.frame.policy.lifter.options.image_limbs for p in known])
@@ -242,48 +263,42 @@ def _seen(found: Sequence[_Found]) -> None:
         p.seen = x
 
 
-def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: list[TrackedLift | Exception]
-           ) -> None:
+def _after(solved: Sequence[tuple[int, _Pending, LiftResult, bool]], out: dict[int, TrackOutcome]) -> None:
     """The lifted frames entered into their tracks and published into ``out`` (hybrid: smoothed,
-    as arrays over the frames, and measurement-updated); a frame's error goes to ``out``."""
-    hybrid: list[tuple[int, _Pending, LiftResult, bool, Track]] = []
+    as arrays over the frames, and measurement-updated); a frame's failure goes to ``out``."""
     tracked = [(k, p, r, reinit) for k, p, r, reinit in solved if p.frame.track_id >= 0]
-    for k, p, r, reinit in solved:
-        if p.frame.track_id < 0:
-            out[k] = TrackedLift(r, p.warm is not None, reinit, swapped=p.screened.swapped)
     try:
-        tracks: Sequence[Track | Exception] = _record([(p.frame, p.track, r) for _, p, r, _ in tracked])
+        tracks: Sequence[Track] = _record([(p.frame, p.track, r) for _, p, r, _ in tracked])
     except Exception as err:  # a bug, not a refusal: every frame of the batch reports it
-        tracks = [err] * len(tracked)
-    for (k, p, r, reinit), track in zip(tracked, tracks, strict=True):
-        if isinstance(track, Exception):
-            out[k] = track
-        elif p.frame.policy.lifter.options.mode == "hybrid":
-            hybrid.append((k, p, r, reinit, track))
-        else:
-            out[k] = TrackedLift(r, p.warm is not None, reinit, swapped=p.screened.swapped)
+        out.update((k, TrackOutcome.failed(Failure.of(err))) for k, _, _, _ in tracked)
+        tracked, tracks = [], []
+    by_frame = dict(zip((k for k, _, _, _ in tracked), tracks, strict=True))
+    hybrid: list[tuple[int, _Pending, LiftResult, bool, Track]] = []
+    for k, p, r, reinit in solved:
+        if k in by_frame and p.frame.policy.lifter.options.mode == "hybrid":
+            hybrid.append((k, p, r, reinit, by_frame[k]))
+        elif k in by_frame or p.frame.track_id < 0:
+            out[k] = TrackOutcome.solved(TrackedLift(r, p.warm is not None, reinit,
+                                                     swapped=p.screened.swapped))
     # the output's state carries over a re-initialised frame (its jump is smoothed)
-    published: Sequence[LiftResult | Exception | None]
     try:
         published = _smoothed([(p, r, t) for _, p, r, _, t in hybrid])
     except Exception as err:  # a bug, not a refusal: every frame of the batch reports it
-        published = [err] * len(hybrid)
+        out.update((k, TrackOutcome.failed(Failure.of(err))) for k, _, _, _, _ in hybrid)
+        return
     for (k, p, r, reinit, track), smoothed in zip(hybrid, published, strict=True):
         follows = p.warm is not None
-        if isinstance(smoothed, Exception):
-            out[k] = smoothed
-            continue
         try:
             updated = p.frame.policy._measure(track, smoothed or r, p.seen, follows, p.frame)
         except Exception as err:
-            out[k] = err
+            out[k] = TrackOutcome.failed(Failure.of(err))
             continue
         o = updated if updated is not None else smoothed
-        out[k] = (TrackedLift(r, follows, reinit, swapped=p.screened.swapped) if o is None
-                  else TrackedLift(o, follows, reinit, r.pose_camera, p.screened.swapped))
+        out[k] = TrackOutcome.solved(TrackedLift(r, follows, reinit, swapped=p.screened.swapped) if o is None
+                                     else TrackedLift(o, follows, reinit, r.pose_camera, p.screened.swapped))
 
 
-def _record(rows: Sequence[tuple[TrackFrame, Track | None, LiftResult]]) -> list[Track | Exception]:
+def _record(rows: Sequence[tuple[TrackFrame, Track | None, LiftResult]]) -> list[Track]:
     """Each lifted frame entered into its track (made on its first frame): the warm start, stamp,
     objective, the prior's limb proportions, the frame's 2D, where each joint was and its image
     limb lengths, the arrays of all of them computed together."""
@@ -300,7 +315,7 @@ def _record(rows: Sequence[tuple[TrackFrame, Track | None, LiftResult]]) -> list
     where = np.where(used[..., None], x, project_each(np.array([r.pose for r in results]),
                                                      [r.camera for r in results]))
     spans = image_spans(x, used, scale)
-    out: list[Track | Exception] = []
+    out: list[Track] = []
     for i, (f, track, result) in enumerate(rows):
         if track is None:
             track = f.policy._tracks[f.track_id] = Track(None, f.stamp_ns)
@@ -360,15 +375,12 @@ def _smoothed(rows: Sequence[tuple[_Pending, LiftResult, Track]]) -> list[LiftRe
     return out
 
 
-def _dropped_warm(p: _Pending, err: Exception) -> Exception:
-    """A lift's error: a refusal (:class:`PoseLifterError`) drops the track's warm start."""
-    if isinstance(err, PoseLifterError) and p.track is not None:
+def _dropped_warm(p: _Pending, lifted: LiftOutcome) -> TrackOutcome:
+    """A lift without a result: a refusal (any status but ``FAILED``, a bug) drops the track's
+    warm start."""
+    if lifted.status != LiftStatus.FAILED and p.track is not None:
         p.track.warm = None
-    return err
-
-
-#: A place in :func:`lift_tracks_steps`' results before its frame is lifted.
-_NOT_TRACKED = RuntimeError("frame not lifted")
+    return TrackOutcome(lifted.status, lifted.reason)
 
 
 class TrackPolicy:
@@ -431,18 +443,10 @@ class TrackPolicy:
     def lift(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
              confidence: NDArray[np.float64] | None = None,
              intrinsics: CameraIntrinsics | None = None, ahead: FramesAhead | None = None) -> TrackedLift:
-        """:meth:`lift_steps` driven alone."""
-        return self.lifter.runs.solve(self.lift_steps(track_id, stamp_ns, points, confidence, intrinsics,
-                                                      ahead))
-
-    def lift_steps(self, track_id: int, stamp_ns: int, points: NDArray[np.float64],
-                   confidence: NDArray[np.float64] | None = None,
-                   intrinsics: CameraIntrinsics | None = None,
-                   ahead: FramesAhead | None = None) -> Steps[TrackedLift]:
         """Lift one frame of a track (model joints, as :meth:`Lifter.lift`): find the track and its
         warm start, screen the frame (gate, noise), tell the lifter what the track knows, solve
         (cold again when the warm solve degraded), record the frame in the track and publish
-        (hybrid: smoothed and measurement-updated).
+        (hybrid: smoothed and measurement-updated). :func:`lift_tracks` of this frame alone.
 
         With ``intrinsics`` ``((fx, fy), (cx, cy))`` (pixels) the lift reads the 2D corrected for
         perspective by the track's last pose (:mod:`.placement`; hybrid mode, a frame that follows
@@ -450,8 +454,6 @@ class TrackPolicy:
 
         ``ahead``, the track's next frames, is read by a temporal prior with future frames (see
         :func:`~pose_lifter.core.track.screening.next_frames`); a causal prior ignores it.
-
-        A solve (:mod:`pose_lifter.core.lift.batch`): :func:`lift_tracks_steps` of this frame alone.
 
         Raises
         ------
@@ -461,10 +463,7 @@ class TrackPolicy:
             From the lifter; the track's warm start is dropped.
         """
         frame = TrackFrame(self, track_id, stamp_ns, points, confidence, intrinsics, ahead)
-        (out,) = yield from lift_tracks_steps([frame])
-        if isinstance(out, Exception):
-            raise out
-        return out
+        return lift_tracks([frame])[0].unwrap()
 
     def _found(self, f: TrackFrame) -> _Found:
         """A frame's track and warm start."""

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import PoseLifterError
+from ..errors import OutOfOrderFrameError
 from ..results import LiftResult
 
 __all__ = ["FramesAhead", "OutOfOrderFrameError", "TrackedLift"]
@@ -18,7 +18,7 @@ __all__ = ["FramesAhead", "OutOfOrderFrameError", "TrackedLift"]
 @dataclass(frozen=True)
 class FramesAhead:
     """A track's next frames as its detector gave them (what an offline lift knows of a frame's
-    future; :meth:`pose_lifter.core.track.policy.TrackPolicy.lift_steps`).
+    future; :meth:`pose_lifter.core.track.policy.TrackPolicy.lift`).
 
     Attributes
     ----------
@@ -32,10 +32,6 @@ class FramesAhead:
     stamps_ns: NDArray[np.int64]
     points: NDArray[np.float64]
     confidence: NDArray[np.float64] | None = None
-
-
-class OutOfOrderFrameError(PoseLifterError):
-    """A tracked frame is older than the track's last frame (within ``track_timeout``)."""
 
 
 @dataclass(frozen=True)
