@@ -284,7 +284,7 @@ def _check_convex_pose(
     var = VARIANTS[name]
     theta = 0.05 if var.sparsity else 0.0
     x, cam, w = _pose_problem(test_poses, case)
-    opts = LifterOptions(variant=name, theta=theta, **options)  # type: ignore[arg-type]
+    opts = LifterOptions(mode="paper", variant=name, theta=theta, **options)  # type: ignore[arg-type]
     res = pose_step(x, cam.projection, cam.translation, w, model, np.zeros(bases.n_bases), opts)
     a_ref, f_ref = ref.reference_pose_convex(x, cam, bases.mean, bases.components, w, theta, var.loss)
     f_fast = ref.pose_objective(x, cam, bases.mean, bases.components, w, theta, var.loss, res.alpha)
