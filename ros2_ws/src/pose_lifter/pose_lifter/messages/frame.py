@@ -12,7 +12,7 @@ what the node publishes for it. One frame:
    :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
    [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
 2. :func:`lift_together` (the skeletons together, each through its pipeline's track policy,
-   :func:`~pose_lifter.core.track.policy.lift_tracks_steps`): the core's
+   :func:`~pose_lifter.core.track.policy.lift_tracks`): the core's
    :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
    placed together, :func:`~pose_lifter.core.track.placement.place_results`) and :func:`check_output`
@@ -111,7 +111,7 @@ class SkeletonInput:
         Clipped into [0, 1].
     ahead : FramesAhead, optional
         The track's next frames, when the lift knows them (an offline lift whose temporal prior
-        reads them; :meth:`pose_lifter.core.track.policy.TrackPolicy.lift_steps`).
+        reads them; :func:`pose_lifter.core.track.policy.lift_tracks`).
     """
 
     track_id: int
@@ -298,10 +298,10 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
 def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines share ``lifter``): their frames through their tracks' policies in common rounds
-    (:func:`~pose_lifter.core.track.policy.lift_tracks_steps`: the lifts of a round as one batch
-    of the lifter, its runs of alternations in one compiled pass and its prior's poses in one pass
-    of each prior's network); then the people seen by one camera placed in one pass
+    pipelines share ``lifter``): their frames through their tracks' policies
+    (:func:`~pose_lifter.core.track.policy.lift_tracks`: the rows handed to the lifter as one batch,
+    and once more for the frames it re-initialises; each stage of the lift one compiled pass over
+    the batch); then the people seen by one camera placed in one pass
     (:func:`place_lifted`). Each person gets what they get lifted alone (their track is theirs;
     the kernel solves each run on its own operands, the network's rows do not mix). Their
     ``solve_time`` is the whole lift's time divided among them."""
