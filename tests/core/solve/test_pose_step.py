@@ -226,7 +226,8 @@ def test_every_solver_result_reports_convergence_alike(model: PoseModel) -> None
 def test_lift_result_carries_the_alternations(model: PoseModel) -> None:
     x, _, _, _, _ = _problem(model, 3)
     for mode in ("paper", "hybrid"):
-        lifter = Lifter(None, LifterOptions(mode="paper", n_starts=3) if mode == "paper" else LifterOptions(mode=mode))
+        options = LifterOptions(mode="paper", n_starts=3) if mode == "paper" else LifterOptions(mode=mode)
+        lifter = Lifter(None, options)
         res = lifter.lift(100.0 * x + 300.0)
         assert len(res.history) == res.n_iter >= 1, mode
         objectives = [a.objective for a in res.history]
