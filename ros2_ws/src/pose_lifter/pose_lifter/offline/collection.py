@@ -65,9 +65,7 @@ __all__ = [
     "plan_jobs",
 ]
 
-MANIFEST_NAME: Final[str] = "pose_lifter_manifest.json"
-ERRORS_NAME: Final[str] = "pose_lifter_errors.txt"
-MANIFEST_FORMAT: Final[int] = 1
+#: The characters that make an input a glob pattern.
 _GLOB_CHARS: Final[frozenset[str]] = frozenset("*?[")
 
 
@@ -211,6 +209,12 @@ def plan_jobs(inputs: Sequence[str], out_dir: str | Path) -> list[BagJob]:
 
 
 # --------------------------------------------------------------------------- manifest
+
+#: The manifest's file name in the output directory, and its format (the ``"format"`` key).
+MANIFEST_NAME: Final[str] = "pose_lifter_manifest.json"
+MANIFEST_FORMAT: Final[int] = 1
+#: The failed bags' errors and tracebacks, in the output directory.
+ERRORS_NAME: Final[str] = "pose_lifter_errors.txt"
 
 
 class Manifest:
