@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
+from cmu_data import DATA, needs_data
 from mcap_check import check_mcap
 from pose_lifter import cli
 from pose_lifter.core.model.bases import PoseBases
@@ -17,13 +18,6 @@ from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 from pose_lifter.offline.evaluate import evaluate_bag
 from scipy.spatial.transform import Rotation
-
-try:
-    DATA = mocap.resolve_data_dir()
-except mocap.MocapDataError:
-    DATA = None
-needs_data = pytest.mark.skipif(DATA is None, reason="CMU data not found (../shared/data/cmu or "
-                                "$POSE_LIFTER_CMU_DATA)")
 
 
 def test_help_lists_subcommands(capsys: pytest.CaptureFixture[str]) -> None:

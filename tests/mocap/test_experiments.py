@@ -9,18 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
+from cmu_data import DATA, needs_data
 from pose_lifter import cli
 from pose_lifter.core.model.skeleton import body_frame
-from pose_lifter.mocap import cmu as mocap
 from pose_lifter.mocap.experiment_tasks import BasesTask, LiftSolver, LiftTask, Worker, WorkerInputs, cost
 from pose_lifter.mocap.experiments import action_class, camera_rotation, project
-
-try:
-    DATA = mocap.resolve_data_dir()
-except mocap.MocapDataError:
-    DATA = None
-needs_data = pytest.mark.skipif(DATA is None, reason="CMU data not found (../shared/data/cmu or "
-                                "$POSE_LIFTER_CMU_DATA)")
 
 
 @pytest.mark.parametrize("yaw", [0.0, 37.0, 90.0, 180.0, 271.0])

@@ -9,15 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
+from cmu_data import DATA, needs_data
 from pose_lifter.core.model.skeleton import limb_lengths
 from pose_lifter.mocap import cmu as mocap
-
-try:
-    DATA = mocap.resolve_data_dir()
-except mocap.MocapDataError:
-    DATA = None
-needs_data = pytest.mark.skipif(DATA is None, reason="CMU data not found (../shared/data/cmu or "
-                                "$POSE_LIFTER_CMU_DATA); the raw files are never committed")
 
 # (trial, format, frames, L upper arm, L forearm, L thigh, L shin) from the data README
 CHECKS = [

@@ -9,6 +9,7 @@ import dataclasses
 import os
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -41,14 +42,20 @@ def lift(*args: str) -> int:
     return cli.main(["lift", *args, "--quiet", "--workers", "1"])
 
 
+def lift_checked(bag: Path, tmp_path: Path, *args: str) -> tuple[Path, Counter[str]]:
+    """``bag`` lifted into ``tmp_path/out.mcap`` (more flags: ``args``), the exit status 0 and
+    the MCAP checked: the output and its messages per topic."""
+    out = tmp_path / "out.mcap"
+    assert lift(str(bag), "--out", str(out), *args) == 0
+    return out, check_mcap(out)
+
+
 def test_lift_topic_camera_info_topic_and_keep(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = renamed(WALK, tmp_path / "in.mcap", {"/keypoints_2d": "/detector/pose",
                                                 "/camera_info": "/cam/camera_info"})
-    out = tmp_path / "out.mcap"
-    assert lift(str(bag), "--out", str(out), "--topic", "/detector/pose", "--camera-info-topic",
-                "/cam/camera_info", "--keep", "/cam/camera_info", "--max-messages", "10",
-                "--no-publish-hri") == 0
-    counts = check_mcap(out)
+    out, counts = lift_checked(bag, tmp_path, "--topic", "/detector/pose", "--camera-info-topic",
+                               "/cam/camera_info", "--keep", "/cam/camera_info", "--max-messages", "10",
+                               "--no-publish-hri")
     assert set(counts) == {"/cam/camera_info", "/skeletons_3d", "/skeleton_markers"}
     assert counts["/skeletons_3d"] == 10
     skels = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
@@ -86,9 +93,7 @@ def test_lift_yolo_detection_array_bag(tmp_path: Path) -> None:
                                                                  keypoints=f["KeyPoint2DArray"](data=data))])
             w.write(conn, 10**9 + i * 10**8, store.serialize_cdr(msg, "yolo_msgs/msg/DetectionArray"))
     bag = next((tmp_path / "yolo").glob("*.mcap"))
-    out = tmp_path / "out.mcap"
-    assert lift(str(bag), "--out", str(out), "--topic", "/yolo/detections") == 0
-    counts = check_mcap(out)
+    out, counts = lift_checked(bag, tmp_path, "--topic", "/yolo/detections")
     assert counts["/yolo/detections"] == 5 and counts["/skeletons_3d"] == 5
     answers = [x.msg for x in bags.read_messages(out, ["/skeletons_3d"])]
     assert [s.track_id for a in answers for s in a.skeletons] == [7] * 5
@@ -393,9 +398,7 @@ def test_lift_upgrades_an_older_skeleton3d_definition(tmp_path: Path) -> None:
             upgraded = typestore.upgrade_message(msg, x.msgtype, old)
             w.write(c, x.stamp_ns, old.serialize_cdr(upgraded, x.msgtype))
     bag = next((tmp_path / "old").glob("*.mcap"))
-    out = tmp_path / "out.mcap"
-    assert lift(str(bag), "--out", str(out), "--max-messages", "3") == 0
-    counts = check_mcap(out)
+    out, counts = lift_checked(bag, tmp_path, "--max-messages", "3")
     assert counts["/ground_truth/skeletons_3d"] == 3 and counts["/skeletons_3d"] == 3
     back = [x.msg for x in bags.read_messages(out, ["/ground_truth/skeletons_3d"])]
     for a, b in zip(back, msgs, strict=True):

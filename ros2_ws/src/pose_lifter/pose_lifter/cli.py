@@ -424,15 +424,31 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.set_defaults(func=_cmd_lift)
 
 
+def _lifted_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
+                       summary: str) -> argparse.ArgumentParser:
+    """The parser of a command ``name`` (``summary``: its line in the commands' list) that reads a
+    lifted bag, its first argument."""
+    p = sub.add_parser(name, help=summary)
+    p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
+    return p
+
+
 def _export_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``pose-lifter export`` command's arguments."""
-    p = sub.add_parser("export", help="the /skeletons_3d of a bag as CSV, NPZ or JSON")
-    p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
+    p = _lifted_bag_parser(sub, "export", "the /skeletons_3d of a bag as CSV, NPZ or JSON")
     p.add_argument("--out", required=True, help="output file: .csv, .npz or .json (format from the suffix)")
     p.add_argument("--topic", default=TOPIC_SKELETONS,
                    help=f"Skeleton3DArray topic (default {TOPIC_SKELETONS})")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_export)
+
+
+def _evaluate_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``pose-lifter evaluate`` command's arguments."""
+    p = _lifted_bag_parser(sub, "evaluate", "errors of /skeletons_3d against /ground_truth/skeletons_3d")
+    p.add_argument("--bases", default=None, help="bases for the mean-pose floor (default: packaged)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_cmd_evaluate)
 
 
 def _play_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -447,15 +463,6 @@ def _play_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                    "so that no first message is lost; on giving up, one line on stderr and play "
                    "(default 5; 0: do not wait)")
     p.set_defaults(func=_cmd_play)
-
-
-def _evaluate_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The ``pose-lifter evaluate`` command's arguments."""
-    p = sub.add_parser("evaluate", help="errors of /skeletons_3d against /ground_truth/skeletons_3d")
-    p.add_argument("bag", help="a lifted bag: .mcap file or rosbag2 directory")
-    p.add_argument("--bases", default=None, help="bases for the mean-pose floor (default: packaged)")
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(func=_cmd_evaluate)
 
 
 def _demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -43,6 +43,7 @@ from pose_lifter.messages.cdr import (
     header_cdr,
     stamp_cdr,
 )
+from pose_lifter.messages.names import BODIES_NS, PER_BODY, TF_TOPIC
 
 __all__ = [
     "BODIES_NS",
@@ -61,14 +62,6 @@ __all__ = [
     "tf_message_cdr",
 ]
 
-#: The REP-155 namespace of bodies.
-BODIES_NS: Final[str] = "/humans/bodies"
-#: The topic of the bodies' frames.
-TF_TOPIC: Final[str] = "/tf"
-#: Each body's topics (``BODIES_NS/<id>/<kind>``) and their types; ``urdf`` is latched.
-PER_BODY: Final[dict[str, str]] = {"urdf": "std_msgs/msg/String", "skeleton2d": "hri_msgs/msg/Skeleton2D",
-                                   "roi": "hri_msgs/msg/NormalizedRegionOfInterest2D",
-                                   "joint_states": "sensor_msgs/msg/JointState"}
 #: The field layouts the CDR writers follow (``get_fields_and_field_types()`` of rclpy's classes).
 LAYOUTS: Final[dict[str, dict[str, str]]] = {
     "hri_msgs/msg/IdsList": {"header": "std_msgs/Header", "ids": "sequence<string>"},

@@ -11,11 +11,14 @@ from __future__ import annotations
 from typing import Final
 
 __all__ = [
+    "BODIES_NS",
     "CAMERA_INFO",
     "LIFTER_NODE",
     "MARKER_ARRAY",
+    "PER_BODY",
     "SKELETON2D_ARRAY",
     "SKELETON3D_ARRAY",
+    "TF_TOPIC",
     "TOPIC_CAMERA_INFO",
     "TOPIC_GROUND_TRUTH",
     "TOPIC_KEYPOINTS",
@@ -43,3 +46,13 @@ MARKER_ARRAY: Final[str] = "visualization_msgs/msg/MarkerArray"
 CAMERA_INFO: Final[str] = "sensor_msgs/msg/CameraInfo"
 #: yolo_ros' detections (with keypoints), lifted through :mod:`pose_lifter.messages.adapters`.
 YOLO_DETECTION_ARRAY: Final[str] = "yolo_msgs/msg/DetectionArray"
+
+# REP-155 (ros4hri) bodies (:mod:`pose_lifter.messages.hri`), absolute names as REP-155 fixes them.
+#: Each body's topics (``BODIES_NS/<id>/<kind>``) and their types; ``urdf`` is latched.
+PER_BODY: Final[dict[str, str]] = {"urdf": "std_msgs/msg/String", "skeleton2d": "hri_msgs/msg/Skeleton2D",
+                                   "roi": "hri_msgs/msg/NormalizedRegionOfInterest2D",
+                                   "joint_states": "sensor_msgs/msg/JointState"}
+#: The namespace of bodies.
+BODIES_NS: Final[str] = "/humans/bodies"
+#: The topic of the bodies' frames (``tf2_msgs/TFMessage``).
+TF_TOPIC: Final[str] = "/tf"

@@ -46,10 +46,13 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from pose_lifter.offline.bags import BagError, bag_path, bag_sha256, bag_stat, is_rosbag2_dir
 from pose_lifter.offline.settings import LiftSettings, package_version
+
+if TYPE_CHECKING:
+    from pose_lifter.offline.lift import LiftSummary
 
 __all__ = [
     "ERRORS_NAME",
@@ -65,9 +68,6 @@ __all__ = [
     "plan_jobs",
 ]
 
-MANIFEST_NAME: Final[str] = "pose_lifter_manifest.json"
-ERRORS_NAME: Final[str] = "pose_lifter_errors.txt"
-MANIFEST_FORMAT: Final[int] = 1
 _GLOB_CHARS: Final[frozenset[str]] = frozenset("*?[")
 
 
@@ -212,6 +212,11 @@ def plan_jobs(inputs: Sequence[str], out_dir: str | Path) -> list[BagJob]:
 
 # --------------------------------------------------------------------------- manifest
 
+#: The names in the output directory of the manifest and of the failed bags' errors; the manifest's format.
+MANIFEST_NAME: Final[str] = "pose_lifter_manifest.json"
+MANIFEST_FORMAT: Final[int] = 1
+ERRORS_NAME: Final[str] = "pose_lifter_errors.txt"
+
 
 class Manifest:
     """``pose_lifter_manifest.json``: what each output was lifted from and with.
@@ -255,15 +260,18 @@ class Manifest:
 
     def record(self, outcome: BagOutcome, digest: str, settings: LiftSettings, version: str) -> None:
         self.data["settings"].setdefault(digest, {"version": version, "settings": settings.to_json()})
+        lifted = outcome.lifted  # a failed bag's counts: 0
+        n = (0, 0, 0, 0) if lifted is None else (lifted.n_messages, lifted.n_skeletons, lifted.n_lifted,
+                                                 lifted.n_failed)
         entry: dict[str, Any] = {
-            "status": "done" if outcome.ok else "failed", "input": outcome.job.input,
+            "status": "failed" if lifted is None else "done", "input": outcome.job.input,
             "input_sha256": outcome.input_sha256, "input_size": outcome.job.size,
             "input_mtime_ns": outcome.job.mtime_ns, "settings": digest, "version": version,
-            "messages": outcome.n_messages, "skeletons": outcome.n_skeletons, "poses": outcome.n_lifted,
-            "failed_skeletons": outcome.n_failed, "seconds": round(outcome.seconds, 3),
+            "messages": n[0], "skeletons": n[1], "poses": n[2], "failed_skeletons": n[3],
+            "seconds": round(outcome.seconds, 3),
             "worker": outcome.worker, "finished": datetime.now(UTC).isoformat(timespec="seconds"),
         }
-        if not outcome.ok:
+        if lifted is None:
             entry["error"] = outcome.error
         self.data["bags"][outcome.job.rel] = entry
         used = {e.get("settings") for e in self.data["bags"].values()}
@@ -281,20 +289,17 @@ class Manifest:
 
 @dataclass
 class BagOutcome:
-    """What lifting one bag gave (sent back from the worker that lifted it)."""
+    """What lifting one bag gave (sent back from the worker that lifted it): ``lifted``, what
+    :func:`~pose_lifter.offline.lift.lift_bag` did, or None when the bag failed (then ``error`` and
+    ``traceback``)."""
 
     job: BagJob
-    ok: bool
-    n_messages: int = 0
-    n_skeletons: int = 0
-    n_lifted: int = 0
-    n_failed: int = 0
+    lifted: LiftSummary | None = None
     seconds: float = 0.0
     input_sha256: str = ""
     worker: str = ""
     error: str | None = None
     traceback: str | None = None
-    failures: list[str] = field(default_factory=list)
 
 
 def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1) -> BagOutcome:
@@ -313,10 +318,9 @@ def lift_one(job: BagJob, settings: LiftSettings, lifter: Any, workers: int = 1)
         text = " ".join(str(exc).split()) or type(exc).__name__
         if not isinstance(exc, BagError | OSError | ValueError) or type(exc).__module__.startswith("rosbags"):
             text = f"{type(exc).__name__}: {text}"
-        return BagOutcome(job, False, seconds=time.perf_counter() - t0, worker=worker, error=text[:2000],
+        return BagOutcome(job, seconds=time.perf_counter() - t0, worker=worker, error=text[:2000],
                           traceback=traceback.format_exc())
-    return BagOutcome(job, True, summary.n_messages, summary.n_skeletons, summary.n_lifted, summary.n_failed,
-                      time.perf_counter() - t0, sha, worker, failures=summary.failures[:5])
+    return BagOutcome(job, summary, time.perf_counter() - t0, sha, worker)
 
 
 # --------------------------------------------------------------------------- executors
@@ -478,10 +482,10 @@ def _recorder(manifest: Manifest, settings: LiftSettings, digest: str, version: 
     def on_done(o: BagOutcome) -> None:
         manifest.record(o, digest, settings, version)
         manifest.save()
-        if o.ok:
+        if o.lifted is not None:
             summary.n_lifted += 1
-            summary.n_poses += o.n_lifted
-            summary.n_failed_skeletons += o.n_failed
+            summary.n_poses += o.lifted.n_lifted
+            summary.n_failed_skeletons += o.lifted.n_failed
         else:
             summary.failed.append(o)
             _write_errors(errors_path, summary.failed)

@@ -185,41 +185,12 @@ def place_poses(
     if pose.shape != (n, N_JOINTS, 3):
         raise InvalidInputError(f"pose_camera must be an (n, {N_JOINTS}, 3) array")
     local = pose * float(leg_length_m)  # the core's pose_camera is centred on the joints' mean
-    centroid = _centroids(n, scale, translation, leg_length_m, focal, principal_point, default_distance_m)
-    if focal is None or principal_point is None:
-        return np.asarray(local + centroid[:, None, :])
-    return np.asarray(local @ ray_rotations(centroid).transpose(0, 2, 1) + centroid[:, None, :])
-
-
-def _centroids(
-    n: int,
-    scale: NDArray[np.float64],
-    translation: NDArray[np.float64],
-    leg_length_m: float,
-    focal: tuple[float, float] | None,
-    principal_point: tuple[float, float] | None,
-    default_distance_m: float,
-) -> NDArray[np.float64]:
-    """The centroids (n, 3) in metres of :func:`place_poses`: at ``(0, 0, default_distance_m)``
-    without ``focal``, else at the depth of ``scale`` (n,), on the optical axis without
-    ``principal_point``, else on the ray to ``translation`` (n, 2).
-
-    Raises
-    ------
-    InvalidInputError
-        ``default_distance_m`` (without ``focal``), a focal length or a camera scale is not
-        finite and > 0.
-    """
-    import numpy as np
-
-    from pose_lifter.core.errors import InvalidInputError
-
     centroid = np.zeros((n, 3))
-    if focal is None:
+    if focal is None:  # at (0, 0, default_distance_m)
         if not math.isfinite(default_distance_m) or default_distance_m <= 0:
             raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")
         centroid[:, 2] = float(default_distance_m)
-        return centroid
+        return np.asarray(local + centroid[:, None, :])
     fx, fy = (float(focal[0]), float(focal[1]))
     s = np.asarray(scale, dtype=np.float64).reshape(n)
     if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)):
@@ -227,13 +198,13 @@ def _centroids(
     bad = ~(np.isfinite(s) & (s > 0))
     if bad.any():
         raise InvalidInputError(f"camera scale must be > 0, got {float(s[np.argmax(bad)])!r}")
-    centroid[:, 2] = 0.5 * (fx + fy) * float(leg_length_m) / s
-    if principal_point is None:
-        return centroid
-    t = np.asarray(translation, dtype=np.float64).reshape(n, 2)
+    centroid[:, 2] = 0.5 * (fx + fy) * float(leg_length_m) / s  # at the depth of the scale
+    if principal_point is None:  # on the optical axis
+        return np.asarray(local + centroid[:, None, :])
+    t = np.asarray(translation, dtype=np.float64).reshape(n, 2)  # on the ray to the translation
     centroid[:, 0] = (t[:, 0] - float(principal_point[0])) * centroid[:, 2] / fx
     centroid[:, 1] = (t[:, 1] - float(principal_point[1])) * centroid[:, 2] / fy
-    return centroid
+    return np.asarray(local @ ray_rotations(centroid).transpose(0, 2, 1) + centroid[:, None, :])
 
 
 def ray_rotation(point: NDArray[np.float64]) -> NDArray[np.float64]:
