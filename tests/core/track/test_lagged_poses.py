@@ -1,13 +1,15 @@
-"""A track's lagged poses (core.track.lagged): without an update, the centred window over the
-frames kept (checked against the offline lift's smoothing and the weights written out); the
-window of frames kept, a clock that jumps back, forgetting idle tracks; with the update, the
-forward pass of a frame is taken once."""
+"""The refiner (core.track.later.Refiner): with a horizon (the node's ``output_lag``), without an
+update, the centred window over the frames kept (checked against the offline lift's smoothing and
+the weights written out); the window of frames kept, a clock that jumps back, forgetting idle
+tracks. Over the whole track, with the update: the two passes of the offline update written out;
+a horizon that reaches every frame of a short track gives the whole track's poses."""
 
 from __future__ import annotations
 
 import numpy as np
 import tolerances as tol
-from pose_lifter.core.track.lagged import WINDOW, LaggedPoses
+from pose_lifter.core.track.later import WINDOW, LaterFrame, Refiner, RunArrays, update_later
+from pose_lifter.core.track.measurement import MeasurementUpdate
 from pose_lifter.core.track.smoothing import centred_smoothing
 
 STEP = 33_333_333
@@ -23,7 +25,7 @@ def test_without_an_update_the_lagged_pose_is_the_offline_window_over_the_frames
     poses = _poses(12)
     stamps = np.arange(12, dtype=np.int64) * STEP
     stamps[9:] += 2 * 10**9  # a gap over the timeout: frames 9-11 are another segment
-    kept = LaggedPoses(0.04, 1.0, 0.5, 0.3)
+    kept = Refiner(3, 0.04, 1.0, 0.5, 0.3)
     for s, p in zip(stamps, poses, strict=True):
         kept.add(3, int(s), p, None)
     # the independent reference: the Gaussian weights written out for frame 5 (+-3 frames at 0.04 s)
@@ -36,7 +38,7 @@ def test_without_an_update_the_lagged_pose_is_the_offline_window_over_the_frames
 
 
 def test_a_track_keeps_its_newest_window_forgets_when_idle_and_restarts_when_the_clock_jumps_back() -> None:
-    kept = LaggedPoses(0.04, 1.0, 0.5, 0.3)
+    kept = Refiner(3, 0.04, 1.0, 0.5, 0.3)
     poses = _poses(WINDOW + 5)
     for i, p in enumerate(poses):
         kept.add(7, i * STEP, p, None)
@@ -49,3 +51,54 @@ def test_a_track_keeps_its_newest_window_forgets_when_idle_and_restarts_when_the
     kept.add(9, 100 * STEP, poses[1], None)
     kept.forget(50 * STEP)
     assert len(kept) == 1 and kept.pose(9, 100 * STEP) is not None
+
+
+def _later_frames(n: int, seed: int = 1) -> list[LaterFrame]:
+    """A track's frames with an update: noisy 2D of a moving pose, the noise known from frame 2 on,
+    a new run (a frame that does not follow) at frame 14."""
+    rng = np.random.default_rng(seed)
+    poses = _poses(n, seed)
+    used = np.ones(12, dtype=bool)
+    points = 100.0 * poses[:, :, :2] + 320.0 + rng.normal(scale=3.0, size=(n, 12, 2))
+    return [LaterFrame(i * STEP, poses[i], points[i], used, None if i < 2 else 0.05, i not in (0, 14))
+            for i in range(n)]
+
+
+def test_over_the_whole_track_each_run_is_the_mean_of_a_forward_and_a_backward_pass() -> None:
+    frames = _later_frames(24)
+    out = update_later(frames, 0.5, 0.3)
+    for a, b in ((0, 14), (14, 24)):  # the runs, written out: the 2D smoothed over each, two passes
+        arrays = RunArrays.of(frames[a:b])
+        noise = arrays.backward_noise()
+        assert noise is not None
+        order = np.arange(b - a)
+        fwd, fdone = MeasurementUpdate().run(*arrays, order, 0.5, 0.3)
+        bwd, bdone = MeasurementUpdate().run(arrays.poses, arrays.points, arrays.used, noise, order[::-1],
+                                             0.5, 0.3)
+        for i in order:
+            p = out[a + i]
+            assert bdone[i] and p is not None
+            expect = 0.5 * (fwd[i] + bwd[i]) if fdone[i] else bwd[i]
+            np.testing.assert_allclose(p, expect, rtol=0, atol=tol.ROUND_OFF)
+    assert not np.allclose(out[5], frames[5].pose, atol=1e-3)  # the update moved it
+
+
+def test_a_horizon_that_reaches_every_frame_gives_the_whole_tracks_refinement() -> None:
+    frames = _later_frames(WINDOW - 2)
+    lagged, whole = Refiner(3, 0.04, 1.0, 0.5, 0.3), Refiner(None, 0.04, 1.0, 0.5, 0.3)
+    for f in frames:
+        lagged.add(4, f.stamp_ns, f.pose, f)
+        whole.add(4, f.stamp_ns, f.pose, f)
+    for f in frames:  # asked in time order once every frame has come (the node's flush)
+        a, b = lagged.pose(4, f.stamp_ns), whole.pose(4, f.stamp_ns)
+        assert a is not None and b is not None
+        np.testing.assert_allclose(a, b, rtol=0, atol=tol.ROUND_OFF)
+    with np.testing.assert_raises(ValueError):
+        lagged.measured(4)
+    # over the whole track the window is the offline lift's centred smoothing of the updated poses
+    measured = whole.measured(4)
+    updated = np.array([f.pose if p is None else p for f, p in zip(frames, measured, strict=True)])
+    stamps = np.array([f.stamp_ns for f in frames], dtype=np.int64)
+    offline = centred_smoothing(updated, stamps, np.ones(len(frames), dtype=bool), 0.04, 1.0)
+    for k, f in enumerate(frames):
+        np.testing.assert_allclose(whole.pose(4, f.stamp_ns), offline[k], rtol=0, atol=tol.ROUND_OFF)

@@ -2,10 +2,11 @@
 
 :class:`LaggedFrames` takes each checked frame and gives it back lifted ``lag`` frames later,
 each tracked skeleton's pose refined over the frames then known
-(:class:`~pose_lifter.core.track.lagged.LaggedPoses`: the offline lift's measurement update of
-the smoothed 2D and its centred window, over the track's newest frames) and placed again in the
-camera frame. The pipeline's policy keeps what the update reads of each frame
-(:attr:`TrackPolicy.smoothed_later`) instead of running the node's causal update.
+(:class:`~pose_lifter.core.track.later.Refiner` with the horizon ``lag``, the code that refines
+the offline lift's tracks: the measurement update of the smoothed 2D and its centred window, over
+the track's newest frames) and placed again in the camera frame. The pipeline's policy keeps
+what the update reads of each frame (:attr:`TrackPolicy.smoothed_later`) instead of running the
+node's causal update.
 
 Below AHEAD_LAG frames each frame is lifted when it arrives, by the node's causal priors. From
 AHEAD_LAG on, the pipeline's lifter reads ahead (``Lifter.reads_ahead``: the offline prior) and
@@ -27,8 +28,7 @@ from typing import Final, Generic, NamedTuple, TypeVar
 import numpy as np
 
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
-from pose_lifter.core.track.lagged import LaggedPoses
-from pose_lifter.core.track.later import LaterFrame
+from pose_lifter.core.track.later import LaterFrame, Refiner
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -91,10 +91,10 @@ class LaggedFrames(Generic[T]):
         """Frames each frame waits before it is lifted (its prior's future frames; 0: none)."""
         return self.pipeline.lifter.frames_ahead if self.lag >= AHEAD_LAG else 0
 
-    def _new_poses(self) -> LaggedPoses:
+    def _new_poses(self) -> Refiner:
         opts = self.pipeline.lifter.options
-        return LaggedPoses(LAG_SMOOTHING_S, self.pipeline.settings.track_timeout, opts.measurement_depth,
-                           opts.measurement_gate)
+        return Refiner(self.lag, LAG_SMOOTHING_S, self.pipeline.settings.track_timeout,
+                       opts.measurement_depth, opts.measurement_gate)
 
     def __len__(self) -> int:
         """Frames held."""
@@ -160,7 +160,7 @@ class LaggedFrames(Generic[T]):
         return out
 
     def _refined(self, frame: LaggedFrame[T]) -> LaggedFrame[T]:
-        """``frame`` with each tracked skeleton's pose refined (:class:`LaggedPoses`) and placed
+        """``frame`` with each tracked skeleton's pose refined (:class:`Refiner`) and placed
         again; a skeleton whose refined pose cannot be placed keeps the pose it was lifted with."""
         rows: list[tuple[int, LiftedSkeleton]] = []
         poses = []

@@ -58,7 +58,7 @@ from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.options import Mode
 from pose_lifter.core.track.defaults import AHEAD_LAG
-from pose_lifter.core.track.lagged import LaggedPoses
+from pose_lifter.core.track.later import Refiner
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
@@ -279,7 +279,8 @@ class Evaluator:
         if policy is not None and m == "hybrid-lag":
             policy.smoothed_later = True
             o = lifter.options
-            lagged = LaggedPoses(OFFLINE_SMOOTHING_S, 1.0, o.measurement_depth, o.measurement_gate)
+            lagged = Refiner(self.setup.lag, OFFLINE_SMOOTHING_S, 1.0, o.measurement_depth,
+                             o.measurement_gate)
         preds = np.full((n, 12, 3), np.nan)
         fit = np.full((n, 12, 3), np.nan)
         depth = np.full(n, np.nan)
@@ -362,7 +363,7 @@ def _figures(preds: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str
     return out
 
 
-def _lag_out(lagged: LaggedPoses, stamps: NDArray[np.int64], leg_m: NDArray[np.float64],
+def _lag_out(lagged: Refiner, stamps: NDArray[np.int64], leg_m: NDArray[np.float64],
              preds: NDArray[np.float64], k: int) -> None:
     """Frame ``k``'s lagged pose into ``preds`` (metres), when the frame was lifted."""
     if k < 0 or not np.isfinite(preds[k]).all():

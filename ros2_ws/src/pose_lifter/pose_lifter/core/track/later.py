@@ -1,11 +1,16 @@
-"""The offline measurement update (``pose-lifter lift``,
-:attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`): a track's frames are kept as it
-is lifted, and after its last frame its 2D is smoothed over past and future frames and the
+"""Poses refined over the frames after them: one refiner (:class:`Refiner`) with a horizon, the
+node's ``output_lag`` N (each frame published N frames late, refined over those) and ``pose-lifter
+lift`` (the whole track, :attr:`~pose_lifter.core.track.policy.TrackPolicy.smoothed_later`).
+
+A track's frames are kept as it is lifted; its 2D is smoothed over past and future frames and the
 measurement update (:mod:`.measurement`) runs over them from the smoothed 2D, at every noise
-level, forward and backward in time (each frame publishes the mean of the two passes).
+level, forward and backward in time (each frame publishes the mean of the two passes), then a
+centred Gaussian window (:func:`.smoothing.centred_smoothing`) over the poses. With a lag of 3
+frames (0.1 s at 30 Hz) the window (+-3 frames) is whole. Output-only: the track's fits never see
+it.
 
 Live, the update stops above ``MAX_NOISE`` (:mod:`.measurement`: its causal gain would follow a
-detector's noise, and its frame-correlated error most). Offline each joint's 2D (the joints the
+detector's noise, and its frame-correlated error most). Here each joint's 2D (the joints the
 lift used) is first smoothed by a Rauch-Tung-Striebel smoother of a constant-velocity model,
 which halves white 2D noise of 0.05 leg lengths, and the update's gain and depth step follow the
 smoothed 2D's noise
@@ -13,30 +18,32 @@ smoothed 2D's noise
 A detector's frame-correlated error is not halved; the smoother's ratio, estimated for white
 noise, then leaves the gain where the track's noise puts it. The update's filters (its offsets'
 gain, its depths' alpha-beta filter) lag the motion; run backward in time they lag the other
-way, and the mean of the two passes does not. Output-only, as live: the track's fits never see
-it. Measured in docs/accuracy.md and docs/cross_action.md (their decisions).
+way, and the mean of the two passes does not. Measured in docs/accuracy.md (the hybrid-lag and
+hybrid-offline columns) and docs/cross_action.md (their decisions).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections import Counter
-from typing import TYPE_CHECKING, NamedTuple
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..model.skeleton import N_JOINTS
 from ..numeric.jit import njit
+from .defaults import MAX_LAG
 from .measurement import MeasurementUpdate
 
 if TYPE_CHECKING:
     from ..results import LiftResult
     from .state import Track
 
-__all__ = ["LaterFrame", "RunArrays", "compile_kernels", "mean_of_passes", "smooth_track_2d", "update_later",
-           "update_tracks_later"]
+__all__ = ["MAX_LAG", "WINDOW", "LaterFrame", "Refiner", "RunArrays", "compile_kernels", "mean_of_passes",
+           "smooth_track_2d", "update_later", "update_tracks_later"]
 
 #: Offline smoothing of the 2D (:func:`smooth_track_2d`): the constant-velocity model's random
 #: acceleration, per frame^2 at 30 Hz, as a share of the track's 2D size (the median over frames of
@@ -270,31 +277,6 @@ class LaterFrame(NamedTuple):
                    np.array(points, dtype=np.float64), result.weights > 0, noise, follows)
 
 
-def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[NDArray[np.float64] | None]:
-    """The offline measurement update of one track's frames (in time order): each run of frames
-    that follow one another has its 2D smoothed (:func:`smooth_track_2d`), then the update
-    (:meth:`MeasurementUpdate.run`) runs over the run from the smoothed 2D, at every noise
-    level, with the track's noise times the smoother's ratio, once forward and once backward in
-    time, and each frame publishes the mean of the two: each direction's filters (the x, y
-    offsets' gain, the depths' alpha-beta filter) lag the motion their own way, their mean does
-    not. The backward pass reads the run's first frames, whose noise the track did not know yet,
-    at its first known noise. Returns each frame's published pose (12, 3), or None where neither
-    pass updated it (the fit's is published)."""
-    out: list[NDArray[np.float64] | None] = [None] * len(frames)
-    starts = [i for i, f in enumerate(frames) if i == 0 or not f.follows] + [len(frames)]
-    for a, b in itertools.pairwise(starts):
-        run = RunArrays.of(frames[a:b])
-        backward = run.backward_noise()
-        if backward is None:
-            continue
-        forward = np.arange(b - a)
-        fwd, fdone = run.update(MeasurementUpdate(), forward, depth, gate)
-        bwd, bdone = run.update(MeasurementUpdate(), forward[::-1], depth, gate, noise=backward)
-        for i in forward:
-            out[a + i] = mean_of_passes(fwd[i] if fdone[i] else None, bwd[i] if bdone[i] else None)
-    return out
-
-
 def mean_of_passes(forward: NDArray[np.float64] | None, backward: NDArray[np.float64] | None
                    ) -> NDArray[np.float64] | None:
     """A frame's published pose (12, 3) from the update's two passes: their mean, the one that
@@ -339,6 +321,242 @@ class RunArrays(NamedTuple):
                          depth, gate, restart)
 
 
+#: The newest frames of a track a refiner with a horizon keeps (:class:`Refiner`): 20 (0.67 s at
+#: 30 Hz); its 2D is smoothed over these, its backward pass and window read at most these.
+WINDOW: Final[int] = 20
+
+
+@dataclass
+class _Frame:
+    """One kept frame of a track."""
+
+    stamp_ns: int
+    pose: NDArray[np.float64]  #: (12, 3) the published pose without the update
+    later: LaterFrame | None  #: what the update reads of it (None: no update)
+    forward: NDArray[np.float64] | None = None  #: the forward pass's pose, once taken
+    taken: bool = False  #: the forward pass has taken it
+
+
+def _later(f: _Frame) -> LaterFrame:
+    """What the update reads of a frame that has one."""
+    assert f.later is not None
+    return f.later
+
+
+@dataclass
+class _Track:
+    """One track's kept frames and its forward pass."""
+
+    frames: deque[_Frame]
+    forward: MeasurementUpdate | None = None  #: the forward pass's state (None: starts again)
+    #: the whole track's updated poses by run (its first and end index into ``frames``), by frame
+    #: index; valid until a frame is added
+    measured: dict[tuple[int, int], dict[int, NDArray[np.float64]]] = field(default_factory=dict)
+
+
+class Refiner:
+    """Tracks' poses refined over the frames after them: the node's ``output_lag`` N and ``pose-lifter
+    lift`` (module docstring), one code with a horizon.
+
+    Per track, its frames in time order, each with the pose it was lifted with and what the update
+    reads of it. A frame's pose is refined over the frames known when it is asked for:
+
+    * the update's runs (frames that follow one another) have their 2D smoothed
+      (:func:`smooth_track_2d`) over the frames kept;
+    * the forward pass of the update (:meth:`MeasurementUpdate.run`) takes each frame once, when its
+      2D is final: with a horizon, when its pose is asked for (its 2D then smoothed with the horizon's
+      frames of future), the frames after it continued on a copy; over the whole track, every frame
+      at once;
+    * the backward pass starts at the newest frame (with the run's first known noise for its first
+      frames, whose noise the track did not know yet); each frame's updated pose is the mean of the
+      two passes (:func:`mean_of_passes`);
+    * :meth:`pose` is then the centred Gaussian window (:func:`.smoothing.centred_smoothing`'s row)
+      over the updated poses, in the model frame (across the update's runs, as the offline lift's
+      window; split at a gap); :meth:`measured` gives the updated poses alone
+      (``pose-lifter lift`` places them first and windows them in metres, which smooths the
+      placement's depth too; a lagged frame's neighbours are already published, their placement
+      not redone).
+
+    With a horizon, a track keeps its newest WINDOW frames, so a frame costs the same at any point
+    of a long track; over the whole track every frame is kept and each run is refined once.
+
+    Parameters
+    ----------
+    horizon : int or None
+        Frames of future a pose is refined with (the node's ``output_lag``, 1 to :data:`MAX_LAG`),
+        or None: the whole track (every frame added before any pose is asked for).
+    smoothing_s : float
+        The centred window's standard deviation (seconds; ``pose-lifter lift``'s).
+    gap_s : float
+        A gap over this (seconds) splits the window (the track's timeout: it was forgotten).
+    depth, gate : float
+        The update's ``measurement_depth`` and ``measurement_gate`` (the lifter's options).
+    """
+
+    def __init__(self, horizon: int | None, smoothing_s: float, gap_s: float, depth: float, gate: float
+                 ) -> None:
+        if horizon is not None and not 1 <= horizon <= MAX_LAG:
+            raise ValueError(f"horizon must be 1 to {MAX_LAG} frames or None, got {horizon}")
+        self.horizon = horizon
+        self.smoothing_s, self.gap_s, self.depth, self.gate = smoothing_s, gap_s, depth, gate
+        self._tracks: dict[int, _Track] = {}
+
+    def __len__(self) -> int:
+        return len(self._tracks)
+
+    def add(self, track_id: int, stamp_ns: int, pose: NDArray[np.float64], later: LaterFrame | None) -> None:
+        """Keep a track's newest frame: its published pose (12, 3) and what the update reads of it
+        (None: none). With a horizon, a stamp before the track's last one (the input clock jumped
+        back) starts the track again; over the whole track the frames are kept, the update's runs
+        split where a frame does not follow (:attr:`LaterFrame.follows`) and the window where the
+        clock steps back."""
+        t = self._tracks.get(track_id)
+        if t is None or (self.horizon is not None and t.frames and stamp_ns < t.frames[-1].stamp_ns):
+            t = self._tracks[track_id] = _Track(deque(maxlen=None if self.horizon is None else WINDOW))
+        t.frames.append(_Frame(int(stamp_ns), np.array(pose, dtype=np.float64), later))
+        t.measured.clear()
+
+    def pose(self, track_id: int, stamp_ns: int) -> NDArray[np.float64] | None:
+        """The refined pose (12, 3; finite) of the track's kept frame at ``stamp_ns`` (the latest
+        with that stamp), over the frames kept now; None when it is no longer kept. With a
+        horizon, ask for a track's frames in time order: each is taken by the forward pass when
+        first asked."""
+        t = self._tracks.get(track_id)
+        if t is None:
+            return None
+        frames = list(t.frames)
+        at = next((k for k in range(len(frames) - 1, -1, -1) if frames[k].stamp_ns == stamp_ns), None)
+        if at is None:
+            return None
+        lo, hi = self._near(frames, at)
+        measured: dict[int, NDArray[np.float64]] = {}
+        k = lo
+        while k < hi:  # the update's runs the window reads (it crosses a run's start, not a gap)
+            first, end = self._run(frames, k)
+            measured.update(self._measured(t, frames, first, end, at))
+            k = end
+        refined = [measured.get(k, f.pose) for k, f in enumerate(frames[lo:hi], lo)]
+        out = self._window(np.array([f.stamp_ns for f in frames[lo:hi]], dtype=np.int64), refined, at - lo)
+        return out if np.isfinite(out).all() else np.array(frames[at].pose, dtype=np.float64)
+
+    def _near(self, frames: list[_Frame], at: int) -> tuple[int, int]:
+        """The first and end index of the frames around frame ``at`` its window may read: within
+        3 standard deviations of it (and a nanosecond), no step back in time between."""
+        reach = self.smoothing_s * 3e9 + 1.0 if self.smoothing_s > 0 else 0.0
+        lo, hi, stamp = at, at + 1, frames[at].stamp_ns
+        while lo > 0 and stamp - reach <= frames[lo - 1].stamp_ns <= frames[lo].stamp_ns:
+            lo -= 1
+        while hi < len(frames) and frames[hi - 1].stamp_ns <= frames[hi].stamp_ns <= stamp + reach:
+            hi += 1
+        return lo, hi
+
+    def measured(self, track_id: int) -> list[NDArray[np.float64] | None]:
+        """Each kept frame's updated pose (12, 3), in the order added, or None where neither pass
+        updated it (its own pose stands); no window. Over the whole track (``horizon`` None)."""
+        if self.horizon is not None:
+            raise ValueError("measured() refines a whole track: the refiner's horizon must be None")
+        t = self._tracks.get(track_id)
+        if t is None:
+            return []
+        frames = list(t.frames)
+        out: list[NDArray[np.float64] | None] = [None] * len(frames)
+        at = 0
+        while at < len(frames):
+            first, end = self._run(frames, at)
+            for k, pose in self._measured(t, frames, first, end, at).items():
+                out[k] = pose
+            at = end
+        return out
+
+    @staticmethod
+    def _run(frames: list[_Frame], at: int) -> tuple[int, int]:
+        """The first and end index of the update's run holding frame ``at`` (a frame with an
+        update that does not follow its track's last starts one)."""
+        starts = [k for k, f in enumerate(frames) if f.later is not None and not f.later.follows]
+        return (max([k for k in starts if k <= at], default=0),
+                min([k for k in starts if k > at], default=len(frames)))
+
+    def _window(self, stamps_ns: NDArray[np.int64], poses: list[NDArray[np.float64]], at: int
+                ) -> NDArray[np.float64]:
+        """Row ``at`` of :func:`.smoothing.centred_smoothing` of ``poses`` (in time order): the
+        Gaussian-weighted mean of the frames within 3 standard deviations of it and no gap over
+        ``gap_s`` or step back in time away."""
+        if self.smoothing_s <= 0:
+            return np.array(poses[at], dtype=np.float64)
+        t = (stamps_ns - stamps_ns[at]) * 1e-9
+        dt = np.diff(t)
+        segment = np.concatenate([[0], np.cumsum((dt > self.gap_s) | (dt < 0))])
+        near = (segment == segment[at]) & (np.abs(t) <= 3.0 * self.smoothing_s)
+        w = np.exp(-0.5 * (t[near] / self.smoothing_s) ** 2)
+        rows = np.flatnonzero(near)
+        return np.asarray(np.einsum("k,kjc->jc", w, np.array([poses[k] for k in rows])) / w.sum(),
+                          dtype=np.float64)
+
+    def _measured(self, t: _Track, frames: list[_Frame], first: int, end: int, at: int
+                  ) -> dict[int, NDArray[np.float64]]:
+        """The updated poses (by index into ``frames``) of the run ``frames[first:end]`` around
+        frame ``at``: over the whole track every frame of the run (computed once until a frame is
+        added), with a horizon those the window around frame ``at`` reads."""
+        whole = self.horizon is None
+        if whole and (first, end) in t.measured:
+            return t.measured[(first, end)]
+        run = [k for k in range(first, end) if frames[k].later is not None]
+        out: dict[int, NDArray[np.float64]] = {}
+        if not run:
+            return out
+        later = [_later(frames[k]) for k in run]
+        arrays = RunArrays.of(later)
+        restart = np.array([not f.follows for f in later])  # a new run starts the pass again
+        upto = len(run) if whole else sum(k <= at for k in run)  # run[:upto]: 2D final, taken
+        # forward: the track's state takes each final frame once; the later ones on a copy
+        new = [j for j in range(upto) if not frames[run[j]].taken]
+        if t.forward is None:
+            t.forward = MeasurementUpdate()
+        if new:
+            fout, fdone = arrays.update(t.forward, np.array(new), self.depth, self.gate, restart)
+            for j in new:
+                f = frames[run[j]]
+                f.forward, f.taken = (fout[j] if fdone[j] else None), True
+        fwd: dict[int, NDArray[np.float64] | None] = {run[j]: frames[run[j]].forward for j in range(upto)}
+        if upto < len(run):
+            after = np.arange(upto, len(run))
+            fout, fdone = arrays.update(t.forward.copy(), after, self.depth, self.gate, restart)
+            fwd.update({run[j]: fout[j] if fdone[j] else None for j in range(upto, len(run))})
+        # backward: from the newest frame down to the first the window around frame ``at`` reads
+        noise = arrays.backward_noise()
+        if noise is not None:
+            reach = -math.inf if whole else frames[at].stamp_ns - self.smoothing_s * 3e9
+            back = list(itertools.takewhile(lambda j: frames[run[j]].stamp_ns >= reach,
+                                            range(len(run) - 1, -1, -1)))
+            bwd, bdone = arrays.update(MeasurementUpdate(), np.array(back, dtype=np.int64), self.depth,
+                                       self.gate, noise=noise)
+            for j in back:
+                pose = mean_of_passes(fwd.get(run[j]), bwd[j] if bdone[j] else None)
+                if pose is not None:
+                    out[run[j]] = pose
+        if whole:
+            t.measured[(first, end)] = out
+        return out
+
+    def forget(self, before_ns: int) -> None:
+        """Forget the tracks whose newest frame is older than ``before_ns``."""
+        for track_id in [k for k, t in self._tracks.items() if t.frames[-1].stamp_ns < before_ns]:
+            del self._tracks[track_id]
+
+    def clear(self) -> None:
+        self._tracks.clear()
+
+
+def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[NDArray[np.float64] | None]:
+    """The update of one track's frames (in time order) refined over the whole track
+    (:meth:`Refiner.measured`): each frame's updated pose (12, 3), or None where neither pass
+    updated it (the fit's is published)."""
+    refiner = Refiner(None, 0.0, math.inf, depth, gate)
+    for f in frames:
+        refiner.add(0, f.stamp_ns, f.pose, f)
+    return refiner.measured(0)
+
+
 def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate: float
                         ) -> dict[tuple[int, int, int], NDArray[np.float64]]:
     """:func:`update_later` of each track's kept frames (by track id): the published pose (12, 3)
@@ -354,7 +572,6 @@ def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate:
             if pose is not None:
                 out[(track_id, f.stamp_ns, k)] = pose
     return out
-
 
 _COMPILED = False
 
