@@ -460,12 +460,10 @@ class Refiner:
             return []
         frames = list(t.frames)
         out: list[NDArray[np.float64] | None] = [None] * len(frames)
-        at = 0
-        while at < len(frames):
-            first, end = self._run(frames, at)
-            for k, pose in self._measured(t, frames, first, end, at).items():
+        starts = [k for k, f in enumerate(frames) if k == 0 or (f.later is not None and not f.later.follows)]
+        for first, end in itertools.pairwise([*starts, len(frames)]):
+            for k, pose in self._measured(t, frames, first, end, first).items():
                 out[k] = pose
-            at = end
         return out
 
     @staticmethod
