@@ -22,13 +22,16 @@ what this gives.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Final, Generic, NamedTuple, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
+from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
-from pose_lifter.core.track.later import LaterFrame, Refiner
+from pose_lifter.core.track.later import LaterFrame, Refiner, placements
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -37,11 +40,11 @@ from pose_lifter.messages.frame import (
     LiftedSkeleton,
     SkeletonInput,
     SkipSkeleton,
-    placed_again,
+    check_output,
     with_frames_ahead,
 )
 
-__all__ = ["AHEAD_LAG", "MAX_LAG", "LaggedFrame", "LaggedFrames"]
+__all__ = ["AHEAD_LAG", "MAX_LAG", "LaggedFrame", "LaggedFrames", "refined_skeletons"]
 
 T = TypeVar("T")
 
@@ -145,12 +148,21 @@ class LaggedFrames(Generic[T]):
         self._poses.depth, self._poses.gate = opts.measurement_depth, opts.measurement_gate
         self._poses.gap_s = self.pipeline.settings.track_timeout
         kept = self.pipeline.policy.kept_later()
-        for s in frame.lifted:
-            if s.track_id < 0:  # untracked: no past, no future; published as lifted
-                continue
+        tracked = [s for s in frame.lifted if s.track_id >= 0]  # untracked: no past, no future
+        settings = self.pipeline.settings
+        try:
+            placed = placements([s.result for s in tracked], settings.lower_leg_length, frame.intrinsics,
+                                settings.default_distance)
+        except Exception:  # (lifted, so placed once already) e.g. a camera scale not > 0: as lifted
+            placed, tracked = [], []
+        for s, placement in zip(tracked, placed, strict=True):
             frames = [f for f in kept.get(s.track_id, []) if f.stamp_ns == frame.stamp_ns]
             later: LaterFrame | None = frames[-1] if frames else None
-            self._poses.add(s.track_id, frame.stamp_ns, s.result.pose_camera, later)
+            # the fit's own pose, or the published one with the measurement update (as offline:
+            # the causal output smoothing is replaced, not compounded)
+            own = (s.result.pose_camera if s.fit_pose_camera is None or opts.measurement_update
+                   else s.fit_pose_camera)
+            self._poses.add(s.track_id, frame.stamp_ns, own, later, placement)
         self._held.append(frame)
         out = []
         while len(self._held) > self.lag - self.ahead:
@@ -160,25 +172,46 @@ class LaggedFrames(Generic[T]):
         return out
 
     def _refined(self, frame: LaggedFrame[T]) -> LaggedFrame[T]:
-        """``frame`` with each tracked skeleton's pose refined (:class:`Refiner`) and placed
-        again; a skeleton whose refined pose cannot be placed keeps the pose it was lifted with."""
+        """``frame`` with each tracked skeleton's metric joints refined (:class:`Refiner`, placed),
+        its result's pose the refined joints centred; a skeleton whose refinement is not a valid
+        output keeps what it was lifted with."""
         rows: list[tuple[int, LiftedSkeleton]] = []
-        poses = []
+        joints = []
         for k, s in enumerate(frame.outcomes):
             if not isinstance(s, LiftedSkeleton) or s.track_id < 0:
                 continue
-            pose = self._poses.pose(s.track_id, frame.stamp_ns)
-            if pose is not None:
+            j = self._poses.pose(s.track_id, frame.stamp_ns)
+            if j is not None:
                 rows.append((k, s))
-                poses.append(pose)
+                joints.append(j)
         if not rows:
             return frame
-        placed = placed_again([s for _, s in rows], np.array(poses), self.pipeline.settings, frame.intrinsics)
         outcomes = list(frame.outcomes)
-        for (k, _), again in zip(rows, placed, strict=True):
-            if again is not None:  # else the pose it was lifted with is kept
+        leg = self.pipeline.settings.lower_leg_length
+        again_of = refined_skeletons([s for _, s in rows], np.array(joints), leg)
+        for (k, _), again in zip(rows, again_of, strict=True):
+            if again is not None:  # else what it was lifted with is kept
                 outcomes[k] = again
         return frame._replace(outcomes=outcomes)
+
+
+def refined_skeletons(lifted: Sequence[LiftedSkeleton], joints: NDArray[np.float64], leg_m: float
+                      ) -> list[LiftedSkeleton | None]:
+    """Lifted skeletons with refined metric joints (``joints`` (n, 12, 3), metres, camera frame:
+    :meth:`Refiner.pose`): each result's camera-frame pose the joints centred, in leg units
+    (:func:`~pose_lifter.core.results.with_camera_poses`); None for a skeleton that is then no
+    valid output (:func:`check_output`)."""
+    centred = (joints - joints.mean(axis=1, keepdims=True)) / leg_m
+    results = with_camera_poses([s.result for s in lifted], centred)
+    out: list[LiftedSkeleton | None] = []
+    for s, res, j in zip(lifted, results, joints, strict=True):
+        try:
+            check_output(s.track_id, res, j)
+        except SkipSkeleton:
+            out.append(None)
+            continue
+        out.append(replace(s, result=res, joints_m=j))
+    return out
 
 
 def _with_ahead(checked: CheckedFrame, after: list[CheckedFrame], stamps: list[int], n: int) -> CheckedFrame:

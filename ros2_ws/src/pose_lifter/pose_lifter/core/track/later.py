@@ -24,9 +24,11 @@ hybrid-offline columns) and docs/cross_action.md (their decisions).
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import math
 from collections import Counter, deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, NamedTuple
 
@@ -37,13 +39,15 @@ from ..model.skeleton import N_JOINTS
 from ..numeric.jit import njit
 from .defaults import MAX_LAG
 from .measurement import MeasurementUpdate
+from .placement import CameraIntrinsics, place_results, ray_rotations
+from .smoothing import centred_smoothing
 
 if TYPE_CHECKING:
     from ..results import LiftResult
     from .state import Track
 
-__all__ = ["MAX_LAG", "WINDOW", "LaterFrame", "Refiner", "RunArrays", "compile_kernels", "mean_of_passes",
-           "smooth_track_2d", "update_later", "update_tracks_later"]
+__all__ = ["MAX_LAG", "WINDOW", "LaterFrame", "Placement", "Refiner", "RunArrays", "compile_kernels",
+           "mean_of_passes", "placements", "smooth_track_2d", "update_later", "update_tracks_later"]
 
 #: Offline smoothing of the 2D (:func:`smooth_track_2d`): the constant-velocity model's random
 #: acceleration, per frame^2 at 30 Hz, as a share of the track's 2D size (the median over frames of
@@ -326,6 +330,32 @@ class RunArrays(NamedTuple):
 WINDOW: Final[int] = 20
 
 
+class Placement(NamedTuple):
+    """Where a lifted frame's pose goes in metres (:func:`.placement.place_poses`): ``joints =
+    leg_m * pose @ rotation.T + centroid``; the centroid and the ray's rotation follow from the
+    lift's camera (scale, translation) and the intrinsics, not from the pose, so a refined pose is
+    placed as the lift's."""
+
+    rotation: NDArray[np.float64] | None  #: (3, 3) the ray's rotation (None: no intrinsics, none)
+    centroid: NDArray[np.float64]  #: (3,) metres
+    leg_m: float  #: the right lower leg, metres
+
+    def place(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The pose's joints (12, 3; ``pose`` (12, 3) camera frame, centred, leg units) in metres."""
+        local = pose * self.leg_m
+        return local + self.centroid if self.rotation is None else local @ self.rotation.T + self.centroid
+
+
+def placements(results: Sequence[LiftResult], leg_m: float, intrinsics: CameraIntrinsics | None,
+               default_distance_m: float) -> list[Placement]:
+    """The :class:`Placement` of each of ``results`` (one camera's; :func:`.placement.place_results`,
+    which raises what it raises)."""
+    centroids = place_results(np.zeros((len(results), N_JOINTS, 3)), results, leg_m, intrinsics,
+                              default_distance_m)[:, 0, :]
+    rotations = ray_rotations(centroids) if intrinsics is not None else [None] * len(results)
+    return [Placement(r, c, float(leg_m)) for r, c in zip(rotations, centroids, strict=True)]
+
+
 @dataclass
 class _Frame:
     """One kept frame of a track."""
@@ -333,8 +363,13 @@ class _Frame:
     stamp_ns: int
     pose: NDArray[np.float64]  #: (12, 3) the published pose without the update
     later: LaterFrame | None  #: what the update reads of it (None: no update)
+    placement: Placement | None  #: where its pose goes in metres (None: the model frame)
     forward: NDArray[np.float64] | None = None  #: the forward pass's pose, once taken
     taken: bool = False  #: the forward pass has taken it
+
+    def placed(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``pose`` (a refinement of this frame's) placed as this frame (12, 3)."""
+        return pose if self.placement is None else self.placement.place(pose)
 
 
 def _later(f: _Frame) -> LaterFrame:
@@ -358,8 +393,9 @@ class Refiner:
     """Tracks' poses refined over the frames after them: the node's ``output_lag`` N and ``pose-lifter
     lift`` (module docstring), one code with a horizon.
 
-    Per track, its frames in time order, each with the pose it was lifted with and what the update
-    reads of it. A frame's pose is refined over the frames known when it is asked for:
+    Per track, its frames in time order, each with the pose it was lifted with, what the update
+    reads of it and where it is placed. A frame's pose is refined over the frames known when it is
+    asked for:
 
     * the update's runs (frames that follow one another) have their 2D smoothed
       (:func:`smooth_track_2d`) over the frames kept;
@@ -370,12 +406,10 @@ class Refiner:
     * the backward pass starts at the newest frame (with the run's first known noise for its first
       frames, whose noise the track did not know yet); each frame's updated pose is the mean of the
       two passes (:func:`mean_of_passes`);
-    * :meth:`pose` is then the centred Gaussian window (:func:`.smoothing.centred_smoothing`'s row)
-      over the updated poses, in the model frame (across the update's runs, as the offline lift's
-      window; split at a gap); :meth:`measured` gives the updated poses alone
-      (``pose-lifter lift`` places them first and windows them in metres, which smooths the
-      placement's depth too; a lagged frame's neighbours are already published, their placement
-      not redone).
+    * each updated pose is placed as its frame (:class:`Placement`: in metres, so the window also
+      smooths the placement's depth; without one, the model frame), and the centred Gaussian window
+      (:func:`.smoothing.centred_smoothing`; split at a gap or a step back in time, across the
+      update's runs) averages them: :meth:`pose` a frame's row of it, :meth:`poses` every row.
 
     With a horizon, a track keeps its newest WINDOW frames, so a frame costs the same at any point
     of a long track; over the whole track every frame is kept and each run is refined once.
@@ -404,21 +438,23 @@ class Refiner:
     def __len__(self) -> int:
         return len(self._tracks)
 
-    def add(self, track_id: int, stamp_ns: int, pose: NDArray[np.float64], later: LaterFrame | None) -> None:
-        """Keep a track's newest frame: its published pose (12, 3) and what the update reads of it
-        (None: none). With a horizon, a stamp before the track's last one (the input clock jumped
+    def add(self, track_id: int, stamp_ns: int, pose: NDArray[np.float64], later: LaterFrame | None,
+            placement: Placement | None = None) -> None:
+        """Keep a track's newest frame: its published pose (12, 3), what the update reads of it
+        (None: none) and where it is placed (None: not, the model frame; all of a track's frames
+        or none). With a horizon, a stamp before the track's last one (the input clock jumped
         back) starts the track again; over the whole track the frames are kept, the update's runs
         split where a frame does not follow (:attr:`LaterFrame.follows`) and the window where the
         clock steps back."""
         t = self._tracks.get(track_id)
         if t is None or (self.horizon is not None and t.frames and stamp_ns < t.frames[-1].stamp_ns):
             t = self._tracks[track_id] = _Track(deque(maxlen=None if self.horizon is None else WINDOW))
-        t.frames.append(_Frame(int(stamp_ns), np.array(pose, dtype=np.float64), later))
+        t.frames.append(_Frame(int(stamp_ns), np.array(pose, dtype=np.float64), later, placement))
         t.measured.clear()
 
     def pose(self, track_id: int, stamp_ns: int) -> NDArray[np.float64] | None:
-        """The refined pose (12, 3; finite) of the track's kept frame at ``stamp_ns`` (the latest
-        with that stamp), over the frames kept now; None when it is no longer kept. With a
+        """The refined pose (12, 3; finite; placed) of the track's kept frame at ``stamp_ns`` (the
+        latest with that stamp), over the frames kept now; None when it is no longer kept. With a
         horizon, ask for a track's frames in time order: each is taken by the forward pass when
         first asked."""
         t = self._tracks.get(track_id)
@@ -430,14 +466,54 @@ class Refiner:
             return None
         lo, hi = self._near(frames, at)
         measured: dict[int, NDArray[np.float64]] = {}
+        starts = self._starts(frames)
         k = lo
-        while k < hi:  # the update's runs the window reads (it crosses a run's start, not a gap)
-            first, end = self._run(frames, k)
+        while k < hi:  # the update's runs the window reads
+            first, end = self._run(starts, len(frames), k)
             measured.update(self._measured(t, frames, first, end, at))
             k = end
-        refined = [measured.get(k, f.pose) for k, f in enumerate(frames[lo:hi], lo)]
-        out = self._window(np.array([f.stamp_ns for f in frames[lo:hi]], dtype=np.int64), refined, at - lo)
-        return out if np.isfinite(out).all() else np.array(frames[at].pose, dtype=np.float64)
+        placed = np.array([f.placed(measured.get(k, f.pose)) for k, f in enumerate(frames[lo:hi], lo)])
+        stamps = np.array([f.stamp_ns for f in frames[lo:hi]], dtype=np.int64)
+        out = self._window(stamps, placed, at - lo)
+        return out if np.isfinite(out).all() else frames[at].placed(frames[at].pose)
+
+    def poses(self, track_id: int) -> NDArray[np.float64]:
+        """Every kept frame's refined pose (T, 12, 3; placed), in the order added: the whole track
+        (``horizon`` None), the window over every frame at once (a frame whose window is not finite
+        keeps its own pose, placed)."""
+        if self.horizon is not None:
+            raise ValueError("poses() refines a whole track: the refiner's horizon must be None")
+        t = self._tracks.get(track_id)
+        if t is None:
+            return np.empty((0, N_JOINTS, 3))
+        frames = list(t.frames)
+        measured = self.measured(track_id)
+        placed = np.array([f.placed(f.pose if p is None else p)
+                           for f, p in zip(frames, measured, strict=True)])
+        stamps = np.array([f.stamp_ns for f in frames], dtype=np.int64)
+        ok = np.isfinite(placed).all(axis=(1, 2))
+        out = centred_smoothing(np.where(ok[:, None, None], placed, 0.0), stamps, ok, self.smoothing_s,
+                                self.gap_s)
+        bad = ~(np.isfinite(out).all(axis=(1, 2)) & ok)
+        for k in np.flatnonzero(bad):
+            out[k] = frames[k].placed(frames[k].pose)
+        return out
+
+    def measured(self, track_id: int) -> list[NDArray[np.float64] | None]:
+        """Each kept frame's updated pose (12, 3; not placed), in the order added, or None where
+        neither pass updated it (its own pose stands); no window. Over the whole track
+        (``horizon`` None)."""
+        if self.horizon is not None:
+            raise ValueError("measured() refines a whole track: the refiner's horizon must be None")
+        t = self._tracks.get(track_id)
+        if t is None:
+            return []
+        frames = list(t.frames)
+        out: list[NDArray[np.float64] | None] = [None] * len(frames)
+        for first, end in itertools.pairwise([*self._starts(frames), len(frames)]):
+            for k, pose in self._measured(t, frames, first, end, first).items():
+                out[k] = pose
+        return out
 
     def _near(self, frames: list[_Frame], at: int) -> tuple[int, int]:
         """The first and end index of the frames around frame ``at`` its window may read: within
@@ -450,35 +526,24 @@ class Refiner:
             hi += 1
         return lo, hi
 
-    def measured(self, track_id: int) -> list[NDArray[np.float64] | None]:
-        """Each kept frame's updated pose (12, 3), in the order added, or None where neither pass
-        updated it (its own pose stands); no window. Over the whole track (``horizon`` None)."""
-        if self.horizon is not None:
-            raise ValueError("measured() refines a whole track: the refiner's horizon must be None")
-        t = self._tracks.get(track_id)
-        if t is None:
-            return []
-        frames = list(t.frames)
-        out: list[NDArray[np.float64] | None] = [None] * len(frames)
-        starts = [k for k, f in enumerate(frames) if k == 0 or (f.later is not None and not f.later.follows)]
-        for first, end in itertools.pairwise([*starts, len(frames)]):
-            for k, pose in self._measured(t, frames, first, end, first).items():
-                out[k] = pose
-        return out
+    @staticmethod
+    def _starts(frames: list[_Frame]) -> list[int]:
+        """The first index of each of the update's runs (the first frame, and each frame with an
+        update that does not follow its track's last)."""
+        return [k for k, f in enumerate(frames) if k == 0 or (f.later is not None and not f.later.follows)]
 
     @staticmethod
-    def _run(frames: list[_Frame], at: int) -> tuple[int, int]:
-        """The first and end index of the update's run holding frame ``at`` (a frame with an
-        update that does not follow its track's last starts one)."""
-        starts = [k for k, f in enumerate(frames) if f.later is not None and not f.later.follows]
-        return (max([k for k in starts if k <= at], default=0),
-                min([k for k in starts if k > at], default=len(frames)))
+    def _run(starts: list[int], n: int, at: int) -> tuple[int, int]:
+        """The first and end index of the run (``starts``: :meth:`_starts` of ``n`` frames) holding
+        frame ``at``."""
+        i = bisect.bisect_right(starts, at)
+        return starts[i - 1], starts[i] if i < len(starts) else n
 
-    def _window(self, stamps_ns: NDArray[np.int64], poses: list[NDArray[np.float64]], at: int
+    def _window(self, stamps_ns: NDArray[np.int64], poses: NDArray[np.float64], at: int
                 ) -> NDArray[np.float64]:
-        """Row ``at`` of :func:`.smoothing.centred_smoothing` of ``poses`` (in time order): the
-        Gaussian-weighted mean of the frames within 3 standard deviations of it and no gap over
-        ``gap_s`` or step back in time away."""
+        """Row ``at`` of :func:`.smoothing.centred_smoothing` of ``poses`` (T, 12, 3; in time
+        order): the Gaussian-weighted mean of the frames within 3 standard deviations of it and no
+        gap over ``gap_s`` or step back in time away."""
         if self.smoothing_s <= 0:
             return np.array(poses[at], dtype=np.float64)
         t = (stamps_ns - stamps_ns[at]) * 1e-9
@@ -486,9 +551,7 @@ class Refiner:
         segment = np.concatenate([[0], np.cumsum((dt > self.gap_s) | (dt < 0))])
         near = (segment == segment[at]) & (np.abs(t) <= 3.0 * self.smoothing_s)
         w = np.exp(-0.5 * (t[near] / self.smoothing_s) ** 2)
-        rows = np.flatnonzero(near)
-        return np.asarray(np.einsum("k,kjc->jc", w, np.array([poses[k] for k in rows])) / w.sum(),
-                          dtype=np.float64)
+        return np.asarray(np.einsum("k,kjc->jc", w, poses[near]) / w.sum(), dtype=np.float64)
 
     def _measured(self, t: _Track, frames: list[_Frame], first: int, end: int, at: int
                   ) -> dict[int, NDArray[np.float64]]:
