@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import tolerances as tol
-from pose_lifter.core.track.later import WINDOW, LaterFrame, Refiner, RunArrays, update_later
+from pose_lifter.core.track.later import WINDOW, LaterFrame, Placement, Refiner, RunArrays, update_later
 from pose_lifter.core.track.measurement import MeasurementUpdate
 from pose_lifter.core.track.smoothing import centred_smoothing
 
@@ -102,3 +102,35 @@ def test_a_horizon_that_reaches_every_frame_gives_the_whole_tracks_refinement() 
     offline = centred_smoothing(updated, stamps, np.ones(len(frames), dtype=bool), 0.04, 1.0)
     for k, f in enumerate(frames):
         np.testing.assert_allclose(whole.pose(4, f.stamp_ns), offline[k], rtol=0, atol=tol.ROUND_OFF)
+
+
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def test_each_pose_is_placed_as_its_frame_then_windowed_in_metres() -> None:
+    """Frames placed at different centroids and rays: the window averages the placed joints (the
+    person's depth smoothed too), a horizon's row as the whole track's, as centred_smoothing of
+    the placed poses."""
+    rng = np.random.default_rng(5)
+    frames = _later_frames(16)
+    placed = [Placement(_rotation(rng), np.array([0.1, -0.2, 5.0]) + rng.normal(scale=0.05, size=3), 0.45)
+              for _ in frames]
+    lagged, whole = Refiner(3, 0.04, 1.0, 0.5, 0.3), Refiner(None, 0.04, 1.0, 0.5, 0.3)
+    for f, p in zip(frames, placed, strict=True):
+        lagged.add(2, f.stamp_ns, f.pose, f, p)
+        whole.add(2, f.stamp_ns, f.pose, f, p)
+    measured = whole.measured(2)
+    metres = np.array([p.rotation @ (0.45 * (f.pose if m is None else m)).T for f, p, m in
+                       zip(frames, placed, measured, strict=True)]).transpose(0, 2, 1)
+    metres += np.array([p.centroid for p in placed])[:, None, :]
+    stamps = np.array([f.stamp_ns for f in frames], dtype=np.int64)
+    expect = centred_smoothing(metres, stamps, np.ones(len(frames), dtype=bool), 0.04, 1.0)
+    np.testing.assert_allclose(whole.poses(2), expect, rtol=0, atol=tol.ROUND_OFF)
+    for k, f in enumerate(frames):
+        np.testing.assert_allclose(lagged.pose(2, f.stamp_ns), expect[k], rtol=0, atol=tol.ROUND_OFF)
+    # the centroid is the window over the frames' centroids
+    w = np.exp(-0.5 * ((np.arange(2, 9) - 5) * STEP * 1e-9 / 0.04) ** 2)
+    centroids = np.array([p.centroid for p in placed[2:9]])
+    np.testing.assert_allclose(expect[5].mean(axis=0), w @ centroids / w.sum(), rtol=0, atol=tol.ROUND_OFF)

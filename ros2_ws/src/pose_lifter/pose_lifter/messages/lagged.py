@@ -3,10 +3,10 @@
 :class:`LaggedFrames` takes each checked frame and gives it back lifted ``lag`` frames later,
 each tracked skeleton's pose refined over the frames then known
 (:class:`~pose_lifter.core.track.later.Refiner` with the horizon ``lag``, the code that refines
-the offline lift's tracks: the measurement update of the smoothed 2D and its centred window, over
-the track's newest frames) and placed again in the camera frame. The pipeline's policy keeps
-what the update reads of each frame (:attr:`TrackPolicy.smoothed_later`) instead of running the
-node's causal update.
+the offline lift's tracks: the measurement update of the smoothed 2D, each pose placed where its
+frame's lift put the person, and the centred window over the metric joints, over the track's
+newest frames). The pipeline's policy keeps what the update reads of each frame
+(:attr:`TrackPolicy.smoothed_later`) instead of running the node's causal update.
 
 Below AHEAD_LAG frames each frame is lifted when it arrives, by the node's causal priors. From
 AHEAD_LAG on, the pipeline's lifter reads ahead (``Lifter.reads_ahead``: the offline prior) and
