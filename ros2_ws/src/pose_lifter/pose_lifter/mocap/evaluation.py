@@ -301,10 +301,11 @@ class Evaluator:
                 continue
             preds[i] = r.pose_camera * leg_m[i]
             if refiner is not None and policy is not None:
-                # what is refined: the fit's own pose, or the published one with the measurement
-                # update (pose_lifter.offline.chains.refine_chain), centred, times the true leg
+                # what is refined, centred, times the true leg: the published pose (the lagged
+                # node's) or offline the fit's own, the published one with the measurement update
+                # (pose_lifter.offline.chains.refine_chain)
                 own = (r.pose_camera if t.fit_pose_camera is None or lifter.options.measurement_update
-                       else t.fit_pose_camera)
+                       or refiner.horizon is not None else t.fit_pose_camera)
                 kept = policy.kept_later().get(0, [])
                 refiner.add(0, int(stamps[i]), own, kept[-1] if kept else None,
                             Placement(None, np.zeros(3), float(leg_m[i])))
