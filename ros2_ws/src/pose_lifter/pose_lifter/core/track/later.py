@@ -39,7 +39,7 @@ from ..model.skeleton import N_JOINTS
 from ..numeric.jit import njit
 from .defaults import MAX_LAG
 from .measurement import MeasurementUpdate
-from .placement import CameraIntrinsics, place_results, ray_rotations
+from .placement import CameraIntrinsics, ray_rotations, result_centroids
 from .smoothing import centred_smoothing
 
 if TYPE_CHECKING:
@@ -348,10 +348,9 @@ class Placement(NamedTuple):
 
 def placements(results: Sequence[LiftResult], leg_m: float, intrinsics: CameraIntrinsics | None,
                default_distance_m: float) -> list[Placement]:
-    """The :class:`Placement` of each of ``results`` (one camera's; :func:`.placement.place_results`,
+    """The :class:`Placement` of each of ``results`` (one camera's; :func:`.placement.place_results`'s,
     which raises what it raises)."""
-    centroids = place_results(np.zeros((len(results), N_JOINTS, 3)), results, leg_m, intrinsics,
-                              default_distance_m)[:, 0, :]
+    centroids = result_centroids(results, leg_m, intrinsics, default_distance_m)
     rotations = ray_rotations(centroids) if intrinsics is not None else [None] * len(results)
     return [Placement(r, c, float(leg_m)) for r, c in zip(rotations, centroids, strict=True)]
 
@@ -370,6 +369,23 @@ class _Frame:
     def placed(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """``pose`` (a refinement of this frame's) placed as this frame (12, 3)."""
         return pose if self.placement is None else self.placement.place(pose)
+
+
+def _placed(frames: list[_Frame], poses: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``poses`` (K, 12, 3; refinements of ``frames``' poses) each placed as its frame
+    (:meth:`_Frame.placed`), in one pass."""
+    found = [f.placement for f in frames]
+    if not any(found):
+        return poses
+    if not all(found):
+        return np.array([f.placed(p) for f, p in zip(frames, poses, strict=True)])
+    places = [p for p in found if p is not None]
+    local = poses * np.array([p.leg_m for p in places])[:, None, None]
+    centroids = np.array([p.centroid for p in places])[:, None, :]
+    if all(p.rotation is None for p in places):
+        return np.asarray(local + centroids, dtype=np.float64)
+    rotations = np.array([np.eye(3) if p.rotation is None else p.rotation for p in places])
+    return np.asarray(local @ rotations.transpose(0, 2, 1) + centroids, dtype=np.float64)
 
 
 def _later(f: _Frame) -> LaterFrame:
@@ -472,7 +488,8 @@ class Refiner:
             first, end = self._run(starts, len(frames), k)
             measured.update(self._measured(t, frames, first, end, at))
             k = end
-        placed = np.array([f.placed(measured.get(k, f.pose)) for k, f in enumerate(frames[lo:hi], lo)])
+        near = frames[lo:hi]
+        placed = _placed(near, np.array([measured.get(k, f.pose) for k, f in enumerate(near, lo)]))
         stamps = np.array([f.stamp_ns for f in frames[lo:hi]], dtype=np.int64)
         out = self._window(stamps, placed, at - lo)
         return out if np.isfinite(out).all() else frames[at].placed(frames[at].pose)
@@ -488,10 +505,10 @@ class Refiner:
             return np.empty((0, N_JOINTS, 3))
         frames = list(t.frames)
         measured = self.measured(track_id)
-        placed = np.array([f.placed(f.pose if p is None else p)
-                           for f, p in zip(frames, measured, strict=True)])
+        updated = [f.pose if p is None else p for f, p in zip(frames, measured, strict=True)]
+        placed = _placed(frames, np.array(updated))
         stamps = np.array([f.stamp_ns for f in frames], dtype=np.int64)
-        ok = np.isfinite(placed).all(axis=(1, 2))
+        ok: NDArray[np.bool_] = np.asarray(np.isfinite(placed).all(axis=(1, 2)), dtype=bool)
         out = centred_smoothing(np.where(ok[:, None, None], placed, 0.0), stamps, ok, self.smoothing_s,
                                 self.gap_s)
         bad = ~(np.isfinite(out).all(axis=(1, 2)) & ok)
