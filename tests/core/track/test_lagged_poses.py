@@ -2,14 +2,28 @@
 update, the centred window over the frames kept (checked against the offline lift's smoothing and
 the weights written out); the window of frames kept, a clock that jumps back, forgetting idle
 tracks. Over the whole track, with the update: the two passes of the offline update written out;
-a horizon that reaches every frame of a short track gives the whole track's poses."""
+a horizon that reaches every frame of a short track gives the whole track's poses; each pose placed
+as its frame (as place_results places it), then windowed in metres."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+from typing import Any
+
 import numpy as np
+import pytest
 import tolerances as tol
-from pose_lifter.core.track.later import WINDOW, LaterFrame, Placement, Refiner, RunArrays, update_later
+from pose_lifter.core.track.later import (
+    WINDOW,
+    LaterFrame,
+    Placement,
+    Refiner,
+    RunArrays,
+    placements,
+    update_later,
+)
 from pose_lifter.core.track.measurement import MeasurementUpdate
+from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.smoothing import centred_smoothing
 
 STEP = 33_333_333
@@ -134,3 +148,16 @@ def test_each_pose_is_placed_as_its_frame_then_windowed_in_metres() -> None:
     w = np.exp(-0.5 * ((np.arange(2, 9) - 5) * STEP * 1e-9 / 0.04) ** 2)
     centroids = np.array([p.centroid for p in placed[2:9]])
     np.testing.assert_allclose(expect[5].mean(axis=0), w @ centroids / w.sum(), rtol=0, atol=tol.ROUND_OFF)
+
+
+@pytest.mark.parametrize("intrinsics", [None, ((800.0, 790.0), (320.0, 240.0))])
+def test_a_placement_places_any_pose_as_the_lift_was_placed(intrinsics: Any) -> None:
+    """placements() of lifts (their camera's scale and translation): a refined pose placed by it is
+    where place_results puts that pose with those lifts' cameras."""
+    rng = np.random.default_rng(7)
+    results: Any = [SimpleNamespace(camera=SimpleNamespace(scale=s, translation=t))
+                    for s, t in zip([60.0, 95.0, 140.0], rng.uniform(50, 600, size=(3, 2)), strict=True)]
+    poses = _poses(3, 4)
+    expect = place_results(poses, results, 0.43, intrinsics, 5.0)
+    for p, placement, e in zip(poses, placements(results, 0.43, intrinsics, 5.0), expect, strict=True):
+        np.testing.assert_allclose(placement.place(p), e, rtol=0, atol=tol.ROUND_OFF)
