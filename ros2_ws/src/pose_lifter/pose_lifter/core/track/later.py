@@ -4,10 +4,11 @@ lift`` (the whole track, :attr:`~pose_lifter.core.track.policy.TrackPolicy.smoot
 
 A track's frames are kept as it is lifted; its 2D is smoothed over past and future frames and the
 measurement update (:mod:`.measurement`) runs over them from the smoothed 2D, at every noise
-level, forward and backward in time (each frame publishes the mean of the two passes), then a
-centred Gaussian window (:func:`.smoothing.centred_smoothing`) over the poses. With a lag of 3
-frames (0.1 s at 30 Hz) the window (+-3 frames) is whole. Output-only: the track's fits never see
-it.
+level, forward and backward in time (each frame publishes the mean of the two passes), then each
+pose is placed where its frame's lift put the person (:class:`Placement`) and a centred Gaussian
+window (:func:`.smoothing.centred_smoothing`) averages the metric joints, the person's depth with
+them. With a lag of 3 frames (0.1 s at 30 Hz) the window (+-3 frames) is whole. Output-only: the
+track's fits never see it.
 
 Live, the update stops above ``MAX_NOISE`` (:mod:`.measurement`: its causal gain would follow a
 detector's noise, and its frame-correlated error most). Here each joint's 2D (the joints the
