@@ -10,10 +10,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+import tolerances as tol
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
+from pose_lifter.core.track.smoothing import centred_smoothing
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import FramePipeline, FrameSettings, Intrinsics, LiftedSkeleton
-from pose_lifter.messages.lagged import AHEAD_LAG, MAX_LAG, LaggedFrames
+from pose_lifter.messages.lagged import AHEAD_LAG, LAG_SMOOTHING_S, MAX_LAG, LaggedFrames
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_GROUND_TRUTH, TOPIC_KEYPOINTS
 from pose_lifter.offline.bags import read_messages
 
@@ -71,16 +73,23 @@ def test_every_frame_is_answered_once_in_order_lag_frames_late(lifter: Lifter) -
     # frame k leaves when frame k + LAG has been lifted; the last LAG when the input stops
     assert [a[1] for a in late] == [min(k + LAG, len(frames)) for k in range(len(frames))]
     changed = 0
-    for (_, _, a), (_, _, b) in zip(now, late, strict=True):
+    # each pose is placed where the lift put the person, then windowed in metres: the centroid
+    # is the centred window over the lifted centroids, the offline lift's smoothing
+    stamps = np.array([stamp for stamp, _ in frames], dtype=np.int64)
+    centroids = np.array([[x.joints_m.mean(axis=0) for x in a] for _, _, a in now])  # (T, 2, 3)
+    windowed = centred_smoothing(centroids, stamps, np.ones(len(frames), dtype=bool), LAG_SMOOTHING_S, 1.0)
+    for k, ((_, _, a), (_, _, b)) in enumerate(zip(now, late, strict=True)):
         assert [s.track_id for s in a] == [s.track_id for s in b] and len(a) == 2
-        for x, y in zip(a, b, strict=True):
+        for p, (x, y) in enumerate(zip(a, b, strict=True)):
             # the lift is the node's (its camera and warm start); only the pose is refined
             assert x.warm_started == y.warm_started
             np.testing.assert_array_equal(x.result.camera.translation, y.result.camera.translation)
             assert float(x.result.camera.scale) == float(y.result.camera.scale)
             assert np.isfinite(y.joints_m).all()
-            # placed where the lift put the person: the same centroid
-            np.testing.assert_allclose(y.joints_m.mean(axis=0), x.joints_m.mean(axis=0), atol=1e-9)
+            np.testing.assert_allclose(y.joints_m.mean(axis=0), windowed[k, p], rtol=0, atol=tol.ROUND_OFF)
+            # the result's pose is the joints centred, in leg units
+            np.testing.assert_allclose(y.result.pose_camera * FrameSettings().lower_leg_length,
+                                       y.joints_m - y.joints_m.mean(axis=0), rtol=0, atol=tol.ROUND_OFF)
             changed += not np.allclose(x.joints_m, y.joints_m, atol=1e-3)
     assert changed > 0.9 * 2 * len(frames)
 

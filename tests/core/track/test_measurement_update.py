@@ -369,7 +369,7 @@ def test_offline_the_update_runs_both_ways_in_time_and_does_not_lag() -> None:
 
 
 def test_a_copy_of_the_state_goes_on_as_the_original_and_leaves_it_alone() -> None:
-    """The lagged node (core/track/lagged.py) continues a track's forward pass on a copy."""
+    """The refiner with a horizon (core/track/later.py) continues a track's forward pass on a copy."""
     pose = _pose()
     rng = np.random.default_rng(3)
     frames = [(pose + rng.normal(scale=0.02, size=pose.shape),

@@ -58,10 +58,10 @@ from pose_lifter.core.model.bases import default_bases_path
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.core.options import Mode
 from pose_lifter.core.track.defaults import AHEAD_LAG
-from pose_lifter.core.track.lagged import LaggedPoses
+from pose_lifter.core.track.later import Placement, Refiner
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
-from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S, centred_smoothing
+from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.mocap.cmu import load_trial, read_manifest, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, DetectorModel, detect, swap_labels
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -271,17 +271,17 @@ class Evaluator:
         intrinsics = ((FOCAL, FOCAL), (float(CENTRE[0]), float(CENTRE[1]))) if (
             filmed.perspective and self.setup.intrinsics) else None
         policy = TrackPolicy(lifter, track_timeout=1e9) if m in TRACKED else None
-        if policy is not None and m.endswith("-offline"):  # as pose-lifter lift (offline/chains.py)
-            policy.smoothed_later = True
-        # the node with output_lag (pose_lifter.messages.lagged): each frame refined lag frames late
+        # the refiner: of the node with output_lag (pose_lifter.messages.lagged), each frame refined
+        # lag frames late, or of pose-lifter lift (pose_lifter.offline.chains), the whole track
         lag = self.setup.lag - (lifter.frames_ahead if m == "hybrid-lag" else 0)  # after the lift's
-        lagged = None
-        if policy is not None and m == "hybrid-lag":
+        refiner = None
+        if policy is not None and (m == "hybrid-lag" or m.endswith("-offline")):
             policy.smoothed_later = True
             o = lifter.options
-            lagged = LaggedPoses(OFFLINE_SMOOTHING_S, 1.0, o.measurement_depth, o.measurement_gate)
+            refiner = Refiner(self.setup.lag if m == "hybrid-lag" else None, OFFLINE_SMOOTHING_S, 1.0,
+                              o.measurement_depth, o.measurement_gate)
         preds = np.full((n, 12, 3), np.nan)
-        fit = np.full((n, 12, 3), np.nan)
+        refined: list[int] = []  # the frames given to the refiner
         depth = np.full(n, np.nan)
         stamps, leg_m = filmed.stamps, filmed.leg_m
         warm = None
@@ -293,11 +293,6 @@ class Evaluator:
                     ahead = FramesAhead(stamps[nxt], filmed.px[nxt], filmed.conf[nxt]) if k_ahead else None
                     t = policy.lift(0, int(stamps[i]), filmed.px[i], filmed.conf[i], intrinsics, ahead)
                     r = t.result
-                    # what pose-lifter lift smooths: the fit's own pose, or the published one with
-                    # the measurement update (pose_lifter.offline.chains.lift_chains)
-                    own = (r.pose_camera if t.fit_pose_camera is None or lifter.options.measurement_update
-                           else t.fit_pose_camera)
-                    fit[i] = own * leg_m[i]
                 else:
                     r = lifter.lift(filmed.px[i], filmed.conf[i], warm=warm)
                     warm = r.warm_start() if m == "paper" else None
@@ -305,24 +300,26 @@ class Evaluator:
                 warm = None
                 continue
             preds[i] = r.pose_camera * leg_m[i]
-            if lagged is not None and policy is not None:
+            if refiner is not None and policy is not None:
+                # what is refined, centred, times the true leg: the published pose (the lagged
+                # node's) or offline the fit's own, the published one with the measurement update
+                # (pose_lifter.offline.chains.refine_chain)
+                own = (r.pose_camera if t.fit_pose_camera is None or lifter.options.measurement_update
+                       or refiner.horizon is not None else t.fit_pose_camera)
                 kept = policy.kept_later().get(0, [])
-                lagged.add(0, int(stamps[i]), r.pose_camera, kept[-1] if kept else None)
-                _lag_out(lagged, stamps, leg_m, preds, i - lag)
+                refiner.add(0, int(stamps[i]), own, kept[-1] if kept else None,
+                            Placement(None, np.zeros(3), float(leg_m[i])))
+                refined.append(i)
+                if refiner.horizon is not None:
+                    _lag_out(refiner, stamps, preds, i - lag)
             if filmed.perspective:  # the node's placement with the focal length and the true leg
                 z = place_in_camera(r, float(leg_m[i]), (FOCAL, FOCAL), None, filmed.distance).mean(axis=0)[2]
                 depth[i] = 100.0 * abs(z - filmed.distance) / filmed.distance
-        if lagged is not None:  # the input stopped: the frames held are published
+        if refiner is not None and refiner.horizon is not None:  # the input stopped: the frames held
             for k in range(max(0, n - lag), n):
-                _lag_out(lagged, stamps, leg_m, preds, k)
-        elif policy is not None and policy.smoothed_later:  # the offline measurement update
-            index = {int(s): i for i, s in enumerate(stamps)}
-            for (_, stamp, _), pose in policy.measured_later().items():
-                fit[index[stamp]] = pose * leg_m[index[stamp]]
-        if m.endswith("-offline"):
-            ok = np.all(np.isfinite(fit), axis=(1, 2))
-            preds = centred_smoothing(np.nan_to_num(fit), stamps, ok, OFFLINE_SMOOTHING_S, 1.0)
-            preds[~ok] = np.nan
+                _lag_out(refiner, stamps, preds, k)
+        elif refiner is not None:
+            preds[refined] = refiner.poses(0)
         return preds, depth
 
 
@@ -362,14 +359,13 @@ def _figures(preds: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str
     return out
 
 
-def _lag_out(lagged: LaggedPoses, stamps: NDArray[np.int64], leg_m: NDArray[np.float64],
-             preds: NDArray[np.float64], k: int) -> None:
-    """Frame ``k``'s lagged pose into ``preds`` (metres), when the frame was lifted."""
+def _lag_out(lagged: Refiner, stamps: NDArray[np.int64], preds: NDArray[np.float64], k: int) -> None:
+    """Frame ``k``'s lagged pose (metres) into ``preds``, when the frame was lifted."""
     if k < 0 or not np.isfinite(preds[k]).all():
         return
     pose = lagged.pose(0, int(stamps[k]))
     if pose is not None:
-        preds[k] = pose * leg_m[k]
+        preds[k] = pose
 
 
 def evaluation_tracks(split: str, data: str | None, frames: int, views: int,

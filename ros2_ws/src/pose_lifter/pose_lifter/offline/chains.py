@@ -29,10 +29,8 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.model.skeleton import N_JOINTS
-from pose_lifter.core.results import LiftResult, with_camera_poses
-from pose_lifter.core.track.placement import place_results
-from pose_lifter.core.track.smoothing import centred_smoothing
+from pose_lifter.core.results import LiftResult
+from pose_lifter.core.track.later import LaterFrame, Placement, Refiner, placements
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
@@ -47,6 +45,7 @@ from pose_lifter.messages.frame import (
     lift_together,
     with_frames_ahead,
 )
+from pose_lifter.messages.lagged import refined_skeletons
 
 __all__ = [
     "GROUP_CHAINS",
@@ -57,8 +56,7 @@ __all__ = [
     "chain_groups",
     "lift_chains",
     "lift_parallel",
-    "measured_later",
-    "smooth_chain",
+    "refine_chain",
     "split_chains",
     "stop_workers",
 ]
@@ -214,10 +212,9 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
                 ) -> list[list[LiftedSkeleton | SkipSkeleton]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
-    each chain's poses are then refined over its whole track (:func:`measured_later`, then
-    :func:`smooth_chain`), and the policy's causal smoothing of noisy tracks is off
-    (:attr:`TrackPolicy.smoothed_later`). Returns per chain, per item, the lifted skeleton or why
-    not.
+    each chain's poses are then refined over its whole track (:func:`refine_chain`), and the
+    policy's causal smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
+    Returns per chain, per item, the lifted skeleton or why not.
 
     With a lifter that reads ahead (``Lifter.reads_ahead``), each item carries its track's next
     frames for the offline prior (:func:`~pose_lifter.messages.frame.with_frames_ahead`). Message
@@ -252,77 +249,55 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
             fits[c].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
                            and not lifter.options.measurement_update else None)
     if smoothing_s > 0:
-        out = [measured_later(chain, d, p) for chain, d, p in zip(chains, out, pipelines, strict=True)]
-        return [smooth_chain(chain, d, f, settings, smoothing_s)
-                for chain, d, f in zip(chains, out, fits, strict=True)]
+        return [refine_chain(chain, d, f, p, smoothing_s)
+                for chain, d, f, p in zip(chains, out, fits, pipelines, strict=True)]
     return out
 
 
-def measured_later(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton], pipeline: FramePipeline
-                   ) -> list[LiftedSkeleton | SkipSkeleton]:
-    """A lifted chain with the offline measurement update of its hybrid frames
-    (:meth:`pose_lifter.core.track.policy.TrackPolicy.measured_later`: each track's 2D smoothed over
-    past and future frames, then the update at every noise level): each updated result's
-    ``pose_camera`` becomes the updated pose (its metric joints are placed again by
-    :func:`smooth_chain`)."""
-    updated = pipeline.policy.measured_later()
-    if not updated:
-        return outcomes
-    rows: list[int] = []
-    lifted: list[LiftedSkeleton] = []
-    poses: list[NDArray[np.float64]] = []
-    seen: Counter[tuple[int, int]] = Counter()  # a stamp the input clock replayed comes again
-    for i, (item, d) in enumerate(zip(chain, outcomes, strict=True)):
-        if not isinstance(d, LiftedSkeleton):
-            continue
-        key = (item.track_id, item.stamp_ns)
-        pose = updated.get((*key, seen[key]))
-        seen[key] += 1
-        if pose is not None:
-            rows.append(i)
-            lifted.append(d)
-            poses.append(pose)
-    if not rows:
-        return outcomes
-    out = list(outcomes)
-    results = with_camera_poses([s.result for s in lifted], np.array(poses))
-    for i, s, res in zip(rows, lifted, results, strict=True):
-        out[i] = replace(s, result=res)
-    return out
-
-
-def smooth_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton],
-                 fits: list[NDArray[np.float64] | None], settings: FrameSettings, smoothing_s: float
+def refine_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton],
+                 fits: list[NDArray[np.float64] | None], pipeline: FramePipeline, smoothing_s: float
                  ) -> list[LiftedSkeleton | SkipSkeleton]:
-    """A lifted chain with its metric joints smoothed by a centred Gaussian window of
-    ``smoothing_s`` seconds (:func:`pose_lifter.core.track.smoothing.centred_smoothing`, segments
-    split at gaps over ``track_timeout``), from the fit's own poses (``fits[i]``; None: from the
-    result's pose, the fit's or, with ``measurement_update``, the published one) placed by
-    :func:`~pose_lifter.core.track.placement.place_results`: without the update the causal
-    output smoothing of the live node is replaced, not compounded. Each result's ``pose`` and
-    ``pose_camera`` become the smoothed pose (camera and the rest kept)."""
+    """A lifted chain refined over its whole track (:class:`~pose_lifter.core.track.later.Refiner`
+    without a horizon, the lagged node's with one): the offline measurement update of its hybrid
+    frames (what the pipeline's policy kept of them, :attr:`TrackPolicy.smoothed_later`), each
+    pose placed as its frame, then a centred Gaussian window of ``smoothing_s`` seconds over the
+    metric joints (segments split at gaps over ``track_timeout``). The refinement starts from the
+    fit's own poses (``fits[i]``; None: from the result's pose, the fit's or, with
+    ``measurement_update``, the published one): without the update the causal output smoothing
+    of the live node is replaced, not compounded. Each result's ``pose_camera`` becomes the
+    refined joints centred (:func:`~pose_lifter.messages.lagged.refined_skeletons`)."""
+    kept = pipeline.policy.kept_later()
     rows = [i for i, d in enumerate(outcomes) if isinstance(d, LiftedSkeleton)]
     lifted = [d for d in outcomes if isinstance(d, LiftedSkeleton)]
     if len(rows) < 2:
         return outcomes
-    leg = settings.lower_leg_length
-    placed = np.empty((len(rows), N_JOINTS, 3))
+    settings, opts, leg = pipeline.settings, pipeline.lifter.options, pipeline.settings.lower_leg_length
+    later: dict[tuple[int, int], LaterFrame] = {}  # by (stamp, k): the input clock may replay a stamp
+    seen: Counter[int] = Counter()
+    for f in (f for frames in kept.values() for f in frames):
+        later[(f.stamp_ns, seen[f.stamp_ns])] = f
+        seen[f.stamp_ns] += 1
+    placed: list[Placement | None] = [None] * len(rows)
     by_camera: dict[Intrinsics, list[int]] = {}  # the rows seen with each camera's intrinsics
     for r, i in enumerate(rows):
         by_camera.setdefault(chain[i].intrinsics, []).append(r)
     for intrinsics, members in by_camera.items():
-        fit = [fits[rows[r]] for r in members]
-        poses = np.array([lifted[r].result.pose_camera if f is None else f
-                          for r, f in zip(members, fit, strict=True)], dtype=np.float64)
-        placed[members] = place_results(poses, [lifted[r].result for r in members], leg, intrinsics,
-                                        settings.default_distance)
-    stamps = np.array([chain[i].stamp_ns for i in rows], dtype=np.int64)
-    smooth = centred_smoothing(placed, stamps, np.ones(len(rows), dtype=bool), smoothing_s,
-                               settings.track_timeout)
-    out = list(outcomes)
+        for r, p in zip(members, placements([lifted[r].result for r in members], leg, intrinsics,
+                                            settings.default_distance), strict=True):
+            placed[r] = p
+    refiner = Refiner(None, smoothing_s, settings.track_timeout, opts.measurement_depth,
+                      opts.measurement_gate)
+    seen.clear()
     for r, (i, s) in enumerate(zip(rows, lifted, strict=True)):
-        res = s.result.with_camera_pose((smooth[r] - smooth[r].mean(axis=0)) / leg)
-        out[i] = replace(s, result=res, joints_m=smooth[r])
+        stamp = chain[i].stamp_ns
+        fit = fits[i]
+        refiner.add(0, stamp, s.result.pose_camera if fit is None else fit, later.get((stamp, seen[stamp])),
+                    placed[r])
+        seen[stamp] += 1
+    out = list(outcomes)
+    for i, again in zip(rows, refined_skeletons(lifted, refiner.poses(0), leg), strict=True):
+        if again is not None:  # else what it was lifted with is kept
+            out[i] = again
     return out
 
 

@@ -13,7 +13,7 @@ written next to the input topics. Where it differs, on purpose:
 * the node's ``frame_id`` is not an offline setting (the headers are copied unchanged);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
-  future frames (:func:`pose_lifter.offline.chains.smooth_chain`); 0 gives the node's causal
+  future frames (:func:`pose_lifter.offline.chains.refine_chain`); 0 gives the node's causal
   priors and poses, and with ``output_lag`` N the node's answers with ``output_lag:=N``
   (:class:`pose_lifter.messages.lagged.LaggedFrames`, the messages in order in one process).
 

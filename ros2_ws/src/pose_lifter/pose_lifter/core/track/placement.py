@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "CameraIntrinsics",
            "perspective_corrected", "perspective_corrected_rows", "place_in_camera", "place_poses",
-           "place_results", "ray_rotation", "ray_rotations"]
+           "place_results", "ray_rotation", "ray_rotations", "result_centroids"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -118,6 +118,23 @@ def place_results(
     return place_poses(poses, np.array([float(r.camera.scale) for r in results], dtype=np.float64),
                        np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2),
                        leg_length_m, focal, centre, default_distance_m)
+
+
+def result_centroids(results: Sequence[LiftResult], leg_length_m: float, intrinsics: CameraIntrinsics | None,
+                     default_distance_m: float) -> NDArray[np.float64]:
+    """The centroids (n, 3; metres) :func:`place_results` puts ``n`` lifts of one camera at (the
+    same for any pose: :func:`place_poses`' joints are the pose turned onto the ray to its
+    centroid, plus the centroid); raises as it does."""
+    import numpy as np
+
+    from pose_lifter.core.errors import InvalidInputError
+
+    if not math.isfinite(leg_length_m) or leg_length_m <= 0:
+        raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
+    focal, centre = intrinsics if intrinsics is not None else (None, None)
+    return _centroids(len(results), np.array([float(r.camera.scale) for r in results], dtype=np.float64),
+                      np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2),
+                      leg_length_m, focal, centre, default_distance_m)
 
 
 def place_poses(
