@@ -124,17 +124,13 @@ def result_centroids(results: Sequence[LiftResult], leg_length_m: float, intrins
                      default_distance_m: float) -> NDArray[np.float64]:
     """The centroids (n, 3; metres) :func:`place_results` puts ``n`` lifts of one camera at (the
     same for any pose: :func:`place_poses`' joints are the pose turned onto the ray to its
-    centroid, plus the centroid); raises as it does."""
+    centroid, plus the centroid: the placement of the zero pose); raises as it does."""
     import numpy as np
 
-    from pose_lifter.core.errors import InvalidInputError
+    from pose_lifter.core.model.skeleton import N_JOINTS
 
-    if not math.isfinite(leg_length_m) or leg_length_m <= 0:
-        raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
-    focal, centre = intrinsics if intrinsics is not None else (None, None)
-    return _centroids(len(results), np.array([float(r.camera.scale) for r in results], dtype=np.float64),
-                      np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2),
-                      leg_length_m, focal, centre, default_distance_m)
+    zero = np.zeros((len(results), N_JOINTS, 3))
+    return np.asarray(place_results(zero, results, leg_length_m, intrinsics, default_distance_m)[:, 0, :])
 
 
 def place_poses(
