@@ -244,7 +244,7 @@ def _batch_smoother(z: np.ndarray, seen: np.ndarray, dt: np.ndarray, q: float, r
         state = np.array([[1.0, h], [0.0, 1.0]]) @ state
         state[:, 2 + t - 1] += [h * h / 2.0, h]
         m[t] = state[0]
-    from pose_lifter.core.track.later import SMOOTH_PRIOR_VAR
+    from pose_lifter.core.track.smooth2d import SMOOTH_PRIOR_VAR
 
     # the whitened system (its QR factors: the normal equations' conditioning squared costs digits)
     a = np.vstack([m[seen] / np.sqrt(r),
@@ -258,10 +258,10 @@ def _batch_smoother(z: np.ndarray, seen: np.ndarray, dt: np.ndarray, q: float, r
 
 
 def test_the_smoother_solves_its_least_squares_problem() -> None:
-    """The offline smoother's two recursive passes (later._rts_kernel) give the posterior
+    """The offline smoother's two recursive passes (smooth2d._rts_kernel) give the posterior
     means and variances of the whole least-squares problem solved at once, with frames missing
     and uneven steps."""
-    from pose_lifter.core.track.later import _rts_kernel
+    from pose_lifter.core.track.smooth2d import _rts_kernel
     from tolerances import SMOOTHER_AGREEMENT, SMOOTHER_VARIANCE_AGREEMENT
 
     rng = np.random.default_rng(0)
@@ -288,7 +288,7 @@ def test_the_smoothed_2d_halves_white_noise(walker: tuple[np.ndarray, np.ndarray
     from the exact 2D (measured 0.45 of the raw RMS error, seeds 5 and 6), and the smoother's own
     ratio says about as much (measured 0.50-0.51); on exact 2D it moves the points by a small
     share of a pixel."""
-    from pose_lifter.core.track.later import smooth_track_2d
+    from pose_lifter.core.track.smooth2d import smooth_track_2d
 
     x, truth = walker
     leg_px = 160.0 * float(np.median(limb_lengths(truth)[:, RIGHT_LOWER_LEG]))
