@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array, skeleton3d_array_cdr
 from pose_lifter.messages.convert import stamp_to_ns
@@ -95,15 +95,12 @@ class AnsweredFrame:
     answer : FrameAnswer
     lifted : list of LiftedSkeleton
         Its lifted skeletons, in message order (what the answer carries).
-    skipped : list of SkipSkeleton
-        Its skeletons left out of the answer (bad input or a failed solve), in message order.
     received : float
         When its input arrived (the caller's clock; its latency counts from it).
     """
 
     answer: FrameAnswer
     lifted: list[LiftedSkeleton]
-    skipped: list[SkipSkeleton]
     received: float
 
 
@@ -117,7 +114,9 @@ class FrameStep:
         In input order: this frame's answer at once (no lag), those the lag releases, or none
         (a frame over a cap is left unanswered).
     skipped : tuple of SkipSkeleton
-        Refusals of the frame itself (over a cap, unknown layout, too many skeletons).
+        What was refused: the frame itself (over a cap, unknown layout, too many skeletons), then,
+        per answer, its skeletons left out (bad input or a failed solve; ``"skeleton skipped: "``
+        before the reason), in message order.
     clipped : tuple of str
         One warning per skeleton whose confidences were clipped into [0, 1].
     """
@@ -125,6 +124,20 @@ class FrameStep:
     answers: tuple[AnsweredFrame, ...] = ()
     skipped: tuple[SkipSkeleton, ...] = ()
     clipped: tuple[str, ...] = ()
+
+
+class _Lifted(NamedTuple):
+    """A frame lifted, to answer: its header, arrival, stamp and per checked skeleton what lifting it gave."""
+
+    header: Any
+    received: float
+    stamp_ns: int
+    outcomes: list[LiftedSkeleton | SkipSkeleton]
+
+
+def _released(frames: list[LaggedFrame[tuple[Any, float]]]) -> list[_Lifted]:
+    """The frames the lag releases (their token: the input's header and arrival)."""
+    return [_Lifted(f.token[0], f.token[1], f.stamp_ns, f.outcomes) for f in frames]
 
 
 class AnswerStream:
@@ -182,31 +195,33 @@ class AnswerStream:
         if not header.frame_id:  # RViz cannot place an empty frame
             header = DecodedHeader(header.stamp, self.frame_id)
         stamp_ns = stamp_to_ns(header.stamp) or arrival_ns
-        answers: tuple[AnsweredFrame, ...]
         if self.lagged is None:
             outcomes = self.pipeline.frame(checked, stamp_ns, self.intrinsics)
-            answers = (self._answered(header, stamp_ns, outcomes, received),)
+            frames = [_Lifted(header, received, stamp_ns, outcomes)]
         else:
-            answers = self._released(self.lagged.lift((header, received), stamp_ns, self.intrinsics, checked))
-        return FrameStep(answers, checked.skipped, tuple(clipped))
+            frames = _released(self.lagged.lift((header, received), stamp_ns, self.intrinsics, checked))
+        return self._answered(frames, checked.skipped, tuple(clipped))
 
     def flush(self) -> FrameStep:
         """The answers held for the lag, all of them (the input stopped: nothing later refines them)."""
-        return FrameStep(self._released(self.lagged.flush()) if self.lagged is not None else ())
+        return self._answered(_released(self.lagged.flush()) if self.lagged is not None else [], (), ())
 
     def clear(self) -> None:
         """Forget the frames held for the lag."""
         if self.lagged is not None:
             self.lagged.clear()
 
-    def _released(self, frames: list[LaggedFrame[tuple[Any, float]]]) -> tuple[AnsweredFrame, ...]:
-        return tuple(self._answered(f.token[0], f.stamp_ns, f.outcomes, f.token[1]) for f in frames)
-
-    def _answered(self, header: Any, stamp_ns: int, outcomes: list[LiftedSkeleton | SkipSkeleton],
-                  received: float) -> AnsweredFrame:
-        lifted = [x for x in outcomes if not isinstance(x, SkipSkeleton)]
-        skipped = [x for x in outcomes if isinstance(x, SkipSkeleton)]
-        answer = frame_answer(header, stamp_ns, SkeletonFrame.of(lifted), markers=self.markers,
-                              marker_lifetime=self.marker_lifetime, bodies=self.bodies,
-                              image_size=self.image_size)
-        return AnsweredFrame(answer, lifted, skipped, received)
+    def _answered(self, frames: list[_Lifted], skipped: tuple[SkipSkeleton, ...], clipped: tuple[str, ...]
+                  ) -> FrameStep:
+        """The answers of lifted frames, in order, with what was refused on the way."""
+        answers: list[AnsweredFrame] = []
+        refused = list(skipped)
+        for header, received, stamp_ns, outcomes in frames:
+            lifted = [x for x in outcomes if not isinstance(x, SkipSkeleton)]
+            refused += [SkipSkeleton(x.kind, f"skeleton skipped: {x}", x.track_id)
+                        for x in outcomes if isinstance(x, SkipSkeleton)]
+            answer = frame_answer(header, stamp_ns, SkeletonFrame.of(lifted), markers=self.markers,
+                                  marker_lifetime=self.marker_lifetime, bodies=self.bodies,
+                                  image_size=self.image_size)
+            answers.append(AnsweredFrame(answer, lifted, received))
+        return FrameStep(tuple(answers), tuple(refused), clipped)

@@ -413,8 +413,6 @@ class LifterNode(Node):
         for skip in step.skipped:
             self._warn_skip(skip.kind, str(skip))
         for out in step.answers:
-            for skip in out.skipped:
-                self._warn_skip(skip.kind, f"skeleton skipped: {skip}")
             self._pub_skeletons.publish(out.answer.skeletons)
             if out.answer.markers is not None:
                 self._pub_markers.publish(out.answer.markers)
