@@ -6,28 +6,31 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    serialised bytes; before each lift every frame the subscription holds joins the waiting frames
    (:class:`~pose_lifter.ros.frame_queue.FrameQueue`), and the oldest left is lifted: when the
    input is faster than the lift, a newer frame drops the oldest waiting one whole (at most
-   ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded. The
-   frame lifted is read into arrays, its keypoints one array per skeleton
-   (:func:`~pose_lifter.messages.cdr.decode_skeleton2d_array`, the offline lift's reader; rclpy
-   deserialises what that reader refuses): a frame dropped is never read.
-2. The frame pipeline (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's
-   too) checks the frame and each skeleton against the caps and converts it to the paper's 12
-   joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`
-   over :class:`~pose_lifter.core.Lifter`): warm-started from the same track's previous solution
-   when there is one, cold (multi-start) otherwise, places it in the camera optical frame in
-   metres (:func:`~pose_lifter.core.track.placement.place_results`: depth from the weak-perspective
-   scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
-   checks it finite once.
-3. The frame's answer (:func:`~pose_lifter.messages.answer.frame_answer`, what the offline lift
-   writes): one ``Skeleton3DArray``, its markers and its REP-155 bodies, written as CDR from the
-   lifted skeletons' arrays (:class:`~pose_lifter.messages.cdr.SkeletonFrame`; rclpy reads them as
-   the message built field by field, ``tests/ros/test_rclpy_bytes.py``).
-4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
-   frame) at once, or with ``output_lag`` N after the next N frames, each skeleton's pose refined
-   over them (:class:`~pose_lifter.messages.lagged.LaggedFrames`), then ``skeleton_markers``
-   (``visualization_msgs/MarkerArray``, :class:`~pose_lifter.messages.markers.MarkerBook`, the
-   offline lift's too: the same bytes).
-5. With ``publish_hri`` (default), the tracked people as REP-155 bodies
+   ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded. A
+   frame dropped is never read.
+2. The frame lifted is handed, as its bytes, to one call
+   (:meth:`~pose_lifter.messages.answer.AnswerStream.answer`, no rclpy): it is read into arrays
+   (:func:`~pose_lifter.messages.cdr.read_skeleton2d_array`, the offline lift's reader; rclpy
+   deserialises what that reader refuses), checked and lifted by the frame pipeline
+   (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's too: the caps, the
+   layout mapped to the paper's 12 joints once, the core's per-track policy
+   :class:`~pose_lifter.core.track.policy.TrackPolicy` over :class:`~pose_lifter.core.Lifter`,
+   warm-started from the same track's previous solution when there is one, cold otherwise; placed
+   in the camera optical frame in metres by
+   :func:`~pose_lifter.core.track.placement.place_results`, depth from the weak-perspective scale
+   and ``camera_info``'s focal length, or a parameter distance without ``camera_info``; checked
+   finite once), with ``output_lag`` N held for the next N frames and each pose refined over them
+   (:class:`~pose_lifter.messages.lagged.LaggedFrames`), and answered
+   (:func:`~pose_lifter.messages.answer.frame_answer`, what the offline lift writes: one
+   ``Skeleton3DArray``, its markers and its REP-155 bodies, CDR written from the lifted
+   skeletons' arrays; rclpy reads them as the message built field by field,
+   ``tests/ros/test_rclpy_bytes.py``).
+3. What that call returns is data (:class:`~pose_lifter.messages.answer.FrameStep`): the node
+   warns and counts the refusals and clipped confidences, then publishes each answer:
+   ``skeletons_3d`` (``Skeleton3DArray``) with the input's header (stamp and frame), then
+   ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
+   :class:`~pose_lifter.messages.markers.MarkerBook`, the offline lift's too: the same bytes).
+4. With ``publish_hri`` (default), the tracked people as REP-155 bodies
    (:class:`~pose_lifter.ros.hri.HriOutputs`): ``/humans/bodies/tracked``, per body
    ``skeleton2d``, ``roi``, ``joint_states`` and the latched ``urdf``, and their frames on ``/tf``
    (``body_<id>`` under the input's frame).
