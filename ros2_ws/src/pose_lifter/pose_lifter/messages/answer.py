@@ -113,16 +113,16 @@ class FrameStep:
     answers : tuple of AnsweredFrame
         In input order: this frame's answer at once (no lag), those the lag releases, or none
         (a frame over a cap is left unanswered).
-    skipped : tuple of SkipSkeleton
-        What was refused: the frame itself (over a cap, unknown layout, too many skeletons), then,
-        per answer, its skeletons left out (bad input or a failed solve; ``"skeleton skipped: "``
-        before the reason), in message order.
+    skipped : tuple of (str, str)
+        What was refused, as (kind, reason): the frame itself (over a cap, unknown layout, too
+        many skeletons), then, per answer, its skeletons left out (bad input or a failed solve;
+        ``"skeleton skipped: "`` before the reason), in message order.
     clipped : tuple of str
         One warning per skeleton whose confidences were clipped into [0, 1].
     """
 
     answers: tuple[AnsweredFrame, ...] = ()
-    skipped: tuple[SkipSkeleton, ...] = ()
+    skipped: tuple[tuple[str, str], ...] = ()
     clipped: tuple[str, ...] = ()
 
 
@@ -137,7 +137,7 @@ class _Lifted(NamedTuple):
 
 def _released(frames: list[LaggedFrame[tuple[Any, float]]]) -> list[_Lifted]:
     """The frames the lag releases (their token: the input's header and arrival)."""
-    return [_Lifted(f.token[0], f.token[1], f.stamp_ns, f.outcomes) for f in frames]
+    return [_Lifted(held.token[0], held.token[1], held.stamp_ns, held.outcomes) for held in frames]
 
 
 class AnswerStream:
@@ -190,7 +190,7 @@ class AnswerStream:
         clipped: list[str] = []
         checked = self.pipeline.check(msg, clipped.append)
         if not checked.answered:  # over a cap: skipped, unanswered
-            return FrameStep((), checked.skipped, tuple(clipped))
+            return self._answered([], checked.skipped, tuple(clipped))
         header = msg.header
         if not header.frame_id:  # RViz cannot place an empty frame
             header = DecodedHeader(header.stamp, self.frame_id)
@@ -215,13 +215,13 @@ class AnswerStream:
                   ) -> FrameStep:
         """The answers of lifted frames, in order, with what was refused on the way."""
         answers: list[AnsweredFrame] = []
-        refused = list(skipped)
-        for header, received, stamp_ns, outcomes in frames:
-            lifted = [x for x in outcomes if not isinstance(x, SkipSkeleton)]
-            refused += [SkipSkeleton(x.kind, f"skeleton skipped: {x}", x.track_id)
-                        for x in outcomes if isinstance(x, SkipSkeleton)]
-            answer = frame_answer(header, stamp_ns, SkeletonFrame.of(lifted), markers=self.markers,
+        refused = [(x.kind, str(x)) for x in skipped]
+        for done in frames:
+            lifted = [x for x in done.outcomes if not isinstance(x, SkipSkeleton)]
+            refused += [(x.kind, f"skeleton skipped: {x}")
+                        for x in done.outcomes if isinstance(x, SkipSkeleton)]
+            answer = frame_answer(done.header, done.stamp_ns, SkeletonFrame.of(lifted), markers=self.markers,
                                   marker_lifetime=self.marker_lifetime, bodies=self.bodies,
                                   image_size=self.image_size)
-            answers.append(AnsweredFrame(answer, lifted, received))
+            answers.append(AnsweredFrame(answer, lifted, done.received))
         return FrameStep(tuple(answers), tuple(refused), clipped)

@@ -413,8 +413,8 @@ class LifterNode(Node):
         for text in step.clipped:  # they weigh the solve: clipped into [0, 1], with a warning
             self._counts.clip()
             self._throttle.warn("confidence outside [0, 1]", text)
-        for skip in step.skipped:
-            self._warn_skip(skip.kind, str(skip))
+        for kind, text in step.skipped:
+            self._warn_skip(kind, text)
         for out in step.answers:
             self._pub_skeletons.publish(out.answer.skeletons)
             if out.answer.markers is not None:
