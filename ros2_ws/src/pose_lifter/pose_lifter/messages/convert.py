@@ -163,15 +163,17 @@ def frame_joints(skeletons: Sequence[Any], layout: str | Layout
         except Exception as err:
             out.append(err)
             continue
-        bad = ~np.isfinite(points).all(axis=1)
         if not np.isfinite(confidence).all():
             out.append(InvalidInputError("keypoint confidences must be finite"))
-        elif (bad & (confidence > 0)).any():
-            names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
-            out.append(InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}"))
-        else:
+            continue
+        bad = ~np.isfinite(points).all(axis=1)
+        if bad.any():
+            if (bad & (confidence > 0)).any():
+                names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
+                out.append(InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}"))
+                continue
             points[bad] = 0.0  # missing joints (confidence 0) may carry any coordinates
-            out.append((points, confidence))
+        out.append((points, confidence))
     return out
 
 
