@@ -2,15 +2,27 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from pose_lifter.core import Lifter, LifterOptions, PoseBases
 from pose_lifter.messages import cdr, hri
-from pose_lifter.messages.answer import frame_answer
+from pose_lifter.messages.answer import AnswerStream, frame_answer
 from pose_lifter.messages.cdr import DecodedHeader, DecodedStamp, SkeletonFrame
+from pose_lifter.messages.frame import FramePipeline, FrameSettings, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.markers import MarkerBook
-from pose_lifter.messages.names import MARKER_ARRAY, SKELETON3D_ARRAY, TOPIC_MARKERS, TOPIC_SKELETONS
+from pose_lifter.messages.names import (
+    MARKER_ARRAY,
+    SKELETON2D_ARRAY,
+    SKELETON3D_ARRAY,
+    TOPIC_MARKERS,
+    TOPIC_SKELETONS,
+)
+from pose_lifter.messages.typestore import pose_lifter_typestore
 from scipy.spatial.transform import Rotation
 from test_body import ground_truth_poses
 from test_convert import fake_result
+from test_frame import sequence
 
 HEADER = DecodedHeader(DecodedStamp(12, 345), "camera")
 STAMP_NS = 12 * 10**9 + 345
@@ -63,3 +75,72 @@ def test_columns_take_and_concat_keep_the_rows() -> None:
     np.testing.assert_array_equal(picked.points, np.stack([b.points[2], a.points[0]]))
     first = both.take(np.array([0, 1]))
     assert cdr.skeleton3d_array_cdr(HEADER, first) == cdr.skeleton3d_array_cdr(HEADER, a)
+
+
+def _untimed(skeletons: list[LiftedSkeleton]) -> bytes:
+    """Lifted skeletons written without their solve times (each solve's own)."""
+    return cdr.skeleton3d_array_cdr(HEADER, SkeletonFrame.of([x.timed(0.0) for x in skeletons]))
+
+
+def _unread(data: bytes) -> Any:
+    raise AssertionError("the array reader reads these bytes")
+
+
+def test_a_stream_answers_each_frame_s_bytes_as_its_parts_do() -> None:
+    """:class:`AnswerStream` reads the serialised frame, checks, lifts and answers it: the same
+    answer bytes as the pipeline's steps and :func:`frame_answer` called one by one, with the
+    frame's own refusals, its skeletons' and its clipped confidences returned beside it; a frame
+    over a cap is left unanswered; an empty ``frame_id`` is the stream's; with a lag the same
+    answers come later, the last ones at the flush; bytes the array reader refuses are read by
+    the fallback."""
+    lifter = Lifter(PoseBases.load(), LifterOptions())
+    store = pose_lifter_typestore()
+    seq, _ = sequence()
+    stream = AnswerStream(FramePipeline(lifter, FrameSettings()), 0, _unread)
+    stream.markers, stream.frame_id = MarkerBook("ns"), "fallback"
+    pipeline, markers = FramePipeline(lifter, FrameSettings()), MarkerBook("ns")
+    answered: list[bytes] = []
+    firsts: list[list[LiftedSkeleton]] = []
+    kinds: list[str] = []
+    for i, (stamp, msg) in enumerate(seq):
+        if i == 1:
+            msg.header.frame_id = ""
+        step = stream.answer(bytes(store.serialize_cdr(msg, SKELETON2D_ARRAY)), float(i), 0)
+        clipped: list[str] = []
+        checked = pipeline.check(msg, clipped.append)
+        n_frame = len(checked.skipped)
+        assert list(step.skipped[:n_frame]) == [(s.kind, str(s)) for s in checked.skipped]
+        assert list(step.clipped) == clipped
+        if not checked.answered:
+            assert step.answers == ()
+            continue
+        outcomes = pipeline.frame(checked, stamp, None)
+        header = DecodedHeader(msg.header.stamp, msg.header.frame_id or "fallback")
+        lifted = [x for x in outcomes if isinstance(x, LiftedSkeleton)]
+        want = frame_answer(header, stamp, SkeletonFrame.of(lifted), markers=markers)
+        (got,) = step.answers
+        assert (got.answer.markers, got.received) == (want.markers, float(i))
+        assert _untimed(got.lifted) == _untimed(lifted) and len(got.answer.skeletons) == len(want.skeletons)
+        firsts.append(got.lifted)
+        assert list(step.skipped[n_frame:]) == [
+            (x.kind, f"skeleton skipped: {x}") for x in outcomes if isinstance(x, SkipSkeleton)]
+        kinds += [kind for kind, _ in step.skipped]
+        answered.append(got.answer.skeletons)
+    assert "duplicate track id" in kinds and "UnknownLayoutError" in kinds and len(answered) == len(seq) - 1
+    assert b"fallback" in answered[1] and b"fallback" not in answered[0]
+
+    lagged = AnswerStream(FramePipeline(lifter, FrameSettings()), 2, _unread)
+    steps = [lagged.answer(bytes(store.serialize_cdr(msg, SKELETON2D_ARRAY)), 0.0, 0) for _, msg in seq[:6]]
+    assert [len(s.answers) for s in steps] == [0, 0, 1, 1, 0, 1]  # frame 4 is left unanswered
+    assert len(lagged) == 2 and len(lagged.flush().answers) == 2 and len(lagged) == 0
+
+    big = bytes(store.serialize_cdr(seq[0][1], SKELETON2D_ARRAY, little_endian=False))
+    read: list[bytes] = []
+
+    def fallback(data: bytes) -> Any:
+        read.append(data)
+        return store.deserialize_cdr(data, SKELETON2D_ARRAY)
+
+    again = AnswerStream(FramePipeline(lifter, FrameSettings()), 0, fallback)
+    (first,) = again.answer(big, 0.0, 0).answers
+    assert read == [big] and _untimed(first.lifted) == _untimed(firsts[0])

@@ -220,3 +220,20 @@ def test_camera_info_roundtrip() -> None:
     back = roundtrip(info, "sensor_msgs/msg/CameraInfo")
     assert (back.width, back.height) == (640, 480)
     assert m.intrinsics_from_camera_info(back) == ((500.0, 510.0), (319.5, 239.5))
+
+
+def test_a_frame_s_joints_are_read_with_its_layout_looked_up_once() -> None:
+    """Each skeleton of a frame read as :func:`skeleton2d_to_arrays` reads it, a malformed one
+    giving its error in its place; an unknown layout refuses the frame."""
+    rng = np.random.default_rng(3)
+    good = [m.arrays_to_skeleton2d(rng.uniform(0, 500, (17, 2)), np.full(17, 0.8), k, T) for k in range(2)]
+    bad = m.arrays_to_skeleton2d(rng.uniform(0, 500, (10, 2)), np.full(10, 0.8), 9, T)
+    first, wrong, second = m.frame_joints([good[0], bad, good[1]], "coco17")
+    assert isinstance(wrong, InvalidInputError)
+    for got, skel in ((first, good[0]), (second, good[1])):
+        assert not isinstance(got, Exception)
+        want = m.skeleton2d_to_arrays(skel, "coco17")
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    with pytest.raises(UnknownLayoutError):
+        m.frame_joints(good, "no_such_layout")

@@ -10,11 +10,17 @@ from typing import Any
 import numpy as np
 import pytest
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.messages import convert as m
-from pose_lifter.messages.frame import SkipSkeleton, check_output, frame_over_cap, skeleton_input
+from pose_lifter.messages.frame import (
+    SkeletonInput,
+    SkipSkeleton,
+    admitted_track,
+    check_output,
+    frame_over_cap,
+    skeleton_input,
+)
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from pose_lifter.ros.checks import WarningThrottle
@@ -25,12 +31,20 @@ from pose_lifter.ros.stats import FrameCounter, FrameStats
 
 T = m.rosbags_types()
 SETTINGS = NodeSettings.read({p.name: p.default for p in PARAMS}.__getitem__).frame
-COCO = get_layout("coco17")
 
 
 def skeleton(track_id: int = 0, scale: float = 1.0, confidence: float = 0.9, k: int = 17) -> Any:
     rng = np.random.default_rng(track_id + 10)
     return m.arrays_to_skeleton2d(rng.uniform(100, 400, (k, 2)) * scale, np.full(k, confidence), track_id, T)
+
+
+def checked(skel: Any, seen: set[int], threshold: float, warnings: list[str]) -> SkeletonInput:
+    """One skeleton through the frame pipeline's checks: the caps, its joints, the joints' checks."""
+    track_id = admitted_track(skel, SETTINGS, seen)
+    (read,) = m.frame_joints([skel], "coco17")
+    if isinstance(read, Exception):
+        raise read
+    return skeleton_input(track_id, *read, SETTINGS, threshold, warnings.append)
 
 
 def lift_result(scale: float = 80.0) -> LiftResult:
@@ -43,7 +57,7 @@ def lift_result(scale: float = 80.0) -> LiftResult:
 def test_skeleton_input_takes_a_good_skeleton_and_skips_each_bad_kind() -> None:
     seen: set[int] = set()
     warnings: list[str] = []
-    inp = skeleton_input(skeleton(3), COCO, SETTINGS, 0.1, seen, warnings.append)
+    inp = checked(skeleton(3), seen, 0.1, warnings)
     assert inp.track_id == 3 and inp.points.shape == (12, 2) and seen == {3} and warnings == []
     cases = [  # (skeleton, kind)
         (skeleton(3), "duplicate track id"),
@@ -53,21 +67,21 @@ def test_skeleton_input_takes_a_good_skeleton_and_skips_each_bad_kind() -> None:
     ]
     for skel, kind in cases:
         with pytest.raises(SkipSkeleton) as err:
-            skeleton_input(skel, COCO, SETTINGS, 0.1, seen, warnings.append)
+            checked(skel, seen, 0.1, warnings)
         assert err.value.kind == kind
     with pytest.raises(InvalidInputError):  # wrong keypoint count for the layout
-        skeleton_input(skeleton(7, k=10), COCO, SETTINGS, 0.1, seen, warnings.append)
+        checked(skeleton(7, k=10), seen, 0.1, warnings)
     # untracked skeletons (-1) may repeat
     for _ in range(2):
-        skeleton_input(skeleton(-1), COCO, SETTINGS, 0.1, seen, warnings.append)
+        checked(skeleton(-1), seen, 0.1, warnings)
 
 
 def test_clipped_confidences_are_reported_even_when_the_skeleton_is_then_skipped() -> None:
     warnings: list[str] = []
-    inp = skeleton_input(skeleton(1, confidence=1.5), COCO, SETTINGS, 0.1, set(), warnings.append)
+    inp = checked(skeleton(1, confidence=1.5), set(), 0.1, warnings)
     assert np.all(inp.confidence == 1.0) and len(warnings) == 1 and "clipped" in warnings[0]
     with pytest.raises(SkipSkeleton, match="beyond"):
-        skeleton_input(skeleton(2, scale=1e5, confidence=-0.5), COCO, SETTINGS, 0.0, set(), warnings.append)
+        checked(skeleton(2, scale=1e5, confidence=-0.5), set(), 0.0, warnings)
     assert len(warnings) == 2 and "-0.5" in warnings[1]
 
 

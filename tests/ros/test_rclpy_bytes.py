@@ -8,6 +8,8 @@ against rosbags)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from lift_samples import random_frame
@@ -46,28 +48,29 @@ def test_the_written_skeletons_are_the_bytes_rclpy_serialises(frame_id: str) -> 
 
 def test_the_node_reads_a_frame_as_arrays_and_what_the_reader_refuses_through_rclpy() -> None:
     """The node subscribes to the serialised frame (``raw``) and reads it into arrays
-    (:meth:`LifterNode.read_frame`): the frame rclpy serialises reads as rclpy's message does,
-    keypoint for keypoint; a frame the array reader refuses (big-endian CDR) is deserialised by
-    rclpy instead; a message object passes as it is."""
+    (:func:`~pose_lifter.messages.cdr.read_skeleton2d_array`, rclpy's deserialiser its fallback):
+    the frame rclpy serialises reads as rclpy's message does, keypoint for keypoint; a frame the
+    array reader refuses (big-endian CDR) is deserialised by rclpy instead; a message object
+    passes as it is."""
     _load_workspace_messages()
-    from types import SimpleNamespace
-
-    from pose_lifter.messages.cdr import DecodedSkeleton2DArray
+    from pose_lifter.messages.cdr import DecodedSkeleton2DArray, read_skeleton2d_array
     from pose_lifter.messages.typestore import pose_lifter_typestore
     from pose_lifter.offline.bags import read_messages
-    from pose_lifter.ros.node import LifterNode
     from pose_lifter_msgs.msg import Skeleton2DArray
     from rclpy.serialization import deserialize_message, serialize_message
 
     from .conftest import REPO
 
     store = pose_lifter_typestore()
-    node = SimpleNamespace(_types=m.rclpy_types())
+
+    def read_frame(data: object) -> Any:  # as the node reads a frame
+        return read_skeleton2d_array(data, lambda raw: deserialize_message(raw, Skeleton2DArray))
+
     x = next(r for r in read_messages(REPO / "bags" / "two_people.mcap") if r.topic.endswith("keypoints_2d"))
     msg = deserialize_message(bytes(store.serialize_cdr(x.msg, x.msgtype)), Skeleton2DArray)
     msg.header.frame_id = "camera_optical"
     little = bytes(serialize_message(msg))
-    read = LifterNode.read_frame(node, little)  # type: ignore[arg-type]
+    read = read_frame(little)
     assert isinstance(read, DecodedSkeleton2DArray)
     assert (read.header.stamp.sec, read.header.stamp.nanosec, read.header.frame_id, read.layout) == (
         msg.header.stamp.sec, msg.header.stamp.nanosec, "camera_optical", msg.layout)
@@ -76,7 +79,7 @@ def test_the_node_reads_a_frame_as_arrays_and_what_the_reader_refuses_through_rc
         xyc = np.array([[k.x, k.y, k.confidence] for k in want.keypoints])
         assert np.array_equal(got.xyc, xyc)
     big = bytes(store.serialize_cdr(x.msg, x.msgtype, little_endian=False))
-    fallback = LifterNode.read_frame(node, big)  # type: ignore[arg-type]
+    fallback = read_frame(big)
     assert isinstance(fallback, Skeleton2DArray)
     assert fallback == deserialize_message(bytes(store.serialize_cdr(x.msg, x.msgtype)), Skeleton2DArray)
-    assert LifterNode.read_frame(node, msg) is msg  # type: ignore[arg-type]
+    assert read_frame(msg) is msg

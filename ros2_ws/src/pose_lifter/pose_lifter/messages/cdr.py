@@ -33,7 +33,7 @@ lengths as uint32 (strings with their NUL), the elements of an empty sequence no
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, fields
 from functools import lru_cache
 from typing import Any, Final
@@ -55,6 +55,7 @@ __all__ = [
     "decode_skeleton2d_array",
     "header_cdr",
     "marker_array_cdr",
+    "read_skeleton2d_array",
     "skeleton3d_array_cdr",
     "stamp_cdr",
 ]
@@ -481,3 +482,13 @@ def decode_skeleton2d_array(data: bytes | memoryview) -> DecodedSkeleton2DArray 
         return None
     return DecodedSkeleton2DArray(DecodedHeader(DecodedStamp(int(sec), int(nanosec)), frame_id), layout,
                                   skeletons)
+
+
+def read_skeleton2d_array(data: Any, fallback: Callable[[bytes], Any]) -> Any:
+    """A ``Skeleton2DArray`` read for the frame pipeline: serialised bytes as arrays
+    (:func:`decode_skeleton2d_array`), or by ``fallback`` (e.g. rclpy's deserialiser) where that
+    reader refuses them (another encoding); a message object is returned as it is."""
+    if not isinstance(data, bytes | memoryview):
+        return data
+    decoded = decode_skeleton2d_array(data)
+    return fallback(bytes(data)) if decoded is None else decoded

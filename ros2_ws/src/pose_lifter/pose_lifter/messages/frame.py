@@ -8,9 +8,12 @@ what the node publishes for it. One frame:
    is over its cap is skipped unanswered (:attr:`CheckedFrame.answered` False: no output, no
    expiry); an unknown layout skips the whole frame (answered, empty); of a crowd of more than
    ``max_skeletons`` liftable skeletons only the ``max_skeletons`` largest in the image are
-   lifted (:func:`largest_first`), the others skipped; each skeleton is checked by
-   :func:`skeleton_input` (keypoint count, duplicate track id, confidences clipped into
-   [0, 1], no confident keypoint, absurd coordinates, malformed keypoints).
+   lifted (:func:`largest_first`), the others skipped; each skeleton is checked against the
+   caps before its keypoints are read (:func:`admitted_track`: keypoint count, duplicate track
+   id), read into the paper's joints with the layout looked up once for the frame
+   (:func:`~pose_lifter.messages.convert.frame_joints`: malformed keypoints refused), then
+   checked as joints (:func:`skeleton_input`: confidences clipped into [0, 1], no confident
+   keypoint, absurd coordinates).
 2. :func:`lift_together` (the skeletons together, each through its pipeline's track policy,
    :func:`~pose_lifter.core.track.policy.lift_tracks`): the core's
    :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
@@ -39,7 +42,6 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.model.layouts import Layout, get_layout
 from pose_lifter.core.results import LiftResult, with_camera_poses
 from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.policy import (
@@ -51,7 +53,7 @@ from pose_lifter.core.track.policy import (
     lift_tracks,
 )
 from pose_lifter.core.track.state import swap_back
-from pose_lifter.messages.convert import skeleton2d_to_arrays
+from pose_lifter.messages.convert import frame_joints
 from pose_lifter.messages.settings import FrameSettings
 
 __all__ = [
@@ -62,6 +64,7 @@ __all__ = [
     "LiftedSkeleton",
     "SkeletonInput",
     "SkipSkeleton",
+    "admitted_track",
     "check_output",
     "expiry_stamps",
     "frame_over_cap",
@@ -229,18 +232,10 @@ def frame_over_cap(msg: Any, settings: FrameSettings) -> SkipSkeleton | None:
     return None
 
 
-def skeleton_input(skel: Any, layout: Layout, settings: FrameSettings, confidence_threshold: float,
-                   seen: set[int], on_clipped: Callable[[str], Any] = _NO_CLIP) -> SkeletonInput:
-    """The paper's 12 joints of one ``Skeleton2D`` of a frame, or :class:`SkipSkeleton`.
-
-    Refused: more keypoints than ``max_keypoints``, a track id already in ``seen`` (this
-    frame's; the skeleton's id is added), no keypoint at or above ``confidence_threshold``,
-    visible keypoints beyond ``max_coordinate`` pixels; malformed keypoints raise the
-    :class:`~pose_lifter.core.errors.InvalidInputError` of
-    :func:`~pose_lifter.messages.convert.skeleton2d_to_arrays`. Confidences outside [0, 1] are
-    clipped into it and ``on_clipped(warning)`` is called (before the checks that follow may skip
-    the skeleton).
-    """
+def admitted_track(skel: Any, settings: FrameSettings, seen: set[int]) -> int:
+    """The track id of one ``Skeleton2D`` of a frame, before its keypoints are read, or
+    :class:`SkipSkeleton`: more keypoints than ``max_keypoints``, or a track id already in
+    ``seen`` (this frame's; the skeleton's id is added; untracked skeletons, -1, may repeat)."""
     track_id = int(skel.track_id)
     xyc = getattr(skel, "xyc", None)  # a decoded bag message: the keypoints as one array
     n_keypoints = len(xyc) if xyc is not None else len(skel.keypoints)
@@ -252,7 +247,19 @@ def skeleton_input(skel: Any, layout: Layout, settings: FrameSettings, confidenc
             raise SkipSkeleton("duplicate track id",
                                f"duplicate track id {track_id} in one frame: later copy skipped", track_id)
         seen.add(track_id)
-    points, confidence = skeleton2d_to_arrays(skel, layout)
+    return track_id
+
+
+def skeleton_input(track_id: int, points: NDArray[np.float64], confidence: NDArray[np.float64],
+                   settings: FrameSettings, confidence_threshold: float,
+                   on_clipped: Callable[[str], Any] = _NO_CLIP) -> SkeletonInput:
+    """One skeleton's paper joints (``points`` (12, 2) pixels, ``confidence`` (12,), as
+    :func:`~pose_lifter.messages.convert.frame_joints` reads them) checked, or :class:`SkipSkeleton`.
+
+    Refused: no keypoint at or above ``confidence_threshold``, visible keypoints beyond
+    ``max_coordinate`` pixels. Confidences outside [0, 1] are clipped into it and
+    ``on_clipped(warning)`` is called (before the checks that follow may skip the skeleton).
+    """
     outside = (confidence < 0.0) | (confidence > 1.0)
     if outside.any():  # they weigh the solve: clipped into [0, 1], with a warning
         worst = float(confidence[outside][np.argmax(np.abs(confidence[outside]))])
@@ -281,6 +288,14 @@ def check_output(track_id: int, result: LiftResult, joints_m: NDArray[np.float64
     if not finite:
         raise SkipSkeleton("non-finite result", f"track {track_id}: the solve returned non-finite values",
                            track_id)
+
+
+def _track_id_of(skel: Any) -> int | None:
+    """A skeleton's track id, or None where it is not an integer (a malformed message)."""
+    try:
+        return int(skel.track_id)
+    except Exception:
+        return None
 
 
 def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
@@ -458,27 +473,33 @@ class FramePipeline:
         if over_cap is not None:
             return CheckedFrame(False, skipped=(over_cap,))
         skeletons: Sequence[Any] = msg.skeletons
-        try:
-            layout = get_layout(str(msg.layout))
+        n_scanned = min(len(skeletons), CROWD_SCAN * st.max_skeletons)
+        seen: set[int] = set()
+        admitted: list[int | SkipSkeleton] = []
+        for skel in skeletons[:n_scanned]:  # the caps, before any keypoint is read
+            try:
+                admitted.append(admitted_track(skel, st, seen))
+            except Exception as err:
+                admitted.append(_refusal(err, _track_id_of(skel)))
+        try:  # the layout looked up once, each admitted skeleton mapped to the paper's joints
+            joints = iter(frame_joints([skel for skel, a in zip(skeletons[:n_scanned], admitted, strict=True)
+                                        if isinstance(a, int)], str(msg.layout)))
         except Exception as err:  # e.g. an unknown layout: the whole frame is unusable
             skip = _refusal(err, None)
             skip = SkipSkeleton(skip.kind, f"frame skipped: {skip}")
             return CheckedFrame(True, skipped=(skip,), n_left_out=len(skeletons))
-        skipped: tuple[SkipSkeleton, ...] = ()
-        n_scanned = min(len(skeletons), CROWD_SCAN * st.max_skeletons)
         threshold = self.lifter.options.confidence_threshold
-        seen: set[int] = set()
         out: list[SkeletonInput | SkipSkeleton] = []
-        for skel in skeletons[:n_scanned]:
+        for track_id in admitted:
+            if isinstance(track_id, SkipSkeleton):
+                out.append(track_id)
+                continue
+            read = next(joints)
             try:
-                out.append(skeleton_input(skel, layout, st, threshold, seen, on_clipped))
+                if isinstance(read, Exception):
+                    raise read
+                out.append(skeleton_input(track_id, *read, st, threshold, on_clipped))
             except Exception as err:
-                track_id = getattr(err, "track_id", None)
-                if track_id is None:
-                    try:
-                        track_id = int(skel.track_id)
-                    except Exception:
-                        track_id = None
                 out.append(_refusal(err, track_id))
         inputs = [(i, x) for i, x in enumerate(out) if isinstance(x, SkeletonInput)]
         n_left_out = len(skeletons) - n_scanned
@@ -487,6 +508,7 @@ class FramePipeline:
             dropped = {i for k, (i, _) in enumerate(inputs) if k not in kept}
             n_left_out += len(dropped)
             out = [x for i, x in enumerate(out) if i not in dropped]
+        skipped: tuple[SkipSkeleton, ...] = ()
         if n_left_out:
             skipped = (SkipSkeleton("too many skeletons", f"{len(skeletons)} skeletons in one frame, "
                                     f"lifting the {st.max_skeletons} largest (max_skeletons)"),)

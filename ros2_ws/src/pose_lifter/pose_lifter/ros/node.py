@@ -6,28 +6,31 @@ One frame, from subscription to publication (:meth:`LifterNode.on_keypoints`):
    serialised bytes; before each lift every frame the subscription holds joins the waiting frames
    (:class:`~pose_lifter.ros.frame_queue.FrameQueue`), and the oldest left is lifted: when the
    input is faster than the lift, a newer frame drops the oldest waiting one whole (at most
-   ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded. The
-   frame lifted is read into arrays, its keypoints one array per skeleton
-   (:func:`~pose_lifter.messages.cdr.decode_skeleton2d_array`, the offline lift's reader; rclpy
-   deserialises what that reader refuses): a frame dropped is never read.
-2. The frame pipeline (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's
-   too) checks the frame and each skeleton against the caps and converts it to the paper's 12
-   joints, lifts it by the core's per-track policy (:class:`~pose_lifter.core.track.policy.TrackPolicy`
-   over :class:`~pose_lifter.core.Lifter`): warm-started from the same track's previous solution
-   when there is one, cold (multi-start) otherwise, places it in the camera optical frame in
-   metres (:func:`~pose_lifter.core.track.placement.place_results`: depth from the weak-perspective
-   scale and ``camera_info``'s focal length, or a parameter distance without ``camera_info``) and
-   checks it finite once.
-3. The frame's answer (:func:`~pose_lifter.messages.answer.frame_answer`, what the offline lift
-   writes): one ``Skeleton3DArray``, its markers and its REP-155 bodies, written as CDR from the
-   lifted skeletons' arrays (:class:`~pose_lifter.messages.cdr.SkeletonFrame`; rclpy reads them as
-   the message built field by field, ``tests/ros/test_rclpy_bytes.py``).
-4. ``skeletons_3d`` (``Skeleton3DArray``) is published with the input's header (stamp and
-   frame) at once, or with ``output_lag`` N after the next N frames, each skeleton's pose refined
-   over them (:class:`~pose_lifter.messages.lagged.LaggedFrames`), then ``skeleton_markers``
-   (``visualization_msgs/MarkerArray``, :class:`~pose_lifter.messages.markers.MarkerBook`, the
-   offline lift's too: the same bytes).
-5. With ``publish_hri`` (default), the tracked people as REP-155 bodies
+   ``max_waiting_frames`` wait), counted in ``/diagnostics``, so the latency stays bounded. A
+   frame dropped is never read.
+2. The frame lifted is handed, as its bytes, to one call
+   (:meth:`~pose_lifter.messages.answer.AnswerStream.answer`, no rclpy): it is read into arrays
+   (:func:`~pose_lifter.messages.cdr.read_skeleton2d_array`, the offline lift's reader; rclpy
+   deserialises what that reader refuses), checked and lifted by the frame pipeline
+   (:class:`~pose_lifter.messages.frame.FramePipeline`, the offline lift's too: the caps, the
+   layout mapped to the paper's 12 joints once, the core's per-track policy
+   :class:`~pose_lifter.core.track.policy.TrackPolicy` over :class:`~pose_lifter.core.Lifter`,
+   warm-started from the same track's previous solution when there is one, cold otherwise; placed
+   in the camera optical frame in metres by
+   :func:`~pose_lifter.core.track.placement.place_results`, depth from the weak-perspective scale
+   and ``camera_info``'s focal length, or a parameter distance without ``camera_info``; checked
+   finite once), with ``output_lag`` N held for the next N frames and each pose refined over them
+   (:class:`~pose_lifter.messages.lagged.LaggedFrames`), and answered
+   (:func:`~pose_lifter.messages.answer.frame_answer`, what the offline lift writes: one
+   ``Skeleton3DArray``, its markers and its REP-155 bodies, CDR written from the lifted
+   skeletons' arrays; rclpy reads them as the message built field by field,
+   ``tests/ros/test_rclpy_bytes.py``).
+3. What that call returns is data (:class:`~pose_lifter.messages.answer.FrameStep`): the node
+   warns and counts the refusals and clipped confidences, then publishes each answer:
+   ``skeletons_3d`` (``Skeleton3DArray``) with the input's header (stamp and frame), then
+   ``skeleton_markers`` (``visualization_msgs/MarkerArray``,
+   :class:`~pose_lifter.messages.markers.MarkerBook`, the offline lift's too: the same bytes).
+4. With ``publish_hri`` (default), the tracked people as REP-155 bodies
    (:class:`~pose_lifter.ros.hri.HriOutputs`): ``/humans/bodies/tracked``, per body
    ``skeleton2d``, ``roi``, ``joint_states`` and the latched ``urdf``, and their frames on ``/tf``
    (``body_<id>`` under the input's frame).
@@ -69,10 +72,8 @@ from pose_lifter.core.track.defaults import AHEAD_LAG
 from pose_lifter.core.track.policy import compile_kernels
 from pose_lifter.messages import convert as messages
 from pose_lifter.messages import names
-from pose_lifter.messages.answer import frame_answer
-from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, decode_skeleton2d_array
-from pose_lifter.messages.frame import FramePipeline, LiftedSkeleton, SkipSkeleton
-from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
+from pose_lifter.messages.answer import AnswerStream, FrameStep
+from pose_lifter.messages.frame import FramePipeline
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
@@ -161,12 +162,11 @@ class LifterNode(Node):
         freeze_long_lived()
 
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
-        # answers held for output_lag frames: (header, arrival time) each
-        self._lagged: LaggedFrames[tuple[Any, float]] | None = (
-            LaggedFrames(self._pipeline, lag) if lag > 0 else None)
+        # a frame's way from its bytes to its answer (rclpy reads what the array reader refuses)
+        skeletons_2d = self._types.Skeleton2DArray
+        self._stream = AnswerStream(self._pipeline, lag, lambda data: deserialize_message(data, skeletons_2d))
         self._last_frame = time.perf_counter()
         self._markers = MarkerBook(MARKER_NS)
-        self._intrinsics: tuple[tuple[float, float], tuple[float, float]] | None = None
         self._counts = FrameCounter()  # one counter, a window per report (stats line, /diagnostics)
 
         qos_override = QoSOverridingOptions.with_default_policies()
@@ -178,7 +178,7 @@ class LifterNode(Node):
         self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")),
                                                          self._counts)
         self._hri = self._hri_outputs()
-        self._image_size: tuple[float, float] | None = None
+        self._configure_answers()
         if not self._callbacks_added:
             self.add_on_set_parameters_callback(self._validate_parameters)
             self.add_post_set_parameters_callback(self._apply_parameters)
@@ -194,15 +194,15 @@ class LifterNode(Node):
             self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
         # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only);
-        # raw: the serialised frame, read into arrays when it is lifted (read_frame)
+        # raw: the serialised frame, read into arrays when it is lifted (AnswerStream.answer)
         self._sub_keypoints = self.create_subscription(
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints,  # type: ignore[arg-type]
             qos_profile_sensor_data, qos_overriding_options=qos_override, raw=True)
         # triggered while frames wait after a lift: the executor comes back for the next one
         # between its other callbacks (camera_info, timers, parameter services)
         self._more = self.create_guard_condition(self._lift_next)
-        self._lag_timer = (self.create_timer(LAG_CHECK_S, self._publish_idle) if self._lagged is not None
-                           else None)
+        lagged = self._stream.lagged
+        self._lag_timer = self.create_timer(LAG_CHECK_S, self._publish_idle) if lagged is not None else None
         period = float(self._param("stats_period"))
         self._stats_timer = None
         if period > 0:
@@ -213,7 +213,7 @@ class LifterNode(Node):
             f"{self._bases.method} bases (k={self._bases.n_bases}), variant {options.variant}, "
             f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}, "
             f"mode {options.mode}, weak perspective until camera_info arrives"
-            + (f", answers {self._lagged.lag} frames late (output_lag)" if self._lagged is not None else "")
+            + (f", answers {lagged.lag} frames late (output_lag)" if lagged is not None else "")
         )
 
     def _hri_outputs(self) -> HriOutputs | None:
@@ -250,8 +250,7 @@ class LifterNode(Node):
 
     def cleanup_lifter(self) -> None:
         """Destroy the publishers and the diagnostics (back to the state after the constructor)."""
-        if self._lagged is not None:
-            self._lagged.clear()
+        self._stream.clear()
         self._diagnostics.close()
         for pub in (self._pub_skeletons, self._pub_markers):
             self.destroy_publisher(pub)
@@ -260,6 +259,14 @@ class LifterNode(Node):
         self._pipeline.policy.clear()
 
     # ------------------------------------------------------------------ parameters
+
+    def _configure_answers(self) -> None:
+        """The answers' outputs and defaults, from the settings."""
+        stream = self._stream
+        stream.markers = self._markers if self._settings.publish_markers else None
+        stream.bodies = self._hri.book if self._hri is not None else None
+        stream.frame_id = self._settings.frame_id  # RViz cannot place an empty frame
+        stream.marker_lifetime = self._settings.marker_lifetime
 
     def _param(self, name: str) -> Any:
         return self.get_parameter(name).value
@@ -311,6 +318,7 @@ class LifterNode(Node):
     def _apply_parameters(self, params: list[Parameter]) -> None:
         """Post-set callback: switch to what :meth:`_validate_parameters` built (cannot fail)."""
         self._settings = self._read_settings()
+        self._configure_answers()
         if self._hri is not None:  # bodies leave as tracks are forgotten
             self._hri.book.timeout_ns = round(self._settings.frame.track_timeout * 1e9)
         if self._pending is None:
@@ -340,13 +348,13 @@ class LifterNode(Node):
             self._warn_skip("camera_info", str(err))
             return
         if int(msg.width) > 0 and int(msg.height) > 0:  # the REP-155 2D outputs are normalised by it
-            self._image_size = (float(msg.width), float(msg.height))
-        if self._intrinsics is None:
+            self._stream.image_size = (float(msg.width), float(msg.height))
+        if self._stream.intrinsics is None:
             (fx, fy), (cx, cy) = intrinsics
             self.get_logger().info(
                 f"camera_info received (fx {fx:.1f}, fy {fy:.1f}, cx {cx:.1f}, cy {cy:.1f} px): tracked "
                 "people are lifted from their 2D corrected for perspective and placed at metric depth")
-        self._intrinsics = intrinsics
+        self._stream.intrinsics = intrinsics
 
     def on_keypoints(self, msg: Any, info: Any) -> None:
         """A frame arrived: it waits with the others (:class:`~pose_lifter.ros.frame_queue.FrameQueue`),
@@ -383,78 +391,37 @@ class LifterNode(Node):
         if len(self._waiting):
             self._more.trigger()
 
-    def read_frame(self, data: Any) -> Any:
-        """A ``Skeleton2DArray`` as the subscription gives it (its serialised bytes) read for the
-        pipeline: its keypoints as arrays (:func:`~pose_lifter.messages.cdr.decode_skeleton2d_array`),
-        or the rclpy message where that reader refuses the bytes (another encoding); a message
-        object is returned as it is."""
-        if not isinstance(data, bytes):
-            return data
-        decoded = decode_skeleton2d_array(data)
-        if decoded is None:
-            return deserialize_message(data, self._types.Skeleton2DArray)
-        return decoded
-
     def lift_frame(self, data: Any, received: float) -> None:
-        """Lift one frame (:meth:`read_frame`) and publish its answer (always, even when every
-        skeleton is skipped); ``received``: when it arrived (:func:`time.perf_counter`), for its
-        latency."""
-        msg = self.read_frame(data)
-        checked = self._pipeline.check(msg, self._on_clipped)
-        for skip in checked.skipped:
-            self._warn_skip(skip.kind, str(skip))
-        if not checked.answered:  # over a cap: skipped, unanswered
-            return
-        header = msg.header
-        if not header.frame_id:  # RViz cannot place an empty frame: the frame_id parameter
-            header = DecodedHeader(header.stamp, self._settings.frame_id)
-        stamp_ns = messages.stamp_to_ns(header.stamp)
-        if stamp_ns == 0:  # detectors that leave the stamp empty: use the arrival time
-            stamp_ns = self.get_clock().now().nanoseconds
-        if self._lagged is None:
-            outcomes = self._pipeline.frame(checked, stamp_ns, self._intrinsics)
-            self._publish(header, stamp_ns, outcomes, received)
-            return
+        """Lift one frame (its serialised bytes, or a message object) and publish its answer
+        (always, even when every skeleton is skipped; with ``output_lag``, those it releases);
+        ``received``: when it arrived (:func:`time.perf_counter`), for its latency."""
         self._last_frame = time.perf_counter()
-        self._publish_lagged(self._lagged.lift((header, received), stamp_ns, self._intrinsics, checked))
+        self._publish(self._stream.answer(data, received, self.get_clock().now().nanoseconds))
 
     def _publish_idle(self, force: bool = False) -> None:
         """Publish the answers held for ``output_lag`` when no frame has come for LAG_IDLE_S (or
         ``force``): the input stopped, and nothing later will refine them."""
-        if self._lagged is None or not len(self._lagged):
+        if not len(self._stream):
             return
         if force or time.perf_counter() - self._last_frame > LAG_IDLE_S:
-            self._publish_lagged(self._lagged.flush())
+            self._publish(self._stream.flush())
 
-    def _publish_lagged(self, frames: list[LaggedFrame[tuple[Any, float]]]) -> None:
-        """The answers ``output_lag`` releases, in order, each with its input's header and arrival."""
-        for f in frames:
-            self._publish(f.token[0], f.stamp_ns, f.outcomes, f.token[1])
-
-    def _publish(self, header: Any, stamp_ns: int, outcomes: list[LiftedSkeleton | SkipSkeleton],
-                 received: float) -> None:
-        """A frame's answer on every output: ``skeletons_3d``, the markers, the REP-155 bodies, from
-        what lifting each skeleton gave (the refusals warned); ``received``: when its input
-        arrived (its latency)."""
-        lifted: list[LiftedSkeleton] = []
-        for out in outcomes:
-            if isinstance(out, SkipSkeleton):
-                self._warn_skip(out.kind, f"skeleton skipped: {out}")
-            else:
-                lifted.append(out)
-        # the offline lift's answer (messages/answer.py), CDR straight from the arrays (rclpy
-        # message objects cost ~0.5 ms more a skeleton)
-        answer = frame_answer(header, stamp_ns, SkeletonFrame.of(lifted),
-                              markers=self._markers if self._settings.publish_markers else None,
-                              marker_lifetime=self._settings.marker_lifetime,
-                              bodies=self._hri.book if self._hri is not None else None,
-                              image_size=self._image_size)
-        self._pub_skeletons.publish(answer.skeletons)
-        if answer.markers is not None:
-            self._pub_markers.publish(answer.markers)
-        if self._hri is not None and answer.bodies is not None:  # REP-155 bodies and /tf
-            self._hri.publish(answer.bodies)
-        self._counts.frame(lifted, time.perf_counter() - received)
+    def _publish(self, step: FrameStep) -> None:
+        """What a frame gave, on every output: each answer's ``skeletons_3d``, markers and REP-155
+        bodies, in order; the refusals and clipped confidences counted and warned; each answer's
+        latency counted from when its input arrived."""
+        for text in step.clipped:  # they weigh the solve: clipped into [0, 1], with a warning
+            self._counts.clip()
+            self._throttle.warn("confidence outside [0, 1]", text)
+        for kind, text in step.skipped:
+            self._warn_skip(kind, text)
+        for out in step.answers:
+            self._pub_skeletons.publish(out.answer.skeletons)
+            if out.answer.markers is not None:
+                self._pub_markers.publish(out.answer.markers)
+            if self._hri is not None and out.answer.bodies is not None:  # REP-155 bodies and /tf
+                self._hri.publish(out.answer.bodies)
+            self._counts.frame(out.lifted, time.perf_counter() - out.received)
 
     # ------------------------------------------------------------------ diagnostics
 
@@ -462,11 +429,6 @@ class LifterNode(Node):
         """Count a skipped input and warn, rate-limited per kind (each kind at least once a period)."""
         self._counts.skip(kind)
         self._throttle.warn(kind, text)
-
-    def _on_clipped(self, text: str) -> None:
-        """Confidences outside [0, 1] were clipped into it: counted and warned (rate-limited)."""
-        self._counts.clip()
-        self._throttle.warn("confidence outside [0, 1]", text)
 
     def _check_unknown_parameters(self) -> None:
         """Report start-up parameters that are not the node's (a misspelt name is otherwise ignored)."""
