@@ -36,7 +36,8 @@ def test_hybrid_meets_the_limb_constraints_and_beats_both_parts(
     x, truth = real_frames
     errs: dict[str, list[float]] = {"paper": [], "learned": [], "hybrid": []}
     for mode in errs:
-        lifter = Lifter(bases, LifterOptions(mode="paper", n_starts=10) if mode == "paper" else LifterOptions(mode=mode))
+        opts = LifterOptions(mode="paper", n_starts=10) if mode == "paper" else LifterOptions(mode=mode)
+        lifter = Lifter(bases, opts)
         for xi, ti in zip(x, truth, strict=True):
             r = lifter.lift(xi)
             errs[mode].append(float(p_mpjpe(r.pose_camera, ti)))
@@ -90,7 +91,8 @@ def test_the_compiled_prior_target_is_its_numpy_reference() -> None:
         assert status == TargetStatus.OK, trial
         assert np.allclose(got, target, rtol=tol.ROUND_OFF_LONG, atol=tol.ROUND_OFF), trial
     tw = np.ones(12)
-    assert _target_kernel(pose, centre, spread, previous, tw, np.zeros(12, bool), True)[1] == TargetStatus.NO_JOINT
+    none = np.zeros(12, dtype=bool)
+    assert _target_kernel(pose, centre, spread, previous, tw, none, True)[1] == TargetStatus.NO_JOINT
     pose[3, 2] = np.inf
     assert _target_kernel(pose, centre, spread, previous, tw, vis, False)[1] == TargetStatus.NOT_FINITE
 

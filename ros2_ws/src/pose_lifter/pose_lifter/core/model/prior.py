@@ -170,9 +170,10 @@ def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor:
     """:func:`_window_features` of a window (W, 12, 2) (C-contiguous; W = 1: one frame) with its
     visibility (W, 12), joints with non-finite coordinates missing, normalised on its frame
     ``anchor`` (the centre the visible joints' mean, the radius the root mean square of their
-    coordinates about it), the values of :func:`_window_features` to round-off. Returns ``(features (36 W,), centre (2,), radius, visible joints of the
-    anchor frame)``; the features are zero where :func:`_window_features` raises (fewer than 2
-    visible joints, a radius not finite or <= 1e-12)."""
+    coordinates about it): the values of :func:`_window_features` to round-off. Returns
+    ``(features (36 W,), centre (2,), radius, visible joints of the anchor frame)``; the features
+    are zero where :func:`_window_features` raises (fewer than 2 visible joints, a radius not
+    finite or <= 1e-12)."""
     w = x.shape[0]
     nj = x.shape[1]
     vis = np.empty((w, nj), dtype=np.bool_)
