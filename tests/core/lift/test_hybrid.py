@@ -36,8 +36,8 @@ def test_hybrid_meets_the_limb_constraints_and_beats_both_parts(
     x, truth = real_frames
     errs: dict[str, list[float]] = {"paper": [], "learned": [], "hybrid": []}
     for mode in errs:
-        opts = LifterOptions(mode="paper", n_starts=10) if mode == "paper" else LifterOptions(mode=mode)
-        lifter = Lifter(bases, opts)
+        options = LifterOptions(mode="paper", n_starts=10) if mode == "paper" else LifterOptions(mode=mode)
+        lifter = Lifter(bases, options)
         for xi, ti in zip(x, truth, strict=True):
             r = lifter.lift(xi)
             errs[mode].append(float(p_mpjpe(r.pose_camera, ti)))
