@@ -67,11 +67,10 @@ def test_a_confident_outlier_is_dropped_and_does_not_drag_the_depth(bases: PoseB
     assert np.mean(err_on) < np.mean(err_off)
 
 
-def test_the_compiled_prior_target_is_the_numpy_one() -> None:
-    """hybrid._target_kernel against the numpy lines it replaced (PriorFit.rows' target and its blend
-    with the previous frame's pose), to round-off (0 measured here)."""
+def test_the_compiled_prior_target_is_its_numpy_reference() -> None:
+    """hybrid._target_kernel (PriorFit.rows' target and its blend with the previous frame's pose)
+    against the same maths in numpy, to round-off; its two refusals."""
     from pose_lifter.core.lift.hybrid import TargetStatus, _target_kernel
-    from pose_lifter.core.numeric.fast import median_rows
 
     rng = np.random.default_rng(5)
     for trial in range(300):
@@ -86,11 +85,14 @@ def test_the_compiled_prior_target_is_the_numpy_one() -> None:
         target[:, 2] = pose[:, 2] / spread
         if (tw > 0).any():
             prev = previous.copy()
-            prev[:, :2] += median_rows(target[vis, :2] - prev[vis, :2])
+            prev[:, :2] += np.median(target[vis, :2] - prev[vis, :2], axis=0)
             target = (target + tw[:, None] * prev) / (1.0 + tw[:, None])
         got, status = _target_kernel(pose, centre, spread, previous, tw, vis, True)
         assert status == TargetStatus.OK, trial
         assert np.allclose(got, target, rtol=tol.ROUND_OFF_LONG, atol=tol.ROUND_OFF), trial
+    tw = np.ones(12)
+    none = np.zeros(12, dtype=bool)
+    assert _target_kernel(pose, centre, spread, previous, tw, none, True)[1] == TargetStatus.NO_JOINT
     pose[3, 2] = np.inf
     assert _target_kernel(pose, centre, spread, previous, tw, vis, False)[1] == TargetStatus.NOT_FINITE
 
@@ -146,7 +148,7 @@ def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> N
     from pose_lifter.core.lift.hybrid import OUTLIER_MEDIAN_FACTOR, Person, _Fitting
     from pose_lifter.core.lift.runs import Run
     from pose_lifter.core.lift.starts import StartRun
-    from pose_lifter.core.numeric.fast import median_rows, row_norms
+    from pose_lifter.core.numeric.fast import row_norms
     from pose_lifter.core.results import (
         Camera,
         CameraResult,
@@ -186,7 +188,7 @@ def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> N
                            row_norms(xn - target[:, :2]))
         vis = w > 0
         threshold = o.outlier_threshold_gated if track.gated else o.outlier_threshold
-        limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(median_rows(resid[vis])))
+        limit = max(threshold, OUTLIER_MEDIAN_FACTOR * float(np.median(resid[vis])))
         out = vis & (resid > limit)
         drops = bool(out.any()) and int(np.count_nonzero(vis & ~out)) >= o.min_visible_joints
         want.append(np.where(out, 0.0, w) if drops else None)

@@ -181,10 +181,8 @@ def test_the_single_frame_path_equals_the_batched_one(prior: PosePrior) -> None:
 def test_the_compiled_features_are_the_numpy_ones() -> None:
     """The per-frame path's compiled features (prior._features_kernel) and their numpy reference
     (prior._window_features, _frame_features) agree, errors included, normalised on any frame of
-    the window. The kernel repeats numpy's
-    operations in numpy's order (0 difference measured on every trial here); the bound is
-    round-off, so that a compiler's choices on another CPU cannot fail it and a changed operation
-    still does."""
+    the window, to round-off (the kernel sums in its own order): a changed operation still fails
+    it."""
     from pose_lifter.core.model import prior as prior_module
 
     rng = np.random.default_rng(4)

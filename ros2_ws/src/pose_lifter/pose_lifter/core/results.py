@@ -354,7 +354,7 @@ def with_camera_poses(results: Sequence[LiftResult], poses_camera: NDArray[np.fl
     it is alone)."""
     rotations = np.array([r.camera.rotation for r in results])  # (n, 3, 3)
     body = np.array([r.pose for r in results])  # (n, 12, 3)
-    poses = poses_camera @ rotations + (np.add.reduce(body, axis=1) / body.shape[1])[:, None, :]
+    poses = poses_camera @ rotations + body.mean(axis=1)[:, None, :]
     return [r.with_pose(poses[i], np.ascontiguousarray(poses_camera[i])) for i, r in enumerate(results)]
 
 

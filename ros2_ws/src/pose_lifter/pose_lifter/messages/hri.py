@@ -292,14 +292,8 @@ def _skeleton2d_and_roi(points: Sequence[NDArray[np.float64]], confidence: Seque
     skeletons : ndarray, shape (B, 54)
         Per body the 18 points' (x, y, c).
     boxes : ndarray, shape (B, 5)
-        Per body (xmin, ymin, xmax, ymax, c).
-
-    Notes
-    -----
-    The values are those of the per-body computation: elementwise operations on the same float64
-    numbers, min / max over the observed points (order-free, except with NaN or -0.0: such a
-    body's box is reduced on its own), and the mean confidence as ``np.mean`` sums it (its
-    ``add.reduce`` of the observed values), one body at a time.
+        Per body (xmin, ymin, xmax, ymax, c): the bounds of its observed points (confidence > 0)
+        and their mean confidence; zeros (an empty box with c = 0) for a body without one.
     """
     n = len(points)
     w, h = image_size
@@ -321,22 +315,8 @@ def _skeleton2d_and_roi(points: Sequence[NDArray[np.float64]], confidence: Seque
     by_joint, seen_by_joint = np.ascontiguousarray(norm.transpose(1, 0, 2)), np.ascontiguousarray(seen.T)
     boxes[:, :2] = np.where(seen_by_joint[..., None], by_joint, np.inf).min(axis=0)
     boxes[:, 2:4] = np.where(seen_by_joint[..., None], by_joint, -np.inf).max(axis=0)
-    if np.isnan(norm).any() or np.signbit(norm).any():  # NaN or -0.0: min / max depend on the order
-        for k in np.flatnonzero(counts).tolist():
-            observed = norm[k][seen[k]]
-            boxes[k, :2], boxes[k, 2:4] = observed.min(axis=0), observed.max(axis=0)
-    observed_conf = conf[seen]  # each body's observed confidences, in order, one after the other
-    begin = 0
-    for k, end in enumerate(np.cumsum(counts).tolist()):
-        c = confidence[k]
-        if end == begin:
-            boxes[k] = 0.0  # an empty box with c = 0
-        elif isinstance(c, np.ndarray) and c.dtype == np.float64:  # np.mean: the sum over the count
-            boxes[k, 4] = float(np.add.reduce(observed_conf[begin:end])) / (end - begin)
-        else:  # np.mean in the input's dtype
-            c = np.asarray(c)
-            boxes[k, 4] = float(np.mean(c[c > 0]))
-        begin = end
+    boxes[:, 4] = np.where(seen, conf, 0.0).sum(axis=1) / np.maximum(counts, 1)
+    boxes[counts == 0] = 0.0
     return _float32(xyc.reshape(n, -1)), _float32(boxes)
 
 

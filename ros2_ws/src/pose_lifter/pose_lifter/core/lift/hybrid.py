@@ -13,7 +13,6 @@ call (:meth:`~pose_lifter.core.lift.runs.Runs.run_all`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -70,52 +69,26 @@ def _target_kernel(pose: NDArray[np.float64], centre: NDArray[np.float64], sprea
     """The prior rows' target (12, 3) of :meth:`PriorFit._prior_rows`: the prior's ``pose`` (12, 3,
     input units) in the normalised frame (``(x - centre) / spread``, depth ``/ spread``), and with
     ``blend`` the previous frame's pose ``P`` (12, 3, same frame), its image positions moved by
-    the median over the ``visible`` joints of the target's minus its own (numpy's median: the
-    middle of the sorted values, or the mean of the two middle ones), blended in by
-    ``temporal_weight`` ``t`` (12,) as ``(target + t P) / (1 + t)`` (when some ``t > 0``):
-    numpy's operations of the code it replaces, one by one. Returns ``(target, status)``, the
-    status a :class:`TargetStatus` value (an int: a compiled function boxes no enum member)."""
-    nj = pose.shape[0]
-    target = np.empty((nj, 3))
-    for j in range(nj):
-        target[j, 0] = (pose[j, 0] - centre[0]) / spread
-        target[j, 1] = (pose[j, 1] - centre[1]) / spread
-        target[j, 2] = pose[j, 2] / spread
-    for j in range(nj):
-        for a in range(3):
-            if not math.isfinite(target[j, a]):
-                return target, TargetStatus.NOT_FINITE.value
-    if not blend:
+    the median over the ``visible`` joints of the target's minus its own, blended in by
+    ``temporal_weight`` ``t`` (12,) as ``(target + t P) / (1 + t)`` (when some ``t > 0``).
+    Returns ``(target, status)``, the status a :class:`TargetStatus` value (an int: a compiled
+    function boxes no enum member)."""
+    target = np.empty_like(pose)
+    target[:, 0] = (pose[:, 0] - centre[0]) / spread
+    target[:, 1] = (pose[:, 1] - centre[1]) / spread
+    target[:, 2] = pose[:, 2] / spread
+    if not np.isfinite(target).all():
+        return target, TargetStatus.NOT_FINITE.value
+    if not blend or not (temporal_weight > 0).any():
         return target, TargetStatus.OK.value
-    weighted = False
-    for j in range(nj):
-        weighted = weighted or temporal_weight[j] > 0
-    if not weighted:
-        return target, TargetStatus.OK.value
-    n = 0
-    for j in range(nj):
-        n += visible[j]
-    if n == 0:
+    if not visible.any():
         return target, TargetStatus.NO_JOINT.value
-    d0 = np.empty(n)
-    d1 = np.empty(n)
-    k = 0
-    for j in range(nj):
-        if visible[j]:
-            d0[k] = target[j, 0] - previous[j, 0]
-            d1[k] = target[j, 1] - previous[j, 1]
-            k += 1
-    d0.sort()
-    d1.sort()
-    m = n // 2
-    m0 = d0[m] if n % 2 else (d0[m - 1] + d0[m]) / 2.0
-    m1 = d1[m] if n % 2 else (d1[m - 1] + d1[m]) / 2.0
-    for j in range(nj):
-        t = temporal_weight[j]
-        target[j, 0] = (target[j, 0] + t * (previous[j, 0] + m0)) / (1.0 + t)
-        target[j, 1] = (target[j, 1] + t * (previous[j, 1] + m1)) / (1.0 + t)
-        target[j, 2] = (target[j, 2] + t * previous[j, 2]) / (1.0 + t)
-    return target, TargetStatus.OK.value
+    d = (target[:, :2] - previous[:, :2])[visible]
+    moved = previous.copy()
+    moved[:, 0] += np.median(d[:, 0])
+    moved[:, 1] += np.median(d[:, 1])
+    t = temporal_weight.reshape(-1, 1)
+    return (target + t * moved) / (1.0 + t), TargetStatus.OK.value
 
 
 def _prior_weights(prior: PosePrior, weight_xy: float, weight_z: float) -> NDArray[np.float64]:
@@ -176,7 +149,7 @@ class PriorFit:
         if p.shape != (8,) or not np.isfinite(p).all() or (p <= 0).any():
             return None
         lp = np.log(p)
-        return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))  # np.mean
+        return np.ascontiguousarray(p * np.exp(self._log_limb_mean - np.add.reduce(lp) / lp.size))
 
     def prior_input(self, x: NDArray[np.float64], visible: NDArray[np.bool_], past: Frames | None,
                     future: Frames | None = None) -> tuple[PosePrior, NDArray[np.float64], NDArray[np.bool_]]:
@@ -395,8 +368,8 @@ class PriorFit:
         resid = np.maximum(row_norms(xn - fits_2d), row_norms(xn - prior_2d))
         vis = np.array([f.w for f in fits]) > 0  # (n, 12)
         n_vis = np.count_nonzero(vis, axis=1)
-        # the median over each person's visible joints (median_rows): the middle of the sorted
-        # values, or the mean of the two middle ones
+        # the median over each person's visible joints, all people at once: the middle of the
+        # sorted values, or the mean of the two middle ones
         ranked = np.sort(np.where(vis, resid, np.inf), axis=1)
         rows, mid = np.arange(len(fits)), n_vis // 2
         upper = ranked[rows, mid]

@@ -225,10 +225,10 @@ class Lifter:
         spreads over the mean pose's (n,; input units per normalised unit), and which rows have a
         spread (finite, not (almost) 0: the visible joints are not all at one point)."""
         with np.errstate(divide="ignore", invalid="ignore"):  # a row without weight: refused
-            total = np.add.reduce(w, axis=1)  # each row's w.sum()
+            total = w.sum(axis=1)
             centre = (w[:, None, :] @ x)[:, 0, :] / total[:, None]
             d = x - centre[:, None, :]
-            spread = np.sqrt((w[:, None, :] @ np.add.reduce(d * d, axis=2)[:, :, None])[:, 0, 0] / total)
+            spread = np.sqrt((w[:, None, :] @ (d * d).sum(axis=2)[:, :, None])[:, 0, 0] / total)
             ok = np.isfinite(spread) & (spread > 1e-9 * np.maximum(1.0, np.abs(centre).max(axis=1)))
         return centre, spread / self._data.mean_spread, ok
 
@@ -441,11 +441,13 @@ class Lifter:
         translation = centre + spread[:, None] * np.array([c.translation for c in cams])  # (n, 2)
         rotation = np.array([c.rotation for c in cams])  # (n, 3, 3)
         pose = np.array([r.pose.pose for r in runs])  # (n, 12, 3)
-        pose_c = pose - np.add.reduce(pose, axis=1)[:, None, :] / pose.shape[1]  # mean_rows, per person
+        pose_c = pose - pose.mean(axis=1)[:, None, :]
         pose_camera = pose_c @ rotation.transpose(0, 2, 1)
         cam = [Camera(c.rotation, c.scale * s, t) for c, s, t in zip(cams, spread.tolist(), translation,
                                                                         strict=True)]
         reproj_all = row_norms(np.array([p.x for p, _ in won]) - project_each(pose, cam))  # (n, 12)
+        used = np.array([st.weights for _, st in won]) > 0  # (n, 12): the joints the fit used
+        reproj_mean = (np.where(used, reproj_all, 0.0).sum(axis=1) / np.count_nonzero(used, axis=1)).tolist()
         alpha = np.array([r.pose.alpha for r in runs])
         finite = (np.isfinite(pose).all(axis=(1, 2)) & np.isfinite(alpha).all(axis=1)
                   & np.isfinite(rotation).all(axis=(1, 2)) & np.isfinite(translation).all(axis=1)).tolist()
@@ -456,14 +458,13 @@ class Lifter:
                                        "the solve produced non-finite values for this input"))
                 continue
             w = st.weights / p.track.data_weight if scaled else st.weights
-            reproj = reproj_all[k][w > 0]
             out.append(LiftOutcome.solved(LiftResult(
                 pose=run.pose.pose,
                 pose_camera=pose_camera[k],
                 camera=cam[k],
                 alpha=run.pose.alpha,
                 objective=run.objective,
-                reprojection_error=float(np.add.reduce(reproj) / reproj.size),  # reproj.mean()
+                reprojection_error=reproj_mean[k],
                 limb_violation=run.pose.limb_violation,
                 n_iter=run.n_iter,
                 converged=run.converged,

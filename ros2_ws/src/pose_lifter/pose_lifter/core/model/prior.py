@@ -39,7 +39,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidInputError, PriorFileError
-from ..numeric.fast import pairwise_sum
 from ..numeric.jit import HAVE_NUMBA, njit, njit_nogil
 from ..numeric.threads import thread_pool
 from .skeleton import COUNTERPART, N_JOINTS
@@ -170,11 +169,11 @@ def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor:
                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
     """:func:`_window_features` of a window (W, 12, 2) (C-contiguous; W = 1: one frame) with its
     visibility (W, 12), joints with non-finite coordinates missing, normalised on its frame
-    ``anchor``: numpy's operations in numpy's order (the centre the visible joints' sum row by
-    row over their count, as ``mean(axis=0)``; the radius's sum of squares numpy's
-    :func:`pairwise_sum`). Returns ``(features (36 W,), centre (2,), radius, visible joints of the
-    anchor frame)``; the features are zero where :func:`_window_features` raises (fewer than 2
-    visible joints, a radius not finite or <= 1e-12)."""
+    ``anchor`` (the centre the visible joints' mean, the radius the root mean square of their
+    coordinates about it): the values of :func:`_window_features` to round-off. Returns
+    ``(features (36 W,), centre (2,), radius, visible joints of the anchor frame)``; the features
+    are zero where :func:`_window_features` raises (fewer than 2 visible joints, a radius not
+    finite or <= 1e-12)."""
     w = x.shape[0]
     nj = x.shape[1]
     vis = np.empty((w, nj), dtype=np.bool_)
@@ -196,15 +195,13 @@ def _features_kernel(x: NDArray[np.float64], visible: NDArray[np.bool_], anchor:
     c0 /= n
     c1 /= n
     centre[0], centre[1] = c0, c1
-    sq = np.empty(2 * n)
-    k = 0
+    sq = 0.0
     for j in range(nj):
         if vis[anchor, j]:
             d0 = x[anchor, j, 0] - c0
             d1 = x[anchor, j, 1] - c1
-            sq[k], sq[k + 1] = d0 * d0, d1 * d1
-            k += 2
-    radius = math.sqrt(pairwise_sum(sq) / n)
+            sq += d0 * d0 + d1 * d1
+    radius = math.sqrt(sq / n)
     if not (math.isfinite(radius) and radius > 1e-12):
         return feats, centre, radius, n
     for f in range(w):

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidInputError
+from ..numeric.fast import row_norms
 from ..numeric.jit import njit
 
 __all__ = [
@@ -131,7 +132,7 @@ def limb_lengths(pose: NDArray[np.float64]) -> NDArray[np.float64]:
     """
     arr = _check_pose(pose)
     d = arr[..., _LIMB_A, :] - arr[..., _LIMB_B, :]
-    return np.asarray(np.sqrt(np.add.reduce(d * d, axis=-1)))  # np.linalg.norm(d, axis=-1)
+    return row_norms(d)
 
 
 def limb_selectors() -> NDArray[np.float64]:

@@ -191,7 +191,7 @@ def priors_in_camera(results: Sequence[LiftResult]) -> tuple[NDArray[np.float64]
     if rows:
         prior = np.array([results[i].prior_pose for i in rows])
         scale = np.array([float(results[i].camera.scale) for i in rows])
-        x = (prior - (np.add.reduce(prior, axis=1) / prior.shape[1])[:, None, :]) / scale[:, None, None]
+        x = (prior - prior.mean(axis=1)[:, None, :]) / scale[:, None, None]
         out[rows] = x
         ok[rows] = np.isfinite(x).all(axis=(1, 2))
     return out, ok

@@ -8,6 +8,7 @@ one per track id.
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -25,7 +26,7 @@ from ..model.skeleton import (
     N_JOINTS,
     RIGHT_LIMBS,
 )
-from ..numeric.fast import median_rows, row_norms
+from ..numeric.fast import row_norms
 from ..numeric.jit import njit
 from .measurement import MAX_NOISE, MeasurementUpdate
 from .smoothing import CausalSmoother
@@ -128,7 +129,7 @@ def calibrated_limb_proportions(estimate: NDArray[np.float64]) -> NDArray[np.flo
     :data:`LIMB_CALIBRATION`; left and right stay equal (:meth:`Lifter.limb_proportions_of`)."""
     e = np.asarray(estimate, dtype=np.float64)
     g = np.log(np.maximum(e[..., _LEFT_LIMBS], 1e-12))
-    m = np.add.reduce(g, axis=-1, keepdims=True) / g.shape[-1]  # g.mean()
+    m = np.add.reduce(g, axis=-1, keepdims=True) / g.shape[-1]  # the mean log, per row
     slope, offset = LIMB_CALIBRATION
     out = np.exp(m + slope * (g - m) + offset)
     return np.asarray(out[..., _GROUP_OF])
@@ -212,7 +213,7 @@ class Track:
     def objective_median(self) -> float:
         """The median of the track's last objectives (at least one)."""
         if self._objective_median is None:
-            self._objective_median = float(median_rows(np.asarray(self.objectives)))
+            self._objective_median = float(statistics.median(self.objectives))
         return self._objective_median
 
     def screen_ahead(self, points: NDArray[np.float64], vis: NDArray[np.bool_],
@@ -297,14 +298,14 @@ class Track:
     def noise_median(self) -> float:
         """The median of the track's last 2D noise estimates (at least one)."""
         if self._noise_median is None:
-            self._noise_median = float(median_rows(np.asarray(self.noise)))
+            self._noise_median = float(statistics.median(self.noise))
         return self._noise_median
 
     def data_weight(self) -> float:
         if len(self.noise) < NOISE_MIN_FRAMES:
             return 1.0
         level = self.noise_level()
-        return min(max(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT), 1.0)  # np.clip
+        return min(max(NOISE_REFERENCE / max(level, 1e-12), NOISE_MIN_WEIGHT), 1.0)
 
     def limb_proportions(self, image: bool = False) -> NDArray[np.float64] | None:
         """The track's limb proportions (8,): :func:`tracks_limb_proportions` of this track."""
