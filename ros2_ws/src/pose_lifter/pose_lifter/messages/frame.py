@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.results import LiftResult, with_camera_poses
+from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.policy import (
     FramesAhead,
@@ -70,7 +70,6 @@ __all__ = [
     "frame_over_cap",
     "lift_together",
     "place_lifted",
-    "placed_again",
     "skeleton_input",
     "with_frames_ahead",
 ]
@@ -373,30 +372,6 @@ def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput
             out[k] = LiftedSkeleton(inp, res, j, tracked.warm_started, 0.0, tracked.fit_pose_camera,
                                     tracked.swapped)
     return [x for x in out if x is not None]
-
-
-def placed_again(lifted: Sequence[LiftedSkeleton], poses: NDArray[np.float64], settings: FrameSettings,
-                 intrinsics: Intrinsics) -> list[LiftedSkeleton | None]:
-    """Lifted skeletons of one camera with refined poses (``poses`` (n, 12, 3), camera frame,
-    centred, leg units): each result's pose replaced
-    (:func:`~pose_lifter.core.results.with_camera_poses`) and placed again in one
-    :func:`~pose_lifter.core.track.placement.place_results` pass; None for a skeleton whose
-    placement is refused or not finite (:func:`check_output`), or for all when the pass is."""
-    results = with_camera_poses([s.result for s in lifted], poses)
-    try:
-        joints = place_results(poses, results, settings.lower_leg_length, intrinsics,
-                               settings.default_distance)
-    except Exception:  # e.g. a camera scale not > 0
-        return [None] * len(lifted)
-    out: list[LiftedSkeleton | None] = []
-    for s, res, j in zip(lifted, results, joints, strict=True):
-        try:
-            check_output(s.track_id, res, j)
-        except SkipSkeleton:
-            out.append(None)
-            continue
-        out.append(replace(s, result=res, joints_m=j))
-    return out
 
 
 def with_frames_ahead(track: Sequence[tuple[int, SkeletonInput]], n: int) -> list[SkeletonInput]:

@@ -1,9 +1,9 @@
 """How the lifter node says what it refuses: rate-limited warnings.
 
 The refusals themselves (input caps and sanitising, the one check of what is published) are the
-frame pipeline's (:mod:`pose_lifter.messages.frame`, shared with the offline lift): each is a
-:class:`~pose_lifter.messages.frame.SkipSkeleton` with a short kind, counted in the statistics
-line and warned at most once per :data:`WARN_PERIOD` per kind (:class:`WarningThrottle`).
+frame pipeline's (:mod:`pose_lifter.messages.frame`, shared with the offline lift): the answer
+stream (:class:`~pose_lifter.messages.answer.AnswerStream`) returns each as a short kind and its
+reason, which the node counts in the statistics line and warns at most once per :data:`WARN_PERIOD` per kind (:class:`WarningThrottle`).
 """
 
 from __future__ import annotations
