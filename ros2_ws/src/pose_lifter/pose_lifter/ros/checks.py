@@ -3,7 +3,8 @@
 The refusals themselves (input caps and sanitising, the one check of what is published) are the
 frame pipeline's (:mod:`pose_lifter.messages.frame`, shared with the offline lift): the answer
 stream (:class:`~pose_lifter.messages.answer.AnswerStream`) returns each as a short kind and its
-reason, which the node counts in the statistics line and warns at most once per :data:`WARN_PERIOD` per kind (:class:`WarningThrottle`).
+reason, which the node counts in the statistics line and warns at most once per
+:data:`WARN_PERIOD` per kind (:class:`WarningThrottle`).
 """
 
 from __future__ import annotations
