@@ -84,13 +84,14 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
         Seconds (0: until replaced or deleted).
     image_size : (width, height) in pixels, or None (no REP-155 ``skeleton2d`` / ``roi``)
     """
-    track_ids = lifted.track_ids.tolist()
-    gone = markers.update(track_ids)._asdict() if markers is not None else None
     head = cdr.message_header(header)
     skeletons = cdr.skeleton3d_array_cdr(head, lifted)
     shown = None
-    if markers is not None and gone is not None:
-        shown = cdr.marker_array_cdr(head, track_ids, lifted.joints_m, markers.ns, marker_lifetime, **gone)
+    if markers is not None:
+        track_ids = lifted.track_ids.tolist()
+        gone = markers.update(track_ids)
+        shown = cdr.marker_array_cdr(head, track_ids, lifted.joints_m, markers.ns, marker_lifetime,
+                                     **gone._asdict())
     if bodies is None:
         return FrameAnswer(skeletons, shown)
     clock = cdr.header_cdr(cdr.stamp_cdr(stamp_ns), str(header.frame_id))
