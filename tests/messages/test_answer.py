@@ -26,6 +26,7 @@ from test_frame import sequence
 
 HEADER = DecodedHeader(DecodedStamp(12, 345), "camera")
 STAMP_NS = 12 * 10**9 + 345
+HEAD = cdr.message_header(HEADER)  # its CDR
 
 
 def _frame(track_ids: list[int]) -> SkeletonFrame:
@@ -39,6 +40,12 @@ def _frame(track_ids: list[int]) -> SkeletonFrame:
                                       [False] * len(track_ids), points, [np.full(12, 0.8)] * len(track_ids))
 
 
+def _markers(book: MarkerBook, track_ids: list[int], joints_m: np.ndarray, lifetime: float) -> bytes:
+    """The ``MarkerArray`` of ``HEADER`` showing these skeletons, deleting what ``book`` says is gone."""
+    return cdr.marker_array_cdr(HEAD, track_ids, joints_m, book.ns, lifetime,
+                                **book.update(track_ids)._asdict())
+
+
 def test_the_answer_is_each_writer_s_bytes_in_the_node_s_order() -> None:
     """The skeletons, the markers (their book updated), then the bodies' messages (theirs), each
     the bytes of its own writer; an output without its book is left out."""
@@ -46,10 +53,10 @@ def test_the_answer_is_each_writer_s_bytes_in_the_node_s_order() -> None:
     markers, bodies = MarkerBook("ns"), hri.BodyBook(1.0)
     answer = frame_answer(HEADER, STAMP_NS, lifted, markers=markers, marker_lifetime=0.5, bodies=bodies,
                           image_size=(640.0, 480.0))
-    assert answer.skeletons == cdr.skeleton3d_array_cdr(HEADER, lifted)
+    assert answer.skeletons == cdr.skeleton3d_array_cdr(HEAD, lifted)
     same_markers, same_bodies = MarkerBook("ns"), hri.BodyBook(1.0)
-    assert answer.markers == same_markers.update(HEADER, [3, 8, -1], lifted.joints_m, 0.5)
-    people = same_bodies.frame(STAMP_NS, "camera", lifted, (640.0, 480.0))
+    assert answer.markers == _markers(same_markers, [3, 8, -1], lifted.joints_m, 0.5)
+    people = same_bodies.frame(STAMP_NS, HEAD, lifted, (640.0, 480.0))
     assert answer.bodies is not None and answer.bodies.messages() == people.messages()
     assert len(bodies) == 2  # the untracked skeleton has no body
     got = answer.messages()
@@ -58,7 +65,7 @@ def test_the_answer_is_each_writer_s_bytes_in_the_node_s_order() -> None:
     assert got[2:] == people.messages()
     # the books carry over: the next frame's markers delete the track that went
     again = frame_answer(HEADER, STAMP_NS + 10**8, lifted.take(np.array([0])), markers=markers)
-    assert again.markers == same_markers.update(HEADER, [3], lifted.joints_m[:1], 0.0)
+    assert again.markers == _markers(same_markers, [3], lifted.joints_m[:1], 0.0)
     assert again.bodies is None and [t for t, _, _ in again.messages()] == [TOPIC_SKELETONS, TOPIC_MARKERS]
     alone = frame_answer(HEADER, STAMP_NS, lifted)
     assert alone.markers is None and alone.bodies is None and len(alone.messages()) == 1
@@ -74,12 +81,12 @@ def test_columns_take_and_concat_keep_the_rows() -> None:
     np.testing.assert_array_equal(picked.joints_m, np.stack([b.joints_m[2], a.joints_m[0]]))
     np.testing.assert_array_equal(picked.points, np.stack([b.points[2], a.points[0]]))
     first = both.take(np.array([0, 1]))
-    assert cdr.skeleton3d_array_cdr(HEADER, first) == cdr.skeleton3d_array_cdr(HEADER, a)
+    assert cdr.skeleton3d_array_cdr(HEAD, first) == cdr.skeleton3d_array_cdr(HEAD, a)
 
 
 def _untimed(skeletons: list[LiftedSkeleton]) -> bytes:
     """Lifted skeletons written without their solve times (each solve's own)."""
-    return cdr.skeleton3d_array_cdr(HEADER, SkeletonFrame.of([x.timed(0.0) for x in skeletons]))
+    return cdr.skeleton3d_array_cdr(HEAD, SkeletonFrame.of([x.timed(0.0) for x in skeletons]))
 
 
 def _unread(data: bytes) -> Any:

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import body, hri
-from pose_lifter.messages.cdr import SkeletonFrame
+from pose_lifter.messages.cdr import SkeletonFrame, header_cdr, stamp_cdr
 from pose_lifter.messages.convert import skeleton3d_to_joints
 from pose_lifter.offline.bags import read_messages
 
@@ -199,6 +199,11 @@ class Person(NamedTuple):
     confidence: NDArray[np.float64]  #: (12,)
 
 
+def _header(stamp_ns: int, frame_id: str) -> bytes:
+    """A body book's header: the CDR of ``stamp_ns`` and ``frame_id``."""
+    return header_cdr(stamp_cdr(stamp_ns), frame_id)
+
+
 def bodies(people: Sequence[Person]) -> SkeletonFrame:
     """``people`` as the columns a body book reads (the fields it does not read zero)."""
     n, z = len(people), np.zeros
@@ -306,7 +311,7 @@ def test_crowd_frames_are_rosbags_serialisation_of_messages_built_from_their_fie
         steps = [(people, (640.0, 480.0)), (people[::-1][:25], None), (people[5:], (1280, 720))]
         for step, (shown, size) in enumerate(steps):
             stamp_ns = 1_700_000_000 * 10**9 + 123_456_789 * step + length
-            out = book.frame(stamp_ns, frame_id, bodies(shown), size)
+            out = book.frame(stamp_ns, _header(stamp_ns, frame_id), bodies(shown), size)
             bids = [hri.body_id(p.track_id) for p in shown]
             new = set(bids) - alive
             alive |= new
@@ -334,7 +339,8 @@ def test_book_messages_and_bodies_coming_and_going() -> None:
     def decode(data: bytes, name: str) -> Any:
         return store.deserialize_cdr(data, name)
 
-    out = book.frame(10**9, "cam", bodies([lifted(3, 0), lifted(8, 1), lifted(-1, 2)]), (640.0, 480.0))
+    out = book.frame(10**9, _header(10**9, "cam"), bodies([lifted(3, 0), lifted(8, 1), lifted(-1, 2)]),
+                     (640.0, 480.0))
     a, b = hri.body_id(3), hri.body_id(8)
     tracked = decode(out.tracked, "hri_msgs/msg/IdsList")
     assert sorted(tracked.ids) == sorted([a, b]) and set(out.new) == {a, b} and out.gone == []
@@ -358,18 +364,18 @@ def test_book_messages_and_bodies_coming_and_going() -> None:
     assert (box.xmin, box.ymax) == pytest.approx((seen[:, 0].min() / 640, seen[:, 1].max() / 480))
 
     # track 8 stops: still tracked within the timeout, gone after it; no URDF twice
-    out = book.frame(int(1.4e9), "cam", bodies([lifted(3, 0)]), None)
+    out = book.frame(int(1.4e9), _header(int(1.4e9), "cam"), bodies([lifted(3, 0)]), None)
     assert sorted(decode(out.tracked, "hri_msgs/msg/IdsList").ids) == sorted([a, b])
     assert out.new == {} and set(out.bodies) == {a}
     assert "skeleton2d" not in out.bodies[a]  # no image size: no normalised 2D
-    out = book.frame(int(1.6e9), "cam", bodies([lifted(3, 0)]), None)
+    out = book.frame(int(1.6e9), _header(int(1.6e9), "cam"), bodies([lifted(3, 0)]), None)
     assert list(decode(out.tracked, "hri_msgs/msg/IdsList").ids) == [a] and out.gone == [b]
     assert not any(tr.child_frame_id.endswith(b)
                    for tr in decode(out.tf, "tf2_msgs/msg/TFMessage").transforms)
-    out = book.frame(int(3.0e9), "cam", bodies([]), None)
+    out = book.frame(int(3.0e9), _header(int(3.0e9), "cam"), bodies([]), None)
     assert list(decode(out.tracked, "hri_msgs/msg/IdsList").ids) == [] and out.gone == [a] and out.tf is None
     # a degenerate skeleton (both hips at one point) has no body, the frame goes on
     flat = poses[0].copy()
     flat[9] = flat[6]
-    out = book.frame(int(3.1e9), "cam", bodies([Person(5, flat, points, conf)]), None)
+    out = book.frame(int(3.1e9), _header(int(3.1e9), "cam"), bodies([Person(5, flat, points, conf)]), None)
     assert out.tf is None and len(book) == 0

@@ -273,12 +273,13 @@ def test_encoders_equal_the_node_builders_for_every_alignment(frame_id: str) -> 
                                           strict=True)]
         want = bytes(store.serialize_cdr(m.skeletons3d_array(header, skels, types), cdr.SKELETON3D_ARRAY))
         frame = cdr.SkeletonFrame.from_results(track_ids[:n], joints[:n], results[:n], times[:n], warm[:n])
-        assert cdr.skeleton3d_array_cdr(header, frame) == want
+        assert cdr.skeleton3d_array_cdr(cdr.message_header(header), frame) == want
         for lifetime, deleted in ((0.0, []), (1.5e-9, [11, -2]), (2.75, [1, 2])):
             tracks = list(zip(track_ids[:n], joints[:n], strict=True))
             mk = m.skeleton_markers(header, tracks, "ns", lifetime, types, deleted_track_ids=deleted)
             want = bytes(store.serialize_cdr(mk, cdr.MARKER_ARRAY))
-            got = cdr.marker_array_cdr(header, track_ids[:n], frame.joints_m, "ns", lifetime, deleted)
+            got = cdr.marker_array_cdr(cdr.message_header(header), track_ids[:n], frame.joints_m, "ns",
+                                       lifetime, deleted)
             assert got == want, _first_difference(got, want, cdr.MARKER_ARRAY)
 
 

@@ -12,6 +12,7 @@ import pytest
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.track.placement import place_in_camera
+from pose_lifter.messages import cdr
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.frame import (
     SkeletonInput,
@@ -131,15 +132,20 @@ def test_marker_book_clears_first_then_shows_and_deletes_what_is_gone() -> None:
     header = m.make_header(5, "cam", T)
     j = np.stack([np.full((12, 3), float(i)) for i in range(3)])
     book = MarkerBook("ns")
-    first = store.deserialize_cdr(book.update(header, [4, 9, -1], j, 1.0), kind)
+
+    def shown(track_ids: list[int], joints_m: np.ndarray) -> bytes:
+        return cdr.marker_array_cdr(cdr.message_header(header), track_ids, joints_m, book.ns, 1.0,
+                                    **book.update(track_ids)._asdict())
+
+    first = store.deserialize_cdr(shown([4, 9, -1], j), kind)
     assert [(x.ns, x.action) for x in first.markers[:2]] == [("ns/joints", 3), ("ns/bones", 3)]
     from_arrays = m.skeleton_markers(header, [(4, j[0]), (9, j[1]), (-1, j[2])], "ns", 1.0, T)
     assert (bytes(store.serialize_cdr(T.MarkerArray(markers=first.markers[2:]), kind))
             == bytes(store.serialize_cdr(from_arrays, kind)))
-    second = store.deserialize_cdr(book.update(header, [9], j[1:2], 1.0), kind)
+    second = store.deserialize_cdr(shown([9], j[1:2]), kind)
     assert [(x.ns, x.id, x.action) for x in second.markers[2:]] == [
         ("ns/joints", 4, 2), ("ns/bones", 4, 2), ("ns/joints", -1, 2), ("ns/bones", -1, 2)]
-    third = store.deserialize_cdr(book.update(header, [9], j[1:2], 1.0), kind)
+    third = store.deserialize_cdr(shown([9], j[1:2]), kind)
     assert len(third.markers) == 2  # nothing more to delete, no DELETEALL again
 
 

@@ -39,7 +39,7 @@ def test_the_written_skeletons_are_the_bytes_rclpy_serialises(frame_id: str) -> 
         msg = m.skeletons3d_array(header, skels, types)
         want = bytes(serialize_message(msg))
         frame = cdr.SkeletonFrame.from_results(track_ids[:n], joints[:n], results[:n], times[:n], warm[:n])
-        got = cdr.skeleton3d_array_cdr(header, frame)
+        got = cdr.skeleton3d_array_cdr(cdr.message_header(header), frame)
         assert deserialize_message(got, Skeleton3DArray) == msg
         assert len(got) == len(want)
         differ = [i for i, (a, b) in enumerate(zip(got, want, strict=True)) if a != b]

@@ -4,7 +4,8 @@ The node publishes what :func:`frame_answer` gives and the offline lift writes i
 (:func:`pose_lifter.offline.lift.lift_bag`), so a lifted bag holds what the node published:
 
 * ``skeletons_3d`` (``Skeleton3DArray``, :func:`~pose_lifter.messages.cdr.skeleton3d_array_cdr`),
-* ``skeleton_markers`` (``MarkerArray``, :class:`~pose_lifter.messages.markers.MarkerBook`),
+* ``skeleton_markers`` (``MarkerArray``, :func:`~pose_lifter.messages.cdr.marker_array_cdr`, what is
+  gone from :class:`~pose_lifter.messages.markers.MarkerBook`),
 * the REP-155 bodies and their ``/tf`` (:class:`~pose_lifter.messages.hri.BodyBook`).
 
 The books carry what is on screen and which bodies are alive from one frame to the next; the
@@ -24,7 +25,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array, skeleton3d_array_cdr
+from pose_lifter.messages import cdr
+from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.frame import FramePipeline, Intrinsics, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.hri import BodyBook, BodyFrame
@@ -68,6 +70,9 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
     the markers that show them (``markers``' book updated) and their REP-155 bodies (``bodies``'
     book updated).
 
+    The books say what changes (markers gone, bodies new and gone); the header is written once
+    (its CDR, and the bodies' with their clock) and each message is written after it.
+
     Parameters
     ----------
     header : the answer's ``std_msgs/Header`` (``stamp.sec``, ``stamp.nanosec``, ``frame_id``)
@@ -79,11 +84,18 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
         Seconds (0: until replaced or deleted).
     image_size : (width, height) in pixels, or None (no REP-155 ``skeleton2d`` / ``roi``)
     """
-    skeletons = skeleton3d_array_cdr(header, lifted)
-    shown = (markers.update(header, lifted.track_ids.tolist(), lifted.joints_m, marker_lifetime)
-             if markers is not None else None)
-    people = bodies.frame(stamp_ns, str(header.frame_id), lifted, image_size) if bodies is not None else None
-    return FrameAnswer(skeletons, shown, people)
+    head = cdr.message_header(header)
+    skeletons = cdr.skeleton3d_array_cdr(head, lifted)
+    shown = None
+    if markers is not None:
+        track_ids = lifted.track_ids.tolist()
+        gone = markers.update(track_ids)
+        shown = cdr.marker_array_cdr(head, track_ids, lifted.joints_m, markers.ns, marker_lifetime,
+                                     **gone._asdict())
+    if bodies is None:
+        return FrameAnswer(skeletons, shown)
+    clock = cdr.header_cdr(cdr.stamp_cdr(stamp_ns), str(header.frame_id))
+    return FrameAnswer(skeletons, shown, bodies.frame(stamp_ns, clock, lifted, image_size))
 
 
 @dataclass(frozen=True)

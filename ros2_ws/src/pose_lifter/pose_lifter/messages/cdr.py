@@ -55,6 +55,7 @@ __all__ = [
     "decode_skeleton2d_array",
     "header_cdr",
     "marker_array_cdr",
+    "message_header",
     "read_skeleton2d_array",
     "skeleton3d_array_cdr",
     "stamp_cdr",
@@ -134,7 +135,7 @@ def header_cdr(stamp: bytes, frame_id: str) -> bytes:
     return stamp + _string_bytes(frame_id)
 
 
-def _message_header(header: Any) -> bytes:
+def message_header(header: Any) -> bytes:
     """:func:`header_cdr` of a message's ``header`` (``stamp.sec``, ``stamp.nanosec``, ``frame_id``)."""
     return header_cdr(_STAMP.pack(int(header.stamp.sec), int(header.stamp.nanosec)), str(header.frame_id))
 
@@ -274,11 +275,11 @@ class SkeletonFrame:
         return len(self.track_ids)
 
 
-def skeleton3d_array_cdr(header: Any, frame: SkeletonFrame) -> bytes:
-    """A serialised ``pose_lifter_msgs/Skeleton3DArray`` of ``header`` (``stamp.sec``,
-    ``stamp.nanosec``, ``frame_id``) and the skeletons of ``frame``."""
+def skeleton3d_array_cdr(header: bytes, frame: SkeletonFrame) -> bytes:
+    """A serialised ``pose_lifter_msgs/Skeleton3DArray`` of ``header`` (a ``std_msgs/Header``'s
+    CDR: :func:`header_cdr`, :func:`message_header`) and the skeletons of ``frame``."""
     w = _Writer()
-    w.buf += _message_header(header)
+    w.buf += header
     n = len(frame)
     w.u32(n)
     buf = w.buf
@@ -334,7 +335,7 @@ def _marker(w: _Writer, header_bytes: bytes, ns: bytes, ids: tuple[int, int, int
 
 
 def marker_array_cdr(
-    header: Any,
+    header: bytes,
     track_ids: Sequence[int],
     joints_m: NDArray[np.float64],
     ns: str,
@@ -346,14 +347,14 @@ def marker_array_cdr(
     deleted_untracked: Iterable[int] = (),
 ) -> bytes:
     """A serialised ``visualization_msgs/MarkerArray``: the bytes of
-    :func:`pose_lifter.messages.convert.skeleton_markers` (same arguments; ``joints_m`` is (n, 12, 3)
-    for the ``n`` track ids) as rosbags serialises it; with ``clear``, DELETEALL markers of both
+    :func:`pose_lifter.messages.convert.skeleton_markers` (same arguments, ``header`` as its CDR:
+    :func:`header_cdr`, :func:`message_header`; ``joints_m`` is (n, 12, 3) for the ``n`` track
+    ids) as rosbags serialises it; with ``clear``, DELETEALL markers of both
     namespaces first, and DELETE markers for the untracked positions ``deleted_untracked`` last
     (ids ``-1 - position``, :func:`~pose_lifter.messages.convert.marker_id`)."""
     joints = np.asarray(joints_m, dtype="<f8").reshape(len(track_ids), N_JOINTS, 3)
     deleted = [int(t) for t in deleted_track_ids if t >= 0]
     positions = [int(p) for p in deleted_untracked]
-    hb = _message_header(header)
     ns_joints, ns_bones = _string_bytes(f"{ns}/joints"), _string_bytes(f"{ns}/bones")
     ns_sec, ns_nsec = divmod(max(0, round(float(lifetime) * 1e9)), 1_000_000_000)
     identity = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # position, orientation (x, y, z, w)
@@ -365,7 +366,7 @@ def marker_array_cdr(
     w.u32(2 * (len(track_ids) + len(deleted) + len(positions) + int(clear)))
     if clear:
         for kind in (ns_joints, ns_bones):
-            _marker(w, hb, kind, (0, 0, _DELETEALL), zero_pose, zero_color, None)
+            _marker(w, header, kind, (0, 0, _DELETEALL), zero_pose, zero_color, None)
     untracked = 0
     for i, tid in enumerate(track_ids):
         track_id = int(tid)
@@ -374,11 +375,11 @@ def marker_array_cdr(
             untracked += 1
         r, g, b = _track_color(track_id)
         color = _COLOR_LIFETIME.pack(r, g, b, 1.0, int(ns_sec), int(ns_nsec), False)
-        _marker(w, hb, ns_joints, (mid, _SPHERE_LIST, _ADD), joint_pose, color, joints[i])
-        _marker(w, hb, ns_bones, (mid, _LINE_LIST, _ADD), bone_pose, color, joints[i][_BONE_INDEX])
+        _marker(w, header, ns_joints, (mid, _SPHERE_LIST, _ADD), joint_pose, color, joints[i])
+        _marker(w, header, ns_bones, (mid, _LINE_LIST, _ADD), bone_pose, color, joints[i][_BONE_INDEX])
     for mid in [marker_id(t, 0) for t in deleted] + [marker_id(-1, p) for p in positions]:
         for kind in (ns_joints, ns_bones):
-            _marker(w, hb, kind, (mid, 0, _DELETE), zero_pose, zero_color, None)
+            _marker(w, header, kind, (mid, 0, _DELETE), zero_pose, zero_color, None)
     return bytes(w.buf)
 
 

@@ -115,17 +115,22 @@ def body_id(track_id: int) -> str:
     return "".join(letters)
 
 
-def _header_block(stamp: bytes, frame_id: str) -> bytes:
-    """The encapsulation and a std_msgs/Header (:func:`~pose_lifter.messages.cdr.header_cdr`)
+def _header_block(header: bytes) -> bytes:
+    """The encapsulation and a std_msgs/Header's CDR (:func:`~pose_lifter.messages.cdr.header_cdr`)
     padded to 4: the start of every message here whose header is followed by 4-aligned fields,
     shared by the frame's messages that have the input's frame."""
-    data = _ENCAPSULATION + header_cdr(stamp, frame_id)
+    data = _ENCAPSULATION + header
     return data + b"\x00" * (-len(data) % 4)
 
 
 def ids_list_cdr(stamp_ns: int, frame_id: str, ids: Sequence[str]) -> bytes:
     """``hri_msgs/IdsList`` of ``ids``."""
-    buf = bytearray(_header_block(stamp_cdr(stamp_ns), frame_id))
+    return _ids_list(header_cdr(stamp_cdr(stamp_ns), frame_id), ids)
+
+
+def _ids_list(header: bytes, ids: Sequence[str]) -> bytes:
+    """:func:`ids_list_cdr` with its header's CDR."""
+    buf = bytearray(_header_block(header))
     buf += _U32.pack(len(ids))
     for i in ids:
         buf += b"\x00" * (-len(buf) % 4)
@@ -173,15 +178,15 @@ class _TfBlock:
 
 
 @lru_cache(maxsize=1024)
-def _tf_block(bid: str, root: str, phase: int) -> _TfBlock:
+def _tf_block(bid: str, root: bytes, phase: int) -> _TfBlock:
     """The :class:`_TfBlock` of body ``bid`` starting at a CDR offset of ``phase`` modulo 8, its
-    ``body_<id>`` a child of ``root`` (the input's frame)."""
+    ``body_<id>`` a child of ``root`` (the input's frame, as a CDR string)."""
     buf = bytearray(phase)  # offsets in buf have the message's alignment
     stamps, values = [], []
     for parent, child in body.LINKS:
         buf += b"\x00" * (-len(buf) % 4)  # the header: stamp (written per frame), frame_id
         stamps.append(len(buf) - phase)
-        buf += header_cdr(bytes(_STAMP.size), f"{parent}_{bid}" if parent else root)
+        buf += header_cdr(bytes(_STAMP.size), f"{parent}_{bid}") if parent else bytes(_STAMP.size) + root
         buf += b"\x00" * (-len(buf) % 4)  # child_frame_id
         buf += _string_bytes(f"{child}_{bid}")
         buf += b"\x00" * (-len(buf) % 8)  # translation, rotation: float64
@@ -196,6 +201,11 @@ def tf_message_cdr(stamp_ns: int, frame_id: str, bodies: Sequence[tuple[str, bod
 
     Each body's names and padding are cached (:func:`_tf_block`); the frame's stamp and the
     bodies' transforms are written into them with one numpy assignment per layout."""
+    return _tf_message(header_cdr(stamp_cdr(stamp_ns), frame_id), bodies)
+
+
+def _tf_message(header: bytes, bodies: Sequence[tuple[str, body.BodyPose]]) -> bytes:
+    """:func:`tf_message_cdr` with the stamp and frame of a header's CDR."""
     n_links = len(body.LINKS)
     head = _ENCAPSULATION + _U32.pack(n_links * len(bodies))
     if not bodies:
@@ -208,14 +218,14 @@ def tf_message_cdr(stamp_ns: int, frame_id: str, bodies: Sequence[tuple[str, bod
     buf = bytearray(4) + head
     groups: dict[_TfLayout, tuple[list[int], list[int]]] = {}  # layout -> (bodies, CDR offsets)
     for k, (bid, _) in enumerate(bodies):
-        block = _tf_block(bid, frame_id, 4 if k == 0 else 0)
+        block = _tf_block(bid, header[_STAMP.size:], 4 if k == 0 else 0)
         ks, starts = groups.setdefault(block.layout, ([], []))
         ks.append(k)
         starts.append(len(buf) - 8)
         buf += block.data
     words = np.frombuffer(buf, dtype="<u4")  # CDR offset c: word (c + 8) / 4
     doubles = np.frombuffer(buf, dtype="<f8", offset=8)  # CDR offset c: double c / 8
-    sec, nanosec = np.frombuffer(stamp_cdr(stamp_ns), dtype="<u4")
+    sec, nanosec = np.frombuffer(header[:_STAMP.size], dtype="<u4")
     for layout, (ks, starts) in groups.items():
         at = np.array(starts, dtype=np.intp)[:, None]
         stamp_at = (at + 8) // 4 + layout.stamp_words
@@ -327,7 +337,7 @@ def skeleton2d_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], co
     at the shoulders' midpoint; the points the model has no joint for (nose, eyes, ears) have
     confidence 0."""
     skeletons, _ = _skeleton2d_and_roi([points], [confidence], image_size)
-    return _header_block(stamp_cdr(stamp_ns), frame_id) + bytes(skeletons[0].tobytes())
+    return _header_block(header_cdr(stamp_cdr(stamp_ns), frame_id)) + bytes(skeletons[0].tobytes())
 
 
 def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidence: NDArray[np.float64],
@@ -335,7 +345,7 @@ def roi_cdr(stamp_ns: int, frame_id: str, points: NDArray[np.float64], confidenc
     """``hri_msgs/NormalizedRegionOfInterest2D``: the box of the observed joints (confidence > 0),
     normalised; ``c`` their mean confidence (an empty box with c = 0 when none is observed)."""
     _, boxes = _skeleton2d_and_roi([points], [confidence], image_size)
-    return _header_block(stamp_cdr(stamp_ns), frame_id) + bytes(boxes[0].tobytes())
+    return _header_block(header_cdr(stamp_cdr(stamp_ns), frame_id)) + bytes(boxes[0].tobytes())
 
 
 @dataclass(frozen=True)
@@ -404,13 +414,15 @@ class BodyBook:
         self._seen.clear()
         return gone
 
-    def frame(self, stamp_ns: int, frame_id: str, lifted: SkeletonFrame,
+    def frame(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
               image_size: tuple[float, float] | None) -> BodyFrame:
         """The outputs of one frame.
 
         Parameters
         ----------
-        stamp_ns, frame_id : the input's stamp and frame (the joints' frame)
+        stamp_ns : the input's stamp
+        header : the bodies' ``std_msgs/Header`` as CDR (:func:`~pose_lifter.messages.cdr.header_cdr`
+            of ``stamp_ns`` and the input's frame, the joints' frame)
         lifted : the frame's lifted skeletons (read: ``track_ids``, ``joints_m`` in metres in
             ``frame_id``, the 2D ``points`` in pixels and their ``confidence``)
         image_size : (width, height) in pixels, or None (no ``skeleton2d`` / ``roi``)
@@ -433,16 +445,16 @@ class BodyBook:
         gone = sorted(self._bodies.pop(tid) for tid in stale)
         for tid in stale:
             del self._seen[tid]
-        stamp = stamp_cdr(stamp_ns)
+        stamp = header[:_STAMP.size]
         outputs = {bid: {"joint_states": _joint_state(stamp, bid, pose.angles)} for bid, pose, _ in shown}
         if shown and image_size is not None:
-            header = _header_block(stamp, frame_id)
+            block = _header_block(header)
             rows = [k for _, _, k in shown]
             skeletons, boxes = _skeleton2d_and_roi(list(lifted.points[rows]), list(lifted.confidence[rows]),
                                                    image_size)
             for (bid, _, _), skeleton, box in zip(shown, skeletons, boxes, strict=True):
-                outputs[bid]["skeleton2d"] = header + skeleton.tobytes()
-                outputs[bid]["roi"] = header + box.tobytes()
-        tf = tf_message_cdr(stamp_ns, frame_id, [(bid, pose) for bid, pose, _ in shown]) if shown else None
-        return BodyFrame(tracked=ids_list_cdr(stamp_ns, frame_id, sorted(self._bodies.values())), tf=tf,
+                outputs[bid]["skeleton2d"] = block + skeleton.tobytes()
+                outputs[bid]["roi"] = block + box.tobytes()
+        tf = _tf_message(header, [(bid, pose) for bid, pose, _ in shown]) if shown else None
+        return BodyFrame(tracked=_ids_list(header, sorted(self._bodies.values())), tf=tf,
                          bodies=outputs, new=new, gone=gone)
