@@ -71,6 +71,23 @@ def test_the_answer_is_each_writer_s_bytes_in_the_node_s_order() -> None:
     assert alone.markers is None and alone.bodies is None and len(alone.messages()) == 1
 
 
+def test_a_frames_bodies_are_computed_when_read_and_in_the_books_order() -> None:
+    """A frame's REP-155 bodies are computed when first read (so a publisher sends the skeletons
+    first); a frame whose bodies were not read yet is computed before the book's next frame, so the
+    book sees every frame in order and each answer's bodies are what the eager book gives."""
+    lifted, later = _frame([3, 8]), _frame([3])
+    book, eager = hri.BodyBook(1.0), hri.BodyBook(1.0)
+    first = frame_answer(HEADER, STAMP_NS, lifted, bodies=book)
+    assert len(book) == 0  # not computed yet
+    second = frame_answer(HEADER, STAMP_NS + 10**8, later, bodies=book)
+    assert len(book) == 2  # the first frame's bodies, computed before the second frame's
+    head2 = cdr.message_header(DecodedHeader(DecodedStamp(12, 345 + 10**8), "camera"))
+    want1 = eager.frame(STAMP_NS, HEAD, lifted, None).messages()
+    want2 = eager.frame(STAMP_NS + 10**8, head2, later, None).messages()
+    assert second.bodies is not None and second.bodies.messages() == want2
+    assert first.bodies is not None and first.bodies.messages() == want1
+
+
 def test_columns_take_and_concat_keep_the_rows() -> None:
     """A frame's rows taken from the columns of several are those rows, field by field."""
     a, b = _frame([1, 2]), _frame([5, 6, 7])

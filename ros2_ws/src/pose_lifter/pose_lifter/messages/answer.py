@@ -29,7 +29,7 @@ from pose_lifter.messages import cdr
 from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.frame import FramePipeline, Intrinsics, LiftedSkeleton, SkipSkeleton
-from pose_lifter.messages.hri import BodyBook, BodyFrame
+from pose_lifter.messages.hri import BodyBook, BodyFrame, LaterBodies
 from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.names import MARKER_ARRAY, SKELETON3D_ARRAY, TOPIC_MARKERS, TOPIC_SKELETONS
@@ -47,13 +47,20 @@ class FrameAnswer:
         ``Skeleton3DArray`` with the input's header.
     markers : bytes or None
         ``MarkerArray`` (None: no markers book).
-    bodies : BodyFrame or None
-        The REP-155 messages (None: no bodies book).
+    later_bodies : LaterBodies or None
+        The REP-155 messages (None: no bodies book), computed when :attr:`bodies` is first read
+        and at the latest before the book's next frame.
     """
 
     skeletons: bytes
     markers: bytes | None = None
-    bodies: BodyFrame | None = None
+    later_bodies: LaterBodies | None = None  #: the bodies, computed when first read
+
+    @property
+    def bodies(self) -> BodyFrame | None:
+        """The REP-155 messages (None: no bodies book), computed when first read, so that a
+        publisher sends the skeletons first."""
+        return self.later_bodies() if self.later_bodies is not None else None
 
     def messages(self) -> list[tuple[str, bytes, str]]:
         """Everything, in the node's publishing order, as (default topic, CDR, type)."""
@@ -95,7 +102,7 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
     if bodies is None:
         return FrameAnswer(skeletons, shown)
     clock = cdr.header_cdr(cdr.stamp_cdr(stamp_ns), str(header.frame_id))
-    return FrameAnswer(skeletons, shown, bodies.frame(stamp_ns, clock, lifted, image_size))
+    return FrameAnswer(skeletons, shown, bodies.later(stamp_ns, clock, lifted, image_size))
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ serialisation of the same messages.
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, Final
@@ -52,6 +52,7 @@ __all__ = [
     "TF_TOPIC",
     "BodyBook",
     "BodyFrame",
+    "LaterBodies",
     "body_id",
     "ids_list_cdr",
     "joint_state_cdr",
@@ -385,6 +386,20 @@ class BodyFrame:
         return out
 
 
+class LaterBodies:
+    """A frame's REP-155 messages, computed once, when first called (:meth:`BodyBook.later`)."""
+
+    def __init__(self, compute: Callable[[], BodyFrame]) -> None:
+        self._compute: Callable[[], BodyFrame] | None = compute
+        self._frame: BodyFrame | None = None
+
+    def __call__(self) -> BodyFrame:
+        if self._compute is not None:
+            self._frame, self._compute = self._compute(), None
+        assert self._frame is not None
+        return self._frame
+
+
 class BodyBook:
     """The bodies on the REP-155 topics, from one frame to the next.
 
@@ -403,20 +418,36 @@ class BodyBook:
         self.timeout_ns = round(float(timeout_s) * 1e9)
         self._bodies: dict[int, str] = {}  # track id -> body id
         self._seen: dict[int, int] = {}  # track id -> stamp of its last lifted skeleton
+        self._pending: LaterBodies | None = None  # a frame asked for with later(), not yet computed
 
     def __len__(self) -> int:
         return len(self._bodies)
 
     def clear(self) -> list[str]:
         """Forget every body; returns their ids (gone)."""
+        self.settle()
         gone = sorted(self._bodies.values())
         self._bodies.clear()
         self._seen.clear()
         return gone
 
+    def later(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
+              image_size: tuple[float, float] | None) -> LaterBodies:
+        """:meth:`frame`, computed when first asked for (after the frame's skeletons are out), and at
+        the latest before the book's next frame: the book sees its frames in order."""
+        self.settle()
+        self._pending = LaterBodies(lambda: self._frame(stamp_ns, header, lifted, image_size))
+        return self._pending
+
+    def settle(self) -> None:
+        """Compute the frame asked for with :meth:`later`, if it is not yet."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending()
+
     def frame(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
               image_size: tuple[float, float] | None) -> BodyFrame:
-        """The outputs of one frame.
+        """The outputs of one frame (any frame asked for with :meth:`later` computed first).
 
         Parameters
         ----------
@@ -427,6 +458,11 @@ class BodyBook:
             ``frame_id``, the 2D ``points`` in pixels and their ``confidence``)
         image_size : (width, height) in pixels, or None (no ``skeleton2d`` / ``roi``)
         """
+        self.settle()
+        return self._frame(stamp_ns, header, lifted, image_size)
+
+    def _frame(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
+               image_size: tuple[float, float] | None) -> BodyFrame:
         new: dict[str, bytes] = {}
         shown: list[tuple[str, body.BodyPose, int]] = []  # body id, pose, row of lifted
         tracked = np.flatnonzero(lifted.track_ids >= 0)
