@@ -47,7 +47,8 @@ class Person:
     Attributes
     ----------
     x : ndarray, shape (12, 2)
-        The 2D in input units (missing joints at 0).
+        The 2D in input units (a missing joint at the weighted centroid of the others:
+        :func:`~pose_lifter.core.validation.joint_weights`).
     xn : ndarray, shape (12, 2)
         The same normalised by ``norm``.
     w : ndarray, shape (12,)
