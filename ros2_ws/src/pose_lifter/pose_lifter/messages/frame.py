@@ -309,10 +309,10 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
     return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
 
 
-def lift_together(lifter: Lifter, frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
+def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines share ``lifter``): their frames through their tracks' policies
+    pipelines may share a lifter): their frames through their tracks' policies
     (:func:`~pose_lifter.core.track.policy.lift_tracks`: the rows handed to the lifter as one batch,
     and once more for the frames it re-initialises; each stage of the lift one compiled pass over
     the batch); then the people seen by one camera placed in one pass
@@ -501,7 +501,7 @@ class FramePipeline:
         if not checked.answered:
             return []
         inputs = [x for x in checked.skeletons if not isinstance(x, SkipSkeleton)]
-        lifted = iter(lift_together(self.lifter, [(self, x, stamp_ns, intrinsics) for x in inputs]))
+        lifted = iter(lift_together([(self, x, stamp_ns, intrinsics) for x in inputs]))
         out = [x if isinstance(x, SkipSkeleton) else next(lifted) for x in checked.skeletons]
         self.end_frame(stamp_ns)
         return out

@@ -240,8 +240,8 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
         for c, _, item in step:
             if item.expire_ns is not None:
                 pipelines[c].end_frame(item.expire_ns)
-        together = lift_together(lifter, [(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
-                                          for c, k, item in step])
+        together = lift_together([(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
+                                  for c, k, item in step])
         for (c, _, _), lifted in zip(step, together, strict=True):
             out[c].append(lifted)
             # the centred smoothing starts from the fit's own pose; with the measurement update,
