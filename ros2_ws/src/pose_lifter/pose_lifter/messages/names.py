@@ -13,6 +13,8 @@ from typing import Final
 __all__ = [
     "BODIES_NS",
     "CAMERA_INFO",
+    "COMPRESSED_IMAGE",
+    "IMAGE",
     "LIFTER_NODE",
     "MARKER_ARRAY",
     "PER_BODY",
@@ -20,6 +22,8 @@ __all__ = [
     "SKELETON3D_ARRAY",
     "TF_TOPIC",
     "TOPIC_CAMERA_INFO",
+    "TOPIC_DEPTH",
+    "TOPIC_DEPTH_COMPRESSED",
     "TOPIC_GROUND_TRUTH",
     "TOPIC_KEYPOINTS",
     "TOPIC_MARKERS",
@@ -33,6 +37,11 @@ LIFTER_NODE: Final[str] = "pose_lifter"
 TOPIC_KEYPOINTS: Final[str] = "/keypoints_2d"
 #: The camera intrinsics (``CameraInfo``).
 TOPIC_CAMERA_INFO: Final[str] = "/camera_info"
+#: The depth image registered to the keypoints' camera (``Image``, 16UC1 millimetres or 32FC1 metres):
+#: RealSense's aligned depth topic.
+TOPIC_DEPTH: Final[str] = "/camera/aligned_depth_to_color/image_raw"
+#: The same image as image_transport's ``compressedDepth`` records it (``CompressedImage``).
+TOPIC_DEPTH_COMPRESSED: Final[str] = TOPIC_DEPTH + "/compressedDepth"
 #: The lifted skeletons (``Skeleton3DArray``, camera optical frame, metres).
 TOPIC_SKELETONS: Final[str] = "/skeletons_3d"
 #: Joints and bones per track (``MarkerArray``).
@@ -44,6 +53,8 @@ SKELETON2D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton2DArray"
 SKELETON3D_ARRAY: Final[str] = "pose_lifter_msgs/msg/Skeleton3DArray"
 MARKER_ARRAY: Final[str] = "visualization_msgs/msg/MarkerArray"
 CAMERA_INFO: Final[str] = "sensor_msgs/msg/CameraInfo"
+IMAGE: Final[str] = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE: Final[str] = "sensor_msgs/msg/CompressedImage"
 #: yolo_ros' detections (with keypoints), lifted through :mod:`pose_lifter.messages.adapters`.
 YOLO_DETECTION_ARRAY: Final[str] = "yolo_msgs/msg/DetectionArray"
 
