@@ -1,0 +1,275 @@
+"""Depth fused with the monocular lift: the body's metric place from the depth camera, each joint
+from its depth reading where that reading is the joint's, and from the lifted shape where not.
+
+The monocular lift fixes the body's shape and its image (the weak-perspective fit of the 2D); its
+distance comes from an assumed leg length, a few per cent off. Scaling a placed body about the
+camera centre by ``k`` keeps its image and moves every joint along its ray (the body's size and
+its distance change together), so one number is left for the depth to settle:
+
+1. **Place** each body as the monocular lift does (:func:`~pose_lifter.core.track.placement.place_poses`,
+   leg 0.43 m): joints ``X0`` (12, 3).
+2. **Read** a patch of the depth image at each observed keypoint
+   (:func:`~pose_lifter.core.depth.reading.read_patches`) and add the joint's surface offset:
+   readings ``d_j`` with variances ``v_j``.
+3. **Occlusion**: a reading at a joint that another body part hides on the image (a limb or a torso
+   of the placed bodies, any person's, in front of it by a margin) is the occluder's, not the joint's.
+4. **Scale**: ``k`` minimises ``sum_j rho((d_j - k z0_j) / sigma_j) + (k - 1)^2 / (2 p^2)`` by
+   iteratively reweighted least squares, ``rho`` Tukey's biweight (c = 4.685),
+   ``sigma_j^2 = v_j + (k sigma_shape,j)^2`` (the reading's variance and the shape's error in depth),
+   ``p`` the prior on the scale (:attr:`~pose_lifter.core.depth.reading.DepthOptions.prior_std`); from
+   the weighted median of ``d_j / z0_j``, until ``k`` moves by less than ``tol`` (relative) or
+   ``max_iter``. Readings beyond ``gate`` standard deviations of the scaled body are dropped.
+5. **Fuse**: a kept reading gives the joint on its keypoint's ray at depth ``d_j``; it is combined
+   per axis with the scaled body's joint ``k X0_j`` by their inverse variances
+   (:func:`~pose_lifter.core.depth.uncertainty.body_std` with the fit's scale uncertainty, and the
+   reading's own: the 2D's error across, ``v_j`` along the depth). The other joints are the scaled
+   body's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose_lifter.core.depth.reading import (
+    LIMB_RADIUS_M,
+    SURFACE_OFFSET_M,
+    DepthOptions,
+    joint_radius_px,
+    read_patches,
+)
+from pose_lifter.core.depth.uncertainty import MONOCULAR_SCALE_STD, SHAPE_STD_M, body_std
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS
+from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_poses
+
+if TYPE_CHECKING:
+    from pose_lifter.core.track.placement import CameraIntrinsics
+
+__all__ = ["KEYPOINT_STD", "FusedPeople", "fuse_depth"]
+
+#: Standard deviation of a keypoint's pixel position across the ray, in right-lower-leg lengths
+#: of the person's image (a detector errs in proportion to the person's size in pixels).
+KEYPOINT_STD: Final[float] = 0.05
+#: Tukey's biweight constant (95 % efficiency under Gaussian noise).
+_TUKEY: Final[float] = 4.685
+#: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
+_LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
+    [0.5 * (LIMB_RADIUS_M[a] + LIMB_RADIUS_M[b]) for a, b in LIMBS])
+#: Half the torso's depth, metres: its front lies this much before the shoulders' and hips' plane.
+_TORSO_HALF_DEPTH: Final[float] = 0.1
+#: The torso as two triangles of joints (left shoulder, right shoulder, right hip, left hip).
+_TORSO: Final[tuple[tuple[int, int, int], ...]] = ((0, 3, 9), (0, 9, 6))
+_TORSO_JOINTS: Final[frozenset[int]] = frozenset({0, 3, 6, 9})
+
+
+@dataclass(frozen=True)
+class FusedPeople:
+    """The people of one frame placed with a depth image.
+
+    Attributes
+    ----------
+    joints_m : ndarray, shape (n, 12, 3)
+        Metres, camera optical frame.
+    std_m : ndarray, shape (n, 12, 3)
+        Standard deviation of each joint along x, y, z, metres.
+    from_depth : ndarray of bool, shape (n, 12)
+        The joints whose depth reading was kept.
+    leg_m : ndarray, shape (n,)
+        The right lower leg's length the depth gives each body (0.43 m times its scale).
+    converged : ndarray of bool, shape (n,)
+        The scale fit met its stopping rule (a body with no reading: True, at the prior).
+    n_iter : ndarray of int, shape (n,)
+    objective : ndarray, shape (n,)
+        The scale fit's objective at its end.
+    """
+
+    joints_m: NDArray[np.float64]
+    std_m: NDArray[np.float64]
+    from_depth: NDArray[np.bool_]
+    leg_m: NDArray[np.float64]
+    converged: NDArray[np.bool_]
+    n_iter: NDArray[np.int64]
+    objective: NDArray[np.float64]
+
+
+def _tukey(r: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Tukey's biweight loss and IRLS weight of standardised residuals ``r``."""
+    u = np.minimum((r / _TUKEY) ** 2, 1.0)
+    return _TUKEY**2 / 6.0 * (1.0 - (1.0 - u) ** 3), (1.0 - u) ** 2
+
+
+def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates: NDArray[np.bool_],
+            intrinsics: CameraIntrinsics, margin: float) -> NDArray[np.bool_]:
+    """Which ``candidates`` (n, 12) joints of the placed bodies ``joints`` (n, 12, 3) another body
+    part hides at their keypoints ``pixels`` (n, 12, 2): a limb (a capsule of
+    :data:`_LIMB_RADIUS`) or a torso (the shoulders' and hips' quadrilateral, its front
+    :data:`_TORSO_HALF_DEPTH` before them) of any body, not the joint's own, whose surface on the
+    joint's pixel is nearer than the joint's surface by more than ``margin`` metres."""
+    (fx, fy), (cx, cy) = intrinsics
+    n = len(joints)
+    hidden = np.zeros((n, N_JOINTS), dtype=bool)
+    pi, ji = np.nonzero(candidates)
+    if len(pi) == 0:
+        return hidden
+    q = pixels[pi, ji]  # (m, 2)
+    surface = joints[pi, ji, 2] - SURFACE_OFFSET_M[ji]  # (m,)
+    z = np.maximum(joints[..., 2], 1e-3)
+    proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)  # (n, 12, 2)
+    la, lb = np.array([a for a, _ in LIMBS]), np.array([b for _, b in LIMBS])
+    pa, pb = proj[:, la].reshape(-1, 2), proj[:, lb].reshape(-1, 2)  # (n*8, 2)
+    za, zb = z[:, la].ravel(), z[:, lb].ravel()
+    seg_person = np.repeat(np.arange(n), len(LIMBS))
+    seg_limb = np.tile(np.arange(len(LIMBS)), n)
+    ab = pb - pa
+    d = q[:, None, :] - pa[None, :, :]  # (m, s, 2)
+    tau = np.clip((d * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-9)[None], 0.0, 1.0)
+    dist = np.linalg.norm(d - tau[..., None] * ab[None], axis=-1)
+    zs = za[None] + tau * (zb - za)[None]
+    radius = _LIMB_RADIUS[seg_limb][None]
+    ends = (la[seg_limb][None] == ji[:, None]) | (lb[seg_limb][None] == ji[:, None])
+    own = (seg_person[None] == pi[:, None]) & ends
+    on_pixel = dist < radius * 0.5 * (fx + fy) / zs
+    by_limb = (on_pixel & (zs - radius < surface[:, None] - margin) & ~own).any(axis=1)
+    by_torso = np.zeros(len(pi), dtype=bool)
+    for a, b, c in _TORSO:
+        p0, p1, p2 = proj[:, a], proj[:, b], proj[:, c]  # (n, 2)
+        v0, v1 = p1 - p0, p2 - p0
+        den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]  # (n,)
+        den = np.where(np.abs(den) < 1e-9, np.nan, den)
+        w = q[:, None, :] - p0[None]  # (m, n, 2)
+        s1 = (w[..., 0] * v1[None, :, 1] - w[..., 1] * v1[None, :, 0]) / den[None]
+        s2 = (v0[None, :, 0] * w[..., 1] - v0[None, :, 1] * w[..., 0]) / den[None]
+        inside = (s1 >= 0) & (s2 >= 0) & (s1 + s2 <= 1)
+        zt = (1 - s1 - s2) * z[None, :, a] + s1 * z[None, :, b] + s2 * z[None, :, c] - _TORSO_HALF_DEPTH
+        own_torso = (np.arange(n)[None] == pi[:, None]) & np.isin(ji, list(_TORSO_JOINTS))[:, None]
+        by_torso |= (inside & (zt < surface[:, None] - margin) & ~own_torso).any(axis=1)
+    hidden[pi, ji] = by_limb | by_torso
+    return hidden
+
+
+def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+               weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
+               centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
+    """The ``n`` people of one frame placed with the frame's registered depth image (module
+    docstring: steps and the objective of the scale fit).
+
+    Parameters
+    ----------
+    depth : ndarray of float32, shape (H, W)
+        Metres along the optical axis, NaN where there is no reading; registered to the camera of
+        ``intrinsics``.
+    intrinsics : ((fx, fy), (cx, cy))
+        Pixels.
+    points : ndarray, shape (n, 12, 2)
+        The keypoints the lifts read, pixels.
+    weights : ndarray, shape (n, 12)
+        Their weights (confidences); joints below ``options.confidence_threshold`` are not read.
+    poses : ndarray, shape (n, 12, 3)
+        Each lift's ``pose_camera`` (camera frame, centred, leg units).
+    scales : ndarray, shape (n,)
+        Each lift's camera scale (pixels per leg unit).
+    centres : ndarray, shape (n, 2)
+        Each lift's camera translation (the image of its centroid, pixels).
+    options : DepthOptions, optional
+
+    Returns
+    -------
+    FusedPeople
+        Finite joints and standard deviations for every person (a person the depth cannot place
+        keeps the monocular placement and its uncertainty).
+
+    Raises
+    ------
+    InvalidInputError
+        ``depth`` is not a 2-D image, or the shapes disagree.
+    """
+    opt = options if options is not None else DepthOptions()
+    img = np.asarray(depth)
+    if img.ndim != 2 or img.size == 0:
+        raise InvalidInputError(f"a depth image must be (H, W), got shape {img.shape}")
+    pose = np.asarray(poses, dtype=np.float64)
+    n = len(pose)
+    px = np.asarray(points, dtype=np.float64).reshape(n, N_JOINTS, 2)
+    wt = np.asarray(weights, dtype=np.float64).reshape(n, N_JOINTS)
+    s = np.asarray(scales, dtype=np.float64).reshape(n)
+    (fx, fy), (cx, cy) = intrinsics
+    f = 0.5 * (float(fx) + float(fy))
+    x0 = place_poses(pose, s, np.asarray(centres, dtype=np.float64).reshape(n, 2), DEFAULT_LEG_LENGTH_M,
+                     (float(fx), float(fy)), (float(cx), float(cy)), DEFAULT_DISTANCE_M)
+    z0 = x0[..., 2]
+    observed = (wt >= opt.confidence_threshold) & np.isfinite(px).all(axis=-1)
+
+    # 2. readings at the observed keypoints
+    radius = joint_radius_px(f / np.maximum(z0.mean(axis=1), 1e-3), opt)
+    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), opt)
+    d = (read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]).copy()
+    v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
+    have = observed & np.isfinite(d) & (z0 > 0)
+    d[~have] = 0.0
+    v[~have] = 1.0
+
+    # 4a. a first scale (the weighted median of the ratios), for the occlusion test
+    ratio = np.where(have, d / np.where(z0 > 0, z0, 1.0), np.nan)
+    k = np.ones(n)
+    some = have.any(axis=1)
+    if some.any():
+        k[some] = np.nanmedian(ratio[some], axis=1)
+    # 3. occlusion against the bodies at that scale
+    have &= ~_hidden(k[:, None, None] * x0, px, have, intrinsics, opt.occlusion_margin_m)
+
+    # 4b. the robust scale fit (IRLS)
+    shape_z = SHAPE_STD_M[:, 1][None, :]
+    prior = 1.0 / opt.prior_std**2
+    converged = np.zeros(n, dtype=bool)
+    n_iter = np.zeros(n, dtype=np.int64)
+    active = have.any(axis=1)
+    converged[~active] = True
+    k[~active] = 1.0
+    for it in range(1, opt.max_iter + 1):
+        if not active.any():
+            break
+        sig2 = v + (k[:, None] * shape_z) ** 2
+        r = (d - k[:, None] * z0) / np.sqrt(sig2)
+        _, w = _tukey(r)
+        w = np.where(have, w, 0.0)
+        num = (w * d * z0 / sig2).sum(axis=1) + prior
+        den = (w * z0 * z0 / sig2).sum(axis=1) + prior
+        k_new = np.where(active, num / den, k)
+        step = np.abs(k_new - k) <= opt.tol * np.abs(k)
+        n_iter[active] = it
+        k = k_new
+        converged |= active & step
+        active &= ~step
+    sig2 = v + (k[:, None] * shape_z) ** 2
+    r = (d - k[:, None] * z0) / np.sqrt(sig2)
+    loss, w = _tukey(r)
+    objective = np.where(have, loss, 0.0).sum(axis=1) + 0.5 * prior * (k - 1.0) ** 2
+    kept = have & (np.abs(r) <= opt.gate)
+    info = (w * np.where(have, z0 * z0 / sig2, 0.0)).sum(axis=1) + prior
+    scale_std = np.sqrt(1.0 / info) / np.maximum(k, 1e-9)
+    placeable = np.isfinite(k) & (k > 0)
+    k = np.where(placeable, k, 1.0)
+    scale_std = np.where(placeable & kept.any(axis=1), np.minimum(scale_std, MONOCULAR_SCALE_STD),
+                         MONOCULAR_SCALE_STD)
+    kept &= placeable[:, None]
+
+    # 5. the joints: the scaled body, and the kept readings on their rays
+    body = k[:, None, None] * x0
+    body_sd = body_std(body, observed, scale_std)
+    ray = np.stack([(px[..., 0] - cx) / fx, (px[..., 1] - cy) / fy, np.ones((n, N_JOINTS))], axis=-1)
+    at_depth = np.where(kept[..., None], d[..., None] * np.nan_to_num(ray), body)
+    across = KEYPOINT_STD * s[:, None] * np.where(kept, d, 1.0)
+    read_sd = np.stack([across / fx, across / fy, np.sqrt(np.where(kept, v, 1.0))], axis=-1)
+    wb, wr = 1.0 / body_sd**2, np.where(kept[..., None], 1.0 / read_sd**2, 0.0)
+    joints = (wb * body + wr * at_depth) / (wb + wr)
+    std = np.sqrt(1.0 / (wb + wr))
+    bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
+    if bad.any():  # never NaN: such a person keeps the monocular placement
+        joints[bad] = x0[bad]
+        std[bad] = body_std(x0[bad], observed[bad], np.full(int(bad.sum()), MONOCULAR_SCALE_STD))
+        kept[bad] = False
+    return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
