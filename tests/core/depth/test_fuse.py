@@ -16,7 +16,7 @@ from pose_lifter.core.depth import (
     read_patches,
 )
 from pose_lifter.core.depth.fuse import _hidden
-from pose_lifter.core.depth.reading import _row_medians, sensor_std
+from pose_lifter.core.depth.reading import sensor_std
 from pose_lifter.core.track.placement import place_poses
 from synthetic_poses import synthetic_poses
 from tolerances import ROUND_OFF_ACCUMULATED
@@ -66,12 +66,18 @@ def _fuse(pose: NDArray[np.float64], centre: NDArray[np.float64], scale: float, 
     return fuse_depth(depth, K, _project(truth)[None], w, pose[None], np.array([scale]), centre[None])
 
 
-def test_row_medians_match_numpy() -> None:
+def test_patch_reading_is_the_median_of_the_band() -> None:
+    """Noisy readings of one surface: the reading is the median of the patch's in-band pixels
+    (an independent reference: numpy's nanmedian of the same pixels)."""
     rng = np.random.default_rng(0)
-    a = rng.random((40, 25))
-    a[rng.random(a.shape) < 0.6] = np.nan
-    a[:, 0] = rng.random(40)  # every row has a finite value
-    assert np.allclose(_row_medians(a), np.nanmedian(a, axis=1), rtol=0, atol=ROUND_OFF_ACCUMULATED)
+    img = (2.5 + 0.01 * rng.standard_normal(SIZE)).astype(np.float32)
+    img[rng.random(SIZE) < 0.3] = np.nan
+    opt = DepthOptions(trim=1e9)  # no trimming: the plain median
+    r = read_patches(img, np.array([[200.0, 100.0]]), np.array([4.0]), np.array([2.5]), opt)
+    v, u = np.mgrid[0:SIZE[0], 0:SIZE[1]]
+    patch = img[(u - 200) ** 2 + (v - 100) ** 2 <= 16].astype(np.float64)
+    assert abs(float(r.surface[0]) - float(np.nanmedian(patch))) < ROUND_OFF_ACCUMULATED
+    assert int(r.n_pixels[0]) == int(np.isfinite(patch).sum())
 
 
 def test_patch_reading_drops_background_holes_and_mixed_pixels() -> None:

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.depth.kernels import hidden_kernel, scale_fit_kernel
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
@@ -54,16 +55,14 @@ __all__ = ["KEYPOINT_STD", "FusedPeople", "fuse_depth"]
 #: Standard deviation of a keypoint's pixel position across the ray, in right-lower-leg lengths
 #: of the person's image (a detector errs in proportion to the person's size in pixels).
 KEYPOINT_STD: Final[float] = 0.05
-#: Tukey's biweight constant (95 % efficiency under Gaussian noise).
-_TUKEY: Final[float] = 4.685
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
     [0.5 * (LIMB_RADIUS_M[a] + LIMB_RADIUS_M[b]) for a, b in LIMBS])
 #: Half the torso's depth, metres: its front lies this much before the shoulders' and hips' plane.
 _TORSO_HALF_DEPTH: Final[float] = 0.1
 #: The torso as two triangles of joints (left shoulder, right shoulder, right hip, left hip).
-_TORSO: Final[tuple[tuple[int, int, int], ...]] = ((0, 3, 9), (0, 9, 6))
-_TORSO_JOINTS: Final[frozenset[int]] = frozenset({0, 3, 6, 9})
+_TORSO: Final[NDArray[np.int64]] = np.array([[0, 3, 9], [0, 9, 6]], dtype=np.int64)
+_LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(LIMBS, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -96,12 +95,6 @@ class FusedPeople:
     objective: NDArray[np.float64]
 
 
-def _tukey(r: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Tukey's biweight loss and IRLS weight of standardised residuals ``r``."""
-    u = np.minimum((r / _TUKEY) ** 2, 1.0)
-    return _TUKEY**2 / 6.0 * (1.0 - (1.0 - u) ** 3), (1.0 - u) ** 2
-
-
 def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates: NDArray[np.bool_],
             intrinsics: CameraIntrinsics, margin: float) -> NDArray[np.bool_]:
     """Which ``candidates`` (n, 12) joints of the placed bodies ``joints`` (n, 12, 3) another body
@@ -110,44 +103,13 @@ def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates
     :data:`_TORSO_HALF_DEPTH` before them) of any body, not the joint's own, whose surface on the
     joint's pixel is nearer than the joint's surface by more than ``margin`` metres."""
     (fx, fy), (cx, cy) = intrinsics
-    n = len(joints)
-    hidden = np.zeros((n, N_JOINTS), dtype=bool)
-    pi, ji = np.nonzero(candidates)
-    if len(pi) == 0:
-        return hidden
-    q = pixels[pi, ji]  # (m, 2)
-    surface = joints[pi, ji, 2] - SURFACE_OFFSET_M[ji]  # (m,)
     z = np.maximum(joints[..., 2], 1e-3)
-    proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)  # (n, 12, 2)
-    la, lb = np.array([a for a, _ in LIMBS]), np.array([b for _, b in LIMBS])
-    pa, pb = proj[:, la].reshape(-1, 2), proj[:, lb].reshape(-1, 2)  # (n*8, 2)
-    za, zb = z[:, la].ravel(), z[:, lb].ravel()
-    seg_person = np.repeat(np.arange(n), len(LIMBS))
-    seg_limb = np.tile(np.arange(len(LIMBS)), n)
-    ab = pb - pa
-    d = q[:, None, :] - pa[None, :, :]  # (m, s, 2)
-    tau = np.clip((d * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-9)[None], 0.0, 1.0)
-    dist = np.linalg.norm(d - tau[..., None] * ab[None], axis=-1)
-    zs = za[None] + tau * (zb - za)[None]
-    radius = _LIMB_RADIUS[seg_limb][None]
-    ends = (la[seg_limb][None] == ji[:, None]) | (lb[seg_limb][None] == ji[:, None])
-    own = (seg_person[None] == pi[:, None]) & ends
-    on_pixel = dist < radius * 0.5 * (fx + fy) / zs
-    by_limb = (on_pixel & (zs - radius < surface[:, None] - margin) & ~own).any(axis=1)
-    by_torso = np.zeros(len(pi), dtype=bool)
-    for a, b, c in _TORSO:
-        p0, p1, p2 = proj[:, a], proj[:, b], proj[:, c]  # (n, 2)
-        v0, v1 = p1 - p0, p2 - p0
-        den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]  # (n,)
-        den = np.where(np.abs(den) < 1e-9, np.nan, den)
-        w = q[:, None, :] - p0[None]  # (m, n, 2)
-        s1 = (w[..., 0] * v1[None, :, 1] - w[..., 1] * v1[None, :, 0]) / den[None]
-        s2 = (v0[None, :, 0] * w[..., 1] - v0[None, :, 1] * w[..., 0]) / den[None]
-        inside = (s1 >= 0) & (s2 >= 0) & (s1 + s2 <= 1)
-        zt = (1 - s1 - s2) * z[None, :, a] + s1 * z[None, :, b] + s2 * z[None, :, c] - _TORSO_HALF_DEPTH
-        own_torso = (np.arange(n)[None] == pi[:, None]) & np.isin(ji, list(_TORSO_JOINTS))[:, None]
-        by_torso |= (inside & (zt < surface[:, None] - margin) & ~own_torso).any(axis=1)
-    hidden[pi, ji] = by_limb | by_torso
+    proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)
+    hidden = np.zeros(candidates.shape, dtype=bool)
+    hidden_kernel(np.ascontiguousarray(proj), np.ascontiguousarray(z), np.ascontiguousarray(candidates),
+                  np.ascontiguousarray(pixels, dtype=np.float64), joints[..., 2] - SURFACE_OFFSET_M[None],
+                  _LIMB_ARRAY, _LIMB_RADIUS, _TORSO, _TORSO_HALF_DEPTH, 0.5 * (float(fx) + float(fy)), margin,
+                  hidden)
     return hidden
 
 
@@ -212,44 +174,31 @@ def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     d[~have] = 0.0
     v[~have] = 1.0
 
-    # 4a. a first scale (the weighted median of the ratios), for the occlusion test
-    ratio = np.where(have, d / np.where(z0 > 0, z0, 1.0), np.nan)
-    k = np.ones(n)
-    some = have.any(axis=1)
-    if some.any():
-        k[some] = np.nanmedian(ratio[some], axis=1)
+    # 4a. a first scale (the median of the ratios d_j / z0_j), for the occlusion test
+    ratio = np.where(have, d / np.where(z0 > 0, z0, 1.0), np.inf)
+    ratio.sort(axis=1)
+    count = have.sum(axis=1)
+    rows = np.arange(n)
+    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, N_JOINTS - 1)
+    mid = 0.5 * (ratio[rows, lo] + ratio[rows, hi])
+    k = np.where(count > 0, mid, 1.0)
     # 3. occlusion against the bodies at that scale
     have &= ~_hidden(k[:, None, None] * x0, px, have, intrinsics, opt.occlusion_margin_m)
 
     # 4b. the robust scale fit (IRLS)
-    shape_z = SHAPE_STD_M[:, 1][None, :]
-    prior = 1.0 / opt.prior_std**2
-    converged = np.zeros(n, dtype=bool)
-    n_iter = np.zeros(n, dtype=np.int64)
-    active = have.any(axis=1)
-    converged[~active] = True
-    k[~active] = 1.0
-    for it in range(1, opt.max_iter + 1):
-        if not active.any():
-            break
-        sig2 = v + (k[:, None] * shape_z) ** 2
-        r = (d - k[:, None] * z0) / np.sqrt(sig2)
-        _, w = _tukey(r)
-        w = np.where(have, w, 0.0)
-        num = (w * d * z0 / sig2).sum(axis=1) + prior
-        den = (w * z0 * z0 / sig2).sum(axis=1) + prior
-        k_new = np.where(active, num / den, k)
-        step = np.abs(k_new - k) <= opt.tol * np.abs(k)
-        n_iter[active] = it
-        k = k_new
-        converged |= active & step
-        active &= ~step
-    sig2 = v + (k[:, None] * shape_z) ** 2
-    r = (d - k[:, None] * z0) / np.sqrt(sig2)
-    loss, w = _tukey(r)
-    objective = np.where(have, loss, 0.0).sum(axis=1) + 0.5 * prior * (k - 1.0) ** 2
+    shape_z = SHAPE_STD_M[:, 1]
+    k0 = np.where(have.any(axis=1), k, 1.0)
+    k = np.empty(n)
+    info = np.empty(n)
+    objective = np.empty(n)
+    n_iter = np.empty(n, dtype=np.int64)
+    converged = np.empty(n, dtype=bool)
+    scale_fit_kernel(np.ascontiguousarray(d), np.ascontiguousarray(v), np.ascontiguousarray(z0),
+                     np.ascontiguousarray(have),
+                     np.ascontiguousarray(shape_z), opt.prior_std, k0, int(opt.max_iter), opt.tol, k, info,
+                     objective, n_iter, converged)
+    r = (d - k[:, None] * z0) / np.sqrt(v + (k[:, None] * shape_z[None]) ** 2)
     kept = have & (np.abs(r) <= opt.gate)
-    info = (w * np.where(have, z0 * z0 / sig2, 0.0)).sum(axis=1) + prior
     scale_std = np.sqrt(1.0 / info) / np.maximum(k, 1e-9)
     placeable = np.isfinite(k) & (k > 0)
     k = np.where(placeable, k, 1.0)

@@ -21,6 +21,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.depth.kernels import read_kernel
+
 __all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthOptions", "PatchReadings", "joint_radius_px",
            "read_patches", "sensor_std"]
 
@@ -143,60 +145,24 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
     Returns
     -------
     PatchReadings
-        The median of the in-band pixels of each patch after trimming, its variance
+        The median of the in-band pixels of each patch (every ``stride``-th pixel of a large patch,
+        :data:`~pose_lifter.core.depth.kernels.STRIDE_RADIUS`) after trimming, its variance
         ``sigma_z^2 + spread^2 / n`` (the sensor's noise is correlated over a patch, so it is not
         divided by the pixel count); NaN where fewer than ``min_pixels`` pixels (or less than
         ``min_fraction`` of the patch) are in band, or the keypoint is outside the image.
     """
-    img = np.asarray(depth)
-    h, w = img.shape
-    m = len(pixels)
-    r_max = int(options.max_patch_px)
-    radius = np.clip(np.asarray(radius_px, dtype=np.float64), options.min_patch_px, float(r_max))
-    grid = np.arange(-r_max, r_max + 1)
-    dv, du = (a.ravel() for a in np.meshgrid(grid, grid, indexing="ij"))
-    dist2 = (du * du + dv * dv).astype(np.float64)
-    px = np.asarray(pixels, dtype=np.float64)
-    finite = np.asarray(np.isfinite(px).all(axis=1), dtype=bool)
-    centre = np.where(finite[:, None], np.rint(px), -10 * (r_max + 1)).astype(np.int64)
-    rows = centre[:, 1:2] + dv[None, :]
-    cols = centre[:, 0:1] + du[None, :]
-    in_patch = dist2[None, :] <= (radius * radius)[:, None]
-    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w) & in_patch
-    vals = np.full((m, len(dv)), np.nan)
-    vals[inside] = img[rows[inside], cols[inside]]
-    exp = np.asarray(expected, dtype=np.float64)
-    band = options.band_m + options.band_fraction * exp
-    vals[~(np.abs(vals - exp[:, None]) <= band[:, None])] = np.nan  # NaN, background and foreground
-    n_in = np.isfinite(vals).sum(axis=1)
-    n_patch = in_patch.sum(axis=1)
-    ok = finite & (n_in >= options.min_pixels) & (n_in >= options.min_fraction * n_patch)
-    surface = np.full(m, np.nan)
-    var = np.full(m, np.nan)
-    n_used = np.zeros(m, dtype=np.int64)
-    if ok.any():
-        v = vals[ok]
-        med = _row_medians(v)
-        dev = np.abs(v - med[:, None])
-        spread = 1.4826 * _row_medians(dev)
-        keep = dev <= options.trim * np.maximum(spread, sensor_std(med, options))[:, None]
-        n_k = keep.sum(axis=1)
-        med2 = _row_medians(np.where(keep, v, np.nan))
-        resid = np.where(keep, v - med2[:, None], 0.0)
-        s2 = (resid * resid).sum(axis=1) / np.maximum(n_k - 1, 1)
-        surface[ok] = med2
-        var[ok] = sensor_std(med2, options) ** 2 + s2 / n_k
-        n_used[ok] = n_k
+    img = np.ascontiguousarray(depth, dtype=np.float32)
+    px = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 2)
+    m = len(px)
+    radius = np.clip(np.asarray(radius_px, dtype=np.float64).reshape(m), options.min_patch_px,
+                     float(options.max_patch_px))
+    surface = np.empty(m)
+    var = np.empty(m)
+    n_used = np.empty(m, dtype=np.int64)
+    read_kernel(img, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m), options.band_m,
+                options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
+                options.sensor_noise, int(options.max_patch_px), surface, var, n_used)
     return PatchReadings(surface, var, n_used)
-
-
-def _row_medians(values: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The median of each row's finite values (m, P) -> (m,); every row has at least one (NaN
-    sorts last, so the finite values are the first ``n`` of the sorted row)."""
-    srt = np.sort(values, axis=1)
-    n = np.isfinite(values).sum(axis=1)
-    rows = np.arange(len(values))
-    return np.asarray(0.5 * (srt[rows, (n - 1) // 2] + srt[rows, n // 2]))
 
 
 def joint_radius_px(scale_px_per_m: NDArray[np.float64], options: DepthOptions) -> NDArray[np.float64]:
