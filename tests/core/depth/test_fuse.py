@@ -153,3 +153,20 @@ def test_a_wrist_behind_the_torso_is_hidden(wrist_z: float, hidden: bool) -> Non
     got = _hidden(body[None], _project(body)[None], np.ones((1, 12), dtype=bool), K, 0.08)
     assert bool(got[0, 2]) is hidden
     assert not got[0, [0, 3, 6, 9]].any()  # the torso's own joints are never hidden by it
+
+
+def test_readings_fuse_a_later_pose_without_the_image() -> None:
+    """A frame's readings fuse another pose of the same people (refined over later frames) as the
+    image would: the readings do not depend on the pose beyond the occlusion test."""
+    from pose_lifter.core.depth import fuse_readings, read_depth
+
+    pose, centre, scale, truth = _body(k=1.05)
+    img = _painted(truth)
+    args = (K, _project(truth)[None], np.ones((1, 12)))
+    readings = read_depth(img, *args, pose[None], np.array([scale]), centre[None])
+    assert np.isfinite(readings.depth_m).all()
+    other = pose + 0.02 * np.random.default_rng(1).standard_normal(pose.shape)
+    later = fuse_readings(readings, *args, other[None], np.array([scale]), centre[None])
+    direct = fuse_depth(img, *args, other[None], np.array([scale]), centre[None])
+    assert np.allclose(later.joints_m, direct.joints_m, atol=ROUND_OFF_ACCUMULATED)
+    assert np.allclose(later.std_m, direct.std_m, atol=ROUND_OFF_ACCUMULATED)

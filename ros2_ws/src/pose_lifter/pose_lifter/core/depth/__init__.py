@@ -5,9 +5,16 @@ lift hand it the depth image of a frame (:mod:`pose_lifter.messages.depth` decod
 
 from __future__ import annotations
 
-from pose_lifter.core.depth.fuse import KEYPOINT_STD, FusedPeople, fuse_depth
+from pose_lifter.core.depth.fuse import (
+    KEYPOINT_STD,
+    DepthReadings,
+    FusedPeople,
+    fuse_depth,
+    fuse_readings,
+    read_depth,
+)
 from pose_lifter.core.depth.reading import SURFACE_OFFSET_M, DepthOptions, read_patches
 from pose_lifter.core.depth.uncertainty import body_std, monocular_std
 
-__all__ = ["KEYPOINT_STD", "SURFACE_OFFSET_M", "DepthOptions", "FusedPeople", "body_std", "fuse_depth",
-           "monocular_std", "read_patches"]
+__all__ = ["KEYPOINT_STD", "SURFACE_OFFSET_M", "DepthOptions", "DepthReadings", "FusedPeople", "body_std",
+           "fuse_depth", "fuse_readings", "monocular_std", "read_depth", "read_patches"]

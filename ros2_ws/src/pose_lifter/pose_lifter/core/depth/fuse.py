@@ -24,6 +24,10 @@ its distance change together), so one number is left for the depth to settle:
    (:func:`~pose_lifter.core.depth.uncertainty.body_std` with the fit's scale uncertainty, and the
    reading's own: the 2D's error across, ``v_j`` along the depth). The other joints are the scaled
    body's.
+
+:func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
+the readings only: a pose refined over later frames is fused with its frame's readings without
+keeping the image); :func:`fuse_depth` both.
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LEN
 if TYPE_CHECKING:
     from pose_lifter.core.track.placement import CameraIntrinsics
 
-__all__ = ["KEYPOINT_STD", "FusedPeople", "fuse_depth"]
+__all__ = ["KEYPOINT_STD", "DepthReadings", "FusedPeople", "fuse_depth", "fuse_readings", "read_depth"]
 
 #: Standard deviation of a keypoint's pixel position across the ray, in right-lower-leg lengths
 #: of the person's image (a detector errs in proportion to the person's size in pixels).
@@ -113,11 +117,84 @@ def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates
     return hidden
 
 
+@dataclass(frozen=True)
+class DepthReadings:
+    """The depth readings of the joints of ``n`` people of one frame, kept after the occlusion
+    test (:func:`read_depth`): all a later fusion of the frame needs (:func:`fuse_readings`, e.g.
+    of a pose refined over the next frames), without the image.
+
+    Attributes
+    ----------
+    depth_m : ndarray, shape (n, 12)
+        Each joint's depth (its surface reading plus its surface offset), metres; NaN where the
+        joint was not read, or the reading is another body part's.
+    var : ndarray, shape (n, 12)
+        Their variances, m^2 (NaN where no reading).
+    """
+
+    depth_m: NDArray[np.float64]
+    var: NDArray[np.float64]
+
+
+class _Placed:
+    """The monocular placement (step 1) of ``n`` lifts, and what the steps after it read."""
+
+    def __init__(self, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+                 weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64], centres: NDArray[np.float64],
+                 opt: DepthOptions) -> None:
+        pose = np.asarray(poses, dtype=np.float64)
+        n = len(pose)
+        self.px = np.asarray(points, dtype=np.float64).reshape(n, N_JOINTS, 2)
+        self.scales = np.asarray(scales, dtype=np.float64).reshape(n)
+        (fx, fy), (cx, cy) = intrinsics
+        self.x0 = place_poses(pose, self.scales, np.asarray(centres, dtype=np.float64).reshape(n, 2),
+                              DEFAULT_LEG_LENGTH_M, (float(fx), float(fy)), (float(cx), float(cy)),
+                              DEFAULT_DISTANCE_M)
+        wt = np.asarray(weights, dtype=np.float64).reshape(n, N_JOINTS)
+        self.observed = (wt >= opt.confidence_threshold) & np.isfinite(self.px).all(axis=-1)
+
+
+def _median_ratio(d: NDArray[np.float64], z0: NDArray[np.float64], have: NDArray[np.bool_]
+                  ) -> NDArray[np.float64]:
+    """Each person's median of ``d_j / z0_j`` over its readings ``have`` (n, 12); 1 without any."""
+    ratio = np.where(have, d / np.where(z0 > 0, z0, 1.0), np.inf)
+    ratio.sort(axis=1)
+    count = have.sum(axis=1)
+    rows = np.arange(len(d))
+    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, N_JOINTS - 1)
+    return np.asarray(np.where(count > 0, 0.5 * (ratio[rows, lo] + ratio[rows, hi]), 1.0))
+
+
+def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+               weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
+               centres: NDArray[np.float64], options: DepthOptions | None = None) -> DepthReadings:
+    """Steps 1-3 of the fusion (module docstring): the readings of the observed joints of ``n``
+    people, those another body part hides dropped (arguments as :func:`fuse_depth`)."""
+    opt = options if options is not None else DepthOptions()
+    img = np.asarray(depth)
+    if img.ndim != 2 or img.size == 0:
+        raise InvalidInputError(f"a depth image must be (H, W), got shape {img.shape}")
+    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    x0, px = placed.x0, placed.px
+    n = len(x0)
+    z0 = x0[..., 2]
+    (fx, fy), _ = intrinsics
+    radius = joint_radius_px(0.5 * (float(fx) + float(fy)) / np.maximum(z0.mean(axis=1), 1e-3), opt)
+    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), opt)
+    d = read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]
+    v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
+    have = placed.observed & np.isfinite(d) & (z0 > 0)
+    k = _median_ratio(d, z0, have)  # a first scale places the bodies for the occlusion test
+    have &= ~_hidden(k[:, None, None] * x0, px, have, intrinsics, opt.occlusion_margin_m)
+    return DepthReadings(np.where(have, d, np.nan), np.where(have, v, np.nan))
+
+
 def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
                centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
     """The ``n`` people of one frame placed with the frame's registered depth image (module
-    docstring: steps and the objective of the scale fit).
+    docstring: steps and the objective of the scale fit): :func:`fuse_readings` of
+    :func:`read_depth`.
 
     Parameters
     ----------
@@ -147,47 +224,31 @@ def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     Raises
     ------
     InvalidInputError
-        ``depth`` is not a 2-D image, or the shapes disagree.
+        ``depth`` is not a 2-D image.
     """
+    readings = read_depth(depth, intrinsics, points, weights, poses, scales, centres, options)
+    return fuse_readings(readings, intrinsics, points, weights, poses, scales, centres, options)
+
+
+def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+                  weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
+                  centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
+    """Steps 4-5 of the fusion (module docstring) of the ``n`` people of :func:`read_depth`'s
+    ``readings``: the same people, possibly with other poses (a pose refined over later frames);
+    arguments as :func:`fuse_depth`."""
     opt = options if options is not None else DepthOptions()
-    img = np.asarray(depth)
-    if img.ndim != 2 or img.size == 0:
-        raise InvalidInputError(f"a depth image must be (H, W), got shape {img.shape}")
-    pose = np.asarray(poses, dtype=np.float64)
-    n = len(pose)
-    px = np.asarray(points, dtype=np.float64).reshape(n, N_JOINTS, 2)
-    wt = np.asarray(weights, dtype=np.float64).reshape(n, N_JOINTS)
-    s = np.asarray(scales, dtype=np.float64).reshape(n)
-    (fx, fy), (cx, cy) = intrinsics
-    f = 0.5 * (float(fx) + float(fy))
-    x0 = place_poses(pose, s, np.asarray(centres, dtype=np.float64).reshape(n, 2), DEFAULT_LEG_LENGTH_M,
-                     (float(fx), float(fy)), (float(cx), float(cy)), DEFAULT_DISTANCE_M)
+    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    x0, px, observed, s = placed.x0, placed.px, placed.observed, placed.scales
+    n = len(x0)
     z0 = x0[..., 2]
-    observed = (wt >= opt.confidence_threshold) & np.isfinite(px).all(axis=-1)
-
-    # 2. readings at the observed keypoints
-    radius = joint_radius_px(f / np.maximum(z0.mean(axis=1), 1e-3), opt)
-    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), opt)
-    d = (read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]).copy()
-    v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
-    have = observed & np.isfinite(d) & (z0 > 0)
-    d[~have] = 0.0
-    v[~have] = 1.0
-
-    # 4a. a first scale (the median of the ratios d_j / z0_j), for the occlusion test
-    ratio = np.where(have, d / np.where(z0 > 0, z0, 1.0), np.inf)
-    ratio.sort(axis=1)
-    count = have.sum(axis=1)
-    rows = np.arange(n)
-    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, N_JOINTS - 1)
-    mid = 0.5 * (ratio[rows, lo] + ratio[rows, hi])
-    k = np.where(count > 0, mid, 1.0)
-    # 3. occlusion against the bodies at that scale
-    have &= ~_hidden(k[:, None, None] * x0, px, have, intrinsics, opt.occlusion_margin_m)
+    (fx, fy), (cx, cy) = intrinsics
+    have = np.isfinite(readings.depth_m) & observed & (z0 > 0)
+    d = np.where(have, readings.depth_m, 0.0)
+    v = np.where(have, readings.var, 1.0)
+    k0 = _median_ratio(d, z0, have)
 
     # 4b. the robust scale fit (IRLS)
     shape_z = SHAPE_STD_M[:, 1]
-    k0 = np.where(have.any(axis=1), k, 1.0)
     k = np.empty(n)
     info = np.empty(n)
     objective = np.empty(n)
