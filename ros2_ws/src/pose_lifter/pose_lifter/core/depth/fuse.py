@@ -140,8 +140,8 @@ class _Placed:
     """The monocular placement (step 1) of ``n`` lifts, and what the steps after it read."""
 
     def __init__(self, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
-                 weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64], centres: NDArray[np.float64],
-                 opt: DepthOptions) -> None:
+                 weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
+                 centres: NDArray[np.float64], opt: DepthOptions) -> None:
         pose = np.asarray(poses, dtype=np.float64)
         n = len(pose)
         self.px = np.asarray(points, dtype=np.float64).reshape(n, N_JOINTS, 2)
