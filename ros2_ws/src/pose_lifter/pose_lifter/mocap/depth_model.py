@@ -1,0 +1,592 @@
+"""A depth camera filming mocap people: a body surface around the 12 joints, ray cast to a depth
+image, seen through an active-stereo sensor (RealSense D435-like) with its faults.
+
+**The body surface** (:func:`body_primitives`), built from the 12 model joints alone (metres,
+camera optical frame); radii are adult values in metres (anthropometric girths / 2 pi, rounded,
+after Gordon et al., *ANSUR 1988*: upper arm 0.30-0.33 m, forearm 0.26-0.28 m, wrist 0.17 m,
+thigh 0.50-0.60 m, calf 0.35-0.38 m):
+
+* the limbs as capsules (cylinders with spherical ends): upper arms :data:`UPPER_ARM_RADIUS`,
+  forearms :data:`FOREARM_RADIUS` tapering to :data:`WRIST_RADIUS` (two capsules joined at the
+  forearm's middle), thighs :data:`THIGH_RADIUS`, shins :data:`SHIN_RADIUS`;
+* a hand, a sphere of :data:`HAND_RADIUS` :data:`HAND_OFFSET` beyond the wrist along the
+  forearm; a foot, a capsule of :data:`FOOT_RADIUS` from the heel to the toes along the body's
+  facing direction, its sole :data:`ANKLE_HEIGHT` below the ankle;
+* the torso, an elliptic cylinder along the spine (body frame of
+  :func:`pose_lifter.core.model.skeleton.body_frame`: x hip to hip, y hip centre to shoulder
+  centre, z the facing direction), :data:`TORSO_HALF_WIDTH` x :data:`TORSO_HALF_DEPTH` half axes
+  (0.33 m wide, 0.2 m deep), from :data:`TORSO_BELOW_HIPS` below the hip centre to
+  :data:`TORSO_ABOVE_SHOULDERS` above the shoulder centre;
+* a neck capsule and a head sphere of :data:`HEAD_RADIUS` above the shoulder centre along the
+  spine (:data:`HEAD_ABOVE_SHOULDERS`).
+
+**Rendering** (:func:`render_depth`): each pixel's ray is cast against every primitive, exactly
+(quadratics), over the primitive's image bounding box only (the projection of its bounding
+sphere), and the nearest hit kept: the ideal z-depth (along the optical axis, not ray length)
+and which person and part it belongs to. Rays are written ``t (x_n, y_n, 1)`` with
+``x_n = (u - cx) / fx``, ``y_n = (v - cy) / fy`` (pixel centres at integer u, v), so a hit's ray
+parameter ``t`` is its z-depth. Behind the people a :class:`Background`: a wall perpendicular to
+the optical axis and a floor, the plane :data:`ANKLE_HEIGHT` below the lowest ankle along the
+camera's up direction (the virtual cameras of :mod:`pose_lifter.mocap.scenes` look horizontally:
+up is -y).
+
+**The sensor** (:class:`DepthSensor`, :func:`sense`), in this order on the ideal image:
+
+1. *mixed (flying) pixels*: a pixel on a silhouette (a 4-neighbour differs in depth by more
+   than ``edge_jump_m``), with probability ``mixed_rate``, reads a depth uniformly between the
+   nearest and the farthest depth of its 3x3 neighbourhood (a stereo window straddling the edge);
+2. *noise*: Gaussian, standard deviation ``noise_c z^2`` (the stereo depth RMS error
+   ``z^2 subpixel / (f B)`` of Grunnet-Jepsen, Sweetser & Woodfill, "Best-known-methods for
+   tuning Intel RealSense D400 depth cameras for best performance", Intel, 2018: subpixel 0.08,
+   f = 640 px at 1280x720 (87 deg field of view), B = 50 mm give 0.0024 per metre), spatially
+   correlated over ``noise_window_px`` pixels (a block-matching window), with unit variance per
+   pixel;
+3. *quantisation* to ``quantisation_m`` (1 mm: a 16UC1 image in millimetres);
+4. *edge shadows*: the stereo occlusion of an active-stereo pair whose second imager sits
+   ``baseline_m`` to the right of the depth reference (the D435's left imager): a pixel is lost
+   when, in the right imager, a nearer surface to its right covers it, i.e. when
+   ``u - d(u) >= min over u' > u of (u' - d(u'))`` with ``d = fx B / z`` the disparity. This
+   removes a band ``fx B (1/z_near - 1/z_far)`` pixels wide on the far side, to the left of each
+   near object (6 px for a person at 3 m before a wall at 5.5 m);
+5. *holes*: random dropouts in square blobs of ``hole_size_px`` pixels (a grid of cells at a
+   random offset, each lost with probability ``hole_rate``), as low texture and specular spots
+   give;
+6. *range*: no reading nearer than ``min_range_m`` or farther than ``max_range_m``.
+
+Deterministic for a generator's state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.core.model.skeleton import N_JOINTS, body_frame
+from pose_lifter.core.track.placement import CameraIntrinsics
+
+__all__ = [
+    "ANKLE_HEIGHT",
+    "PART_NAMES",
+    "REALISTIC",
+    "Background",
+    "BodyPrimitives",
+    "DepthSensor",
+    "RenderedDepth",
+    "body_primitives",
+    "render_depth",
+    "sense",
+]
+
+UPPER_ARM_RADIUS: Final[float] = 0.05
+FOREARM_RADIUS: Final[float] = 0.042
+WRIST_RADIUS: Final[float] = 0.035
+HAND_RADIUS: Final[float] = 0.045
+#: Metres from the wrist to the hand sphere's centre, along the forearm.
+HAND_OFFSET: Final[float] = 0.07
+THIGH_RADIUS: Final[float] = 0.08
+SHIN_RADIUS: Final[float] = 0.055
+FOOT_RADIUS: Final[float] = 0.035
+#: Heel and toe ends of the foot capsule: metres behind / ahead of the ankle along the facing direction.
+FOOT_BACK: Final[float] = 0.03
+FOOT_FRONT: Final[float] = 0.13
+#: Metres from the ankle joint down to the sole (and the floor).
+ANKLE_HEIGHT: Final[float] = 0.075
+TORSO_HALF_WIDTH: Final[float] = 0.165
+TORSO_HALF_DEPTH: Final[float] = 0.10
+TORSO_BELOW_HIPS: Final[float] = 0.06
+TORSO_ABOVE_SHOULDERS: Final[float] = 0.04
+NECK_RADIUS: Final[float] = 0.055
+NECK_LENGTH: Final[float] = 0.12
+HEAD_RADIUS: Final[float] = 0.10
+#: Metres from the shoulder centre up the spine to the head's centre.
+HEAD_ABOVE_SHOULDERS: Final[float] = 0.25
+
+#: The body parts of the label maps (:attr:`RenderedDepth.part`), in this order.
+PART_NAMES: Final[tuple[str, ...]] = (
+    "torso", "neck", "head",
+    "left_upper_arm", "left_forearm", "left_hand", "right_upper_arm", "right_forearm", "right_hand",
+    "left_thigh", "left_shin", "left_foot", "right_thigh", "right_shin", "right_foot",
+)
+_PART: Final[dict[str, int]] = {name: i for i, name in enumerate(PART_NAMES)}
+_LSH, _LEL, _LWR, _RSH, _REL, _RWR, _LHIP, _LKN, _LANK, _RHIP, _RKN, _RANK = range(N_JOINTS)
+_ANKLES: Final[tuple[int, int]] = (_LANK, _RANK)
+
+
+@dataclass(frozen=True)
+class BodyPrimitives:
+    """The solids of people's bodies (P people), camera frame, metres.
+
+    Attributes
+    ----------
+    capsule_a, capsule_b : ndarray, shape (P, C, 3)
+        Capsule end points.
+    capsule_radius : ndarray, shape (C,)
+    capsule_part : tuple of int
+        Part index (:data:`PART_NAMES`) of each capsule.
+    sphere_centre : ndarray, shape (P, S, 3)
+    sphere_radius : ndarray, shape (S,)
+    sphere_part : tuple of int
+    torso_rotation : ndarray, shape (P, 3, 3)
+        Rows: the torso's width, spine and depth axes.
+    torso_centre : ndarray, shape (P, 3)
+        On the spine, midway between the hip and shoulder centres.
+    torso_extent : ndarray, shape (P, 2)
+        Lowest and highest spine coordinates of the torso, relative to the centre.
+    """
+
+    capsule_a: NDArray[np.float64]
+    capsule_b: NDArray[np.float64]
+    capsule_radius: NDArray[np.float64]
+    capsule_part: tuple[int, ...]
+    sphere_centre: NDArray[np.float64]
+    sphere_radius: NDArray[np.float64]
+    sphere_part: tuple[int, ...]
+    torso_rotation: NDArray[np.float64]
+    torso_centre: NDArray[np.float64]
+    torso_extent: NDArray[np.float64]
+
+
+def body_primitives(joints_cam: NDArray[np.float64]) -> BodyPrimitives:
+    """The body surface (module docstring) of people given by their 12 joints.
+
+    Parameters
+    ----------
+    joints_cam : ndarray, shape (P, 12, 3)
+        Metres, camera optical frame.
+
+    Returns
+    -------
+    BodyPrimitives
+    """
+    j = np.asarray(joints_cam, dtype=np.float64)
+    frame = body_frame(j)  # (P, 3, 3) rows x (hip to hip), y (spine), z (facing)
+    up, fwd = frame[:, 1], frame[:, 2]
+    hips = 0.5 * (j[:, _LHIP] + j[:, _RHIP])
+    shoulders = 0.5 * (j[:, _LSH] + j[:, _RSH])
+    caps_a, caps_b, radii, parts = [], [], [], []
+
+    def capsule(a: NDArray[np.float64], b: NDArray[np.float64], r: float, part: str) -> None:
+        caps_a.append(a)
+        caps_b.append(b)
+        radii.append(r)
+        parts.append(_PART[part])
+
+    sph_c, sph_r, sph_p = [], [], []
+    for side, (sh, el, wr) in (("left", (_LSH, _LEL, _LWR)), ("right", (_RSH, _REL, _RWR))):
+        capsule(j[:, sh], j[:, el], UPPER_ARM_RADIUS, f"{side}_upper_arm")
+        mid = 0.5 * (j[:, el] + j[:, wr])
+        capsule(j[:, el], mid, FOREARM_RADIUS, f"{side}_forearm")
+        capsule(mid, j[:, wr], WRIST_RADIUS, f"{side}_forearm")
+        along = j[:, wr] - j[:, el]
+        along /= np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-9)
+        sph_c.append(j[:, wr] + HAND_OFFSET * along)
+        sph_r.append(HAND_RADIUS)
+        sph_p.append(_PART[f"{side}_hand"])
+    sole = ANKLE_HEIGHT - FOOT_RADIUS
+    for side, (hip, kn, ank) in (("left", (_LHIP, _LKN, _LANK)), ("right", (_RHIP, _RKN, _RANK))):
+        capsule(j[:, hip], j[:, kn], THIGH_RADIUS, f"{side}_thigh")
+        capsule(j[:, kn], j[:, ank], SHIN_RADIUS, f"{side}_shin")
+        capsule(j[:, ank] - FOOT_BACK * fwd - sole * up, j[:, ank] + FOOT_FRONT * fwd - sole * up,
+                FOOT_RADIUS, f"{side}_foot")
+    capsule(shoulders, shoulders + NECK_LENGTH * up, NECK_RADIUS, "neck")
+    sph_c.append(shoulders + HEAD_ABOVE_SHOULDERS * up)
+    sph_r.append(HEAD_RADIUS)
+    sph_p.append(_PART["head"])
+    centre = 0.5 * (hips + shoulders)
+    low = np.einsum("pi,pi->p", hips - centre, up) - TORSO_BELOW_HIPS
+    high = np.einsum("pi,pi->p", shoulders - centre, up) + TORSO_ABOVE_SHOULDERS
+    return BodyPrimitives(
+        np.stack(caps_a, axis=1), np.stack(caps_b, axis=1), np.array(radii), tuple(parts),
+        np.stack(sph_c, axis=1), np.array(sph_r), tuple(sph_p),
+        frame, centre, np.stack([low, high], axis=1),
+    )
+
+
+@dataclass(frozen=True)
+class Background:
+    """What is behind the people.
+
+    Attributes
+    ----------
+    wall_depth : float or None
+        z-depth (metres) of a wall perpendicular to the optical axis; None: ``wall_behind``
+        behind the people's mean joint depth (no wall when there are no people).
+    wall_behind : float
+        Metres behind the people's mean joint depth, when ``wall_depth`` is None.
+    floor : bool
+        A floor :data:`ANKLE_HEIGHT` below the lowest ankle along ``up`` (none without people).
+    up : tuple of float
+        The world's up direction in the camera frame (unit; the scenes' cameras look
+        horizontally: (0, -1, 0)).
+    """
+
+    wall_depth: float | None = None
+    wall_behind: float = 2.5
+    floor: bool = True
+    up: tuple[float, float, float] = (0.0, -1.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if self.wall_depth is not None and not (np.isfinite(self.wall_depth) and self.wall_depth > 0):
+            raise InvalidInputError(f"Background.wall_depth must be a positive depth, got {self.wall_depth}")
+        if not np.isfinite(self.wall_behind):
+            raise InvalidInputError(f"Background.wall_behind must be finite, got {self.wall_behind}")
+        if not np.isclose(np.linalg.norm(self.up), 1.0):
+            raise InvalidInputError(f"Background.up must be a unit vector, got {self.up}")
+
+
+@dataclass(frozen=True)
+class RenderedDepth:
+    """An ideal depth image.
+
+    Attributes
+    ----------
+    depth : ndarray, shape (H, W), float64
+        z-depth, metres; inf where the ray hits nothing.
+    person : ndarray, shape (H, W), int16
+        Index of the person seen at each pixel; -1 background (wall, floor) or nothing.
+    part : ndarray, shape (H, W), int16
+        Body part (:data:`PART_NAMES`) seen at each pixel; -1 where ``person`` is -1.
+    intrinsics : CameraIntrinsics
+        ((fx, fy), (cx, cy)) pixels.
+    """
+
+    depth: NDArray[np.float64]
+    person: NDArray[np.int16]
+    part: NDArray[np.int16]
+    intrinsics: CameraIntrinsics
+
+
+class _Canvas:
+    """The z-buffer being drawn, with the normalised ray coordinates of its rows and columns."""
+
+    def __init__(self, intrinsics: CameraIntrinsics, size: tuple[int, int]) -> None:
+        (fx, fy), (cx, cy) = intrinsics
+        w, h = size
+        self.fx, self.fy, self.cx, self.cy, self.w, self.h = fx, fy, cx, cy, w, h
+        self.xn = (np.arange(w, dtype=np.float64) - cx) / fx  # (W,)
+        self.yn = (np.arange(h, dtype=np.float64) - cy) / fy  # (H,)
+        self.depth = np.full((h, w), np.inf)
+        self.person = np.full((h, w), -1, dtype=np.int16)
+        self.part = np.full((h, w), -1, dtype=np.int16)
+
+    def box(self, centres: NDArray[np.float64], radius: float) -> tuple[slice, slice] | None:
+        """Rows and columns covering the projection of spheres of one radius about ``centres``
+        (k, 3) (conservatively: the projections of the corners of their bounding boxes; a capsule
+        lies inside the hull of its end spheres); None when outside the image."""
+        x, y, z = centres[:, 0], centres[:, 1], centres[:, 2]
+        if np.all(z + radius <= 0):
+            return None
+        if np.any(z - radius <= 1e-6):  # reaches the camera plane: the whole image
+            return slice(0, self.h), slice(0, self.w)
+        near, far = 1.0 / (z - radius), 1.0 / (z + radius)
+        us = self.fx * np.concatenate([(x - radius) * near, (x - radius) * far, (x + radius) * near,
+                                       (x + radius) * far]) + self.cx
+        vs = self.fy * np.concatenate([(y - radius) * near, (y - radius) * far, (y + radius) * near,
+                                       (y + radius) * far]) + self.cy
+        u0, u1 = max(int(np.floor(us.min())), 0), min(int(np.ceil(us.max())) + 1, self.w)
+        v0, v1 = max(int(np.floor(vs.min())), 0), min(int(np.ceil(vs.max())) + 1, self.h)
+        if u0 >= u1 or v0 >= v1:
+            return None
+        return slice(v0, v1), slice(u0, u1)
+
+    def rays(self, box: tuple[slice, slice]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(1, cols) x and (rows, 1) y normalised ray coordinates of a box."""
+        return self.xn[box[1]][None, :], self.yn[box[0]][:, None]
+
+    def draw(self, box: tuple[slice, slice], t: NDArray[np.float64], person: int, part: int) -> None:
+        """Keep the hits ``t`` (box-shaped, inf = none) nearer than what is drawn."""
+        d = self.depth[box]
+        nearer = t < d
+        d[nearer] = t[nearer]
+        self.person[box][nearer] = person
+        self.part[box][nearer] = part
+
+
+def _sphere_t(xn: NDArray[np.float64], yn: NDArray[np.float64], c: NDArray[np.float64], r: float,
+              dd: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """Nearest positive ray parameter (= z-depth) of rays ``t (xn, yn, 1)`` hitting a sphere; inf
+    where they miss. ``dd``: the rays' squared norms, if known."""
+    if dd is None:
+        dd = xn * xn + yn * yn + 1.0
+    dc = xn * c[0] + yn * c[1] + c[2]
+    disc = dc * dc - dd * (c @ c - r * r)
+    with np.errstate(invalid="ignore"):
+        t = (dc - np.sqrt(disc)) / dd
+    return np.where(t > 0, t, np.inf)  # NaN (a miss) > 0 is False
+
+
+def _capsule_t(xn: NDArray[np.float64], yn: NDArray[np.float64], a: NDArray[np.float64],
+               b: NDArray[np.float64], r: float) -> NDArray[np.float64]:
+    """Nearest positive ray parameter of rays hitting a capsule (segment a-b, radius r)."""
+    dd = xn * xn + yn * yn + 1.0
+    t = np.minimum(_sphere_t(xn, yn, a, r, dd), _sphere_t(xn, yn, b, r, dd))
+    axis = b - a
+    length = float(np.linalg.norm(axis))
+    if length < 1e-9:
+        return t
+    e = axis / length
+    de = xn * e[0] + yn * e[1] + e[2]
+    ae = float(a @ e)
+    # |t d_perp - a_perp|^2 = r^2 with d_perp = d - (d.e) e, a_perp = a - (a.e) e
+    qa = dd - de * de
+    qb = xn * a[0] + yn * a[1] + (a[2] - de * ae)
+    qc = a @ a - ae * ae - r * r
+    disc = qb * qb - qa * qc
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tc = (qb - np.sqrt(disc)) / qa
+        s = tc * de - ae  # position of the hit along the axis, metres from a
+        ok = (tc > 0) & (s >= 0) & (s <= length)  # False where NaN (a miss)
+    return np.where(ok & (tc < t), tc, t)
+
+
+def _torso_t(xn: NDArray[np.float64], yn: NDArray[np.float64], rot: NDArray[np.float64],
+             centre: NDArray[np.float64], extent: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Nearest positive ray parameter of rays hitting the torso's capped elliptic cylinder: in the
+    torso frame (rows of ``rot``) ``(x/a)^2 + (z/b)^2 <= 1`` and ``low <= y <= high``; a ray enters
+    the solid at the later of its entries into the cylinder and the slab."""
+    dx = xn * rot[0, 0] + yn * rot[0, 1] + rot[0, 2]
+    dy = xn * rot[1, 0] + yn * rot[1, 1] + rot[1, 2]
+    dz = xn * rot[2, 0] + yn * rot[2, 1] + rot[2, 2]
+    cx, cy, cz = rot @ centre
+    ia, ib = 1.0 / TORSO_HALF_WIDTH**2, 1.0 / TORSO_HALF_DEPTH**2
+    qa = dx * dx * ia + dz * dz * ib
+    qb = dx * cx * ia + dz * cz * ib
+    qc = cx * cx * ia + cz * cz * ib - 1.0
+    disc = qb * qb - qa * qc
+    with np.errstate(invalid="ignore", divide="ignore"):
+        root = np.sqrt(disc)
+        t_in, t_out = (qb - root) / qa, (qb + root) / qa
+        s0, s1 = (extent[0] + cy) / dy, (extent[1] + cy) / dy
+    slab_in, slab_out = np.minimum(s0, s1), np.maximum(s0, s1)
+    flat = np.abs(dy) < 1e-12  # ray parallel to the caps: inside the slab or never
+    inside = (extent[0] <= -cy) & (-cy <= extent[1])
+    slab_in = np.where(flat, -np.inf if inside else np.inf, slab_in)
+    slab_out = np.where(flat, np.inf if inside else -np.inf, slab_out)
+    enter, leave = np.maximum(t_in, slab_in), np.minimum(t_out, slab_out)
+    ok = (disc >= 0) & (qa > 1e-12) & (enter <= leave) & (enter > 0)
+    return np.where(ok, enter, np.inf)
+
+
+def _background(canvas: _Canvas, joints: NDArray[np.float64], background: Background) -> None:
+    """Draw the wall and the floor (person -1) into the empty canvas."""
+    wall = background.wall_depth
+    if wall is None and len(joints):
+        wall = float(joints[..., 2].mean()) + background.wall_behind
+    if wall is not None and wall > 0:
+        canvas.depth[:] = wall
+    if background.floor and len(joints):
+        up = np.asarray(background.up, dtype=np.float64)
+        height = float((joints[:, _ANKLES] @ up).min()) - ANKLE_HEIGHT  # the floor: up . p = height
+        toward = canvas.yn[:, None] * up[1] + up[2]  # (H, 1): up . ray, per row when up has no x
+        if up[0] != 0.0:
+            toward = toward + canvas.xn[None, :] * up[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tf = height / toward
+        tf = np.where(np.isfinite(tf) & (tf > 0), tf, np.inf)
+        np.minimum(canvas.depth, tf, out=canvas.depth)
+
+
+def render_depth(joints_cam: NDArray[np.float64], intrinsics: CameraIntrinsics,
+                 size: tuple[int, int] = (640, 480), background: Background | None = Background()
+                 ) -> RenderedDepth:
+    """The ideal depth image of people (module docstring).
+
+    Parameters
+    ----------
+    joints_cam : ndarray, shape (P, 12, 3)
+        The people's joints, metres, camera optical frame (every joint in front of the camera);
+        P may be 0.
+    intrinsics : CameraIntrinsics
+        ((fx, fy), (cx, cy)) pixels.
+    size : (width, height)
+        Pixels.
+    background : Background or None
+        None: nothing behind the people (inf).
+
+    Returns
+    -------
+    RenderedDepth
+    """
+    j = np.asarray(joints_cam, dtype=np.float64)
+    if j.ndim != 3 or j.shape[1:] != (N_JOINTS, 3):
+        raise InvalidInputError(f"joints_cam must be (P, {N_JOINTS}, 3), got {j.shape}")
+    if not np.all(np.isfinite(j)) or np.any(j[..., 2] <= 0):
+        raise InvalidInputError("joints_cam must be finite and in front of the camera (z > 0)")
+    (fx, fy), _ = intrinsics
+    if not (fx > 0 and fy > 0) or size[0] < 1 or size[1] < 1:
+        raise InvalidInputError(f"bad camera: intrinsics {intrinsics}, size {size}")
+    canvas = _Canvas(intrinsics, (int(size[0]), int(size[1])))
+    if background is not None:
+        _background(canvas, j, background)
+    if len(j):
+        prim = body_primitives(j)
+        for p in range(len(j)):
+            rot, centre, extent = prim.torso_rotation[p], prim.torso_centre[p], prim.torso_extent[p]
+            # the torso lies inside the hull of its bounding box's 8 corners
+            corners = centre + np.array([[sx * TORSO_HALF_WIDTH, sy, sz * TORSO_HALF_DEPTH] for sx in (-1, 1)
+                                         for sy in extent for sz in (-1, 1)]) @ rot
+            box = canvas.box(corners, 0.0)
+            if box is not None:
+                canvas.draw(box, _torso_t(*canvas.rays(box), rot, centre, extent), p, _PART["torso"])
+            for k, part in enumerate(prim.capsule_part):
+                a, b, r = prim.capsule_a[p, k], prim.capsule_b[p, k], float(prim.capsule_radius[k])
+                box = canvas.box(np.stack([a, b]), r)
+                if box is not None:
+                    canvas.draw(box, _capsule_t(*canvas.rays(box), a, b, r), p, part)
+            for k, part in enumerate(prim.sphere_part):
+                c, r = prim.sphere_centre[p, k], float(prim.sphere_radius[k])
+                box = canvas.box(c[None], r)
+                if box is not None:
+                    canvas.draw(box, _sphere_t(*canvas.rays(box), c, r), p, part)
+    return RenderedDepth(canvas.depth, canvas.person, canvas.part, intrinsics)
+
+
+# --------------------------------------------------------------------------- the sensor
+
+
+@dataclass(frozen=True)
+class DepthSensor:
+    """The faults of :func:`sense` (module docstring); lengths in metres, rates per pixel."""
+
+    #: sigma_z = noise_c z^2 (per metre)
+    noise_c: float = 0.0024
+    #: side of the square window over which the noise is correlated (pixels; 1: independent pixels)
+    noise_window_px: int = 3
+    quantisation_m: float = 0.001
+    #: fraction of a silhouette's pixels that read a depth between the near and far surfaces
+    mixed_rate: float = 0.3
+    #: a depth step larger than this between 4-neighbours is a silhouette
+    edge_jump_m: float = 0.05
+    #: stereo baseline: the edge shadows' width (0: no shadows)
+    baseline_m: float = 0.05
+    hole_rate: float = 0.02
+    hole_size_px: int = 4
+    min_range_m: float = 0.3
+    max_range_m: float = 6.0
+
+    def __post_init__(self) -> None:
+        for name in ("noise_c", "quantisation_m", "edge_jump_m", "baseline_m", "min_range_m"):
+            if not 0.0 <= getattr(self, name) < np.inf:
+                raise ValueError(f"DepthSensor.{name} = {getattr(self, name)} must be finite and >= 0")
+        for name in ("mixed_rate", "hole_rate"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"DepthSensor.{name} = {getattr(self, name)} not in [0, 1]")
+        if self.noise_window_px < 1 or self.hole_size_px < 1:
+            raise ValueError("DepthSensor.noise_window_px and hole_size_px must be >= 1")
+        if not self.min_range_m < self.max_range_m:
+            raise ValueError(f"DepthSensor range [{self.min_range_m}, {self.max_range_m}] is empty")
+
+
+#: An active-stereo camera like the RealSense D435 (module docstring): noise 0.0024 z^2 (10 mm at
+#: 2 m, 38 mm at 4 m) correlated over 3x3 pixels, 1 mm steps, 30 % of silhouette pixels mixed,
+#: 50 mm baseline shadows, 2 % holes in 4x4 px blobs, readings from 0.3 to 6 m.
+REALISTIC = DepthSensor()
+
+
+def silhouette(depth: NDArray[np.floating], jump: float) -> NDArray[np.bool_]:
+    """(H, W) pixels with a 4-neighbour whose depth differs by more than ``jump`` (an infinite
+    depth, nothing, differs from every finite one)."""
+    edge = np.zeros(depth.shape, dtype=bool)
+    finite = np.isfinite(depth)
+    with np.errstate(invalid="ignore"):
+        for a, b in (((slice(1, None), slice(None)), (slice(None, -1), slice(None))),
+                     ((slice(None), slice(1, None)), (slice(None), slice(None, -1)))):
+            big = (np.abs(depth[a] - depth[b]) > jump) | (finite[a] != finite[b])
+            edge[a] |= big
+            edge[b] |= big
+    return edge
+
+
+def _mix(z: NDArray[np.float32], ideal: NDArray[np.float32], rate: float, jump: float,
+         rng: np.random.Generator) -> None:
+    """Mixed pixels, in place (module docstring, step 1): ``rate`` of the silhouette's pixels get
+    a depth uniform between the nearest and farthest finite depths of their 3x3 neighbourhood."""
+    rows, cols = np.nonzero(silhouette(ideal, jump))
+    pick = rng.random(len(rows)) < rate
+    rows, cols = rows[pick], cols[pick]
+    padded = np.pad(ideal, 1, constant_values=np.inf)
+    around = np.stack([padded[rows + dv, cols + du] for dv in range(3) for du in range(3)])  # (9, n)
+    finite = np.isfinite(around)
+    lo = np.where(finite, around, np.inf).min(axis=0)
+    hi = np.where(finite, around, -np.inf).max(axis=0)
+    ok = hi > lo
+    rows, cols, lo, hi = rows[ok], cols[ok], lo[ok], hi[ok]
+    z[rows, cols] = lo + rng.random(len(rows), dtype=np.float32) * (hi - lo)
+
+
+def stereo_shadow(depth: NDArray[np.floating], fx: float, baseline: float) -> NDArray[np.bool_]:
+    """(H, W) pixels hidden from the right imager of a stereo pair (module docstring, step 4):
+    ``u - d(u) >= min over u' > u of (u' - d(u'))``, ``d = fx baseline / z`` (0 where inf)."""
+    w = depth.shape[1]
+    with np.errstate(divide="ignore"):
+        disparity = (fx * baseline) / depth  # 0 where inf
+    m = np.arange(w, dtype=depth.dtype)[None, :] - disparity
+    after = np.full_like(m, np.inf)
+    # the minimum over the columns to the right of each pixel
+    after[:, :-1] = np.minimum.accumulate(m[:, :0:-1], axis=1)[:, ::-1]
+    return np.asarray(m >= after)
+
+
+def _correlated_normal(shape: tuple[int, int], window: int, rng: np.random.Generator) -> NDArray[np.float32]:
+    """(H, W) standard normal field (unit variance per pixel), each pixel the mean of a
+    ``window`` x ``window`` block of independent draws (so neighbours within it correlate)."""
+    h, w = shape
+    white = rng.standard_normal((h + window - 1, w + window - 1), dtype=np.float32)
+    if window == 1:
+        return white
+    rows = white[:h].copy()
+    for k in range(1, window):
+        rows += white[k:k + h]
+    out = rows[:, :w].copy()
+    for k in range(1, window):
+        out += rows[:, k:k + w]
+    out /= np.float32(window)
+    return out
+
+
+def _holes(shape: tuple[int, int], rate: float, size: int, rng: np.random.Generator) -> NDArray[np.bool_]:
+    """(H, W) pixels lost in square blobs: cells of ``size`` pixels at a random offset, each lost
+    with probability ``rate``."""
+    h, w = shape
+    oy, ox = (int(o) for o in rng.integers(0, size, 2))
+    cells = rng.random(((h + oy) // size + 1, (w + ox) // size + 1)) < rate
+    grid = np.repeat(np.repeat(cells, size, axis=0), size, axis=1)
+    return np.asarray(grid[oy:oy + h, ox:ox + w])
+
+
+def sense(rendered: RenderedDepth, sensor: DepthSensor, rng: np.random.Generator) -> NDArray[np.float32]:
+    """What the depth sensor reads of an ideal depth image (module docstring, steps 1-6).
+
+    Parameters
+    ----------
+    rendered : RenderedDepth
+    sensor : DepthSensor
+    rng : numpy Generator
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32
+        z-depth in metres, NaN where there is no reading.
+    """
+    ideal = rendered.depth.astype(np.float32)
+    shape = (ideal.shape[0], ideal.shape[1])
+    z = ideal.copy()
+    if sensor.mixed_rate > 0:
+        _mix(z, ideal, sensor.mixed_rate, sensor.edge_jump_m, rng)
+    if sensor.noise_c > 0:
+        z += np.float32(sensor.noise_c) * z * z * _correlated_normal(shape, sensor.noise_window_px, rng)
+    if sensor.quantisation_m > 0:
+        q = np.float32(sensor.quantisation_m)
+        z = np.round(z / q) * q
+    with np.errstate(invalid="ignore"):
+        lost = ~((z >= sensor.min_range_m) & (z <= sensor.max_range_m))  # also NaN, inf
+    if sensor.baseline_m > 0:
+        lost |= stereo_shadow(ideal, rendered.intrinsics[0][0], sensor.baseline_m)
+    if sensor.hole_rate > 0:
+        lost |= _holes(shape, sensor.hole_rate, sensor.hole_size_px, rng)
+    z[lost] = np.nan
+    return z
