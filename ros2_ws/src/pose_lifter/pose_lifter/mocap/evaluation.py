@@ -60,7 +60,7 @@ from pose_lifter.core.options import Mode
 from pose_lifter.core.track.defaults import AHEAD_LAG
 from pose_lifter.core.track.later import Placement, Refiner
 from pose_lifter.core.track.placement import place_in_camera
-from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
+from pose_lifter.core.track.policy import FramesAhead, TrackedLift, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.mocap.cmu import load_trial, read_manifest, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, DetectorModel, detect, swap_labels
@@ -69,8 +69,8 @@ from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_
 
 __all__ = [
     "ALL_CONDITIONS", "CAMERAS", "CONDITIONS", "DIAGNOSTIC_CONDITIONS", "METHODS", "Evaluator", "Setup",
-    "Track", "detector_model", "evaluate_jobs", "evaluation_tracks", "film_track", "merge_runs", "nanmean",
-    "parse_settings", "render_table", "run_stamp", "summarise",
+    "Track", "detector_model", "evaluate_jobs", "evaluation_tracks", "film_track", "frame_figures",
+    "merge_runs", "nanmean", "parse_settings", "render_table", "run_stamp", "summarise",
 ]
 
 CONDITIONS: dict[str, dict[str, float]] = {
@@ -258,14 +258,29 @@ class Evaluator:
             else:
                 preds, depth = self._lift(m, filmed)
             ms = 1000.0 * (time.perf_counter() - t0) / n
-            out[m] = {**_figures(preds, truth), "ms": ms}
+            out[m] = {**frame_figures(preds, truth), "ms": ms}
             if depth is not None and perspective:
                 out[m]["depth_pct"] = depth.tolist()
         return {"track": track.name, "cond": condition, "camera": track.camera, "n": n, "methods": out}
 
-    def _lift(self, m: str, filmed: _Film) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def lifts(self, m: str, px: NDArray[np.float64], conf: NDArray[np.float64], leg_m: NDArray[np.float64],
+              distance: float) -> tuple[NDArray[np.float64], list[TrackedLift | None]]:
+        """Tracked method ``m``'s lifts of a perspective track at ``distance`` metres (``px`` (T,
+        12, 2) pixels at 30 Hz, ``conf`` (T, 12), the true right lower leg ``leg_m`` (T,) metres):
+        its poses (T, 12, 3; as :meth:`evaluate` scores them: camera frame, centred, times
+        ``leg_m``; NaN where not lifted; ``hybrid-lag``: each frame's refined pose) and each
+        frame's tracked lift (None where not lifted)."""
+        if m not in TRACKED:
+            raise ValueError(f"{m} is not a tracked method ({', '.join(TRACKED)})")
+        results: list[TrackedLift | None] = []
+        filmed = _Film(px, conf, leg_m, np.arange(len(px), dtype=np.int64) * FRAME_NS, True, distance)
+        return self._lift(m, filmed, results)[0], results
+
+    def _lift(self, m: str, filmed: _Film, results: list[TrackedLift | None] | None = None
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Method ``m``'s poses of ``filmed`` (T, 12, 3) (metres, camera frame, centred; NaN where
-        not lifted) and the centroid's depth error (%) per frame on a perspective track."""
+        not lifted) and the centroid's depth error (%) per frame on a perspective track; each
+        frame's tracked lift appended to ``results`` (None where not lifted; tracked methods)."""
         lifter = self.lifters[m]
         n = len(filmed.px)
         intrinsics = ((FOCAL, FOCAL), (float(CENTRE[0]), float(CENTRE[1]))) if (
@@ -298,7 +313,11 @@ class Evaluator:
                     warm = r.warm_start() if m == "paper" else None
             except PoseLifterError:
                 warm = None
+                if results is not None:
+                    results.append(None)
                 continue
+            if results is not None and policy is not None:
+                results.append(t)
             preds[i] = r.pose_camera * leg_m[i]
             if refiner is not None and policy is not None:
                 # what is refined, centred, times the true leg: the published pose (the lagged
@@ -335,9 +354,10 @@ class _Film:
     distance: float  #: the camera's distance, metres
 
 
-def _figures(preds: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str, Any]:
-    """The per-frame figures (mm; lists of T, NaN where not lifted) of poses ``preds`` against the
-    centred camera-frame ``truth``, both (T, 12, 3) metres."""
+def frame_figures(preds: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str, Any]:
+    """The per-frame figures (mm; lists of T, NaN where not lifted) of poses ``preds`` against
+    ``truth``, both (T, 12, 3) metres in the camera frame: ``mpjpe`` compares them as given (the
+    accuracy table's are centred, :mod:`.rgbd_evaluation`'s placed)."""
     n = len(truth)
     ok = np.all(np.isfinite(preds), axis=(1, 2))
     pm = np.full(n, np.nan)
