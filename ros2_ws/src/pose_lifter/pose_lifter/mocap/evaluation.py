@@ -44,10 +44,10 @@ import platform
 import subprocess
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, Protocol, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,7 +70,7 @@ from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_
 __all__ = [
     "ALL_CONDITIONS", "CAMERAS", "CONDITIONS", "DIAGNOSTIC_CONDITIONS", "METHODS", "Evaluator", "Setup",
     "Track", "detector_model", "evaluate_jobs", "evaluation_tracks", "film_track", "frame_figures",
-    "merge_runs", "nanmean", "parse_settings", "render_table", "run_stamp", "summarise",
+    "merge_runs", "nanmean", "parse_settings", "render_table", "run_jobs", "run_stamp", "summarise",
 ]
 
 CONDITIONS: dict[str, dict[str, float]] = {
@@ -418,18 +418,37 @@ def action_trials(action: str, data: str | None) -> list[str]:
     return sorted({t.trial for t in read_manifest(data) if t.action == action and t.trial in known})
 
 
-_WORKER: dict[str, Evaluator] = {}
+class _Evaluates(Protocol):
+    """What :func:`run_jobs` runs: an evaluator of one job's arguments."""
+
+    def evaluate(self, *job: Any) -> dict[str, Any]: ...
 
 
-def _start_worker(methods: tuple[str, ...], settings: dict[str, Any], setup: Setup, bases_file: str | None,
-                  offline: dict[str, Any] | None) -> None:
-    """A pool worker's initialiser: its own :class:`Evaluator`."""
+_WORKER: dict[str, _Evaluates] = {}
+
+
+def _start_worker(make: Callable[..., _Evaluates], init: tuple[Any, ...]) -> None:
+    """A pool worker's initialiser: its own evaluator ``make(*init)``."""
     warnings.simplefilter("ignore")
-    _WORKER["evaluator"] = Evaluator(methods, settings, setup, bases_file, offline)
+    _WORKER["evaluator"] = make(*init)
 
 
-def _worker_job(job: tuple[Track, str]) -> dict[str, Any]:
+def _worker_job(job: tuple[Any, ...]) -> dict[str, Any]:
     return _WORKER["evaluator"].evaluate(*job)
+
+
+def run_jobs(jobs: Sequence[tuple[Any, ...]], make: Callable[..., _Evaluates], init: tuple[Any, ...],
+             workers: int = 1) -> list[dict[str, Any]]:
+    """``evaluate(*job)`` of every job of ``jobs`` by evaluators ``make(*init)`` (e.g. an
+    :class:`Evaluator`), one per process over ``workers`` processes (the records in the order
+    they finish)."""
+    if workers > 1:
+        with mp.get_context("fork").Pool(workers, _start_worker, (make, init)) as pool:
+            return list(pool.imap_unordered(_worker_job, jobs, chunksize=1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        evaluator = make(*init)
+        return [evaluator.evaluate(*job) for job in jobs]
 
 
 def evaluate_jobs(jobs: Sequence[tuple[Track, str]], methods: Sequence[str], settings: dict[str, Any],
@@ -437,14 +456,7 @@ def evaluate_jobs(jobs: Sequence[tuple[Track, str]], methods: Sequence[str], set
                   offline: dict[str, Any] | None = None, workers: int = 1) -> list[dict[str, Any]]:
     """:meth:`Evaluator.evaluate` of every ``(track, condition)`` of ``jobs``, over ``workers``
     processes (each with its own lifters; the records in the order they finish)."""
-    init = (tuple(methods), settings, setup, bases_file, offline)
-    if workers > 1:
-        with mp.get_context("fork").Pool(workers, _start_worker, init) as pool:
-            return list(pool.imap_unordered(_worker_job, jobs, chunksize=1))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        evaluator = Evaluator(*init)
-        return [evaluator.evaluate(*job) for job in jobs]
+    return run_jobs(jobs, Evaluator, (tuple(methods), settings, setup, bases_file, offline), workers)
 
 
 def nanmean(values: Sequence[float]) -> float:

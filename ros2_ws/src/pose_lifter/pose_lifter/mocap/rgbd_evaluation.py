@@ -42,8 +42,6 @@ from depth and over those filled from the prior.
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -293,31 +291,11 @@ def _fused(depth: NDArray[np.float32], points: NDArray[np.float64], confidence: 
     return fused.joints_m[0], fused.std_m[0], fused.from_depth[0]
 
 
-_WORKER: dict[str, RgbdEvaluator] = {}
-
-
-def _start_worker(methods: tuple[str, ...], settings: dict[str, Any], bases_file: str | None) -> None:
-    """A pool worker's initialiser: its own :class:`RgbdEvaluator`."""
-    warnings.simplefilter("ignore")
-    _WORKER["evaluator"] = RgbdEvaluator(methods, settings, bases_file)
-
-
-def _worker_job(job: tuple[ev.Track, float]) -> dict[str, Any]:
-    return _WORKER["evaluator"].evaluate(*job)
-
-
 def evaluate_jobs(jobs: Sequence[tuple[ev.Track, float]], methods: Sequence[str], settings: dict[str, Any],
                   bases_file: str | None = None, workers: int = 1) -> list[dict[str, Any]]:
     """:meth:`RgbdEvaluator.evaluate` of every ``(track, distance)`` of ``jobs`` over ``workers``
-    processes (the records in the order they finish)."""
-    init = (tuple(methods), settings, bases_file)
-    if workers > 1:
-        with mp.get_context("fork").Pool(workers, _start_worker, init) as pool:
-            return list(pool.imap_unordered(_worker_job, jobs, chunksize=1))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        evaluator = RgbdEvaluator(*init)
-        return [evaluator.evaluate(*job) for job in jobs]
+    processes (:func:`~pose_lifter.mocap.evaluation.run_jobs`; the records in the order they finish)."""
+    return ev.run_jobs(jobs, RgbdEvaluator, (tuple(methods), settings, bases_file), workers)
 
 
 def summarise(results: Sequence[dict[str, Any]], distances: Sequence[float], methods: Sequence[str]
