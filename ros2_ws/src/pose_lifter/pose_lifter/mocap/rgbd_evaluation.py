@@ -4,11 +4,12 @@ lift side by side (``make rgbd-accuracy``, ``tools/rgbd_accuracy.py``).
 Tracks: :func:`pose_lifter.mocap.evaluation.evaluation_tracks` (the evaluation split's trials, or
 a cross-action fold's class, at 30 Hz), each filmed by a pinhole camera (640x480 pixels, 800 px
 focal length, principal point at the image centre) at each of :data:`DISTANCES` from the joints'
-centroid, looking at it: :func:`rgbd_cameras`, the azimuths of the accuracy table at elevation 0
-(the camera at the centroid's height, about the hips') and optionally elevated. The 2D goes
-through the realistic detector (:data:`pose_lifter.mocap.detector_model.REALISTIC`, joints outside
-the image lost: the ``detector3m`` condition of :mod:`.evaluation` at each distance), and each
-frame's depth image is rendered from the true joints and sensed by
+centroid (:func:`film_rgbd`): from the directions of :func:`rgbd_cameras` (the accuracy table's
+azimuths, level, and optionally :data:`ELEVATED`), the camera at the height of the hip centre (or
+above it), looking at it, following the person. The 2D goes through the realistic detector
+(:data:`pose_lifter.mocap.detector_model.REALISTIC`, joints outside the image lost: at 1.5 m the
+image holds about 0.9 m of the body's height, so shoulders and ankles are lost on most frames),
+and each frame's depth image is rendered from the true joints and sensed by
 :mod:`pose_lifter.mocap.depth_model` (:data:`~pose_lifter.mocap.depth_model.REALISTIC` unless
 told). The detector and the depth sensor draw from their own generators, seeded per track and
 distance: every method sees the same 2D and the same depth images.
@@ -20,11 +21,13 @@ Methods (:data:`METHODS`), each tracked as the node tracks (the default hybrid m
 * ``mono``: the monocular lift placed as the node places it
   (:func:`~pose_lifter.core.track.placement.place_results`, the default 0.43 m leg), its
   uncertainty :func:`pose_lifter.core.depth.monocular_std`;
-* ``naive``: what users do today: each joint at the depth reading of its rounded pixel,
-  back-projected on its ray (``z K^-1 [u v 1]``); a joint the lifter does not use (confidence
-  below its ``confidence_threshold``), outside the image or on a pixel without a reading keeps
-  the ``mono`` joint; no uncertainty;
-* ``fused``: :func:`pose_lifter.core.depth.fuse_depth` of the live lift and the frame's depth;
+* ``naive``: what users do today: each joint at the depth reading of its rounded pixel (the
+  detector's 2D and labels as given), back-projected on its ray (``z K^-1 [u v 1]``); a joint the
+  lifter does not use (confidence below its ``confidence_threshold``), outside the image or on a
+  pixel without a reading keeps the ``mono`` joint; no uncertainty;
+* ``fused``: :func:`pose_lifter.core.depth.fuse_depth` of the live lift and the frame's depth, as
+  the node calls it (the frame's 2D with the labels the track gave the 3D joints, weighted by the
+  confidences);
 * ``fused-lag``: the node with ``output_lag`` (3): each frame's pose refined over the next
   frames (:class:`~pose_lifter.core.track.later.Refiner`, as ``hybrid-lag`` of :mod:`.evaluation`),
   then fused with that frame's depth by the same function.
@@ -61,10 +64,12 @@ from pose_lifter.core.track.policy import TrackedLift
 from pose_lifter.messages.frame import labelled_2d
 from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
+from pose_lifter.mocap.detector_model import REALISTIC, detect
+from pose_lifter.mocap.views import film, view_rotation
 
 __all__ = ["AXIS_TARGETS", "DISTANCES", "GROUPS", "JOINT_TARGETS", "METHODS", "RgbdEvaluator", "coverage",
-           "coverage_counts", "evaluate_jobs", "naive_lookup", "render_table", "rgbd_cameras", "rgbd_figures",
-           "root_error", "summarise"]
+           "coverage_counts", "evaluate_jobs", "film_rgbd", "naive_lookup", "render_table", "rgbd_cameras",
+           "rgbd_figures", "root_error", "summarise"]
 
 METHODS = ("mono", "naive", "fused", "fused-lag")
 #: Camera distances (m, to the joints' centroid).
@@ -90,6 +95,34 @@ def rgbd_cameras(elevations: Sequence[float] = (0.0,)) -> list[tuple[float, floa
     """The cameras the tracks rotate over: each of the accuracy table's azimuths at each of
     ``elevations`` (degrees), perspective, the elevations alternating first."""
     return [(float(a), float(e), "perspective") for a in ev.AZIMUTHS for e in elevations]
+
+
+def film_rgbd(track: ev.Track, distance: float, rng: np.random.Generator
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``track`` filmed by its camera's direction (azimuth, elevation) from ``distance`` metres,
+    the camera at the height of the hip centre on every frame (elevation 0) or above it, looking
+    at it, the joints' centroid ``distance`` ahead: the 2D of the realistic detector (joints
+    outside the image lost) and the true joints.
+
+    Returns
+    -------
+    px : ndarray, shape (T, 12, 2)
+        Pixels.
+    conf : ndarray, shape (T, 12)
+    truth : ndarray, shape (T, 12, 3)
+        Metres, camera optical frame.
+    """
+    az, el, _ = track.camera
+    n = len(track.world)
+    rots = np.repeat(view_rotation(az, el)[None], n, axis=0)
+    _, cam, leg = film(track.world, rots, np.full(n, distance), np.ones(n, dtype=bool))
+    hips = cam[:, list(HIPS)].mean(axis=1)  # (T, 3)
+    truth = cam - np.stack([np.zeros(n), hips[:, 1], np.full(n, -distance)], axis=1)[:, None, :]
+    (fx, fy), (cx, cy) = INTRINSICS
+    z = truth[..., 2]
+    clean = np.stack([fx * truth[..., 0] / z + cx, fy * truth[..., 1] / z + cy], axis=-1)
+    px, conf = detect(clean, fx * leg, REALISTIC, rng, ev.IMAGE_SIZE)
+    return px, conf, truth
 
 
 def root_error(pred: NDArray[np.float64], truth: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -243,11 +276,9 @@ class RgbdEvaluator:
         track's name, its camera, the distance, the frame count ``n`` and ``methods``: per method
         the lists of :meth:`_Method.record`."""
         det_seed, depth_seed = np.random.SeedSequence([track.seed, round(1000 * distance)]).spawn(2)
-        px, conf, world, centred = ev.film_track(track, {"detector": 1.0, "distance": distance},
-                                                 np.random.default_rng(det_seed))
+        px, conf, truth = film_rgbd(track, distance, np.random.default_rng(det_seed))
         depth_rng = np.random.default_rng(depth_seed)
-        truth = centred + np.array([0.0, 0.0, distance])
-        leg_m = limb_lengths(world)[:, RIGHT_LOWER_LEG]
+        leg_m = limb_lengths(track.world)[:, RIGHT_LOWER_LEG]
         n = len(truth)
         _, live = self.lifts.lifts("hybrid", px, conf, leg_m, distance)
         lagged = np.full((n, N_JOINTS, 3), np.nan)
