@@ -96,6 +96,28 @@ def test_the_naive_lookup_back_projects_the_reading_of_the_rounded_pixel() -> No
     np.testing.assert_array_equal(joints[2:], fallback[2:])
 
 
+def test_the_camera_looks_at_the_hip_centre_and_loses_the_joints_outside_the_image() -> None:
+    track = ev.Track("synthetic", synthetic_poses(40, seed=5), (90.0, 0.0, "perspective"), 1)
+    for distance in (1.5, 5.0):
+        px, conf, truth = rgbd.film_rgbd(track, distance, np.random.default_rng(0))
+        hips = truth[:, list(rgbd.HIPS)].mean(axis=1)
+        np.testing.assert_allclose(hips[:, 1], 0.0, atol=ROUND_OFF_ACCUMULATED)  # level with the hips
+        np.testing.assert_allclose(truth.mean(axis=1)[:, [0, 2]], [[0.0, distance]] * 40,
+                                   atol=ROUND_OFF_ACCUMULATED)
+        (fx, fy), (cx, cy) = rgbd.INTRINSICS
+        v = fy * truth[..., 1] / truth[..., 2] + cy
+        u = fx * truth[..., 0] / truth[..., 2] + cx
+        outside = (v < 0) | (v > rgbd.IMAGE_SIZE[1]) | (u < 0) | (u > rgbd.IMAGE_SIZE[0])
+        assert np.all(conf[outside] < 0.05)  # lost (detector_model.CONFIDENCE_LOST)
+        if distance == 1.5:  # the image holds ~0.9 m of the body: shoulders and ankles often out
+            assert outside[:, [0, 3, 8, 11]].mean() > 0.5 and not outside[:, list(rgbd.HIPS)].any()
+        else:
+            assert not outside.any()
+        # the detector's 2D is near the true projection where it is confident
+        near = np.linalg.norm(px - np.stack([u, v], axis=-1), axis=-1)
+        assert np.median(near[conf > 0.5]) < 0.1 * fy * 0.4 / distance  # a tenth of a shin
+
+
 def test_a_tiny_run_gives_every_method_at_every_distance_finite_figures() -> None:
     track = ev.Track("synthetic", synthetic_poses(5, seed=2), (0.0, 0.0, "perspective"), 3)
     distances = (1.5, 3.0, 5.0)
