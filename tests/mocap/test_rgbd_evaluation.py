@@ -139,6 +139,12 @@ def test_a_tiny_run_gives_every_method_at_every_distance_finite_figures() -> Non
     for d in table:
         for m in rgbd.METHODS:
             assert f"| {d} | {m} |" in text
+    # several camera elevations: a row per distance and elevation
+    high = ev.Track("high", track.world, (0.0, rgbd.ELEVATED, "perspective"), 4)
+    elevated = rgbd.evaluate_jobs([(high, 3.0)], rgbd.METHODS, {})
+    both = rgbd.summarise([*results, *elevated], (3.0,), rgbd.METHODS)
+    assert list(both) == ["3 m, level", "3 m, 30 deg above"]
+    assert both["3 m, level"]["mono"]["mpjpe"] == table["3 m"]["mono"]["mpjpe"]
     # seeded per track and distance: the same run gives the same figures
     again = rgbd.evaluate_jobs([(track, 3.0)], ("mono", "naive"), {})[0]
     first = next(r for r in results if r["distance"] == 3.0)

@@ -331,22 +331,28 @@ def evaluate_jobs(jobs: Sequence[tuple[ev.Track, float]], methods: Sequence[str]
 
 def summarise(results: Sequence[dict[str, Any]], distances: Sequence[float], methods: Sequence[str]
               ) -> dict[str, dict[str, dict[str, Any]]]:
-    """Per distance (``"3 m"``) and method: the means over every lifted frame of ``results``
-    (records of :meth:`RgbdEvaluator.evaluate`) of :data:`FIGURES`, the share of frames
-    ``lifted`` and ``coverage``: per group of :data:`GROUPS` the :func:`coverage` over every
-    joint (None for a method without uncertainty)."""
+    """Per distance (``"3 m"``; with several camera elevations among ``results``, per distance
+    and elevation: ``"3 m, level"``, ``"3 m, 30 deg above"``) and method: the means over every
+    lifted frame of ``results`` (records of :meth:`RgbdEvaluator.evaluate`) of :data:`FIGURES`,
+    the share of frames ``lifted`` and ``coverage``: per group of :data:`GROUPS` the
+    :func:`coverage` over every joint (None for a method without uncertainty)."""
+    elevations = sorted({float(r["camera"][1]) for r in results})
     table: dict[str, dict[str, dict[str, Any]]] = {}
     for d in distances:
-        rows = [r["methods"] for r in results if r["distance"] == d]
-        row: dict[str, dict[str, Any]] = {}
-        for m in methods:
-            vals: dict[str, Any] = {k: ev.nanmean([v for r in rows for v in r[m][k]]) for k in FIGURES}
-            vals["lifted"] = float(np.mean(np.concatenate([np.isfinite(r[m]["mpjpe"]) for r in rows])))
-            counts = [r[m]["coverage"] for r in rows if r[m]["coverage"] is not None]
-            vals["coverage"] = ({g: coverage(np.sum([c[g] for c in counts], axis=0)) for g in GROUPS}
-                                if counts else None)
-            row[m] = vals
-        table[f"{d:g} m"] = row
+        for el in elevations:
+            rows = [r["methods"] for r in results if r["distance"] == d and float(r["camera"][1]) == el]
+            if not rows:
+                continue
+            row: dict[str, dict[str, Any]] = {}
+            for m in methods:
+                vals: dict[str, Any] = {k: ev.nanmean([v for r in rows for v in r[m][k]]) for k in FIGURES}
+                vals["lifted"] = float(np.mean(np.concatenate([np.isfinite(r[m]["mpjpe"]) for r in rows])))
+                counts = [r[m]["coverage"] for r in rows if r[m]["coverage"] is not None]
+                vals["coverage"] = ({g: coverage(np.sum([c[g] for c in counts], axis=0)) for g in GROUPS}
+                                    if counts else None)
+                row[m] = vals
+            view = "" if len(elevations) == 1 else ", level" if el == 0 else f", {el:g} deg above"
+            table[f"{d:g} m{view}"] = row
     return table
 
 
