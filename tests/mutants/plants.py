@@ -49,7 +49,7 @@ BEHAVIOUR = [
     Plant("the params file's options ignored", "messages/settings.py",
           "            values[name] = value", "            values[name] = spec.default",
           "tests/offline/test_lift_cli.py"),
-    Plant("a wrong joint order in an adapter (COCO-17 wrists swapped)", "core/model/layouts.py",
+    Plant("a wrong joint order in an adapter (COCO-17 wrists swapped)", "messages/layouts.py",
           '"coco17": Layout("coco17", 17, (5, 7, 9, 6, 8, 10,',
           '"coco17": Layout("coco17", 17, (5, 7, 10, 6, 8, 9,',
           "tests/messages/test_adapters.py"),

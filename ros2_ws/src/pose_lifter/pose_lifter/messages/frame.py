@@ -11,7 +11,7 @@ what the node publishes for it. One frame:
    lifted (:func:`largest_first`), the others skipped; each skeleton is checked against the
    caps before its keypoints are read (:func:`admitted_track`: keypoint count, duplicate track
    id), read into the paper's joints with the layout looked up once for the frame
-   (:func:`~pose_lifter.messages.convert.frame_joints`: malformed keypoints refused), then
+   (:func:`~pose_lifter.messages.layouts.frame_joints`: malformed keypoints refused), then
    checked as joints (:func:`skeleton_input`: confidences clipped into [0, 1], no confident
    keypoint, absurd coordinates).
 2. :func:`lift_together` (the skeletons together, each through its pipeline's track policy,
@@ -53,7 +53,7 @@ from pose_lifter.core.track.policy import (
     lift_tracks,
 )
 from pose_lifter.core.track.state import swap_back
-from pose_lifter.messages.convert import frame_joints
+from pose_lifter.messages.layouts import frame_joints
 from pose_lifter.messages.settings import FrameSettings
 
 __all__ = [
@@ -253,7 +253,7 @@ def skeleton_input(track_id: int, points: NDArray[np.float64], confidence: NDArr
                    settings: FrameSettings, confidence_threshold: float,
                    on_clipped: Callable[[str], Any] = _NO_CLIP) -> SkeletonInput:
     """One skeleton's paper joints (``points`` (12, 2) pixels, ``confidence`` (12,), as
-    :func:`~pose_lifter.messages.convert.frame_joints` reads them) checked, or :class:`SkipSkeleton`.
+    :func:`~pose_lifter.messages.layouts.frame_joints` reads them) checked, or :class:`SkipSkeleton`.
 
     Refused: no keypoint at or above ``confidence_threshold``, visible keypoints beyond
     ``max_coordinate`` pixels. Confidences outside [0, 1] are clipped into it and

@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.messages import names
+from pose_lifter.messages.layouts import get_layout
 
 __all__ = [
     "CAMERA_FRAME",
