@@ -42,13 +42,14 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
-from pose_lifter.core.results import LiftResult
+from pose_lifter.core.results import LiftResult, LiftStatus
 from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.policy import (
     FramesAhead,
     OutOfOrderFrameError,
     TrackedLift,
     TrackFrame,
+    TrackOutcome,
     TrackPolicy,
     lift_tracks,
 )
@@ -309,6 +310,24 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
     return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
 
 
+#: The refusal's kind (:attr:`SkipSkeleton.kind`) of each way a lift ends without a result: the
+#: name of the error the core raises for it alone, as :func:`_refusal` names it.
+_KIND_OF_STATUS: Final[dict[LiftStatus, str]] = {
+    LiftStatus.INVALID_INPUT: "InvalidInputError",
+    LiftStatus.TOO_FEW_JOINTS: "TooFewJointsError",
+    LiftStatus.DIVERGED: "SolverError",
+    LiftStatus.OUT_OF_ORDER: "out-of-order stamp",
+    LiftStatus.FAILED: "unexpected",
+}
+
+
+def _outcome_refusal(outcome: TrackOutcome, track_id: int) -> SkipSkeleton:
+    """A track's frame lifted without a result as a :class:`SkipSkeleton`: its status's kind and
+    its reason (a bug, ``FAILED``, as ``"unexpected"``)."""
+    text = f"unexpected error: {outcome.reason}" if outcome.status == LiftStatus.FAILED else outcome.reason
+    return SkipSkeleton(_KIND_OF_STATUS[outcome.status], text, track_id)
+
+
 def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
                   ) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
@@ -322,17 +341,17 @@ def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intr
     if not frames:
         return []
     start = time.perf_counter()
-    done = [o.result if o.result is not None else o.error() for o in lift_tracks([
+    done = lift_tracks([
         TrackFrame(pipeline.policy, inp.track_id, stamp, inp.points, inp.confidence, intrinsics, inp.ahead)
-        for pipeline, inp, stamp, intrinsics in frames])]
+        for pipeline, inp, stamp, intrinsics in frames])
     out: list[LiftedSkeleton | SkipSkeleton | None] = []
     solved: list[tuple[int, FramePipeline, Intrinsics, SkeletonInput, TrackedLift]] = []
     for k, ((pipeline, inp, _, intrinsics), d) in enumerate(zip(frames, done, strict=True)):
-        if isinstance(d, Exception):  # a refusal, or anything else (a bug) costs only its skeleton
-            out.append(_refusal(d, inp.track_id))
+        if d.result is None:  # a refusal, or anything else (a bug) costs only its skeleton
+            out.append(_outcome_refusal(d, inp.track_id))
         else:
             out.append(None)  # placed below
-            solved.append((k, pipeline, intrinsics, inp, d))
+            solved.append((k, pipeline, intrinsics, inp, d.result))
     placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved])
     share = (time.perf_counter() - start) / len(frames)
     for (k, *_), lifted in zip(solved, placed, strict=True):
