@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidInputError
-from ..model.skeleton import limb_selectors
+from ..model.skeleton import LimbVectors, limb_selectors
 from ..results import Camera
 from ._common import (
     array,
@@ -132,10 +132,8 @@ class _SmoothPose:
         Residual ``r = b - A alpha`` (:func:`_pose_linear_map`).
     w2 : ndarray, shape (2n,)
         Per-entry weights.
-    cb : ndarray, shape (8, 3, k)
-        Limb vectors of the components.
-    cm : ndarray, shape (8, 3)
-        Limb vectors of the mean.
+    limbs : LimbVectors
+        Limb vectors of the components and of the mean.
     lsq : ndarray, shape (8,)
         Squared target lengths.
     th : float
@@ -147,8 +145,7 @@ class _SmoothPose:
     a_mat: NDArray[np.float64]
     b_vec: NDArray[np.float64]
     w2: NDArray[np.float64]
-    cb: NDArray[np.float64]
-    cm: NDArray[np.float64]
+    limbs: LimbVectors
     lsq: NDArray[np.float64]
     th: float
     l1: bool
@@ -193,15 +190,15 @@ class _SmoothPose:
 
     def limb_fun(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """The limb constraints ``||C_i y||^2 - L_i``, shape (8,), at ``u`` (nvar,)."""
-        v = self.cm + self.cb @ self.alpha_of(u)  # (8, 3)
+        v = self.limbs.of_mean + self.limbs.of_components @ self.alpha_of(u)  # (8, 3)
         return np.asarray((v * v).sum(axis=1) - self.lsq)
 
     def limb_jac(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """The Jacobian (8, nvar) of :meth:`limb_fun` at ``u`` (nvar,)."""
         k = self.k
-        v = self.cm + self.cb @ self.alpha_of(u)
-        ga = 2.0 * np.einsum("ij,ijk->ik", v, self.cb)  # (8, k)
-        out = np.zeros((self.cb.shape[0], self.nvar))
+        v = self.limbs.of_mean + self.limbs.of_components @ self.alpha_of(u)
+        ga = 2.0 * np.einsum("ij,ijk->ik", v, self.limbs.of_components)  # (8, k)
+        out = np.zeros((len(v), self.nvar))
         out[:, :k] = ga
         out[:, k : 2 * k] = -ga
         return out
@@ -286,9 +283,7 @@ def reference_pose_limbs_local(
     a0 = array(alpha0, (bm.shape[1],), "alpha0")
     c = limb_selectors()
     lsq = array(limb_sq_lengths, (c.shape[0],), "limb_sq_lengths")
-    cb = np.einsum("ija,ak->ijk", c, bm)  # (8, 3, k)
-    cm = c @ mu  # (8, 3)
-    sp = _SmoothPose(a_mat, b_vec, w2, cb, cm, lsq, float(theta), lo == "l1")
+    sp = _SmoothPose(a_mat, b_vec, w2, LimbVectors.of(mu, bm), lsq, float(theta), lo == "l1")
     cons, bounds, u0 = _smooth_constraints(sp, a0)
     u = local_minimize(sp.fun, u0, sp.jac, cons, bounds, sp.limb_fun, "reference_pose_limbs_local")
     alpha = sp.alpha_of(u)

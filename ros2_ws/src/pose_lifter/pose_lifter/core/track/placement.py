@@ -203,14 +203,9 @@ def place_poses(
     return place_at(pose, leg_length_m, centroid, rotation)  # pose_camera is centred on the joints' mean
 
 
-def placed_centroids(
-    scale: NDArray[np.float64],
-    translation: NDArray[np.float64],
-    leg_length_m: float,
-    focal: tuple[float, float] | None,
-    principal_point: tuple[float, float] | None,
-    default_distance_m: float,
-) -> NDArray[np.float64]:
+def placed_centroids(scale: NDArray[np.float64], translation: NDArray[np.float64], leg_length_m: float,
+                     focal: tuple[float, float] | None, principal_point: tuple[float, float] | None,
+                     default_distance_m: float) -> NDArray[np.float64]:
     """The centroids (n, 3; metres) :func:`place_poses` puts ``n`` poses at, from their cameras'
     ``scale`` (n,) and ``translation`` (n, 2) (see there); raises as it does."""
     import numpy as np
