@@ -54,8 +54,9 @@ BEHAVIOUR = [
           '"coco17": Layout("coco17", 17, (5, 7, 10, 6, 8, 9,',
           "tests/messages/test_adapters.py"),
     Plant("a zeroed depth in the metric placement", "core/track/placement.py",
-          "local = pose * float(leg_length_m)",
-          "local = pose * np.array([1.0, 1.0, 0.0]) * float(leg_length_m)",
+          "local = poses * np.reshape(np.asarray(leg_m, dtype=np.float64), (-1, 1, 1))",
+          "local = poses * np.array([1.0, 1.0, 0.0])"
+          " * np.reshape(np.asarray(leg_m, dtype=np.float64), (-1, 1, 1))",
           "tests/offline/test_offline.py"),
     Plant("the perspective correction's sign", "core/track/placement.py",
           "ratio = 1.0 + depths * scale[:, None] / focal[:, None]",
