@@ -140,6 +140,19 @@ def test_wall_and_floor() -> None:
     assert np.all(empty.depth == 2.0) and np.all(empty.person == -1)
 
 
+def test_bounding_boxes_clip_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each primitive cast over its image box only gives the image that casting every primitive
+    over the whole image gives: near the camera (primitives across its plane), far, off-centre."""
+    rng = np.random.default_rng(0)
+    poses = [_t_pose(d, rng.uniform(-1.2, 0.5)) + rng.normal(0.0, 0.05, (12, 3)) + [rng.uniform(-1, 1), 0, 0]
+             for d in (0.08, 0.4, 1.5, 3.0, 6.0) for _ in range(3)]
+    boxed = [dm.render_depth(np.maximum(p, [-9, -9, 0.02])[None], INTR) for p in poses]
+    monkeypatch.setattr(dm._Canvas, "boxes", lambda self, c, r: [[0, self.h, 0, self.w]] * len(c))
+    for p, r in zip(poses, boxed, strict=True):
+        full = dm.render_depth(np.maximum(p, [-9, -9, 0.02])[None], INTR)
+        assert np.array_equal(r.depth, full.depth) and np.array_equal(r.part, full.part)
+
+
 def test_bad_input_is_refused() -> None:
     with pytest.raises(InvalidInputError, match=r"\(P, 12, 3\)"):
         dm.render_depth(np.zeros((12, 3)), INTR)

@@ -273,37 +273,39 @@ class _Canvas:
         self.person = np.full((h, w), -1, dtype=np.int16)
         self.part = np.full((h, w), -1, dtype=np.int16)
 
-    def box(self, centres: NDArray[np.float64], radius: float) -> tuple[slice, slice] | None:
-        """Rows and columns covering the projection of spheres of one radius about ``centres``
-        (k, 3) (conservatively: the projections of the corners of their bounding boxes; a capsule
-        lies inside the hull of its end spheres); None when outside the image."""
-        x, y, z = centres[:, 0], centres[:, 1], centres[:, 2]
-        if np.all(z + radius <= 0):
-            return None
-        if np.any(z - radius <= 1e-6):  # reaches the camera plane: the whole image
-            return slice(0, self.h), slice(0, self.w)
-        near, far = 1.0 / (z - radius), 1.0 / (z + radius)
-        us = self.fx * np.concatenate([(x - radius) * near, (x - radius) * far, (x + radius) * near,
-                                       (x + radius) * far]) + self.cx
-        vs = self.fy * np.concatenate([(y - radius) * near, (y - radius) * far, (y + radius) * near,
-                                       (y + radius) * far]) + self.cy
-        u0, u1 = max(int(np.floor(us.min())), 0), min(int(np.ceil(us.max())) + 1, self.w)
-        v0, v1 = max(int(np.floor(vs.min())), 0), min(int(np.ceil(vs.max())) + 1, self.h)
-        if u0 >= u1 or v0 >= v1:
-            return None
-        return slice(v0, v1), slice(u0, u1)
+    def boxes(self, centres: NDArray[np.float64], radius: NDArray[np.float64]) -> list[list[int]]:
+        """Per primitive ``[v0, v1, u0, u1]``: the rows and columns covering the projection of
+        spheres about ``centres`` (n, k, 3), of radius ``radius`` (n,) (conservatively: the
+        projections of the corners of their bounding boxes; a capsule lies inside the hull of its
+        end spheres, a torso inside the hull of its box's corners); empty (v0 >= v1 or u0 >= u1)
+        outside the image, the whole image when one reaches the camera plane."""
+        r = np.asarray(radius, dtype=np.float64)[:, None, None]
+        z = centres[..., 2:3]
+        with np.errstate(divide="ignore"):
+            inv = np.concatenate([1.0 / (z - r), 1.0 / (z + r)], axis=-1)  # (n, k, 2)
+        side = np.array([-1.0, 1.0])
+        us = self.fx * ((centres[..., 0:1] + side * r)[..., :, None] * inv[..., None, :]) + self.cx
+        vs = self.fy * ((centres[..., 1:2] + side * r)[..., :, None] * inv[..., None, :]) + self.cy
+        us, vs = us.reshape(len(us), -1), vs.reshape(len(vs), -1)
+        out = np.stack([np.floor(vs.min(axis=1)), np.ceil(vs.max(axis=1)) + 1,
+                        np.floor(us.min(axis=1)), np.ceil(us.max(axis=1)) + 1], axis=1)
+        out = np.clip(out, 0, [self.h, self.h, self.w, self.w])
+        near = np.any(z[..., 0] - r[..., 0] <= 1e-6, axis=1)
+        out[near] = [0, self.h, 0, self.w]
+        return out.astype(np.int64).tolist()  # type: ignore[no-any-return]
 
-    def rays(self, box: tuple[slice, slice]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def rays(self, box: list[int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(1, cols) x and (rows, 1) y normalised ray coordinates of a box."""
-        return self.xn[box[1]][None, :], self.yn[box[0]][:, None]
+        return self.xn[None, box[2]:box[3]], self.yn[box[0]:box[1], None]
 
-    def draw(self, box: tuple[slice, slice], t: NDArray[np.float64], person: int, part: int) -> None:
+    def draw(self, box: list[int], t: NDArray[np.float64], person: int, part: int) -> None:
         """Keep the hits ``t`` (box-shaped, inf = none) nearer than what is drawn."""
-        d = self.depth[box]
+        rows, cols = slice(box[0], box[1]), slice(box[2], box[3])
+        d = self.depth[rows, cols]
         nearer = t < d
         d[nearer] = t[nearer]
-        self.person[box][nearer] = person
-        self.part[box][nearer] = part
+        self.person[rows, cols][nearer] = person
+        self.part[rows, cols][nearer] = part
 
 
 def _sphere_t(xn: NDArray[np.float64], yn: NDArray[np.float64], c: NDArray[np.float64], r: float,
@@ -424,24 +426,34 @@ def render_depth(joints_cam: NDArray[np.float64], intrinsics: CameraIntrinsics,
         _background(canvas, j, background)
     if len(j):
         prim = body_primitives(j)
-        for p in range(len(j)):
-            rot, centre, extent = prim.torso_rotation[p], prim.torso_centre[p], prim.torso_extent[p]
-            # the torso lies inside the hull of its bounding box's 8 corners
-            corners = centre + np.array([[sx * TORSO_HALF_WIDTH, sy, sz * TORSO_HALF_DEPTH] for sx in (-1, 1)
-                                         for sy in extent for sz in (-1, 1)]) @ rot
-            box = canvas.box(corners, 0.0)
-            if box is not None:
-                canvas.draw(box, _torso_t(*canvas.rays(box), rot, centre, extent), p, _PART["torso"])
+        n_people, n_caps, n_spheres = len(j), len(prim.capsule_part), len(prim.sphere_part)
+        # the torso lies inside the hull of its bounding box's 8 corners
+        signs = np.array([(sx, top, sz) for sx in (-1, 1) for top in (0, 1) for sz in (-1, 1)])
+        local = np.empty((n_people, 8, 3))
+        local[..., 0] = signs[:, 0] * TORSO_HALF_WIDTH
+        local[..., 1] = prim.torso_extent[:, signs[:, 1]]
+        local[..., 2] = signs[:, 2] * TORSO_HALF_DEPTH
+        corners = prim.torso_centre[:, None] + local @ prim.torso_rotation
+        torso_boxes = canvas.boxes(corners, np.zeros(n_people))
+        cap_boxes = canvas.boxes(np.stack([prim.capsule_a, prim.capsule_b], axis=2).reshape(-1, 2, 3),
+                                 np.tile(prim.capsule_radius, n_people))
+        sphere_boxes = canvas.boxes(prim.sphere_centre.reshape(-1, 1, 3),
+                                    np.tile(prim.sphere_radius, n_people))
+        for p in range(n_people):
+            box = torso_boxes[p]
+            if box[0] < box[1] and box[2] < box[3]:
+                canvas.draw(box, _torso_t(*canvas.rays(box), prim.torso_rotation[p], prim.torso_centre[p],
+                                          prim.torso_extent[p]), p, _PART["torso"])
             for k, part in enumerate(prim.capsule_part):
-                a, b, r = prim.capsule_a[p, k], prim.capsule_b[p, k], float(prim.capsule_radius[k])
-                box = canvas.box(np.stack([a, b]), r)
-                if box is not None:
-                    canvas.draw(box, _capsule_t(*canvas.rays(box), a, b, r), p, part)
+                box = cap_boxes[p * n_caps + k]
+                if box[0] < box[1] and box[2] < box[3]:
+                    canvas.draw(box, _capsule_t(*canvas.rays(box), prim.capsule_a[p, k], prim.capsule_b[p, k],
+                                                float(prim.capsule_radius[k])), p, part)
             for k, part in enumerate(prim.sphere_part):
-                c, r = prim.sphere_centre[p, k], float(prim.sphere_radius[k])
-                box = canvas.box(c[None], r)
-                if box is not None:
-                    canvas.draw(box, _sphere_t(*canvas.rays(box), c, r), p, part)
+                box = sphere_boxes[p * n_spheres + k]
+                if box[0] < box[1] and box[2] < box[3]:
+                    canvas.draw(box, _sphere_t(*canvas.rays(box), prim.sphere_centre[p, k],
+                                               float(prim.sphere_radius[k])), p, part)
     return RenderedDepth(canvas.depth, canvas.person, canvas.part, intrinsics)
 
 
