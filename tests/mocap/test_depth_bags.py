@@ -88,6 +88,11 @@ def test_committed_rgbd_bag_is_registered_to_the_camera() -> None:
     msgs = _decoded(RGBD_BAG)
     images = _check_registered(msgs, names.TOPIC_DEPTH, _raw_mm)
     assert not np.array_equal(images[0], images[1])  # a new sensor draw each frame
+    # a static wall 2.5 m behind the person: the top corner's median is the same on every frame
+    truth = np.array([[[p.x, p.y, p.z] for p in m.skeletons[0].joints]
+                      for m in msgs[names.TOPIC_GROUND_TRUTH]])
+    corner = [np.median(mm[:40, :40][mm[:40, :40] > 0]) / 1000.0 for mm in images]
+    np.testing.assert_allclose(corner, truth[..., 2].mean() + 2.5, atol=0.01)
     assert RGBD_BAG.stat().st_size < 2_000_000
 
 

@@ -140,6 +140,23 @@ def test_wall_and_floor() -> None:
     assert np.all(empty.depth == 2.0) and np.all(empty.person == -1)
 
 
+def test_scene_backgrounds_stay_put_when_the_person_jumps() -> None:
+    d = 3.0
+    standing = _t_pose(d, -0.8)
+    jumping = standing + np.array([0.0, -0.3, 0.5])  # 0.3 m up, 0.5 m farther
+    seq = np.stack([standing, jumping])[None]  # (1, 2, 12, 3)
+    up = np.tile([0.0, -1.0, 0.0], (2, 1))
+    backs = dm.scene_backgrounds(seq, up)
+    assert backs[0] == backs[1]
+    assert backs[0].wall_depth == pytest.approx(d + 0.25 + backs[0].wall_behind)
+    assert backs[0].floor_height == pytest.approx(-(standing[8, 1] + dm.ANKLE_HEIGHT))
+    a, b = (dm.render_depth(p[None], INTR, background=g) for p, g in zip(seq[0], backs, strict=True))
+    assert a.depth[479, 5] == b.depth[479, 5] and a.depth[5, 5] == b.depth[5, 5]
+    # on a per-image background the floor would follow the feet up
+    c = dm.render_depth(jumping[None], INTR)
+    assert c.depth[479, 5] < b.depth[479, 5]  # a higher floor meets the downward rays sooner
+
+
 def test_bounding_boxes_clip_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     """Each primitive cast over its image box only gives the image that casting every primitive
     over the whole image gives: near the camera (primitives across its plane), far, off-centre."""

@@ -28,7 +28,7 @@ and which person and part it belongs to. Rays are written ``t (x_n, y_n, 1)`` wi
 parameter ``t`` is its z-depth. Behind the people a :class:`Background`: a wall perpendicular to
 the optical axis and a floor, the plane :data:`ANKLE_HEIGHT` below the lowest ankle along the
 camera's up direction (the virtual cameras of :mod:`pose_lifter.mocap.scenes` look horizontally:
-up is -y).
+up is -y); :func:`scene_backgrounds` keeps them put over a sequence.
 
 **The sensor** (:class:`DepthSensor`, :func:`sense`), in this order on the ideal image:
 
@@ -78,6 +78,7 @@ __all__ = [
     "RenderedDepth",
     "body_primitives",
     "render_depth",
+    "scene_backgrounds",
     "sense",
 ]
 
@@ -218,7 +219,10 @@ class Background:
     wall_behind : float
         Metres behind the people's mean joint depth, when ``wall_depth`` is None.
     floor : bool
-        A floor :data:`ANKLE_HEIGHT` below the lowest ankle along ``up`` (none without people).
+        A floor, the plane ``up . p = floor_height`` of camera-frame points p.
+    floor_height : float or None
+        Metres (negative: below the camera); None: :data:`ANKLE_HEIGHT` below the image's lowest
+        ankle along ``up`` (no floor when there are no people).
     up : tuple of float
         The world's up direction in the camera frame (unit; the scenes' cameras look
         horizontally: (0, -1, 0)).
@@ -227,13 +231,15 @@ class Background:
     wall_depth: float | None = None
     wall_behind: float = 2.5
     floor: bool = True
+    floor_height: float | None = None
     up: tuple[float, float, float] = (0.0, -1.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.wall_depth is not None and not (np.isfinite(self.wall_depth) and self.wall_depth > 0):
             raise InvalidInputError(f"Background.wall_depth must be a positive depth, got {self.wall_depth}")
-        if not np.isfinite(self.wall_behind):
-            raise InvalidInputError(f"Background.wall_behind must be finite, got {self.wall_behind}")
+        for name in ("wall_behind", "floor_height"):
+            if getattr(self, name) is not None and not np.isfinite(getattr(self, name)):
+                raise InvalidInputError(f"Background.{name} must be finite, got {getattr(self, name)}")
         if not np.isclose(np.linalg.norm(self.up), 1.0):
             raise InvalidInputError(f"Background.up must be a unit vector, got {self.up}")
 
@@ -380,9 +386,11 @@ def _background(canvas: _Canvas, joints: NDArray[np.float64], background: Backgr
         wall = float(joints[..., 2].mean()) + background.wall_behind
     if wall is not None and wall > 0:
         canvas.depth[:] = wall
-    if background.floor and len(joints):
+    height = background.floor_height
+    if height is None and len(joints):
+        height = float((joints[:, _ANKLES] @ np.asarray(background.up)).min()) - ANKLE_HEIGHT
+    if background.floor and height is not None:
         up = np.asarray(background.up, dtype=np.float64)
-        height = float((joints[:, _ANKLES] @ up).min()) - ANKLE_HEIGHT  # the floor: up . p = height
         toward = canvas.yn[:, None] * up[1] + up[2]  # (H, 1): up . ray, per row when up has no x
         if up[0] != 0.0:
             toward = toward + canvas.xn[None, :] * up[0]
@@ -390,6 +398,33 @@ def _background(canvas: _Canvas, joints: NDArray[np.float64], background: Backgr
             tf = height / toward
         tf = np.where(np.isfinite(tf) & (tf > 0), tf, np.inf)
         np.minimum(canvas.depth, tf, out=canvas.depth)
+
+
+def scene_backgrounds(joints_cam: NDArray[np.float64], up: NDArray[np.float64], wall_behind: float = 2.5
+                      ) -> list[Background]:
+    """Per frame the background of a filmed sequence that stays put: a wall ``wall_behind``
+    behind the people's mean joint depth over all frames, and a floor :data:`ANKLE_HEIGHT` below
+    the lowest ankle of all frames (the camera's height taken as constant).
+
+    Parameters
+    ----------
+    joints_cam : ndarray, shape (P, T, 12, 3)
+        Metres, each frame's camera optical frame.
+    up : ndarray, shape (T, 3)
+        The world's up direction in each frame's camera frame (``R @ (0, 1, 0)`` of the frame's
+        world -> camera rotation R).
+    wall_behind : float
+
+    Returns
+    -------
+    list of Background, one per frame
+    """
+    j = np.asarray(joints_cam, dtype=np.float64)
+    u = np.asarray(up, dtype=np.float64)
+    wall = float(j[..., 2].mean()) + wall_behind
+    floor = float(np.einsum("ptak,tk->pta", j[:, :, _ANKLES], u).min()) - ANKLE_HEIGHT
+    return [Background(wall_depth=wall, floor_height=floor, up=(float(x), float(y), float(z)))
+            for x, y, z in u]
 
 
 def render_depth(joints_cam: NDArray[np.float64], intrinsics: CameraIntrinsics,

@@ -385,7 +385,8 @@ def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = No
 
     ``depth`` adds each frame's depth image, registered to the virtual camera (the camera_info's
     stamp and frame), as :mod:`pose_lifter.mocap.depth_model`'s REALISTIC sensor reads the
-    people in front of the default background (seeded by the scene's seed): ``"raw"`` a 16UC1
+    people in front of a wall 2.5 m behind them and on a floor, both static over the scene
+    (:func:`~pose_lifter.mocap.depth_model.scene_backgrounds`), seeded by the scene's seed: ``"raw"`` a 16UC1
     ``sensor_msgs/Image`` on ``names.TOPIC_DEPTH``, ``"compressed"`` its compressedDepth PNG
     (:func:`compressed_depth_data`) on ``names.TOPIC_DEPTH_COMPRESSED``."""
     from pose_lifter.messages import convert as m
@@ -396,6 +397,8 @@ def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = No
     types = m.rosbags_types()
     rng = np.random.default_rng([int(scene.metadata.get("seed", 0)), _DEPTH_STREAM])
     intrinsics = ((FOCAL_PX, FOCAL_PX), PRINCIPAL_POINT)
+    if depth is not None:
+        backgrounds = depth_model.scene_backgrounds(scene.joints_camera, scene.rotations @ _UP)
     for ti, stamp in enumerate(scene.stamps_ns):
         header = m.make_header(int(stamp), CAMERA_FRAME, types)
         skels2d, skels3d = [], []
@@ -411,7 +414,7 @@ def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = No
                names.SKELETON3D_ARRAY)
         if depth is not None:
             rendered = depth_model.render_depth(scene.joints_camera[:, ti], intrinsics,
-                                                (IMAGE_WIDTH, IMAGE_HEIGHT))
+                                                (IMAGE_WIDTH, IMAGE_HEIGHT), backgrounds[ti])
             topic, msg, msgtype = _depth_message(
                 header, depth_model.sense(rendered, depth_model.REALISTIC, rng), depth)
             yield (topic, int(stamp), msg, msgtype)
