@@ -10,9 +10,9 @@ active-stereo sensor (RealSense D435-like) with its faults (:func:`sense`).
 2. *noise*: Gaussian, standard deviation ``noise_c z^2`` (the stereo depth RMS error
    ``z^2 subpixel / (f B)`` of Grunnet-Jepsen, Sweetser & Woodfill, "Best-known-methods for
    tuning Intel RealSense D400 depth cameras for best performance", Intel, 2018: subpixel 0.08,
-   f = 640 px at 1280x720 (87 deg field of view), B = 50 mm give 0.0024 per metre), spatially
-   correlated over ``noise_window_px`` pixels (a block-matching window), with unit variance per
-   pixel;
+   f = 0.5 * 1280 / tan(87 deg / 2) = 675 px at 1280x720, B = 50 mm give 0.0024 per metre); each
+   pixel's draw is the mean of a ``noise_window_px`` square block of independent draws, rescaled
+   to unit variance, so neighbours within a block-matching window err alike;
 3. *quantisation* to ``quantisation_m`` (1 mm: a 16UC1 image in millimetres);
 4. *edge shadows*: the stereo occlusion of an active-stereo pair whose second imager sits
    ``baseline_m`` to the right of the depth reference (the D435's left imager): a pixel is lost
