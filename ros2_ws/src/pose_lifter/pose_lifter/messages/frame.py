@@ -143,6 +143,9 @@ class LiftedSkeleton:
     swapped : ndarray of bool, shape (2,), optional
         The arms' and the legs' left/right labels its track swapped back on this frame
         (:class:`~pose_lifter.core.track.policy.TrackedLift`; None: none).
+    std_m : ndarray, shape (12, 3), optional
+        Each joint's standard deviation along x, y, z of the camera frame, metres (finite,
+        non-negative; published as ``Skeleton3D.joint_std``); None: unknown (published empty).
     """
 
     input: SkeletonInput
@@ -152,6 +155,7 @@ class LiftedSkeleton:
     solve_time: float
     fit_pose_camera: NDArray[np.float64] | None = None
     swapped: NDArray[np.bool_] | None = None
+    std_m: NDArray[np.float64] | None = None
 
     @property
     def track_id(self) -> int:
