@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import tolerances as tol
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.layouts import frame_joints, get_layout
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from scipy.spatial.transform import Rotation
 
@@ -192,6 +194,39 @@ def test_skeleton3d_to_joints_reorders_by_name() -> None:
         m.skeleton3d_to_joints(msg)
 
 
+def test_joint_std_round_trips_reorders_by_name_and_is_nan_where_unknown() -> None:
+    """``joint_std`` through rosbags' CDR comes back as written (float64, bit for bit), in the core
+    order when the message lists its joints in another order; an empty field, ground truth and a
+    message of the definition before the field (no attribute) read as NaN; a bad std is refused
+    with one line."""
+    res = fake_result(np.eye(3), 80.0, np.array([300.0, 200.0]))
+    rng = np.random.default_rng(4)
+    joints, std = rng.normal(size=(12, 3)), rng.uniform(0.01, 0.3, size=(12, 3))
+    msg = m.result_to_skeleton3d(res, 7, joints, T, std_m=std)
+    arr = m.skeletons3d_array(m.make_header(5, "cam", T), [msg, m.result_to_skeleton3d(res, 8, joints, T)], T)
+    with_std, without = roundtrip(arr, "pose_lifter_msgs/msg/Skeleton3DArray").skeletons
+    assert np.array_equal(m.skeleton3d_to_std(with_std), std)
+    assert len(without.joint_std) == 0 and np.isnan(m.skeleton3d_to_std(without)).all()
+    assert len(m.skeleton3d_from_joints(0, joints, T).joint_std) == 0
+    perm = rng.permutation(12)
+    with_std.joint_names = [JOINT_NAMES[i] for i in perm]
+    with_std.joints = [with_std.joints[i] for i in perm]
+    with_std.joint_std = [with_std.joint_std[i] for i in perm]
+    np.testing.assert_array_equal(m.skeleton3d_to_std(with_std), std)
+    np.testing.assert_array_equal(m.skeleton3d_to_joints(with_std), joints)
+    with_std.joint_std = with_std.joint_std[:-1]
+    with pytest.raises(InvalidInputError, match="joint_names and joint_std differ"):
+        m.skeleton3d_to_std(with_std)
+
+    older = SimpleNamespace(joint_names=list(JOINT_NAMES), joints=msg.joints)  # read before joint_std
+    assert np.isnan(m.skeleton3d_to_std(older)).all()
+    for bad, expected in [(std[:11], r"\(12, 3\) metres, got shape \(11, 3\)"),
+                          (np.where(np.eye(12, 3) > 0, np.nan, std), "finite and non-negative"),
+                          (-std, "finite and non-negative")]:
+        with pytest.raises(InvalidInputError, match=expected):
+            m.result_to_skeleton3d(res, 7, joints, T, std_m=bad)
+
+
 def test_skeleton_markers() -> None:
     header = m.make_header(0, "cam", T)
     j0 = np.zeros((12, 3))
@@ -228,7 +263,7 @@ def test_a_frame_s_joints_are_read_with_its_layout_looked_up_once() -> None:
     rng = np.random.default_rng(3)
     good = [m.arrays_to_skeleton2d(rng.uniform(0, 500, (17, 2)), np.full(17, 0.8), k, T) for k in range(2)]
     bad = m.arrays_to_skeleton2d(rng.uniform(0, 500, (10, 2)), np.full(10, 0.8), 9, T)
-    first, wrong, second = m.frame_joints([good[0], bad, good[1]], "coco17")
+    first, wrong, second = frame_joints([good[0], bad, good[1]], "coco17")
     assert isinstance(wrong, InvalidInputError)
     for got, skel in ((first, good[0]), (second, good[1])):
         assert not isinstance(got, Exception)
@@ -236,4 +271,4 @@ def test_a_frame_s_joints_are_read_with_its_layout_looked_up_once() -> None:
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
     with pytest.raises(UnknownLayoutError):
-        m.frame_joints(good, "no_such_layout")
+        frame_joints(good, "no_such_layout")

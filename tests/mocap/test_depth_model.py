@@ -1,6 +1,6 @@
-"""The depth camera model (pose_lifter.mocap.depth_model): the rendered body surface against
-analytic depths, occlusion order, the background, and each sensor fault at its stated rate
-(statistical bounds are several standard errors wide)."""
+"""The depth camera model (pose_lifter.mocap.body_surface and .depth_model): the rendered body
+surface against analytic depths, occlusion order, the background, and each sensor fault at its
+stated rate (statistical bounds are several standard errors wide)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import tolerances as tol
 from pose_lifter.core.errors import InvalidInputError
+from pose_lifter.mocap import body_surface as bs
 from pose_lifter.mocap import depth_model as dm
 from scipy import ndimage
 
@@ -44,14 +45,14 @@ def _row_extent(mask: np.ndarray) -> tuple[int, int]:
 
 def test_head_sphere_depth_and_silhouette_match_the_analytic_sphere() -> None:
     d = 3.0
-    pose = _t_pose(d, dm.HEAD_ABOVE_SHOULDERS)  # head centre on the optical axis at depth d
+    pose = _t_pose(d, bs.HEAD_ABOVE_SHOULDERS)  # head centre on the optical axis at depth d
     r = dm.render_depth(pose[None], INTR, background=None)
-    head = dm.PART_NAMES.index("head")
+    head = bs.PART_NAMES.index("head")
     v, u = int(CY), int(CX)
     assert r.part[v, u] == head and r.person[v, u] == 0
-    assert r.depth[v, u] == pytest.approx(d - dm.HEAD_RADIUS, abs=tol.ROUND_OFF_ACCUMULATED)
+    assert r.depth[v, u] == pytest.approx(d - bs.HEAD_RADIUS, abs=tol.ROUND_OFF_ACCUMULATED)
     # the silhouette: a circle of f r / sqrt(d^2 - r^2) pixels
-    radius_px = F * dm.HEAD_RADIUS / np.sqrt(d * d - dm.HEAD_RADIUS**2)
+    radius_px = F * bs.HEAD_RADIUS / np.sqrt(d * d - bs.HEAD_RADIUS**2)
     lo, hi = _row_extent(r.part[v] == head)
     assert lo == int(np.ceil(CX - radius_px)) and hi == int(np.floor(CX + radius_px))
     top = np.flatnonzero(r.part[:, u] == head).min()
@@ -60,7 +61,7 @@ def test_head_sphere_depth_and_silhouette_match_the_analytic_sphere() -> None:
     vv, uu = np.nonzero(r.part == head)
     t = r.depth[vv, uu]
     pts = np.stack([t * (uu - CX) / F, t * (vv - CY) / F, t], axis=1)
-    np.testing.assert_allclose(np.linalg.norm(pts - [0.0, 0.0, d], axis=1), dm.HEAD_RADIUS,
+    np.testing.assert_allclose(np.linalg.norm(pts - [0.0, 0.0, d], axis=1), bs.HEAD_RADIUS,
                                atol=tol.ROUND_OFF_ACCUMULATED)
 
 
@@ -68,10 +69,10 @@ def test_vertical_shin_capsule_matches_the_analytic_cylinder() -> None:
     d = 2.5
     pose = _t_pose(d, -1.175)  # the shins' middles on the row y = 0 (row cy), at x = +-0.1
     r = dm.render_depth(pose[None], INTR, background=None)
-    shin = dm.PART_NAMES.index("left_shin")
+    shin = bs.PART_NAMES.index("left_shin")
     v = int(CY)
     # the row's rays (xn, 0, 1) meet the circle of radius r about (0.1, d) in the plane y = 0
-    rad, xc = dm.SHIN_RADIUS, 0.1
+    rad, xc = bs.SHIN_RADIUS, 0.1
     lo, hi = _row_extent(r.part[v] == shin)
     rho, theta = np.hypot(xc, d), np.arctan2(xc, d)
     edges = CX + F * np.tan(theta + np.array([-1.0, 1.0]) * np.arcsin(rad / rho))
@@ -88,13 +89,13 @@ def test_torso_is_the_stated_width_and_depth() -> None:
     d = 3.0
     pose = _t_pose(d, 0.0)
     r = dm.render_depth(pose[None], INTR, background=None)
-    torso = dm.PART_NAMES.index("torso")
+    torso = bs.PART_NAMES.index("torso")
     v = int(CY + F * 0.3 / d)  # between the arms and the legs
     lo, hi = _row_extent(r.part[v] == torso)
     width_m = (hi - lo + 1) * d / F
-    assert width_m == pytest.approx(2 * dm.TORSO_HALF_WIDTH, abs=2 * d / F)
-    assert 0.3 <= 2 * dm.TORSO_HALF_WIDTH <= 0.35 and 2 * dm.TORSO_HALF_DEPTH == pytest.approx(0.2)
-    assert r.depth[v, int(CX)] == pytest.approx(d - dm.TORSO_HALF_DEPTH, abs=1e-4)
+    assert width_m == pytest.approx(2 * bs.TORSO_HALF_WIDTH, abs=2 * d / F)
+    assert 0.3 <= 2 * bs.TORSO_HALF_WIDTH <= 0.35 and 2 * bs.TORSO_HALF_DEPTH == pytest.approx(0.2)
+    assert r.depth[v, int(CX)] == pytest.approx(d - bs.TORSO_HALF_DEPTH, abs=1e-4)
 
 
 def test_a_near_limb_occludes_the_torso_and_a_far_one_is_hidden() -> None:
@@ -107,10 +108,10 @@ def test_a_near_limb_occludes_the_torso_and_a_far_one_is_hidden() -> None:
     u, v = int(CX + F * 0.02 / (d - 0.3)), int(CY + F * 0.25 / d)
     rf = dm.render_depth(front[None], INTR, background=None)
     rb = dm.render_depth(back[None], INTR, background=None)
-    assert dm.PART_NAMES[rf.part[v, u]] in ("right_forearm", "right_hand")
-    assert rf.depth[v, u] < d - dm.TORSO_HALF_DEPTH - 0.1
-    assert dm.PART_NAMES[rb.part[v, u]] == "torso"
-    assert rb.depth[v, u] == pytest.approx(d - dm.TORSO_HALF_DEPTH, abs=0.01)
+    assert bs.PART_NAMES[rf.part[v, u]] in ("right_forearm", "right_hand")
+    assert rf.depth[v, u] < d - bs.TORSO_HALF_DEPTH - 0.1
+    assert bs.PART_NAMES[rb.part[v, u]] == "torso"
+    assert rb.depth[v, u] == pytest.approx(d - bs.TORSO_HALF_DEPTH, abs=0.01)
     # a nearer person hides a farther one where they overlap
     far = _t_pose(4.0, 0.0) + np.array([1.0, 0.0, 0.0])
     two = dm.render_depth(np.stack([far, _t_pose(2.0, 0.0)]), INTR, background=None)
@@ -125,12 +126,12 @@ def test_wall_and_floor() -> None:
     r = dm.render_depth(pose[None], INTR)
     wall = d + dm.Background().wall_behind
     assert r.depth[5, 5] == pytest.approx(wall, abs=tol.ROUND_OFF_ACCUMULATED) and r.person[5, 5] == -1
-    floor_y = pose[[8, 11], 1].max() + dm.ANKLE_HEIGHT  # camera y is down
+    floor_y = pose[[8, 11], 1].max() + bs.ANKLE_HEIGHT  # camera y is down
     v = 479
     assert r.person[v, 5] == -1
     assert r.depth[v, 5] == pytest.approx(floor_y / ((v - CY) / F), abs=tol.ROUND_OFF_ACCUMULATED)
     # the feet stand on the floor: their lowest point is at the floor's height
-    foot = np.isin(r.part, [dm.PART_NAMES.index("left_foot"), dm.PART_NAMES.index("right_foot")])
+    foot = np.isin(r.part, [bs.PART_NAMES.index("left_foot"), bs.PART_NAMES.index("right_foot")])
     vv, uu = np.nonzero(foot)
     k = np.argmax(vv)
     lowest_y = (vv[k] - CY) / F * r.depth[vv[k], uu[k]]
@@ -138,6 +139,36 @@ def test_wall_and_floor() -> None:
     assert np.all(np.isinf(dm.render_depth(pose[None], INTR, background=None).depth[:, 5]))
     empty = dm.render_depth(np.zeros((0, 12, 3)), INTR, background=dm.Background(wall_depth=2.0))
     assert np.all(empty.depth == 2.0) and np.all(empty.person == -1)
+
+
+def test_scene_backgrounds_stay_put_when_the_person_jumps() -> None:
+    d = 3.0
+    standing = _t_pose(d, -0.8)
+    jumping = standing + np.array([0.0, -0.3, 0.5])  # 0.3 m up, 0.5 m farther
+    seq = np.stack([standing, jumping])[None]  # (1, 2, 12, 3)
+    up = np.tile([0.0, -1.0, 0.0], (2, 1))
+    backs = dm.scene_backgrounds(seq, up)
+    assert backs[0] == backs[1]
+    assert backs[0].wall_depth == pytest.approx(d + 0.25 + backs[0].wall_behind)
+    assert backs[0].floor_height == pytest.approx(-(standing[8, 1] + bs.ANKLE_HEIGHT))
+    a, b = (dm.render_depth(p[None], INTR, background=g) for p, g in zip(seq[0], backs, strict=True))
+    assert a.depth[479, 5] == b.depth[479, 5] and a.depth[5, 5] == b.depth[5, 5]
+    # on a per-image background the floor would follow the feet up
+    c = dm.render_depth(jumping[None], INTR)
+    assert c.depth[479, 5] < b.depth[479, 5]  # a higher floor meets the downward rays sooner
+
+
+def test_bounding_boxes_clip_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each primitive cast over its image box only gives the image that casting every primitive
+    over the whole image gives: near the camera (primitives across its plane), far, off-centre."""
+    rng = np.random.default_rng(0)
+    poses = [_t_pose(d, rng.uniform(-1.2, 0.5)) + rng.normal(0.0, 0.05, (12, 3)) + [rng.uniform(-1, 1), 0, 0]
+             for d in (0.08, 0.4, 1.5, 3.0, 6.0) for _ in range(3)]
+    boxed = [dm.render_depth(np.maximum(p, [-9, -9, 0.02])[None], INTR) for p in poses]
+    monkeypatch.setattr(bs._Canvas, "boxes", lambda self, c, r: [[0, self.h, 0, self.w]] * len(c))
+    for p, r in zip(poses, boxed, strict=True):
+        full = dm.render_depth(np.maximum(p, [-9, -9, 0.02])[None], INTR)
+        assert np.array_equal(r.depth, full.depth) and np.array_equal(r.part, full.part)
 
 
 def test_bad_input_is_refused() -> None:

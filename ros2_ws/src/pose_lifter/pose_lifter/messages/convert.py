@@ -25,20 +25,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import Layout, get_layout, to_model_joints
 from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 from pose_lifter.core.results import LiftResult
 from pose_lifter.messages import names
+from pose_lifter.messages.layouts import Layout, frame_joints, get_layout
 
 __all__ = [
     "MESSAGE_TYPES",
     "arrays_to_skeleton2d",
     "camera_estimate",
     "camera_info",
+    "checked_joint_std",
     "delete_all_markers",
     "delete_markers",
     "delete_untracked_markers",
-    "frame_joints",
     "intrinsics_from_camera_info",
     "joint_points",
     "make_header",
@@ -52,6 +52,7 @@ __all__ = [
     "skeleton2d_to_arrays",
     "skeleton3d_from_joints",
     "skeleton3d_to_joints",
+    "skeleton3d_to_std",
     "skeleton_markers",
     "skeletons3d_array",
     "stamp_to_ns",
@@ -132,51 +133,6 @@ def make_header(stamp_ns: int, frame_id: str, types: Any) -> Any:
 # --------------------------------------------------------------------------- 2D
 
 
-def frame_joints(skeletons: Sequence[Any], layout: str | Layout
-                 ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception]:
-    """The paper's 12 joints of each ``Skeleton2D`` of one frame, the frame's ``layout`` (a name
-    or a :class:`~pose_lifter.core.model.layouts.Layout`) looked up once: per skeleton, in order,
-    ``(points (12, 2) pixels, confidence (12,))``, or the error that refused it (a malformed
-    skeleton costs only itself: :class:`~pose_lifter.core.errors.InvalidInputError` for a wrong
-    keypoint count or non-finite values). Joints whose confidence is 0 (missing) may carry
-    non-finite coordinates; they are returned as 0.
-
-    Raises
-    ------
-    UnknownLayoutError
-        Unknown layout name (the whole frame is unusable).
-    """
-    read: list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception] = []
-    for skel in skeletons:
-        try:
-            read.append(_keypoints(skel))
-        except Exception as err:
-            read.append(err)
-    lay = layout if isinstance(layout, Layout) else get_layout(layout)
-    out: list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception] = []
-    for r in read:
-        if isinstance(r, Exception):
-            out.append(r)
-            continue
-        try:
-            points, confidence = to_model_joints(*r, lay)
-        except Exception as err:
-            out.append(err)
-            continue
-        if not np.isfinite(confidence).all():
-            out.append(InvalidInputError("keypoint confidences must be finite"))
-            continue
-        bad = ~np.isfinite(points).all(axis=1)
-        if bad.any():
-            if (bad & (confidence > 0)).any():
-                names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
-                out.append(InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}"))
-                continue
-            points[bad] = 0.0  # missing joints (confidence 0) may carry any coordinates
-        out.append((points, confidence))
-    return out
-
-
 def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The paper's 12 joints of a ``Skeleton2D``.
 
@@ -190,7 +146,7 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
         one (K, 3) array, as :class:`pose_lifter.messages.cdr.DecodedSkeleton2D` has).
     layout : str or Layout
         The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``, ...), by name
-        or as the :class:`~pose_lifter.core.model.layouts.Layout` a frame looked up once.
+        or as the :class:`~pose_lifter.messages.layouts.Layout` a frame looked up once.
 
     Returns
     -------
@@ -209,16 +165,6 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
     if isinstance(read, Exception):
         raise read
     return read
-
-
-def _keypoints(skel: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A ``Skeleton2D``'s keypoints as given: pixels (K, 2) and confidences (K,)."""
-    xyc = getattr(skel, "xyc", None)  # pose_lifter.messages.cdr.DecodedSkeleton2D: the keypoints as one array
-    if xyc is not None:
-        return xyc[:, :2], xyc[:, 2]
-    kps = list(skel.keypoints)
-    xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
-    return xy, np.array([float(k.confidence) for k in kps], dtype=np.float64)
 
 
 def arrays_to_skeleton2d(
@@ -320,6 +266,25 @@ def joint_points(joints_m: NDArray[np.float64], types: Any) -> list[Any]:
     return [types.Point(x=float(a), y=float(b), z=float(c)) for a, b, c in j]
 
 
+def checked_joint_std(std_m: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    """A skeleton's joint standard deviations, shape (12, 3), metres along x, y, z of its frame, as
+    float64; None stays None (unknown).
+
+    Raises
+    ------
+    InvalidInputError
+        Another shape, or a value that is not finite and non-negative.
+    """
+    if std_m is None:
+        return None
+    std = np.asarray(std_m, dtype=np.float64)
+    if std.shape != (N_JOINTS, 3):
+        raise InvalidInputError(f"joint std must be ({N_JOINTS}, 3) metres, got shape {std.shape}")
+    if not (np.all(np.isfinite(std)) and np.all(std >= 0)):
+        raise InvalidInputError("joint std must be finite and non-negative metres (None when unknown)")
+    return std
+
+
 def result_to_skeleton3d(
     result: LiftResult,
     track_id: int,
@@ -327,6 +292,7 @@ def result_to_skeleton3d(
     types: Any,
     solve_time: float = 0.0,
     warm_started: bool = False,
+    std_m: NDArray[np.float64] | None = None,
 ) -> Any:
     """A ``Skeleton3D`` from a lift and its metric joints
     (see :func:`pose_lifter.core.track.placement.place_in_camera`).
@@ -341,7 +307,10 @@ def result_to_skeleton3d(
     solve_time : float
         Seconds.
     warm_started : bool
+    std_m : ndarray, shape (12, 3), optional
+        Each joint's standard deviation along x, y, z, metres (``joint_std``; None: unknown, empty).
     """
+    std = checked_joint_std(std_m)
     return types.Skeleton3D(
         track_id=int(track_id),
         joint_names=list(JOINT_NAMES),
@@ -355,11 +324,14 @@ def result_to_skeleton3d(
         warm_started=bool(warm_started),
         observed=[bool(w > 0) for w in np.asarray(result.weights, dtype=np.float64)],
         joint_weights=[float(w) for w in np.asarray(result.weights, dtype=np.float64)],
+        joint_std=[] if std is None else [types.Vector3(x=float(a), y=float(b), z=float(c))
+                                          for a, b, c in std],
     )
 
 
 def skeleton3d_from_joints(track_id: int, joints_m: NDArray[np.float64], types: Any) -> Any:
-    """A ``Skeleton3D`` carrying only joints (ground truth); the solver fields stay default."""
+    """A ``Skeleton3D`` carrying only joints (ground truth); the solver fields stay default (and
+    ``joint_std`` empty: the truth has no uncertainty to publish)."""
     return types.Skeleton3D(
         track_id=int(track_id), joint_names=list(JOINT_NAMES), joints=joint_points(joints_m, types),
         converged=True,
@@ -371,18 +343,36 @@ def skeleton3d_to_joints(skel: Any) -> NDArray[np.float64]:
 
     ``joint_names`` (when filled) are used to reorder; unknown or missing names raise.
     """
-    pts = np.array([[float(p.x), float(p.y), float(p.z)] for p in skel.joints], dtype=np.float64)
+    return _in_core_order(skel, skel.joints, "joints")
+
+
+def skeleton3d_to_std(skel: Any) -> NDArray[np.float64]:
+    """Joint standard deviations of a ``Skeleton3D`` (``joint_std``) as an array (12, 3), metres
+    along x, y, z, in the core order (reordered by ``joint_names`` as
+    :func:`skeleton3d_to_joints`); all NaN where unknown: an empty ``joint_std``, or a message of a
+    definition without the field (an older bag read with its own types).
+    """
+    vectors = getattr(skel, "joint_std", None)
+    if vectors is None or len(vectors) == 0:
+        return np.full((N_JOINTS, 3), np.nan)
+    return _in_core_order(skel, vectors, "joint_std")
+
+
+def _in_core_order(skel: Any, vectors: Sequence[Any], field: str) -> NDArray[np.float64]:
+    """A per-joint field of a ``Skeleton3D`` (``x``, ``y``, ``z`` each, in the order of its
+    ``joint_names`` when filled) as an array (12, 3) in the core order."""
+    pts = np.array([[float(p.x), float(p.y), float(p.z)] for p in vectors], dtype=np.float64).reshape(-1, 3)
     names = list(skel.joint_names)
     if names:
         if len(names) != len(pts):
-            raise InvalidInputError("Skeleton3D joint_names and joints differ in length")
+            raise InvalidInputError(f"Skeleton3D joint_names and {field} differ in length")
         index = {n: i for i, n in enumerate(names)}
         missing = [n for n in JOINT_NAMES if n not in index]
         if missing:
             raise InvalidInputError(f"Skeleton3D lacks joints {missing}")
         pts = pts[[index[n] for n in JOINT_NAMES]]
     if pts.shape != (N_JOINTS, 3):
-        raise InvalidInputError(f"Skeleton3D must have {N_JOINTS} joints, got {len(pts)}")
+        raise InvalidInputError(f"Skeleton3D must have {N_JOINTS} {field}, got {len(pts)}")
     return pts
 
 

@@ -6,7 +6,6 @@ lift hand it the depth image of a frame (:mod:`pose_lifter.messages.depth` decod
 from __future__ import annotations
 
 from pose_lifter.core.depth.fuse import (
-    KEYPOINT_STD,
     DepthReadings,
     FusedPeople,
     fuse_depth,
@@ -16,5 +15,5 @@ from pose_lifter.core.depth.fuse import (
 from pose_lifter.core.depth.reading import SURFACE_OFFSET_M, DepthOptions, read_patches
 from pose_lifter.core.depth.uncertainty import body_std, monocular_std
 
-__all__ = ["KEYPOINT_STD", "SURFACE_OFFSET_M", "DepthOptions", "DepthReadings", "FusedPeople", "body_std",
+__all__ = ["SURFACE_OFFSET_M", "DepthOptions", "DepthReadings", "FusedPeople", "body_std",
            "fuse_depth", "fuse_readings", "monocular_std", "read_depth", "read_patches"]

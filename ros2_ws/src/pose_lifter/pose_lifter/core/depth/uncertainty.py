@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from pose_lifter.core.track.placement import CameraIntrinsics
 
 __all__ = ["MONOCULAR_SCALE_STD", "SHAPE_STD_M", "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std",
-           "monocular_std"]
+           "monocular_std", "shape_std"]
 
 #: Standard deviation of an observed joint's position relative to the body, metres, per joint
 #: (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`): columns across the image (x
@@ -37,6 +37,14 @@ UNOBSERVED_FACTOR: Final[float] = 2.0
 MONOCULAR_SCALE_STD: Final[float] = 0.07
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
+
+
+def shape_std(observed: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The shape's standard deviations (n, 12, 3; metres) of ``n`` bodies whose 2D showed the
+    joints ``observed`` (n, 12): :data:`SHAPE_STD_M` (x and y across, z along the depth), times
+    :data:`UNOBSERVED_FACTOR` where not observed."""
+    factor = np.where(np.asarray(observed), 1.0, UNOBSERVED_FACTOR)[:, :, None]
+    return np.asarray(SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor)
 
 
 def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_std: NDArray[np.float64]
@@ -60,8 +68,7 @@ def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_s
         slide along the rays.
     """
     x = np.asarray(joints_m, dtype=np.float64)
-    factor = np.where(np.asarray(observed), 1.0, UNOBSERVED_FACTOR)[:, :, None]
-    shape = SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor
+    shape = shape_std(observed)
     root = np.asarray(scale_std, dtype=np.float64)[:, None, None] * np.abs(x)
     return np.asarray(np.sqrt(shape * shape + root * root))
 
