@@ -9,7 +9,8 @@ azimuths, level, and optionally :data:`ELEVATED`), the camera at the height of t
 above it), looking at it, following the person. The 2D goes through the realistic detector
 (:data:`pose_lifter.mocap.detector_model.REALISTIC`, joints outside the image lost: at 1.5 m the
 image holds about 0.9 m of the body's height, so shoulders and ankles are lost on most frames),
-and each frame's depth image is rendered from the true joints and sensed by
+and each frame's depth image is rendered from the true joints (a wall and a floor that stay put
+over the track: :func:`pose_lifter.mocap.depth_model.scene_backgrounds`) and sensed by
 :mod:`pose_lifter.mocap.depth_model` (:data:`~pose_lifter.mocap.depth_model.REALISTIC` unless
 told). The detector and the depth sensor draw from their own generators, seeded per track and
 distance: every method sees the same 2D and the same depth images.
@@ -286,8 +287,10 @@ class RgbdEvaluator:
         if "fused-lag" in self.methods:
             lagged, lag_results = self.lifts.lifts("hybrid-lag", px, conf, leg_m, distance)
         out = {m: _Method(n) for m in METHODS}
+        up = view_rotation(*track.camera[:2]) @ np.array([0.0, 1.0, 0.0])  # the world's up, camera frame
+        scene = depth_model.scene_backgrounds(truth[None], np.repeat(up[None], n, axis=0))
         for i in range(n):
-            rendered = depth_model.render_depth(truth[i][None], INTRINSICS, IMAGE_SIZE)
+            rendered = depth_model.render_depth(truth[i][None], INTRINSICS, IMAGE_SIZE, scene[i])
             depth = depth_model.sense(rendered, self.sensor, depth_rng)
             t = live[i]
             if t is not None:
