@@ -18,7 +18,8 @@ what the node publishes for it. One frame:
    :func:`~pose_lifter.core.track.policy.lift_tracks`): the core's
    :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
-   placed together, :func:`~pose_lifter.core.track.placement.place_results`) and :func:`check_output`
+   placed together, :func:`~pose_lifter.core.track.placement.place_results`; with the frame's
+   depth image, fused with it, :func:`pose_lifter.core.depth.fuse_depth`) and :func:`check_output`
    (nothing non-finite leaves).
 3. :meth:`FramePipeline.end_frame`: tracks unseen for ``track_timeout`` are forgotten.
 
@@ -58,6 +59,7 @@ from pose_lifter.messages.settings import FrameSettings
 
 __all__ = [
     "CheckedFrame",
+    "DepthImage",
     "FramePipeline",
     "FrameSettings",
     "Intrinsics",
@@ -68,6 +70,7 @@ __all__ = [
     "check_output",
     "expiry_stamps",
     "frame_over_cap",
+    "fused_joints",
     "lift_together",
     "place_lifted",
     "skeleton_input",
@@ -76,6 +79,9 @@ __all__ = [
 
 #: Camera intrinsics ((fx, fy), (cx, cy)) in pixels, or None (the default distance).
 Intrinsics = tuple[tuple[float, float], tuple[float, float]] | None
+#: A frame's depth image (:mod:`pose_lifter.messages.depth`): float32 (H, W) metres along the
+#: optical axis, NaN where there is no reading; None: no depth (the monocular placement).
+DepthImage = NDArray[np.float32] | None
 
 _NO_CLIP: Final[Callable[[str], Any]] = lambda text: None  # noqa: E731
 _DEFAULTS: Final[FrameSettings] = FrameSettings()
@@ -142,6 +148,9 @@ class LiftedSkeleton:
     swapped : ndarray of bool, shape (2,), optional
         The arms' and the legs' left/right labels its track swapped back on this frame
         (:class:`~pose_lifter.core.track.policy.TrackedLift`; None: none).
+    std_m : ndarray, shape (12, 3), optional
+        Standard deviation of each joint along x, y, z of the camera frame, metres (placed on a
+        depth image: :class:`pose_lifter.core.depth.FusedPeople` ``std_m``; None: unknown).
     """
 
     input: SkeletonInput
@@ -151,6 +160,7 @@ class LiftedSkeleton:
     solve_time: float
     fit_pose_camera: NDArray[np.float64] | None = None
     swapped: NDArray[np.bool_] | None = None
+    std_m: NDArray[np.float64] | None = None
 
     @property
     def track_id(self) -> int:
@@ -309,10 +319,11 @@ def _refusal(err: Exception, track_id: int | None) -> SkipSkeleton:
     return SkipSkeleton("unexpected", f"unexpected error: {err!r}", track_id)
 
 
-def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
-                  ) -> list[LiftedSkeleton | SkipSkeleton]:
+def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]],
+                  depths: Sequence[DepthImage] | None = None) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines may share a lifter): their frames through their tracks' policies
+    pipelines may share a lifter) and, with ``depths``, each one's frame's depth image (None:
+    none): their frames through their tracks' policies
     (:func:`~pose_lifter.core.track.policy.lift_tracks`: the rows handed to the lifter as one batch,
     and once more for the frames it re-initialises; each stage of the lift one compiled pass over
     the batch); then the people seen by one camera placed in one pass
@@ -333,45 +344,91 @@ def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intr
         else:
             out.append(None)  # placed below
             solved.append((k, pipeline, intrinsics, inp, d))
-    placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved])
+    placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved],
+                          None if depths is None else [depths[k] for k, *_ in solved])
     share = (time.perf_counter() - start) / len(frames)
     for (k, *_), lifted in zip(solved, placed, strict=True):
         out[k] = lifted if isinstance(lifted, SkipSkeleton) else lifted.timed(share)
     return [x for x in out if x is not None]
 
 
-def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]]
-                 ) -> list[LiftedSkeleton | SkipSkeleton]:
+def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]],
+                 depths: Sequence[DepthImage] | None = None) -> list[LiftedSkeleton | SkipSkeleton]:
     """The lifted skeletons of skeletons through their tracks' policies, each with its pipeline's
     settings and its camera's intrinsics: those that share them placed in one
     :func:`~pose_lifter.core.track.placement.place_results` pass, then :func:`check_output` per
     skeleton. A group the pass refuses (a camera scale not > 0, or anything unexpected) is
-    placed skeleton by skeleton, so a refusal costs only its own skeleton."""
+    placed skeleton by skeleton, so a refusal costs only its own skeleton.
+
+    With ``depths`` (per skeleton its frame's depth image, or None), the people of one camera
+    and one depth image (with intrinsics) are fused with it in one
+    :func:`pose_lifter.core.depth.fuse_depth` call (:func:`fused_joints`): their joints and
+    ``std_m`` are the fusion's. A person the fusion gives no finite joints (or a fusion that
+    fails) is placed as without depth (``std_m`` None). Without depth the placement is the
+    monocular one, unchanged."""
     out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
-    groups: dict[tuple[float, float, Intrinsics], list[int]] = {}
+    groups: dict[tuple[float, float, Intrinsics, int], list[int]] = {}
+    images: dict[int, NDArray[np.float32]] = {}
     for k, (st, intrinsics, _, _) in enumerate(solved):
-        groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics), []).append(k)
-    for (leg, distance, intrinsics), members in groups.items():
+        depth = depths[k] if depths is not None else None
+        key = id(depth) if depth is not None and intrinsics is not None else 0
+        if key:
+            images[key] = depth  # type: ignore[assignment]  # not None where key is set
+        groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics, key), []).append(k)
+    for (leg, distance, intrinsics, key), members in groups.items():
         results = [solved[k][3].result for k in members]
         try:
             joints = place_results(np.array([r.pose_camera for r in results], dtype=np.float64), results, leg,
                                    intrinsics, distance)
         except Exception:  # placed one by one below, where a refusal costs only its own skeleton
             joints = None
+        fused = (fused_joints(images[key], intrinsics, [(solved[k][2], solved[k][3]) for k in members])
+                 if key and intrinsics is not None else None)
         for m, k in enumerate(members):
             inp, tracked = solved[k][2], solved[k][3]
             res = tracked.result
+            std: NDArray[np.float64] | None = None
             try:
-                j = (joints[m] if joints is not None
-                     else place_results(np.array([res.pose_camera], dtype=np.float64), [res], leg, intrinsics,
-                                        distance)[0])
+                if fused is not None and np.isfinite(fused[0][m]).all() and np.isfinite(fused[1][m]).all():
+                    j, std = fused[0][m], fused[1][m]
+                else:
+                    j = (joints[m] if joints is not None
+                         else place_results(np.array([res.pose_camera], dtype=np.float64), [res], leg,
+                                            intrinsics, distance)[0])
                 check_output(inp.track_id, res, j)
             except Exception as err:
                 out[k] = _refusal(err, inp.track_id)
                 continue
             out[k] = LiftedSkeleton(inp, res, j, tracked.warm_started, 0.0, tracked.fit_pose_camera,
-                                    tracked.swapped)
+                                    tracked.swapped, std)
     return [x for x in out if x is not None]
+
+
+def fused_joints(depth: NDArray[np.float32], intrinsics: tuple[tuple[float, float], tuple[float, float]],
+                 people: Sequence[tuple[SkeletonInput, TrackedLift]]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The joints (n, 12, 3) and their standard deviations (n, 12, 3), metres, camera frame, of
+    the people of one camera (each its input and its track's lift) fused with that camera's
+    depth image in one :func:`pose_lifter.core.depth.fuse_depth` call: their 2D with the labels
+    their tracks gave the 3D joints (:func:`labelled_2d`), weighted by their confidences, and
+    each lift's pose, camera scale and centre. None when the fusion fails (the people are then
+    placed without depth)."""
+    try:
+        from pose_lifter.core.depth import fuse_depth
+    except ImportError:  # no fusion in this build: the monocular placement
+        return None
+    labelled = [labelled_2d(inp.points, inp.confidence, t.swapped) for inp, t in people]
+    results = [t.result for _, t in people]
+    try:
+        fused = fuse_depth(depth, intrinsics,
+                           np.array([p for p, _ in labelled], dtype=np.float64),
+                           np.array([c for _, c in labelled], dtype=np.float64),
+                           np.array([r.pose_camera for r in results], dtype=np.float64),
+                           np.array([float(r.camera.scale) for r in results], dtype=np.float64),
+                           np.array([r.camera.translation for r in results], dtype=np.float64))
+    except Exception:  # a failed fusion costs the people their depth, not their lift
+        return None
+    return np.asarray(fused.joints_m, dtype=np.float64), np.asarray(fused.std_m, dtype=np.float64)
 
 
 def with_frames_ahead(track: Sequence[tuple[int, SkeletonInput]], n: int) -> list[SkeletonInput]:
@@ -493,15 +550,17 @@ class FramePipeline:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
         self.policy.expire(stamp_ns)
 
-    def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics
+    def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics, depth: DepthImage = None
               ) -> list[LiftedSkeleton | SkipSkeleton]:
         """Steps 2 and 3 of a checked frame: per skeleton of ``checked.skeletons``, in order, the
         lifted skeleton or why not (an unanswered frame lifts and expires nothing). The people
-        are lifted together (:func:`lift_together`)."""
+        are lifted together (:func:`lift_together`), and placed on the frame's ``depth`` image
+        when there is one."""
         if not checked.answered:
             return []
         inputs = [x for x in checked.skeletons if not isinstance(x, SkipSkeleton)]
-        lifted = iter(lift_together([(self, x, stamp_ns, intrinsics) for x in inputs]))
+        lifted = iter(lift_together([(self, x, stamp_ns, intrinsics) for x in inputs],
+                                    None if depth is None else [depth] * len(inputs)))
         out = [x if isinstance(x, SkipSkeleton) else next(lifted) for x in checked.skeletons]
         self.end_frame(stamp_ns)
         return out

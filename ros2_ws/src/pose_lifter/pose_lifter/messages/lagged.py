@@ -35,6 +35,7 @@ from pose_lifter.core.track.later import LaterFrame, Refiner, placements
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.frame import (
     CheckedFrame,
+    DepthImage,
     FramePipeline,
     Intrinsics,
     LiftedSkeleton,
@@ -85,7 +86,8 @@ class LaggedFrames(Generic[T]):
             raise ValueError(f"lag must be 1 to {MAX_LAG} frames, got {lag}")
         self.pipeline, self.lag = pipeline, lag
         pipeline.policy.smoothed_later = True
-        self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame]] = deque()  # waiting to be lifted
+        # waiting to be lifted (with the frame's depth image: at most ``ahead`` + 1 are held)
+        self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame, DepthImage]] = deque()
         self._held: deque[LaggedFrame[T]] = deque()  # lifted, waiting to be refined
         self._poses = self._new_poses()
 
@@ -103,12 +105,13 @@ class LaggedFrames(Generic[T]):
         """Frames held."""
         return len(self._inputs) + len(self._held)
 
-    def lift(self, token: T, stamp_ns: int, intrinsics: Intrinsics, checked: CheckedFrame
-             ) -> list[LaggedFrame[T]]:
-        """A checked, answered frame (:meth:`FramePipeline.check`): lifted now or, reading ahead,
-        once its prior's future frames have come; returns the frames now ``lag`` frames old (at
-        most one), their tracked skeletons refined."""
-        self._inputs.append((token, stamp_ns, intrinsics, checked))
+    def lift(self, token: T, stamp_ns: int, intrinsics: Intrinsics, checked: CheckedFrame,
+             depth: DepthImage = None) -> list[LaggedFrame[T]]:
+        """A checked, answered frame (:meth:`FramePipeline.check`), with its depth image or None:
+        lifted now or, reading ahead, once its prior's future frames have come; returns the frames
+        now ``lag`` frames old (at most one), their tracked skeletons refined (those placed on a
+        depth image keep their fused joints)."""
+        self._inputs.append((token, stamp_ns, intrinsics, checked, depth))
         out: list[LaggedFrame[T]] = []
         while len(self._inputs) > self.ahead:
             out += self._lift_oldest()
@@ -134,11 +137,11 @@ class LaggedFrames(Generic[T]):
     def _lift_oldest(self) -> list[LaggedFrame[T]]:
         """Lift the oldest waiting frame (with its tracks' next frames from the frames waiting
         after it) and keep it for the refinement; the frames then refinement-lag old, refined."""
-        token, stamp_ns, intrinsics, checked = self._inputs.popleft()
+        token, stamp_ns, intrinsics, checked, depth = self._inputs.popleft()
         if self.ahead:
-            checked = _with_ahead(checked, [c for _, _, _, c in self._inputs],
-                                  [s for _, s, _, _ in self._inputs], self.ahead)
-        outcomes = self.pipeline.frame(checked, stamp_ns, intrinsics)
+            checked = _with_ahead(checked, [x[3] for x in self._inputs], [x[1] for x in self._inputs],
+                                  self.ahead)
+        outcomes = self.pipeline.frame(checked, stamp_ns, intrinsics, depth)
         return self._hold(LaggedFrame(token, stamp_ns, intrinsics, outcomes))
 
     def _hold(self, frame: LaggedFrame[T]) -> list[LaggedFrame[T]]:
@@ -187,8 +190,10 @@ class LaggedFrames(Generic[T]):
         outcomes = list(frame.outcomes)
         leg = self.pipeline.settings.lower_leg_length
         again_of = refined_skeletons([s for _, s in rows], np.array(joints), leg)
-        for (k, _), again in zip(rows, again_of, strict=True):
-            if again is not None:  # else what it was lifted with is kept
+        for (k, s), again in zip(rows, again_of, strict=True):
+            # else what it was lifted with is kept; so are joints fused with a depth image (the
+            # refinement places the monocular lift)
+            if again is not None and s.std_m is None:
                 outcomes[k] = again
         return frame._replace(outcomes=outcomes)
 
