@@ -66,6 +66,7 @@ __all__ = [
     "DepthFault",
     "PairFault",
     "Pairing",
+    "camera_info_missing",
     "check_depth_size",
     "compressed_depth_image",
     "decode_compressed_image_cdr",
@@ -314,14 +315,19 @@ def check_depth_size(depth: NDArray[np.float32], camera_size: tuple[float, float
     the keypoints' camera (e.g. the raw depth topic instead of the aligned one), or no
     ``camera_info`` at all (None): the depth cannot be placed without the intrinsics."""
     if camera_size is None:
-        raise DepthError(DepthFault.NO_CAMERA_INFO, "a depth image but no camera_info: depth needs the "
-                         "intrinsics of the keypoints' camera (remap camera_info)")
+        raise camera_info_missing()
     width, height = round(camera_size[0]), round(camera_size[1])
     if depth.shape != (height, width):
         raise DepthError(DepthFault.SIZE, f"depth image of {depth.shape[1]}x{depth.shape[0]} pixels, "
                          f"camera_info of {width}x{height}: not registered to the keypoints' camera (use "
                          "the depth aligned to the colour image)")
     return depth
+
+
+def camera_info_missing() -> DepthError:
+    """The refusal of a depth image that came before any ``camera_info``."""
+    return DepthError(DepthFault.NO_CAMERA_INFO, "a depth image but no camera_info: depth needs the "
+                      "intrinsics of the keypoints' camera (remap camera_info)")
 
 
 def is_compressed_topic(topic: str) -> bool:
