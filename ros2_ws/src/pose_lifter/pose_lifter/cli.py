@@ -204,7 +204,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     keep = keep_topics(args.keep)
     camera_info = args.camera_info_topic or None
     # every check that needs no lifting first: bad input never costs a kernel compile
-    topics = check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
+    topics = check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite, args.depth_topic)
     if camera_info and camera_info not in topics and "camera_info_topic" in args.typed:
         raise BagError(f"{bag} has no topic {camera_info!r}; its topics: {sorted(topics)} "
                        "(--camera-info-topic '' lifts without camera_info, at the default distance)")
@@ -220,6 +220,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
     for f in summary.failures[:5]:
         print(f"  failed: {f}")
+    for line in ([summary.depth_line()] if summary.depth is not None else []) + summary.notes:
+        print(f"  {line}")
     return 0
 
 
