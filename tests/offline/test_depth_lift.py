@@ -47,13 +47,13 @@ def _compressed_image(stamp_ns: int, mm: int) -> Any:
 
 
 def rgbd_bag(path: Path, offset_ns: int = 3_000_000, topic: str = TOPIC_DEPTH, compressed: bool = False,
-             size: tuple[int, int] = (640, 480), encoding: str = "16UC1") -> Path:
-    """walk_clean's first N frames with a depth image per frame, stamped ``offset_ns`` after the
+             size: tuple[int, int] = (640, 480), encoding: str = "16UC1", source: Path = WALK) -> Path:
+    """``source``'s first N frames with a depth image per frame, stamped ``offset_ns`` after the
     keypoints' header stamp and recorded before them (a depth of 3 m + 1 mm per frame)."""
     kind = COMPRESSED_IMAGE if compressed else IMAGE
     with bags.BagWriter(path, compress=False) as w:
         n = 0
-        for raw in bags.read_raw(WALK):
+        for raw in bags.read_raw(source):
             if raw.topic == "/keypoints_2d":
                 if n == N:
                     break
@@ -171,3 +171,16 @@ def test_a_named_depth_topic_the_bag_lacks_is_an_error(tmp_path: Path, capsys: p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "/camera/depth/nope" in err[0] and TOPIC_DEPTH in err[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("mode", [("--workers", "2"), ("--output-lag", "3", "--smoothing", "0")])
+def test_lift_with_depth_on_workers_and_lagged(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                               mode: tuple[str, ...]) -> None:
+    """The forked workers (each its own reader of the depth topic; two tracks, two chains) and the
+    node's lagged answers."""
+    bag = rgbd_bag(tmp_path / "rgbd.mcap", source=REPO / "bags" / "two_people.mcap")
+    out = tmp_path / "out.mcap"
+    assert cli.main(["lift", str(bag), "--out", str(out), "--quiet", "--max-messages", str(N),
+                     "--no-publish-hri", *(mode if "--workers" in mode else ("--workers", "1", *mode))]) == 0
+    assert f"{N} of {N} messages paired" in capsys.readouterr().out
+    assert len(_joints(out)) == N

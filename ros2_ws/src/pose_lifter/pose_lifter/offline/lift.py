@@ -27,6 +27,7 @@ The lifted bag is evaluated by :mod:`pose_lifter.offline.evaluate`.
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -447,11 +448,12 @@ def lift_bag(
 
     if depth_topic is not None and not infos:
         summary.notes.append(f"depth topic {depth_topic} but no camera_info: lifted from the 2D alone")
-    elif depth_topic is not None:
+    elif depth_topic is not None:  # each message's camera size: the last camera_info's at or before it
+        size_stamps = [s for s, _ in sizes]
         summary.depth = pair_depth(
             in_path, depth_topic, topics[depth_topic],
             [m.stamp_to_ns(msg.header.stamp) or stamp for stamp, msg in to_lift],
-            [next((wh for s, wh in reversed(sizes) if s <= stamp), sizes[0][1] if sizes else None)
+            [sizes[max(0, bisect.bisect_right(size_stamps, stamp) - 1)][1] if sizes else None
              for stamp, _ in to_lift], settings.frame.depth_tolerance)
     frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_answer=record,
                            summary=summary, workers=workers, depth=summary.depth)
