@@ -283,6 +283,61 @@ def test_encoders_equal_the_node_builders_for_every_alignment(frame_id: str) -> 
             assert got == want, _first_difference(got, want, cdr.MARKER_ARRAY)
 
 
+@pytest.mark.parametrize("frame_id", ["", "c", "ca", "cam", "came", "camer", "camera", "camera_"])
+def test_joint_std_is_rosbags_bytes_filled_and_empty_for_every_alignment(frame_id: str) -> None:
+    """``joint_std`` written from the columns is what rosbags serialises for the node's builder
+    (:func:`~pose_lifter.messages.convert.result_to_skeleton3d` with ``std_m``): every skeleton
+    with it, none, and a mix (an empty sequence between filled ones shifts the alignment of the
+    next skeleton); rosbags reads the standard deviations back bit for bit, and
+    :meth:`SkeletonFrame.of`, ``take`` and ``concat`` carry them."""
+    from pose_lifter.messages.frame import LiftedSkeleton, SkeletonInput
+
+    rng = np.random.default_rng(len(frame_id) + 20)
+    store = typestore.pose_lifter_typestore()
+    types = m.rosbags_types(store)
+    header = m.make_header(1_234_567_890_123, frame_id, types)
+    track_ids = [3, -1, 7, 11, 0]
+    results, joints, times, warm = random_frame(rng, len(track_ids))
+    filled = [rng.uniform(0.005, 0.4, size=(12, 3)) for _ in track_ids]
+    for stds in (filled, [None] * len(filled), [filled[0], None, filled[2], filled[3], None],
+                 [None, filled[1], None, None, filled[4]]):
+        skels = [m.result_to_skeleton3d(r, t, j, types, s, w, std_m=sd)
+                 for r, t, j, s, w, sd in zip(results, track_ids, joints, times, warm, stds, strict=True)]
+        want = bytes(store.serialize_cdr(m.skeletons3d_array(header, skels, types), cdr.SKELETON3D_ARRAY))
+        frame = cdr.SkeletonFrame.from_results(track_ids, joints, results, times, warm, std_m=stds)
+        got = cdr.skeleton3d_array_cdr(cdr.message_header(header), frame)
+        assert got == want, _first_difference(got, want, cdr.SKELETON3D_ARRAY)
+        back = store.deserialize_cdr(got, cdr.SKELETON3D_ARRAY).skeletons
+        for sk, sd in zip(back, stds, strict=True):
+            if sd is None:
+                assert len(sk.joint_std) == 0 and np.isnan(m.skeleton3d_to_std(sk)).all()
+            else:
+                assert np.array_equal(m.skeleton3d_to_std(sk), sd)
+        lifted = [LiftedSkeleton(SkeletonInput(t, np.zeros((12, 2)), np.ones(12)), r, j, w, s, std_m=sd)
+                  for r, t, j, s, w, sd in zip(results, track_ids, joints, times, warm, stds, strict=True)]
+        of = cdr.SkeletonFrame.of(lifted)
+        assert cdr.skeleton3d_array_cdr(cdr.message_header(header), of) == want
+        rows = np.array([4, 0, 2])
+        again = cdr.SkeletonFrame.concat([of.take(rows[:1]), of.take(rows[1:])])
+        assert again.std_m is not None and frame.std_m is not None
+        assert np.array_equal(again.std_m, frame.std_m[rows], equal_nan=True)
+
+
+def test_joint_std_bad_input_is_refused_with_one_line() -> None:
+    rng = np.random.default_rng(2)
+    results, joints, times, warm = random_frame(rng, 2)
+    good = rng.uniform(0.01, 0.1, size=(12, 3))
+    negative, nan = good.copy(), good.copy()
+    negative[3, 1] = -0.01
+    nan[0, 2] = np.nan
+    for stds, expected in [([good], "one joint std"), ([good, good[:, :2]], r"got shape \(12, 2\)"),
+                           ([negative, None], "finite and non-negative"),
+                           ([good, nan], "finite and non-negative")]:
+        with pytest.raises(ValueError, match=expected) as err:
+            cdr.SkeletonFrame.from_results([1, 2], joints, results, times, warm, std_m=stds)
+        assert "\n" not in str(err.value)
+
+
 def test_quaternions_are_scipys_bit_for_bit() -> None:
     rng = np.random.default_rng(0)
     special = [np.eye(3)]

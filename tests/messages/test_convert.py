@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import tolerances as tol
@@ -190,6 +192,39 @@ def test_skeleton3d_to_joints_reorders_by_name() -> None:
     msg.joint_names = msg.joint_names[:-1]
     with pytest.raises(InvalidInputError):
         m.skeleton3d_to_joints(msg)
+
+
+def test_joint_std_round_trips_reorders_by_name_and_is_nan_where_unknown() -> None:
+    """``joint_std`` through rosbags' CDR comes back as written (float64, bit for bit), in the core
+    order when the message lists its joints in another order; an empty field, ground truth and a
+    message of the definition before the field (no attribute) read as NaN; a bad std is refused
+    with one line."""
+    res = fake_result(np.eye(3), 80.0, np.array([300.0, 200.0]))
+    rng = np.random.default_rng(4)
+    joints, std = rng.normal(size=(12, 3)), rng.uniform(0.01, 0.3, size=(12, 3))
+    msg = m.result_to_skeleton3d(res, 7, joints, T, std_m=std)
+    arr = m.skeletons3d_array(m.make_header(5, "cam", T), [msg, m.result_to_skeleton3d(res, 8, joints, T)], T)
+    with_std, without = roundtrip(arr, "pose_lifter_msgs/msg/Skeleton3DArray").skeletons
+    assert np.array_equal(m.skeleton3d_to_std(with_std), std)
+    assert len(without.joint_std) == 0 and np.isnan(m.skeleton3d_to_std(without)).all()
+    assert len(m.skeleton3d_from_joints(0, joints, T).joint_std) == 0
+    perm = rng.permutation(12)
+    with_std.joint_names = [JOINT_NAMES[i] for i in perm]
+    with_std.joints = [with_std.joints[i] for i in perm]
+    with_std.joint_std = [with_std.joint_std[i] for i in perm]
+    np.testing.assert_array_equal(m.skeleton3d_to_std(with_std), std)
+    np.testing.assert_array_equal(m.skeleton3d_to_joints(with_std), joints)
+    with_std.joint_std = with_std.joint_std[:-1]
+    with pytest.raises(InvalidInputError, match="joint_names and joint_std differ"):
+        m.skeleton3d_to_std(with_std)
+
+    older = SimpleNamespace(joint_names=list(JOINT_NAMES), joints=msg.joints)  # read before joint_std
+    assert np.isnan(m.skeleton3d_to_std(older)).all()
+    for bad, expected in [(std[:11], r"\(12, 3\) metres, got shape \(11, 3\)"),
+                          (np.where(np.eye(12, 3) > 0, np.nan, std), "finite and non-negative"),
+                          (-std, "finite and non-negative")]:
+        with pytest.raises(InvalidInputError, match=expected):
+            m.result_to_skeleton3d(res, 7, joints, T, std_m=bad)
 
 
 def test_skeleton_markers() -> None:

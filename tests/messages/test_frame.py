@@ -156,7 +156,7 @@ def test_the_node_and_the_offline_lift_give_the_same_outputs(lifter: Lifter, war
     offline_columns = SkeletonFrame.concat(columns)
     for name in ("track_ids", "joints_m", "projection", "scale", "orientation_xyzw", "translation",
                  "objective", "reprojection_error", "iterations", "converged", "warm_started", "weights",
-                 "points", "confidence"):
+                 "points", "confidence", "std_m"):
         np.testing.assert_array_equal(getattr(offline_columns, name), getattr(node_columns, name),
                                       err_msg=name)
     assert summary.n_lifted == len(offline) == len(lifted)

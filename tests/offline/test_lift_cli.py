@@ -305,7 +305,7 @@ def test_export_csv_npz_json_agree_with_the_bag(tmp_path: Path, capsys: pytest.C
         rows = list(reader)
     # units in the column names (a pandas user reads them with the data)
     assert reader.fieldnames == ["stamp_ns", "frame_id", "track_id", "joint", "x_m", "y_m", "z_m", "observed",
-                                 "reprojection_error_px", "warm_started"]
+                                 "reprojection_error_px", "warm_started", "std_x_m", "std_y_m", "std_z_m"]
     document = json.loads((tmp_path / "e.json").read_text())
     assert document["units"]["joints"].startswith("metres")
     from_json = [(fr["stamp_ns"], s["track_id"], np.array(s["joints"]), s["observed"])

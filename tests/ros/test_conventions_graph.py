@@ -1,6 +1,6 @@
 """ROS conventions of the installed lifter, on the real graph: ``/diagnostics`` levels and
 content, markers with a lifetime and a DELETEALL first, the ``frame_id`` fallback for empty input
-frames, and the per-joint ``observed`` / ``joint_weights`` of ``Skeleton3D``."""
+frames, and the per-joint ``observed`` / ``joint_weights`` / ``joint_std`` of ``Skeleton3D``."""
 
 from __future__ import annotations
 
@@ -95,6 +95,10 @@ def test_markers_lifetime_deleteall_first_frame_fallback_observed(start_lifter: 
     weights = np.asarray(skel.joint_weights)
     assert weights[names.index("left_wrist")] == 0.0
     assert weights[names.index("right_wrist")] == pytest.approx(0.9)
+    # joint_std reaches rclpy as the field's layout: 12 standard deviations, or empty when unknown
+    std = m.skeleton3d_to_std(skel)
+    assert len(skel.joint_std) in (0, 12)
+    assert np.isnan(std).all() if len(skel.joint_std) == 0 else (np.isfinite(std).all() and (std >= 0).all())
 
 
 def test_a_burst_faster_than_the_lift_drops_whole_frames_and_says_so(start_lifter: Any,

@@ -4,10 +4,11 @@
 (:func:`pose_lifter.messages.convert.result_to_skeleton3d`), and they must be exactly as long as
 rclpy's own serialisation of it, byte for byte outside the alignment padding (which rclpy leaves
 uninitialised; the writer zeroes it, as rosbags does: ``tests/messages/test_cdr.py`` checks every byte
-against rosbags)."""
+against rosbags), with each skeleton's ``joint_std`` filled or empty."""
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -32,18 +33,24 @@ def test_the_written_skeletons_are_the_bytes_rclpy_serialises(frame_id: str) -> 
     header = m.make_header(1_234_567_890_123, frame_id, types)
     track_ids = [4, -1, 9, 2**40 + 3, 0]
     results, joints, times, warm = random_frame(rng, len(track_ids), depth=4.0)
-    for n in (0, 1, len(track_ids)):
-        skels = [m.result_to_skeleton3d(r, t, j, types, s, w)
-                 for r, t, j, s, w in zip(results[:n], track_ids[:n], joints[:n], times[:n], warm[:n],
-                                          strict=True)]
+    filled = [rng.uniform(0.005, 0.4, size=(12, 3)) for _ in track_ids]
+    mixed = [filled[0], None, filled[2], None, filled[4]]  # joint_std filled, empty, filled, ...
+    for n, stds in itertools.product((0, 1, len(track_ids)), ([None] * len(track_ids), mixed)):
+        skels = [m.result_to_skeleton3d(r, t, j, types, s, w, std_m=sd)
+                 for r, t, j, s, w, sd in zip(results[:n], track_ids[:n], joints[:n], times[:n], warm[:n],
+                                              stds[:n], strict=True)]
         msg = m.skeletons3d_array(header, skels, types)
         want = bytes(serialize_message(msg))
-        frame = cdr.SkeletonFrame.from_results(track_ids[:n], joints[:n], results[:n], times[:n], warm[:n])
+        frame = cdr.SkeletonFrame.from_results(track_ids[:n], joints[:n], results[:n], times[:n], warm[:n],
+                                               std_m=stds[:n])
         got = cdr.skeleton3d_array_cdr(cdr.message_header(header), frame)
         assert deserialize_message(got, Skeleton3DArray) == msg
         assert len(got) == len(want)
         differ = [i for i, (a, b) in enumerate(zip(got, want, strict=True)) if a != b]
         assert all(got[i] == 0 for i in differ), differ  # only padding, which the writer zeroes
+        for sk, sd in zip(deserialize_message(got, Skeleton3DArray).skeletons, stds, strict=False):
+            std = m.skeleton3d_to_std(sk)
+            assert np.isnan(std).all() if sd is None else np.array_equal(std, sd)
 
 
 def test_the_node_reads_a_frame_as_arrays_and_what_the_reader_refuses_through_rclpy() -> None:

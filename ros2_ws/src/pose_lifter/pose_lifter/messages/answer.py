@@ -86,6 +86,8 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
     stamp_ns : int
         The frame's stamp (the bodies' clock: the header's, or the arrival time when it is 0).
     lifted : SkeletonFrame
+        Its ``std_m`` rows are the skeletons' ``joint_std`` (empty where unknown:
+        :attr:`~pose_lifter.messages.frame.LiftedSkeleton.std_m` None).
     markers, bodies : the stream's books, or None (that output off)
     marker_lifetime : float
         Seconds (0: until replaced or deleted).

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
-from pose_lifter.messages.convert import marker_id, quaternions_xyzw, track_color
+from pose_lifter.messages.convert import checked_joint_std, marker_id, quaternions_xyzw, track_color
 from pose_lifter.messages.names import MARKER_ARRAY, SKELETON2D_ARRAY, SKELETON3D_ARRAY
 
 __all__ = [
@@ -64,7 +64,7 @@ __all__ = [
 #: RIHS01 hashes of the definitions this module encodes (``typestore.hash_rihs01``).
 _DEFINITIONS: Final[dict[str, str]] = {
     SKELETON2D_ARRAY: "RIHS01_9a9e20ea43808ca6e731cf1c13e2c7bc885bb847d487eaf55c5976ed8a473513",
-    SKELETON3D_ARRAY: "RIHS01_e5b204b9880e70721ebabf10f0fc3db447a3154177cd013f0d6b47d7227ae3e4",
+    SKELETON3D_ARRAY: "RIHS01_e2c0cee7cbfab1c00f6004e2203f7f8251b6f4b9a2f907965c55c037474f07f0",
     MARKER_ARRAY: "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf",
 }
 
@@ -193,6 +193,10 @@ class SkeletonFrame:
     :func:`pose_lifter.messages.convert.result_to_skeleton3d` fills them, and the 2D input with
     the left/right labels its track gave it (:meth:`pose_lifter.messages.frame.LiftedSkeleton.labelled_2d`;
     the REP-155 ``skeleton2d`` and ``roi``).
+
+    ``std_m`` (n, 12, 3) is each joint's standard deviation along x, y, z in metres
+    (``Skeleton3D.joint_std``); a row that is not all finite is unknown (an empty ``joint_std``).
+    None (the default) makes every row unknown: NaN rows.
     """
 
     track_ids: NDArray[np.int64]
@@ -210,16 +214,23 @@ class SkeletonFrame:
     weights: NDArray[np.float64]  # (n, 12)
     points: NDArray[np.float64]  # (n, 12, 2) pixels
     confidence: NDArray[np.float64]  # (n, 12)
+    std_m: NDArray[np.float64] | None = None  # (n, 12, 3) metres, NaN rows: unknown
+
+    def __post_init__(self) -> None:
+        if self.std_m is None:
+            object.__setattr__(self, "std_m", np.full((len(self.track_ids), N_JOINTS, 3), np.nan))
 
     @classmethod
     def from_results(cls, track_ids: Sequence[int], joints_m: Sequence[NDArray[np.float64]],
                      results: Sequence[Any], solve_times: Sequence[float],
                      warm_started: Sequence[bool], points: Sequence[NDArray[np.float64]] | None = None,
-                     confidence: Sequence[NDArray[np.float64]] | None = None) -> SkeletonFrame:
+                     confidence: Sequence[NDArray[np.float64]] | None = None,
+                     std_m: Sequence[NDArray[np.float64] | None] | None = None) -> SkeletonFrame:
         """From the lifts of one message (``LiftResult``-like: ``camera``, ``objective``,
         ``reprojection_error``, ``total_alternations``, ``converged``, ``weights``), their
-        metric joints and their 2D (None: zeros); the orientations of all of them in one
-        :func:`pose_lifter.messages.convert.quaternions_xyzw` call."""
+        metric joints, their 2D (None: zeros) and their joints' standard deviations (each (12, 3)
+        metres, finite and non-negative, or None: unknown; None: all unknown); the orientations of
+        all of them in one :func:`pose_lifter.messages.convert.quaternions_xyzw` call."""
         n = len(results)
         if not (len(track_ids) == len(joints_m) == len(solve_times) == len(warm_started) == n):
             raise ValueError("one track id, joints array, solve time and warm flag per result")
@@ -227,12 +238,14 @@ class SkeletonFrame:
             return cls(np.zeros(0, np.int64), np.zeros((0, N_JOINTS, 3)), np.zeros((0, 6)), np.zeros(0),
                        np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0, np.int64),
                        np.zeros(0, bool), np.zeros(0), np.zeros(0, bool), np.zeros((0, N_JOINTS)),
-                       np.zeros((0, N_JOINTS, 2)), np.zeros((0, N_JOINTS)))
+                       np.zeros((0, N_JOINTS, 2)), np.zeros((0, N_JOINTS)), np.zeros((0, N_JOINTS, 3)))
         cams = [r.camera for r in results]
         rotations = np.array([np.asarray(c.rotation, dtype=np.float64) for c in cams]).reshape(n, 3, 3)
         joints = np.array([np.asarray(j, dtype=np.float64) for j in joints_m])
         if joints.shape != (n, N_JOINTS, 3):
             raise ValueError(f"joints must be ({N_JOINTS}, 3) each, got {joints.shape[1:]}")
+        if std_m is not None and len(std_m) != n:
+            raise ValueError("one joint std (or None) per result")
         return cls(
             track_ids=np.array([int(t) for t in track_ids], dtype=np.int64),
             joints_m=joints,
@@ -251,6 +264,8 @@ class SkeletonFrame:
                     else np.array(points, dtype=np.float64).reshape(n, N_JOINTS, 2)),
             confidence=(np.zeros((n, N_JOINTS)) if confidence is None
                         else np.array(confidence, dtype=np.float64).reshape(n, N_JOINTS)),
+            std_m=(None if std_m is None
+                   else np.array([_std_or_nan(s) for s in std_m]).reshape(n, N_JOINTS, 3)),
         )
 
     @classmethod
@@ -260,7 +275,7 @@ class SkeletonFrame:
         return cls.from_results([s.track_id for s in lifted], [s.joints_m for s in lifted],
                                 [s.result for s in lifted], [s.solve_time for s in lifted],
                                 [s.warm_started for s in lifted], [p for p, _ in labelled],
-                                [c for _, c in labelled])
+                                [c for _, c in labelled], [s.std_m for s in lifted])
 
     @classmethod
     def concat(cls, frames: Sequence[SkeletonFrame]) -> SkeletonFrame:
@@ -275,9 +290,16 @@ class SkeletonFrame:
         return len(self.track_ids)
 
 
+def _std_or_nan(std_m: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """A skeleton's checked joint standard deviations (12, 3) metres; NaN where unknown (None)."""
+    std = checked_joint_std(std_m)
+    return np.full((N_JOINTS, 3), np.nan) if std is None else std
+
+
 def skeleton3d_array_cdr(header: bytes, frame: SkeletonFrame) -> bytes:
     """A serialised ``pose_lifter_msgs/Skeleton3DArray`` of ``header`` (a ``std_msgs/Header``'s
-    CDR: :func:`header_cdr`, :func:`message_header`) and the skeletons of ``frame``."""
+    CDR: :func:`header_cdr`, :func:`message_header`) and the skeletons of ``frame`` (``joint_std``
+    empty for a row of ``frame.std_m`` that is not all finite)."""
     w = _Writer()
     w.buf += header
     n = len(frame)
@@ -289,6 +311,8 @@ def skeleton3d_array_cdr(header: bytes, frame: SkeletonFrame) -> bytes:
                              frame.reprojection_error[:, None]], axis=1).astype("<f8", copy=False)
     observed = (frame.weights > 0).astype(np.bool_)
     weights32 = frame.weights.astype("<f4")
+    std = np.full((n, N_JOINTS, 3), np.nan) if frame.std_m is None else frame.std_m.astype("<f8", copy=False)
+    std_known = np.isfinite(std).all(axis=(1, 2))
     for i in range(n):
         w.align(8)
         buf += _I64.pack(int(frame.track_ids[i]))
@@ -304,6 +328,12 @@ def skeleton3d_array_cdr(header: bytes, frame: SkeletonFrame) -> bytes:
         buf += observed[i].tobytes()
         w.u32(N_JOINTS)
         buf += weights32[i].tobytes()
+        if std_known[i]:
+            w.u32(N_JOINTS)
+            w.align(8)
+            buf += std[i].tobytes()
+        else:
+            w.u32(0)
     return bytes(buf)
 
 

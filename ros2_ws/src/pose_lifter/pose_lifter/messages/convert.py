@@ -35,6 +35,7 @@ __all__ = [
     "arrays_to_skeleton2d",
     "camera_estimate",
     "camera_info",
+    "checked_joint_std",
     "delete_all_markers",
     "delete_markers",
     "delete_untracked_markers",
@@ -52,6 +53,7 @@ __all__ = [
     "skeleton2d_to_arrays",
     "skeleton3d_from_joints",
     "skeleton3d_to_joints",
+    "skeleton3d_to_std",
     "skeleton_markers",
     "skeletons3d_array",
     "stamp_to_ns",
@@ -320,6 +322,25 @@ def joint_points(joints_m: NDArray[np.float64], types: Any) -> list[Any]:
     return [types.Point(x=float(a), y=float(b), z=float(c)) for a, b, c in j]
 
 
+def checked_joint_std(std_m: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+    """A skeleton's joint standard deviations, shape (12, 3), metres along x, y, z of its frame, as
+    float64; None stays None (unknown).
+
+    Raises
+    ------
+    InvalidInputError
+        Another shape, or a value that is not finite and non-negative.
+    """
+    if std_m is None:
+        return None
+    std = np.asarray(std_m, dtype=np.float64)
+    if std.shape != (N_JOINTS, 3):
+        raise InvalidInputError(f"joint std must be ({N_JOINTS}, 3) metres, got shape {std.shape}")
+    if not (np.all(np.isfinite(std)) and np.all(std >= 0)):
+        raise InvalidInputError("joint std must be finite and non-negative metres (None when unknown)")
+    return std
+
+
 def result_to_skeleton3d(
     result: LiftResult,
     track_id: int,
@@ -327,6 +348,7 @@ def result_to_skeleton3d(
     types: Any,
     solve_time: float = 0.0,
     warm_started: bool = False,
+    std_m: NDArray[np.float64] | None = None,
 ) -> Any:
     """A ``Skeleton3D`` from a lift and its metric joints
     (see :func:`pose_lifter.core.track.placement.place_in_camera`).
@@ -341,7 +363,10 @@ def result_to_skeleton3d(
     solve_time : float
         Seconds.
     warm_started : bool
+    std_m : ndarray, shape (12, 3), optional
+        Each joint's standard deviation along x, y, z, metres (``joint_std``; None: unknown, empty).
     """
+    std = checked_joint_std(std_m)
     return types.Skeleton3D(
         track_id=int(track_id),
         joint_names=list(JOINT_NAMES),
@@ -355,11 +380,14 @@ def result_to_skeleton3d(
         warm_started=bool(warm_started),
         observed=[bool(w > 0) for w in np.asarray(result.weights, dtype=np.float64)],
         joint_weights=[float(w) for w in np.asarray(result.weights, dtype=np.float64)],
+        joint_std=[] if std is None else [types.Vector3(x=float(a), y=float(b), z=float(c))
+                                          for a, b, c in std],
     )
 
 
 def skeleton3d_from_joints(track_id: int, joints_m: NDArray[np.float64], types: Any) -> Any:
-    """A ``Skeleton3D`` carrying only joints (ground truth); the solver fields stay default."""
+    """A ``Skeleton3D`` carrying only joints (ground truth); the solver fields stay default (and
+    ``joint_std`` empty: the truth has no uncertainty to publish)."""
     return types.Skeleton3D(
         track_id=int(track_id), joint_names=list(JOINT_NAMES), joints=joint_points(joints_m, types),
         converged=True,
@@ -371,18 +399,36 @@ def skeleton3d_to_joints(skel: Any) -> NDArray[np.float64]:
 
     ``joint_names`` (when filled) are used to reorder; unknown or missing names raise.
     """
-    pts = np.array([[float(p.x), float(p.y), float(p.z)] for p in skel.joints], dtype=np.float64)
+    return _in_core_order(skel, skel.joints, "joints")
+
+
+def skeleton3d_to_std(skel: Any) -> NDArray[np.float64]:
+    """Joint standard deviations of a ``Skeleton3D`` (``joint_std``) as an array (12, 3), metres
+    along x, y, z, in the core order (reordered by ``joint_names`` as
+    :func:`skeleton3d_to_joints`); all NaN where unknown: an empty ``joint_std``, or a message of a
+    definition without the field (an older bag read with its own types).
+    """
+    vectors = getattr(skel, "joint_std", None)
+    if vectors is None or len(vectors) == 0:
+        return np.full((N_JOINTS, 3), np.nan)
+    return _in_core_order(skel, vectors, "joint_std")
+
+
+def _in_core_order(skel: Any, vectors: Sequence[Any], field: str) -> NDArray[np.float64]:
+    """A per-joint field of a ``Skeleton3D`` (``x``, ``y``, ``z`` each, in the order of its
+    ``joint_names`` when filled) as an array (12, 3) in the core order."""
+    pts = np.array([[float(p.x), float(p.y), float(p.z)] for p in vectors], dtype=np.float64).reshape(-1, 3)
     names = list(skel.joint_names)
     if names:
         if len(names) != len(pts):
-            raise InvalidInputError("Skeleton3D joint_names and joints differ in length")
+            raise InvalidInputError(f"Skeleton3D joint_names and {field} differ in length")
         index = {n: i for i, n in enumerate(names)}
         missing = [n for n in JOINT_NAMES if n not in index]
         if missing:
             raise InvalidInputError(f"Skeleton3D lacks joints {missing}")
         pts = pts[[index[n] for n in JOINT_NAMES]]
     if pts.shape != (N_JOINTS, 3):
-        raise InvalidInputError(f"Skeleton3D must have {N_JOINTS} joints, got {len(pts)}")
+        raise InvalidInputError(f"Skeleton3D must have {N_JOINTS} {field}, got {len(pts)}")
     return pts
 
 

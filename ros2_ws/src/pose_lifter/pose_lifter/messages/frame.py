@@ -149,8 +149,10 @@ class LiftedSkeleton:
         The arms' and the legs' left/right labels its track swapped back on this frame
         (:class:`~pose_lifter.core.track.policy.TrackedLift`; None: none).
     std_m : ndarray, shape (12, 3), optional
-        Standard deviation of each joint along x, y, z of the camera frame, metres (placed on a
-        depth image: :class:`pose_lifter.core.depth.FusedPeople` ``std_m``; None: unknown).
+        Each joint's standard deviation along x, y, z of the camera frame, metres (finite,
+        non-negative; published as ``Skeleton3D.joint_std``; placed on a depth image, the
+        fusion's, :class:`pose_lifter.core.depth.FusedPeople` ``std_m``); None: unknown
+        (published empty).
     """
 
     input: SkeletonInput
@@ -413,10 +415,8 @@ def fused_joints(depth: NDArray[np.float32], intrinsics: tuple[tuple[float, floa
     their tracks gave the 3D joints (:func:`labelled_2d`), weighted by their confidences, and
     each lift's pose, camera scale and centre. None when the fusion fails (the people are then
     placed without depth)."""
-    try:
-        from pose_lifter.core.depth import fuse_depth
-    except ImportError:  # no fusion in this build: the monocular placement
-        return None
+    from pose_lifter.core.depth import fuse_depth  # loaded with the first depth image
+
     labelled = [labelled_2d(inp.points, inp.confidence, t.swapped) for inp, t in people]
     results = [t.result for _, t in people]
     try:
@@ -426,7 +426,7 @@ def fused_joints(depth: NDArray[np.float32], intrinsics: tuple[tuple[float, floa
                            np.array([r.pose_camera for r in results], dtype=np.float64),
                            np.array([float(r.camera.scale) for r in results], dtype=np.float64),
                            np.array([r.camera.translation for r in results], dtype=np.float64))
-    except Exception:  # a failed fusion costs the people their depth, not their lift
+    except Exception:  # a failed fusion (bad input, or a bug) costs the people their depth, not their lift
         return None
     return np.asarray(fused.joints_m, dtype=np.float64), np.asarray(fused.std_m, dtype=np.float64)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,9 @@ class Evaluation:
 
     Arrays have one entry per matched (stamp, track) pair. Floors are computed on the same
     pairs: ``flat`` is the 2D input with zero depth, ``mean_pose`` the bases' mean pose,
-    both similarity-aligned to the truth.
+    both similarity-aligned to the truth. ``joint_std_m`` (n_matched, 12, 3) is each estimate's
+    ``Skeleton3D.joint_std`` (metres along x, y, z of the camera frame), NaN where the message has
+    none.
     """
 
     n_ground_truth: int
@@ -46,6 +48,7 @@ class Evaluation:
     mean_pose_p_mpjpe_mm: NDArray[np.float64]
     mean_pose_normalised: NDArray[np.float64]
     track_ids: NDArray[np.int64]
+    joint_std_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
 
     def table(self) -> dict[str, dict[str, float | None]]:
         """Mean errors: {row: {"mpjpe_mm", "p_mpjpe_mm", "normalised"}}."""
@@ -108,6 +111,7 @@ def evaluate_bag(path: str | Path, bases: PoseBases | None = None) -> Evaluation
     b = bases if bases is not None else PoseBases.load()
     gt: dict[tuple[int, int], NDArray[np.float64]] = {}
     est: dict[tuple[int, int], NDArray[np.float64]] = {}
+    std: dict[tuple[int, int], NDArray[np.float64]] = {}
     inp: dict[tuple[int, int], tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     joints_of = {TOPIC_GROUND_TRUTH: gt, TOPIC_SKELETONS: est}  # the 3D topics: (stamp, track) -> joints
     for x in read_messages(path):
@@ -115,6 +119,8 @@ def evaluate_bag(path: str | Path, bases: PoseBases | None = None) -> Evaluation
             s = m.stamp_to_ns(x.msg.header.stamp)
             for sk in x.msg.skeletons:
                 joints_of[x.topic][(s, int(sk.track_id))] = m.skeleton3d_to_joints(sk)
+                if x.topic == TOPIC_SKELETONS:
+                    std[(s, int(sk.track_id))] = m.skeleton3d_to_std(sk)
         elif x.topic == TOPIC_KEYPOINTS:
             s = m.stamp_to_ns(x.msg.header.stamp)
             for sk in x.msg.skeletons:
@@ -148,6 +154,7 @@ def evaluate_bag(path: str | Path, bases: PoseBases | None = None) -> Evaluation
         mean_pose_p_mpjpe_mm=per_pose(p_mpjpe, meanp, ftruth, 1e3),
         mean_pose_normalised=per_pose(similarity_normalised_error, meanp, ftruth),
         track_ids=np.array([k[1] for k in keys], dtype=np.int64),
+        joint_std_m=np.array([std[k] for k in keys]).reshape(-1, N_JOINTS, 3),
     )
 
 

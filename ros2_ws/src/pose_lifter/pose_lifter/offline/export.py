@@ -4,18 +4,22 @@ One row per lifted skeleton, in bag order:
 
 - CSV (``pandas.read_csv(f)``), one line per joint, the unit in each column's name:
   ``stamp_ns, frame_id, track_id, joint, x_m, y_m, z_m, observed`` plus the skeleton's
-  ``reprojection_error_px`` and ``warm_started`` on each line (flags as 1 / 0);
+  ``reprojection_error_px`` and ``warm_started`` on each line (flags as 1 / 0), then the joint's
+  standard deviation ``std_x_m, std_y_m, std_z_m``;
 - NPZ (``numpy.load(f)``, no pickle): ``stamp_ns (N,)``, ``track_id (N,)``, ``joints (N, 12, 3)``
   metres, ``observed (N, 12)``, ``joint_names (12,)``, ``frame_id (N,)``, ``reprojection_error
-  (N,)`` pixels, ``objective (N,)``, ``warm_started (N,)``;
+  (N,)`` pixels, ``objective (N,)``, ``warm_started (N,)``, ``joint_std (N, 12, 3)`` metres;
 - JSON: ``{"joint_names": [...], "units": {...}, "frames": [{"stamp_ns", "frame_id",
   "skeletons": [{"track_id", "joints", "observed", "reprojection_error", "objective",
-  "warm_started"}]}]}`` (one entry per message, also the empty ones).
+  "warm_started", "joint_std"}]}]}`` (one entry per message, also the empty ones).
 
 Joints are in the message's frame (the camera optical frame: x right, y down, z forward).
 ``observed`` is ``Skeleton3D.observed``: per joint, whether the 2D input showed it (else its 3D
 position is the pose model's alone). A message without the flags (ground truth, or a bag written
-before the field) gives an empty CSV cell, JSON ``null`` and NPZ ``False``.
+before the field) gives an empty CSV cell, JSON ``null`` and NPZ ``False``. ``joint_std`` is
+``Skeleton3D.joint_std``: per joint, the standard deviation of its position along x, y and z of
+that frame; where a message has none (ground truth, or a bag written before the field) it is an
+empty CSV cell, JSON ``null`` and NPZ NaN.
 
 The file is written next to its final name and renamed at the end: an error leaves nothing.
 """
@@ -41,10 +45,12 @@ __all__ = ["CSV_COLUMNS", "FORMATS", "UNITS", "export_skeletons"]
 FORMATS: Final[tuple[str, ...]] = (".csv", ".npz", ".json")
 #: The CSV header: one line per joint, units in the names (metres, pixels).
 CSV_COLUMNS: Final[tuple[str, ...]] = ("stamp_ns", "frame_id", "track_id", "joint", "x_m", "y_m", "z_m",
-                                       "observed", "reprojection_error_px", "warm_started")
+                                       "observed", "reprojection_error_px", "warm_started",
+                                       "std_x_m", "std_y_m", "std_z_m")
 #: The units of the JSON's numbers (its ``units`` entry).
 UNITS: Final[dict[str, str]] = {"stamp_ns": "nanoseconds", "joints": "metres (camera optical frame)",
-                                "reprojection_error": "pixels", "objective": "normalised"}
+                                "reprojection_error": "pixels", "objective": "normalised",
+                                "joint_std": "metres (standard deviation along x, y, z of the joints' frame)"}
 
 
 def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
@@ -62,10 +68,17 @@ def _frames(bag: str | Path, topic: str) -> list[dict[str, Any]]:
             "reprojection_error": float(s.reprojection_error),
             "objective": float(s.objective),
             "warm_started": bool(s.warm_started),
+            "joint_std": _joint_std(s),
         } for s in x.msg.skeletons]
         frames.append({"stamp_ns": m.stamp_to_ns(x.msg.header.stamp), "frame_id": str(x.msg.header.frame_id),
                        "skeletons": skels})
     return frames
+
+
+def _joint_std(skel: Any) -> list[list[float]] | None:
+    """A skeleton's ``joint_std`` (12, 3) in the core order, or None where it has none."""
+    std = m.skeleton3d_to_std(skel)
+    return std.tolist() if np.all(np.isfinite(std)) else None
 
 
 def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
@@ -77,10 +90,12 @@ def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
         w.writerow(CSV_COLUMNS)
         for f, s in rows:
             flags = s["observed"] or [""] * len(JOINT_NAMES)
-            for name, (x, y, z), seen in zip(JOINT_NAMES, s["joints"], flags, strict=True):
+            std = [[repr(v) for v in xyz] for xyz in s["joint_std"]] if s["joint_std"] else \
+                [["", "", ""]] * len(JOINT_NAMES)
+            for name, (x, y, z), seen, sd in zip(JOINT_NAMES, s["joints"], flags, std, strict=True):
                 w.writerow([f["stamp_ns"], f["frame_id"], s["track_id"], name, repr(x), repr(y), repr(z),
                             seen if seen == "" else int(seen), repr(s["reprojection_error"]),
-                            int(s["warm_started"])])
+                            int(s["warm_started"]), *sd])
     else:
         np.savez_compressed(
             handle,
@@ -95,6 +110,8 @@ def _write(path: Path, frames: list[dict[str, Any]], handle: Any) -> None:
             reprojection_error=np.array([s["reprojection_error"] for _, s in rows], dtype=np.float64),
             objective=np.array([s["objective"] for _, s in rows], dtype=np.float64),
             warm_started=np.array([s["warm_started"] for _, s in rows], dtype=bool),
+            joint_std=np.array([s["joint_std"] or np.full((len(JOINT_NAMES), 3), np.nan) for _, s in rows],
+                               dtype=np.float64).reshape(len(rows), len(JOINT_NAMES), 3),
         )
 
 

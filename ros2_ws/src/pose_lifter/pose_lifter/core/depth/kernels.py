@@ -1,0 +1,195 @@
+"""The depth fusion's loops, compiled (:func:`pose_lifter.core.numeric.jit.njit`): the patch
+readings, the occlusion test and the robust scale fit, one person or joint at a time over small
+arrays, where numpy's per-call overhead would cost more than the arithmetic. Their meaning is
+documented where they are called (:mod:`.reading`, :mod:`.fuse`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose_lifter.core.numeric.jit import njit
+
+__all__ = ["hidden_kernel", "read_kernel", "scale_fit_kernel"]
+
+#: Tukey's biweight constant (95 % efficiency under Gaussian noise).
+TUKEY = 4.685
+#: A patch samples every ``int(radius / STRIDE_RADIUS)``-th pixel along rows and columns: at most
+#: about ``pi STRIDE_RADIUS^2`` pixels however large the person (the sensor's noise is correlated
+#: over neighbouring pixels, so more would add little).
+STRIDE_RADIUS = 5.0
+
+
+@njit
+def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: NDArray[np.float64],
+                expected: NDArray[np.float64], band_m: float, band_fraction: float, min_pixels: int,
+                min_fraction: float, trim: float, sensor_noise: float, r_max: int,
+                surface: NDArray[np.float64], var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
+    """Fill ``surface``, ``var`` and ``n_used`` (m,) with the readings of
+    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments)."""
+    h, w = img.shape
+    buf = np.empty((2 * r_max + 1) ** 2)
+    dev = np.empty_like(buf)
+    for i in range(len(pixels)):
+        surface[i] = np.nan
+        var[i] = np.nan
+        n_used[i] = 0
+        u, v = pixels[i, 0], pixels[i, 1]
+        if not (math.isfinite(u) and math.isfinite(v)):
+            continue
+        cu, cv = int(np.rint(u)), int(np.rint(v))
+        r2 = radius[i] * radius[i]
+        stride = max(1, int(radius[i] / STRIDE_RADIUS))
+        reach = int(radius[i])
+        band = band_m + band_fraction * expected[i]
+        n_patch = 0
+        n = 0
+        for dv in range(-reach, reach + 1, stride):
+            for du in range(-reach, reach + 1, stride):
+                if du * du + dv * dv > r2:
+                    continue
+                n_patch += 1
+                row, col = cv + dv, cu + du
+                if row < 0 or row >= h or col < 0 or col >= w:
+                    continue
+                z = float(img[row, col])
+                if math.isfinite(z) and abs(z - expected[i]) <= band:
+                    buf[n] = z
+                    n += 1
+        if n < min_pixels or n < min_fraction * n_patch:
+            continue
+        med = np.median(buf[:n])
+        for k in range(n):
+            dev[k] = abs(buf[k] - med)
+        spread = 1.4826 * np.median(dev[:n])
+        limit = trim * max(spread, max(sensor_noise * med * med, 1e-3))
+        nk = 0
+        for k in range(n):
+            if dev[k] <= limit:
+                buf[nk] = buf[k]
+                nk += 1
+        med2 = np.median(buf[:nk])
+        s2 = 0.0
+        for k in range(nk):
+            s2 += (buf[k] - med2) ** 2
+        s2 /= max(nk - 1, 1)
+        sd = max(sensor_noise * med2 * med2, 1e-3)
+        surface[i] = med2
+        var[i] = sd * sd + s2 / nk
+        n_used[i] = nk
+
+
+@njit
+def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates: NDArray[np.bool_],
+                  pixels: NDArray[np.float64], surface: NDArray[np.float64], limbs: NDArray[np.int64],
+                  limb_radius: NDArray[np.float64], torso: NDArray[np.int64], torso_half_depth: float,
+                  focal: float, margin: float, hidden: NDArray[np.bool_]) -> None:
+    """Fill ``hidden`` (n, 12) for the occlusion test of :func:`pose_lifter.core.depth.fuse._hidden`:
+    ``proj`` (n, 12, 2) the bodies' joints in the image, ``z`` (n, 12) their depths, ``pixels``
+    (n, 12, 2) the keypoints, ``surface`` (n, 12) each joint's surface depth, ``limbs`` (8, 2),
+    ``limb_radius`` (8,), ``torso`` (2, 3) the torso's triangles."""
+    n = proj.shape[0]
+    for p in range(n):
+        for j in range(proj.shape[1]):
+            if not candidates[p, j]:
+                continue
+            qu, qv = pixels[p, j, 0], pixels[p, j, 1]
+            limit = surface[p, j] - margin
+            found = False
+            for o in range(n):
+                for li in range(limbs.shape[0]):
+                    a, b = limbs[li, 0], limbs[li, 1]
+                    if o == p and (a == j or b == j):
+                        continue
+                    au, av = proj[o, a, 0], proj[o, a, 1]
+                    eu, ev = proj[o, b, 0] - au, proj[o, b, 1] - av
+                    du, dv = qu - au, qv - av
+                    tau = min(max((du * eu + dv * ev) / max(eu * eu + ev * ev, 1e-9), 0.0), 1.0)
+                    dist = math.hypot(du - tau * eu, dv - tau * ev)
+                    zs = z[o, a] + tau * (z[o, b] - z[o, a])
+                    rad = limb_radius[li]
+                    if dist < rad * focal / max(zs, 1e-3) and zs - rad < limit:
+                        found = True
+                        break
+                if found:
+                    break
+                if o == p and (j == torso[0, 0] or j == torso[0, 1] or j == torso[0, 2] or j == torso[1, 2]):
+                    continue
+                for t in range(torso.shape[0]):
+                    a, b, c = torso[t, 0], torso[t, 1], torso[t, 2]
+                    v0u, v0v = proj[o, b, 0] - proj[o, a, 0], proj[o, b, 1] - proj[o, a, 1]
+                    v1u, v1v = proj[o, c, 0] - proj[o, a, 0], proj[o, c, 1] - proj[o, a, 1]
+                    den = v0u * v1v - v0v * v1u
+                    if abs(den) < 1e-9:
+                        continue
+                    wu, wv = qu - proj[o, a, 0], qv - proj[o, a, 1]
+                    s1 = (wu * v1v - wv * v1u) / den
+                    s2 = (v0u * wv - v0v * wu) / den
+                    if s1 >= 0 and s2 >= 0 and s1 + s2 <= 1:
+                        zt = (1 - s1 - s2) * z[o, a] + s1 * z[o, b] + s2 * z[o, c] - torso_half_depth
+                        if zt < limit:
+                            found = True
+                            break
+                if found:
+                    break
+            hidden[p, j] = found
+
+
+@njit
+def scale_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], z0: NDArray[np.float64],
+                     have: NDArray[np.bool_], shape_z: NDArray[np.float64], prior_std: float,
+                     k0: NDArray[np.float64], max_iter: int, tol: float, k: NDArray[np.float64],
+                     info: NDArray[np.float64],
+                     objective: NDArray[np.float64], n_iter: NDArray[np.int64], converged: NDArray[np.bool_]
+                     ) -> None:
+    """The robust scale fit of :func:`pose_lifter.core.depth.fuse.fuse_depth` for each of ``n``
+    people: readings ``d`` (n, 12) with variances ``v``, the placed depths ``z0``, ``have`` the
+    readings to fit, ``shape_z`` (12,) the shape's depth error, from ``k0`` (n,). Minimises
+    ``sum_j rho((d_j - k z0_j) / sigma_j) + (k - 1)^2 / (2 prior_std^2)`` (Tukey's rho,
+    ``sigma_j^2 = v_j + (k shape_z_j)^2``) by iteratively reweighted least squares until ``k`` moves
+    by less than ``tol`` relative or ``max_iter``; fills ``k``, the Fisher information ``info`` of
+    ``k`` (the final weights), ``objective``, ``n_iter`` and ``converged``."""
+    prior = 1.0 / (prior_std * prior_std)
+    for p in range(len(d)):
+        kk = k0[p]
+        n_iter[p] = 0
+        converged[p] = True
+        m = 0
+        for j in range(d.shape[1]):
+            if have[p, j]:
+                m += 1
+        if m > 0:
+            converged[p] = False
+            for it in range(1, max_iter + 1):
+                num, den = prior, prior
+                for j in range(d.shape[1]):
+                    if not have[p, j]:
+                        continue
+                    sig2 = v[p, j] + (kk * shape_z[j]) ** 2
+                    r = (d[p, j] - kk * z0[p, j]) / math.sqrt(sig2)
+                    u = min((r / TUKEY) ** 2, 1.0)
+                    wt = (1.0 - u) ** 2
+                    num += wt * d[p, j] * z0[p, j] / sig2
+                    den += wt * z0[p, j] * z0[p, j] / sig2
+                k_new = num / den
+                n_iter[p] = it
+                done = abs(k_new - kk) <= tol * abs(kk)
+                kk = k_new
+                if done:
+                    converged[p] = True
+                    break
+        loss = 0.5 * prior * (kk - 1.0) ** 2
+        fisher = prior
+        for j in range(d.shape[1]):
+            if not have[p, j]:
+                continue
+            sig2 = v[p, j] + (kk * shape_z[j]) ** 2
+            r = (d[p, j] - kk * z0[p, j]) / math.sqrt(sig2)
+            u = min((r / TUKEY) ** 2, 1.0)
+            loss += TUKEY * TUKEY / 6.0 * (1.0 - (1.0 - u) ** 3)
+            fisher += (1.0 - u) ** 2 * z0[p, j] * z0[p, j] / sig2
+        k[p] = kk
+        info[p] = fisher
+        objective[p] = loss

@@ -1,0 +1,173 @@
+"""A robust depth reading per joint: a patch of a registered depth image around each keypoint.
+
+A depth camera sees the body's surface, not its joints: the reading at a wrist's pixel is the
+front of the forearm, a hole, the wall behind the person (the keypoint a few pixels off the
+limb), a pixel mixed from both at the silhouette, or the other arm in front of it.
+:func:`read_patches` takes the pixels within a radius of each keypoint (sized to the limb's image
+width), drops those outside a depth band around the person (background and far foreground),
+takes the median of the rest and trims the pixels that stray from it (mixed pixels, a second
+surface in the patch), and gives the reading a variance (the sensor's noise at that depth, and
+the spread of the trimmed pixels). The joint centre lies behind the surface it shows by the
+limb's radius and the body around the joint: :data:`SURFACE_OFFSET_M` (``tools/depth_calibration.py``
+measures it on the training split). Which readings belong to the joint (and not to a limb in front
+of it) the fusion decides against the placed body (:mod:`pose_lifter.core.depth.fuse`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose_lifter.core.depth.kernels import read_kernel
+
+__all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthOptions", "PatchReadings", "joint_radius_px",
+           "read_patches", "sensor_std"]
+
+#: Depth of each joint's centre behind the surface the camera sees at its pixel, metres (order of
+#: :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`: shoulders, elbows, wrists, hips, knees,
+#: ankles; left then right): the limb's radius and the flesh around the joint (a shoulder sits
+#: inside the deltoid and the chest, a hip inside the pelvis).
+SURFACE_OFFSET_M: Final[NDArray[np.float64]] = np.array(
+    [0.10, 0.07, 0.05, 0.10, 0.07, 0.05, 0.11, 0.07, 0.06, 0.11, 0.07, 0.06])
+#: Radius of the body at each joint, metres: the patch stays inside the limb's image
+#: (:attr:`DepthOptions.patch_scale`).
+LIMB_RADIUS_M: Final[NDArray[np.float64]] = np.array(
+    [0.06, 0.045, 0.035, 0.06, 0.045, 0.035, 0.08, 0.06, 0.05, 0.08, 0.06, 0.05])
+
+
+@dataclass(frozen=True)
+class DepthOptions:
+    """How depth readings are taken and fused (:func:`read_patches`,
+    :func:`pose_lifter.core.depth.fuse.fuse_depth`).
+
+    Attributes
+    ----------
+    patch_scale : float
+        Patch radius as a fraction of the limb's radius in the image (:data:`LIMB_RADIUS_M` at the
+        person's placed depth): the patch stays on the limb when the keypoint is on it.
+    min_patch_px, max_patch_px : float, int
+        Bounds of the patch radius, pixels.
+    band_m, band_fraction : float
+        Pixels farther than ``band_m + band_fraction * Z`` from the person's placed depth ``Z`` in
+        front or behind are not the person (background, a near object).
+    min_pixels : int
+        Fewest in-band pixels a reading needs.
+    min_fraction : float
+        Least fraction of the patch's pixels in band (a patch mostly on the background is a miss).
+    trim : float
+        Pixels farther than ``trim`` robust standard deviations (or sensor standard deviations,
+        whichever is larger) from the patch's median are dropped before the reading.
+    sensor_noise : float
+        The sensor's depth noise ``c`` of ``sigma_z = c z^2`` (per metre): active stereo cameras
+        (RealSense D4xx: about 2 % RMS at 4 m).
+    offset_std_m : float
+        Standard deviation of a joint's surface offset about :data:`SURFACE_OFFSET_M`, metres (the
+        limb's orientation and the body's build).
+    confidence_threshold : float
+        Joints whose 2D weight is below this are not read (their pixel is not known).
+    gate : float
+        A reading farther from the placed body than ``gate`` standard deviations (the reading's and
+        the body's together) is not this joint's (dropped, as a 2D outlier is).
+    occlusion_margin_m : float
+        A body part whose surface lies this much in front of a joint's surface on its pixel hides
+        the joint.
+    prior_std : float
+        Standard deviation of the person's depth scale about the monocular placement's (relative):
+        the prior on the leg length that keeps a person with few readings near it.
+    max_iter : int
+        Iteration cap of the robust scale fit.
+    tol : float
+        Stopping rule of the robust scale fit: relative change of the scale.
+    """
+
+    patch_scale: float = 0.6
+    min_patch_px: float = 1.5
+    max_patch_px: int = 10
+    band_m: float = 0.6
+    band_fraction: float = 0.15
+    min_pixels: int = 3
+    min_fraction: float = 0.25
+    trim: float = 3.0
+    sensor_noise: float = 0.0025
+    offset_std_m: float = 0.025
+    confidence_threshold: float = 0.1
+    gate: float = 3.0
+    occlusion_margin_m: float = 0.08
+    prior_std: float = 0.15
+    max_iter: int = 50
+    tol: float = 1e-7
+
+
+def sensor_std(z: NDArray[np.float64], options: DepthOptions) -> NDArray[np.float64]:
+    """The sensor's depth standard deviation at depths ``z`` (any shape, metres): ``c z^2``, at
+    least 1 mm (the 16-bit image's quantisation)."""
+    return np.maximum(options.sensor_noise * np.asarray(z, dtype=np.float64) ** 2, 1e-3)
+
+
+@dataclass(frozen=True)
+class PatchReadings:
+    """The depth readings of ``m`` keypoints.
+
+    Attributes
+    ----------
+    surface : ndarray, shape (m,)
+        Depth of the surface at each keypoint, metres (NaN: no reading).
+    var : ndarray, shape (m,)
+        Variance of ``surface``, m^2 (NaN where no reading).
+    n_pixels : ndarray of int, shape (m,)
+        Pixels the reading used.
+    """
+
+    surface: NDArray[np.float64]
+    var: NDArray[np.float64]
+    n_pixels: NDArray[np.int64]
+
+
+def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius_px: NDArray[np.float64],
+                 expected: NDArray[np.float64], options: DepthOptions) -> PatchReadings:
+    """Robust surface depths of ``m`` keypoints of one depth image.
+
+    Parameters
+    ----------
+    depth : ndarray of float32, shape (H, W)
+        Metres along the optical axis, NaN where there is no reading.
+    pixels : ndarray, shape (m, 2)
+        The keypoints (u column, v row), pixels.
+    radius_px : ndarray, shape (m,)
+        Patch radius per keypoint, pixels (clipped to ``[min_patch_px, max_patch_px]``).
+    expected : ndarray, shape (m,)
+        The person's placed depth per keypoint, metres: the centre of the depth band.
+    options : DepthOptions
+
+    Returns
+    -------
+    PatchReadings
+        The median of the in-band pixels of each patch (every ``stride``-th pixel of a large patch,
+        :data:`~pose_lifter.core.depth.kernels.STRIDE_RADIUS`) after trimming, its variance
+        ``sigma_z^2 + spread^2 / n`` (the sensor's noise is correlated over a patch, so it is not
+        divided by the pixel count); NaN where fewer than ``min_pixels`` pixels (or less than
+        ``min_fraction`` of the patch) are in band, or the keypoint is outside the image.
+    """
+    img = np.ascontiguousarray(depth, dtype=np.float32)
+    px = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 2)
+    m = len(px)
+    radius = np.clip(np.asarray(radius_px, dtype=np.float64).reshape(m), options.min_patch_px,
+                     float(options.max_patch_px))
+    surface = np.empty(m)
+    var = np.empty(m)
+    n_used = np.empty(m, dtype=np.int64)
+    read_kernel(img, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m), options.band_m,
+                options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
+                options.sensor_noise, int(options.max_patch_px), surface, var, n_used)
+    return PatchReadings(surface, var, n_used)
+
+
+def joint_radius_px(scale_px_per_m: NDArray[np.float64], options: DepthOptions) -> NDArray[np.float64]:
+    """Patch radius (n, 12; pixels) of each joint of ``n`` people whose image scale is
+    ``scale_px_per_m`` (n,; pixels per metre at the person's depth, ``f / Z``)."""
+    per_m = np.asarray(scale_px_per_m, dtype=np.float64)[:, None]
+    return options.patch_scale * LIMB_RADIUS_M[None, :] * per_m
+

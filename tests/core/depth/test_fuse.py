@@ -1,0 +1,172 @@
+"""The depth fusion (pose_lifter.core.depth) on small problems with a known answer: a body whose
+joints are painted into a depth image as disks at their surface depth, at a scale the monocular
+placement does not know."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from pose_lifter.core.depth import (
+    SURFACE_OFFSET_M,
+    DepthOptions,
+    FusedPeople,
+    fuse_depth,
+    monocular_std,
+    read_patches,
+)
+from pose_lifter.core.depth.fuse import _hidden
+from pose_lifter.core.depth.reading import sensor_std
+from pose_lifter.core.track.placement import place_poses
+from synthetic_poses import synthetic_poses
+from tolerances import ROUND_OFF_ACCUMULATED
+
+K = ((800.0, 800.0), (320.0, 240.0))
+SIZE = (480, 640)
+#: How far the fused joints may be from the truth when every reading is exact (the fit's stopping
+#: rule and the readings' 1 mm quantisation floor on the variance): metres.
+EXACT_READING_M = 2e-3
+
+
+def _project(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    (fx, fy), (cx, cy) = K
+    return np.stack([fx * x[..., 0] / x[..., 2] + cx, fy * x[..., 1] / x[..., 2] + cy], axis=-1)
+
+
+def _body(k: float = 1.1, seed: int = 3) -> tuple[NDArray[np.float64], NDArray[np.float64], float,
+                                                   NDArray[np.float64]]:
+    """A synthetic pose in the camera frame (leg units, centred), its camera scale and centre for a
+    person about 4.5 m away (wholly in the image), and the true joints: the monocular placement
+    scaled by ``k``."""
+    pose = synthetic_poses(1, seed=seed)[0][0] * np.array([1.0, -1.0, -1.0])
+    pose -= pose.mean(axis=0)
+    scale, centre = 800.0 * 0.43 / 4.5, np.array([310.0, 235.0])
+    x0 = place_poses(pose[None], np.array([scale]), centre[None], 0.43, K[0], K[1], 5.0)[0]
+    return pose, centre, scale, k * x0
+
+
+def _painted(joints: NDArray[np.float64], radius_px: float = 12.0, background: float = np.nan,
+             shift: dict[int, float] | None = None) -> NDArray[np.float32]:
+    """A depth image: each joint a disk at its surface depth (its depth minus its surface offset,
+    plus ``shift``), nearer disks over farther ones."""
+    img = np.full(SIZE, np.inf)
+    v, u = np.mgrid[0:SIZE[0], 0:SIZE[1]]
+    pix = _project(joints)
+    for j in range(12):
+        z = joints[j, 2] - SURFACE_OFFSET_M[j] + (shift or {}).get(j, 0.0)
+        disk = (u - pix[j, 0]) ** 2 + (v - pix[j, 1]) ** 2 <= radius_px**2
+        img[disk] = np.minimum(img[disk], z)
+    img[np.isinf(img)] = background
+    return img.astype(np.float32)
+
+
+def _fuse(pose: NDArray[np.float64], centre: NDArray[np.float64], scale: float, truth: NDArray[np.float64],
+          depth: NDArray[np.float32], weights: NDArray[np.float64] | None = None) -> FusedPeople:
+    w = np.ones((1, 12)) if weights is None else weights[None]
+    return fuse_depth(depth, K, _project(truth)[None], w, pose[None], np.array([scale]), centre[None])
+
+
+def test_patch_reading_is_the_median_of_the_band() -> None:
+    """Noisy readings of one surface: the reading is the median of the patch's in-band pixels
+    (an independent reference: numpy's nanmedian of the same pixels)."""
+    rng = np.random.default_rng(0)
+    img = (2.5 + 0.01 * rng.standard_normal(SIZE)).astype(np.float32)
+    img[rng.random(SIZE) < 0.3] = np.nan
+    opt = DepthOptions(trim=1e9)  # no trimming: the plain median
+    r = read_patches(img, np.array([[200.0, 100.0]]), np.array([4.0]), np.array([2.5]), opt)
+    v, u = np.mgrid[0:SIZE[0], 0:SIZE[1]]
+    patch = img[(u - 200) ** 2 + (v - 100) ** 2 <= 16].astype(np.float64)
+    assert abs(float(r.surface[0]) - float(np.nanmedian(patch))) < ROUND_OFF_ACCUMULATED
+    assert int(r.n_pixels[0]) == int(np.isfinite(patch).sum())
+
+
+def test_patch_reading_drops_background_holes_and_mixed_pixels() -> None:
+    img = np.full(SIZE, 6.0, dtype=np.float32)  # the wall
+    img[100:200, 100:130] = 2.0  # a limb, 30 px wide
+    img[100:200, 130] = 4.0  # mixed pixels at its silhouette
+    img[150:153, 110:113] = np.nan  # a hole
+    opt = DepthOptions()
+    # on the limb, near its edge (the patch spills over the mixed pixels and the wall)
+    r = read_patches(img, np.array([[126.0, 150.0], [115.0, 150.0]]), np.array([6.0, 6.0]),
+                     np.array([2.1, 2.1]), opt)
+    assert np.allclose(r.surface, 2.0, atol=ROUND_OFF_ACCUMULATED)
+    assert np.allclose(r.var, sensor_std(np.array([2.0, 2.0]), opt) ** 2, rtol=1e-6)
+    # off the limb (the wall only), outside the image, non-finite: no reading
+    r = read_patches(img, np.array([[300.0, 300.0], [-50.0, 10.0], [np.nan, 5.0]]), np.full(3, 6.0),
+                     np.full(3, 2.1), opt)
+    assert np.isnan(r.surface).all() and (r.n_pixels == 0).all()
+
+
+def test_exact_readings_give_the_metric_body() -> None:
+    pose, centre, scale, truth = _body(k=1.1)
+    fused = _fuse(pose, centre, scale, truth, _painted(truth))
+    assert fused.from_depth.all() and fused.converged.all()
+    assert abs(float(fused.leg_m[0]) - 0.43 * 1.1) < 1e-3
+    assert np.abs(fused.joints_m[0] - truth).max() < EXACT_READING_M
+    assert np.isfinite(fused.std_m).all() and (fused.std_m > 0).all()
+
+
+def test_without_the_surface_offset_the_joints_sit_on_the_surface() -> None:
+    """The offset is what moves a reading from the skin to the joint: painted without it (the
+    reading at the joint's own depth), the fused joints come out in front by about the offsets."""
+    pose, centre, scale, truth = _body(k=1.1)
+    fused = _fuse(pose, centre, scale, truth, _painted(truth, shift=dict(enumerate(SURFACE_OFFSET_M))))
+    err_z = fused.joints_m[0, :, 2] - truth[:, 2]
+    assert (err_z > 0.5 * SURFACE_OFFSET_M).all()
+
+
+def test_a_reading_off_the_body_is_dropped() -> None:
+    pose, centre, scale, truth = _body(k=0.95)
+    fused = _fuse(pose, centre, scale, truth, _painted(truth, shift={5: -0.6}))  # something before a wrist
+    assert not fused.from_depth[0, 5] and fused.from_depth[0, np.arange(12) != 5].all()
+    assert abs(float(fused.leg_m[0]) - 0.43 * 0.95) < 1e-3
+    others = np.arange(12) != 5
+    assert np.abs(fused.joints_m[0, others] - truth[others]).max() < EXACT_READING_M
+
+
+def test_no_reading_keeps_the_monocular_placement() -> None:
+    pose, centre, scale, truth = _body(k=1.2)
+    fused = _fuse(pose, centre, scale, truth, np.full(SIZE, np.nan, dtype=np.float32))
+    x0 = truth / 1.2
+    assert not fused.from_depth.any() and fused.converged.all() and fused.n_iter[0] == 0
+    assert np.allclose(fused.joints_m[0], x0, atol=ROUND_OFF_ACCUMULATED)
+    assert np.allclose(fused.std_m, monocular_std(x0[None], np.ones((1, 12)), K),
+                       atol=ROUND_OFF_ACCUMULATED)
+
+
+def test_an_unobserved_joint_is_not_read() -> None:
+    pose, centre, scale, truth = _body()
+    w = np.ones(12)
+    w[2] = 0.0
+    fused = _fuse(pose, centre, scale, truth, _painted(truth), weights=w)
+    assert not fused.from_depth[0, 2] and fused.from_depth[0, np.arange(12) != 2].all()
+    assert fused.std_m[0, 2].min() > fused.std_m[0, 1].max()
+
+
+@pytest.mark.parametrize(("wrist_z", "hidden"), [(0.35, True), (-0.35, False)])
+def test_a_wrist_behind_the_torso_is_hidden(wrist_z: float, hidden: bool) -> None:
+    """A wrist on the torso's image is hidden when it is behind the torso, seen when in front."""
+    body = np.array([[0.2, -0.5, 3.0], [0.3, -0.2, 3.0], [0.0, 0.0, 3.0], [-0.2, -0.5, 3.0],
+                     [-0.3, -0.2, 3.0], [-0.4, 0.0, 3.0], [0.15, 0.1, 3.0], [0.15, 0.5, 3.0],
+                     [0.15, 0.9, 3.0], [-0.15, 0.1, 3.0], [-0.15, 0.5, 3.0], [-0.15, 0.9, 3.0]])
+    body[2, 2] += wrist_z
+    got = _hidden(body[None], _project(body)[None], np.ones((1, 12), dtype=bool), K, 0.08)
+    assert bool(got[0, 2]) is hidden
+    assert not got[0, [0, 3, 6, 9]].any()  # the torso's own joints are never hidden by it
+
+
+def test_readings_fuse_a_later_pose_without_the_image() -> None:
+    """A frame's readings fuse another pose of the same people (refined over later frames) as the
+    image would: the readings do not depend on the pose beyond the occlusion test."""
+    from pose_lifter.core.depth import fuse_readings, read_depth
+
+    pose, centre, scale, truth = _body(k=1.05)
+    img = _painted(truth)
+    args = (K, _project(truth)[None], np.ones((1, 12)))
+    readings = read_depth(img, *args, pose[None], np.array([scale]), centre[None])
+    assert np.isfinite(readings.depth_m).all()
+    other = pose + 0.02 * np.random.default_rng(1).standard_normal(pose.shape)
+    later = fuse_readings(readings, *args, other[None], np.array([scale]), centre[None])
+    direct = fuse_depth(img, *args, other[None], np.array([scale]), centre[None])
+    assert np.allclose(later.joints_m, direct.joints_m, atol=ROUND_OFF_ACCUMULATED)
+    assert np.allclose(later.std_m, direct.std_m, atol=ROUND_OFF_ACCUMULATED)
