@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 from pose_lifter import cli
 from pose_lifter.messages import typestore
-from pose_lifter.messages.convert import skeleton3d_to_joints, stamp_to_ns
+from pose_lifter.messages.convert import skeleton3d_to_joints, skeleton3d_to_std, stamp_to_ns
 from pose_lifter.messages.depth import DepthFault, PairFault
 from pose_lifter.messages.names import COMPRESSED_IMAGE, IMAGE, TOPIC_DEPTH, TOPIC_DEPTH_COMPRESSED
 from pose_lifter.offline import bags
@@ -25,6 +25,11 @@ from pose_lifter.offline.depth import depth_topic_of, pair_depth
 REPO = Path(__file__).resolve().parents[2]
 WALK = REPO / "bags" / "walk_clean.mcap"  # 640 x 480 camera_info, keypoints stamped as recorded
 N = 12  # keypoints messages lifted
+#: The depth images' wall, millimetres: the monocular lift places walk_clean's walker ~5.1 m away.
+WALL_MM = 4500
+#: The fused joints lie behind the wall's surface by the joints' surface offsets (at most ~0.12 m,
+#: pose_lifter.core.depth.SURFACE_OFFSET_M) and their spread along the ray: within this of it.
+NEAR_WALL_M = 0.2
 
 
 def _depth_image(stamp_ns: int, mm: int, size: tuple[int, int] = (640, 480), encoding: str = "16UC1") -> Any:
@@ -49,7 +54,7 @@ def _compressed_image(stamp_ns: int, mm: int) -> Any:
 def rgbd_bag(path: Path, offset_ns: int = 3_000_000, topic: str = TOPIC_DEPTH, compressed: bool = False,
              size: tuple[int, int] = (640, 480), encoding: str = "16UC1", source: Path = WALK) -> Path:
     """``source``'s first N frames with a depth image per frame, stamped ``offset_ns`` after the
-    keypoints' header stamp and recorded before them (a depth of 3 m + 1 mm per frame)."""
+    keypoints' header stamp and recorded before them (a wall at WALL_MM + 1 mm per frame)."""
     kind = COMPRESSED_IMAGE if compressed else IMAGE
     with bags.BagWriter(path, compress=False) as w:
         n = 0
@@ -59,8 +64,8 @@ def rgbd_bag(path: Path, offset_ns: int = 3_000_000, topic: str = TOPIC_DEPTH, c
                     break
                 header = typestore.pose_lifter_typestore().deserialize_cdr(raw.data, raw.msgtype).header
                 stamp = stamp_to_ns(header.stamp) + offset_ns
-                image = (_compressed_image(stamp, 3000 + n) if compressed
-                         else _depth_image(stamp, 3000 + n, size, encoding))
+                image = (_compressed_image(stamp, WALL_MM + n) if compressed
+                         else _depth_image(stamp, WALL_MM + n, size, encoding))
                 w.write(topic, raw.stamp_ns, image, kind)
                 n += 1
             w.write_raw(raw)
@@ -113,7 +118,7 @@ def test_pairs_by_header_stamp_within_the_tolerance(tmp_path: Path) -> None:
         for i in (0, 1, 5, 2):  # forward, then back (the topic read again from its start)
             image = frames.image(i)
             assert image is not None and image.shape == (480, 640)
-            np.testing.assert_allclose(image, (3000 + i) / 1000.0, rtol=1e-6)
+            np.testing.assert_allclose(image, (WALL_MM + i) / 1000.0, rtol=1e-6)
         assert not frames.refused
 
 
@@ -137,15 +142,29 @@ def _joints(out: Path) -> list[np.ndarray]:
             for x in bags.read_messages(out, ["/skeletons_3d"])]
 
 
+def _stds(out: Path) -> list[np.ndarray]:
+    """Per answer, its skeletons' joint_std (n, 12, 3) metres (NaN: unknown)."""
+    return [np.array([skeleton3d_to_std(s) for s in x.msg.skeletons]).reshape(-1, 12, 3)
+            for x in bags.read_messages(out, ["/skeletons_3d"])]
+
+
 @pytest.mark.parametrize("compressed", [False, True])
 def test_lift_reads_the_bag_s_depth_topic(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                           compressed: bool) -> None:
     topic = TOPIC_DEPTH_COMPRESSED if compressed else TOPIC_DEPTH
     bag = rgbd_bag(tmp_path / "rgbd.mcap", topic=topic, compressed=compressed)
-    out = tmp_path / "out.mcap"
+    out, mono = tmp_path / "out.mcap", tmp_path / "mono.mcap"
     assert lift(str(bag), "--out", str(out), "--no-publish-hri") == 0  # the one depth topic, by default
     assert f"depth from {topic}: {N} of {N} messages paired" in capsys.readouterr().out
-    assert len(_joints(out)) == N
+    assert lift(str(bag), "--out", str(mono), "--no-publish-hri", "--depth-topic", "none") == 0
+    fused, alone = _joints(out), _joints(mono)
+    assert len(fused) == len(alone) == N
+    for k, (f, a) in enumerate(zip(fused, alone, strict=True)):  # the person sits at the depth
+        wall = (WALL_MM + k) / 1000.0
+        assert 0.0 < f[..., 2].mean() - wall < NEAR_WALL_M and abs(a[..., 2].mean() - wall) > 2 * NEAR_WALL_M
+    for std in _stds(out):  # each joint with its uncertainty
+        assert np.isfinite(std).all() and (std > 0).all()
+    assert all(np.isnan(std).all() for std in _stds(mono))
 
 
 def test_no_depth_topic_is_the_monocular_lift(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -173,14 +192,27 @@ def test_a_named_depth_topic_the_bag_lacks_is_an_error(tmp_path: Path, capsys: p
     assert not out.exists()
 
 
-@pytest.mark.parametrize("mode", [("--workers", "2"), ("--output-lag", "3", "--smoothing", "0")])
-def test_lift_with_depth_on_workers_and_lagged(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                               mode: tuple[str, ...]) -> None:
-    """The forked workers (each its own reader of the depth topic; two tracks, two chains) and the
-    node's lagged answers."""
-    bag = rgbd_bag(tmp_path / "rgbd.mcap", source=REPO / "bags" / "two_people.mcap")
-    out = tmp_path / "out.mcap"
+def _lift_all(bag: Path, out: Path, *args: str) -> list[np.ndarray]:
     assert cli.main(["lift", str(bag), "--out", str(out), "--quiet", "--max-messages", str(N),
-                     "--no-publish-hri", *(mode if "--workers" in mode else ("--workers", "1", *mode))]) == 0
-    assert f"{N} of {N} messages paired" in capsys.readouterr().out
-    assert len(_joints(out)) == N
+                     "--no-publish-hri", *args]) == 0
+    return _joints(out)
+
+
+def test_lift_with_depth_on_workers_is_the_serial_lift(tmp_path: Path) -> None:
+    """The forked workers (each its own reader of the depth topic; two tracks, two chains) give
+    the serial lift's joints, and those are not the monocular ones."""
+    bag = rgbd_bag(tmp_path / "rgbd.mcap", source=REPO / "bags" / "two_people.mcap")
+    serial = _lift_all(bag, tmp_path / "serial.mcap", "--workers", "1")
+    forked = _lift_all(bag, tmp_path / "forked.mcap", "--workers", "2")
+    alone = _lift_all(bag, tmp_path / "alone.mcap", "--workers", "1", "--depth-topic", "none")
+    assert len(serial) == N and all(np.array_equal(a, b) for a, b in zip(serial, forked, strict=True))
+    assert not any(np.allclose(a, b) for a, b in zip(serial, alone, strict=True))
+
+
+def test_lagged_answers_keep_the_fused_joints(tmp_path: Path) -> None:
+    bag = rgbd_bag(tmp_path / "rgbd.mcap")
+    lagged = _lift_all(bag, tmp_path / "lagged.mcap", "--workers", "1", "--output-lag", "3",
+                       "--smoothing", "0")
+    assert len(lagged) == N
+    for k, f in enumerate(lagged):
+        assert 0.0 < f[..., 2].mean() - (WALL_MM + k) / 1000.0 < NEAR_WALL_M
