@@ -20,7 +20,11 @@ from .test_lifter_graph import STANDING, coco_keypoints, frame
 pytestmark = pytest.mark.ros
 
 W, H, FX = 640, 480, 500.0
-DEPTH_MM = 2000  # the monocular lift of these keypoints places the person at ~3.3 m
+#: The depth images' wall: the monocular lift of these keypoints places the person ~3.1 m away.
+DEPTH_MM = 3600
+#: The fused joints lie behind the wall's surface by the joints' surface offsets (at most ~0.12 m,
+#: pose_lifter.core.depth.SURFACE_OFFSET_M) and their spread along the ray: within this of it.
+NEAR_WALL_M = 0.2
 
 
 def _status(msg: Any) -> tuple[int, str, dict[str, str]]:
@@ -74,9 +78,17 @@ def test_depth_paired_counted_and_silence_warned(start_lifter: Any, graph: Graph
         graph.pub_camera_info.publish(info)
         stamp = 10**9 + i * 33_000_000
         answers.append(_send_with_depth(graph, pub, stamp, _depth_image(stamp)))
+    wall = DEPTH_MM / 1000.0
+    at_wall = []  # the person placed on the depth, not where the 2D alone puts it (~0.5 m nearer)
     for a in answers:
         (s,) = a.skeletons.skeletons
         assert all_finite(a.skeletons) and len(s.joints) == 12
+        if 0.0 < m.skeleton3d_to_joints(s)[:, 2].mean() - wall < NEAR_WALL_M:
+            at_wall.append(s)
+            assert np.isfinite(m.skeleton3d_to_std(s)).all()  # each joint with its uncertainty
+    # the first images may come before the lifter's reader has matched this writer
+    assert len(at_wall) >= 4 and at_wall[-1] is answers[-1].skeletons.skeletons[0], \
+        f"{len(at_wall)} of 8 frames placed on their depth image"
     graph.spin_until(lambda: any(int(_status(d)[2].get("frames with depth", "0")) > 0 for d in diags), 30.0,
                      "a diagnostics window with frames lifted with depth")
     assert f"depth from {TOPIC_DEPTH}" in lifter.log()
