@@ -20,6 +20,7 @@ from pose_lifter.messages.depth import (
     DepthFault,
     PairFault,
     check_depth_size,
+    check_held,
     compressed_depth_image,
     decode_compressed_image_cdr,
     decode_image_cdr,
@@ -225,6 +226,12 @@ def test_huge_image_refused_before_allocation() -> None:
     finally:
         tracemalloc.stop()
     assert "MAX_DEPTH_PIXELS" in text and peak < 1 << 20
+    # nor held for pairing (the node's buffer), nor a compressed payload larger than such an image
+    _refused(DepthFault.TOO_LARGE, check_held, msg)
+    _refused(DepthFault.TOO_LARGE, check_held, _compressed("16UC1; compressedDepth png", bytes(4 * 100 + 1)),
+             max_pixels=100)
+    small = SimpleNamespace(**{**vars(msg), "height": 480, "width": 640})
+    assert check_held(small) is small
     # a PNG whose header says too many pixels is refused before it is decoded
     payload = _config_header() + _png(_millimetres())
     _refused(DepthFault.TOO_LARGE, compressed_depth_image, _compressed("16UC1; compressedDepth png", payload),

@@ -68,6 +68,7 @@ __all__ = [
     "Pairing",
     "camera_info_missing",
     "check_depth_size",
+    "check_held",
     "compressed_depth_image",
     "decode_compressed_image_cdr",
     "decode_image_cdr",
@@ -298,6 +299,19 @@ def compressed_depth_image(msg: Any, max_pixels: int = MAX_DEPTH_PIXELS) -> NDAr
         depth = np.float32(quant_a) / (raw.astype(np.float32) - np.float32(quant_b))
     depth[(raw == 0) | ~(depth > 0.0) | np.isinf(depth)] = np.nan
     return _checked_readings(depth, encoding)
+
+
+def check_held(msg: Any, max_pixels: int = MAX_DEPTH_PIXELS) -> Any:
+    """``msg`` (an ``Image`` or a ``CompressedImage``) when it may be held for pairing, else
+    :class:`DepthError`: an image of more than ``max_pixels`` pixels, or a compressed payload of
+    more bytes than such an image's float32 pixels (nothing is decoded)."""
+    if hasattr(msg, "format"):
+        if len(msg.data) > 4 * max_pixels:
+            raise DepthError(DepthFault.TOO_LARGE, f"compressed depth image of {len(msg.data)} bytes, more "
+                             f"than {4 * max_pixels} (MAX_DEPTH_PIXELS float32 pixels)")
+        return msg
+    _size(msg.height, msg.width, max_pixels)
+    return msg
 
 
 def read_depth(msg: Any, max_pixels: int = MAX_DEPTH_PIXELS) -> NDArray[np.float32]:

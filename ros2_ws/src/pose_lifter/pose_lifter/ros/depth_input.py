@@ -30,6 +30,7 @@ from pose_lifter.messages.depth import (
     DepthError,
     camera_info_missing,
     check_depth_size,
+    check_held,
     decode_compressed_image_cdr,
     decode_image_cdr,
     is_compressed_topic,
@@ -97,10 +98,10 @@ class DepthInput:
 
     def on_image(self, data: bytes) -> None:
         """A serialised depth image: held by its header stamp (a message that does not even hold
-        its fields is refused, warned)."""
+        its fields, or of more than MAX_DEPTH_PIXELS pixels, is refused and warned)."""
         self.last_image = time.monotonic()
         try:
-            image = self._decode(data)
+            image = check_held(self._decode(data))  # a huge image is not held
         except DepthError as err:
             self._warn(str(err.fault), f"depth image refused: {err}")
             return
