@@ -4,7 +4,7 @@ tests): one standing person, imaged, and laid out as each layout's own definitio
 from __future__ import annotations
 
 import numpy as np
-from pose_lifter.core.model.layouts import get_layout
+from pose_lifter.messages.layouts import get_layout
 
 # A standing person (metres, y up) in the model's joint order.
 STANDING = np.array([

@@ -26,3 +26,8 @@ mk 07_01 02_05 --out bags/two_people.mcap --frames 75 --view-angle 15 --noise 0.
 # five people (the speed target's scene, tools/bench_node.py): walkers (tracks 0, 2, 3, 4) and a boxer (1),
 # 2.7 s at 30 Hz, noise 0.03
 mk 07_05 02_05 02_01 07_04 07_03 --out bags/five_people.mcap --frames 80 --view-angle 20 --noise 0.03 --seed 4
+# RGB-D (bags/rgbd/): punch (subject 02), camera 3 m away, 20 degrees off the front, noise 0.05, and the
+# depth image of each frame (16UC1, the D435-like sensor of pose_lifter.mocap.depth_model). 4 frames: a
+# realistic depth image does not compress below ~0.4 MB (the sensor's noise), so 4 keep the file < 2 MB.
+mk 02_05 --out bags/rgbd/punch_rgbd.mcap --start 3 --frames 4 --view-angle 20 --distance 3 --noise 0.05 \
+    --seed 5 --depth --depth-format raw

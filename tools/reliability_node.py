@@ -170,8 +170,8 @@ class Harness:
 
 def _kinds(t: Any) -> dict[str, Callable[[int], Any]]:
     """Malformed messages by kind: each builds one from a stamp (ns)."""
-    from pose_lifter.core.model.layouts import get_layout
     from pose_lifter.messages.convert import arrays_to_skeleton2d, camera_info, make_header
+    from pose_lifter.messages.layouts import get_layout
 
     rng = np.random.default_rng(0)
     idx = list(get_layout("coco17").model_indices)
@@ -238,8 +238,8 @@ def _kinds(t: Any) -> dict[str, Callable[[int], Any]]:
 
 
 def fuzz(args: argparse.Namespace) -> int:
-    from pose_lifter.core.model.layouts import get_layout
     from pose_lifter.messages.convert import arrays_to_skeleton2d, make_header
+    from pose_lifter.messages.layouts import get_layout
 
     h = Harness([], reliable_input=False)
     t = h.t

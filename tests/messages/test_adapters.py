@@ -15,7 +15,6 @@ import tolerances as tol
 from detector_poses import coco17, coco17_to, model_xy
 from pose_lifter.core import Lifter, PoseBases
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
-from pose_lifter.core.model.layouts import ALIASES, LAYOUTS, get_layout, to_model_joints
 from pose_lifter.core.model.skeleton import N_JOINTS
 from pose_lifter.messages import adapters, typestore
 from pose_lifter.messages import convert as m
@@ -30,6 +29,7 @@ from pose_lifter.messages.detectors import (
     guess_layout,
     sparse_to_model,
 )
+from pose_lifter.messages.layouts import ALIASES, LAYOUTS, get_layout, to_model_joints
 from pose_lifter.offline import bags
 
 REPO = Path(__file__).resolve().parents[2]

@@ -17,11 +17,11 @@ from typing import Any, NamedTuple
 import numpy as np
 import pytest
 from numpy.typing import NDArray
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import body, hri
 from pose_lifter.messages.cdr import SkeletonFrame, header_cdr, stamp_cdr
 from pose_lifter.messages.convert import skeleton3d_to_joints
+from pose_lifter.messages.layouts import get_layout
 from pose_lifter.offline.bags import read_messages
 
 REPO = Path(__file__).resolve().parents[2]

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import tolerances as tol
 from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES
 from pose_lifter.core.results import Camera, LiftResult
 from pose_lifter.core.track.placement import place_in_camera
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.layouts import frame_joints, get_layout
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from scipy.spatial.transform import Rotation
 
@@ -263,7 +263,7 @@ def test_a_frame_s_joints_are_read_with_its_layout_looked_up_once() -> None:
     rng = np.random.default_rng(3)
     good = [m.arrays_to_skeleton2d(rng.uniform(0, 500, (17, 2)), np.full(17, 0.8), k, T) for k in range(2)]
     bad = m.arrays_to_skeleton2d(rng.uniform(0, 500, (10, 2)), np.full(10, 0.8), 9, T)
-    first, wrong, second = m.frame_joints([good[0], bad, good[1]], "coco17")
+    first, wrong, second = frame_joints([good[0], bad, good[1]], "coco17")
     assert isinstance(wrong, InvalidInputError)
     for got, skel in ((first, good[0]), (second, good[1])):
         assert not isinstance(got, Exception)
@@ -271,4 +271,4 @@ def test_a_frame_s_joints_are_read_with_its_layout_looked_up_once() -> None:
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
     with pytest.raises(UnknownLayoutError):
-        m.frame_joints(good, "no_such_layout")
+        frame_joints(good, "no_such_layout")

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import tolerances as tol
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import limb_lengths
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.layouts import get_layout
 from pose_lifter.mocap import scenes
 from pose_lifter.offline import bags
 

@@ -14,9 +14,9 @@ import pytest
 import tolerances as tol
 import yaml
 from params_cases import LIVE_ONLY_PARAMS, NON_DEFAULT_PARAMS
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import JOINT_NAMES
 from pose_lifter.messages import convert as m
+from pose_lifter.messages.layouts import get_layout
 from scipy.spatial.transform import Rotation
 
 from .conftest import PARAMS_YAML, REPO, SHUTDOWN_TIMEOUT, GraphClient, all_finite

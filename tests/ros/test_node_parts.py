@@ -22,6 +22,7 @@ from pose_lifter.messages.frame import (
     frame_over_cap,
     skeleton_input,
 )
+from pose_lifter.messages.layouts import frame_joints
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.typestore import pose_lifter_typestore
 from pose_lifter.ros.checks import WarningThrottle
@@ -42,7 +43,7 @@ def skeleton(track_id: int = 0, scale: float = 1.0, confidence: float = 0.9, k: 
 def checked(skel: Any, seen: set[int], threshold: float, warnings: list[str]) -> SkeletonInput:
     """One skeleton through the frame pipeline's checks: the caps, its joints, the joints' checks."""
     track_id = admitted_track(skel, SETTINGS, seen)
-    (read,) = m.frame_joints([skel], "coco17")
+    (read,) = frame_joints([skel], "coco17")
     if isinstance(read, Exception):
         raise read
     return skeleton_input(track_id, *read, SETTINGS, threshold, warnings.append)

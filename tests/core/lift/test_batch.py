@@ -173,12 +173,12 @@ def test_each_row_ends_with_its_status_and_reason() -> None:
     few = np.zeros(12)
     few[:3] = 1.0
     rows = [LiftRow(x, c), LiftRow(x[:11], c[:11]), LiftRow(x, few), LiftRow(np.full((12, 2), 5.0), c),
-            LiftRow(x, c, track=TrackContext(data_weight=2.0)), LiftRow(points[0, 1], conf[0, 1])]
+            LiftRow(x, c, track=TrackContext(temporal_weight=-1.0)), LiftRow(points[0, 1], conf[0, 1])]
     out = lifter.lift_people(rows)
     assert [o.status for o in out] == [LiftStatus.SOLVED, LiftStatus.INVALID_INPUT, LiftStatus.TOO_FEW_JOINTS,
                                        LiftStatus.INVALID_INPUT, LiftStatus.INVALID_INPUT, LiftStatus.SOLVED]
     assert "shape" in out[1].reason and "3 joints visible" in out[2].reason
-    assert "one point" in out[3].reason and "data_weight" in out[4].reason
+    assert "one point" in out[3].reason and "temporal_weight" in out[4].reason
     assert all(o.result is None for o in out[1:5]) and out[0].reason == out[5].reason == ""
     for o, r in ((out[0], rows[0]), (out[5], rows[5])):
         alone = lifter.lift(r.points, r.confidence)
@@ -212,10 +212,10 @@ def test_a_batch_that_fails_is_lifted_person_by_person(monkeypatch: pytest.Monke
     alone = [lifter.lift(points[0, p], conf[0, p]) for p in range(3)]
     original = Lifter._results
 
-    def only_alone(self: Lifter, won: Any, scaled: bool) -> Any:
+    def only_alone(self: Lifter, won: Any) -> Any:
         if len(won) > 1 or won[0][0].x[0, 0] == points[0, 1, 0, 0]:
             raise RuntimeError("a bug of the batch")
-        return original(self, won, scaled)
+        return original(self, won)
 
     monkeypatch.setattr(Lifter, "_results", only_alone)
     got = lifter.lift_people(rows)

@@ -9,20 +9,19 @@ from pose_lifter.core import (
     BasisFileError,
     PoseBases,
     UnknownLayoutError,
-    get_layout,
     learn_pca_bases,
     mpjpe,
     normalise_pose,
     normalised_error,
     p_mpjpe,
     procrustes_align,
-    to_model_joints,
 )
 from pose_lifter.core.model.metrics import similarity_normalised_error
 from pose_lifter.core.model.skeleton import LIMBS, body_frame, limb_lengths
 from pose_lifter.core.options import LifterOptions
 from pose_lifter.core.results import Camera, LiftResult, StartKind
 from pose_lifter.core.solve.camera import camera_step, weighted_median
+from pose_lifter.messages.layouts import get_layout, to_model_joints
 from scipy.spatial.transform import Rotation
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from pose_lifter.core import Lifter, LifterOptions, p_mpjpe
 from pose_lifter.core.model.skeleton import LIMB_NAMES, LIMBS, RIGHT_LOWER_LEG, limb_lengths
+from pose_lifter.core.track.later import LaterFrame, update_later
 from pose_lifter.core.track.measurement import MeasurementUpdate, kalman_gain
 from pose_lifter.core.track.policy import TrackedLift, TrackPolicy
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -316,10 +317,12 @@ def _offline(options: LifterOptions, x: np.ndarray, conf: np.ndarray) -> tuple[l
     policy.smoothed_later = True
     out = [policy.lift(0, i * 33_333_333, x[i], conf[i]) for i in range(len(x))]
     poses = np.array([t.result.pose_camera for t in out])
-    for (track_id, stamp, _), pose in policy.measured_later().items():
-        assert track_id == 0
-        poses[stamp // 33_333_333] = pose
-    assert policy.measured_later() == {}  # the kept frames are used once
+    kept = policy.kept_later().get(0, [])  # none without the measurement update
+    assert policy.kept_later() == {}  # the kept frames are handed over once
+    opts = policy.lifter.options
+    for f, pose in zip(kept, update_later(kept, opts.measurement_depth, opts.measurement_gate), strict=True):
+        if pose is not None:
+            poses[f.stamp_ns // 33_333_333] = pose
     return out, poses
 
 
@@ -351,7 +354,6 @@ def test_offline_the_update_runs_both_ways_in_time_and_does_not_lag() -> None:
     first updated frame moves it by the gain's share); the mean of the forward and backward passes
     moves it as far on the track's first frames as on its last, and the frames whose noise the
     track did not know yet are published too."""
-    from pose_lifter.core.track.later import LaterFrame, update_later
 
     pose = _pose()
     points = 100.0 * pose[:, :2] + 320.0

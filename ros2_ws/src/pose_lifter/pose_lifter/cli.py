@@ -20,7 +20,7 @@ import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
@@ -101,7 +101,9 @@ def _cmd_learn_bases(args: argparse.Namespace) -> int:
 
 def make_bag(
     trials: Sequence[str], out: str | Path, data_dir: str | Path | None = None, fps: float = 30.0,
-    start: float = 0.0, frames: int | None = None, overwrite: bool = False, **scene: Any,
+    start: float = 0.0, frames: int | None = None, overwrite: bool = False,
+    depth: Literal["raw", "compressed"] | None = None,
+    **scene: Any,
 ) -> Any:
     """Film mocap trials with the virtual camera and write the bag.
 
@@ -117,6 +119,9 @@ def make_bag(
         Seconds into each trial.
     frames : int, optional
         Output frames (default: as many as the shortest trial allows).
+    depth : {"raw", "compressed"}, optional
+        Also film the depth image of each frame (:func:`pose_lifter.mocap.scenes.scene_messages`):
+        16UC1 ``sensor_msgs/Image`` or its compressedDepth PNG.
     **scene
         Other :class:`pose_lifter.mocap.scenes.SceneOptions` fields.
 
@@ -142,7 +147,7 @@ def make_bag(
             raise ValueError(f"trial {t} has no frames after {start} s")
         people.append(clip)
     scene_ = scenes.build_scene(people, opts, source_fps=fps)
-    write_messages(out, scenes.scene_messages(scene_), overwrite=overwrite)
+    write_messages(out, scenes.scene_messages(scene_, depth=depth), overwrite=overwrite)
     return scene_
 
 
@@ -152,9 +157,12 @@ def _cmd_make_bag(args: argparse.Namespace) -> int:
         overwrite=args.overwrite, view_angle=args.view_angle, orbit_speed=args.orbit_speed,
         distance=args.distance, follow=not args.no_follow, spacing=args.spacing, noise=args.noise,
         outliers=args.outliers, missing=args.missing, seed=args.seed,
+        depth=args.depth_format if args.depth else None,
     )
     n_people, n_frames = scene.joints_camera.shape[:2]
-    print(f"{args.out}: {n_frames} frames at {args.fps:g} Hz, {n_people} people (tracks {scene.track_ids})")
+    rgbd = f", depth {args.depth_format}" if args.depth else ""
+    print(f"{args.out}: {n_frames} frames at {args.fps:g} Hz, {n_people} people "
+          f"(tracks {scene.track_ids}){rgbd}")
     return 0
 
 
@@ -372,7 +380,13 @@ def _make_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--noise", type=_NONNEG, default=0.0, help="2D Gaussian noise std, right-lower-leg units")
     p.add_argument("--outliers", type=_FRACTION, default=0.0, help="fraction of joints displaced 1-3 legs")
     p.add_argument("--missing", type=_FRACTION, default=0.0, help="fraction of joints with confidence 0")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the 2D corruption and the depth sensor")
+    p.add_argument("--depth", action="store_true",
+                   help="RGB-D: also each frame's depth image, the body surface seen by a D435-like sensor "
+                   "(pose_lifter.mocap.depth_model), registered to the virtual camera")
+    p.add_argument("--depth-format", choices=("raw", "compressed"), default="raw",
+                   help="raw: 16UC1 sensor_msgs/Image (mm) on the depth topic; compressed: image_transport's "
+                   "compressedDepth PNG on its /compressedDepth topic")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_make_bag)
 

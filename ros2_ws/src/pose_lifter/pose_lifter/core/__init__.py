@@ -22,7 +22,6 @@ if TYPE_CHECKING:
     )
     from .lift.lifter import Lifter
     from .model.bases import PoseBases, learn_classwise_pca_bases, learn_pca_bases, learn_sparse_bases
-    from .model.layouts import LAYOUTS, get_layout, to_model_joints
     from .model.metrics import mpjpe, normalised_error, p_mpjpe, per_joint_error, procrustes_align
     from .model.skeleton import JOINT_NAMES, LIMB_NAMES, LIMBS, limb_lengths, normalise_pose
     from .options import VARIANTS, ExperimentOptions, LifterOptions, UserOptions, Variant, get_variant
@@ -53,9 +52,6 @@ _MODULE_OF: dict[str, str] = {
     "SolverError": "errors",
     "TooFewJointsError": "errors",
     "UnknownLayoutError": "errors",
-    "LAYOUTS": "model.layouts",
-    "get_layout": "model.layouts",
-    "to_model_joints": "model.layouts",
     "Lifter": "lift.lifter",
     "mpjpe": "model.metrics",
     "normalised_error": "model.metrics",
@@ -88,7 +84,6 @@ _MODULE_OF: dict[str, str] = {
 
 __all__ = [
     "JOINT_NAMES",
-    "LAYOUTS",
     "LIMBS",
     "LIMB_NAMES",
     "VARIANTS",
@@ -116,7 +111,6 @@ __all__ = [
     "UserOptions",
     "Variant",
     "WarmStart",
-    "get_layout",
     "get_variant",
     "learn_classwise_pca_bases",
     "learn_pca_bases",
@@ -128,7 +122,6 @@ __all__ = [
     "p_mpjpe",
     "per_joint_error",
     "procrustes_align",
-    "to_model_joints",
 ]
 
 

@@ -221,8 +221,6 @@ class TrackContext:
     limb_proportions : ndarray, shape (8,), optional
         The person's limb proportions (the track's estimate over its frames), used for the limb
         constraints with ``options.prior_limbs``.
-    data_weight : float
-        Factor on the 2D term's weights, in (0, 1] (the track's estimate of its detector's noise).
     temporal_weight : float or ndarray, shape (12,)
         With a warm start: weight ``w`` (per joint, or one for all) of the warm start's pose ``Y``
         in the prior term's target ``(P + w Y) / (1 + w)``, ``Y``'s image positions moved by the
@@ -251,7 +249,6 @@ class TrackContext:
     """
 
     limb_proportions: NDArray[np.float64] | None = None
-    data_weight: float = 1.0
     temporal_weight: float | NDArray[np.float64] = 0.0
     past: Frames | None = None
     gated: bool = False

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InvalidInputError
 from .model.skeleton import N_JOINTS
 
-__all__ = ["check_keypoint_sequence", "check_keypoints", "joint_weights"]
+__all__ = ["check_keypoint_sequence", "check_keypoints", "joint_weights", "weighted_centroids"]
 
 
 def check_keypoints(points_2d: ArrayLike, confidence: ArrayLike | None
@@ -105,6 +105,12 @@ def joint_weights(points: NDArray[np.float64], confidence: NDArray[np.float64], 
     bad = np.asarray(~np.isfinite(points).all(axis=2))
     weights[bad] = 0.0
     held = np.where(bad[:, :, None], 0.0, points)
-    total = weights.sum(axis=1)  # (n,)
-    centroid = (weights[:, None, :] @ held)[:, 0, :] / np.where(total > 0.0, total, 1.0)[:, None]
+    centroid = weighted_centroids(held, weights)
     return np.where((weights > 0.0)[:, :, None], held, centroid[:, None, :]), weights
+
+
+def weighted_centroids(points: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The weighted centroid (n, 2) of each of n people's finite points (n, 12, 2) with weights
+    (n, 12) >= 0: ``sum_j w_j x_j / sum_j w_j``, 0 for a person without weight."""
+    total = weights.sum(axis=1)  # (n,)
+    return np.asarray((weights[:, None, :] @ points)[:, 0, :] / np.where(total > 0.0, total, 1.0)[:, None])

@@ -22,8 +22,8 @@ from typing import Any, Final
 import numpy as np
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages.detectors import Person2D, sparse_to_model
+from pose_lifter.messages.layouts import get_layout
 from pose_lifter.messages.names import YOLO_DETECTION_ARRAY
 
 __all__ = [

@@ -25,10 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import Layout, get_layout, to_model_joints
 from pose_lifter.core.model.skeleton import BONES_FOR_DRAWING, JOINT_NAMES, N_JOINTS
 from pose_lifter.core.results import LiftResult
 from pose_lifter.messages import names
+from pose_lifter.messages.layouts import Layout, frame_joints, get_layout
 
 __all__ = [
     "MESSAGE_TYPES",
@@ -39,7 +39,6 @@ __all__ = [
     "delete_all_markers",
     "delete_markers",
     "delete_untracked_markers",
-    "frame_joints",
     "intrinsics_from_camera_info",
     "joint_points",
     "make_header",
@@ -134,51 +133,6 @@ def make_header(stamp_ns: int, frame_id: str, types: Any) -> Any:
 # --------------------------------------------------------------------------- 2D
 
 
-def frame_joints(skeletons: Sequence[Any], layout: str | Layout
-                 ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception]:
-    """The paper's 12 joints of each ``Skeleton2D`` of one frame, the frame's ``layout`` (a name
-    or a :class:`~pose_lifter.core.model.layouts.Layout`) looked up once: per skeleton, in order,
-    ``(points (12, 2) pixels, confidence (12,))``, or the error that refused it (a malformed
-    skeleton costs only itself: :class:`~pose_lifter.core.errors.InvalidInputError` for a wrong
-    keypoint count or non-finite values). Joints whose confidence is 0 (missing) may carry
-    non-finite coordinates; they are returned as 0.
-
-    Raises
-    ------
-    UnknownLayoutError
-        Unknown layout name (the whole frame is unusable).
-    """
-    read: list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception] = []
-    for skel in skeletons:
-        try:
-            read.append(_keypoints(skel))
-        except Exception as err:
-            read.append(err)
-    lay = layout if isinstance(layout, Layout) else get_layout(layout)
-    out: list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception] = []
-    for r in read:
-        if isinstance(r, Exception):
-            out.append(r)
-            continue
-        try:
-            points, confidence = to_model_joints(*r, lay)
-        except Exception as err:
-            out.append(err)
-            continue
-        if not np.isfinite(confidence).all():
-            out.append(InvalidInputError("keypoint confidences must be finite"))
-            continue
-        bad = ~np.isfinite(points).all(axis=1)
-        if bad.any():
-            if (bad & (confidence > 0)).any():
-                names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
-                out.append(InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}"))
-                continue
-            points[bad] = 0.0  # missing joints (confidence 0) may carry any coordinates
-        out.append((points, confidence))
-    return out
-
-
 def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The paper's 12 joints of a ``Skeleton2D``.
 
@@ -192,7 +146,7 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
         one (K, 3) array, as :class:`pose_lifter.messages.cdr.DecodedSkeleton2D` has).
     layout : str or Layout
         The enclosing array's layout (``coco17``, ``h36m17``, ``body25``, ``wang12``, ...), by name
-        or as the :class:`~pose_lifter.core.model.layouts.Layout` a frame looked up once.
+        or as the :class:`~pose_lifter.messages.layouts.Layout` a frame looked up once.
 
     Returns
     -------
@@ -211,16 +165,6 @@ def skeleton2d_to_arrays(skel: Any, layout: str | Layout) -> tuple[NDArray[np.fl
     if isinstance(read, Exception):
         raise read
     return read
-
-
-def _keypoints(skel: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A ``Skeleton2D``'s keypoints as given: pixels (K, 2) and confidences (K,)."""
-    xyc = getattr(skel, "xyc", None)  # pose_lifter.messages.cdr.DecodedSkeleton2D: the keypoints as one array
-    if xyc is not None:
-        return xyc[:, :2], xyc[:, 2]
-    kps = list(skel.keypoints)
-    xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
-    return xy, np.array([float(k.confidence) for k in kps], dtype=np.float64)
 
 
 def arrays_to_skeleton2d(

@@ -30,8 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core.errors import InvalidInputError
-from ..core.model.layouts import Layout, get_layout, to_model_joints
 from ..core.model.skeleton import JOINT_NAMES
+from .layouts import Layout, get_layout, to_model_joints
 
 __all__ = [
     "LAYOUT_FOR_COUNT",

@@ -31,7 +31,6 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages import body
 from pose_lifter.messages.cdr import (
     _ENCAPSULATION,
@@ -43,6 +42,7 @@ from pose_lifter.messages.cdr import (
     header_cdr,
     stamp_cdr,
 )
+from pose_lifter.messages.layouts import get_layout
 from pose_lifter.messages.names import BODIES_NS, PER_BODY, TF_TOPIC
 
 __all__ = [

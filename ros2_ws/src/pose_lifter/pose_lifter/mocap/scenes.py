@@ -3,7 +3,10 @@
 A scene places one or more mocap clips (metres, Y-up world) in front of a virtual 640x480
 pinhole camera several metres away (weak-perspective-like), projects the 12 model joints to
 COCO-17 pixels, and can corrupt the 2D like a detector: Gaussian noise (in right-lower-leg
-units, as in the paper), gross outliers and missing joints.
+units, as in the paper), gross outliers and missing joints. A bag of a scene can also carry the
+depth image a depth camera registered to the virtual camera reads
+(:mod:`pose_lifter.mocap.depth_model`: the body surface in front of a wall and a floor, seen
+through its REALISTIC sensor).
 
 Frames: world Y-up; camera optical frame x right, y down, z forward. The world->camera map is
 a proper rotation (y -> -y AND z -> -z when looking along -Z), never a mirror.
@@ -11,20 +14,24 @@ a proper rotation (y -> -y AND z -> -z when looking along -Z), never a mirror.
 
 from __future__ import annotations
 
+import io
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.core.model.skeleton import RIGHT_LOWER_LEG, body_frame, limb_lengths
 from pose_lifter.messages import names
+from pose_lifter.messages.layouts import get_layout
 
 __all__ = [
     "CAMERA_FRAME",
+    "COMPRESSED_DEPTH_FORMAT",
+    "DEPTH_ENCODING",
     "FOCAL_PX",
     "IMAGE_HEIGHT",
     "IMAGE_WIDTH",
@@ -32,7 +39,9 @@ __all__ = [
     "Scene",
     "SceneOptions",
     "build_scene",
+    "compressed_depth_data",
     "corrupt_2d",
+    "depth_to_mm",
     "look_at",
     "project",
     "scene_messages",
@@ -48,6 +57,15 @@ PRINCIPAL_POINT: Final[tuple[float, float]] = (320.0, 240.0)
 CAMERA_FRAME: Final[str] = "virtual_camera_optical_frame"
 _UP: Final[NDArray[np.float64]] = np.array([0.0, 1.0, 0.0])
 _START_NS: Final[int] = 1_000_000_000
+#: The depth image's encoding: millimetres, 0 = no reading.
+DEPTH_ENCODING: Final[str] = "16UC1"
+#: ``sensor_msgs/CompressedImage.format`` of image_transport's compressedDepth PNG of a 16UC1 image.
+COMPRESSED_DEPTH_FORMAT: Final[str] = "16UC1; compressedDepth png"
+#: zlib level of the compressedDepth PNG: a noisy depth image compresses 4 % less at 3 than at 9,
+#: five times faster (image_transport's own default, png_level 9, decodes the same).
+_PNG_LEVEL: Final[int] = 3
+#: The depth sensor's random stream, next to the 2D corruption's, from the scene's seed.
+_DEPTH_STREAM: Final[int] = 1
 
 
 @dataclass(frozen=True)
@@ -238,7 +256,7 @@ def build_scene(people: Sequence[NDArray[np.float64]], options: SceneOptions,
     ids = list(track_ids) if track_ids is not None else list(range(len(clips)))
     stamps = _START_NS + np.round(t * 1e9).astype(np.int64)
     return Scene(joints_cam, pts, conf, clean, stamps, ids, rots,
-                 {"n_frames": n, "n_people": len(clips)})
+                 {"n_frames": n, "n_people": len(clips), "seed": options.seed})
 
 
 def corrupt_2d(
@@ -311,14 +329,76 @@ def to_coco17(points: NDArray[np.float64], confidence: NDArray[np.float64]
     return kp, cf
 
 
-def scene_messages(scene: Scene) -> Iterator[tuple[str, int, Any, str]]:
+def depth_to_mm(depth: NDArray[np.floating]) -> NDArray[np.uint16]:
+    """A depth image (H, W) in metres, NaN = none, as 16UC1 millimetres (0 = none; rounded,
+    readings beyond 65.535 m dropped)."""
+    mm = np.round(np.asarray(depth, dtype=np.float64) * 1000.0)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(mm) & (mm >= 1) & (mm <= 65535)
+    return np.where(ok, mm, 0).astype(np.uint16)
+
+
+def compressed_depth_data(mm: NDArray[np.uint16]) -> bytes:
+    """``CompressedImage.data`` of a 16UC1 image (H, W millimetres) in image_transport's
+    compressedDepth PNG format: a 12-byte ``ConfigHeader`` (int32 ``compressionFormat``,
+    INV_DEPTH = 0, then float32 ``depthParam[2]``, both 0 for a 16-bit image whose values are
+    stored as they are), then the 16-bit grayscale PNG of the image. Layout of
+    ros-perception/image_transport_plugins, compressed_depth_image_transport:
+    include/compressed_depth_image_transport/compression_common.hpp (``ConfigHeader``) and
+    src/codec.cpp (``encodeCompressedDepthImage``: ``ConfigHeader compressionConfig {}``, format
+    ``INV_DEPTH``, the quantisation parameters set only for 32FC1; the header memcpy'd in front
+    of ``cv::imencode(".png", ...)``), read by ``decodeCompressedDepthImage``. Native byte order:
+    little-endian, as on the x86-64 and arm64 machines that record it."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    image = Image.fromarray(np.ascontiguousarray(mm, dtype=np.uint16))  # mode I;16: 16-bit grayscale
+    image.save(buf, format="PNG", compress_level=_PNG_LEVEL)
+    return struct.pack("<iff", 0, 0.0, 0.0) + buf.getvalue()
+
+
+def _depth_message(header: Any, depth: NDArray[np.float32], kind: Literal["raw", "compressed"]
+                   ) -> tuple[str, Any, str]:
+    """(topic, message, type name) of one depth image: a 16UC1 ``sensor_msgs/Image`` (little-endian,
+    step = 2 width) or its compressedDepth ``sensor_msgs/CompressedImage``."""
+    from pose_lifter.messages.typestore import message_factory
+
+    mm = depth_to_mm(depth)
+    if kind == "compressed":
+        data = np.frombuffer(compressed_depth_data(mm), dtype=np.uint8)
+        make = message_factory(names.COMPRESSED_IMAGE)
+        msg = make(header=header, format=COMPRESSED_DEPTH_FORMAT, data=data)
+        return names.TOPIC_DEPTH_COMPRESSED, msg, names.COMPRESSED_IMAGE
+    h, w = mm.shape
+    msg = message_factory(names.IMAGE)(
+        header=header, height=h, width=w, encoding=DEPTH_ENCODING, is_bigendian=0, step=2 * w,
+        data=np.frombuffer(mm.astype("<u2").tobytes(), dtype=np.uint8))
+    return names.TOPIC_DEPTH, msg, names.IMAGE
+
+
+def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = None
+                   ) -> Iterator[tuple[str, int, Any, str]]:
     """A scene as the messages of a bag, ``(topic, stamp_ns, message, type name)`` in time order
     (rosbags messages): ``/keypoints_2d`` (coco17 pixels), ``/ground_truth/skeletons_3d`` (camera
     optical frame, metres) and ``/camera_info``. The offline writer stores them
-    (:func:`pose_lifter.offline.bags.write_messages`, as ``pose-lifter make-bag`` does)."""
-    from pose_lifter.messages import convert as m
+    (:func:`pose_lifter.offline.bags.write_messages`, as ``pose-lifter make-bag`` does).
 
+    ``depth`` adds each frame's depth image, registered to the virtual camera (the camera_info's
+    stamp and frame), as :mod:`pose_lifter.mocap.depth_model`'s REALISTIC sensor reads the
+    people in front of a wall 2.5 m behind them and on a floor, both static over the scene
+    (:func:`~pose_lifter.mocap.depth_model.scene_backgrounds`), seeded by the scene's seed: ``"raw"`` a 16UC1
+    ``sensor_msgs/Image`` on ``names.TOPIC_DEPTH``, ``"compressed"`` its compressedDepth PNG
+    (:func:`compressed_depth_data`) on ``names.TOPIC_DEPTH_COMPRESSED``."""
+    from pose_lifter.messages import convert as m
+    from pose_lifter.mocap import depth_model
+
+    if depth not in (None, "raw", "compressed"):
+        raise InvalidInputError(f"depth must be None, 'raw' or 'compressed', got {depth!r}")
     types = m.rosbags_types()
+    rng = np.random.default_rng([int(scene.metadata.get("seed", 0)), _DEPTH_STREAM])
+    intrinsics = ((FOCAL_PX, FOCAL_PX), PRINCIPAL_POINT)
+    if depth is not None:
+        backgrounds = depth_model.scene_backgrounds(scene.joints_camera, scene.rotations @ _UP)
     for ti, stamp in enumerate(scene.stamps_ns):
         header = m.make_header(int(stamp), CAMERA_FRAME, types)
         skels2d, skels3d = [], []
@@ -332,3 +412,9 @@ def scene_messages(scene: Scene) -> Iterator[tuple[str, int, Any, str]]:
                names.SKELETON2D_ARRAY)
         yield (names.TOPIC_GROUND_TRUTH, int(stamp), m.skeletons3d_array(header, skels3d, types),
                names.SKELETON3D_ARRAY)
+        if depth is not None:
+            rendered = depth_model.render_depth(scene.joints_camera[:, ti], intrinsics,
+                                                (IMAGE_WIDTH, IMAGE_HEIGHT), backgrounds[ti])
+            topic, msg, msgtype = _depth_message(
+                header, depth_model.sense(rendered, depth_model.REALISTIC, rng), depth)
+            yield (topic, int(stamp), msg, msgtype)

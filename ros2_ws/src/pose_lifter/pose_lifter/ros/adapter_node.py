@@ -26,9 +26,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from pose_lifter.core.errors import InvalidInputError, PoseLifterError
-from pose_lifter.core.model.layouts import get_layout
 from pose_lifter.messages import adapters, names
 from pose_lifter.messages import convert as messages
+from pose_lifter.messages.layouts import get_layout
 from pose_lifter.ros.run import run_node
 
 __all__ = ["AdapterNode", "main"]

@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 from ..errors import InvalidInputError, OptionsError, TooFewJointsError
 from ..model.bases import PoseBases
-from ..model.skeleton import N_JOINTS, limb_lengths, limb_selectors
+from ..model.skeleton import N_JOINTS, LimbVectors, limb_lengths
 from ..results import Camera, LiftResult, WarmStart
 from ..validation import check_keypoint_sequence, check_keypoints
 
@@ -387,11 +387,9 @@ def _problem(x: NDArray[np.float64], w: NDArray[np.float64], bases: PoseBases, t
     """The fitting problem of the normalised joints ``x`` (12, 2) with weights ``w`` (12,) and
     target limb lengths ``tl`` (8,)."""
     mu, comps = bases.mean, bases.components
-    c = limb_selectors()
-    cb_all = np.einsum("ija,ak->ijk", c, comps)  # (8, 3, k)
-    cm = c @ mu  # (8, 3)
+    limbs = LimbVectors.of(mu, comps)
     sw = np.sqrt(np.repeat(w, 2))
-    return _Problem(x, w, sw, mu, comps, cb_all, cm, tl, squared)
+    return _Problem(x, w, sw, mu, comps, limbs.of_components, limbs.of_mean, tl, squared)
 
 
 def _most_correlated_basis(

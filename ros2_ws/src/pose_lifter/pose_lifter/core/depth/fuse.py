@@ -34,7 +34,7 @@ keeping the image); :func:`fuse_depth` both.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,10 +50,12 @@ from pose_lifter.core.depth.reading import (
 from pose_lifter.core.depth.uncertainty import MONOCULAR_SCALE_STD, SHAPE_STD_M, body_std, shape_std
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS
-from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_poses
-
-if TYPE_CHECKING:
-    from pose_lifter.core.track.placement import CameraIntrinsics
+from pose_lifter.core.track.placement import (
+    DEFAULT_DISTANCE_M,
+    DEFAULT_LEG_LENGTH_M,
+    CameraIntrinsics,
+    place_poses,
+)
 
 __all__ = ["DepthReadings", "FusedPeople", "fuse_depth", "fuse_readings", "read_depth"]
 

@@ -138,6 +138,26 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
 
 
 @njit
+def _tukey_sums(d: NDArray[np.float64], v: NDArray[np.float64], z0: NDArray[np.float64],
+                have: NDArray[np.bool_], shape_z: NDArray[np.float64], k: float
+                ) -> tuple[float, float, float]:
+    """One person's IRLS sums at scale ``k``: ``sum w d z0 / sigma^2``, ``sum w z0^2 / sigma^2``
+    (Tukey's weights ``w``) and ``sum rho`` over its readings ``have`` (12,)."""
+    num, den, loss = 0.0, 0.0, 0.0
+    for j in range(len(d)):
+        if not have[j]:
+            continue
+        sig2 = v[j] + (k * shape_z[j]) ** 2
+        r = (d[j] - k * z0[j]) / math.sqrt(sig2)
+        u = min((r / TUKEY) ** 2, 1.0)
+        wt = (1.0 - u) ** 2
+        num += wt * d[j] * z0[j] / sig2
+        den += wt * z0[j] * z0[j] / sig2
+        loss += TUKEY * TUKEY / 6.0 * (1.0 - (1.0 - u) ** 3)
+    return num, den, loss
+
+
+@njit
 def scale_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], z0: NDArray[np.float64],
                      have: NDArray[np.bool_], shape_z: NDArray[np.float64], prior_std: float,
                      k0: NDArray[np.float64], max_iter: int, tol: float, k: NDArray[np.float64],
@@ -155,41 +175,16 @@ def scale_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], z0: NDArray
     for p in range(len(d)):
         kk = k0[p]
         n_iter[p] = 0
-        converged[p] = True
-        m = 0
-        for j in range(d.shape[1]):
-            if have[p, j]:
-                m += 1
-        if m > 0:
-            converged[p] = False
-            for it in range(1, max_iter + 1):
-                num, den = prior, prior
-                for j in range(d.shape[1]):
-                    if not have[p, j]:
-                        continue
-                    sig2 = v[p, j] + (kk * shape_z[j]) ** 2
-                    r = (d[p, j] - kk * z0[p, j]) / math.sqrt(sig2)
-                    u = min((r / TUKEY) ** 2, 1.0)
-                    wt = (1.0 - u) ** 2
-                    num += wt * d[p, j] * z0[p, j] / sig2
-                    den += wt * z0[p, j] * z0[p, j] / sig2
-                k_new = num / den
-                n_iter[p] = it
-                done = abs(k_new - kk) <= tol * abs(kk)
-                kk = k_new
-                if done:
-                    converged[p] = True
-                    break
-        loss = 0.5 * prior * (kk - 1.0) ** 2
-        fisher = prior
-        for j in range(d.shape[1]):
-            if not have[p, j]:
-                continue
-            sig2 = v[p, j] + (kk * shape_z[j]) ** 2
-            r = (d[p, j] - kk * z0[p, j]) / math.sqrt(sig2)
-            u = min((r / TUKEY) ** 2, 1.0)
-            loss += TUKEY * TUKEY / 6.0 * (1.0 - (1.0 - u) ** 3)
-            fisher += (1.0 - u) ** 2 * z0[p, j] * z0[p, j] / sig2
+        converged[p] = not have[p].any()
+        it = 0
+        while not converged[p] and it < max_iter:
+            it += 1
+            num, den, _ = _tukey_sums(d[p], v[p], z0[p], have[p], shape_z, kk)
+            k_new = (prior + num) / (prior + den)
+            converged[p] = abs(k_new - kk) <= tol * abs(kk)
+            kk = k_new
+        n_iter[p] = it
+        _, den, loss = _tukey_sums(d[p], v[p], z0[p], have[p], shape_z, kk)
         k[p] = kk
-        info[p] = fisher
-        objective[p] = loss
+        info[p] = prior + den
+        objective[p] = loss + 0.5 * prior * (kk - 1.0) ** 2

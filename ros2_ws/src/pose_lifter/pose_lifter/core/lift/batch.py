@@ -52,7 +52,7 @@ class Person:
     xn : ndarray, shape (12, 2)
         The same normalised by ``norm``.
     w : ndarray, shape (12,)
-        The 2D term's weights (hybrid: times the track's ``data_weight``).
+        The 2D term's weights.
     norm : Normalisation
     warm : WarmStart or None
     cam0 : Camera or None

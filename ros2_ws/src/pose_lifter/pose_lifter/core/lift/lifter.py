@@ -85,7 +85,7 @@ from ..results import (
     project_each,
 )
 from ..solve.alpha.lifted_admm import QStepFn
-from ..validation import check_keypoints, joint_weights
+from ..validation import check_keypoints, joint_weights, weighted_centroids
 from .batch import NO_TRACK, LiftRow, Person
 from .hybrid import PriorFit
 from .runs import Runs
@@ -223,10 +223,10 @@ class Lifter:
         """The 2D normalisation of n people, as arrays (each row what it is alone): their 2D ``x``
         (n, 12, 2) and weights ``w`` (n, 12) give the weighted centres (n, 2) and the weighted RMS
         spreads over the mean pose's (n,; input units per normalised unit), and which rows have a
-        spread (finite, not (almost) 0: the visible joints are not all at one point)."""
+        spread (finite, not (almost) 0: the visible joints are not all at one point; ``x`` finite)."""
+        centre = weighted_centroids(x, w)
         with np.errstate(divide="ignore", invalid="ignore"):  # a row without weight: refused
             total = w.sum(axis=1)
-            centre = (w[:, None, :] @ x)[:, 0, :] / total[:, None]
             d = x - centre[:, None, :]
             spread = np.sqrt((w[:, None, :] @ (d * d).sum(axis=2)[:, :, None])[:, 0, 0] / total)
             ok = np.isfinite(spread) & (spread > 1e-9 * np.maximum(1.0, np.abs(centre).max(axis=1)))
@@ -325,7 +325,7 @@ class Lifter:
             else:
                 won.append((i, p, st))
         if won:
-            results = self._results([(p, st) for _, p, st in won], scaled=fit is not None)
+            results = self._results([(p, st) for _, p, st in won])
             out.update((i, lifted) for (i, _, _), lifted in zip(won, results, strict=True))
         return [out[i] for i in range(len(rows))]
 
@@ -379,8 +379,6 @@ class Lifter:
                 raise InvalidInputError("warm start alpha does not match the bases")
             cam0 = Camera(warm.camera.rotation, warm.camera.scale / norm.spread,
                           (warm.camera.translation - norm.centre) / norm.spread)
-        if self._prior_fit is not None and self._options.mode == "hybrid":
-            w = w * tc.data_weight
         return Person(x, xn, w, norm, warm, cam0, tc)
 
     def _track_context(self, track: TrackContext, w: NDArray[np.float64]) -> TrackContext:
@@ -400,17 +398,14 @@ class Lifter:
             # only for the joints this frame lacks: one the outlier pass flags stays missing
             fill = (fp, fv & np.isfinite(fp).all(axis=-1) & ~(w > 0))
         if self._options.mode != "hybrid":
-            return TrackContext(track.limb_proportions, track.data_weight, track.temporal_weight, past,
-                                track.gated, fill, future)
-        data_weight = track.data_weight
-        if not 0.0 < data_weight <= 1.0:
-            raise InvalidInputError(f"data_weight must be in (0, 1], got {data_weight!r}")
+            return TrackContext(track.limb_proportions, track.temporal_weight, past, track.gated, fill,
+                                future)
         tw = np.array(track.temporal_weight, dtype=np.float64)
         if tw.shape != (N_JOINTS,):
             tw = np.broadcast_to(tw, (N_JOINTS,)).copy()
         if not ((tw >= 0.0) & (tw <= 1e3)).all():
             raise InvalidInputError(f"temporal_weight must be in [0, 1000], got {track.temporal_weight!r}")
-        return TrackContext(track.limb_proportions, data_weight, tw, past, track.gated, fill, future)
+        return TrackContext(track.limb_proportions, tw, past, track.gated, fill, future)
 
     def input_scales(self, points: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
         """The unit of the lifter's normalised 2D for n people's points (n, 12, 2) and weights (n,
@@ -429,10 +424,9 @@ class Lifter:
         pairs = 0.5 * (lengths[..., _LEFT_LIMBS] + lengths[..., _RIGHT_LIMBS])
         return np.asarray(pairs[..., _GROUP_OF])
 
-    def _results(self, won: Sequence[tuple[Person, Starts]], scaled: bool) -> list[LiftOutcome]:
+    def _results(self, won: Sequence[tuple[Person, Starts]]) -> list[LiftOutcome]:
         """Each person's winning run (of their :class:`Starts`) mapped back to input units and
-        checked finite, the people's arrays together (the 2D term's weights divided by the
-        track's ``data_weight`` when ``scaled``: the hybrid mode multiplied them by it)."""
+        checked finite, the people's arrays together."""
         best = [st.best() for _, st in won]
         runs = [b.run for b in best]
         cams = [r.camera.camera for r in runs]
@@ -457,7 +451,6 @@ class Lifter:
                 out.append(LiftOutcome(LiftStatus.DIVERGED,
                                        "the solve produced non-finite values for this input"))
                 continue
-            w = st.weights / p.track.data_weight if scaled else st.weights
             out.append(LiftOutcome.solved(LiftResult(
                 pose=run.pose.pose,
                 pose_camera=pose_camera[k],
@@ -470,7 +463,7 @@ class Lifter:
                 converged=run.converged,
                 n_starts=st.n_starts,
                 start_index=b.index,
-                weights=w,
+                weights=st.weights,
                 total_alternations=st.total_alternations,
                 prior_pose=st.prior_pose,
                 history=run.history,

@@ -8,7 +8,7 @@ A 3D pose is an array of shape ``(12, 3)`` (joint-major); the paper's vector
 from __future__ import annotations
 
 import math
-from typing import Final
+from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +32,7 @@ __all__ = [
     "N_JOINTS",
     "RIGHT_LIMBS",
     "RIGHT_LOWER_LEG",
+    "LimbVectors",
     "body_frame",
     "limb_lengths",
     "limb_selectors",
@@ -157,6 +158,20 @@ def _build_limb_selectors() -> NDArray[np.float64]:
 
 
 _LIMB_SELECTORS = _build_limb_selectors()
+
+
+class LimbVectors(NamedTuple):
+    """The limb vectors ``C_i y`` (:func:`limb_selectors`) of a linear pose model ``y = mean +
+    components @ alpha``: ``of_mean + of_components @ alpha`` (8, 3)."""
+
+    of_components: NDArray[np.float64]  #: (8, 3, k)
+    of_mean: NDArray[np.float64]  #: (8, 3)
+
+    @classmethod
+    def of(cls, mean: NDArray[np.float64], components: NDArray[np.float64]) -> LimbVectors:
+        """The limb vectors of ``mean`` (36,) and ``components`` (36, k)."""
+        c = limb_selectors()
+        return cls(np.einsum("ija,ak->ijk", c, components), c @ mean)
 
 
 #: The joints that define the body frame (:func:`body_frame`, :func:`normalise_pose_flat`).

@@ -10,13 +10,13 @@ a local SLSQP reference.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidInputError
-from ..model.skeleton import limb_selectors
+from ..model.skeleton import LimbVectors, limb_selectors
 from ..results import Camera
 from ._common import (
     array,
@@ -63,17 +63,28 @@ def _pose_data(
     return x, mu, b, weights_array(weights, n)
 
 
+class _Residual(NamedTuple):
+    """The pose step's weighted residual ``r(alpha) = b - A alpha`` (stacked x1, y1, x2, ...)."""
+
+    a_mat: NDArray[np.float64]  #: (2n, k)
+    b_vec: NDArray[np.float64]  #: (2n,)
+    w2: NDArray[np.float64]  #: (2n,) per-entry weights
+
+    def at(self, alpha: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``r(alpha)``, shape (2n,), of ``alpha`` (k,)."""
+        return np.asarray(self.b_vec - self.a_mat @ alpha)
+
+
 def _pose_linear_map(
     x: NDArray[np.float64], camera: Camera, mu: NDArray[np.float64], bm: NDArray[np.float64],
     w: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Residual ``r(alpha) = b - A alpha`` (stacked x1, y1, x2, ...) and per-entry weights,
-    for checked data (:func:`_pose_data`)."""
+) -> _Residual:
+    """The weighted residual of checked data (:func:`_pose_data`)."""
     n = x.shape[0]
     big_m = np.kron(np.eye(n), camera.projection)  # (2n, 3n)
     a_mat = big_m @ bm
     b_vec = x.reshape(-1) - big_m @ mu - np.tile(camera.translation, n)
-    return a_mat, b_vec, np.repeat(w, 2)
+    return _Residual(a_mat, b_vec, np.repeat(w, 2))
 
 
 def reference_pose_convex(
@@ -127,15 +138,10 @@ class _SmoothPose:
 
     Attributes
     ----------
-    a_mat : ndarray, shape (2n, k)
-    b_vec : ndarray, shape (2n,)
-        Residual ``r = b - A alpha`` (:func:`_pose_linear_map`).
-    w2 : ndarray, shape (2n,)
-        Per-entry weights.
-    cb : ndarray, shape (8, 3, k)
-        Limb vectors of the components.
-    cm : ndarray, shape (8, 3)
-        Limb vectors of the mean.
+    residual : _Residual
+        ``r = b - A alpha`` and its per-entry weights (:func:`_pose_linear_map`).
+    limbs : LimbVectors
+        Limb vectors of the components and of the mean.
     lsq : ndarray, shape (8,)
         Squared target lengths.
     th : float
@@ -144,11 +150,8 @@ class _SmoothPose:
         L1 loss, with the slacks ``e`` (shape (2n,)) at the end of ``u``.
     """
 
-    a_mat: NDArray[np.float64]
-    b_vec: NDArray[np.float64]
-    w2: NDArray[np.float64]
-    cb: NDArray[np.float64]
-    cm: NDArray[np.float64]
+    residual: _Residual
+    limbs: LimbVectors
     lsq: NDArray[np.float64]
     th: float
     l1: bool
@@ -156,12 +159,12 @@ class _SmoothPose:
     @property
     def k(self) -> int:
         """The number of components."""
-        return int(self.a_mat.shape[1])
+        return int(self.residual.a_mat.shape[1])
 
     @property
     def nvar(self) -> int:
         """The length of ``u``."""
-        return 2 * self.k + (self.a_mat.shape[0] if self.l1 else 0)
+        return 2 * self.k + (self.residual.a_mat.shape[0] if self.l1 else 0)
 
     def alpha_of(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """``alpha = a_plus - a_minus``, shape (k,), of ``u`` (nvar,)."""
@@ -173,9 +176,9 @@ class _SmoothPose:
         k = self.k
         reg = self.th * float(u[: 2 * k].sum())
         if self.l1:
-            return float(self.w2 @ u[2 * k :]) + reg
-        r = self.b_vec - self.a_mat @ self.alpha_of(u)
-        return float(self.w2 @ (r * r)) + reg
+            return float(self.residual.w2 @ u[2 * k :]) + reg
+        r = self.residual.at(self.alpha_of(u))
+        return float(self.residual.w2 @ (r * r)) + reg
 
     def jac(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """The gradient (nvar,) of :meth:`fun` at ``u`` (nvar,)."""
@@ -183,32 +186,32 @@ class _SmoothPose:
         g = np.zeros(self.nvar)
         g[: 2 * k] = self.th
         if self.l1:
-            g[2 * k :] = self.w2
+            g[2 * k :] = self.residual.w2
         else:
-            r = self.b_vec - self.a_mat @ self.alpha_of(u)
-            ga = -2.0 * self.a_mat.T @ (self.w2 * r)
+            r = self.residual.at(self.alpha_of(u))
+            ga = -2.0 * self.residual.a_mat.T @ (self.residual.w2 * r)
             g[:k] += ga
             g[k : 2 * k] -= ga
         return g
 
     def limb_fun(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """The limb constraints ``||C_i y||^2 - L_i``, shape (8,), at ``u`` (nvar,)."""
-        v = self.cm + self.cb @ self.alpha_of(u)  # (8, 3)
+        v = self.limbs.of_mean + self.limbs.of_components @ self.alpha_of(u)  # (8, 3)
         return np.asarray((v * v).sum(axis=1) - self.lsq)
 
     def limb_jac(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """The Jacobian (8, nvar) of :meth:`limb_fun` at ``u`` (nvar,)."""
         k = self.k
-        v = self.cm + self.cb @ self.alpha_of(u)
-        ga = 2.0 * np.einsum("ij,ijk->ik", v, self.cb)  # (8, k)
-        out = np.zeros((self.cb.shape[0], self.nvar))
+        v = self.limbs.of_mean + self.limbs.of_components @ self.alpha_of(u)
+        ga = 2.0 * np.einsum("ij,ijk->ik", v, self.limbs.of_components)  # (8, k)
+        out = np.zeros((len(v), self.nvar))
         out[:, :k] = ga
         out[:, k : 2 * k] = -ga
         return out
 
     def slack_ineq(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """L1 only: ``e - r >= 0`` and ``e + r >= 0``, shape (4n,), at ``u`` (nvar,)."""
-        r = self.b_vec - self.a_mat @ self.alpha_of(u)
+        r = self.residual.at(self.alpha_of(u))
         e = u[2 * self.k :]
         return np.concatenate([e - r, e + r])
 
@@ -236,13 +239,13 @@ def _smooth_constraints(
     u0 = np.concatenate([np.maximum(a0, 0.0), np.maximum(-a0, 0.0)])
     if sp.l1:
         # e - r >= 0 and e + r >= 0 with r = b - A alpha
-        a_mat = sp.a_mat
+        a_mat = sp.residual.a_mat
         r_dim = a_mat.shape[0]
         jr = np.hstack([-a_mat, a_mat])  # d r / d (a+, a-)
         ineq_jac = np.vstack([np.hstack([-jr, np.eye(r_dim)]), np.hstack([jr, np.eye(r_dim)])])
         cons.append({"type": "ineq", "fun": sp.slack_ineq, "jac": lambda u: ineq_jac})
         bounds += [(0.0, None)] * r_dim
-        u0 = np.concatenate([u0, np.abs(sp.b_vec - a_mat @ a0)])
+        u0 = np.concatenate([u0, np.abs(sp.residual.b_vec - a_mat @ a0)])
     return cons, bounds, u0
 
 
@@ -282,13 +285,11 @@ def reference_pose_limbs_local(
     """
     lo = check_loss(loss)
     x, mu, bm, w = _pose_data(points, mean, components, weights)
-    a_mat, b_vec, w2 = _pose_linear_map(x, camera, mu, bm, w)
+    residual = _pose_linear_map(x, camera, mu, bm, w)
     a0 = array(alpha0, (bm.shape[1],), "alpha0")
     c = limb_selectors()
     lsq = array(limb_sq_lengths, (c.shape[0],), "limb_sq_lengths")
-    cb = np.einsum("ija,ak->ijk", c, bm)  # (8, 3, k)
-    cm = c @ mu  # (8, 3)
-    sp = _SmoothPose(a_mat, b_vec, w2, cb, cm, lsq, float(theta), lo == "l1")
+    sp = _SmoothPose(residual, LimbVectors.of(mu, bm), lsq, float(theta), lo == "l1")
     cons, bounds, u0 = _smooth_constraints(sp, a0)
     u = local_minimize(sp.fun, u0, sp.jac, cons, bounds, sp.limb_fun, "reference_pose_limbs_local")
     alpha = sp.alpha_of(u)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import bisect
 import itertools
 import math
-from collections import Counter, deque
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final, NamedTuple
@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from ..model.skeleton import N_JOINTS
 from .defaults import MAX_LAG
 from .measurement import MeasurementUpdate
-from .placement import CameraIntrinsics, ray_rotations, result_centroids
+from .placement import CameraIntrinsics, place_at, ray_rotations, result_centroids
 from .smooth2d import smooth_track_2d
 from .smoothing import centred_smoothing
 
@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from .state import Track
 
 __all__ = ["MAX_LAG", "WINDOW", "LaterFrame", "Placement", "Refiner", "RunArrays", "compile_kernels",
-           "mean_of_passes", "placements", "smooth_track_2d", "update_later", "update_tracks_later"]
+           "mean_of_passes", "placements", "smooth_track_2d", "update_later"]
 
 
 class LaterFrame(NamedTuple):
@@ -121,7 +121,7 @@ WINDOW: Final[int] = 20
 
 
 class Placement(NamedTuple):
-    """Where a lifted frame's pose goes in metres (:func:`.placement.place_poses`): ``joints =
+    """Where a lifted frame's pose goes in metres (:func:`.placement.place_at`): ``joints =
     leg_m * pose @ rotation.T + centroid``; the centroid and the ray's rotation follow from the
     lift's camera (scale, translation) and the intrinsics, not from the pose, so a refined pose is
     placed as the lift's."""
@@ -132,8 +132,9 @@ class Placement(NamedTuple):
 
     def place(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """The pose's joints (12, 3; ``pose`` (12, 3) camera frame, centred, leg units) in metres."""
-        local = pose * self.leg_m
-        return local + self.centroid if self.rotation is None else local @ self.rotation.T + self.centroid
+        placed = place_at(pose[None], self.leg_m, self.centroid[None],
+                          None if self.rotation is None else self.rotation[None])
+        return np.asarray(placed[0], dtype=np.float64)
 
 
 def placements(results: Sequence[LiftResult], leg_m: float, intrinsics: CameraIntrinsics | None,
@@ -170,12 +171,10 @@ def _placed(frames: list[_Frame], poses: NDArray[np.float64]) -> NDArray[np.floa
     if not all(found):
         return np.array([f.placed(p) for f, p in zip(frames, poses, strict=True)])
     places = [p for p in found if p is not None]
-    local = poses * np.array([p.leg_m for p in places])[:, None, None]
-    centroids = np.array([p.centroid for p in places])[:, None, :]
-    if all(p.rotation is None for p in places):
-        return np.asarray(local + centroids, dtype=np.float64)
-    rotations = np.array([np.eye(3) if p.rotation is None else p.rotation for p in places])
-    return np.asarray(local @ rotations.transpose(0, 2, 1) + centroids, dtype=np.float64)
+    rotations = (None if all(p.rotation is None for p in places)
+                 else np.array([np.eye(3) if p.rotation is None else p.rotation for p in places]))
+    return place_at(poses, np.array([p.leg_m for p in places]), np.array([p.centroid for p in places]),
+                    rotations)
 
 
 def _later(f: _Frame) -> LaterFrame:
@@ -424,22 +423,6 @@ def update_later(frames: list[LaterFrame], depth: float, gate: float) -> list[ND
         refiner.add(0, f.stamp_ns, f.pose, f)
     return refiner.measured(0)
 
-
-def update_tracks_later(frames: dict[int, list[LaterFrame]], depth: float, gate: float
-                        ) -> dict[tuple[int, int, int], NDArray[np.float64]]:
-    """:func:`update_later` of each track's kept frames (by track id): the published pose (12, 3)
-    of each frame it updates (the others publish the fit's), by (track id, stamp, k), ``k`` the
-    number of the track's earlier kept frames with the same stamp (0 unless the input clock
-    jumped back and replayed it, e.g. a looped recording)."""
-    out: dict[tuple[int, int, int], NDArray[np.float64]] = {}
-    for track_id, kept in frames.items():
-        seen: Counter[int] = Counter()
-        for f, pose in zip(kept, update_later(kept, depth, gate), strict=True):
-            k = seen[f.stamp_ns]
-            seen[f.stamp_ns] += 1
-            if pose is not None:
-                out[(track_id, f.stamp_ns, k)] = pose
-    return out
 
 _COMPILED = False
 

@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     from pose_lifter.core.results import LiftResult
 
 __all__ = ["DEFAULT_DISTANCE_M", "DEFAULT_LEG_LENGTH_M", "LEG_LENGTH_RANGE_M", "CameraIntrinsics",
-           "perspective_corrected", "perspective_corrected_rows", "place_in_camera", "place_poses",
-           "place_results", "ray_rotation", "ray_rotations", "result_centroids"]
+           "perspective_corrected", "perspective_corrected_rows", "place_at", "place_in_camera",
+           "place_poses", "place_results", "placed_centroids", "ray_rotation", "ray_rotations",
+           "result_centroids"]
 
 #: Right lower leg (knee-ankle) in metres that makes lifted poses metric (CMU adults: 0.41-0.44).
 DEFAULT_LEG_LENGTH_M: Final[float] = 0.43
@@ -112,25 +113,24 @@ def place_results(
     default distance): :func:`place_poses` of ``poses`` (n, 12, 3; each lift's ``pose_camera``,
     or a refinement of it) with each lift's camera scale and translation. The one placement of
     the node, the lagged node and the offline lift."""
-    import numpy as np
-
     focal, centre = intrinsics if intrinsics is not None else (None, None)
-    return place_poses(poses, np.array([float(r.camera.scale) for r in results], dtype=np.float64),
-                       np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2),
-                       leg_length_m, focal, centre, default_distance_m)
+    return place_poses(poses, *_cameras(results), leg_length_m, focal, centre, default_distance_m)
 
 
 def result_centroids(results: Sequence[LiftResult], leg_length_m: float, intrinsics: CameraIntrinsics | None,
                      default_distance_m: float) -> NDArray[np.float64]:
-    """The centroids (n, 3; metres) :func:`place_results` puts ``n`` lifts of one camera at (the
-    same for any pose: :func:`place_poses`' joints are the pose turned onto the ray to its
-    centroid, plus the centroid: the placement of the zero pose); raises as it does."""
+    """The centroids (n, 3; metres) :func:`place_results` puts ``n`` lifts of one camera at, for
+    any pose (:func:`placed_centroids` of their cameras); raises as it does."""
+    focal, centre = intrinsics if intrinsics is not None else (None, None)
+    return placed_centroids(*_cameras(results), leg_length_m, focal, centre, default_distance_m)
+
+
+def _cameras(results: Sequence[LiftResult]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The camera scales (n,) and translations (n, 2) of ``n`` lifts."""
     import numpy as np
 
-    from pose_lifter.core.model.skeleton import N_JOINTS
-
-    zero = np.zeros((len(results), N_JOINTS, 3))
-    return np.asarray(place_results(zero, results, leg_length_m, intrinsics, default_distance_m)[:, 0, :])
+    return (np.array([float(r.camera.scale) for r in results], dtype=np.float64),
+            np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2))
 
 
 def place_poses(
@@ -194,18 +194,33 @@ def place_poses(
     if not math.isfinite(leg_length_m) or leg_length_m <= 0:
         raise InvalidInputError(f"leg_length_m must be > 0, got {leg_length_m!r}")
     pose = np.asarray(pose_camera, dtype=np.float64)
-    n = len(pose)
-    if pose.shape != (n, N_JOINTS, 3):
+    if pose.shape != (len(pose), N_JOINTS, 3):
         raise InvalidInputError(f"pose_camera must be an (n, {N_JOINTS}, 3) array")
-    local = pose * float(leg_length_m)  # the core's pose_camera is centred on the joints' mean
+    centroid = placed_centroids(scale, translation, leg_length_m, focal, principal_point, default_distance_m)
+    if len(centroid) != len(pose):
+        raise InvalidInputError(f"{len(centroid)} camera scales for {len(pose)} poses")
+    rotation = ray_rotations(centroid) if focal is not None and principal_point is not None else None
+    return place_at(pose, leg_length_m, centroid, rotation)  # pose_camera is centred on the joints' mean
+
+
+def placed_centroids(scale: NDArray[np.float64], translation: NDArray[np.float64], leg_length_m: float,
+                     focal: tuple[float, float] | None, principal_point: tuple[float, float] | None,
+                     default_distance_m: float) -> NDArray[np.float64]:
+    """The centroids (n, 3; metres) :func:`place_poses` puts ``n`` poses at, from their cameras'
+    ``scale`` (n,) and ``translation`` (n, 2) (see there); raises as it does."""
+    import numpy as np
+
+    from pose_lifter.core.errors import InvalidInputError
+
+    s = np.asarray(scale, dtype=np.float64).reshape(-1)
+    n = len(s)
     centroid = np.zeros((n, 3))
     if focal is None:  # at (0, 0, default_distance_m)
         if not math.isfinite(default_distance_m) or default_distance_m <= 0:
             raise InvalidInputError(f"default_distance_m must be > 0, got {default_distance_m!r}")
         centroid[:, 2] = float(default_distance_m)
-        return np.asarray(local + centroid[:, None, :])
+        return centroid
     fx, fy = (float(focal[0]), float(focal[1]))
-    s = np.asarray(scale, dtype=np.float64).reshape(n)
     if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)):
         raise InvalidInputError(f"focal lengths must be > 0, got {focal!r}")
     bad = ~(np.isfinite(s) & (s > 0))
@@ -213,11 +228,26 @@ def place_poses(
         raise InvalidInputError(f"camera scale must be > 0, got {float(s[np.argmax(bad)])!r}")
     centroid[:, 2] = 0.5 * (fx + fy) * float(leg_length_m) / s  # at the depth of the scale
     if principal_point is None:  # on the optical axis
-        return np.asarray(local + centroid[:, None, :])
+        return centroid
     t = np.asarray(translation, dtype=np.float64).reshape(n, 2)  # on the ray to the translation
     centroid[:, 0] = (t[:, 0] - float(principal_point[0])) * centroid[:, 2] / fx
     centroid[:, 1] = (t[:, 1] - float(principal_point[1])) * centroid[:, 2] / fy
-    return np.asarray(local @ ray_rotations(centroid).transpose(0, 2, 1) + centroid[:, None, :])
+    return centroid
+
+
+def place_at(poses: NDArray[np.float64], leg_m: float | NDArray[np.float64], centroids: NDArray[np.float64],
+             rotations: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """The last step of :func:`place_poses`: ``n`` poses (n, 12, 3; camera frame, centred, leg
+    units) in metres, ``leg_m * pose @ rotation.T + centroid``, with the legs ``leg_m`` (metres,
+    one or (n,)), the ``centroids`` (n, 3) and the rays' ``rotations`` (n, 3, 3; None: none).
+    The centroid and the rotation follow from a lift's camera, not from its pose, so a
+    refinement of a pose is placed as the lift was."""
+    import numpy as np
+
+    local = poses * np.reshape(np.asarray(leg_m, dtype=np.float64), (-1, 1, 1))
+    if rotations is None:
+        return np.asarray(local + centroids[:, None, :])
+    return np.asarray(local @ rotations.transpose(0, 2, 1) + centroids[:, None, :])
 
 
 def ray_rotation(point: NDArray[np.float64]) -> NDArray[np.float64]:

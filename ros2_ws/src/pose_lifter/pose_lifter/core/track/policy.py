@@ -84,7 +84,7 @@ from ..results import (
     with_camera_poses,
 )
 from .defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S
-from .later import LaterFrame, update_tracks_later
+from .later import LaterFrame
 from .later import compile_kernels as compile_later_kernels
 from .measurement import compile_kernels as compile_measurement_kernels
 from .placement import CameraIntrinsics, perspective_corrected_rows
@@ -403,7 +403,7 @@ class TrackPolicy:
                  warm_start: bool = True, reinit_ratio: float = DEFAULT_REINIT_RATIO) -> None:
         self._tracks: dict[int, Track] = {}
         #: The caller smooths each track over past and future frames (the offline lift): the
-        #: measurement update waits for :meth:`measured_later` (after the tracks' frames).
+        #: measurement update waits for :meth:`kept_later` (after the tracks' frames).
         self.smoothed_later = False
         self._later: dict[int, list[LaterFrame]] = {}  # the frames kept for it, by track id
         self.configure(lifter, track_timeout, warm_start, reinit_ratio)
@@ -539,13 +539,13 @@ class TrackPolicy:
             if track.fit_is_sound():
                 fill = (frame.predicted, track.unused < opts.fill_missing_frames)
         future = next_frames(self.lifter, track, ahead, stamp_ns, past, points, frame)
-        return TrackContext(limbs, 1.0, tw, past, frame.gated, fill, future)
+        return TrackContext(limbs, tw, past, frame.gated, fill, future)
 
     def _measure(self, track: Track, result: LiftResult, points: NDArray[np.float64], follows: bool,
                  frame: TrackFrame) -> LiftResult | None:
         """``result`` (the fit, smoothed) with its pose replaced by the measurement update's
         (:meth:`Track.measured`), or None; with :attr:`smoothed_later` the frame (``frame``:
-        its track id and stamp) is kept for the offline update (:meth:`measured_later`) instead."""
+        its track id and stamp) is kept for the offline update (:meth:`kept_later`) instead."""
         opts = self.lifter.options
         if self.smoothed_later and opts.measurement_update:
             self._later.setdefault(frame.track_id, []).append(
@@ -559,13 +559,6 @@ class TrackPolicy:
         track id, in the order lifted; then forgotten here."""
         kept, self._later = self._later, {}
         return kept
-
-    def measured_later(self) -> dict[tuple[int, int, int], NDArray[np.float64]]:
-        """The offline measurement update (:mod:`.later`) of the frames kept since the last call
-        (:meth:`kept_later`): the published pose (12, 3) by (track id, stamp, k) of each frame it
-        updates (:func:`~.later.update_tracks_later`)."""
-        opts = self.lifter.options
-        return update_tracks_later(self.kept_later(), opts.measurement_depth, opts.measurement_gate)
 
 
 def compile_kernels() -> float:

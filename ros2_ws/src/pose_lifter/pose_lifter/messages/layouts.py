@@ -1,18 +1,23 @@
-"""2D keypoint layouts of common detectors, mapped onto the paper's 12 joints."""
+"""2D keypoint layouts of common detectors, mapped onto the paper's 12 joints, and a frame's
+``Skeleton2D`` messages read through them (:func:`frame_joints`).
+
+A detector's keypoint order is a property of its messages: the core reads the 12 joints only.
+"""
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InvalidInputError, UnknownLayoutError
-from .skeleton import N_JOINTS
+from pose_lifter.core.errors import InvalidInputError, UnknownLayoutError
+from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS
 
-__all__ = ["ALIASES", "LAYOUTS", "Layout", "get_layout", "to_model_joints"]
+__all__ = ["ALIASES", "LAYOUTS", "Layout", "frame_joints", "get_layout", "to_model_joints"]
 
 
 @dataclass(frozen=True)
@@ -126,3 +131,58 @@ def to_model_joints(
             )
     idx = lay.index_array
     return kp[idx], conf[idx]  # integer indexing: copies
+
+
+def frame_joints(skeletons: Sequence[Any], layout: str | Layout
+                 ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception]:
+    """The paper's 12 joints of each ``Skeleton2D`` of one frame, the frame's ``layout`` (a name
+    or a :class:`Layout`) looked up once: per skeleton, in order,
+    ``(points (12, 2) pixels, confidence (12,))``, or the error that refused it (a malformed
+    skeleton costs only itself: :class:`~pose_lifter.core.errors.InvalidInputError` for a wrong
+    keypoint count or non-finite values). Joints whose confidence is 0 (missing) may carry
+    non-finite coordinates; they are returned as 0.
+
+    Raises
+    ------
+    UnknownLayoutError
+        Unknown layout name (the whole frame is unusable).
+    """
+    read: list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception] = []
+    for skel in skeletons:
+        try:
+            read.append(_keypoints(skel))
+        except Exception as err:
+            read.append(err)
+    lay = layout if isinstance(layout, Layout) else get_layout(layout)
+    out: list[tuple[NDArray[np.float64], NDArray[np.float64]] | Exception] = []
+    for r in read:
+        if isinstance(r, Exception):
+            out.append(r)
+            continue
+        try:
+            points, confidence = to_model_joints(*r, lay)
+        except Exception as err:
+            out.append(err)
+            continue
+        if not np.isfinite(confidence).all():
+            out.append(InvalidInputError("keypoint confidences must be finite"))
+            continue
+        bad = ~np.isfinite(points).all(axis=1)
+        if bad.any():
+            if (bad & (confidence > 0)).any():
+                names = [JOINT_NAMES[j] for j in np.flatnonzero(bad & (confidence > 0))]
+                out.append(InvalidInputError(f"non-finite keypoint coordinates for visible joints {names}"))
+                continue
+            points[bad] = 0.0  # missing joints (confidence 0) may carry any coordinates
+        out.append((points, confidence))
+    return out
+
+
+def _keypoints(skel: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A ``Skeleton2D``'s keypoints as given: pixels (K, 2) and confidences (K,)."""
+    xyc = getattr(skel, "xyc", None)  # pose_lifter.messages.cdr.DecodedSkeleton2D: the keypoints as one array
+    if xyc is not None:
+        return xyc[:, :2], xyc[:, 2]
+    kps = list(skel.keypoints)
+    xy = np.array([[float(k.x), float(k.y)] for k in kps], dtype=np.float64).reshape(len(kps), 2)
+    return xy, np.array([float(k.confidence) for k in kps], dtype=np.float64)
