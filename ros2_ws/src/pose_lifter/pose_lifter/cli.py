@@ -226,9 +226,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
-    for f in summary.failures[:5]:
-        print(f"  failed: {f}")
-    for line in ([summary.depth_line()] if summary.depth is not None else []) + summary.notes:
+    for line in [f"failed: {f}" for f in summary.failures[:5]] + summary.notes:
         print(f"  {line}")
     return 0
 

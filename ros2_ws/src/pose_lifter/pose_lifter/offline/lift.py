@@ -117,7 +117,7 @@ class LiftSummary:
     failures: list[str] = field(default_factory=list)
     #: the depth topic and each message's partner on it (None: no depth)
     depth: BagDepth | None = None
-    #: what the lift says besides its counts (e.g. why it used no depth)
+    #: what the lift says besides its counts (the depth pairing, or why it used no depth)
     notes: list[str] = field(default_factory=list)
 
     def depth_line(self) -> str:
@@ -457,6 +457,8 @@ def lift_bag(
              for stamp, _ in to_lift], settings.frame.depth_tolerance)
     frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_answer=record,
                            summary=summary, workers=workers, depth=summary.depth)
+    if summary.depth is not None:
+        summary.notes.insert(0, summary.depth_line())
     kept = set(topics) if settings.keep is None else set(settings.keep)
     _write_lifted(in_path, out_path, topic, kept, last, answers, overwrite)
     return summary, frames
