@@ -131,6 +131,15 @@ def test_refused_images_leave_their_frames_to_the_2d(tmp_path: Path) -> None:
     with pair_depth(mono8, TOPIC_DEPTH, IMAGE, stamps, [None] * N, 0.02).frames() as frames:
         assert frames.image(3) is None and frames.image(3) is None
         assert frames.refused == {str(DepthFault.ENCODING): 1}  # once per image
+        assert "'8UC1'" in frames.reasons[str(DepthFault.ENCODING)]
+
+
+def test_lift_says_once_why_the_depth_images_are_refused(tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    bag = rgbd_bag(tmp_path / "small.mcap", size=(320, 240))  # not registered to the 640 x 480 camera
+    assert lift(str(bag), "--out", str(tmp_path / "out.mcap"), "--no-publish-hri") == 0
+    lines = [x for x in capsys.readouterr().out.splitlines() if "depth image refused" in x]
+    assert len(lines) == 1 and "320x240" in lines[0] and "640x480" in lines[0]
 
 
 # ------------------------------------------------------------------ pose-lifter lift

@@ -105,6 +105,17 @@ class BagDepth:
         """A reader of the partners (open it in the process that reads)."""
         return DepthFrames(self)
 
+    def first_refusal(self) -> str:
+        """Why the first paired image is refused (read and checked here: a topic whose images are
+        all unusable, e.g. of another encoding or size, said once before the lift); ``""``: it is
+        usable, or nothing is paired."""
+        first = next((i for i, k in enumerate(self.partners) if k is not None), None)
+        if first is None:
+            return ""
+        with self.frames() as frames:
+            frames.image(first)
+        return next(iter(frames.reasons.values()), "")
+
 
 def pair_depth(path: str | Path, topic: str, msgtype: str, frame_stamps: Sequence[int],
                sizes: Sequence[tuple[float, float] | None], tolerance_s: float) -> BagDepth:
@@ -131,11 +142,13 @@ def pair_depth(path: str | Path, topic: str, msgtype: str, frame_stamps: Sequenc
 class DepthFrames:
     """The depth images of a :class:`BagDepth`'s keypoints messages, read forward through the
     topic one message at a time (asked out of order, it reads the topic again from its start).
-    A context manager; :attr:`refused` counts the images refused by kind."""
+    A context manager; :attr:`refused` counts the images refused by kind, :attr:`reasons` the
+    first reason of each kind."""
 
     def __init__(self, depth: BagDepth) -> None:
         self.depth = depth
         self.refused: Counter[str] = Counter()
+        self.reasons: dict[str, str] = {}
         self._stream: Iterator[RawMessage] | None = None
         self._next = 0  # index of the topic's message the stream gives next
         self._last: tuple[int, NDArray[np.float32] | None] | None = None  # (index, its image)
@@ -174,7 +187,7 @@ class DepthFrames:
             try:
                 self._last = (index, read_depth(_decoder(self.depth.msgtype)(self._raw(index).data)))
             except DepthError as err:
-                self.refused[str(err.fault)] += 1
+                self._refuse(err)
                 return None
         image, size = self._last[1], self.depth.sizes[msg_index]
         if image is None:  # refused already (counted once)
@@ -182,5 +195,9 @@ class DepthFrames:
         try:
             return check_depth_size(image, size) if size is not None else image
         except DepthError as err:
-            self.refused[str(err.fault)] += 1
+            self._refuse(err)
             return None
+
+    def _refuse(self, err: DepthError) -> None:
+        self.refused[str(err.fault)] += 1
+        self.reasons.setdefault(str(err.fault), str(err))

@@ -455,6 +455,9 @@ def lift_bag(
             [m.stamp_to_ns(msg.header.stamp) or stamp for stamp, msg in to_lift],
             [sizes[max(0, bisect.bisect_right(size_stamps, stamp) - 1)][1] if sizes else None
              for stamp, _ in to_lift], settings.frame.depth_tolerance)
+        refused = summary.depth.first_refusal()
+        if refused:
+            summary.notes.append(f"depth image refused: {refused}; such frames are lifted from the 2D alone")
     frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_answer=record,
                            summary=summary, workers=workers, depth=summary.depth)
     if summary.depth is not None:
