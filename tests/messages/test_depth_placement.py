@@ -7,8 +7,6 @@ pose_lifter.core.depth's, tested there)."""
 
 from __future__ import annotations
 
-import sys
-from types import ModuleType, SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -37,28 +35,29 @@ def _people(n: int, swapped_first: bool = False) -> list[tuple[SkeletonInput, Tr
 
 @pytest.fixture
 def fusion(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
-    """``pose_lifter.core.depth.fuse_depth`` replaced by a double that records each call and puts
-    every joint at z = 2 m (std 0.05 m), the second person's NaN."""
+    """``pose_lifter.core.depth.place.place_people`` with a depth image replaced by a double that
+    records each call and puts every joint at z = 2 m (std 0.05 m), the second person's NaN;
+    without depth, the real (monocular) placement."""
+    from pose_lifter.core.depth import place
+    from pose_lifter.core.depth.fuse import DepthReadings
+
     calls: list[dict[str, Any]] = []
+    real = place.place_people
 
-    def fuse_depth(depth: Any, intrinsics: Any, points: Any, weights: Any, poses: Any, scales: Any,
-                   centres: Any, options: Any = None) -> Any:
-        calls.append(dict(depth=depth, intrinsics=intrinsics, points=points, weights=weights, poses=poses,
-                          scales=scales, centres=centres))
-        joints = np.zeros(poses.shape)
+    def place_people(results: Any, points: Any, intrinsics: Any, leg: float, distance: float, *,
+                     poses: Any = None, depth: Any = None, readings: Any = None) -> Any:
+        if depth is None and readings is None:
+            return real(results, points, intrinsics, leg, distance, poses=poses)
+        calls.append(dict(depth=depth, intrinsics=intrinsics, points=points, results=results))
+        n = len(results)
+        joints = np.zeros((n, 12, 3))
         joints[..., 2] = 2.0
-        if len(joints) > 1:
+        if n > 1:
             joints[1] = np.nan
-        return SimpleNamespace(joints_m=joints, std_m=np.full(poses.shape, 0.05))
+        return place.Placed(joints, np.full((n, 12, 3), 0.05), DepthReadings(np.full((n, 12), 2.0),
+                                                                             np.full((n, 12), 1e-4)))
 
-    import pose_lifter.core as core
-
-    module = sys.modules.get("pose_lifter.core.depth")
-    if module is None:  # the fusion is not in this build: a module of the double alone
-        module = ModuleType("pose_lifter.core.depth")
-        monkeypatch.setitem(sys.modules, "pose_lifter.core.depth", module)
-        monkeypatch.setattr(core, "depth", module, raising=False)
-    monkeypatch.setattr(module, "fuse_depth", fuse_depth, raising=False)
+    monkeypatch.setattr(place, "place_people", place_people)
     return calls
 
 
@@ -70,12 +69,13 @@ def test_without_depth_the_placement_is_the_monocular_one(fusion: list[dict[str,
         for a, b in zip(plain, out, strict=True):
             assert isinstance(a, LiftedSkeleton) and isinstance(b, LiftedSkeleton)
             np.testing.assert_array_equal(a.joints_m, b.joints_m)
-            assert a.std_m is None and b.std_m is None
+            assert a.std_m is not None and b.std_m is not None and a.depth is None and b.depth is None
+            np.testing.assert_array_equal(a.std_m, b.std_m)  # the monocular uncertainty
     assert not fusion
     # a depth image without intrinsics: nothing to fuse it with
     depth = np.full((480, 640), 2.0, dtype=np.float32)
     no_camera = place_lifted([(SETTINGS, None, inp, t) for inp, t in people], [depth] * 3)
-    assert not fusion and all(isinstance(x, LiftedSkeleton) and x.std_m is None for x in no_camera)
+    assert not fusion and all(isinstance(x, LiftedSkeleton) and x.depth is None for x in no_camera)
 
 
 def test_one_fusion_per_camera_and_depth_image(fusion: list[dict[str, Any]]) -> None:
@@ -88,23 +88,21 @@ def test_one_fusion_per_camera_and_depth_image(fusion: list[dict[str, Any]]) -> 
     assert len(fusion) == 2  # people 0-2 on one image, person 3 on the other
     first = fusion[0]
     assert first["depth"] is depth and first["intrinsics"] == CAMERA
-    # the 2D as the track labelled the 3D joints (person 0's arms swapped back), its confidences
+    # the 2D as the track labelled the 3D joints (person 0's arms swapped back), and their lifts
     inp0 = people[0][0]
     swapped = inp0.points.copy()
     swapped[[0, 1, 2, 3, 4, 5]] = inp0.points[[3, 4, 5, 0, 1, 2]]
     np.testing.assert_array_equal(first["points"][0], swapped)
     np.testing.assert_array_equal(first["points"][1], people[1][0].points)
-    np.testing.assert_array_equal(first["weights"][2], people[2][0].confidence)
-    np.testing.assert_array_equal(first["poses"], np.array([t.result.pose_camera for _, t in people[:3]]))
-    np.testing.assert_array_equal(first["scales"], [t.result.camera.scale for _, t in people[:3]])
-    np.testing.assert_array_equal(first["centres"],
-                                  np.array([t.result.camera.translation for _, t in people[:3]]))
-    for k in (0, 2, 3):  # placed on the depth with its uncertainty
+    assert [r is t.result for r, (_, t) in zip(first["results"], people[:3], strict=True)] == [True] * 3
+    for k in (0, 2, 3):  # placed on the depth with its uncertainty and its readings
         x = out[k]
-        assert isinstance(x, LiftedSkeleton) and x.std_m is not None
+        assert isinstance(x, LiftedSkeleton) and x.std_m is not None and x.depth is not None
         np.testing.assert_array_equal(x.joints_m[:, 2], 2.0)
         np.testing.assert_array_equal(x.std_m, 0.05)
     # person 1: no finite joints from the fusion, placed as without depth
     x1, m1 = out[1], mono[1]
-    assert isinstance(x1, LiftedSkeleton) and isinstance(m1, LiftedSkeleton) and x1.std_m is None
+    assert isinstance(x1, LiftedSkeleton) and isinstance(m1, LiftedSkeleton) and x1.depth is None
     np.testing.assert_array_equal(x1.joints_m, m1.joints_m)
+    assert m1.std_m is not None and x1.std_m is not None
+    np.testing.assert_array_equal(x1.std_m, m1.std_m)

@@ -173,7 +173,8 @@ def test_lift_reads_the_bag_s_depth_topic(tmp_path: Path, capsys: pytest.Capture
         assert 0.0 < f[..., 2].mean() - wall < NEAR_WALL_M and abs(a[..., 2].mean() - wall) > 2 * NEAR_WALL_M
     for std in _stds(out):  # each joint with its uncertainty
         assert np.isfinite(std).all() and (std > 0).all()
-    assert all(np.isnan(std).all() for std in _stds(mono))
+    for fused_std, mono_std in zip(_stds(out), _stds(mono), strict=True):  # the depth is the surer
+        assert np.isfinite(mono_std).all() and mono_std[..., 2].mean() > fused_std[..., 2].mean()
 
 
 def test_no_depth_topic_is_the_monocular_lift(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

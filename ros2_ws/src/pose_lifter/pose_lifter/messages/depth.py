@@ -183,8 +183,12 @@ def _millimetres(raw: NDArray[np.uint16]) -> NDArray[np.float32]:
 
 
 def warm_up() -> None:
-    """Compile (or load from its cache) the millimetre kernel, so that no frame pays for it."""
+    """Compile (or load from their cache) the millimetre kernel and the fusion's
+    (:func:`pose_lifter.core.depth.fuse.compile_kernels`), so that no frame pays for them."""
+    from pose_lifter.core.depth.fuse import compile_kernels
+
     _millimetres(np.ones((1, 1), dtype=np.uint16))
+    compile_kernels()
 
 
 def depth_image(msg: Any, max_pixels: int = MAX_DEPTH_PIXELS) -> NDArray[np.float32]:

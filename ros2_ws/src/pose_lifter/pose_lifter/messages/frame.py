@@ -41,10 +41,10 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.depth.fuse import DepthReadings
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult, LiftStatus
-from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.policy import (
     FramesAhead,
     OutOfOrderFrameError,
@@ -71,9 +71,9 @@ __all__ = [
     "check_output",
     "expiry_stamps",
     "frame_over_cap",
-    "fused_joints",
     "lift_together",
     "place_lifted",
+    "place_skeletons",
     "skeleton_input",
     "with_frames_ahead",
 ]
@@ -151,9 +151,11 @@ class LiftedSkeleton:
         (:class:`~pose_lifter.core.track.policy.TrackedLift`; None: none).
     std_m : ndarray, shape (12, 3), optional
         Each joint's standard deviation along x, y, z of the camera frame, metres (finite,
-        non-negative; published as ``Skeleton3D.joint_std``; placed on a depth image, the
-        fusion's, :class:`pose_lifter.core.depth.FusedPeople` ``std_m``); None: unknown
-        (published empty).
+        non-negative; published as ``Skeleton3D.joint_std``:
+        :func:`~pose_lifter.core.depth.place.place_people`'s); None: unknown (published empty).
+    depth : DepthReadings, optional
+        The depth readings of its joints ((12,) arrays) when it was placed on a depth image: a
+        pose refined over later frames is placed again with them (:mod:`pose_lifter.messages.lagged`).
     """
 
     input: SkeletonInput
@@ -164,6 +166,7 @@ class LiftedSkeleton:
     fit_pose_camera: NDArray[np.float64] | None = None
     swapped: NDArray[np.bool_] | None = None
     std_m: NDArray[np.float64] | None = None
+    depth: DepthReadings | None = None
 
     @property
     def track_id(self) -> int:
@@ -376,17 +379,12 @@ def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intr
 def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]],
                  depths: Sequence[DepthImage] | None = None) -> list[LiftedSkeleton | SkipSkeleton]:
     """The lifted skeletons of skeletons through their tracks' policies, each with its pipeline's
-    settings and its camera's intrinsics: those that share them placed in one
-    :func:`~pose_lifter.core.track.placement.place_results` pass, then :func:`check_output` per
-    skeleton. A group the pass refuses (a camera scale not > 0, or anything unexpected) is
-    placed skeleton by skeleton, so a refusal costs only its own skeleton.
-
-    With ``depths`` (per skeleton its frame's depth image, or None), the people of one camera
-    and one depth image (with intrinsics) are fused with it in one
-    :func:`pose_lifter.core.depth.fuse_depth` call (:func:`fused_joints`): their joints and
-    ``std_m`` are the fusion's. A person the fusion gives no finite joints (or a fusion that
-    fails) is placed as without depth (``std_m`` None). Without depth the placement is the
-    monocular one, unchanged."""
+    settings and its camera's intrinsics (and, in ``depths``, its frame's depth image or None):
+    those that share them placed in one :func:`~pose_lifter.core.depth.place.place_people` pass
+    (with a depth image and intrinsics, fused with it; each joint with its standard deviation),
+    then :func:`check_output` per skeleton. A group the pass refuses (a camera scale not > 0, or
+    anything unexpected) is placed skeleton by skeleton, so a refusal costs only its own skeleton;
+    a group whose fusion fails (or gives a skeleton no valid output) is placed without depth."""
     out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
     groups: dict[tuple[float, float, Intrinsics, int], list[int]] = {}
     images: dict[int, NDArray[np.float32]] = {}
@@ -397,57 +395,60 @@ def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput
             images[key] = depth  # type: ignore[assignment]  # not None where key is set
         groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics, key), []).append(k)
     for (leg, distance, intrinsics, key), members in groups.items():
-        results = [solved[k][3].result for k in members]
+        people = [(solved[k][2], solved[k][3]) for k in members]
+        points = np.array([labelled_2d(inp.points, inp.confidence, t.swapped)[0] for inp, t in people])
+        results = [t.result for _, t in people]
         try:
-            joints = place_results(np.array([r.pose_camera for r in results], dtype=np.float64), results, leg,
-                                   intrinsics, distance)
+            placed: list[_Place] | None = place_skeletons(points, results, leg, distance, intrinsics,
+                                                           images.get(key))
         except Exception:  # placed one by one below, where a refusal costs only its own skeleton
-            joints = None
-        fused = (fused_joints(images[key], intrinsics, [(solved[k][2], solved[k][3]) for k in members])
-                 if key and intrinsics is not None else None)
+            placed = None
         for m, k in enumerate(members):
-            inp, tracked = solved[k][2], solved[k][3]
-            res = tracked.result
-            std: NDArray[np.float64] | None = None
+            inp, tracked = people[m]
             try:
-                if fused is not None and np.isfinite(fused[0][m]).all() and np.isfinite(fused[1][m]).all():
-                    j, std = fused[0][m], fused[1][m]
-                else:
-                    j = (joints[m] if joints is not None
-                         else place_results(np.array([res.pose_camera], dtype=np.float64), [res], leg,
-                                            intrinsics, distance)[0])
-                check_output(inp.track_id, res, j)
+                joints, std, readings = (placed[m] if placed is not None else place_skeletons(
+                    points[m:m + 1], results[m:m + 1], leg, distance, intrinsics, None)[0])
+                check_output(inp.track_id, tracked.result, joints)
             except Exception as err:
                 out[k] = _refusal(err, inp.track_id)
                 continue
-            out[k] = LiftedSkeleton(inp, res, j, tracked.warm_started, 0.0, tracked.fit_pose_camera,
-                                    tracked.swapped, std)
+            out[k] = LiftedSkeleton(inp, tracked.result, joints, tracked.warm_started, 0.0,
+                                    tracked.fit_pose_camera, tracked.swapped, std, readings)
     return [x for x in out if x is not None]
 
 
-def fused_joints(depth: NDArray[np.float32], intrinsics: tuple[tuple[float, float], tuple[float, float]],
-                 people: Sequence[tuple[SkeletonInput, TrackedLift]]
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-    """The joints (n, 12, 3) and their standard deviations (n, 12, 3), metres, camera frame, of
-    the people of one camera (each its input and its track's lift) fused with that camera's
-    depth image in one :func:`pose_lifter.core.depth.fuse_depth` call: their 2D with the labels
-    their tracks gave the 3D joints (:func:`labelled_2d`), weighted by their confidences, and
-    each lift's pose, camera scale and centre. None when the fusion fails (the people are then
-    placed without depth)."""
-    from pose_lifter.core.depth import fuse_depth  # loaded with the first depth image
+_Place = tuple[NDArray[np.float64], NDArray[np.float64], DepthReadings | None]
 
-    labelled = [labelled_2d(inp.points, inp.confidence, t.swapped) for inp, t in people]
-    results = [t.result for _, t in people]
+
+def place_skeletons(points: NDArray[np.float64], results: Sequence[LiftResult], leg: float, distance: float,
+                    intrinsics: Intrinsics, depth: DepthImage, poses: NDArray[np.float64] | None = None,
+                    readings: Sequence[DepthReadings | None] | None = None) -> list[_Place]:
+    """Per person ``(joints (12, 3), std (12, 3), readings or None)`` of
+    :func:`~pose_lifter.core.depth.place.place_people` for ``n`` people of one camera (their 2D
+    ``points`` (n, 12, 2) with the labels their tracks gave the 3D joints, :func:`labelled_2d`;
+    ``poses`` default the results'), with the frame's ``depth`` or each person's earlier
+    ``readings`` (all or none); with depth, a person whose fused joints are not finite (or a fusion
+    that fails) is placed without. Raises as the monocular placement."""
+    from pose_lifter.core.depth.place import place_people  # numpy work: loaded with the first lift
+
+    people = range(len(results))
+    got = [r for r in readings or () if r is not None]
+    stacked = (DepthReadings(np.array([r.depth_m for r in got]), np.array([r.var for r in got]))
+               if got and len(got) == len(people) else None)
+    mono = place_people(results, points, intrinsics, leg, distance, poses=poses)
+    out: list[_Place] = [(mono.joints_m[m], mono.std_m[m], None) for m in range(len(people))]
+    if intrinsics is None or (depth is None and stacked is None):
+        return out
     try:
-        fused = fuse_depth(depth, intrinsics,
-                           np.array([p for p, _ in labelled], dtype=np.float64),
-                           np.array([c for _, c in labelled], dtype=np.float64),
-                           np.array([r.pose_camera for r in results], dtype=np.float64),
-                           np.array([float(r.camera.scale) for r in results], dtype=np.float64),
-                           np.array([r.camera.translation for r in results], dtype=np.float64))
+        fused = place_people(results, points, intrinsics, leg, distance, poses=poses, depth=depth,
+                             readings=stacked)
     except Exception:  # a failed fusion (bad input, or a bug) costs the people their depth, not their lift
-        return None
-    return np.asarray(fused.joints_m, dtype=np.float64), np.asarray(fused.std_m, dtype=np.float64)
+        return out
+    for m in range(len(people)):
+        if np.isfinite(fused.joints_m[m]).all() and np.isfinite(fused.std_m[m]).all() and fused.readings:
+            out[m] = (fused.joints_m[m], fused.std_m[m],
+                      DepthReadings(fused.readings.depth_m[m], fused.readings.var[m]))
+    return out
 
 
 def with_frames_ahead(track: Sequence[tuple[int, SkeletonInput]], n: int) -> list[SkeletonInput]:

@@ -304,10 +304,10 @@ def refine_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton
                     placed[r])
         seen[stamp] += 1
     out = list(outcomes)
-    for i, s, again in zip(rows, lifted, refined_skeletons(lifted, refiner.poses(0), leg), strict=True):
-        # else what it was lifted with is kept; so are joints fused with a depth image (the
-        # refinement places the monocular lift)
-        if again is not None and s.std_m is None:
+    again_of = refined_skeletons(lifted, refiner.poses(0), leg, [chain[i].intrinsics for i in rows],
+                                 settings.default_distance)
+    for i, again in zip(rows, again_of, strict=True):
+        if again is not None:  # else what it was lifted with is kept
             out[i] = again
     return out
 

@@ -153,6 +153,7 @@ class FrameLift:
     joints_m: NDArray[np.float64]
     warm_started: bool
     solve_time: float
+    std_m: NDArray[np.float64]  #: (12, 3) each joint's standard deviation, metres (NaN: unknown)
 
 
 def lift_messages(
@@ -245,9 +246,9 @@ def lift_messages(
         summ.n_lifted += len(rows)
         summ.n_warm += int(lifted.warm_started.sum())
         summ.solve_time_s += float(lifted.solve_time.sum())
-        frames = [FrameLift(stamp, t, p, c, j, w, dt) for t, p, c, j, w, dt in zip(
+        frames = [FrameLift(stamp, t, p, c, j, w, dt, sd) for t, p, c, j, w, dt, sd in zip(
             lifted.track_ids.tolist(), lifted.points, lifted.confidence, lifted.joints_m,
-            lifted.warm_started.tolist(), lifted.solve_time.tolist(), strict=True)]
+            lifted.warm_started.tolist(), lifted.solve_time.tolist(), lifted.std_m, strict=True)]
         out.extend(frames)
         if on_frame is not None:
             on_frame(stamp, msg, frames, [results[r] for r in rows])
