@@ -248,7 +248,7 @@ def lift_messages(
         summ.solve_time_s += float(lifted.solve_time.sum())
         frames = [FrameLift(stamp, t, p, c, j, w, dt, sd) for t, p, c, j, w, dt, sd in zip(
             lifted.track_ids.tolist(), lifted.points, lifted.confidence, lifted.joints_m,
-            lifted.warm_started.tolist(), lifted.solve_time.tolist(), lifted.std_m, strict=True)]
+            lifted.warm_started.tolist(), lifted.solve_time.tolist(), np.asarray(lifted.std_m), strict=True)]
         out.extend(frames)
         if on_frame is not None:
             on_frame(stamp, msg, frames, [results[r] for r in rows])
