@@ -74,7 +74,7 @@ class _Reference:
                 for a, b, c in joints]
 
     def skeleton3d(self, result: Any, track_id: int, joints: np.ndarray, solve_time: float,
-                   warm: bool) -> Any:
+                   warm: bool, std: np.ndarray | None = None) -> Any:
         cam = result.camera
         q = np.asarray(Rotation.from_matrix(np.asarray(cam.rotation, dtype=np.float64)).as_quat())
         camera = self.msg(
@@ -89,7 +89,9 @@ class _Reference:
             joints=self.points(joints), camera=camera, objective=float(result.objective),
             reprojection_error=float(result.reprojection_error), iterations=int(result.total_alternations),
             converged=bool(result.converged), solve_time=float(solve_time), warm_started=bool(warm),
-            observed=[bool(w > 0) for w in weights], joint_weights=[float(w) for w in weights])
+            observed=[bool(w > 0) for w in weights], joint_weights=[float(w) for w in weights],
+            joint_std=[] if std is None or not np.isfinite(std).all() else [
+                self.msg("geometry_msgs/msg/Vector3", x=float(a), y=float(b), z=float(c)) for a, b, c in std])
 
     def markers(self, header: Any, tracks: list[tuple[int, np.ndarray]], ns: str, lifetime: float,
                 deleted: list[int], clear: bool = False, deleted_untracked: range = range(0)) -> Any:
@@ -133,7 +135,7 @@ class _Reference:
               lifetime: float, first: bool = False,
               previous_untracked: int = 0) -> tuple[bytes, bytes, set[int]]:
         """The two serialised messages of one keypoint message (``lift_bag``'s ``record``)."""
-        skels = [self.skeleton3d(r, f.track_id, f.joints_m, f.solve_time, f.warm_started)
+        skels = [self.skeleton3d(r, f.track_id, f.joints_m, f.solve_time, f.warm_started, f.std_m)
                  for f, r in zip(lifted, results, strict=True)]
         now = {f.track_id for f in lifted if f.track_id >= 0}
         untracked = sum(1 for f in lifted if f.track_id < 0)

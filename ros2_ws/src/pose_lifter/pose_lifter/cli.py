@@ -212,7 +212,7 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     keep = keep_topics(args.keep)
     camera_info = args.camera_info_topic or None
     # every check that needs no lifting first: bad input never costs a kernel compile
-    topics = check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite)
+    topics = check_lift_inputs(bag, args.out, args.topic, camera_info, keep, args.overwrite, args.depth_topic)
     if camera_info and camera_info not in topics and "camera_info_topic" in args.typed:
         raise BagError(f"{bag} has no topic {camera_info!r}; its topics: {sorted(topics)} "
                        "(--camera-info-topic '' lifts without camera_info, at the default distance)")
@@ -226,8 +226,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")
-    for f in summary.failures[:5]:
-        print(f"  failed: {f}")
+    for line in [f"failed: {f}" for f in summary.failures[:5]] + summary.notes:
+        print(f"  {line}")
     return 0
 
 

@@ -28,7 +28,7 @@ from typing import Any, NamedTuple
 from pose_lifter.messages import cdr
 from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array
 from pose_lifter.messages.convert import stamp_to_ns
-from pose_lifter.messages.frame import FramePipeline, Intrinsics, LiftedSkeleton, SkipSkeleton
+from pose_lifter.messages.frame import DepthImage, FramePipeline, Intrinsics, LiftedSkeleton, SkipSkeleton
 from pose_lifter.messages.hri import BodyBook, BodyFrame, LaterBodies
 from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
@@ -185,6 +185,9 @@ class AnswerStream:
     intrinsics : Intrinsics
         The camera's, or None (weak perspective, the default distance).
     image_size : (width, height) in pixels, or None
+    depth_of : callable or None
+        ``depth_of(stamp_ns)``: the depth image of the frame of that stamp, or None (lifted from the
+        2D alone); None: no depth.
     """
 
     def __init__(self, pipeline: FramePipeline, lag: int, fallback: Callable[[bytes], Any]) -> None:
@@ -197,6 +200,7 @@ class AnswerStream:
         self.marker_lifetime = 0.0
         self.intrinsics: Intrinsics = None
         self.image_size: tuple[float, float] | None = None
+        self.depth_of: Callable[[int], DepthImage] | None = None
 
     def __len__(self) -> int:
         """The frames held for the lag."""
@@ -216,11 +220,13 @@ class AnswerStream:
         if not header.frame_id:  # RViz cannot place an empty frame
             header = DecodedHeader(header.stamp, self.frame_id)
         stamp_ns = stamp_to_ns(header.stamp) or arrival_ns
+        depth = self.depth_of(stamp_ns) if self.depth_of is not None and checked.skeletons else None
         if self.lagged is None:
-            outcomes = self.pipeline.frame(checked, stamp_ns, self.intrinsics)
+            outcomes = self.pipeline.frame(checked, stamp_ns, self.intrinsics, depth)
             frames = [_Lifted(header, received, stamp_ns, outcomes)]
         else:
-            frames = _released(self.lagged.lift((header, received), stamp_ns, self.intrinsics, checked))
+            frames = _released(self.lagged.lift((header, received), stamp_ns, self.intrinsics, checked,
+                                                depth))
         return self._answered(frames, checked.skipped, tuple(clipped))
 
     def flush(self) -> FrameStep:

@@ -18,7 +18,8 @@ what the node publishes for it. One frame:
    :func:`~pose_lifter.core.track.policy.lift_tracks`): the core's
    :class:`~pose_lifter.core.track.policy.TrackPolicy` (warm starts, re-initialisation,
    out-of-order stamps refused), then :func:`place_lifted` (the people seen by one camera
-   placed together, :func:`~pose_lifter.core.track.placement.place_results`) and :func:`check_output`
+   placed together, :func:`~pose_lifter.core.track.placement.place_results`; with the frame's
+   depth image, fused with it, :func:`pose_lifter.core.depth.fuse_depth`) and :func:`check_output`
    (nothing non-finite leaves).
 3. :meth:`FramePipeline.end_frame`: tracks unseen for ``track_timeout`` are forgotten.
 
@@ -40,10 +41,10 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.depth.fuse import DepthReadings
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult, LiftStatus
-from pose_lifter.core.track.placement import place_results
 from pose_lifter.core.track.policy import (
     FramesAhead,
     OutOfOrderFrameError,
@@ -59,6 +60,7 @@ from pose_lifter.messages.settings import FrameSettings
 
 __all__ = [
     "CheckedFrame",
+    "DepthImage",
     "FramePipeline",
     "FrameSettings",
     "Intrinsics",
@@ -71,12 +73,16 @@ __all__ = [
     "frame_over_cap",
     "lift_together",
     "place_lifted",
+    "place_skeletons",
     "skeleton_input",
     "with_frames_ahead",
 ]
 
 #: Camera intrinsics ((fx, fy), (cx, cy)) in pixels, or None (the default distance).
 Intrinsics = tuple[tuple[float, float], tuple[float, float]] | None
+#: A frame's depth image (:mod:`pose_lifter.messages.depth`): float32 (H, W) metres along the
+#: optical axis, NaN where there is no reading; None: no depth (the monocular placement).
+DepthImage = NDArray[np.float32] | None
 
 _NO_CLIP: Final[Callable[[str], Any]] = lambda text: None  # noqa: E731
 _DEFAULTS: Final[FrameSettings] = FrameSettings()
@@ -145,7 +151,11 @@ class LiftedSkeleton:
         (:class:`~pose_lifter.core.track.policy.TrackedLift`; None: none).
     std_m : ndarray, shape (12, 3), optional
         Each joint's standard deviation along x, y, z of the camera frame, metres (finite,
-        non-negative; published as ``Skeleton3D.joint_std``); None: unknown (published empty).
+        non-negative; published as ``Skeleton3D.joint_std``:
+        :func:`~pose_lifter.core.depth.place.place_people`'s); None: unknown (published empty).
+    depth : DepthReadings, optional
+        The depth readings of its joints ((12,) arrays) when it was placed on a depth image: a
+        pose refined over later frames is placed again with them (:mod:`pose_lifter.messages.lagged`).
     """
 
     input: SkeletonInput
@@ -156,6 +166,7 @@ class LiftedSkeleton:
     fit_pose_camera: NDArray[np.float64] | None = None
     swapped: NDArray[np.bool_] | None = None
     std_m: NDArray[np.float64] | None = None
+    depth: DepthReadings | None = None
 
     @property
     def track_id(self) -> int:
@@ -332,10 +343,11 @@ def _outcome_refusal(outcome: TrackOutcome, track_id: int) -> SkipSkeleton:
     return SkipSkeleton(_KIND_OF_STATUS[outcome.status], text, track_id)
 
 
-def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]]
-                  ) -> list[LiftedSkeleton | SkipSkeleton]:
+def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intrinsics]],
+                  depths: Sequence[DepthImage] | None = None) -> list[LiftedSkeleton | SkipSkeleton]:
     """Step 2 for several people at once, ``(pipeline, skeleton, stamp, intrinsics)`` each (their
-    pipelines may share a lifter): their frames through their tracks' policies
+    pipelines may share a lifter) and, with ``depths``, each one's frame's depth image (None:
+    none): their frames through their tracks' policies
     (:func:`~pose_lifter.core.track.policy.lift_tracks`: the rows handed to the lifter as one batch,
     and once more for the frames it re-initialises; each stage of the lift one compiled pass over
     the batch); then the people seen by one camera placed in one pass
@@ -356,45 +368,87 @@ def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intr
         else:
             out.append(None)  # placed below
             solved.append((k, pipeline, intrinsics, inp, d.result))
-    placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved])
+    placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved],
+                          None if depths is None else [depths[k] for k, *_ in solved])
     share = (time.perf_counter() - start) / len(frames)
     for (k, *_), lifted in zip(solved, placed, strict=True):
         out[k] = lifted if isinstance(lifted, SkipSkeleton) else lifted.timed(share)
     return [x for x in out if x is not None]
 
 
-def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]]
-                 ) -> list[LiftedSkeleton | SkipSkeleton]:
+def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]],
+                 depths: Sequence[DepthImage] | None = None) -> list[LiftedSkeleton | SkipSkeleton]:
     """The lifted skeletons of skeletons through their tracks' policies, each with its pipeline's
-    settings and its camera's intrinsics: those that share them placed in one
-    :func:`~pose_lifter.core.track.placement.place_results` pass, then :func:`check_output` per
-    skeleton. A group the pass refuses (a camera scale not > 0, or anything unexpected) is
-    placed skeleton by skeleton, so a refusal costs only its own skeleton."""
+    settings and its camera's intrinsics (and, in ``depths``, its frame's depth image or None):
+    those that share them placed in one :func:`~pose_lifter.core.depth.place.place_people` pass
+    (with a depth image and intrinsics, fused with it; each joint with its standard deviation),
+    then :func:`check_output` per skeleton. A group the pass refuses (a camera scale not > 0, or
+    anything unexpected) is placed skeleton by skeleton, so a refusal costs only its own skeleton;
+    a group whose fusion fails (or gives a skeleton no valid output) is placed without depth."""
     out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
-    groups: dict[tuple[float, float, Intrinsics], list[int]] = {}
+    groups: dict[tuple[float, float, Intrinsics, int], list[int]] = {}
+    images: dict[int, NDArray[np.float32]] = {}
     for k, (st, intrinsics, _, _) in enumerate(solved):
-        groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics), []).append(k)
-    for (leg, distance, intrinsics), members in groups.items():
-        results = [solved[k][3].result for k in members]
+        depth = depths[k] if depths is not None else None
+        key = id(depth) if depth is not None and intrinsics is not None else 0
+        if key:
+            images[key] = depth  # type: ignore[assignment]  # not None where key is set
+        groups.setdefault((st.lower_leg_length, st.default_distance, intrinsics, key), []).append(k)
+    for (leg, distance, intrinsics, key), members in groups.items():
+        people = [(solved[k][2], solved[k][3]) for k in members]
+        points = np.array([labelled_2d(inp.points, inp.confidence, t.swapped)[0] for inp, t in people])
+        results = [t.result for _, t in people]
         try:
-            joints = place_results(np.array([r.pose_camera for r in results], dtype=np.float64), results, leg,
-                                   intrinsics, distance)
+            placed: list[_Place] | None = place_skeletons(points, results, leg, distance, intrinsics,
+                                                           images.get(key))
         except Exception:  # placed one by one below, where a refusal costs only its own skeleton
-            joints = None
+            placed = None
         for m, k in enumerate(members):
-            inp, tracked = solved[k][2], solved[k][3]
-            res = tracked.result
+            inp, tracked = people[m]
             try:
-                j = (joints[m] if joints is not None
-                     else place_results(np.array([res.pose_camera], dtype=np.float64), [res], leg, intrinsics,
-                                        distance)[0])
-                check_output(inp.track_id, res, j)
+                joints, std, readings = (placed[m] if placed is not None else place_skeletons(
+                    points[m:m + 1], results[m:m + 1], leg, distance, intrinsics, None)[0])
+                check_output(inp.track_id, tracked.result, joints)
             except Exception as err:
                 out[k] = _refusal(err, inp.track_id)
                 continue
-            out[k] = LiftedSkeleton(inp, res, j, tracked.warm_started, 0.0, tracked.fit_pose_camera,
-                                    tracked.swapped)
+            out[k] = LiftedSkeleton(inp, tracked.result, joints, tracked.warm_started, 0.0,
+                                    tracked.fit_pose_camera, tracked.swapped, std, readings)
     return [x for x in out if x is not None]
+
+
+_Place = tuple[NDArray[np.float64], NDArray[np.float64], DepthReadings | None]
+
+
+def place_skeletons(points: NDArray[np.float64], results: Sequence[LiftResult], leg: float, distance: float,
+                    intrinsics: Intrinsics, depth: DepthImage, poses: NDArray[np.float64] | None = None,
+                    readings: Sequence[DepthReadings | None] | None = None) -> list[_Place]:
+    """Per person ``(joints (12, 3), std (12, 3), readings or None)`` of
+    :func:`~pose_lifter.core.depth.place.place_people` for ``n`` people of one camera (their 2D
+    ``points`` (n, 12, 2) with the labels their tracks gave the 3D joints, :func:`labelled_2d`;
+    ``poses`` default the results'), with the frame's ``depth`` or each person's earlier
+    ``readings`` (all or none); with depth, a person whose fused joints are not finite (or a fusion
+    that fails) is placed without. Raises as the monocular placement."""
+    from pose_lifter.core.depth.place import place_people  # numpy work: loaded with the first lift
+
+    people = range(len(results))
+    got = [r for r in readings or () if r is not None]
+    stacked = (DepthReadings(np.array([r.depth_m for r in got]), np.array([r.var for r in got]))
+               if got and len(got) == len(people) else None)
+    mono = place_people(results, points, intrinsics, leg, distance, poses=poses)
+    out: list[_Place] = [(mono.joints_m[m], mono.std_m[m], None) for m in range(len(people))]
+    if intrinsics is None or (depth is None and stacked is None):
+        return out
+    try:
+        fused = place_people(results, points, intrinsics, leg, distance, poses=poses, depth=depth,
+                             readings=stacked)
+    except Exception:  # a failed fusion (bad input, or a bug) costs the people their depth, not their lift
+        return out
+    for m in range(len(people)):
+        if np.isfinite(fused.joints_m[m]).all() and np.isfinite(fused.std_m[m]).all() and fused.readings:
+            out[m] = (fused.joints_m[m], fused.std_m[m],
+                      DepthReadings(fused.readings.depth_m[m], fused.readings.var[m]))
+    return out
 
 
 def with_frames_ahead(track: Sequence[tuple[int, SkeletonInput]], n: int) -> list[SkeletonInput]:
@@ -516,15 +570,17 @@ class FramePipeline:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
         self.policy.expire(stamp_ns)
 
-    def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics
+    def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics, depth: DepthImage = None
               ) -> list[LiftedSkeleton | SkipSkeleton]:
         """Steps 2 and 3 of a checked frame: per skeleton of ``checked.skeletons``, in order, the
         lifted skeleton or why not (an unanswered frame lifts and expires nothing). The people
-        are lifted together (:func:`lift_together`)."""
+        are lifted together (:func:`lift_together`), and placed on the frame's ``depth`` image
+        when there is one."""
         if not checked.answered:
             return []
         inputs = [x for x in checked.skeletons if not isinstance(x, SkipSkeleton)]
-        lifted = iter(lift_together([(self, x, stamp_ns, intrinsics) for x in inputs]))
+        lifted = iter(lift_together([(self, x, stamp_ns, intrinsics) for x in inputs],
+                                    None if depth is None else [depth] * len(inputs)))
         out = [x if isinstance(x, SkipSkeleton) else next(lifted) for x in checked.skeletons]
         self.end_frame(stamp_ns)
         return out

@@ -29,18 +29,21 @@ from typing import Final, Generic, NamedTuple, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.depth.fuse import DepthReadings
 from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.later import LaterFrame, Refiner, placements
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.frame import (
     CheckedFrame,
+    DepthImage,
     FramePipeline,
     Intrinsics,
     LiftedSkeleton,
     SkeletonInput,
     SkipSkeleton,
     check_output,
+    place_skeletons,
     with_frames_ahead,
 )
 
@@ -85,7 +88,8 @@ class LaggedFrames(Generic[T]):
             raise ValueError(f"lag must be 1 to {MAX_LAG} frames, got {lag}")
         self.pipeline, self.lag = pipeline, lag
         pipeline.policy.smoothed_later = True
-        self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame]] = deque()  # waiting to be lifted
+        # waiting to be lifted (with the frame's depth image: at most ``ahead`` + 1 are held)
+        self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame, DepthImage]] = deque()
         self._held: deque[LaggedFrame[T]] = deque()  # lifted, waiting to be refined
         self._poses = self._new_poses()
 
@@ -103,12 +107,13 @@ class LaggedFrames(Generic[T]):
         """Frames held."""
         return len(self._inputs) + len(self._held)
 
-    def lift(self, token: T, stamp_ns: int, intrinsics: Intrinsics, checked: CheckedFrame
-             ) -> list[LaggedFrame[T]]:
-        """A checked, answered frame (:meth:`FramePipeline.check`): lifted now or, reading ahead,
-        once its prior's future frames have come; returns the frames now ``lag`` frames old (at
-        most one), their tracked skeletons refined."""
-        self._inputs.append((token, stamp_ns, intrinsics, checked))
+    def lift(self, token: T, stamp_ns: int, intrinsics: Intrinsics, checked: CheckedFrame,
+             depth: DepthImage = None) -> list[LaggedFrame[T]]:
+        """A checked, answered frame (:meth:`FramePipeline.check`), with its depth image or None:
+        lifted now or, reading ahead, once its prior's future frames have come; returns the frames
+        now ``lag`` frames old (at most one), their tracked skeletons refined (those placed on a
+        depth image keep their fused joints)."""
+        self._inputs.append((token, stamp_ns, intrinsics, checked, depth))
         out: list[LaggedFrame[T]] = []
         while len(self._inputs) > self.ahead:
             out += self._lift_oldest()
@@ -134,11 +139,11 @@ class LaggedFrames(Generic[T]):
     def _lift_oldest(self) -> list[LaggedFrame[T]]:
         """Lift the oldest waiting frame (with its tracks' next frames from the frames waiting
         after it) and keep it for the refinement; the frames then refinement-lag old, refined."""
-        token, stamp_ns, intrinsics, checked = self._inputs.popleft()
+        token, stamp_ns, intrinsics, checked, depth = self._inputs.popleft()
         if self.ahead:
-            checked = _with_ahead(checked, [c for _, _, _, c in self._inputs],
-                                  [s for _, s, _, _ in self._inputs], self.ahead)
-        outcomes = self.pipeline.frame(checked, stamp_ns, intrinsics)
+            checked = _with_ahead(checked, [x[3] for x in self._inputs], [x[1] for x in self._inputs],
+                                  self.ahead)
+        outcomes = self.pipeline.frame(checked, stamp_ns, intrinsics, depth)
         return self._hold(LaggedFrame(token, stamp_ns, intrinsics, outcomes))
 
     def _hold(self, frame: LaggedFrame[T]) -> list[LaggedFrame[T]]:
@@ -186,29 +191,53 @@ class LaggedFrames(Generic[T]):
             return frame
         outcomes = list(frame.outcomes)
         leg = self.pipeline.settings.lower_leg_length
-        again_of = refined_skeletons([s for _, s in rows], np.array(joints), leg)
+        again_of = refined_skeletons([s for _, s in rows], np.array(joints), leg,
+                                     [frame.intrinsics] * len(rows), self.pipeline.settings.default_distance)
         for (k, _), again in zip(rows, again_of, strict=True):
             if again is not None:  # else what it was lifted with is kept
                 outcomes[k] = again
         return frame._replace(outcomes=outcomes)
 
 
-def refined_skeletons(lifted: Sequence[LiftedSkeleton], joints: NDArray[np.float64], leg_m: float
-                      ) -> list[LiftedSkeleton | None]:
+def refined_skeletons(lifted: Sequence[LiftedSkeleton], joints: NDArray[np.float64], leg_m: float,
+                      intrinsics: Sequence[Intrinsics], distance_m: float) -> list[LiftedSkeleton | None]:
     """Lifted skeletons with refined metric joints (``joints`` (n, 12, 3), metres, camera frame:
     :meth:`Refiner.pose`): each result's camera-frame pose the joints centred, in leg units
-    (:func:`~pose_lifter.core.results.with_camera_poses`); None for a skeleton that is then no
-    valid output (:func:`check_output`)."""
+    (:func:`~pose_lifter.core.results.with_camera_poses`); a skeleton placed on a depth image is
+    placed again, the refined pose with its frame's readings (:func:`place_skeletons`, with its
+    camera's ``intrinsics``), the others keep the refined joints with their monocular standard
+    deviations. None for a skeleton that is then no valid output (:func:`check_output`)."""
+    from pose_lifter.core.depth.uncertainty import monocular_std
+
     centred = (joints - joints.mean(axis=1, keepdims=True)) / leg_m
     results = with_camera_poses([s.result for s in lifted], centred)
+    groups: dict[tuple[Intrinsics, bool], list[int]] = {}
+    for i, (s, intr) in enumerate(zip(lifted, intrinsics, strict=True)):
+        groups.setdefault((intr, s.depth is not None and intr is not None), []).append(i)
+    by_row: dict[int, tuple[NDArray[np.float64], NDArray[np.float64], DepthReadings | None]] = {}
+    for (intr, with_depth), members in groups.items():
+        again = None
+        if with_depth:
+            points = np.array([lifted[i].labelled_2d()[0] for i in members])
+            try:
+                again = place_skeletons(points, [results[i] for i in members], leg_m, distance_m, intr, None,
+                                        centred[members], [lifted[i].depth for i in members])
+            except Exception:  # placed as without depth
+                again = None
+        if again is None:
+            weights = np.array([(results[i].weights > 0) for i in members], dtype=np.float64)
+            sds = monocular_std(joints[members], weights, intr)
+            again = [(joints[i], sd, None) for i, sd in zip(members, sds, strict=True)]
+        by_row.update(zip(members, again, strict=True))
+    placed = [by_row[i] for i in range(len(lifted))]
     out: list[LiftedSkeleton | None] = []
-    for s, res, j in zip(lifted, results, joints, strict=True):
+    for s, res, (j, std, readings) in zip(lifted, results, placed, strict=True):
         try:
             check_output(s.track_id, res, j)
         except SkipSkeleton:
             out.append(None)
             continue
-        out.append(replace(s, result=res, joints_m=j))
+        out.append(replace(s, result=res, joints_m=j, std_m=std, depth=readings))
     return out
 
 

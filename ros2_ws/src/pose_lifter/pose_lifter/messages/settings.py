@@ -40,7 +40,12 @@ from pose_lifter.core.options import NODE_OPTIONS, OPTION_DEFAULTS, OPTION_META,
 from pose_lifter.core.track.defaults import DEFAULT_REINIT_RATIO, DEFAULT_TRACK_TIMEOUT_S, MAX_LAG
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, LEG_LENGTH_RANGE_M
 
+#: Seconds between a frame's stamp and its depth image's at most: a depth stream at 30 Hz has an
+#: image within 17 ms of any frame, and 0.02 s never pairs one a whole frame (33 ms) away.
+DEFAULT_DEPTH_TOLERANCE_S: Final[float] = 0.02
+
 __all__ = [
+    "DEFAULT_DEPTH_TOLERANCE_S",
     "OFFLINE_PARAMS",
     "PARAMS",
     "SPECS",
@@ -63,6 +68,11 @@ class FrameSettings:
         Metres, the placement (:func:`~pose_lifter.core.track.placement.place_in_camera`).
     max_skeletons, max_coordinate, max_frame_id_length, max_layout_length, max_keypoints
         Caps on the input (see :mod:`pose_lifter.messages.frame`).
+    depth_topic : str
+        The depth image registered to the keypoints' camera (:mod:`pose_lifter.messages.depth`;
+        ``""``: none live, the bag's one depth topic offline).
+    depth_tolerance : float
+        Seconds: a frame's depth partner is the image of the nearest stamp at most this far.
     """
 
     warm_start: bool = True
@@ -75,6 +85,8 @@ class FrameSettings:
     max_frame_id_length: int = 256
     max_layout_length: int = 64
     max_keypoints: int = 512
+    depth_topic: str = ""
+    depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE_S
 
     @classmethod
     def read(cls, get: Callable[[str], Any]) -> FrameSettings:
@@ -164,6 +176,9 @@ class ParamSpec:
 
 
 _FRAME: Final[FrameSettings] = FrameSettings()
+#: Pixels of a depth image at most (:data:`pose_lifter.messages.depth.MAX_DEPTH_PIXELS`, not
+#: imported: this module loads without numpy).
+_MAX_DEPTH_SIDE: Final[str] = "4096 x 4096"
 
 #: Every parameter of the node, in the order of ``config/lifter.yaml``: the bases, the solver
 #: options (:data:`~pose_lifter.core.options.NODE_OPTIONS`), then the node's own settings (the frame
@@ -181,6 +196,18 @@ PARAMS: Final[tuple[ParamSpec, ...]] = (
               "the metric scale.", *LEG_LENGTH_RANGE_M),
     ParamSpec("default_distance", _FRAME.default_distance, "Depth of the skeleton centroid in metres "
               "when no camera_info has been received.", 0.01, 1000.0),
+    ParamSpec("depth_topic", _FRAME.depth_topic, "Depth image registered to the keypoints' camera, e.g. "
+              "RealSense's /camera/camera/aligned_depth_to_color/image_raw (sensor_msgs/Image: 16UC1 "
+              "millimetres or 32FC1 metres; a name ending in /compressedDepth: image_transport's "
+              "compressedDepth CompressedImage). Each frame is paired with the image of the nearest stamp "
+              "within depth_tolerance and its people placed in metres on the depth; a frame without one, "
+              "or with a refused image (other encoding, size other than camera_info's, no readings, "
+              f"absurd range, over {_MAX_DEPTH_SIDE} pixels, corrupt), is lifted from the 2D alone "
+              "(counted in /diagnostics). Needs camera_info. Empty: no depth. Offline: empty = the bag's "
+              "one Image or CompressedImage topic whose name holds 'depth' (none or several: no depth), "
+              "'none' = no depth.", read_only=True),
+    ParamSpec("depth_tolerance", _FRAME.depth_tolerance, "Seconds between a frame's header stamp and its "
+              "depth image's at most: farther, the frame has no depth partner.", 0.0, 1.0),
     ParamSpec("output_lag", 0, "Frames each answer waits before it is published (0 = none, at once). "
               "Waiting, each skeleton's pose is refined over the frames that came after it, as "
               "pose-lifter lift refines a recording (the measurement update of the smoothed 2D, a "

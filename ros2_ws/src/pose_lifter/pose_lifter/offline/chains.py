@@ -46,6 +46,7 @@ from pose_lifter.messages.frame import (
     with_frames_ahead,
 )
 from pose_lifter.messages.lagged import refined_skeletons
+from pose_lifter.offline.depth import BagDepth
 
 __all__ = [
     "GROUP_CHAINS",
@@ -208,10 +209,12 @@ def chain_groups(chains: list[list[Item]], workers: int) -> list[list[int]]:
     return sorted(groups, key=lambda g: -sum(len(chains[c]) for c in g))
 
 
-def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSettings, smoothing_s: float = 0.0
-                ) -> list[list[LiftedSkeleton | SkipSkeleton]]:
+def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSettings, smoothing_s: float = 0.0,
+                depth: BagDepth | None = None) -> list[list[LiftedSkeleton | SkipSkeleton]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
-    per-track policy, the placement, the expiry at the node's stamps); with ``smoothing_s > 0``
+    per-track policy, the placement, the expiry at the node's stamps; with ``depth``, each
+    message's people placed on its depth image, read one at a time in message order,
+    :class:`~pose_lifter.offline.depth.DepthFrames`); with ``smoothing_s > 0``
     each chain's poses are then refined over its whole track (:func:`refine_chain`), and the
     policy's causal smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
     Returns per chain, per item, the lifted skeleton or why not.
@@ -235,19 +238,25 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     for c, chain in enumerate(chains):
         for k, item in enumerate(chain):
             steps.setdefault(item.msg_index, []).append((c, k, item))
-    for msg_index in sorted(steps):
-        step = steps[msg_index]
-        for c, _, item in step:
-            if item.expire_ns is not None:
-                pipelines[c].end_frame(item.expire_ns)
-        together = lift_together([(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
-                                  for c, k, item in step])
-        for (c, _, _), lifted in zip(step, together, strict=True):
-            out[c].append(lifted)
-            # the centred smoothing starts from the fit's own pose; with the measurement update,
-            # from the published one (which has read each frame's 2D; docs/tuning.md)
-            fits[c].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
-                           and not lifter.options.measurement_update else None)
+    images = depth.frames() if depth is not None else None
+    try:
+        for msg_index in sorted(steps):
+            step = steps[msg_index]
+            for c, _, item in step:
+                if item.expire_ns is not None:
+                    pipelines[c].end_frame(item.expire_ns)
+            image = images.image(msg_index) if images is not None else None
+            together = lift_together([(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
+                                      for c, k, item in step], None if image is None else [image] * len(step))
+            for (c, _, _), lifted in zip(step, together, strict=True):
+                out[c].append(lifted)
+                # the centred smoothing starts from the fit's own pose; with the measurement update,
+                # from the published one (which has read each frame's 2D; docs/tuning.md)
+                fits[c].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
+                               and not lifter.options.measurement_update else None)
+    finally:
+        if images is not None:
+            images.close()
     if smoothing_s > 0:
         return [refine_chain(chain, d, f, p, smoothing_s)
                 for chain, d, f, p in zip(chains, out, fits, pipelines, strict=True)]
@@ -295,7 +304,9 @@ def refine_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton
                     placed[r])
         seen[stamp] += 1
     out = list(outcomes)
-    for i, again in zip(rows, refined_skeletons(lifted, refiner.poses(0), leg), strict=True):
+    again_of = refined_skeletons(lifted, refiner.poses(0), leg, [chain[i].intrinsics for i in rows],
+                                 settings.default_distance)
+    for i, again in zip(rows, again_of, strict=True):
         if again is not None:  # else what it was lifted with is kept
             out[i] = again
     return out
@@ -315,11 +326,12 @@ class ChainWork:
     chains: list[list[Item]]
     groups: list[list[int]]
     keep_results: bool
+    depth: BagDepth | None = None
 
     def run(self, index: int) -> list[ChainLift]:
         group = [self.chains[c] for c in self.groups[index]]
         return [ChainLift.of(outcomes, self.keep_results)
-                for outcomes in lift_chains(self.lifter, group, self.settings, self.smoothing_s)]
+                for outcomes in lift_chains(self.lifter, group, self.settings, self.smoothing_s, self.depth)]
 
 
 #: The work of this worker process (set by :func:`_worker_init`; None in the parent).

@@ -11,6 +11,11 @@ written next to the input topics. Where it differs, on purpose:
 * the camera intrinsics are those of the latest ``/camera_info`` at or before the message
   (before the first one: the first one), not of the latest received;
 * the node's ``frame_id`` is not an offline setting (the headers are copied unchanged);
+* a depth topic (``--depth-topic``; by default the bag's one depth image topic,
+  :func:`pose_lifter.offline.depth.depth_topic_of`) pairs each message with the depth image of the
+  nearest header stamp within ``depth_tolerance`` once, before the lift
+  (:func:`~pose_lifter.offline.depth.pair_depth`), and the images are read one at a time as the
+  messages are lifted (the node pairs each frame as it comes, from a buffer of the newest images);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.refine_chain`); 0 gives the node's causal
@@ -22,6 +27,7 @@ The lifted bag is evaluated by :mod:`pose_lifter.offline.evaluate`.
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,6 +80,7 @@ from pose_lifter.offline.chains import (
     lift_parallel,
     split_chains,
 )
+from pose_lifter.offline.depth import BagDepth, depth_topic_of, pair_depth
 from pose_lifter.offline.settings import LiftSettings
 
 __all__ = [
@@ -108,6 +115,19 @@ class LiftSummary:
     n_warm: int = 0
     solve_time_s: float = 0.0
     failures: list[str] = field(default_factory=list)
+    #: the depth topic and each message's partner on it (None: no depth)
+    depth: BagDepth | None = None
+    #: what the lift says besides its counts (the depth pairing, or why it used no depth)
+    notes: list[str] = field(default_factory=list)
+
+    def depth_line(self) -> str:
+        """The depth pairing in one line (``""``: no depth topic)."""
+        d = self.depth
+        if d is None:
+            return ""
+        why = ", ".join(f"{k} {n}" for k, n in sorted(d.unpaired.items()))
+        return (f"depth from {d.topic}: {d.paired} of {len(d.partners)} messages paired"
+                + (f" (without: {why})" if why else ""))
 
     @property
     def mean_solve_time_ms(self) -> float:
@@ -133,6 +153,7 @@ class FrameLift:
     joints_m: NDArray[np.float64]
     warm_started: bool
     solve_time: float
+    std_m: NDArray[np.float64]  #: (12, 3) each joint's standard deviation, metres (NaN: unknown)
 
 
 def lift_messages(
@@ -146,6 +167,7 @@ def lift_messages(
     on_answer: Callable[[int, Any, SkeletonFrame], None] | None = None,
     summary: LiftSummary | None = None,
     workers: int = 1,
+    depth: BagDepth | None = None,
 ) -> list[FrameLift]:
     """Lift ``Skeleton2DArray`` messages in order through the node's frame pipeline.
 
@@ -181,6 +203,9 @@ def lift_messages(
         Filled in place.
     workers : int
         Processes (fork) lifting the chains; 1 lifts in this process.
+    depth : BagDepth, optional
+        Each message's depth image (:func:`~pose_lifter.offline.depth.pair_depth`, the messages
+        of ``keypoint_msgs`` in order): its people placed on it.
     """
     if workers < 1:
         raise ValueError("workers must be >= 1")
@@ -190,9 +215,10 @@ def lift_messages(
     keep_results = on_frame is not None
     if settings.output_lag:
         parts = _lift_lagged(lifter, keypoint_msgs, per_msg, checked, frame, settings.output_lag,
-                             keep_results)
+                             keep_results, depth)
     else:
-        parts = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, keep_results, progress)
+        parts = _lift_chains(lifter, chains, frame, settings.smoothing_s, workers, keep_results, progress,
+                             depth)
     columns = SkeletonFrame.concat([p.lifted for _, p in parts]) if parts else SkeletonFrame.of([])
     results = [r for _, p in parts for r in (p.results or [])]
     row_of: dict[int, int | str] = {}  # id(item) -> its row of columns, or why it was not lifted
@@ -220,9 +246,9 @@ def lift_messages(
         summ.n_lifted += len(rows)
         summ.n_warm += int(lifted.warm_started.sum())
         summ.solve_time_s += float(lifted.solve_time.sum())
-        frames = [FrameLift(stamp, t, p, c, j, w, dt) for t, p, c, j, w, dt in zip(
+        frames = [FrameLift(stamp, t, p, c, j, w, dt, sd) for t, p, c, j, w, dt, sd in zip(
             lifted.track_ids.tolist(), lifted.points, lifted.confidence, lifted.joints_m,
-            lifted.warm_started.tolist(), lifted.solve_time.tolist(), strict=True)]
+            lifted.warm_started.tolist(), lifted.solve_time.tolist(), np.asarray(lifted.std_m), strict=True)]
         out.extend(frames)
         if on_frame is not None:
             on_frame(stamp, msg, frames, [results[r] for r in rows])
@@ -233,7 +259,8 @@ def lift_messages(
 
 def _lift_lagged(lifter: Lifter, keypoint_msgs: list[tuple[int, Any]],
                  per_msg: list[list[Item | SkipSkeleton]], checked: list[CheckedFrame], frame: FrameSettings,
-                 lag: int, keep_results: bool) -> list[tuple[list[Item], ChainLift]]:
+                 lag: int, keep_results: bool, depth: BagDepth | None = None
+                 ) -> list[tuple[list[Item], ChainLift]]:
     """The node's answers with ``output_lag`` = ``lag``: every answered message through one frame
     pipeline, in order, as the node lifts it, and its skeletons refined when ``lag`` later messages
     have been lifted (:class:`~pose_lifter.messages.lagged.LaggedFrames`; the last ``lag`` when the
@@ -250,19 +277,26 @@ def _lift_lagged(lifter: Lifter, keypoint_msgs: list[tuple[int, Any]],
                 items.append(x)
                 outcomes.append(s)
 
-    for i, ((stamp, _), row, check) in enumerate(zip(keypoint_msgs, per_msg, checked, strict=True)):
-        if not check.answered:
-            continue
-        first = next((x for x in row if isinstance(x, Item)), None)
-        for f in lagged.lift(i, stamp, first.intrinsics if first is not None else None, check):
-            release(f)
+    images = depth.frames() if depth is not None else None
+    try:
+        for i, ((stamp, _), row, check) in enumerate(zip(keypoint_msgs, per_msg, checked, strict=True)):
+            if not check.answered:
+                continue
+            first = next((x for x in row if isinstance(x, Item)), None)
+            image = images.image(i) if images is not None and first is not None else None
+            for f in lagged.lift(i, stamp, first.intrinsics if first is not None else None, check, image):
+                release(f)
+    finally:
+        if images is not None:
+            images.close()
     for f in lagged.flush():
         release(f)
     return [(items, ChainLift.of(outcomes, keep_results))]
 
 
 def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings, smoothing_s: float,
-                 workers: int, keep_results: bool, progress: bool) -> list[tuple[list[Item], ChainLift]]:
+                 workers: int, keep_results: bool, progress: bool, depth: BagDepth | None = None
+                 ) -> list[tuple[list[Item], ChainLift]]:
     """Every chain lifted, in this process (``workers`` 1, or a single chain) or in ``workers``
     forked processes (one group of chains each, :func:`chain_groups`): each chain's items with
     what lifting them gave."""
@@ -273,12 +307,13 @@ def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings,
         parts: list[tuple[list[Item], ChainLift]] = []
         for group in chain_groups(chains, 1):
             # one list of outcomes per chain of the group: the bar advances by that chain's items
-            for c, outcomes in zip(group, lift_chains(lifter, [chains[c] for c in group], frame, smoothing_s),
-                                   strict=True):
+            for c, outcomes in zip(group, lift_chains(lifter, [chains[c] for c in group], frame, smoothing_s,
+                                                      depth), strict=True):
                 parts.append((chains[c], ChainLift.of(outcomes, keep_results)))
                 bar.update(len(outcomes))
     else:
-        work = ChainWork(lifter, frame, smoothing_s, chains, chain_groups(chains, workers), keep_results)
+        work = ChainWork(lifter, frame, smoothing_s, chains, chain_groups(chains, workers), keep_results,
+                         depth)
         parts = list(zip(chains, lift_parallel(work, workers, bar), strict=True))
     bar.close()
     return parts
@@ -291,6 +326,7 @@ def check_lift_inputs(
     camera_info_topic: str | None = TOPIC_CAMERA_INFO,
     keep: Sequence[str] | None = None,
     overwrite: bool = False,
+    depth_topic: str = "",
 ) -> dict[str, str]:
     """Everything :func:`lift_bag` can check before any work; returns the bag's topic -> type.
 
@@ -300,7 +336,8 @@ def check_lift_inputs(
         ``out_path`` does not end in ``.mcap``, exists (without ``overwrite``), is a directory,
         has no parent directory, is the input or lies inside the input rosbag2 directory; the
         input is missing or unreadable; ``topic`` is missing or not a
-        liftable type; a kept topic is missing; ``camera_info_topic`` has another type.
+        liftable type; a kept topic is missing; ``camera_info_topic`` has another type; a named
+        ``depth_topic`` is missing or not an image topic (:func:`~pose_lifter.offline.depth.depth_topic_of`).
     """
     out = check_output(out_path, (".mcap",), overwrite)
     source = bag_path(in_path).resolve()
@@ -324,6 +361,7 @@ def check_lift_inputs(
     missing = sorted(set(keep or ()) - set(topics))
     if missing:
         raise BagError(f"{in_path} has no topic(s) {missing} to keep; its topics: {sorted(topics)}")
+    depth_topic_of(topics, depth_topic, in_path)
     return topics
 
 
@@ -371,7 +409,9 @@ def lift_bag(
         (stop after this many keypoint messages; inputs are cut there too), ``topic`` (the
         keypoints: ``pose_lifter_msgs/msg/Skeleton2DArray`` or ``yolo_msgs/msg/DetectionArray``),
         ``camera_info_topic`` (``sensor_msgs/msg/CameraInfo`` for the metric placement; None or
-        absent: the default distance), ``keep`` (input topics copied to the output; None = all,
+        absent: the default distance), ``frame.depth_topic`` and ``frame.depth_tolerance`` (the
+        depth images, :mod:`pose_lifter.offline.depth`; the summary's ``depth`` says how many
+        messages were paired), ``keep`` (input topics copied to the output; None = all,
         ``[]`` = none), ``marker_lifetime`` (seconds, 0 = until replaced or deleted).
     progress, overwrite : bool
     workers : int
@@ -382,7 +422,9 @@ def lift_bag(
     if every < 1:
         raise ValueError("every must be >= 1")
     camera_info_topic = settings.camera_info_topic
-    topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, settings.keep, overwrite)
+    topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, settings.keep, overwrite,
+                               settings.frame.depth_topic)
+    depth_topic = depth_topic_of(topics, settings.frame.depth_topic, in_path)
     cdr.check_definitions(pose_lifter_typestore())
     info_topic = camera_info_topic if camera_info_topic in topics else None
     cap = None if max_messages is None else max_messages * every
@@ -405,8 +447,22 @@ def lift_bag(
             msg.header, m.stamp_to_ns(msg.header.stamp) or stamp, lifted, markers=markers,
             marker_lifetime=settings.marker_lifetime, bodies=bodies, image_size=size)
 
+    if depth_topic is not None and not infos:
+        summary.notes.append(f"depth topic {depth_topic} but no camera_info: lifted from the 2D alone")
+    elif depth_topic is not None:  # each message's camera size: the last camera_info's at or before it
+        size_stamps = [s for s, _ in sizes]
+        summary.depth = pair_depth(
+            in_path, depth_topic, topics[depth_topic],
+            [m.stamp_to_ns(msg.header.stamp) or stamp for stamp, msg in to_lift],
+            [sizes[max(0, bisect.bisect_right(size_stamps, stamp) - 1)][1] if sizes else None
+             for stamp, _ in to_lift], settings.frame.depth_tolerance)
+        refused = summary.depth.first_refusal()
+        if refused:
+            summary.notes.append(f"depth image refused: {refused}; such frames are lifted from the 2D alone")
     frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_answer=record,
-                           summary=summary, workers=workers)
+                           summary=summary, workers=workers, depth=summary.depth)
+    if summary.depth is not None:
+        summary.notes.insert(0, summary.depth_line())
     kept = set(topics) if settings.keep is None else set(settings.keep)
     _write_lifted(in_path, out_path, topic, kept, last, answers, overwrite)
     return summary, frames

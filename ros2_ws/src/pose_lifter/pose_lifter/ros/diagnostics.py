@@ -17,17 +17,22 @@ key                       value
 ``solve median (ms)``     per skeleton (also ``p95``)
 ``labels swapped back``   skeletons whose track swapped back their detector's left/right labels
 ``skipped total``         skeletons or frames left out, and ``skipped: <kind>`` per kind
+``frames with depth``     with ``depth_topic``: frames lifted with their depth image, and
+                          ``frames without depth: <why>`` per reason (no partner within
+                          ``depth_tolerance``, no camera_info, an image refused by kind)
 ========================  ===============================================================
 
 The counts come from the node's one counter (:class:`pose_lifter.ros.stats.FrameCounter`), in a
 window of their own. Levels: ``ERROR`` when skeletons came in but none could be lifted; ``WARN``
 when no input came in the window, frames were dropped (the input is faster than the lift: fewer
-people, ``max_skeletons``, or a lower rate) or some inputs were skipped; ``OK`` otherwise. The
-message says which.
+people, ``max_skeletons``, or a lower rate), some inputs were skipped, or with ``depth_topic`` no
+depth image came for a second (:data:`pose_lifter.ros.depth_input.SILENT_S`: the frames are lifted
+from the 2D alone); ``OK`` otherwise. The message says which.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, Final
 
 import numpy as np
@@ -42,17 +47,24 @@ WARN: Final[int] = 1
 ERROR: Final[int] = 2
 
 
-def status_level(frames: int, lifted: int, skipped: int, dropped: int = 0) -> tuple[int, str]:
-    """(level, message) of a window with these counts (see the module doc)."""
+def status_level(frames: int, lifted: int, skipped: int, dropped: int = 0, depth_warning: str = ""
+                 ) -> tuple[int, str]:
+    """(level, message) of a window with these counts (see the module doc); ``depth_warning``:
+    the depth input's (``""``: none)."""
     if frames == 0 and dropped == 0:
-        return WARN, "no input on keypoints_2d"
-    if lifted == 0 and skipped > 0:
+        level, message = WARN, "no input on keypoints_2d"
+    elif lifted == 0 and skipped > 0:
         return ERROR, f"no skeleton could be lifted ({skipped} skipped)"
-    if dropped > 0:
-        return WARN, f"{dropped} of {frames + dropped} frames dropped: the input is faster than the lift"
-    if skipped > 0:
-        return WARN, f"{skipped} inputs skipped"
-    return OK, "lifting"
+    elif dropped > 0:
+        level, message = WARN, (f"{dropped} of {frames + dropped} frames dropped: the input is faster than "
+                                "the lift")
+    elif skipped > 0:
+        level, message = WARN, f"{skipped} inputs skipped"
+    else:
+        level, message = OK, "lifting"
+    if depth_warning:
+        return WARN, depth_warning if level == OK else f"{message}; {depth_warning}"
+    return level, message
 
 
 def values(window: FrameStats) -> list[tuple[str, str]]:
@@ -77,6 +89,9 @@ def values(window: FrameStats) -> list[tuple[str, str]]:
         ("skipped total", str(sum(window.skipped.values()))),
     ]
     out += [(f"skipped: {k}", str(v)) for k, v in sorted(window.skipped.items())]
+    if window.with_depth or window.without_depth:
+        out.append(("frames with depth", str(window.with_depth)))
+        out += [(f"frames without depth: {k}", str(v)) for k, v in sorted(window.without_depth.items())]
     return out
 
 
@@ -90,6 +105,12 @@ class LifterDiagnostics:
         Seconds between updates; 0 = no publisher, no timer, no window.
     counter : FrameCounter
         The node's counter (this report opens its window ``"diagnostics"`` in it).
+
+    Attributes
+    ----------
+    depth_warning : callable or None
+        The depth input's warning now (:meth:`pose_lifter.ros.depth_input.DepthInput.silence`;
+        None: no depth topic).
     """
 
     REPORT: Final[str] = "diagnostics"
@@ -98,6 +119,7 @@ class LifterDiagnostics:
         self._node = node
         self._counter = counter
         self._pub = None
+        self.depth_warning: Callable[[], str] | None = None
         if period > 0:
             from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
@@ -121,7 +143,7 @@ class LifterDiagnostics:
         array_t, status_t, kv_t = self._types
         window = self._counter.take(self.REPORT)
         level, message = status_level(window.frames, window.lifted, sum(window.skipped.values()),
-                                      window.dropped)
+                                      window.dropped, self.depth_warning() if self.depth_warning else "")
         status = status_t(level=bytes([level]), name=f"{self._node.get_name()}: lifter", message=message,
                           hardware_id=HARDWARE_ID, values=[kv_t(key=k, value=v) for k, v in values(window)])
         msg = array_t(status=[status])

@@ -40,6 +40,12 @@ that cannot be lifted (bad input or a failed solve) is left out of it with one r
 warning; the other skeletons of the frame are still published, and a frame with no liftable
 skeleton is answered with an empty array. Nothing non-finite is ever published.
 
+With ``depth_topic`` (a ``sensor_msgs/Image`` registered to the camera, e.g. RealSense's
+aligned depth, or its ``/compressedDepth`` transport), each frame is paired with the depth image
+of the nearest stamp within ``depth_tolerance`` (:class:`~pose_lifter.ros.depth_input.DepthInput`)
+and its people are placed on it (:func:`~pose_lifter.messages.frame.place_lifted`); a frame
+without one is lifted from the 2D alone, counted and warned by why.
+
 Parameters (one table, :data:`pose_lifter.ros.params.PARAMS`, the solver options' ranges from the
 core's option metadata; see ``config/lifter.yaml``) are validated on every live change by the
 same :class:`~pose_lifter.core.LifterOptions` the core uses; a bad value is refused with the
@@ -77,6 +83,7 @@ from pose_lifter.messages.frame import FramePipeline
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.ros import diagnostics
 from pose_lifter.ros.checks import WarningThrottle
+from pose_lifter.ros.depth_input import DepthInput
 from pose_lifter.ros.frame_queue import FrameQueue
 from pose_lifter.ros.hri import HriOutputs, message_classes
 from pose_lifter.ros.params import PARAMS, SPECS, NodeSettings, descriptor, params_yaml, unknown_parameters
@@ -159,6 +166,11 @@ class LifterNode(Node):
                                f"{self._lifter.threads} solver threads")
         self._pending: tuple[PoseBases, Lifter] | None = None
         self._settings = self._read_settings()
+        self._depth: DepthInput | None = None
+        if self._settings.frame.depth_topic:  # compile or load the depth kernel before the first frame
+            from pose_lifter.messages import depth
+
+            depth.warm_up()
         freeze_long_lived()
 
         self._pipeline = FramePipeline(self._lifter, self._settings.frame)
@@ -193,6 +205,13 @@ class LifterNode(Node):
         self._sub_camera_info = self.create_subscription(
             self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
+        # the depth images before the keypoints (the frame's image is then held when it is lifted)
+        frame = self._settings.frame
+        if frame.depth_topic:
+            self._depth = DepthInput(self, frame.depth_topic, frame.depth_tolerance, self._counts.depth,
+                                     self._throttle.warn, self._camera, qos_profile_sensor_data, qos_override)
+            self._stream.depth_of = self._depth.depth_of
+            self._diagnostics.depth_warning = self._depth.silence
         # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only);
         # raw: the serialised frame, read into arrays when it is lifted (AnswerStream.answer)
         self._sub_keypoints = self.create_subscription(
@@ -214,7 +233,16 @@ class LifterNode(Node):
             f"{options.n_starts} cold starts, warm start {'on' if self._param('warm_start') else 'off'}, "
             f"mode {options.mode}, weak perspective until camera_info arrives"
             + (f", answers {lagged.lag} frames late (output_lag)" if lagged is not None else "")
+            + (f", depth from {self._depth.topic} (within {frame.depth_tolerance:g} s)"
+               if self._depth is not None else "")
         )
+        if self._depth is not None and self._stream.intrinsics is None:
+            self.get_logger().info("depth_topic is set: its images are used once camera_info has come "
+                                   "(the lift is from the 2D alone until then)")
+
+    def _camera(self) -> tuple[Any, Any]:
+        """The camera's intrinsics and (width, height) from camera_info (None: not yet)."""
+        return self._stream.intrinsics, self._stream.image_size
 
     def _hri_outputs(self) -> HriOutputs | None:
         """The REP-155 publishers, or None (``publish_hri`` false, or a message package missing:
@@ -240,6 +268,11 @@ class LifterNode(Node):
         self.destroy_guard_condition(self._more)
         for entity in (self._sub_keypoints, self._sub_camera_info):
             self.destroy_subscription(entity)
+        if self._depth is not None:
+            self._depth.close()
+            self._depth = None
+            self._stream.depth_of = None
+            self._diagnostics.depth_warning = None
         if self._stats_timer is not None:
             self.destroy_timer(self._stats_timer)
             self._stats_timer = None
@@ -321,6 +354,8 @@ class LifterNode(Node):
         self._configure_answers()
         if self._hri is not None:  # bodies leave as tracks are forgotten
             self._hri.book.timeout_ns = round(self._settings.frame.track_timeout * 1e9)
+        if self._depth is not None:
+            self._depth.set_tolerance(self._settings.frame.depth_tolerance)
         if self._pending is None:
             return
         bases, lifter = self._pending

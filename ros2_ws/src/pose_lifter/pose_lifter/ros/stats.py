@@ -7,7 +7,8 @@ the statistics line (:meth:`FrameStats.line`) and ``/diagnostics``
 
 Every ``stats_period`` s the node logs the frame rate, the latency per frame (frame received ->
 answer published: median, p95, max), the solve time per person-frame (median, p95), the frames
-dropped while it was busy, the skeletons lifted with clipped confidences, those whose track
+dropped while it was busy, the frames lifted with and without their depth image (by why), the
+skeletons lifted with clipped confidences, those whose track
 swapped back their detector's left/right labels (a detector's side confusions, how often) and
 the skipped inputs by kind.
 """
@@ -39,6 +40,8 @@ class FrameStats:
     clipped: int = 0  # skeletons lifted with confidences clipped into [0, 1]
     dropped: int = 0  # whole frames dropped unanswered while the node was busy (the oldest first)
     relabelled: int = 0  # skeletons whose track swapped back their detector's left/right labels
+    with_depth: int = 0  # frames lifted with their depth image (depth_topic)
+    without_depth: Counter[str] = field(default_factory=Counter)  # ... and without, by why
 
     def frame(self, lifted: Sequence[Any], latency: float) -> None:
         """Count one answered frame: its lifted skeletons (``warm_started``, ``solve_time`` and,
@@ -57,7 +60,7 @@ class FrameStats:
     def line(self) -> str:
         """The statistics line (``""`` when nothing happened since the counters started)."""
         elapsed = self.elapsed()
-        if self.frames == 0 and not self.skipped and not self.dropped:
+        if self.frames == 0 and not self.skipped and not self.dropped and not self.without_depth:
             return ""
         lat = np.asarray(self.latencies) * 1e3
         solve = np.asarray(self.solve_times) * 1e3
@@ -74,6 +77,11 @@ class FrameStats:
             text += f", confidences clipped in {self.clipped} skeletons"
         if self.relabelled:
             text += f", left/right labels swapped back in {self.relabelled} skeletons"
+        if self.with_depth or self.without_depth:
+            text += f", {self.with_depth} frames with depth"
+            if self.without_depth:
+                why = ", ".join(f"{k} {n}" for k, n in sorted(self.without_depth.items()))
+                text += f" (without: {why})"
         if self.skipped:
             text += ", skipped: " + ", ".join(f"{k} {n}" for k, n in sorted(self.skipped.items()))
         return text
@@ -112,6 +120,14 @@ class FrameCounter:
         """One skipped input of a kind."""
         for window in self._windows.values():
             window.skipped[kind] += 1
+
+    def depth(self, kind: str | None) -> None:
+        """One frame lifted with its depth image (``kind`` None), or without it (why)."""
+        for window in self._windows.values():
+            if kind is None:
+                window.with_depth += 1
+            else:
+                window.without_depth[kind] += 1
 
     def drop(self) -> None:
         """One whole frame dropped unanswered (a newer one came while the node was busy)."""

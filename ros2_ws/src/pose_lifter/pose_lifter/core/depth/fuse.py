@@ -57,7 +57,7 @@ from pose_lifter.core.track.placement import (
     place_poses,
 )
 
-__all__ = ["DepthReadings", "FusedPeople", "fuse_depth", "fuse_readings", "read_depth"]
+__all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fuse_readings", "read_depth"]
 
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
@@ -286,3 +286,13 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
         std[bad] = body_std(x0[bad], observed[bad], np.full(int(bad.sum()), MONOCULAR_SCALE_STD))
         kept[bad] = False
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
+
+
+def compile_kernels() -> None:
+    """Compile the fusion's kernels (numba, see ``core.numeric.jit``) into their cache, or load
+    them from it: one fusion of a small synthetic frame, so that no frame pays for it."""
+    grid = np.linspace(-0.5, 0.5, N_JOINTS)
+    pose = np.stack([grid, grid[::-1], 0.2 * grid], axis=-1)[None]
+    points = 32.0 + 10.0 * pose[..., :2]
+    fuse_depth(np.full((64, 64), 3.0, dtype=np.float32), ((50.0, 50.0), (32.0, 32.0)), points,
+               np.ones((1, N_JOINTS)), pose, np.array([20.0]), np.array([[32.0, 32.0]]))

@@ -570,6 +570,8 @@ def compile_kernels() -> float:
     sources, so an editable source tree and an installed copy each need it once (the Makefile runs
     it after installing either); a user's first lift then starts as fast as the second. Returns
     the seconds it took (~25-60 s of CPU to compile, ~1 s to load)."""
+    from pose_lifter.core.depth.fuse import compile_kernels as compile_depth_kernels
+
     start = time.perf_counter()
     for mode in KERNEL_MODES:
         Lifter(None, LifterOptions(mode=mode)).warm_up()
@@ -577,4 +579,5 @@ def compile_kernels() -> float:
     compile_later_kernels()
     compile_track_kernels()
     compile_screening_kernels()
+    compile_depth_kernels()
     return time.perf_counter() - start
