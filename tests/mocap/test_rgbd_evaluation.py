@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pose_lifter.core.depth.place import place_people
 from pose_lifter.core.model.synthetic import synthetic_poses
+from pose_lifter.messages.frame import labelled_2d
+from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap import rgbd_evaluation as rgbd
 from tolerances import ROUND_OFF_ACCUMULATED
@@ -116,6 +119,30 @@ def test_the_camera_looks_at_the_hip_centre_and_loses_the_joints_outside_the_ima
         # the detector's 2D is near the true projection where it is confident
         near = np.linalg.norm(px - np.stack([u, v], axis=-1), axis=-1)
         assert np.median(near[conf > 0.5]) < 0.1 * fy * 0.4 / distance  # a tenth of a shin
+
+
+def test_the_fused_methods_place_as_the_node_places() -> None:
+    track = ev.Track("synthetic", synthetic_poses(6, seed=2), (45.0, 0.0, "perspective"), 3)
+    px, conf, truth = rgbd.film_rgbd(track, 3.0, np.random.default_rng(0))
+    evaluator = rgbd.RgbdEvaluator(("mono", "fused"), {})
+    leg = np.full(len(px), 0.42)
+    _, lifts = evaluator.lifts.lifts("hybrid", px, conf, leg, 3.0)
+    t = lifts[-1]
+    assert t is not None
+    rendered = depth_model.render_depth(truth[-1][None], rgbd.INTRINSICS, rgbd.IMAGE_SIZE)
+    depth = depth_model.sense(rendered, depth_model.REALISTIC, np.random.default_rng(1))
+    points = labelled_2d(px[-1], conf[-1], t.swapped)[0][None]
+    node = place_people([t.result], points, rgbd.INTRINSICS, 0.43, 5.0, depth=depth)
+    joints, std, read = rgbd.fuse_person(depth, points, t.result, t.result.pose_camera)
+    np.testing.assert_allclose(joints, node.joints_m[0], rtol=ROUND_OFF_ACCUMULATED)
+    np.testing.assert_allclose(std, node.std_m[0], rtol=ROUND_OFF_ACCUMULATED)
+    assert read.any() and not read[~np.isfinite(node.readings.depth_m[0])].any()
+    # a refined pose placed again with the frame's readings, as the lagged node does
+    refined = t.result.pose_camera * 1.05
+    again = place_people([t.result], points, rgbd.INTRINSICS, 0.43, 5.0, poses=refined[None],
+                         readings=node.readings)
+    np.testing.assert_allclose(rgbd.fuse_person(depth, points, t.result, refined)[0], again.joints_m[0],
+                               rtol=ROUND_OFF_ACCUMULATED)
 
 
 def test_a_tiny_run_gives_every_method_at_every_distance_finite_figures() -> None:

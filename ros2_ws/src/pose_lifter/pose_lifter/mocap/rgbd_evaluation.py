@@ -19,19 +19,19 @@ Methods (:data:`METHODS`), each tracked as the node tracks (the default hybrid m
 :class:`~pose_lifter.core.track.policy.TrackPolicy`, knowing the intrinsics as the node does from
 ``camera_info``):
 
-* ``mono``: the monocular lift placed as the node places it
-  (:func:`~pose_lifter.core.track.placement.place_results`, the default 0.43 m leg), its
-  uncertainty :func:`pose_lifter.core.depth.monocular_std`;
+* ``mono``: the monocular lift placed as the node places it without depth
+  (:func:`pose_lifter.core.depth.place.place_people`: the default 0.43 m leg, the uncertainty of
+  :func:`~pose_lifter.core.depth.monocular_std`);
 * ``naive``: what users do today: each joint at the depth reading of its rounded pixel (the
   detector's 2D and labels as given), back-projected on its ray (``z K^-1 [u v 1]``); a joint the
   lifter does not use (confidence below its ``confidence_threshold``), outside the image or on a
   pixel without a reading keeps the ``mono`` joint; no uncertainty;
-* ``fused``: :func:`pose_lifter.core.depth.fuse_depth` of the live lift and the frame's depth, as
-  the node calls it (the frame's 2D with the labels the track gave the 3D joints, weighted by the
-  confidences);
+* ``fused``: the live lift placed on the frame's depth image as the node places it
+  (:func:`fuse_person`: :func:`~pose_lifter.core.depth.place.place_people`'s fusion, the frame's
+  2D with the labels the track gave the 3D joints);
 * ``fused-lag``: the node with ``output_lag`` (3): each frame's pose refined over the next
   frames (:class:`~pose_lifter.core.track.later.Refiner`, as ``hybrid-lag`` of :mod:`.evaluation`),
-  then fused with that frame's depth by the same function.
+  then placed again with the depth readings its frame's lift took, as the lagged node does.
 
 Figures per frame (:func:`rgbd_figures`; means over every lifted frame in :func:`summarise`):
 P-MPJPE (mm, similarity-aligned), metric MPJPE (mm, camera frame, no alignment), root error (mm,
@@ -53,13 +53,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth import fuse_depth, monocular_std
+from pose_lifter.core.depth import fuse_readings, read_depth
+from pose_lifter.core.depth.place import place_people
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
+from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.placement import (
     DEFAULT_DISTANCE_M,
     DEFAULT_LEG_LENGTH_M,
     CameraIntrinsics,
-    place_results,
 )
 from pose_lifter.core.track.policy import TrackedLift
 from pose_lifter.messages.frame import labelled_2d
@@ -69,8 +70,8 @@ from pose_lifter.mocap.detector_model import REALISTIC, detect
 from pose_lifter.mocap.views import film, view_rotation
 
 __all__ = ["AXIS_TARGETS", "DISTANCES", "GROUPS", "JOINT_TARGETS", "METHODS", "RgbdEvaluator", "coverage",
-           "coverage_counts", "evaluate_jobs", "film_rgbd", "naive_lookup", "render_table", "rgbd_cameras",
-           "rgbd_figures", "root_error", "summarise"]
+           "coverage_counts", "evaluate_jobs", "film_rgbd", "fuse_person", "naive_lookup", "render_table",
+           "rgbd_cameras", "rgbd_figures", "root_error", "summarise"]
 
 METHODS = ("mono", "naive", "fused", "fused-lag")
 #: Camera distances (m, to the joints' centroid).
@@ -294,34 +295,53 @@ class RgbdEvaluator:
             depth = depth_model.sense(rendered, self.sensor, depth_rng)
             t = live[i]
             if t is not None:
-                r = t.result
-                mono = place_results(r.pose_camera[None], [r], DEFAULT_LEG_LENGTH_M, INTRINSICS,
-                                     DEFAULT_DISTANCE_M)
-                _, weights = labelled_2d(px[i], conf[i], t.swapped)
-                std = monocular_std(mono, weights[None], INTRINSICS, self.threshold)[0]
-                out["mono"].put(i, mono[0], std, np.zeros(N_JOINTS, dtype=bool))
-                joints, read = naive_lookup(depth, INTRINSICS, px[i], conf[i] >= self.threshold, mono[0])
+                points = labelled_2d(px[i], conf[i], t.swapped)[0][None]
+                mono = place_people([t.result], points, INTRINSICS, DEFAULT_LEG_LENGTH_M, DEFAULT_DISTANCE_M)
+                out["mono"].put(i, mono.joints_m[0], mono.std_m[0], np.zeros(N_JOINTS, dtype=bool))
+                usable = conf[i] >= self.threshold
+                joints, read = naive_lookup(depth, INTRINSICS, px[i], usable, mono.joints_m[0])
                 out["naive"].put(i, joints, None, read)
                 if "fused" in self.methods:
-                    out["fused"].put(i, *_fused(depth, px[i], conf[i], t, r.pose_camera))
+                    out["fused"].put(i, *fuse_person(depth, points, t.result, t.result.pose_camera))
             tl = lag_results[i]
             if tl is not None and np.isfinite(lagged[i]).all():
-                out["fused-lag"].put(i, *_fused(depth, px[i], conf[i], tl, lagged[i] / leg_m[i]))
+                points = labelled_2d(px[i], conf[i], tl.swapped)[0][None]
+                out["fused-lag"].put(i, *fuse_person(depth, points, tl.result, lagged[i] / leg_m[i]))
         return {"track": track.name, "camera": track.camera, "distance": distance, "n": n,
                 "methods": {m: out[m].record(truth) for m in self.methods}}
 
 
-def _fused(depth: NDArray[np.float32], points: NDArray[np.float64], confidence: NDArray[np.float64],
-           tracked: TrackedLift, pose: NDArray[np.float64]
-           ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-    """:func:`~pose_lifter.core.depth.fuse_depth` of one person as the node calls it: the frame's
-    2D (12, 2) and confidences (12,) with the labels its track gave the 3D joints, ``pose`` (12,
-    3; the lift's ``pose_camera`` or its refinement, leg units) and the lift's camera."""
-    labelled, weights = labelled_2d(points, confidence, tracked.swapped)
-    r = tracked.result
-    fused = fuse_depth(depth, INTRINSICS, labelled[None], weights[None], pose[None],
-                       np.array([float(r.camera.scale)]),
-                       np.asarray(r.camera.translation, dtype=np.float64).reshape(1, 2))
+def fuse_person(depth: NDArray[np.float32], points: NDArray[np.float64], result: LiftResult,
+                pose: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """One person placed on a depth image as :func:`pose_lifter.core.depth.place.place_people`
+    places it (the node's, the lagged node's and the offline lift's placement), with the joints
+    it read from depth: the readings taken with the lift's own pose
+    (:func:`~pose_lifter.core.depth.read_depth`), then ``pose`` (12, 3; the lift's
+    ``pose_camera`` or its refinement over later frames, leg units) fused with them
+    (:func:`~pose_lifter.core.depth.fuse_readings`).
+
+    Parameters
+    ----------
+    depth : ndarray of float32, shape (H, W)
+    points : ndarray, shape (1, 12, 2)
+        The 2D the lift read, labelled as its joints (pixels).
+    result : LiftResult
+    pose : ndarray, shape (12, 3)
+
+    Returns
+    -------
+    joints : ndarray, shape (12, 3)
+        Metres, camera frame.
+    std : ndarray, shape (12, 3)
+        Metres, per axis.
+    from_depth : ndarray of bool, shape (12,)
+    """
+    weights = np.asarray(result.weights, dtype=np.float64)[None]
+    scale = np.array([float(result.camera.scale)])
+    centre = np.asarray(result.camera.translation, dtype=np.float64).reshape(1, 2)
+    readings = read_depth(depth, INTRINSICS, points, weights, result.pose_camera[None], scale, centre)
+    fused = fuse_readings(readings, INTRINSICS, points, weights, pose[None], scale, centre)
     return fused.joints_m[0], fused.std_m[0], fused.from_depth[0]
 
 
