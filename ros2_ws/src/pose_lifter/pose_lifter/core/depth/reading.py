@@ -77,10 +77,14 @@ class DepthOptions:
     prior_std : float
         Standard deviation of the person's depth scale about the monocular placement's (relative):
         the prior on the leg length that keeps a person with few readings near it.
+    tilt_std : float
+        Standard deviation of the depth field's tilt (metres of depth per metre across the image):
+        the prior that keeps a body read at few joints as the lift leans it.
     max_iter : int
-        Iteration cap of the robust scale fit.
+        Iteration cap of the robust depth fit.
     tol : float
-        Stopping rule of the robust scale fit: relative change of the scale.
+        Stopping rule of the robust depth fit: the largest change of a parameter (relative, or
+        absolute below 1).
     """
 
     patch_scale: float = 0.6
@@ -96,7 +100,8 @@ class DepthOptions:
     confidence_threshold: float = 0.1
     gate: float = 3.0
     occlusion_margin_m: float = 0.08
-    prior_std: float = 0.15
+    prior_std: float = 0.1
+    tilt_std: float = 0.3
     max_iter: int = 50
     tol: float = 1e-7
 
