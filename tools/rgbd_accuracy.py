@@ -4,7 +4,7 @@
     .venv/bin/python tools/rgbd_accuracy.py [--data ../shared/data/cmu] [--frames 90] [--views 2]
         [--distances 1.5 3 5] [--elevated] [--methods mono naive fused fused-lag] [--workers 2]
         [--trials T ...] [--max-trials N] [--fold CLASS --folds DIR] [--set NAME=VALUE ...]
-        [--out out/rgbd_accuracy]
+        [--out out/rgbd_accuracy] [--calibrate]
 
 The tracks, the depth images, the methods and the figures are
 :mod:`pose_lifter.mocap.rgbd_evaluation`'s. ``--fold CLASS`` lifts the trials of a motion class
@@ -31,7 +31,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap import rgbd_evaluation as rgbd
-from pose_lifter.mocap.cmu import split_trials
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -56,6 +55,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
     ap.add_argument("--out", type=Path, default=Path("out/rgbd_accuracy"))
+    ap.add_argument("--calibrate", action="store_true",
+                    help="measure the fusion's constants on the training split's held-out trials instead "
+                         "(pose_lifter.mocap.depth_calibration; make depth-calibration) and print them")
     return ap
 
 
@@ -82,10 +84,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.fold:
         settings.update(fold_settings(args.fold, args.folds))
         trials = ev.action_trials(args.fold, args.data)
+    split = "val" if args.calibrate else "eval"
     if args.max_trials:
-        trials = trials or split_trials("eval", args.data)
+        trials = trials or ev.split_ids(split, args.data)
         trials = trials[:: max(1, len(trials) // args.max_trials)][: args.max_trials]
     cameras = rgbd.rgbd_cameras((0.0, rgbd.ELEVATED) if args.elevated else (0.0,))
+    if args.calibrate:  # the training split's trials the packaged prior was not fitted on
+        from pose_lifter.mocap.depth_calibration import calibrate, format_calibration
+
+        tracks = ev.evaluation_tracks(split, args.data, args.frames, args.views, trials, cameras)
+        print(f"{len(tracks)} training-split tracks (held out of the prior), distances {args.distances}",
+              flush=True)
+        print(format_calibration(calibrate(tracks, args.distances, settings)))
+        print(f"measured at {ev.run_stamp(REPO)}, {time.perf_counter() - t0:.0f} s")
+        return 0
     tracks = ev.evaluation_tracks("eval", args.data, args.frames, args.views, trials, cameras)
     jobs = [(t, d) for d in args.distances for t in tracks]
     n_frames = sum(len(t.world) for t in tracks)

@@ -70,7 +70,8 @@ from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_
 __all__ = [
     "ALL_CONDITIONS", "CAMERAS", "CONDITIONS", "DIAGNOSTIC_CONDITIONS", "METHODS", "Evaluator", "Setup",
     "Track", "detector_model", "evaluate_jobs", "evaluation_tracks", "film_track", "frame_figures",
-    "merge_runs", "nanmean", "parse_settings", "render_table", "run_jobs", "run_stamp", "summarise",
+    "merge_runs", "nanmean", "parse_settings", "render_table", "run_jobs", "run_stamp", "split_ids",
+    "summarise",
 ]
 
 CONDITIONS: dict[str, dict[str, float]] = {
@@ -388,6 +389,16 @@ def _lag_out(lagged: Refiner, stamps: NDArray[np.int64], preds: NDArray[np.float
         preds[k] = pose
 
 
+def split_ids(split: str, data: str | None) -> list[str]:
+    """The trials of ``split``: ``eval``, subjects 02, 07, 08 and 09_12, never trained on; ``val``,
+    the training-split trials the packaged prior was not fitted on (tuning, calibration)."""
+    if split == "eval":
+        return split_trials("eval", data)
+    from pose_lifter.core.model.prior import PosePrior
+
+    return list(PosePrior.load().metadata.get("validation_trials", []))
+
+
 def evaluation_tracks(split: str, data: str | None, frames: int, views: int,
                       trials: Sequence[str] | None = None,
                       cameras: Sequence[tuple[float, float, str]] | None = None) -> list[Track]:
@@ -395,13 +406,7 @@ def evaluation_tracks(split: str, data: str | None, frames: int, views: int,
     never trained on; ``val``: the training-split trials the packaged prior was not fitted on),
     at 30 Hz, at most ``frames`` frames each, each seen by ``views`` of ``cameras`` (default
     :data:`CAMERAS`), the cameras rotating over the trials."""
-    if trials:
-        ids = list(trials)
-    elif split == "eval":
-        ids = split_trials("eval", data)
-    else:  # the prior's held-out training-split trials (tuning)
-        from pose_lifter.core.model.prior import PosePrior
-        ids = list(PosePrior.load().metadata.get("validation_trials", []))
+    ids = list(trials) if trials else split_ids(split, data)
     cams = list(cameras or CAMERAS)
     out = []
     for k, t in enumerate(ids):

@@ -19,10 +19,11 @@ placed depths scaled (the body's size and distance together) and tilted across t
    ``g_j = (z0_j, y_j, x_j)`` the joint's placed depth and its offsets across the image from the
    body's centroid (metres), ``rho`` Tukey's biweight (c = 4.685),
    ``sigma_j^2 = v_j + (k sigma_shape,j)^2`` (the reading's variance and the shape's error in depth),
-   ``P`` the prior's precisions (:attr:`~pose_lifter.core.depth.reading.DepthOptions.prior_std` on
-   ``k``, ``tilt_std`` on ``a`` and ``b``), by iteratively reweighted least squares from ``k`` the
-   median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or ``max_iter``. Readings
-   beyond ``gate`` standard deviations of the field are dropped.
+   ``P`` the prior's precisions (on ``k`` the monocular placement's own scale error,
+   :func:`~pose_lifter.core.depth.uncertainty.monocular_scale_std`; on ``a`` and ``b``
+   :attr:`~pose_lifter.core.depth.reading.DepthOptions.tilt_std`), by iteratively reweighted least
+   squares from ``k`` the median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or
+   ``max_iter``. Readings beyond ``gate`` standard deviations of the field are dropped.
 5. **Fuse**: each joint moves along its ray to the field's depth ``g_j . theta`` (its standard
    deviation from the fit's covariance); a kept reading's depth ``d_j`` is combined with it by
    their inverse variances (``v_j``; the field's and the shape's,
@@ -52,7 +53,7 @@ from pose_lifter.core.depth.reading import (
     joint_radius_px,
     read_patches,
 )
-from pose_lifter.core.depth.uncertainty import MONOCULAR_SCALE_STD, SHAPE_STD_M, body_std, shape_std
+from pose_lifter.core.depth.uncertainty import SHAPE_STD_M, body_std, monocular_scale_std, shape_std
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS
 from pose_lifter.core.track.placement import (
@@ -261,7 +262,8 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     # in depth, a body leaning towards or away from the camera, moves no joint on the image)
     lateral = x0[..., :2] - x0[..., :2].mean(axis=1, keepdims=True)
     g = np.ascontiguousarray(np.concatenate([z0[..., None], lateral[..., ::-1]], axis=-1))  # (n, 12, 3)
-    precision = np.array([opt.prior_std**-2, opt.tilt_std**-2, opt.tilt_std**-2])
+    mono_scale = monocular_scale_std(observed)  # the prior on k: the monocular placement's own error
+    precision = np.stack([mono_scale**-2, np.full(n, opt.tilt_std**-2), np.full(n, opt.tilt_std**-2)], axis=1)
     theta0 = np.zeros((n, 3))
     theta0[:, 0] = k0
     theta = np.empty((n, 3))
@@ -287,7 +289,7 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     body = x0 * (model_z / z0)[..., None]
     shape = shape_std(observed)
     along_sd = np.sqrt(np.einsum("njc,ncd,njd->nj", g, cov, g)) / model_z  # relative, along the ray
-    along_sd[mono] = MONOCULAR_SCALE_STD
+    along_sd[mono] = mono_scale[mono, None]
     root = along_sd[..., None] * np.abs(body)
     w_body = 1.0 / (shape[..., 2] ** 2 + root[..., 2] ** 2)
     w_read = np.where(kept, 1.0 / v, 0.0)
@@ -300,7 +302,7 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
-        std[bad] = body_std(x0[bad], observed[bad], np.full(int(bad.sum()), MONOCULAR_SCALE_STD))
+        std[bad] = body_std(x0[bad], observed[bad], mono_scale[bad])
         kept[bad] = False
     k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)

@@ -177,11 +177,12 @@ def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[
     """The robust fit of each of ``n`` people's depth field (:func:`.fuse.fuse_readings`):
     readings ``d`` (n, 12) with variances ``v``, ``have`` the readings to fit, each joint's
     regressors ``g`` (n, 12, 3) (its placed depth and its offsets across the image), ``shape_z``
-    (12,) the shape's depth error, a Gaussian prior (``mean``, diagonal ``precision``; 3,), from
-    ``theta0`` (n, 3). Minimises ``sum_j rho((d_j - g_j . theta) / sigma_j) + (theta - mean)^T P
-    (theta - mean) / 2`` (Tukey's rho, ``sigma_j^2 = v_j + (theta_0 shape_z_j)^2``) by iteratively
-    reweighted least squares until no parameter moves by more than ``tol`` (relative, at least
-    absolute) or ``max_iter``; fills ``theta``, its covariance ``cov`` (n, 3, 3; the inverse of the
+    (12,) the shape's depth error, a Gaussian prior (``mean`` (3,), each person's diagonal
+    ``precision`` (n, 3)), from ``theta0`` (n, 3). Minimises
+    ``sum_j rho((d_j - g_j . theta) / sigma_j) + (theta - mean)^T P (theta - mean) / 2`` (Tukey's rho,
+    ``sigma_j^2 = v_j + (theta_0 shape_z_j)^2``) by iteratively reweighted least squares until no
+    parameter moves by more than ``tol`` (relative, at least absolute) or ``max_iter``; fills
+    ``theta``, its covariance ``cov`` (n, 3, 3; the inverse of the
     final normal matrix), ``objective``, ``n_iter`` and ``converged``."""
     for p in range(len(d)):
         th = theta0[p].copy()
@@ -189,7 +190,7 @@ def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[
         it = 0
         while not converged[p] and it < max_iter:
             it += 1
-            a, b, _ = _normal_equations(d[p], v[p], g[p], have[p], shape_z, precision, mean, th)
+            a, b, _ = _normal_equations(d[p], v[p], g[p], have[p], shape_z, precision[p], mean, th)
             new = np.linalg.solve(a, b)
             step = 0.0
             for i in range(3):
@@ -197,10 +198,10 @@ def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[
             converged[p] = step <= tol
             th = new
         n_iter[p] = it
-        a, _, loss = _normal_equations(d[p], v[p], g[p], have[p], shape_z, precision, mean, th)
+        a, _, loss = _normal_equations(d[p], v[p], g[p], have[p], shape_z, precision[p], mean, th)
         theta[p] = th
         cov[p] = np.linalg.inv(a)
         prior = 0.0
         for i in range(3):
-            prior += 0.5 * precision[i] * (th[i] - mean[i]) ** 2
+            prior += 0.5 * precision[p, i] * (th[i] - mean[i]) ** 2
         objective[p] = loss + prior
