@@ -95,7 +95,7 @@ def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_s
     x = np.asarray(joints_m, dtype=np.float64)
     shape = shape_std(observed)
     root = np.asarray(scale_std, dtype=np.float64)[:, None, None] * np.abs(x)
-    return np.asarray(np.sqrt(shape * shape + root * root))
+    return np.asarray(np.hypot(shape, root))  # finite wherever the joints are (no square overflows)
 
 
 def monocular_std(joints_m: NDArray[np.float64], weights: NDArray[np.float64],
