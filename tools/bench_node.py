@@ -8,11 +8,12 @@ Usage (``make bench-node`` sources the workspace first)::
 
 Starts ``ros2_ws/install/pose_lifter/lib/pose_lifter/lifter`` (what ``ros2 run`` executes) as a
 separate process on a private ROS domain, publishes the bag's ``/keypoints_2d`` (and
-``/camera_info``) at ``--rate`` Hz in real time -- not in lock step: a frame the node cannot
-take in time is dropped by its sensor-data (keep-last) subscription, as behind a real camera --
-and collects ``skeletons_3d``. Each loop over the bag is shifted by the bag's duration so the
-stamps keep increasing (tracks stay warm across loops; the people jump back to their first
-pose). Prints:
+``/camera_info``, and its depth image when the bag has one: the node then reads it as
+``depth_topic``; ``--no-depth`` leaves it out) at ``--rate`` Hz in real time -- not in lock
+step: a frame the node cannot take in time is dropped by its sensor-data (keep-last)
+subscription, as behind a real camera -- and collects ``skeletons_3d``. Each loop over the bag is
+shifted by the bag's duration so the stamps keep increasing (tracks stay warm across loops; the
+people jump back to their first pose). Prints:
 
 * frames answered / published;
 * per person-frame solve time inside the node (``Skeleton3D.solve_time``), warm and cold, median
@@ -72,6 +73,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--bag", default=str(REPO / "bags" / "five_people.mcap"))
     ap.add_argument("--rate", type=float, default=30.0, help="publishing rate, Hz")
     ap.add_argument("--loops", type=int, default=3, help="passes over the bag")
+    ap.add_argument("--no-depth", action="store_true",
+                    help="do not publish the bag's depth images (the node lifts from the 2D alone)")
     ap.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
                     help="extra lifter parameter (repeatable), e.g. n_starts:=10")
     ap.add_argument("--checkout", type=Path, default=REPO,
@@ -88,34 +91,37 @@ def _ros() -> SimpleNamespace:
         from pose_lifter_msgs.msg import Skeleton2DArray, Skeleton3DArray
         from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
         from rclpy.serialization import deserialize_message
-        from sensor_msgs.msg import CameraInfo
+        from sensor_msgs.msg import CameraInfo, Image
     except ImportError as err:
         sys.exit(f"{err}: run `make ros` and `source ros2_ws/install/setup.bash` (make bench-node does)")
     return SimpleNamespace(rclpy=rclpy, Skeleton2DArray=Skeleton2DArray, Skeleton3DArray=Skeleton3DArray,
                            QoSProfile=QoSProfile, ReliabilityPolicy=ReliabilityPolicy,
                            qos_profile_sensor_data=qos_profile_sensor_data,
-                           deserialize_message=deserialize_message, CameraInfo=CameraInfo)
+                           deserialize_message=deserialize_message, CameraInfo=CameraInfo, Image=Image)
 
 
 class _Bag(NamedTuple):
-    """The bag's keypoint frames as rclpy messages, its first camera info (if any), the most people
-    in a frame, and the stamp shift of one loop over the bag (ns)."""
+    """The bag's keypoint frames as rclpy messages, its first camera info (if any), each frame's
+    depth image of the same stamp (None: none, or not wanted), the most people in a frame, and the
+    stamp shift of one loop over the bag (ns)."""
 
     kp_msgs: list[Any]
     info_msg: Any
+    depth_msgs: list[Any]
     n_people: int
     span_ns: int
 
 
-def _load_bag(path: str, rate: float, ros: SimpleNamespace) -> _Bag:
-    """The ``/keypoints_2d`` and ``/camera_info`` messages of the bag at ``path``, replayed at
-    ``rate`` Hz."""
-    from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
+def _load_bag(path: str, rate: float, ros: SimpleNamespace, depth: bool) -> _Bag:
+    """The ``/keypoints_2d``, ``/camera_info`` and (``depth``) depth image messages of the bag at
+    ``path``, replayed at ``rate`` Hz."""
+    from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_DEPTH, TOPIC_KEYPOINTS
     from pose_lifter.messages.typestore import pose_lifter_typestore
     from pose_lifter.offline.bags import read_messages
 
     store = pose_lifter_typestore()
-    recorded = [x for x in read_messages(path) if x.topic in (TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO)]
+    topics = (TOPIC_KEYPOINTS, TOPIC_CAMERA_INFO) + ((TOPIC_DEPTH,) if depth else ())
+    recorded = [x for x in read_messages(path) if x.topic in topics]
     frames = [x for x in recorded if x.topic == TOPIC_KEYPOINTS]
     infos = [x for x in recorded if x.topic == TOPIC_CAMERA_INFO]
     span_ns = frames[-1].stamp_ns - frames[0].stamp_ns + round(1e9 / rate)
@@ -125,8 +131,10 @@ def _load_bag(path: str, rate: float, ros: SimpleNamespace) -> _Bag:
 
     kp_msgs = [rclpy_msg(x, ros.Skeleton2DArray) for x in frames]
     info_msg = rclpy_msg(infos[0], ros.CameraInfo) if infos else None
+    images = {x.stamp_ns: x for x in recorded if x.topic == TOPIC_DEPTH}
+    depth_msgs = [rclpy_msg(images[x.stamp_ns], ros.Image) if x.stamp_ns in images else None for x in frames]
     n_people = max(len(m.skeletons) for m in kp_msgs)
-    return _Bag(kp_msgs, info_msg, n_people, span_ns)
+    return _Bag(kp_msgs, info_msg, depth_msgs, n_people, span_ns)
 
 
 def _checkout_env(checkout: Path) -> dict[str, str]:
@@ -182,9 +190,10 @@ def _handshake(ros: SimpleNamespace, node: Any, pub: Any, answers: dict[int, tup
     answers.clear()
 
 
-def _replay(ros: SimpleNamespace, node: Any, pub: Any, pub_info: Any, bag: _Bag, rate: float, loops: int,
-            types: Any) -> dict[int, float]:
-    """Publish the bag's frames (each with the camera info) at ``rate`` Hz in real time, ``loops``
+def _replay(ros: SimpleNamespace, node: Any, pub: Any, pub_info: Any, pub_depth: Any, bag: _Bag, rate: float,
+            loops: int, types: Any) -> dict[int, float]:
+    """Publish the bag's frames (each after the camera info and its depth image) at ``rate`` Hz in
+    real time, ``loops``
     times, each loop's stamps shifted by the bag's span; returns each stamp's publishing time
     (``time.perf_counter``)."""
     from pose_lifter.messages.convert import ns_to_stamp, stamp_to_ns
@@ -194,7 +203,7 @@ def _replay(ros: SimpleNamespace, node: Any, pub: Any, pub_info: Any, bag: _Bag,
     start = time.perf_counter()
     i = 0
     for loop in range(loops):
-        for msg in bag.kp_msgs:
+        for msg, image in zip(bag.kp_msgs, bag.depth_msgs, strict=True):
             target = start + i * period
             while (now := time.perf_counter()) < target:
                 ros.rclpy.spin_once(node, timeout_sec=max(0.0, min(target - now, 0.005)))
@@ -203,6 +212,9 @@ def _replay(ros: SimpleNamespace, node: Any, pub: Any, pub_info: Any, bag: _Bag,
             if bag.info_msg is not None:
                 bag.info_msg.header.stamp = msg.header.stamp
                 pub_info.publish(bag.info_msg)
+            if image is not None:
+                image.header.stamp = msg.header.stamp
+                pub_depth.publish(image)
             pub.publish(msg)
             sent[stamp] = time.perf_counter()
             msg.header.stamp = ns_to_stamp(stamp - loop * bag.span_ns, types)
@@ -233,8 +245,10 @@ def _report(args: argparse.Namespace, bag: _Bag, answers: dict[int, tuple[float,
     e2e = [(t - sent[k]) * 1e3 for k, (t, _) in answers.items()]
     stats = [line for line in text.splitlines() if "frames (" in line]
     cb = [float(v) for line in stats for v in re.findall(r"latency median ([\d.]+) ms", line)]
+    n_depth = sum(m is not None for m in bag.depth_msgs)
     print(f"bag {Path(args.bag).name}: {len(bag.kp_msgs)} frames x {args.loops} loops at {args.rate:g} Hz, "
-          f"{bag.n_people} people per frame; lifter params {args.param or 'defaults'}; "
+          f"{bag.n_people} people per frame, {n_depth} with a depth image; "
+          f"lifter params {args.param or 'defaults'}; "
           f"the lifter of {args.checkout}")
     print(f"frames answered: {len(answers)} of {len(sent)} published "
           f"({len(warm) + len(cold)} person-frames lifted)")
@@ -262,8 +276,10 @@ def main() -> None:
     from pose_lifter.messages.convert import rclpy_types, stamp_to_ns
 
     types = rclpy_types()
-    bag = _load_bag(args.bag, args.rate, ros)
-    proc, log, domain = _start_lifter(args.param, args.checkout)
+    bag = _load_bag(args.bag, args.rate, ros, not args.no_depth)
+    with_depth = any(m is not None for m in bag.depth_msgs)
+    params = args.param + (["depth_topic:=depth"] if with_depth else [])
+    proc, log, domain = _start_lifter(params, args.checkout)
 
     ros.rclpy.init(domain_id=domain)
     node = ros.rclpy.create_node("bench_node_client")
@@ -274,6 +290,7 @@ def main() -> None:
 
     pub = node.create_publisher(ros.Skeleton2DArray, "keypoints_2d", ros.qos_profile_sensor_data)
     pub_info = node.create_publisher(ros.CameraInfo, "camera_info", ros.qos_profile_sensor_data)
+    pub_depth = node.create_publisher(ros.Image, "depth", ros.qos_profile_sensor_data)
     node.create_subscription(ros.Skeleton3DArray, "skeletons_3d", on_answer,
                              ros.QoSProfile(depth=100, reliability=ros.ReliabilityPolicy.RELIABLE))
     try:
@@ -284,7 +301,7 @@ def main() -> None:
         gc.freeze()
         gc.disable()
         try:
-            sent = _replay(ros, node, pub, pub_info, bag, args.rate, args.loops, types)
+            sent = _replay(ros, node, pub, pub_info, pub_depth, bag, args.rate, args.loops, types)
         finally:
             gc.enable()
         # the last frames in flight

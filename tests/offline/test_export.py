@@ -98,8 +98,8 @@ def _older_store() -> Any:
 
 
 def test_a_lifted_bag_written_before_joint_std_reads_exports_and_evaluates(tmp_path: Path) -> None:
-    """Estimates and ground truth in the definition before ``joint_std``: read with the bag's own
-    types they have no such field (NaN), read raw they are upgraded (an empty ``joint_std``);
+    """Estimates and ground truth in the definition before ``joint_std``: read (deserialised or
+    raw) they are upgraded to today's definition (an empty ``joint_std``: NaN stds);
     export writes NaN / empty cells / null; evaluate matches them and reports NaN stds."""
     old = _older_store()
     types = m.rosbags_types(old)
@@ -118,7 +118,7 @@ def test_a_lifted_bag_written_before_joint_std_reads_exports_and_evaluates(tmp_p
                 w.write_raw(bags.RawMessage(topic, SKELETON3D_ARRAY, 10**8 * (k + 1),
                                             bytes(old.serialize_cdr(msg, SKELETON3D_ARRAY)), msgdef, rihs01))
     read = [x.msg.skeletons[0] for x in bags.read_messages(bag, [TOPIC_SKELETONS])]
-    assert len(read) == 4 and not hasattr(read[0], "joint_std")
+    assert len(read) == 4 and len(read[0].joint_std) == 0
     np.testing.assert_array_equal(m.skeleton3d_to_joints(read[2]), truth[2] + shift)
     assert np.isnan(m.skeleton3d_to_std(read[2])).all()
     store = typestore.pose_lifter_typestore()
@@ -144,7 +144,7 @@ def test_the_committed_bags_have_no_joint_std_and_still_export(bag: str, tmp_pat
     """The committed bags' ground truth was written before ``joint_std``: it exports with NaN
     standard deviations (the joints as the reader reads them)."""
     first = next(bags.read_messages(BAGS / bag, [TOPIC_GROUND_TRUTH])).msg
-    assert not hasattr(first.skeletons[0], "joint_std")  # the older definition
+    assert len(first.skeletons[0].joint_std) == 0  # the older definition, read as today's
     export_skeletons(BAGS / bag, tmp_path / "gt.npz", TOPIC_GROUND_TRUTH)
     data = np.load(tmp_path / "gt.npz", allow_pickle=False)
     assert data["joint_std"].shape == data["joints"].shape and np.isnan(data["joint_std"]).all()

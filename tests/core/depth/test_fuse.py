@@ -91,7 +91,10 @@ def test_patch_reading_drops_background_holes_and_mixed_pixels() -> None:
     r = read_patches(img, np.array([[126.0, 150.0], [115.0, 150.0]]), np.array([6.0, 6.0]),
                      np.array([2.1, 2.1]), opt)
     assert np.allclose(r.surface, 2.0, atol=ROUND_OFF_ACCUMULATED)
-    assert np.allclose(r.var, sensor_std(np.array([2.0, 2.0]), opt) ** 2, rtol=1e-6)
+    # a flat surface: the median of the sensor's noise over the patch's independent draws (one a 3x3
+    # window of the correlated noise: the patch's every pixel is sampled at this size)
+    n_eff = r.n_pixels / opt.noise_window_px**2
+    assert np.allclose(r.var, 0.5 * np.pi * sensor_std(np.array([2.0, 2.0]), opt) ** 2 / n_eff, rtol=1e-6)
     # off the limb (the wall only), outside the image, non-finite: no reading
     r = read_patches(img, np.array([[300.0, 300.0], [-50.0, 10.0], [np.nan, 5.0]]), np.full(3, 6.0),
                      np.full(3, 2.1), opt)

@@ -18,9 +18,11 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
 * :data:`~pose_lifter.core.depth.uncertainty.SHAPE_STD_M`: per joint, the 68th percentiles of the
   scaled placement's errors across the image (x and y together) and along the depth, of the joints
   of wholly shown bodies; :data:`~pose_lifter.core.depth.uncertainty.SHAPE_FACTOR` per bin the same
-  of the shown joints over the whole bodies', and
-  :data:`~pose_lifter.core.depth.uncertainty.UNOBSERVED_FACTOR` of the joints not shown over the
-  shown ones of the same bodies (medians over joints and axes).
+  of the shown joints' errors over their joint's spread (every joint and axis together), and
+  :data:`~pose_lifter.core.depth.uncertainty.UNOBSERVED_FACTOR` per bin and per axis the same of
+  the joints not shown over the bin's shown ones (a joint outside the image is placed by the lift's
+  guess across the image too, not by the 2D: most along the image's vertical, where an upright
+  body leaves the image).
 
 The 68th percentile of an error's absolute value is its standard deviation when it is Gaussian,
 and the coverage the RGB-D evaluation reports is that of these quantiles: it says how far the
@@ -45,7 +47,7 @@ from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, film_rgbd
 
-__all__ = ["Calibration", "calibrate", "format_calibration"]
+__all__ = ["Calibration", "calibrate", "format_calibration", "spread_factors"]
 
 #: A reading farther than this from its joint's true depth minus a typical offset
 #: (:data:`_TYPICAL_OFFSET_M`) is not the joint's surface (an occluder, the background): metres.
@@ -64,7 +66,7 @@ class Calibration:
     monocular_scale_std: NDArray[np.float64]  #: per observed-count bin
     shape_std_m: NDArray[np.float64]  #: (12, 2): across, along the depth
     shape_factor: NDArray[np.float64]  #: per observed-count bin
-    unobserved_factor: float
+    unobserved_factor: NDArray[np.float64]  #: per observed-count bin (rows): x, y, z
     n_frames: int
     n_readings: int
 
@@ -86,10 +88,10 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     bins = len(OBSERVED_BINS)
     offsets: list[list[float]] = [[] for _ in range(N_JOINTS)]
     scale_err: list[list[float]] = [[] for _ in range(bins)]
-    # the scaled placements' errors per bin, axis (across, along) and joint: of shown and hidden joints
-    shown: list[list[list[list[float]]]] = [[[[] for _ in range(N_JOINTS)] for _ in range(2)]
+    # the scaled placements' errors per bin, axis (x, y, z) and joint: of shown and hidden joints
+    shown: list[list[list[list[float]]]] = [[[[] for _ in range(N_JOINTS)] for _ in range(3)]
                                             for _ in range(bins)]
-    hidden: list[list[list[list[float]]]] = [[[[] for _ in range(N_JOINTS)] for _ in range(2)]
+    hidden: list[list[list[list[float]]]] = [[[[] for _ in range(N_JOINTS)] for _ in range(3)]
                                              for _ in range(bins)]
     n_frames = 0
     for track in tracks:
@@ -113,8 +115,8 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
                 err = k * x0 - truth[i]
                 for j in range(N_JOINTS):
                     into = shown[b] if observed[j] else hidden[b]
-                    into[0][j].extend(err[j, :2].tolist())
-                    into[1][j].append(float(err[j, 2]))
+                    for axis in range(3):
+                        into[axis][j].append(float(err[j, axis]))
                 rendered = depth_model.render_depth(truth[i][None], INTRINSICS, IMAGE_SIZE)
                 depth = depth_model.sense(rendered, sensor or depth_model.REALISTIC, rng)
                 points = labelled_2d(px[i], conf[i], t.swapped)[0]
@@ -126,13 +128,49 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     pooled = _pooled(offsets)
     surface = np.array([float(np.median(p)) if len(p) else float("nan") for p in pooled])
     spread = np.concatenate([p - surface[j] for j, p in enumerate(pooled)])
-    q_shown = np.array([[[_q68(p) for p in _pooled(shown[b][a])] for a in (0, 1)] for b in range(bins)])
-    q_hidden = np.array([[[_q68(p) for p in _pooled(hidden[b][a])] for a in (0, 1)] for b in range(bins)])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        factor = np.array([float(np.nanmedian(q_shown[b] / q_shown[0])) for b in range(bins)])
-        unobserved = float(np.nanmedian(q_hidden / q_shown))
+    shape, factor, unobserved = spread_factors(shown, hidden)
     return Calibration(surface, _q68(spread), np.array([_q68(np.array(e)) for e in scale_err]),
-                       q_shown[0].T, factor, unobserved, n_frames, sum(len(o) for o in offsets))
+                       shape, factor, unobserved, n_frames, sum(len(o) for o in offsets))
+
+
+def spread_factors(shown: Sequence[Sequence[Sequence[Sequence[float]]]],
+                   hidden: Sequence[Sequence[Sequence[Sequence[float]]]]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The shape's spread and its factors from the errors of scaled placements.
+
+    Parameters
+    ----------
+    shown, hidden : nested sequences [bin][axis][joint] of float
+        Per bin of :data:`~pose_lifter.core.depth.uncertainty.OBSERVED_BINS` (bin 0: whole bodies),
+        axis (x, y, z) and joint, the errors (metres) of the joints the 2D showed and did not show.
+
+    Returns
+    -------
+    shape : ndarray, shape (12, 2)
+        Per joint (left and right pooled), the 68th percentile of the whole bodies' shown joints'
+        absolute errors across the image (x and y together) and along the depth.
+    factor : ndarray, shape (bins,)
+        Per bin, the same of the shown joints' errors over their joint's ``shape`` (every axis).
+    unobserved : ndarray, shape (bins, 3)
+        Per bin and axis, the same of the hidden joints' errors over their joint's ``shape`` times
+        the bin's ``factor`` (1 in bin 0, which hides no joint; NaN where a bin has no sample).
+    """
+    def as_lists(errors: Sequence[Sequence[float]]) -> list[list[float]]:
+        return [list(e) for e in errors]
+
+    across = [list(x) + list(y) for x, y in zip(shown[0][0], shown[0][1], strict=True)]
+    shape = np.array([[_q68(p) for p in _pooled(errors)] for errors in (across, as_lists(shown[0][2]))])
+
+    def normalised(errors: Sequence[Sequence[Sequence[float]]]) -> list[NDArray[np.float64]]:
+        """Per axis (x, y, z), one bin's errors over their joint's spread (x, y: across; z: along)."""
+        return [np.concatenate([p / shape[a // 2, j] for j, p in enumerate(_pooled(as_lists(errors[a])))])
+                for a in range(3)]
+
+    bins = len(shown)
+    factor = np.array([_q68(np.concatenate(normalised(shown[b]))) for b in range(bins)])
+    unobserved = np.array([[_q68(e) / factor[b] for e in normalised(hidden[b])] for b in range(bins)])
+    unobserved[0] = 1.0  # a whole body has no joint hidden
+    return shape.T, factor, unobserved
 
 
 def format_calibration(c: Calibration) -> str:
@@ -147,5 +185,6 @@ def format_calibration(c: Calibration) -> str:
         f"MONOCULAR_SCALE_STD = [{row(c.monocular_scale_std)}]  # per bin of OBSERVED_BINS",
         "SHAPE_STD_M = [" + ", ".join(f"[{a:.3f}, {b:.3f}]" for a, b in c.shape_std_m) + "]",
         f"SHAPE_FACTOR = [{row(c.shape_factor)}]",
-        f"UNOBSERVED_FACTOR = {c.unobserved_factor:.2f}",
+        "UNOBSERVED_FACTOR = [" + ", ".join("[" + ", ".join(f"{x:.2f}" for x in r) + "]"
+                                            for r in c.unobserved_factor) + "]",
     ])

@@ -25,7 +25,7 @@ STRIDE_RADIUS = 5.0
 @njit
 def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: NDArray[np.float64],
                 expected: NDArray[np.float64], band_m: float, band_fraction: float, min_pixels: int,
-                min_fraction: float, trim: float, sensor_noise: float, r_max: int,
+                min_fraction: float, trim: float, sensor_noise: float, noise_window: int, r_max: int,
                 surface: NDArray[np.float64], var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
     """Fill ``surface``, ``var`` and ``n_used`` (m,) with the readings of
     :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments)."""
@@ -76,8 +76,11 @@ def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: N
             s2 += (buf[k] - med2) ** 2
         s2 /= max(nk - 1, 1)
         sd = max(sensor_noise * med2 * med2, 1e-3)
+        # independent draws among the samples: a stride shorter than the noise's correlation window
+        # samples each window's one draw several times
+        n_eff = max(1.0, nk * min(1.0, (stride / noise_window) ** 2))
         surface[i] = med2
-        var[i] = sd * sd + s2 / nk
+        var[i] = 0.5 * math.pi * max(sd * sd, s2) / n_eff  # the median's variance
         n_used[i] = nk
 
 

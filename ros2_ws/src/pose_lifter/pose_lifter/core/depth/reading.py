@@ -64,6 +64,10 @@ class DepthOptions:
     sensor_noise : float
         The sensor's depth noise ``c`` of ``sigma_z = c z^2`` (per metre): active stereo cameras
         (RealSense D4xx: about 2 % RMS at 4 m).
+    noise_window_px : int
+        Side of the square over which the sensor's noise is correlated, pixels: samples within one
+        window count as one draw in a reading's variance (raise it for a camera whose error spreads
+        over larger areas).
     offset_std_m : float
         Standard deviation of a joint's surface offset about :data:`SURFACE_OFFSET_M`, metres (the
         limb's orientation and the body's build; ``make depth-calibration``).
@@ -94,6 +98,7 @@ class DepthOptions:
     min_fraction: float = 0.25
     trim: float = 3.0
     sensor_noise: float = 0.0025
+    noise_window_px: int = 3
     offset_std_m: float = 0.028
     confidence_threshold: float = 0.1
     gate: float = 3.0
@@ -149,9 +154,10 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
     PatchReadings
         The median of the in-band pixels of each patch (every ``stride``-th pixel of a large patch,
         :data:`~pose_lifter.core.depth.kernels.STRIDE_RADIUS`) after trimming, its variance
-        ``sigma_z^2 + spread^2 / n`` (the sensor's noise is correlated over a patch, so it is not
-        divided by the pixel count); NaN where fewer than ``min_pixels`` pixels (or less than
-        ``min_fraction`` of the patch) are in band, or the keypoint is outside the image.
+        ``pi/2 max(sigma_z^2, spread^2) / n_eff`` (a median's; ``n_eff`` the independent draws
+        among the samples, :attr:`DepthOptions.noise_window_px`); NaN where fewer than
+        ``min_pixels`` pixels (or less than ``min_fraction`` of the patch) are in band, or the
+        keypoint is outside the image.
     """
     img = np.ascontiguousarray(depth, dtype=np.float32)
     px = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 2)
@@ -163,7 +169,8 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
     n_used = np.empty(m, dtype=np.int64)
     read_kernel(img, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m), options.band_m,
                 options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
-                options.sensor_noise, int(options.max_patch_px), surface, var, n_used)
+                options.sensor_noise, max(1, int(options.noise_window_px)), int(options.max_patch_px),
+                surface, var, n_used)
     return PatchReadings(surface, var, n_used)
 
 

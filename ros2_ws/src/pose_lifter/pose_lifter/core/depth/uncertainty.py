@@ -35,17 +35,21 @@ __all__ = ["MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_FACTOR", "SHAPE_STD_M"
 SHAPE_STD_M: Final[NDArray[np.float64]] = np.array(
     [[0.018, 0.057], [0.020, 0.056], [0.021, 0.071], [0.018, 0.057], [0.020, 0.056], [0.021, 0.071],
      [0.019, 0.028], [0.023, 0.059], [0.030, 0.105], [0.019, 0.028], [0.023, 0.059], [0.030, 0.105]])
-#: A joint the 2D did not show (weight below the threshold) is this much less certain.
-UNOBSERVED_FACTOR: Final[float] = 1.24
 #: The bins of a body by how many of its 12 joints the 2D shows (each the least count of its bin):
 #: a body cut by the image's border (a person close to the camera) or hidden in part is lifted
 #: and placed worse.
 OBSERVED_BINS: Final[tuple[int, ...]] = (12, 10, 8, 0)
 #: Per bin of :data:`OBSERVED_BINS`: the shape's spread relative to :data:`SHAPE_STD_M`.
-SHAPE_FACTOR: Final[NDArray[np.float64]] = np.array([1.0, 1.087, 1.596, 2.043])
+SHAPE_FACTOR: Final[NDArray[np.float64]] = np.array([1.000, 1.077, 1.700, 1.953])
 #: Per bin of :data:`OBSERVED_BINS`: relative standard deviation of a monocular placement's
 #: distance (the leg length assumed, the image scale measured): the body's position along the rays.
 MONOCULAR_SCALE_STD: Final[NDArray[np.float64]] = np.array([0.055, 0.060, 0.378, 0.430])
+#: Per bin of :data:`OBSERVED_BINS`: how much less certain a joint the 2D did not show (weight
+#: below the threshold) is than the bin's shown joints, along x, y and z (a joint outside the image
+#: is where the lift guesses it, across the image too: most along the image's vertical, where an
+#: upright body leaves it).
+UNOBSERVED_FACTOR: Final[NDArray[np.float64]] = np.array(
+    [[1.00, 1.00, 1.00], [1.40, 1.46, 1.12], [2.00, 5.59, 1.45], [1.98, 4.96, 1.34]])
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
 
@@ -68,8 +72,10 @@ def shape_std(observed: NDArray[np.bool_]) -> NDArray[np.float64]:
     joints ``observed`` (n, 12): :data:`SHAPE_STD_M` (x and y across, z along the depth) times the
     body's :data:`SHAPE_FACTOR`, and times :data:`UNOBSERVED_FACTOR` where not observed."""
     seen = np.asarray(observed)
-    factor = np.where(seen, 1.0, UNOBSERVED_FACTOR) * SHAPE_FACTOR[observed_bin(seen)][:, None]
-    return np.asarray(SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor[:, :, None])
+    b = observed_bin(seen)
+    hidden = UNOBSERVED_FACTOR[b][:, None, :]  # (n, 1, 3)
+    factor = np.where(seen[:, :, None], 1.0, hidden) * SHAPE_FACTOR[b][:, None, None]
+    return np.asarray(SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor)
 
 
 def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_std: NDArray[np.float64]
