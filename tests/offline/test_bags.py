@@ -205,3 +205,22 @@ def test_a_looping_clock_keeps_each_loops_own_offline_update() -> None:
     assert len(alone[0]) > 0.9 * n
     for a, b in zip(alone[0] + alone[1], both, strict=True):
         np.testing.assert_allclose(b.joints_m, a.joints_m, rtol=0, atol=tol.ROUND_OFF_ACCUMULATED)
+
+
+def test_a_recording_of_an_older_skeleton3d_is_read_as_todays(tmp_path: Path) -> None:
+    """walk_clean.mcap holds Skeleton3D written before ``joint_std``: read_messages rebuilds it in
+    today's definition (the new field empty), so it can be written again or published."""
+    from mcap.reader import make_reader
+
+    bag = REPO / "bags" / "walk_clean.mcap"
+    with open(bag, "rb") as f:
+        schemas = {s.name: s.data.decode() for s in make_reader(f).get_summary().schemas.values()}
+    assert "joint_std" not in schemas["pose_lifter_msgs/msg/Skeleton3DArray"]  # the older definition
+    msgs = list(bags.read_messages(bag, ["/ground_truth/skeletons_3d"]))[:3]
+    assert all(len(s.joint_std) == 0 and len(s.joints) == 12 for x in msgs for s in x.msg.skeletons)
+    with bags.BagWriter(tmp_path / "copy.mcap") as w:
+        for x in msgs:
+            w.write(x.topic, x.stamp_ns, x.msg, x.msgtype)
+    back = [x.msg for x in bags.read_messages(tmp_path / "copy.mcap")]
+    assert [m.skeleton3d_to_joints(s).tolist() for x in back for s in x.skeletons] == \
+        [m.skeleton3d_to_joints(s).tolist() for x in msgs for s in x.msg.skeletons]

@@ -23,9 +23,10 @@ from tolerances import ROUND_OFF_ACCUMULATED
 
 K = ((800.0, 800.0), (320.0, 240.0))
 SIZE = (480, 640)
-#: How far the fused joints may be from the truth when every reading is exact (the fit's stopping
-#: rule and the readings' 1 mm quantisation floor on the variance): metres.
-EXACT_READING_M = 2e-3
+#: How far the fused joints may be from the truth when every reading is exact: metres. The fit's
+#: stopping rule and the readings' 1 mm variance floor, and the prior on the scale (the monocular
+#: placement's own error, a few per cent) that shrinks a 10 % scale error by ~1 % of itself.
+EXACT_READING_M = 5e-3
 
 
 def _project(x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -140,7 +141,7 @@ def test_an_unobserved_joint_is_not_read() -> None:
     w[2] = 0.0
     fused = _fuse(pose, centre, scale, truth, _painted(truth), weights=w)
     assert not fused.from_depth[0, 2] and fused.from_depth[0, np.arange(12) != 2].all()
-    assert fused.std_m[0, 2].min() > fused.std_m[0, 1].max()
+    assert (fused.std_m[0, 2] > fused.std_m[0, 1]).all()  # per axis: the wrist is less sure than its elbow
 
 
 @pytest.mark.parametrize(("wrist_z", "hidden"), [(0.35, True), (-0.35, False)])

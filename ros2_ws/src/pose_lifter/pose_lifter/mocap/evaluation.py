@@ -44,10 +44,10 @@ import platform
 import subprocess
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, Protocol, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,7 @@ from pose_lifter.core.options import Mode
 from pose_lifter.core.track.defaults import AHEAD_LAG
 from pose_lifter.core.track.later import Placement, Refiner
 from pose_lifter.core.track.placement import place_in_camera
-from pose_lifter.core.track.policy import FramesAhead, TrackPolicy
+from pose_lifter.core.track.policy import FramesAhead, TrackedLift, TrackPolicy
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.mocap.cmu import load_trial, read_manifest, split_trials
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, REALISTIC, DetectorModel, detect, swap_labels
@@ -69,8 +69,9 @@ from pose_lifter.mocap.views import film, limb_scale_factors, scale_limbs, view_
 
 __all__ = [
     "ALL_CONDITIONS", "CAMERAS", "CONDITIONS", "DIAGNOSTIC_CONDITIONS", "METHODS", "Evaluator", "Setup",
-    "Track", "detector_model", "evaluate_jobs", "evaluation_tracks", "film_track", "merge_runs", "nanmean",
-    "parse_settings", "render_table", "run_stamp", "summarise",
+    "Track", "detector_model", "evaluate_jobs", "evaluation_tracks", "film_track", "frame_figures",
+    "merge_runs", "nanmean", "parse_settings", "render_table", "run_jobs", "run_stamp", "split_ids",
+    "summarise",
 ]
 
 CONDITIONS: dict[str, dict[str, float]] = {
@@ -258,14 +259,29 @@ class Evaluator:
             else:
                 preds, depth = self._lift(m, filmed)
             ms = 1000.0 * (time.perf_counter() - t0) / n
-            out[m] = {**_figures(preds, truth), "ms": ms}
+            out[m] = {**frame_figures(preds, truth), "ms": ms}
             if depth is not None and perspective:
                 out[m]["depth_pct"] = depth.tolist()
         return {"track": track.name, "cond": condition, "camera": track.camera, "n": n, "methods": out}
 
-    def _lift(self, m: str, filmed: _Film) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def lifts(self, m: str, px: NDArray[np.float64], conf: NDArray[np.float64], leg_m: NDArray[np.float64],
+              distance: float) -> tuple[NDArray[np.float64], list[TrackedLift | None]]:
+        """Tracked method ``m``'s lifts of a perspective track at ``distance`` metres (``px`` (T,
+        12, 2) pixels at 30 Hz, ``conf`` (T, 12), the true right lower leg ``leg_m`` (T,) metres):
+        its poses (T, 12, 3; as :meth:`evaluate` scores them: camera frame, centred, times
+        ``leg_m``; NaN where not lifted; ``hybrid-lag``: each frame's refined pose) and each
+        frame's tracked lift (None where not lifted)."""
+        if m not in TRACKED:
+            raise ValueError(f"{m} is not a tracked method ({', '.join(TRACKED)})")
+        results: list[TrackedLift | None] = []
+        filmed = _Film(px, conf, leg_m, np.arange(len(px), dtype=np.int64) * FRAME_NS, True, distance)
+        return self._lift(m, filmed, results)[0], results
+
+    def _lift(self, m: str, filmed: _Film, results: list[TrackedLift | None] | None = None
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Method ``m``'s poses of ``filmed`` (T, 12, 3) (metres, camera frame, centred; NaN where
-        not lifted) and the centroid's depth error (%) per frame on a perspective track."""
+        not lifted) and the centroid's depth error (%) per frame on a perspective track; each
+        frame's tracked lift appended to ``results`` (None where not lifted; tracked methods)."""
         lifter = self.lifters[m]
         n = len(filmed.px)
         intrinsics = ((FOCAL, FOCAL), (float(CENTRE[0]), float(CENTRE[1]))) if (
@@ -298,7 +314,11 @@ class Evaluator:
                     warm = r.warm_start() if m == "paper" else None
             except PoseLifterError:
                 warm = None
+                if results is not None:
+                    results.append(None)
                 continue
+            if results is not None and policy is not None:
+                results.append(t)
             preds[i] = r.pose_camera * leg_m[i]
             if refiner is not None and policy is not None:
                 # what is refined, centred, times the true leg: the published pose (the lagged
@@ -335,9 +355,10 @@ class _Film:
     distance: float  #: the camera's distance, metres
 
 
-def _figures(preds: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str, Any]:
-    """The per-frame figures (mm; lists of T, NaN where not lifted) of poses ``preds`` against the
-    centred camera-frame ``truth``, both (T, 12, 3) metres."""
+def frame_figures(preds: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str, Any]:
+    """The per-frame figures (mm; lists of T, NaN where not lifted) of poses ``preds`` against
+    ``truth``, both (T, 12, 3) metres in the camera frame: ``mpjpe`` compares them as given (the
+    accuracy table's are centred, :mod:`.rgbd_evaluation`'s placed)."""
     n = len(truth)
     ok = np.all(np.isfinite(preds), axis=(1, 2))
     pm = np.full(n, np.nan)
@@ -368,6 +389,16 @@ def _lag_out(lagged: Refiner, stamps: NDArray[np.int64], preds: NDArray[np.float
         preds[k] = pose
 
 
+def split_ids(split: str, data: str | None) -> list[str]:
+    """The trials of ``split``: ``eval``, subjects 02, 07, 08 and 09_12, never trained on; ``val``,
+    the training-split trials the packaged prior was not fitted on (tuning, calibration)."""
+    if split == "eval":
+        return split_trials("eval", data)
+    from pose_lifter.core.model.prior import PosePrior
+
+    return list(PosePrior.load().metadata.get("validation_trials", []))
+
+
 def evaluation_tracks(split: str, data: str | None, frames: int, views: int,
                       trials: Sequence[str] | None = None,
                       cameras: Sequence[tuple[float, float, str]] | None = None) -> list[Track]:
@@ -375,13 +406,7 @@ def evaluation_tracks(split: str, data: str | None, frames: int, views: int,
     never trained on; ``val``: the training-split trials the packaged prior was not fitted on),
     at 30 Hz, at most ``frames`` frames each, each seen by ``views`` of ``cameras`` (default
     :data:`CAMERAS`), the cameras rotating over the trials."""
-    if trials:
-        ids = list(trials)
-    elif split == "eval":
-        ids = split_trials("eval", data)
-    else:  # the prior's held-out training-split trials (tuning)
-        from pose_lifter.core.model.prior import PosePrior
-        ids = list(PosePrior.load().metadata.get("validation_trials", []))
+    ids = list(trials) if trials else split_ids(split, data)
     cams = list(cameras or CAMERAS)
     out = []
     for k, t in enumerate(ids):
@@ -398,18 +423,37 @@ def action_trials(action: str, data: str | None) -> list[str]:
     return sorted({t.trial for t in read_manifest(data) if t.action == action and t.trial in known})
 
 
-_WORKER: dict[str, Evaluator] = {}
+class _Evaluates(Protocol):
+    """What :func:`run_jobs` runs: an evaluator of one job's arguments."""
+
+    def evaluate(self, *job: Any) -> dict[str, Any]: ...
 
 
-def _start_worker(methods: tuple[str, ...], settings: dict[str, Any], setup: Setup, bases_file: str | None,
-                  offline: dict[str, Any] | None) -> None:
-    """A pool worker's initialiser: its own :class:`Evaluator`."""
+_WORKER: dict[str, _Evaluates] = {}
+
+
+def _start_worker(make: Callable[..., _Evaluates], init: tuple[Any, ...]) -> None:
+    """A pool worker's initialiser: its own evaluator ``make(*init)``."""
     warnings.simplefilter("ignore")
-    _WORKER["evaluator"] = Evaluator(methods, settings, setup, bases_file, offline)
+    _WORKER["evaluator"] = make(*init)
 
 
-def _worker_job(job: tuple[Track, str]) -> dict[str, Any]:
+def _worker_job(job: tuple[Any, ...]) -> dict[str, Any]:
     return _WORKER["evaluator"].evaluate(*job)
+
+
+def run_jobs(jobs: Sequence[tuple[Any, ...]], make: Callable[..., _Evaluates], init: tuple[Any, ...],
+             workers: int = 1) -> list[dict[str, Any]]:
+    """``evaluate(*job)`` of every job of ``jobs`` by evaluators ``make(*init)`` (e.g. an
+    :class:`Evaluator`), one per process over ``workers`` processes (the records in the order
+    they finish)."""
+    if workers > 1:
+        with mp.get_context("fork").Pool(workers, _start_worker, (make, init)) as pool:
+            return list(pool.imap_unordered(_worker_job, jobs, chunksize=1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        evaluator = make(*init)
+        return [evaluator.evaluate(*job) for job in jobs]
 
 
 def evaluate_jobs(jobs: Sequence[tuple[Track, str]], methods: Sequence[str], settings: dict[str, Any],
@@ -417,14 +461,7 @@ def evaluate_jobs(jobs: Sequence[tuple[Track, str]], methods: Sequence[str], set
                   offline: dict[str, Any] | None = None, workers: int = 1) -> list[dict[str, Any]]:
     """:meth:`Evaluator.evaluate` of every ``(track, condition)`` of ``jobs``, over ``workers``
     processes (each with its own lifters; the records in the order they finish)."""
-    init = (tuple(methods), settings, setup, bases_file, offline)
-    if workers > 1:
-        with mp.get_context("fork").Pool(workers, _start_worker, init) as pool:
-            return list(pool.imap_unordered(_worker_job, jobs, chunksize=1))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        evaluator = Evaluator(*init)
-        return [evaluator.evaluate(*job) for job in jobs]
+    return run_jobs(jobs, Evaluator, (tuple(methods), settings, setup, bases_file, offline), workers)
 
 
 def nanmean(values: Sequence[float]) -> float:

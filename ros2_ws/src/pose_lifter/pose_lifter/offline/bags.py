@@ -336,8 +336,7 @@ def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
         meta = {c.id: _definition(c) for c in conns}
         # our own types written by an older pose_lifter_msgs (e.g. Skeleton3D before `observed`):
         # upgraded to today's definition, so one output bag never holds two layouts of one type
-        stale = {c.id for c in conns if c.msgtype.startswith(f"{MSG_PACKAGE}/") and c.msgtype in ours.types
-                 and meta[c.id][1] != ours.hash_rihs01(c.msgtype)}
+        stale = _stale(conns, {c.id: meta[c.id][1] for c in conns}, ours)
         for conn, stamp, raw in _messages(p, reader, conns):
             msgdef, rihs01 = meta[conn.id]
             data = bytes(raw)
@@ -380,14 +379,25 @@ def read_messages(
             missing = wanted - {c.topic for c in conns}
             if missing:
                 raise BagError(f"{p} has no topic(s) {sorted(missing)}")
+        ours = pose_lifter_typestore()
+        stale = _stale(conns, {c.id: reader.typestore.hash_rihs01(c.msgtype) for c in conns}, ours)
         fast: dict[int, Callable[[bytes], Any | None]] = {}
         if decoders and reader.is2:
-            ours = pose_lifter_typestore()
-            fast = {c.id: decoders[c.msgtype] for c in conns if c.msgtype in decoders
+            fast = {c.id: decoders[c.msgtype] for c in conns if c.msgtype in decoders and c.id not in stale
                     and reader.typestore.hash_rihs01(c.msgtype) == ours.hash_rihs01(c.msgtype)}
         for conn, stamp, raw in _messages(p, reader, conns):
             decode = fast.get(conn.id)
             msg = decode(raw) if decode is not None else None
             if msg is None:
                 msg = reader.deserialize(raw, conn.msgtype)
+                if conn.id in stale:
+                    msg = upgrade_message(msg, conn.msgtype, ours)
             yield BagMessage(conn.topic, conn.msgtype, int(stamp), msg)
+
+
+def _stale(conns: Iterable[Any], hashes: Mapping[int, str], ours: Any) -> set[int]:
+    """The connections (ids) of our own types written by an older pose_lifter_msgs (e.g. Skeleton3D
+    before ``joint_std``): read as today's definition (:func:`upgrade_message`), so that a message
+    read from a recording is one of today's, whatever wrote it."""
+    return {c.id for c in conns if c.msgtype.startswith(f"{MSG_PACKAGE}/") and c.msgtype in ours.types
+            and hashes[c.id] != ours.hash_rihs01(c.msgtype)}

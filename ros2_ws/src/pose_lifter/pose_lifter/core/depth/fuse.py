@@ -2,9 +2,10 @@
 from its depth reading where that reading is the joint's, and from the lifted shape where not.
 
 The monocular lift fixes the body's shape and its image (the weak-perspective fit of the 2D); its
-distance comes from an assumed leg length, a few per cent off. Scaling a placed body about the
-camera centre by ``k`` keeps its image and moves every joint along its ray (the body's size and
-its distance change together), so one number is left for the depth to settle:
+distance comes from an assumed leg length, a few per cent off, and its depths from the limbs'
+foreshortening, often leaning the whole body towards or away from the camera. Moving a joint along
+its ray keeps its image, so the depth is fitted as a field of three numbers along the rays: the
+placed depths scaled (the body's size and distance together) and tilted across the image:
 
 1. **Place** each body as the monocular lift does (:func:`~pose_lifter.core.track.placement.place_poses`,
    leg 0.43 m): joints ``X0`` (12, 3).
@@ -13,18 +14,23 @@ its distance change together), so one number is left for the depth to settle:
    readings ``d_j`` with variances ``v_j``.
 3. **Occlusion**: a reading at a joint that another body part hides on the image (a limb or a torso
    of the placed bodies, any person's, in front of it by a margin) is the occluder's, not the joint's.
-4. **Scale**: ``k`` minimises ``sum_j rho((d_j - k z0_j) / sigma_j) + (k - 1)^2 / (2 p^2)`` by
-   iteratively reweighted least squares, ``rho`` Tukey's biweight (c = 4.685),
+4. **Depth field**: ``theta = (k, a, b)`` minimises
+   ``sum_j rho((d_j - g_j . theta) / sigma_j) + (theta - (1, 0, 0))^T P (theta - (1, 0, 0)) / 2``,
+   ``g_j = (z0_j, y_j, x_j)`` the joint's placed depth and its offsets across the image from the
+   body's centroid (metres), ``rho`` Tukey's biweight (c = 4.685),
    ``sigma_j^2 = v_j + (k sigma_shape,j)^2`` (the reading's variance and the shape's error in depth),
-   ``p`` the prior on the scale (:attr:`~pose_lifter.core.depth.reading.DepthOptions.prior_std`); from
-   the weighted median of ``d_j / z0_j``, until ``k`` moves by less than ``tol`` (relative) or
-   ``max_iter``. Readings beyond ``gate`` standard deviations of the scaled body are dropped.
-5. **Fuse**: a kept reading's depth ``d_j`` and the scaled body's ``k z0_j`` are combined by their
-   inverse variances (``v_j``, and :func:`~pose_lifter.core.depth.uncertainty.body_std`'s with the
-   fit's scale uncertainty), and the joint moved along its ray in the scaled body to that depth: the
-   lift's image of the joint, which the prior has denoised, is kept (the 2D keypoint's own ray is
-   noisier: on the training split it costs ~10 mm of P-MPJPE at 3 m). The other joints are the
-   scaled body's.
+   ``P`` the prior's precisions (on ``k`` the monocular placement's own scale error,
+   :func:`~pose_lifter.core.depth.uncertainty.monocular_scale_std`; on ``a`` and ``b``
+   :attr:`~pose_lifter.core.depth.reading.DepthOptions.tilt_std`), by iteratively reweighted least
+   squares from ``k`` the median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or
+   ``max_iter``. Readings beyond ``gate`` standard deviations of the field are dropped.
+5. **Fuse**: each joint moves along its ray to the field's depth ``g_j . theta`` (its standard
+   deviation from the fit's covariance); a kept reading's depth ``d_j`` is combined with it by
+   their inverse variances (``v_j``; the field's and the shape's,
+   :func:`~pose_lifter.core.depth.uncertainty.shape_std`) and the joint moved along its ray to that
+   depth: the lift's image of the joint, which the prior has denoised, is kept (the 2D keypoint's
+   own ray is noisier: on the training split it costs ~10 mm of P-MPJPE at 3 m). A body without a
+   kept reading keeps the monocular placement and its uncertainty.
 
 :func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
 the readings only: a pose refined over later frames is fused with its frame's readings without
@@ -33,13 +39,13 @@ keeping the image); :func:`fuse_depth` both.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.kernels import hidden_kernel, scale_fit_kernel
+from pose_lifter.core.depth.kernels import depth_fit_kernel, hidden_kernel
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
@@ -47,7 +53,7 @@ from pose_lifter.core.depth.reading import (
     joint_radius_px,
     read_patches,
 )
-from pose_lifter.core.depth.uncertainty import MONOCULAR_SCALE_STD, SHAPE_STD_M, body_std, shape_std
+from pose_lifter.core.depth.uncertainty import SHAPE_STD_M, body_std, monocular_scale_std, shape_std
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS
 from pose_lifter.core.track.placement import (
@@ -82,12 +88,12 @@ class FusedPeople:
     from_depth : ndarray of bool, shape (n, 12)
         The joints whose depth reading was kept.
     leg_m : ndarray, shape (n,)
-        The right lower leg's length the depth gives each body (0.43 m times its scale).
+        The right lower leg's length the depth gives each body (0.43 m times its scale ``k``).
     converged : ndarray of bool, shape (n,)
-        The scale fit met its stopping rule (a body with no reading: True, at the prior).
+        The depth fit met its stopping rule (a body with no reading: True, at the prior).
     n_iter : ndarray of int, shape (n,)
     objective : ndarray, shape (n,)
-        The scale fit's objective at its end.
+        The depth fit's objective at its end.
     """
 
     joints_m: NDArray[np.float64]
@@ -154,15 +160,14 @@ class _Placed:
         self.observed = (wt >= opt.confidence_threshold) & np.isfinite(self.px).all(axis=-1)
 
 
-def _median_ratio(d: NDArray[np.float64], z0: NDArray[np.float64], have: NDArray[np.bool_]
-                  ) -> NDArray[np.float64]:
-    """Each person's median of ``d_j / z0_j`` over its readings ``have`` (n, 12); 1 without any."""
-    ratio = np.where(have, d / np.where(z0 > 0, z0, 1.0), np.inf)
-    ratio.sort(axis=1)
-    count = have.sum(axis=1)
-    rows = np.arange(len(d))
-    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, N_JOINTS - 1)
-    return np.asarray(np.where(count > 0, 0.5 * (ratio[rows, lo] + ratio[rows, hi]), 1.0))
+def _masked_median(values: NDArray[np.float64], mask: NDArray[np.bool_], empty: float) -> NDArray[np.float64]:
+    """Each row's median of ``values`` (n, 12) where ``mask``; ``empty`` for a row without any."""
+    v = np.where(mask, values, np.inf)
+    v.sort(axis=1)
+    count = mask.sum(axis=1)
+    rows = np.arange(len(v))
+    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, v.shape[1] - 1)
+    return np.asarray(np.where(count > 0, 0.5 * (v[rows, lo] + v[rows, hi]), empty))
 
 
 def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
@@ -180,11 +185,17 @@ def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     z0 = x0[..., 2]
     (fx, fy), _ = intrinsics
     radius = joint_radius_px(0.5 * (float(fx) + float(fy)) / np.maximum(z0.mean(axis=1), 1e-3), opt)
-    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), opt)
+    # the person's depth as the image shows it: the median of the observed keypoints' patches
+    # (most lie on the body), the centre of the band (the monocular placement may be far off)
+    raw = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), replace(opt, band_m=np.inf))
+    seen = raw.surface.reshape(n, N_JOINTS)
+    centre = _masked_median(seen, placed.observed & np.isfinite(seen), 0.0)
+    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), np.repeat(centre, N_JOINTS), opt)
     d = read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]
     v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
     have = placed.observed & np.isfinite(d) & (z0 > 0)
-    k = _median_ratio(d, z0, have)  # a first scale places the bodies for the occlusion test
+    # a first scale (the median of d_j / z0_j) places the bodies for the occlusion test
+    k = _masked_median(d / np.where(z0 > 0, z0, 1.0), have, 1.0)
     have &= ~_hidden(k[:, None, None] * x0, px, have, intrinsics, opt.occlusion_margin_m)
     return DepthReadings(np.where(have, d, np.nan), np.where(have, v, np.nan))
 
@@ -244,47 +255,56 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     have = np.isfinite(readings.depth_m) & observed & (z0 > 0)
     d = np.where(have, readings.depth_m, 0.0)
     v = np.where(have, readings.var, 1.0)
-    k0 = _median_ratio(d, z0, have)
+    k0 = _masked_median(d / np.where(z0 > 0, z0, 1.0), have, 1.0)
 
-    # 4b. the robust scale fit (IRLS)
-    shape_z = SHAPE_STD_M[:, 1]
-    k = np.empty(n)
-    info = np.empty(n)
+    # 4b. the robust fit of the depth field (IRLS): the placed depth scaled, plus a tilt across
+    # the image (a depth that grows linearly across the body: the monocular lift's commonest error
+    # in depth, a body leaning towards or away from the camera, moves no joint on the image)
+    lateral = x0[..., :2] - x0[..., :2].mean(axis=1, keepdims=True)
+    g = np.ascontiguousarray(np.concatenate([z0[..., None], lateral[..., ::-1]], axis=-1))  # (n, 12, 3)
+    mono_scale = monocular_scale_std(observed)  # the prior on k: the monocular placement's own error
+    precision = np.stack([mono_scale**-2, np.full(n, opt.tilt_std**-2), np.full(n, opt.tilt_std**-2)], axis=1)
+    theta0 = np.zeros((n, 3))
+    theta0[:, 0] = k0
+    theta = np.empty((n, 3))
+    cov = np.empty((n, 3, 3))
     objective = np.empty(n)
     n_iter = np.empty(n, dtype=np.int64)
     converged = np.empty(n, dtype=bool)
-    scale_fit_kernel(np.ascontiguousarray(d), np.ascontiguousarray(v), np.ascontiguousarray(z0),
-                     np.ascontiguousarray(have),
-                     np.ascontiguousarray(shape_z), opt.prior_std, k0, int(opt.max_iter), opt.tol, k, info,
+    shape_z = np.ascontiguousarray(SHAPE_STD_M[:, 1])
+    depth_fit_kernel(np.ascontiguousarray(d), np.ascontiguousarray(v), g, np.ascontiguousarray(have), shape_z,
+                     precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter), opt.tol, theta, cov,
                      objective, n_iter, converged)
-    r = (d - k[:, None] * z0) / np.sqrt(v + (k[:, None] * shape_z[None]) ** 2)
+    model_z = np.einsum("njc,nc->nj", g, theta)
+    r = (d - model_z) / np.sqrt(v + (theta[:, :1] * shape_z[None]) ** 2)
     kept = have & (np.abs(r) <= opt.gate)
-    scale_std = np.sqrt(1.0 / info) / np.maximum(k, 1e-9)
-    placeable = np.isfinite(k) & (k > 0)
-    k = np.where(placeable, k, 1.0)
-    scale_std = np.where(placeable & kept.any(axis=1), np.minimum(scale_std, MONOCULAR_SCALE_STD),
-                         MONOCULAR_SCALE_STD)
+    placeable = np.isfinite(model_z).all(axis=1) & (model_z > 0).all(axis=1) & kept.any(axis=1)
     kept &= placeable[:, None]
 
-    # 5. the joints: the scaled body; a kept reading's depth fused with its joint's, along the
-    # joint's ray (the lift's image of the joint: the 2D denoised by the prior)
-    body = k[:, None, None] * x0
+    # 5. the joints: the body moved along its rays to the fitted depths; a kept reading's depth
+    # fused with its joint's, along the joint's ray (the lift's image of the joint: the 2D denoised
+    # by the prior)
+    mono = ~placeable
+    model_z[mono] = z0[mono]
+    body = x0 * (model_z / z0)[..., None]
     shape = shape_std(observed)
-    root = scale_std[:, None, None] * np.abs(body)
-    body_z = body[..., 2]
+    along_sd = np.sqrt(np.einsum("njc,ncd,njd->nj", g, cov, g)) / model_z  # relative, along the ray
+    along_sd[mono] = mono_scale[mono, None]
+    root = along_sd[..., None] * np.abs(body)
     w_body = 1.0 / (shape[..., 2] ** 2 + root[..., 2] ** 2)
     w_read = np.where(kept, 1.0 / v, 0.0)
-    z = (w_body * body_z + w_read * d) / (w_body + w_read)
+    z = (w_body * model_z + w_read * d) / (w_body + w_read)
     z_std = 1.0 / np.sqrt(w_body + w_read)
-    joints = body * (z / body_z)[..., None]
+    joints = body * (z / model_z)[..., None]
     along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
     std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
     std[..., 2] = np.where(kept, z_std, std[..., 2])
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
-        std[bad] = body_std(x0[bad], observed[bad], np.full(int(bad.sum()), MONOCULAR_SCALE_STD))
+        std[bad] = body_std(x0[bad], observed[bad], mono_scale[bad])
         kept[bad] = False
+    k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
 
 

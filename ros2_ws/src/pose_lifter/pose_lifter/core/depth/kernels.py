@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.numeric.jit import njit
 
-__all__ = ["hidden_kernel", "read_kernel", "scale_fit_kernel"]
+__all__ = ["depth_fit_kernel", "hidden_kernel", "read_kernel"]
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
@@ -138,53 +138,70 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
 
 
 @njit
-def _tukey_sums(d: NDArray[np.float64], v: NDArray[np.float64], z0: NDArray[np.float64],
-                have: NDArray[np.bool_], shape_z: NDArray[np.float64], k: float
-                ) -> tuple[float, float, float]:
-    """One person's IRLS sums at scale ``k``: ``sum w d z0 / sigma^2``, ``sum w z0^2 / sigma^2``
-    (Tukey's weights ``w``) and ``sum rho`` over its readings ``have`` (12,)."""
-    num, den, loss = 0.0, 0.0, 0.0
+def _normal_equations(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[np.float64],
+                      have: NDArray[np.bool_], shape_z: NDArray[np.float64], precision: NDArray[np.float64],
+                      mean: NDArray[np.float64], theta: NDArray[np.float64]
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """One person's IRLS normal equations at ``theta`` (3,): ``A = sum w g g^T / sigma^2 + P`` and
+    ``b = sum w d g / sigma^2 + P mean`` (Tukey's weights ``w`` of the residuals
+    ``(d_j - g_j . theta) / sigma_j``, ``P`` the prior's diagonal ``precision``), and
+    ``sum rho`` over its readings ``have`` (12,)."""
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for i in range(3):
+        a[i, i] = precision[i]
+        b[i] = precision[i] * mean[i]
+    loss = 0.0
     for j in range(len(d)):
         if not have[j]:
             continue
-        sig2 = v[j] + (k * shape_z[j]) ** 2
-        r = (d[j] - k * z0[j]) / math.sqrt(sig2)
+        sig2 = v[j] + (theta[0] * shape_z[j]) ** 2
+        m = g[j, 0] * theta[0] + g[j, 1] * theta[1] + g[j, 2] * theta[2]
+        r = (d[j] - m) / math.sqrt(sig2)
         u = min((r / TUKEY) ** 2, 1.0)
-        wt = (1.0 - u) ** 2
-        num += wt * d[j] * z0[j] / sig2
-        den += wt * z0[j] * z0[j] / sig2
+        wt = (1.0 - u) ** 2 / sig2
+        for i in range(3):
+            b[i] += wt * d[j] * g[j, i]
+            for k in range(3):
+                a[i, k] += wt * g[j, i] * g[j, k]
         loss += TUKEY * TUKEY / 6.0 * (1.0 - (1.0 - u) ** 3)
-    return num, den, loss
+    return a, b, loss
 
 
 @njit
-def scale_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], z0: NDArray[np.float64],
-                     have: NDArray[np.bool_], shape_z: NDArray[np.float64], prior_std: float,
-                     k0: NDArray[np.float64], max_iter: int, tol: float, k: NDArray[np.float64],
-                     info: NDArray[np.float64],
-                     objective: NDArray[np.float64], n_iter: NDArray[np.int64], converged: NDArray[np.bool_]
-                     ) -> None:
-    """The robust scale fit of :func:`pose_lifter.core.depth.fuse.fuse_depth` for each of ``n``
-    people: readings ``d`` (n, 12) with variances ``v``, the placed depths ``z0``, ``have`` the
-    readings to fit, ``shape_z`` (12,) the shape's depth error, from ``k0`` (n,). Minimises
-    ``sum_j rho((d_j - k z0_j) / sigma_j) + (k - 1)^2 / (2 prior_std^2)`` (Tukey's rho,
-    ``sigma_j^2 = v_j + (k shape_z_j)^2``) by iteratively reweighted least squares until ``k`` moves
-    by less than ``tol`` relative or ``max_iter``; fills ``k``, the Fisher information ``info`` of
-    ``k`` (the final weights), ``objective``, ``n_iter`` and ``converged``."""
-    prior = 1.0 / (prior_std * prior_std)
+def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[np.float64],
+                     have: NDArray[np.bool_], shape_z: NDArray[np.float64], precision: NDArray[np.float64],
+                     mean: NDArray[np.float64], theta0: NDArray[np.float64], max_iter: int, tol: float,
+                     theta: NDArray[np.float64], cov: NDArray[np.float64], objective: NDArray[np.float64],
+                     n_iter: NDArray[np.int64], converged: NDArray[np.bool_]) -> None:
+    """The robust fit of each of ``n`` people's depth field (:func:`.fuse.fuse_readings`):
+    readings ``d`` (n, 12) with variances ``v``, ``have`` the readings to fit, each joint's
+    regressors ``g`` (n, 12, 3) (its placed depth and its offsets across the image), ``shape_z``
+    (12,) the shape's depth error, a Gaussian prior (``mean`` (3,), each person's diagonal
+    ``precision`` (n, 3)), from ``theta0`` (n, 3). Minimises
+    ``sum_j rho((d_j - g_j . theta) / sigma_j) + (theta - mean)^T P (theta - mean) / 2`` (Tukey's rho,
+    ``sigma_j^2 = v_j + (theta_0 shape_z_j)^2``) by iteratively reweighted least squares until no
+    parameter moves by more than ``tol`` (relative, at least absolute) or ``max_iter``; fills
+    ``theta``, its covariance ``cov`` (n, 3, 3; the inverse of the
+    final normal matrix), ``objective``, ``n_iter`` and ``converged``."""
     for p in range(len(d)):
-        kk = k0[p]
-        n_iter[p] = 0
+        th = theta0[p].copy()
         converged[p] = not have[p].any()
         it = 0
         while not converged[p] and it < max_iter:
             it += 1
-            num, den, _ = _tukey_sums(d[p], v[p], z0[p], have[p], shape_z, kk)
-            k_new = (prior + num) / (prior + den)
-            converged[p] = abs(k_new - kk) <= tol * abs(kk)
-            kk = k_new
+            a, b, _ = _normal_equations(d[p], v[p], g[p], have[p], shape_z, precision[p], mean, th)
+            new = np.linalg.solve(a, b)
+            step = 0.0
+            for i in range(3):
+                step = max(step, abs(new[i] - th[i]) / max(1.0, abs(th[i])))
+            converged[p] = step <= tol
+            th = new
         n_iter[p] = it
-        _, den, loss = _tukey_sums(d[p], v[p], z0[p], have[p], shape_z, kk)
-        k[p] = kk
-        info[p] = prior + den
-        objective[p] = loss + 0.5 * prior * (kk - 1.0) ** 2
+        a, _, loss = _normal_equations(d[p], v[p], g[p], have[p], shape_z, precision[p], mean, th)
+        theta[p] = th
+        cov[p] = np.linalg.inv(a)
+        prior = 0.0
+        for i in range(3):
+            prior += 0.5 * precision[p, i] * (th[i] - mean[i]) ** 2
+        objective[p] = loss + prior

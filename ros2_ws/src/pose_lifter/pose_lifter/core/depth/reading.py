@@ -8,7 +8,7 @@ width), drops those outside a depth band around the person (background and far f
 takes the median of the rest and trims the pixels that stray from it (mixed pixels, a second
 surface in the patch), and gives the reading a variance (the sensor's noise at that depth, and
 the spread of the trimmed pixels). The joint centre lies behind the surface it shows by the
-limb's radius and the body around the joint: :data:`SURFACE_OFFSET_M` (``tools/depth_calibration.py``
+limb's radius and the body around the joint: :data:`SURFACE_OFFSET_M` (``make depth-calibration``
 measures it on the training split). Which readings belong to the joint (and not to a limb in front
 of it) the fusion decides against the placed body (:mod:`pose_lifter.core.depth.fuse`).
 """
@@ -29,9 +29,10 @@ __all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthOptions", "PatchReadings",
 #: Depth of each joint's centre behind the surface the camera sees at its pixel, metres (order of
 #: :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`: shoulders, elbows, wrists, hips, knees,
 #: ankles; left then right): the limb's radius and the flesh around the joint (a shoulder sits
-#: inside the deltoid and the chest, a hip inside the pelvis).
+#: inside the deltoid and the chest, a hip inside the pelvis), measured on the training split's
+#: held-out trials (``make depth-calibration``, :mod:`pose_lifter.mocap.depth_calibration`).
 SURFACE_OFFSET_M: Final[NDArray[np.float64]] = np.array(
-    [0.10, 0.07, 0.05, 0.10, 0.07, 0.05, 0.11, 0.07, 0.06, 0.11, 0.07, 0.06])
+    [0.050, 0.049, 0.036, 0.050, 0.049, 0.036, 0.100, 0.084, 0.055, 0.100, 0.084, 0.055])
 #: Radius of the body at each joint, metres: the patch stays inside the limb's image
 #: (:attr:`DepthOptions.patch_scale`).
 LIMB_RADIUS_M: Final[NDArray[np.float64]] = np.array(
@@ -65,7 +66,7 @@ class DepthOptions:
         (RealSense D4xx: about 2 % RMS at 4 m).
     offset_std_m : float
         Standard deviation of a joint's surface offset about :data:`SURFACE_OFFSET_M`, metres (the
-        limb's orientation and the body's build).
+        limb's orientation and the body's build; ``make depth-calibration``).
     confidence_threshold : float
         Joints whose 2D weight is below this are not read (their pixel is not known).
     gate : float
@@ -74,13 +75,14 @@ class DepthOptions:
     occlusion_margin_m : float
         A body part whose surface lies this much in front of a joint's surface on its pixel hides
         the joint.
-    prior_std : float
-        Standard deviation of the person's depth scale about the monocular placement's (relative):
-        the prior on the leg length that keeps a person with few readings near it.
+    tilt_std : float
+        Standard deviation of the depth field's tilt (metres of depth per metre across the image):
+        the prior that keeps a body read at few joints as the lift leans it.
     max_iter : int
-        Iteration cap of the robust scale fit.
+        Iteration cap of the robust depth fit.
     tol : float
-        Stopping rule of the robust scale fit: relative change of the scale.
+        Stopping rule of the robust depth fit: the largest change of a parameter (relative, or
+        absolute below 1).
     """
 
     patch_scale: float = 0.6
@@ -92,11 +94,11 @@ class DepthOptions:
     min_fraction: float = 0.25
     trim: float = 3.0
     sensor_noise: float = 0.0025
-    offset_std_m: float = 0.025
+    offset_std_m: float = 0.028
     confidence_threshold: float = 0.1
     gate: float = 3.0
     occlusion_margin_m: float = 0.08
-    prior_std: float = 0.15
+    tilt_std: float = 0.3
     max_iter: int = 50
     tol: float = 1e-7
 

@@ -5,10 +5,14 @@ a few centimetres across the image and more along the depth (the depths come fro
 foreshortening), more for a joint the 2D did not show (:data:`SHAPE_STD_M`,
 :data:`UNOBSERVED_FACTOR`). Its place: the body's distance comes from an assumed leg length, so the
 whole body slides along the rays by a relative error (:data:`MONOCULAR_SCALE_STD`), which moves a
-joint by that fraction of its own position. The two are independent; :func:`body_std` adds them.
+joint by that fraction of its own position. Both grow when the 2D shows less of the body
+(:data:`OBSERVED_BINS`, :data:`SHAPE_FACTOR`): a person close to the camera, cut by the image's
+border, is lifted from a part of the body. The two are independent; :func:`body_std` adds them.
 The depth fusion shrinks the second (the distance is read) and, where a joint is read, the first
-(:func:`pose_lifter.core.depth.fuse.fuse_depth`). The constants are fitted on the training split
-so that the per-axis 1-sigma and 2-sigma coverage is Gaussian (``tools/depth_calibration.py``).
+(:func:`pose_lifter.core.depth.fuse.fuse_depth`). The constants are measured on the training
+split's trials the packaged prior was not fitted on, at 1.5, 3 and 5 m (``make depth-calibration``,
+:mod:`pose_lifter.mocap.depth_calibration`: each the 68th percentile of its error's absolute
+value, a Gaussian's standard deviation).
 """
 
 from __future__ import annotations
@@ -21,30 +25,51 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from pose_lifter.core.track.placement import CameraIntrinsics
 
-__all__ = ["MONOCULAR_SCALE_STD", "SHAPE_STD_M", "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std",
-           "monocular_std", "shape_std"]
+__all__ = ["MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_FACTOR", "SHAPE_STD_M", "UNINFORMED_SCALE_STD",
+           "UNOBSERVED_FACTOR", "body_std", "monocular_scale_std", "monocular_std", "observed_bin",
+           "shape_std"]
 
 #: Standard deviation of an observed joint's position relative to the body, metres, per joint
-#: (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`): columns across the image (x
-#: and y) and along the depth (z).
+#: (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`), of a body the 2D shows whole:
+#: columns across the image (x and y) and along the depth (z).
 SHAPE_STD_M: Final[NDArray[np.float64]] = np.array(
-    [[0.035, 0.06], [0.05, 0.09], [0.07, 0.12], [0.035, 0.06], [0.05, 0.09], [0.07, 0.12],
-     [0.035, 0.06], [0.05, 0.08], [0.06, 0.10], [0.035, 0.06], [0.05, 0.08], [0.06, 0.10]])
+    [[0.018, 0.057], [0.020, 0.056], [0.021, 0.071], [0.018, 0.057], [0.020, 0.056], [0.021, 0.071],
+     [0.019, 0.028], [0.023, 0.059], [0.030, 0.105], [0.019, 0.028], [0.023, 0.059], [0.030, 0.105]])
 #: A joint the 2D did not show (weight below the threshold) is this much less certain.
-UNOBSERVED_FACTOR: Final[float] = 2.0
-#: Relative standard deviation of a monocular placement's distance (the leg length assumed, the
-#: image scale measured): the body's position along the rays.
-MONOCULAR_SCALE_STD: Final[float] = 0.07
+UNOBSERVED_FACTOR: Final[float] = 1.24
+#: The bins of a body by how many of its 12 joints the 2D shows (each the least count of its bin):
+#: a body cut by the image's border (a person close to the camera) or hidden in part is lifted
+#: and placed worse.
+OBSERVED_BINS: Final[tuple[int, ...]] = (12, 10, 8, 0)
+#: Per bin of :data:`OBSERVED_BINS`: the shape's spread relative to :data:`SHAPE_STD_M`.
+SHAPE_FACTOR: Final[NDArray[np.float64]] = np.array([1.0, 1.087, 1.596, 2.043])
+#: Per bin of :data:`OBSERVED_BINS`: relative standard deviation of a monocular placement's
+#: distance (the leg length assumed, the image scale measured): the body's position along the rays.
+MONOCULAR_SCALE_STD: Final[NDArray[np.float64]] = np.array([0.055, 0.060, 0.378, 0.430])
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
 
 
+def observed_bin(observed: NDArray[np.bool_]) -> NDArray[np.intp]:
+    """The bin (n,) of :data:`OBSERVED_BINS` of each of ``n`` bodies whose 2D showed the joints
+    ``observed`` (n, 12)."""
+    count = np.asarray(observed).sum(axis=1)
+    return np.asarray(np.searchsorted(-np.array(OBSERVED_BINS), -count, side="left"), dtype=np.intp)
+
+
+def monocular_scale_std(observed: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The monocular placement's relative scale uncertainty (n,) of ``n`` bodies
+    (:data:`MONOCULAR_SCALE_STD` of their :func:`observed_bin`)."""
+    return np.asarray(MONOCULAR_SCALE_STD[observed_bin(observed)])
+
+
 def shape_std(observed: NDArray[np.bool_]) -> NDArray[np.float64]:
     """The shape's standard deviations (n, 12, 3; metres) of ``n`` bodies whose 2D showed the
-    joints ``observed`` (n, 12): :data:`SHAPE_STD_M` (x and y across, z along the depth), times
-    :data:`UNOBSERVED_FACTOR` where not observed."""
-    factor = np.where(np.asarray(observed), 1.0, UNOBSERVED_FACTOR)[:, :, None]
-    return np.asarray(SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor)
+    joints ``observed`` (n, 12): :data:`SHAPE_STD_M` (x and y across, z along the depth) times the
+    body's :data:`SHAPE_FACTOR`, and times :data:`UNOBSERVED_FACTOR` where not observed."""
+    seen = np.asarray(observed)
+    factor = np.where(seen, 1.0, UNOBSERVED_FACTOR) * SHAPE_FACTOR[observed_bin(seen)][:, None]
+    return np.asarray(SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor[:, :, None])
 
 
 def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_std: NDArray[np.float64]
@@ -70,7 +95,7 @@ def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_s
     x = np.asarray(joints_m, dtype=np.float64)
     shape = shape_std(observed)
     root = np.asarray(scale_std, dtype=np.float64)[:, None, None] * np.abs(x)
-    return np.asarray(np.sqrt(shape * shape + root * root))
+    return np.asarray(np.hypot(shape, root))  # finite wherever the joints are (no square overflows)
 
 
 def monocular_std(joints_m: NDArray[np.float64], weights: NDArray[np.float64],
@@ -78,7 +103,7 @@ def monocular_std(joints_m: NDArray[np.float64], weights: NDArray[np.float64],
                   ) -> NDArray[np.float64]:
     """Per-axis standard deviations (n, 12, 3; metres) of ``n`` monocular lifts placed by
     :func:`pose_lifter.core.track.placement.place_results` (:func:`body_std` with
-    :data:`MONOCULAR_SCALE_STD`, or :data:`UNINFORMED_SCALE_STD` without ``intrinsics``).
+    :func:`monocular_scale_std`, or :data:`UNINFORMED_SCALE_STD` without ``intrinsics``).
 
     Parameters
     ----------
@@ -89,5 +114,6 @@ def monocular_std(joints_m: NDArray[np.float64], weights: NDArray[np.float64],
     confidence_threshold : float
     """
     x = np.asarray(joints_m, dtype=np.float64)
-    s = MONOCULAR_SCALE_STD if intrinsics is not None else UNINFORMED_SCALE_STD
-    return body_std(x, np.asarray(weights) >= confidence_threshold, np.full(len(x), s))
+    observed = np.asarray(weights) >= confidence_threshold
+    s = monocular_scale_std(observed) if intrinsics is not None else np.full(len(x), UNINFORMED_SCALE_STD)
+    return body_std(x, observed, s)
