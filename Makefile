@@ -15,7 +15,7 @@ export OMP_NUM_THREADS := 1
 export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
-.PHONY: help venv test test-fast test-fp2 lint demo bench bench-node bench-lag bench-lift bench-collection \
+.PHONY: help venv test test-fast test-fp2 lint demo bench bench-node bench-lag bench-lift bench-collection bench-prior \
   lift-hash mutants fuzz soak experiments bases bags bag-bands prior prior-temporal prior-offline prior-fixture \
   actions-model accuracy rgbd-accuracy rgbd-accuracy-short depth-calibration lock clean ros cross-action train-deps
 
@@ -41,6 +41,7 @@ help:
 	@echo "make bench-lag   what the node's output_lag costs per person-frame (bags/five_people.mcap)"
 	@echo "make bench-lift BEFORE=DIR BAG=FILE      pose-lifter lift of this checkout vs DIR's, side by side"
 	@echo "make bench-collection BEFORE=DIR BAG=FILE  the same over a collection of copies of BAG"
+	@echo "make bench-prior  the learned priors' layer pass per row at 1-72 rows, and this CPU's facts"
 	@echo "make lift-hash   a hash of every committed bag's lifts: equal before and after a refactor (same machine)"
 	@echo "make mutants     every planted regression of tests/mutants must fail its tests (kernel plants: minutes each)"
 	@echo "make bag-bands   the committed bags' errors at the tests' replay settings (tests/tolerances.py BAG_REPLAY_MM)"
@@ -112,6 +113,11 @@ bench-lift: venv
 
 bench-collection: venv
 	$(PY) tools/bench_collection.py $(BAG) --before $(BEFORE) --work out/bench_collection $(BENCH_COLLECTION_ARGS)
+
+# the priors' layer pass per row at a few row counts, with the CPU model, numba's target and
+# OpenBLAS's kernel: what differs between machines (docs/bench.md, the CPU kinds)
+bench-prior: venv
+	$(PY) tools/bench_prior_rows.py
 
 # a refactor that changes no result keeps these hashes (on one machine and install; tools/lift_hash.py)
 lift-hash: venv

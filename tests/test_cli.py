@@ -79,6 +79,29 @@ def test_make_bag_and_floors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert 50 < res["mean"]["mean_pose_floor"]["p_mpjpe_mm"] < 250
 
 
+@needs_data
+def test_make_bag_one_after_another_without_camera_info(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "seq.mcap"
+    rc = cli.main(["make-bag", "07_05", "02_05", "07_05", "--out", str(out), "--frames", "6", "--fps", "15",
+                   "--noise", "0.05", "--one-after-another", "--no-camera-info"])
+    assert rc == 0 and "tracks [0, 1, 2]" in capsys.readouterr().out
+    assert check_mcap(out) == {"/keypoints_2d": 18, "/ground_truth/skeletons_3d": 18}
+    kp = [x.msg for x in bags.read_messages(out, ["/keypoints_2d"])]
+    assert [[s.track_id for s in x.skeletons] for x in kp] == [[0]] * 6 + [[1]] * 6 + [[2]] * 6
+    stamps = np.array([m.stamp_to_ns(x.header.stamp) for x in kp])
+    # 15 Hz within a trial; each trial starts a second after the previous one's last frame
+    steps = np.diff(stamps)
+    np.testing.assert_allclose(np.delete(steps, [5, 11]), 1e9 / 15, atol=1)
+    np.testing.assert_array_equal(steps[[5, 11]], 1_000_000_000)
+    # the same trial twice: the same person, its own corruption
+    pts = np.array([m.skeleton2d_to_arrays(x.skeletons[0], x.layout)[0] for x in kp])
+    truth = np.array([m.skeleton3d_to_joints(x.msg.skeletons[0])
+                      for x in bags.read_messages(out, ["/ground_truth/skeletons_3d"])])
+    np.testing.assert_allclose(truth[12:], truth[:6], atol=tol.ROUND_OFF_ACCUMULATED)
+    assert not np.allclose(pts[12:], pts[:6])
+
+
 def _bag_with_estimates(tmp_path: Path, transform: np.ndarray, offset: np.ndarray) -> Path:
     """A scene bag plus /skeletons_3d = ground truth moved by a rotation and offset."""
     rng = np.random.default_rng(0)

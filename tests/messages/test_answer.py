@@ -88,6 +88,22 @@ def test_a_frames_bodies_are_computed_when_read_and_in_the_books_order() -> None
     assert first.bodies is not None and first.bodies.messages() == want1
 
 
+def test_bodies_posed_for_many_frames_in_one_pass_give_each_frames_own_messages() -> None:
+    """The bodies' poses of several frames computed in one pass (an offline lift's:
+    hri.tracked_body_poses) give each frame the messages the book computes of that frame alone."""
+    frames = [_frame([3, 8, -1]), _frame([-1]), _frame([3])]
+    poses = hri.tracked_body_poses(frames)
+    assert [len(p) for p in poses] == [2, 0, 1]
+    ahead, alone = hri.BodyBook(1.0), hri.BodyBook(1.0)
+    for k, (lifted, posed) in enumerate(zip(frames, poses, strict=True)):
+        stamp = STAMP_NS + k * 10**8
+        head = cdr.message_header(DecodedHeader(DecodedStamp(12, 345 + k * 10**8), "camera"))
+        got = frame_answer(HEADER, stamp, lifted, bodies=ahead, image_size=(640.0, 480.0), body_poses=posed)
+        assert got.bodies is not None
+        assert got.bodies.messages() == alone.frame(stamp, head, lifted, (640.0, 480.0)).messages()
+    assert hri.tracked_body_poses([]) == []
+
+
 def test_columns_take_and_concat_keep_the_rows() -> None:
     """A frame's rows taken from the columns of several are those rows, field by field."""
     a, b = _frame([1, 2]), _frame([5, 6, 7])

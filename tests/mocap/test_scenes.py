@@ -124,3 +124,23 @@ def test_to_coco17_and_bag(tmp_path: Path) -> None:
     np.testing.assert_allclose(m.skeleton3d_to_joints(gt_msgs[2].msg.skeletons[1]), sc.joints_camera[1, 2])
     info = next(x.msg for x in msgs if x.topic == "/camera_info")
     assert m.intrinsics_from_camera_info(info) == ((800.0, 800.0), (320.0, 240.0))
+
+
+def test_scenes_in_sequence_follow_one_another_a_second_apart(tmp_path: Path) -> None:
+    clip = np.repeat(standing_person()[None], 5, axis=0)
+    one = scenes.build_scene([clip], scenes.SceneOptions(), track_ids=[0])
+    two = scenes.build_scene([clip[:3]], scenes.SceneOptions(), track_ids=[1])
+    a, b = scenes.in_sequence([one, two])
+    np.testing.assert_array_equal(a.stamps_ns, one.stamps_ns)
+    assert b.stamps_ns[0] == a.stamps_ns[-1] + 1_000_000_000
+    np.testing.assert_array_equal(np.diff(b.stamps_ns), np.diff(two.stamps_ns))
+    np.testing.assert_array_equal(b.points_2d, two.points_2d)
+    with pytest.raises(InvalidInputError, match="gap_s"):
+        scenes.in_sequence([one, two], gap_s=0.0)
+    # without camera_info: the keypoints and the ground truth only
+    path = tmp_path / "s.mcap"
+    bags.write_messages(path, (x for s in (a, b) for x in scenes.scene_messages(s, camera_info=False)))
+    assert set(bags.bag_topics(path)) == {"/keypoints_2d", "/ground_truth/skeletons_3d"}
+    kp = [x for x in bags.read_messages(path, ["/keypoints_2d"])]
+    assert [x.stamp_ns for x in kp] == [*a.stamps_ns, *b.stamps_ns]
+    assert [[s.track_id for s in x.msg.skeletons] for x in kp] == [[0]] * 5 + [[1]] * 3

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -208,7 +207,7 @@ def test_the_camera_timeline_takes_the_latest_usable_camera_info_as_the_node_wou
     assert CameraTimeline([(10, info(0.0))]).at(10) is None  # none usable: the default distance
 
 
-def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together() -> None:
+def test_chain_groups_cover_every_chain_once_in_groups_of_equal_work() -> None:
     from pose_lifter.offline.chains import GROUP_CHAINS, Item, chain_groups
 
     def chain(first: int, n: int) -> list[Item]:
@@ -220,24 +219,64 @@ def test_chain_groups_cover_every_chain_once_in_groups_of_people_seen_together()
     for workers in (1, 6, 200):
         groups = chain_groups(chains, workers)
         assert sorted(c for g in groups for c in g) == list(range(len(chains)))
+        assert len(groups) == min(len(chains), workers)
         assert all(1 <= len(g) <= GROUP_CHAINS for g in groups)
         sizes = [sum(len(chains[c]) for c in g) for g in groups]
         assert sizes == sorted(sizes, reverse=True)
-        # no group holds more than an equal share of the items, but a group of one chain
-        share = sum(len(c) for c in chains) / min(len(chains), workers)
-        assert all(s <= share or len(g) == 1 for s, g in zip(sizes, groups, strict=True))
-        # a group holds chains that start close in time: the groups' start ranges do not interleave
-        spans = sorted((min(chains[c][0].msg_index for c in g), max(chains[c][0].msg_index for c in g))
-                       for g in groups)
-        assert all(a[1] <= b[0] for a, b in itertools.pairwise(spans))
+        # equal work: no group exceeds another by more than its own last (shortest) chain
+        assert all(s - min(sizes) <= min(len(chains[c]) for c in g)
+                   for s, g in zip(sizes, groups, strict=True))
+        # within a group, the chains in the order of their first message
+        assert all([chains[c][0].msg_index for c in g] == sorted(chains[c][0].msg_index for c in g)
+                   for g in groups)
     # tracks of one length over 2 workers: two groups of equal work, as large as they can be
     assert [len(g) for g in chain_groups([chain(0, 30) for _ in range(36)], 2)] == [18, 18]
+    # ... whether seen together or one after another
+    assert [len(g) for g in chain_groups([chain(31 * k, 30) for k in range(36)], 2)] == [18, 18]
     # of different lengths: equal items, not equal counts
     uneven = [chain(0, 90)] + [chain(0, 10) for _ in range(9)]
     assert [sum(len(uneven[c]) for c in g) for g in chain_groups(uneven, 2)] == [90, 90]
-    # enough groups of people seen together: the halves' tracks are not mixed
-    assert all(len({chains[c][0].msg_index >= 60 for c in g if len(chains[c]) > 1}) == 1
-               for g in chain_groups(chains[:20], 1))
+    # more chains than a group holds: as few groups as hold them
+    assert [len(g) for g in chain_groups([chain(k, 3) for k in range(GROUP_CHAINS + 1)], 1)] == [
+        GROUP_CHAINS // 2 + 1, GROUP_CHAINS // 2]
+
+
+def test_tracks_one_after_another_are_lifted_in_step_each_as_alone() -> None:
+    """Tracks that follow one another in time (a second apart, other track ids) are lifted in
+    step, the k-th frame of each in one batch of the lifter; each track's lifted skeletons are
+    those it gets lifted alone (the batch's rows do not mix)."""
+    from dataclasses import replace
+
+    from pose_lifter.core import Lifter, LifterOptions
+
+    bag = Path(__file__).resolve().parents[2] / "bags"
+    n = 20
+    first, second = ([(x.stamp_ns, x.msg) for x in bags.read_messages(bag / name, ["/keypoints_2d"])][:n]
+                     for name in ("walk_noisy.mcap", "punch_outliers.mcap"))
+    shift = first[-1][0] + 1_000_000_000 - second[0][0]
+
+    def moved(msg: Any, stamp: int) -> Any:  # restamped, its people as track 7
+        t = replace(msg.header.stamp, sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+        return replace(msg, header=replace(msg.header, stamp=t),
+                       skeletons=[replace(s, track_id=7) for s in msg.skeletons])
+
+    second = [(s + shift, moved(msg, s + shift)) for s, msg in second]
+    lifter = Lifter(options=LifterOptions())
+    batches: list[int] = []
+    lift_people = lifter.lift_people
+
+    def counted(rows: Sequence[LiftRow]) -> list[LiftOutcome]:
+        batches.append(len(rows))
+        return lift_people(rows)
+
+    alone = [offline.lift_messages(msgs, [], lifter, NODE) for msgs in (first, second)]
+    lifter.lift_people = counted  # type: ignore[method-assign]
+    both = offline.lift_messages(first + second, [], lifter, NODE)
+    assert sum(batches) >= 2 * n and batches.count(2) >= n - 1  # in step: two rows a batch
+    assert [(f.stamp_ns, f.track_id) for f in both] == [(f.stamp_ns, f.track_id) for f in alone[0] + alone[1]]
+    assert len(both) == 2 * n
+    for a, b in zip(alone[0] + alone[1], both, strict=True):
+        np.testing.assert_allclose(b.joints_m, a.joints_m, rtol=0, atol=tol.ROUND_OFF_ACCUMULATED)
 
 
 def test_an_offline_lift_reads_each_tracks_next_frames(tmp_path: Path) -> None:

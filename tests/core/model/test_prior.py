@@ -235,6 +235,27 @@ def test_the_compiled_layer_pass_of_a_few_rows_is_the_matrix_product(
                                                  np.array([0.5, 0.0], np.float32), True), [[0.0, 0.0]])
 
 
+
+def test_the_compiled_layer_pass_adds_the_products_one_at_a_time_in_order() -> None:
+    """_affine_rows: each output is the bias plus the products added in the order of the inputs,
+    each product and sum rounded to float32 (numpy's element-wise float32 arithmetic, one input at
+    a time, is the same sum bit for bit), whatever the rows around it; input widths with and
+    without a remainder of the pass's blocks of eight, a ReLU's zeros among the inputs."""
+    from pose_lifter.core.model import prior as prior_module
+
+    rng = np.random.default_rng(11)
+    for d, m, n in ((36, 512, 1), (252, 40, 3), (512, 36, 40), (5, 7, 2)):
+        h = np.maximum(rng.normal(size=(n, d)), 0.0).astype(np.float32)
+        w = rng.normal(size=(d, m)).astype(np.float32)
+        b = rng.normal(size=m).astype(np.float32)
+        ref = np.repeat(b[None], n, axis=0)
+        for i in range(d):
+            ref = ref + h[:, i:i + 1] * w[i]
+        for relu in (False, True):
+            got = prior_module._affine_rows(h, w, b, relu)
+            np.testing.assert_array_equal(got, np.maximum(ref, 0.0) if relu else ref)
+        np.testing.assert_array_equal(prior_module._affine_rows(h[-1:], w, b, False), ref[-1:])
+
 def _counting_passes(mp: pytest.MonkeyPatch) -> list[int]:
     """``PosePrior._forward_small`` patched (inside ``mp``) to record each compiled pass's row
     count in the returned list."""

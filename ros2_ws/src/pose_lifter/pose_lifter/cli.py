@@ -102,7 +102,8 @@ def _cmd_learn_bases(args: argparse.Namespace) -> int:
 def make_bag(
     trials: Sequence[str], out: str | Path, data_dir: str | Path | None = None, fps: float = 30.0,
     start: float = 0.0, frames: int | None = None, overwrite: bool = False,
-    depth: Literal["raw", "compressed"] | None = None,
+    depth: Literal["raw", "compressed"] | None = None, one_after_another: bool = False,
+    camera_info: bool = True,
     **scene: Any,
 ) -> Any:
     """Film mocap trials with the virtual camera and write the bag.
@@ -110,7 +111,8 @@ def make_bag(
     Parameters
     ----------
     trials : sequence of str
-        One trial per person (track ids 0, 1, ...).
+        One trial per person (track ids 0, 1, ...), side by side or ``one_after_another``
+        (:func:`pose_lifter.mocap.scenes.film_trials`).
     out : path
         ``.mcap`` file.
     data_dir : path, optional
@@ -118,51 +120,42 @@ def make_bag(
     start : float
         Seconds into each trial.
     frames : int, optional
-        Output frames (default: as many as the shortest trial allows).
+        Output frames of each trial (default: all; side by side, the shortest trial's).
     depth : {"raw", "compressed"}, optional
         Also film the depth image of each frame (:func:`pose_lifter.mocap.scenes.scene_messages`):
         16UC1 ``sensor_msgs/Image`` or its compressedDepth PNG.
+    camera_info : bool
+        Write ``/camera_info`` (False: the bag has none).
     **scene
         Other :class:`pose_lifter.mocap.scenes.SceneOptions` fields.
 
     Returns
     -------
-    Scene
+    list of Scene
     """
     from pose_lifter.mocap import cmu as mocap
     from pose_lifter.mocap import scenes
     from pose_lifter.offline.bags import write_messages
 
-    d = mocap.resolve_data_dir(data_dir)
     opts = scenes.SceneOptions(fps=fps, **scene)
-    people = []
-    for t in trials:
-        row = mocap.find_trial(t, d)
-        step = max(1, round(row.fps / fps))
-        first = round(start * row.fps)
-        clip = mocap.load_trial(t, d, step=1)[first::step]
-        if frames is not None:
-            clip = clip[:frames]
-        if len(clip) == 0:
-            raise ValueError(f"trial {t} has no frames after {start} s")
-        people.append(clip)
-    scene_ = scenes.build_scene(people, opts, source_fps=fps)
-    write_messages(out, scenes.scene_messages(scene_, depth=depth), overwrite=overwrite)
-    return scene_
+    filmed = scenes.film_trials(trials, mocap.resolve_data_dir(data_dir), opts, start, frames,
+                                one_after_another)
+    write_messages(out, (x for f in filmed for x in scenes.scene_messages(f, depth, camera_info)),
+                   overwrite=overwrite)
+    return filmed
 
 
 def _cmd_make_bag(args: argparse.Namespace) -> int:
-    scene = make_bag(
+    filmed = make_bag(
         args.trials, args.out, args.data, fps=args.fps, start=args.start, frames=args.frames,
         overwrite=args.overwrite, view_angle=args.view_angle, orbit_speed=args.orbit_speed,
         distance=args.distance, follow=not args.no_follow, spacing=args.spacing, noise=args.noise,
         outliers=args.outliers, missing=args.missing, seed=args.seed,
-        depth=args.depth_format if args.depth else None,
-    )
-    n_people, n_frames = scene.joints_camera.shape[:2]
+        depth=args.depth_format if args.depth else None, one_after_another=args.one_after_another,
+        camera_info=not args.no_camera_info)
     rgbd = f", depth {args.depth_format}" if args.depth else ""
-    print(f"{args.out}: {n_frames} frames at {args.fps:g} Hz, {n_people} people "
-          f"(tracks {scene.track_ids}){rgbd}")
+    print(f"{args.out}: {sum(s.joints_camera.shape[1] for s in filmed)} frames at {args.fps:g} Hz, "
+          f"tracks {[t for s in filmed for t in s.track_ids]}{rgbd}")
     return 0
 
 
@@ -385,6 +378,9 @@ def _make_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("--depth-format", choices=("raw", "compressed"), default="raw",
                    help="raw: 16UC1 sensor_msgs/Image (mm) on the depth topic; compressed: image_transport's "
                    "compressedDepth PNG on its /compressedDepth topic")
+    p.add_argument("--one-after-another", action="store_true", help="the trials one at a time, each its own "
+                   "track, a second apart (default: side by side, all at once)")
+    p.add_argument("--no-camera-info", action="store_true", help="leave /camera_info out")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_make_bag)
 

@@ -21,11 +21,12 @@ clipped on the way, which the caller counts and logs.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 from pose_lifter.messages import cdr
+from pose_lifter.messages.body import BodyPose
 from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.frame import DepthImage, FramePipeline, Intrinsics, LiftedSkeleton, SkipSkeleton
@@ -72,7 +73,8 @@ class FrameAnswer:
 
 def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: MarkerBook | None = None,
                  marker_lifetime: float = 0.0, bodies: BodyBook | None = None,
-                 image_size: tuple[float, float] | None = None) -> FrameAnswer:
+                 image_size: tuple[float, float] | None = None,
+                 body_poses: Sequence[BodyPose | None] | None = None) -> FrameAnswer:
     """The answer of one frame: its lifted skeletons (in message order) as ``Skeleton3DArray``,
     the markers that show them (``markers``' book updated) and their REP-155 bodies (``bodies``'
     book updated).
@@ -92,6 +94,8 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
     marker_lifetime : float
         Seconds (0: until replaced or deleted).
     image_size : (width, height) in pixels, or None (no REP-155 ``skeleton2d`` / ``roi``)
+    body_poses : the bodies' poses of the tracked rows, computed ahead, or None
+        (:meth:`~pose_lifter.messages.hri.BodyBook.frame`)
     """
     head = cdr.message_header(header)
     skeletons = cdr.skeleton3d_array_cdr(head, lifted)
@@ -104,7 +108,7 @@ def frame_answer(header: Any, stamp_ns: int, lifted: SkeletonFrame, *, markers: 
     if bodies is None:
         return FrameAnswer(skeletons, shown)
     clock = cdr.header_cdr(cdr.stamp_cdr(stamp_ns), str(header.frame_id))
-    return FrameAnswer(skeletons, shown, bodies.later(stamp_ns, clock, lifted, image_size))
+    return FrameAnswer(skeletons, shown, bodies.later(stamp_ns, clock, lifted, image_size, body_poses))
 
 
 @dataclass(frozen=True)

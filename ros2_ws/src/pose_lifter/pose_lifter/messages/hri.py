@@ -386,6 +386,17 @@ class BodyFrame:
         return out
 
 
+def tracked_body_poses(frames: Sequence[SkeletonFrame]) -> list[list[body.BodyPose | None]]:
+    """Per frame, the :func:`~pose_lifter.messages.body.body_poses` of its tracked rows (track id
+    >= 0, in order), of all the frames in one pass (each skeleton's pose is its own, whatever the
+    pass: what :meth:`BodyBook.frame` computes of one frame)."""
+    rows = [np.flatnonzero(f.track_ids >= 0) for f in frames]
+    joints = [f.joints_m[r] for f, r in zip(frames, rows, strict=True) if r.size]
+    poses = body.body_poses(np.concatenate(joints)) if joints else []
+    ends = np.cumsum([r.size for r in rows]).tolist()
+    return [poses[end - r.size:end] for r, end in zip(rows, ends, strict=True)]
+
+
 class LaterBodies:
     """A frame's REP-155 messages, computed once, when first called (:meth:`BodyBook.later`)."""
 
@@ -432,11 +443,12 @@ class BodyBook:
         return gone
 
     def later(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
-              image_size: tuple[float, float] | None) -> LaterBodies:
+              image_size: tuple[float, float] | None,
+              poses: Sequence[body.BodyPose | None] | None = None) -> LaterBodies:
         """:meth:`frame`, computed when first asked for (after the frame's skeletons are out), and at
         the latest before the book's next frame: the book sees its frames in order."""
         self.settle()
-        self._pending = LaterBodies(lambda: self._frame(stamp_ns, header, lifted, image_size))
+        self._pending = LaterBodies(lambda: self._frame(stamp_ns, header, lifted, image_size, poses))
         return self._pending
 
     def settle(self) -> None:
@@ -446,7 +458,8 @@ class BodyBook:
             pending()
 
     def frame(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
-              image_size: tuple[float, float] | None) -> BodyFrame:
+              image_size: tuple[float, float] | None,
+              poses: Sequence[body.BodyPose | None] | None = None) -> BodyFrame:
         """The outputs of one frame (any frame asked for with :meth:`later` computed first).
 
         Parameters
@@ -457,16 +470,21 @@ class BodyBook:
         lifted : the frame's lifted skeletons (read: ``track_ids``, ``joints_m`` in metres in
             ``frame_id``, the 2D ``points`` in pixels and their ``confidence``)
         image_size : (width, height) in pixels, or None (no ``skeleton2d`` / ``roi``)
+        poses : the :func:`~pose_lifter.messages.body.body_poses` of the frame's tracked rows (track
+            id >= 0, in order), computed ahead (an offline lift's, for all of its frames in one
+            pass: :func:`tracked_body_poses`), or None: computed here
         """
         self.settle()
-        return self._frame(stamp_ns, header, lifted, image_size)
+        return self._frame(stamp_ns, header, lifted, image_size, poses)
 
     def _frame(self, stamp_ns: int, header: bytes, lifted: SkeletonFrame,
-               image_size: tuple[float, float] | None) -> BodyFrame:
+               image_size: tuple[float, float] | None,
+               poses: Sequence[body.BodyPose | None] | None = None) -> BodyFrame:
         new: dict[str, bytes] = {}
         shown: list[tuple[str, body.BodyPose, int]] = []  # body id, pose, row of lifted
         tracked = np.flatnonzero(lifted.track_ids >= 0)
-        poses = body.body_poses(lifted.joints_m[tracked]) if tracked.size else []
+        if poses is None:
+            poses = body.body_poses(lifted.joints_m[tracked]) if tracked.size else []
         for k, pose in zip(tracked.tolist(), poses, strict=True):
             if pose is None:  # a degenerate skeleton: no body this frame
                 continue

@@ -17,7 +17,8 @@ from __future__ import annotations
 import io
 import struct
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any, Final, Literal
 
 import numpy as np
@@ -42,6 +43,8 @@ __all__ = [
     "compressed_depth_data",
     "corrupt_2d",
     "depth_to_mm",
+    "film_trials",
+    "in_sequence",
     "look_at",
     "project",
     "scene_messages",
@@ -259,6 +262,61 @@ def build_scene(people: Sequence[NDArray[np.float64]], options: SceneOptions,
                  {"n_frames": n, "n_people": len(clips), "seed": options.seed})
 
 
+def in_sequence(scenes: Sequence[Scene], gap_s: float = 1.0) -> list[Scene]:
+    """Scenes re-stamped to follow one another, as a camera records people who come and go one
+    at a time: each scene's first frame ``gap_s`` seconds after the previous scene's last frame
+    (its frames keep their spacing). The first scene keeps its stamps."""
+    if gap_s <= 0:
+        raise InvalidInputError(f"gap_s must be > 0, got {gap_s}")
+    out: list[Scene] = []
+    for scene in scenes:
+        offset = 0 if not out else int(out[-1].stamps_ns[-1]) + round(gap_s * 1e9) - int(scene.stamps_ns[0])
+        out.append(replace(scene, stamps_ns=scene.stamps_ns + offset))
+    return out
+
+
+def film_trials(trials: Sequence[str], data_dir: str | Path, options: SceneOptions, start: float = 0.0,
+                frames: int | None = None, one_after_another: bool = False) -> list[Scene]:
+    """Film CMU trials (one person each, track ids 0, 1, ... in order) at ``options.fps``.
+
+    Parameters
+    ----------
+    trials : sequence of str
+        Trial ids, e.g. ``"02_05"``.
+    data_dir : path
+        The CMU data directory (:func:`pose_lifter.mocap.cmu.resolve_data_dir`).
+    options : SceneOptions
+    start : float
+        Seconds into each trial.
+    frames : int, optional
+        At most this many frames of each trial (default: all).
+    one_after_another : bool
+        False: one scene, the people side by side, cut to the shortest clip. True: one scene per
+        trial, each of its own length and its corruption seeded ``options.seed + k``, each
+        starting a second after the previous one ended (:func:`in_sequence`).
+
+    Returns
+    -------
+    list of Scene
+    """
+    from pose_lifter.mocap import cmu
+
+    people = []
+    for t in trials:
+        row = cmu.find_trial(t, data_dir)
+        step = max(1, round(row.fps / options.fps))
+        clip = cmu.load_trial(t, data_dir, step=1)[round(start * row.fps)::step]
+        if frames is not None:
+            clip = clip[:frames]
+        if len(clip) == 0:
+            raise InvalidInputError(f"trial {t} has no frames after {start} s")
+        people.append(clip)
+    if not one_after_another:
+        return [build_scene(people, options, source_fps=options.fps)]
+    return in_sequence([build_scene([p], replace(options, seed=options.seed + k), options.fps, [k])
+                               for k, p in enumerate(people)])
+
+
 def corrupt_2d(
     clean: NDArray[np.float64], leg_px: NDArray[np.float64], noise: float, outliers: float,
     missing: float, rng: np.random.Generator,
@@ -376,7 +434,7 @@ def _depth_message(header: Any, depth: NDArray[np.float32], kind: Literal["raw",
     return names.TOPIC_DEPTH, msg, names.IMAGE
 
 
-def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = None
+def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = None, camera_info: bool = True
                    ) -> Iterator[tuple[str, int, Any, str]]:
     """A scene as the messages of a bag, ``(topic, stamp_ns, message, type name)`` in time order
     (rosbags messages): ``/keypoints_2d`` (coco17 pixels), ``/ground_truth/skeletons_3d`` (camera
@@ -388,7 +446,8 @@ def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = No
     people in front of a wall 2.5 m behind them and on a floor, both static over the scene
     (:func:`~pose_lifter.mocap.depth_model.scene_backgrounds`), seeded by the scene's seed: ``"raw"`` a 16UC1
     ``sensor_msgs/Image`` on ``names.TOPIC_DEPTH``, ``"compressed"`` its compressedDepth PNG
-    (:func:`compressed_depth_data`) on ``names.TOPIC_DEPTH_COMPRESSED``."""
+    (:func:`compressed_depth_data`) on ``names.TOPIC_DEPTH_COMPRESSED``. ``camera_info`` False
+    leaves ``/camera_info`` out (a detector's bag without the camera's calibration)."""
     from pose_lifter.messages import convert as m
     from pose_lifter.mocap import depth_model
 
@@ -406,8 +465,10 @@ def scene_messages(scene: Scene, depth: Literal["raw", "compressed"] | None = No
             kp, cf = to_coco17(scene.points_2d[pi, ti], scene.confidence[pi, ti])
             skels2d.append(m.arrays_to_skeleton2d(kp, cf, tid, types))
             skels3d.append(m.skeleton3d_from_joints(tid, scene.joints_camera[pi, ti], types))
-        info = m.camera_info(header, IMAGE_WIDTH, IMAGE_HEIGHT, FOCAL_PX, FOCAL_PX, *PRINCIPAL_POINT, types)
-        yield (names.TOPIC_CAMERA_INFO, int(stamp), info, names.CAMERA_INFO)
+        if camera_info:
+            info = m.camera_info(header, IMAGE_WIDTH, IMAGE_HEIGHT, FOCAL_PX, FOCAL_PX, *PRINCIPAL_POINT,
+                                 types)
+            yield (names.TOPIC_CAMERA_INFO, int(stamp), info, names.CAMERA_INFO)
         yield (names.TOPIC_KEYPOINTS, int(stamp), m.skeleton2d_array(header, "coco17", skels2d, types),
                names.SKELETON2D_ARRAY)
         yield (names.TOPIC_GROUND_TRUTH, int(stamp), m.skeletons3d_array(header, skels3d, types),

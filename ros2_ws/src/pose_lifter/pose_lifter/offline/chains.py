@@ -5,8 +5,9 @@ processes, with the same outcomes.
 A track's frames depend on one another (warm starts, the track's history); different tracks do
 not, so each track is a chain. A chain expires its track at the stamps a pipeline lifting every
 frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
-node's one pipeline over the whole bag. Chains seen together are lifted in groups, in step
-(:func:`lift_chains`), so that the prior's network runs once per step for all of them
+node's one pipeline over the whole bag. Chains are lifted in groups, in step, the k-th frame of
+each chain together whether they were seen together or one after another (:func:`lift_chains`),
+so that the prior's network runs once per step for all of them
 (:func:`~pose_lifter.core.lift.batch.prior_calls`); a chain's outcomes do not depend on its group.
 What a chain gave comes back as columns (:class:`ChainLift`: its lifted skeletons as one
 :class:`~pose_lifter.messages.cdr.SkeletonFrame`), from a worker as from this process.
@@ -181,31 +182,24 @@ GROUP_CHAINS: Final[int] = 64
 
 def chain_groups(chains: list[list[Item]], workers: int) -> list[list[int]]:
     """The chains (indices) split into groups lifted in step (:func:`lift_chains`), one per worker
-    of a pool: in the order of their first message, a group closed when full or when the next
-    chain starts after every chain of the group has ended (so a group's people are seen
-    together). Full is :data:`GROUP_CHAINS` chains, or an equal share of the items (poses) among
-    ``n`` groups (a chain longer than the share is a group alone), ``n`` the larger of
-    ``workers`` (at most one per chain) and what groups of :data:`GROUP_CHAINS` chains need: the
-    workers carry equal work, each group as large as it can be (a round's fixed costs are shared
-    by every person of the group; the 36-track bag on 2 workers, tools/bench_lift.py: 497 poses/s
-    and 24.2 CPU s with 3 groups per worker of equal chain counts, 526 and 22.8 with these). The
-    groups with most items first."""
-    order = sorted(range(len(chains)), key=lambda c: (chains[c][0].msg_index, -len(chains[c])))
+    of a pool: ``n`` groups, ``n`` the larger of ``workers`` (at most one per chain) and what
+    groups of :data:`GROUP_CHAINS` chains need; the longest chain first, each chain to the group
+    of fewest items that has room (the longest-processing-time rule). The workers carry equal
+    work, each group as large as it can be (a round's fixed costs are shared by every person of
+    the group; the 36-track bag on 2 workers, tools/bench_lift.py: 497 poses/s and 24.2 CPU s
+    with 3 groups per worker of equal chain counts, 526 and 22.8 with one group per worker of
+    equal items). Chains in step need not be seen together: a group's chains are lifted frame by
+    frame of each chain (:func:`lift_chains`), people who follow one another in time as those
+    seen together. Within a group, chains in the order of their first message; the groups
+    with most items first."""
     n_groups = max(min(len(chains), workers), -(-len(chains) // GROUP_CHAINS), 1)
-    share = sum(len(c) for c in chains) / n_groups  # a group's items, at most (but one chain)
-    groups: list[list[int]] = []
-    current: list[int] = []
-    items, end = 0, -1
-    for c in order:
-        if current and (len(current) >= GROUP_CHAINS or items + len(chains[c]) > share * (1.0 + 1e-9)
-                        or chains[c][0].msg_index > end):
-            groups.append(current)
-            current, items, end = [], 0, -1
-        current.append(c)
-        items += len(chains[c])
-        end = max(end, chains[c][-1].msg_index)
-    if current:
-        groups.append(current)
+    groups: list[list[int]] = [[] for _ in range(n_groups)]
+    items = [0] * n_groups
+    for c in sorted(range(len(chains)), key=lambda c: (-len(chains[c]), chains[c][0].msg_index)):
+        g = min((g for g in range(n_groups) if len(groups[g]) < GROUP_CHAINS), key=lambda g: (items[g], g))
+        groups[g].append(c)
+        items[g] += len(chains[c])
+    groups = [sorted(g, key=lambda c: chains[c][0].msg_index) for g in groups if g]
     return sorted(groups, key=lambda g: -sum(len(chains[c]) for c in g))
 
 
@@ -225,7 +219,10 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     lifted together, each in its chain's pipeline (:func:`lift_together`: the prior's networks in
     one pass, the runs of alternations in one compiled pass per round). A chain's outcomes are
     those of lifting it alone: the chains share only the lifter, whose prior's poses and runs are
-    bit for bit those computed alone."""
+    bit for bit those computed alone. So the chains are in step by their own frames, the k-th
+    item of each chain with the k-th of the others, whether they were seen together or one after
+    another (people who come and go one at a time are lifted as a crowd); with ``depth``, by
+    message (its images are read forward through the bag)."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
@@ -237,15 +234,15 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     steps: dict[int, list[tuple[int, int, Item]]] = {}
     for c, chain in enumerate(chains):
         for k, item in enumerate(chain):
-            steps.setdefault(item.msg_index, []).append((c, k, item))
+            steps.setdefault(k if depth is None else item.msg_index, []).append((c, k, item))
     images = depth.frames() if depth is not None else None
     try:
-        for msg_index in sorted(steps):
-            step = steps[msg_index]
+        for key in sorted(steps):
+            step = steps[key]
             for c, _, item in step:
                 if item.expire_ns is not None:
                     pipelines[c].end_frame(item.expire_ns)
-            image = images.image(msg_index) if images is not None else None
+            image = images.image(key) if images is not None else None
             together = lift_together([(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
                                       for c, k, item in step], None if image is None else [image] * len(step))
             for (c, _, _), lifted in zip(step, together, strict=True):

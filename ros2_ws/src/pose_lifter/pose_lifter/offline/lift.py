@@ -437,20 +437,11 @@ def lift_bag(
     markers = MarkerBook(_MARKER_NS) if settings.publish_markers else None
     bodies = hri.BodyBook(settings.frame.track_timeout) if settings.publish_hri else None
     sizes = [(s, (float(i.width), float(i.height))) for s, i in infos if i.width > 0 and i.height > 0]
-
-    def record(stamp: int, msg: Any, lifted: SkeletonFrame) -> None:
-        # the node's answer (messages/answer.py): the REP-155 bodies timed by the header stamp (the
-        # bag stamp when it is 0, as the node's arrival time), with the image size of the last
-        # camera_info at or before the frame
-        size = next((wh for s, wh in reversed(sizes) if s <= stamp), None)
-        answers[index_of[id(msg)]] = frame_answer(
-            msg.header, m.stamp_to_ns(msg.header.stamp) or stamp, lifted, markers=markers,
-            marker_lifetime=settings.marker_lifetime, bodies=bodies, image_size=size)
-
+    size_stamps = [s for s, _ in sizes]
+    answered: list[tuple[int, Any, SkeletonFrame]] = []  # (stamp, message, its lifted skeletons)
     if depth_topic is not None and not infos:
         summary.notes.append(f"depth topic {depth_topic} but no camera_info: lifted from the 2D alone")
     elif depth_topic is not None:  # each message's camera size: the last camera_info's at or before it
-        size_stamps = [s for s, _ in sizes]
         summary.depth = pair_depth(
             in_path, depth_topic, topics[depth_topic],
             [m.stamp_to_ns(msg.header.stamp) or stamp for stamp, msg in to_lift],
@@ -459,8 +450,20 @@ def lift_bag(
         refused = summary.depth.first_refusal()
         if refused:
             summary.notes.append(f"depth image refused: {refused}; such frames are lifted from the 2D alone")
-    frames = lift_messages(to_lift, infos, lifter, settings, progress=progress, on_answer=record,
-                           summary=summary, workers=workers, depth=summary.depth)
+    frames = lift_messages(to_lift, infos, lifter, settings, progress=progress,
+                           on_answer=lambda *a: answered.append(a), summary=summary, workers=workers,
+                           depth=summary.depth)
+    # the node's answers (messages/answer.py), in order: the REP-155 bodies timed by the header
+    # stamp (the bag stamp when it is 0, as the node's arrival time), with the image size of the
+    # last camera_info at or before the frame; the bodies' poses of every frame in one pass
+    poses = hri.tracked_body_poses([lifted for _, _, lifted in answered]) if bodies is not None else None
+    for k, (stamp, msg, lifted) in enumerate(answered):
+        at = bisect.bisect_right(size_stamps, stamp) - 1
+        size = sizes[at][1] if at >= 0 else None
+        answers[index_of[id(msg)]] = frame_answer(
+            msg.header, m.stamp_to_ns(msg.header.stamp) or stamp, lifted, markers=markers,
+            marker_lifetime=settings.marker_lifetime, bodies=bodies, image_size=size,
+            body_poses=None if poses is None else poses[k])
     if summary.depth is not None:
         summary.notes.insert(0, summary.depth_line())
     kept = set(topics) if settings.keep is None else set(settings.keep)
