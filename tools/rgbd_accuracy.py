@@ -2,7 +2,7 @@
 (``make rgbd-accuracy``).
 
     .venv/bin/python tools/rgbd_accuracy.py [--data ../shared/data/cmu] [--frames 90] [--views 2]
-        [--distances 1.5 3 5] [--elevated] [--methods mono naive fused fused-lag] [--workers 2]
+        [--distances 1.5 3 5] [--elevated] [--methods mono naive fused fused-lag true-depth] [--workers 2]
         [--trials T ...] [--max-trials N] [--fold CLASS --folds DIR] [--set NAME=VALUE ...]
         [--out out/rgbd_accuracy] [--calibrate]
 

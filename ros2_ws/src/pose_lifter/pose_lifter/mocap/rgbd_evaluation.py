@@ -31,7 +31,10 @@ Methods (:data:`METHODS`), each tracked as the node tracks (the default hybrid m
   2D with the labels the track gave the 3D joints);
 * ``fused-lag``: the node with ``output_lag`` (3): each frame's pose refined over the next
   frames (:class:`~pose_lifter.core.track.later.Refiner`, as ``hybrid-lag`` of :mod:`.evaluation`),
-  then placed again with the depth readings its frame's lift took, as the lagged node does.
+  then placed again with the depth readings its frame's lift took, as the lagged node does;
+* ``true-depth``: a floor, not a method: each joint of ``mono`` moved along its ray to the true
+  joint's depth (what a perfect depth reading of every joint centre would give the live lift):
+  the error left is the lift's image of the joints, from the detector's 2D.
 
 Figures per frame (:func:`rgbd_figures`; means over every lifted frame in :func:`summarise`):
 P-MPJPE (mm, similarity-aligned), metric MPJPE (mm, camera frame, no alignment), root error (mm,
@@ -73,7 +76,7 @@ __all__ = ["AXIS_TARGETS", "DISTANCES", "GROUPS", "JOINT_TARGETS", "METHODS", "R
            "coverage_counts", "evaluate_jobs", "film_rgbd", "fuse_person", "naive_lookup", "render_table",
            "rgbd_cameras", "rgbd_figures", "root_error", "summarise"]
 
-METHODS = ("mono", "naive", "fused", "fused-lag")
+METHODS = ("mono", "naive", "fused", "fused-lag", "true-depth")
 #: Camera distances (m, to the joints' centroid).
 DISTANCES = (1.5, 3.0, 5.0)
 #: The elevation (degrees, looking down) of the optional elevated views.
@@ -303,6 +306,9 @@ class RgbdEvaluator:
                 out["naive"].put(i, joints, None, read)
                 if "fused" in self.methods:
                     out["fused"].put(i, *fuse_person(depth, points, t.result, t.result.pose_camera))
+                x0 = mono.joints_m[0]
+                out["true-depth"].put(i, x0 * (truth[i, :, 2] / x0[:, 2])[:, None], None,
+                                      np.ones(N_JOINTS, dtype=bool))
             tl = lag_results[i]
             if tl is not None and np.isfinite(lagged[i]).all():
                 points = labelled_2d(px[i], conf[i], tl.swapped)[0][None]

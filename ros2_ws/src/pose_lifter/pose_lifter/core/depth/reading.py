@@ -76,6 +76,10 @@ class DepthOptions:
     gate : float
         A reading farther from the placed body than ``gate`` standard deviations (the reading's and
         the body's together) is not this joint's (dropped, as a 2D outlier is).
+    outlier_share : float
+        The share of kept readings taken to be another surface's (an arm in front, the clothing
+        between the legs): a reading counts for its joint with its probability of being the
+        joint's under this mixture (:func:`pose_lifter.core.depth.fuse.fuse_readings`).
     occlusion_margin_m : float
         A body part whose surface lies this much in front of a joint's surface on its pixel hides
         the joint.
@@ -102,6 +106,7 @@ class DepthOptions:
     offset_std_m: float = 0.028
     confidence_threshold: float = 0.1
     gate: float = 3.0
+    outlier_share: float = 0.15
     occlusion_margin_m: float = 0.08
     tilt_std: float = 0.3
     max_iter: int = 50
