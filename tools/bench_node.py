@@ -46,6 +46,9 @@ REPO = Path(__file__).resolve().parents[1]
 LIFTER = REPO / "ros2_ws" / "install" / "pose_lifter" / "lib" / "pose_lifter" / "lifter"
 
 
+#: How long before its keypoints a frame's depth image is published, seconds: the detector's
+#: latency (the camera publishes the depth with the colour image the detector then reads).
+DEPTH_LEAD_S = 0.015
 #: The frames of a loop's start that :func:`_report` counts apart.
 LOOP_START_FRAMES = 3
 
@@ -192,29 +195,34 @@ def _handshake(ros: SimpleNamespace, node: Any, pub: Any, answers: dict[int, tup
 
 def _replay(ros: SimpleNamespace, node: Any, pub: Any, pub_info: Any, pub_depth: Any, bag: _Bag, rate: float,
             loops: int, types: Any) -> dict[int, float]:
-    """Publish the bag's frames (each after the camera info and its depth image) at ``rate`` Hz in
-    real time, ``loops``
+    """Publish the bag's frames (each after the camera info, and :data:`DEPTH_LEAD_S` after its
+    depth image) at ``rate`` Hz in real time, ``loops``
     times, each loop's stamps shifted by the bag's span; returns each stamp's publishing time
     (``time.perf_counter``)."""
     from pose_lifter.messages.convert import ns_to_stamp, stamp_to_ns
 
     period = 1.0 / rate
     sent: dict[int, float] = {}
+
+    def wait(until: float) -> None:
+        while (now := time.perf_counter()) < until:
+            ros.rclpy.spin_once(node, timeout_sec=max(0.0, min(until - now, 0.005)))
+
     start = time.perf_counter()
     i = 0
     for loop in range(loops):
         for msg, image in zip(bag.kp_msgs, bag.depth_msgs, strict=True):
             target = start + i * period
-            while (now := time.perf_counter()) < target:
-                ros.rclpy.spin_once(node, timeout_sec=max(0.0, min(target - now, 0.005)))
             stamp = stamp_to_ns(msg.header.stamp) + loop * bag.span_ns
             msg.header.stamp = ns_to_stamp(stamp, types)
+            if image is not None:  # the camera's image, a detector's latency before its keypoints
+                wait(target - DEPTH_LEAD_S)
+                image.header.stamp = msg.header.stamp
+                pub_depth.publish(image)
+            wait(target)
             if bag.info_msg is not None:
                 bag.info_msg.header.stamp = msg.header.stamp
                 pub_info.publish(bag.info_msg)
-            if image is not None:
-                image.header.stamp = msg.header.stamp
-                pub_depth.publish(image)
             pub.publish(msg)
             sent[stamp] = time.perf_counter()
             msg.header.stamp = ns_to_stamp(stamp - loop * bag.span_ns, types)
@@ -290,7 +298,8 @@ def main() -> None:
 
     pub = node.create_publisher(ros.Skeleton2DArray, "keypoints_2d", ros.qos_profile_sensor_data)
     pub_info = node.create_publisher(ros.CameraInfo, "camera_info", ros.qos_profile_sensor_data)
-    pub_depth = node.create_publisher(ros.Image, "depth", ros.qos_profile_sensor_data)
+    pub_depth = node.create_publisher(ros.Image, "depth",
+                                      ros.QoSProfile(depth=2, reliability=ros.ReliabilityPolicy.RELIABLE))
     node.create_subscription(ros.Skeleton3DArray, "skeletons_3d", on_answer,
                              ros.QoSProfile(depth=100, reliability=ros.ReliabilityPolicy.RELIABLE))
     try:

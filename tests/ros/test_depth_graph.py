@@ -55,6 +55,9 @@ def _setup(start_lifter: Any, graph: GraphClient, **params: Any) -> tuple[Any, A
     lifter = start_lifter(params={"depth_topic": TOPIC_DEPTH, "diagnostics_period": 0.5, **params})
     graph.wait_for_lifter(lifter)
     graph.spin_until(lambda: pub.get_subscription_count() > 0, 60.0, "the lifter's depth subscription")
+    # reliable, as cameras publish depth (over best effort most 0.6 MB images never arrive whole)
+    (sub,) = graph.node.get_subscriptions_info_by_topic(TOPIC_DEPTH)
+    assert sub.qos_profile.reliability == ReliabilityPolicy.RELIABLE
     return lifter, pub, diags
 
 

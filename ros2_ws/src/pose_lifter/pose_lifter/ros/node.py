@@ -98,6 +98,9 @@ STATS_LINE: Final[str] = "stats line"  # the statistics line's window in the nod
 #: A frame's receive stamp older than this (s) is taken as another clock's: its latency counts from
 #: its callback instead.
 MAX_RECEIVE_AGE_S: Final[float] = 10.0
+#: The depth subscription's QoS: reliable, keep the last 2 (RealSense and image_transport publish
+#: depth reliably; over best effort most 0.6 MB images lose a fragment and never arrive).
+DEPTH_QOS: Final[QoSProfile] = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)
 #: With ``output_lag``, the frames held for it are published when no frame has come for this long
 #: (s): the input stopped or paused. Checked every LAG_CHECK_S.
 LAG_IDLE_S: Final[float] = 0.5
@@ -205,11 +208,12 @@ class LifterNode(Node):
         self._sub_camera_info = self.create_subscription(
             self._types.CameraInfo, "camera_info", self.on_camera_info, qos_profile_sensor_data,
             qos_overriding_options=qos_override)
-        # the depth images before the keypoints (the frame's image is then held when it is lifted)
+        # the depth images before the keypoints (the frame's image is then held when it is lifted);
+        # reliable, as cameras publish them: best effort loses most 0.6 MB images in fragments
         frame = self._settings.frame
         if frame.depth_topic:
             self._depth = DepthInput(self, frame.depth_topic, frame.depth_tolerance, self._counts.depth,
-                                     self._throttle.warn, self._camera, qos_profile_sensor_data, qos_override)
+                                     self._throttle.warn, self._camera, DEPTH_QOS, qos_override)
             self._stream.depth_of = self._depth.depth_of
             self._diagnostics.depth_warning = self._depth.silence
         # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only);
