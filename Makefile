@@ -17,7 +17,7 @@ export MKL_NUM_THREADS := 1
 
 .PHONY: help venv test test-fast test-fp2 lint demo bench bench-node bench-lag bench-lift bench-collection bench-prior \
   lift-hash mutants fuzz soak experiments bases bags bag-bands prior prior-temporal prior-offline prior-fixture \
-  actions-model accuracy rgbd-accuracy rgbd-accuracy-short depth-calibration lock clean ros cross-action train-deps
+  actions-model accuracy rgbd-accuracy rgbd-accuracy-short rgbd-cross-action depth-calibration lock clean ros cross-action train-deps
 
 help:
 	@echo "make demo        lift a committed bag, print errors, write out/demo.mcap + out/demo.png"
@@ -36,6 +36,7 @@ help:
 	@echo "make prior-offline   re-train the offline variant, past and future (data/prior_mlp_w7c.npz, ~15 min)"
 	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy/accuracy.md (~25 min)"
 	@echo "make rgbd-accuracy   mono / naive depth lookup / fused / fused-lag at 1.5, 3, 5 m -> out/rgbd_accuracy (~6 min)"
+	@echo "make rgbd-cross-action  the same on unseen motion, per cross-action fold and their mean (~3 min; needs make cross-action)"
 	@echo "make depth-calibration  the depth fusion's constants measured on the training split (printed)"
 	@echo "make rgbd-accuracy-short  the same on 3 trials x 30 frames, one view -> out/rgbd_accuracy_short (~20 s)"
 	@echo "make bench-lag   what the node's output_lag costs per person-frame (bags/five_people.mcap)"
@@ -195,6 +196,15 @@ rgbd-accuracy: venv
 # trials the packaged prior was not fitted on; printed, to be copied into core/depth
 depth-calibration: venv
 	$(PY) tools/rgbd_accuracy.py --calibrate --data $(CMU_DATA) --frames 60 --views 2 --elevated
+
+# the same on unseen motion: each motion class lifted by the priors trained without it (make
+# cross-action trains them), 8 trials a class, one view; the mean over the classes
+RGBD_CLASSES := walk run jump punch dance basketball playground other
+rgbd-cross-action: venv
+	for c in $(RGBD_CLASSES); do $(PY) tools/rgbd_accuracy.py --data $(CMU_DATA) --fold $$c --frames 60 --views 1 \
+	  --max-trials 8 --workers 2 --methods mono naive fused fused-lag --out out/rgbd_cross_action/$$c || exit 1; done
+	$(PY) tools/rgbd_accuracy.py --merge $(addprefix out/rgbd_cross_action/,$(RGBD_CLASSES)) \
+	  --out out/rgbd_cross_action
 
 rgbd-accuracy-short: venv
 	$(PY) tools/rgbd_accuracy.py --data $(CMU_DATA) --frames 30 --views 1 --max-trials 3 --workers 2 \

@@ -5,12 +5,14 @@
         [--distances 1.5 3 5] [--elevated] [--methods mono naive fused fused-lag true-depth] [--workers 2]
         [--trials T ...] [--max-trials N] [--fold CLASS --folds DIR] [--set NAME=VALUE ...]
         [--out out/rgbd_accuracy] [--calibrate]
+    .venv/bin/python tools/rgbd_accuracy.py --merge RUN1 RUN2 ... --out DIR
 
 The tracks, the depth images, the methods and the figures are
 :mod:`pose_lifter.mocap.rgbd_evaluation`'s. ``--fold CLASS`` lifts the trials of a motion class
 with the priors ``tools/cross_action.py`` trained without it (``DIR/CLASS.npz`` and, when present,
 its causal temporal prior ``DIR/CLASS_w4.npz``; ``make cross-action`` writes them to
-``out/cross_action/folds``). Writes ``rgbd_accuracy.md`` (the tables, stamped with the git commit
+``out/cross_action/folds``); ``--merge`` prints the mean of such runs' tables (each class weighs the
+same; ``make rgbd-cross-action``). Writes ``rgbd_accuracy.md`` (the tables, stamped with the git commit
 and the CPU model) and ``rgbd_accuracy.json`` (the table and each track's figures) to ``--out``.
 Deterministic (the detector and the depth sensor seeded per track and distance).
 """
@@ -55,6 +57,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--set", action="append", default=[], help="a LifterOptions field, e.g. prior_weight_z=2")
     ap.add_argument("--bases", default=None, help="hybrid bases (default: the packaged ones)")
     ap.add_argument("--out", type=Path, default=Path("out/rgbd_accuracy"))
+    ap.add_argument("--merge", type=Path, nargs="+", default=None,
+                    help="the mean table of these runs' directories (e.g. one per cross-action fold)")
     ap.add_argument("--calibrate", action="store_true",
                     help="measure the fusion's constants on the training split's held-out trials instead "
                          "(pose_lifter.mocap.depth_calibration; make depth-calibration) and print them")
@@ -75,10 +79,27 @@ def fold_settings(cls: str, folds: Path) -> dict[str, Any]:
     return {"prior_file": str(prior), "temporal_prior": False}
 
 
+def _merge(runs: list[Path], out: Path) -> int:
+    """Print (and write to ``out``) the mean table of the runs in ``runs``' directories."""
+    records = [json.loads((r / "rgbd_accuracy.json").read_text()) for r in runs]
+    methods = records[0]["methods"]
+    table = rgbd.mean_table([r["table"] for r in records])
+    what = ", ".join(str(r["fold"] or "eval split") for r in records)
+    header = (f"RGB-D accuracy, the mean over {len(records)} runs ({what}; each weighs the same), "
+              f"measured at {'; '.join(sorted({r['measured_at'] for r in records}))}")
+    text = rgbd.render_table(table, methods, header)
+    print(text)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "rgbd_accuracy.md").write_text(text + "\n")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
+    if args.merge:
+        return _merge(args.merge, args.out)
     settings = ev.parse_settings(args.set)
     trials = args.trials
     if args.fold:

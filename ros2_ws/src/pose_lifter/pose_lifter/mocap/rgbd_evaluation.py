@@ -385,6 +385,28 @@ def summarise(results: Sequence[dict[str, Any]], distances: Sequence[float], met
     return table
 
 
+Table = dict[str, dict[str, dict[str, Any]]]
+
+
+def mean_table(tables: Sequence[Table]) -> Table:
+    """The mean of :func:`summarise` tables of the same rows (e.g. the cross-action folds: each
+    class weighs the same): of each figure and each coverage fraction (NaN-aware), the joints
+    counted summed."""
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for d, row in tables[0].items():
+        out[d] = {}
+        for m, first in row.items():
+            cells = [t[d][m] for t in tables]
+            vals: dict[str, Any] = {k: ev.nanmean([c[k] for c in cells]) for k in (*FIGURES, "lifted")}
+            covs = [c["coverage"] for c in cells if c["coverage"] is not None]
+            vals["coverage"] = None if first["coverage"] is None else {
+                g: {k: (float(np.sum([c[g][k] for c in covs])) if k == "joints"
+                        else ev.nanmean([c[g][k] for c in covs if c[g]["joints"]]))
+                    for k in covs[0][g]} for g in GROUPS}
+            out[d][m] = vals
+    return out
+
+
 def _pair(cov: dict[str, dict[str, float]] | None, group: str, kind: str) -> str:
     """``"68.1 / 95.2"`` (%) of a group's 1- and 2-sigma coverage of ``kind`` (axis, joint), or ``-``."""
     if cov is None or not cov[group]["joints"]:
