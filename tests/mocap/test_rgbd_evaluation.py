@@ -174,6 +174,11 @@ def test_a_tiny_run_gives_every_method_at_every_distance_finite_figures() -> Non
     both = rgbd.summarise([*results, *elevated], (3.0,), rgbd.METHODS)
     assert list(both) == ["3 m, level", "3 m, 30 deg above"]
     assert both["3 m, level"]["mono"]["mpjpe"] == table["3 m"]["mono"]["mpjpe"]
+    # the mean of tables (the cross-action folds): of a table with itself, the table
+    twice = rgbd.mean_table([table, table])
+    assert twice["3 m"]["fused"]["mpjpe"] == pytest.approx(table["3 m"]["fused"]["mpjpe"])
+    counted = twice["3 m"]["fused"]["coverage"]["all"]["joints"]
+    assert counted == 2 * table["3 m"]["fused"]["coverage"]["all"]["joints"]
     # seeded per track and distance: the same run gives the same figures
     again = rgbd.evaluate_jobs([(track, 3.0)], ("mono", "naive"), {})[0]
     first = next(r for r in results if r["distance"] == 3.0)
