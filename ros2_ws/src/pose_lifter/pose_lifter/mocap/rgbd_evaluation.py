@@ -38,13 +38,13 @@ Methods (:data:`METHODS`), each tracked as the node tracks (the default hybrid m
 
 Figures per frame (:func:`rgbd_figures`; means over every lifted frame in :func:`summarise`):
 P-MPJPE (mm, similarity-aligned), metric MPJPE (mm, camera frame, no alignment), root error (mm,
-the distance between the predicted and the true hip centres, the mean of the two hips), jitter
-(:func:`~pose_lifter.mocap.evaluation.frame_figures`' acceleration error, on the metric joints),
-the share of joints read from depth, and the coverage of the predicted standard deviations
-(:func:`coverage_counts`): the fraction of true joint coordinates within 1 and 2 standard
-deviations on their axis (Gaussian: 68.3 / 95.4 %) and of whole joints inside the 1- and 2-sigma
-ellipsoid (chi-square with 3 degrees of freedom: 19.9 / 73.9 %), over all joints, over those read
-from depth and over those filled from the prior.
+the distance between the predicted and the true hip centres, the mean of the two hips), the wrists'
+metric error (mm), jitter (:func:`~pose_lifter.mocap.evaluation.frame_figures`' acceleration error,
+on the metric joints), the share of joints read from depth, and the coverage of the predicted
+standard deviations (:func:`coverage_counts`): the fraction of true joint coordinates within 1 and
+2 standard deviations on their axis (Gaussian: 68.3 / 95.4 %) and of whole joints inside the 1- and
+2-sigma ellipsoid (chi-square with 3 degrees of freedom: 19.9 / 73.9 %), over all joints, over
+those read from depth and over those filled from the prior.
 """
 
 from __future__ import annotations
@@ -84,6 +84,9 @@ ELEVATED = 30.0
 INTRINSICS: CameraIntrinsics = ((ev.FOCAL, ev.FOCAL), (float(ev.CENTRE[0]), float(ev.CENTRE[1])))
 IMAGE_SIZE = (int(ev.IMAGE_SIZE[0]), int(ev.IMAGE_SIZE[1]))  #: (width, height) pixels
 HIPS = (JOINT_NAMES.index("left_hip"), JOINT_NAMES.index("right_hip"))
+#: The wrists: the joints a robot reaches for, and the ones the depth reads worst (an arm across or
+#: behind the body).
+WRISTS = (JOINT_NAMES.index("left_wrist"), JOINT_NAMES.index("right_wrist"))
 #: Gaussian coverage of k standard deviations: on one axis, and of a 3D joint's k-sigma ellipsoid
 #: (chi-square with 3 degrees of freedom), k = 1, 2.
 AXIS_TARGETS = (0.683, 0.954)
@@ -91,7 +94,7 @@ JOINT_TARGETS = (0.199, 0.739)
 #: The joints a coverage is counted over: all, those read from depth, those filled from the prior.
 GROUPS = ("all", "depth", "prior")
 #: The figures averaged over the frames (mm; ``from_depth`` a fraction of the joints).
-FIGURES = ("p_mpjpe", "mpjpe", "root", "jitter", "from_depth")
+FIGURES = ("p_mpjpe", "mpjpe", "root", "wrists", "jitter", "from_depth")
 #: The node's ``output_lag`` of ``fused-lag`` (frames).
 LAG = 3
 
@@ -140,12 +143,14 @@ def root_error(pred: NDArray[np.float64], truth: NDArray[np.float64]) -> NDArray
 def rgbd_figures(pred: NDArray[np.float64], truth: NDArray[np.float64]) -> dict[str, list[float]]:
     """Per frame (lists of T; mm; NaN where not lifted) of placed poses ``pred`` against the true
     joints ``truth`` (both (T, 12, 3), metres, camera frame): ``p_mpjpe`` (similarity-aligned),
-    ``mpjpe`` (no alignment), ``root`` (:func:`root_error`) and ``jitter`` (acceleration error,
-    mm per frame^2)."""
+    ``mpjpe`` (no alignment), ``root`` (:func:`root_error`), ``jitter`` (acceleration error,
+    mm per frame^2) and ``wrists`` (the metric error of the two wrists, :data:`WRISTS`)."""
     figures = ev.frame_figures(pred, truth)
     root = 1000.0 * root_error(pred, truth)
+    w = list(WRISTS)
+    wrists = 1000.0 * np.linalg.norm(pred[:, w] - truth[:, w], axis=-1).mean(axis=1)
     return {"p_mpjpe": figures["p_mpjpe"], "mpjpe": figures["mpjpe"], "root": root.tolist(),
-            "jitter": figures["jitter"]}
+            "wrists": wrists.tolist(), "jitter": figures["jitter"]}
 
 
 def coverage_counts(err: NDArray[np.float64], std: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -418,13 +423,14 @@ def render_table(table: dict[str, dict[str, dict[str, Any]]], methods: Sequence[
                  footer: str = "") -> str:
     """The markdown of a :func:`summarise` table: ``header``, a row per distance and method of
     the errors, then of the coverage, ``footer``."""
-    lines = [header, "", "| distance | method | P-MPJPE (mm) | metric MPJPE (mm) | root (mm) "
-             "| jitter (mm/frame^2) | read from depth | frames lifted |", "|---|---|---|---|---|---|---|---|"]
+    lines = [header, "", "| distance | method | P-MPJPE (mm) | metric MPJPE (mm) | root (mm) | wrists (mm) "
+             "| jitter (mm/frame^2) | read from depth | frames lifted |", "|---" * 9 + "|"]
     for d, row in table.items():
         for m in methods:
             v = row[m]
             lines.append(f"| {d} | {m} | {v['p_mpjpe']:.1f} | {v['mpjpe']:.1f} | {v['root']:.1f} | "
-                         f"{v['jitter']:.1f} | {100 * v['from_depth']:.1f} % | {100 * v['lifted']:.1f} % |")
+                         f"{v['wrists']:.1f} | {v['jitter']:.1f} | {100 * v['from_depth']:.1f} % | "
+                         f"{100 * v['lifted']:.1f} % |")
     lines += ["", f"Coverage (%) of the predicted standard deviations: true coordinates within 1 / 2 sigma "
               f"per axis (Gaussian {100 * AXIS_TARGETS[0]:.1f} / {100 * AXIS_TARGETS[1]:.1f}), true joints "
               f"inside the 1 / 2 sigma ellipsoid (chi-square, 3 dof: {100 * JOINT_TARGETS[0]:.1f} / "
