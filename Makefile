@@ -118,7 +118,7 @@ bench-collection: venv
 # the priors' layer pass per row at a few row counts, with the CPU model, numba's target and
 # OpenBLAS's kernel: what differs between machines (docs/bench.md, the CPU kinds)
 bench-prior: venv
-	$(PY) tools/bench_prior_rows.py
+	$(PY) tools/bench.py --prior-rows
 
 # a refactor that changes no result keeps these hashes (on one machine and install; tools/lift_hash.py)
 lift-hash: venv
