@@ -87,6 +87,13 @@ BEHAVIOUR = [
           "return np.where((weights > 0.0)[:, :, None], held, centroid[:, None, :]), weights",
           "return np.where(bad[:, :, None], 0.0, points), weights", "tests/core/test_validation.py",
           "where_a_missing_joint_was_put"),
+    Plant("the depth readings without the surface-to-joint offset", "core/depth/fuse.py",
+          "d = read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]",
+          "d = read.surface.reshape(n, N_JOINTS)", "tests/core/depth/test_fuse.py",
+          "exact_readings"),
+    Plant("the published uncertainty doubled", "core/depth/uncertainty.py",
+          "return np.asarray(np.hypot(shape, root))", "return np.asarray(2.0 * np.hypot(shape, root))",
+          "tests/mocap/test_rgbd_evaluation.py", "published_uncertainty"),
 ]
 
 PLANTS = KERNEL + BEHAVIOUR
