@@ -130,3 +130,20 @@ def test_bad_depth_input_warns_and_the_lift_goes_on(start_lifter: Any, graph: Gr
     key = "frames without depth: depth: unsupported encoding"
     graph.spin_until(lambda: any(int(_status(d)[2].get(key, "0")) > 0 for d in diags), 30.0,
                      "the refused images counted in /diagnostics")
+
+
+def test_one_topics_qos_override_stays_on_its_topic(start_lifter: Any, graph: GraphClient) -> None:
+    """rclpy writes a topic's ``qos_overrides`` into the profile it is given: camera_info made
+    reliable must leave the keypoints best effort (a shared profile carried it over, and a
+    best-effort detector's keypoints then never arrived)."""
+    from rclpy.qos import ReliabilityPolicy
+
+    lifter = start_lifter(params={"qos_overrides./camera_info.subscription.reliability": "reliable",
+                                  "depth_topic": TOPIC_DEPTH})
+    graph.wait_for_lifter(lifter)
+    graph.spin_until(lambda: bool(graph.node.get_subscriptions_info_by_topic(TOPIC_DEPTH)), 60.0,
+                     "the lifter's depth subscription")
+    policy = {t: graph.node.get_subscriptions_info_by_topic(t)[0].qos_profile.reliability
+              for t in ("/camera_info", "/keypoints_2d", TOPIC_DEPTH)}
+    reliable, best_effort = ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT
+    assert policy == {"/camera_info": reliable, "/keypoints_2d": best_effort, TOPIC_DEPTH: reliable}
