@@ -159,6 +159,18 @@ def test_a_wrist_behind_the_torso_is_hidden(wrist_z: float, hidden: bool) -> Non
     assert not got[0, [0, 3, 6, 9]].any()  # the torso's own joints are never hidden by it
 
 
+def test_seen_from_the_side_the_trunk_hides_the_far_shoulder_and_hip() -> None:
+    """The body of the test above turned 90 degrees about the vertical: the far shoulder and hip
+    (and the far arm's elbow) lie behind the trunk on their pixels, the near ones are seen."""
+    front = np.array([[0.2, -0.5, 3.0], [0.3, -0.2, 3.0], [0.35, 0.0, 3.0], [-0.2, -0.5, 3.0],
+                      [-0.3, -0.2, 3.0], [-0.35, 0.0, 3.0], [0.15, 0.1, 3.0], [0.15, 0.5, 3.0],
+                      [0.15, 0.9, 3.0], [-0.15, 0.1, 3.0], [-0.15, 0.5, 3.0], [-0.15, 0.9, 3.0]])
+    side = np.stack([front[:, 2] - 3.0, front[:, 1], 3.0 + front[:, 0]], axis=1)  # the left side is far
+    got = _hidden(side[None], _project(side)[None], np.ones((1, 12), dtype=bool), K, 0.08)[0]
+    assert got[[0, 1, 6]].all()  # left shoulder, elbow, hip: behind the trunk
+    assert not got[[3, 4, 9]].any()  # right shoulder, elbow, hip: in front
+
+
 def test_readings_fuse_a_later_pose_without_the_image() -> None:
     """A frame's readings fuse another pose of the same people (refined over later frames) as the
     image would: the readings do not depend on the pose beyond the occlusion test."""

@@ -113,8 +113,10 @@ def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates
     """Which ``candidates`` (n, 12) joints of the placed bodies ``joints`` (n, 12, 3) another body
     part hides at their keypoints ``pixels`` (n, 12, 2): a limb (a capsule of
     :data:`_LIMB_RADIUS`) or a torso (the shoulders' and hips' quadrilateral, its front
-    :data:`_TORSO_HALF_DEPTH` before them) of any body, not the joint's own, whose surface on the
-    joint's pixel is nearer than the joint's surface by more than ``margin`` metres."""
+    :data:`_TORSO_HALF_DEPTH` before them) of any body, not the joint's own, or a trunk (a capsule
+    of that radius from the shoulders' midpoint to the hips', the joint's own too: seen from the
+    side it hides the far shoulder, hip and arm), whose surface on the joint's pixel is nearer than
+    the joint's surface by more than ``margin`` metres."""
     (fx, fy), (cx, cy) = intrinsics
     z = np.maximum(joints[..., 2], 1e-3)
     proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)

@@ -118,6 +118,22 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
                         break
                 if found:
                     break
+                # the trunk: a capsule of radius torso_half_depth from the shoulders' midpoint to the
+                # hips', every joint's own too (seen from the side it covers the far shoulder, hip and
+                # an arm behind it)
+                au = 0.5 * (proj[o, torso[0, 0], 0] + proj[o, torso[0, 1], 0])
+                av = 0.5 * (proj[o, torso[0, 0], 1] + proj[o, torso[0, 1], 1])
+                za = 0.5 * (z[o, torso[0, 0]] + z[o, torso[0, 1]])
+                eu = 0.5 * (proj[o, torso[0, 2], 0] + proj[o, torso[1, 2], 0]) - au
+                ev = 0.5 * (proj[o, torso[0, 2], 1] + proj[o, torso[1, 2], 1]) - av
+                ze = 0.5 * (z[o, torso[0, 2]] + z[o, torso[1, 2]]) - za
+                du, dv = qu - au, qv - av
+                tau = min(max((du * eu + dv * ev) / max(eu * eu + ev * ev, 1e-9), 0.0), 1.0)
+                zs = za + tau * ze
+                if (math.hypot(du - tau * eu, dv - tau * ev) < torso_half_depth * focal / max(zs, 1e-3)
+                        and zs - torso_half_depth < limit):
+                    found = True
+                    break
                 if o == p and (j == torso[0, 0] or j == torso[0, 1] or j == torso[0, 2] or j == torso[1, 2]):
                     continue
                 for t in range(torso.shape[0]):
