@@ -160,15 +160,15 @@ def test_a_wrist_behind_the_torso_is_hidden(wrist_z: float, hidden: bool) -> Non
 
 
 def test_seen_from_the_side_the_trunk_hides_the_far_shoulder_and_hip() -> None:
-    """The body of the test above turned 90 degrees about the vertical: the far shoulder and hip
-    (and the far arm's elbow) lie behind the trunk on their pixels, the near ones are seen."""
-    front = np.array([[0.2, -0.5, 3.0], [0.3, -0.2, 3.0], [0.35, 0.0, 3.0], [-0.2, -0.5, 3.0],
-                      [-0.3, -0.2, 3.0], [-0.35, 0.0, 3.0], [0.15, 0.1, 3.0], [0.15, 0.5, 3.0],
-                      [0.15, 0.9, 3.0], [-0.15, 0.1, 3.0], [-0.15, 0.5, 3.0], [-0.15, 0.9, 3.0]])
-    side = np.stack([front[:, 2] - 3.0, front[:, 1], 3.0 + front[:, 0]], axis=1)  # the left side is far
+    """A body seen from its right side, its right arm and leg reaching forward (off the trunk's
+    image): its left shoulder and hip lie behind the trunk on their pixels, no limb in front of
+    them; the right ones are seen."""
+    side = np.array([[0.0, -0.5, 3.2], [0.0, -0.2, 3.25], [0.0, 0.05, 3.25], [0.0, -0.5, 2.8],
+                     [0.3, -0.45, 2.8], [0.6, -0.45, 2.8], [0.0, 0.1, 3.15], [0.0, 0.5, 3.15],
+                     [0.0, 0.9, 3.15], [0.0, 0.1, 2.85], [0.35, 0.4, 2.85], [0.4, 0.8, 2.85]])
     got = _hidden(side[None], _project(side)[None], np.ones((1, 12), dtype=bool), K, 0.08)[0]
-    assert got[[0, 1, 6]].all()  # left shoulder, elbow, hip: behind the trunk
-    assert not got[[3, 4, 9]].any()  # right shoulder, elbow, hip: in front
+    assert got[[0, 6]].all()  # left shoulder, left hip: behind the trunk
+    assert not got[[3, 4, 5, 9, 10, 11]].any()  # the right side: in front
 
 
 def test_readings_fuse_a_later_pose_without_the_image() -> None:
