@@ -115,6 +115,13 @@ class StartupError(Exception):
 _DEFAULT_OPTIONS: Final[LifterOptions] = LifterOptions()
 
 
+def _own(profile: QoSProfile) -> QoSProfile:
+    """A copy of ``profile`` for one topic: rclpy writes a topic's ``qos_overrides`` into the
+    profile it is given, so a profile shared by two topics would carry one's override to the other
+    (camera_info made reliable made the keypoints reliable)."""
+    return copy.copy(profile)
+
+
 def freeze_long_lived() -> None:
     """Move what the node now holds for as long as it runs (rclpy, numba and its kernels, the
     bases, the prior, the lifter) out of the garbage collector's generations, so that a full
@@ -188,9 +195,9 @@ class LifterNode(Node):
         qos_override = QoSOverridingOptions.with_default_policies()
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._pub_skeletons = self.create_publisher(
-            self._types.Skeleton3DArray, "skeletons_3d", reliable, qos_overriding_options=qos_override)
+            self._types.Skeleton3DArray, "skeletons_3d", _own(reliable), qos_overriding_options=qos_override)
         self._pub_markers = self.create_publisher(
-            self._types.MarkerArray, "skeleton_markers", reliable, qos_overriding_options=qos_override)
+            self._types.MarkerArray, "skeleton_markers", _own(reliable), qos_overriding_options=qos_override)
         self._diagnostics = diagnostics.LifterDiagnostics(self, float(self._param("diagnostics_period")),
                                                          self._counts)
         self._hri = self._hri_outputs()
@@ -202,28 +209,26 @@ class LifterNode(Node):
 
     def activate_lifter(self) -> None:
         """Subscribe to the inputs (and start the statistics timer): lifting starts."""
-        # each subscription its own profile: rclpy writes a topic's qos_overrides into the profile
-        # it is given (a shared one would carry one topic's override to the next)
         qos_override = QoSOverridingOptions.with_default_policies()
         options = self._lifter.options
         # camera_info first: when an image's camera_info and keypoints are both waiting, the
         # executor serves subscriptions in creation order, so the keypoints see that camera_info
         self._sub_camera_info = self.create_subscription(
-            self._types.CameraInfo, "camera_info", self.on_camera_info, copy.copy(qos_profile_sensor_data),
+            self._types.CameraInfo, "camera_info", self.on_camera_info, _own(qos_profile_sensor_data),
             qos_overriding_options=qos_override)
         # the depth images before the keypoints (the frame's image is then held when it is lifted);
         # reliable, as cameras publish them: best effort loses most 0.6 MB images in fragments
         frame = self._settings.frame
         if frame.depth_topic:
             self._depth = DepthInput(self, frame.depth_topic, frame.depth_tolerance, self._counts.depth,
-                                     self._throttle.warn, self._camera, copy.copy(DEPTH_QOS), qos_override)
+                                     self._throttle.warn, self._camera, _own(DEPTH_QOS), qos_override)
             self._stream.depth_of = self._depth.depth_of
             self._diagnostics.depth_warning = self._depth.silence
         # a callback of (message, MessageInfo), which rclpy takes (its stubs know one argument only);
         # raw: the serialised frame, read into arrays when it is lifted (AnswerStream.answer)
         self._sub_keypoints = self.create_subscription(
             self._types.Skeleton2DArray, "keypoints_2d", self.on_keypoints,  # type: ignore[arg-type]
-            copy.copy(qos_profile_sensor_data), qos_overriding_options=qos_override, raw=True)
+            _own(qos_profile_sensor_data), qos_overriding_options=qos_override, raw=True)
         # triggered while frames wait after a lift: the executor comes back for the next one
         # between its other callbacks (camera_info, timers, parameter services)
         self._more = self.create_guard_condition(self._lift_next)
