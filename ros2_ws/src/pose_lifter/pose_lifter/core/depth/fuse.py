@@ -31,9 +31,9 @@ placed depths scaled (the body's size and distance together) and tilted across t
    reading is the joint's (a Gaussian about the field against a stray surface uniform over the
    depth band, :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`; the joint's
    variance is the mixture's), and the joint moved along its ray to that depth: the lift's image
-   of the joint, which the prior has denoised, is kept (the 2D keypoint's
-   own ray is noisier: on the training split it costs ~10 mm of P-MPJPE at 3 m). A body without a
-   kept reading keeps the monocular placement and its uncertainty.
+   of the joint, which the prior has denoised, is kept (the 2D keypoint's own ray is noisier: on
+   the training split it costs ~10 mm of P-MPJPE at 3 m). A body without a kept reading keeps the
+   monocular placement and its uncertainty.
 
 :func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
 the readings only: a pose refined over later frames is fused with its frame's readings without

@@ -94,6 +94,16 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
     (n, 12, 2) the keypoints, ``surface`` (n, 12) each joint's surface depth, ``limbs`` (8, 2),
     ``limb_radius`` (8,), ``torso`` (2, 3) the torso's triangles."""
     n = proj.shape[0]
+    # each body's trunk axis: the shoulders' midpoint (image, depth) and the way to the hips'
+    trunk = np.empty((n, 6))
+    for o in range(n):
+        sl, sr, hr, hl = torso[0, 0], torso[0, 1], torso[0, 2], torso[1, 2]
+        trunk[o, 0] = 0.5 * (proj[o, sl, 0] + proj[o, sr, 0])
+        trunk[o, 1] = 0.5 * (proj[o, sl, 1] + proj[o, sr, 1])
+        trunk[o, 2] = 0.5 * (z[o, sl] + z[o, sr])
+        trunk[o, 3] = 0.5 * (proj[o, hl, 0] + proj[o, hr, 0]) - trunk[o, 0]
+        trunk[o, 4] = 0.5 * (proj[o, hl, 1] + proj[o, hr, 1]) - trunk[o, 1]
+        trunk[o, 5] = 0.5 * (z[o, hl] + z[o, hr]) - trunk[o, 2]
     for p in range(n):
         for j in range(proj.shape[1]):
             if not candidates[p, j]:
@@ -121,12 +131,8 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
                 # the trunk: a capsule of radius torso_half_depth from the shoulders' midpoint to the
                 # hips', every joint's own too (seen from the side it covers the far shoulder, hip and
                 # an arm behind it)
-                au = 0.5 * (proj[o, torso[0, 0], 0] + proj[o, torso[0, 1], 0])
-                av = 0.5 * (proj[o, torso[0, 0], 1] + proj[o, torso[0, 1], 1])
-                za = 0.5 * (z[o, torso[0, 0]] + z[o, torso[0, 1]])
-                eu = 0.5 * (proj[o, torso[0, 2], 0] + proj[o, torso[1, 2], 0]) - au
-                ev = 0.5 * (proj[o, torso[0, 2], 1] + proj[o, torso[1, 2], 1]) - av
-                ze = 0.5 * (z[o, torso[0, 2]] + z[o, torso[1, 2]]) - za
+                au, av, za = trunk[o, 0], trunk[o, 1], trunk[o, 2]
+                eu, ev, ze = trunk[o, 3], trunk[o, 4], trunk[o, 5]
                 du, dv = qu - au, qv - av
                 tau = min(max((du * eu + dv * ev) / max(eu * eu + ev * ev, 1e-9), 0.0), 1.0)
                 zs = za + tau * ze
@@ -201,8 +207,8 @@ def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[
     ``sum_j rho((d_j - g_j . theta) / sigma_j) + (theta - mean)^T P (theta - mean) / 2`` (Tukey's rho,
     ``sigma_j^2 = v_j + (theta_0 shape_z_j)^2``) by iteratively reweighted least squares until no
     parameter moves by more than ``tol`` (relative, at least absolute) or ``max_iter``; fills
-    ``theta``, its covariance ``cov`` (n, 3, 3; the inverse of the
-    final normal matrix), ``objective``, ``n_iter`` and ``converged``."""
+    ``theta``, its covariance ``cov`` (n, 3, 3; the inverse of the final normal matrix),
+    ``objective``, ``n_iter`` and ``converged``."""
     for p in range(len(d)):
         th = theta0[p].copy()
         converged[p] = not have[p].any()
