@@ -58,7 +58,7 @@ from pose_lifter.core.depth.reading import (
 )
 from pose_lifter.core.depth.uncertainty import SHAPE_STD_M, body_std, monocular_scale_std, shape_std
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS
+from pose_lifter.core.model.skeleton import JOINT_NAMES, LIMBS, N_JOINTS
 from pose_lifter.core.track.placement import (
     DEFAULT_DISTANCE_M,
     DEFAULT_LEG_LENGTH_M,
@@ -71,10 +71,15 @@ __all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fus
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
     [0.5 * (LIMB_RADIUS_M[a] + LIMB_RADIUS_M[b]) for a, b in LIMBS])
-#: Half the torso's depth, metres: its front lies this much before the shoulders' and hips' plane.
+#: The trunk as an occluder: an elliptic cylinder along the spine, from below the hips' midpoint to
+#: above the shoulders', its half axes across the hips and front to back (an adult torso about
+#: 0.33 m wide and 0.2 m deep: ANSUR 1988 chest breadth and depth), metres.
+_TORSO_HALF_WIDTH: Final[float] = 0.165
 _TORSO_HALF_DEPTH: Final[float] = 0.1
-#: The torso as two triangles of joints (left shoulder, right shoulder, right hip, left hip).
-_TORSO: Final[NDArray[np.int64]] = np.array([[0, 3, 9], [0, 9, 6]], dtype=np.int64)
+_TORSO_BELOW_HIPS: Final[float] = 0.06
+_TORSO_ABOVE_SHOULDERS: Final[float] = 0.04
+_L_SHOULDER, _R_SHOULDER, _L_HIP, _R_HIP = (JOINT_NAMES.index(f"{s}_{j}") for j in ("shoulder", "hip")
+                                              for s in ("left", "right"))
 _LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(LIMBS, dtype=np.int64)
 
 
@@ -108,23 +113,48 @@ class FusedPeople:
     objective: NDArray[np.float64]
 
 
+def _unit(v: NDArray[np.float64], fallback: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``v`` (n, 3) normalised, ``fallback`` (n, 3) where it is (nearly) zero."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), fallback)
+
+
+def _trunks(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                  NDArray[np.float64]]:
+    """Each body's trunk (``joints`` (n, 12, 3)): the hips' midpoint (n, 3), the axes (n, 3, 3) as
+    rows (right hip to left hip, up the spine, the facing direction: the body frame of
+    :func:`~pose_lifter.core.model.skeleton.body_frame`) and its ends along the spine (n, 2)."""
+    hips = 0.5 * (joints[:, _L_HIP] + joints[:, _R_HIP])
+    up = 0.5 * (joints[:, _L_SHOULDER] + joints[:, _R_SHOULDER]) - hips
+    ex = np.broadcast_to(np.array([1.0, 0.0, 0.0]), hips.shape)
+    across = _unit(joints[:, _L_SHOULDER] - joints[:, _R_SHOULDER], ex)
+    x = _unit(joints[:, _L_HIP] - joints[:, _R_HIP], across)
+    helper = np.where(np.abs(x[:, 2:]) < 0.9, np.array([0.0, 0.0, 1.0]), ex)  # not along x
+    y = _unit(up - np.sum(up * x, axis=-1, keepdims=True) * x, _unit(np.cross(x, helper), ex))
+    axes = np.stack([x, y, np.cross(x, y)], axis=1)
+    extent = np.stack([np.full(len(hips), -_TORSO_BELOW_HIPS),
+                       np.sum(up * y, axis=-1) + _TORSO_ABOVE_SHOULDERS], axis=-1)
+    return hips, axes, extent
+
+
 def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates: NDArray[np.bool_],
             intrinsics: CameraIntrinsics, margin: float) -> NDArray[np.bool_]:
     """Which ``candidates`` (n, 12) joints of the placed bodies ``joints`` (n, 12, 3) another body
     part hides at their keypoints ``pixels`` (n, 12, 2): a limb (a capsule of
-    :data:`_LIMB_RADIUS`) or a torso (the shoulders' and hips' quadrilateral, its front
-    :data:`_TORSO_HALF_DEPTH` before them) of any body, not the joint's own, or a trunk (a capsule
-    of that radius from the shoulders' midpoint to the hips', the joint's own too: seen from the
-    side it hides the far shoulder, hip and arm), whose surface on the joint's pixel is nearer than
-    the joint's surface by more than ``margin`` metres."""
+    :data:`_LIMB_RADIUS`) of any body, not one of the joint's own limbs, or a trunk (an elliptic
+    cylinder, :data:`_TORSO_HALF_WIDTH`) of any body, the joint's own too (seen from the side it
+    hides the far shoulder, hip and arm), whose surface on the joint's pixel is nearer than the
+    joint's surface by more than ``margin`` metres."""
     (fx, fy), (cx, cy) = intrinsics
     z = np.maximum(joints[..., 2], 1e-3)
     proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)
+    origin, axes, extent = _trunks(joints)
     hidden = np.zeros(candidates.shape, dtype=bool)
     hidden_kernel(np.ascontiguousarray(proj), np.ascontiguousarray(z), np.ascontiguousarray(candidates),
                   np.ascontiguousarray(pixels, dtype=np.float64), joints[..., 2] - SURFACE_OFFSET_M[None],
-                  _LIMB_ARRAY, _LIMB_RADIUS, _TORSO, _TORSO_HALF_DEPTH, 0.5 * (float(fx) + float(fy)), margin,
-                  hidden)
+                  _LIMB_ARRAY, _LIMB_RADIUS, np.ascontiguousarray(origin), np.ascontiguousarray(axes),
+                  np.ascontiguousarray(extent), _TORSO_HALF_WIDTH, _TORSO_HALF_DEPTH,
+                  np.array([fx, fy, cx, cy], dtype=np.float64), margin, hidden)
     return hidden
 
 
