@@ -186,3 +186,43 @@ def test_readings_fuse_a_later_pose_without_the_image() -> None:
     direct = fuse_depth(img, *args, other[None], np.array([scale]), centre[None])
     assert np.allclose(later.joints_m, direct.joints_m, atol=ROUND_OFF_ACCUMULATED)
     assert np.allclose(later.std_m, direct.std_m, atol=ROUND_OFF_ACCUMULATED)
+
+
+def test_the_conditioning_is_the_textbook_gaussian_one() -> None:
+    """``_condition`` against the conditional mean and covariance computed on the read joints
+    alone, ``m + S[:, R] (S[R, R] + V)^-1 (d_R - m_R)``, for random priors and reading sets."""
+    from pose_lifter.core.depth.fuse import _condition
+    from tolerances import DEPTH_CONDITIONING
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        a = 0.05 * rng.standard_normal((12, 12))
+        prior = a @ a.T + 1e-4 * np.eye(12)
+        mean = 3.0 + 0.1 * rng.standard_normal(12)
+        d = mean + 0.05 * rng.standard_normal(12)
+        v = 1e-4 * (1.0 + rng.random(12))
+        kept = rng.random(12) < 0.6
+        r = np.flatnonzero(kept)
+        gain = prior[:, r] @ np.linalg.inv(prior[np.ix_(r, r)] + np.diag(v[r]))
+        want_z = mean + gain @ (d[r] - mean[r])
+        want_sd = np.sqrt(np.diag(prior - gain @ prior[r, :]))
+        z, sd = _condition(mean[None], prior[None], d[None], v[None], kept[None])
+        assert np.abs(z[0] - want_z).max() < DEPTH_CONDITIONING
+        assert np.abs(sd[0] - want_sd).max() < DEPTH_CONDITIONING
+
+
+def test_a_read_elbow_takes_its_unread_wrist_along() -> None:
+    """The left elbow and wrist lie 8 cm deeper than the lift says (an arm leaning away), the
+    wrist unseen by the 2D: the elbow's reading moves the wrist with it through the shape's
+    correlation between them (a fusion of independent joints leaves it where the lift put it)."""
+    pose, centre, scale, truth = _body(k=1.0)
+    lifted = truth.copy()
+    truth[[1, 2], 2] += 0.08
+    w = np.ones(12)
+    w[2] = 0.0
+    fused = fuse_depth(_painted(truth), K, _project(truth)[None], w[None], pose[None], np.array([scale]),
+                       centre[None])
+    assert fused.from_depth[0, 1] and not fused.from_depth[0, 2]
+    elbow, wrist = fused.joints_m[0, [1, 2], 2] - lifted[[1, 2], 2]
+    assert 0.5 * 0.08 < elbow < 0.08 + 0.01  # the elbow: most of the way to its reading
+    assert 0.5 * elbow < wrist < 0.08 + 0.01  # the wrist: along with it, not past the truth

@@ -24,16 +24,20 @@ placed depths scaled (the body's size and distance together) and tilted across t
    :attr:`~pose_lifter.core.depth.reading.DepthOptions.tilt_std`), by iteratively reweighted least
    squares from ``k`` the median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or
    ``max_iter``. Readings beyond ``gate`` standard deviations of the field are dropped.
-5. **Fuse**: each joint moves along its ray to the field's depth ``g_j . theta`` (its standard
-   deviation from the fit's covariance); a kept reading's depth ``d_j`` is combined with it by
-   their inverse variances (``v_j``; the field's and the shape's,
-   :func:`~pose_lifter.core.depth.uncertainty.shape_std`), weighted by the probability that the
-   reading is the joint's (a Gaussian about the field against a stray surface uniform over the
-   depth band, :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`; the joint's
-   variance is the mixture's), and the joint moved along its ray to that depth: the lift's image
-   of the joint, which the prior has denoised, is kept (the 2D keypoint's own ray is noisier: on
-   the training split it costs ~10 mm of P-MPJPE at 3 m). A body without a kept reading keeps the
-   monocular placement and its uncertainty.
+5. **Fuse**: the true depths are Gaussian about the field's, ``z ~ N(g . theta, S)``, ``S`` the
+   shape's covariance (per joint :func:`~pose_lifter.core.depth.uncertainty.shape_std`, correlated
+   between joints by :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's
+   (from the fit's covariance); each kept reading is ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j / p_j)``,
+   ``p_j`` the probability that the reading is the joint's (a Gaussian about the field against a
+   stray surface uniform over the depth band,
+   :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`; below 1/2 the reading is
+   dropped). The depths are the conditional mean given the readings and their standard deviations
+   the conditional ones: a reading moves its own joint, and through the correlations the joints
+   the depth does not read (an elbow read farther than the field takes its hidden wrist along).
+   Each joint moves along its ray to its depth: the lift's image of the joint, which the prior has
+   denoised, is kept (the 2D keypoint's own ray is noisier: on the training split it costs ~10 mm
+   of P-MPJPE at 3 m). A body without a kept reading keeps the monocular placement and its
+   uncertainty.
 
 :func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
 the readings only: a pose refined over later frames is fused with its frame's readings without
@@ -56,7 +60,13 @@ from pose_lifter.core.depth.reading import (
     joint_radius_px,
     read_patches,
 )
-from pose_lifter.core.depth.uncertainty import SHAPE_STD_M, body_std, monocular_scale_std, shape_std
+from pose_lifter.core.depth.uncertainty import (
+    SHAPE_CORR_Z,
+    SHAPE_STD_M,
+    body_std,
+    monocular_scale_std,
+    shape_std,
+)
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.skeleton import JOINT_NAMES, LIMBS, N_JOINTS
 from pose_lifter.core.track.placement import (
@@ -80,6 +90,8 @@ _TORSO_BELOW_HIPS: Final[float] = 0.06
 _TORSO_ABOVE_SHOULDERS: Final[float] = 0.04
 _L_SHOULDER, _R_SHOULDER, _L_HIP, _R_HIP = (JOINT_NAMES.index(f"{s}_{j}") for j in ("shoulder", "hip")
                                               for s in ("left", "right"))
+#: A joint without a reading enters the conditioning with this variance (m^2): no weight.
+_UNREAD_VAR: Final[float] = 1e6
 _LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(LIMBS, dtype=np.int64)
 
 
@@ -334,15 +346,13 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     band = 2.0 * (opt.band_m + opt.band_fraction * model_z)
     p_in = np.where(kept, (1.0 - opt.outlier_share) * dens_in
                     / ((1.0 - opt.outlier_share) * dens_in + opt.outlier_share / band), 0.0)
-    z_read = (model_z * v + d * var_body) / var_in  # the joint's depth if the reading is its own
-    var_read = v * var_body / var_in
-    z = p_in * z_read + (1.0 - p_in) * model_z
-    z_std = np.sqrt(p_in * var_read + (1.0 - p_in) * var_body + p_in * (1.0 - p_in) * (z_read - model_z) ** 2)
     kept &= p_in >= 0.5
+    z, z_std = _condition(model_z, _depth_cov(shape[..., 2], g, cov, root[..., 2], mono),
+                          d, v / np.maximum(p_in, 0.5), kept)
     joints = body * (z / model_z)[..., None]
     along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
     std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
-    std[..., 2] = np.where(kept, z_std, std[..., 2])
+    std[..., 2] = z_std
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
@@ -350,6 +360,37 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
         kept[bad] = False
     k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
+
+
+def _depth_cov(shape_z: NDArray[np.float64], g: NDArray[np.float64], cov: NDArray[np.float64],
+               root_z: NDArray[np.float64], mono: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The covariance (n, 12, 12) of the true depths about the depth field's: the shape's
+    (``shape_z`` (n, 12) standard deviations, correlated between joints by
+    :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's (``g`` (n, 12, 3)
+    its regressors, ``cov`` (n, 3, 3) its parameters' covariance), or for the bodies left at the
+    monocular placement (``mono`` (n,)) the placement's scale error (``root_z`` (n, 12), fully
+    correlated: the body slides along its rays as a whole)."""
+    field = np.einsum("njc,ncd,nkd->njk", g, cov, g)
+    place = root_z[:, :, None] * root_z[:, None, :]
+    shape = shape_z[:, :, None] * SHAPE_CORR_Z[None] * shape_z[:, None, :]
+    return np.asarray(shape + np.where(mono[:, None, None], place, field))
+
+
+def _condition(mean: NDArray[np.float64], prior: NDArray[np.float64], d: NDArray[np.float64],
+               v: NDArray[np.float64], kept: NDArray[np.bool_]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The joints' depths (n, 12) and their standard deviations given the ``kept`` (n, 12)
+    readings ``d`` of variances ``v``: the Gaussian ``N(mean, prior)`` ((n, 12), (n, 12, 12))
+    conditioned on ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j)``, so a reading moves its joint and,
+    through the prior's correlations, the joints without one. A joint without a reading gets the
+    variance :data:`_UNREAD_VAR` in the solve (it drops out)."""
+    noise = np.where(kept, v, _UNREAD_VAR)
+    system = prior + noise[:, :, None] * np.eye(N_JOINTS)[None]
+    gain = np.linalg.solve(system, prior).transpose(0, 2, 1)  # prior @ system^-1 (both symmetric)
+    z = mean + np.einsum("njk,nk->nj", gain, np.where(kept, d - mean, 0.0))
+    post = prior - gain @ prior
+    var = np.diagonal(post, axis1=1, axis2=2)
+    return z, np.sqrt(np.maximum(var, 1e-3 * np.diagonal(prior, axis1=1, axis2=2)))
 
 
 def compile_kernels() -> None:
