@@ -28,10 +28,11 @@ placed depths scaled (the body's size and distance together) and tilted across t
    shape's covariance (per joint :func:`~pose_lifter.core.depth.uncertainty.shape_std`, correlated
    between joints by :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's
    (from the fit's covariance); each kept reading is ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j / p_j)``,
-   ``p_j`` the probability that the reading is the joint's (a Gaussian about the field against a
-   stray surface uniform over the depth band,
-   :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`; below 1/2 the reading is
-   dropped). The depths are the conditional mean given the readings and their standard deviations
+   ``p_j`` the probability that the reading is the joint's (a Gaussian against a stray surface
+   uniform over the depth band, :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`:
+   first about the field alone, then about what the other readings predict of the joint through
+   ``S``, leaving the reading out; below 1/2 the reading is dropped: a wrist read 22 cm before an
+   elbow read true is another surface, though within three of the field's own deviations). The depths are the conditional mean given the readings and their standard deviations
    the conditional ones: a reading moves its own joint, and through the correlations the joints
    the depth does not read (an elbow read farther than the field takes its hidden wrist along).
    Each joint moves along its ray to its depth: the lift's image of the joint, which the prior has
@@ -92,6 +93,9 @@ _L_SHOULDER, _R_SHOULDER, _L_HIP, _R_HIP = (JOINT_NAMES.index(f"{s}_{j}") for j 
                                               for s in ("left", "right"))
 #: A joint without a reading enters the conditioning with this variance (m^2): no weight.
 _UNREAD_VAR: Final[float] = 1e6
+#: The least inlier probability by which a reading's variance is divided in the leave-one-out
+#: predictions (a doubtful reading weighs little in the others' predictions, never nothing).
+_MIN_INLIER: Final[float] = 0.05
 _LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(LIMBS, dtype=np.int64)
 
 
@@ -339,16 +343,16 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     along_sd[mono] = mono_scale[mono, None]
     root = along_sd[..., None] * np.abs(body)
     var_body = shape[..., 2] ** 2 + root[..., 2] ** 2
-    # each reading is the joint's with the probability of its residual under a mixture: the
-    # joint's surface (Gaussian about the body's depth) or a stray surface (uniform over the band)
-    var_in = var_body + v
-    dens_in = np.exp(-0.5 * (d - model_z) ** 2 / var_in) / np.sqrt(2.0 * np.pi * var_in)
+    # each reading is the joint's with the probability of its residual under a mixture (the
+    # joint's surface, Gaussian; a stray surface, uniform over the band): its residual first from
+    # the field alone, then from what the other readings predict of its joint (leave one out)
     band = 2.0 * (opt.band_m + opt.band_fraction * model_z)
-    p_in = np.where(kept, (1.0 - opt.outlier_share) * dens_in
-                    / ((1.0 - opt.outlier_share) * dens_in + opt.outlier_share / band), 0.0)
+    p_in = _inlier(d - model_z, var_body + v, kept, band, opt.outlier_share)
+    prior = _depth_cov(shape[..., 2], g, cov, root[..., 2], mono)
+    loo, loo_var = _leave_one_out(prior, d - model_z, v / np.maximum(p_in, _MIN_INLIER), kept)
+    p_in = _inlier(loo, loo_var + v, kept, band, opt.outlier_share)
     kept &= p_in >= 0.5
-    z, z_std = _condition(model_z, _depth_cov(shape[..., 2], g, cov, root[..., 2], mono),
-                          d, v / np.maximum(p_in, 0.5), kept)
+    z, z_std = _condition(model_z, prior, d, v / np.maximum(p_in, 0.5), kept)
     joints = body * (z / model_z)[..., None]
     along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
     std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
@@ -374,6 +378,30 @@ def _depth_cov(shape_z: NDArray[np.float64], g: NDArray[np.float64], cov: NDArra
     place = root_z[:, :, None] * root_z[:, None, :]
     shape = shape_z[:, :, None] * SHAPE_CORR_Z[None] * shape_z[:, None, :]
     return np.asarray(shape + np.where(mono[:, None, None], place, field))
+
+
+def _inlier(residual: NDArray[np.float64], var: NDArray[np.float64], kept: NDArray[np.bool_],
+            band: NDArray[np.float64], share: float) -> NDArray[np.float64]:
+    """The probability (n, 12) that each ``kept`` reading is its joint's, from its ``residual``
+    of variance ``var`` if it is (Gaussian), against a stray surface (probability ``share``)
+    uniform over the depth ``band``; 0 where not ``kept``."""
+    dens = np.exp(-0.5 * residual**2 / var) / np.sqrt(2.0 * np.pi * var)
+    return np.where(kept, (1.0 - share) * dens / ((1.0 - share) * dens + share / band), 0.0)
+
+
+def _leave_one_out(prior: NDArray[np.float64], residual: NDArray[np.float64], v: NDArray[np.float64],
+                   kept: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each ``kept`` reading's residual (n, 12) from its joint's depth as the Gaussian
+    ``N(0, prior)`` conditioned on the other kept readings (``residual`` about the prior's mean,
+    variances ``v``) predicts it, and that prediction's variance (n, 12) (the reading's own noise
+    not included): ``a_j / C_jj`` and ``1 / C_jj - v_j``, ``C = (prior + diag(v))^-1``,
+    ``a = C residual`` (the closed form of leaving one observation out of a Gaussian
+    conditioning)."""
+    noise = np.where(kept, v, _UNREAD_VAR)
+    inv = np.linalg.inv(prior + noise[:, :, None] * np.eye(N_JOINTS)[None])
+    diag = np.diagonal(inv, axis1=1, axis2=2)
+    a = np.einsum("njk,nk->nj", inv, np.where(kept, residual, 0.0))
+    return a / diag, np.maximum(1.0 / diag - noise, 1e-3 * np.diagonal(prior, axis1=1, axis2=2))
 
 
 def _condition(mean: NDArray[np.float64], prior: NDArray[np.float64], d: NDArray[np.float64],
