@@ -33,8 +33,9 @@ placed depths scaled (the body's size and distance together) and tilted across t
    first about the field alone, then about what the other readings predict of the joint through
    ``S``, leaving the reading out; below 1/2 the reading is dropped: a wrist read 22 cm before an
    elbow read true is another surface, though within three of the field's own deviations). The
-   depths are the conditional mean given the readings and their standard deviations the
-   conditional ones: a reading moves its own joint, and through the correlations the joints
+   depths are the conditional mean given the readings, their standard deviations the conditional
+   ones where read and the marginal ones elsewhere (the correlations hold less on motion the prior
+   never saw): a reading moves its own joint, and through the correlations the joints
    the depth does not read (an elbow read farther than the field takes its hidden wrist along).
    Each joint moves along its ray to its depth: the lift's image of the joint, which the prior has
    denoised, is kept (the 2D keypoint's own ray is noisier: on the training split it costs ~10 mm
@@ -360,6 +361,10 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     p_in = _inlier(loo, loo_var + v, kept, band, opt.outlier_share)
     kept &= p_in >= 0.5
     z, z_std = _condition(model_z, prior, d, v / np.maximum(p_in, 0.5), kept)
+    # a joint without its own reading keeps its marginal deviation: the correlations, measured on
+    # motion the prior knows, hold less on motion it does not (on the cross-action folds the
+    # conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %)
+    z_std = np.where(kept, z_std, np.sqrt(np.diagonal(prior, axis1=1, axis2=2)))
     joints = body * (z / model_z)[..., None]
     along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
     std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
