@@ -403,3 +403,45 @@ def test_segments_of_real_tracks_are_as_accurate_as_whole_tracks(tmp_path: Path,
     assert [(f.stamp_ns, f.track_id, f.warm_started) for f in runs["cut"]] == [
         (f.stamp_ns, f.track_id, f.warm_started) for f in runs["whole"]]
     assert mpjpe["cut"] < 1.1 * mpjpe["whole"], mpjpe
+
+
+def test_pieces_of_a_long_track_share_the_workers_with_results_identical_to_one(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A long track is split into pieces (chains of their own, margins lifted and dropped) that
+    the workers share: every frame once, from the piece that keeps it, and the same skeletons with
+    one worker or two."""
+    from pose_lifter.core import Lifter, LifterOptions
+    from pose_lifter.offline import chains as ch
+
+    small = {"SEGMENT_FRAMES": 8, "SEGMENT_LEAD": 4, "PIECE_FRAMES": 20, "PIECE_MARGIN": 4}
+    for name, value in small.items():
+        monkeypatch.setattr(ch, name, value)
+    items = [ch.Item(i, i * 33_000_000, None, None) for i in range(45)]  # type: ignore[arg-type]
+    cut = ch.pieces(items)
+    assert cut == [(0, 0, 22, 26), (18, 22, 45, 45)]
+    bag = Path(__file__).resolve().parents[2] / "bags" / "two_people.mcap"
+    lifter = Lifter(options=LifterOptions())
+    runs = {}
+    for workers in (1, 2):
+        runs[workers] = offline.lift_bag(bag, tmp_path / f"w{workers}.mcap", lifter,
+                                         LiftSettings(max_messages=45), progress=False, workers=workers)[1]
+    one, two = runs[1], runs[2]
+    assert len(one) == 90
+    assert [(f.stamp_ns, f.track_id) for f in one] == [(f.stamp_ns, f.track_id) for f in two]
+    np.testing.assert_array_equal([f.joints_m for f in one], [f.joints_m for f in two])
+
+
+def test_a_pieces_kept_part_takes_its_items_and_their_rows() -> None:
+    """``kept_part``: the failures of the kept items, and the rows (and results) of those lifted."""
+    from dataclasses import fields
+
+    from pose_lifter.messages.cdr import SkeletonFrame
+    from pose_lifter.offline.chains import ChainLift, kept_part
+
+    frame = SkeletonFrame(*(np.arange(4) for _ in fields(SkeletonFrame)))
+    whole = ChainLift([None, "no", None, None, "no", None], frame, ["r0", "r1", "r2", "r3"])  # type: ignore[arg-type]
+    part = kept_part(whole, 1, 5)
+    assert part.failures == ["no", None, None, "no"] and part.results == ["r1", "r2"]
+    assert part.lifted.track_ids.tolist() == [1, 2]
+    assert kept_part(whole, 0, 1).results == ["r0"]
+    assert kept_part(whole, 5, 6).lifted.track_ids.tolist() == [3]

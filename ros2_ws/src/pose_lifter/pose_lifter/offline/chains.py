@@ -54,6 +54,8 @@ from pose_lifter.offline.depth import BagDepth
 
 __all__ = [
     "GROUP_CHAINS",
+    "PIECE_FRAMES",
+    "PIECE_MARGIN",
     "SEGMENT_FRAMES",
     "SEGMENT_LEAD",
     "CameraTimeline",
@@ -61,8 +63,10 @@ __all__ = [
     "ChainWork",
     "Item",
     "chain_groups",
+    "kept_part",
     "lift_chains",
     "lift_parallel",
+    "pieces",
     "refine_chain",
     "segments",
     "split_chains",
@@ -208,6 +212,37 @@ def segments(chain: list[Item]) -> list[tuple[int, int, int]]:
         return [(0, 0, n)]
     bounds = [round(i * n / count) for i in range(count + 1)]
     return [(max(0, a - SEGMENT_LEAD), a, b) for a, b in pairwise(bounds)]
+
+
+#: A track longer than :data:`PIECE_FRAMES` + 2 :data:`PIECE_MARGIN` frames is split into pieces of
+#: about ``PIECE_FRAMES`` kept frames (:func:`pieces`), lifted and refined as chains of their own
+#: (so the workers share a long track), each with ``PIECE_MARGIN`` frames more at either end that
+#: are lifted and refined but dropped: its first kept frame starts warm, as a segment's, and the
+#: centred smoothing and the offline update of its last kept frames see the frames after them.
+PIECE_FRAMES: Final[int] = 4 * SEGMENT_FRAMES
+PIECE_MARGIN: Final[int] = SEGMENT_LEAD
+
+
+def pieces(chain: list[Item]) -> list[tuple[int, int, int, int]]:
+    """A chain's pieces (:data:`PIECE_FRAMES`) as ``(start, first kept, end kept, end)`` item
+    indices: each lifted from ``start`` to ``end``, its outcomes kept from ``first kept`` to
+    ``end kept``; the kept ranges tile the chain. One piece for a short chain, or one whose stamps
+    do not increase strictly. They do not depend on the workers (results identical to one)."""
+    n = len(chain)
+    count = n // PIECE_FRAMES
+    if count < 2 or len(segments(chain)) < 2:
+        return [(0, 0, n, n)]
+    bounds = [round(i * n / count) for i in range(count + 1)]
+    return [(max(0, a - PIECE_MARGIN), a, b, min(n, b + PIECE_MARGIN)) for a, b in pairwise(bounds)]
+
+
+def kept_part(lifted: ChainLift, first: int, end: int) -> ChainLift:
+    """What lifting a chain gave for its items ``first`` to ``end`` (a piece's kept range)."""
+    rows = np.cumsum([f is None for f in lifted.failures])  # lifted rows up to each item, inclusive
+    r0 = int(rows[first - 1]) if first > 0 else 0
+    r1 = int(rows[end - 1]) if end > 0 else 0
+    return ChainLift(lifted.failures[first:end], lifted.lifted.take(np.arange(r0, r1, dtype=np.intp)),
+                     None if lifted.results is None else lifted.results[r0:r1])
 
 
 def chain_groups(chains: list[list[Item]], workers: int) -> list[list[int]]:

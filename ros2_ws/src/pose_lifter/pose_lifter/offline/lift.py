@@ -76,8 +76,10 @@ from pose_lifter.offline.chains import (
     ChainWork,
     Item,
     chain_groups,
+    kept_part,
     lift_chains,
     lift_parallel,
+    pieces,
     split_chains,
 )
 from pose_lifter.offline.depth import BagDepth, depth_topic_of, pair_depth
@@ -298,25 +300,32 @@ def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings,
                  workers: int, keep_results: bool, progress: bool, depth: BagDepth | None = None
                  ) -> list[tuple[list[Item], ChainLift]]:
     """Every chain lifted, in this process (``workers`` 1, or a single chain) or in ``workers``
-    forked processes (one group of chains each, :func:`chain_groups`): each chain's items with
-    what lifting them gave."""
+    forked processes (one group of chains each, :func:`chain_groups`), a long chain as its
+    :func:`~pose_lifter.offline.chains.pieces` (without depth): each chain's or piece's kept items
+    with what lifting them gave."""
     from tqdm import tqdm
 
-    bar = tqdm(total=sum(len(c) for c in chains), desc="lifting", unit="skeleton", disable=not progress)
-    if workers == 1 or len(chains) < 2:
-        parts: list[tuple[list[Item], ChainLift]] = []
-        for group in chain_groups(chains, 1):
+    # a long chain's pieces are chains of their own, each kept from its first to its last kept item
+    cut = [(c, *p) for c, chain in enumerate(chains)
+           for p in (pieces(chain) if depth is None else [(0, 0, len(chain), len(chain))])]
+    work_chains = [chains[c][a:e] for c, a, _, _, e in cut]
+    bar = tqdm(total=sum(len(c) for c in work_chains), desc="lifting", unit="skeleton", disable=not progress)
+    lifted: list[ChainLift]
+    if workers == 1 or len(work_chains) < 2:
+        lifted = [ChainLift.of([], keep_results)] * len(work_chains)
+        for group in chain_groups(work_chains, 1):
             # one list of outcomes per chain of the group: the bar advances by that chain's items
-            for c, outcomes in zip(group, lift_chains(lifter, [chains[c] for c in group], frame, smoothing_s,
-                                                      depth), strict=True):
-                parts.append((chains[c], ChainLift.of(outcomes, keep_results)))
+            for c, outcomes in zip(group, lift_chains(lifter, [work_chains[c] for c in group], frame,
+                                                      smoothing_s, depth), strict=True):
+                lifted[c] = ChainLift.of(outcomes, keep_results)
                 bar.update(len(outcomes))
     else:
-        work = ChainWork(lifter, frame, smoothing_s, chains, chain_groups(chains, workers), keep_results,
-                         depth)
-        parts = list(zip(chains, lift_parallel(work, workers, bar), strict=True))
+        work = ChainWork(lifter, frame, smoothing_s, work_chains, chain_groups(work_chains, workers),
+                         keep_results, depth)
+        lifted = lift_parallel(work, workers, bar)
     bar.close()
-    return parts
+    return [(chains[c][k:b], kept_part(part, k - a, b - a)) for (c, a, k, b, _), part in
+            zip(cut, lifted, strict=True)]
 
 
 def check_lift_inputs(
