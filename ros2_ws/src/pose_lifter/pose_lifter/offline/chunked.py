@@ -33,6 +33,9 @@ __all__ = ["ChunkCopier", "ChunkedMcap", "IndexedMessages", "chunked_mcap"]
 #: A message to write: (topic, CDR bytes, type name).
 Addition = tuple[str, bytes, str]
 
+#: The size (uncompressed bytes) at which a chunk of new messages is closed: rosbags' own.
+NEW_CHUNK_BYTES = 2**20
+
 _MESSAGE: Final[int] = 0x05
 _MESSAGE_INDEX: Final[int] = 0x07
 _U64: Final = struct.Struct("<Q")
@@ -290,6 +293,11 @@ def _make_storage() -> type:
                                          connection.ext.serialization_format, self.channel_metadata))
             self.channel_stats[connection.id] = 0
             write_channel(self.bio if self.direct else self.chunk.bio, self.channels[-1], self.schemas)
+
+        def write(self, connection: Any, timestamp: int, data: bytes | memoryview) -> None:
+            super().write(connection, timestamp, data)
+            if self.chunk.bio.tell() > NEW_CHUNK_BYTES:
+                self.close_chunk()
 
         def copy_chunk(self, source: BinaryIO, chunk: Any) -> None:
             start = self.bio.tell()
