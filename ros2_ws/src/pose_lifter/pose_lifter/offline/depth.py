@@ -20,7 +20,7 @@ and the partners read one at a time while the chains are lifted.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, NamedTuple
@@ -34,15 +34,16 @@ from pose_lifter.messages.depth import (
     DepthError,
     check_depth_size,
     decode_compressed_image_cdr,
+    decode_header_cdr,
     decode_image_cdr,
     read_depth,
 )
 from pose_lifter.messages.names import COMPRESSED_IMAGE, IMAGE
 from pose_lifter.offline.bags import BagError, RawMessage, read_raw
-from pose_lifter.offline.chunked import ChunkedMcap, IndexedMessages, chunked_mcap
+from pose_lifter.offline.mcap_index import ChunkedMcap, IndexedMessages, chunked_mcap
 
-__all__ = ["IMAGE_TYPES", "NO_DEPTH", "BagDepth", "DepthFrames", "DepthStamp", "depth_topic_of",
-           "header_stamp", "pair_depth"]
+__all__ = ["HEADER_BYTES", "IMAGE_TYPES", "NO_DEPTH", "BagDepth", "DepthFrames", "DepthStamp",
+           "depth_topic_of", "header_stamp", "pair_depth"]
 
 #: The message types of a depth topic.
 IMAGE_TYPES: Final[tuple[str, ...]] = (IMAGE, COMPRESSED_IMAGE)
@@ -95,7 +96,7 @@ class BagDepth:
         Messages without a partner, by why (:class:`~pose_lifter.messages.depth.PairFault`).
     located : (ChunkedMcap, positions) or None
         The topic's messages in the chunks of a single MCAP file (each its log time, chunk and
-        offset, :meth:`~pose_lifter.offline.chunked.ChunkedMcap.positions`), read by number; None:
+        offset, :meth:`~pose_lifter.offline.mcap_index.ChunkedMcap.positions`), read by number; None:
         read as a stream.
     """
 
@@ -124,19 +125,18 @@ class BagDepth:
         return next(iter(frames.reasons.values()), "")
 
 
-def header_stamp(msgtype: str) -> Callable[[Any], DepthStamp]:
-    """A decoder of a depth message's header stamp alone (for
-    :func:`~pose_lifter.offline.bags.read_messages`): a :class:`DepthStamp`, -1 when the bytes
-    do not even hold a header."""
-    decode = _decoder(msgtype)
+#: The bytes of a depth message that hold its header (for any frame id of a sane length).
+HEADER_BYTES: Final[int] = 1024
 
-    def stamp(data: Any) -> DepthStamp:
-        try:
-            return DepthStamp(stamp_to_ns(decode(data).header.stamp))
-        except DepthError:
-            return DepthStamp(-1)
 
-    return stamp
+def header_stamp(data: Any) -> DepthStamp:
+    """A depth message's header stamp, read from its first bytes alone (at most
+    :data:`HEADER_BYTES` are needed; a decoder for :func:`~pose_lifter.offline.bags.read_messages`);
+    -1 when they do not even hold a header."""
+    try:
+        return DepthStamp(stamp_to_ns(decode_header_cdr(data).stamp))
+    except DepthError:
+        return DepthStamp(-1)
 
 
 class DepthStamp(NamedTuple):
@@ -155,11 +155,10 @@ def pair_depth(path: str | Path, topic: str, msgtype: str, frame_stamps: Sequenc
     ``stamps``: each depth message's (bag stamp, header stamp, -1 for none) in read order, as the
     caller read them (:func:`header_stamp`, in the pass that reads the keypoints); None: read here,
     one pass over the topic reading the headers only. A single chunked MCAP file's depth messages
-    are then located in its chunks (:meth:`~pose_lifter.offline.chunked.ChunkedMcap.positions`),
+    are then located in its chunks (:meth:`~pose_lifter.offline.mcap_index.ChunkedMcap.positions`),
     so that :class:`DepthFrames` reads each partner's chunk alone."""
     if stamps is None:
-        read = header_stamp(msgtype)
-        stamps = [(raw.stamp_ns, read(raw.data).stamp_ns) for raw in read_raw(path, [topic])]
+        stamps = [(raw.stamp_ns, header_stamp(raw.data).stamp_ns) for raw in read_raw(path, [topic])]
     buffer: DepthBuffer[int] = DepthBuffer(max(1, len(stamps)), round(tolerance_s * 1e9))
     for k, (_, s) in enumerate(stamps):
         if s >= 0:  # not even a header: never a partner
@@ -176,7 +175,7 @@ def pair_depth(path: str | Path, topic: str, msgtype: str, frame_stamps: Sequenc
 
 class DepthFrames:
     """The depth images of a :class:`BagDepth`'s keypoints messages. Located in a chunked MCAP
-    file, each is read from its chunk (:class:`~pose_lifter.offline.chunked.IndexedMessages`: one
+    file, each is read from its chunk (:class:`~pose_lifter.offline.mcap_index.IndexedMessages`: one
     chunk decompressed at a time, in any order); otherwise read forward through the topic one
     message at a time (asked out of order, it reads the topic again from its start). A context
     manager; :attr:`refused` counts the images refused by kind, :attr:`reasons` the first reason of

@@ -80,8 +80,16 @@ from pose_lifter.offline.chains import (
     lift_parallel,
     split_chains,
 )
-from pose_lifter.offline.chunked import chunked_mcap, copy_with
-from pose_lifter.offline.depth import BagDepth, DepthStamp, depth_topic_of, header_stamp, pair_depth
+from pose_lifter.offline.chunk_copy import copy_with
+from pose_lifter.offline.depth import (
+    HEADER_BYTES,
+    BagDepth,
+    DepthStamp,
+    depth_topic_of,
+    header_stamp,
+    pair_depth,
+)
+from pose_lifter.offline.mcap_index import chunked_mcap
 from pose_lifter.offline.settings import LiftSettings
 
 __all__ = [
@@ -490,10 +498,11 @@ def _read_keypoints(in_path: str | Path, topic: str, camera_info_topic: str | No
     decoders: dict[str, Callable[[bytes], Any]] = {SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}
     if depth is not None:
         wanted.append(depth[0])
-        decoders[depth[1]] = header_stamp(depth[1])
+        decoders[depth[1]] = header_stamp
     out = _FirstPass([], [], [] if depth is not None else None)
     full = False
-    for x in read_messages(in_path, wanted, decoders=decoders):
+    heads = {depth[1]: HEADER_BYTES} if depth is not None else None
+    for x in read_messages(in_path, wanted, decoders=decoders, heads=heads):
         if depth is not None and x.topic == depth[0]:
             stamp = x.msg if isinstance(x.msg, DepthStamp) else DepthStamp(m.stamp_to_ns(x.msg.header.stamp))
             assert out.depth_stamps is not None
@@ -526,10 +535,10 @@ def _write_lifted(in_path: str | Path, out_path: str | Path, topic: str, kept: s
     (None: all), each keypoint message's answer (``answers``: the keypoint message's index in the
     bag -> its answer; ``stamps``: each keypoint message's bag stamp) after every input message of
     its log time (a reader in log-time order reads a copied chunk's messages of one log time
-    together, :mod:`pose_lifter.offline.chunked`).
+    together, :mod:`pose_lifter.offline.chunk_copy`).
 
     A single chunked MCAP file all of whose topics are kept (without ``last``) has its chunks
-    copied as they are (:func:`~pose_lifter.offline.chunked.copy_with`: nothing decompressed or
+    copied as they are (:func:`~pose_lifter.offline.chunk_copy.copy_with`: nothing decompressed or
     compressed again); any other input is read and written message by message."""
     if last is None:
         mcap = chunked_mcap(in_path)

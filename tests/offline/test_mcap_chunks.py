@@ -1,9 +1,9 @@
-"""An MCAP input read and copied through its index (pose_lifter.offline.chunked): the lift's output
-with the input's chunks copied as they are holds the same messages in the same order as the
-message-by-message write, read back by rosbags, by the ``mcap`` package and by ``read_raw``; a
-depth topic read by number gives the stream's messages; inputs that cannot be copied so (a
-rosbag2 directory, our own types in an older layout, a cut or a topic left out) take the
-message-by-message path."""
+"""An MCAP input read and copied through its index (pose_lifter.offline.mcap_index and
+pose_lifter.offline.chunk_copy): the lift's output with the input's chunks copied as they are holds
+the same messages in the same order as the message-by-message write, read back by rosbags, by the
+``mcap`` package and by ``read_raw``; a topic read by number, or in order with only its headers,
+gives the stream's messages; inputs that cannot be copied so (a rosbag2 directory, our own types in
+an older layout, a cut or a topic left out) take the message-by-message path."""
 
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ from pose_lifter.core import Lifter
 from pose_lifter.messages import typestore
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.names import IMAGE, TOPIC_DEPTH, TOPIC_KEYPOINTS
-from pose_lifter.offline import bags, chunked, lift
-from pose_lifter.offline.depth import header_stamp, pair_depth
+from pose_lifter.offline import bags, chunk_copy, lift, mcap_index
+from pose_lifter.offline.depth import HEADER_BYTES, header_stamp, pair_depth
 from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[2]
@@ -92,13 +92,13 @@ def _lift_both_ways(bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, 
 def test_the_chunk_copy_writes_what_the_message_by_message_path_writes(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     bag = rgbd_bag(tmp_path / "rgbd.mcap")
-    monkeypatch.setattr(chunked, "NEW_CHUNK_BYTES", 3000)  # the answers' chunks between the copied ones
-    source = chunked.chunked_mcap(bag)
+    monkeypatch.setattr(chunk_copy, "NEW_CHUNK_BYTES", 3000)  # the answers' chunks between the copied ones
+    source = mcap_index.chunked_mcap(bag)
     assert source is not None and len(source.chunks) >= 4
     starts = {c.message_start_time for c in source.chunks}
     assert any(c.message_end_time in starts for c in source.chunks)  # a log time in two chunks
     fast, slow = _lift_both_ways(bag, tmp_path, monkeypatch)
-    copied = chunked.chunked_mcap(fast)
+    copied = mcap_index.chunked_mcap(fast)
     assert copied is not None and len(copied.chunks) > len(source.chunks) + 2
     last_copied = max(d.chunk_start_offset for d in copied.chunks if d.chunk_length in
                       {c.chunk_length for c in source.chunks})
@@ -131,6 +131,8 @@ def test_the_chunk_copy_writes_what_the_message_by_message_path_writes(
         summary = reader.get_summary()
         meta = next(iter(reader.iter_metadata())).metadata
     assert read == [(x.topic, x.stamp_ns, x.data) for x in out]
+    monkeypatch.setattr(bags, "_chunked", lambda *_: None)  # rosbags' own reader: the same
+    assert _raw(fast) == out
     assert summary is not None and summary.statistics is not None
     assert summary.statistics.message_count == len(out)
     counts = Counter(x.topic for x in out)
@@ -148,7 +150,7 @@ def test_inputs_that_cannot_be_copied_as_they_are_are_written_message_by_message
     """Our own type in an older layout (upgraded when read), a topic left out or a cut: the
     message-by-message path, with the answers after every input message of their log time."""
     copies: list[bool] = []
-    copy_with = chunked.copy_with
+    copy_with = chunk_copy.copy_with
 
     def spy(*args: Any, **kw: Any) -> bool:
         copies.append(copy_with(*args, **kw))
@@ -174,25 +176,25 @@ def test_inputs_that_cannot_be_copied_as_they_are_are_written_message_by_message
 def test_a_rosbag2_directory_or_a_sqlite_bag_is_not_read_through_an_mcap_index(tmp_path: Path) -> None:
     (tmp_path / "rec").mkdir()
     bag = rgbd_bag(tmp_path / "rec" / "rec.mcap")
-    assert chunked.chunked_mcap(bag) is not None
+    assert mcap_index.chunked_mcap(bag) is not None
     (tmp_path / "rec" / bags.METADATA_NAME).write_text("rosbag2_bagfile_information: {}\n")
-    assert chunked.chunked_mcap(tmp_path / "rec") is None
+    assert mcap_index.chunked_mcap(tmp_path / "rec") is None
     db3 = tmp_path / "x.db3"
     shutil.copy(bag, db3)
-    assert chunked.chunked_mcap(db3) is None
+    assert mcap_index.chunked_mcap(db3) is None
     truncated = tmp_path / "cut.mcap"
     truncated.write_bytes(bag.read_bytes()[:-100])
-    assert chunked.chunked_mcap(truncated) is None
+    assert mcap_index.chunked_mcap(truncated) is None
 
 
 def test_a_topic_read_by_number_is_the_stream(tmp_path: Path) -> None:
     bag = rgbd_bag(tmp_path / "rgbd.mcap")
-    mcap = chunked.chunked_mcap(bag)
+    mcap = mcap_index.chunked_mcap(bag)
     assert mcap is not None
     positions = mcap.positions(mcap.channel_ids([TOPIC_DEPTH]))
     stream = [x for x in _raw(bag) if x.topic == TOPIC_DEPTH]
     assert [t for t, _, _ in positions] == [x.stamp_ns for x in stream]
-    with chunked.IndexedMessages(mcap, positions) as read:
+    with mcap_index.IndexedMessages(mcap, positions) as read:
         for k in reversed(range(len(stream))):  # any order
             assert bytes(read.data(k)) == stream[k].data
         assert read.n_decompressed == len({c for _, c, _ in positions})
@@ -202,7 +204,7 @@ def test_the_depth_stamps_read_with_the_keypoints_pair_as_a_pass_of_their_own(tm
     bag = rgbd_bag(tmp_path / "rgbd.mcap")
     kp = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, [TOPIC_KEYPOINTS])]
     frames = [stamp_to_ns(msg.header.stamp) + 5_000_000 * (k % 2) for k, (_, msg) in enumerate(kp)]
-    read = header_stamp(IMAGE)
+    read = header_stamp
     stamps = [(x.stamp_ns, read(x.data).stamp_ns) for x in bags.read_raw(bag, [TOPIC_DEPTH])]
     sizes = [(640.0, 480.0)] * len(kp)
     alone = pair_depth(bag, TOPIC_DEPTH, IMAGE, frames, sizes, 0.003)
@@ -212,6 +214,13 @@ def test_the_depth_stamps_read_with_the_keypoints_pair_as_a_pass_of_their_own(tm
     assert given.located[1] == alone.located[1]
     assert alone.paired == (len(kp) + 1) // 2 and sum(alone.unpaired.values()) == len(kp) // 2
     assert read(b"\x00\x01").stamp_ns == -1  # not even a header: never a partner
+    # the keypoints pass reads the same stamps, of every image even when the keypoints are cut,
+    # from each image's first bytes alone
+    for cut in (None, 3):
+        first = lift._read_keypoints(bag, TOPIC_KEYPOINTS, "/camera_info", cut, (TOPIC_DEPTH, IMAGE))
+        assert first.depth_stamps == stamps and len(first.keypoints) == (cut or len(kp))
+    sizes_read = [x.msg for x in bags.read_messages(bag, [TOPIC_DEPTH], {IMAGE: len}, {IMAGE: HEADER_BYTES})]
+    assert len(sizes_read) == len(kp) and max(sizes_read) <= HEADER_BYTES
     # read from their chunks or as a stream: the same images, the stream read once
     streamed = replace(alone, located=None)
     with alone.frames() as a, streamed.frames() as b:

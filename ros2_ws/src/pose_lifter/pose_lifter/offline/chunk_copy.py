@@ -1,183 +1,30 @@
-"""A single MCAP file read and copied through its index: messages read by number, and the chunks
-copied into a new bag as they are.
+"""A bag whose every chunk of an MCAP input is copied as it is, not decompressed and compressed
+again, next to new messages in chunks of their own (:func:`copy_with`).
 
-An MCAP file written by rosbag2 or rosbags holds its messages in compressed chunks and, after each
-chunk, a message index (each message's log time and offset inside the chunk); the summary at the
-file's end lists the chunks (:func:`chunked_mcap`). Through it:
-
-* :class:`IndexedMessages` reads the messages of some topics by their number in the file's read
-  order (log time, then chunk offset, then offset in the chunk: what rosbags' and the ``mcap``
-  package's readers give), decompressing only the chunk that holds one and keeping only the last
-  chunk: random access to a large topic (a depth camera's images) in bounded memory;
-* :class:`ChunkCopier` writes a bag whose every input chunk (with its message index) is copied
-  byte for byte, not decompressed and compressed again, and whose new messages go into chunks of
-  their own after them. MCAP lets chunks overlap in time and readers in log-time order merge them by
-  (log time, file offset), so a new message is read after every copied message of its log time:
-  :func:`pose_lifter.offline.lift.lift_bag` writes its answers after every input message of their
-  log time on either path, so both paths write the same messages in the same order.
+MCAP lets chunks overlap in time, and readers in log-time order merge them by (log time, file
+offset), so a new message is read after every copied message of its log time:
+:func:`pose_lifter.offline.lift.lift_bag` writes its answers after every input message of their
+log time on either path (this one, or message by message), so both paths write the same messages
+in the same order. The input's channels keep their ids, schemas and metadata (a copied chunk may
+hold their records); a new topic gets the next id.
 """
 
 from __future__ import annotations
 
-import struct
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from io import BytesIO
 from pathlib import Path
-from typing import Any, BinaryIO, Final
+from typing import Any, BinaryIO
 
-from pose_lifter.offline.bags import BagWriter, bag_path
+from pose_lifter.offline.bags import BagWriter
+from pose_lifter.offline.mcap_index import ChunkedMcap
 
-__all__ = ["ChunkCopier", "ChunkedMcap", "IndexedMessages", "chunked_mcap"]
+__all__ = ["NEW_CHUNK_BYTES", "Addition", "ChunkCopier", "copy_with", "copyable"]
 
 #: A message to write: (topic, CDR bytes, type name).
 Addition = tuple[str, bytes, str]
-
 #: The size (uncompressed bytes) at which a chunk of new messages is closed: rosbags' own.
 NEW_CHUNK_BYTES = 2**20
-
-_MESSAGE: Final[int] = 0x05
-_MESSAGE_INDEX: Final[int] = 0x07
-_U64: Final = struct.Struct("<Q")
-_ENTRY: Final = struct.Struct("<QQ")  # a message index entry: log time, offset in the chunk
-
-
-@dataclass(frozen=True)
-class ChunkedMcap:
-    """The index of a single MCAP file whose every message lies in an indexed chunk.
-
-    Attributes
-    ----------
-    path : Path
-    chunks : tuple of rosbags ``ChunkInfo``
-        In file order: offsets, sizes, compression, time range, each channel's message index
-        offset and message count.
-    channels : dict of int -> rosbags ``Channel``
-    schemas : dict of int -> rosbags ``Schema``
-    connections : tuple of rosbags ``Connection``
-        Per channel (ids as the channels'): topic, type, message definition.
-    """
-
-    path: Path
-    chunks: tuple[Any, ...]
-    channels: dict[int, Any]
-    schemas: dict[int, Any]
-    connections: tuple[Any, ...]
-
-    def channel_ids(self, topics: Iterable[str]) -> list[int]:
-        """The ids of the channels of ``topics``."""
-        wanted = set(topics)
-        return sorted(k for k, c in self.channels.items() if c.topic in wanted)
-
-    def positions(self, channel_ids: Sequence[int]) -> list[tuple[int, int, int]]:
-        """``(log time, chunk number, offset in the chunk)`` of every message of ``channel_ids``,
-        in read order (log time, chunk offset, offset; read from the message indexes, nothing
-        decompressed)."""
-        out: list[tuple[int, int, int, int]] = []
-        with self.path.open("rb") as f:
-            for k, chunk in enumerate(self.chunks):
-                for cid in channel_ids:
-                    at = chunk.message_index_offsets.get(cid)
-                    if at is None:
-                        continue
-                    f.seek(at)
-                    head = f.read(15)  # opcode, record length, channel id, entries' length
-                    if len(head) != 15 or head[0] != _MESSAGE_INDEX:
-                        raise ValueError(f"{self.path}: no message index at {at}")
-                    n = struct.unpack_from("<I", head, 11)[0]
-                    entries = f.read(n)
-                    out.extend((t, chunk.chunk_start_offset, k, o) for t, o in _ENTRY.iter_unpack(entries))
-        out.sort()
-        return [(t, k, o) for t, _, k, o in out]
-
-
-def chunked_mcap(path: str | Path) -> ChunkedMcap | None:
-    """The index of the MCAP file ``path``, or None when it is not one whose messages all lie in
-    indexed chunks (a rosbag2 directory, a ``.db3`` file, an MCAP file without a summary, with
-    messages outside chunks, or with attachments)."""
-    from rosbags.rosbag2.storage_mcap import McapReader
-
-    p = bag_path(path)
-    if not p.is_file() or p.suffix != ".mcap" or not _has_summary(p):
-        return None
-    reader = McapReader(p)
-    try:
-        reader.open()
-    except Exception:  # not readable here: the caller's reader says why
-        return None
-    try:
-        stats = reader.statistics
-        chunks = tuple(sorted(reader.chunks, key=lambda c: c.chunk_start_offset))
-        in_chunks = sum(sum(c.channel_count.values()) for c in chunks)
-        if stats is None or not chunks or stats.attachement_count or in_chunks != stats.message_count:
-            return None
-        return ChunkedMcap(p, chunks, dict(reader.channels), dict(reader.schemas),
-                           tuple(reader.connections))
-    finally:
-        reader.close()
-
-
-def _has_summary(path: Path) -> bool:
-    """The file ends in an MCAP footer that points at a summary section."""
-    with path.open("rb") as f:
-        size = f.seek(0, 2)
-        if size < 8 + 37:
-            return False
-        f.seek(size - 37)
-        footer = f.read(37)
-    return footer[0] == 0x02 and footer[-8:] == b"\x89MCAP0\r\n" and _U64.unpack_from(footer, 9)[0] > 0
-
-
-def _chunk_data(f: BinaryIO, chunk: Any) -> bytes:
-    """The decompressed records of ``chunk`` (checked against its CRC when it has one)."""
-    from rosbags.rosbag2.storage_mcap import decompress
-
-    f.seek(chunk.chunk_start_offset + 9 + 24)
-    crc = struct.unpack("<I", f.read(4))[0]
-    f.seek(chunk.chunk_start_offset + 9 + 40 + len(chunk.compression))
-    data = f.read(chunk.compressed_size)
-    return bytes(decompress(data, chunk.compression, chunk.uncompressed_size, crc))
-
-
-class IndexedMessages:
-    """The messages at ``positions`` (:meth:`ChunkedMcap.positions`) of an MCAP file, read by
-    number: the chunk that holds one is decompressed (the last one is kept, so neighbours cost
-    nothing), and its bytes are returned as a view into it. A context manager."""
-
-    def __init__(self, mcap: ChunkedMcap, positions: Sequence[tuple[int, int, int]]) -> None:
-        self.mcap = mcap
-        self.positions = positions
-        self._file: BinaryIO | None = None
-        self._chunk: tuple[int, memoryview] | None = None  # (chunk number, its records)
-        self.n_decompressed = 0
-
-    def __enter__(self) -> IndexedMessages:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self) -> None:
-        f, self._file, self._chunk = self._file, None, None
-        if f is not None:
-            f.close()
-
-    def __len__(self) -> int:
-        return len(self.positions)
-
-    def data(self, index: int) -> memoryview:
-        """The serialised bytes of message ``index`` (in read order)."""
-        _, k, offset = self.positions[index]
-        if self._chunk is None or self._chunk[0] != k:
-            if self._file is None:
-                self._file = self.mcap.path.open("rb")
-            self._chunk = (k, memoryview(_chunk_data(self._file, self.mcap.chunks[k])))
-            self.n_decompressed += 1
-        records = self._chunk[1]
-        if records[offset] != _MESSAGE:
-            raise ValueError(f"{self.mcap.path}: no message at offset {offset} of chunk {k}")
-        length = _U64.unpack_from(records, offset + 1)[0]
-        return records[offset + 9 + 22:offset + 9 + length]
 
 
 class ChunkCopier(BagWriter):
