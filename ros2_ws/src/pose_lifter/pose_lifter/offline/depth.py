@@ -5,15 +5,20 @@ and the partners read one at a time while the chains are lifted.
   type, is an error naming the bag's image topics), or, when it names none (``""``), the bag's
   one ``Image`` / ``CompressedImage`` topic whose name holds ``depth`` (none, or several: no
   depth, the monocular lift); ``none``: no depth.
-* :func:`pair_depth`: one streaming pass over the depth topic reading only each image's header
-  stamp, then each keypoints message paired with the image of the nearest stamp within
-  ``depth_tolerance`` (the node's :class:`~pose_lifter.messages.depth.DepthBuffer`, holding the
-  stamps only), by the keypoints' header stamp (the bag stamp where it is 0): a detector's
-  keypoints arrive after their image by its latency, so their bag stamps are not the image's.
-* :class:`DepthFrames`: the partners read while the chains are lifted, in message order, one
-  image decoded at a time (:func:`~pose_lifter.messages.depth.read_depth`, checked against the
-  ``camera_info`` size at the message), so memory is bounded by one image whatever the bag's
-  length; a worker process opens its own reader. A refused image (see
+* :func:`pair_depth`: each image's header stamp (:func:`header_stamp`, from the image's first
+  bytes alone; read in the pass that reads the keypoints, :func:`pose_lifter.offline.lift.lift_bag`,
+  or in a pass of its own), then each keypoints message paired with the image of the nearest
+  stamp within ``depth_tolerance`` (the node's :class:`~pose_lifter.messages.depth.DepthBuffer`,
+  holding the stamps only), by the keypoints' header stamp (the bag stamp where it is 0): a
+  detector's keypoints arrive after their image by its latency, so their bag stamps are not the
+  image's.
+* :class:`DepthFrames`: the partners read while the chains are lifted, one image decoded at a
+  time (:func:`~pose_lifter.messages.depth.read_depth`, checked against the ``camera_info`` size
+  at the message), so memory is bounded by one image (and the one chunk that holds it) whatever
+  the bag's length; in a single chunked MCAP file each image is read from its own chunk through
+  the file's index (:mod:`pose_lifter.offline.mcap_index`: no pass over the topic, so worker
+  processes lifting different tracks decompress different chunks), elsewhere through the topic in
+  message order. A worker process opens its own reader. A refused image (see
   :mod:`pose_lifter.messages.depth`) leaves its frame to the 2D alone.
 """
 

@@ -13,9 +13,10 @@ written next to the input topics. Where it differs, on purpose:
 * the node's ``frame_id`` is not an offline setting (the headers are copied unchanged);
 * a depth topic (``--depth-topic``; by default the bag's one depth image topic,
   :func:`pose_lifter.offline.depth.depth_topic_of`) pairs each message with the depth image of the
-  nearest header stamp within ``depth_tolerance`` once, before the lift
-  (:func:`~pose_lifter.offline.depth.pair_depth`), and the images are read one at a time as the
-  messages are lifted (the node pairs each frame as it comes, from a buffer of the newest images);
+  nearest header stamp within ``depth_tolerance`` once, before the lift (the images' stamps read
+  with the keypoints, :func:`~pose_lifter.offline.depth.pair_depth`), and the images are read one
+  at a time as the messages are lifted (the node pairs each frame as it comes, from a buffer of
+  the newest images);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.refine_chain`); 0 gives the node's causal
@@ -402,9 +403,13 @@ def lift_bag(
     tracks), one of each per answered keypoint message (as the node answers). Everything checkable
     is checked before any work (:func:`check_lift_inputs`).
 
-    Memory: the bag is read twice, streaming: first only ``topic`` and ``camera_info_topic``
-    (deserialised, kept for the lifting), then every kept topic one message at a time, copied
-    as serialised bytes. Large topics (images) are never held.
+    Memory: the bag is read in passes that hold one message (or one MCAP chunk) at a time: first
+    ``topic`` and ``camera_info_topic`` (deserialised, kept for the lifting) and the depth
+    images' header stamps (:mod:`pose_lifter.offline.depth`); then, while the lifting, each paired
+    depth image; then the output is written: every kept topic copied as serialised bytes
+    (a single chunked MCAP file all of whose topics are kept: its chunks copied as they are,
+    :func:`_write_lifted`), each answer after every input message of its log time. Large topics
+    (images) are never held.
 
     Parameters
     ----------
