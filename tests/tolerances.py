@@ -102,6 +102,10 @@ SMOOTHER_AGREEMENT: Final[float] = 1e-9
 #: variance from a barely determined velocity, which the recursive and the batch solutions (and
 #: a plain 2 x 2 matrix version of the recursion) compute to ~1e-6 of each other.
 SMOOTHER_VARIANCE_AGREEMENT: Final[float] = 1e-5
+#: The depth fusion's Gaussian conditioning (a joint without a reading enters its solve with a
+#: variance of 1e6 m^2, not infinity) against the textbook formula on the read joints alone:
+#: depths (m) and standard deviations (m), absolute.
+DEPTH_CONDITIONING: Final[float] = 1e-7
 
 # ---------------------------------------------------------------- accuracy bounds from measurements
 # Each bound below is the value it guards, measured on this code (the command and commit named),

@@ -287,3 +287,29 @@ def test_sense_is_deterministic_for_a_generator_state() -> None:
     b = dm.sense(r, dm.REALISTIC, np.random.default_rng(7))
     c = dm.sense(r, dm.REALISTIC, np.random.default_rng(8))
     assert np.array_equal(a, b, equal_nan=True) and not np.array_equal(a, c, equal_nan=True)
+
+
+@pytest.mark.parametrize("turn_deg", [-90, -75, -60, -45, -30, 0, 30, 45, 60, 75, 90])
+def test_the_fusions_occlusion_test_hides_what_the_rendered_body_hides(turn_deg: int) -> None:
+    """A body turning away from the camera about its spine: the fusion's occlusion test
+    (``core.depth.fuse._hidden``: limbs and an elliptic trunk) hides at each joint's pixel what the
+    rendered body surface shows nearer than the joint's surface by its margin (the trunk's
+    width matters from ~60 degrees: a round trunk misses the far elbow there)."""
+    from pose_lifter.core.depth.fuse import _hidden
+    from pose_lifter.core.depth.reading import SURFACE_OFFSET_M
+
+    k = ((600.0, 600.0), (320.0, 240.0))
+    facing = np.array([[0.19, -0.5, 0.0], [0.22, -0.2, 0.0], [0.22, 0.05, 0.0], [-0.19, -0.5, 0.0],
+                       [-0.22, -0.2, 0.0], [-0.22, 0.05, 0.0], [0.1, 0.05, 0.0], [0.1, 0.5, 0.0],
+                       [0.1, 0.9, 0.0], [-0.1, 0.05, 0.0], [-0.1, 0.5, 0.0], [-0.1, 0.9, 0.0]])
+    a = np.radians(turn_deg)
+    turn = np.array([[np.cos(a), 0.0, -np.sin(a)], [0.0, 1.0, 0.0], [np.sin(a), 0.0, np.cos(a)]])
+    body = facing @ turn.T + np.array([0.0, 0.0, 3.0])
+    pixels = 600.0 * body[:, :2] / body[:, 2:] + np.array([320.0, 240.0])
+    margin = 0.08
+    img = bs.render_depth(body[None], k, (640, 480), bs.Background(floor=False)).depth
+    u, v = np.round(pixels).astype(int).T
+    rendered = img[v, u] < body[:, 2] - SURFACE_OFFSET_M - margin
+    got = _hidden(body[None], pixels[None], np.ones((1, 12), dtype=bool), k, margin)[0]
+    np.testing.assert_array_equal(got, rendered)
+    assert rendered.any() == (abs(turn_deg) >= 60)  # the far side is hidden when turned far enough

@@ -186,3 +186,75 @@ def test_readings_fuse_a_later_pose_without_the_image() -> None:
     direct = fuse_depth(img, *args, other[None], np.array([scale]), centre[None])
     assert np.allclose(later.joints_m, direct.joints_m, atol=ROUND_OFF_ACCUMULATED)
     assert np.allclose(later.std_m, direct.std_m, atol=ROUND_OFF_ACCUMULATED)
+
+
+def test_the_conditioning_is_the_textbook_gaussian_one() -> None:
+    """``_condition`` against the conditional mean and covariance computed on the read joints
+    alone, ``m + S[:, R] (S[R, R] + V)^-1 (d_R - m_R)``, for random priors and reading sets."""
+    from pose_lifter.core.depth.fuse import _condition
+    from tolerances import DEPTH_CONDITIONING
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        a = 0.05 * rng.standard_normal((12, 12))
+        prior = a @ a.T + 1e-4 * np.eye(12)
+        mean = 3.0 + 0.1 * rng.standard_normal(12)
+        d = mean + 0.05 * rng.standard_normal(12)
+        v = 1e-4 * (1.0 + rng.random(12))
+        kept = rng.random(12) < 0.6
+        r = np.flatnonzero(kept)
+        gain = prior[:, r] @ np.linalg.inv(prior[np.ix_(r, r)] + np.diag(v[r]))
+        want_z = mean + gain @ (d[r] - mean[r])
+        want_sd = np.sqrt(np.diag(prior - gain @ prior[r, :]))
+        z, sd = _condition(mean[None], prior[None], d[None], v[None], kept[None])
+        assert np.abs(z[0] - want_z).max() < DEPTH_CONDITIONING
+        assert np.abs(sd[0] - want_sd).max() < DEPTH_CONDITIONING
+
+
+def test_a_read_elbow_takes_its_unread_wrist_along() -> None:
+    """The left elbow and wrist lie 8 cm deeper than the lift says (an arm leaning away), the
+    wrist unseen by the 2D: the elbow's reading moves the wrist with it through the shape's
+    correlation between them (a fusion of independent joints leaves it where the lift put it)."""
+    pose, centre, scale, truth = _body(k=1.0)
+    lifted = truth.copy()
+    truth[[1, 2], 2] += 0.08
+    w = np.ones(12)
+    w[2] = 0.0
+    fused = fuse_depth(_painted(truth), K, _project(truth)[None], w[None], pose[None], np.array([scale]),
+                       centre[None])
+    assert fused.from_depth[0, 1] and not fused.from_depth[0, 2]
+    elbow, wrist = fused.joints_m[0, [1, 2], 2] - lifted[[1, 2], 2]
+    assert 0.5 * 0.08 < elbow < 0.08 + 0.01  # the elbow: most of the way to its reading
+    assert 0.5 * elbow < wrist < 0.08 + 0.01  # the wrist: along with it, not past the truth
+
+
+def test_leave_one_out_is_the_conditioning_on_the_other_readings() -> None:
+    """``_leave_one_out`` against conditioning on the other kept readings one at a time (the
+    textbook formula): each read joint's predicted residual and its variance."""
+    from pose_lifter.core.depth.fuse import _leave_one_out
+    from tolerances import DEPTH_CONDITIONING
+
+    rng = np.random.default_rng(6)
+    for _ in range(10):
+        a = 0.05 * rng.standard_normal((12, 12))
+        prior = a @ a.T + 1e-4 * np.eye(12)
+        residual = 0.05 * rng.standard_normal(12)
+        v = 1e-4 * (1.0 + rng.random(12))
+        kept = rng.random(12) < 0.7
+        got, got_var = _leave_one_out(prior[None], residual[None], v[None], kept[None])
+        for j in np.flatnonzero(kept):
+            r = np.flatnonzero(kept & (np.arange(12) != j))
+            gain = prior[j, r] @ np.linalg.inv(prior[np.ix_(r, r)] + np.diag(v[r]))
+            assert abs(got[0, j] - (residual[j] - gain @ residual[r])) < DEPTH_CONDITIONING
+            assert abs(got_var[0, j] - (prior[j, j] - gain @ prior[r, j])) < DEPTH_CONDITIONING
+
+
+def test_a_reading_its_neighbours_contradict_is_dropped() -> None:
+    """A left wrist read 22 cm too near (a hand in front of it, unmodelled) while its elbow and
+    the rest read true: what the other readings predict of the wrist rejects the reading, and
+    the wrist stays near the truth (judged against the field alone, the reading is 2.9 of its
+    standard deviations off and kept, pulling the wrist 15 cm)."""
+    pose, centre, scale, truth = _body(k=1.0)
+    fused = _fuse(pose, centre, scale, truth, _painted(truth, shift={2: -0.22}))
+    assert not fused.from_depth[0, 2] and fused.from_depth[0, np.arange(12) != 2].all()
+    assert abs(fused.joints_m[0, 2, 2] - truth[2, 2]) < 0.03

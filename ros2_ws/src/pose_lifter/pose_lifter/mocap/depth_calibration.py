@@ -22,7 +22,10 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
   :data:`~pose_lifter.core.depth.uncertainty.UNOBSERVED_FACTOR` per bin and per axis the same of
   the joints not shown over the bin's shown ones (a joint outside the image is placed by the lift's
   guess across the image too, not by the 2D: most along the image's vertical, where an upright
-  body leaves the image).
+  body leaves the image);
+* :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`: the correlation between the joints of
+  the scaled placement's errors along the depth, of wholly shown bodies (:func:`shape_correlation`:
+  left and right pooled, so the matrix is the same seen in a mirror).
 
 The 68th percentile of an error's absolute value is its standard deviation when it is Gaussian,
 and the coverage the RGB-D evaluation reports is that of these quantiles: it says how far the
@@ -47,7 +50,7 @@ from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, film_rgbd
 
-__all__ = ["Calibration", "calibrate", "format_calibration", "spread_factors"]
+__all__ = ["Calibration", "calibrate", "format_calibration", "shape_correlation", "spread_factors"]
 
 #: A reading farther than this from its joint's true depth minus a typical offset
 #: (:data:`_TYPICAL_OFFSET_M`) is not the joint's surface (an occluder, the background): metres.
@@ -67,6 +70,7 @@ class Calibration:
     shape_std_m: NDArray[np.float64]  #: (12, 2): across, along the depth
     shape_factor: NDArray[np.float64]  #: per observed-count bin
     unobserved_factor: NDArray[np.float64]  #: per observed-count bin (rows): x, y, z
+    shape_corr_z: NDArray[np.float64]  #: (12, 12)
     n_frames: int
     n_readings: int
 
@@ -93,6 +97,7 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
                                             for _ in range(bins)]
     hidden: list[list[list[list[float]]]] = [[[[] for _ in range(N_JOINTS)] for _ in range(3)]
                                              for _ in range(bins)]
+    whole_z: list[NDArray[np.float64]] = []  # the depth errors (12,) of wholly shown bodies
     n_frames = 0
     for track in tracks:
         for distance in distances:
@@ -113,6 +118,8 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
                 b = int(observed_bin(observed[None])[0])
                 scale_err[b].append(k - 1.0)
                 err = k * x0 - truth[i]
+                if observed.all():
+                    whole_z.append(err[:, 2])
                 for j in range(N_JOINTS):
                     into = shown[b] if observed[j] else hidden[b]
                     for axis in range(3):
@@ -130,7 +137,16 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     spread = np.concatenate([p - surface[j] for j, p in enumerate(pooled)])
     shape, factor, unobserved = spread_factors(shown, hidden)
     return Calibration(surface, _q68(spread), np.array([_q68(np.array(e)) for e in scale_err]),
-                       shape, factor, unobserved, n_frames, sum(len(o) for o in offsets))
+                       shape, factor, unobserved, shape_correlation(np.array(whole_z)), n_frames,
+                       sum(len(o) for o in offsets))
+
+
+def shape_correlation(errors: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The correlation matrix (12, 12) of ``errors`` (m, 12), m samples of the 12 joints, with
+    each body's mirror image as a sample too (left and right joints swapped)."""
+    e = np.asarray(errors, dtype=np.float64)
+    both = np.concatenate([e, e[:, list(COUNTERPART)]])
+    return np.asarray(np.corrcoef(both, rowvar=False))
 
 
 def spread_factors(shown: Sequence[Sequence[Sequence[Sequence[float]]]],
@@ -187,4 +203,6 @@ def format_calibration(c: Calibration) -> str:
         f"SHAPE_FACTOR = [{row(c.shape_factor)}]",
         "UNOBSERVED_FACTOR = [" + ", ".join("[" + ", ".join(f"{x:.2f}" for x in r) + "]"
                                             for r in c.unobserved_factor) + "]",
+        "SHAPE_CORR_Z = [\n" + "\n".join("    [" + ", ".join(f"{x:.2f}" for x in r) + "],"
+                                         for r in c.shape_corr_z) + "\n]",
     ])

@@ -24,16 +24,21 @@ placed depths scaled (the body's size and distance together) and tilted across t
    :attr:`~pose_lifter.core.depth.reading.DepthOptions.tilt_std`), by iteratively reweighted least
    squares from ``k`` the median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or
    ``max_iter``. Readings beyond ``gate`` standard deviations of the field are dropped.
-5. **Fuse**: each joint moves along its ray to the field's depth ``g_j . theta`` (its standard
-   deviation from the fit's covariance); a kept reading's depth ``d_j`` is combined with it by
-   their inverse variances (``v_j``; the field's and the shape's,
-   :func:`~pose_lifter.core.depth.uncertainty.shape_std`), weighted by the probability that the
-   reading is the joint's (a Gaussian about the field against a stray surface uniform over the
-   depth band, :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`; the joint's
-   variance is the mixture's), and the joint moved along its ray to that depth: the lift's image
-   of the joint, which the prior has denoised, is kept (the 2D keypoint's own ray is noisier: on
-   the training split it costs ~10 mm of P-MPJPE at 3 m). A body without a kept reading keeps the
-   monocular placement and its uncertainty.
+5. **Fuse**: the true depths are Gaussian about the field's, ``z ~ N(g . theta, S)``, ``S`` the
+   shape's covariance (per joint :func:`~pose_lifter.core.depth.uncertainty.shape_std`, correlated
+   between joints by :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's
+   (from the fit's covariance); each kept reading is ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j / p_j)``,
+   ``p_j`` the probability that the reading is the joint's (a Gaussian against a stray surface
+   uniform over the depth band, :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`:
+   first about the field alone, then about what the other readings predict of the joint through
+   ``S``, leaving the reading out; below 1/2 the reading is dropped: a wrist read 22 cm before an
+   elbow read true is another surface, though within three of the field's own deviations). The depths are the conditional mean given the readings and their standard deviations
+   the conditional ones: a reading moves its own joint, and through the correlations the joints
+   the depth does not read (an elbow read farther than the field takes its hidden wrist along).
+   Each joint moves along its ray to its depth: the lift's image of the joint, which the prior has
+   denoised, is kept (the 2D keypoint's own ray is noisier: on the training split it costs ~10 mm
+   of P-MPJPE at 3 m). A body without a kept reading keeps the monocular placement and its
+   uncertainty.
 
 :func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
 the readings only: a pose refined over later frames is fused with its frame's readings without
@@ -56,9 +61,15 @@ from pose_lifter.core.depth.reading import (
     joint_radius_px,
     read_patches,
 )
-from pose_lifter.core.depth.uncertainty import SHAPE_STD_M, body_std, monocular_scale_std, shape_std
+from pose_lifter.core.depth.uncertainty import (
+    SHAPE_CORR_Z,
+    SHAPE_STD_M,
+    body_std,
+    monocular_scale_std,
+    shape_std,
+)
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS
+from pose_lifter.core.model.skeleton import JOINT_NAMES, LIMBS, N_JOINTS
 from pose_lifter.core.track.placement import (
     DEFAULT_DISTANCE_M,
     DEFAULT_LEG_LENGTH_M,
@@ -71,10 +82,20 @@ __all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fus
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
     [0.5 * (LIMB_RADIUS_M[a] + LIMB_RADIUS_M[b]) for a, b in LIMBS])
-#: Half the torso's depth, metres: its front lies this much before the shoulders' and hips' plane.
+#: The trunk as an occluder: an elliptic cylinder along the spine, from below the hips' midpoint to
+#: above the shoulders', its half axes across the hips and front to back (an adult torso about
+#: 0.33 m wide and 0.2 m deep: ANSUR 1988 chest breadth and depth), metres.
+_TORSO_HALF_WIDTH: Final[float] = 0.165
 _TORSO_HALF_DEPTH: Final[float] = 0.1
-#: The torso as two triangles of joints (left shoulder, right shoulder, right hip, left hip).
-_TORSO: Final[NDArray[np.int64]] = np.array([[0, 3, 9], [0, 9, 6]], dtype=np.int64)
+_TORSO_BELOW_HIPS: Final[float] = 0.06
+_TORSO_ABOVE_SHOULDERS: Final[float] = 0.04
+_L_SHOULDER, _R_SHOULDER, _L_HIP, _R_HIP = (JOINT_NAMES.index(f"{s}_{j}") for j in ("shoulder", "hip")
+                                              for s in ("left", "right"))
+#: A joint without a reading enters the conditioning with this variance (m^2): no weight.
+_UNREAD_VAR: Final[float] = 1e6
+#: The least inlier probability by which a reading's variance is divided in the leave-one-out
+#: predictions (a doubtful reading weighs little in the others' predictions, never nothing).
+_MIN_INLIER: Final[float] = 0.05
 _LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(LIMBS, dtype=np.int64)
 
 
@@ -108,23 +129,48 @@ class FusedPeople:
     objective: NDArray[np.float64]
 
 
+def _unit(v: NDArray[np.float64], fallback: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``v`` (n, 3) normalised, ``fallback`` (n, 3) where it is (nearly) zero."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), fallback)
+
+
+def _trunks(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                  NDArray[np.float64]]:
+    """Each body's trunk (``joints`` (n, 12, 3)): the hips' midpoint (n, 3), the axes (n, 3, 3) as
+    rows (right hip to left hip, up the spine, the facing direction: the body frame of
+    :func:`~pose_lifter.core.model.skeleton.body_frame`) and its ends along the spine (n, 2)."""
+    hips = 0.5 * (joints[:, _L_HIP] + joints[:, _R_HIP])
+    up = 0.5 * (joints[:, _L_SHOULDER] + joints[:, _R_SHOULDER]) - hips
+    ex = np.broadcast_to(np.array([1.0, 0.0, 0.0]), hips.shape)
+    across = _unit(joints[:, _L_SHOULDER] - joints[:, _R_SHOULDER], ex)
+    x = _unit(joints[:, _L_HIP] - joints[:, _R_HIP], across)
+    helper = np.where(np.abs(x[:, 2:]) < 0.9, np.array([0.0, 0.0, 1.0]), ex)  # not along x
+    y = _unit(up - np.sum(up * x, axis=-1, keepdims=True) * x, _unit(np.cross(x, helper), ex))
+    axes = np.stack([x, y, np.cross(x, y)], axis=1)
+    extent = np.stack([np.full(len(hips), -_TORSO_BELOW_HIPS),
+                       np.sum(up * y, axis=-1) + _TORSO_ABOVE_SHOULDERS], axis=-1)
+    return hips, axes, extent
+
+
 def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates: NDArray[np.bool_],
             intrinsics: CameraIntrinsics, margin: float) -> NDArray[np.bool_]:
     """Which ``candidates`` (n, 12) joints of the placed bodies ``joints`` (n, 12, 3) another body
     part hides at their keypoints ``pixels`` (n, 12, 2): a limb (a capsule of
-    :data:`_LIMB_RADIUS`) or a torso (the shoulders' and hips' quadrilateral, its front
-    :data:`_TORSO_HALF_DEPTH` before them) of any body, not the joint's own, or a trunk (a capsule
-    of that radius from the shoulders' midpoint to the hips', the joint's own too: seen from the
-    side it hides the far shoulder, hip and arm), whose surface on the joint's pixel is nearer than
-    the joint's surface by more than ``margin`` metres."""
+    :data:`_LIMB_RADIUS`) of any body, not one of the joint's own limbs, or a trunk (an elliptic
+    cylinder, :data:`_TORSO_HALF_WIDTH`) of any body, the joint's own too (seen from the side it
+    hides the far shoulder, hip and arm), whose surface on the joint's pixel is nearer than the
+    joint's surface by more than ``margin`` metres."""
     (fx, fy), (cx, cy) = intrinsics
     z = np.maximum(joints[..., 2], 1e-3)
     proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)
+    origin, axes, extent = _trunks(joints)
     hidden = np.zeros(candidates.shape, dtype=bool)
     hidden_kernel(np.ascontiguousarray(proj), np.ascontiguousarray(z), np.ascontiguousarray(candidates),
                   np.ascontiguousarray(pixels, dtype=np.float64), joints[..., 2] - SURFACE_OFFSET_M[None],
-                  _LIMB_ARRAY, _LIMB_RADIUS, _TORSO, _TORSO_HALF_DEPTH, 0.5 * (float(fx) + float(fy)), margin,
-                  hidden)
+                  _LIMB_ARRAY, _LIMB_RADIUS, np.ascontiguousarray(origin), np.ascontiguousarray(axes),
+                  np.ascontiguousarray(extent), _TORSO_HALF_WIDTH, _TORSO_HALF_DEPTH,
+                  np.array([fx, fy, cx, cy], dtype=np.float64), margin, hidden)
     return hidden
 
 
@@ -297,22 +343,20 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     along_sd[mono] = mono_scale[mono, None]
     root = along_sd[..., None] * np.abs(body)
     var_body = shape[..., 2] ** 2 + root[..., 2] ** 2
-    # each reading is the joint's with the probability of its residual under a mixture: the
-    # joint's surface (Gaussian about the body's depth) or a stray surface (uniform over the band)
-    var_in = var_body + v
-    dens_in = np.exp(-0.5 * (d - model_z) ** 2 / var_in) / np.sqrt(2.0 * np.pi * var_in)
+    # each reading is the joint's with the probability of its residual under a mixture (the
+    # joint's surface, Gaussian; a stray surface, uniform over the band): its residual first from
+    # the field alone, then from what the other readings predict of its joint (leave one out)
     band = 2.0 * (opt.band_m + opt.band_fraction * model_z)
-    p_in = np.where(kept, (1.0 - opt.outlier_share) * dens_in
-                    / ((1.0 - opt.outlier_share) * dens_in + opt.outlier_share / band), 0.0)
-    z_read = (model_z * v + d * var_body) / var_in  # the joint's depth if the reading is its own
-    var_read = v * var_body / var_in
-    z = p_in * z_read + (1.0 - p_in) * model_z
-    z_std = np.sqrt(p_in * var_read + (1.0 - p_in) * var_body + p_in * (1.0 - p_in) * (z_read - model_z) ** 2)
+    p_in = _inlier(d - model_z, var_body + v, kept, band, opt.outlier_share)
+    prior = _depth_cov(shape[..., 2], g, cov, root[..., 2], mono)
+    loo, loo_var = _leave_one_out(prior, d - model_z, v / np.maximum(p_in, _MIN_INLIER), kept)
+    p_in = _inlier(loo, loo_var + v, kept, band, opt.outlier_share)
     kept &= p_in >= 0.5
+    z, z_std = _condition(model_z, prior, d, v / np.maximum(p_in, 0.5), kept)
     joints = body * (z / model_z)[..., None]
     along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
     std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
-    std[..., 2] = np.where(kept, z_std, std[..., 2])
+    std[..., 2] = z_std
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
@@ -320,6 +364,61 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
         kept[bad] = False
     k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
+
+
+def _depth_cov(shape_z: NDArray[np.float64], g: NDArray[np.float64], cov: NDArray[np.float64],
+               root_z: NDArray[np.float64], mono: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The covariance (n, 12, 12) of the true depths about the depth field's: the shape's
+    (``shape_z`` (n, 12) standard deviations, correlated between joints by
+    :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's (``g`` (n, 12, 3)
+    its regressors, ``cov`` (n, 3, 3) its parameters' covariance), or for the bodies left at the
+    monocular placement (``mono`` (n,)) the placement's scale error (``root_z`` (n, 12), fully
+    correlated: the body slides along its rays as a whole)."""
+    field = np.einsum("njc,ncd,nkd->njk", g, cov, g)
+    place = root_z[:, :, None] * root_z[:, None, :]
+    shape = shape_z[:, :, None] * SHAPE_CORR_Z[None] * shape_z[:, None, :]
+    return np.asarray(shape + np.where(mono[:, None, None], place, field))
+
+
+def _inlier(residual: NDArray[np.float64], var: NDArray[np.float64], kept: NDArray[np.bool_],
+            band: NDArray[np.float64], share: float) -> NDArray[np.float64]:
+    """The probability (n, 12) that each ``kept`` reading is its joint's, from its ``residual``
+    of variance ``var`` if it is (Gaussian), against a stray surface (probability ``share``)
+    uniform over the depth ``band``; 0 where not ``kept``."""
+    dens = np.exp(-0.5 * residual**2 / var) / np.sqrt(2.0 * np.pi * var)
+    return np.where(kept, (1.0 - share) * dens / ((1.0 - share) * dens + share / band), 0.0)
+
+
+def _leave_one_out(prior: NDArray[np.float64], residual: NDArray[np.float64], v: NDArray[np.float64],
+                   kept: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each ``kept`` reading's residual (n, 12) from its joint's depth as the Gaussian
+    ``N(0, prior)`` conditioned on the other kept readings (``residual`` about the prior's mean,
+    variances ``v``) predicts it, and that prediction's variance (n, 12) (the reading's own noise
+    not included): ``a_j / C_jj`` and ``1 / C_jj - v_j``, ``C = (prior + diag(v))^-1``,
+    ``a = C residual`` (the closed form of leaving one observation out of a Gaussian
+    conditioning)."""
+    noise = np.where(kept, v, _UNREAD_VAR)
+    inv = np.linalg.inv(prior + noise[:, :, None] * np.eye(N_JOINTS)[None])
+    diag = np.diagonal(inv, axis1=1, axis2=2)
+    a = np.einsum("njk,nk->nj", inv, np.where(kept, residual, 0.0))
+    return a / diag, np.maximum(1.0 / diag - noise, 1e-3 * np.diagonal(prior, axis1=1, axis2=2))
+
+
+def _condition(mean: NDArray[np.float64], prior: NDArray[np.float64], d: NDArray[np.float64],
+               v: NDArray[np.float64], kept: NDArray[np.bool_]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The joints' depths (n, 12) and their standard deviations given the ``kept`` (n, 12)
+    readings ``d`` of variances ``v``: the Gaussian ``N(mean, prior)`` ((n, 12), (n, 12, 12))
+    conditioned on ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j)``, so a reading moves its joint and,
+    through the prior's correlations, the joints without one. A joint without a reading gets the
+    variance :data:`_UNREAD_VAR` in the solve (it drops out)."""
+    noise = np.where(kept, v, _UNREAD_VAR)
+    system = prior + noise[:, :, None] * np.eye(N_JOINTS)[None]
+    gain = np.linalg.solve(system, prior).transpose(0, 2, 1)  # prior @ system^-1 (both symmetric)
+    z = mean + np.einsum("njk,nk->nj", gain, np.where(kept, d - mean, 0.0))
+    post = prior - gain @ prior
+    var = np.diagonal(post, axis1=1, axis2=2)
+    return z, np.sqrt(np.maximum(var, 1e-3 * np.diagonal(prior, axis1=1, axis2=2)))
 
 
 def compile_kernels() -> None:

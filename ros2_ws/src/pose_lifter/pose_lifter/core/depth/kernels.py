@@ -85,25 +85,53 @@ def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: N
 
 
 @njit
+def _trunk_entry(ru: float, rv: float, origin: NDArray[np.float64], axes: NDArray[np.float64],
+                 extent: NDArray[np.float64], half_width: float, half_depth: float) -> float:
+    """The z-depth where the ray ``t (ru, rv, 1)`` enters an elliptic cylinder (``origin`` (3,),
+    ``axes`` (3, 3) rows: its width, spine and depth directions, ``extent`` (2,) its ends along the
+    spine from ``origin``, half axes ``half_width`` x ``half_depth``), caps included; inf if it
+    misses."""
+    r = (ru, rv, 1.0)
+    rr = np.empty(3)  # the ray and the origin in the cylinder's axes
+    cc = np.empty(3)
+    for i in range(3):
+        rr[i] = axes[i, 0] * r[0] + axes[i, 1] * r[1] + axes[i, 2] * r[2]
+        cc[i] = axes[i, 0] * origin[0] + axes[i, 1] * origin[1] + axes[i, 2] * origin[2]
+    iw, id2 = 1.0 / (half_width * half_width), 1.0 / (half_depth * half_depth)
+    best = math.inf
+    a = rr[0] * rr[0] * iw + rr[2] * rr[2] * id2
+    b = -2.0 * (rr[0] * cc[0] * iw + rr[2] * cc[2] * id2)
+    c = cc[0] * cc[0] * iw + cc[2] * cc[2] * id2 - 1.0
+    disc = b * b - 4.0 * a * c
+    if a > 1e-12 and disc > 0.0:
+        t = (-b - math.sqrt(disc)) / (2.0 * a)
+        s = t * rr[1] - cc[1]
+        if t > 0.0 and extent[0] <= s <= extent[1]:
+            best = t
+    if abs(rr[1]) > 1e-12:  # the caps
+        for e in range(2):
+            t = (extent[e] + cc[1]) / rr[1]
+            pw, pd = t * rr[0] - cc[0], t * rr[2] - cc[2]
+            if 0.0 < t < best and pw * pw * iw + pd * pd * id2 <= 1.0:
+                best = t
+    return best
+
+
+@njit
 def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates: NDArray[np.bool_],
                   pixels: NDArray[np.float64], surface: NDArray[np.float64], limbs: NDArray[np.int64],
-                  limb_radius: NDArray[np.float64], torso: NDArray[np.int64], torso_half_depth: float,
-                  focal: float, margin: float, hidden: NDArray[np.bool_]) -> None:
+                  limb_radius: NDArray[np.float64], trunk_origin: NDArray[np.float64],
+                  trunk_axes: NDArray[np.float64], trunk_extent: NDArray[np.float64], half_width: float,
+                  half_depth: float, intrinsics: NDArray[np.float64], margin: float,
+                  hidden: NDArray[np.bool_]) -> None:
     """Fill ``hidden`` (n, 12) for the occlusion test of :func:`pose_lifter.core.depth.fuse._hidden`:
     ``proj`` (n, 12, 2) the bodies' joints in the image, ``z`` (n, 12) their depths, ``pixels``
     (n, 12, 2) the keypoints, ``surface`` (n, 12) each joint's surface depth, ``limbs`` (8, 2),
-    ``limb_radius`` (8,), ``torso`` (2, 3) the torso's triangles."""
+    ``limb_radius`` (8,), each body's trunk (``trunk_origin`` (n, 3), ``trunk_axes`` (n, 3, 3),
+    ``trunk_extent`` (n, 2), see :func:`_trunk_entry`), ``intrinsics`` (fx, fy, cx, cy)."""
     n = proj.shape[0]
-    # each body's trunk axis: the shoulders' midpoint (image, depth) and the way to the hips'
-    trunk = np.empty((n, 6))
-    for o in range(n):
-        sl, sr, hr, hl = torso[0, 0], torso[0, 1], torso[0, 2], torso[1, 2]
-        trunk[o, 0] = 0.5 * (proj[o, sl, 0] + proj[o, sr, 0])
-        trunk[o, 1] = 0.5 * (proj[o, sl, 1] + proj[o, sr, 1])
-        trunk[o, 2] = 0.5 * (z[o, sl] + z[o, sr])
-        trunk[o, 3] = 0.5 * (proj[o, hl, 0] + proj[o, hr, 0]) - trunk[o, 0]
-        trunk[o, 4] = 0.5 * (proj[o, hl, 1] + proj[o, hr, 1]) - trunk[o, 1]
-        trunk[o, 5] = 0.5 * (z[o, hl] + z[o, hr]) - trunk[o, 2]
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    focal = 0.5 * (fx + fy)
     for p in range(n):
         for j in range(proj.shape[1]):
             if not candidates[p, j]:
@@ -128,36 +156,11 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
                         break
                 if found:
                     break
-                # the trunk: a capsule of radius torso_half_depth from the shoulders' midpoint to the
-                # hips', every joint's own too (seen from the side it covers the far shoulder, hip and
-                # an arm behind it)
-                au, av, za = trunk[o, 0], trunk[o, 1], trunk[o, 2]
-                eu, ev, ze = trunk[o, 3], trunk[o, 4], trunk[o, 5]
-                du, dv = qu - au, qv - av
-                tau = min(max((du * eu + dv * ev) / max(eu * eu + ev * ev, 1e-9), 0.0), 1.0)
-                zs = za + tau * ze
-                if (math.hypot(du - tau * eu, dv - tau * ev) < torso_half_depth * focal / max(zs, 1e-3)
-                        and zs - torso_half_depth < limit):
+                # the trunk, every body's own too: seen from the side it hides the far shoulder,
+                # hip and an arm behind it
+                if _trunk_entry((qu - cx) / fx, (qv - cy) / fy, trunk_origin[o], trunk_axes[o],
+                                trunk_extent[o], half_width, half_depth) < limit:
                     found = True
-                    break
-                if o == p and (j == torso[0, 0] or j == torso[0, 1] or j == torso[0, 2] or j == torso[1, 2]):
-                    continue
-                for t in range(torso.shape[0]):
-                    a, b, c = torso[t, 0], torso[t, 1], torso[t, 2]
-                    v0u, v0v = proj[o, b, 0] - proj[o, a, 0], proj[o, b, 1] - proj[o, a, 1]
-                    v1u, v1v = proj[o, c, 0] - proj[o, a, 0], proj[o, c, 1] - proj[o, a, 1]
-                    den = v0u * v1v - v0v * v1u
-                    if abs(den) < 1e-9:
-                        continue
-                    wu, wv = qu - proj[o, a, 0], qv - proj[o, a, 1]
-                    s1 = (wu * v1v - wv * v1u) / den
-                    s2 = (v0u * wv - v0v * wu) / den
-                    if s1 >= 0 and s2 >= 0 and s1 + s2 <= 1:
-                        zt = (1 - s1 - s2) * z[o, a] + s1 * z[o, b] + s2 * z[o, c] - torso_half_depth
-                        if zt < limit:
-                            found = True
-                            break
-                if found:
                     break
             hidden[p, j] = found
 

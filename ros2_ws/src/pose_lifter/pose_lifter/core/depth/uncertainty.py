@@ -25,9 +25,9 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from pose_lifter.core.track.placement import CameraIntrinsics
 
-__all__ = ["MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_FACTOR", "SHAPE_STD_M", "UNINFORMED_SCALE_STD",
-           "UNOBSERVED_FACTOR", "body_std", "monocular_scale_std", "monocular_std", "observed_bin",
-           "shape_std"]
+__all__ = ["MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_CORR_Z", "SHAPE_FACTOR", "SHAPE_STD_M",
+           "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std", "monocular_scale_std", "monocular_std",
+           "observed_bin", "shape_std"]
 
 #: Standard deviation of an observed joint's position relative to the body, metres, per joint
 #: (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`), of a body the 2D shows whole:
@@ -35,6 +35,25 @@ __all__ = ["MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_FACTOR", "SHAPE_STD_M"
 SHAPE_STD_M: Final[NDArray[np.float64]] = np.array(
     [[0.018, 0.057], [0.020, 0.056], [0.021, 0.071], [0.018, 0.057], [0.020, 0.056], [0.021, 0.071],
      [0.019, 0.028], [0.023, 0.059], [0.030, 0.105], [0.019, 0.028], [0.023, 0.059], [0.030, 0.105]])
+#: Correlation between the joints (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`) of
+#: the shape's errors along the depth: a limb leaning wrongly takes its elbow and wrist along, both
+#: shoulders move together, and an arm placed too near leaves the legs too far once the body's
+#: distance is right. The fusion carries a reading's correction to the joints the depth does not
+#: read through it (:func:`pose_lifter.core.depth.fuse.fuse_readings`).
+SHAPE_CORR_Z: Final[NDArray[np.float64]] = np.array([
+    [1.00, 0.55, 0.27, 0.83, 0.33, 0.09, 0.05, -0.42, -0.56, -0.07, -0.46, -0.54],
+    [0.55, 1.00, 0.74, 0.33, 0.23, 0.00, -0.22, -0.49, -0.47, -0.37, -0.49, -0.39],
+    [0.27, 0.74, 1.00, 0.09, 0.00, -0.03, -0.32, -0.34, -0.33, -0.45, -0.38, -0.28],
+    [0.83, 0.33, 0.09, 1.00, 0.55, 0.27, -0.07, -0.46, -0.54, 0.05, -0.42, -0.56],
+    [0.33, 0.23, 0.00, 0.55, 1.00, 0.74, -0.37, -0.49, -0.39, -0.22, -0.49, -0.47],
+    [0.09, 0.00, -0.03, 0.27, 0.74, 1.00, -0.45, -0.38, -0.28, -0.32, -0.34, -0.33],
+    [0.05, -0.22, -0.32, -0.07, -0.37, -0.45, 1.00, 0.30, 0.07, 0.81, 0.16, 0.00],
+    [-0.42, -0.49, -0.34, -0.46, -0.49, -0.38, 0.30, 1.00, 0.72, 0.16, 0.08, -0.03],
+    [-0.56, -0.47, -0.33, -0.54, -0.39, -0.28, 0.07, 0.72, 1.00, 0.00, -0.03, 0.01],
+    [-0.07, -0.37, -0.45, 0.05, -0.22, -0.32, 0.81, 0.16, 0.00, 1.00, 0.30, 0.07],
+    [-0.46, -0.49, -0.38, -0.42, -0.49, -0.34, 0.16, 0.08, -0.03, 0.30, 1.00, 0.72],
+    [-0.54, -0.39, -0.28, -0.56, -0.47, -0.33, 0.00, -0.03, 0.01, 0.07, 0.72, 1.00],
+])
 #: The bins of a body by how many of its 12 joints the 2D shows (each the least count of its bin):
 #: a body cut by the image's border (a person close to the camera) or hidden in part is lifted
 #: and placed worse.
