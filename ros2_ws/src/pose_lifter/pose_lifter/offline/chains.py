@@ -47,7 +47,7 @@ from pose_lifter.messages.frame import (
     with_frames_ahead,
 )
 from pose_lifter.messages.lagged import refined_skeletons
-from pose_lifter.offline.depth import BagDepth
+from pose_lifter.offline.depth import HELD_IMAGES, BagDepth
 
 __all__ = [
     "GROUP_CHAINS",
@@ -207,8 +207,8 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
                 depth: BagDepth | None = None) -> list[list[LiftedSkeleton | SkipSkeleton]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps; with ``depth``, each
-    message's people placed on its depth image, read one at a time in message order,
-    :class:`~pose_lifter.offline.depth.DepthFrames`); with ``smoothing_s > 0``
+    message's people placed on its depth image, :class:`~pose_lifter.offline.depth.DepthFrames`);
+    with ``smoothing_s > 0``
     each chain's poses are then refined over its whole track (:func:`refine_chain`), and the
     policy's causal smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
     Returns per chain, per item, the lifted skeleton or why not.
@@ -221,8 +221,11 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     those of lifting it alone: the chains share only the lifter, whose prior's poses and runs are
     bit for bit those computed alone. So the chains are in step by their own frames, the k-th
     item of each chain with the k-th of the others, whether they were seen together or one after
-    another (people who come and go one at a time are lifted as a crowd); with ``depth``, by
-    message (its images are read forward through the bag)."""
+    another (people who come and go one at a time are lifted as a crowd). With ``depth`` the
+    people of one message are placed on its image in one pass, so the chains are in step by
+    message, unless each message holds one person and the images are read by number
+    (:attr:`~pose_lifter.offline.depth.BagDepth.located`): then by their own frames too, at most
+    :data:`~pose_lifter.offline.depth.HELD_IMAGES` messages' images at a time."""
     pipelines = [FramePipeline(lifter, settings) for _ in chains]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
@@ -232,25 +235,32 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fits: list[list[NDArray[np.float64] | None]] = [[] for _ in chains]
     steps: dict[int, list[tuple[int, int, Item]]] = {}
+    # with depth, by the chains' own frames only where that places each person alone on its image
+    # as by message (one person a message: the placement of the people of one image is one pass)
+    # and the images can be read in any order (by number)
+    by_frame = depth is None or (depth.located is not None and len(
+        {it.msg_index for chain in chains for it in chain}) == sum(len(chain) for chain in chains))
     for c, chain in enumerate(chains):
         for k, item in enumerate(chain):
-            steps.setdefault(k if depth is None else item.msg_index, []).append((c, k, item))
+            steps.setdefault(k if by_frame else item.msg_index, []).append((c, k, item))
     images = depth.frames() if depth is not None else None
     try:
         for key in sorted(steps):
-            step = steps[key]
-            for c, _, item in step:
-                if item.expire_ns is not None:
-                    pipelines[c].end_frame(item.expire_ns)
-            image = images.image(key) if images is not None else None
-            together = lift_together([(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
-                                      for c, k, item in step], None if image is None else [image] * len(step))
-            for (c, _, _), lifted in zip(step, together, strict=True):
-                out[c].append(lifted)
-                # the centred smoothing starts from the fit's own pose; with the measurement update,
-                # from the published one (which has read each frame's 2D; docs/tuning.md)
-                fits[c].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
-                               and not lifter.options.measurement_update else None)
+            for step in _held(steps[key]) if images is not None else [steps[key]]:
+                for c, _, item in step:
+                    if item.expire_ns is not None:
+                        pipelines[c].end_frame(item.expire_ns)
+                msgs = sorted({x.msg_index for *_, x in step}) if images is not None else []
+                of_msg = {i: _own(images.image(i)) for i in msgs} if images is not None else {}
+                together = lift_together([(pipelines[c], inputs[c][k], item.stamp_ns, item.intrinsics)
+                                          for c, k, item in step],
+                                         None if images is None else [of_msg[x.msg_index] for *_, x in step])
+                for (c, _, _), lifted in zip(step, together, strict=True):
+                    out[c].append(lifted)
+                    # the centred smoothing starts from the fit's own pose; with the measurement update,
+                    # from the published one (which has read each frame's 2D; docs/tuning.md)
+                    fits[c].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
+                                   and not lifter.options.measurement_update else None)
     finally:
         if images is not None:
             images.close()
@@ -258,6 +268,26 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
         return [refine_chain(chain, d, f, p, smoothing_s)
                 for chain, d, f, p in zip(chains, out, fits, pipelines, strict=True)]
     return out
+
+
+def _own(image: NDArray[np.float32] | None) -> NDArray[np.float32] | None:
+    """A message's own array of its depth image (a view: two messages paired with one image are
+    still placed each on its own, :func:`~pose_lifter.messages.frame.place_lifted`)."""
+    return None if image is None else image.view()
+
+
+def _held(step: list[tuple[int, int, Item]]) -> list[list[tuple[int, int, Item]]]:
+    """A step's items in message order, cut into parts of at most :data:`HELD_IMAGES` messages (the
+    depth images held at once)."""
+    parts: list[list[tuple[int, int, Item]]] = []
+    seen: set[int] = set()
+    for x in sorted(step, key=lambda x: x[2].msg_index):
+        if not parts or (x[2].msg_index not in seen and len(seen) == HELD_IMAGES):
+            parts.append([])
+            seen = set()
+        parts[-1].append(x)
+        seen.add(x[2].msg_index)
+    return parts
 
 
 def refine_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton],

@@ -47,7 +47,7 @@ from pose_lifter.messages.names import COMPRESSED_IMAGE, IMAGE
 from pose_lifter.offline.bags import BagError, RawMessage, read_raw
 from pose_lifter.offline.mcap_index import ChunkedMcap, IndexedMessages, chunked_mcap
 
-__all__ = ["HEADER_BYTES", "IMAGE_TYPES", "NO_DEPTH", "BagDepth", "DepthFrames", "DepthStamp",
+__all__ = ["HEADER_BYTES", "HELD_IMAGES", "IMAGE_TYPES", "NO_DEPTH", "BagDepth", "DepthFrames", "DepthStamp",
            "depth_topic_of", "header_stamp", "pair_depth"]
 
 #: The message types of a depth topic.
@@ -130,6 +130,9 @@ class BagDepth:
         return next(iter(frames.reasons.values()), "")
 
 
+#: The most depth images (and, read by number, the most chunks holding them) held at once while the
+#: chains are lifted: one per message of a step (:func:`pose_lifter.offline.chains.lift_chains`).
+HELD_IMAGES: Final[int] = 16
 #: The bytes of a depth message that hold its header (for any frame id of a sane length).
 HEADER_BYTES: Final[int] = 1024
 
@@ -194,7 +197,8 @@ class DepthFrames:
         self._stream: Iterator[RawMessage] | None = None
         self._next = 0  # index of the topic's message the stream gives next
         self._last: tuple[int, NDArray[np.float32] | None] | None = None  # (index, its image)
-        self._indexed = IndexedMessages(*depth.located) if depth.located is not None else None
+        self._indexed = (IndexedMessages(*depth.located, keep=HELD_IMAGES) if depth.located is not None
+                         else None)
 
     def __enter__(self) -> DepthFrames:
         return self

@@ -234,14 +234,16 @@ def _index_entries(index: bytes, wanted: set[int]) -> tuple[list[tuple[int, int,
 
 class IndexedMessages:
     """The messages at ``positions`` (:meth:`ChunkedMcap.positions`) of an MCAP file, read by
-    number: the chunk that holds one is decompressed (the last one is kept, so neighbours cost
-    nothing), and its bytes are returned as a view into it. A context manager."""
+    number: the chunk that holds one is decompressed, as far as that message, and the last ``keep``
+    chunks read are kept (so neighbours, and messages asked for in turns among a few chunks, cost
+    nothing more); a message's bytes are a view into its chunk. A context manager."""
 
-    def __init__(self, mcap: ChunkedMcap, positions: Sequence[tuple[int, int, int]]) -> None:
+    def __init__(self, mcap: ChunkedMcap, positions: Sequence[tuple[int, int, int]], keep: int = 1) -> None:
         self.mcap = mcap
         self.positions = positions
+        self.keep = max(1, keep)
         self._file: BinaryIO | None = None
-        self._chunk: tuple[int, _Records] | None = None  # (chunk number, its records)
+        self._chunks: dict[int, _Records] = {}  # chunk number -> its records, the last used last
         self.n_decompressed = 0
 
     def __enter__(self) -> IndexedMessages:
@@ -251,7 +253,8 @@ class IndexedMessages:
         self.close()
 
     def close(self) -> None:
-        f, self._file, self._chunk = self._file, None, None
+        f, self._file = self._file, None
+        self._chunks.clear()
         if f is not None:
             f.close()
 
@@ -261,11 +264,14 @@ class IndexedMessages:
     def data(self, index: int) -> memoryview:
         """The serialised bytes of message ``index`` (in read order)."""
         _, k, offset = self.positions[index]
-        if self._chunk is None or self._chunk[0] != k:
+        records = self._chunks.pop(k, None)
+        if records is None:
             if self._file is None:
                 self._file = self.mcap.path.open("rb")
-            self._chunk = (k, _Records(self._file, self.mcap.chunks[k]))
+            records = _Records(self._file, self.mcap.chunks[k])
             self.n_decompressed += 1
-        records = self._chunk[1]
+            while len(self._chunks) >= self.keep:
+                del self._chunks[next(iter(self._chunks))]
+        self._chunks[k] = records
         view = records.upto(offset + 9)
         return _message_at(records.upto(offset + 9 + _U64.unpack_from(view, offset + 1)[0]), offset)[1]
