@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import shutil
 from collections import Counter
+from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -40,28 +41,33 @@ def _depth_image(stamp_ns: int, mm: int) -> Any:
     return msg
 
 
-def rgbd_bag(path: Path) -> Path:
+def rgbd_bag(path: Path, tracks: int = 1) -> Path:
     """walk_clean's first N frames (zstd chunks), each with a depth image (a wall at 4.5 m) of its
     keypoints' header stamp and the depth camera's camera_info, recorded at the keypoints' bag
     stamp right after them: the lift's answers share that log time with input messages read
     after the keypoints, in the keypoints' chunk and (the camera_info after a chunk's second image)
-    in the next chunk."""
+    in the next chunk. ``tracks``: the walker's frames cut into that many tracks, one after another."""
+    store = typestore.pose_lifter_typestore()
     with bags.BagWriter(path) as w:
         n = 0
         info: bags.RawMessage | None = None
         for raw in bags.read_raw(WALK):
             if raw.topic == OLD_LAYOUT:
                 continue
-            w.write_raw(raw)
             info = raw if raw.topic == "/camera_info" else info
-            if raw.topic == TOPIC_KEYPOINTS:
-                assert info is not None
-                header = typestore.pose_lifter_typestore().deserialize_cdr(raw.data, raw.msgtype).header
-                w.write(TOPIC_DEPTH, raw.stamp_ns, _depth_image(stamp_to_ns(header.stamp), 4500 + n), IMAGE)
-                w.write_raw(replace(info, topic=DEPTH_INFO, stamp_ns=raw.stamp_ns))
-                n += 1
-                if n == N:
-                    break
+            if raw.topic != TOPIC_KEYPOINTS:
+                w.write_raw(raw)
+                continue
+            assert info is not None
+            msg = store.deserialize_cdr(raw.data, raw.msgtype)
+            for sk in msg.skeletons:
+                sk.track_id = n * tracks // N
+            w.write(raw.topic, raw.stamp_ns, msg, raw.msgtype)
+            w.write(TOPIC_DEPTH, raw.stamp_ns, _depth_image(stamp_to_ns(msg.header.stamp), 4500 + n), IMAGE)
+            w.write_raw(replace(info, topic=DEPTH_INFO, stamp_ns=raw.stamp_ns))
+            n += 1
+            if n == N:
+                break
     return path
 
 
@@ -194,7 +200,7 @@ def test_a_topic_read_by_number_is_the_stream(tmp_path: Path) -> None:
     positions = mcap.positions(mcap.channel_ids([TOPIC_DEPTH]))
     stream = [x for x in _raw(bag) if x.topic == TOPIC_DEPTH]
     assert [t for t, _, _ in positions] == [x.stamp_ns for x in stream]
-    with mcap_index.IndexedMessages(mcap, positions) as read:
+    with closing(mcap_index.IndexedMessages(mcap, positions)) as read:
         for k in reversed(range(len(stream))):  # any order
             assert bytes(read.data(k)) == stream[k].data
         assert read.n_decompressed == len({c for _, c, _ in positions})
@@ -230,3 +236,43 @@ def test_the_depth_stamps_read_with_the_keypoints_pair_as_a_pass_of_their_own(tm
             if x is not None and y is not None:
                 np.testing.assert_array_equal(x, y)
         assert (a.n_passes, b.n_passes) == (0, 1)
+
+
+def test_one_person_a_message_is_lifted_in_step_by_frame_as_by_message(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tracks one after another, one person a message, images read by number: the chains are lifted
+    in step by their own frames (a batch of people from different messages, each on its own image),
+    and each gets what it gets lifted message by message (the images read as a stream)."""
+    from pose_lifter.messages.frame import FramePipeline
+    from pose_lifter.offline import chains as chains_module
+    from pose_lifter.offline.chains import split_chains
+
+    batches: list[int] = []
+    together = chains_module.lift_together
+
+    def spy(frames: Any, depths: Any = None) -> Any:
+        batches.append(len(frames))
+        return together(frames, depths)
+
+    monkeypatch.setattr(chains_module, "lift_together", spy)
+
+    bag = rgbd_bag(tmp_path / "rgbd.mcap", tracks=2)
+    kp = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, [TOPIC_KEYPOINTS])]
+    infos = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, ["/camera_info"])]
+    assert {sk.track_id for _, msg in kp for sk in msg.skeletons} == {0, 1}
+    frames = [stamp_to_ns(msg.header.stamp) for _, msg in kp]
+    depth = pair_depth(bag, TOPIC_DEPTH, IMAGE, frames, [(640.0, 480.0)] * len(kp), 0.003)
+    assert depth.located is not None and depth.paired == len(kp)
+    lifter, settings = Lifter(), LiftSettings()
+    chains, _, _ = split_chains(kp, infos, FramePipeline(lifter, settings.frame))
+    assert sorted(len(c) for c in chains) == [N // 2, N // 2]
+    got = {}
+    for by, d in (("frame", depth), ("message", replace(depth, located=None))):
+        batches.clear()
+        got[by] = lift.lift_messages(kp, infos, lifter, settings, depth=d)
+        assert batches == ([2] * (N // 2) if by == "frame" else [1] * N)
+    assert len(got["frame"]) == len(kp)
+    for a, b in zip(got["frame"], got["message"], strict=True):
+        assert (a.stamp_ns, a.track_id) == (b.stamp_ns, b.track_id)
+        np.testing.assert_array_equal(a.joints_m, b.joints_m)
+        np.testing.assert_array_equal(a.std_m, b.std_m)

@@ -236,7 +236,7 @@ class IndexedMessages:
     """The messages at ``positions`` (:meth:`ChunkedMcap.positions`) of an MCAP file, read by
     number: the chunk that holds one is decompressed, as far as that message, and the last ``keep``
     chunks read are kept (so neighbours, and messages asked for in turns among a few chunks, cost
-    nothing more); a message's bytes are a view into its chunk. A context manager."""
+    nothing more); a message's bytes are a view into its chunk. :meth:`close` closes the file."""
 
     def __init__(self, mcap: ChunkedMcap, positions: Sequence[tuple[int, int, int]], keep: int = 1) -> None:
         self.mcap = mcap
@@ -245,12 +245,6 @@ class IndexedMessages:
         self._file: BinaryIO | None = None
         self._chunks: dict[int, _Records] = {}  # chunk number -> its records, the last used last
         self.n_decompressed = 0
-
-    def __enter__(self) -> IndexedMessages:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def close(self) -> None:
         f, self._file = self._file, None
