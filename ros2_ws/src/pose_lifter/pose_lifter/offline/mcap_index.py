@@ -16,6 +16,7 @@ file's end lists the chunks (:func:`chunked_mcap`). Through it:
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import struct
 from collections.abc import Iterable, Iterator, Sequence
@@ -171,42 +172,42 @@ def _message_at(records: memoryview, offset: int, head: int | None = None) -> tu
 def iter_chunked(mcap: ChunkedMcap, channel_ids: Iterable[int], heads: dict[int, int] | None = None
                  ) -> Iterator[tuple[int, int, memoryview]]:
     """``(channel id, log time, data)`` of every message of ``channel_ids``, in read order (log
-    time, chunk offset, offset in the chunk: rosbags' and the ``mcap`` package's order). Each
-    chunk is decompressed once, only as far as its last message wanted here ends, and kept until
-    its last one is given; ``heads``: channel id -> only the first so many bytes of each of its
-    messages are wanted (e.g. an image's header: its pixels are not decompressed unless a later
-    message of the chunk is wanted). The data are views into the chunk (copy what is kept)."""
+    time, chunk offset, offset in the chunk: rosbags' and the ``mcap`` package's order). The
+    chunks are merged as rosbags merges them: a chunk's message index is read, and the chunk
+    decompressed, when the merge reaches its first log time, so memory holds only the chunks whose
+    time ranges overlap; each is decompressed once, only as far as its last message wanted here
+    ends. ``heads``: channel id -> only the first so many bytes of each of its messages are wanted
+    (e.g. an image's header: its pixels are not decompressed unless a later message of the chunk
+    is wanted). The data are views into the chunk (copy what is kept)."""
     wanted = set(channel_ids)
-    heads = heads or {}
-    entries: list[tuple[int, int, int, int, int]] = []  # log time, chunk offset, offset, chunk, channel
-    needed: list[int] = []  # per chunk: how far its records must be decompressed
-    left: list[int] = []  # per chunk: its messages still to give
     with mcap.path.open("rb") as f:
-        for k, chunk in enumerate(mcap.chunks):
-            f.seek(chunk.chunk_start_offset + chunk.chunk_length)
-            index = f.read(chunk.message_index_length)
-            mine, ends = _index_entries(index, wanted)
-            needed.append(0)
-            for t, offset, cid in mine:
-                entries.append((t, chunk.chunk_start_offset, offset, k, cid))
-                head = heads.get(cid)
-                after = ends.get(offset, chunk.uncompressed_size)
-                needed[k] = max(needed[k], after if head is None else min(after, offset + 31 + head))
-            left.append(len(mine))
-    entries.sort()
-    open_chunks: dict[int, memoryview] = {}
-    with mcap.path.open("rb") as f:
-        for t, _, offset, k, cid in entries:
-            records = open_chunks.get(k)
-            if records is None:
-                records = open_chunks[k] = _Records(f, mcap.chunks[k]).upto(needed[k])
-            log_time, data = _message_at(records, offset, heads.get(cid))
-            if log_time != t:
-                raise ValueError(f"{mcap.path}: the message index does not match chunk {k}")
-            left[k] -= 1
-            if not left[k]:
-                del open_chunks[k]
-            yield cid, t, data
+        merged = heapq.merge(*[_chunk_messages(f, chunk, wanted, heads or {}) for chunk in mcap.chunks
+                               if any(chunk.channel_count.get(cid) for cid in wanted)])
+        for t, _, offset, cid, data in merged:
+            if data is not None:
+                yield cid, t, data
+
+
+def _chunk_messages(f: BinaryIO, chunk: Any, wanted: set[int], heads: dict[int, int]
+                    ) -> Iterator[tuple[int, int, int, int, memoryview | None]]:
+    """The messages of ``wanted`` of one chunk for :func:`iter_chunked`'s merge, ``(log time,
+    chunk offset, offset, channel id, data)`` in read order, after a first item without data that
+    sorts before them (the chunk's start): nothing is read before the merge reaches it."""
+    yield chunk.message_start_time, chunk.chunk_start_offset, -1, -1, None
+    f.seek(chunk.chunk_start_offset + chunk.chunk_length)
+    mine, ends = _index_entries(f.read(chunk.message_index_length), wanted)
+    needed = 0
+    for _, offset, cid in mine:
+        after = ends.get(offset, chunk.uncompressed_size)
+        head = heads.get(cid)
+        needed = max(needed, after if head is None else min(after, offset + 31 + head))
+    records = _Records(f, chunk).upto(needed)
+    for t, offset, cid in sorted(mine):
+        log_time, data = _message_at(records, offset, heads.get(cid))
+        if log_time != t:
+            raise ValueError(f"{f.name}: the message index of the chunk at {chunk.chunk_start_offset} "
+                             "does not match it")
+        yield t, chunk.chunk_start_offset, offset, cid, data
 
 
 def _index_entries(index: bytes, wanted: set[int]) -> tuple[list[tuple[int, int, int]], dict[int, int]]:
