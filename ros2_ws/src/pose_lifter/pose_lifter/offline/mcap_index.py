@@ -235,7 +235,8 @@ def _index_entries(index: bytes, wanted: set[int]) -> tuple[list[tuple[int, int,
 
 class IndexedMessages:
     """The messages at ``positions`` (:meth:`ChunkedMcap.positions`) of an MCAP file, read by
-    number: the chunk that holds one is decompressed, as far as that message, and the last ``keep``
+    number: the chunk that holds one is decompressed (whole: its neighbours are likely wanted
+    next, and one pass over it is the cheapest), and the last ``keep``
     chunks read are kept (so neighbours, and messages asked for in turns among a few chunks, cost
     nothing more); a message's bytes are a view into its chunk. :meth:`close` closes the file."""
 
@@ -268,5 +269,4 @@ class IndexedMessages:
             while len(self._chunks) >= self.keep:
                 del self._chunks[next(iter(self._chunks))]
         self._chunks[k] = records
-        view = records.upto(offset + 9)
-        return _message_at(records.upto(offset + 9 + _U64.unpack_from(view, offset + 1)[0]), offset)[1]
+        return _message_at(records.upto(records.size), offset)[1]
