@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tolerances as tol
+from cmu_data import DATA, needs_data
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.model.skeleton import limb_lengths
 from pose_lifter.messages import convert as m
@@ -144,3 +145,16 @@ def test_scenes_in_sequence_follow_one_another_a_second_apart(tmp_path: Path) ->
     kp = [x for x in bags.read_messages(path, ["/keypoints_2d"])]
     assert [x.stamp_ns for x in kp] == [*a.stamps_ns, *b.stamps_ns]
     assert [[s.track_id for s in x.msg.skeletons] for x in kp] == [[0]] * 5 + [[1]] * 3
+
+
+@needs_data
+def test_trials_filmed_as_one_track_follow_one_another_a_frame_apart() -> None:
+    """``make-bag --one-after-another --one-track``: one person recorded at length, the trials
+    on track 0, each a frame after the previous one; refused without --one-after-another."""
+    opts = scenes.SceneOptions(fps=30.0)
+    a, b = scenes.film_trials(["01_01", "01_02"], DATA, opts, frames=5, one_after_another=True,
+                              one_track=True)
+    assert list(a.track_ids) == list(b.track_ids) == [0]
+    assert b.stamps_ns[0] - a.stamps_ns[-1] == round(1e9 / 30.0)
+    with pytest.raises(InvalidInputError, match="one-after-another"):
+        scenes.film_trials(["01_01"], DATA, opts, frames=5, one_track=True)

@@ -103,7 +103,7 @@ def make_bag(
     trials: Sequence[str], out: str | Path, data_dir: str | Path | None = None, fps: float = 30.0,
     start: float = 0.0, frames: int | None = None, overwrite: bool = False,
     depth: Literal["raw", "compressed"] | None = None, one_after_another: bool = False,
-    camera_info: bool = True,
+    camera_info: bool = True, one_track: bool = False,
     **scene: Any,
 ) -> Any:
     """Film mocap trials with the virtual camera and write the bag.
@@ -126,6 +126,8 @@ def make_bag(
         16UC1 ``sensor_msgs/Image`` or its compressedDepth PNG.
     camera_info : bool
         Write ``/camera_info`` (False: the bag has none).
+    one_track : bool
+        With ``one_after_another``: the trials as one track, a frame apart.
     **scene
         Other :class:`pose_lifter.mocap.scenes.SceneOptions` fields.
 
@@ -139,7 +141,7 @@ def make_bag(
 
     opts = scenes.SceneOptions(fps=fps, **scene)
     filmed = scenes.film_trials(trials, mocap.resolve_data_dir(data_dir), opts, start, frames,
-                                one_after_another)
+                                one_after_another, one_track)
     write_messages(out, (x for f in filmed for x in scenes.scene_messages(f, depth, camera_info)),
                    overwrite=overwrite)
     return filmed
@@ -152,7 +154,7 @@ def _cmd_make_bag(args: argparse.Namespace) -> int:
         distance=args.distance, follow=not args.no_follow, spacing=args.spacing, noise=args.noise,
         outliers=args.outliers, missing=args.missing, seed=args.seed,
         depth=args.depth_format if args.depth else None, one_after_another=args.one_after_another,
-        camera_info=not args.no_camera_info)
+        camera_info=not args.no_camera_info, one_track=args.one_track)
     rgbd = f", depth {args.depth_format}" if args.depth else ""
     print(f"{args.out}: {sum(s.joints_camera.shape[1] for s in filmed)} frames at {args.fps:g} Hz, "
           f"tracks {[t for s in filmed for t in s.track_ids]}{rgbd}")
@@ -380,6 +382,8 @@ def _make_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
                    "compressedDepth PNG on its /compressedDepth topic")
     p.add_argument("--one-after-another", action="store_true", help="the trials one at a time, each its own "
                    "track, a second apart (default: side by side, all at once)")
+    p.add_argument("--one-track", action="store_true", help="with --one-after-another: the trials as one "
+                   "track, a frame apart (one person recorded at length)")
     p.add_argument("--no-camera-info", action="store_true", help="leave /camera_info out")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_cmd_make_bag)

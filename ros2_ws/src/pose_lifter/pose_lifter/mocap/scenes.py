@@ -276,7 +276,8 @@ def in_sequence(scenes: Sequence[Scene], gap_s: float = 1.0) -> list[Scene]:
 
 
 def film_trials(trials: Sequence[str], data_dir: str | Path, options: SceneOptions, start: float = 0.0,
-                frames: int | None = None, one_after_another: bool = False) -> list[Scene]:
+                frames: int | None = None, one_after_another: bool = False, one_track: bool = False
+                ) -> list[Scene]:
     """Film CMU trials (one person each, track ids 0, 1, ... in order) at ``options.fps``.
 
     Parameters
@@ -294,6 +295,9 @@ def film_trials(trials: Sequence[str], data_dir: str | Path, options: SceneOptio
         False: one scene, the people side by side, cut to the shortest clip. True: one scene per
         trial, each of its own length and its corruption seeded ``options.seed + k``, each
         starting a second after the previous one ended (:func:`in_sequence`).
+    one_track : bool
+        With ``one_after_another``: every trial on track 0, each starting a frame after the
+        previous one ended (one person recorded at length, changing motion).
 
     Returns
     -------
@@ -301,6 +305,9 @@ def film_trials(trials: Sequence[str], data_dir: str | Path, options: SceneOptio
     """
     from pose_lifter.mocap import cmu
 
+    if one_track and not one_after_another:
+        raise InvalidInputError("one track is for trials one after another "
+                                "(--one-track needs --one-after-another)")
     people = []
     for t in trials:
         row = cmu.find_trial(t, data_dir)
@@ -313,8 +320,9 @@ def film_trials(trials: Sequence[str], data_dir: str | Path, options: SceneOptio
         people.append(clip)
     if not one_after_another:
         return [build_scene(people, options, source_fps=options.fps)]
-    return in_sequence([build_scene([p], replace(options, seed=options.seed + k), options.fps, [k])
-                               for k, p in enumerate(people)])
+    return in_sequence([build_scene([p], replace(options, seed=options.seed + k), options.fps,
+                                    [0 if one_track else k]) for k, p in enumerate(people)],
+                       1.0 / options.fps if one_track else 1.0)
 
 
 def corrupt_2d(
