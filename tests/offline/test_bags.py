@@ -190,7 +190,8 @@ def test_a_looping_clock_keeps_each_loops_own_offline_update() -> None:
     from pose_lifter.offline.settings import LiftSettings
 
     n = 45  # 1.5 s at 30 Hz: the replay jumps back further than the track timeout (1 s)
-    kp, infos = _read_keypoints(BAGS / "punch_outliers.mcap", "/keypoints_2d", "/camera_info", 2 * n)
+    first = _read_keypoints(BAGS / "punch_outliers.mcap", "/keypoints_2d", "/camera_info", 2 * n)
+    kp, infos = first.keypoints, first.infos
     stamps = [s for s, _ in kp[:n]]
 
     def restamped(msg: Any, stamp: int) -> Any:

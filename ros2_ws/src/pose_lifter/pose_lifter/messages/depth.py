@@ -417,6 +417,12 @@ class _Reader:
         return DecodedHeader(DecodedStamp(sec, self.u32()), self.string())
 
 
+def decode_header_cdr(data: Any) -> DecodedHeader:
+    """The ``std_msgs/Header`` that a serialised message (an ``Image``, a ``CompressedImage``)
+    starts with, read from its first bytes alone; :class:`DepthError` when they end inside it."""
+    return _Reader(data).header()
+
+
 def decode_image_cdr(data: Any) -> DecodedImage:
     """A serialised ``sensor_msgs/Image`` read into its fields (no copy of the pixels);
     :class:`DepthError` when the bytes end early."""

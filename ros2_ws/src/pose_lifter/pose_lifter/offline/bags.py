@@ -299,18 +299,24 @@ class _OneFile:
         self.metadata = whole.metadata
 
 
-def _messages(p: Path, reader: Any, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
+def _messages(p: Path, reader: Any, conns: list[Any], heads: Mapping[int, int] | None = None
+              ) -> Iterator[tuple[Any, int, Any]]:
     """(connection, stamp, raw) of ``conns`` in time order; a rosbag2 directory's files are merged
-    by stamp (rosbags reads them one after the other). A read that fails on the way (a damaged
-    file) is a :class:`BagReadError`."""
+    by stamp (rosbags reads them one after the other); a single chunked MCAP file is read through
+    its index (:func:`_chunked`: ``heads``, connection id -> only the first so many bytes of each
+    of its messages are wanted). A read that fails on the way (a damaged file) is a
+    :class:`BagReadError`."""
     from rosbags.rosbag2.reader import DirectoryReader
 
     storage = getattr(reader.readers[0], "storage", None) if len(reader.readers) == 1 else None
-    if isinstance(storage, DirectoryReader) and len(storage.storages) > 1:
+    chunked = _chunked(p, conns, heads or {})
+    if chunked is not None:
+        stream: Iterator[tuple[Any, int, Any]] = chunked
+    elif isinstance(storage, DirectoryReader) and len(storage.storages) > 1:
         wanted = conns or reader.connections
         parts = [DirectoryReader.messages(_OneFile(storage, s), wanted)  # type: ignore[arg-type]
                  for s in storage.storages]
-        stream: Iterator[tuple[Any, int, Any]] = heapq.merge(*parts, key=lambda x: int(x[1]))
+        stream = heapq.merge(*parts, key=lambda x: int(x[1]))
     else:
         stream = iter(reader.messages(connections=conns))
     while True:
@@ -321,6 +327,26 @@ def _messages(p: Path, reader: Any, conns: list[Any]) -> Iterator[tuple[Any, int
         except Exception as exc:
             raise _reading_error(p, exc) from None
         yield item
+
+
+def _chunked(p: Path, conns: list[Any], heads: Mapping[int, int]) -> Iterator[tuple[Any, int, Any]] | None:
+    """(connection, stamp, data view) of ``conns`` read through the index of a single chunked MCAP
+    file (:func:`pose_lifter.offline.mcap_index.iter_chunked`: the order of rosbags' reader, each
+    chunk decompressed once and only as far as needed, no copy of a message); None when ``p`` is
+    not one or a connection is not one channel of it."""
+    from pose_lifter.offline.mcap_index import chunked_mcap, iter_chunked
+
+    mcap = chunked_mcap(p) if conns else None
+    if mcap is None:
+        return None
+    of_channel: dict[int, Any] = {}
+    for conn in conns:
+        ids = [k for k, ch in mcap.channels.items() if (ch.topic, ch.schema) == (conn.topic, conn.msgtype)]
+        if len(ids) != 1 or ids[0] in of_channel:
+            return None
+        of_channel[ids[0]] = conn
+    cut = {k: heads[c.id] for k, c in of_channel.items() if c.id in heads}
+    return ((of_channel[k], t, data) for k, t, data in iter_chunked(mcap, of_channel, cut))
 
 
 def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
@@ -341,7 +367,7 @@ def read_raw(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
             msgdef, rihs01 = meta[conn.id]
             data = bytes(raw)
             if conn.id in stale:
-                new = upgrade_message(reader.deserialize(raw, conn.msgtype), conn.msgtype, ours)
+                new = upgrade_message(reader.deserialize(data, conn.msgtype), conn.msgtype, ours)
                 data = bytes(ours.serialize_cdr(new, conn.msgtype))
                 msgdef = ours.generate_msgdef(conn.msgtype, ros_version=2)[0]
                 rihs01 = ours.hash_rihs01(conn.msgtype)
@@ -358,6 +384,7 @@ def read_messages(
     path: str | Path,
     topics: Iterable[str] | None = None,
     decoders: Mapping[str, Callable[[bytes], Any | None]] | None = None,
+    heads: Mapping[str, int] | None = None,
 ) -> Iterator[BagMessage]:
     """Deserialised messages of a bag (MCAP file or rosbag2 directory), in time order.
 
@@ -371,6 +398,10 @@ def read_messages(
         Faster decoders for some of our types (e.g. :func:`pose_lifter.messages.cdr.decode_skeleton2d_array`):
         used on a ROS 2 bag whose definition of the type is ours; a decoder returning None hands
         the message to rosbags.
+    heads : mapping of message type -> int, optional
+        Types of ``decoders`` that need only the first so many bytes of each message (e.g. an
+        image's header): where the bag allows (a single chunked MCAP file), the rest is not read
+        and the decoder is given the first bytes alone.
     """
     with _open_reader(path) as (p, reader):
         wanted = set(topics) if topics is not None else None
@@ -385,11 +416,13 @@ def read_messages(
         if decoders and reader.is2:
             fast = {c.id: decoders[c.msgtype] for c in conns if c.msgtype in decoders and c.id not in stale
                     and reader.typestore.hash_rihs01(c.msgtype) == ours.hash_rihs01(c.msgtype)}
-        for conn, stamp, raw in _messages(p, reader, conns):
+        head_of = heads or {}
+        cut = {c.id: head_of[c.msgtype] for c in conns if c.id in fast and c.msgtype in head_of}
+        for conn, stamp, raw in _messages(p, reader, conns, cut):
             decode = fast.get(conn.id)
             msg = decode(raw) if decode is not None else None
             if msg is None:
-                msg = reader.deserialize(raw, conn.msgtype)
+                msg = reader.deserialize(bytes(raw), conn.msgtype)
                 if conn.id in stale:
                     msg = upgrade_message(msg, conn.msgtype, ours)
             yield BagMessage(conn.topic, conn.msgtype, int(stamp), msg)

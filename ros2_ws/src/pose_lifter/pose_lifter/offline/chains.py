@@ -50,7 +50,7 @@ from pose_lifter.messages.frame import (
     with_frames_ahead,
 )
 from pose_lifter.messages.lagged import refined_skeletons
-from pose_lifter.offline.depth import BagDepth
+from pose_lifter.offline.depth import HELD_IMAGES, BagDepth
 
 __all__ = [
     "GROUP_CHAINS",
@@ -272,8 +272,8 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
                 depth: BagDepth | None = None) -> list[list[LiftedSkeleton | SkipSkeleton]]:
     """Lift independent chains in step, each through its own frame pipeline (steps 2 and 3: the
     per-track policy, the placement, the expiry at the node's stamps; with ``depth``, each
-    message's people placed on its depth image, read one at a time in message order,
-    :class:`~pose_lifter.offline.depth.DepthFrames`); with ``smoothing_s > 0``
+    message's people placed on its depth image, :class:`~pose_lifter.offline.depth.DepthFrames`);
+    with ``smoothing_s > 0``
     each chain's poses are then refined over its whole track (:func:`refine_chain`), and the
     policy's causal smoothing of noisy tracks is off (:attr:`TrackPolicy.smoothed_later`).
     Returns per chain, per item, the lifted skeleton or why not.
@@ -286,14 +286,17 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     those of lifting it alone: the chains share only the lifter, whose prior's poses and runs are
     bit for bit those computed alone. So the chains are in step by their own frames, the k-th
     item of each chain with the k-th of the others, whether they were seen together or one after
-    another (people who come and go one at a time are lifted as a crowd); with ``depth``, by
-    message (its images are read forward through the bag). Without ``depth`` a long chain is
-    lifted as its :func:`segments`, each through its own pipeline from its lead-in, and stitched
-    (the lead-ins' outcomes dropped; the offline update and the smoothing then run over the
-    stitched chain): a segment's poses are not bit for bit the unsegmented chain's (a warm start
-    keeps the reading of an ambiguous 2D it started from), but as accurate."""
+    another (people who come and go one at a time are lifted as a crowd). With ``depth`` the
+    people of one message are placed on its image in one pass, so the chains are in step by
+    message, unless each message holds one person and the images are read by number
+    (:attr:`~pose_lifter.offline.depth.BagDepth.located`): then by their own frames too, at most
+    :data:`~pose_lifter.offline.depth.HELD_IMAGES` messages' images at a time. Without ``depth`` a
+    long chain is lifted as its :func:`segments`, each through its own pipeline from its lead-in,
+    and stitched (the lead-ins' outcomes dropped; the offline update and the smoothing then run
+    over the stitched chain): a segment's poses are not bit for bit the unsegmented chain's (a
+    warm start keeps the reading of an ambiguous 2D it started from), but as accurate."""
     # a long chain's segments are lifted as chains of their own, in step with the others (with
-    # depth the steps are the messages, whose images are read forward: no segments)
+    # depth, none: a segment's poses are not the chain's, and the depth path keeps them)
     runs = [(c, a, k, b) for c, chain in enumerate(chains)
             for a, k, b in (segments(chain) if depth is None else [(0, 0, len(chain))])]
     pipelines = [FramePipeline(lifter, settings) for _ in runs]
@@ -306,25 +309,32 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fitted: list[list[NDArray[np.float64] | None]] = [[] for _ in runs]
     steps: dict[int, list[tuple[int, int, Item]]] = {}
+    # with depth, by the chains' own frames only where that places each person alone on its image
+    # as by message (one person a message: the placement of the people of one image is one pass)
+    # and the images can be read in any order (by number)
+    by_frame = depth is None or (depth.located is not None and len(
+        {it.msg_index for chain in chains for it in chain}) == sum(len(chain) for chain in chains))
     for r, (c, a, _, b) in enumerate(runs):
         for k, item in enumerate(chains[c][a:b]):
-            steps.setdefault(k if depth is None else item.msg_index, []).append((r, k, item))
+            steps.setdefault(k if by_frame else item.msg_index, []).append((r, k, item))
     images = depth.frames() if depth is not None else None
     try:
         for key in sorted(steps):
-            step = steps[key]
-            for r, _, item in step:
-                if item.expire_ns is not None:
-                    pipelines[r].end_frame(item.expire_ns)
-            image = images.image(key) if images is not None else None
-            together = lift_together([(pipelines[r], inputs[r][k], item.stamp_ns, item.intrinsics)
-                                      for r, k, item in step], None if image is None else [image] * len(step))
-            for (r, _, _), lifted in zip(step, together, strict=True):
-                done[r].append(lifted)
-                # the centred smoothing starts from the fit's own pose; with the measurement update,
-                # from the published one (which has read each frame's 2D; docs/tuning.md)
-                fitted[r].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
-                                 and not lifter.options.measurement_update else None)
+            for step in _held(steps[key]) if images is not None else [steps[key]]:
+                for r, _, item in step:
+                    if item.expire_ns is not None:
+                        pipelines[r].end_frame(item.expire_ns)
+                msgs = sorted({x.msg_index for *_, x in step}) if images is not None else []
+                of_msg = {i: _own(images.image(i)) for i in msgs} if images is not None else {}
+                together = lift_together([(pipelines[r], inputs[r][k], item.stamp_ns, item.intrinsics)
+                                          for r, k, item in step],
+                                         None if images is None else [of_msg[x.msg_index] for *_, x in step])
+                for (r, _, _), lifted in zip(step, together, strict=True):
+                    done[r].append(lifted)
+                    # the centred smoothing starts from the fit's own pose; with the measurement update,
+                    # from the published one (which has read each frame's 2D; docs/tuning.md)
+                    fitted[r].append(lifted.fit_pose_camera if isinstance(lifted, LiftedSkeleton)
+                                     and not lifter.options.measurement_update else None)
     finally:
         if images is not None:
             images.close()
@@ -345,6 +355,26 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
         return [refine_chain(chain, out[c], fits[c], later[c], pipelines[first_run[c]], smoothing_s)
                 for c, chain in enumerate(chains)]
     return out
+
+
+def _own(image: NDArray[np.float32] | None) -> NDArray[np.float32] | None:
+    """A message's own array of its depth image (a view: two messages paired with one image are
+    still placed each on its own, :func:`~pose_lifter.messages.frame.place_lifted`)."""
+    return None if image is None else image.view()
+
+
+def _held(step: list[tuple[int, int, Item]]) -> list[list[tuple[int, int, Item]]]:
+    """A step's items in message order, cut into parts of at most :data:`HELD_IMAGES` messages (the
+    depth images held at once)."""
+    parts: list[list[tuple[int, int, Item]]] = []
+    seen: set[int] = set()
+    for x in sorted(step, key=lambda x: x[2].msg_index):
+        if not parts or (x[2].msg_index not in seen and len(seen) == HELD_IMAGES):
+            parts.append([])
+            seen = set()
+        parts[-1].append(x)
+        seen.add(x[2].msg_index)
+    return parts
 
 
 def refine_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton],

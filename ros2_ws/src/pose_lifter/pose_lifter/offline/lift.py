@@ -13,9 +13,10 @@ written next to the input topics. Where it differs, on purpose:
 * the node's ``frame_id`` is not an offline setting (the headers are copied unchanged);
 * a depth topic (``--depth-topic``; by default the bag's one depth image topic,
   :func:`pose_lifter.offline.depth.depth_topic_of`) pairs each message with the depth image of the
-  nearest header stamp within ``depth_tolerance`` once, before the lift
-  (:func:`~pose_lifter.offline.depth.pair_depth`), and the images are read one at a time as the
-  messages are lifted (the node pairs each frame as it comes, from a buffer of the newest images);
+  nearest header stamp within ``depth_tolerance`` once, before the lift (the images' stamps read
+  with the keypoints, :func:`~pose_lifter.offline.depth.pair_depth`), and the images are read one
+  at a time as the messages are lifted (the node pairs each frame as it comes, from a buffer of
+  the newest images);
 * ``smoothing_s > 0`` reads each track's next frames into its offline prior
   (:func:`pose_lifter.messages.frame.with_frames_ahead`) and smooths each track's poses with past and
   future frames (:func:`pose_lifter.offline.chains.refine_chain`); 0 gives the node's causal
@@ -82,7 +83,16 @@ from pose_lifter.offline.chains import (
     pieces,
     split_chains,
 )
-from pose_lifter.offline.depth import BagDepth, depth_topic_of, pair_depth
+from pose_lifter.offline.chunk_copy import copy_with
+from pose_lifter.offline.depth import (
+    HEADER_BYTES,
+    BagDepth,
+    DepthStamp,
+    depth_topic_of,
+    header_stamp,
+    pair_depth,
+)
+from pose_lifter.offline.mcap_index import chunked_mcap
 from pose_lifter.offline.settings import LiftSettings
 
 __all__ = [
@@ -402,9 +412,13 @@ def lift_bag(
     tracks), one of each per answered keypoint message (as the node answers). Everything checkable
     is checked before any work (:func:`check_lift_inputs`).
 
-    Memory: the bag is read twice, streaming: first only ``topic`` and ``camera_info_topic``
-    (deserialised, kept for the lifting), then every kept topic one message at a time, copied
-    as serialised bytes. Large topics (images) are never held.
+    Memory: the bag is read in passes that hold one message (or one MCAP chunk) at a time: first
+    ``topic`` and ``camera_info_topic`` (deserialised, kept for the lifting) and the depth
+    images' header stamps (:mod:`pose_lifter.offline.depth`); then, while the lifting, each paired
+    depth image; then the output is written: every kept topic copied as serialised bytes
+    (a single chunked MCAP file all of whose topics are kept: its chunks copied as they are,
+    :func:`_write_lifted`), each answer after every input message of its log time. Large topics
+    (images) are never held.
 
     Parameters
     ----------
@@ -437,7 +451,9 @@ def lift_bag(
     cdr.check_definitions(pose_lifter_typestore())
     info_topic = camera_info_topic if camera_info_topic in topics else None
     cap = None if max_messages is None else max_messages * every
-    kp_all, infos = _read_keypoints(in_path, topic, info_topic, cap)
+    first = _read_keypoints(in_path, topic, info_topic, cap,
+                            None if depth_topic is None else (depth_topic, topics[depth_topic]))
+    kp_all, infos = first.keypoints, first.infos
     last = kp_all[-1][0] if max_messages is not None else None
     to_lift = kp_all[::every]
     index_of = {id(msg): i * every for i, (_, msg) in enumerate(to_lift)}
@@ -455,7 +471,7 @@ def lift_bag(
             in_path, depth_topic, topics[depth_topic],
             [m.stamp_to_ns(msg.header.stamp) or stamp for stamp, msg in to_lift],
             [sizes[max(0, bisect.bisect_right(size_stamps, stamp) - 1)][1] if sizes else None
-             for stamp, _ in to_lift], settings.frame.depth_tolerance)
+             for stamp, _ in to_lift], settings.frame.depth_tolerance, first.depth_stamps)
         refused = summary.depth.first_refusal()
         if refused:
             summary.notes.append(f"depth image refused: {refused}; such frames are lifted from the 2D alone")
@@ -476,48 +492,93 @@ def lift_bag(
     if summary.depth is not None:
         summary.notes.insert(0, summary.depth_line())
     kept = set(topics) if settings.keep is None else set(settings.keep)
-    _write_lifted(in_path, out_path, topic, kept, last, answers, overwrite)
+    _write_lifted(in_path, out_path, topic, kept, last, answers, [stamp for stamp, _ in kp_all], overwrite)
     return summary, frames
 
 
-def _read_keypoints(in_path: str | Path, topic: str, camera_info_topic: str | None, max_messages: int | None
-                    ) -> tuple[list[tuple[int, Any]], list[tuple[int, Any]]]:
+def _read_keypoints(in_path: str | Path, topic: str, camera_info_topic: str | None, max_messages: int | None,
+                    depth: tuple[str, str] | None = None) -> _FirstPass:
     """A bag's keypoint messages ``(stamp, Skeleton2DArray)`` of ``topic`` (the first
-    ``max_messages``; YOLO detections converted, their ids made track ids) and its camera infos
-    ``(stamp, CameraInfo)`` of ``camera_info_topic`` (None: none), read in one stream."""
+    ``max_messages``; YOLO detections converted, their ids made track ids), its camera infos
+    ``(stamp, CameraInfo)`` of ``camera_info_topic`` (None: none) and, of the ``depth`` topic
+    (topic, type; None: none), each message's (bag stamp, header stamp) in read order
+    (:func:`~pose_lifter.offline.depth.header_stamp`: the images are not kept), read in one stream
+    (to the bag's end for the depth stamps when ``max_messages`` cuts the keypoints)."""
     from pose_lifter.messages.adapters import TrackIds
 
     types = m.rosbags_types()
     ids = TrackIds()
     wanted = [topic] + ([camera_info_topic] if camera_info_topic is not None else [])
-    kp_all: list[tuple[int, Any]] = []
-    infos: list[tuple[int, Any]] = []
-    for x in read_messages(in_path, wanted, decoders={SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}):
-        if x.topic == topic:
-            if max_messages is not None and len(kp_all) >= max_messages:
+    decoders: dict[str, Callable[[bytes], Any]] = {SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}
+    if depth is not None:
+        wanted.append(depth[0])
+        decoders[depth[1]] = header_stamp
+    out = _FirstPass([], [], [] if depth is not None else None)
+    full = False
+    heads = {depth[1]: HEADER_BYTES} if depth is not None else None
+    for x in read_messages(in_path, wanted, decoders=decoders, heads=heads):
+        if depth is not None and x.topic == depth[0]:
+            stamp = x.msg if isinstance(x.msg, DepthStamp) else DepthStamp(m.stamp_to_ns(x.msg.header.stamp))
+            assert out.depth_stamps is not None
+            out.depth_stamps.append((x.stamp_ns, stamp.stamp_ns))
+        elif x.topic == topic:
+            full = full or (max_messages is not None and len(out.keypoints) >= max_messages)
+            if full and depth is None:
                 break
-            kp_all.append((x.stamp_ns, _as_skeleton2d(x.msg, x.msgtype, types, ids)))
-        else:
-            infos.append((x.stamp_ns, x.msg))
-    if not kp_all:
+            if not full:
+                out.keypoints.append((x.stamp_ns, _as_skeleton2d(x.msg, x.msgtype, types, ids)))
+        elif not full:
+            out.infos.append((x.stamp_ns, x.msg))
+    if not out.keypoints:
         raise InvalidInputError(f"{in_path} has no {topic} messages")
-    return kp_all, infos
+    return out
+
+
+@dataclass
+class _FirstPass:
+    """What :func:`_read_keypoints` reads."""
+
+    keypoints: list[tuple[int, Any]]
+    infos: list[tuple[int, Any]]
+    depth_stamps: list[tuple[int, int]] | None  #: per depth message (bag stamp, header stamp)
 
 
 def _write_lifted(in_path: str | Path, out_path: str | Path, topic: str, kept: set[str], last: int | None,
-                  answers: dict[int, FrameAnswer], overwrite: bool) -> None:
+                  answers: dict[int, FrameAnswer], stamps: Sequence[int], overwrite: bool) -> None:
     """The output bag: the ``kept`` input topics copied byte for byte up to the stamp ``last``
-    (None: all), each keypoint message of ``topic`` followed by its answer (``answers``: the
-    keypoint message's index in the bag -> its answer)."""
+    (None: all), each keypoint message's answer (``answers``: the keypoint message's index in the
+    bag -> its answer; ``stamps``: each keypoint message's bag stamp) after every input message of
+    its log time (a reader in log-time order reads a copied chunk's messages of one log time
+    together, :mod:`pose_lifter.offline.chunk_copy`).
+
+    A single chunked MCAP file all of whose topics are kept (without ``last``) has its chunks
+    copied as they are (:func:`~pose_lifter.offline.chunk_copy.copy_with`: nothing decompressed or
+    compressed again); any other input is read and written message by message."""
+    if last is None:
+        mcap = chunked_mcap(in_path)
+        if mcap is not None and {c.topic for c in mcap.channels.values()} <= kept:
+            additions = [(stamps[i], answers[i].messages()) for i in sorted(answers)]
+            if copy_with(mcap, out_path, additions, overwrite):
+                return
     index = 0
+    pending: list[tuple[int, FrameAnswer]] = []  # answers waiting for the last input message of their stamp
     with BagWriter(out_path, overwrite=overwrite) as w:
+
+        def flush(before: int | None) -> None:
+            while pending and (before is None or pending[0][0] < before):
+                stamp, answer = pending.pop(0)
+                for out_topic, data, msgtype in answer.messages():
+                    w.write_cdr(out_topic, stamp, data, msgtype)
+
         for raw in read_raw(in_path, kept | {topic}):
             if last is not None and raw.stamp_ns > last:
                 break
+            flush(raw.stamp_ns)
             if raw.topic in kept:
                 w.write_raw(raw)
             if raw.topic == topic:
                 answer = answers.pop(index, None)
-                for out_topic, data, msgtype in answer.messages() if answer is not None else []:
-                    w.write_cdr(out_topic, raw.stamp_ns, data, msgtype)
+                if answer is not None:
+                    pending.append((raw.stamp_ns, answer))
                 index += 1
+        flush(None)
