@@ -9,8 +9,10 @@ node's one pipeline over the whole bag. Chains are lifted in groups, in step, th
 each chain together whether they were seen together or one after another (:func:`lift_chains`),
 so that the prior's network runs once per step for all of them
 (:func:`~pose_lifter.core.lift.batch.prior_calls`); a chain's outcomes do not depend on its group.
-A long chain (one track recorded at length) is lifted as segments in step with one another
-(:func:`segments`), so it too shares each step among many rows.
+A long chain (one track recorded at length) is lifted as pieces that the workers share
+(:func:`pieces`), each as segments in step with one another (:func:`segments`), so it too shares
+each step among many rows; its outcomes are then as accurate as the one pipeline's, not the same
+(each segment starts its track afresh a lead-in before its first kept frame).
 What a chain gave comes back as columns (:class:`ChainLift`: its lifted skeletons as one
 :class:`~pose_lifter.messages.cdr.SkeletonFrame`), from a worker as from this process.
 """
