@@ -344,7 +344,8 @@ def test_a_long_track_is_lifted_as_segments_in_step_each_item_once(tmp_path: Pat
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """Segments of a long track are lifted in step (rows of one batch), each from its lead-in, and
     stitched: with a lifter whose answer is the frame's own (no history) the stitched outcomes
-    are the unsegmented lift's, item for item."""
+    are the unsegmented lift's, item for item. The node's causal poses (no smoothing) lift the
+    track whole."""
     from pose_lifter.offline import chains as ch
 
     rng = np.random.default_rng(3)
@@ -354,15 +355,18 @@ def test_a_long_track_is_lifted_as_segments_in_step_each_item_once(tmp_path: Pat
     bags.write_messages(path, scenes.scene_messages(sc))
     msgs = [(x.stamp_ns, x.msg) for x in bags.read_messages(path, ["/keypoints_2d"])]
 
+    from dataclasses import replace
+
     class FrameLifter(EchoLifter):  # its pose the frame's own
         def lift(self, points: np.ndarray, confidence: np.ndarray, warm: WarmStart | None = None,
                  **per_frame: Any) -> LiftResult:
             r = super().lift(points, confidence, warm, **per_frame)
             pose = self.pose * (1.0 + 1e-3 * float(points[0, 0]))
-            return LiftResult(pose, pose, *r[2:])
+            return replace(r, pose=pose, pose_camera=pose)
 
-    alone = offline.lift_messages(msgs, [], FrameLifter(), NODE)
-    assert len({float(f.joints_m[0, 0]) for f in alone}) == len(alone)  # every frame its own joints
+    offline_lift = LiftSettings()  # the offline defaults: the centred smoothing
+    alone = offline.lift_messages(msgs, [], FrameLifter(), offline_lift)
+    assert len(alone) == 40 and len({float(f.joints_m[0, 0]) for f in alone}) == 40  # each frame its own
     monkeypatch.setattr(ch, "SEGMENT_FRAMES", 12)
     monkeypatch.setattr(ch, "SEGMENT_LEAD", 5)
     cut = FrameLifter()
@@ -374,7 +378,10 @@ def test_a_long_track_is_lifted_as_segments_in_step_each_item_once(tmp_path: Pat
         return lift_people(rows)
 
     cut.lift_people = counted  # type: ignore[method-assign]
-    parts = offline.lift_messages(msgs, [], cut, NODE)
+    node = offline.lift_messages(msgs, [], cut, NODE)  # the node's causal poses: the track whole
+    assert max(batches) == 1 and len(node) == 40
+    batches.clear()
+    parts = offline.lift_messages(msgs, [], cut, offline_lift)
     assert [(f.stamp_ns, f.track_id) for f in parts] == [(f.stamp_ns, f.track_id) for f in alone]
     np.testing.assert_array_equal([f.joints_m for f in parts], [f.joints_m for f in alone])
     assert max(batches) == 3 and sum(batches) == 40 + 2 * 5  # three segments in step, two lead-ins

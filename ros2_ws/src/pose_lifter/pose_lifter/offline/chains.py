@@ -292,15 +292,17 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     people of one message are placed on its image in one pass, so the chains are in step by
     message, unless each message holds one person and the images are read by number
     (:attr:`~pose_lifter.offline.depth.BagDepth.located`): then by their own frames too, at most
-    :data:`~pose_lifter.offline.depth.HELD_IMAGES` messages' images at a time. Without ``depth`` a
-    long chain is lifted as its :func:`segments`, each through its own pipeline from its lead-in,
-    and stitched (the lead-ins' outcomes dropped; the offline update and the smoothing then run
-    over the stitched chain): a segment's poses are not bit for bit the unsegmented chain's (a
-    warm start keeps the reading of an ambiguous 2D it started from), but as accurate."""
-    # a long chain's segments are lifted as chains of their own, in step with the others (with
-    # depth, none: a segment's poses are not the chain's, and the depth path keeps them)
+    :data:`~pose_lifter.offline.depth.HELD_IMAGES` messages' images at a time. Without ``depth``
+    and with ``smoothing_s > 0`` a long chain is lifted as its :func:`segments`, each through its
+    own pipeline from its lead-in, and stitched (the lead-ins' outcomes dropped; the offline update
+    and the smoothing then run over the stitched chain): a segment's poses are not bit for bit the
+    unsegmented chain's (a warm start keeps the reading of an ambiguous 2D it started from), but
+    as accurate; ``smoothing_s`` 0 gives the node's causal poses, so it lifts every chain whole."""
+    # a long chain's segments are lifted as chains of their own, in step with the others (not with
+    # depth, whose path keeps the chain's own poses, nor for the node's causal poses: smoothing_s 0)
+    whole = depth is not None or smoothing_s <= 0
     runs = [(c, a, k, b) for c, chain in enumerate(chains)
-            for a, k, b in (segments(chain) if depth is None else [(0, 0, len(chain))])]
+            for a, k, b in ([(0, 0, len(chain))] if whole else segments(chain))]
     pipelines = [FramePipeline(lifter, settings) for _ in runs]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0

@@ -316,8 +316,10 @@ def _lift_chains(lifter: Lifter, chains: list[list[Item]], frame: FrameSettings,
     from tqdm import tqdm
 
     # a long chain's pieces are chains of their own, each kept from its first to its last kept item
+    # (not with depth, nor for the node's causal poses: smoothing_s 0 gives what the node gives)
+    whole = depth is not None or smoothing_s <= 0
     cut = [(c, *p) for c, chain in enumerate(chains)
-           for p in (pieces(chain) if depth is None else [(0, 0, len(chain), len(chain))])]
+           for p in ([(0, 0, len(chain), len(chain))] if whole else pieces(chain))]
     work_chains = [chains[c][a:e] for c, a, _, _, e in cut]
     bar = tqdm(total=sum(len(c) for c in work_chains), desc="lifting", unit="skeleton", disable=not progress)
     lifted: list[ChainLift]
