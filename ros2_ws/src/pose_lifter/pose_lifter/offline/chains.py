@@ -201,17 +201,24 @@ SEGMENT_FRAMES: Final[int] = 720
 SEGMENT_LEAD: Final[int] = 90
 
 
+def _bounds(chain: list[Item], size: int) -> list[int] | None:
+    """The item indices that cut ``chain`` into parts of about ``size`` items (the first 0, the
+    last its length), or None: fewer than two parts' worth, or stamps that do not increase
+    strictly (a replayed clock: the parts' frames are told apart by stamp)."""
+    n = len(chain)
+    count = n // size
+    if count < 2 or any(b.stamp_ns <= a.stamp_ns for a, b in pairwise(chain)):
+        return None
+    return [round(i * n / count) for i in range(count + 1)]
+
+
 def segments(chain: list[Item]) -> list[tuple[int, int, int]]:
     """A chain's segments (:data:`SEGMENT_FRAMES`), as ``(start, first kept, end)`` item indices:
     each lifted from ``start``, its outcomes kept from ``first kept`` to ``end``; the kept ranges
-    tile the chain. One segment for a short chain, or one whose stamps do not increase strictly
-    (a replayed clock: the segments' frames are told apart by stamp)."""
-    n = len(chain)
-    count = n // SEGMENT_FRAMES
-    stamps = [it.stamp_ns for it in chain]
-    if count < 2 or any(b <= a for a, b in pairwise(stamps)):
-        return [(0, 0, n)]
-    bounds = [round(i * n / count) for i in range(count + 1)]
+    tile the chain. One segment for a short chain, or one whose stamps do not increase strictly."""
+    bounds = _bounds(chain, SEGMENT_FRAMES)
+    if bounds is None:
+        return [(0, 0, len(chain))]
     return [(max(0, a - SEGMENT_LEAD), a, b) for a, b in pairwise(bounds)]
 
 
@@ -230,10 +237,9 @@ def pieces(chain: list[Item]) -> list[tuple[int, int, int, int]]:
     ``end kept``; the kept ranges tile the chain. One piece for a short chain, or one whose stamps
     do not increase strictly. They do not depend on the workers (results identical to one)."""
     n = len(chain)
-    count = n // PIECE_FRAMES
-    if count < 2 or len(segments(chain)) < 2:
+    bounds = _bounds(chain, PIECE_FRAMES)
+    if bounds is None:
         return [(0, 0, n, n)]
-    bounds = [round(i * n / count) for i in range(count + 1)]
     return [(max(0, a - PIECE_MARGIN), a, b, min(n, b + PIECE_MARGIN)) for a, b in pairwise(bounds)]
 
 
