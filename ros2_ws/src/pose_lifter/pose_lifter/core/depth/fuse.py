@@ -71,7 +71,7 @@ from pose_lifter.core.depth.uncertainty import (
     shape_std,
 )
 from pose_lifter.core.errors import InvalidInputError
-from pose_lifter.core.model.skeleton import JOINT_NAMES, LIMBS, N_JOINTS
+from pose_lifter.core.model.skeleton import JOINT_NAMES, LIMBS, N_JOINTS, body_frame
 from pose_lifter.core.track.placement import (
     DEFAULT_DISTANCE_M,
     DEFAULT_LEG_LENGTH_M,
@@ -131,34 +131,21 @@ class FusedPeople:
     objective: NDArray[np.float64]
 
 
-def _unit(v: NDArray[np.float64], fallback: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``v`` (n, 3) normalised, ``fallback`` (n, 3) where it is (nearly) zero."""
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), fallback)
-
-
-def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Row-wise cross products of ``a`` and ``b`` (n, 3) (numpy's cross costs ~50 us a call)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=-1)
-
-
 def _trunks(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                   NDArray[np.float64]]:
-    """Each body's trunk (``joints`` (n, 12, 3)): the hips' midpoint (n, 3), the axes (n, 3, 3) as
-    rows (right hip to left hip, up the spine, the facing direction: the body frame of
-    :func:`~pose_lifter.core.model.skeleton.body_frame`) and its ends along the spine (n, 2)."""
+    """Each body's trunk (``joints`` (n, 12, 3)): its axes (n, 3, 3) as rows (the body frame of
+    :func:`~pose_lifter.core.model.skeleton.body_frame`: right hip to left hip, up the spine, the
+    facing direction; the camera's axes for a body without one, whose trunk is then empty), the
+    hips' midpoint in those axes (n, 3) and the trunk's ends along the spine from it (n, 2)."""
     hips = 0.5 * (joints[:, _L_HIP] + joints[:, _R_HIP])
     up = 0.5 * (joints[:, _L_SHOULDER] + joints[:, _R_SHOULDER]) - hips
-    ex = np.broadcast_to(np.array([1.0, 0.0, 0.0]), hips.shape)
-    across = _unit(joints[:, _L_SHOULDER] - joints[:, _R_SHOULDER], ex)
-    x = _unit(joints[:, _L_HIP] - joints[:, _R_HIP], across)
-    helper = np.where(np.abs(x[:, 2:]) < 0.9, np.array([0.0, 0.0, 1.0]), ex)  # not along x
-    y = _unit(up - np.sum(up * x, axis=-1, keepdims=True) * x, _unit(_cross(x, helper), ex))
-    axes = np.stack([x, y, _cross(x, y)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axes = body_frame(joints)
+    framed = np.asarray(np.isfinite(axes).all(axis=(1, 2)))
+    axes = np.where(framed[:, None, None], axes, np.eye(3))
     extent = np.stack([np.full(len(hips), -_TORSO_BELOW_HIPS),
-                       np.sum(up * y, axis=-1) + _TORSO_ABOVE_SHOULDERS], axis=-1)
-    return hips, axes, extent
+                       np.sum(up * axes[:, 1], axis=-1) + _TORSO_ABOVE_SHOULDERS], axis=-1)
+    return axes, np.einsum("nij,nj->ni", axes, hips), extent
 
 
 def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates: NDArray[np.bool_],
@@ -172,11 +159,11 @@ def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates
     (fx, fy), (cx, cy) = intrinsics
     z = np.maximum(joints[..., 2], 1e-3)
     proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)
-    origin, axes, extent = _trunks(joints)
+    axes, centre, extent = _trunks(joints)
     hidden = np.zeros(candidates.shape, dtype=bool)
     hidden_kernel(np.ascontiguousarray(proj), np.ascontiguousarray(z), np.ascontiguousarray(candidates),
                   np.ascontiguousarray(pixels, dtype=np.float64), joints[..., 2] - SURFACE_OFFSET_M[None],
-                  _LIMB_ARRAY, _LIMB_RADIUS, np.ascontiguousarray(origin), np.ascontiguousarray(axes),
+                  _LIMB_ARRAY, _LIMB_RADIUS, np.ascontiguousarray(centre), np.ascontiguousarray(axes),
                   np.ascontiguousarray(extent), _TORSO_HALF_WIDTH, _TORSO_HALF_DEPTH,
                   np.array([fx, fy, cx, cy], dtype=np.float64), margin, hidden)
     return hidden

@@ -85,33 +85,30 @@ def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: N
 
 
 @njit
-def _trunk_entry(ru: float, rv: float, origin: NDArray[np.float64], axes: NDArray[np.float64],
+def _trunk_entry(ru: float, rv: float, centre: NDArray[np.float64], axes: NDArray[np.float64],
                  extent: NDArray[np.float64], half_width: float, half_depth: float) -> float:
-    """The z-depth where the ray ``t (ru, rv, 1)`` enters an elliptic cylinder (``origin`` (3,),
-    ``axes`` (3, 3) rows: its width, spine and depth directions, ``extent`` (2,) its ends along the
-    spine from ``origin``, half axes ``half_width`` x ``half_depth``), caps included; inf if it
-    misses."""
-    r = (ru, rv, 1.0)
-    rr = np.empty(3)  # the ray and the origin in the cylinder's axes
-    cc = np.empty(3)
+    """The z-depth where the ray ``t (ru, rv, 1)`` enters an elliptic cylinder (``axes`` (3, 3)
+    rows: its width, spine and depth directions; ``centre`` (3,) its origin in those axes;
+    ``extent`` (2,) its ends along the spine from it; half axes ``half_width`` x ``half_depth``),
+    caps included; inf if it misses."""
+    rr = np.empty(3)  # the ray in the cylinder's axes
     for i in range(3):
-        rr[i] = axes[i, 0] * r[0] + axes[i, 1] * r[1] + axes[i, 2] * r[2]
-        cc[i] = axes[i, 0] * origin[0] + axes[i, 1] * origin[1] + axes[i, 2] * origin[2]
+        rr[i] = axes[i, 0] * ru + axes[i, 1] * rv + axes[i, 2]
     iw, id2 = 1.0 / (half_width * half_width), 1.0 / (half_depth * half_depth)
     best = math.inf
     a = rr[0] * rr[0] * iw + rr[2] * rr[2] * id2
-    b = -2.0 * (rr[0] * cc[0] * iw + rr[2] * cc[2] * id2)
-    c = cc[0] * cc[0] * iw + cc[2] * cc[2] * id2 - 1.0
+    b = -2.0 * (rr[0] * centre[0] * iw + rr[2] * centre[2] * id2)
+    c = centre[0] * centre[0] * iw + centre[2] * centre[2] * id2 - 1.0
     disc = b * b - 4.0 * a * c
     if a > 1e-12 and disc > 0.0:
         t = (-b - math.sqrt(disc)) / (2.0 * a)
-        s = t * rr[1] - cc[1]
+        s = t * rr[1] - centre[1]
         if t > 0.0 and extent[0] <= s <= extent[1]:
             best = t
     if abs(rr[1]) > 1e-12:  # the caps
         for e in range(2):
-            t = (extent[e] + cc[1]) / rr[1]
-            pw, pd = t * rr[0] - cc[0], t * rr[2] - cc[2]
+            t = (extent[e] + centre[1]) / rr[1]
+            pw, pd = t * rr[0] - centre[0], t * rr[2] - centre[2]
             if 0.0 < t < best and pw * pw * iw + pd * pd * id2 <= 1.0:
                 best = t
     return best
@@ -120,14 +117,14 @@ def _trunk_entry(ru: float, rv: float, origin: NDArray[np.float64], axes: NDArra
 @njit
 def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates: NDArray[np.bool_],
                   pixels: NDArray[np.float64], surface: NDArray[np.float64], limbs: NDArray[np.int64],
-                  limb_radius: NDArray[np.float64], trunk_origin: NDArray[np.float64],
+                  limb_radius: NDArray[np.float64], trunk_centre: NDArray[np.float64],
                   trunk_axes: NDArray[np.float64], trunk_extent: NDArray[np.float64], half_width: float,
                   half_depth: float, intrinsics: NDArray[np.float64], margin: float,
                   hidden: NDArray[np.bool_]) -> None:
     """Fill ``hidden`` (n, 12) for the occlusion test of :func:`pose_lifter.core.depth.fuse._hidden`:
     ``proj`` (n, 12, 2) the bodies' joints in the image, ``z`` (n, 12) their depths, ``pixels``
     (n, 12, 2) the keypoints, ``surface`` (n, 12) each joint's surface depth, ``limbs`` (8, 2),
-    ``limb_radius`` (8,), each body's trunk (``trunk_origin`` (n, 3), ``trunk_axes`` (n, 3, 3),
+    ``limb_radius`` (8,), each body's trunk (``trunk_centre`` (n, 3), ``trunk_axes`` (n, 3, 3),
     ``trunk_extent`` (n, 2), see :func:`_trunk_entry`), ``intrinsics`` (fx, fy, cx, cy)."""
     n = proj.shape[0]
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
@@ -158,7 +155,7 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
                     break
                 # the trunk, every body's own too: seen from the side it hides the far shoulder,
                 # hip and an arm behind it
-                if _trunk_entry((qu - cx) / fx, (qv - cy) / fy, trunk_origin[o], trunk_axes[o],
+                if _trunk_entry((qu - cx) / fx, (qv - cy) / fy, trunk_centre[o], trunk_axes[o],
                                 trunk_extent[o], half_width, half_depth) < limit:
                     found = True
                     break
