@@ -56,7 +56,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth import fuse_readings, read_depth
 from pose_lifter.core.depth.place import place_people
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.results import LiftResult
@@ -325,12 +324,11 @@ class RgbdEvaluator:
 def fuse_person(depth: NDArray[np.float32], points: NDArray[np.float64], result: LiftResult,
                 pose: NDArray[np.float64]
                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-    """One person placed on a depth image as :func:`pose_lifter.core.depth.place.place_people`
-    places it (the node's, the lagged node's and the offline lift's placement), with the joints
-    it read from depth: the readings taken with the lift's own pose
-    (:func:`~pose_lifter.core.depth.read_depth`), then ``pose`` (12, 3; the lift's
-    ``pose_camera`` or its refinement over later frames, leg units) fused with them
-    (:func:`~pose_lifter.core.depth.fuse_readings`).
+    """One person placed on a depth image by :func:`pose_lifter.core.depth.place.place_people`
+    (the node's, the lagged node's and the offline lift's placement), with the joints it read
+    from depth: the lift placed with its own pose, then ``pose`` (12, 3; the lift's
+    ``pose_camera`` or its refinement over later frames, leg units) placed again with the
+    readings that took, as the lagged node places a refined pose.
 
     Parameters
     ----------
@@ -348,12 +346,12 @@ def fuse_person(depth: NDArray[np.float32], points: NDArray[np.float64], result:
         Metres, per axis.
     from_depth : ndarray of bool, shape (12,)
     """
-    weights = np.asarray(result.weights, dtype=np.float64)[None]
-    scale = np.array([float(result.camera.scale)])
-    centre = np.asarray(result.camera.translation, dtype=np.float64).reshape(1, 2)
-    readings = read_depth(depth, INTRINSICS, points, weights, result.pose_camera[None], scale, centre)
-    fused = fuse_readings(readings, INTRINSICS, points, weights, pose[None], scale, centre)
-    return fused.joints_m[0], fused.std_m[0], fused.from_depth[0]
+    placed = place_people([result], points, INTRINSICS, DEFAULT_LEG_LENGTH_M, DEFAULT_DISTANCE_M, depth=depth)
+    if not np.array_equal(pose, result.pose_camera):
+        placed = place_people([result], points, INTRINSICS, DEFAULT_LEG_LENGTH_M, DEFAULT_DISTANCE_M,
+                              poses=pose[None], readings=placed.readings)
+    assert placed.from_depth is not None
+    return placed.joints_m[0], placed.std_m[0], placed.from_depth[0]
 
 
 def evaluate_jobs(jobs: Sequence[tuple[ev.Track, float]], methods: Sequence[str], settings: dict[str, Any],

@@ -38,11 +38,14 @@ class Placed:
         Each joint's standard deviation along x, y, z, metres.
     readings : DepthReadings or None
         The depth readings the placement used ((n, 12) arrays), None without depth.
+    from_depth : ndarray of bool, shape (n, 12), or None
+        The joints whose depth reading was kept (None without depth).
     """
 
     joints_m: NDArray[np.float64]
     std_m: NDArray[np.float64]
     readings: DepthReadings | None
+    from_depth: NDArray[np.bool_] | None = None
 
 
 def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
@@ -92,4 +95,4 @@ def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
         assert depth is not None
         readings = read_depth(depth, *args)
     fused = fuse_readings(readings, *args)
-    return Placed(fused.joints_m, fused.std_m, readings)
+    return Placed(fused.joints_m, fused.std_m, readings, fused.from_depth)
