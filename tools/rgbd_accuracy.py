@@ -114,14 +114,15 @@ def main(argv: list[str] | None = None) -> int:
         trials = trials[:: max(1, len(trials) // args.max_trials)][: args.max_trials]
     cameras = rgbd.rgbd_cameras((0.0, rgbd.ELEVATED) if args.elevated else (0.0,))
     if args.calibrate:  # the training split's trials the packaged prior was not fitted on
-        from pose_lifter.mocap.depth_calibration import calibrate, format_calibration, smoothed_std_factor
+        from pose_lifter.mocap.depth_calibration import calibrate, format_calibration, smoothed_std_factors
 
         tracks = ev.evaluation_tracks(split, args.data, args.frames, args.views, trials, cameras)
         print(f"{len(tracks)} training-split tracks (held out of the prior), distances {args.distances}",
               flush=True)
         print(format_calibration(calibrate(tracks, args.distances, settings)), flush=True)
-        factor, n = smoothed_std_factor(tracks, args.distances, settings, args.workers)
-        print(f"SMOOTHED_STD_FACTOR = {factor:.3f}  # {n} coordinates")
+        names = {"fused-offline": "SMOOTHED_STD_FACTOR", "fused-lag": "LAGGED_STD_FACTOR"}
+        for m, (factor, n) in smoothed_std_factors(tracks, args.distances, settings, args.workers).items():
+            print(f"{names[m]} = {factor:.3f}  # {m}, {n} coordinates")
         print(f"measured at {ev.run_stamp(REPO)}, {time.perf_counter() - t0:.0f} s")
         return 0
     tracks = ev.evaluation_tracks("eval", args.data, args.frames, args.views, trials, cameras)

@@ -69,9 +69,10 @@ def test_one_frame_s_window_is_the_track_s() -> None:
     joints = rng.normal(size=(n, 12, 3))
     std = rng.uniform(0.01, 0.1, size=(n, 12, 3))
     stamps = np.arange(n, dtype=np.int64) * FRAME_NS
-    whole_j, whole_s = smooth_fused(joints, std, stamps, np.ones(n, dtype=bool), 0.04, 1.0)
+    whole_j, whole_s = smooth_fused(joints, std, stamps, np.ones(n, dtype=bool), 0.04, 1.0, std_factor=0.9)
     frames = [(int(stamps[k]), joints[k], std[k]) for k in range(n)]
     for i in (0, 7, 19):
-        j, s = smooth_fused_at(frames[max(0, i - 4):i], frames[i], frames[i + 1:i + 5], 0.04, 1.0)
+        j, s = smooth_fused_at(frames[max(0, i - 4):i], frames[i], frames[i + 1:i + 5], 0.04, 1.0,
+                               std_factor=0.9)
         np.testing.assert_allclose(j, whole_j[i], atol=ROUND_OFF)
         np.testing.assert_allclose(s, whole_s[i], atol=ROUND_OFF)

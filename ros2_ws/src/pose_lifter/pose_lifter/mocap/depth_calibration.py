@@ -26,10 +26,12 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
 * :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`: the correlation between the joints of
   the scaled placement's errors along the depth, of wholly shown bodies (:func:`shape_correlation`:
   left and right pooled, so the matrix is the same seen in a mirror);
-* :data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` (:func:`smoothed_std_factor`):
-  the 68th percentile of the offline lift's fused errors over their standard deviations, every
-  coordinate, after the track's smoothing (the deviations averaged as the joints) over the same of
-  each frame's own fusion: the scale that gives the smoothed joints the frames' coverage.
+* :data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` and
+  :data:`~pose_lifter.core.depth.uncertainty.LAGGED_STD_FACTOR` (:func:`smoothed_std_factors`):
+  the 68th percentile of the offline lift's (the lagged node's) fused errors over their standard
+  deviations, every coordinate, after the window over the fused joints (the deviations averaged
+  as the joints) over the same of each frame's own fusion: the scale that gives the smoothed
+  joints the frames' coverage.
 
 The 68th percentile of an error's absolute value is its standard deviation when it is Gaussian,
 and the coverage the RGB-D evaluation reports is that of these quantiles: it says how far the
@@ -52,9 +54,9 @@ from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LEN
 from pose_lifter.messages.frame import labelled_2d
 from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
-from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, RgbdEvaluator, film_rgbd
+from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, STD_FACTORS, RgbdEvaluator, film_rgbd
 
-__all__ = ["Calibration", "calibrate", "format_calibration", "shape_correlation", "smoothed_std_factor",
+__all__ = ["Calibration", "calibrate", "format_calibration", "shape_correlation", "smoothed_std_factors",
            "spread_factors"]
 
 #: A reading farther than this from its joint's true depth minus a typical offset
@@ -194,16 +196,22 @@ def spread_factors(shown: Sequence[Sequence[Sequence[Sequence[float]]]],
     return shape.T, factor, unobserved
 
 
-def smoothed_std_factor(tracks: Sequence[ev.Track], distances: Sequence[float],
-                        settings: dict[str, Any] | None = None, workers: int = 1) -> tuple[float, int]:
-    """:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` measured on ``tracks`` at
-    each of ``distances`` (module docstring), and the coordinates behind it."""
+def smoothed_std_factors(tracks: Sequence[ev.Track], distances: Sequence[float],
+                         settings: dict[str, Any] | None = None, workers: int = 1
+                         ) -> dict[str, tuple[float, int]]:
+    """Per smoothed method of the RGB-D evaluation (``fused-offline``: SMOOTHED_STD_FACTOR,
+    ``fused-lag``: LAGGED_STD_FACTOR), its factor measured on ``tracks`` at each of ``distances``
+    (module docstring) and the coordinates behind it."""
     jobs = [(t, d) for t in tracks for d in distances]
-    records = ev.run_jobs(jobs, RgbdEvaluator, (("fused-offline",), settings or {}, None, None, 1.0, True),
-                          workers)
-    frames = np.concatenate([np.asarray(r["normalised_errors"]["frames"]) for r in records])
-    smoothed = np.concatenate([np.asarray(r["normalised_errors"]["smoothed"]) for r in records])
-    return _q68(smoothed) / _q68(frames), len(frames)
+    methods = tuple(STD_FACTORS)
+    records = ev.run_jobs(jobs, RgbdEvaluator,
+                          (methods, settings or {}, None, None, dict.fromkeys(methods, 1.0), True), workers)
+    out: dict[str, tuple[float, int]] = {}
+    for m in methods:
+        frames = np.concatenate([np.asarray(r["normalised_errors"][m]["frames"]) for r in records])
+        smoothed = np.concatenate([np.asarray(r["normalised_errors"][m]["smoothed"]) for r in records])
+        out[m] = (_q68(smoothed) / _q68(frames), len(frames))
+    return out
 
 
 def format_calibration(c: Calibration) -> str:

@@ -63,7 +63,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.depth.place import place_people
 from pose_lifter.core.depth.smooth import Fused, smooth_fused, smooth_fused_at
-from pose_lifter.core.depth.uncertainty import SMOOTHED_STD_FACTOR
+from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.placement import (
@@ -109,6 +109,9 @@ FIGURES = ("p_mpjpe", "mpjpe", "root", "wrists", "jitter", "from_depth")
 LAG = 3
 #: The largest gap within one track (seconds): :mod:`.evaluation`'s refinement's.
 GAP_S = 1.0
+#: The smoothed methods, each with the scale of its averaged standard deviations
+#: (:mod:`pose_lifter.core.depth.smooth`).
+STD_FACTORS = {"fused-lag": LAGGED_STD_FACTOR, "fused-offline": SMOOTHED_STD_FACTOR}
 
 
 def rgbd_cameras(elevations: Sequence[float] = (0.0,)) -> list[tuple[float, float, str]]:
@@ -280,19 +283,18 @@ class RgbdEvaluator:
         The hybrid bases (default: the packaged ones).
     sensor : DepthSensor, optional
         Default :data:`pose_lifter.mocap.depth_model.REALISTIC`.
-    smoothed_std_factor : float
-        ``fused-offline``'s scale of its averaged standard deviations
-        (:func:`~pose_lifter.core.depth.smooth.smooth_fused`).
+    std_factors : dict, optional
+        Per smoothed method (:data:`STD_FACTORS`' keys), the scale of its averaged standard
+        deviations (default :data:`STD_FACTORS`).
     normalised_errors : bool
-        Each record holds ``normalised_errors``: ``fused-offline``'s errors over its standard
-        deviations per coordinate of every lifted frame, of the frames' own fusion (``frames``) and
-        smoothed (``smoothed``): what ``make depth-calibration`` measures
-        :data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` on.
+        Each record holds ``normalised_errors``: per smoothed method, its errors over its standard
+        deviations per coordinate of every lifted frame, of each frame's own fusion (``frames``) and
+        smoothed (``smoothed``): what ``make depth-calibration`` measures :data:`STD_FACTORS` on.
     """
 
     def __init__(self, methods: Sequence[str], settings: dict[str, Any], bases_file: str | None = None,
                  sensor: depth_model.DepthSensor | None = None,
-                 smoothed_std_factor: float = SMOOTHED_STD_FACTOR, normalised_errors: bool = False) -> None:
+                 std_factors: dict[str, float] | None = None, normalised_errors: bool = False) -> None:
         unknown = sorted(set(methods) - set(METHODS))
         if unknown:
             raise ValueError(f"unknown methods {unknown} (of {list(METHODS)})")
@@ -301,7 +303,7 @@ class RgbdEvaluator:
         lifts = ("hybrid", *(lift for m, lift in REFINED.items() if m in self.methods))
         self.lifts = ev.Evaluator(lifts, settings, ev.Setup(intrinsics=True, lag=LAG), bases_file)
         self.threshold = self.lifts.lifters["hybrid"].options.confidence_threshold
-        self.smoothed_std_factor = smoothed_std_factor
+        self.std_factors = {**STD_FACTORS, **(std_factors or {})}
         self.normalised_errors = normalised_errors
 
     def evaluate(self, track: ev.Track, distance: float) -> dict[str, Any]:
@@ -343,24 +345,26 @@ class RgbdEvaluator:
                     out[m].put(i, *fuse_person(depth, points, tl.result, poses[i] / leg_m[i]))
                     if m == "fused-lag":  # the frame as lifted, fused: what the lag holds of it
                         live_lag.put(i, *fuse_person(depth, points, tl.result, tl.result.pose_camera))
-        record = {"track": track.name, "camera": track.camera, "distance": distance, "n": n}
+        record: dict[str, Any] = {"track": track.name, "camera": track.camera, "distance": distance, "n": n}
         stamps = np.arange(n, dtype=np.int64) * ev.FRAME_NS
-        if "fused-lag" in self.methods:
-            out["fused-lag"] = _lag_window(out["fused-lag"], live_lag, stamps)
-        if "fused-offline" in self.methods:  # pose-lifter lift averages each track's fused joints
-            f = out["fused-offline"]
+        normalised: dict[str, dict[str, list[float]]] = {}
+        for m in [m for m in STD_FACTORS if m in self.methods]:
+            f = out[m]
             frames = (f.joints - truth) / f.std
             lifted = np.asarray(np.isfinite(f.joints).all(axis=(1, 2)), dtype=bool)
-            f.joints, f.std = smooth_fused(f.joints, f.std, stamps, lifted, OFFLINE_SMOOTHING_S, GAP_S,
-                                           self.smoothed_std_factor)
-            if self.normalised_errors:
-                smoothed = (f.joints - truth) / f.std
-                record["normalised_errors"] = {"frames": frames[lifted].ravel().tolist(),
-                                               "smoothed": smoothed[lifted].ravel().tolist()}
+            if m == "fused-lag":  # the lagged node's window
+                out[m] = f = _lag_window(f, live_lag, stamps, self.std_factors[m])
+            else:  # pose-lifter lift averages each track's fused joints
+                f.joints, f.std = smooth_fused(f.joints, f.std, stamps, lifted, OFFLINE_SMOOTHING_S, GAP_S,
+                                               self.std_factors[m])
+            normalised[m] = {"frames": frames[lifted].ravel().tolist(),
+                             "smoothed": ((f.joints - truth) / f.std)[lifted].ravel().tolist()}
+        if self.normalised_errors:
+            record["normalised_errors"] = normalised
         return {**record, "methods": {m: out[m].record(truth) for m in self.methods}}
 
 
-def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64]) -> _Method:
+def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_factor: float) -> _Method:
     """The lagged node's window over ``lagged``'s fused joints (its refined poses fused,
     :meth:`pose_lifter.messages.lagged.LaggedFrames._refined`): each frame averaged with the
     frames before it as refined and fused and the :data:`LAG` frames after it as lifted and fused
@@ -378,7 +382,7 @@ def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64]) -> _M
             now = (int(stamps[i]), lagged.joints[i], lagged.std[i])
             out.joints[i], out.std[i] = smooth_fused_at(
                 frames(lagged, range(max(0, i - 2 * LAG), i), i), now,
-                frames(live, range(i + 1, min(lagged.n, i + LAG + 1)), i), LAG_SMOOTHING_S, GAP_S)
+                frames(live, range(i + 1, min(lagged.n, i + LAG + 1)), i), LAG_SMOOTHING_S, GAP_S, std_factor)
     return out
 
 

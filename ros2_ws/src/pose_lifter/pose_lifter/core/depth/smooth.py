@@ -9,9 +9,11 @@ smooths the shape, and each frame's reading then moves the joint again). Measure
 mm from above, the jitter 47 -> 10 mm/frame^2.
 
 The window averages correlated errors (a limb's shape, the body's distance) as well as
-independent ones, so the averaged standard deviations are scaled by
-:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR`, measured as what keeps the
-smoothed joints' coverage that of the frames' own (``make depth-calibration``).
+independent ones, so the averaged standard deviations are scaled by a factor
+(:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` over a whole track,
+:data:`~pose_lifter.core.depth.uncertainty.LAGGED_STD_FACTOR` over the lagged node's window),
+measured as what keeps the smoothed joints' coverage that of the frames' own (``make
+depth-calibration``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import TypeAlias
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.uncertainty import SMOOTHED_STD_FACTOR
+from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.track.smoothing import centred_smoothing
 
 __all__ = ["Fused", "smooth_fused", "smooth_fused_at"]
@@ -69,7 +71,7 @@ def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stam
 
 
 def smooth_fused_at(before: Sequence[Fused], frame: Fused, after: Sequence[Fused], sigma_s: float,
-                    gap_s: float, std_factor: float = SMOOTHED_STD_FACTOR
+                    gap_s: float, std_factor: float = LAGGED_STD_FACTOR
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One frame's fused joints and standard deviations averaged with its track's frames around
     it, as :func:`smooth_fused` averages them over the whole track (the same where ``before`` and
