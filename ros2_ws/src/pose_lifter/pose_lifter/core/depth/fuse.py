@@ -55,7 +55,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.kernels import depth_fit_kernel, hidden_kernel
+from pose_lifter.core.depth.kernels import depth_fit_kernel, fuse_kernel, hidden_kernel
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
@@ -321,41 +321,21 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     depth_fit_kernel(np.ascontiguousarray(d), np.ascontiguousarray(v), g, np.ascontiguousarray(have), shape_z,
                      precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter), opt.tol, theta, cov,
                      objective, n_iter, converged)
-    model_z = np.einsum("njc,nc->nj", g, theta)
-    r = (d - model_z) / np.sqrt(v + (theta[:, :1] * shape_z[None]) ** 2)
-    kept = have & (np.abs(r) <= opt.gate)
-    placeable = np.isfinite(model_z).all(axis=1) & (model_z > 0).all(axis=1) & kept.any(axis=1)
-    kept &= placeable[:, None]
-
-    # 5. the joints: the body moved along its rays to the fitted depths; a kept reading's depth
-    # fused with its joint's, along the joint's ray (the lift's image of the joint: the 2D denoised
-    # by the prior)
-    mono = ~placeable
-    model_z[mono] = z0[mono]
-    body = x0 * (model_z / z0)[..., None]
+    # 4c-5. readings beyond the gate dropped; the joints: the body moved along its rays to the
+    # fitted depths, a kept reading's depth fused with its joint's along the joint's ray (the
+    # lift's image of the joint: the 2D denoised by the prior), each reading first judged by its
+    # residual from the field, then by what the other readings predict of its joint (leave one
+    # out); a joint without its own reading keeps its marginal deviation (the correlations,
+    # measured on motion the prior knows, hold less on motion it does not: on the cross-action
+    # folds the conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %).
+    # Compiled, one person at a time: :func:`~pose_lifter.core.depth.kernels.fuse_kernel`
     shape = shape_std(observed)
-    along_sd = np.sqrt(np.einsum("njc,ncd,njd->nj", g, cov, g)) / model_z  # relative, along the ray
-    along_sd[mono] = mono_scale[mono, None]
-    root = along_sd[..., None] * np.abs(body)
-    var_body = shape[..., 2] ** 2 + root[..., 2] ** 2
-    # each reading is the joint's with the probability of its residual under a mixture (the
-    # joint's surface, Gaussian; a stray surface, uniform over the band): its residual first from
-    # the field alone, then from what the other readings predict of its joint (leave one out)
-    band = 2.0 * (opt.band_m + opt.band_fraction * model_z)
-    p_in = _inlier(d - model_z, var_body + v, kept, band, opt.outlier_share)
-    prior = _depth_cov(shape[..., 2], g, cov, root[..., 2], mono)
-    loo, loo_var = _leave_one_out(prior, d - model_z, v / np.maximum(p_in, _MIN_INLIER), kept)
-    p_in = _inlier(loo, loo_var + v, kept, band, opt.outlier_share)
-    kept &= p_in >= 0.5
-    z, z_std = _condition(model_z, prior, d, v / np.maximum(p_in, 0.5), kept)
-    # a joint without its own reading keeps its marginal deviation: the correlations, measured on
-    # motion the prior knows, hold less on motion it does not (on the cross-action folds the
-    # conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %)
-    z_std = np.where(kept, z_std, np.sqrt(np.diagonal(prior, axis1=1, axis2=2)))
-    joints = body * (z / model_z)[..., None]
-    along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
-    std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
-    std[..., 2] = z_std
+    joints = np.empty((n, N_JOINTS, 3))
+    std = np.empty((n, N_JOINTS, 3))
+    kept = np.empty((n, N_JOINTS), dtype=bool)
+    placeable = np.empty(n, dtype=bool)
+    fuse_kernel(x0, g, d, v, have, theta, cov, shape, SHAPE_CORR_Z, mono_scale, shape_z, opt.gate, opt.band_m,
+                opt.band_fraction, opt.outlier_share, _MIN_INLIER, _UNREAD_VAR, joints, std, kept, placeable)
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
@@ -363,61 +343,6 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
         kept[bad] = False
     k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
-
-
-def _depth_cov(shape_z: NDArray[np.float64], g: NDArray[np.float64], cov: NDArray[np.float64],
-               root_z: NDArray[np.float64], mono: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """The covariance (n, 12, 12) of the true depths about the depth field's: the shape's
-    (``shape_z`` (n, 12) standard deviations, correlated between joints by
-    :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's (``g`` (n, 12, 3)
-    its regressors, ``cov`` (n, 3, 3) its parameters' covariance), or for the bodies left at the
-    monocular placement (``mono`` (n,)) the placement's scale error (``root_z`` (n, 12), fully
-    correlated: the body slides along its rays as a whole)."""
-    field = np.einsum("njc,ncd,nkd->njk", g, cov, g)
-    place = root_z[:, :, None] * root_z[:, None, :]
-    shape = shape_z[:, :, None] * SHAPE_CORR_Z[None] * shape_z[:, None, :]
-    return np.asarray(shape + np.where(mono[:, None, None], place, field))
-
-
-def _inlier(residual: NDArray[np.float64], var: NDArray[np.float64], kept: NDArray[np.bool_],
-            band: NDArray[np.float64], share: float) -> NDArray[np.float64]:
-    """The probability (n, 12) that each ``kept`` reading is its joint's, from its ``residual``
-    of variance ``var`` if it is (Gaussian), against a stray surface (probability ``share``)
-    uniform over the depth ``band``; 0 where not ``kept``."""
-    dens = np.exp(-0.5 * residual**2 / var) / np.sqrt(2.0 * np.pi * var)
-    return np.where(kept, (1.0 - share) * dens / ((1.0 - share) * dens + share / band), 0.0)
-
-
-def _leave_one_out(prior: NDArray[np.float64], residual: NDArray[np.float64], v: NDArray[np.float64],
-                   kept: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Each ``kept`` reading's residual (n, 12) from its joint's depth as the Gaussian
-    ``N(0, prior)`` conditioned on the other kept readings (``residual`` about the prior's mean,
-    variances ``v``) predicts it, and that prediction's variance (n, 12) (the reading's own noise
-    not included): ``a_j / C_jj`` and ``1 / C_jj - v_j``, ``C = (prior + diag(v))^-1``,
-    ``a = C residual`` (the closed form of leaving one observation out of a Gaussian
-    conditioning)."""
-    noise = np.where(kept, v, _UNREAD_VAR)
-    inv = np.linalg.inv(prior + noise[:, :, None] * np.eye(N_JOINTS)[None])
-    diag = np.diagonal(inv, axis1=1, axis2=2)
-    a = np.einsum("njk,nk->nj", inv, np.where(kept, residual, 0.0))
-    return a / diag, np.maximum(1.0 / diag - noise, 1e-3 * np.diagonal(prior, axis1=1, axis2=2))
-
-
-def _condition(mean: NDArray[np.float64], prior: NDArray[np.float64], d: NDArray[np.float64],
-               v: NDArray[np.float64], kept: NDArray[np.bool_]
-               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The joints' depths (n, 12) and their standard deviations given the ``kept`` (n, 12)
-    readings ``d`` of variances ``v``: the Gaussian ``N(mean, prior)`` ((n, 12), (n, 12, 12))
-    conditioned on ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j)``, so a reading moves its joint and,
-    through the prior's correlations, the joints without one. A joint without a reading gets the
-    variance :data:`_UNREAD_VAR` in the solve (it drops out)."""
-    noise = np.where(kept, v, _UNREAD_VAR)
-    system = prior + noise[:, :, None] * np.eye(N_JOINTS)[None]
-    gain = np.linalg.solve(system, prior).transpose(0, 2, 1)  # prior @ system^-1 (both symmetric)
-    z = mean + np.einsum("njk,nk->nj", gain, np.where(kept, d - mean, 0.0))
-    post = prior - gain @ prior
-    var = np.diagonal(post, axis1=1, axis2=2)
-    return z, np.sqrt(np.maximum(var, 1e-3 * np.diagonal(prior, axis1=1, axis2=2)))
 
 
 def compile_kernels() -> None:

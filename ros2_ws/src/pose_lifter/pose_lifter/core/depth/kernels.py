@@ -1,7 +1,8 @@
 """The depth fusion's loops, compiled (:func:`pose_lifter.core.numeric.jit.njit`): the patch
-readings, the occlusion test and the robust scale fit, one person or joint at a time over small
-arrays, where numpy's per-call overhead would cost more than the arithmetic. Their meaning is
-documented where they are called (:mod:`.reading`, :mod:`.fuse`)."""
+readings, the occlusion test, the robust scale fit and the fusion of the readings with the body,
+one person or joint at a time over small arrays, where numpy's per-call overhead would cost more
+than the arithmetic. Their meaning is documented where they are called (:mod:`.reading`,
+:mod:`.fuse`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.numeric.jit import njit
 
-__all__ = ["depth_fit_kernel", "hidden_kernel", "read_kernel"]
+__all__ = ["condition", "depth_fit_kernel", "fuse_kernel", "hidden_kernel", "inlier", "leave_one_out",
+           "read_kernel"]
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
@@ -230,3 +232,156 @@ def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[
         for i in range(3):
             prior += 0.5 * precision[p, i] * (th[i] - mean[i]) ** 2
         objective[p] = loss + prior
+
+
+
+@njit
+def inlier(residual: float, var: float, band: float, share: float) -> float:
+    """The probability that a reading is its joint's, from its ``residual`` of variance ``var`` if
+    it is (Gaussian), against a stray surface (probability ``share``) uniform over the depth
+    ``band``."""
+    dens = math.exp(-0.5 * residual * residual / var) / math.sqrt(2.0 * math.pi * var)
+    return (1.0 - share) * dens / ((1.0 - share) * dens + share / band)
+
+
+@njit
+def leave_one_out(prior: NDArray[np.float64], residual: NDArray[np.float64], noise: NDArray[np.float64],
+                  loo: NDArray[np.float64], loo_var: NDArray[np.float64]) -> None:
+    """Fill ``loo`` (m,) with each reading's residual from its joint's depth as the Gaussian
+    ``N(0, prior)`` (``prior`` (m, m)) conditioned on the other readings (``residual`` (m,) about
+    the prior's mean, 0 where there is none; variances ``noise`` (m,), a large one where there is
+    none) predicts it, and ``loo_var`` (m,) with that prediction's variance (the reading's own noise
+    not included, at least ``1e-3`` of the prior's): ``a_j / C_jj`` and ``1 / C_jj - noise_j``,
+    ``C = (prior + diag(noise))^-1``, ``a = C residual`` (the closed form of leaving one
+    observation out of a Gaussian conditioning)."""
+    m = len(residual)
+    system = prior.copy()
+    for j in range(m):
+        system[j, j] += noise[j]
+    inv = np.linalg.solve(system, np.eye(m))
+    for j in range(m):
+        a = 0.0
+        for k in range(m):
+            a += inv[j, k] * residual[k]
+        loo[j] = a / inv[j, j]
+        loo_var[j] = max(1.0 / inv[j, j] - noise[j], 1e-3 * prior[j, j])
+
+
+@njit
+def condition(prior: NDArray[np.float64], residual: NDArray[np.float64], noise: NDArray[np.float64],
+              shift: NDArray[np.float64], sd: NDArray[np.float64]) -> None:
+    """The Gaussian ``N(mean, prior)`` (``prior`` (m, m)) conditioned on readings ``d_j = z_j + e_j``,
+    ``e_j ~ N(0, noise_j)`` (``residual`` (m,) = ``d - mean``, 0 where there is none; ``noise``
+    (m,), a large variance where there is none): fill ``shift`` (m,) with the conditional mean
+    minus ``mean`` (``prior (prior + diag(noise))^-1 residual``) and ``sd`` (m,) with the
+    conditional standard deviations (at least ``sqrt(1e-3)`` of the prior's)."""
+    m = len(residual)
+    system = prior.copy()
+    for j in range(m):
+        system[j, j] += noise[j]
+    x = np.linalg.solve(system, prior)  # its transpose is prior @ system^-1, the gain
+    for j in range(m):
+        z = 0.0
+        post = prior[j, j]
+        for k in range(m):
+            z += x[k, j] * residual[k]
+            post -= x[k, j] * prior[k, j]
+        shift[j] = z
+        sd[j] = math.sqrt(max(post, 1e-3 * prior[j, j]))
+
+
+@njit
+def fuse_kernel(x0: NDArray[np.float64], g: NDArray[np.float64], d: NDArray[np.float64],
+                v: NDArray[np.float64], have: NDArray[np.bool_], theta: NDArray[np.float64],
+                cov: NDArray[np.float64], shape: NDArray[np.float64], shape_corr: NDArray[np.float64],
+                mono_scale: NDArray[np.float64], shape_z: NDArray[np.float64], gate: float, band_m: float,
+                band_fraction: float, share: float, min_inlier: float, unread_var: float,
+                joints: NDArray[np.float64], std: NDArray[np.float64], kept: NDArray[np.bool_],
+                placeable: NDArray[np.bool_]) -> None:
+    """Steps 4c-5 of :func:`pose_lifter.core.depth.fuse.fuse_readings` (the module docstring of
+    :mod:`.fuse`) for ``n`` people, after the depth field's fit: their placed joints ``x0``
+    (n, 12, 3), the fit's regressors ``g`` (n, 12, 3), readings ``d`` (n, 12) of variances ``v``
+    (``have`` the readings fitted; 0 and 1 elsewhere), the field ``theta`` (n, 3) and its
+    covariance ``cov`` (n, 3, 3), the shape's standard deviations ``shape`` (n, 12, 3) and depth
+    correlations ``shape_corr`` (12, 12), the monocular scale errors ``mono_scale`` (n,), the fit's
+    shape depth errors ``shape_z`` (12,), and the options (``gate``, ``band_m``,
+    ``band_fraction``, ``share`` the outlier share; ``min_inlier`` the least inlier probability in
+    the leave-one-out predictions, ``unread_var`` the variance of a joint without a reading). Fills
+    ``joints`` and ``std`` (n, 12, 3), the readings ``kept`` (n, 12) and the bodies the field
+    places (``placeable`` (n,)); a body it does not place keeps its monocular placement and its
+    uncertainty."""
+    n, m = d.shape
+    model_z = np.empty(m)
+    body = np.empty((m, 3))
+    root = np.empty((m, 3))
+    band = np.empty(m)
+    p_in = np.empty(m)
+    res = np.empty(m)
+    noise = np.empty(m)
+    prior = np.empty((m, m))
+    loo = np.empty(m)
+    loo_var = np.empty(m)
+    shift = np.empty(m)
+    z_sd = np.empty(m)
+    for p in range(n):
+        # readings beyond the gate of the field dropped; a field of a non-positive depth places nothing
+        ok = False
+        fin = True
+        for j in range(m):
+            model_z[j] = g[p, j, 0] * theta[p, 0] + g[p, j, 1] * theta[p, 1] + g[p, j, 2] * theta[p, 2]
+            r = (d[p, j] - model_z[j]) / math.sqrt(v[p, j] + (theta[p, 0] * shape_z[j]) ** 2)
+            kept[p, j] = have[p, j] and abs(r) <= gate
+            ok = ok or kept[p, j]
+            fin = fin and math.isfinite(model_z[j]) and model_z[j] > 0
+        placeable[p] = ok and fin
+        mono = not placeable[p]
+        # the body along its rays at the field's depths; each joint's error along its ray
+        for j in range(m):
+            kept[p, j] = kept[p, j] and placeable[p]
+            if mono:
+                model_z[j] = x0[p, j, 2]
+                sd = mono_scale[p]
+            else:
+                q = 0.0
+                for c in range(3):
+                    for e in range(3):
+                        q += g[p, j, c] * cov[p, c, e] * g[p, j, e]
+                sd = math.sqrt(q) / model_z[j]
+            f = model_z[j] / x0[p, j, 2]
+            for c in range(3):
+                body[j, c] = x0[p, j, c] * f
+                root[j, c] = sd * abs(body[j, c])
+            band[j] = 2.0 * (band_m + band_fraction * model_z[j])
+            res[j] = d[p, j] - model_z[j] if kept[p, j] else 0.0
+            var_body = shape[p, j, 2] ** 2 + root[j, 2] ** 2
+            p_in[j] = inlier(res[j], var_body + v[p, j], band[j], share) if kept[p, j] else 0.0
+        # the true depths' covariance about the field's: the shape's plus the field's (or the
+        # monocular placement's scale error, fully correlated)
+        for j in range(m):
+            for k in range(m):
+                if mono:
+                    field = root[j, 2] * root[k, 2]
+                else:
+                    field = 0.0
+                    for c in range(3):
+                        for e in range(3):
+                            field += g[p, j, c] * cov[p, c, e] * g[p, k, e]
+                prior[j, k] = shape[p, j, 2] * shape_corr[j, k] * shape[p, k, 2] + field
+            noise[j] = v[p, j] / max(p_in[j], min_inlier) if kept[p, j] else unread_var
+        # each reading against what the others predict of its joint; then the conditioning
+        leave_one_out(prior, res, noise, loo, loo_var)
+        for j in range(m):
+            p_in[j] = inlier(loo[j], loo_var[j] + v[p, j], band[j], share) if kept[p, j] else 0.0
+            kept[p, j] = kept[p, j] and p_in[j] >= 0.5
+            noise[j] = v[p, j] / max(p_in[j], 0.5) if kept[p, j] else unread_var
+            res[j] = d[p, j] - model_z[j] if kept[p, j] else 0.0
+        condition(prior, res, noise, shift, z_sd)
+        for j in range(m):
+            z = model_z[j] + shift[j]
+            # a joint without its own reading keeps its marginal deviation (fuse_readings)
+            sd_j = z_sd[j] if kept[p, j] else math.sqrt(prior[j, j])
+            for c in range(3):
+                joints[p, j, c] = body[j, c] * (z / model_z[j])
+                other = abs(joints[p, j, c]) * (sd_j / z) if kept[p, j] else root[j, c]
+                std[p, j, c] = math.sqrt(shape[p, j, c] ** 2 + other ** 2)
+            std[p, j, 2] = sd_j

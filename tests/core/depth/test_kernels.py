@@ -1,0 +1,123 @@
+"""The depth fusion's compiled kernels (pose_lifter.core.depth.kernels) against numpy versions of
+the same arithmetic, written as the fusion's module docstring states it (whole-array operations
+over the ``n`` people of a frame)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR
+from pose_lifter.core.depth.kernels import fuse_kernel
+from pose_lifter.core.depth.reading import DepthOptions
+from pose_lifter.core.depth.uncertainty import SHAPE_CORR_Z, SHAPE_STD_M, shape_std
+from tolerances import ROUND_OFF
+
+N = 12
+
+
+def _inlier(residual: NDArray[np.float64], var: NDArray[np.float64], kept: NDArray[np.bool_],
+            band: NDArray[np.float64], share: float) -> NDArray[np.float64]:
+    dens = np.exp(-0.5 * residual**2 / var) / np.sqrt(2.0 * np.pi * var)
+    return np.where(kept, (1.0 - share) * dens / ((1.0 - share) * dens + share / band), 0.0)
+
+
+def _conditioned(prior: NDArray[np.float64], residual: NDArray[np.float64], v: NDArray[np.float64],
+                 kept: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                   NDArray[np.float64], NDArray[np.float64]]:
+    """The leave-one-out residuals and variances, and the conditional shifts and deviations, of
+    ``N(0, prior)`` given the ``kept`` residuals of variances ``v`` (n, 12)."""
+    noise = np.where(kept, v, _UNREAD_VAR)
+    system = prior + noise[:, :, None] * np.eye(N)[None]
+    inv = np.linalg.inv(system)
+    diag = np.diagonal(inv, axis1=1, axis2=2)
+    res = np.where(kept, residual, 0.0)
+    a = np.einsum("njk,nk->nj", inv, res)
+    prior_diag = np.diagonal(prior, axis1=1, axis2=2)
+    loo_var = np.maximum(1.0 / diag - noise, 1e-3 * prior_diag)
+    gain = prior @ inv
+    post = np.diagonal(prior - gain @ prior, axis1=1, axis2=2)
+    return a / diag, loo_var, np.einsum("njk,nk->nj", gain, res), np.sqrt(np.maximum(post, 1e-3 * prior_diag))
+
+
+def _fuse_numpy(x0: NDArray[np.float64], g: NDArray[np.float64], d: NDArray[np.float64],
+                v: NDArray[np.float64], have: NDArray[np.bool_], theta: NDArray[np.float64],
+                cov: NDArray[np.float64], observed: NDArray[np.bool_], mono_scale: NDArray[np.float64],
+                opt: DepthOptions) -> tuple[NDArray[np.float64], ...]:
+    """Steps 4c-5 of the fusion in numpy (:func:`~pose_lifter.core.depth.kernels.fuse_kernel`'s
+    arguments): joints, std, kept, placeable."""
+    shape_z = SHAPE_STD_M[:, 1]
+    model_z = np.einsum("njc,nc->nj", g, theta)
+    r = (d - model_z) / np.sqrt(v + (theta[:, :1] * shape_z[None]) ** 2)
+    kept = have & (np.abs(r) <= opt.gate)
+    placeable = np.isfinite(model_z).all(axis=1) & (model_z > 0).all(axis=1) & kept.any(axis=1)
+    kept &= placeable[:, None]
+    mono = ~placeable
+    model_z[mono] = x0[mono, :, 2]
+    body = x0 * (model_z / x0[..., 2])[..., None]
+    shape = shape_std(observed)
+    along_sd = np.sqrt(np.einsum("njc,ncd,njd->nj", g, cov, g)) / model_z
+    along_sd[mono] = mono_scale[mono, None]
+    root = along_sd[..., None] * np.abs(body)
+    band = 2.0 * (opt.band_m + opt.band_fraction * model_z)
+    p_in = _inlier(d - model_z, shape[..., 2] ** 2 + root[..., 2] ** 2 + v, kept, band, opt.outlier_share)
+    field = np.einsum("njc,ncd,nkd->njk", g, cov, g)
+    place = root[..., 2][:, :, None] * root[..., 2][:, None, :]
+    prior = (shape[..., 2][:, :, None] * SHAPE_CORR_Z[None] * shape[..., 2][:, None, :]
+             + np.where(mono[:, None, None], place, field))
+    loo, loo_var, _, _ = _conditioned(prior, d - model_z, v / np.maximum(p_in, _MIN_INLIER), kept)
+    p_in = _inlier(loo, loo_var + v, kept, band, opt.outlier_share)
+    kept &= p_in >= 0.5
+    _, _, shift, z_std = _conditioned(prior, d - model_z, v / np.maximum(p_in, 0.5), kept)
+    z = model_z + shift
+    z_std = np.where(kept, z_std, np.sqrt(np.diagonal(prior, axis1=1, axis2=2)))
+    joints = body * (z / model_z)[..., None]
+    along = np.abs(joints) * (z_std / z)[..., None]
+    std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
+    std[..., 2] = z_std
+    return joints, std, kept, placeable
+
+
+def _frame(seed: int) -> tuple[NDArray[np.float64], ...]:
+    """Four people's fusion inputs: one read whole with a few stray readings, one read at three
+    joints, one without readings, and one whose field puts it behind the camera."""
+    rng = np.random.default_rng(seed)
+    n = 4
+    x0 = rng.normal(0.0, 0.3, (n, N, 3)) + np.array([0.0, 0.0, 1.0]) * rng.uniform(2.0, 6.0, (n, 1, 1))
+    lateral = x0[..., :2] - x0[..., :2].mean(axis=1, keepdims=True)
+    g = np.ascontiguousarray(np.concatenate([x0[..., 2:], lateral[..., ::-1]], axis=-1))
+    theta = np.column_stack([rng.uniform(0.9, 1.1, n), rng.normal(0.0, 0.05, (n, 2))])
+    theta[3, 0] = -1.0
+    d = np.einsum("njc,nc->nj", g, theta) + rng.normal(0.0, 0.02, (n, N))
+    d[0, rng.choice(N, 3, replace=False)] -= rng.uniform(0.1, 0.4, 3)  # stray surfaces
+    v = rng.uniform(1e-4, 1e-3, (n, N))
+    have = np.ones((n, N), dtype=bool)
+    have[1] = False
+    have[1, [0, 4, 7]] = True
+    have[2] = False
+    d, v = np.where(have, d, 0.0), np.where(have, v, 1.0)
+    a = rng.normal(0.0, 0.01, (n, 3, 3))
+    cov = a @ a.transpose(0, 2, 1) + 1e-6 * np.eye(3)
+    observed = rng.random((n, N)) < 0.9
+    return x0, g, d, v, have, theta, cov, observed
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_fusion_kernel_is_the_numpy_fusion(seed: int) -> None:
+    """:func:`fuse_kernel` against :func:`_fuse_numpy` (the same steps on whole arrays): the same
+    readings kept and bodies placed, the same joints and deviations up to round-off."""
+    x0, g, d, v, have, theta, cov, observed = _frame(seed)
+    opt = DepthOptions()
+    mono_scale = np.array([0.055, 0.06, 0.378, 0.43])
+    n = len(x0)
+    joints, std = np.empty((n, N, 3)), np.empty((n, N, 3))
+    kept, placeable = np.empty((n, N), dtype=bool), np.empty(n, dtype=bool)
+    fuse_kernel(x0, g, d, v, have, theta, cov, shape_std(observed), SHAPE_CORR_Z, mono_scale,
+                np.ascontiguousarray(SHAPE_STD_M[:, 1]), opt.gate, opt.band_m, opt.band_fraction,
+                opt.outlier_share, _MIN_INLIER, _UNREAD_VAR, joints, std, kept, placeable)
+    want = _fuse_numpy(x0, g, d, v, have, theta, cov, observed, mono_scale, opt)
+    assert placeable.tolist() == [True, True, False, False] == want[3].tolist()
+    assert np.array_equal(kept, want[2]) and not kept[0].all() and kept[0].sum() > 6
+    assert np.abs(joints - want[0]).max() < ROUND_OFF
+    assert np.abs(std - want[1]).max() < ROUND_OFF
+    assert np.array_equal(joints[2:], x0[2:])  # not placed: the monocular placement
