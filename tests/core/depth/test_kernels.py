@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from numpy.typing import NDArray
-from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR
+from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR, fuse_depth
 from pose_lifter.core.depth.kernels import fuse_kernel
-from pose_lifter.core.depth.reading import DepthOptions
+from pose_lifter.core.depth.reading import DepthOptions, read_patches
 from pose_lifter.core.depth.uncertainty import SHAPE_CORR_Z, SHAPE_STD_M, shape_std
 from tolerances import ROUND_OFF
 
@@ -121,3 +121,29 @@ def test_the_fusion_kernel_is_the_numpy_fusion(seed: int) -> None:
     assert np.abs(joints - want[0]).max() < ROUND_OFF
     assert np.abs(std - want[1]).max() < ROUND_OFF
     assert np.array_equal(joints[2:], x0[2:])  # not placed: the monocular placement
+
+
+def test_millimetres_are_read_as_their_float32_metres() -> None:
+    """A uint16 millimetre image (0: no reading) gives the patch readings and the fusion of the
+    float32 metres it converts to (``mm / 1000`` correctly rounded, NaN for 0), bit for bit."""
+    rng = np.random.default_rng(9)
+    mm = rng.integers(2900, 3100, (120, 160)).astype(np.uint16)
+    mm[rng.random(mm.shape) < 0.2] = 0
+    mm[:, :30] = 6000  # a wall behind
+    metres = np.where(mm > 0, mm.astype(np.float32) / np.float32(1000.0), np.float32(np.nan))
+    pixels = np.column_stack([rng.uniform(-5.0, 165.0, 60), rng.uniform(-5.0, 125.0, 60)])
+    radius, expected = rng.uniform(1.0, 12.0, 60), rng.uniform(2.8, 3.2, 60)
+    for opt in (DepthOptions(), DepthOptions(band_m=np.inf)):
+        a = read_patches(mm, pixels, radius, expected, opt)
+        b = read_patches(metres, pixels, radius, expected, opt)
+        assert np.isfinite(a.surface).sum() > 30
+        for x, y in ((a.surface, b.surface), (a.var, b.var), (a.n_pixels, b.n_pixels)):
+            np.testing.assert_array_equal(x, y)
+    grid = np.linspace(-0.5, 0.5, N)
+    pose = np.stack([grid, grid[::-1], 0.2 * grid], axis=-1)[None]
+    args = (((100.0, 100.0), (80.0, 60.0)), 80.0 + 20.0 * pose[..., :2], np.ones((1, N)), pose,
+            np.array([14.0]), np.array([[80.0, 60.0]]))
+    x, y = fuse_depth(mm, *args), fuse_depth(metres, *args)
+    assert x.from_depth.any()
+    np.testing.assert_array_equal(x.joints_m, y.joints_m)
+    np.testing.assert_array_equal(x.std_m, y.std_m)

@@ -59,6 +59,7 @@ from pose_lifter.core.depth.kernels import depth_fit_kernel, fuse_kernel, hidden
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
+    DepthArray,
     DepthOptions,
     joint_radius_px,
     read_patches,
@@ -216,7 +217,7 @@ def _masked_median(values: NDArray[np.float64], mask: NDArray[np.bool_], empty: 
     return np.asarray(np.where(count > 0, 0.5 * (v[rows, lo] + v[rows, hi]), empty))
 
 
-def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+def read_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
                centres: NDArray[np.float64], options: DepthOptions | None = None) -> DepthReadings:
     """Steps 1-3 of the fusion (module docstring): the readings of the observed joints of ``n``
@@ -233,10 +234,10 @@ def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     radius = joint_radius_px(0.5 * (float(fx) + float(fy)) / np.maximum(z0.mean(axis=1), 1e-3), opt)
     # the person's depth as the image shows it: the median of the observed keypoints' patches
     # (most lie on the body), the centre of the band (the monocular placement may be far off)
-    raw = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), replace(opt, band_m=np.inf))
+    raw = read_patches(depth, px.reshape(-1, 2), radius.ravel(), z0.ravel(), replace(opt, band_m=np.inf))
     seen = raw.surface.reshape(n, N_JOINTS)
     centre = _masked_median(seen, placed.observed & np.isfinite(seen), 0.0)
-    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), np.repeat(centre, N_JOINTS), opt)
+    read = read_patches(depth, px.reshape(-1, 2), radius.ravel(), np.repeat(centre, N_JOINTS), opt)
     d = read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]
     v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
     have = placed.observed & np.isfinite(d) & (z0 > 0)
@@ -246,7 +247,7 @@ def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     return DepthReadings(np.where(have, d, np.nan), np.where(have, v, np.nan))
 
 
-def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+def fuse_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
                centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
     """The ``n`` people of one frame placed with the frame's registered depth image (module
@@ -255,9 +256,10 @@ def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
 
     Parameters
     ----------
-    depth : ndarray of float32, shape (H, W)
-        Metres along the optical axis, NaN where there is no reading; registered to the camera of
-        ``intrinsics``.
+    depth : ndarray of float32 or uint16, shape (H, W)
+        Metres along the optical axis, NaN where there is no reading (or uint16 millimetres, 0
+        where there is none: :data:`~pose_lifter.core.depth.reading.DepthArray`); registered to
+        the camera of ``intrinsics``.
     intrinsics : ((fx, fy), (cx, cy))
         Pixels.
     points : ndarray, shape (n, 12, 2)
@@ -347,9 +349,11 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
 
 def compile_kernels() -> None:
     """Compile the fusion's kernels (numba, see ``core.numeric.jit``) into their cache, or load
-    them from it: one fusion of a small synthetic frame, so that no frame pays for it."""
+    them from it: one fusion of a small synthetic frame in metres and one in millimetres, so that no
+    frame pays for it."""
     grid = np.linspace(-0.5, 0.5, N_JOINTS)
     pose = np.stack([grid, grid[::-1], 0.2 * grid], axis=-1)[None]
     points = 32.0 + 10.0 * pose[..., :2]
-    fuse_depth(np.full((64, 64), 3.0, dtype=np.float32), ((50.0, 50.0), (32.0, 32.0)), points,
-               np.ones((1, N_JOINTS)), pose, np.array([20.0]), np.array([[32.0, 32.0]]))
+    for depth in (np.full((64, 64), 3.0, dtype=np.float32), np.full((64, 64), 3000, dtype=np.uint16)):
+        fuse_depth(depth, ((50.0, 50.0), (32.0, 32.0)), points, np.ones((1, N_JOINTS)), pose,
+                   np.array([20.0]), np.array([[32.0, 32.0]]))

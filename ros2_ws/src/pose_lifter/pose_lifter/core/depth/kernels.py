@@ -25,12 +25,15 @@ STRIDE_RADIUS = 5.0
 
 
 @njit
-def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: NDArray[np.float64],
-                expected: NDArray[np.float64], band_m: float, band_fraction: float, min_pixels: int,
-                min_fraction: float, trim: float, sensor_noise: float, noise_window: int, r_max: int,
-                surface: NDArray[np.float64], var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
+def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool,
+                pixels: NDArray[np.float64], radius: NDArray[np.float64], expected: NDArray[np.float64],
+                band_m: float, band_fraction: float, min_pixels: int, min_fraction: float, trim: float,
+                sensor_noise: float, noise_window: int, r_max: int, surface: NDArray[np.float64],
+                var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
     """Fill ``surface``, ``var`` and ``n_used`` (m,) with the readings of
-    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments)."""
+    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments);
+    ``millimetres``: ``img`` holds uint16 millimetres (0: no reading), each pixel read as the
+    float32 metres ``mm / 1000`` (correctly rounded), else float32 metres."""
     h, w = img.shape
     buf = np.empty((2 * r_max + 1) ** 2)
     dev = np.empty_like(buf)
@@ -56,7 +59,11 @@ def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: N
                 row, col = cv + dv, cu + du
                 if row < 0 or row >= h or col < 0 or col >= w:
                     continue
-                z = float(img[row, col])
+                pixel = img[row, col]
+                if millimetres:
+                    z = float(np.float32(pixel) / np.float32(1000.0)) if pixel != 0 else math.nan
+                else:
+                    z = float(pixel)
                 if math.isfinite(z) and abs(z - expected[i]) <= band:
                     buf[n] = z
                     n += 1

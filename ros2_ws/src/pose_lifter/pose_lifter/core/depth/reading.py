@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.depth.kernels import read_kernel
 
-__all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthOptions", "PatchReadings", "joint_radius_px",
-           "read_patches", "sensor_std"]
+__all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthArray", "DepthOptions", "PatchReadings",
+           "joint_radius_px", "read_patches", "sensor_std"]
 
 #: Depth of each joint's centre behind the surface the camera sees at its pixel, metres (order of
 #: :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`: shoulders, elbows, wrists, hips, knees,
@@ -37,6 +37,14 @@ SURFACE_OFFSET_M: Final[NDArray[np.float64]] = np.array(
 #: (:attr:`DepthOptions.patch_scale`).
 LIMB_RADIUS_M: Final[NDArray[np.float64]] = np.array(
     [0.06, 0.045, 0.035, 0.06, 0.045, 0.035, 0.08, 0.06, 0.05, 0.08, 0.06, 0.05])
+
+
+#: A depth image: float32 metres along the optical axis, NaN where there is no reading (the
+#: package's depth image); or uint16 millimetres, 0 where there is none, as a 16UC1 camera sends it
+#: (:func:`pose_lifter.messages.depth.read_depth` with ``millimetres=True``), each pixel read as
+#: the float32 metres ``mm / 1000``: the fusion reads a few patches, so the whole image is never
+#: converted. Pixel (u, v) is ``depth[v, u]``.
+DepthArray = NDArray[np.float32] | NDArray[np.uint16]
 
 
 @dataclass(frozen=True)
@@ -138,14 +146,15 @@ class PatchReadings:
     n_pixels: NDArray[np.int64]
 
 
-def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius_px: NDArray[np.float64],
+def read_patches(depth: DepthArray, pixels: NDArray[np.float64], radius_px: NDArray[np.float64],
                  expected: NDArray[np.float64], options: DepthOptions) -> PatchReadings:
     """Robust surface depths of ``m`` keypoints of one depth image.
 
     Parameters
     ----------
-    depth : ndarray of float32, shape (H, W)
-        Metres along the optical axis, NaN where there is no reading.
+    depth : ndarray of float32 or uint16, shape (H, W)
+        Metres along the optical axis, NaN where there is no reading; or uint16 millimetres, 0
+        where there is none (:data:`DepthArray`).
     pixels : ndarray, shape (m, 2)
         The keypoints (u column, v row), pixels.
     radius_px : ndarray, shape (m,)
@@ -164,7 +173,9 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
         ``min_pixels`` pixels (or less than ``min_fraction`` of the patch) are in band, or the
         keypoint is outside the image.
     """
-    img = np.ascontiguousarray(depth, dtype=np.float32)
+    millimetres = np.asarray(depth).dtype == np.uint16
+    img: DepthArray = (np.ascontiguousarray(depth, dtype=np.uint16) if millimetres
+                       else np.ascontiguousarray(depth, dtype=np.float32))
     px = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 2)
     m = len(px)
     radius = np.clip(np.asarray(radius_px, dtype=np.float64).reshape(m), options.min_patch_px,
@@ -172,7 +183,8 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
     surface = np.empty(m)
     var = np.empty(m)
     n_used = np.empty(m, dtype=np.int64)
-    read_kernel(img, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m), options.band_m,
+    read_kernel(img, bool(millimetres), px, radius,
+                np.ascontiguousarray(expected, dtype=np.float64).reshape(m), options.band_m,
                 options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
                 options.sensor_noise, max(1, int(options.noise_window_px)), int(options.max_patch_px),
                 surface, var, n_used)
