@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR, fuse_depth
-from pose_lifter.core.depth.kernels import fuse_kernel
+from pose_lifter.core.depth.kernels import fuse_kernel, masked_median
 from pose_lifter.core.depth.reading import DepthOptions, read_patches
 from pose_lifter.core.depth.uncertainty import SHAPE_CORR_Z, SHAPE_STD_M, shape_std
 from tolerances import ROUND_OFF
@@ -147,3 +147,18 @@ def test_millimetres_are_read_as_their_float32_metres() -> None:
     assert x.from_depth.any()
     np.testing.assert_array_equal(x.joints_m, y.joints_m)
     np.testing.assert_array_equal(x.std_m, y.std_m)
+
+
+def test_masked_median_is_numpys_median_of_the_masked_values() -> None:
+    """:func:`masked_median` of each row against ``np.median`` of its masked values (odd and even
+    counts, ties, a row without any: ``empty``)."""
+    rng = np.random.default_rng(10)
+    values = rng.normal(3.0, 0.5, (200, N))
+    values[::7, :4] = 2.5  # ties
+    mask = rng.random((200, N)) < rng.random((200, 1))
+    mask[0] = False
+    out = np.empty(200)
+    masked_median(values, mask, -1.0, out)
+    want = np.array([np.median(v[m]) if m.any() else -1.0 for v, m in zip(values, mask, strict=True)])
+    np.testing.assert_array_equal(out, want)
+    assert len({int(c) for c in mask.sum(axis=1) % 2}) == 2

@@ -44,7 +44,7 @@ placed depths scaled (the body's size and distance together) and tilted across t
 
 :func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
 the readings only: a pose refined over later frames is fused with its frame's readings without
-keeping the image); :func:`fuse_depth` both.
+keeping the image); :func:`fuse_depth` both, and :func:`read_and_fuse` both with the readings.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.kernels import depth_fit_kernel, fuse_kernel, hidden_kernel
+from pose_lifter.core.depth.kernels import depth_fit_kernel, fuse_kernel, hidden_kernel, masked_median
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
@@ -80,7 +80,8 @@ from pose_lifter.core.track.placement import (
     place_poses,
 )
 
-__all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fuse_readings", "read_depth"]
+__all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fuse_readings", "read_and_fuse",
+           "read_depth"]
 
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
@@ -208,13 +209,12 @@ class _Placed:
 
 
 def _masked_median(values: NDArray[np.float64], mask: NDArray[np.bool_], empty: float) -> NDArray[np.float64]:
-    """Each row's median of ``values`` (n, 12) where ``mask``; ``empty`` for a row without any."""
-    v = np.where(mask, values, np.inf)
-    v.sort(axis=1)
-    count = mask.sum(axis=1)
-    rows = np.arange(len(v))
-    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, v.shape[1] - 1)
-    return np.asarray(np.where(count > 0, 0.5 * (v[rows, lo] + v[rows, hi]), empty))
+    """Each row's median of ``values`` (n, 12) where ``mask``; ``empty`` for a row without any
+    (compiled: :func:`~pose_lifter.core.depth.kernels.masked_median`)."""
+    out = np.empty(len(values))
+    masked_median(np.ascontiguousarray(values, dtype=np.float64), np.ascontiguousarray(mask, dtype=bool),
+                  float(empty), out)
+    return out
 
 
 def read_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
@@ -223,10 +223,20 @@ def read_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[
     """Steps 1-3 of the fusion (module docstring): the readings of the observed joints of ``n``
     people, those another body part hides dropped (arguments as :func:`fuse_depth`)."""
     opt = options if options is not None else DepthOptions()
+    _check_image(depth)
+    return _read(depth, intrinsics, _Placed(intrinsics, points, weights, poses, scales, centres, opt), opt)
+
+
+def _check_image(depth: DepthArray) -> None:
+    """:class:`InvalidInputError` unless ``depth`` is a non-empty (H, W) image."""
     img = np.asarray(depth)
     if img.ndim != 2 or img.size == 0:
         raise InvalidInputError(f"a depth image must be (H, W), got shape {img.shape}")
-    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+
+
+def _read(depth: DepthArray, intrinsics: CameraIntrinsics, placed: _Placed, opt: DepthOptions
+          ) -> DepthReadings:
+    """Steps 2-3 of :func:`read_depth` for the people ``placed``."""
     x0, px = placed.x0, placed.px
     n = len(x0)
     z0 = x0[..., 2]
@@ -285,8 +295,21 @@ def fuse_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[
     InvalidInputError
         ``depth`` is not a 2-D image.
     """
-    readings = read_depth(depth, intrinsics, points, weights, poses, scales, centres, options)
-    return fuse_readings(readings, intrinsics, points, weights, poses, scales, centres, options)
+    return read_and_fuse(depth, intrinsics, points, weights, poses, scales, centres, options)[1]
+
+
+def read_and_fuse(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+                  weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
+                  centres: NDArray[np.float64], options: DepthOptions | None = None
+                  ) -> tuple[DepthReadings, FusedPeople]:
+    """:func:`read_depth` and :func:`fuse_readings` of its readings, the people placed once
+    (arguments as :func:`fuse_depth`): the readings (for a later fusion of the frame) and the
+    people placed."""
+    opt = options if options is not None else DepthOptions()
+    _check_image(depth)
+    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    readings = _read(depth, intrinsics, placed, opt)
+    return readings, _fuse(readings, placed, opt)
 
 
 def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
@@ -296,7 +319,11 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     ``readings``: the same people, possibly with other poses (a pose refined over later frames);
     arguments as :func:`fuse_depth`."""
     opt = options if options is not None else DepthOptions()
-    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    return _fuse(readings, _Placed(intrinsics, points, weights, poses, scales, centres, opt), opt)
+
+
+def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedPeople:
+    """Steps 4-5 of :func:`fuse_readings` for the people ``placed``."""
     x0, observed = placed.x0, placed.observed
     n = len(x0)
     z0 = x0[..., 2]

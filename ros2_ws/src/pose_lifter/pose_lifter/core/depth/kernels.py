@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.numeric.jit import njit
 
 __all__ = ["condition", "depth_fit_kernel", "fuse_kernel", "hidden_kernel", "inlier", "leave_one_out",
-           "read_kernel"]
+           "masked_median", "read_kernel"]
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
@@ -91,6 +91,26 @@ def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool
         surface[i] = med2
         var[i] = 0.5 * math.pi * max(sd * sd, s2) / n_eff  # the median's variance
         n_used[i] = nk
+
+
+@njit
+def masked_median(values: NDArray[np.float64], mask: NDArray[np.bool_], empty: float,
+                  out: NDArray[np.float64]) -> None:
+    """Fill ``out`` (n,) with each row's median of ``values`` (n, m) where ``mask`` (the mean of
+    the middle two of an even count), ``empty`` for a row without any."""
+    buf = np.empty(values.shape[1])
+    for i in range(values.shape[0]):
+        c = 0
+        for j in range(values.shape[1]):
+            if mask[i, j]:
+                buf[c] = values[i, j]
+                c += 1
+        if c == 0:
+            out[i] = empty
+            continue
+        head = buf[:c]
+        head.sort()
+        out[i] = 0.5 * (head[(c - 1) // 2] + head[c // 2])
 
 
 @njit

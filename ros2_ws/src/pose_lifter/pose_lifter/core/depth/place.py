@@ -2,7 +2,7 @@
 
 :func:`place_people` places the ``n`` lifts of one camera: with a registered depth image (or the
 readings an earlier placement of the same frame took of it), fused with it
-(:func:`~pose_lifter.core.depth.fuse.read_depth`, :func:`~pose_lifter.core.depth.fuse.fuse_readings`);
+(:func:`~pose_lifter.core.depth.fuse.read_and_fuse`, :func:`~pose_lifter.core.depth.fuse.fuse_readings`);
 without, at the distance their image scale gives for the assumed leg length
 (:func:`~pose_lifter.core.track.placement.place_results`). Either way each joint gets its standard
 deviation (:func:`~pose_lifter.core.depth.uncertainty.monocular_std` without depth). The node, the
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.fuse import DepthReadings, fuse_readings, read_depth
+from pose_lifter.core.depth.fuse import DepthReadings, fuse_readings, read_and_fuse
 from pose_lifter.core.depth.reading import DepthArray
 from pose_lifter.core.depth.uncertainty import monocular_std
 from pose_lifter.core.results import LiftResult
@@ -95,6 +95,7 @@ def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
     args = (intrinsics, np.asarray(points, dtype=np.float64), weights, pose, scales, centres)
     if readings is None:
         assert depth is not None
-        readings = read_depth(depth, *args)
-    fused = fuse_readings(readings, *args)
+        readings, fused = read_and_fuse(depth, *args)
+    else:
+        fused = fuse_readings(readings, *args)
     return Placed(fused.joints_m, fused.std_m, readings, fused.from_depth)
