@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR, fuse_depth
-from pose_lifter.core.depth.kernels import fuse_kernel, masked_median
+from pose_lifter.core.depth.kernels import STRIDE_RADIUS, fuse_kernel, masked_median
 from pose_lifter.core.depth.reading import DepthOptions, read_patches
 from pose_lifter.core.depth.uncertainty import SHAPE_CORR_Z, SHAPE_STD_M, shape_std
 from tolerances import ROUND_OFF
@@ -162,3 +162,51 @@ def test_masked_median_is_numpys_median_of_the_masked_values() -> None:
     want = np.array([np.median(v[m]) if m.any() else -1.0 for v, m in zip(values, mask, strict=True)])
     np.testing.assert_array_equal(out, want)
     assert len({int(c) for c in mask.sum(axis=1) % 2}) == 2
+
+
+def _read_numpy(img: NDArray[np.float32], u: float, v: float, radius: float, expected: float,
+                opt: DepthOptions) -> tuple[float, float, int]:
+    """One patch reading of :func:`read_patches` in numpy: the in-band pixels of the strided disk,
+    their median, the pixels within ``trim`` robust (or sensor) deviations of it, their median and
+    its variance (the spread about the median, or the sensor's)."""
+    r = float(np.clip(radius, opt.min_patch_px, opt.max_patch_px))
+    stride, reach = max(1, int(r / STRIDE_RADIUS)), int(r)
+    dv, du = np.meshgrid(np.arange(-reach, reach + 1, stride), np.arange(-reach, reach + 1, stride),
+                         indexing="ij")
+    disk = (du**2 + dv**2 <= r * r).ravel()
+    rows, cols = (int(np.rint(v)) + dv).ravel()[disk], (int(np.rint(u)) + du).ravel()[disk]
+    inside = (rows >= 0) & (rows < img.shape[0]) & (cols >= 0) & (cols < img.shape[1])
+    z = img[rows[inside], cols[inside]].astype(np.float64)
+    z = z[np.isfinite(z) & (np.abs(z - expected) <= opt.band_m + opt.band_fraction * expected)]
+    if len(z) < opt.min_pixels or len(z) < opt.min_fraction * disk.sum():
+        return np.nan, np.nan, 0
+    med = np.median(z)
+    spread = 1.4826 * np.median(np.abs(z - med))
+    z = z[np.abs(z - med) <= opt.trim * max(spread, opt.sensor_noise * med**2, 1e-3)]
+    med = np.median(z)
+    sd = max(opt.sensor_noise * med**2, 1e-3)
+    n_eff = max(1.0, len(z) * min(1.0, (stride / opt.noise_window_px) ** 2))
+    s2 = np.sum((z - med) ** 2) / max(len(z) - 1, 1)  # the spread about the median
+    return med, 0.5 * np.pi * max(sd * sd, s2) / n_eff, len(z)
+
+
+def test_the_patch_reading_is_the_numpy_reading() -> None:
+    """:func:`read_patches` against :func:`_read_numpy` on a body-like surface with a wall behind,
+    holes, mixed pixels at its edges and patches of every size: the same readings (the kernel
+    skips the spread and the second median where no pixel can be trimmed)."""
+    rng = np.random.default_rng(11)
+    img = np.full((120, 160), 5.0, dtype=np.float32)
+    img[20:100, 40:120] = (3.0 + 0.01 * rng.standard_normal((80, 80))).astype(np.float32)
+    img[rng.random(img.shape) < 0.1] = np.nan
+    img[20:100, 40:42] = 4.0  # mixed pixels
+    pixels = np.column_stack([rng.uniform(30.0, 130.0, 80), rng.uniform(10.0, 110.0, 80)])
+    radius = rng.uniform(1.0, 14.0, 80)
+    for opt in (DepthOptions(), DepthOptions(band_m=np.inf), DepthOptions(sensor_noise=0.0)):
+        got = read_patches(img, pixels, radius, np.full(80, 3.0), opt)
+        want = np.array([_read_numpy(img, u, v, r, 3.0, opt)
+                         for (u, v), r in zip(pixels, radius, strict=True)])
+        np.testing.assert_array_equal(got.surface, want[:, 0])
+        np.testing.assert_array_equal(got.n_pixels, want[:, 2])
+        finite = np.isfinite(want[:, 1])
+        assert np.array_equal(np.isfinite(got.var), finite) and finite.sum() > 40
+        np.testing.assert_allclose(got.var[finite], want[finite, 1], rtol=ROUND_OFF)

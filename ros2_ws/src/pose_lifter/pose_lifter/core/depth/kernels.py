@@ -70,16 +70,23 @@ def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool
         if n < min_pixels or n < min_fraction * n_patch:
             continue
         med = np.median(buf[:n])
+        widest = 0.0
         for k in range(n):
             dev[k] = abs(buf[k] - med)
-        spread = 1.4826 * np.median(dev[:n])
-        limit = trim * max(spread, max(sensor_noise * med * med, 1e-3))
-        nk = 0
-        for k in range(n):
-            if dev[k] <= limit:
-                buf[nk] = buf[k]
-                nk += 1
-        med2 = np.median(buf[:nk])
+            widest = max(widest, dev[k])
+        floor = trim * max(sensor_noise * med * med, 1e-3)
+        nk = n
+        med2 = med
+        if widest > floor:  # else no pixel is trimmed, whatever the spread: the median stands
+            spread = 1.4826 * np.median(dev[:n])
+            limit = trim * max(spread, max(sensor_noise * med * med, 1e-3))
+            nk = 0
+            for k in range(n):
+                if dev[k] <= limit:
+                    buf[nk] = buf[k]
+                    nk += 1
+            if nk < n:
+                med2 = np.median(buf[:nk])
         s2 = 0.0
         for k in range(nk):
             s2 += (buf[k] - med2) ** 2
