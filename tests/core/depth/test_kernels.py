@@ -9,7 +9,7 @@ import pytest
 from numpy.typing import NDArray
 from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR, fuse_depth
 from pose_lifter.core.depth.kernels import STRIDE_RADIUS, fuse_kernel, masked_median
-from pose_lifter.core.depth.reading import DepthOptions, read_patches
+from pose_lifter.core.depth.reading import DepthOptions, read_patches, read_people
 from pose_lifter.core.depth.uncertainty import SHAPE_CORR_Z, SHAPE_STD_M, shape_std
 from tolerances import ROUND_OFF
 
@@ -210,3 +210,34 @@ def test_the_patch_reading_is_the_numpy_reading() -> None:
         finite = np.isfinite(want[:, 1])
         assert np.array_equal(np.isfinite(got.var), finite) and finite.sum() > 40
         np.testing.assert_allclose(got.var[finite], want[finite, 1], rtol=ROUND_OFF)
+
+
+def test_people_are_read_about_their_depth_in_the_image() -> None:
+    """:func:`read_people` against its two steps with :func:`read_patches`: the patches read
+    without a band about the placed depths, each person's band centred on the median of its
+    observed keypoints' readings (0 without any), the patches read again (float32 and uint16
+    images alike)."""
+    rng = np.random.default_rng(12)
+    mm = rng.integers(2950, 3050, (120, 160)).astype(np.uint16)
+    mm[:, 100:] = rng.integers(4450, 4550, (120, 60))  # a second person behind
+    mm[rng.random(mm.shape) < 0.15] = 0
+    metres = np.where(mm > 0, mm.astype(np.float32) / np.float32(1000.0), np.float32(np.nan))
+    pixels = np.stack([np.column_stack([rng.uniform(10, 90, N), rng.uniform(10, 110, N)]),
+                       np.column_stack([rng.uniform(110, 150, N), rng.uniform(10, 110, N)]),
+                       np.column_stack([rng.uniform(10, 150, N), rng.uniform(10, 110, N)])])
+    radius = rng.uniform(2.0, 9.0, (3, N))
+    z0 = np.stack([np.full(N, 2.0), np.full(N, 5.5), np.full(N, 3.0)])  # placed far off
+    observed = rng.random((3, N)) < 0.8
+    observed[2] = False  # no keypoint to place the band: centred on 0, nothing read
+    opt = DepthOptions()
+    for img in (mm, metres):
+        surface, var = read_people(img, pixels, radius, z0, observed, opt)
+        raw = read_patches(img, pixels.reshape(-1, 2), radius.ravel(), z0.ravel(),
+                           DepthOptions(band_m=np.inf)).surface.reshape(3, N)
+        centre = [np.median(r[o & np.isfinite(r)]) if (o & np.isfinite(r)).any() else 0.0
+                  for r, o in zip(raw, observed, strict=True)]
+        want = read_patches(img, pixels.reshape(-1, 2), radius.ravel(), np.repeat(centre, N), opt)
+        np.testing.assert_array_equal(surface.ravel(), want.surface)
+        np.testing.assert_array_equal(var.ravel(), want.var)
+        assert np.isfinite(surface[:2]).sum() > 15 and not np.isfinite(surface[2]).any()
+        assert abs(np.nanmedian(surface[1]) - 4.5) < 0.05

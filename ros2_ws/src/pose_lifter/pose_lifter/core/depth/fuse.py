@@ -49,7 +49,7 @@ keeping the image); :func:`fuse_depth` both, and :func:`read_and_fuse` both with
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
@@ -62,7 +62,7 @@ from pose_lifter.core.depth.reading import (
     DepthArray,
     DepthOptions,
     joint_radius_px,
-    read_patches,
+    read_people,
 )
 from pose_lifter.core.depth.uncertainty import (
     SHAPE_CORR_Z,
@@ -238,18 +238,13 @@ def _read(depth: DepthArray, intrinsics: CameraIntrinsics, placed: _Placed, opt:
           ) -> DepthReadings:
     """Steps 2-3 of :func:`read_depth` for the people ``placed``."""
     x0, px = placed.x0, placed.px
-    n = len(x0)
     z0 = x0[..., 2]
     (fx, fy), _ = intrinsics
     radius = joint_radius_px(0.5 * (float(fx) + float(fy)) / np.maximum(z0.mean(axis=1), 1e-3), opt)
-    # the person's depth as the image shows it: the median of the observed keypoints' patches
-    # (most lie on the body), the centre of the band (the monocular placement may be far off)
-    raw = read_patches(depth, px.reshape(-1, 2), radius.ravel(), z0.ravel(), replace(opt, band_m=np.inf))
-    seen = raw.surface.reshape(n, N_JOINTS)
-    centre = _masked_median(seen, placed.observed & np.isfinite(seen), 0.0)
-    read = read_patches(depth, px.reshape(-1, 2), radius.ravel(), np.repeat(centre, N_JOINTS), opt)
-    d = read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]
-    v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
+    # each band about the person's depth as the image shows it (read_people)
+    surface, var = read_people(depth, px, radius, z0, placed.observed, opt)
+    d = surface + SURFACE_OFFSET_M[None]
+    v = var + opt.offset_std_m**2
     have = placed.observed & np.isfinite(d) & (z0 > 0)
     # a first scale (the median of d_j / z0_j) places the bodies for the occlusion test
     k = _masked_median(d / np.where(z0 > 0, z0, 1.0), have, 1.0)

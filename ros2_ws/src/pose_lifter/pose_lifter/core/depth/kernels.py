@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.numeric.jit import njit
 
 __all__ = ["condition", "depth_fit_kernel", "fuse_kernel", "hidden_kernel", "inlier", "leave_one_out",
-           "masked_median", "read_kernel"]
+           "masked_median", "read_kernel", "read_people_kernel"]
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
@@ -98,6 +98,34 @@ def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool
         surface[i] = med2
         var[i] = 0.5 * math.pi * max(sd * sd, s2) / n_eff  # the median's variance
         n_used[i] = nk
+
+
+@njit
+def read_people_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool,
+                       pixels: NDArray[np.float64], radius: NDArray[np.float64], z0: NDArray[np.float64],
+                       observed: NDArray[np.bool_], band_m: float, band_fraction: float, min_pixels: int,
+                       min_fraction: float, trim: float, sensor_noise: float, noise_window: int, r_max: int,
+                       surface: NDArray[np.float64], var: NDArray[np.float64]) -> None:
+    """Fill ``surface`` and ``var`` (n, 12) with the patch readings (:func:`read_kernel`) of the
+    keypoints ``pixels`` (n, 12, 2) of ``n`` people (patch radii ``radius`` (n, 12), already
+    clipped), each person's depth band centred on its depth as the image shows it: the median of
+    the readings of its ``observed`` (n, 12) keypoints' patches without a band about its placed
+    depths ``z0`` (n, 12) (0 for a person without any)."""
+    n, m = z0.shape
+    seen = np.empty((n, m))
+    seen_var = np.empty(n * m)
+    used = np.empty(n * m, dtype=np.int64)
+    read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), z0.reshape(n * m), np.inf,
+                band_fraction, min_pixels, min_fraction, trim, sensor_noise, noise_window, r_max,
+                seen.reshape(n * m), seen_var, used)
+    centre = np.empty(n)
+    masked_median(seen, observed & np.isfinite(seen), 0.0, centre)
+    expected = np.empty((n, m))
+    for p in range(n):
+        expected[p] = centre[p]
+    read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), expected.reshape(n * m),
+                band_m, band_fraction, min_pixels, min_fraction, trim, sensor_noise, noise_window, r_max,
+                surface.reshape(n * m), var.reshape(n * m), used)
 
 
 @njit
