@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 from pose_lifter.core.depth.fuse import _MIN_INLIER, _UNREAD_VAR, fuse_depth
-from pose_lifter.core.depth.kernels import STRIDE_RADIUS, fuse_kernel, masked_median
+from pose_lifter.core.depth.kernels import STRIDE_RADIUS, field_kernel, fuse_kernel, masked_median
 from pose_lifter.core.depth.reading import DepthOptions, read_patches, read_people
 from pose_lifter.core.depth.uncertainty import SHAPE_CORR_Z, SHAPE_STD_M, shape_std
 from tolerances import ROUND_OFF
@@ -241,3 +241,29 @@ def test_people_are_read_about_their_depth_in_the_image() -> None:
         np.testing.assert_array_equal(var.ravel(), want.var)
         assert np.isfinite(surface[:2]).sum() > 15 and not np.isfinite(surface[2]).any()
         assert abs(np.nanmedian(surface[1]) - 4.5) < 0.05
+
+
+def test_the_field_data_are_the_numpy_ones() -> None:
+    """:func:`field_kernel` against numpy: the readings fitted (finite, observed, placed in front
+    of the camera), their values and variances (0 and 1 elsewhere), the regressors (placed depth,
+    then the offsets across the image, y and x, from the centroid) and the first scale (the median
+    of ``d_j / z0_j``, 1 without readings)."""
+    x0, _, d, v, have, _, _, observed = _frame(13)
+    x0[0, 3, 2] = -0.5  # behind the camera
+    depth_m, var = np.where(have, d, np.nan), np.where(have, v, np.nan)
+    n = len(x0)
+    got = (np.empty((n, N), dtype=bool), np.empty((n, N)), np.empty((n, N)), np.empty((n, N, 3)),
+           np.empty((n, 3)))
+    field_kernel(x0, observed, depth_m, var, *got)
+    z0 = x0[..., 2]
+    want_have = np.isfinite(depth_m) & observed & (z0 > 0)
+    want_d = np.where(want_have, depth_m, 0.0)
+    lateral = x0[..., :2] - x0[..., :2].mean(axis=1, keepdims=True)
+    k0 = [np.median((want_d / np.where(z0 > 0, z0, 1.0))[p][want_have[p]]) if want_have[p].any() else 1.0
+          for p in range(n)]
+    assert np.array_equal(got[0], want_have) and not got[0][0, 3]
+    np.testing.assert_array_equal(got[1], want_d)
+    np.testing.assert_array_equal(got[2], np.where(want_have, var, 1.0))
+    np.testing.assert_allclose(got[3], np.concatenate([z0[..., None], lateral[..., ::-1]], axis=-1),
+                               rtol=0.0, atol=ROUND_OFF)
+    np.testing.assert_array_equal(got[4], np.column_stack([k0, np.zeros((n, 2))]))

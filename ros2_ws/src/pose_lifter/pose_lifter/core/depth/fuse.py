@@ -55,7 +55,13 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.kernels import depth_fit_kernel, fuse_kernel, hidden_kernel, masked_median
+from pose_lifter.core.depth.kernels import (
+    depth_fit_kernel,
+    field_kernel,
+    fuse_kernel,
+    hidden_kernel,
+    masked_median,
+)
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
@@ -321,30 +327,29 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     """Steps 4-5 of :func:`fuse_readings` for the people ``placed``."""
     x0, observed = placed.x0, placed.observed
     n = len(x0)
-    z0 = x0[..., 2]
-    have = np.isfinite(readings.depth_m) & observed & (z0 > 0)
-    d = np.where(have, readings.depth_m, 0.0)
-    v = np.where(have, readings.var, 1.0)
-    k0 = _masked_median(d / np.where(z0 > 0, z0, 1.0), have, 1.0)
-
     # 4b. the robust fit of the depth field (IRLS): the placed depth scaled, plus a tilt across
     # the image (a depth that grows linearly across the body: the monocular lift's commonest error
-    # in depth, a body leaning towards or away from the camera, moves no joint on the image)
-    lateral = x0[..., :2] - x0[..., :2].mean(axis=1, keepdims=True)
-    g = np.ascontiguousarray(np.concatenate([z0[..., None], lateral[..., ::-1]], axis=-1))  # (n, 12, 3)
+    # in depth, a body leaning towards or away from the camera, moves no joint on the image), from
+    # the median of d_j / z0_j (:func:`~pose_lifter.core.depth.kernels.field_kernel`)
+    have = np.empty((n, N_JOINTS), dtype=bool)
+    d, v = np.empty((n, N_JOINTS)), np.empty((n, N_JOINTS))
+    g = np.empty((n, N_JOINTS, 3))  # (z0_j, y_j, x_j)
+    theta0 = np.empty((n, 3))
+    field_kernel(x0, observed, np.ascontiguousarray(readings.depth_m, dtype=np.float64).reshape(n, N_JOINTS),
+                 np.ascontiguousarray(readings.var, dtype=np.float64).reshape(n, N_JOINTS), have, d, v, g,
+                 theta0)
     mono_scale = monocular_scale_std(observed)  # the prior on k: the monocular placement's own error
-    precision = np.stack([mono_scale**-2, np.full(n, opt.tilt_std**-2), np.full(n, opt.tilt_std**-2)], axis=1)
-    theta0 = np.zeros((n, 3))
-    theta0[:, 0] = k0
+    precision = np.empty((n, 3))
+    precision[:, 0] = mono_scale**-2
+    precision[:, 1:] = opt.tilt_std**-2
     theta = np.empty((n, 3))
     cov = np.empty((n, 3, 3))
     objective = np.empty(n)
     n_iter = np.empty(n, dtype=np.int64)
     converged = np.empty(n, dtype=bool)
     shape_z = np.ascontiguousarray(SHAPE_STD_M[:, 1])
-    depth_fit_kernel(np.ascontiguousarray(d), np.ascontiguousarray(v), g, np.ascontiguousarray(have), shape_z,
-                     precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter), opt.tol, theta, cov,
-                     objective, n_iter, converged)
+    depth_fit_kernel(d, v, g, have, shape_z, precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter),
+                     opt.tol, theta, cov, objective, n_iter, converged)
     # 4c-5. readings beyond the gate dropped; the joints: the body moved along its rays to the
     # fitted depths, a kept reading's depth fused with its joint's along the joint's ray (the
     # lift's image of the joint: the 2D denoised by the prior), each reading first judged by its

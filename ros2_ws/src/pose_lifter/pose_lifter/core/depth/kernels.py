@@ -13,8 +13,8 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.numeric.jit import njit
 
-__all__ = ["condition", "depth_fit_kernel", "fuse_kernel", "hidden_kernel", "inlier", "leave_one_out",
-           "masked_median", "read_kernel", "read_people_kernel"]
+__all__ = ["condition", "depth_fit_kernel", "field_kernel", "fuse_kernel", "hidden_kernel", "inlier",
+           "leave_one_out", "masked_median", "read_kernel", "read_people_kernel"]
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
@@ -224,6 +224,43 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
                     found = True
                     break
             hidden[p, j] = found
+
+
+@njit
+def field_kernel(x0: NDArray[np.float64], observed: NDArray[np.bool_], depth_m: NDArray[np.float64],
+                 var: NDArray[np.float64], have: NDArray[np.bool_], d: NDArray[np.float64],
+                 v: NDArray[np.float64], g: NDArray[np.float64], theta0: NDArray[np.float64]) -> None:
+    """The depth field's data of ``n`` people (:func:`depth_fit_kernel`'s), from their placed joints
+    ``x0`` (n, 12, 3), ``observed`` (n, 12) keypoints and depth readings ``depth_m`` (n, 12) of
+    variances ``var`` (NaN where none): fill ``have`` (n, 12) (a reading of an observed joint
+    placed in front of the camera), ``d`` and ``v`` (its readings and variances; 0 and 1
+    elsewhere), ``g`` (n, 12, 3) (each joint's placed depth and its offsets across the image from
+    the body's centroid, y then x) and ``theta0`` (n, 3) (the median of ``d_j / z0_j``, 1 for a
+    body without readings, and no tilt)."""
+    n, m = d.shape
+    ratio = np.empty((n, m))
+    for p in range(n):
+        mean_x, mean_y = 0.0, 0.0
+        for j in range(m):
+            mean_x += x0[p, j, 0]
+            mean_y += x0[p, j, 1]
+        mean_x /= m
+        mean_y /= m
+        for j in range(m):
+            z0 = x0[p, j, 2]
+            have[p, j] = math.isfinite(depth_m[p, j]) and observed[p, j] and z0 > 0
+            d[p, j] = depth_m[p, j] if have[p, j] else 0.0
+            v[p, j] = var[p, j] if have[p, j] else 1.0
+            ratio[p, j] = d[p, j] / (z0 if z0 > 0 else 1.0)
+            g[p, j, 0] = z0
+            g[p, j, 1] = x0[p, j, 1] - mean_y
+            g[p, j, 2] = x0[p, j, 0] - mean_x
+        theta0[p, 1] = 0.0
+        theta0[p, 2] = 0.0
+    k0 = np.empty(n)
+    masked_median(ratio, have, 1.0, k0)
+    for p in range(n):
+        theta0[p, 0] = k0[p]
 
 
 @njit
