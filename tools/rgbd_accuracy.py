@@ -103,6 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     settings = ev.parse_settings(args.set)
     trials = args.trials
     if args.fold:
+        if "fused-offline" in args.methods:  # its lift reads ahead through the packaged offline prior
+            raise SystemExit("--fold: fused-offline needs a fold's offline prior (the packaged one has seen "
+                             "every class); leave it out of --methods")
         settings.update(fold_settings(args.fold, args.folds))
         trials = ev.action_trials(args.fold, args.data)
     split = "val" if args.calibrate else "eval"
@@ -111,12 +114,14 @@ def main(argv: list[str] | None = None) -> int:
         trials = trials[:: max(1, len(trials) // args.max_trials)][: args.max_trials]
     cameras = rgbd.rgbd_cameras((0.0, rgbd.ELEVATED) if args.elevated else (0.0,))
     if args.calibrate:  # the training split's trials the packaged prior was not fitted on
-        from pose_lifter.mocap.depth_calibration import calibrate, format_calibration
+        from pose_lifter.mocap.depth_calibration import calibrate, format_calibration, smoothed_std_factor
 
         tracks = ev.evaluation_tracks(split, args.data, args.frames, args.views, trials, cameras)
         print(f"{len(tracks)} training-split tracks (held out of the prior), distances {args.distances}",
               flush=True)
-        print(format_calibration(calibrate(tracks, args.distances, settings)))
+        print(format_calibration(calibrate(tracks, args.distances, settings)), flush=True)
+        factor, n = smoothed_std_factor(tracks, args.distances, settings, args.workers)
+        print(f"SMOOTHED_STD_FACTOR = {factor:.3f}  # {n} coordinates")
         print(f"measured at {ev.run_stamp(REPO)}, {time.perf_counter() - t0:.0f} s")
         return 0
     tracks = ev.evaluation_tracks("eval", args.data, args.frames, args.views, trials, cameras)

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.fuse import DepthReadings
+from pose_lifter.core.depth.smooth import Fused, smooth_fused_at
 from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.later import LaterFrame, Refiner, placements
@@ -92,6 +93,8 @@ class LaggedFrames(Generic[T]):
         self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame, DepthImage]] = deque()
         self._held: deque[LaggedFrame[T]] = deque()  # lifted, waiting to be refined
         self._poses = self._new_poses()
+        # per track, its latest refined fused frames (before the window), for the next frames' window
+        self._fused: dict[int, deque[Fused]] = {}
 
     @property
     def ahead(self) -> int:
@@ -125,7 +128,8 @@ class LaggedFrames(Generic[T]):
         out: list[LaggedFrame[T]] = []
         while self._inputs:
             out += self._lift_oldest()
-        out += [self._refined(f) for f in self._held]
+        held = list(self._held)
+        out += [self._refined(f, held[k + 1:]) for k, f in enumerate(held)]
         self._held.clear()
         return out
 
@@ -134,6 +138,7 @@ class LaggedFrames(Generic[T]):
         self._inputs.clear()
         self._held.clear()
         self._poses = self._new_poses()
+        self._fused.clear()
         self.pipeline.policy.kept_later()
 
     def _lift_oldest(self) -> list[LaggedFrame[T]]:
@@ -169,15 +174,23 @@ class LaggedFrames(Generic[T]):
         self._held.append(frame)
         out = []
         while len(self._held) > self.lag - self.ahead:
-            out.append(self._refined(self._held.popleft()))
+            oldest = self._held.popleft()
+            out.append(self._refined(oldest, list(self._held)))
         # tracks unseen for the timeout are forgotten, as the policy forgets them
-        self._poses.forget(frame.stamp_ns - round(self.pipeline.settings.track_timeout * 1e9))
+        timeout = frame.stamp_ns - round(self.pipeline.settings.track_timeout * 1e9)
+        self._poses.forget(timeout)
+        for track in [t for t, past in self._fused.items() if not past or past[-1][0] < timeout]:
+            del self._fused[track]
         return out
 
-    def _refined(self, frame: LaggedFrame[T]) -> LaggedFrame[T]:
+    def _refined(self, frame: LaggedFrame[T], after: Sequence[LaggedFrame[T]]) -> LaggedFrame[T]:
         """``frame`` with each tracked skeleton's metric joints refined (:class:`Refiner`, placed),
         its result's pose the refined joints centred; a skeleton whose refinement is not a valid
-        output keeps what it was lifted with."""
+        output keeps what it was lifted with. A skeleton placed on a depth image has its fused
+        joints averaged over the window (:func:`~pose_lifter.core.depth.smooth.smooth_fused_at`,
+        as ``pose-lifter lift`` averages them over the track): with its track's refined fused
+        joints of the frames before it and the fused joints of the frames held ``after`` it
+        (fused as lifted: their refinement is to come)."""
         rows: list[tuple[int, LiftedSkeleton]] = []
         joints = []
         for k, s in enumerate(frame.outcomes):
@@ -195,8 +208,25 @@ class LaggedFrames(Generic[T]):
                                      [frame.intrinsics] * len(rows), self.pipeline.settings.default_distance)
         for (k, _), again in zip(rows, again_of, strict=True):
             if again is not None:  # else what it was lifted with is kept
-                outcomes[k] = again
+                outcomes[k] = self._averaged(again, frame.stamp_ns, after)
         return frame._replace(outcomes=outcomes)
+
+    def _averaged(self, s: LiftedSkeleton, stamp_ns: int, after: Sequence[LaggedFrame[T]]) -> LiftedSkeleton:
+        """A refined skeleton placed on a depth image with its fused joints averaged over the
+        window (:meth:`_refined`); kept, before the average, for its track's next frames."""
+        if s.depth is None or s.std_m is None:
+            return s
+        sigma = LAG_SMOOTHING_S
+        past = self._fused.setdefault(s.track_id, deque())
+        while past and (past[0][0] < stamp_ns - round(3 * sigma * 1e9) or past[-1][0] > stamp_ns):
+            past.popleft()  # out of the window, or the input clock stepped back
+        later = [(f.stamp_ns, x.joints_m, x.std_m) for f in after for x in f.lifted
+                 if x.track_id == s.track_id and x.depth is not None and x.std_m is not None
+                 and stamp_ns < f.stamp_ns <= stamp_ns + round(3 * sigma * 1e9)]
+        now: Fused = (stamp_ns, s.joints_m, s.std_m)
+        joints, std = smooth_fused_at(list(past), now, later, sigma, self.pipeline.settings.track_timeout)
+        past.append(now)
+        return replace(s, joints_m=joints, std_m=std)
 
 
 def refined_skeletons(lifted: Sequence[LiftedSkeleton], joints: NDArray[np.float64], leg_m: float,

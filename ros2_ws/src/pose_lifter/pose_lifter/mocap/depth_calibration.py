@@ -25,7 +25,11 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
   body leaves the image);
 * :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`: the correlation between the joints of
   the scaled placement's errors along the depth, of wholly shown bodies (:func:`shape_correlation`:
-  left and right pooled, so the matrix is the same seen in a mirror).
+  left and right pooled, so the matrix is the same seen in a mirror);
+* :data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` (:func:`smoothed_std_factor`):
+  the 68th percentile of the offline lift's fused errors over their standard deviations, every
+  coordinate, after the track's smoothing (the deviations averaged as the joints) over the same of
+  each frame's own fusion: the scale that gives the smoothed joints the frames' coverage.
 
 The 68th percentile of an error's absolute value is its standard deviation when it is Gaussian,
 and the coverage the RGB-D evaluation reports is that of these quantiles: it says how far the
@@ -48,9 +52,10 @@ from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LEN
 from pose_lifter.messages.frame import labelled_2d
 from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
-from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, film_rgbd
+from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, RgbdEvaluator, film_rgbd
 
-__all__ = ["Calibration", "calibrate", "format_calibration", "shape_correlation", "spread_factors"]
+__all__ = ["Calibration", "calibrate", "format_calibration", "shape_correlation", "smoothed_std_factor",
+           "spread_factors"]
 
 #: A reading farther than this from its joint's true depth minus a typical offset
 #: (:data:`_TYPICAL_OFFSET_M`) is not the joint's surface (an occluder, the background): metres.
@@ -187,6 +192,18 @@ def spread_factors(shown: Sequence[Sequence[Sequence[Sequence[float]]]],
     unobserved = np.array([[_q68(e) / factor[b] for e in normalised(hidden[b])] for b in range(bins)])
     unobserved[0] = 1.0  # a whole body has no joint hidden
     return shape.T, factor, unobserved
+
+
+def smoothed_std_factor(tracks: Sequence[ev.Track], distances: Sequence[float],
+                        settings: dict[str, Any] | None = None, workers: int = 1) -> tuple[float, int]:
+    """:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` measured on ``tracks`` at
+    each of ``distances`` (module docstring), and the coordinates behind it."""
+    jobs = [(t, d) for t in tracks for d in distances]
+    records = ev.run_jobs(jobs, RgbdEvaluator, (("fused-offline",), settings or {}, None, None, 1.0, True),
+                          workers)
+    frames = np.concatenate([np.asarray(r["normalised_errors"]["frames"]) for r in records])
+    smoothed = np.concatenate([np.asarray(r["normalised_errors"]["smoothed"]) for r in records])
+    return _q68(smoothed) / _q68(frames), len(frames)
 
 
 def format_calibration(c: Calibration) -> str:

@@ -32,6 +32,11 @@ Methods (:data:`METHODS`), each tracked as the node tracks (the default hybrid m
 * ``fused-lag``: the node with ``output_lag`` (3): each frame's pose refined over the next
   frames (:class:`~pose_lifter.core.track.later.Refiner`, as ``hybrid-lag`` of :mod:`.evaluation`),
   then placed again with the depth readings its frame's lift took, as the lagged node does;
+* ``fused-offline``: ``pose-lifter lift`` of an RGB-D recording: each track lifted with its next
+  frames known (the offline prior) and refined over the whole track (the offline measurement update
+  and the centred smoothing, as ``hybrid-offline`` of :mod:`.evaluation`), each pose then placed
+  again with the depth readings of its frame's lift, as ``pose_lifter.offline.chains.refine_chain``
+  places it;
 * ``true-depth``: a floor, not a method: each joint of ``mono`` moved along its ray to the true
   joint's depth (what a perfect depth reading of every joint centre would give the live lift):
   the error left is the lift's image of the joints, from the detector's 2D.
@@ -57,6 +62,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.place import place_people
+from pose_lifter.core.depth.smooth import Fused, smooth_fused, smooth_fused_at
+from pose_lifter.core.depth.uncertainty import SMOOTHED_STD_FACTOR
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.placement import (
@@ -64,8 +71,9 @@ from pose_lifter.core.track.placement import (
     DEFAULT_LEG_LENGTH_M,
     CameraIntrinsics,
 )
-from pose_lifter.core.track.policy import TrackedLift
+from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.frame import labelled_2d
+from pose_lifter.messages.lagged import LAG_SMOOTHING_S
 from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.detector_model import REALISTIC, detect
@@ -75,7 +83,10 @@ __all__ = ["AXIS_TARGETS", "DISTANCES", "GROUPS", "JOINT_TARGETS", "METHODS", "R
            "coverage_counts", "evaluate_jobs", "film_rgbd", "fuse_person", "naive_lookup", "render_table",
            "rgbd_cameras", "rgbd_figures", "root_error", "summarise"]
 
-METHODS = ("mono", "naive", "fused", "fused-lag", "true-depth")
+METHODS = ("mono", "naive", "fused", "fused-lag", "fused-offline", "true-depth")
+#: The refined methods: each the fused lift of the refined poses of one lift of
+#: :mod:`.evaluation` (the lagged node's; ``pose-lifter lift``'s, over the whole track).
+REFINED = {"fused-lag": "hybrid-lag", "fused-offline": "hybrid-offline"}
 #: Camera distances (m, to the joints' centroid).
 DISTANCES = (1.5, 3.0, 5.0)
 #: The elevation (degrees, looking down) of the optional elevated views.
@@ -96,6 +107,8 @@ GROUPS = ("all", "depth", "prior")
 FIGURES = ("p_mpjpe", "mpjpe", "root", "wrists", "jitter", "from_depth")
 #: The node's ``output_lag`` of ``fused-lag`` (frames).
 LAG = 3
+#: The largest gap within one track (seconds): :mod:`.evaluation`'s refinement's.
+GAP_S = 1.0
 
 
 def rgbd_cameras(elevations: Sequence[float] = (0.0,)) -> list[tuple[float, float, str]]:
@@ -267,18 +280,29 @@ class RgbdEvaluator:
         The hybrid bases (default: the packaged ones).
     sensor : DepthSensor, optional
         Default :data:`pose_lifter.mocap.depth_model.REALISTIC`.
+    smoothed_std_factor : float
+        ``fused-offline``'s scale of its averaged standard deviations
+        (:func:`~pose_lifter.core.depth.smooth.smooth_fused`).
+    normalised_errors : bool
+        Each record holds ``normalised_errors``: ``fused-offline``'s errors over its standard
+        deviations per coordinate of every lifted frame, of the frames' own fusion (``frames``) and
+        smoothed (``smoothed``): what ``make depth-calibration`` measures
+        :data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` on.
     """
 
     def __init__(self, methods: Sequence[str], settings: dict[str, Any], bases_file: str | None = None,
-                 sensor: depth_model.DepthSensor | None = None) -> None:
+                 sensor: depth_model.DepthSensor | None = None,
+                 smoothed_std_factor: float = SMOOTHED_STD_FACTOR, normalised_errors: bool = False) -> None:
         unknown = sorted(set(methods) - set(METHODS))
         if unknown:
             raise ValueError(f"unknown methods {unknown} (of {list(METHODS)})")
         self.methods = tuple(methods)
         self.sensor = sensor or depth_model.REALISTIC
-        lifts = ("hybrid",) + (("hybrid-lag",) if "fused-lag" in self.methods else ())
+        lifts = ("hybrid", *(lift for m, lift in REFINED.items() if m in self.methods))
         self.lifts = ev.Evaluator(lifts, settings, ev.Setup(intrinsics=True, lag=LAG), bases_file)
         self.threshold = self.lifts.lifters["hybrid"].options.confidence_threshold
+        self.smoothed_std_factor = smoothed_std_factor
+        self.normalised_errors = normalised_errors
 
     def evaluate(self, track: ev.Track, distance: float) -> dict[str, Any]:
         """Each method's figures of ``track`` filmed at ``distance`` metres: a record with the
@@ -290,11 +314,10 @@ class RgbdEvaluator:
         leg_m = limb_lengths(track.world)[:, RIGHT_LOWER_LEG]
         n = len(truth)
         _, live = self.lifts.lifts("hybrid", px, conf, leg_m, distance)
-        lagged = np.full((n, N_JOINTS, 3), np.nan)
-        lag_results: list[TrackedLift | None] = [None] * n
-        if "fused-lag" in self.methods:
-            lagged, lag_results = self.lifts.lifts("hybrid-lag", px, conf, leg_m, distance)
+        refined = {m: self.lifts.lifts(lift, px, conf, leg_m, distance) for m, lift in REFINED.items()
+                   if m in self.methods}
         out = {m: _Method(n) for m in METHODS}
+        live_lag = _Method(n)
         up = view_rotation(*track.camera[:2]) @ np.array([0.0, 1.0, 0.0])  # the world's up, camera frame
         scene = depth_model.scene_backgrounds(truth[None], np.repeat(up[None], n, axis=0))
         for i in range(n):
@@ -313,12 +336,50 @@ class RgbdEvaluator:
                 x0 = mono.joints_m[0]
                 out["true-depth"].put(i, x0 * (truth[i, :, 2] / x0[:, 2])[:, None], None,
                                       np.ones(N_JOINTS, dtype=bool))
-            tl = lag_results[i]
-            if tl is not None and np.isfinite(lagged[i]).all():
-                points = labelled_2d(px[i], conf[i], tl.swapped)[0][None]
-                out["fused-lag"].put(i, *fuse_person(depth, points, tl.result, lagged[i] / leg_m[i]))
-        return {"track": track.name, "camera": track.camera, "distance": distance, "n": n,
-                "methods": {m: out[m].record(truth) for m in self.methods}}
+            for m, (poses, results) in refined.items():
+                tl = results[i]
+                if tl is not None and np.isfinite(poses[i]).all():
+                    points = labelled_2d(px[i], conf[i], tl.swapped)[0][None]
+                    out[m].put(i, *fuse_person(depth, points, tl.result, poses[i] / leg_m[i]))
+                    if m == "fused-lag":  # the frame as lifted, fused: what the lag holds of it
+                        live_lag.put(i, *fuse_person(depth, points, tl.result, tl.result.pose_camera))
+        record = {"track": track.name, "camera": track.camera, "distance": distance, "n": n}
+        stamps = np.arange(n, dtype=np.int64) * ev.FRAME_NS
+        if "fused-lag" in self.methods:
+            out["fused-lag"] = _lag_window(out["fused-lag"], live_lag, stamps)
+        if "fused-offline" in self.methods:  # pose-lifter lift averages each track's fused joints
+            f = out["fused-offline"]
+            frames = (f.joints - truth) / f.std
+            lifted = np.asarray(np.isfinite(f.joints).all(axis=(1, 2)), dtype=bool)
+            f.joints, f.std = smooth_fused(f.joints, f.std, stamps, lifted, OFFLINE_SMOOTHING_S, GAP_S,
+                                           self.smoothed_std_factor)
+            if self.normalised_errors:
+                smoothed = (f.joints - truth) / f.std
+                record["normalised_errors"] = {"frames": frames[lifted].ravel().tolist(),
+                                               "smoothed": smoothed[lifted].ravel().tolist()}
+        return {**record, "methods": {m: out[m].record(truth) for m in self.methods}}
+
+
+def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64]) -> _Method:
+    """The lagged node's window over ``lagged``'s fused joints (its refined poses fused,
+    :meth:`pose_lifter.messages.lagged.LaggedFrames._refined`): each frame averaged with the
+    frames before it as refined and fused and the :data:`LAG` frames after it as lifted and fused
+    (``live``), those within the window (:func:`~pose_lifter.core.depth.smooth.smooth_fused_at`)."""
+    out = _Method(lagged.n)
+    out.from_depth = lagged.from_depth
+    window_ns = round(3 * LAG_SMOOTHING_S * 1e9)
+
+    def frames(m: _Method, ks: range, at: int) -> list[Fused]:
+        return [(int(stamps[k]), m.joints[k], m.std[k]) for k in ks
+                if np.isfinite(m.joints[k]).all() and abs(stamps[k] - stamps[at]) <= window_ns]
+
+    for i in range(lagged.n):
+        if np.isfinite(lagged.joints[i]).all():
+            now = (int(stamps[i]), lagged.joints[i], lagged.std[i])
+            out.joints[i], out.std[i] = smooth_fused_at(
+                frames(lagged, range(max(0, i - 2 * LAG), i), i), now,
+                frames(live, range(i + 1, min(lagged.n, i + LAG + 1)), i), LAG_SMOOTHING_S, GAP_S)
+    return out
 
 
 def fuse_person(depth: NDArray[np.float32], points: NDArray[np.float64], result: LiftResult,

@@ -33,6 +33,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.depth.smooth import smooth_fused
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult
@@ -433,6 +434,25 @@ def refine_chain(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton
     for i, again in zip(rows, again_of, strict=True):
         if again is not None:  # else what it was lifted with is kept
             out[i] = again
+    return _smoothed_fused(chain, out, smoothing_s, settings.track_timeout)
+
+
+def _smoothed_fused(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkeleton], smoothing_s: float,
+                    gap_s: float) -> list[LiftedSkeleton | SkipSkeleton]:
+    """The chain's skeletons placed on a depth image with their fused joints averaged over the
+    centred window (:func:`~pose_lifter.core.depth.smooth.smooth_fused`: each frame's reading
+    errors averaged out); the others as given."""
+    placed = [(i, d) for i, d in enumerate(outcomes)
+              if isinstance(d, LiftedSkeleton) and d.depth is not None and d.std_m is not None]
+    if len(placed) < 2:
+        return outcomes
+    rows, fused = [i for i, _ in placed], [d for _, d in placed]
+    joints, std = smooth_fused(np.array([s.joints_m for s in fused]), np.array([s.std_m for s in fused]),
+                               np.array([chain[i].stamp_ns for i in rows], dtype=np.int64),
+                               np.ones(len(rows), dtype=bool), smoothing_s, gap_s)
+    out = list(outcomes)
+    for i, s, j, sd in zip(rows, fused, joints, std, strict=True):
+        out[i] = replace(s, joints_m=j, std_m=sd)
     return out
 
 

@@ -26,8 +26,8 @@ if TYPE_CHECKING:
     from pose_lifter.core.track.placement import CameraIntrinsics
 
 __all__ = ["MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_CORR_Z", "SHAPE_FACTOR", "SHAPE_STD_M",
-           "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std", "monocular_scale_std", "monocular_std",
-           "observed_bin", "shape_std"]
+           "SMOOTHED_STD_FACTOR", "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std",
+           "monocular_scale_std", "monocular_std", "observed_bin", "shape_std"]
 
 #: Standard deviation of an observed joint's position relative to the body, metres, per joint
 #: (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`), of a body the 2D shows whole:
@@ -69,6 +69,10 @@ MONOCULAR_SCALE_STD: Final[NDArray[np.float64]] = np.array([0.055, 0.060, 0.378,
 #: upright body leaves it).
 UNOBSERVED_FACTOR: Final[NDArray[np.float64]] = np.array(
     [[1.00, 1.00, 1.00], [1.40, 1.46, 1.12], [2.00, 5.59, 1.45], [1.98, 4.96, 1.34]])
+#: The scale of a track's fused joints' standard deviations averaged over its smoothing window
+#: (:func:`pose_lifter.core.depth.smooth.smooth_fused`): the window averages the frames' reading
+#: errors, so the smoothed joints err less than each frame's own deviations say.
+SMOOTHED_STD_FACTOR: Final[float] = 0.926
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
 
