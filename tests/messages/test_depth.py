@@ -104,11 +104,17 @@ def test_16uc1_round_trip(encoding: str, big: bool, pad: int) -> None:
 @pytest.mark.parametrize("big", [False, True])
 @pytest.mark.parametrize("pad", [0, 6])
 def test_16uc1_kept_in_millimetres(big: bool, pad: int) -> None:
-    """``millimetres=True``: a 16-bit image (raw or compressedDepth) as its uint16 millimetres, an
-    array of its own in native order, whose metres are the float32 image's; a 32FC1 image stays
-    float32 metres."""
+    """``millimetres=True``: a 16-bit image (raw or compressedDepth) as its uint16 millimetres in
+    native order, whose metres are the float32 image's: an array of its own, or a read-only view
+    of bytes nothing can change (``bytes``, native and unpadded); a 32FC1 image stays float32
+    metres."""
     mm = _millimetres(8)
-    data = bytearray(_image_cdr(mm, "16UC1", big, pad))
+    frozen = _image_cdr(mm, "16UC1", big, pad)
+    view = read_depth(decode_image_cdr(frozen), millimetres=True)
+    np.testing.assert_array_equal(view, mm)
+    shared = np.shares_memory(view, np.frombuffer(frozen, dtype=np.uint8))
+    assert shared == (not big and not pad) and view.flags.writeable == (not shared) and view.dtype.isnative
+    data = bytearray(frozen)
     for msg in (STORE.deserialize_cdr(bytes(data), IMAGE), decode_image_cdr(data)):
         kept = read_depth(msg, millimetres=True)
         assert kept.dtype == np.uint16 and kept.dtype.isnative and kept.flags.c_contiguous

@@ -376,11 +376,14 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
 
 def compile_kernels() -> None:
     """Compile the fusion's kernels (numba, see ``core.numeric.jit``) into their cache, or load
-    them from it: one fusion of a small synthetic frame in metres and one in millimetres, so that no
-    frame pays for it."""
+    them from it: one fusion of a small synthetic frame in metres and in millimetres (writable, and
+    read-only as a view of a message's bytes), so that no frame pays for it."""
     grid = np.linspace(-0.5, 0.5, N_JOINTS)
     pose = np.stack([grid, grid[::-1], 0.2 * grid], axis=-1)[None]
     points = 32.0 + 10.0 * pose[..., :2]
-    for depth in (np.full((64, 64), 3.0, dtype=np.float32), np.full((64, 64), 3000, dtype=np.uint16)):
+    read_only = np.full((64, 64), 3000, dtype=np.uint16)
+    read_only.flags.writeable = False  # a view of a message's bytes (numba compiles it apart)
+    for depth in (np.full((64, 64), 3.0, dtype=np.float32), np.full((64, 64), 3000, dtype=np.uint16),
+                  read_only):
         fuse_depth(depth, ((50.0, 50.0), (32.0, 32.0)), points, np.ones((1, N_JOINTS)), pose,
                    np.array([20.0]), np.array([[32.0, 32.0]]))
