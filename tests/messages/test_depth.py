@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image
 from pose_lifter.messages.depth import (
+    _MM_TO_M,
     MAX_DEPTH_PIXELS,
     DepthBuffer,
     DepthError,
@@ -98,6 +99,36 @@ def test_16uc1_round_trip(encoding: str, big: bool, pad: int) -> None:
         assert depth.dtype == np.float32 and depth.shape == (H, W)
         np.testing.assert_allclose(depth[mm > 0], mm[mm > 0] / 1000.0, rtol=FLOAT32_REL)
         assert np.isnan(depth[mm == 0]).all()
+
+
+@pytest.mark.parametrize("big", [False, True])
+@pytest.mark.parametrize("pad", [0, 6])
+def test_16uc1_kept_in_millimetres(big: bool, pad: int) -> None:
+    """``millimetres=True``: a 16-bit image (raw or compressedDepth) as its uint16 millimetres in
+    native order, whose metres are the float32 image's: an array of its own, or a read-only view
+    of bytes nothing can change (``bytes``, native and unpadded); a 32FC1 image stays float32
+    metres."""
+    mm = _millimetres(8)
+    frozen = _image_cdr(mm, "16UC1", big, pad)
+    view = read_depth(decode_image_cdr(frozen), millimetres=True)
+    np.testing.assert_array_equal(view, mm)
+    shared = np.shares_memory(view, np.frombuffer(frozen, dtype=np.uint8))
+    assert shared == (not big and not pad) and view.flags.writeable == (not shared) and view.dtype.isnative
+    data = bytearray(frozen)
+    for msg in (STORE.deserialize_cdr(bytes(data), IMAGE), decode_image_cdr(data)):
+        kept = read_depth(msg, millimetres=True)
+        assert kept.dtype == np.uint16 and kept.dtype.isnative and kept.flags.c_contiguous
+        np.testing.assert_array_equal(kept, mm)
+        np.testing.assert_array_equal(_MM_TO_M[kept], depth_image(msg))
+    data[-2 * W * H:] = bytes(2 * W * H)  # the bytes the decoded message views reused: the image is its own
+    np.testing.assert_array_equal(kept, mm)
+    png = _compressed("16UC1; compressedDepth png", _config_header() + _png(mm))
+    np.testing.assert_array_equal(read_depth(png, millimetres=True), mm)
+    metres = mm.astype(np.float32) / np.float32(1000.0)
+    assert read_depth(decode_image_cdr(_image_cdr(metres, "32FC1")), millimetres=True).dtype == np.float32
+    # refused as the metres are: a 16UC1 image written in metres
+    _refused(DepthFault.RANGE, read_depth, decode_image_cdr(_image_cdr((mm // 1000).astype(np.uint16),
+                                                                       "16UC1")), millimetres=True)
 
 
 def test_32fc1_round_trip_no_reading_values() -> None:

@@ -189,9 +189,11 @@ def test_readings_fuse_a_later_pose_without_the_image() -> None:
 
 
 def test_the_conditioning_is_the_textbook_gaussian_one() -> None:
-    """``_condition`` against the conditional mean and covariance computed on the read joints
-    alone, ``m + S[:, R] (S[R, R] + V)^-1 (d_R - m_R)``, for random priors and reading sets."""
-    from pose_lifter.core.depth.fuse import _condition
+    """The kernels' ``condition`` against the conditional mean and covariance computed on the read
+    joints alone, ``m + S[:, R] (S[R, R] + V)^-1 (d_R - m_R)``, for random priors and reading sets
+    (an unread joint: the fusion's ``_UNREAD_VAR`` and no residual)."""
+    from pose_lifter.core.depth.fuse import _UNREAD_VAR
+    from pose_lifter.core.depth.kernels import condition
     from tolerances import DEPTH_CONDITIONING
 
     rng = np.random.default_rng(5)
@@ -206,9 +208,10 @@ def test_the_conditioning_is_the_textbook_gaussian_one() -> None:
         gain = prior[:, r] @ np.linalg.inv(prior[np.ix_(r, r)] + np.diag(v[r]))
         want_z = mean + gain @ (d[r] - mean[r])
         want_sd = np.sqrt(np.diag(prior - gain @ prior[r, :]))
-        z, sd = _condition(mean[None], prior[None], d[None], v[None], kept[None])
-        assert np.abs(z[0] - want_z).max() < DEPTH_CONDITIONING
-        assert np.abs(sd[0] - want_sd).max() < DEPTH_CONDITIONING
+        shift, sd = np.empty(12), np.empty(12)
+        condition(prior, np.where(kept, d - mean, 0.0), np.where(kept, v, _UNREAD_VAR), shift, sd)
+        assert np.abs(mean + shift - want_z).max() < DEPTH_CONDITIONING
+        assert np.abs(sd - want_sd).max() < DEPTH_CONDITIONING
 
 
 def test_a_read_elbow_takes_its_unread_wrist_along() -> None:
@@ -229,9 +232,10 @@ def test_a_read_elbow_takes_its_unread_wrist_along() -> None:
 
 
 def test_leave_one_out_is_the_conditioning_on_the_other_readings() -> None:
-    """``_leave_one_out`` against conditioning on the other kept readings one at a time (the
-    textbook formula): each read joint's predicted residual and its variance."""
-    from pose_lifter.core.depth.fuse import _leave_one_out
+    """The kernels' ``leave_one_out`` against conditioning on the other kept readings one at a time
+    (the textbook formula): each read joint's predicted residual and its variance."""
+    from pose_lifter.core.depth.fuse import _UNREAD_VAR
+    from pose_lifter.core.depth.kernels import leave_one_out
     from tolerances import DEPTH_CONDITIONING
 
     rng = np.random.default_rng(6)
@@ -241,12 +245,13 @@ def test_leave_one_out_is_the_conditioning_on_the_other_readings() -> None:
         residual = 0.05 * rng.standard_normal(12)
         v = 1e-4 * (1.0 + rng.random(12))
         kept = rng.random(12) < 0.7
-        got, got_var = _leave_one_out(prior[None], residual[None], v[None], kept[None])
+        got, got_var = np.empty(12), np.empty(12)
+        leave_one_out(prior, np.where(kept, residual, 0.0), np.where(kept, v, _UNREAD_VAR), got, got_var)
         for j in np.flatnonzero(kept):
             r = np.flatnonzero(kept & (np.arange(12) != j))
             gain = prior[j, r] @ np.linalg.inv(prior[np.ix_(r, r)] + np.diag(v[r]))
-            assert abs(got[0, j] - (residual[j] - gain @ residual[r])) < DEPTH_CONDITIONING
-            assert abs(got_var[0, j] - (prior[j, j] - gain @ prior[r, j])) < DEPTH_CONDITIONING
+            assert abs(got[j] - (residual[j] - gain @ residual[r])) < DEPTH_CONDITIONING
+            assert abs(got_var[j] - (prior[j, j] - gain @ prior[r, j])) < DEPTH_CONDITIONING
 
 
 def test_a_reading_its_neighbours_contradict_is_dropped() -> None:

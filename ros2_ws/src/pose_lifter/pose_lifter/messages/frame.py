@@ -81,8 +81,9 @@ __all__ = [
 #: Camera intrinsics ((fx, fy), (cx, cy)) in pixels, or None (the default distance).
 Intrinsics = tuple[tuple[float, float], tuple[float, float]] | None
 #: A frame's depth image (:mod:`pose_lifter.messages.depth`): float32 (H, W) metres along the
-#: optical axis, NaN where there is no reading; None: no depth (the monocular placement).
-DepthImage = NDArray[np.float32] | None
+#: optical axis, NaN where there is no reading, or uint16 millimetres, 0 where there is none
+#: (:data:`~pose_lifter.core.depth.reading.DepthArray`); None: no depth (the monocular placement).
+DepthImage = NDArray[np.float32] | NDArray[np.uint16] | None
 
 _NO_CLIP: Final[Callable[[str], Any]] = lambda text: None  # noqa: E731
 _DEFAULTS: Final[FrameSettings] = FrameSettings()
@@ -387,7 +388,7 @@ def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput
     a group whose fusion fails (or gives a skeleton no valid output) is placed without depth."""
     out: list[LiftedSkeleton | SkipSkeleton | None] = [None] * len(solved)
     groups: dict[tuple[float, float, Intrinsics, int], list[int]] = {}
-    images: dict[int, NDArray[np.float32]] = {}
+    images: dict[int, NDArray[np.float32] | NDArray[np.uint16]] = {}
     for k, (st, intrinsics, _, _) in enumerate(solved):
         depth = depths[k] if depths is not None else None
         key = id(depth) if depth is not None and intrinsics is not None else 0

@@ -42,6 +42,7 @@ from pose_lifter.messages import convert as m
 from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
     CheckedFrame,
+    DepthImage,
     FramePipeline,
     FrameSettings,
     Intrinsics,
@@ -367,7 +368,7 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     return out
 
 
-def _own(image: NDArray[np.float32] | None) -> NDArray[np.float32] | None:
+def _own(image: DepthImage) -> DepthImage:
     """A message's own array of its depth image (a view: two messages paired with one image are
     still placed each on its own, :func:`~pose_lifter.messages.frame.place_lifted`)."""
     return None if image is None else image.view()

@@ -13,9 +13,10 @@ and the partners read one at a time while the chains are lifted.
   detector's keypoints arrive after their image by its latency, so their bag stamps are not the
   image's.
 * :class:`DepthFrames`: the partners read while the chains are lifted, one image decoded at a
-  time (:func:`~pose_lifter.messages.depth.read_depth`, checked against the ``camera_info`` size
-  at the message), so memory is bounded by one image (and the one chunk that holds it) whatever
-  the bag's length; in a single chunked MCAP file each image is read from its own chunk through
+  time (:func:`~pose_lifter.messages.depth.read_depth`, a 16-bit image kept in millimetres: a
+  view of the chunk's bytes, which it keeps while it is held; checked against the ``camera_info``
+  size at the message), so memory is bounded by one image (and the one chunk that holds it)
+  whatever the bag's length; in a single chunked MCAP file each image is read from its own chunk through
   the file's index (:mod:`pose_lifter.offline.mcap_index`: no pass over the topic, so worker
   processes lifting different tracks decompress different chunks), elsewhere through the topic in
   message order. A worker process opens its own reader. A refused image (see
@@ -28,10 +29,7 @@ from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final, NamedTuple
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.depth import (
@@ -46,6 +44,9 @@ from pose_lifter.messages.depth import (
 from pose_lifter.messages.names import COMPRESSED_IMAGE, IMAGE
 from pose_lifter.offline.bags import BagError, RawMessage, read_raw
 from pose_lifter.offline.mcap_index import ChunkedMcap, IndexedMessages, chunked_mcap
+
+if TYPE_CHECKING:
+    from pose_lifter.core.depth.reading import DepthArray
 
 __all__ = ["HEADER_BYTES", "HELD_IMAGES", "IMAGE_TYPES", "NO_DEPTH", "BagDepth", "DepthFrames", "DepthStamp",
            "depth_topic_of", "header_stamp", "pair_depth"]
@@ -196,7 +197,7 @@ class DepthFrames:
         self.n_passes = 0
         self._stream: Iterator[RawMessage] | None = None
         self._next = 0  # index of the topic's message the stream gives next
-        self._last: tuple[int, NDArray[np.float32] | None] | None = None  # (index, its image)
+        self._last: tuple[int, DepthArray | None] | None = None  # (index, its image)
         self._indexed = (IndexedMessages(*depth.located, keep=HELD_IMAGES) if depth.located is not None
                          else None)
 
@@ -228,16 +229,18 @@ class DepthFrames:
                 return raw.data
         raise BagError(f"{self.depth.path}: depth topic {self.depth.topic} has no message {index}")
 
-    def image(self, msg_index: int) -> NDArray[np.float32] | None:
-        """The depth image of keypoints message ``msg_index``, or None (no partner, or refused:
-        counted in :attr:`refused`)."""
+    def image(self, msg_index: int) -> DepthArray | None:
+        """The depth image of keypoints message ``msg_index`` (a 16-bit one as uint16 millimetres:
+        :func:`~pose_lifter.messages.depth.read_depth` with ``millimetres``), or None (no partner,
+        or refused: counted in :attr:`refused`)."""
         index = self.depth.partners[msg_index]
         if index is None:
             return None
         if self._last is None or self._last[0] != index:
             self._last = (index, None)
             try:
-                self._last = (index, read_depth(_decoder(self.depth.msgtype)(self._data(index))))
+                self._last = (index, read_depth(_decoder(self.depth.msgtype)(self._data(index)),
+                                                millimetres=True))
             except DepthError as err:
                 self._refuse(err)
                 return None

@@ -21,9 +21,6 @@ import time
 from collections.abc import Callable
 from typing import Any, Final
 
-import numpy as np
-from numpy.typing import NDArray
-
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.depth import (
     DepthBuffer,
@@ -36,6 +33,7 @@ from pose_lifter.messages.depth import (
     is_compressed_topic,
     read_depth,
 )
+from pose_lifter.messages.frame import DepthImage
 
 __all__ = ["DEPTH_CAPACITY", "NO_PARTNER", "SILENT_S", "DepthInput"]
 
@@ -114,8 +112,9 @@ class DepthInput:
             while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
                 self.on_image(taken[0])
 
-    def depth_of(self, stamp_ns: int) -> NDArray[np.float32] | None:
-        """The depth image (float32 (H, W) metres, NaN = none) of the frame of ``stamp_ns``, or
+    def depth_of(self, stamp_ns: int) -> DepthImage:
+        """The depth image (float32 (H, W) metres, NaN = none; a 16-bit one as uint16 millimetres,
+        0 = none: :func:`~pose_lifter.messages.depth.read_depth`) of the frame of ``stamp_ns``, or
         None (counted and warned: no partner within the tolerance, no camera_info, an image
         refused)."""
         self._take_waiting()
@@ -129,7 +128,7 @@ class DepthInput:
         try:
             if intrinsics is None:
                 raise camera_info_missing()
-            depth = read_depth(pairing.image)
+            depth = read_depth(pairing.image, millimetres=True)
             if size is not None:
                 check_depth_size(depth, size)
         except DepthError as err:

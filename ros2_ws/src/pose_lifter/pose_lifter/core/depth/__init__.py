@@ -10,10 +10,11 @@ from pose_lifter.core.depth.fuse import (
     FusedPeople,
     fuse_depth,
     fuse_readings,
+    read_and_fuse,
     read_depth,
 )
-from pose_lifter.core.depth.reading import SURFACE_OFFSET_M, DepthOptions, read_patches
+from pose_lifter.core.depth.reading import SURFACE_OFFSET_M, DepthArray, DepthOptions, read_patches
 from pose_lifter.core.depth.uncertainty import body_std, monocular_std
 
-__all__ = ["SURFACE_OFFSET_M", "DepthOptions", "DepthReadings", "FusedPeople", "body_std",
-           "fuse_depth", "fuse_readings", "monocular_std", "read_depth", "read_patches"]
+__all__ = ["SURFACE_OFFSET_M", "DepthArray", "DepthOptions", "DepthReadings", "FusedPeople", "body_std",
+           "fuse_depth", "fuse_readings", "monocular_std", "read_and_fuse", "read_depth", "read_patches"]

@@ -44,24 +44,31 @@ placed depths scaled (the body's size and distance together) and tilted across t
 
 :func:`read_depth` takes steps 1-3 (it needs the image), :func:`fuse_readings` steps 4-5 (it needs
 the readings only: a pose refined over later frames is fused with its frame's readings without
-keeping the image); :func:`fuse_depth` both.
+keeping the image); :func:`fuse_depth` both, and :func:`read_and_fuse` both with the readings.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.kernels import depth_fit_kernel, hidden_kernel
+from pose_lifter.core.depth.kernels import (
+    depth_fit_kernel,
+    field_kernel,
+    fuse_kernel,
+    hidden_kernel,
+    masked_median,
+)
 from pose_lifter.core.depth.reading import (
     LIMB_RADIUS_M,
     SURFACE_OFFSET_M,
+    DepthArray,
     DepthOptions,
     joint_radius_px,
-    read_patches,
+    read_people,
 )
 from pose_lifter.core.depth.uncertainty import (
     SHAPE_CORR_Z,
@@ -79,7 +86,8 @@ from pose_lifter.core.track.placement import (
     place_poses,
 )
 
-__all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fuse_readings", "read_depth"]
+__all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fuse_readings", "read_and_fuse",
+           "read_depth"]
 
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
@@ -207,38 +215,42 @@ class _Placed:
 
 
 def _masked_median(values: NDArray[np.float64], mask: NDArray[np.bool_], empty: float) -> NDArray[np.float64]:
-    """Each row's median of ``values`` (n, 12) where ``mask``; ``empty`` for a row without any."""
-    v = np.where(mask, values, np.inf)
-    v.sort(axis=1)
-    count = mask.sum(axis=1)
-    rows = np.arange(len(v))
-    lo, hi = np.maximum(count - 1, 0) // 2, np.minimum(count // 2, v.shape[1] - 1)
-    return np.asarray(np.where(count > 0, 0.5 * (v[rows, lo] + v[rows, hi]), empty))
+    """Each row's median of ``values`` (n, 12) where ``mask``; ``empty`` for a row without any
+    (compiled: :func:`~pose_lifter.core.depth.kernels.masked_median`)."""
+    out = np.empty(len(values))
+    masked_median(np.ascontiguousarray(values, dtype=np.float64), np.ascontiguousarray(mask, dtype=bool),
+                  float(empty), out)
+    return out
 
 
-def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+def read_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
                centres: NDArray[np.float64], options: DepthOptions | None = None) -> DepthReadings:
     """Steps 1-3 of the fusion (module docstring): the readings of the observed joints of ``n``
     people, those another body part hides dropped (arguments as :func:`fuse_depth`)."""
     opt = options if options is not None else DepthOptions()
+    _check_image(depth)
+    return _read(depth, intrinsics, _Placed(intrinsics, points, weights, poses, scales, centres, opt), opt)
+
+
+def _check_image(depth: DepthArray) -> None:
+    """:class:`InvalidInputError` unless ``depth`` is a non-empty (H, W) image."""
     img = np.asarray(depth)
     if img.ndim != 2 or img.size == 0:
         raise InvalidInputError(f"a depth image must be (H, W), got shape {img.shape}")
-    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+
+
+def _read(depth: DepthArray, intrinsics: CameraIntrinsics, placed: _Placed, opt: DepthOptions
+          ) -> DepthReadings:
+    """Steps 2-3 of :func:`read_depth` for the people ``placed``."""
     x0, px = placed.x0, placed.px
-    n = len(x0)
     z0 = x0[..., 2]
     (fx, fy), _ = intrinsics
     radius = joint_radius_px(0.5 * (float(fx) + float(fy)) / np.maximum(z0.mean(axis=1), 1e-3), opt)
-    # the person's depth as the image shows it: the median of the observed keypoints' patches
-    # (most lie on the body), the centre of the band (the monocular placement may be far off)
-    raw = read_patches(img, px.reshape(-1, 2), radius.ravel(), z0.ravel(), replace(opt, band_m=np.inf))
-    seen = raw.surface.reshape(n, N_JOINTS)
-    centre = _masked_median(seen, placed.observed & np.isfinite(seen), 0.0)
-    read = read_patches(img, px.reshape(-1, 2), radius.ravel(), np.repeat(centre, N_JOINTS), opt)
-    d = read.surface.reshape(n, N_JOINTS) + SURFACE_OFFSET_M[None]
-    v = read.var.reshape(n, N_JOINTS) + opt.offset_std_m**2
+    # each band about the person's depth as the image shows it (read_people)
+    surface, var = read_people(depth, px, radius, z0, placed.observed, opt)
+    d = surface + SURFACE_OFFSET_M[None]
+    v = var + opt.offset_std_m**2
     have = placed.observed & np.isfinite(d) & (z0 > 0)
     # a first scale (the median of d_j / z0_j) places the bodies for the occlusion test
     k = _masked_median(d / np.where(z0 > 0, z0, 1.0), have, 1.0)
@@ -246,7 +258,7 @@ def read_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     return DepthReadings(np.where(have, d, np.nan), np.where(have, v, np.nan))
 
 
-def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+def fuse_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
                centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
     """The ``n`` people of one frame placed with the frame's registered depth image (module
@@ -255,9 +267,10 @@ def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
 
     Parameters
     ----------
-    depth : ndarray of float32, shape (H, W)
-        Metres along the optical axis, NaN where there is no reading; registered to the camera of
-        ``intrinsics``.
+    depth : ndarray of float32 or uint16, shape (H, W)
+        Metres along the optical axis, NaN where there is no reading (or uint16 millimetres, 0
+        where there is none: :data:`~pose_lifter.core.depth.reading.DepthArray`); registered to
+        the camera of ``intrinsics``.
     intrinsics : ((fx, fy), (cx, cy))
         Pixels.
     points : ndarray, shape (n, 12, 2)
@@ -283,8 +296,21 @@ def fuse_depth(depth: NDArray[np.float32], intrinsics: CameraIntrinsics, points:
     InvalidInputError
         ``depth`` is not a 2-D image.
     """
-    readings = read_depth(depth, intrinsics, points, weights, poses, scales, centres, options)
-    return fuse_readings(readings, intrinsics, points, weights, poses, scales, centres, options)
+    return read_and_fuse(depth, intrinsics, points, weights, poses, scales, centres, options)[1]
+
+
+def read_and_fuse(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
+                  weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
+                  centres: NDArray[np.float64], options: DepthOptions | None = None
+                  ) -> tuple[DepthReadings, FusedPeople]:
+    """:func:`read_depth` and :func:`fuse_readings` of its readings, the people placed once
+    (arguments as :func:`fuse_depth`): the readings (for a later fusion of the frame) and the
+    people placed."""
+    opt = options if options is not None else DepthOptions()
+    _check_image(depth)
+    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    readings = _read(depth, intrinsics, placed, opt)
+    return readings, _fuse(readings, placed, opt)
 
 
 def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
@@ -294,68 +320,51 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     ``readings``: the same people, possibly with other poses (a pose refined over later frames);
     arguments as :func:`fuse_depth`."""
     opt = options if options is not None else DepthOptions()
-    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    return _fuse(readings, _Placed(intrinsics, points, weights, poses, scales, centres, opt), opt)
+
+
+def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedPeople:
+    """Steps 4-5 of :func:`fuse_readings` for the people ``placed``."""
     x0, observed = placed.x0, placed.observed
     n = len(x0)
-    z0 = x0[..., 2]
-    have = np.isfinite(readings.depth_m) & observed & (z0 > 0)
-    d = np.where(have, readings.depth_m, 0.0)
-    v = np.where(have, readings.var, 1.0)
-    k0 = _masked_median(d / np.where(z0 > 0, z0, 1.0), have, 1.0)
-
     # 4b. the robust fit of the depth field (IRLS): the placed depth scaled, plus a tilt across
     # the image (a depth that grows linearly across the body: the monocular lift's commonest error
-    # in depth, a body leaning towards or away from the camera, moves no joint on the image)
-    lateral = x0[..., :2] - x0[..., :2].mean(axis=1, keepdims=True)
-    g = np.ascontiguousarray(np.concatenate([z0[..., None], lateral[..., ::-1]], axis=-1))  # (n, 12, 3)
+    # in depth, a body leaning towards or away from the camera, moves no joint on the image), from
+    # the median of d_j / z0_j (:func:`~pose_lifter.core.depth.kernels.field_kernel`)
+    have = np.empty((n, N_JOINTS), dtype=bool)
+    d, v = np.empty((n, N_JOINTS)), np.empty((n, N_JOINTS))
+    g = np.empty((n, N_JOINTS, 3))  # (z0_j, y_j, x_j)
+    theta0 = np.empty((n, 3))
+    field_kernel(x0, observed, np.ascontiguousarray(readings.depth_m, dtype=np.float64).reshape(n, N_JOINTS),
+                 np.ascontiguousarray(readings.var, dtype=np.float64).reshape(n, N_JOINTS), have, d, v, g,
+                 theta0)
     mono_scale = monocular_scale_std(observed)  # the prior on k: the monocular placement's own error
-    precision = np.stack([mono_scale**-2, np.full(n, opt.tilt_std**-2), np.full(n, opt.tilt_std**-2)], axis=1)
-    theta0 = np.zeros((n, 3))
-    theta0[:, 0] = k0
+    precision = np.empty((n, 3))
+    precision[:, 0] = mono_scale**-2
+    precision[:, 1:] = opt.tilt_std**-2
     theta = np.empty((n, 3))
     cov = np.empty((n, 3, 3))
     objective = np.empty(n)
     n_iter = np.empty(n, dtype=np.int64)
     converged = np.empty(n, dtype=bool)
     shape_z = np.ascontiguousarray(SHAPE_STD_M[:, 1])
-    depth_fit_kernel(np.ascontiguousarray(d), np.ascontiguousarray(v), g, np.ascontiguousarray(have), shape_z,
-                     precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter), opt.tol, theta, cov,
-                     objective, n_iter, converged)
-    model_z = np.einsum("njc,nc->nj", g, theta)
-    r = (d - model_z) / np.sqrt(v + (theta[:, :1] * shape_z[None]) ** 2)
-    kept = have & (np.abs(r) <= opt.gate)
-    placeable = np.isfinite(model_z).all(axis=1) & (model_z > 0).all(axis=1) & kept.any(axis=1)
-    kept &= placeable[:, None]
-
-    # 5. the joints: the body moved along its rays to the fitted depths; a kept reading's depth
-    # fused with its joint's, along the joint's ray (the lift's image of the joint: the 2D denoised
-    # by the prior)
-    mono = ~placeable
-    model_z[mono] = z0[mono]
-    body = x0 * (model_z / z0)[..., None]
+    depth_fit_kernel(d, v, g, have, shape_z, precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter),
+                     opt.tol, theta, cov, objective, n_iter, converged)
+    # 4c-5. readings beyond the gate dropped; the joints: the body moved along its rays to the
+    # fitted depths, a kept reading's depth fused with its joint's along the joint's ray (the
+    # lift's image of the joint: the 2D denoised by the prior), each reading first judged by its
+    # residual from the field, then by what the other readings predict of its joint (leave one
+    # out); a joint without its own reading keeps its marginal deviation (the correlations,
+    # measured on motion the prior knows, hold less on motion it does not: on the cross-action
+    # folds the conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %).
+    # Compiled, one person at a time: :func:`~pose_lifter.core.depth.kernels.fuse_kernel`
     shape = shape_std(observed)
-    along_sd = np.sqrt(np.einsum("njc,ncd,njd->nj", g, cov, g)) / model_z  # relative, along the ray
-    along_sd[mono] = mono_scale[mono, None]
-    root = along_sd[..., None] * np.abs(body)
-    var_body = shape[..., 2] ** 2 + root[..., 2] ** 2
-    # each reading is the joint's with the probability of its residual under a mixture (the
-    # joint's surface, Gaussian; a stray surface, uniform over the band): its residual first from
-    # the field alone, then from what the other readings predict of its joint (leave one out)
-    band = 2.0 * (opt.band_m + opt.band_fraction * model_z)
-    p_in = _inlier(d - model_z, var_body + v, kept, band, opt.outlier_share)
-    prior = _depth_cov(shape[..., 2], g, cov, root[..., 2], mono)
-    loo, loo_var = _leave_one_out(prior, d - model_z, v / np.maximum(p_in, _MIN_INLIER), kept)
-    p_in = _inlier(loo, loo_var + v, kept, band, opt.outlier_share)
-    kept &= p_in >= 0.5
-    z, z_std = _condition(model_z, prior, d, v / np.maximum(p_in, 0.5), kept)
-    # a joint without its own reading keeps its marginal deviation: the correlations, measured on
-    # motion the prior knows, hold less on motion it does not (on the cross-action folds the
-    # conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %)
-    z_std = np.where(kept, z_std, np.sqrt(np.diagonal(prior, axis1=1, axis2=2)))
-    joints = body * (z / model_z)[..., None]
-    along = np.abs(joints) * (z_std / z)[..., None]  # the depth's error along the ray, per axis
-    std = np.where(kept[..., None], np.sqrt(shape**2 + along**2), np.sqrt(shape**2 + root**2))
-    std[..., 2] = z_std
+    joints = np.empty((n, N_JOINTS, 3))
+    std = np.empty((n, N_JOINTS, 3))
+    kept = np.empty((n, N_JOINTS), dtype=bool)
+    placeable = np.empty(n, dtype=bool)
+    fuse_kernel(x0, g, d, v, have, theta, cov, shape, SHAPE_CORR_Z, mono_scale, shape_z, opt.gate, opt.band_m,
+                opt.band_fraction, opt.outlier_share, _MIN_INLIER, _UNREAD_VAR, joints, std, kept, placeable)
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
@@ -365,66 +374,16 @@ def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points:
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
 
 
-def _depth_cov(shape_z: NDArray[np.float64], g: NDArray[np.float64], cov: NDArray[np.float64],
-               root_z: NDArray[np.float64], mono: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """The covariance (n, 12, 12) of the true depths about the depth field's: the shape's
-    (``shape_z`` (n, 12) standard deviations, correlated between joints by
-    :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's (``g`` (n, 12, 3)
-    its regressors, ``cov`` (n, 3, 3) its parameters' covariance), or for the bodies left at the
-    monocular placement (``mono`` (n,)) the placement's scale error (``root_z`` (n, 12), fully
-    correlated: the body slides along its rays as a whole)."""
-    field = np.einsum("njc,ncd,nkd->njk", g, cov, g)
-    place = root_z[:, :, None] * root_z[:, None, :]
-    shape = shape_z[:, :, None] * SHAPE_CORR_Z[None] * shape_z[:, None, :]
-    return np.asarray(shape + np.where(mono[:, None, None], place, field))
-
-
-def _inlier(residual: NDArray[np.float64], var: NDArray[np.float64], kept: NDArray[np.bool_],
-            band: NDArray[np.float64], share: float) -> NDArray[np.float64]:
-    """The probability (n, 12) that each ``kept`` reading is its joint's, from its ``residual``
-    of variance ``var`` if it is (Gaussian), against a stray surface (probability ``share``)
-    uniform over the depth ``band``; 0 where not ``kept``."""
-    dens = np.exp(-0.5 * residual**2 / var) / np.sqrt(2.0 * np.pi * var)
-    return np.where(kept, (1.0 - share) * dens / ((1.0 - share) * dens + share / band), 0.0)
-
-
-def _leave_one_out(prior: NDArray[np.float64], residual: NDArray[np.float64], v: NDArray[np.float64],
-                   kept: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Each ``kept`` reading's residual (n, 12) from its joint's depth as the Gaussian
-    ``N(0, prior)`` conditioned on the other kept readings (``residual`` about the prior's mean,
-    variances ``v``) predicts it, and that prediction's variance (n, 12) (the reading's own noise
-    not included): ``a_j / C_jj`` and ``1 / C_jj - v_j``, ``C = (prior + diag(v))^-1``,
-    ``a = C residual`` (the closed form of leaving one observation out of a Gaussian
-    conditioning)."""
-    noise = np.where(kept, v, _UNREAD_VAR)
-    inv = np.linalg.inv(prior + noise[:, :, None] * np.eye(N_JOINTS)[None])
-    diag = np.diagonal(inv, axis1=1, axis2=2)
-    a = np.einsum("njk,nk->nj", inv, np.where(kept, residual, 0.0))
-    return a / diag, np.maximum(1.0 / diag - noise, 1e-3 * np.diagonal(prior, axis1=1, axis2=2))
-
-
-def _condition(mean: NDArray[np.float64], prior: NDArray[np.float64], d: NDArray[np.float64],
-               v: NDArray[np.float64], kept: NDArray[np.bool_]
-               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The joints' depths (n, 12) and their standard deviations given the ``kept`` (n, 12)
-    readings ``d`` of variances ``v``: the Gaussian ``N(mean, prior)`` ((n, 12), (n, 12, 12))
-    conditioned on ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j)``, so a reading moves its joint and,
-    through the prior's correlations, the joints without one. A joint without a reading gets the
-    variance :data:`_UNREAD_VAR` in the solve (it drops out)."""
-    noise = np.where(kept, v, _UNREAD_VAR)
-    system = prior + noise[:, :, None] * np.eye(N_JOINTS)[None]
-    gain = np.linalg.solve(system, prior).transpose(0, 2, 1)  # prior @ system^-1 (both symmetric)
-    z = mean + np.einsum("njk,nk->nj", gain, np.where(kept, d - mean, 0.0))
-    post = prior - gain @ prior
-    var = np.diagonal(post, axis1=1, axis2=2)
-    return z, np.sqrt(np.maximum(var, 1e-3 * np.diagonal(prior, axis1=1, axis2=2)))
-
-
 def compile_kernels() -> None:
     """Compile the fusion's kernels (numba, see ``core.numeric.jit``) into their cache, or load
-    them from it: one fusion of a small synthetic frame, so that no frame pays for it."""
+    them from it: one fusion of a small synthetic frame in metres and in millimetres (writable, and
+    read-only as a view of a message's bytes), so that no frame pays for it."""
     grid = np.linspace(-0.5, 0.5, N_JOINTS)
     pose = np.stack([grid, grid[::-1], 0.2 * grid], axis=-1)[None]
     points = 32.0 + 10.0 * pose[..., :2]
-    fuse_depth(np.full((64, 64), 3.0, dtype=np.float32), ((50.0, 50.0), (32.0, 32.0)), points,
-               np.ones((1, N_JOINTS)), pose, np.array([20.0]), np.array([[32.0, 32.0]]))
+    read_only = np.full((64, 64), 3000, dtype=np.uint16)
+    read_only.flags.writeable = False  # a view of a message's bytes (numba compiles it apart)
+    for depth in (np.full((64, 64), 3.0, dtype=np.float32), np.full((64, 64), 3000, dtype=np.uint16),
+                  read_only):
+        fuse_depth(depth, ((50.0, 50.0), (32.0, 32.0)), points, np.ones((1, N_JOINTS)), pose,
+                   np.array([20.0]), np.array([[32.0, 32.0]]))

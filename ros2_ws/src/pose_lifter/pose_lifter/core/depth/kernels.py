@@ -1,7 +1,8 @@
 """The depth fusion's loops, compiled (:func:`pose_lifter.core.numeric.jit.njit`): the patch
-readings, the occlusion test and the robust scale fit, one person or joint at a time over small
-arrays, where numpy's per-call overhead would cost more than the arithmetic. Their meaning is
-documented where they are called (:mod:`.reading`, :mod:`.fuse`)."""
+readings, the occlusion test, the robust scale fit and the fusion of the readings with the body,
+one person or joint at a time over small arrays, where numpy's per-call overhead would cost more
+than the arithmetic. Their meaning is documented where they are called (:mod:`.reading`,
+:mod:`.fuse`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.numeric.jit import njit
 
-__all__ = ["depth_fit_kernel", "hidden_kernel", "read_kernel"]
+__all__ = ["condition", "depth_fit_kernel", "field_kernel", "fuse_kernel", "hidden_kernel", "inlier",
+           "leave_one_out", "masked_median", "read_kernel", "read_people_kernel"]
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
@@ -23,12 +25,15 @@ STRIDE_RADIUS = 5.0
 
 
 @njit
-def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: NDArray[np.float64],
-                expected: NDArray[np.float64], band_m: float, band_fraction: float, min_pixels: int,
-                min_fraction: float, trim: float, sensor_noise: float, noise_window: int, r_max: int,
-                surface: NDArray[np.float64], var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
+def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool,
+                pixels: NDArray[np.float64], radius: NDArray[np.float64], expected: NDArray[np.float64],
+                band_m: float, band_fraction: float, min_pixels: int, min_fraction: float, trim: float,
+                sensor_noise: float, noise_window: int, r_max: int, surface: NDArray[np.float64],
+                var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
     """Fill ``surface``, ``var`` and ``n_used`` (m,) with the readings of
-    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments)."""
+    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments);
+    ``millimetres``: ``img`` holds uint16 millimetres (0: no reading), each pixel read as the
+    float32 metres ``mm / 1000`` (correctly rounded), else float32 metres."""
     h, w = img.shape
     buf = np.empty((2 * r_max + 1) ** 2)
     dev = np.empty_like(buf)
@@ -54,23 +59,34 @@ def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: N
                 row, col = cv + dv, cu + du
                 if row < 0 or row >= h or col < 0 or col >= w:
                     continue
-                z = float(img[row, col])
+                pixel = img[row, col]
+                if millimetres:
+                    z = float(np.float32(pixel) / np.float32(1000.0)) if pixel != 0 else math.nan
+                else:
+                    z = float(pixel)
                 if math.isfinite(z) and abs(z - expected[i]) <= band:
                     buf[n] = z
                     n += 1
         if n < min_pixels or n < min_fraction * n_patch:
             continue
         med = np.median(buf[:n])
+        widest = 0.0
         for k in range(n):
             dev[k] = abs(buf[k] - med)
-        spread = 1.4826 * np.median(dev[:n])
-        limit = trim * max(spread, max(sensor_noise * med * med, 1e-3))
-        nk = 0
-        for k in range(n):
-            if dev[k] <= limit:
-                buf[nk] = buf[k]
-                nk += 1
-        med2 = np.median(buf[:nk])
+            widest = max(widest, dev[k])
+        floor = trim * max(sensor_noise * med * med, 1e-3)
+        nk = n
+        med2 = med
+        if widest > floor:  # else no pixel is trimmed, whatever the spread: the median stands
+            spread = 1.4826 * np.median(dev[:n])
+            limit = trim * max(spread, max(sensor_noise * med * med, 1e-3))
+            nk = 0
+            for k in range(n):
+                if dev[k] <= limit:
+                    buf[nk] = buf[k]
+                    nk += 1
+            if nk < n:
+                med2 = np.median(buf[:nk])
         s2 = 0.0
         for k in range(nk):
             s2 += (buf[k] - med2) ** 2
@@ -82,6 +98,54 @@ def read_kernel(img: NDArray[np.float32], pixels: NDArray[np.float64], radius: N
         surface[i] = med2
         var[i] = 0.5 * math.pi * max(sd * sd, s2) / n_eff  # the median's variance
         n_used[i] = nk
+
+
+@njit
+def read_people_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool,
+                       pixels: NDArray[np.float64], radius: NDArray[np.float64], z0: NDArray[np.float64],
+                       observed: NDArray[np.bool_], band_m: float, band_fraction: float, min_pixels: int,
+                       min_fraction: float, trim: float, sensor_noise: float, noise_window: int, r_max: int,
+                       surface: NDArray[np.float64], var: NDArray[np.float64]) -> None:
+    """Fill ``surface`` and ``var`` (n, 12) with the patch readings (:func:`read_kernel`) of the
+    keypoints ``pixels`` (n, 12, 2) of ``n`` people (patch radii ``radius`` (n, 12), already
+    clipped), each person's depth band centred on its depth as the image shows it: the median of
+    the readings of its ``observed`` (n, 12) keypoints' patches without a band about its placed
+    depths ``z0`` (n, 12) (0 for a person without any)."""
+    n, m = z0.shape
+    seen = np.empty((n, m))
+    seen_var = np.empty(n * m)
+    used = np.empty(n * m, dtype=np.int64)
+    read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), z0.reshape(n * m), np.inf,
+                band_fraction, min_pixels, min_fraction, trim, sensor_noise, noise_window, r_max,
+                seen.reshape(n * m), seen_var, used)
+    centre = np.empty(n)
+    masked_median(seen, observed & np.isfinite(seen), 0.0, centre)
+    expected = np.empty((n, m))
+    for p in range(n):
+        expected[p] = centre[p]
+    read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), expected.reshape(n * m),
+                band_m, band_fraction, min_pixels, min_fraction, trim, sensor_noise, noise_window, r_max,
+                surface.reshape(n * m), var.reshape(n * m), used)
+
+
+@njit
+def masked_median(values: NDArray[np.float64], mask: NDArray[np.bool_], empty: float,
+                  out: NDArray[np.float64]) -> None:
+    """Fill ``out`` (n,) with each row's median of ``values`` (n, m) where ``mask`` (the mean of
+    the middle two of an even count), ``empty`` for a row without any."""
+    buf = np.empty(values.shape[1])
+    for i in range(values.shape[0]):
+        c = 0
+        for j in range(values.shape[1]):
+            if mask[i, j]:
+                buf[c] = values[i, j]
+                c += 1
+        if c == 0:
+            out[i] = empty
+            continue
+        head = buf[:c]
+        head.sort()
+        out[i] = 0.5 * (head[(c - 1) // 2] + head[c // 2])
 
 
 @njit
@@ -163,6 +227,43 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
 
 
 @njit
+def field_kernel(x0: NDArray[np.float64], observed: NDArray[np.bool_], depth_m: NDArray[np.float64],
+                 var: NDArray[np.float64], have: NDArray[np.bool_], d: NDArray[np.float64],
+                 v: NDArray[np.float64], g: NDArray[np.float64], theta0: NDArray[np.float64]) -> None:
+    """The depth field's data of ``n`` people (:func:`depth_fit_kernel`'s), from their placed joints
+    ``x0`` (n, 12, 3), ``observed`` (n, 12) keypoints and depth readings ``depth_m`` (n, 12) of
+    variances ``var`` (NaN where none): fill ``have`` (n, 12) (a reading of an observed joint
+    placed in front of the camera), ``d`` and ``v`` (its readings and variances; 0 and 1
+    elsewhere), ``g`` (n, 12, 3) (each joint's placed depth and its offsets across the image from
+    the body's centroid, y then x) and ``theta0`` (n, 3) (the median of ``d_j / z0_j``, 1 for a
+    body without readings, and no tilt)."""
+    n, m = d.shape
+    ratio = np.empty((n, m))
+    for p in range(n):
+        mean_x, mean_y = 0.0, 0.0
+        for j in range(m):
+            mean_x += x0[p, j, 0]
+            mean_y += x0[p, j, 1]
+        mean_x /= m
+        mean_y /= m
+        for j in range(m):
+            z0 = x0[p, j, 2]
+            have[p, j] = math.isfinite(depth_m[p, j]) and observed[p, j] and z0 > 0
+            d[p, j] = depth_m[p, j] if have[p, j] else 0.0
+            v[p, j] = var[p, j] if have[p, j] else 1.0
+            ratio[p, j] = d[p, j] / (z0 if z0 > 0 else 1.0)
+            g[p, j, 0] = z0
+            g[p, j, 1] = x0[p, j, 1] - mean_y
+            g[p, j, 2] = x0[p, j, 0] - mean_x
+        theta0[p, 1] = 0.0
+        theta0[p, 2] = 0.0
+    k0 = np.empty(n)
+    masked_median(ratio, have, 1.0, k0)
+    for p in range(n):
+        theta0[p, 0] = k0[p]
+
+
+@njit
 def _normal_equations(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[np.float64],
                       have: NDArray[np.bool_], shape_z: NDArray[np.float64], precision: NDArray[np.float64],
                       mean: NDArray[np.float64], theta: NDArray[np.float64]
@@ -230,3 +331,156 @@ def depth_fit_kernel(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[
         for i in range(3):
             prior += 0.5 * precision[p, i] * (th[i] - mean[i]) ** 2
         objective[p] = loss + prior
+
+
+
+@njit
+def inlier(residual: float, var: float, band: float, share: float) -> float:
+    """The probability that a reading is its joint's, from its ``residual`` of variance ``var`` if
+    it is (Gaussian), against a stray surface (probability ``share``) uniform over the depth
+    ``band``."""
+    dens = math.exp(-0.5 * residual * residual / var) / math.sqrt(2.0 * math.pi * var)
+    return (1.0 - share) * dens / ((1.0 - share) * dens + share / band)
+
+
+@njit
+def leave_one_out(prior: NDArray[np.float64], residual: NDArray[np.float64], noise: NDArray[np.float64],
+                  loo: NDArray[np.float64], loo_var: NDArray[np.float64]) -> None:
+    """Fill ``loo`` (m,) with each reading's residual from its joint's depth as the Gaussian
+    ``N(0, prior)`` (``prior`` (m, m)) conditioned on the other readings (``residual`` (m,) about
+    the prior's mean, 0 where there is none; variances ``noise`` (m,), a large one where there is
+    none) predicts it, and ``loo_var`` (m,) with that prediction's variance (the reading's own noise
+    not included, at least ``1e-3`` of the prior's): ``a_j / C_jj`` and ``1 / C_jj - noise_j``,
+    ``C = (prior + diag(noise))^-1``, ``a = C residual`` (the closed form of leaving one
+    observation out of a Gaussian conditioning)."""
+    m = len(residual)
+    system = prior.copy()
+    for j in range(m):
+        system[j, j] += noise[j]
+    inv = np.linalg.solve(system, np.eye(m))
+    for j in range(m):
+        a = 0.0
+        for k in range(m):
+            a += inv[j, k] * residual[k]
+        loo[j] = a / inv[j, j]
+        loo_var[j] = max(1.0 / inv[j, j] - noise[j], 1e-3 * prior[j, j])
+
+
+@njit
+def condition(prior: NDArray[np.float64], residual: NDArray[np.float64], noise: NDArray[np.float64],
+              shift: NDArray[np.float64], sd: NDArray[np.float64]) -> None:
+    """The Gaussian ``N(mean, prior)`` (``prior`` (m, m)) conditioned on readings ``d_j = z_j + e_j``,
+    ``e_j ~ N(0, noise_j)`` (``residual`` (m,) = ``d - mean``, 0 where there is none; ``noise``
+    (m,), a large variance where there is none): fill ``shift`` (m,) with the conditional mean
+    minus ``mean`` (``prior (prior + diag(noise))^-1 residual``) and ``sd`` (m,) with the
+    conditional standard deviations (at least ``sqrt(1e-3)`` of the prior's)."""
+    m = len(residual)
+    system = prior.copy()
+    for j in range(m):
+        system[j, j] += noise[j]
+    x = np.linalg.solve(system, prior)  # its transpose is prior @ system^-1, the gain
+    for j in range(m):
+        z = 0.0
+        post = prior[j, j]
+        for k in range(m):
+            z += x[k, j] * residual[k]
+            post -= x[k, j] * prior[k, j]
+        shift[j] = z
+        sd[j] = math.sqrt(max(post, 1e-3 * prior[j, j]))
+
+
+@njit
+def fuse_kernel(x0: NDArray[np.float64], g: NDArray[np.float64], d: NDArray[np.float64],
+                v: NDArray[np.float64], have: NDArray[np.bool_], theta: NDArray[np.float64],
+                cov: NDArray[np.float64], shape: NDArray[np.float64], shape_corr: NDArray[np.float64],
+                mono_scale: NDArray[np.float64], shape_z: NDArray[np.float64], gate: float, band_m: float,
+                band_fraction: float, share: float, min_inlier: float, unread_var: float,
+                joints: NDArray[np.float64], std: NDArray[np.float64], kept: NDArray[np.bool_],
+                placeable: NDArray[np.bool_]) -> None:
+    """Steps 4c-5 of :func:`pose_lifter.core.depth.fuse.fuse_readings` (the module docstring of
+    :mod:`.fuse`) for ``n`` people, after the depth field's fit: their placed joints ``x0``
+    (n, 12, 3), the fit's regressors ``g`` (n, 12, 3), readings ``d`` (n, 12) of variances ``v``
+    (``have`` the readings fitted; 0 and 1 elsewhere), the field ``theta`` (n, 3) and its
+    covariance ``cov`` (n, 3, 3), the shape's standard deviations ``shape`` (n, 12, 3) and depth
+    correlations ``shape_corr`` (12, 12), the monocular scale errors ``mono_scale`` (n,), the fit's
+    shape depth errors ``shape_z`` (12,), and the options (``gate``, ``band_m``,
+    ``band_fraction``, ``share`` the outlier share; ``min_inlier`` the least inlier probability in
+    the leave-one-out predictions, ``unread_var`` the variance of a joint without a reading). Fills
+    ``joints`` and ``std`` (n, 12, 3), the readings ``kept`` (n, 12) and the bodies the field
+    places (``placeable`` (n,)); a body it does not place keeps its monocular placement and its
+    uncertainty."""
+    n, m = d.shape
+    model_z = np.empty(m)
+    body = np.empty((m, 3))
+    root = np.empty((m, 3))
+    band = np.empty(m)
+    p_in = np.empty(m)
+    res = np.empty(m)
+    noise = np.empty(m)
+    prior = np.empty((m, m))
+    loo = np.empty(m)
+    loo_var = np.empty(m)
+    shift = np.empty(m)
+    z_sd = np.empty(m)
+    for p in range(n):
+        # readings beyond the gate of the field dropped; a field of a non-positive depth places nothing
+        ok = False
+        fin = True
+        for j in range(m):
+            model_z[j] = g[p, j, 0] * theta[p, 0] + g[p, j, 1] * theta[p, 1] + g[p, j, 2] * theta[p, 2]
+            r = (d[p, j] - model_z[j]) / math.sqrt(v[p, j] + (theta[p, 0] * shape_z[j]) ** 2)
+            kept[p, j] = have[p, j] and abs(r) <= gate
+            ok = ok or kept[p, j]
+            fin = fin and math.isfinite(model_z[j]) and model_z[j] > 0
+        placeable[p] = ok and fin
+        mono = not placeable[p]
+        # the body along its rays at the field's depths; each joint's error along its ray
+        for j in range(m):
+            kept[p, j] = kept[p, j] and placeable[p]
+            if mono:
+                model_z[j] = x0[p, j, 2]
+                sd = mono_scale[p]
+            else:
+                q = 0.0
+                for c in range(3):
+                    for e in range(3):
+                        q += g[p, j, c] * cov[p, c, e] * g[p, j, e]
+                sd = math.sqrt(q) / model_z[j]
+            f = model_z[j] / x0[p, j, 2]
+            for c in range(3):
+                body[j, c] = x0[p, j, c] * f
+                root[j, c] = sd * abs(body[j, c])
+            band[j] = 2.0 * (band_m + band_fraction * model_z[j])
+            res[j] = d[p, j] - model_z[j] if kept[p, j] else 0.0
+            var_body = shape[p, j, 2] ** 2 + root[j, 2] ** 2
+            p_in[j] = inlier(res[j], var_body + v[p, j], band[j], share) if kept[p, j] else 0.0
+        # the true depths' covariance about the field's: the shape's plus the field's (or the
+        # monocular placement's scale error, fully correlated)
+        for j in range(m):
+            for k in range(m):
+                if mono:
+                    field = root[j, 2] * root[k, 2]
+                else:
+                    field = 0.0
+                    for c in range(3):
+                        for e in range(3):
+                            field += g[p, j, c] * cov[p, c, e] * g[p, k, e]
+                prior[j, k] = shape[p, j, 2] * shape_corr[j, k] * shape[p, k, 2] + field
+            noise[j] = v[p, j] / max(p_in[j], min_inlier) if kept[p, j] else unread_var
+        # each reading against what the others predict of its joint; then the conditioning
+        leave_one_out(prior, res, noise, loo, loo_var)
+        for j in range(m):
+            p_in[j] = inlier(loo[j], loo_var[j] + v[p, j], band[j], share) if kept[p, j] else 0.0
+            kept[p, j] = kept[p, j] and p_in[j] >= 0.5
+            noise[j] = v[p, j] / max(p_in[j], 0.5) if kept[p, j] else unread_var
+            res[j] = d[p, j] - model_z[j] if kept[p, j] else 0.0
+        condition(prior, res, noise, shift, z_sd)
+        for j in range(m):
+            z = model_z[j] + shift[j]
+            # a joint without its own reading keeps its marginal deviation (fuse_readings)
+            sd_j = z_sd[j] if kept[p, j] else math.sqrt(prior[j, j])
+            for c in range(3):
+                joints[p, j, c] = body[j, c] * (z / model_z[j])
+                other = abs(joints[p, j, c]) * (sd_j / z) if kept[p, j] else root[j, c]
+                std[p, j, c] = math.sqrt(shape[p, j, c] ** 2 + other ** 2)
+            std[p, j, 2] = sd_j

@@ -2,7 +2,7 @@
 
 :func:`place_people` places the ``n`` lifts of one camera: with a registered depth image (or the
 readings an earlier placement of the same frame took of it), fused with it
-(:func:`~pose_lifter.core.depth.fuse.read_depth`, :func:`~pose_lifter.core.depth.fuse.fuse_readings`);
+(:func:`~pose_lifter.core.depth.fuse.read_and_fuse`, :func:`~pose_lifter.core.depth.fuse.fuse_readings`);
 without, at the distance their image scale gives for the assumed leg length
 (:func:`~pose_lifter.core.track.placement.place_results`). Either way each joint gets its standard
 deviation (:func:`~pose_lifter.core.depth.uncertainty.monocular_std` without depth). The node, the
@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.fuse import DepthReadings, fuse_readings, read_depth
+from pose_lifter.core.depth.fuse import DepthReadings, fuse_readings, read_and_fuse
+from pose_lifter.core.depth.reading import DepthArray
 from pose_lifter.core.depth.uncertainty import monocular_std
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.placement import CameraIntrinsics, place_results
@@ -51,7 +52,7 @@ class Placed:
 def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
                  intrinsics: CameraIntrinsics | None, leg_length_m: float, default_distance_m: float, *,
                  poses: NDArray[np.float64] | None = None,
-                 depth: NDArray[np.float32] | None = None, readings: DepthReadings | None = None) -> Placed:
+                 depth: DepthArray | None = None, readings: DepthReadings | None = None) -> Placed:
     """The ``n`` lifts ``results`` of one camera placed (module docstring).
 
     Parameters
@@ -68,8 +69,9 @@ def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
     poses : ndarray, shape (n, 12, 3), optional
         The poses to place (camera frame, centred, leg units); default each result's
         ``pose_camera``.
-    depth : ndarray of float32, shape (H, W), optional
-        The frame's registered depth image (metres, NaN where no reading).
+    depth : ndarray of float32 or uint16, shape (H, W), optional
+        The frame's registered depth image (metres, NaN where no reading; or millimetres, 0 where
+        none: :data:`~pose_lifter.core.depth.reading.DepthArray`).
     readings : DepthReadings, optional
         The readings of an earlier placement of the same frame and people (instead of ``depth``).
 
@@ -93,6 +95,7 @@ def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
     args = (intrinsics, np.asarray(points, dtype=np.float64), weights, pose, scales, centres)
     if readings is None:
         assert depth is not None
-        readings = read_depth(depth, *args)
-    fused = fuse_readings(readings, *args)
+        readings, fused = read_and_fuse(depth, *args)
+    else:
+        fused = fuse_readings(readings, *args)
     return Placed(fused.joints_m, fused.std_m, readings, fused.from_depth)

@@ -21,10 +21,10 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.kernels import read_kernel
+from pose_lifter.core.depth.kernels import read_kernel, read_people_kernel
 
-__all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthOptions", "PatchReadings", "joint_radius_px",
-           "read_patches", "sensor_std"]
+__all__ = ["LIMB_RADIUS_M", "SURFACE_OFFSET_M", "DepthArray", "DepthOptions", "PatchReadings",
+           "joint_radius_px", "read_patches", "read_people", "sensor_std"]
 
 #: Depth of each joint's centre behind the surface the camera sees at its pixel, metres (order of
 #: :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`: shoulders, elbows, wrists, hips, knees,
@@ -37,6 +37,14 @@ SURFACE_OFFSET_M: Final[NDArray[np.float64]] = np.array(
 #: (:attr:`DepthOptions.patch_scale`).
 LIMB_RADIUS_M: Final[NDArray[np.float64]] = np.array(
     [0.06, 0.045, 0.035, 0.06, 0.045, 0.035, 0.08, 0.06, 0.05, 0.08, 0.06, 0.05])
+
+
+#: A depth image: float32 metres along the optical axis, NaN where there is no reading (the
+#: package's depth image); or uint16 millimetres, 0 where there is none, as a 16UC1 camera sends it
+#: (:func:`pose_lifter.messages.depth.read_depth` with ``millimetres=True``), each pixel read as
+#: the float32 metres ``mm / 1000``: the fusion reads a few patches, so the whole image is never
+#: converted. Pixel (u, v) is ``depth[v, u]``.
+DepthArray = NDArray[np.float32] | NDArray[np.uint16]
 
 
 @dataclass(frozen=True)
@@ -138,14 +146,15 @@ class PatchReadings:
     n_pixels: NDArray[np.int64]
 
 
-def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius_px: NDArray[np.float64],
+def read_patches(depth: DepthArray, pixels: NDArray[np.float64], radius_px: NDArray[np.float64],
                  expected: NDArray[np.float64], options: DepthOptions) -> PatchReadings:
     """Robust surface depths of ``m`` keypoints of one depth image.
 
     Parameters
     ----------
-    depth : ndarray of float32, shape (H, W)
-        Metres along the optical axis, NaN where there is no reading.
+    depth : ndarray of float32 or uint16, shape (H, W)
+        Metres along the optical axis, NaN where there is no reading; or uint16 millimetres, 0
+        where there is none (:data:`DepthArray`).
     pixels : ndarray, shape (m, 2)
         The keypoints (u column, v row), pixels.
     radius_px : ndarray, shape (m,)
@@ -164,7 +173,7 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
         ``min_pixels`` pixels (or less than ``min_fraction`` of the patch) are in band, or the
         keypoint is outside the image.
     """
-    img = np.ascontiguousarray(depth, dtype=np.float32)
+    img, millimetres = _image(depth)
     px = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 2)
     m = len(px)
     radius = np.clip(np.asarray(radius_px, dtype=np.float64).reshape(m), options.min_patch_px,
@@ -172,11 +181,61 @@ def read_patches(depth: NDArray[np.float32], pixels: NDArray[np.float64], radius
     surface = np.empty(m)
     var = np.empty(m)
     n_used = np.empty(m, dtype=np.int64)
-    read_kernel(img, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m), options.band_m,
-                options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
-                options.sensor_noise, max(1, int(options.noise_window_px)), int(options.max_patch_px),
-                surface, var, n_used)
+    read_kernel(img, millimetres, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m),
+                options.band_m, *_settings(options), surface, var, n_used)
     return PatchReadings(surface, var, n_used)
+
+
+def read_people(depth: DepthArray, pixels: NDArray[np.float64], radius_px: NDArray[np.float64],
+                z0: NDArray[np.float64], observed: NDArray[np.bool_], options: DepthOptions
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The readings (:func:`read_patches`) of the keypoints of ``n`` people, each person's depth
+    band centred on its depth as the image shows it: the median of its observed keypoints'
+    patches read without a band (most lie on the body; the placed depth may be far off).
+
+    Parameters
+    ----------
+    depth : ndarray of float32 or uint16, shape (H, W)
+        As :func:`read_patches`.
+    pixels : ndarray, shape (n, 12, 2)
+        The keypoints, pixels.
+    radius_px : ndarray, shape (n, 12)
+        Patch radii, pixels (clipped as :func:`read_patches` clips them).
+    z0 : ndarray, shape (n, 12)
+        The joints' placed depths, metres: the centres of the bands of the first patches.
+    observed : ndarray of bool, shape (n, 12)
+        The keypoints whose first patches give the person's depth.
+    options : DepthOptions
+
+    Returns
+    -------
+    surface, var : ndarray, shape (n, 12)
+        As :func:`read_patches`'s (NaN where no reading).
+    """
+    img, millimetres = _image(depth)
+    z = np.ascontiguousarray(z0, dtype=np.float64)
+    radius = np.clip(np.asarray(radius_px, dtype=np.float64).reshape(z.shape), options.min_patch_px,
+                     float(options.max_patch_px))
+    surface, var = np.empty(z.shape), np.empty(z.shape)
+    read_people_kernel(img, millimetres, np.ascontiguousarray(pixels, dtype=np.float64).reshape(*z.shape, 2),
+                       radius, z, np.ascontiguousarray(observed, dtype=bool), options.band_m,
+                       *_settings(options), surface, var)
+    return surface, var
+
+
+def _image(depth: DepthArray) -> tuple[DepthArray, bool]:
+    """``depth`` as the kernels read it (C-ordered float32 metres or uint16 millimetres), and
+    whether it holds millimetres."""
+    millimetres = bool(np.asarray(depth).dtype == np.uint16)
+    img: DepthArray = (np.ascontiguousarray(depth, dtype=np.uint16) if millimetres
+                       else np.ascontiguousarray(depth, dtype=np.float32))
+    return img, millimetres
+
+
+def _settings(options: DepthOptions) -> tuple[float, int, float, float, float, int, int]:
+    """The reading's settings after the band's half width, in :func:`read_kernel`'s order."""
+    return (options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
+            options.sensor_noise, max(1, int(options.noise_window_px)), int(options.max_patch_px))
 
 
 def joint_radius_px(scale_px_per_m: NDArray[np.float64], options: DepthOptions) -> NDArray[np.float64]:
