@@ -30,7 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.fuse import DepthReadings
-from pose_lifter.core.depth.smooth import Fused, smooth_fused_at
+from pose_lifter.core.depth.smooth import Fused, smooth_fused_at, window_std_factor
+from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR
 from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
 from pose_lifter.core.track.later import LaterFrame, Refiner, placements
@@ -224,7 +225,9 @@ class LaggedFrames(Generic[T]):
                  if x.track_id == s.track_id and x.depth is not None and x.std_m is not None
                  and stamp_ns < f.stamp_ns <= stamp_ns + round(3 * sigma * 1e9)]
         now: Fused = (stamp_ns, s.joints_m, s.std_m)
-        joints, std = smooth_fused_at(list(past), now, later, sigma, self.pipeline.settings.track_timeout)
+        factor = float(window_std_factor(s.result.weights > 0, LAGGED_STD_FACTOR))
+        joints, std = smooth_fused_at(list(past), now, later, sigma, self.pipeline.settings.track_timeout,
+                                      factor)
         past.append(now)
         return replace(s, joints_m=joints, std_m=std)
 

@@ -288,8 +288,9 @@ class RgbdEvaluator:
         deviations (default :data:`STD_FACTORS`).
     normalised_errors : bool
         Each record holds ``normalised_errors``: per smoothed method, its errors over its standard
-        deviations per coordinate of every lifted frame, of each frame's own fusion (``frames``) and
-        smoothed (``smoothed``): what ``make depth-calibration`` measures :data:`STD_FACTORS` on.
+        deviations per coordinate of every lifted frame whose 2D shows the body whole, of each
+        frame's own fusion (``frames``) and smoothed (``smoothed``): what ``make
+        depth-calibration`` measures :data:`STD_FACTORS` on.
     """
 
     def __init__(self, methods: Sequence[str], settings: dict[str, Any], bases_file: str | None = None,
@@ -320,6 +321,7 @@ class RgbdEvaluator:
                    if m in self.methods}
         out = {m: _Method(n) for m in METHODS}
         live_lag = _Method(n)
+        whole = {m: np.zeros(n, dtype=bool) for m in refined}  # the frames whose 2D shows the body whole
         up = view_rotation(*track.camera[:2]) @ np.array([0.0, 1.0, 0.0])  # the world's up, camera frame
         scene = depth_model.scene_backgrounds(truth[None], np.repeat(up[None], n, axis=0))
         for i in range(n):
@@ -343,6 +345,7 @@ class RgbdEvaluator:
                 if tl is not None and np.isfinite(poses[i]).all():
                     points = labelled_2d(px[i], conf[i], tl.swapped)[0][None]
                     out[m].put(i, *fuse_person(depth, points, tl.result, poses[i] / leg_m[i]))
+                    whole[m][i] = bool((tl.result.weights > 0).all())
                     if m == "fused-lag":  # the frame as lifted, fused: what the lag holds of it
                         live_lag.put(i, *fuse_person(depth, points, tl.result, tl.result.pose_camera))
         record: dict[str, Any] = {"track": track.name, "camera": track.camera, "distance": distance, "n": n}
@@ -352,19 +355,22 @@ class RgbdEvaluator:
             f = out[m]
             frames = (f.joints - truth) / f.std
             lifted = np.asarray(np.isfinite(f.joints).all(axis=(1, 2)), dtype=bool)
+            factor = np.where(whole[m], self.std_factors[m], 1.0)  # window_std_factor's
             if m == "fused-lag":  # the lagged node's window
-                out[m] = f = _lag_window(f, live_lag, stamps, self.std_factors[m])
+                out[m] = f = _lag_window(f, live_lag, stamps, factor)
             else:  # pose-lifter lift averages each track's fused joints
                 f.joints, f.std = smooth_fused(f.joints, f.std, stamps, lifted, OFFLINE_SMOOTHING_S, GAP_S,
-                                               self.std_factors[m])
-            normalised[m] = {"frames": frames[lifted].ravel().tolist(),
-                             "smoothed": ((f.joints - truth) / f.std)[lifted].ravel().tolist()}
+                                               factor)
+            counted = lifted & whole[m]  # the factors are measured on bodies shown whole
+            normalised[m] = {"frames": frames[counted].ravel().tolist(),
+                             "smoothed": ((f.joints - truth) / f.std)[counted].ravel().tolist()}
         if self.normalised_errors:
             record["normalised_errors"] = normalised
         return {**record, "methods": {m: out[m].record(truth) for m in self.methods}}
 
 
-def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_factor: float) -> _Method:
+def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_factor: NDArray[np.float64]
+                ) -> _Method:
     """The lagged node's window over ``lagged``'s fused joints (its refined poses fused,
     :meth:`pose_lifter.messages.lagged.LaggedFrames._refined`): each frame averaged with the
     frames before it as refined and fused and the :data:`LAG` frames after it as lifted and fused
@@ -382,7 +388,8 @@ def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_f
             now = (int(stamps[i]), lagged.joints[i], lagged.std[i])
             out.joints[i], out.std[i] = smooth_fused_at(
                 frames(lagged, range(max(0, i - 2 * LAG), i), i), now,
-                frames(live, range(i + 1, min(lagged.n, i + LAG + 1)), i), LAG_SMOOTHING_S, GAP_S, std_factor)
+                frames(live, range(i + 1, min(lagged.n, i + LAG + 1)), i), LAG_SMOOTHING_S, GAP_S,
+                float(std_factor[i]))
     return out
 
 

@@ -33,7 +33,8 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.depth.smooth import smooth_fused
+from pose_lifter.core.depth.smooth import smooth_fused, window_std_factor
+from pose_lifter.core.depth.uncertainty import SMOOTHED_STD_FACTOR
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult
@@ -447,9 +448,10 @@ def _smoothed_fused(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkele
     if len(placed) < 2:
         return outcomes
     rows, fused = [i for i, _ in placed], [d for _, d in placed]
+    factor = window_std_factor(np.array([s.result.weights > 0 for s in fused]), SMOOTHED_STD_FACTOR)
     joints, std = smooth_fused(np.array([s.joints_m for s in fused]), np.array([s.std_m for s in fused]),
                                np.array([chain[i].stamp_ns for i in rows], dtype=np.int64),
-                               np.ones(len(rows), dtype=bool), smoothing_s, gap_s)
+                               np.ones(len(rows), dtype=bool), smoothing_s, gap_s, factor)
     out = list(outcomes)
     for i, s, j, sd in zip(rows, fused, joints, std, strict=True):
         out[i] = replace(s, joints_m=j, std_m=sd)

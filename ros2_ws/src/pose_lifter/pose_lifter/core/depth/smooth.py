@@ -13,7 +13,8 @@ independent ones, so the averaged standard deviations are scaled by a factor
 (:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` over a whole track,
 :data:`~pose_lifter.core.depth.uncertainty.LAGGED_STD_FACTOR` over the lagged node's window),
 measured as what keeps the smoothed joints' coverage that of the frames' own (``make
-depth-calibration``).
+depth-calibration``), on bodies the 2D shows whole (:func:`window_std_factor`): a body the image
+cuts errs most in the joints the lift guesses, and those errors last over the frames.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.track.smoothing import centred_smoothing
 
-__all__ = ["Fused", "smooth_fused", "smooth_fused_at"]
+__all__ = ["Fused", "smooth_fused", "smooth_fused_at", "window_std_factor"]
 
 #: One frame of a track's fused joints: (stamp_ns, joints (12, 3) metres, std (12, 3) metres).
 Fused: TypeAlias = tuple[int, NDArray[np.float64], NDArray[np.float64]]
@@ -35,7 +36,8 @@ Fused: TypeAlias = tuple[int, NDArray[np.float64], NDArray[np.float64]]
 
 def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stamps_ns: NDArray[np.int64],
                  valid: NDArray[np.bool_], sigma_s: float, gap_s: float,
-                 std_factor: float = SMOOTHED_STD_FACTOR) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                 std_factor: float | NDArray[np.float64] = SMOOTHED_STD_FACTOR
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One track's fused joints and standard deviations averaged over a centred Gaussian window
     (:func:`~pose_lifter.core.track.smoothing.centred_smoothing`: the same weights for both).
 
@@ -53,8 +55,8 @@ def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stam
     gap_s : float
         A larger gap between valid frames (or a step back in time) starts a new segment, which no
         window crosses.
-    std_factor : float
-        The averaged standard deviations' scale.
+    std_factor : float or ndarray, shape (T,)
+        The averaged standard deviations' scale (per frame: :func:`window_std_factor`).
 
     Returns
     -------
@@ -66,7 +68,8 @@ def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stam
     joints = centred_smoothing(joints_m, stamps_ns, ok, sigma_s, gap_s)
     std = np.asarray(std_m, dtype=np.float64).copy()
     if sigma_s > 0 and ok.sum() >= 2:
-        std[ok] = centred_smoothing(std_m, stamps_ns, ok, sigma_s, gap_s)[ok] * std_factor
+        factor = np.broadcast_to(np.asarray(std_factor, dtype=np.float64), ok.shape)
+        std[ok] = centred_smoothing(std_m, stamps_ns, ok, sigma_s, gap_s)[ok] * factor[ok, None, None]
     return joints, std
 
 
@@ -93,3 +96,10 @@ def smooth_fused_at(before: Sequence[Fused], frame: Fused, after: Sequence[Fused
                                np.array([f[0] for f in frames], dtype=np.int64),
                                np.ones(len(frames), dtype=bool), sigma_s, gap_s, std_factor)
     return joints[len(before)], std[len(before)]
+
+
+def window_std_factor(observed: NDArray[np.bool_], factor: float) -> NDArray[np.float64]:
+    """Per body, the scale of its averaged standard deviations: ``factor`` where the 2D shows the
+    body whole (every joint of ``observed`` (..., 12)), 1 where the image cuts it (module
+    docstring); shape ``observed.shape[:-1]``."""
+    return np.where(np.asarray(observed, dtype=bool).all(axis=-1), factor, 1.0)
