@@ -171,6 +171,20 @@ def test_seen_from_the_side_the_trunk_hides_the_far_shoulder_and_hip() -> None:
     assert not got[[3, 4, 5, 9, 10, 11]].any()  # the right side: in front
 
 
+@pytest.mark.parametrize("above_m", [0.15, 0.3])
+def test_seen_from_the_side_the_neck_and_head_hide_the_far_shoulder(above_m: float) -> None:
+    """The side view's far shoulder read above the trunk's top (its keypoint ``above_m`` higher,
+    as a camera above the person sees it): the neck (0.15 m) or the head (0.3 m) in front of it
+    hides it; the near shoulder read the same way lies in front of them and is seen."""
+    side = np.array([[0.0, -0.5, 3.2], [0.0, -0.2, 3.25], [0.0, 0.05, 3.25], [0.0, -0.5, 2.8],
+                     [0.3, -0.45, 2.8], [0.6, -0.45, 2.8], [0.0, 0.1, 3.15], [0.0, 0.5, 3.15],
+                     [0.0, 0.9, 3.15], [0.0, 0.1, 2.85], [0.35, 0.4, 2.85], [0.4, 0.8, 2.85]])
+    keypoints = side.copy()
+    keypoints[[0, 3], 1] -= above_m
+    got = _hidden(side[None], _project(keypoints)[None], np.ones((1, 12), dtype=bool), K, 0.08)[0]
+    assert got[0] and not got[3]
+
+
 def test_readings_fuse_a_later_pose_without_the_image() -> None:
     """A frame's readings fuse another pose of the same people (refined over later frames) as the
     image would: the readings do not depend on the pose beyond the occlusion test."""

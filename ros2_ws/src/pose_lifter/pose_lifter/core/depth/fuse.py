@@ -106,7 +106,19 @@ _UNREAD_VAR: Final[float] = 1e6
 #: The least inlier probability by which a reading's variance is divided in the leave-one-out
 #: predictions (a doubtful reading weighs little in the others' predictions, never nothing).
 _MIN_INLIER: Final[float] = 0.05
-_LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(LIMBS, dtype=np.int64)
+#: The neck and the head as occluders, along the spine from the shoulders' midpoint (adult values,
+#: metres): the neck a capsule to :data:`_NECK_LENGTH` of radius :data:`_NECK_RADIUS`, the head a
+#: sphere of :data:`_HEAD_RADIUS` at :data:`_HEAD_ABOVE_SHOULDERS` (seen from above they cover the
+#: shoulders' pixels; the 12 joints do not place them otherwise).
+_NECK_LENGTH: Final[float] = 0.12
+_NECK_RADIUS: Final[float] = 0.055
+_HEAD_ABOVE_SHOULDERS: Final[float] = 0.25
+_HEAD_RADIUS: Final[float] = 0.10
+#: The occluders' segments: the limbs, then the neck and the head (a segment of zero length),
+#: between the 12 joints and the three points :func:`_occluder_points` appends; their radii.
+_LIMB_ARRAY: Final[NDArray[np.int64]] = np.array(
+    [*LIMBS, (N_JOINTS, N_JOINTS + 1), (N_JOINTS + 2, N_JOINTS + 2)], dtype=np.int64)
+_OCCLUDER_RADIUS: Final[NDArray[np.float64]] = np.concatenate([_LIMB_RADIUS, [_NECK_RADIUS, _HEAD_RADIUS]])
 
 
 @dataclass(frozen=True)
@@ -156,22 +168,31 @@ def _trunks(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[n
     return axes, np.einsum("nij,nj->ni", axes, hips), extent
 
 
+def _occluder_points(joints: NDArray[np.float64], up: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The 12 joints (n, 12, 3) and the ends of the neck and the head (:data:`_LIMB_ARRAY`) along
+    each body's spine direction ``up`` (n, 3): (n, 15, 3)."""
+    base = 0.5 * (joints[:, _L_SHOULDER] + joints[:, _R_SHOULDER])
+    extra = base[:, None] + np.array([0.0, _NECK_LENGTH, _HEAD_ABOVE_SHOULDERS])[None, :, None] * up[:, None]
+    return np.concatenate([joints, extra], axis=1)
+
+
 def _hidden(joints: NDArray[np.float64], pixels: NDArray[np.float64], candidates: NDArray[np.bool_],
             intrinsics: CameraIntrinsics, margin: float) -> NDArray[np.bool_]:
     """Which ``candidates`` (n, 12) joints of the placed bodies ``joints`` (n, 12, 3) another body
     part hides at their keypoints ``pixels`` (n, 12, 2): a limb (a capsule of
-    :data:`_LIMB_RADIUS`) of any body, not one of the joint's own limbs, or a trunk (an elliptic
-    cylinder, :data:`_TORSO_HALF_WIDTH`) of any body, the joint's own too (seen from the side it
-    hides the far shoulder, hip and arm), whose surface on the joint's pixel is nearer than the
-    joint's surface by more than ``margin`` metres."""
+    :data:`_LIMB_RADIUS`), the neck or the head (:data:`_NECK_LENGTH`) of any body, not one of the
+    joint's own limbs, or a trunk (an elliptic cylinder, :data:`_TORSO_HALF_WIDTH`) of any body,
+    the joint's own too (seen from the side it hides the far shoulder, hip and arm), whose surface
+    on the joint's pixel is nearer than the joint's surface by more than ``margin`` metres."""
     (fx, fy), (cx, cy) = intrinsics
-    z = np.maximum(joints[..., 2], 1e-3)
-    proj = np.stack([fx * joints[..., 0] / z + cx, fy * joints[..., 1] / z + cy], axis=-1)
     axes, centre, extent = _trunks(joints)
+    points = _occluder_points(joints, axes[:, 1])
+    z = np.maximum(points[..., 2], 1e-3)
+    proj = np.stack([fx * points[..., 0] / z + cx, fy * points[..., 1] / z + cy], axis=-1)
     hidden = np.zeros(candidates.shape, dtype=bool)
     hidden_kernel(np.ascontiguousarray(proj), np.ascontiguousarray(z), np.ascontiguousarray(candidates),
                   np.ascontiguousarray(pixels, dtype=np.float64), joints[..., 2] - SURFACE_OFFSET_M[None],
-                  _LIMB_ARRAY, _LIMB_RADIUS, np.ascontiguousarray(centre), np.ascontiguousarray(axes),
+                  _LIMB_ARRAY, _OCCLUDER_RADIUS, np.ascontiguousarray(centre), np.ascontiguousarray(axes),
                   np.ascontiguousarray(extent), _TORSO_HALF_WIDTH, _TORSO_HALF_DEPTH,
                   np.array([fx, fy, cx, cy], dtype=np.float64), margin, hidden)
     return hidden

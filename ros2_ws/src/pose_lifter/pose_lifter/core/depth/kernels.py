@@ -186,15 +186,16 @@ def hidden_kernel(proj: NDArray[np.float64], z: NDArray[np.float64], candidates:
                   half_depth: float, intrinsics: NDArray[np.float64], margin: float,
                   hidden: NDArray[np.bool_]) -> None:
     """Fill ``hidden`` (n, 12) for the occlusion test of :func:`pose_lifter.core.depth.fuse._hidden`:
-    ``proj`` (n, 12, 2) the bodies' joints in the image, ``z`` (n, 12) their depths, ``pixels``
-    (n, 12, 2) the keypoints, ``surface`` (n, 12) each joint's surface depth, ``limbs`` (8, 2),
-    ``limb_radius`` (8,), each body's trunk (``trunk_centre`` (n, 3), ``trunk_axes`` (n, 3, 3),
-    ``trunk_extent`` (n, 2), see :func:`_trunk_entry`), ``intrinsics`` (fx, fy, cx, cy)."""
+    ``proj`` (n, m, 2) the bodies' occluder points in the image (the 12 joints first), ``z`` (n, m)
+    their depths, ``pixels`` (n, 12, 2) the keypoints, ``surface`` (n, 12) each joint's surface
+    depth, ``limbs`` (k, 2) segments between the points, ``limb_radius`` (k,), each body's trunk
+    (``trunk_centre`` (n, 3), ``trunk_axes`` (n, 3, 3), ``trunk_extent`` (n, 2), see
+    :func:`_trunk_entry`), ``intrinsics`` (fx, fy, cx, cy)."""
     n = proj.shape[0]
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     focal = 0.5 * (fx + fy)
     for p in range(n):
-        for j in range(proj.shape[1]):
+        for j in range(candidates.shape[1]):
             if not candidates[p, j]:
                 continue
             qu, qv = pixels[p, j, 0], pixels[p, j, 1]
