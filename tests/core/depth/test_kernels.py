@@ -112,9 +112,11 @@ def test_the_fusion_kernel_is_the_numpy_fusion(seed: int) -> None:
     n = len(x0)
     joints, std = np.empty((n, N, 3)), np.empty((n, N, 3))
     kept, placeable = np.empty((n, N), dtype=bool), np.empty(n, dtype=bool)
-    fuse_kernel(x0, g, d, v, have, theta, cov, shape_std(observed), SHAPE_CORR_Z, mono_scale,
-                np.ascontiguousarray(SHAPE_STD_M[:, 1]), opt.gate, opt.band_m, opt.band_fraction,
-                opt.outlier_share, _MIN_INLIER, _UNREAD_VAR, joints, std, kept, placeable)
+    settings = np.array([opt.gate, opt.band_m, opt.band_fraction, opt.outlier_share, _MIN_INLIER,
+                         _UNREAD_VAR])
+    model = np.column_stack([SHAPE_CORR_Z, SHAPE_STD_M[:, 1]])
+    fuse_kernel(x0, g, d, v, have, theta, cov, shape_std(observed), model, mono_scale, settings, joints, std,
+                kept, placeable)
     want = _fuse_numpy(x0, g, d, v, have, theta, cov, observed, mono_scale, opt)
     assert placeable.tolist() == [True, True, False, False] == want[3].tolist()
     assert np.array_equal(kept, want[2]) and not kept[0].all() and kept[0].sum() > 6

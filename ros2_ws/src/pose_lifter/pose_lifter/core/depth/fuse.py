@@ -384,8 +384,10 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     std = np.empty((n, N_JOINTS, 3))
     kept = np.empty((n, N_JOINTS), dtype=bool)
     placeable = np.empty(n, dtype=bool)
-    fuse_kernel(x0, g, d, v, have, theta, cov, shape, SHAPE_CORR_Z, mono_scale, shape_z, opt.gate, opt.band_m,
-                opt.band_fraction, opt.outlier_share, _MIN_INLIER, _UNREAD_VAR, joints, std, kept, placeable)
+    settings = np.array([opt.gate, opt.band_m, opt.band_fraction, opt.outlier_share, _MIN_INLIER,
+                         _UNREAD_VAR])
+    fuse_kernel(x0, g, d, v, have, theta, cov, shape, np.column_stack([SHAPE_CORR_Z, shape_z]), mono_scale,
+                settings, joints, std, kept, placeable)
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]

@@ -18,6 +18,12 @@ __all__ = ["condition", "depth_fit_kernel", "field_kernel", "fuse_kernel", "hidd
 
 #: Tukey's biweight constant (95 % efficiency under Gaussian noise).
 TUKEY = 4.685
+#: The order of :func:`read_kernel`'s ``settings``: the band's half width and its fraction of the
+#: depth, the least pixels and share of the patch, the trim, the sensor's noise, its correlation
+#: window (pixels) and the largest patch radius (pixels)
+#: (:class:`~pose_lifter.core.depth.reading.DepthOptions`).
+READ_SETTINGS = ("band_m", "band_fraction", "min_pixels", "min_fraction", "trim", "sensor_noise",
+                 "noise_window_px", "max_patch_px")
 #: A patch samples every ``int(radius / STRIDE_RADIUS)``-th pixel along rows and columns: at most
 #: about ``pi STRIDE_RADIUS^2`` pixels however large the person (the sensor's noise is correlated
 #: over neighbouring pixels, so more would add little).
@@ -27,13 +33,16 @@ STRIDE_RADIUS = 5.0
 @njit
 def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool,
                 pixels: NDArray[np.float64], radius: NDArray[np.float64], expected: NDArray[np.float64],
-                band_m: float, band_fraction: float, min_pixels: int, min_fraction: float, trim: float,
-                sensor_noise: float, noise_window: int, r_max: int, surface: NDArray[np.float64],
-                var: NDArray[np.float64], n_used: NDArray[np.int64]) -> None:
+                settings: NDArray[np.float64], surface: NDArray[np.float64], var: NDArray[np.float64],
+                n_used: NDArray[np.int64]) -> None:
     """Fill ``surface``, ``var`` and ``n_used`` (m,) with the readings of
-    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments);
+    :func:`pose_lifter.core.depth.reading.read_patches` (its docstring: the same arguments;
+    ``settings`` (8,) its options in the order of :data:`READ_SETTINGS`);
     ``millimetres``: ``img`` holds uint16 millimetres (0: no reading), each pixel read as the
     float32 metres ``mm / 1000`` (correctly rounded), else float32 metres."""
+    band_m, band_fraction, min_fraction, trim, sensor_noise = (settings[0], settings[1], settings[3],
+                                                                 settings[4], settings[5])
+    min_pixels, noise_window, r_max = int(settings[2]), int(settings[6]), int(settings[7])
     h, w = img.shape
     buf = np.empty((2 * r_max + 1) ** 2)
     dev = np.empty_like(buf)
@@ -103,8 +112,7 @@ def read_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool
 @njit
 def read_people_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetres: bool,
                        pixels: NDArray[np.float64], radius: NDArray[np.float64], z0: NDArray[np.float64],
-                       observed: NDArray[np.bool_], band_m: float, band_fraction: float, min_pixels: int,
-                       min_fraction: float, trim: float, sensor_noise: float, noise_window: int, r_max: int,
+                       observed: NDArray[np.bool_], settings: NDArray[np.float64],
                        surface: NDArray[np.float64], var: NDArray[np.float64]) -> None:
     """Fill ``surface`` and ``var`` (n, 12) with the patch readings (:func:`read_kernel`) of the
     keypoints ``pixels`` (n, 12, 2) of ``n`` people (patch radii ``radius`` (n, 12), already
@@ -115,17 +123,17 @@ def read_people_kernel(img: NDArray[np.float32] | NDArray[np.uint16], millimetre
     seen = np.empty((n, m))
     seen_var = np.empty(n * m)
     used = np.empty(n * m, dtype=np.int64)
-    read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), z0.reshape(n * m), np.inf,
-                band_fraction, min_pixels, min_fraction, trim, sensor_noise, noise_window, r_max,
-                seen.reshape(n * m), seen_var, used)
+    unbanded = settings.copy()
+    unbanded[0] = np.inf
+    read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), z0.reshape(n * m),
+                unbanded, seen.reshape(n * m), seen_var, used)
     centre = np.empty(n)
     masked_median(seen, observed & np.isfinite(seen), 0.0, centre)
     expected = np.empty((n, m))
     for p in range(n):
         expected[p] = centre[p]
     read_kernel(img, millimetres, pixels.reshape(n * m, 2), radius.reshape(n * m), expected.reshape(n * m),
-                band_m, band_fraction, min_pixels, min_fraction, trim, sensor_noise, noise_window, r_max,
-                surface.reshape(n * m), var.reshape(n * m), used)
+                settings, surface.reshape(n * m), var.reshape(n * m), used)
 
 
 @njit
@@ -393,23 +401,26 @@ def condition(prior: NDArray[np.float64], residual: NDArray[np.float64], noise: 
 @njit
 def fuse_kernel(x0: NDArray[np.float64], g: NDArray[np.float64], d: NDArray[np.float64],
                 v: NDArray[np.float64], have: NDArray[np.bool_], theta: NDArray[np.float64],
-                cov: NDArray[np.float64], shape: NDArray[np.float64], shape_corr: NDArray[np.float64],
-                mono_scale: NDArray[np.float64], shape_z: NDArray[np.float64], gate: float, band_m: float,
-                band_fraction: float, share: float, min_inlier: float, unread_var: float,
+                cov: NDArray[np.float64], shape: NDArray[np.float64], shape_model: NDArray[np.float64],
+                mono_scale: NDArray[np.float64], settings: NDArray[np.float64],
                 joints: NDArray[np.float64], std: NDArray[np.float64], kept: NDArray[np.bool_],
                 placeable: NDArray[np.bool_]) -> None:
     """Steps 4c-5 of :func:`pose_lifter.core.depth.fuse.fuse_readings` (the module docstring of
     :mod:`.fuse`) for ``n`` people, after the depth field's fit: their placed joints ``x0``
     (n, 12, 3), the fit's regressors ``g`` (n, 12, 3), readings ``d`` (n, 12) of variances ``v``
     (``have`` the readings fitted; 0 and 1 elsewhere), the field ``theta`` (n, 3) and its
-    covariance ``cov`` (n, 3, 3), the shape's standard deviations ``shape`` (n, 12, 3) and depth
-    correlations ``shape_corr`` (12, 12), the monocular scale errors ``mono_scale`` (n,), the fit's
-    shape depth errors ``shape_z`` (12,), and the options (``gate``, ``band_m``,
-    ``band_fraction``, ``share`` the outlier share; ``min_inlier`` the least inlier probability in
-    the leave-one-out predictions, ``unread_var`` the variance of a joint without a reading). Fills
-    ``joints`` and ``std`` (n, 12, 3), the readings ``kept`` (n, 12) and the bodies the field
+    covariance ``cov`` (n, 3, 3), the shape's standard deviations ``shape`` (n, 12, 3), its depth
+    correlations and the fit's shape depth errors ``shape_model`` (12, 13: the correlations (12,
+    12), then the errors as the last column), the monocular scale errors ``mono_scale`` (n,), and
+    the options ``settings`` (6,): ``gate``, ``band_m``, ``band_fraction``, ``share`` the outlier
+    share, ``min_inlier`` the least inlier probability in the leave-one-out predictions,
+    ``unread_var`` the variance of a joint without a reading. Fills ``joints`` and ``std`` (n, 12,
+    3), the readings ``kept`` (n, 12) and the bodies the field
     places (``placeable`` (n,)); a body it does not place keeps its monocular placement and its
     uncertainty."""
+    gate, band_m, band_fraction, share, min_inlier, unread_var = (settings[0], settings[1], settings[2],
+                                                                  settings[3], settings[4], settings[5])
+    shape_corr, shape_z = shape_model[:, :-1], shape_model[:, -1]
     n, m = d.shape
     model_z = np.empty(m)
     body = np.empty((m, 3))

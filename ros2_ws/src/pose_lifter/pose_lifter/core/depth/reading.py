@@ -182,7 +182,7 @@ def read_patches(depth: DepthArray, pixels: NDArray[np.float64], radius_px: NDAr
     var = np.empty(m)
     n_used = np.empty(m, dtype=np.int64)
     read_kernel(img, millimetres, px, radius, np.ascontiguousarray(expected, dtype=np.float64).reshape(m),
-                options.band_m, *_settings(options), surface, var, n_used)
+                _settings(options), surface, var, n_used)
     return PatchReadings(surface, var, n_used)
 
 
@@ -218,8 +218,8 @@ def read_people(depth: DepthArray, pixels: NDArray[np.float64], radius_px: NDArr
                      float(options.max_patch_px))
     surface, var = np.empty(z.shape), np.empty(z.shape)
     read_people_kernel(img, millimetres, np.ascontiguousarray(pixels, dtype=np.float64).reshape(*z.shape, 2),
-                       radius, z, np.ascontiguousarray(observed, dtype=bool), options.band_m,
-                       *_settings(options), surface, var)
+                       radius, z, np.ascontiguousarray(observed, dtype=bool), _settings(options), surface,
+                       var)
     return surface, var
 
 
@@ -232,10 +232,12 @@ def _image(depth: DepthArray) -> tuple[DepthArray, bool]:
     return img, millimetres
 
 
-def _settings(options: DepthOptions) -> tuple[float, int, float, float, float, int, int]:
-    """The reading's settings after the band's half width, in :func:`read_kernel`'s order."""
-    return (options.band_fraction, int(options.min_pixels), options.min_fraction, options.trim,
-            options.sensor_noise, max(1, int(options.noise_window_px)), int(options.max_patch_px))
+def _settings(options: DepthOptions) -> NDArray[np.float64]:
+    """The reading's settings (8,) as :func:`read_kernel` takes them (the order of
+    :data:`~pose_lifter.core.depth.kernels.READ_SETTINGS`; the counts whole numbers)."""
+    return np.array([options.band_m, options.band_fraction, int(options.min_pixels), options.min_fraction,
+                     options.trim, options.sensor_noise, max(1, int(options.noise_window_px)),
+                     int(options.max_patch_px)], dtype=np.float64)
 
 
 def joint_radius_px(scale_px_per_m: NDArray[np.float64], options: DepthOptions) -> NDArray[np.float64]:
