@@ -4,9 +4,9 @@ A fused joint (:mod:`.fuse`) moves along its ray to its frame's depth reading, s
 frame's reading error: the sensor's noise, the patch it read, a reading that was the occluder's.
 These change from frame to frame while the body moves smoothly, so a window over the track's
 fused joints averages them out where a window over the lifted poses before the fusion cannot (it
-smooths the shape, and each frame's reading then moves the joint again). Measured on the val split
-(``tools/rgbd_accuracy.py``, ``fused-offline``, 3 m): P-MPJPE 37.0 -> 34.8 mm level, 39.9 -> 37.4
-mm from above, the jitter 47 -> 10 mm/frame^2.
+smooths the shape, and each frame's reading then moves the joint again). On the evaluation split
+(``make rgbd-accuracy``, 3 m, level; docs/depth.md) the lagged node's answers went from 41.6 to
+39.4 mm P-MPJPE with this window, their jitter from 43.8 to 10.6 mm/frame^2.
 
 The window averages correlated errors (a limb's shape, the body's distance) as well as
 independent ones, so the averaged standard deviations are scaled by a factor
