@@ -101,6 +101,10 @@ _TORSO_BELOW_HIPS: Final[float] = 0.06
 _TORSO_ABOVE_SHOULDERS: Final[float] = 0.04
 _L_SHOULDER, _R_SHOULDER, _L_HIP, _R_HIP = (JOINT_NAMES.index(f"{s}_{j}") for j in ("shoulder", "hip")
                                               for s in ("left", "right"))
+#: The shape's depth errors per joint (the field fit's), and with the joints' correlations before
+#: them (12, 13), as :func:`~pose_lifter.core.depth.kernels.fuse_kernel` takes them.
+_SHAPE_Z: Final[NDArray[np.float64]] = np.ascontiguousarray(SHAPE_STD_M[:, 1])
+_SHAPE_MODEL: Final[NDArray[np.float64]] = np.column_stack([SHAPE_CORR_Z, _SHAPE_Z])
 #: A joint without a reading enters the conditioning with this variance (m^2): no weight.
 _UNREAD_VAR: Final[float] = 1e6
 #: The least inlier probability by which a reading's variance is divided in the leave-one-out
@@ -368,8 +372,7 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     objective = np.empty(n)
     n_iter = np.empty(n, dtype=np.int64)
     converged = np.empty(n, dtype=bool)
-    shape_z = np.ascontiguousarray(SHAPE_STD_M[:, 1])
-    depth_fit_kernel(d, v, g, have, shape_z, precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter),
+    depth_fit_kernel(d, v, g, have, _SHAPE_Z, precision, np.array([1.0, 0.0, 0.0]), theta0, int(opt.max_iter),
                      opt.tol, theta, cov, objective, n_iter, converged)
     # 4c-5. readings beyond the gate dropped; the joints: the body moved along its rays to the
     # fitted depths, a kept reading's depth fused with its joint's along the joint's ray (the
@@ -386,8 +389,8 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     placeable = np.empty(n, dtype=bool)
     settings = np.array([opt.gate, opt.band_m, opt.band_fraction, opt.outlier_share, _MIN_INLIER,
                          _UNREAD_VAR])
-    fuse_kernel(x0, g, d, v, have, theta, cov, shape, np.column_stack([SHAPE_CORR_Z, shape_z]), mono_scale,
-                settings, joints, std, kept, placeable)
+    fuse_kernel(x0, g, d, v, have, theta, cov, shape, _SHAPE_MODEL, mono_scale, settings, joints, std, kept,
+                placeable)
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]

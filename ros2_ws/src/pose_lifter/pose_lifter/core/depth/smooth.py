@@ -65,12 +65,15 @@ def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stam
         Invalid frames as given.
     """
     ok = np.asarray(valid, dtype=bool)
-    joints = centred_smoothing(joints_m, stamps_ns, ok, sigma_s, gap_s)
-    std = np.asarray(std_m, dtype=np.float64).copy()
+    joints = np.asarray(joints_m, dtype=np.float64)
+    std = np.asarray(std_m, dtype=np.float64)
+    # one window for both: the joints and their deviations side by side, (T, 24, 3)
+    both = centred_smoothing(np.concatenate([joints, std], axis=1), stamps_ns, ok, sigma_s, gap_s)
+    out_std = std.copy()
     if sigma_s > 0 and ok.sum() >= 2:
         factor = np.broadcast_to(np.asarray(std_factor, dtype=np.float64), ok.shape)
-        std[ok] = centred_smoothing(std_m, stamps_ns, ok, sigma_s, gap_s)[ok] * factor[ok, None, None]
-    return joints, std
+        out_std[ok] = both[ok, joints.shape[1]:] * factor[ok, None, None]
+    return both[:, :joints.shape[1]], out_std
 
 
 def smooth_fused_at(before: Sequence[Fused], frame: Fused, after: Sequence[Fused], sigma_s: float,
