@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from pose_lifter.core.depth.smooth import smooth_fused, smooth_fused_at
+from pose_lifter.core.depth.smooth import LagWindow, smooth_fused, smooth_fused_at
 from tolerances import ROUND_OFF
 
 FRAME_NS = 33_333_333
@@ -76,3 +76,35 @@ def test_one_frame_s_window_is_the_track_s() -> None:
                                std_factor=0.9)
         np.testing.assert_allclose(j, whole_j[i], atol=ROUND_OFF)
         np.testing.assert_allclose(s, whole_s[i], atol=ROUND_OFF)
+
+
+def test_the_lag_window_reads_the_answered_frames_before_and_the_held_after() -> None:
+    """Frame by frame, the lag's window averages each frame with the frames it answered before (as
+    given to it, before their own average) and those held after it, those within 3 sigma: the
+    whole track's window where the frames held cover it; a step back in time starts it again, and
+    a forgotten track has no past."""
+    rng = np.random.default_rng(3)
+    n = 16
+    joints = rng.normal(size=(n, 12, 3))
+    std = rng.uniform(0.01, 0.1, size=(n, 12, 3))
+    stamps = np.arange(n, dtype=np.int64) * FRAME_NS
+    frames = [(int(stamps[k]), joints[k], std[k]) for k in range(n)]
+    whole_j, whole_s = smooth_fused(joints, std, stamps, np.ones(n, dtype=bool), 0.04, 1.0, std_factor=0.9)
+    window = LagWindow(0.04, 1.0)
+    for i in range(n):  # the frames held after it: its lag's 5, past the window's 3.6 frames
+        j, s = window.average(7, frames[i], frames[i + 1:i + 6], 0.9)
+        np.testing.assert_allclose(j, whole_j[i], atol=ROUND_OFF)
+        np.testing.assert_allclose(s, whole_s[i], atol=ROUND_OFF)
+    # the input clock steps back: the frame is averaged with those after it alone
+    j, _ = window.average(7, frames[2], frames[3:5], 1.0)
+    np.testing.assert_allclose(j, smooth_fused_at([], frames[2], frames[3:5], 0.04, 1.0, 1.0)[0],
+                               atol=ROUND_OFF)
+    # another track has a past of its own; a forgotten one none
+    window.average(8, frames[10], [], 1.0)
+    window.forget(int(stamps[5]))  # track 7's newest answer is frame 2's
+    j, _ = window.average(7, frames[3], [], 1.0)
+    np.testing.assert_allclose(j, joints[3], atol=ROUND_OFF)
+    j, _ = window.average(8, frames[11], [], 1.0)
+    np.testing.assert_allclose(j, smooth_fused_at(frames[10:11], frames[11], [], 0.04, 1.0, 1.0)[0],
+                               atol=ROUND_OFF)
+    assert not np.allclose(j, joints[11])

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.fuse import DepthReadings
-from pose_lifter.core.depth.smooth import Fused, smooth_fused_at, window_std_factor
+from pose_lifter.core.depth.smooth import LagWindow, window_std_factor
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR
 from pose_lifter.core.results import with_camera_poses
 from pose_lifter.core.track.defaults import AHEAD_LAG, MAX_LAG
@@ -94,8 +94,8 @@ class LaggedFrames(Generic[T]):
         self._inputs: deque[tuple[T, int, Intrinsics, CheckedFrame, DepthImage]] = deque()
         self._held: deque[LaggedFrame[T]] = deque()  # lifted, waiting to be refined
         self._poses = self._new_poses()
-        # per track, its latest refined fused frames (before the window), for the next frames' window
-        self._fused: dict[int, deque[Fused]] = {}
+        # per track, its answered fused frames, for the next frames' window
+        self._window = LagWindow(LAG_SMOOTHING_S, pipeline.settings.track_timeout)
 
     @property
     def ahead(self) -> int:
@@ -139,7 +139,7 @@ class LaggedFrames(Generic[T]):
         self._inputs.clear()
         self._held.clear()
         self._poses = self._new_poses()
-        self._fused.clear()
+        self._window.clear()
         self.pipeline.policy.kept_later()
 
     def _lift_oldest(self) -> list[LaggedFrame[T]]:
@@ -180,8 +180,7 @@ class LaggedFrames(Generic[T]):
         # tracks unseen for the timeout are forgotten, as the policy forgets them
         timeout = frame.stamp_ns - round(self.pipeline.settings.track_timeout * 1e9)
         self._poses.forget(timeout)
-        for track in [t for t, past in self._fused.items() if not past or past[-1][0] < timeout]:
-            del self._fused[track]
+        self._window.forget(timeout)
         return out
 
     def _refined(self, frame: LaggedFrame[T], after: Sequence[LaggedFrame[T]]) -> LaggedFrame[T]:
@@ -213,22 +212,16 @@ class LaggedFrames(Generic[T]):
         return frame._replace(outcomes=outcomes)
 
     def _averaged(self, s: LiftedSkeleton, stamp_ns: int, after: Sequence[LaggedFrame[T]]) -> LiftedSkeleton:
-        """A refined skeleton placed on a depth image with its fused joints averaged over the
-        window (:meth:`_refined`); kept, before the average, for its track's next frames."""
+        """A refined skeleton placed on a depth image with its fused joints averaged over its
+        track's window (:class:`~pose_lifter.core.depth.smooth.LagWindow`: the frames held
+        ``after`` it as lifted)."""
         if s.depth is None or s.std_m is None:
             return s
-        sigma = LAG_SMOOTHING_S
-        past = self._fused.setdefault(s.track_id, deque())
-        while past and (past[0][0] < stamp_ns - round(3 * sigma * 1e9) or past[-1][0] > stamp_ns):
-            past.popleft()  # out of the window, or the input clock stepped back
         later = [(f.stamp_ns, x.joints_m, x.std_m) for f in after for x in f.lifted
-                 if x.track_id == s.track_id and x.depth is not None and x.std_m is not None
-                 and stamp_ns < f.stamp_ns <= stamp_ns + round(3 * sigma * 1e9)]
-        now: Fused = (stamp_ns, s.joints_m, s.std_m)
+                 if x.track_id == s.track_id and x.depth is not None and x.std_m is not None]
+        self._window.gap_s = self.pipeline.settings.track_timeout
         factor = float(window_std_factor(s.result.weights > 0, LAGGED_STD_FACTOR))
-        joints, std = smooth_fused_at(list(past), now, later, sigma, self.pipeline.settings.track_timeout,
-                                      factor)
-        past.append(now)
+        joints, std = self._window.average(s.track_id, (stamp_ns, s.joints_m, s.std_m), later, factor)
         return replace(s, joints_m=joints, std_m=std)
 
 

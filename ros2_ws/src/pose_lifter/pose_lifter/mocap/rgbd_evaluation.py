@@ -62,7 +62,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.place import place_people
-from pose_lifter.core.depth.smooth import Fused, smooth_fused, smooth_fused_at
+from pose_lifter.core.depth.smooth import LagWindow, smooth_fused
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.results import LiftResult
@@ -371,25 +371,21 @@ class RgbdEvaluator:
 
 def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_factor: NDArray[np.float64]
                 ) -> _Method:
-    """The lagged node's window over ``lagged``'s fused joints (its refined poses fused,
-    :meth:`pose_lifter.messages.lagged.LaggedFrames._refined`): each frame averaged with the
-    frames before it as refined and fused and the :data:`LAG` frames after it as lifted and fused
-    (``live``), those within the window (:func:`~pose_lifter.core.depth.smooth.smooth_fused_at`)."""
+    """The lagged node's window (:class:`~pose_lifter.core.depth.smooth.LagWindow`) over
+    ``lagged``'s fused joints (its refined poses fused, as
+    :meth:`pose_lifter.messages.lagged.LaggedFrames._refined` fuses them): each frame averaged
+    with the frames before it as refined and fused and the :data:`LAG` frames after it as lifted
+    and fused (``live``)."""
     out = _Method(lagged.n)
     out.from_depth = lagged.from_depth
-    window_ns = round(3 * LAG_SMOOTHING_S * 1e9)
-
-    def frames(m: _Method, ks: range, at: int) -> list[Fused]:
-        return [(int(stamps[k]), m.joints[k], m.std[k]) for k in ks
-                if np.isfinite(m.joints[k]).all() and abs(stamps[k] - stamps[at]) <= window_ns]
-
+    window = LagWindow(LAG_SMOOTHING_S, GAP_S)
     for i in range(lagged.n):
         if np.isfinite(lagged.joints[i]).all():
-            now = (int(stamps[i]), lagged.joints[i], lagged.std[i])
-            out.joints[i], out.std[i] = smooth_fused_at(
-                frames(lagged, range(max(0, i - 2 * LAG), i), i), now,
-                frames(live, range(i + 1, min(lagged.n, i + LAG + 1)), i), LAG_SMOOTHING_S, GAP_S,
-                float(std_factor[i]))
+            held = range(i + 1, min(lagged.n, i + LAG + 1))
+            after = [(int(stamps[k]), live.joints[k], live.std[k]) for k in held
+                     if np.isfinite(live.joints[k]).all()]
+            out.joints[i], out.std[i] = window.average(0, (int(stamps[i]), lagged.joints[i], lagged.std[i]),
+                                                       after, float(std_factor[i]))
     return out
 
 

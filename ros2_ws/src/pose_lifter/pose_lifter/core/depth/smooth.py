@@ -8,6 +8,10 @@ smooths the shape, and each frame's reading then moves the joint again). On the 
 (``make rgbd-accuracy``, 3 m, level; docs/depth.md) the lagged node's answers went from 41.6 to
 39.4 mm P-MPJPE with this window, their jitter from 43.8 to 10.6 mm/frame^2.
 
+Two windows, one arithmetic: :func:`smooth_fused` over a whole track (``pose-lifter lift``), and
+:class:`LagWindow` a frame at a time over the frames a lag holds (the lagged node and its
+evaluation, :func:`smooth_fused_at`).
+
 The window averages correlated errors (a limb's shape, the body's distance) as well as
 independent ones, so the averaged standard deviations are scaled by a factor
 (:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` over a whole track,
@@ -19,6 +23,7 @@ cuts errs most in the joints the lift guesses, and those errors last over the fr
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from typing import TypeAlias
 
@@ -28,7 +33,7 @@ from numpy.typing import NDArray
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.track.smoothing import centred_smoothing
 
-__all__ = ["Fused", "smooth_fused", "smooth_fused_at", "window_std_factor"]
+__all__ = ["Fused", "LagWindow", "smooth_fused", "smooth_fused_at", "window_std_factor"]
 
 #: One frame of a track's fused joints: (stamp_ns, joints (12, 3) metres, std (12, 3) metres).
 Fused: TypeAlias = tuple[int, NDArray[np.float64], NDArray[np.float64]]
@@ -99,6 +104,50 @@ def smooth_fused_at(before: Sequence[Fused], frame: Fused, after: Sequence[Fused
                                np.array([f[0] for f in frames], dtype=np.int64),
                                np.ones(len(frames), dtype=bool), sigma_s, gap_s, std_factor)
     return joints[len(before)], std[len(before)]
+
+
+class LagWindow:
+    """Per track, the window a lagged answer's fused joints are averaged over
+    (:func:`smooth_fused_at`): the track's frames before it as they were answered (refined, fused,
+    before their own average: kept here as each is averaged) and the frames the lag holds after it
+    (fused as lifted, their refinement to come), those within three ``sigma_s`` of it. The lagged
+    node's (:class:`pose_lifter.messages.lagged.LaggedFrames`) and the RGB-D evaluation's
+    (:mod:`pose_lifter.mocap.rgbd_evaluation`), so the figures are the node's.
+
+    Parameters
+    ----------
+    sigma_s, gap_s : float
+        As :func:`smooth_fused` (``gap_s`` may be changed between frames: the node's track
+        timeout).
+    """
+
+    def __init__(self, sigma_s: float, gap_s: float) -> None:
+        self.sigma_s, self.gap_s = sigma_s, gap_s
+        self._past: dict[int, deque[Fused]] = {}
+
+    def average(self, track_id: int, frame: Fused, after: Sequence[Fused], std_factor: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``frame``'s fused joints and standard deviations (12, 3) averaged with its track's
+        answered frames before it and the frames ``after`` it (in time order; those outside the
+        window are passed over); ``frame`` is then kept as its track's newest answered frame. A
+        frame stamped before the track's newest starts its window again (the input clock stepped
+        back)."""
+        stamp, reach = frame[0], round(3 * self.sigma_s * 1e9)
+        past = self._past.setdefault(track_id, deque())
+        while past and (past[0][0] < stamp - reach or past[-1][0] > stamp):
+            past.popleft()
+        later = [f for f in after if stamp < f[0] <= stamp + reach]
+        joints, std = smooth_fused_at(list(past), frame, later, self.sigma_s, self.gap_s, std_factor)
+        past.append(frame)
+        return joints, std
+
+    def forget(self, before_ns: int) -> None:
+        """Forget the tracks whose newest answered frame is older than ``before_ns``."""
+        for track in [t for t, past in self._past.items() if not past or past[-1][0] < before_ns]:
+            del self._past[track]
+
+    def clear(self) -> None:
+        self._past.clear()
 
 
 def window_std_factor(observed: NDArray[np.bool_], factor: float) -> NDArray[np.float64]:
