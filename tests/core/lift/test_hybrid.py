@@ -200,3 +200,36 @@ def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> N
             n_dropped += 1
             np.testing.assert_array_equal(f.w, w_want)
     assert 20 <= n_dropped <= 180, n_dropped  # the rule both drops and keeps on these fits
+
+
+def test_a_lift_reading_ahead_lifts_a_body_cut_at_the_shoulders_with_the_causal_prior() -> None:
+    """With the packaged priors, a lift reading ahead takes the packaged causal temporal prior for
+    a tracked frame whose 2D lacks a shoulder, and the offline prior for the others; a live lift,
+    and a lift whose temporal prior was named or given, have no such prior."""
+    from pose_lifter.core.model.prior import DEFAULT_TEMPORAL_PRIOR_PATH
+
+    offline = Lifter(options=LifterOptions(), reads_ahead=True)
+    cut = offline.cut_body_prior
+    assert cut is not None and cut.future_frames == 0
+    assert offline.temporal_prior is not None and offline.temporal_prior.future_frames > 0
+    fit = offline._prior_fit
+    assert fit is not None
+    rng = np.random.default_rng(0)
+    x, past, future = rng.normal(size=(12, 2)), rng.normal(size=(3, 12, 2)), rng.normal(size=(3, 12, 2))
+    seen = (np.ones((3, 12), dtype=bool), np.ones((3, 12), dtype=bool))
+    whole = np.ones(12, dtype=bool)
+    assert fit.prior_input(x, whole, (past, seen[0]), (future, seen[1]))[0] is offline.temporal_prior
+    for shoulder in (0, 3):
+        lacking = whole.copy()
+        lacking[shoulder] = False
+        prior, pts, vis = fit.prior_input(x, lacking, (past, seen[0]), (future, seen[1]))
+        assert prior is cut and pts.shape == (cut.window, 12, 2)
+        assert not vis[-1, shoulder] and vis[:-1].all()  # this frame last, the frames before it
+    # untracked: the single-frame prior, shoulders or not
+    lacking[0] = False
+    assert fit.prior_input(x, lacking, None)[0] is offline.prior
+    assert Lifter(options=LifterOptions()).cut_body_prior is None
+    named = LifterOptions(temporal_prior_file=str(DEFAULT_TEMPORAL_PRIOR_PATH))
+    assert Lifter(options=named, reads_ahead=True).cut_body_prior is None
+    given = Lifter(options=LifterOptions(), temporal_prior=offline.temporal_prior, reads_ahead=True)
+    assert given.cut_body_prior is None

@@ -23,7 +23,14 @@ from numpy.typing import NDArray
 from ..errors import InvalidInputError
 from ..model.pose_model import PoseModel
 from ..model.prior import PosePrior
-from ..model.skeleton import N_JOINTS, RIGHT_LOWER_LEG, body_frame, limb_lengths, normalise_pose_flat
+from ..model.skeleton import (
+    JOINT_NAMES,
+    N_JOINTS,
+    RIGHT_LOWER_LEG,
+    body_frame,
+    limb_lengths,
+    normalise_pose_flat,
+)
 from ..numeric.fast import mean_rows, row_norms
 from ..numeric.jit import njit
 from ..options import LifterOptions
@@ -119,6 +126,10 @@ class _Fitting:
     failure: Failure | None = None
 
 
+#: The shoulders' joint indices (:meth:`PriorFit.prior_input`).
+_SHOULDERS = np.array([JOINT_NAMES.index("left_shoulder"), JOINT_NAMES.index("right_shoulder")])
+
+
 class PriorFit:
     """The hybrid and learned modes' solve with one setting of the lifter.
 
@@ -128,15 +139,25 @@ class PriorFit:
     prior : PosePrior
         The single-frame learned prior.
     temporal_prior : PosePrior or None
-        The causal temporal prior of tracked frames (None: off).
+        The temporal prior of tracked frames (None: off): causal, or in a lift that reads ahead one
+        that reads the frames after the one it lifts.
     model : PoseModel
     runs : Runs
         The alternation runs of ``model`` and ``options``.
+    cut_body_prior : PosePrior or None
+        The prior of the tracked frames whose 2D lacks a shoulder (None: the temporal prior's).
+        The packaged offline prior was trained with the lower body cut out of the image, not the
+        top: a body close to the camera, whose shoulders the image cuts, it lifts worse than the
+        causal prior does (the evaluation tool's validation tracks, ``fused-offline`` at 1.5 m:
+        P-MPJPE 119.6 mm, 107.3 with the causal prior on those frames; 3 and 5 m and the
+        accuracy table's conditions unmoved, ``lowercut`` included), so a lift reading ahead
+        takes the causal one there (:attr:`~pose_lifter.core.lift.lifter.Lifter.cut_body_prior`).
     """
 
     def __init__(self, options: LifterOptions, prior: PosePrior, temporal_prior: PosePrior | None,
-                 model: PoseModel, runs: Runs) -> None:
+                 model: PoseModel, runs: Runs, cut_body_prior: PosePrior | None = None) -> None:
         self.options, self.prior, self.temporal_prior = options, prior, temporal_prior
+        self.cut_body_prior = cut_body_prior
         self.model, self.runs = model, runs
         #: the mean log length of the model's own limbs (:meth:`limb_radii`)
         self._log_limb_mean = float(np.mean(np.log(np.sqrt(model.limb_sq))))
@@ -162,11 +183,14 @@ class PriorFit:
         :attr:`~pose_lifter.core.model.prior.PosePrior.future_frames`): the last of ``past`` and the
         first of ``future``, the missing ones padded with the oldest past frame given and the
         latest future frame given (or this frame). The temporal prior runs when ``past`` has a
-        frame; otherwise a windowed ``prior`` gets this frame in every place."""
+        frame (the ``cut_body_prior`` when there is one and this frame lacks a shoulder);
+        otherwise a windowed ``prior`` gets this frame in every place."""
         prior = self.prior
         has_past = past is not None and len(past[0]) > 0
         if has_past and self.temporal_prior is not None:
             prior = self.temporal_prior
+            if self.cut_body_prior is not None and not visible[_SHOULDERS].all():
+                prior = self.cut_body_prior
         if prior.window == 1:
             return prior, x, visible
         n_future = prior.future_frames

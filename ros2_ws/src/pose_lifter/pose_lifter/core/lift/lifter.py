@@ -173,6 +173,15 @@ class Lifter:
         return self._data.temporal_prior(self._options.temporal_prior_file, self.reads_ahead)
 
     @property
+    def cut_body_prior(self) -> PosePrior | None:
+        """The prior of the tracked frames whose 2D lacks a shoulder, in a lift reading ahead with
+        the packaged priors (:meth:`~pose_lifter.core.model.loading.LifterData.cut_body_prior`), or
+        None: the temporal prior lifts every tracked frame."""
+        if not self._options.temporal_prior or self._options.mode == "paper":
+            return None
+        return self._data.cut_body_prior(self._options.temporal_prior_file, self.reads_ahead)
+
+    @property
     def frames_ahead(self) -> int:
         """Frames after the lifted one that a tracked lift reads (its temporal prior's
         ``future_frames`` when it reads ahead; 0: causal, and always in the paper's mode)."""
@@ -201,7 +210,8 @@ class Lifter:
         self._prior_fit: PriorFit | None = None
         if o.mode != "paper":
             # the priors are loaded (and validated) now, not on the first frame
-            self._prior_fit = PriorFit(o, self.prior, self.temporal_prior, self._model, self._runs)
+            self._prior_fit = PriorFit(o, self.prior, self.temporal_prior, self._model, self._runs,
+                                       self.cut_body_prior)
             if o.mode == "hybrid" and (not o.method.limbs or self._model.limb_coordinates is None
                                        or o.pose_solver != "admm"):
                 raise OptionsError("mode 'hybrid' needs a variant with limb constraints, bases with "

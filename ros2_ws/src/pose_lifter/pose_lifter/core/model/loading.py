@@ -44,6 +44,7 @@ class LifterData:
         self._temporal_given = temporal_prior is not None  # stands for its file option's value
         self._model: PoseModel | None = None
         self._model_key: str | None = None
+        self._cut: PosePrior | None = None
         mp = bases.mean_pose
         #: the RMS spread of the mean pose's image positions (the lifter's input normalisation)
         self.mean_spread = float(np.sqrt(np.mean(np.sum((mp[:, :2] - mp[:, :2].mean(0)) ** 2, axis=1))))
@@ -85,6 +86,18 @@ class LifterData:
         if not reads_ahead:
             _causal(self._temporal, path)
         return self._temporal
+
+
+    def cut_body_prior(self, path: str, reads_ahead: bool) -> PosePrior | None:
+        """The prior of a tracked frame whose 2D lacks a shoulder in a lift reading ahead
+        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the packaged causal temporal prior, when
+        the temporal prior is the packaged offline one (``path`` ``""``, loaded from its file, not
+        given); otherwise None (a prior given or named has no known partner)."""
+        if not reads_ahead or path or self._temporal_given:
+            return None
+        if self._cut is None:
+            self._cut = _causal(PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH), "")
+        return self._cut
 
 
 def _causal(prior: PosePrior, path: str) -> PosePrior:
