@@ -25,8 +25,9 @@ placed depths scaled (the body's size and distance together) and tilted across t
    squares from ``k`` the median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or
    ``max_iter``. Readings beyond ``gate`` standard deviations of the field are dropped.
 5. **Fuse**: the true depths are Gaussian about the field's, ``z ~ N(g . theta, S)``, ``S`` the
-   shape's covariance (per joint :func:`~pose_lifter.core.depth.uncertainty.shape_std`, correlated
-   between joints by :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's
+   shape's covariance (per joint :func:`~pose_lifter.core.depth.uncertainty.shape_std`, scaled per
+   body by how far its readings sit from the field, :func:`shape_scale`; correlated between joints
+   by :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`) plus the field's
    (from the fit's covariance); each kept reading is ``d_j = z_j + e_j``, ``e_j ~ N(0, v_j / p_j)``,
    ``p_j`` the probability that the reading is the joint's (a Gaussian against a stray surface
    uniform over the depth band, :attr:`~pose_lifter.core.depth.reading.DepthOptions.outlier_share`:
@@ -86,8 +87,8 @@ from pose_lifter.core.track.placement import (
     place_poses,
 )
 
-__all__ = ["DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth", "fuse_readings", "read_and_fuse",
-           "read_depth"]
+__all__ = ["SHAPE_SCALE_DOF", "DepthReadings", "FusedPeople", "compile_kernels", "fuse_depth",
+           "fuse_readings", "read_and_fuse", "read_depth", "shape_scale"]
 
 #: Radius of each limb of :data:`~pose_lifter.core.model.skeleton.LIMBS` as an occluder, metres.
 _LIMB_RADIUS: Final[NDArray[np.float64]] = np.array(
@@ -105,6 +106,9 @@ _L_SHOULDER, _R_SHOULDER, _L_HIP, _R_HIP = (JOINT_NAMES.index(f"{s}_{j}") for j 
 #: them (12, 13), as :func:`~pose_lifter.core.depth.kernels.fuse_kernel` takes them.
 _SHAPE_Z: Final[NDArray[np.float64]] = np.ascontiguousarray(SHAPE_STD_M[:, 1])
 _SHAPE_MODEL: Final[NDArray[np.float64]] = np.column_stack([SHAPE_CORR_Z, _SHAPE_Z])
+#: The prior degrees of freedom of :func:`shape_scale`: a body read at as many joints has its
+#: shape's deviations scaled half way to what its residuals say.
+SHAPE_SCALE_DOF: Final[float] = 8.0
 #: A joint without a reading enters the conditioning with this variance (m^2): no weight.
 _UNREAD_VAR: Final[float] = 1e6
 #: The least inlier probability by which a reading's variance is divided in the leave-one-out
@@ -381,8 +385,10 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     # out); a joint without its own reading keeps its marginal deviation (the correlations,
     # measured on motion the prior knows, hold less on motion it does not: on the cross-action
     # folds the conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %).
-    # Compiled, one person at a time: :func:`~pose_lifter.core.depth.kernels.fuse_kernel`
+    # Compiled, one person at a time: :func:`~pose_lifter.core.depth.kernels.fuse_kernel`; the
+    # shape's deviations scaled by what the field's residuals say of this body (shape_scale)
     shape = shape_std(observed)
+    shape *= shape_scale(d, v, g, have, theta, shape[..., 2], opt.gate)[:, None, None]
     joints = np.empty((n, N_JOINTS, 3))
     std = np.empty((n, N_JOINTS, 3))
     kept = np.empty((n, N_JOINTS), dtype=bool)
@@ -398,6 +404,44 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
         kept[bad] = False
     k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)
+
+
+def shape_scale(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[np.float64],
+                have: NDArray[np.bool_], theta: NDArray[np.float64], shape_z: NDArray[np.float64],
+                gate: float) -> NDArray[np.float64]:
+    """Per body, the scale of its shape's deviations that its depth readings' residuals from the
+    fitted field give: the fit's a-posteriori variance factor, shrunk towards 1.
+
+    ``sqrt((nu0 + sum_j min(r_j^2 / s_j^2, gate^2)) / (nu0 + n))`` over the body's ``n``
+    readings, ``r_j = d_j - g_j . theta`` and ``s_j^2 = v_j + (k shape_z_j)^2`` (the reading's
+    variance and the shape's in depth, ``k = theta[0]``), ``nu0`` :data:`SHAPE_SCALE_DOF`; a
+    residual beyond the gate counts as the gate (such a reading is another surface's). The shape
+    constants (:mod:`~pose_lifter.core.depth.uncertainty`) are the evaluation's averages: a body
+    whose readings sit closer to its lifted shape than they say has its deviations narrowed, and
+    one they disagree with (motion the prior never saw: on the cross-action folds the prior-filled
+    joints fell out of the two-sigma band) widened. 1 for a body without a reading.
+
+    Parameters
+    ----------
+    d, v : ndarray, shape (n, 12)
+        The readings' depths and variances (m, m^2; read where ``have``).
+    g : ndarray, shape (n, 12, 3)
+        The field's regressors.
+    have : ndarray of bool, shape (n, 12)
+    theta : ndarray, shape (n, 3)
+        The fitted field.
+    shape_z : ndarray, shape (n, 12)
+        The shape's standard deviations in depth (m).
+    gate : float
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    r = np.where(have, d - np.einsum("njc,nc->nj", g, theta), 0.0)
+    s2 = np.where(have, v + (theta[:, :1] * shape_z) ** 2, 1.0)
+    z2 = np.where(have, np.minimum(r * r / s2, gate * gate), 0.0)
+    return np.asarray(np.sqrt((SHAPE_SCALE_DOF + z2.sum(axis=1)) / (SHAPE_SCALE_DOF + have.sum(axis=1))))
 
 
 def compile_kernels() -> None:
