@@ -277,3 +277,47 @@ def test_a_reading_its_neighbours_contradict_is_dropped() -> None:
     fused = _fuse(pose, centre, scale, truth, _painted(truth, shift={2: -0.22}))
     assert not fused.from_depth[0, 2] and fused.from_depth[0, np.arange(12) != 2].all()
     assert abs(fused.joints_m[0, 2, 2] - truth[2, 2]) < 0.03
+
+
+def test_the_shape_scale_is_the_fits_variance_factor_shrunk_towards_one() -> None:
+    """``shape_scale`` against its formula written out per body: readings on the field give
+    sqrt(nu0 / (nu0 + n)), residuals of s_j give 1, a residual past the gate counts as the gate,
+    and a body without a reading keeps 1."""
+    from pose_lifter.core.depth.fuse import SHAPE_SCALE_DOF, shape_scale
+
+    rng = np.random.default_rng(7)
+    n = 4
+    g = np.concatenate([rng.uniform(2.5, 3.5, (n, 12, 1)), rng.normal(scale=0.3, size=(n, 12, 2))], axis=-1)
+    theta = np.array([[1.05, 0.01, -0.02]] * n)
+    v = rng.uniform(1e-4, 1e-3, (n, 12))
+    shape_z = rng.uniform(0.03, 0.1, (n, 12))
+    sd = np.sqrt(v + (theta[:, :1] * shape_z) ** 2)
+    field = np.einsum("njc,nc->nj", g, theta)
+    have = np.ones((n, 12), dtype=bool)
+    have[1, :5] = False
+    have[3] = False
+    sign = rng.choice([-1.0, 1.0], (n, 12))
+    d = field.copy()
+    d[1] += sign[1] * sd[1]  # each residual one of its deviations
+    d[2] += sign[2] * 2.0 * sd[2]
+    d[2, 0] += 50.0 * sd[2, 0]  # past the gate
+    got = shape_scale(d, v, g, have, theta, shape_z, 3.0)
+    nu0 = SHAPE_SCALE_DOF
+    want = [np.sqrt(nu0 / (nu0 + 12)), 1.0, np.sqrt((nu0 + 11 * 4.0 + 9.0) / (nu0 + 12)), 1.0]
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_readings_that_disagree_with_the_shape_widen_the_unread_joints() -> None:
+    """The same body read twice, once true and once with its knees and ankles 25 cm deeper than
+    its lifted shape (the readings kept): the unread wrists' depth deviations are wider the second
+    time (equal without the shape scale)."""
+    pose, centre, scale, truth = _body(k=1.0)
+    w = np.ones(12)
+    w[[2, 5]] = 0.0
+    legs = {j: 0.25 for j in (7, 8, 10, 11)}
+    agree = fuse_depth(_painted(truth), K, _project(truth)[None], w[None], pose[None], np.array([scale]),
+                       centre[None])
+    disagree = fuse_depth(_painted(truth, shift=legs), K, _project(truth)[None], w[None], pose[None],
+                          np.array([scale]), centre[None])
+    assert disagree.from_depth[0, [7, 8, 10, 11]].all()
+    assert (disagree.std_m[0, [2, 5], 2] > 1.3 * agree.std_m[0, [2, 5], 2]).all()
