@@ -134,10 +134,11 @@ def test_the_fused_methods_place_as_the_node_places() -> None:
     depth = depth_model.sense(rendered, depth_model.REALISTIC, np.random.default_rng(1))
     points = labelled_2d(px[-1], conf[-1], t.swapped)[0][None]
     node = place_people([t.result], points, rgbd.INTRINSICS, 0.43, 5.0, depth=depth)
-    joints, std, read = rgbd.fuse_person(depth, points, t.result, t.result.pose_camera)
+    joints, std, kept, read = rgbd.fuse_person(depth, points, t.result, t.result.pose_camera)
     np.testing.assert_allclose(joints, node.joints_m[0], rtol=ROUND_OFF_ACCUMULATED)
     np.testing.assert_allclose(std, node.std_m[0], rtol=ROUND_OFF_ACCUMULATED)
-    assert read.any() and not read[~np.isfinite(node.readings.depth_m[0])].any()
+    assert kept.any() and not kept[~np.isfinite(node.readings.depth_m[0])].any()
+    assert np.array_equal(read, np.isfinite(node.readings.depth_m[0]))
     # a refined pose placed again with the frame's readings, as the lagged node does
     refined = t.result.pose_camera * 1.05
     again = place_people([t.result], points, rgbd.INTRINSICS, 0.43, 5.0, poses=refined[None],

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from pose_lifter.core.depth.smooth import LagWindow, smooth_fused, smooth_fused_at
+from pose_lifter.core.depth.smooth import LagWindow, smooth_fused, smooth_fused_at, window_std_factor
 from tolerances import ROUND_OFF
 
 FRAME_NS = 33_333_333
@@ -108,3 +108,29 @@ def test_the_lag_window_reads_the_answered_frames_before_and_the_held_after() ->
     np.testing.assert_allclose(j, smooth_fused_at(frames[10:11], frames[11], [], 0.04, 1.0, 1.0)[0],
                                atol=ROUND_OFF)
     assert not np.allclose(j, joints[11])
+
+
+def test_the_window_s_scale_is_for_read_joints_and_bodies_shown_whole() -> None:
+    """``window_std_factor``: the factor on every joint of a body the 2D shows whole and on the
+    read joints of a body it cuts, 1 on the others; ``smooth_fused`` scales each joint's averaged
+    deviation by its own factor."""
+    observed = np.ones((3, 12), dtype=bool)
+    observed[1, [0, 3]] = False  # cut at the shoulders
+    observed[2, 8] = False
+    read = np.zeros((3, 12), dtype=bool)
+    read[1, [6, 7, 9]] = True
+    got = window_std_factor(observed, read, 0.8)
+    want = np.ones((3, 12))
+    want[0] = 0.8
+    want[1, [6, 7, 9]] = 0.8  # row 2: cut, nothing read
+    np.testing.assert_array_equal(got, want)
+    rng = np.random.default_rng(4)
+    n = 12
+    joints = rng.normal(size=(n, 12, 3))
+    std = rng.uniform(0.01, 0.1, size=(n, 12, 3))
+    stamps = np.arange(n, dtype=np.int64) * FRAME_NS
+    factor = rng.uniform(0.5, 1.0, size=(n, 12))
+    valid = np.ones(n, dtype=bool)
+    _, s = smooth_fused(joints, std, stamps, valid, 0.04, 1.0, std_factor=factor)
+    _, s1 = smooth_fused(joints, std, stamps, valid, 0.04, 1.0, std_factor=1.0)
+    np.testing.assert_allclose(s, s1 * factor[:, :, None], atol=ROUND_OFF)

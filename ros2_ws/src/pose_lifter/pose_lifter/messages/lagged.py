@@ -220,7 +220,7 @@ class LaggedFrames(Generic[T]):
         later = [(f.stamp_ns, x.joints_m, x.std_m) for f in after for x in f.lifted
                  if x.track_id == s.track_id and x.depth is not None and x.std_m is not None]
         self._window.gap_s = self.pipeline.settings.track_timeout
-        factor = float(window_std_factor(s.result.weights > 0, LAGGED_STD_FACTOR))
+        factor = window_std_factor(s.result.weights > 0, np.isfinite(s.depth.depth_m), LAGGED_STD_FACTOR)
         joints, std = self._window.average(s.track_id, (stamp_ns, s.joints_m, s.std_m), later, factor)
         return replace(s, joints_m=joints, std_m=std)
 

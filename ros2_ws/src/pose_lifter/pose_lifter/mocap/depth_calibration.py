@@ -29,9 +29,10 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
 * :data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` and
   :data:`~pose_lifter.core.depth.uncertainty.LAGGED_STD_FACTOR` (:func:`smoothed_std_factors`):
   the 68th percentile of the offline lift's (the lagged node's) fused errors over their standard
-  deviations, every coordinate, after the window over the fused joints (the deviations averaged
-  as the joints) over the same of each frame's own fusion: the scale that gives the smoothed
-  joints the frames' coverage.
+  deviations, every coordinate of the joints the scale is for (read from depth, or of a body the
+  2D shows whole: :func:`~pose_lifter.core.depth.smooth.window_std_factor`), after the window over
+  the fused joints (the deviations averaged as the joints) over the same of each frame's own
+  fusion: the scale that gives the smoothed joints the frames' coverage.
 
 The 68th percentile of an error's absolute value is its standard deviation when it is Gaussian,
 and the coverage the RGB-D evaluation reports is that of these quantiles: it says how far the

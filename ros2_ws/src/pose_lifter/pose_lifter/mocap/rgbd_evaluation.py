@@ -239,18 +239,22 @@ class _Method:
     joints: NDArray[np.float64] = field(init=False)
     std: NDArray[np.float64] = field(init=False)
     from_depth: NDArray[np.bool_] = field(init=False)
+    read: NDArray[np.bool_] = field(init=False)  #: the joints with a depth reading (T, 12)
 
     def __post_init__(self) -> None:
         self.joints = np.full((self.n, N_JOINTS, 3), np.nan)
         self.std = np.full((self.n, N_JOINTS, 3), np.nan)
         self.from_depth = np.zeros((self.n, N_JOINTS), dtype=bool)
+        self.read = np.zeros((self.n, N_JOINTS), dtype=bool)
 
     def put(self, i: int, joints: NDArray[np.float64], std: NDArray[np.float64] | None,
-            from_depth: NDArray[np.bool_]) -> None:
+            from_depth: NDArray[np.bool_], read: NDArray[np.bool_] | None = None) -> None:
         self.joints[i] = joints
         if std is not None:
             self.std[i] = std
         self.from_depth[i] = from_depth
+        if read is not None:
+            self.read[i] = read
 
     def record(self, truth: NDArray[np.float64]) -> dict[str, Any]:
         """Its figures per frame (:func:`rgbd_figures`, ``from_depth``: the share of joints read
@@ -355,13 +359,15 @@ class RgbdEvaluator:
             f = out[m]
             frames = (f.joints - truth) / f.std
             lifted = np.asarray(np.isfinite(f.joints).all(axis=(1, 2)), dtype=bool)
-            factor = np.where(whole[m], self.std_factors[m], 1.0)  # window_std_factor's
+            scaled = whole[m][:, None] | f.read  # window_std_factor's joints
+            factor = np.where(scaled, self.std_factors[m], 1.0)
             if m == "fused-lag":  # the lagged node's window
                 out[m] = f = _lag_window(f, live_lag, stamps, factor)
             else:  # pose-lifter lift averages each track's fused joints
                 f.joints, f.std = smooth_fused(f.joints, f.std, stamps, lifted, OFFLINE_SMOOTHING_S, GAP_S,
                                                factor)
-            counted = lifted & whole[m]  # the factors are measured on bodies shown whole
+            # the factors are measured on the joints they scale: read, or of a body shown whole
+            counted = lifted[:, None] & scaled
             normalised[m] = {"frames": frames[counted].ravel().tolist(),
                              "smoothed": ((f.joints - truth) / f.std)[counted].ravel().tolist()}
         if self.normalised_errors:
@@ -377,7 +383,7 @@ def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_f
     with the frames before it as refined and fused and the :data:`LAG` frames after it as lifted
     and fused (``live``)."""
     out = _Method(lagged.n)
-    out.from_depth = lagged.from_depth
+    out.from_depth, out.read = lagged.from_depth, lagged.read
     window = LagWindow(LAG_SMOOTHING_S, GAP_S)
     for i in range(lagged.n):
         if np.isfinite(lagged.joints[i]).all():
@@ -385,13 +391,13 @@ def _lag_window(lagged: _Method, live: _Method, stamps: NDArray[np.int64], std_f
             after = [(int(stamps[k]), live.joints[k], live.std[k]) for k in held
                      if np.isfinite(live.joints[k]).all()]
             out.joints[i], out.std[i] = window.average(0, (int(stamps[i]), lagged.joints[i], lagged.std[i]),
-                                                       after, float(std_factor[i]))
+                                                       after, std_factor[i])
     return out
 
 
 def fuse_person(depth: NDArray[np.float32], points: NDArray[np.float64], result: LiftResult,
                 pose: NDArray[np.float64]
-                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """One person placed on a depth image by :func:`pose_lifter.core.depth.place.place_people`
     (the node's, the lagged node's and the offline lift's placement), with the joints it read
     from depth: the lift placed with its own pose, then ``pose`` (12, 3; the lift's
@@ -413,13 +419,17 @@ def fuse_person(depth: NDArray[np.float32], points: NDArray[np.float64], result:
     std : ndarray, shape (12, 3)
         Metres, per axis.
     from_depth : ndarray of bool, shape (12,)
+        The joints whose reading the fusion kept.
+    read : ndarray of bool, shape (12,)
+        The joints with a reading (their patch read, not hidden): those a window's scale applies
+        to (:func:`~pose_lifter.core.depth.smooth.window_std_factor`).
     """
     placed = place_people([result], points, INTRINSICS, DEFAULT_LEG_LENGTH_M, DEFAULT_DISTANCE_M, depth=depth)
     if not np.array_equal(pose, result.pose_camera):
         placed = place_people([result], points, INTRINSICS, DEFAULT_LEG_LENGTH_M, DEFAULT_DISTANCE_M,
                               poses=pose[None], readings=placed.readings)
-    assert placed.from_depth is not None
-    return placed.joints_m[0], placed.std_m[0], placed.from_depth[0]
+    assert placed.from_depth is not None and placed.readings is not None
+    return placed.joints_m[0], placed.std_m[0], placed.from_depth[0], np.isfinite(placed.readings.depth_m[0])
 
 
 def evaluate_jobs(jobs: Sequence[tuple[ev.Track, float]], methods: Sequence[str], settings: dict[str, Any],

@@ -448,7 +448,9 @@ def _smoothed_fused(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkele
     if len(placed) < 2:
         return outcomes
     rows, fused = [i for i, _ in placed], [d for _, d in placed]
-    factor = window_std_factor(np.array([s.result.weights > 0 for s in fused]), SMOOTHED_STD_FACTOR)
+    factor = window_std_factor(np.array([s.result.weights > 0 for s in fused]),
+                               np.array([np.isfinite(s.depth.depth_m) for s in fused if s.depth is not None]),
+                               SMOOTHED_STD_FACTOR)
     joints, std = smooth_fused(np.array([s.joints_m for s in fused]), np.array([s.std_m for s in fused]),
                                np.array([chain[i].stamp_ns for i in rows], dtype=np.int64),
                                np.ones(len(rows), dtype=bool), smoothing_s, gap_s, factor)

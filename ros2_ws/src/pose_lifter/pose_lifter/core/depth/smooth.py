@@ -17,8 +17,9 @@ independent ones, so the averaged standard deviations are scaled by a factor
 (:data:`~pose_lifter.core.depth.uncertainty.SMOOTHED_STD_FACTOR` over a whole track,
 :data:`~pose_lifter.core.depth.uncertainty.LAGGED_STD_FACTOR` over the lagged node's window),
 measured as what keeps the smoothed joints' coverage that of the frames' own (``make
-depth-calibration``), on bodies the 2D shows whole (:func:`window_std_factor`): a body the image
-cuts errs most in the joints the lift guesses, and those errors last over the frames.
+depth-calibration``), on the joints read from depth and every joint of a body the 2D shows whole
+(:func:`window_std_factor`): a body the image cuts errs most in the joints the lift guesses, and
+those errors last over the frames.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
+from pose_lifter.core.model.skeleton import N_JOINTS
 from pose_lifter.core.track.smoothing import centred_smoothing
 
 __all__ = ["Fused", "LagWindow", "smooth_fused", "smooth_fused_at", "window_std_factor"]
@@ -60,8 +62,8 @@ def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stam
     gap_s : float
         A larger gap between valid frames (or a step back in time) starts a new segment, which no
         window crosses.
-    std_factor : float or ndarray, shape (T,)
-        The averaged standard deviations' scale (per frame: :func:`window_std_factor`).
+    std_factor : float or ndarray, shape (T,) or (T, 12)
+        The averaged standard deviations' scale (per frame, or per joint: :func:`window_std_factor`).
 
     Returns
     -------
@@ -76,13 +78,14 @@ def smooth_fused(joints_m: NDArray[np.float64], std_m: NDArray[np.float64], stam
     both = centred_smoothing(np.concatenate([joints, std], axis=1), stamps_ns, ok, sigma_s, gap_s)
     out_std = std.copy()
     if sigma_s > 0 and ok.sum() >= 2:
-        factor = np.broadcast_to(np.asarray(std_factor, dtype=np.float64), ok.shape)
-        out_std[ok] = both[ok, joints.shape[1]:] * factor[ok, None, None]
+        factor = np.asarray(std_factor, dtype=np.float64)
+        factor = np.broadcast_to(factor[:, None] if factor.ndim == 1 else factor, joints.shape[:2])
+        out_std[ok] = both[ok, joints.shape[1]:] * factor[ok][:, :, None]
     return both[:, :joints.shape[1]], out_std
 
 
 def smooth_fused_at(before: Sequence[Fused], frame: Fused, after: Sequence[Fused], sigma_s: float,
-                    gap_s: float, std_factor: float = LAGGED_STD_FACTOR
+                    gap_s: float, std_factor: float | NDArray[np.float64] = LAGGED_STD_FACTOR
                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One frame's fused joints and standard deviations averaged with its track's frames around
     it, as :func:`smooth_fused` averages them over the whole track (the same where ``before`` and
@@ -93,16 +96,19 @@ def smooth_fused_at(before: Sequence[Fused], frame: Fused, after: Sequence[Fused
     ----------
     before, frame, after : (stamp_ns, joints (12, 3), std (12, 3))
         The track's fused frames before it and after it, each in time order, and the frame.
-    sigma_s, gap_s, std_factor : as :func:`smooth_fused`
+    sigma_s, gap_s : as :func:`smooth_fused`
+    std_factor : float or ndarray, shape (12,)
+        The frame's scale (:func:`window_std_factor`).
 
     Returns
     -------
     joints, std : ndarray, shape (12, 3)
     """
     frames = [*before, frame, *after]
+    factor = np.broadcast_to(np.asarray(std_factor, dtype=np.float64), (len(frames), N_JOINTS))
     joints, std = smooth_fused(np.array([f[1] for f in frames]), np.array([f[2] for f in frames]),
                                np.array([f[0] for f in frames], dtype=np.int64),
-                               np.ones(len(frames), dtype=bool), sigma_s, gap_s, std_factor)
+                               np.ones(len(frames), dtype=bool), sigma_s, gap_s, factor)
     return joints[len(before)], std[len(before)]
 
 
@@ -125,8 +131,8 @@ class LagWindow:
         self.sigma_s, self.gap_s = sigma_s, gap_s
         self._past: dict[int, deque[Fused]] = {}
 
-    def average(self, track_id: int, frame: Fused, after: Sequence[Fused], std_factor: float
-                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def average(self, track_id: int, frame: Fused, after: Sequence[Fused],
+                std_factor: float | NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``frame``'s fused joints and standard deviations (12, 3) averaged with its track's
         answered frames before it and the frames ``after`` it (in time order; those outside the
         window are passed over); ``frame`` is then kept as its track's newest answered frame. A
@@ -150,8 +156,11 @@ class LagWindow:
         self._past.clear()
 
 
-def window_std_factor(observed: NDArray[np.bool_], factor: float) -> NDArray[np.float64]:
-    """Per body, the scale of its averaged standard deviations: ``factor`` where the 2D shows the
-    body whole (every joint of ``observed`` (..., 12)), 1 where the image cuts it (module
-    docstring); shape ``observed.shape[:-1]``."""
-    return np.where(np.asarray(observed, dtype=bool).all(axis=-1), factor, 1.0)
+def window_std_factor(observed: NDArray[np.bool_], read: NDArray[np.bool_], factor: float
+                      ) -> NDArray[np.float64]:
+    """Per joint, the scale of its averaged standard deviation: ``factor`` for a joint ``read``
+    from depth and for every joint of a body the 2D shows whole (every joint ``observed``), 1 for
+    the other joints of a body the image cuts (module docstring); ``observed`` and ``read`` (..., 12),
+    the result of their shape."""
+    whole = np.asarray(observed, dtype=bool).all(axis=-1, keepdims=True)
+    return np.where(whole | np.asarray(read, dtype=bool), factor, 1.0)

@@ -72,10 +72,10 @@ UNOBSERVED_FACTOR: Final[NDArray[np.float64]] = np.array(
 #: The scale of a track's fused joints' standard deviations averaged over ``pose-lifter lift``'s
 #: window (:func:`pose_lifter.core.depth.smooth.smooth_fused`): the window averages the frames'
 #: reading errors, so the smoothed joints err less than each frame's own deviations say.
-SMOOTHED_STD_FACTOR: Final[float] = 0.897
+SMOOTHED_STD_FACTOR: Final[float] = 0.908
 #: The same of the lagged node's window (:func:`pose_lifter.core.depth.smooth.smooth_fused_at`:
 #: the frames before a frame refined, those its lag holds after it as lifted).
-LAGGED_STD_FACTOR: Final[float] = 0.850
+LAGGED_STD_FACTOR: Final[float] = 0.866
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
 
