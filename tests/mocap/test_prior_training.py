@@ -309,3 +309,33 @@ def test_an_offline_priors_target_is_the_frame_future_frames_before_the_windows_
                                                         ).future_frames == 2
     with pytest.raises(PriorFileError, match="future_frames"):
         replace(net, metadata={"future_frames": window})
+
+
+def test_a_crop_cuts_a_window_at_two_image_rows_and_is_off_by_default() -> None:
+    """The training's image borders (Augmentation.p_crop): the joints of every frame of a window
+    above one image row and below another are missing, the rows within ``crop_max`` of the target
+    frame's height from its top and bottom; only the samples drawn are cut, and an augmentation
+    without it draws the same samples as before it existed."""
+    from dataclasses import replace
+
+    from pose_lifter.mocap.prior_training import _cropped
+
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(500, 5, 12, 2))
+    crop = rng.random(500) < 0.5
+    out = _cropped(pts, 2, crop, 0.3, np.random.default_rng(4))
+    assert not out[~crop].any() and out[crop].any()
+    y = pts[..., 1]
+    lo, hi = y[:, 2].min(axis=1), y[:, 2].max(axis=1)
+    for i in np.flatnonzero(crop):  # every frame cut at the same two rows
+        kept, cut = y[i][~out[i]], y[i][out[i]]
+        top, bottom = lo[i] + 0.3 * (hi[i] - lo[i]), hi[i] - 0.3 * (hi[i] - lo[i])
+        above = (cut < kept.min()) & (cut < top)
+        below = (cut > kept.max()) & (cut > bottom)
+        assert (above | below).all()
+    seqs = [synthetic_poses(40, seed=s) for s in range(3)]
+    base = make_batch(seqs, 64, np.random.default_rng(2), GENERALISE, window=4)
+    off = make_batch(seqs, 64, np.random.default_rng(2), replace(GENERALISE, p_crop=0.0), window=4)
+    assert np.array_equal(off.features, base.features)
+    on = make_batch(seqs, 64, np.random.default_rng(2), replace(GENERALISE, p_crop=1.0), window=4)
+    assert not np.array_equal(on.features, base.features)

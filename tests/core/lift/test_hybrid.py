@@ -202,16 +202,20 @@ def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> N
     assert 20 <= n_dropped <= 180, n_dropped  # the rule both drops and keeps on these fits
 
 
-def test_a_lift_reading_ahead_lifts_a_body_cut_at_the_shoulders_with_the_causal_prior() -> None:
-    """With the packaged priors, a lift reading ahead takes the packaged causal temporal prior for
-    a tracked frame whose 2D lacks a shoulder, and the offline prior for the others; a live lift,
-    and a lift whose temporal prior was named or given, have no such prior."""
-    from pose_lifter.core.model.prior import DEFAULT_TEMPORAL_PRIOR_PATH
+def test_a_lift_reading_ahead_lifts_a_body_cut_at_the_shoulders_with_the_cut_bodies_prior() -> None:
+    """With the packaged priors, a lift reading ahead takes the packaged offline prior trained with
+    bodies cut by the image's borders for a tracked frame whose 2D lacks a shoulder, and the
+    offline prior for the others; a live lift, and a lift whose temporal prior was named or given,
+    have no such prior."""
+    from pose_lifter.core.model.prior import DEFAULT_OFFLINE_CUT_PRIOR_PATH, DEFAULT_TEMPORAL_PRIOR_PATH
 
     offline = Lifter(options=LifterOptions(), reads_ahead=True)
     cut = offline.cut_body_prior
-    assert cut is not None and cut.future_frames == 0
     assert offline.temporal_prior is not None and offline.temporal_prior.future_frames > 0
+    assert cut is not None and cut is not offline.temporal_prior
+    ahead = offline.temporal_prior
+    assert (cut.window, cut.future_frames) == (ahead.window, ahead.future_frames)
+    assert np.array_equal(cut.weights[0], PosePrior.load(DEFAULT_OFFLINE_CUT_PRIOR_PATH).weights[0])
     fit = offline._prior_fit
     assert fit is not None
     rng = np.random.default_rng(0)
@@ -224,7 +228,8 @@ def test_a_lift_reading_ahead_lifts_a_body_cut_at_the_shoulders_with_the_causal_
         lacking[shoulder] = False
         prior, pts, vis = fit.prior_input(x, lacking, (past, seen[0]), (future, seen[1]))
         assert prior is cut and pts.shape == (cut.window, 12, 2)
-        assert not vis[-1, shoulder] and vis[:-1].all()  # this frame last, the frames before it
+        k = cut.window - 1 - cut.future_frames  # this frame's place, the frames around it seen
+        assert not vis[k, shoulder] and np.delete(vis, k, axis=0).all()
     # untracked: the single-frame prior, shoulders or not
     lacking[0] = False
     assert fit.prior_input(x, lacking, None)[0] is offline.prior

@@ -13,7 +13,8 @@ every sample with a fresh random view and person (augmentation):
 
 Pose augmentations on top (:data:`GENERALISE`, the packaged priors' recipe): mirrored people,
 arms or legs transplanted from another frame, limbs turned about their joints, and the lower body
-out of the image (:mod:`pose_lifter.mocap.pose_augment`).
+out of the image (:mod:`pose_lifter.mocap.pose_augment`); for the offline prior also a person close
+to the camera, cut at both ends by the image's borders (``p_crop``).
 
 Models: :func:`train_prior_residual` (the packaged priors: a residual MLP, Martinez et al. 2017,
 in PyTorch, the optional extra ``train``; batch normalisation folded into the linear layers) and
@@ -79,6 +80,11 @@ class Augmentation:
     #: the lower body out of the image: knees and ankles missing (and the hips too on a third of
     #: those samples), every frame of the window
     p_lower_cut: float = 0.0
+    #: a person close to the camera, cut by the image's top and bottom borders: the joints of the
+    #: window above one image row and below another missing, the two rows cutting up to
+    #: ``crop_max`` of the target frame's image height each off its top and its bottom
+    p_crop: float = 0.0
+    crop_max: float = 0.4
     #: of the noisy chunks, this share gets a detector's noise instead of white noise: per joint
     #: scaled like the COCO sigmas and, over a window's frames, correlated (first-order
     #: autoregressive, correlation uniform in ``detector_correlation``;
@@ -169,6 +175,8 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
         hips = cut & (rng.random(n) < 1.0 / 3.0)
         vis[np.ix_(cut, np.arange(window), LOWER_LEG_JOINTS)] = False
         vis[np.ix_(hips, np.arange(window), _HIPS)] = False
+    if aug.p_crop > 0:
+        vis &= ~_cropped(pts, target, rng.random(n) < aug.p_crop, aug.crop_max, rng)
     # keep at least min_visible joints in the target frame
     short = vis[:, target].sum(axis=1) < aug.min_visible
     vis[short, target] = True
@@ -179,6 +187,20 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
     tgt[..., :2] = (cur_cam[..., :2] / dist[:, None, None] - centre[:, None, :]) / radius[:, None, None]
     tgt[..., 2] = cur_cam[..., 2] / dist[:, None] / radius[:, None]
     return TrainingBatch(feats, tgt.reshape(n, 3 * N_JOINTS), cur_cam, scale)
+
+
+def _cropped(pts: NDArray[np.float64], target: int, crop: NDArray[np.bool_], crop_max: float,
+             rng: np.random.Generator) -> NDArray[np.bool_]:
+    """The joints (N, W, 12) of the windows ``pts`` (N, W, 12, 2) outside an image that the
+    ``crop`` samples' borders cut: rows drawn uniformly within ``crop_max`` of the target frame's
+    image height from its top and its bottom, the same for every frame of the window."""
+    y = pts[..., 1]
+    lo, hi = y[:, target].min(axis=1), y[:, target].max(axis=1)
+    height = hi - lo
+    top = lo + rng.uniform(0.0, crop_max, len(y)) * height
+    bottom = hi - rng.uniform(0.0, crop_max, len(y)) * height
+    out = (y < top[:, None, None]) | (y > bottom[:, None, None])
+    return np.asarray(out & crop[:, None, None])
 
 
 def detector_noise(shape: tuple[int, ...], noise: float, correlation: float, rng: np.random.Generator

@@ -14,7 +14,12 @@ from ..errors import PriorFileError
 from ..options import LimbProportions, Mode
 from .bases import PoseBases, default_bases_path
 from .pose_model import PoseModel
-from .prior import DEFAULT_OFFLINE_PRIOR_PATH, DEFAULT_TEMPORAL_PRIOR_PATH, PosePrior
+from .prior import (
+    DEFAULT_OFFLINE_CUT_PRIOR_PATH,
+    DEFAULT_OFFLINE_PRIOR_PATH,
+    DEFAULT_TEMPORAL_PRIOR_PATH,
+    PosePrior,
+)
 from .skeleton import ANTHROPOMETRIC_PROPORTIONS
 
 __all__ = ["LifterData"]
@@ -90,13 +95,15 @@ class LifterData:
 
     def cut_body_prior(self, path: str, reads_ahead: bool) -> PosePrior | None:
         """The prior of a tracked frame whose 2D lacks a shoulder in a lift reading ahead
-        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the packaged causal temporal prior, when
-        the temporal prior is the packaged offline one (``path`` ``""``, loaded from its file, not
-        given); otherwise None (a prior given or named has no known partner)."""
+        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the packaged offline prior trained with
+        bodies cut by the image's borders
+        (:data:`~pose_lifter.core.model.prior.DEFAULT_OFFLINE_CUT_PRIOR_PATH`), when the temporal
+        prior is the packaged offline one (``path`` ``""``, loaded from its file, not given);
+        otherwise None (a prior given or named has no known partner)."""
         if not reads_ahead or path or self._temporal_given:
             return None
         if self._cut is None:
-            self._cut = _causal(PosePrior.load(DEFAULT_TEMPORAL_PRIOR_PATH), "")
+            self._cut = PosePrior.load(DEFAULT_OFFLINE_CUT_PRIOR_PATH)
         return self._cut
 
 
