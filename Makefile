@@ -16,8 +16,8 @@ export OPENBLAS_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 
 .PHONY: help venv test test-fast test-fp2 lint demo bench bench-node bench-lag bench-lift bench-collection bench-prior \
-  lift-hash mutants fuzz soak experiments bases bags bag-bands prior prior-temporal prior-offline prior-offline-cut \
-  prior-fixture \
+  lift-hash mutants fuzz soak experiments bases bags bag-bands prior prior-temporal prior-offline prior-temporal-cut \
+  prior-offline-cut prior-fixture \
   actions-model accuracy rgbd-accuracy rgbd-accuracy-short rgbd-cross-action depth-calibration lock clean ros cross-action train-deps
 
 help:
@@ -35,7 +35,7 @@ help:
 	@echo "make cross-action  leave-one-class-out accuracy on unseen motion -> out/cross_action (~1 h)"
 	@echo "make prior-temporal  re-train its causal temporal variant (data/prior_mlp_w4.npz, ~25 min loaded)"
 	@echo "make prior-offline   re-train the offline variant, past and future (data/prior_mlp_w7c.npz, ~15 min)"
-	@echo "make prior-offline-cut  its variant for bodies the image cuts (data/prior_mlp_w7c_crop.npz, ~8 min idle)"
+	@echo "make prior-temporal-cut, prior-offline-cut  their variants for bodies the image cuts (data/*_crop.npz)"
 	@echo "make accuracy    paper / learned / hybrid on the evaluation split -> out/accuracy/accuracy.md (~25 min)"
 	@echo "make rgbd-accuracy   mono / naive depth lookup / fused / fused-lag at 1.5, 3, 5 m -> out/rgbd_accuracy (~6 min)"
 	@echo "make rgbd-cross-action  the same on unseen motion, per cross-action fold and their mean (~3 min; needs make cross-action)"
@@ -171,9 +171,13 @@ prior-offline: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 7 --future 3 --dropout 0.05 $(PRIOR_AUG) \
 	  --out $(PKG)/pose_lifter/data/prior_mlp_w7c.npz
 
-# the offline variant of the frames whose 2D lacks a shoulder (a person close to the camera,
-# cut by the image's top border; core/lift/hybrid.py PriorFit): a tenth of the samples cut at
-# both ends by the image's borders (~8 min)
+# the variants of the tracked frames whose 2D lacks a shoulder (a person close to the camera, cut
+# by the image's top border; core/lift/hybrid.py PriorFit): a tenth of the samples cut at both
+# ends by the image's borders (~6 and ~8 min idle)
+prior-temporal-cut: venv train-deps
+	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 4 --dropout 0.05 $(PRIOR_AUG) \
+	  --aug p_crop=0.1 --out $(PKG)/pose_lifter/data/prior_mlp_w4_crop.npz
+
 prior-offline-cut: venv train-deps
 	$(PY) tools/train_prior.py --data $(CMU_DATA) --window 7 --future 3 --dropout 0.05 $(PRIOR_AUG) \
 	  --aug p_crop=0.1 --out $(PKG)/pose_lifter/data/prior_mlp_w7c_crop.npz

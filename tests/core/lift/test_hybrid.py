@@ -202,12 +202,16 @@ def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> N
     assert 20 <= n_dropped <= 180, n_dropped  # the rule both drops and keeps on these fits
 
 
-def test_a_lift_reading_ahead_lifts_a_body_cut_at_the_shoulders_with_the_cut_bodies_prior() -> None:
-    """With the packaged priors, a lift reading ahead takes the packaged offline prior trained with
-    bodies cut by the image's borders for a tracked frame whose 2D lacks a shoulder, and the
-    offline prior for the others; a live lift, and a lift whose temporal prior was named or given,
-    have no such prior."""
-    from pose_lifter.core.model.prior import DEFAULT_OFFLINE_CUT_PRIOR_PATH, DEFAULT_TEMPORAL_PRIOR_PATH
+def test_a_body_cut_at_the_shoulders_is_lifted_with_the_cut_bodies_prior() -> None:
+    """With the packaged priors, a lift takes the temporal prior trained with bodies cut by the
+    image's borders for a tracked frame whose 2D lacks a shoulder (the offline one when it reads
+    ahead, the causal one live), and its temporal prior for the others; a lift whose temporal prior
+    was named or given has no such prior."""
+    from pose_lifter.core.model.prior import (
+        DEFAULT_CUT_PRIOR_PATH,
+        DEFAULT_OFFLINE_CUT_PRIOR_PATH,
+        DEFAULT_TEMPORAL_PRIOR_PATH,
+    )
 
     offline = Lifter(options=LifterOptions(), reads_ahead=True)
     cut = offline.cut_body_prior
@@ -233,7 +237,15 @@ def test_a_lift_reading_ahead_lifts_a_body_cut_at_the_shoulders_with_the_cut_bod
     # untracked: the single-frame prior, shoulders or not
     lacking[0] = False
     assert fit.prior_input(x, lacking, None)[0] is offline.prior
-    assert Lifter(options=LifterOptions()).cut_body_prior is None
+    live = Lifter(options=LifterOptions())
+    assert live.cut_body_prior is not None and live.cut_body_prior.future_frames == 0
+    assert live.cut_body_prior is not live.temporal_prior
+    assert live._prior_fit is not None
+    one = whole.copy()
+    one[3] = False
+    assert live._prior_fit.prior_input(x, one, (past, seen[0]))[0] is live.cut_body_prior
+    assert live._prior_fit.prior_input(x, whole, (past, seen[0]))[0] is live.temporal_prior
+    assert np.array_equal(live.cut_body_prior.weights[0], PosePrior.load(DEFAULT_CUT_PRIOR_PATH).weights[0])
     named = LifterOptions(temporal_prior_file=str(DEFAULT_TEMPORAL_PRIOR_PATH))
     assert Lifter(options=named, reads_ahead=True).cut_body_prior is None
     given = Lifter(options=LifterOptions(), temporal_prior=offline.temporal_prior, reads_ahead=True)

@@ -15,6 +15,7 @@ from ..options import LimbProportions, Mode
 from .bases import PoseBases, default_bases_path
 from .pose_model import PoseModel
 from .prior import (
+    DEFAULT_CUT_PRIOR_PATH,
     DEFAULT_OFFLINE_CUT_PRIOR_PATH,
     DEFAULT_OFFLINE_PRIOR_PATH,
     DEFAULT_TEMPORAL_PRIOR_PATH,
@@ -49,7 +50,7 @@ class LifterData:
         self._temporal_given = temporal_prior is not None  # stands for its file option's value
         self._model: PoseModel | None = None
         self._model_key: str | None = None
-        self._cut: PosePrior | None = None
+        self._cut: dict[bool, PosePrior] = {}  # the cut bodies' priors, by reads_ahead
         mp = bases.mean_pose
         #: the RMS spread of the mean pose's image positions (the lifter's input normalisation)
         self.mean_spread = float(np.sqrt(np.mean(np.sum((mp[:, :2] - mp[:, :2].mean(0)) ** 2, axis=1))))
@@ -94,17 +95,19 @@ class LifterData:
 
 
     def cut_body_prior(self, path: str, reads_ahead: bool) -> PosePrior | None:
-        """The prior of a tracked frame whose 2D lacks a shoulder in a lift reading ahead
-        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the packaged offline prior trained with
-        bodies cut by the image's borders
-        (:data:`~pose_lifter.core.model.prior.DEFAULT_OFFLINE_CUT_PRIOR_PATH`), when the temporal
-        prior is the packaged offline one (``path`` ``""``, loaded from its file, not given);
+        """The prior of a tracked frame whose 2D lacks a shoulder
+        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the packaged temporal prior trained with
+        bodies cut by the image's borders, causal
+        (:data:`~pose_lifter.core.model.prior.DEFAULT_CUT_PRIOR_PATH`) or with ``reads_ahead`` the
+        offline one (:data:`~pose_lifter.core.model.prior.DEFAULT_OFFLINE_CUT_PRIOR_PATH`), when the
+        temporal prior is the packaged one (``path`` ``""``, loaded from its file, not given);
         otherwise None (a prior given or named has no known partner)."""
-        if not reads_ahead or path or self._temporal_given:
+        if path or self._temporal_given:
             return None
-        if self._cut is None:
-            self._cut = PosePrior.load(DEFAULT_OFFLINE_CUT_PRIOR_PATH)
-        return self._cut
+        if reads_ahead not in self._cut:
+            p = DEFAULT_OFFLINE_CUT_PRIOR_PATH if reads_ahead else DEFAULT_CUT_PRIOR_PATH
+            self._cut[reads_ahead] = PosePrior.load(p) if reads_ahead else _causal(PosePrior.load(p), str(p))
+        return self._cut[reads_ahead]
 
 
 def _causal(prior: PosePrior, path: str) -> PosePrior:

@@ -44,8 +44,9 @@ from ..numeric.threads import thread_pool
 from .prior_kernels import affine_rows as _affine_rows
 from .skeleton import COUNTERPART, N_JOINTS
 
-__all__ = ["DEFAULT_OFFLINE_CUT_PRIOR_PATH", "DEFAULT_OFFLINE_PRIOR_PATH", "DEFAULT_PRIOR_PATH",
-           "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "flip_rows", "normalise_2d", "prior_features"]
+__all__ = ["DEFAULT_CUT_PRIOR_PATH", "DEFAULT_OFFLINE_CUT_PRIOR_PATH", "DEFAULT_OFFLINE_PRIOR_PATH",
+           "DEFAULT_PRIOR_PATH", "DEFAULT_TEMPORAL_PRIOR_PATH", "PosePrior", "flip_rows", "normalise_2d",
+           "prior_features"]
 
 #: The prior shipped with the package (``make prior``: tools/train_prior.py).
 DEFAULT_PRIOR_PATH: Final[Path] = Path(__file__).resolve().parents[2] / "data" / "prior_mlp.npz"
@@ -56,9 +57,11 @@ DEFAULT_TEMPORAL_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_m
 #: window of 7 frames at 30 Hz centred on the lifted one, 3 before and 3 after:
 #: ``make prior-offline``.
 DEFAULT_OFFLINE_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w7c.npz")
-#: The offline variant trained with a tenth of its samples cut by the image's top and bottom
-#: borders (a person close to the camera), for the frames whose 2D lacks a shoulder:
-#: ``make prior-offline-cut``.
+#: The causal temporal variant trained with a tenth of its samples cut by the image's top and
+#: bottom borders (a person close to the camera), for the tracked frames whose 2D lacks a
+#: shoulder: ``make prior-temporal-cut``.
+DEFAULT_CUT_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w4_crop.npz")
+#: The same of the offline variant: ``make prior-offline-cut``.
 DEFAULT_OFFLINE_CUT_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w7c_crop.npz")
 _FORMAT_VERSION: Final[int] = 1
 #: Format of a prior with residual blocks (adds the member ``blocks``).
