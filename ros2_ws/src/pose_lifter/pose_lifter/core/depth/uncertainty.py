@@ -41,41 +41,41 @@ SHAPE_STD_M: Final[NDArray[np.float64]] = np.array(
 #: distance is right. The fusion carries a reading's correction to the joints the depth does not
 #: read through it (:func:`pose_lifter.core.depth.fuse.fuse_readings`).
 SHAPE_CORR_Z: Final[NDArray[np.float64]] = np.array([
-    [1.00, 0.55, 0.27, 0.83, 0.33, 0.09, 0.05, -0.42, -0.56, -0.07, -0.46, -0.54],
-    [0.55, 1.00, 0.74, 0.33, 0.23, 0.00, -0.22, -0.49, -0.47, -0.37, -0.49, -0.39],
-    [0.27, 0.74, 1.00, 0.09, 0.00, -0.03, -0.32, -0.34, -0.33, -0.45, -0.38, -0.28],
-    [0.83, 0.33, 0.09, 1.00, 0.55, 0.27, -0.07, -0.46, -0.54, 0.05, -0.42, -0.56],
-    [0.33, 0.23, 0.00, 0.55, 1.00, 0.74, -0.37, -0.49, -0.39, -0.22, -0.49, -0.47],
-    [0.09, 0.00, -0.03, 0.27, 0.74, 1.00, -0.45, -0.38, -0.28, -0.32, -0.34, -0.33],
+    [1.00, 0.56, 0.27, 0.83, 0.33, 0.09, 0.05, -0.42, -0.56, -0.07, -0.46, -0.55],
+    [0.56, 1.00, 0.73, 0.33, 0.23, 0.00, -0.22, -0.48, -0.47, -0.37, -0.49, -0.39],
+    [0.27, 0.73, 1.00, 0.09, 0.00, -0.04, -0.32, -0.34, -0.33, -0.45, -0.37, -0.28],
+    [0.83, 0.33, 0.09, 1.00, 0.56, 0.27, -0.07, -0.46, -0.55, 0.05, -0.42, -0.56],
+    [0.33, 0.23, 0.00, 0.56, 1.00, 0.73, -0.37, -0.49, -0.39, -0.22, -0.48, -0.47],
+    [0.09, 0.00, -0.04, 0.27, 0.73, 1.00, -0.45, -0.37, -0.28, -0.32, -0.34, -0.33],
     [0.05, -0.22, -0.32, -0.07, -0.37, -0.45, 1.00, 0.30, 0.07, 0.81, 0.16, 0.00],
-    [-0.42, -0.49, -0.34, -0.46, -0.49, -0.38, 0.30, 1.00, 0.72, 0.16, 0.08, -0.03],
-    [-0.56, -0.47, -0.33, -0.54, -0.39, -0.28, 0.07, 0.72, 1.00, 0.00, -0.03, 0.01],
+    [-0.42, -0.48, -0.34, -0.46, -0.49, -0.37, 0.30, 1.00, 0.72, 0.16, 0.08, -0.03],
+    [-0.56, -0.47, -0.33, -0.55, -0.39, -0.28, 0.07, 0.72, 1.00, 0.00, -0.03, 0.01],
     [-0.07, -0.37, -0.45, 0.05, -0.22, -0.32, 0.81, 0.16, 0.00, 1.00, 0.30, 0.07],
-    [-0.46, -0.49, -0.38, -0.42, -0.49, -0.34, 0.16, 0.08, -0.03, 0.30, 1.00, 0.72],
-    [-0.54, -0.39, -0.28, -0.56, -0.47, -0.33, 0.00, -0.03, 0.01, 0.07, 0.72, 1.00],
+    [-0.46, -0.49, -0.37, -0.42, -0.48, -0.34, 0.16, 0.08, -0.03, 0.30, 1.00, 0.72],
+    [-0.55, -0.39, -0.28, -0.56, -0.47, -0.33, 0.00, -0.03, 0.01, 0.07, 0.72, 1.00],
 ])
 #: The bins of a body by how many of its 12 joints the 2D shows (each the least count of its bin):
 #: a body cut by the image's border (a person close to the camera) or hidden in part is lifted
 #: and placed worse.
 OBSERVED_BINS: Final[tuple[int, ...]] = (12, 10, 8, 0)
 #: Per bin of :data:`OBSERVED_BINS`: the shape's spread relative to :data:`SHAPE_STD_M`.
-SHAPE_FACTOR: Final[NDArray[np.float64]] = np.array([1.000, 1.077, 1.700, 1.953])
+SHAPE_FACTOR: Final[NDArray[np.float64]] = np.array([1.000, 1.076, 1.303, 1.476])
 #: Per bin of :data:`OBSERVED_BINS`: relative standard deviation of a monocular placement's
 #: distance (the leg length assumed, the image scale measured): the body's position along the rays.
-MONOCULAR_SCALE_STD: Final[NDArray[np.float64]] = np.array([0.055, 0.060, 0.378, 0.430])
+MONOCULAR_SCALE_STD: Final[NDArray[np.float64]] = np.array([0.055, 0.059, 0.117, 0.147])
 #: Per bin of :data:`OBSERVED_BINS`: how much less certain a joint the 2D did not show (weight
 #: below the threshold) is than the bin's shown joints, along x, y and z (a joint outside the image
 #: is where the lift guesses it, across the image too: most along the image's vertical, where an
 #: upright body leaves it).
 UNOBSERVED_FACTOR: Final[NDArray[np.float64]] = np.array(
-    [[1.00, 1.00, 1.00], [1.40, 1.46, 1.12], [2.00, 5.59, 1.45], [1.98, 4.96, 1.34]])
+    [[1.00, 1.00, 1.00], [1.42, 1.45, 1.11], [2.12, 2.32, 1.25], [2.28, 2.47, 1.22]])
 #: The scale of a track's fused joints' standard deviations averaged over ``pose-lifter lift``'s
 #: window (:func:`pose_lifter.core.depth.smooth.smooth_fused`): the window averages the frames'
 #: reading errors, so the smoothed joints err less than each frame's own deviations say.
-SMOOTHED_STD_FACTOR: Final[float] = 0.908
+SMOOTHED_STD_FACTOR: Final[float] = 0.920
 #: The same of the lagged node's window (:func:`pose_lifter.core.depth.smooth.smooth_fused_at`:
 #: the frames before a frame refined, those its lag holds after it as lifted).
-LAGGED_STD_FACTOR: Final[float] = 0.866
+LAGGED_STD_FACTOR: Final[float] = 0.871
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
 
