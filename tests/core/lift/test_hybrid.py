@@ -3,6 +3,9 @@ its target kernel, its bases and iteration cap."""
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 import tolerances as tol
@@ -202,11 +205,11 @@ def test_the_outlier_pass_flags_in_a_batch_what_it_flags_person_by_person() -> N
     assert 20 <= n_dropped <= 180, n_dropped  # the rule both drops and keeps on these fits
 
 
-def test_a_body_cut_at_the_shoulders_is_lifted_with_the_cut_bodies_prior() -> None:
+def test_a_body_cut_at_the_shoulders_is_lifted_with_the_cut_bodies_prior(tmp_path: Path) -> None:
     """With the packaged priors, a lift takes the temporal prior trained with bodies cut by the
     image's borders for a tracked frame whose 2D lacks a shoulder (the offline one when it reads
-    ahead, the causal one live), and its temporal prior for the others; a lift whose temporal prior
-    was named or given has no such prior."""
+    ahead, the causal one live), and its temporal prior for the others; a named temporal prior has
+    the partner beside its file (NAME_crop.npz), if there is one; a given one has none."""
     from pose_lifter.core.model.prior import (
         DEFAULT_CUT_PRIOR_PATH,
         DEFAULT_OFFLINE_CUT_PRIOR_PATH,
@@ -246,7 +249,14 @@ def test_a_body_cut_at_the_shoulders_is_lifted_with_the_cut_bodies_prior() -> No
     assert live._prior_fit.prior_input(x, one, (past, seen[0]))[0] is live.cut_body_prior
     assert live._prior_fit.prior_input(x, whole, (past, seen[0]))[0] is live.temporal_prior
     assert np.array_equal(live.cut_body_prior.weights[0], PosePrior.load(DEFAULT_CUT_PRIOR_PATH).weights[0])
-    named = LifterOptions(temporal_prior_file=str(DEFAULT_TEMPORAL_PRIOR_PATH))
-    assert Lifter(options=named, reads_ahead=True).cut_body_prior is None
+    # a named temporal prior: its NAME_crop partner beside it, if there is one
+    named = Lifter(options=LifterOptions(temporal_prior_file=str(DEFAULT_TEMPORAL_PRIOR_PATH)))
+    assert named.cut_body_prior is not None
+    assert np.array_equal(named.cut_body_prior.weights[0], live.cut_body_prior.weights[0])
+    alone = tmp_path / "mine_w4.npz"
+    shutil.copy(DEFAULT_TEMPORAL_PRIOR_PATH, alone)
+    assert Lifter(options=LifterOptions(temporal_prior_file=str(alone))).cut_body_prior is None
+    shutil.copy(DEFAULT_CUT_PRIOR_PATH, tmp_path / "mine_w4_crop.npz")
+    assert Lifter(options=LifterOptions(temporal_prior_file=str(alone))).cut_body_prior is not None
     given = Lifter(options=LifterOptions(), temporal_prior=offline.temporal_prior, reads_ahead=True)
     assert given.cut_body_prior is None

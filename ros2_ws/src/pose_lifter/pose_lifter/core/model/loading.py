@@ -8,6 +8,8 @@ other options change keeps them.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..errors import PriorFileError
@@ -23,7 +25,7 @@ from .prior import (
 )
 from .skeleton import ANTHROPOMETRIC_PROPORTIONS
 
-__all__ = ["LifterData"]
+__all__ = ["LifterData", "cut_partner"]
 
 
 class LifterData:
@@ -50,7 +52,7 @@ class LifterData:
         self._temporal_given = temporal_prior is not None  # stands for its file option's value
         self._model: PoseModel | None = None
         self._model_key: str | None = None
-        self._cut: dict[bool, PosePrior] = {}  # the cut bodies' priors, by reads_ahead
+        self._cut: dict[tuple[str, bool], PosePrior] = {}  # the cut bodies' priors, by file
         mp = bases.mean_pose
         #: the RMS spread of the mean pose's image positions (the lifter's input normalisation)
         self.mean_spread = float(np.sqrt(np.mean(np.sum((mp[:, :2] - mp[:, :2].mean(0)) ** 2, axis=1))))
@@ -96,18 +98,30 @@ class LifterData:
 
     def cut_body_prior(self, path: str, reads_ahead: bool) -> PosePrior | None:
         """The prior of a tracked frame whose 2D lacks a shoulder
-        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the packaged temporal prior trained with
-        bodies cut by the image's borders, causal
-        (:data:`~pose_lifter.core.model.prior.DEFAULT_CUT_PRIOR_PATH`) or with ``reads_ahead`` the
-        offline one (:data:`~pose_lifter.core.model.prior.DEFAULT_OFFLINE_CUT_PRIOR_PATH`), when the
-        temporal prior is the packaged one (``path`` ``""``, loaded from its file, not given);
-        otherwise None (a prior given or named has no known partner)."""
-        if path or self._temporal_given:
+        (:class:`~pose_lifter.core.lift.hybrid.PriorFit`): the temporal prior's partner trained
+        with bodies cut by the image's borders, the file of its name with ``_crop`` before the
+        suffix (:func:`cut_partner`): of the packaged temporal prior (``path`` ``""``: causal, or
+        with ``reads_ahead`` the offline one), or of the file ``path`` names when it exists;
+        otherwise None, and None for a temporal prior given in memory."""
+        if self._temporal_given:
             return None
-        if reads_ahead not in self._cut:
-            p = DEFAULT_OFFLINE_CUT_PRIOR_PATH if reads_ahead else DEFAULT_CUT_PRIOR_PATH
-            self._cut[reads_ahead] = PosePrior.load(p) if reads_ahead else _causal(PosePrior.load(p), str(p))
-        return self._cut[reads_ahead]
+        if path:
+            partner = cut_partner(Path(path))
+        else:
+            partner = DEFAULT_OFFLINE_CUT_PRIOR_PATH if reads_ahead else DEFAULT_CUT_PRIOR_PATH
+        if not partner.is_file():
+            return None
+        key = (str(partner), reads_ahead)
+        if key not in self._cut:
+            prior = PosePrior.load(partner)
+            self._cut[key] = prior if reads_ahead else _causal(prior, str(partner))
+        return self._cut[key]
+
+
+def cut_partner(path: Path) -> Path:
+    """The file of a temporal prior's partner for bodies the image cuts: ``NAME_crop.npz`` beside
+    ``NAME.npz``."""
+    return path.with_name(f"{path.stem}_crop{path.suffix}")
 
 
 def _causal(prior: PosePrior, path: str) -> PosePrior:

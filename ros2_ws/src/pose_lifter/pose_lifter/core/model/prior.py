@@ -60,7 +60,7 @@ DEFAULT_OFFLINE_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_ml
 #: The causal temporal variant trained with a tenth of its samples cut by the image's top and
 #: bottom borders (a person close to the camera), for the tracked frames whose 2D lacks a
 #: shoulder: ``make prior-temporal-cut``.
-DEFAULT_CUT_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w4_crop.npz")
+DEFAULT_CUT_PRIOR_PATH: Final[Path] = DEFAULT_TEMPORAL_PRIOR_PATH.with_name("prior_mlp_w4_crop.npz")
 #: The same of the offline variant: ``make prior-offline-cut``.
 DEFAULT_OFFLINE_CUT_PRIOR_PATH: Final[Path] = DEFAULT_PRIOR_PATH.with_name("prior_mlp_w7c_crop.npz")
 _FORMAT_VERSION: Final[int] = 1
