@@ -280,7 +280,9 @@ class PriorOptions(_Validated):
         "Hybrid/learned, tracked: frames that follow a track's previous ones use the causal "
         "temporal prior (last 4 frames, trained at 30 Hz)."))
     temporal_prior_file: str = field(default="", metadata=_meta(
-        "Temporal prior weights (.npz); empty = the packaged default.", max_length=MAX_PATH_LENGTH))
+        "Temporal prior weights (.npz); empty = the packaged default. A NAME_crop.npz beside it (a prior "
+        "trained on bodies the image cuts) lifts the tracked frames whose 2D lacks a shoulder.",
+        max_length=MAX_PATH_LENGTH))
     prior_weight_xy: float = field(default=0.6, metadata=_meta(
         "Hybrid: weight of the prior's image positions in the L1 objective.", 0.0, _WEIGHT))
     prior_weight_z: float = field(default=0.6, metadata=_meta(
