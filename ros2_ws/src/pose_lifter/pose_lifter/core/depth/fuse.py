@@ -416,10 +416,10 @@ def shape_scale(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[np.fl
     readings, ``r_j = d_j - g_j . theta`` and ``s_j^2 = v_j + (k shape_z_j)^2`` (the reading's
     variance and the shape's in depth, ``k = theta[0]``), ``nu0`` :data:`SHAPE_SCALE_DOF`; a
     residual beyond the gate counts as the gate (such a reading is another surface's). The shape
-    constants (:mod:`~pose_lifter.core.depth.uncertainty`) are the evaluation's averages: a body
-    whose readings sit closer to its lifted shape than they say has its deviations narrowed, and
-    one they disagree with (motion the prior never saw: on the cross-action folds the prior-filled
-    joints fell out of the two-sigma band) widened. 1 for a body without a reading.
+    constants (:mod:`~pose_lifter.core.depth.uncertainty`) are averages measured on known motion:
+    a body whose readings sit closer to its lifted shape than they say has its deviations
+    narrowed, and one they disagree with (a motion the prior never saw, whose shape errs more)
+    widened. 1 for a body without a reading.
 
     Parameters
     ----------
@@ -438,8 +438,9 @@ def shape_scale(d: NDArray[np.float64], v: NDArray[np.float64], g: NDArray[np.fl
     -------
     ndarray, shape (n,)
     """
-    r = np.where(have, d - np.einsum("njc,nc->nj", g, theta), 0.0)
-    s2 = np.where(have, v + (theta[:, :1] * shape_z) ** 2, 1.0)
+    field = np.einsum("njc,nc->nj", np.where(have[..., None], g, 0.0), theta)
+    r = np.where(have, d, 0.0) - np.where(have, field, 0.0)
+    s2 = np.where(have, v, 1.0) + np.where(have, theta[:, :1] * shape_z, 0.0) ** 2
     z2 = np.where(have, np.minimum(r * r / s2, gate * gate), 0.0)
     return np.asarray(np.sqrt((SHAPE_SCALE_DOF + z2.sum(axis=1)) / (SHAPE_SCALE_DOF + have.sum(axis=1))))
 

@@ -174,10 +174,11 @@ class Lifter:
 
     @property
     def cut_body_prior(self) -> PosePrior | None:
-        """The prior of the tracked frames whose 2D lacks a shoulder, with the packaged priors: the
-        temporal prior (causal, or offline when the lift reads ahead) trained with bodies cut by
-        the image's borders (:meth:`~pose_lifter.core.model.loading.LifterData.cut_body_prior`), or
-        None: the temporal prior lifts every tracked frame."""
+        """The prior of the tracked frames whose 2D lacks a shoulder: the temporal prior's partner
+        (causal, or offline when the lift reads ahead) trained with bodies cut by the image's
+        borders, ``NAME_crop.npz`` beside its file
+        (:meth:`~pose_lifter.core.model.loading.LifterData.cut_body_prior`), or None: the temporal
+        prior lifts every tracked frame."""
         if not self._options.temporal_prior or self._options.mode == "paper":
             return None
         return self._data.cut_body_prior(self._options.temporal_prior_file, self.reads_ahead)

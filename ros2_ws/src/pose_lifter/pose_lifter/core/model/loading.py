@@ -3,7 +3,8 @@
 :class:`LifterData` holds the pose bases and, on first use, the pose-step model of their limb
 targets and the learned priors: each is loaded or built again only when the option that names it
 (``limb_proportions``, ``prior_file``, ``temporal_prior_file``) changes, so that a lifter whose
-other options change keeps them.
+other options change keeps them; and the temporal prior's partner for bodies the image cuts
+(``NAME_crop.npz`` beside it, :func:`cut_partner`).
 """
 
 from __future__ import annotations
@@ -94,7 +95,6 @@ class LifterData:
         if not reads_ahead:
             _causal(self._temporal, path)
         return self._temporal
-
 
     def cut_body_prior(self, path: str, reads_ahead: bool) -> PosePrior | None:
         """The prior of a tracked frame whose 2D lacks a shoulder
