@@ -254,4 +254,4 @@ train-deps: venv
 # docs/cross_action.md)
 cross-action: venv train-deps
 	$(PY) tools/cross_action.py --data $(CMU_DATA) --epochs 6 --samples 40000 --frames 60 --segments 6 \
-	  --views 2 --temporal --offline --intrinsics --out out/cross_action
+	  --views 2 --temporal --cut --offline --intrinsics --out out/cross_action

@@ -56,6 +56,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from pose_lifter.core.errors import PriorFileError
 from pose_lifter.core.model.bases import PoseBases, default_bases_path
+from pose_lifter.core.model.loading import cut_partner
 from pose_lifter.core.model.prior import PosePrior
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.cmu import load_trial, trials_by_action
@@ -67,6 +68,8 @@ METHODS = ("flat", "learned", "learned-t", "learned-offline", "hybrid", "hybrid-
 AUGMENTATIONS: dict[str, Augmentation] = {"views": Augmentation(), "generalise": GENERALISE}
 #: Dropout of a fold's temporal priors (``make prior-temporal``'s, ``make prior-offline``'s).
 TEMPORAL_DROPOUT = 0.05
+#: The share of a cut bodies' prior's samples cut by the image's borders (``make prior-temporal-cut``).
+CUT_SHARE = 0.1
 #: A fold's offline prior: its window and the frames of it after the lifted one (``make prior-offline``).
 OFFLINE_WINDOW, OFFLINE_FUTURE = 7, 3
 
@@ -76,7 +79,7 @@ def fold_training(args: argparse.Namespace) -> dict[str, Any]:
     its metadata hold the same)."""
     spec: dict[str, Any] = {"model": args.model, "augment": args.augment, "epochs": args.epochs,
                             "samples_per_epoch": args.samples, "seed": args.seed, "frame_step": args.step,
-                            "augmentation": dict(AUGMENTATIONS[args.augment].__dict__)}
+                            "augmentation": _augmentation_spec(AUGMENTATIONS[args.augment])}
     if args.model == "residual":
         spec.update(width=args.width, blocks=args.blocks, dropout=args.dropout)
     else:
@@ -84,13 +87,28 @@ def fold_training(args: argparse.Namespace) -> dict[str, Any]:
     return spec
 
 
+def _augmentation_spec(aug: Augmentation) -> dict[str, Any]:
+    """An augmentation's fields as a fold prior's metadata hold them; the crop's (off by default)
+    only when on, so the priors saved before it existed are reused."""
+    spec = dict(aug.__dict__)
+    if not spec.get("p_crop"):
+        spec.pop("p_crop", None)
+        spec.pop("crop_max", None)
+    return spec
+
+
 def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, path: Path, window: int = 1,
-               future: int = 0) -> PosePrior:
+               future: int = 0, crop: float = 0.0) -> PosePrior:
     """Train (or reuse) the prior of the fold without class ``cls``, saved to ``path``; with
     ``window`` > 1 its temporal variant (as ``make prior-temporal``: the track's last ``window``
     frames at 30 Hz, dropout 0.05; with ``future`` > 0 as ``make prior-offline``, ``future`` of
-    them after the lifted one)."""
+    them after the lifted one); with ``crop`` that share of its samples cut by the image's borders
+    (``Augmentation.p_crop``, as ``make prior-temporal-cut``)."""
     spec = fold_training(args)
+    if crop:
+        from dataclasses import replace as with_field
+
+        spec["augmentation"] = _augmentation_spec(with_field(AUGMENTATIONS[args.augment], p_crop=crop))
     step, dropout = args.step, args.dropout
     if window > 1:
         step, dropout = 4, TEMPORAL_DROPOUT
@@ -114,6 +132,10 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     print(f"[{cls}] training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames), "
           f"validation {len(val_ids)} trials", flush=True)
     aug = AUGMENTATIONS[args.augment]
+    if crop:
+        from dataclasses import replace as with_field
+
+        aug = with_field(aug, p_crop=crop)
 
     def log(s: str) -> None:
         print(f"[{cls}] {s}", flush=True)
@@ -234,6 +256,10 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--folds", type=Path, default=None, help="fold priors' directory (default OUT/folds)")
     ap.add_argument("--temporal", action="store_true",
                     help="also train each fold's causal temporal prior and lift with it (as the node does)")
+    ap.add_argument("--cut", action="store_true",
+                    help="with --temporal, also train each fold's temporal prior for bodies the image cuts "
+                    "(NAME_w4_crop.npz: the frames lacking a shoulder are lifted with it, as the packaged "
+                    "one lifts them)")
     ap.add_argument("--offline", action="store_true",
                     help="also train each fold's offline prior (past and future frames) and lift the "
                     "-offline methods with it (as pose-lifter lift does)")
@@ -263,6 +289,9 @@ def _train_fold_priors(cls: str, pool: dict[str, list[str]], args: argparse.Name
     train_fold(cls, pool, args, path)
     if args.temporal:
         train_fold(cls, pool, args, path.with_name(f"{cls}_w4.npz"), window=4)
+        if args.cut:  # its partner for bodies the image cuts, which the lift finds beside it
+            cut = cut_partner(path.with_name(f"{cls}_w4.npz"))
+            train_fold(cls, pool, args, cut, window=4, crop=CUT_SHARE)
     if args.offline:
         train_fold(cls, pool, args, path.with_name(f"{cls}_w7c.npz"), window=OFFLINE_WINDOW,
                    future=OFFLINE_FUTURE)
