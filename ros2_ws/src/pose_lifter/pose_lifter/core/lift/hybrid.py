@@ -151,12 +151,12 @@ class PriorFit:
         lift badly. On those frames the lift takes the same prior trained with a tenth of its
         samples cut at both ends by the image's borders
         (:attr:`~pose_lifter.core.lift.lifter.Lifter.cut_body_prior`). On the evaluation tool's
-        validation tracks at 1.5 m, P-MPJPE: the node's fused lift 111.2 -> 74.9 mm, its
-        monocular one 110.4 -> 75.0, ``fused-offline`` 107.3 -> 72.3 (119.6 with the offline
-        prior on every such frame); 3 and 5 m and the accuracy table's conditions within 0.1 mm
-        (``learned-t`` ``missing15`` +0.5). The cut bodies' prior on every frame gives the offline
-        lift 62.0 at 1.5 m but 0.5-1.3 mm more on the bodies the image shows whole (``lowercut``
-        +1.3), so it takes only the frames that lack a shoulder.
+        validation tracks at 1.5 m, P-MPJPE with it and with the temporal prior on every frame:
+        the node's fused lift 74.9 and 111.2 mm, its monocular one 75.0 and 110.4,
+        ``fused-offline`` 72.3 and 119.6; at 3 and 5 m and in the accuracy table's conditions the
+        two within 0.1 mm (``learned-t`` ``missing15`` 0.5). The cut bodies' prior on every frame
+        gives the offline lift 62.0 at 1.5 m but 0.5-1.3 mm more on the bodies the image shows
+        whole (``lowercut`` 1.3), so it takes only the frames that lack a shoulder.
     """
 
     def __init__(self, options: LifterOptions, prior: PosePrior, temporal_prior: PosePrior | None,
