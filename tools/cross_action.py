@@ -46,6 +46,7 @@ import os
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -104,11 +105,9 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     frames at 30 Hz, dropout 0.05; with ``future`` > 0 as ``make prior-offline``, ``future`` of
     them after the lifted one); with ``crop`` that share of its samples cut by the image's borders
     (``Augmentation.p_crop``, as ``make prior-temporal-cut``)."""
+    aug = replace(AUGMENTATIONS[args.augment], p_crop=crop)
     spec = fold_training(args)
-    if crop:
-        from dataclasses import replace as with_field
-
-        spec["augmentation"] = _augmentation_spec(with_field(AUGMENTATIONS[args.augment], p_crop=crop))
+    spec["augmentation"] = _augmentation_spec(aug)
     step, dropout = args.step, args.dropout
     if window > 1:
         step, dropout = 4, TEMPORAL_DROPOUT
@@ -131,11 +130,6 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
     val = [load_trial(t, args.data, step=step) for t in val_ids]
     print(f"[{cls}] training on {len(fit_ids)} trials ({sum(len(s) for s in fit)} frames), "
           f"validation {len(val_ids)} trials", flush=True)
-    aug = AUGMENTATIONS[args.augment]
-    if crop:
-        from dataclasses import replace as with_field
-
-        aug = with_field(aug, p_crop=crop)
 
     def log(s: str) -> None:
         print(f"[{cls}] {s}", flush=True)
@@ -153,7 +147,6 @@ def train_fold(cls: str, pool: dict[str, list[str]], args: argparse.Namespace, p
                  "validation_trials": val_ids, "frame_step": step,
                  "command": "python tools/cross_action.py " + " ".join(sys.argv[1:]),
                  "wall_seconds": round(time.perf_counter() - t0, 1)})
-    from dataclasses import replace
     prior = replace(prior, metadata=meta)
     path.parent.mkdir(parents=True, exist_ok=True)
     prior.save(path)

@@ -62,7 +62,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.place import place_people
-from pose_lifter.core.depth.smooth import LagWindow, smooth_fused
+from pose_lifter.core.depth.smooth import LagWindow, scaled_joints, smooth_fused
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.results import LiftResult
@@ -325,7 +325,7 @@ class RgbdEvaluator:
                    if m in self.methods}
         out = {m: _Method(n) for m in METHODS}
         live_lag = _Method(n)
-        whole = {m: np.zeros(n, dtype=bool) for m in refined}  # the frames whose 2D shows the body whole
+        observed = {m: np.zeros((n, N_JOINTS), dtype=bool) for m in refined}  # the joints the 2D shows
         up = view_rotation(*track.camera[:2]) @ np.array([0.0, 1.0, 0.0])  # the world's up, camera frame
         scene = depth_model.scene_backgrounds(truth[None], np.repeat(up[None], n, axis=0))
         for i in range(n):
@@ -349,7 +349,7 @@ class RgbdEvaluator:
                 if tl is not None and np.isfinite(poses[i]).all():
                     points = labelled_2d(px[i], conf[i], tl.swapped)[0][None]
                     out[m].put(i, *fuse_person(depth, points, tl.result, poses[i] / leg_m[i]))
-                    whole[m][i] = bool((tl.result.weights > 0).all())
+                    observed[m][i] = tl.result.weights > 0
                     if m == "fused-lag":  # the frame as lifted, fused: what the lag holds of it
                         live_lag.put(i, *fuse_person(depth, points, tl.result, tl.result.pose_camera))
         record: dict[str, Any] = {"track": track.name, "camera": track.camera, "distance": distance, "n": n}
@@ -359,7 +359,7 @@ class RgbdEvaluator:
             f = out[m]
             frames = (f.joints - truth) / f.std
             lifted = np.asarray(np.isfinite(f.joints).all(axis=(1, 2)), dtype=bool)
-            scaled = whole[m][:, None] | f.read  # window_std_factor's joints
+            scaled = scaled_joints(observed[m], f.read)
             factor = np.where(scaled, self.std_factors[m], 1.0)
             if m == "fused-lag":  # the lagged node's window
                 out[m] = f = _lag_window(f, live_lag, stamps, factor)

@@ -443,13 +443,13 @@ def _smoothed_fused(chain: list[Item], outcomes: list[LiftedSkeleton | SkipSkele
     """The chain's skeletons placed on a depth image with their fused joints averaged over the
     centred window (:func:`~pose_lifter.core.depth.smooth.smooth_fused`: each frame's reading
     errors averaged out); the others as given."""
-    placed = [(i, d) for i, d in enumerate(outcomes)
+    placed = [(i, d, d.depth) for i, d in enumerate(outcomes)
               if isinstance(d, LiftedSkeleton) and d.depth is not None and d.std_m is not None]
     if len(placed) < 2:
         return outcomes
-    rows, fused = [i for i, _ in placed], [d for _, d in placed]
+    rows, fused = [i for i, _, _ in placed], [d for _, d, _ in placed]
     factor = window_std_factor(np.array([s.result.weights > 0 for s in fused]),
-                               np.array([np.isfinite(s.depth.depth_m) for s in fused if s.depth is not None]),
+                               np.array([np.isfinite(r.depth_m) for _, _, r in placed]),
                                SMOOTHED_STD_FACTOR)
     joints, std = smooth_fused(np.array([s.joints_m for s in fused]), np.array([s.std_m for s in fused]),
                                np.array([chain[i].stamp_ns for i in rows], dtype=np.int64),

@@ -15,8 +15,9 @@ and the partners read one at a time while the chains are lifted.
 * :class:`DepthFrames`: the partners read while the chains are lifted, one image decoded at a
   time (:func:`~pose_lifter.messages.depth.read_depth`, a 16-bit image kept in millimetres: a
   view of the chunk's bytes, which it keeps while it is held; checked against the ``camera_info``
-  size at the message), so memory is bounded by one image (and the one chunk that holds it)
-  whatever the bag's length; in a single chunked MCAP file each image is read from its own chunk through
+  size at the message), so memory is bounded by the images of one step of the lift (at most
+  :data:`HELD_IMAGES`, and the chunks that hold them) whatever the bag's length; in a single
+  chunked MCAP file each image is read from its own chunk through
   the file's index (:mod:`pose_lifter.offline.mcap_index`: no pass over the topic, so worker
   processes lifting different tracks decompress different chunks), elsewhere through the topic in
   message order. A worker process opens its own reader. A refused image (see

@@ -35,7 +35,7 @@ from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_F
 from pose_lifter.core.model.skeleton import N_JOINTS
 from pose_lifter.core.track.smoothing import centred_smoothing
 
-__all__ = ["Fused", "LagWindow", "smooth_fused", "smooth_fused_at", "window_std_factor"]
+__all__ = ["Fused", "LagWindow", "scaled_joints", "smooth_fused", "smooth_fused_at", "window_std_factor"]
 
 #: One frame of a track's fused joints: (stamp_ns, joints (12, 3) metres, std (12, 3) metres).
 Fused: TypeAlias = tuple[int, NDArray[np.float64], NDArray[np.float64]]
@@ -140,7 +140,9 @@ class LagWindow:
         back)."""
         stamp, reach = frame[0], round(3 * self.sigma_s * 1e9)
         past = self._past.setdefault(track_id, deque())
-        while past and (past[0][0] < stamp - reach or past[-1][0] > stamp):
+        if past and past[-1][0] > stamp:  # the input clock stepped back
+            past.clear()
+        while past and past[0][0] < stamp - reach:
             past.popleft()
         later = [f for f in after if stamp < f[0] <= stamp + reach]
         joints, std = smooth_fused_at(list(past), frame, later, self.sigma_s, self.gap_s, std_factor)
@@ -156,11 +158,16 @@ class LagWindow:
         self._past.clear()
 
 
+def scaled_joints(observed: NDArray[np.bool_], read: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The joints (..., 12) a window's scale applies to: those ``read`` from depth, and every joint
+    of a body the 2D shows whole (every joint ``observed``); the others are the lift's guesses of a
+    body the image cuts, whose errors last over the frames (module docstring)."""
+    whole = np.asarray(observed, dtype=bool).all(axis=-1, keepdims=True)
+    return np.asarray(whole | np.asarray(read, dtype=bool))
+
+
 def window_std_factor(observed: NDArray[np.bool_], read: NDArray[np.bool_], factor: float
                       ) -> NDArray[np.float64]:
-    """Per joint, the scale of its averaged standard deviation: ``factor`` for a joint ``read``
-    from depth and for every joint of a body the 2D shows whole (every joint ``observed``), 1 for
-    the other joints of a body the image cuts (module docstring); ``observed`` and ``read`` (..., 12),
-    the result of their shape."""
-    whole = np.asarray(observed, dtype=bool).all(axis=-1, keepdims=True)
-    return np.where(whole | np.asarray(read, dtype=bool), factor, 1.0)
+    """Per joint, the scale of its averaged standard deviation: ``factor`` on the
+    :func:`scaled_joints` of ``observed`` and ``read`` (..., 12), 1 elsewhere; their shape."""
+    return np.where(scaled_joints(observed, read), factor, 1.0)
