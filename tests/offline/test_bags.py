@@ -186,11 +186,13 @@ def test_a_looping_clock_keeps_each_loops_own_offline_update() -> None:
     from dataclasses import replace
 
     from pose_lifter.core import Lifter, LifterOptions
-    from pose_lifter.offline.lift import _read_keypoints, lift_messages
+    from pose_lifter.offline.first_pass import FirstPassPlan, read_first_pass
+    from pose_lifter.offline.lift import lift_messages
     from pose_lifter.offline.settings import LiftSettings
 
     n = 45  # 1.5 s at 30 Hz: the replay jumps back further than the track timeout (1 s)
-    first = _read_keypoints(BAGS / "punch_outliers.mcap", "/keypoints_2d", "/camera_info", 2 * n)
+    plan = FirstPassPlan("/keypoints_2d", "/camera_info", 2 * n, None)
+    first = read_first_pass(BAGS / "punch_outliers.mcap", plan)
     kp, infos = first.keypoints, first.infos
     stamps = [s for s, _ in kp[:n]]
 

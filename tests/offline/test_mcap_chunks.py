@@ -23,7 +23,9 @@ from pose_lifter.messages import typestore
 from pose_lifter.messages.convert import stamp_to_ns
 from pose_lifter.messages.names import IMAGE, TOPIC_DEPTH, TOPIC_KEYPOINTS
 from pose_lifter.offline import bags, chunk_copy, lift, mcap_index
+from pose_lifter.offline.bags import BagError
 from pose_lifter.offline.depth import HEADER_BYTES, header_stamp, pair_depth
+from pose_lifter.offline.first_pass import FirstPassPlan, read_ahead, read_first_pass
 from pose_lifter.offline.settings import LiftSettings
 
 REPO = Path(__file__).resolve().parents[2]
@@ -223,8 +225,21 @@ def test_the_depth_stamps_read_with_the_keypoints_pair_as_a_pass_of_their_own(tm
     # the keypoints pass reads the same stamps, of every image even when the keypoints are cut,
     # from each image's first bytes alone
     for cut in (None, 3):
-        first = lift._read_keypoints(bag, TOPIC_KEYPOINTS, "/camera_info", cut, (TOPIC_DEPTH, IMAGE))
+        plan = FirstPassPlan(TOPIC_KEYPOINTS, "/camera_info", cut, (TOPIC_DEPTH, IMAGE))
+        first = read_first_pass(bag, plan)
         assert first.depth_stamps == stamps and len(first.keypoints) == (cut or len(kp))
+        # read ahead in a forked process: the same pass
+        ahead = read_ahead(bag, plan)()
+        assert ahead.depth_stamps == first.depth_stamps
+        assert [s for s, _ in ahead.keypoints] == [s for s, _ in first.keypoints]
+        for (_, a), (_, b) in zip(ahead.keypoints, first.keypoints, strict=True):
+            assert (a.header, a.layout, [s.track_id for s in a.skeletons]) == \
+                (b.header, b.layout, [s.track_id for s in b.skeletons])
+            for x, y in zip(a.skeletons, b.skeletons, strict=True):
+                np.testing.assert_array_equal(x.xyc, y.xyc)
+        assert [s for s, _ in ahead.infos] == [s for s, _ in first.infos]
+    with pytest.raises(BagError, match="has no topic"):  # what the pass raises, raised when asked
+        read_ahead(bag, FirstPassPlan("/none", None, None, (TOPIC_DEPTH, IMAGE)))()
     sizes_read = [x.msg for x in bags.read_messages(bag, [TOPIC_DEPTH], {IMAGE: len}, {IMAGE: HEADER_BYTES})]
     assert len(sizes_read) == len(kp) and max(sizes_read) <= HEADER_BYTES
     # read from their chunks or as a stream: the same images, the stream read once

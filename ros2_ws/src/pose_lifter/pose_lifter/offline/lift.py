@@ -37,7 +37,6 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult
 from pose_lifter.messages import cdr, hri
@@ -69,7 +68,6 @@ from pose_lifter.offline.bags import (
     bag_topics,
     check_output,
     is_rosbag2_dir,
-    read_messages,
     read_raw,
 )
 from pose_lifter.offline.chains import (
@@ -84,14 +82,8 @@ from pose_lifter.offline.chains import (
     split_chains,
 )
 from pose_lifter.offline.chunk_copy import copy_with
-from pose_lifter.offline.depth import (
-    HEADER_BYTES,
-    BagDepth,
-    DepthStamp,
-    depth_topic_of,
-    header_stamp,
-    pair_depth,
-)
+from pose_lifter.offline.depth import BagDepth, depth_topic_of, pair_depth
+from pose_lifter.offline.first_pass import FirstPass, FirstPassPlan, read_first_pass
 from pose_lifter.offline.mcap_index import chunked_mcap
 from pose_lifter.offline.settings import LiftSettings
 
@@ -386,16 +378,6 @@ def check_lift_inputs(
     return topics
 
 
-def _as_skeleton2d(msg: Any, msgtype: str, types: Any, track_ids: Any) -> Any:
-    """A Skeleton2DArray from a liftable message (yolo DetectionArray -> wang12 array)."""
-    if msgtype == SKELETON2D_ARRAY:
-        return msg
-    from pose_lifter.messages import adapters
-
-    people, _ = adapters.yolo_detections_to_people(msg, track_ids)
-    return adapters.people_to_skeleton2d_array(msg.header, people, types)
-
-
 def lift_bag(
     in_path: str | Path,
     out_path: str | Path,
@@ -405,6 +387,7 @@ def lift_bag(
     progress: bool = True,
     overwrite: bool = False,
     workers: int = 1,
+    first_pass: Callable[[], FirstPass] | None = None,
 ) -> tuple[LiftSummary, list[FrameLift]]:
     """Lift every message of ``settings.topic`` of a bag into a new bag.
 
@@ -442,19 +425,20 @@ def lift_bag(
     workers : int
         Processes lifting the tracks in parallel (results identical to 1), see
         :func:`lift_messages`.
+    first_pass : callable, optional
+        The bag's first pass, read ahead by the caller
+        (:func:`~pose_lifter.offline.first_pass.read_ahead` of this bag and ``settings``); None:
+        read here (:func:`~pose_lifter.offline.first_pass.read_first_pass`).
     """
     every, max_messages, topic = settings.every, settings.max_messages, settings.topic
     if every < 1:
         raise ValueError("every must be >= 1")
-    camera_info_topic = settings.camera_info_topic
-    topics = check_lift_inputs(in_path, out_path, topic, camera_info_topic, settings.keep, overwrite,
+    topics = check_lift_inputs(in_path, out_path, topic, settings.camera_info_topic, settings.keep, overwrite,
                                settings.frame.depth_topic)
-    depth_topic = depth_topic_of(topics, settings.frame.depth_topic, in_path)
+    plan = FirstPassPlan.of(in_path, settings, topics)
+    depth_topic = None if plan.depth is None else plan.depth[0]
     cdr.check_definitions(pose_lifter_typestore())
-    info_topic = camera_info_topic if camera_info_topic in topics else None
-    cap = None if max_messages is None else max_messages * every
-    first = _read_keypoints(in_path, topic, info_topic, cap,
-                            None if depth_topic is None else (depth_topic, topics[depth_topic]))
+    first = first_pass() if first_pass is not None else read_first_pass(in_path, plan)
     kp_all, infos = first.keypoints, first.infos
     last = kp_all[-1][0] if max_messages is not None else None
     to_lift = kp_all[::every]
@@ -496,53 +480,6 @@ def lift_bag(
     kept = set(topics) if settings.keep is None else set(settings.keep)
     _write_lifted(in_path, out_path, topic, kept, last, answers, [stamp for stamp, _ in kp_all], overwrite)
     return summary, frames
-
-
-def _read_keypoints(in_path: str | Path, topic: str, camera_info_topic: str | None, max_messages: int | None,
-                    depth: tuple[str, str] | None = None) -> _FirstPass:
-    """A bag's keypoint messages ``(stamp, Skeleton2DArray)`` of ``topic`` (the first
-    ``max_messages``; YOLO detections converted, their ids made track ids), its camera infos
-    ``(stamp, CameraInfo)`` of ``camera_info_topic`` (None: none) and, of the ``depth`` topic
-    (topic, type; None: none), each message's (bag stamp, header stamp) in read order
-    (:func:`~pose_lifter.offline.depth.header_stamp`: the images are not kept), read in one stream
-    (to the bag's end for the depth stamps when ``max_messages`` cuts the keypoints)."""
-    from pose_lifter.messages.adapters import TrackIds
-
-    types = m.rosbags_types()
-    ids = TrackIds()
-    wanted = [topic] + ([camera_info_topic] if camera_info_topic is not None else [])
-    decoders: dict[str, Callable[[bytes], Any]] = {SKELETON2D_ARRAY: cdr.decode_skeleton2d_array}
-    if depth is not None:
-        wanted.append(depth[0])
-        decoders[depth[1]] = header_stamp
-    out = _FirstPass([], [], [] if depth is not None else None)
-    full = False
-    heads = {depth[1]: HEADER_BYTES} if depth is not None else None
-    for x in read_messages(in_path, wanted, decoders=decoders, heads=heads):
-        if depth is not None and x.topic == depth[0]:
-            stamp = x.msg if isinstance(x.msg, DepthStamp) else DepthStamp(m.stamp_to_ns(x.msg.header.stamp))
-            assert out.depth_stamps is not None
-            out.depth_stamps.append((x.stamp_ns, stamp.stamp_ns))
-        elif x.topic == topic:
-            full = full or (max_messages is not None and len(out.keypoints) >= max_messages)
-            if full and depth is None:
-                break
-            if not full:
-                out.keypoints.append((x.stamp_ns, _as_skeleton2d(x.msg, x.msgtype, types, ids)))
-        elif not full:
-            out.infos.append((x.stamp_ns, x.msg))
-    if not out.keypoints:
-        raise InvalidInputError(f"{in_path} has no {topic} messages")
-    return out
-
-
-@dataclass
-class _FirstPass:
-    """What :func:`_read_keypoints` reads."""
-
-    keypoints: list[tuple[int, Any]]
-    infos: list[tuple[int, Any]]
-    depth_stamps: list[tuple[int, int]] | None  #: per depth message (bag stamp, header stamp)
 
 
 def _write_lifted(in_path: str | Path, out_path: str | Path, topic: str, kept: set[str], last: int | None,
