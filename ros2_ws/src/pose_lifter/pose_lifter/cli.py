@@ -200,9 +200,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
         raise ValueError("--scheduler lifts a collection: name several bags, a directory or a glob, "
                          "and --out a directory")
     from pose_lifter.offline.bags import BagError
-    from pose_lifter.offline.first_pass import FirstPassPlan, read_ahead
     from pose_lifter.offline.flags import keep_topics, lift_settings
-    from pose_lifter.offline.lift import check_lift_inputs, lift_bag
+    from pose_lifter.offline.lift import FirstPassPlan, check_lift_inputs, lift_bag, read_ahead
 
     (bag,) = args.input
     keep = keep_topics(args.keep)
@@ -217,9 +216,8 @@ def _cmd_lift(args: argparse.Namespace) -> int:
         print(f"pose-lifter lift: note: {bag} has no {camera_info}: depth at the default distance, "
               f"{s.frame.default_distance:g} m (--camera-info-topic names another topic)", file=sys.stderr)
     first_pass = read_ahead(bag, FirstPassPlan.of(bag, s, topics))  # beside the kernels' loading
-    lifter = s.build_lifter()
-    summary, _ = lift_bag(bag, args.out, lifter, s, progress=not args.quiet, overwrite=args.overwrite,
-                          workers=args.workers or _cores(), first_pass=first_pass)
+    summary, _ = lift_bag(bag, args.out, s.build_lifter(), s, progress=not args.quiet,
+                          overwrite=args.overwrite, workers=args.workers or _cores(), first_pass=first_pass)
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")

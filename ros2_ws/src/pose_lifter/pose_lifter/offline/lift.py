@@ -83,18 +83,20 @@ from pose_lifter.offline.chains import (
 )
 from pose_lifter.offline.chunk_copy import copy_with
 from pose_lifter.offline.depth import BagDepth, depth_topic_of, pair_depth
-from pose_lifter.offline.first_pass import FirstPass, FirstPassPlan, read_first_pass
+from pose_lifter.offline.first_pass import FirstPass, FirstPassPlan, read_ahead, read_first_pass
 from pose_lifter.offline.mcap_index import chunked_mcap
 from pose_lifter.offline.settings import LiftSettings
 
 __all__ = [
     "LIFTABLE_TYPES",
+    "FirstPassPlan",
     "FrameLift",
     "LiftSummary",
     "check_lift_inputs",
     "frame_settings",
     "lift_bag",
     "lift_messages",
+    "read_ahead",
 ]
 
 _MARKER_NS: Final[str] = "pose_lifter"
