@@ -1,5 +1,6 @@
 """Careless command lines and broken bags (issue 10): one ``pose-lifter <cmd>: error:`` line, the
-documented exit code (2 usage, 1 data, 130 interrupted), no traceback and no output file."""
+documented exit code (2 usage, 1 data, 130 interrupted, 143 terminated), no traceback and no output
+file, and no worker process left behind."""
 
 from __future__ import annotations
 
@@ -117,3 +118,55 @@ def test_ctrl_c_exits_130_with_one_line(tmp_path: Path) -> None:
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["pose-lifter lift: interrupted"], err
     assert not out.exists() and list(tmp_path.glob(".bagwriter-*")) == []
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (not gone, not a zombie waiting to be reaped)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _lifting(tmp_path: Path) -> tuple[subprocess.Popen[str], list[int], Path]:
+    """``pose-lifter lift`` of the five-person bag on two workers (the slow reference solver), once
+    its workers are forked: the process, the workers' ids, the output it would write."""
+    out = tmp_path / "o.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "pose_lifter.cli", "lift", str(FIVE), "--out", str(out),
+                             "--workers", "2", "--solver", "cvxpy", "--quiet"],
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    deadline = time.monotonic() + 120.0
+    while time.monotonic() < deadline and proc.poll() is None and len(_children(proc.pid)) < 2:
+        time.sleep(0.1)
+    time.sleep(1.0)
+    workers = _children(proc.pid)
+    assert proc.poll() is None and len(workers) >= 2, workers
+    return proc, workers, out
+
+
+def _gone(pids: list[int], within_s: float) -> bool:
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline and any(_alive(p) for p in pids):
+        time.sleep(0.1)
+    return not any(_alive(p) for p in pids)
+
+
+def test_sigterm_exits_143_with_one_line_and_stops_the_workers(tmp_path: Path) -> None:
+    """SIGTERM to the command alone (a supervisor's, ``timeout``'s) unwinds it as Ctrl-C does: its
+    workers stopped, no output, one line, exit 143 (128 + SIGTERM)."""
+    proc, workers, out = _lifting(tmp_path)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines() == ["pose-lifter lift: terminated"], err
+    assert _gone(workers, 30.0)
+    assert not out.exists() and list(tmp_path.glob(".bagwriter-*")) == []
+
+
+def test_the_workers_end_with_a_killed_command(tmp_path: Path) -> None:
+    """A command killed outright (SIGKILL: no handler runs) takes its workers with it: each was
+    told to end with its parent (``die_with_parent``), not to wait for its pool's next task."""
+    proc, workers, _ = _lifting(tmp_path)
+    proc.kill()
+    proc.communicate(timeout=30)
+    assert _gone(workers, 30.0), [p for p in workers if _alive(p)]

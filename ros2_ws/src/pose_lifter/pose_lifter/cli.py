@@ -5,18 +5,18 @@ Run ``pose-lifter --help`` or ``python -m pose_lifter.cli --help``.
 Exit codes: 0 success; 2 a usage error (an option out of range, a missing input file or data
 directory, an output that exists or is a directory) and every other library error; 1 a data
 error (a corrupt, truncated, empty or foreign bag, an invalid basis file, input with nothing to
-lift, a solve that diverged on the input); 130 interrupted (Ctrl-C). Each failure prints one
-``pose-lifter <cmd>: error: ...`` line and leaves no partial output file (set
-``POSE_LIFTER_DEBUG=1`` for the traceback).
+lift, a solve that diverged on the input); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM). Each
+failure prints one ``pose-lifter <cmd>: error: ...`` line and leaves no partial output file (set
+``POSE_LIFTER_DEBUG=1`` for the traceback) and no worker process behind it.
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
-import math
 import os
 import shlex
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,35 +24,9 @@ from typing import Any, Final, Literal
 
 from pose_lifter.core.track.smoothing import OFFLINE_SMOOTHING_S
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS, TOPIC_SKELETONS
+from pose_lifter.offline.arg_types import FINITE, FRACTION, NONNEG, POS_INT, POSITIVE, number
 
 __all__ = ["build_parser", "main", "make_bag"]
-
-
-def _number(kind: type[int] | type[float], low: float | None = None, high: float | None = None,
-            low_open: bool = False) -> Any:
-    """An argparse ``type``: an int or a finite float in [low, high] (or (low, high] if low_open)."""
-    def parse(text: str) -> int | float:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a{'n integer' if kind is int else ' number'}: {text!r}") \
-                from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if low is not None and (value <= low if low_open else value < low):
-            raise argparse.ArgumentTypeError(f"must be {'>' if low_open else '>='} {low:g}, got {text}")
-        if high is not None and value > high:
-            raise argparse.ArgumentTypeError(f"must be <= {high:g}, got {text}")
-        return value
-    parse.__name__ = kind.__name__  # argparse names the type in its messages
-    return parse
-
-
-_POS_INT = _number(int, 1)
-_NONNEG = _number(float, 0.0)
-_POSITIVE = _number(float, 0.0, low_open=True)
-_FRACTION = _number(float, 0.0, 1.0)
-_FINITE = _number(float)
 
 
 def _out_is_a_directory(args: argparse.Namespace) -> bool:
@@ -336,17 +310,17 @@ def _learn_bases_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     p.add_argument("--data", default=None, help="CMU data dir (default ../shared/data/cmu or "
                    "$POSE_LIFTER_CMU_DATA)")
     p.add_argument("--method", choices=("sparse", "pca", "classwise-pca"), default="sparse")
-    p.add_argument("--n-bases", type=_POS_INT, default=None, help="default 200 (sparse), 30 (pca)")
-    p.add_argument("--sparsity", type=_POSITIVE, default=0.1, help="L1 weight of sparse learning")
-    p.add_argument("--n-per-class", type=_POS_INT, default=6, help="classwise-pca components per class")
-    p.add_argument("--step", type=_POS_INT, default=8,
+    p.add_argument("--n-bases", type=POS_INT, default=None, help="default 200 (sparse), 30 (pca)")
+    p.add_argument("--sparsity", type=POSITIVE, default=0.1, help="L1 weight of sparse learning")
+    p.add_argument("--n-per-class", type=POS_INT, default=6, help="classwise-pca components per class")
+    p.add_argument("--step", type=POS_INT, default=8,
                    help="use every STEP-th 120 Hz frame (default 8: 15 Hz)")
-    p.add_argument("--starts", type=_POS_INT, default=30, help="multi-start poses stored (k-means + mean)")
-    p.add_argument("--n-iter", type=_POS_INT, default=2000, help="dictionary-learning iterations")
+    p.add_argument("--starts", type=POS_INT, default=30, help="multi-start poses stored (k-means + mean)")
+    p.add_argument("--n-iter", type=POS_INT, default=2000, help="dictionary-learning iterations")
     p.add_argument("--split", choices=("paper", "prior"), default="paper",
                    help="paper: subject 01 playground (the paper's protocol); prior: the trials the "
                         "packaged learned prior was trained on (the product's hybrid bases)")
-    p.add_argument("--limb-spread", type=_FRACTION, default=0.0,
+    p.add_argument("--limb-spread", type=FRACTION, default=0.0,
                    help="scale each frame's limbs by up to +-this fraction first (other proportions)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output .npz")
@@ -359,20 +333,20 @@ def _make_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument("trials", nargs="+", help="one trial id per person, e.g. 07_05 02_05")
     p.add_argument("--out", required=True, help="output .mcap")
     p.add_argument("--data", default=None, help="CMU data dir")
-    p.add_argument("--fps", type=_number(float, 0.0, 1000.0, low_open=True), default=30.0,
+    p.add_argument("--fps", type=number(float, 0.0, 1000.0, low_open=True), default=30.0,
                    help="frame rate (mocap is 120 Hz)")
-    p.add_argument("--start", type=_NONNEG, default=0.0, help="seconds into each trial")
-    p.add_argument("--frames", type=_POS_INT, default=None, help="number of frames (default: all)")
-    p.add_argument("--view-angle", type=_FINITE, default=0.0,
+    p.add_argument("--start", type=NONNEG, default=0.0, help="seconds into each trial")
+    p.add_argument("--frames", type=POS_INT, default=None, help="number of frames (default: all)")
+    p.add_argument("--view-angle", type=FINITE, default=0.0,
                    help="degrees about the vertical axis from the first person's initial facing "
                    "direction (0 = front, 90 = their left side, 180 = behind)")
-    p.add_argument("--orbit-speed", type=_FINITE, default=0.0, help="camera orbit, degrees per second")
-    p.add_argument("--distance", type=_POSITIVE, default=5.0, help="camera distance in metres")
+    p.add_argument("--orbit-speed", type=FINITE, default=0.0, help="camera orbit, degrees per second")
+    p.add_argument("--distance", type=POSITIVE, default=5.0, help="camera distance in metres")
     p.add_argument("--no-follow", action="store_true", help="static camera (default: slides with the people)")
-    p.add_argument("--spacing", type=_NONNEG, default=1.4, help="metres between people")
-    p.add_argument("--noise", type=_NONNEG, default=0.0, help="2D Gaussian noise std, right-lower-leg units")
-    p.add_argument("--outliers", type=_FRACTION, default=0.0, help="fraction of joints displaced 1-3 legs")
-    p.add_argument("--missing", type=_FRACTION, default=0.0, help="fraction of joints with confidence 0")
+    p.add_argument("--spacing", type=NONNEG, default=1.4, help="metres between people")
+    p.add_argument("--noise", type=NONNEG, default=0.0, help="2D Gaussian noise std, right-lower-leg units")
+    p.add_argument("--outliers", type=FRACTION, default=0.0, help="fraction of joints displaced 1-3 legs")
+    p.add_argument("--missing", type=FRACTION, default=0.0, help="fraction of joints with confidence 0")
     p.add_argument("--seed", type=int, default=0, help="seed of the 2D corruption and the depth sensor")
     p.add_argument("--depth", action="store_true",
                    help="RGB-D: also each frame's depth image, the body surface seen by a D435-like sensor "
@@ -405,9 +379,9 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
                    "(a rosbag2 directory NAME: NAME.mcap) with the inputs' relative layout, a manifest "
                    "(pose_lifter_manifest.json) that lets a stopped run resume")
     add_parameter_flags(p)
-    p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th message only")
-    p.add_argument("--max-messages", type=_POS_INT, default=None, help="stop after N lifted messages")
-    p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
+    p.add_argument("--every", type=POS_INT, default=1, help="lift every N-th message only")
+    p.add_argument("--max-messages", type=POS_INT, default=None, help="stop after N lifted messages")
+    p.add_argument("--smoothing", type=number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
                    metavar="SECONDS",
                    help="each track's poses smoothed by a centred Gaussian window of this standard "
                    "deviation, past and future frames alike (offline only; default "
@@ -415,7 +389,7 @@ def _lift_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the output; for a collection: lift again the bags already done")
-    p.add_argument("--workers", type=_POS_INT, default=None,
+    p.add_argument("--workers", type=POS_INT, default=None,
                    help="processes lifting the tracks (one bag) or the bags (a collection) in parallel "
                    "(results identical to 1; default: the cores available)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -471,7 +445,7 @@ def _play_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.add_argument("bag", help="input bag: .mcap file or rosbag2 directory")
     p.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
     p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1: real time)")
-    p.add_argument("--wait", type=_NONNEG, default=5.0, metavar="SECONDS",
+    p.add_argument("--wait", type=NONNEG, default=5.0, metavar="SECONDS",
                    help="before the first message, wait up to SECONDS for a subscriber on the played "
                    "topics a lifter reads (keypoints, camera_info; the ground truth is not waited for), "
                    "so that no first message is lost; on giving up, one line on stderr and play "
@@ -487,8 +461,8 @@ def _demo_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.add_argument("--bag", default=None, help="input bag (default: the committed two-person bag)")
     p.add_argument("--out", default="out", help="output directory")
     add_parameter_flags(p)
-    p.add_argument("--every", type=_POS_INT, default=1, help="lift every N-th frame (default 1: all)")
-    p.add_argument("--smoothing", type=_number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
+    p.add_argument("--every", type=POS_INT, default=1, help="lift every N-th frame (default 1: all)")
+    p.add_argument("--smoothing", type=number(float, 0.0, 10.0), default=OFFLINE_SMOOTHING_S,
                    metavar="SECONDS", help=f"as for lift (default {OFFLINE_SMOOTHING_S})")
     p.set_defaults(func=_cmd_demo)
 
@@ -500,7 +474,7 @@ def _experiments_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
                    "$POSE_LIFTER_CMU_DATA)")
     p.add_argument("--out", default="out/experiments", help="output directory")
     p.add_argument("--quick", action="store_true", help="a tiny run (a couple of poses) for tests")
-    p.add_argument("--processes", type=_POS_INT, default=2, help="worker processes (default 2)")
+    p.add_argument("--processes", type=POS_INT, default=2, help="worker processes (default 2)")
     p.set_defaults(func=_cmd_experiments)
 
 
@@ -534,6 +508,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # runs ~290 times on the way, walking them (0.05-0.06 s of a ~1 s start-up). The lift
         # itself measures the same at either threshold.
         gc.set_threshold(100_000, 50, 100)
+        # SIGTERM (a supervisor, `timeout`) stops a command as Ctrl-C does, its workers with it
+        signal.signal(signal.SIGTERM, _terminated)
     rc = _main(argv)
     if argv is None:
         # the interpreter's last garbage collections at exit walk every object the command made
@@ -542,6 +518,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         # back when it ends.
         gc.freeze()
     return rc
+
+
+class Terminated(BaseException):
+    """SIGTERM in the ``pose-lifter`` process: raised where it is, unwound as Ctrl-C is (a pool's
+    workers stopped, no partial output), exit 143."""
+
+
+def _terminated(signum: int, frame: Any) -> None:
+    raise Terminated(signum)
 
 
 def _version() -> str:
@@ -576,6 +561,9 @@ def _main(argv: Sequence[str] | None) -> int:
     except KeyboardInterrupt:
         print(f"pose-lifter {args.cmd}: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print(f"pose-lifter {args.cmd}: terminated", file=sys.stderr)
+        return 143
     except BrokenPipeError:  # the reader went away (`pose-lifter evaluate X | head -1`): as SIGPIPE
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # the interpreter's final flush has nowhere to fail

@@ -23,6 +23,7 @@ import bisect
 import gc
 import os
 import signal
+import sys
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -68,6 +69,7 @@ __all__ = [
     "ChainWork",
     "Item",
     "chain_groups",
+    "die_with_parent",
     "kept_part",
     "lift_chains",
     "lift_parallel",
@@ -486,15 +488,33 @@ class ChainWork:
 _work: ChainWork | None = None
 
 
-def _worker_init(work: ChainWork) -> None:
+def _worker_init(work: ChainWork, parent: int) -> None:
     """Keep the worker's work; Ctrl-C ends a worker silently (the parent reports it once), not
-    with a traceback each, and SIGTERM (:func:`stop_workers`) ends it at once: a worker writes
-    nothing, and a handler it inherited from the parent (which may turn SIGTERM into an
-    exception) would leave it alive, the executor's worker loop catching what a task raises."""
+    with a traceback each, and SIGTERM (:func:`stop_workers`, or the parent's end:
+    :func:`die_with_parent`) ends it at once: a worker writes nothing, and a handler it inherited
+    from the parent (which turns SIGTERM into an exception) would leave it alive, the executor's
+    worker loop catching what a task raises."""
     global _work
     _work = work
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent(parent)
+
+
+def die_with_parent(parent: int) -> None:
+    """This forked worker gets SIGTERM when the process that forked it ends, however it ends
+    (killed, crashed): Linux's ``PR_SET_PDEATHSIG``, a no-op elsewhere. A worker left behind would
+    wait for its pool's next task for ever. ``parent``: that process's id, read before the fork
+    (it may have ended before this runs: then the signal is sent at once)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    if os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+_PR_SET_PDEATHSIG: Final[int] = 1  #: prctl's option (linux/prctl.h)
 
 
 def _worker_chain(index: int) -> list[ChainLift]:
@@ -553,7 +573,7 @@ def lift_parallel(work: ChainWork, workers: int, bar: Any) -> list[ChainLift]:
     gc.freeze()
     try:
         ex = ProcessPoolExecutor(n_proc, mp_context=multiprocessing.get_context("fork"),
-                                 initializer=_worker_init, initargs=(work,))
+                                 initializer=_worker_init, initargs=(work, os.getpid()))
         try:
             outcomes_of = ex.map(_worker_chain, range(len(work.groups)))
             for group, per_chain in zip(work.groups, outcomes_of, strict=True):

@@ -333,16 +333,19 @@ class _Stopped(SystemExit):
     """SIGTERM in a worker of the local pool (the parent stopping it)."""
 
 
-def _pool_init() -> None:
+def _pool_init(parent: int) -> None:
     """Ctrl-C ends a worker silently (the parent reports it); SIGTERM (the parent stopping the
-    pool, :func:`pose_lifter.offline.chains.stop_workers`) unwinds it, so that the bag it was
-    writing is discarded, and then ends it (:func:`_pool_job`)."""
+    pool, :func:`pose_lifter.offline.chains.stop_workers`, or ending: ``die_with_parent``) unwinds
+    it, so that the bag it was writing is discarded, and then ends it (:func:`_pool_job`)."""
+    from pose_lifter.offline.chains import die_with_parent
+
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
     def stop(signum: int, frame: Any) -> None:
         raise _Stopped(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)
+    die_with_parent(parent)
 
 
 def _pool_job(job: BagJob) -> BagOutcome:
@@ -371,7 +374,7 @@ def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter:
     gc.freeze()  # the workers' garbage collectors do not walk (and so copy) the parent's objects
     try:
         ex = ProcessPoolExecutor(min(workers, len(jobs)), mp_context=multiprocessing.get_context("fork"),
-                                 initializer=_pool_init)
+                                 initializer=_pool_init, initargs=(os.getpid(),))
         try:
             pending = {ex.submit(_pool_job, j) for j in order}
             while pending:

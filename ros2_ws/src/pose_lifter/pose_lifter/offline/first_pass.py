@@ -10,6 +10,7 @@ a depth topic the pass is short (~10 us a message) and is read when asked, in th
 
 from __future__ import annotations
 
+import os
 import signal
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -132,7 +133,8 @@ def read_ahead(in_path: str | Path, plan: FirstPassPlan) -> Callable[[], FirstPa
 
     from pose_lifter.offline.chains import stop_workers
 
-    ex = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"), initializer=_quiet_worker)
+    ex = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"), initializer=_quiet_worker,
+                             initargs=(os.getpid(),))
     future = ex.submit(read_first_pass, in_path, plan)
 
     def result() -> FirstPass:
@@ -147,7 +149,11 @@ def read_ahead(in_path: str | Path, plan: FirstPassPlan) -> Callable[[], FirstPa
     return result
 
 
-def _quiet_worker() -> None:
-    """Ctrl-C and SIGTERM end the reading process at once (the caller reports them)."""
+def _quiet_worker(parent: int) -> None:
+    """Ctrl-C and SIGTERM end the reading process at once (the caller reports them), and so does
+    the caller's end (:func:`~pose_lifter.offline.chains.die_with_parent`)."""
+    from pose_lifter.offline.chains import die_with_parent
+
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent(parent)
