@@ -7,6 +7,7 @@ an older layout, a cut or a topic left out) take the message-by-message path."""
 
 from __future__ import annotations
 
+import multiprocessing
 import shutil
 from collections import Counter
 from contextlib import closing
@@ -240,6 +241,10 @@ def test_the_depth_stamps_read_with_the_keypoints_pair_as_a_pass_of_their_own(tm
         assert [s for s, _ in ahead.infos] == [s for s, _ in first.infos]
     with pytest.raises(BagError, match="has no topic"):  # what the pass raises, raised when asked
         read_ahead(bag, FirstPassPlan("/none", None, None, (TOPIC_DEPTH, IMAGE)))()
+    assert not multiprocessing.active_children()
+    with read_ahead(bag, plan):  # closed unasked (its caller failed on the way): its reader stopped
+        assert multiprocessing.active_children()
+    assert not multiprocessing.active_children()
     sizes_read = [x.msg for x in bags.read_messages(bag, [TOPIC_DEPTH], {IMAGE: len}, {IMAGE: HEADER_BYTES})]
     assert len(sizes_read) == len(kp) and max(sizes_read) <= HEADER_BYTES
     # read from their chunks or as a stream: the same images, the stream read once

@@ -189,9 +189,9 @@ def _cmd_lift(args: argparse.Namespace) -> int:
     if camera_info and camera_info not in topics:  # the default topic, absent: as the node without it
         print(f"pose-lifter lift: note: {bag} has no {camera_info}: depth at the default distance, "
               f"{s.frame.default_distance:g} m (--camera-info-topic names another topic)", file=sys.stderr)
-    first_pass = read_ahead(bag, FirstPassPlan.of(bag, s, topics))  # beside the kernels' loading
-    summary, _ = lift_bag(bag, args.out, s.build_lifter(), s, progress=not args.quiet,
-                          overwrite=args.overwrite, workers=args.workers or _cores(), first_pass=first_pass)
+    with read_ahead(bag, FirstPassPlan.of(bag, s, topics)) as ahead:  # beside the kernels' loading
+        summary, _ = lift_bag(bag, args.out, s.build_lifter(), s, progress=not args.quiet,
+                              overwrite=args.overwrite, workers=args.workers or _cores(), first_pass=ahead)
     print(f"{args.out}: lifted {summary.n_lifted} of {summary.n_skeletons} skeletons in "
           f"{summary.n_messages} messages ({summary.n_warm} warm-started, {summary.n_failed} failed), "
           f"{summary.mean_solve_time_ms:.1f} ms per skeleton")

@@ -25,7 +25,7 @@ from pose_lifter.offline.bags import read_messages
 from pose_lifter.offline.depth import HEADER_BYTES, DepthStamp, depth_topic_of, header_stamp
 from pose_lifter.offline.settings import LiftSettings
 
-__all__ = ["FirstPass", "FirstPassPlan", "read_ahead", "read_first_pass"]
+__all__ = ["FirstPass", "FirstPassAhead", "FirstPassPlan", "read_ahead", "read_first_pass"]
 
 
 @dataclass
@@ -122,31 +122,54 @@ def _as_skeleton2d(msg: Any, msgtype: str, types: Any, track_ids: Any) -> Any:
     return adapters.people_to_skeleton2d_array(msg.header, people, types)
 
 
-def read_ahead(in_path: str | Path, plan: FirstPassPlan) -> Callable[[], FirstPass]:
-    """The first pass of a bag, to be asked for (once): with a depth topic read now in a forked
-    process, beside the caller's own work (the module docstring); without, read when asked.
-    What the pass raises is raised when asked."""
-    if plan.depth is None:
-        return lambda: read_first_pass(in_path, plan)
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+class FirstPassAhead:
+    """A bag's first pass, read ahead (:func:`read_ahead`): called (once) it gives the pass, or
+    raises what the pass raised; closed (a context manager) before that, it stops the reading
+    process, so that a caller that fails on the way (a bad basis file) ends at once."""
 
-    from pose_lifter.offline.chains import stop_workers
+    def __init__(self, in_path: str | Path, plan: FirstPassPlan) -> None:
+        self.in_path, self.plan = in_path, plan
+        self._ex: Any = None
+        self._future: Any = None
+        if plan.depth is not None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
 
-    ex = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"), initializer=_quiet_worker,
-                             initargs=(os.getpid(),))
-    future = ex.submit(read_first_pass, in_path, plan)
+            self._ex = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"),
+                                           initializer=_quiet_worker, initargs=(os.getpid(),))
+            self._future = self._ex.submit(read_first_pass, in_path, plan)
 
-    def result() -> FirstPass:
+    def __call__(self) -> FirstPass:
+        if self._future is None:
+            return read_first_pass(self.in_path, self.plan)
         try:
-            out = future.result()
+            out: FirstPass = self._future.result()
         except BaseException:  # what the pass raised, or Ctrl-C: the process stopped now
-            stop_workers(ex)
+            self.close()
             raise
-        ex.shutdown()
+        self._ex.shutdown()
+        self._ex = None
         return out
 
-    return result
+    def close(self) -> None:
+        """Stop the reading process if it still runs (nothing when the pass was given)."""
+        if self._ex is not None:
+            from pose_lifter.offline.chains import stop_workers
+
+            stop_workers(self._ex)
+            self._ex = None
+
+    def __enter__(self) -> FirstPassAhead:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def read_ahead(in_path: str | Path, plan: FirstPassPlan) -> FirstPassAhead:
+    """The first pass of a bag, to be asked for: with a depth topic read now in a forked process,
+    beside the caller's own work (the module docstring); without, read when asked."""
+    return FirstPassAhead(in_path, plan)
 
 
 def _quiet_worker(parent: int) -> None:

@@ -83,7 +83,7 @@ from pose_lifter.offline.chains import (
 )
 from pose_lifter.offline.chunk_copy import copy_with
 from pose_lifter.offline.depth import BagDepth, depth_topic_of, pair_depth
-from pose_lifter.offline.first_pass import FirstPass, FirstPassPlan, read_ahead, read_first_pass
+from pose_lifter.offline.first_pass import FirstPassAhead, FirstPassPlan, read_ahead, read_first_pass
 from pose_lifter.offline.mcap_index import chunked_mcap
 from pose_lifter.offline.settings import LiftSettings
 
@@ -389,7 +389,7 @@ def lift_bag(
     progress: bool = True,
     overwrite: bool = False,
     workers: int = 1,
-    first_pass: Callable[[], FirstPass] | None = None,
+    first_pass: FirstPassAhead | None = None,
 ) -> tuple[LiftSummary, list[FrameLift]]:
     """Lift every message of ``settings.topic`` of a bag into a new bag.
 
@@ -427,10 +427,11 @@ def lift_bag(
     workers : int
         Processes lifting the tracks in parallel (results identical to 1), see
         :func:`lift_messages`.
-    first_pass : callable, optional
+    first_pass : FirstPassAhead, optional
         The bag's first pass, read ahead by the caller
-        (:func:`~pose_lifter.offline.first_pass.read_ahead` of this bag and ``settings``); None:
-        read here (:func:`~pose_lifter.offline.first_pass.read_first_pass`).
+        (:func:`~pose_lifter.offline.first_pass.read_ahead` of this bag and ``settings``'
+        :class:`~pose_lifter.offline.first_pass.FirstPassPlan`); None: read here
+        (:func:`~pose_lifter.offline.first_pass.read_first_pass`).
     """
     every, max_messages, topic = settings.every, settings.max_messages, settings.topic
     if every < 1:
