@@ -296,3 +296,49 @@ def test_one_person_a_message_is_lifted_in_step_by_frame_as_by_message(
         assert (a.stamp_ns, a.track_id) == (b.stamp_ns, b.track_id)
         np.testing.assert_array_equal(a.joints_m, b.joints_m)
         np.testing.assert_array_equal(a.std_m, b.std_m)
+
+
+def test_chains_in_step_read_each_chunk_of_depth_images_once(tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """More tracks one after another than the images held at once: the chains go in step that
+    many at a time, so a step reads no more chunks than the reader keeps and each chunk (two
+    images) is decompressed once; the poses are those lifted message by message."""
+    from pose_lifter.messages.frame import FramePipeline
+    from pose_lifter.offline import chains as chains_module
+    from pose_lifter.offline import depth as depth_module
+    from pose_lifter.offline.chains import split_chains
+
+    held = 2
+    monkeypatch.setattr(depth_module, "HELD_IMAGES", held)
+    monkeypatch.setattr(chains_module, "HELD_IMAGES", held)
+    batches: list[int] = []
+    together = chains_module.lift_together
+
+    def spy(frames: Any, depths: Any = None) -> Any:
+        batches.append(len(frames))
+        return together(frames, depths)
+
+    decompressed: list[int] = []
+    close = mcap_index.IndexedMessages.close
+
+    def counted(self: mcap_index.IndexedMessages) -> None:
+        decompressed.append(self.n_decompressed)
+        close(self)
+
+    monkeypatch.setattr(chains_module, "lift_together", spy)
+    monkeypatch.setattr(mcap_index.IndexedMessages, "close", counted)
+    bag = rgbd_bag(tmp_path / "rgbd.mcap", tracks=N // 2)  # five tracks of two frames, a chunk each
+    kp = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, [TOPIC_KEYPOINTS])]
+    infos = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, ["/camera_info"])]
+    depth = pair_depth(bag, TOPIC_DEPTH, IMAGE, [stamp_to_ns(msg.header.stamp) for _, msg in kp],
+                       [(640.0, 480.0)] * len(kp), 0.003)
+    assert depth.located is not None
+    lifter, settings = Lifter(), LiftSettings()
+    chains, _, _ = split_chains(kp, infos, FramePipeline(lifter, settings.frame))
+    assert len(chains) == N // 2
+    by_frame = lift.lift_messages(kp, infos, lifter, settings, depth=depth)
+    assert batches == [2, 2, 2, 2, 1, 1] and decompressed == [N // 2]
+    by_message = lift.lift_messages(kp, infos, lifter, settings, depth=replace(depth, located=None))
+    for a, b in zip(by_frame, by_message, strict=True):
+        assert (a.stamp_ns, a.track_id) == (b.stamp_ns, b.track_id)
+        np.testing.assert_array_equal(a.joints_m, b.joints_m)

@@ -301,8 +301,9 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     another (people who come and go one at a time are lifted as a crowd). With ``depth`` the
     people of one message are placed on its image in one pass, so the chains are in step by
     message, unless each message holds one person and the images are read by number
-    (:attr:`~pose_lifter.offline.depth.BagDepth.located`): then by their own frames too, at most
-    :data:`~pose_lifter.offline.depth.HELD_IMAGES` messages' images at a time. Without ``depth``
+    (:attr:`~pose_lifter.offline.depth.BagDepth.located`): then by their own frames too,
+    :data:`~pose_lifter.offline.depth.HELD_IMAGES` chains at a time (a step reads no more of the
+    images' chunks than the reader keeps: each chunk is decompressed once). Without ``depth``
     and with ``smoothing_s > 0`` a long chain is lifted as its :func:`segments`, each through its
     own pipeline from its lead-in, and stitched (the lead-ins' outcomes dropped; the offline update
     and the smoothing then run over the stitched chain): a segment's poses are not bit for bit the
@@ -322,15 +323,19 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     done: list[list[LiftedSkeleton | SkipSkeleton]] = [[] for _ in runs]
     # the fit's own pose_camera per outcome (the centred smoothing's start)
     fitted: list[list[NDArray[np.float64] | None]] = [[] for _ in runs]
-    steps: dict[int, list[tuple[int, int, Item]]] = {}
+    steps: dict[tuple[int, int], list[tuple[int, int, Item]]] = {}
     # with depth, by the chains' own frames only where that places each person alone on its image
     # as by message (one person a message: the placement of the people of one image is one pass)
     # and the images can be read in any order (by number)
     by_frame = depth is None or (depth.located is not None and len(
         {it.msg_index for chain in chains for it in chain}) == sum(len(chain) for chain in chains))
+    # read by frame, the chains go in step HELD_IMAGES at a time: a step then reads no more chunks
+    # than the reader keeps, so each chunk is decompressed once, not again for each of its images
+    block = HELD_IMAGES if depth is not None and by_frame else len(runs)
     for r, (c, a, _, b) in enumerate(runs):
         for k, item in enumerate(chains[c][a:b]):
-            steps.setdefault(k if by_frame else item.msg_index, []).append((r, k, item))
+            key = (r // block, k) if by_frame else (0, item.msg_index)
+            steps.setdefault(key, []).append((r, k, item))
     images = depth.frames() if depth is not None else None
     try:
         for key in sorted(steps):
