@@ -510,7 +510,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         gc.set_threshold(100_000, 50, 100)
         # SIGTERM (a supervisor, `timeout`) stops a command as Ctrl-C does, its workers with it
         signal.signal(signal.SIGTERM, _terminated)
-    rc = _main(argv)
+    try:
+        rc = _main(argv)
+    except Terminated:  # before or after its command ran (the command's own: in _main)
+        print("pose-lifter: terminated", file=sys.stderr)
+        rc = 143
     if argv is None:
         # the interpreter's last garbage collections at exit walk every object the command made
         # (the bag's messages, the results: ~1 s after lifting a 36-track bag); frozen, they are
