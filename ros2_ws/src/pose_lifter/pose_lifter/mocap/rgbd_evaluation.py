@@ -28,7 +28,8 @@ Methods (:data:`METHODS`), each tracked as the node tracks (the default hybrid m
   pixel without a reading keeps the ``mono`` joint; no uncertainty;
 * ``fused``: the live lift placed on the frame's depth image as the node places it
   (:func:`fuse_person`: :func:`~pose_lifter.core.depth.place.place_people`'s fusion, the frame's
-  2D with the labels the track gave the 3D joints);
+  2D with the labels the track gave the 3D joints), followed along the track by the filter the
+  node answers through (:func:`~pose_lifter.core.depth.track_filter.filter_track`);
 * ``fused-lag``: the node with ``output_lag`` (3): each frame's pose refined over the next
   frames (:class:`~pose_lifter.core.track.later.Refiner`, as ``hybrid-lag`` of :mod:`.evaluation`),
   then placed again with the depth readings its frame's lift took, as the lagged node does;
@@ -63,6 +64,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.depth.place import place_people
 from pose_lifter.core.depth.smooth import LagWindow, scaled_joints, smooth_fused
+from pose_lifter.core.depth.track_filter import filter_track
 from pose_lifter.core.depth.uncertainty import LAGGED_STD_FACTOR, SMOOTHED_STD_FACTOR
 from pose_lifter.core.model.skeleton import JOINT_NAMES, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.results import LiftResult
@@ -354,6 +356,9 @@ class RgbdEvaluator:
                         live_lag.put(i, *fuse_person(depth, points, tl.result, tl.result.pose_camera))
         record: dict[str, Any] = {"track": track.name, "camera": track.camera, "distance": distance, "n": n}
         stamps = np.arange(n, dtype=np.int64) * ev.FRAME_NS
+        fused = out["fused"]  # answered at once: the node's filter along the track
+        placed = np.asarray(np.isfinite(fused.joints).all(axis=(1, 2)), dtype=bool)
+        fused.joints = filter_track(stamps, fused.joints, fused.std, placed, GAP_S)
         normalised: dict[str, dict[str, list[float]]] = {}
         for m in [m for m in STD_FACTORS if m in self.methods]:
             f = out[m]
