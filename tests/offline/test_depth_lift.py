@@ -246,3 +246,42 @@ def test_the_fused_joints_are_averaged_over_the_track(tmp_path: Path) -> None:
     offline = _jitter(_lift_all(bag, tmp_path / "offline.mcap"))
     lagged = _jitter(_lift_all(bag, tmp_path / "lagged.mcap", "--smoothing", "0", "--output-lag", "3"))
     assert offline < 0.3 * node and lagged < 0.3 * node
+
+
+def test_the_lift_at_once_gives_the_node_s_answers_with_depth(tmp_path: Path) -> None:
+    """``pose-lifter lift --smoothing 0`` answers a recording with depth as the node answers it
+    live (:class:`~pose_lifter.messages.answer.AnswerStream`, the node's driver, fed the same
+    frames, camera and paired images): the fused joints through each track's filter, bit for bit;
+    and the filter moved them (the frames' fusion alone differs)."""
+    from pose_lifter.core import Lifter
+    from pose_lifter.messages.answer import AnswerStream
+    from pose_lifter.messages.convert import intrinsics_from_camera_info
+    from pose_lifter.messages.frame import FramePipeline, FrameSettings
+
+    bag = REPO / "bags" / "rgbd" / "punch_rgbd.mcap"
+    offline = _lift_all(bag, tmp_path / "at_once.mcap", "--smoothing", "0", "--workers", "1")
+    kp = [(x.stamp_ns, x.msg) for x in bags.read_messages(bag, ["/keypoints_2d"])][:N]
+    info = next(x.msg for x in bags.read_messages(bag, ["/camera_info"]))
+    stamps = [stamp_to_ns(msg.header.stamp) or s for s, msg in kp]
+    size = (float(info.width), float(info.height))
+    depth = pair_depth(bag, TOPIC_DEPTH, IMAGE, stamps, [size] * len(kp), 0.02)
+    with depth.frames() as frames:
+        images = {s: frames.image(i) for i, s in enumerate(stamps)}
+    stream = AnswerStream(FramePipeline(Lifter(), FrameSettings()), 0, _unread)
+    stream.intrinsics = intrinsics_from_camera_info(info)
+    stream.depth_of = images.get
+    live = [np.array([s.joints_m for s in stream.answer(msg, 0.0, stamp).answers[0].lifted])
+            for stamp, msg in kp]
+    assert len(live) == len(offline) == len(kp) >= 4
+    for a, b in zip(live, offline, strict=True):
+        np.testing.assert_array_equal(a, b)  # float64 points, written and read exactly
+    unfiltered = AnswerStream(FramePipeline(Lifter(), FrameSettings()), 0, _unread)
+    unfiltered.intrinsics, unfiltered.depth_of = stream.intrinsics, images.get
+    unfiltered.track_filter.update = lambda track, stamp, joints, std: np.array(joints)  # type: ignore[method-assign]
+    alone = [np.array([s.joints_m for s in unfiltered.answer(msg, 0.0, stamp).answers[0].lifted])
+             for stamp, msg in kp]
+    assert not any(np.allclose(a, b) for a, b in zip(alone[1:], live[1:], strict=True))
+
+
+def _unread(data: bytes) -> Any:
+    raise AssertionError("frames are given as messages")
