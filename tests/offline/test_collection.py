@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 from lift_compare import assert_same_lift
 from pose_lifter import cli
-from pose_lifter.offline import bags, chains
+from pose_lifter.offline import bags
+from pose_lifter.offline import workers as workers_module
 from pose_lifter.offline.bags import BagError
 from pose_lifter.offline.collection import ERRORS_NAME, MANIFEST_NAME, expand_inputs, plan_jobs
 
@@ -181,13 +182,13 @@ def _deaf_to_sigterm() -> None:
 def test_stopping_a_pool_ends_workers_that_outlive_sigterm(monkeypatch: pytest.MonkeyPatch) -> None:
     # A worker may survive SIGTERM (here it ignores it; a task that turns it into an exception is
     # kept alive by the executor's worker loop): the stop must still end, every worker with it.
-    monkeypatch.setattr(chains, "STOP_TIMEOUT", 0.5)
+    monkeypatch.setattr(workers_module, "STOP_TIMEOUT", 0.5)
     ex = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork"), initializer=_deaf_to_sigterm)
     running = [ex.submit(time.sleep, 3600) for _ in range(3)]
     while not any(f.running() for f in running):
         time.sleep(0.01)
     workers = list(ex._processes.values())
-    chains.stop_workers(ex)
+    workers_module.stop_workers(ex)
     # each reaped once, by one thread: none left marked alive (the executor's manager thread joins
     # the same workers; had both waited at once, the loser's wait would find no child and leave
     # its process marked alive)

@@ -22,9 +22,6 @@ from __future__ import annotations
 import bisect
 import gc
 import os
-import signal
-import sys
-import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -59,6 +56,7 @@ from pose_lifter.messages.frame import (
 )
 from pose_lifter.messages.lagged import refined_skeletons
 from pose_lifter.offline.depth import HELD_IMAGES, BagDepth
+from pose_lifter.offline.workers import quiet_worker, stop_workers
 
 __all__ = [
     "GROUP_CHAINS",
@@ -71,7 +69,6 @@ __all__ = [
     "ChainWork",
     "Item",
     "chain_groups",
-    "die_with_parent",
     "kept_part",
     "lift_chains",
     "lift_parallel",
@@ -79,7 +76,6 @@ __all__ = [
     "refine_chain",
     "segments",
     "split_chains",
-    "stop_workers",
 ]
 
 
@@ -499,74 +495,18 @@ _work: ChainWork | None = None
 
 
 def _worker_init(work: ChainWork, parent: int) -> None:
-    """Keep the worker's work; Ctrl-C ends a worker silently (the parent reports it once), not
-    with a traceback each, and SIGTERM (:func:`stop_workers`, or the parent's end:
-    :func:`die_with_parent`) ends it at once: a worker writes nothing, and a handler it inherited
-    from the parent (which turns SIGTERM into an exception) would leave it alive, the executor's
-    worker loop catching what a task raises."""
+    """Keep the worker's work, with a worker's signals
+    (:func:`~pose_lifter.offline.workers.quiet_worker`): a worker writes nothing, and a handler it
+    inherited from the parent (which turns SIGTERM into an exception) would leave it alive, the
+    executor's worker loop catching what a task raises."""
     global _work
     _work = work
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    die_with_parent(parent)
-
-
-def die_with_parent(parent: int) -> None:
-    """This forked worker gets SIGTERM when the process that forked it ends, however it ends
-    (killed, crashed): Linux's ``PR_SET_PDEATHSIG``, a no-op elsewhere. A worker left behind would
-    wait for its pool's next task for ever. ``parent``: that process's id, read before the fork
-    (it may have ended before this runs: then the signal is sent at once)."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-    if os.getppid() != parent:
-        os.kill(os.getpid(), signal.SIGTERM)
-
-
-_PR_SET_PDEATHSIG: Final[int] = 1  #: prctl's option (linux/prctl.h)
+    quiet_worker(parent)
 
 
 def _worker_chain(index: int) -> list[ChainLift]:
     assert _work is not None, "called outside a worker of lift_messages"
     return _work.run(index)
-
-
-#: Seconds a worker has to exit after SIGTERM (a collection's worker discards the bag it was
-#: writing first) before :func:`stop_workers` kills it.
-STOP_TIMEOUT: Final[float] = 10.0
-
-
-def stop_workers(ex: Any) -> None:
-    """Stop a ProcessPoolExecutor (forked workers) now: its queued work dropped, each worker sent
-    SIGTERM and killed if it has not exited within STOP_TIMEOUT; on return every worker has been
-    reaped.
-
-    The executor is not shut down with ``wait=True``: a worker whose task turned SIGTERM into an
-    exception is kept alive by the executor's worker loop, which returns that exception as the
-    task's result and waits for the next task, so that could wait forever. Its manager thread,
-    which reaps the workers of a broken pool itself, is joined once they are gone and before they
-    are joined here: two threads waiting for the same child race (the loser's wait finds no child
-    and leaves the process marked alive).
-    """
-    import multiprocessing.connection
-
-    processes = list((getattr(ex, "_processes", None) or {}).values())  # no public accessor
-    manager = getattr(ex, "_executor_manager_thread", None)  # (shutdown forgets both)
-    ex.shutdown(wait=False, cancel_futures=True)
-    for proc in processes:
-        proc.terminate()
-    deadline = time.monotonic() + STOP_TIMEOUT
-    running = {proc.sentinel: proc for proc in processes}  # ready once its process has exited
-    while running and (left := deadline - time.monotonic()) > 0:
-        for sentinel in multiprocessing.connection.wait(list(running), left):
-            del running[sentinel]
-    for proc in running.values():
-        proc.kill()
-    if manager is not None:
-        manager.join(STOP_TIMEOUT)
-    for proc in processes:
-        proc.join()
 
 
 def lift_parallel(work: ChainWork, workers: int, bar: Any) -> list[ChainLift]:

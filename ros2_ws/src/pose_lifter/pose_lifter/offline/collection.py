@@ -335,9 +335,9 @@ class _Stopped(SystemExit):
 
 def _pool_init(parent: int) -> None:
     """Ctrl-C ends a worker silently (the parent reports it); SIGTERM (the parent stopping the
-    pool, :func:`pose_lifter.offline.chains.stop_workers`, or ending: ``die_with_parent``) unwinds
+    pool, :func:`pose_lifter.offline.workers.stop_workers`, or ending: ``die_with_parent``) unwinds
     it, so that the bag it was writing is discarded, and then ends it (:func:`_pool_job`)."""
-    from pose_lifter.offline.chains import die_with_parent
+    from pose_lifter.offline.workers import die_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
@@ -382,7 +382,7 @@ def _run_local(jobs: list[BagJob], settings: LiftSettings, workers: int, lifter:
                 for fut in finished:
                     on_done(fut.result())
         except BaseException:
-            from pose_lifter.offline.chains import stop_workers
+            from pose_lifter.offline.workers import stop_workers
 
             stop_workers(ex)
             raise

@@ -11,7 +11,6 @@ a depth topic the pass is short (~10 us a message) and is read when asked, in th
 from __future__ import annotations
 
 import os
-import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -135,8 +134,10 @@ class FirstPassAhead:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
+            from pose_lifter.offline.workers import quiet_worker
+
             self._ex = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"),
-                                           initializer=_quiet_worker, initargs=(os.getpid(),))
+                                           initializer=quiet_worker, initargs=(os.getpid(),))
             self._future = self._ex.submit(read_first_pass, in_path, plan)
 
     def __call__(self) -> FirstPass:
@@ -154,7 +155,7 @@ class FirstPassAhead:
     def close(self) -> None:
         """Stop the reading process if it still runs (nothing when the pass was given)."""
         if self._ex is not None:
-            from pose_lifter.offline.chains import stop_workers
+            from pose_lifter.offline.workers import stop_workers
 
             stop_workers(self._ex)
             self._ex = None
@@ -170,13 +171,3 @@ def read_ahead(in_path: str | Path, plan: FirstPassPlan) -> FirstPassAhead:
     """The first pass of a bag, to be asked for: with a depth topic read now in a forked process,
     beside the caller's own work (the module docstring); without, read when asked."""
     return FirstPassAhead(in_path, plan)
-
-
-def _quiet_worker(parent: int) -> None:
-    """Ctrl-C and SIGTERM end the reading process at once (the caller reports them), and so does
-    the caller's end (:func:`~pose_lifter.offline.chains.die_with_parent`)."""
-    from pose_lifter.offline.chains import die_with_parent
-
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    die_with_parent(parent)
