@@ -13,8 +13,9 @@ every sample with a fresh random view and person (augmentation):
 
 Pose augmentations on top (:data:`GENERALISE`, the packaged priors' recipe): mirrored people,
 arms or legs transplanted from another frame, limbs turned about their joints, and the lower body
-out of the image (:mod:`pose_lifter.mocap.pose_augment`); for the offline prior also a person close
-to the camera, cut at both ends by the image's borders (``p_crop``).
+out of the image (:mod:`pose_lifter.mocap.pose_augment`); for the cut bodies' variants
+(``*_crop.npz``, ``make prior-temporal-cut`` and ``prior-offline-cut``) also a person close to the
+camera, cut at both ends by the image's borders (``p_crop``, off by default).
 
 Models: :func:`train_prior_residual` (the packaged priors: a residual MLP, Martinez et al. 2017,
 in PyTorch, the optional extra ``train``; batch normalisation folded into the linear layers) and

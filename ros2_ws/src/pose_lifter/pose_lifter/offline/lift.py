@@ -430,8 +430,8 @@ def lift_bag(
     first_pass : FirstPassAhead, optional
         The bag's first pass, read ahead by the caller
         (:func:`~pose_lifter.offline.first_pass.read_ahead` of this bag and ``settings``'
-        :class:`~pose_lifter.offline.first_pass.FirstPassPlan`); None: read here
-        (:func:`~pose_lifter.offline.first_pass.read_first_pass`).
+        :class:`~pose_lifter.offline.first_pass.FirstPassPlan`: another plan is a ``ValueError``);
+        None: read here (:func:`~pose_lifter.offline.first_pass.read_first_pass`).
     """
     every, max_messages, topic = settings.every, settings.max_messages, settings.topic
     if every < 1:
@@ -441,6 +441,9 @@ def lift_bag(
     plan = FirstPassPlan.of(in_path, settings, topics)
     depth_topic = None if plan.depth is None else plan.depth[0]
     cdr.check_definitions(pose_lifter_typestore())
+    if first_pass is not None and first_pass.plan != plan:
+        raise ValueError(f"the first pass read ahead was planned for other settings: {first_pass.plan} "
+                         f"instead of {plan}")
     first = first_pass() if first_pass is not None else read_first_pass(in_path, plan)
     kp_all, infos = first.keypoints, first.infos
     last = kp_all[-1][0] if max_messages is not None else None

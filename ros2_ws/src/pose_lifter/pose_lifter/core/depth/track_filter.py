@@ -110,7 +110,8 @@ def filter_track(stamps_ns: Sequence[int] | NDArray[np.int64], joints_m: NDArray
     """One track's fused frames filtered in time order (:class:`TrackFilter`): ``joints_m`` and
     ``std_m`` (T, 12, 3) at ``stamps_ns`` (T,); only the frames ``fused`` (T,) change."""
     out = np.array(joints_m, dtype=np.float64)
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
     f = TrackFilter(gap_s)
     for i in np.flatnonzero(np.asarray(fused, dtype=bool)).tolist():
-        out[i] = f.update(0, int(np.asarray(stamps_ns)[i]), out[i], std_m[i])
+        out[i] = f.update(0, int(stamps[i]), out[i], std_m[i])
     return out
