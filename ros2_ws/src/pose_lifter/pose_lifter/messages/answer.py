@@ -22,10 +22,9 @@ clipped on the way, which the caller counts and logs.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from pose_lifter.core.depth.track_filter import TrackFilter
 from pose_lifter.messages import cdr
 from pose_lifter.messages.body import BodyPose
 from pose_lifter.messages.cdr import DecodedHeader, SkeletonFrame, read_skeleton2d_array
@@ -36,7 +35,7 @@ from pose_lifter.messages.lagged import LaggedFrame, LaggedFrames
 from pose_lifter.messages.markers import MarkerBook
 from pose_lifter.messages.names import MARKER_ARRAY, SKELETON3D_ARRAY, TOPIC_MARKERS, TOPIC_SKELETONS
 
-__all__ = ["AnswerStream", "AnsweredFrame", "FrameAnswer", "FrameStep", "filter_fused", "frame_answer"]
+__all__ = ["AnswerStream", "AnsweredFrame", "FrameAnswer", "FrameStep", "frame_answer"]
 
 
 @dataclass(frozen=True)
@@ -166,18 +165,6 @@ def _released(frames: list[LaggedFrame[tuple[Any, float]]]) -> list[_Lifted]:
     return [_Lifted(held.token[0], held.token[1], held.stamp_ns, held.outcomes) for held in frames]
 
 
-def filter_fused(track_filter: TrackFilter, stamp_ns: int, outcomes: Sequence[LiftedSkeleton | SkipSkeleton]
-                 ) -> list[LiftedSkeleton | SkipSkeleton]:
-    """One frame's outcomes as answered at once: each tracked skeleton placed on a depth image (its
-    fused joints, with standard deviations) followed by its track's filter
-    (:class:`~pose_lifter.core.depth.track_filter.TrackFilter`); the others as given. The node
-    without a lag (:class:`AnswerStream`) and ``pose-lifter lift --smoothing 0``
-    (:func:`pose_lifter.offline.chains.lift_chains`) answer these."""
-    return [replace(d, joints_m=track_filter.update(d.input.track_id, stamp_ns, d.joints_m, d.std_m))
-            if isinstance(d, LiftedSkeleton) and d.depth is not None and d.std_m is not None
-            and d.input.track_id >= 0 else d for d in outcomes]
-
-
 class AnswerStream:
     """One input stream's frames, each from its serialised bytes to its answer.
 
@@ -210,8 +197,7 @@ class AnswerStream:
     def __init__(self, pipeline: FramePipeline, lag: int, fallback: Callable[[bytes], Any]) -> None:
         self.pipeline = pipeline
         self.lagged: LaggedFrames[tuple[Any, float]] | None = LaggedFrames(pipeline, lag) if lag > 0 else None
-        #: the fused joints answered at once, filtered per track (without a lag)
-        self.track_filter = TrackFilter(pipeline.settings.track_timeout)
+        pipeline.follow_fused(lag == 0)  # answered at once, each track's fused joints filtered
         self.fallback = fallback
         self.markers: MarkerBook | None = None
         self.bodies: BodyBook | None = None
@@ -241,12 +227,8 @@ class AnswerStream:
         stamp_ns = stamp_to_ns(header.stamp) or arrival_ns
         depth = self.depth_of(stamp_ns) if self.depth_of is not None and checked.skeletons else None
         if self.lagged is None:
-            timeout = self.pipeline.settings.track_timeout
-            self.track_filter.gap_s = timeout
-            self.track_filter.forget(stamp_ns - round(timeout * 1e9))  # as the policy forgets its tracks
-            outcomes = filter_fused(self.track_filter, stamp_ns,
-                                    self.pipeline.frame(checked, stamp_ns, self.intrinsics, depth))
-            frames = [_Lifted(header, received, stamp_ns, outcomes)]
+            frames = [_Lifted(header, received, stamp_ns,
+                              self.pipeline.frame(checked, stamp_ns, self.intrinsics, depth))]
         else:
             frames = _released(self.lagged.lift((header, received), stamp_ns, self.intrinsics, checked,
                                                 depth))
@@ -257,10 +239,10 @@ class AnswerStream:
         return self._answered(_released(self.lagged.flush()) if self.lagged is not None else [], (), ())
 
     def clear(self) -> None:
-        """Forget the frames held for the lag and the tracks' filters."""
+        """Forget the frames held for the lag and the tracks."""
         if self.lagged is not None:
             self.lagged.clear()
-        self.track_filter.clear()
+        self.pipeline.clear()
 
     def _answered(self, frames: list[_Lifted], skipped: tuple[SkipSkeleton, ...], clipped: tuple[str, ...]
                   ) -> FrameStep:

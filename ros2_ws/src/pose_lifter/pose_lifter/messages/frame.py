@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.fuse import DepthReadings
+from pose_lifter.core.depth.track_filter import TrackFilter
 from pose_lifter.core.errors import PoseLifterError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult, LiftStatus
@@ -371,10 +372,23 @@ def lift_together(frames: Sequence[tuple[FramePipeline, SkeletonInput, int, Intr
             solved.append((k, pipeline, intrinsics, inp, d.result))
     placed = place_lifted([(p.settings, i, x, d) for _, p, i, x, d in solved],
                           None if depths is None else [depths[k] for k, *_ in solved])
+    followed = [lifted if p.track_filter is None else _followed(p.track_filter, frames[k][2], lifted)
+                for (k, p, *_), lifted in zip(solved, placed, strict=True)]
     share = (time.perf_counter() - start) / len(frames)
-    for (k, *_), lifted in zip(solved, placed, strict=True):
+    for (k, *_), lifted in zip(solved, followed, strict=True):
         out[k] = lifted if isinstance(lifted, SkipSkeleton) else lifted.timed(share)
     return [x for x in out if x is not None]
+
+
+def _followed(track_filter: TrackFilter, stamp_ns: int, lifted: LiftedSkeleton | SkipSkeleton
+              ) -> LiftedSkeleton | SkipSkeleton:
+    """A tracked skeleton placed on a depth image with its fused joints moved by its track's filter
+    (:meth:`FramePipeline.follow_fused`); anything else as given."""
+    if (isinstance(lifted, LiftedSkeleton) and lifted.depth is not None and lifted.std_m is not None
+            and lifted.input.track_id >= 0):
+        return replace(lifted, joints_m=track_filter.update(lifted.input.track_id, stamp_ns, lifted.joints_m,
+                                                            lifted.std_m))
+    return lifted
 
 
 def place_lifted(solved: Sequence[tuple[FrameSettings, Intrinsics, SkeletonInput, TrackedLift]],
@@ -509,6 +523,15 @@ class FramePipeline:
     def __init__(self, lifter: Lifter, settings: FrameSettings = _DEFAULTS) -> None:
         self.settings = settings
         self.policy = TrackPolicy(lifter, settings.track_timeout, settings.warm_start, settings.reinit_ratio)
+        #: each track's fused joints followed by its filter (None: not, :meth:`follow_fused`)
+        self.track_filter: TrackFilter | None = None
+
+    def follow_fused(self, on: bool) -> None:
+        """Whether the skeletons placed on a depth image are answered through their track's filter
+        (:class:`~pose_lifter.core.depth.track_filter.TrackFilter`): on where the pipeline's answers
+        are final as lifted (the node without ``output_lag``, ``pose-lifter lift --smoothing 0``),
+        off where they are refined over later frames (the lag's window, the offline smoothing)."""
+        self.track_filter = TrackFilter(self.settings.track_timeout) if on else None
 
     @property
     def lifter(self) -> Lifter:
@@ -518,6 +541,8 @@ class FramePipeline:
         """Change the lifter or the settings; the tracks are kept (see :meth:`TrackPolicy.configure`)."""
         self.settings = settings
         self.policy.configure(lifter, settings.track_timeout, settings.warm_start, settings.reinit_ratio)
+        if self.track_filter is not None:
+            self.track_filter.gap_s = settings.track_timeout
 
     def check(self, msg: Any, on_clipped: Callable[[str], Any] = _NO_CLIP) -> CheckedFrame:
         """Step 1 of a ``Skeleton2DArray`` (see the module doc); never raises for bad input."""
@@ -570,6 +595,14 @@ class FramePipeline:
     def end_frame(self, stamp_ns: int) -> None:
         """Step 3: forget the tracks unseen for more than ``track_timeout`` before ``stamp_ns``."""
         self.policy.expire(stamp_ns)
+        if self.track_filter is not None:
+            self.track_filter.forget(stamp_ns - round(self.settings.track_timeout * 1e9))
+
+    def clear(self) -> None:
+        """Forget every track (e.g. after a change of bases: old coefficients are meaningless)."""
+        self.policy.clear()
+        if self.track_filter is not None:
+            self.track_filter.clear()
 
     def frame(self, checked: CheckedFrame, stamp_ns: int, intrinsics: Intrinsics, depth: DepthImage = None
               ) -> list[LiftedSkeleton | SkipSkeleton]:

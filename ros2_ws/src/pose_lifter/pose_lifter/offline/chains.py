@@ -32,14 +32,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.smooth import smooth_fused, window_std_factor
-from pose_lifter.core.depth.track_filter import TrackFilter
 from pose_lifter.core.depth.uncertainty import SMOOTHED_STD_FACTOR
 from pose_lifter.core.errors import InvalidInputError
 from pose_lifter.core.lift.lifter import Lifter
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.later import LaterFrame, Placement, Refiner, placements
 from pose_lifter.messages import convert as m
-from pose_lifter.messages.answer import filter_fused
 from pose_lifter.messages.cdr import SkeletonFrame
 from pose_lifter.messages.frame import (
     CheckedFrame,
@@ -315,6 +313,7 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     pipelines = [FramePipeline(lifter, settings) for _ in runs]
     for p in pipelines:  # the centred smoothing replaces the causal smoothing of noisy tracks
         p.policy.smoothed_later = smoothing_s > 0
+        p.follow_fused(depth is not None and smoothing_s <= 0)  # answered at once, as the node
     ahead = [with_frames_ahead([(it.stamp_ns, it.input) for it in chain], lifter.frames_ahead)
              for chain in chains]
     inputs = [ahead[c][a:b] for c, a, _, b in runs]
@@ -371,9 +370,6 @@ def lift_chains(lifter: Lifter, chains: list[list[Item]], settings: FrameSetting
     if smoothing_s > 0:
         return [refine_chain(chain, out[c], fits[c], later[c], pipelines[first_run[c]], smoothing_s)
                 for c, chain in enumerate(chains)]
-    for c, chain in enumerate(chains if depth is not None else []):  # answered at once, as the node
-        f = TrackFilter(settings.track_timeout)
-        out[c] = [filter_fused(f, item.stamp_ns, [d])[0] for item, d in zip(chain, out[c], strict=True)]
     return out
 
 

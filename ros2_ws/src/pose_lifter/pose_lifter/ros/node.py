@@ -289,7 +289,7 @@ class LifterNode(Node):
             self.destroy_timer(self._stats_timer)
             self._stats_timer = None
             self._counts.close(STATS_LINE)
-        self._pipeline.policy.clear()
+        self._pipeline.clear()
         if self._hri is not None:
             self._hri.clear()
 
@@ -301,7 +301,6 @@ class LifterNode(Node):
             self.destroy_publisher(pub)
         if self._hri is not None:
             self._hri.close()
-        self._pipeline.policy.clear()
 
     # ------------------------------------------------------------------ parameters
 
@@ -374,7 +373,7 @@ class LifterNode(Node):
         self._pending = None
         if bases is not self._bases:
             self._bases = bases
-            self._pipeline.policy.clear()  # coefficients of other bases are meaningless
+            self._pipeline.clear()  # coefficients of other bases are meaningless
         replaced = lifter is not self._lifter
         self._lifter = lifter
         self._pipeline.configure(self._lifter, self._settings.frame)
