@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 from pose_lifter.core.model.skeleton import COUNTERPART, N_JOINTS
-from pose_lifter.mocap.depth_calibration import shape_correlation, spread_factors
+from pose_lifter.mocap.depth_calibration import residual_line, shape_correlation, spread_factors
 
 #: Relative error of a 68th percentile of ~40,000 Gaussian samples (its standard error is ~0.6 %).
 QUANTILE_RTOL = 0.03
@@ -48,3 +48,14 @@ def test_shape_correlation_recovers_a_known_one_seen_in_a_mirror() -> None:
     assert np.abs(got - want).max() < 0.03
     np.testing.assert_allclose(got, got[np.ix_(swap, swap)], atol=1e-12)
     np.testing.assert_allclose(np.diag(got), 1.0, atol=1e-12)
+
+
+def test_residual_line_recovers_the_spread_s_growth_with_the_residual() -> None:
+    """Errors drawn with a standard deviation of 0.4 + 8 r (r uniform on 0.02-0.2) over unit
+    deviations: the line through the deciles' 68th percentiles is (0.4, 8) to the sampling's error
+    (its level: the errors over it are unit Gaussians); a non-finite residual is left out."""
+    rng = np.random.default_rng(3)
+    r = rng.uniform(0.02, 0.2, 20000)
+    z = np.abs(rng.standard_normal((20000, N_JOINTS, 3))) * (0.4 + 8.0 * r)[:, None, None]
+    a, b = residual_line(np.append(r, np.nan), np.concatenate([z, np.full((1, N_JOINTS, 3), 9.0)]))
+    np.testing.assert_allclose([a, b], [0.4, 8.0], rtol=0.03)

@@ -17,6 +17,7 @@ from pose_lifter.core.depth import (
 )
 from pose_lifter.core.depth.fuse import _hidden
 from pose_lifter.core.depth.reading import sensor_std
+from pose_lifter.core.depth.uncertainty import RESIDUAL_SHAPE_LINE
 from pose_lifter.core.track.placement import place_poses
 from synthetic_poses import synthetic_poses
 from tolerances import ROUND_OFF_ACCUMULATED
@@ -321,3 +322,27 @@ def test_readings_that_disagree_with_the_shape_widen_the_unread_joints() -> None
                           np.array([scale]), centre[None])
     assert disagree.from_depth[0, [7, 8, 10, 11]].all()
     assert (disagree.std_m[0, [2, 5], 2] > 1.3 * agree.std_m[0, [2, 5], 2]).all()
+
+
+def test_a_fit_far_from_its_2d_widens_the_joints_the_depth_does_not_fix() -> None:
+    """The same body and readings fused for a fit whose 2D residual doubles the shape's deviations
+    (its residual_factor 2 against 1): the unread wrists' deviations nearly double along the image,
+    their depth ones widen; the read joints' depths, carried by their readings, widen far less
+    (not exactly twice where read: the readings fix the body's distance, and the shape scale
+    weighs the readings' residuals against the wider shape). Without a reading the fusion keeps
+    the monocular deviations of the same residual."""
+    pose, centre, scale, truth = _body(k=1.0)
+    a, b = RESIDUAL_SHAPE_LINE
+    one, two = (1.0 - a) / b, (2.0 - a) / b
+    w = np.ones(12)
+    w[[2, 5]] = 0.0
+    args = (K, _project(truth)[None], w[None], pose[None], np.array([scale]), centre[None])
+    typical = fuse_depth(_painted(truth), *args, residuals=np.array([one]))
+    far = fuse_depth(_painted(truth), *args, residuals=np.array([two]))
+    assert (far.std_m[0, [2, 5], :2] > 1.8 * typical.std_m[0, [2, 5], :2]).all()
+    assert (far.std_m[0, [2, 5], 2] > 1.3 * typical.std_m[0, [2, 5], 2]).all()
+    read = typical.from_depth[0] & far.from_depth[0]
+    assert read.sum() >= 8 and (far.std_m[0, read, 2] < 1.3 * typical.std_m[0, read, 2]).all()
+    blank = fuse_depth(np.full(SIZE, np.nan, dtype=np.float32), *args, residuals=np.array([two]))
+    alone = monocular_std(blank.joints_m, w[None], K, residual=np.array([two]))
+    np.testing.assert_allclose(blank.std_m, alone, rtol=1e-9)

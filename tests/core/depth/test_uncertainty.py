@@ -6,11 +6,17 @@ import numpy as np
 from pose_lifter.core.depth.uncertainty import (
     MONOCULAR_SCALE_STD,
     OBSERVED_BINS,
+    RESIDUAL_FACTOR_MIN,
+    RESIDUAL_SCALE_LINE,
+    RESIDUAL_SHAPE_LINE,
     SHAPE_STD_M,
     body_std,
+    fit_residual,
     monocular_std,
     observed_bin,
+    residual_factor,
 )
+from pose_lifter.core.results import Camera, LiftResult
 
 K = ((800.0, 800.0), (320.0, 240.0))
 
@@ -39,3 +45,40 @@ def test_std_stays_finite_for_absurd_but_finite_placements() -> None:
     x = np.full((1, 12, 3), 1e200)
     std = body_std(x, np.ones((1, 12), dtype=bool), np.array([0.5]))
     assert np.isfinite(std).all() and (std > 1e199).all()
+
+
+def _result(reprojection_px: float, scale: float, prior: bool) -> LiftResult:
+    pose = np.zeros((12, 3))
+    camera = Camera(np.eye(3), scale, np.zeros(2))
+    return LiftResult(pose, pose, camera, np.zeros(3), 1.0, reprojection_px, 0.0, 2, True, 1, -1, np.ones(12),
+                      prior_pose=pose if prior else None)
+
+
+def test_the_fit_s_residual_is_its_reprojection_error_in_leg_units() -> None:
+    """The hybrid fit's mean reprojection error over its camera scale; none (NaN) for a paper-mode
+    fit (no prior's pose), whose close fit of its 2D says nothing of its error."""
+    r = fit_residual([_result(6.0, 120.0, True), _result(6.0, 60.0, True), _result(6.0, 120.0, False)])
+    np.testing.assert_allclose(r[:2], [0.05, 0.1])
+    assert np.isnan(r[2])
+
+
+def test_the_residual_scales_the_deviations_along_its_lines() -> None:
+    """``a + b r`` above its floor, the floor below it, 1 without a residual; the monocular
+    deviations' shape part scales by the shape's line, the slide along the rays by the scale's."""
+    a, b = RESIDUAL_SHAPE_LINE
+    r = np.array([0.0, 0.05, 0.2, np.nan])
+    f = np.asarray(residual_factor(r, RESIDUAL_SHAPE_LINE))
+    np.testing.assert_allclose(f[1:3], a + b * r[1:3])
+    assert f[0] == max(a, RESIDUAL_FACTOR_MIN) and f[3] == 1.0
+    assert residual_factor(None, RESIDUAL_SHAPE_LINE) == 1.0
+    x = np.zeros((2, 12, 3))
+    x[..., 2] = 4.0
+    residual = np.array([0.05, 0.2])  # above both floors
+    shape = np.asarray(residual_factor(residual, RESIDUAL_SHAPE_LINE))
+    scale = np.asarray(residual_factor(residual, RESIDUAL_SCALE_LINE))
+    assert (shape > RESIDUAL_FACTOR_MIN).all() and (scale > RESIDUAL_FACTOR_MIN).all()
+    std = monocular_std(x, np.ones((2, 12)), K, residual=residual)
+    for i in range(2):  # a whole body on the optical axis: x, y the shape's, z both
+        np.testing.assert_allclose(std[i, :, 0], shape[i] * SHAPE_STD_M[:, 0])
+        np.testing.assert_allclose(std[i, :, 2], np.hypot(shape[i] * SHAPE_STD_M[:, 1],
+                                                          scale[i] * MONOCULAR_SCALE_STD[0] * 4.0))

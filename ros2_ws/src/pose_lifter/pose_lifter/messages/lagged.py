@@ -233,7 +233,7 @@ def refined_skeletons(lifted: Sequence[LiftedSkeleton], joints: NDArray[np.float
     placed again, the refined pose with its frame's readings (:func:`place_skeletons`, with its
     camera's ``intrinsics``), the others keep the refined joints with their monocular standard
     deviations. None for a skeleton that is then no valid output (:func:`check_output`)."""
-    from pose_lifter.core.depth.uncertainty import monocular_std
+    from pose_lifter.core.depth.uncertainty import fit_residual, monocular_std
 
     centred = (joints - joints.mean(axis=1, keepdims=True)) / leg_m
     results = with_camera_poses([s.result for s in lifted], centred)
@@ -252,7 +252,8 @@ def refined_skeletons(lifted: Sequence[LiftedSkeleton], joints: NDArray[np.float
                 again = None
         if again is None:
             weights = np.array([(results[i].weights > 0) for i in members], dtype=np.float64)
-            sds = monocular_std(joints[members], weights, intr)
+            residual = fit_residual([results[i] for i in members])
+            sds = monocular_std(joints[members], weights, intr, residual=residual)
             again = [(joints[i], sd, None) for i, sd in zip(members, sds, strict=True)]
         by_row.update(zip(members, again, strict=True))
     placed = [by_row[i] for i in range(len(lifted))]

@@ -23,6 +23,13 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
   the joints not shown over the bin's shown ones (a joint outside the image is placed by the lift's
   guess across the image too, not by the 2D: most along the image's vertical, where an upright
   body leaves the image);
+* :data:`~pose_lifter.core.depth.uncertainty.RESIDUAL_SHAPE_LINE` and
+  :data:`~pose_lifter.core.depth.uncertainty.RESIDUAL_SCALE_LINE` (:func:`residual_line`): per
+  decile of the fits' 2D residual (:func:`~pose_lifter.core.depth.uncertainty.fit_residual`), the
+  68th percentile of the scaled placement's errors over their shape's deviations (every joint and
+  axis), and of ``|k - 1|`` over the bin's scale deviation; a least-squares line through each
+  against the deciles' median residual, scaled so that the 68th percentile of the errors over the
+  deviations it scales is 1;
 * :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`: the correlation between the joints of
   the scaled placement's errors along the depth, of wholly shown bodies (:func:`shape_correlation`:
   left and right pooled, so the matrix is the same seen in a mirror);
@@ -49,7 +56,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose_lifter.core.depth.reading import DepthOptions, read_patches
-from pose_lifter.core.depth.uncertainty import OBSERVED_BINS, observed_bin
+from pose_lifter.core.depth.uncertainty import (
+    OBSERVED_BINS,
+    fit_residual,
+    monocular_scale_std,
+    observed_bin,
+    shape_std,
+)
 from pose_lifter.core.model.skeleton import COUNTERPART, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_results
 from pose_lifter.messages.frame import labelled_2d
@@ -57,8 +70,8 @@ from pose_lifter.mocap import depth_model
 from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.rgbd_evaluation import IMAGE_SIZE, INTRINSICS, STD_FACTORS, RgbdEvaluator, film_rgbd
 
-__all__ = ["Calibration", "calibrate", "format_calibration", "shape_correlation", "smoothed_std_factors",
-           "spread_factors"]
+__all__ = ["Calibration", "calibrate", "format_calibration", "residual_line", "shape_correlation",
+           "smoothed_std_factors", "spread_factors"]
 
 #: A reading farther than this from its joint's true depth minus a typical offset
 #: (:data:`_TYPICAL_OFFSET_M`) is not the joint's surface (an occluder, the background): metres.
@@ -79,6 +92,8 @@ class Calibration:
     shape_factor: NDArray[np.float64]  #: per observed-count bin
     unobserved_factor: NDArray[np.float64]  #: per observed-count bin (rows): x, y, z
     shape_corr_z: NDArray[np.float64]  #: (12, 12)
+    shape_line: tuple[float, float]  #: (a, b) of RESIDUAL_SHAPE_LINE
+    scale_line: tuple[float, float]  #: (a, b) of RESIDUAL_SCALE_LINE
     n_frames: int
     n_readings: int
 
@@ -106,6 +121,9 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     hidden: list[list[list[list[float]]]] = [[[[] for _ in range(N_JOINTS)] for _ in range(3)]
                                              for _ in range(bins)]
     whole_z: list[NDArray[np.float64]] = []  # the depth errors (12,) of wholly shown bodies
+    residuals: list[float] = []  # each frame's fit's 2D residual
+    shape_z: list[NDArray[np.float64]] = []  # and its scaled placement's errors / the shape's deviations
+    scale_z: list[float] = []  # and |k - 1| / the scale's deviation
     n_frames = 0
     for track in tracks:
         for distance in distances:
@@ -126,6 +144,9 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
                 b = int(observed_bin(observed[None])[0])
                 scale_err[b].append(k - 1.0)
                 err = k * x0 - truth[i]
+                residuals.append(float(fit_residual([res])[0]))
+                shape_z.append(err / shape_std(observed[None])[0])
+                scale_z.append(float((k - 1.0) / monocular_scale_std(observed[None])[0]))
                 if observed.all():
                     whole_z.append(err[:, 2])
                 for j in range(N_JOINTS):
@@ -145,8 +166,28 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     spread = np.concatenate([p - surface[j] for j, p in enumerate(pooled)])
     shape, factor, unobserved = spread_factors(shown, hidden)
     return Calibration(surface, _q68(spread), np.array([_q68(np.array(e)) for e in scale_err]),
-                       shape, factor, unobserved, shape_correlation(np.array(whole_z)), n_frames,
+                       shape, factor, unobserved, shape_correlation(np.array(whole_z)),
+                       residual_line(np.array(residuals), np.array(shape_z)),
+                       residual_line(np.array(residuals), np.array(scale_z)), n_frames,
                        sum(len(o) for o in offsets))
+
+
+def residual_line(residuals: NDArray[np.float64], errors: NDArray[np.float64]) -> tuple[float, float]:
+    """``(a, b)`` of a line of :mod:`~pose_lifter.core.depth.uncertainty` (``RESIDUAL_SHAPE_LINE``,
+    ``RESIDUAL_SCALE_LINE``) from ``n`` frames' fits' 2D residuals (n,) and their errors over their
+    deviations without the line (n, ...): per decile of the residual, the 68th percentile of the
+    errors' absolute values (a frame's values together) against the decile's median residual;
+    the least-squares line through the ten, scaled so that the errors over their deviations scaled
+    by it have a 68th percentile of 1 (module docstring)."""
+    ok = np.isfinite(residuals)
+    r, z = residuals[ok], np.abs(errors[ok]).reshape(int(ok.sum()), -1)
+    edges = np.quantile(r, np.linspace(0.0, 1.0, 11))
+    decile = np.clip(np.searchsorted(edges, r, side="right") - 1, 0, 9)
+    x = np.array([np.median(r[decile == d]) for d in range(10)])
+    y = np.array([_q68(z[decile == d].ravel()) for d in range(10)])
+    b, a = np.polyfit(x, y, 1)
+    level = _q68((z / np.maximum(a + b * r, 1e-9)[:, None]).ravel())  # the line's scale over all frames
+    return float(a * level), float(b * level)
 
 
 def shape_correlation(errors: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -229,6 +270,8 @@ def format_calibration(c: Calibration) -> str:
         f"SHAPE_FACTOR = [{row(c.shape_factor)}]",
         "UNOBSERVED_FACTOR = [" + ", ".join("[" + ", ".join(f"{x:.2f}" for x in r) + "]"
                                             for r in c.unobserved_factor) + "]",
+        f"RESIDUAL_SHAPE_LINE = ({c.shape_line[0]:.3f}, {c.shape_line[1]:.2f})",
+        f"RESIDUAL_SCALE_LINE = ({c.scale_line[0]:.3f}, {c.scale_line[1]:.2f})",
         "SHAPE_CORR_Z = [\n" + "\n".join("    [" + ", ".join(f"{x:.2f}" for x in r) + "],"
                                          for r in c.shape_corr_z) + "\n]",
     ])

@@ -20,7 +20,9 @@ placed depths scaled (the body's size and distance together) and tilted across t
    body's centroid (metres), ``rho`` Tukey's biweight (c = 4.685),
    ``sigma_j^2 = v_j + (k sigma_shape,j)^2`` (the reading's variance and the shape's error in depth),
    ``P`` the prior's precisions (on ``k`` the monocular placement's own scale error,
-   :func:`~pose_lifter.core.depth.uncertainty.monocular_scale_std`; on ``a`` and ``b``
+   :func:`~pose_lifter.core.depth.uncertainty.monocular_scale_std`, and on ``sigma_shape`` the
+   shape's, both scaled by the lift's 2D residual,
+   :func:`~pose_lifter.core.depth.uncertainty.residual_factor`; on ``a`` and ``b``
    :attr:`~pose_lifter.core.depth.reading.DepthOptions.tilt_std`), by iteratively reweighted least
    squares from ``k`` the median of ``d_j / z0_j``, until no parameter moves by more than ``tol`` or
    ``max_iter``. Readings beyond ``gate`` standard deviations of the field are dropped.
@@ -72,10 +74,13 @@ from pose_lifter.core.depth.reading import (
     read_people,
 )
 from pose_lifter.core.depth.uncertainty import (
+    RESIDUAL_SCALE_LINE,
+    RESIDUAL_SHAPE_LINE,
     SHAPE_CORR_Z,
     SHAPE_STD_M,
     body_std,
     monocular_scale_std,
+    residual_factor,
     shape_std,
 )
 from pose_lifter.core.errors import InvalidInputError
@@ -230,9 +235,14 @@ class _Placed:
 
     def __init__(self, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                  weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
-                 centres: NDArray[np.float64], opt: DepthOptions) -> None:
+                 centres: NDArray[np.float64], opt: DepthOptions,
+                 residuals: NDArray[np.float64] | None = None) -> None:
         pose = np.asarray(poses, dtype=np.float64)
         n = len(pose)
+        #: each lift's scales of its shape's and its placement's deviations (its fit's 2D residual)
+        self.shape_factor, self.scale_factor = (
+            np.broadcast_to(np.asarray(residual_factor(residuals, line), dtype=np.float64), (n,))
+            for line in (RESIDUAL_SHAPE_LINE, RESIDUAL_SCALE_LINE))
         self.px = np.asarray(points, dtype=np.float64).reshape(n, N_JOINTS, 2)
         self.scales = np.asarray(scales, dtype=np.float64).reshape(n)
         (fx, fy), (cx, cy) = intrinsics
@@ -289,7 +299,8 @@ def _read(depth: DepthArray, intrinsics: CameraIntrinsics, placed: _Placed, opt:
 
 def fuse_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
-               centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
+               centres: NDArray[np.float64], options: DepthOptions | None = None,
+               residuals: NDArray[np.float64] | None = None) -> FusedPeople:
     """The ``n`` people of one frame placed with the frame's registered depth image (module
     docstring: steps and the objective of the scale fit): :func:`fuse_readings` of
     :func:`read_depth`.
@@ -313,6 +324,11 @@ def fuse_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[
     centres : ndarray, shape (n, 2)
         Each lift's camera translation (the image of its centroid, pixels).
     options : DepthOptions, optional
+    residuals : ndarray, shape (n,), optional
+        Each lift's fit's 2D residual
+        (:func:`~pose_lifter.core.depth.uncertainty.fit_residual`): the shape's and the
+        monocular placement's deviations scaled by its
+        :func:`~pose_lifter.core.depth.uncertainty.residual_factor` (each its line); None: unscaled.
 
     Returns
     -------
@@ -325,31 +341,32 @@ def fuse_depth(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[
     InvalidInputError
         ``depth`` is not a 2-D image.
     """
-    return read_and_fuse(depth, intrinsics, points, weights, poses, scales, centres, options)[1]
+    return read_and_fuse(depth, intrinsics, points, weights, poses, scales, centres, options, residuals)[1]
 
 
 def read_and_fuse(depth: DepthArray, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                   weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
-                  centres: NDArray[np.float64], options: DepthOptions | None = None
-                  ) -> tuple[DepthReadings, FusedPeople]:
+                  centres: NDArray[np.float64], options: DepthOptions | None = None,
+                  residuals: NDArray[np.float64] | None = None) -> tuple[DepthReadings, FusedPeople]:
     """:func:`read_depth` and :func:`fuse_readings` of its readings, the people placed once
     (arguments as :func:`fuse_depth`): the readings (for a later fusion of the frame) and the
     people placed."""
     opt = options if options is not None else DepthOptions()
     _check_image(depth)
-    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt)
+    placed = _Placed(intrinsics, points, weights, poses, scales, centres, opt, residuals)
     readings = _read(depth, intrinsics, placed, opt)
     return readings, _fuse(readings, placed, opt)
 
 
 def fuse_readings(readings: DepthReadings, intrinsics: CameraIntrinsics, points: NDArray[np.float64],
                   weights: NDArray[np.float64], poses: NDArray[np.float64], scales: NDArray[np.float64],
-                  centres: NDArray[np.float64], options: DepthOptions | None = None) -> FusedPeople:
+                  centres: NDArray[np.float64], options: DepthOptions | None = None,
+                  residuals: NDArray[np.float64] | None = None) -> FusedPeople:
     """Steps 4-5 of the fusion (module docstring) of the ``n`` people of :func:`read_depth`'s
     ``readings``: the same people, possibly with other poses (a pose refined over later frames);
     arguments as :func:`fuse_depth`."""
     opt = options if options is not None else DepthOptions()
-    return _fuse(readings, _Placed(intrinsics, points, weights, poses, scales, centres, opt), opt)
+    return _fuse(readings, _Placed(intrinsics, points, weights, poses, scales, centres, opt, residuals), opt)
 
 
 def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedPeople:
@@ -367,7 +384,8 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     field_kernel(x0, observed, np.ascontiguousarray(readings.depth_m, dtype=np.float64).reshape(n, N_JOINTS),
                  np.ascontiguousarray(readings.var, dtype=np.float64).reshape(n, N_JOINTS), have, d, v, g,
                  theta0)
-    mono_scale = monocular_scale_std(observed)  # the prior on k: the monocular placement's own error
+    # the prior on k: the monocular placement's own error (scaled, as the shape's, by the fit's residual)
+    mono_scale = monocular_scale_std(observed) * placed.scale_factor
     precision = np.empty((n, 3))
     precision[:, 0] = mono_scale**-2
     precision[:, 1:] = opt.tilt_std**-2
@@ -387,7 +405,7 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     # folds the conditional one covered 83 % of such joints at 2 sigma, the marginal 86 %).
     # Compiled, one person at a time: :func:`~pose_lifter.core.depth.kernels.fuse_kernel`; the
     # shape's deviations scaled by what the field's residuals say of this body (shape_scale)
-    shape = shape_std(observed)
+    shape = shape_std(observed) * placed.shape_factor[:, None, None]
     shape *= shape_scale(d, v, g, have, theta, shape[..., 2], opt.gate)[:, None, None]
     joints = np.empty((n, N_JOINTS, 3))
     std = np.empty((n, N_JOINTS, 3))
@@ -400,7 +418,7 @@ def _fuse(readings: DepthReadings, placed: _Placed, opt: DepthOptions) -> FusedP
     bad = ~(np.isfinite(joints).all(axis=(1, 2)) & np.isfinite(std).all(axis=(1, 2)))
     if bad.any():  # never NaN: such a person keeps the monocular placement
         joints[bad] = x0[bad]
-        std[bad] = body_std(x0[bad], observed[bad], mono_scale[bad])
+        std[bad] = body_std(x0[bad], observed[bad], mono_scale[bad], placed.shape_factor[bad])
         kept[bad] = False
     k = np.where(placeable, theta[:, 0], 1.0)
     return FusedPeople(joints, std, kept, DEFAULT_LEG_LENGTH_M * k, converged, n_iter, objective)

@@ -5,9 +5,10 @@ readings an earlier placement of the same frame took of it), fused with it
 (:func:`~pose_lifter.core.depth.fuse.read_and_fuse`, :func:`~pose_lifter.core.depth.fuse.fuse_readings`);
 without, at the distance their image scale gives for the assumed leg length
 (:func:`~pose_lifter.core.track.placement.place_results`). Either way each joint gets its standard
-deviation (:func:`~pose_lifter.core.depth.uncertainty.monocular_std` without depth). The node, the
-lagged node and the offline lift place with it, and place a pose refined over later frames again
-with the readings of its own frame.
+deviation (:func:`~pose_lifter.core.depth.uncertainty.monocular_std` without depth), scaled by
+what its fit's 2D residual says of it (:func:`~pose_lifter.core.depth.uncertainty.residual_factor`).
+The node, the lagged node and the offline lift place with it, and place a pose refined over later
+frames again with the readings of its own frame.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.depth.fuse import DepthReadings, fuse_readings, read_and_fuse
 from pose_lifter.core.depth.reading import DepthArray
-from pose_lifter.core.depth.uncertainty import monocular_std
+from pose_lifter.core.depth.uncertainty import fit_residual, monocular_std
 from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.placement import CameraIntrinsics, place_results
 
@@ -87,15 +88,17 @@ def place_people(results: Sequence[LiftResult], points: NDArray[np.float64],
     pose = (np.array([r.pose_camera for r in results], dtype=np.float64) if poses is None
             else np.asarray(poses, dtype=np.float64))
     weights = np.array([r.weights for r in results], dtype=np.float64)
+    residuals = fit_residual(results)
     if intrinsics is None or (depth is None and readings is None):
         joints = place_results(pose, results, leg_length_m, intrinsics, default_distance_m)
-        return Placed(joints, monocular_std(joints, (weights > 0).astype(np.float64), intrinsics), None)
+        return Placed(joints, monocular_std(joints, (weights > 0).astype(np.float64), intrinsics,
+                                            residual=residuals), None)
     scales = np.array([float(r.camera.scale) for r in results], dtype=np.float64)
     centres = np.array([r.camera.translation for r in results], dtype=np.float64).reshape(-1, 2)
     args = (intrinsics, np.asarray(points, dtype=np.float64), weights, pose, scales, centres)
     if readings is None:
         assert depth is not None
-        readings, fused = read_and_fuse(depth, *args)
+        readings, fused = read_and_fuse(depth, *args, residuals=residuals)
     else:
-        fused = fuse_readings(readings, *args)
+        fused = fuse_readings(readings, *args, residuals=residuals)
     return Placed(fused.joints_m, fused.std_m, readings, fused.from_depth)

@@ -8,6 +8,9 @@ whole body slides along the rays by a relative error (:data:`MONOCULAR_SCALE_STD
 joint by that fraction of its own position. Both grow when the 2D shows less of the body
 (:data:`OBSERVED_BINS`, :data:`SHAPE_FACTOR`): a person close to the camera, cut by the image's
 border, is lifted from a part of the body. The two are independent; :func:`body_std` adds them.
+Both also grow with the lift's own residual (:func:`fit_residual`, :func:`residual_factor`): a fit
+that cannot reach its 2D (a motion the prior knows badly, a 2D it misread) errs more, one that
+reaches it closely less.
 The depth fusion shrinks the second (the distance is read) and, where a joint is read, the first
 (:func:`pose_lifter.core.depth.fuse.fuse_depth`). The constants are measured on the training
 split's trials the packaged prior was not fitted on, at 1.5, 3 and 5 m (``make depth-calibration``,
@@ -23,11 +26,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from pose_lifter.core.results import LiftResult
     from pose_lifter.core.track.placement import CameraIntrinsics
 
-__all__ = ["LAGGED_STD_FACTOR", "MONOCULAR_SCALE_STD", "OBSERVED_BINS", "SHAPE_CORR_Z", "SHAPE_FACTOR",
-           "SHAPE_STD_M", "SMOOTHED_STD_FACTOR", "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std",
-           "monocular_scale_std", "monocular_std", "observed_bin", "shape_std"]
+__all__ = ["LAGGED_STD_FACTOR", "MONOCULAR_SCALE_STD", "OBSERVED_BINS", "RESIDUAL_FACTOR_MIN",
+           "RESIDUAL_SCALE_LINE", "RESIDUAL_SHAPE_LINE", "SHAPE_CORR_Z", "SHAPE_FACTOR", "SHAPE_STD_M",
+           "SMOOTHED_STD_FACTOR", "UNINFORMED_SCALE_STD", "UNOBSERVED_FACTOR", "body_std", "fit_residual",
+           "monocular_scale_std", "monocular_std", "observed_bin", "residual_factor", "shape_std"]
 
 #: Standard deviation of an observed joint's position relative to the body, metres, per joint
 #: (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`), of a body the 2D shows whole:
@@ -72,12 +79,46 @@ UNOBSERVED_FACTOR: Final[NDArray[np.float64]] = np.array(
 #: The scale of a track's fused joints' standard deviations averaged over ``pose-lifter lift``'s
 #: window (:func:`pose_lifter.core.depth.smooth.smooth_fused`): the window averages the frames'
 #: reading errors, so the smoothed joints err less than each frame's own deviations say.
-SMOOTHED_STD_FACTOR: Final[float] = 0.920
+SMOOTHED_STD_FACTOR: Final[float] = 0.914
 #: The same of the lagged node's window (:func:`pose_lifter.core.depth.smooth.smooth_fused_at`:
 #: the frames before a frame refined, those its lag holds after it as lifted).
-LAGGED_STD_FACTOR: Final[float] = 0.871
+LAGGED_STD_FACTOR: Final[float] = 0.868
 #: The same without camera intrinsics (the body put at a default distance): nothing is known.
 UNINFORMED_SCALE_STD: Final[float] = 0.5
+#: ``(a, b)``: a lift's shape deviations are scaled by ``a + b r``, ``r`` its fit's 2D residual
+#: (:func:`fit_residual`, leg units): per decile of ``r`` the 68th percentile of the shape's errors
+#: over its deviations, a line fitted through them, at the level that makes the errors over the
+#: scaled deviations' 68th percentile 1 (:func:`pose_lifter.mocap.depth_calibration.residual_line`).
+#: Unscaled, the errors' spread over the shape's deviations runs from 0.8 in the decile of least
+#: residual (median r 0.035) to 1.8 in the decile of most (0.15), past 1 only above r ~0.07.
+RESIDUAL_SHAPE_LINE: Final[tuple[float, float]] = (0.423, 9.01)
+#: The same of the monocular placement's scale (its relative distance error,
+#: :data:`MONOCULAR_SCALE_STD`): from 0.74 to 2.4 over the same deciles.
+RESIDUAL_SCALE_LINE: Final[tuple[float, float]] = (0.082, 14.60)
+#: The least scale :func:`residual_factor` gives (a fit that meets its 2D exactly still errs).
+RESIDUAL_FACTOR_MIN: Final[float] = 0.5
+
+
+def fit_residual(results: Sequence[LiftResult]) -> NDArray[np.float64]:
+    """Each lift's 2D residual (n,): its mean reprojection error over its camera's scale (the
+    body's image size), in leg units; NaN for a lift without the learned prior's pose (the paper
+    mode fits its 2D closely whatever its error: its residual says nothing of it)."""
+    return np.array([r.reprojection_error / r.camera.scale if r.prior_pose is not None and r.camera.scale > 0
+                     else np.nan for r in results], dtype=np.float64)
+
+
+def residual_factor(residual: NDArray[np.float64] | None, line: tuple[float, float]
+                    ) -> NDArray[np.float64] | float:
+    """The scale (n,) of a deviation of lifts whose fits left ``residual`` (n,; :func:`fit_residual`)
+    along ``line`` (:data:`RESIDUAL_SHAPE_LINE`, :data:`RESIDUAL_SCALE_LINE`):
+    ``max(a + b r, RESIDUAL_FACTOR_MIN)``; 1 where ``r`` is not finite, and 1.0 for ``residual``
+    None."""
+    if residual is None:
+        return 1.0
+    r = np.asarray(residual, dtype=np.float64)
+    known = np.isfinite(r)
+    a, b = line
+    return np.where(known, np.maximum(a + b * np.where(known, r, 0.0), RESIDUAL_FACTOR_MIN), 1.0)
 
 
 def observed_bin(observed: NDArray[np.bool_]) -> NDArray[np.intp]:
@@ -104,8 +145,8 @@ def shape_std(observed: NDArray[np.bool_]) -> NDArray[np.float64]:
     return np.asarray(SHAPE_STD_M[:, [0, 0, 1]][None, :, :] * factor)
 
 
-def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_std: NDArray[np.float64]
-             ) -> NDArray[np.float64]:
+def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_std: NDArray[np.float64],
+             shape_factor: NDArray[np.float64] | float = 1.0) -> NDArray[np.float64]:
     """Per-axis standard deviations (n, 12, 3; metres) of ``n`` placed bodies.
 
     Parameters
@@ -116,26 +157,29 @@ def body_std(joints_m: NDArray[np.float64], observed: NDArray[np.bool_], scale_s
         The joints the 2D showed.
     scale_std : ndarray, shape (n,)
         Relative standard deviation of each body's distance (its scale about the camera centre).
+    shape_factor : ndarray, shape (n,), or float
+        Each body's scale of its shape's spread (:func:`residual_factor`).
 
     Returns
     -------
     ndarray, shape (n, 12, 3)
         ``sqrt(shape^2 + (scale_std * |x|)^2)`` per axis: the shape's spread
-        (:data:`SHAPE_STD_M`, times :data:`UNOBSERVED_FACTOR` where not observed) and the body's
-        slide along the rays.
+        (:data:`SHAPE_STD_M`, times :data:`UNOBSERVED_FACTOR` where not observed, times
+        ``shape_factor``) and the body's slide along the rays.
     """
     x = np.asarray(joints_m, dtype=np.float64)
-    shape = shape_std(observed)
+    shape = shape_std(observed) * np.reshape(np.asarray(shape_factor, dtype=np.float64), (-1, 1, 1))
     root = np.asarray(scale_std, dtype=np.float64)[:, None, None] * np.abs(x)
     return np.asarray(np.hypot(shape, root))  # finite wherever the joints are (no square overflows)
 
 
 def monocular_std(joints_m: NDArray[np.float64], weights: NDArray[np.float64],
-                  intrinsics: CameraIntrinsics | None, confidence_threshold: float = 0.1
-                  ) -> NDArray[np.float64]:
+                  intrinsics: CameraIntrinsics | None, confidence_threshold: float = 0.1,
+                  residual: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """Per-axis standard deviations (n, 12, 3; metres) of ``n`` monocular lifts placed by
     :func:`pose_lifter.core.track.placement.place_results` (:func:`body_std` with
-    :func:`monocular_scale_std`, or :data:`UNINFORMED_SCALE_STD` without ``intrinsics``).
+    :func:`monocular_scale_std`, or :data:`UNINFORMED_SCALE_STD` without ``intrinsics``), the
+    shape's and the placement's scaled by the fits' :func:`residual_factor` (each its line).
 
     Parameters
     ----------
@@ -144,8 +188,13 @@ def monocular_std(joints_m: NDArray[np.float64], weights: NDArray[np.float64],
         The joints' 2D weights; observed where at least ``confidence_threshold``.
     intrinsics : ((fx, fy), (cx, cy)) or None
     confidence_threshold : float
+    residual : ndarray, shape (n,), optional
+        Each fit's 2D residual (:func:`fit_residual`); None: unscaled.
     """
     x = np.asarray(joints_m, dtype=np.float64)
     observed = np.asarray(weights) >= confidence_threshold
-    s = monocular_scale_std(observed) if intrinsics is not None else np.full(len(x), UNINFORMED_SCALE_STD)
-    return body_std(x, observed, s)
+    if intrinsics is None:
+        s = np.full(len(x), UNINFORMED_SCALE_STD)
+    else:
+        s = monocular_scale_std(observed) * residual_factor(residual, RESIDUAL_SCALE_LINE)
+    return body_std(x, observed, s, residual_factor(residual, RESIDUAL_SHAPE_LINE))
