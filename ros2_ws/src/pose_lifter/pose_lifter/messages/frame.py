@@ -70,7 +70,6 @@ __all__ = [
     "SkipSkeleton",
     "admitted_track",
     "check_output",
-    "expiry_stamps",
     "frame_over_cap",
     "lift_together",
     "place_lifted",
@@ -478,37 +477,6 @@ def with_frames_ahead(track: Sequence[tuple[int, SkeletonInput]], n: int) -> lis
     return [replace(x, ahead=FramesAhead(stamps[i + 1:i + 1 + n], points[i + 1:i + 1 + n],
                                          confidence[i + 1:i + 1 + n]))
             for i, (_, x) in enumerate(track)]
-
-
-def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:
-    """For one track lifted apart from the others (its own :class:`FramePipeline`), the stamp to
-    expire at before each of its frames, so that it is forgotten exactly when a pipeline lifting
-    every frame would have forgotten it.
-
-    Parameters
-    ----------
-    frame_stamps : sequence of int or None
-        Every frame's stamp in order (None: a frame skipped unanswered, which expires nothing).
-    track_frames : sequence of int
-        Increasing indices into ``frame_stamps`` of the track's frames.
-
-    Returns
-    -------
-    list of int or None
-        Per track frame: the latest stamp among the frames from the track's previous frame
-        (inclusive) to this one (exclusive), None for its first frame. Expiring at that stamp is
-        expiring at each of them (only the track's last stamp, unchanged in between, is compared).
-    """
-    out: list[int | None] = []
-    prev: int | None = None
-    for j in track_frames:
-        if prev is None:
-            out.append(None)
-        else:
-            between = [s for s in frame_stamps[prev:j] if s is not None]
-            out.append(max(between) if between else None)
-        prev = j
-    return out
 
 
 class FramePipeline:

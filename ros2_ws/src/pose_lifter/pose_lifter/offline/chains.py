@@ -4,7 +4,7 @@ processes, with the same outcomes.
 
 A track's frames depend on one another (warm starts, the track's history); different tracks do
 not, so each track is a chain. A chain expires its track at the stamps a pipeline lifting every
-frame would (:func:`~pose_lifter.messages.frame.expiry_stamps`), so the outcomes are those of the
+frame would (:func:`expiry_stamps`), so the outcomes are those of the
 node's one pipeline over the whole bag. Chains are lifted in groups, in step, the k-th frame of
 each chain together whether they were seen together or one after another (:func:`lift_chains`),
 so that the prior's network runs once per step for all of them
@@ -48,7 +48,6 @@ from pose_lifter.messages.frame import (
     LiftedSkeleton,
     SkeletonInput,
     SkipSkeleton,
-    expiry_stamps,
     lift_together,
     with_frames_ahead,
 )
@@ -67,6 +66,7 @@ __all__ = [
     "ChainWork",
     "Item",
     "chain_groups",
+    "expiry_stamps",
     "kept_part",
     "lift_chains",
     "lift_parallel",
@@ -108,7 +108,7 @@ class CameraTimeline:
 @dataclass(frozen=True)
 class Item:
     """One checked skeleton of one message, to lift: its input, the camera, and the stamp its
-    track expires at before it (:func:`~pose_lifter.messages.frame.expiry_stamps`)."""
+    track expires at before it (:func:`expiry_stamps`)."""
 
     msg_index: int
     stamp_ns: int
@@ -147,6 +147,38 @@ class ChainLift:
         lifted = [x for x in outcomes if isinstance(x, LiftedSkeleton)]
         failures = [str(x) if isinstance(x, SkipSkeleton) else None for x in outcomes]
         return cls(failures, SkeletonFrame.of(lifted), [x.result for x in lifted] if keep_results else None)
+
+
+def expiry_stamps(frame_stamps: Sequence[int | None], track_frames: Sequence[int]) -> list[int | None]:
+    """For one track lifted apart from the others (its own
+    :class:`~pose_lifter.messages.frame.FramePipeline`), the stamp to expire at before each of its
+    frames, so that it is forgotten exactly when a pipeline lifting every frame would have
+    forgotten it.
+
+    Parameters
+    ----------
+    frame_stamps : sequence of int or None
+        Every frame's stamp in order (None: a frame skipped unanswered, which expires nothing).
+    track_frames : sequence of int
+        Increasing indices into ``frame_stamps`` of the track's frames.
+
+    Returns
+    -------
+    list of int or None
+        Per track frame: the latest stamp among the frames from the track's previous frame
+        (inclusive) to this one (exclusive), None for its first frame. Expiring at that stamp is
+        expiring at each of them (only the track's last stamp, unchanged in between, is compared).
+    """
+    out: list[int | None] = []
+    prev: int | None = None
+    for j in track_frames:
+        if prev is None:
+            out.append(None)
+        else:
+            between = [s for s in frame_stamps[prev:j] if s is not None]
+            out.append(max(between) if between else None)
+        prev = j
+    return out
 
 
 def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[int, Any]],
