@@ -24,10 +24,10 @@ from pose_lifter.messages.frame import (
     FrameSettings,
     LiftedSkeleton,
     SkipSkeleton,
-    expiry_stamps,
 )
 from pose_lifter.messages.names import TOPIC_CAMERA_INFO, TOPIC_KEYPOINTS
 from pose_lifter.offline import bags
+from pose_lifter.offline.chains import expiry_stamps
 from pose_lifter.offline.lift import FrameLift, LiftSummary, frame_settings, lift_messages
 from pose_lifter.offline.settings import LiftSettings
 from pose_lifter.ros.params import PARAMS, NodeSettings
