@@ -77,6 +77,28 @@ def test_coverage_of_a_gaussian_sample_is_the_gaussian_coverage_and_a_doubled_st
     assert doubled["axis1"] > rgbd.AXIS_TARGETS[0] + 0.2 and doubled["joint1"] > rgbd.JOINT_TARGETS[0] + 0.4
 
 
+def test_coverage_by_the_predicted_deviation_sees_a_bin_whose_deviations_lie() -> None:
+    """Errors drawn with their predicted deviations, spread over the bins of STD_BINS_M: each bin
+    covers as a Gaussian; the same errors with the widest bin's deviations halved (0.3 -> 0.15 m,
+    still in that bin): that bin alone falls to ~38 % at one sigma, the coverage of every coordinate
+    together only to ~61 %."""
+    rng = np.random.default_rng(1)
+    n = 12_000
+    std = rng.choice([0.02, 0.04, 0.09, 0.3], size=(n, 3))
+    err = std * rng.standard_normal((n, 3))
+    counts = rgbd.coverage_by_std(err, std)
+    assert counts.shape == (len(rgbd.STD_BINS_M) + 1, 3) and counts[:, 0].sum() == 3 * n
+    for total, within1, within2 in counts:  # five binomial standard errors
+        assert within1 / total == pytest.approx(rgbd.AXIS_TARGETS[0], abs=5 * np.sqrt(0.683 * 0.317 / total))
+        assert within2 / total == pytest.approx(rgbd.AXIS_TARGETS[1], abs=5 * np.sqrt(0.954 * 0.046 / total))
+    lied = np.where(std > 0.2, std / 2, std)
+    bad = rgbd.coverage_by_std(err, lied)
+    assert bad[-1, 1] / bad[-1, 0] < 0.45
+    np.testing.assert_array_equal(bad[:-1], counts[:-1])
+    assert rgbd.coverage(rgbd.coverage_counts(err, lied))["axis1"] > 0.58  # the pooled figure hides it
+    assert rgbd.coverage_by_std(np.full((2, 3), np.nan), np.ones((2, 3)))[:, 0].sum() == 0
+
+
 def test_the_naive_lookup_back_projects_the_reading_of_the_rounded_pixel() -> None:
     intrinsics = ((100.0, 200.0), (2.0, 1.5))
     depth = np.full((4, 5), np.nan, dtype=np.float32)
@@ -169,6 +191,9 @@ def test_a_tiny_run_gives_every_method_at_every_distance_finite_figures() -> Non
     for d in table:
         for m in rgbd.METHODS:
             assert f"| {d} | {m} |" in text
+        fused = table[d]["fused"]
+        assert sum(c[0] for c in fused["by_std"]) == 3 * fused["coverage"]["all"]["joints"]
+        assert table[d]["naive"]["by_std"] is None
     # several camera elevations: a row per distance and elevation
     high = ev.Track("high", track.world, (0.0, rgbd.ELEVATED, "perspective"), 4)
     elevated = rgbd.evaluate_jobs([(high, 3.0)], rgbd.METHODS, {})
@@ -180,6 +205,7 @@ def test_a_tiny_run_gives_every_method_at_every_distance_finite_figures() -> Non
     assert twice["3 m"]["fused"]["mpjpe"] == pytest.approx(table["3 m"]["fused"]["mpjpe"])
     counted = twice["3 m"]["fused"]["coverage"]["all"]["joints"]
     assert counted == 2 * table["3 m"]["fused"]["coverage"]["all"]["joints"]
+    assert twice["3 m"]["fused"]["by_std"] == (2 * np.array(table["3 m"]["fused"]["by_std"])).tolist()
     # seeded per track and distance: the same run gives the same figures
     again = rgbd.evaluate_jobs([(track, 3.0)], ("mono", "naive"), {})[0]
     first = next(r for r in results if r["distance"] == 3.0)

@@ -57,6 +57,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -81,9 +82,9 @@ from pose_lifter.mocap import evaluation as ev
 from pose_lifter.mocap.detector_model import REALISTIC, detect
 from pose_lifter.mocap.views import film, view_rotation
 
-__all__ = ["AXIS_TARGETS", "DISTANCES", "GROUPS", "JOINT_TARGETS", "METHODS", "RgbdEvaluator", "coverage",
-           "coverage_counts", "evaluate_jobs", "film_rgbd", "fuse_person", "naive_lookup", "render_table",
-           "rgbd_cameras", "rgbd_figures", "root_error", "summarise"]
+__all__ = ["AXIS_TARGETS", "DISTANCES", "GROUPS", "JOINT_TARGETS", "METHODS", "STD_BINS_M", "RgbdEvaluator",
+           "coverage", "coverage_by_std", "coverage_counts", "evaluate_jobs", "film_rgbd", "fuse_person",
+           "naive_lookup", "render_table", "rgbd_cameras", "rgbd_figures", "root_error", "summarise"]
 
 METHODS = ("mono", "naive", "fused", "fused-lag", "fused-offline", "true-depth")
 #: The refined methods: each the fused lift of the refined poses of one lift of
@@ -105,6 +106,9 @@ AXIS_TARGETS = (0.683, 0.954)
 JOINT_TARGETS = (0.199, 0.739)
 #: The joints a coverage is counted over: all, those read from depth, those filled from the prior.
 GROUPS = ("all", "depth", "prior")
+#: The edges of the bins of a coordinate's predicted standard deviation (metres) that its coverage
+#: is also counted in (:func:`coverage_by_std`): honest deviations cover alike, narrow or wide.
+STD_BINS_M = (0.03, 0.06, 0.12)
 #: The figures averaged over the frames (mm; ``from_depth`` a fraction of the joints).
 FIGURES = ("p_mpjpe", "mpjpe", "root", "wrists", "jitter", "from_depth")
 #: The node's ``output_lag`` of ``fused-lag`` (frames).
@@ -181,6 +185,19 @@ def coverage_counts(err: NDArray[np.float64], std: NDArray[np.float64]) -> NDArr
     d2 = (z * z).sum(axis=1)
     return np.array([ok.sum(), (z <= 1.0).sum(), (z <= 2.0).sum(), (d2 <= 1.0).sum(), (d2 <= 4.0).sum()],
                     dtype=np.int64)
+
+
+def coverage_by_std(err: NDArray[np.float64], std: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Per bin of the predicted standard deviation (:data:`STD_BINS_M`: below the first edge, between
+    the edges, from the last on), the coordinates of the errors ``err`` (N, 3; predicted minus true)
+    with finite deviations ``std`` (N, 3; > 0) counted, those within 1 and those within 2 standard
+    deviations: (len(STD_BINS_M) + 1, 3)."""
+    e, sd = np.abs(np.asarray(err, dtype=np.float64)).ravel(), np.asarray(std, dtype=np.float64).ravel()
+    ok = np.isfinite(e) & np.isfinite(sd) & (sd > 0)
+    z = e[ok] / sd[ok]
+    b = np.searchsorted(np.array(STD_BINS_M), sd[ok], side="right")
+    return np.array([[(b == k).sum(), ((b == k) & (z <= 1.0)).sum(), ((b == k) & (z <= 2.0)).sum()]
+                     for k in range(len(STD_BINS_M) + 1)], dtype=np.int64)
 
 
 def coverage(counts: NDArray[np.int64] | Sequence[int]) -> dict[str, float]:
@@ -260,8 +277,9 @@ class _Method:
 
     def record(self, truth: NDArray[np.float64]) -> dict[str, Any]:
         """Its figures per frame (:func:`rgbd_figures`, ``from_depth``: the share of joints read
-        from depth, NaN where not lifted) and ``coverage``: per group of :data:`GROUPS` the
-        :func:`coverage_counts` over the track (None without standard deviations)."""
+        from depth, NaN where not lifted), ``coverage``: per group of :data:`GROUPS` the
+        :func:`coverage_counts` over the track, and ``by_std``: its :func:`coverage_by_std` (both
+        None without standard deviations)."""
         out: dict[str, Any] = rgbd_figures(self.joints, truth)
         lifted = np.isfinite(self.joints).all(axis=(1, 2))
         out["from_depth"] = np.where(lifted, self.from_depth.mean(axis=1), np.nan).tolist()
@@ -271,8 +289,9 @@ class _Method:
             depth = self.from_depth.reshape(-1)
             masks = {"all": np.ones(len(depth), dtype=bool), "depth": depth, "prior": ~depth}
             out["coverage"] = {g: coverage_counts(err[k], std[k]).tolist() for g, k in masks.items()}
+            out["by_std"] = coverage_by_std(err, std).tolist()
         else:
-            out["coverage"] = None
+            out["coverage"], out["by_std"] = None, None
         return out
 
 
@@ -449,8 +468,9 @@ def summarise(results: Sequence[dict[str, Any]], distances: Sequence[float], met
     """Per distance (``"3 m"``; with several camera elevations among ``results``, per distance
     and elevation: ``"3 m, level"``, ``"3 m, 30 deg above"``) and method: the means over every
     lifted frame of ``results`` (records of :meth:`RgbdEvaluator.evaluate`) of :data:`FIGURES`,
-    the share of frames ``lifted`` and ``coverage``: per group of :data:`GROUPS` the
-    :func:`coverage` over every joint (None for a method without uncertainty)."""
+    the share of frames ``lifted``, ``coverage``: per group of :data:`GROUPS` the
+    :func:`coverage` over every joint, and ``by_std``: the :func:`coverage_by_std` counts over
+    every coordinate (both None for a method without uncertainty)."""
     elevations = sorted({float(r["camera"][1]) for r in results})
     table: dict[str, dict[str, dict[str, Any]]] = {}
     for d in distances:
@@ -465,6 +485,8 @@ def summarise(results: Sequence[dict[str, Any]], distances: Sequence[float], met
                 counts = [r[m]["coverage"] for r in rows if r[m]["coverage"] is not None]
                 vals["coverage"] = ({g: coverage(np.sum([c[g] for c in counts], axis=0)) for g in GROUPS}
                                     if counts else None)
+                by_std = [r[m]["by_std"] for r in rows if r[m].get("by_std") is not None]
+                vals["by_std"] = np.sum(by_std, axis=0).tolist() if by_std else None
                 row[m] = vals
             view = "" if len(elevations) == 1 else ", level" if el == 0 else f", {el:g} deg above"
             table[f"{d:g} m{view}"] = row
@@ -489,6 +511,8 @@ def mean_table(tables: Sequence[Table]) -> Table:
                 g: {k: (float(np.sum([c[g][k] for c in covs])) if k == "joints"
                         else ev.nanmean([c[g][k] for c in covs if c[g]["joints"]]))
                     for k in covs[0][g]} for g in GROUPS}
+            by_std = [c["by_std"] for c in cells if c.get("by_std") is not None]
+            vals["by_std"] = np.sum(by_std, axis=0).tolist() if by_std else None  # pooled over the tables
             out[d][m] = vals
     return out
 
@@ -503,7 +527,7 @@ def _pair(cov: dict[str, dict[str, float]] | None, group: str, kind: str) -> str
 def render_table(table: dict[str, dict[str, dict[str, Any]]], methods: Sequence[str], header: str,
                  footer: str = "") -> str:
     """The markdown of a :func:`summarise` table: ``header``, a row per distance and method of
-    the errors, then of the coverage, ``footer``."""
+    the errors, then of the coverage, then of the coverage by predicted deviation, ``footer``."""
     lines = [header, "", "| distance | method | P-MPJPE (mm) | metric MPJPE (mm) | root (mm) | wrists (mm) "
              "| jitter (mm/frame^2) | read from depth | frames lifted |", "|---" * 9 + "|"]
     for d, row in table.items():
@@ -522,6 +546,21 @@ def render_table(table: dict[str, dict[str, dict[str, Any]]], methods: Sequence[
         for m in methods:
             cov = row[m]["coverage"]
             cells = [_pair(cov, g, kind) for kind in ("axis", "joint") for g in GROUPS]
+            lines.append(f"| {d} | {m} | " + " | ".join(cells) + " |")
+    edges = [f"{100 * e:g}" for e in STD_BINS_M]
+    bins = [f"< {edges[0]}", *(f"{a}-{b}" for a, b in pairwise(edges)), f">= {edges[-1]}"]
+    lines += ["", "Coverage per axis by the predicted standard deviation (cm): % of the coordinates within "
+              "1 / 2 sigma, and the bin's share of the coordinates:", "",
+              "| distance | method | " + " | ".join(f"sigma {b}" for b in bins) + " |",
+              "|---" * (len(bins) + 2) + "|"]
+    for d, row in table.items():
+        for m in methods:
+            counts = row[m].get("by_std")
+            if counts is None:
+                continue
+            n_all = max(sum(c[0] for c in counts), 1)
+            cells = [f"{100 * c[1] / c[0]:.1f} / {100 * c[2] / c[0]:.1f} ({100 * c[0] / n_all:.0f} %)"
+                     if c[0] else "-" for c in counts]
             lines.append(f"| {d} | {m} | " + " | ".join(cells) + " |")
     if footer:
         lines += ["", footer]
