@@ -4,9 +4,9 @@ processes, with the same outcomes.
 
 A track's frames depend on one another (warm starts, the track's history); different tracks do
 not, so each track is a chain. A chain expires its track at the stamps a pipeline lifting every
-frame would (:func:`expiry_stamps`), so the outcomes are those of the
-node's one pipeline over the whole bag. Chains are lifted in groups, in step, the k-th frame of
-each chain together whether they were seen together or one after another (:func:`lift_chains`),
+frame would (:func:`expiry_stamps`), so the outcomes are those of the node's one pipeline over the
+whole bag. Chains are lifted in groups, in step, the k-th frame of each chain together whether
+they were seen together or one after another (:func:`lift_chains`),
 so that the prior's network runs once per step for all of them
 (:func:`~pose_lifter.core.lift.batch.prior_calls`); a chain's outcomes do not depend on its group.
 A long chain (one track recorded at length) is lifted as pieces that the workers share
