@@ -282,12 +282,16 @@ class SkeletonFrame:
         """The rows of ``frames``, one after the other (at least one frame)."""
         return cls(*(np.concatenate([getattr(f, x.name) for f in frames]) for x in fields(cls)))
 
-    def take(self, rows: NDArray[np.intp]) -> SkeletonFrame:
-        """These rows, in this order."""
-        return type(self)(*(getattr(self, x.name)[rows] for x in fields(self)))
+    def take(self, rows: NDArray[np.intp] | slice) -> SkeletonFrame:
+        """These rows, in this order (a slice: views of these columns)."""
+        return type(self)(*(getattr(self, name)[rows] for name in _FRAME_FIELDS))
 
     def __len__(self) -> int:
         return len(self.track_ids)
+
+
+#: The columns of a :class:`SkeletonFrame`, in order.
+_FRAME_FIELDS: Final = tuple(x.name for x in fields(SkeletonFrame))
 
 
 def _std_or_nan(std_m: NDArray[np.float64] | None) -> NDArray[np.float64]:

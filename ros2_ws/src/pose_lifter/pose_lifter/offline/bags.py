@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import heapq
 import shutil
+import struct
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -100,6 +101,7 @@ class BagWriter:
         self._tmp = Path(tempfile.mkdtemp(prefix=".bagwriter-", dir=self.path.parent.resolve()))
         self._bagdir = self._tmp / self.path.stem
         self._writer = Writer(self._bagdir, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer.STORAGE_PLUGINS = {StoragePlugin.MCAP: mcap_storage()}
         if compress:  # zstd-compressed MCAP chunks (rosbag2 "storage" compression)
             self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._connections: dict[str, Any] = {}
@@ -131,24 +133,39 @@ class BagWriter:
         if raw.topic not in self._connections:
             self._connections[raw.topic] = self._writer.add_connection(
                 raw.topic, raw.msgtype, msgdef=raw.msgdef, rihs01=raw.rihs01)
-        self._writer.write(self._connections[raw.topic], int(raw.stamp_ns), raw.data)
+        self._put(self._connections[raw.topic], int(raw.stamp_ns), raw.data)
 
     def write(self, topic: str, stamp_ns: int, msg: Any, msgtype: str | None = None) -> None:
         """Serialise and write one message (the topic is added on first use)."""
         if topic not in self._connections:
             self.add_topic(topic, msgtype or str(msg.__msgtype__))
         conn = self._connections[topic]
-        self._writer.write(conn, int(stamp_ns), self.store.serialize_cdr(msg, conn.msgtype))
+        self._put(conn, int(stamp_ns), self.store.serialize_cdr(msg, conn.msgtype))
 
     def write_cdr(self, topic: str, stamp_ns: int, data: bytes, msgtype: str) -> None:
         """Write one message already serialised (CDR, e.g. by :mod:`pose_lifter.messages.cdr`) as a
         ``msgtype`` of our typestore (the topic is added on first use)."""
-        if topic not in self._connections:
+        conn = self._connections.get(topic)
+        if conn is None:
             self.add_topic(topic, msgtype)
-        conn = self._connections[topic]
+            conn = self._connections[topic]
         if conn.msgtype != msgtype:
             raise BagError(f"topic {topic} is {conn.msgtype}, not {msgtype}")
-        self._writer.write(conn, int(stamp_ns), data)
+        self._put(conn, int(stamp_ns), data)
+
+    def _put(self, conn: Any, stamp_ns: int, data: bytes | memoryview) -> None:
+        """What rosbags' ``Writer.write`` does for a connection of this writer (storage
+        compression: no per-message step), without its search of the connection list."""
+        if not self._open:
+            raise BagError(f"{self.path} is not open")
+        w, storage = self._writer, self._writer.storage
+        assert storage is not None
+        storage.write(conn, stamp_ns, data)
+        w.counts[conn.id] += 1
+        if stamp_ns < w.min_timestamp:
+            w.min_timestamp = stamp_ns
+        if stamp_ns > w.max_timestamp:
+            w.max_timestamp = stamp_ns
 
     def close(self, discard: bool = False) -> None:
         """Finish the file (or throw it away with ``discard``)."""
@@ -163,6 +180,39 @@ class BagWriter:
                     shutil.move(str(files[0]), str(self.path))
         finally:
             shutil.rmtree(self._tmp, ignore_errors=True)
+
+
+#: An MCAP message record's opcode, length, channel id, sequence, log and publish times.
+_MESSAGE_HEAD: Final = struct.Struct("<BQHIQQ")
+_STORAGE: Any = None
+
+
+def mcap_storage() -> Any:
+    """rosbags' MCAP storage writer with a message record written in one ``struct`` pack: the
+    same bytes as its own ``write`` (a test compares them), about half its time a message."""
+    global _STORAGE
+    if _STORAGE is not None:
+        return _STORAGE
+    from rosbags.rosbag2.storage_mcap import McapWriter
+
+    class FastMcapWriter(McapWriter):
+        def write(self, connection: Any, timestamp: int, data: bytes | memoryview) -> None:
+            cid = connection.id
+            self.message_start_time = min(timestamp, self.message_start_time)
+            self.message_end_time = max(timestamp, self.message_end_time)
+            self.channel_stats[cid] += 1
+            chunk = self.chunk
+            chunk.message_start_time = min(timestamp, chunk.message_start_time)
+            chunk.message_end_time = max(timestamp, chunk.message_end_time)
+            bio = chunk.bio
+            chunk.msgs[cid].append((timestamp, bio.tell()))
+            bio.write(_MESSAGE_HEAD.pack(0x05, 22 + len(data), cid, 0, timestamp, timestamp))
+            bio.write(data)
+            if bio.tell() > 2**20:  # rosbags' own chunk size
+                self.close_chunk()
+
+    _STORAGE = FastMcapWriter
+    return _STORAGE
 
 
 @dataclass(frozen=True)

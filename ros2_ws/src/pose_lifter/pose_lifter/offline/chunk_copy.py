@@ -16,7 +16,7 @@ from io import BytesIO
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from pose_lifter.offline.bags import BagWriter
+from pose_lifter.offline.bags import BagWriter, mcap_storage
 from pose_lifter.offline.mcap_index import ChunkedMcap
 
 __all__ = ["NEW_CHUNK_BYTES", "Addition", "ChunkCopier", "copy_with", "copyable"]
@@ -111,12 +111,12 @@ def _write_u64(bio: Any, value: int) -> None:
 
 def _make_storage() -> type:
     """rosbags' MCAP storage writer with the copying of chunks (imported when first needed)."""
-    from rosbags.rosbag2.storage_mcap import Channel, McapWriter, write_channel, write_string
+    from rosbags.rosbag2.storage_mcap import Channel, write_channel, write_string
 
-    class CopyingMcapWriter(McapWriter):
-        """rosbags' MCAP storage; ``direct``: schema and channel records go to the file (before
-        copied chunks), not into the pending chunk; ``channel_metadata``: the next channel's
-        metadata bytes as they are."""
+    class CopyingMcapWriter(mcap_storage()):  # type: ignore[misc]
+        """The MCAP storage of :func:`~pose_lifter.offline.bags.mcap_storage`; ``direct``: schema
+        and channel records go to the file (before copied chunks), not into the pending chunk;
+        ``channel_metadata``: the next channel's metadata bytes as they are."""
 
         direct = False
         channel_metadata: bytes | None = None
@@ -170,8 +170,9 @@ def _make_storage() -> type:
             for cid, n_msgs in chunk.channel_count.items():
                 self.channel_stats[cid] += n_msgs
             if chunk.channel_count:
-                self.message_start_time = min(self.message_start_time, chunk.message_start_time)
-                self.message_end_time = max(self.message_end_time, chunk.message_end_time)
+                me: Any = self  # the storage's own times (its base is made at run time)
+                me.message_start_time = min(me.message_start_time, chunk.message_start_time)
+                me.message_end_time = max(me.message_end_time, chunk.message_end_time)
 
     return CopyingMcapWriter
 
