@@ -208,34 +208,55 @@ def tf_message_cdr(stamp_ns: int, frame_id: str, bodies: Sequence[tuple[str, bod
 def _tf_message(header: bytes, bodies: Sequence[tuple[str, body.BodyPose]]) -> bytes:
     """:func:`tf_message_cdr` with the stamp and frame of a header's CDR."""
     n_links = len(body.LINKS)
-    head = _ENCAPSULATION + _U32.pack(n_links * len(bodies))
     if not bodies:
-        return head
+        return _ENCAPSULATION + _U32.pack(0)
     translations = np.array([pose.translations for _, pose in bodies], dtype=np.float64)
     rotations = np.array([pose.quaternions for _, pose in bodies], dtype=np.float64)
     if translations.shape != (len(bodies), n_links, 3) or rotations.shape != (len(bodies), n_links, 4):
         raise ValueError(f"each pose needs {n_links} translations (3) and quaternions (4)")
-    # 4 bytes ahead of the message: its float64 (at CDR offsets multiple of 8) aligned in memory
-    buf = bytearray(4) + head
-    groups: dict[_TfLayout, tuple[list[int], list[int]]] = {}  # layout -> (bodies, CDR offsets)
-    for k, (bid, _) in enumerate(bodies):
-        block = _tf_block(bid, header[_STAMP.size:], 4 if k == 0 else 0)
-        ks, starts = groups.setdefault(block.layout, ([], []))
-        ks.append(k)
-        starts.append(len(buf) - 8)
-        buf += block.data
+    t = _tf_template(header[_STAMP.size:], tuple(bid for bid, _ in bodies))
+    buf = bytearray(t.data)
     words = np.frombuffer(buf, dtype="<u4")  # CDR offset c: word (c + 8) / 4
     doubles = np.frombuffer(buf, dtype="<f8", offset=8)  # CDR offset c: double c / 8
     sec, nanosec = np.frombuffer(header[:_STAMP.size], dtype="<u4")
-    for layout, (ks, starts) in groups.items():
-        at = np.array(starts, dtype=np.intp)[:, None]
-        stamp_at = (at + 8) // 4 + layout.stamp_words
-        words[stamp_at] = sec
-        words[stamp_at + 1] = nanosec
-        first = (at - layout.phase) // 8
-        doubles[first + layout.translation_words] = translations[ks].reshape(len(ks), -1)
-        doubles[first + layout.rotation_words] = rotations[ks].reshape(len(ks), -1)
+    words[t.stamp_words] = sec
+    words[t.stamp_words + 1] = nanosec
+    doubles[t.translation_words] = translations.reshape(-1)
+    doubles[t.rotation_words] = rotations.reshape(-1)
     return bytes(memoryview(buf)[4:])
+
+
+@dataclass(frozen=True)
+class _TfTemplate:
+    """A ``TFMessage`` of some bodies with zero stamps and values, 4 bytes ahead of it (its float64,
+    at CDR offsets multiple of 8, then aligned in memory), and where the stamps and values go:
+    each transform's ``stamp.sec`` in 4-byte words of ``data``, the translations' and rotations'
+    values (bodies, links, then 3 or 4 values) in 8-byte words from byte 8."""
+
+    data: bytes
+    stamp_words: NDArray[np.intp]
+    translation_words: NDArray[np.intp]
+    rotation_words: NDArray[np.intp]
+
+
+@lru_cache(maxsize=256)
+def _tf_template(root: bytes, bids: tuple[str, ...]) -> _TfTemplate:
+    """The :class:`_TfTemplate` of these bodies in this order, ``body_<id>`` a child of ``root``
+    (the input's frame, as a CDR string): made of each body's :func:`_tf_block` once, then reused
+    while the same bodies are shown."""
+    buf = bytearray(4) + _ENCAPSULATION + _U32.pack(len(body.LINKS) * len(bids))
+    stamps, translations, rotations = [], [], []
+    for k, bid in enumerate(bids):
+        block = _tf_block(bid, root, 4 if k == 0 else 0)
+        at = len(buf) - 8  # the block's CDR offset
+        layout = block.layout
+        stamps.append((at + 8) // 4 + layout.stamp_words)
+        first = (at - layout.phase) // 8
+        translations.append(first + layout.translation_words)
+        rotations.append(first + layout.rotation_words)
+        buf += block.data
+    return _TfTemplate(bytes(buf), np.concatenate(stamps), np.concatenate(translations),
+                       np.concatenate(rotations))
 
 
 @lru_cache(maxsize=1024)
