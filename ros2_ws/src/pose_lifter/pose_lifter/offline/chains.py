@@ -39,6 +39,7 @@ from pose_lifter.core.results import LiftResult
 from pose_lifter.core.track.later import LaterFrame, Placement, Refiner, placements
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.cdr import SkeletonFrame
+from pose_lifter.messages.checks import check_frames
 from pose_lifter.messages.frame import (
     CheckedFrame,
     DepthImage,
@@ -187,7 +188,7 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     """Check every message (step 1 of the pipeline) and split the checked skeletons into
     independent chains: one per track id (in message order), one per untracked skeleton.
     Returns (chains, per message its items or refusals in input order, the checked frames)."""
-    checked = [pipeline.check(msg) for _, msg in keypoint_msgs]
+    checked = check_frames(pipeline, [msg for _, msg in keypoint_msgs])
     cameras = CameraTimeline(camera_infos)
     per_track: dict[int, list[Item]] = {}
     chains: list[list[Item]] = []
@@ -209,7 +210,8 @@ def split_chains(keypoint_msgs: list[tuple[int, Any]], camera_infos: list[tuple[
     stamps = [s if c.answered else None for (s, _), c in zip(keypoint_msgs, checked, strict=True)]
     for track in per_track.values():
         expire = expiry_stamps(stamps, [it.msg_index for it in track])
-        chains.append([replace(it, expire_ns=e) for it, e in zip(track, expire, strict=True)])
+        chains.append([Item(it.msg_index, it.stamp_ns, it.input, it.intrinsics, e)
+                       for it, e in zip(track, expire, strict=True)])
     # the items per message with their expiry (the same objects as in the chains)
     final = {(it.msg_index, id(it.input)): it for chain in chains for it in chain}
     per_msg = [[x if isinstance(x, SkipSkeleton) else final[(x.msg_index, id(x.input))] for x in row]
