@@ -7,7 +7,9 @@ from itertools import zip_longest
 from typing import Any
 
 import numpy as np
+import pytest
 from pose_lifter.core import LifterOptions
+from pose_lifter.messages import checks
 from pose_lifter.messages import convert as m
 from pose_lifter.messages.cdr import decode_skeleton2d_array
 from pose_lifter.messages.checks import check_frames
@@ -56,7 +58,10 @@ def _same(a: CheckedFrame, b: CheckedFrame) -> None:
             assert x.points.dtype == y.points.dtype == np.float64 and x.points.shape == (12, 2)
 
 
-def test_a_recordings_frames_checked_together_are_each_frames_own_check() -> None:
+@pytest.mark.parametrize("pass_frames", [checks.PASS_FRAMES, 3])
+def test_a_recordings_frames_checked_together_are_each_frames_own_check(
+        pass_frames: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(checks, "PASS_FRAMES", pass_frames)  # 3: the frames in several passes
     rng = np.random.default_rng(7)
     pipeline = FramePipeline(_Options(), FrameSettings(max_skeletons=3))  # type: ignore[arg-type]
 

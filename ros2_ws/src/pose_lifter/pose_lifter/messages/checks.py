@@ -15,14 +15,17 @@ would be refused, clipped or repaired, and every other frame, goes through
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
 from pose_lifter.messages.frame import CheckedFrame, FramePipeline, SkeletonInput, frame_over_cap
 from pose_lifter.messages.layouts import Layout, get_layout
 
-__all__ = ["check_frames"]
+__all__ = ["PASS_FRAMES", "check_frames"]
+
+#: Frames checked in one array pass at most (the stack's copy of their keypoints is bounded).
+PASS_FRAMES: Final[int] = 8192
 
 
 def check_frames(pipeline: FramePipeline, msgs: Sequence[Any]) -> list[CheckedFrame]:
@@ -51,8 +54,10 @@ def check_frames(pipeline: FramePipeline, msgs: Sequence[Any]) -> list[CheckedFr
     for (name, _), members in usual.items():
         lay = layouts[name]
         assert lay is not None
-        for i, frame in zip(members, _check_usual([msgs[i] for i in members], lay, pipeline), strict=True):
-            out[i] = frame
+        for a in range(0, len(members), PASS_FRAMES):
+            part = members[a:a + PASS_FRAMES]
+            for i, frame in zip(part, _check_usual([msgs[i] for i in part], lay, pipeline), strict=True):
+                out[i] = frame
     return [frame if frame is not None else pipeline.check(msg) for frame, msg in zip(out, msgs, strict=True)]
 
 
