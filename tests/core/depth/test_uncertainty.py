@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from pose_lifter.core.depth.uncertainty import (
+    LEAN_SCALE_LINE,
     MONOCULAR_SCALE_STD,
     OBSERVED_BINS,
     RESIDUAL_FACTOR_MIN,
@@ -12,9 +13,11 @@ from pose_lifter.core.depth.uncertainty import (
     SHAPE_STD_M,
     body_std,
     fit_residual,
+    lean_factor,
     monocular_std,
     observed_bin,
     residual_factor,
+    spine_lean,
 )
 from pose_lifter.core.results import Camera, LiftResult
 
@@ -82,3 +85,34 @@ def test_the_residual_scales_the_deviations_along_its_lines() -> None:
         np.testing.assert_allclose(std[i, :, 0], shape[i] * SHAPE_STD_M[:, 0])
         np.testing.assert_allclose(std[i, :, 2], np.hypot(shape[i] * SHAPE_STD_M[:, 1],
                                                           scale[i] * MONOCULAR_SCALE_STD[0] * 4.0))
+
+
+def _upright(elevation_deg: float, distance: float = 4.0) -> np.ndarray:
+    """A body standing upright (hips at y 0, shoulders 0.5 m above, the camera's y down) seen from
+    ``elevation_deg`` above: its spine turned by that angle about the camera's x axis."""
+    body = np.zeros((12, 3))
+    body[[0, 3], 1] = -0.5  # shoulders
+    body[[0, 6], 0], body[[3, 9], 0] = -0.2, 0.2  # left and right
+    e = np.radians(elevation_deg)
+    turn = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(e), -np.sin(e)], [0.0, np.sin(e), np.cos(e)]])
+    return body @ turn.T + [0.0, 0.0, distance]
+
+
+def test_the_spine_s_lean_widens_the_slide_along_its_line() -> None:
+    """The lean is the spine's angle out of the image plane, whichever way; the monocular slide's
+    deviation scales by the lean's line (a body seen level less, one seen from above more), the
+    shape's not; a degenerate spine (all joints at one point) keeps the unscaled slide."""
+    bodies = np.array([_upright(0.0), _upright(30.0), _upright(-30.0)])
+    np.testing.assert_allclose(spine_lean(bodies), np.radians([0.0, 30.0, 30.0]), atol=1e-12)
+    a, b = LEAN_SCALE_LINE
+    factor = lean_factor(bodies)
+    np.testing.assert_allclose(factor, [a, a + b * np.radians(30.0), a + b * np.radians(30.0)])
+    assert factor[0] < 1.0 < factor[1]
+    std = monocular_std(bodies, np.ones((3, 12)), K)
+    shape = SHAPE_STD_M[:, [0, 0, 1]]
+    for i in range(3):  # sqrt(shape^2 + (s |x|)^2): the slide's share grows by the factor
+        slide = np.sqrt(np.maximum(std[i] ** 2 - shape**2, 0.0))
+        np.testing.assert_allclose(slide, factor[i] * MONOCULAR_SCALE_STD[0] * np.abs(bodies[i]), atol=1e-12)
+    point = np.zeros((1, 12, 3))
+    point[..., 2] = 4.0
+    assert np.isnan(spine_lean(point)[0]) and lean_factor(point)[0] == 1.0

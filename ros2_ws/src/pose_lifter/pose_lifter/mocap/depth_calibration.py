@@ -30,6 +30,9 @@ model's body surface and sensor) at each distance, and lifted as the node lifts:
   axis), and of ``|k - 1|`` over the bin's scale deviation; a least-squares line through each
   against the deciles' median residual, scaled so that the 68th percentile of the errors over the
   deviations it scales is 1;
+* :data:`~pose_lifter.core.depth.uncertainty.LEAN_SCALE_LINE` (:func:`residual_line` against the
+  placed body's :func:`~pose_lifter.core.depth.uncertainty.spine_lean` instead of the residual): the
+  same of ``|k - 1|`` over the scale's deviation scaled by the residual's line just measured;
 * :data:`~pose_lifter.core.depth.uncertainty.SHAPE_CORR_Z`: the correlation between the joints of
   the scaled placement's errors along the depth, of wholly shown bodies (:func:`shape_correlation`:
   left and right pooled, so the matrix is the same seen in a mirror);
@@ -61,7 +64,9 @@ from pose_lifter.core.depth.uncertainty import (
     fit_residual,
     monocular_scale_std,
     observed_bin,
+    residual_factor,
     shape_std,
+    spine_lean,
 )
 from pose_lifter.core.model.skeleton import COUNTERPART, N_JOINTS, RIGHT_LOWER_LEG, limb_lengths
 from pose_lifter.core.track.placement import DEFAULT_DISTANCE_M, DEFAULT_LEG_LENGTH_M, place_results
@@ -94,6 +99,7 @@ class Calibration:
     shape_corr_z: NDArray[np.float64]  #: (12, 12)
     shape_line: tuple[float, float]  #: (a, b) of RESIDUAL_SHAPE_LINE
     scale_line: tuple[float, float]  #: (a, b) of RESIDUAL_SCALE_LINE
+    lean_line: tuple[float, float]  #: (a, b) of LEAN_SCALE_LINE
     n_frames: int
     n_readings: int
 
@@ -124,6 +130,7 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     residuals: list[float] = []  # each frame's fit's 2D residual
     shape_z: list[NDArray[np.float64]] = []  # and its scaled placement's errors / the shape's deviations
     scale_z: list[float] = []  # and |k - 1| / the scale's deviation
+    leans: list[float] = []  # and the placed body's spine's lean out of the image plane
     n_frames = 0
     for track in tracks:
         for distance in distances:
@@ -147,6 +154,7 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
                 residuals.append(float(fit_residual([res])[0]))
                 shape_z.append(err / shape_std(observed[None])[0])
                 scale_z.append(float((k - 1.0) / monocular_scale_std(observed[None])[0]))
+                leans.append(float(spine_lean(x0[None])[0]))
                 if observed.all():
                     whole_z.append(err[:, 2])
                 for j in range(N_JOINTS):
@@ -165,16 +173,19 @@ def calibrate(tracks: Sequence[ev.Track], distances: Sequence[float], settings: 
     surface = np.array([float(np.median(p)) if len(p) else float("nan") for p in pooled])
     spread = np.concatenate([p - surface[j] for j, p in enumerate(pooled)])
     shape, factor, unobserved = spread_factors(shown, hidden)
+    r = np.array(residuals)
+    scale_line = residual_line(r, np.array(scale_z))
+    lean_line = residual_line(np.array(leans), np.array(scale_z) / residual_factor(r, scale_line))
     return Calibration(surface, _q68(spread), np.array([_q68(np.array(e)) for e in scale_err]),
                        shape, factor, unobserved, shape_correlation(np.array(whole_z)),
-                       residual_line(np.array(residuals), np.array(shape_z)),
-                       residual_line(np.array(residuals), np.array(scale_z)), n_frames,
+                       residual_line(r, np.array(shape_z)), scale_line, lean_line, n_frames,
                        sum(len(o) for o in offsets))
 
 
 def residual_line(residuals: NDArray[np.float64], errors: NDArray[np.float64]) -> tuple[float, float]:
     """``(a, b)`` of a line of :mod:`~pose_lifter.core.depth.uncertainty` (``RESIDUAL_SHAPE_LINE``,
-    ``RESIDUAL_SCALE_LINE``) from ``n`` frames' fits' 2D residuals (n,) and their errors over their
+    ``RESIDUAL_SCALE_LINE``; ``LEAN_SCALE_LINE`` with the bodies' leans in place of the residuals)
+    from ``n`` frames' fits' 2D residuals (n,) and their errors over their
     deviations without the line (n, ...): per decile of the residual, the 68th percentile of the
     errors' absolute values (a frame's values together) against the decile's median residual;
     the least-squares line through the ten, scaled so that the errors over their deviations scaled
@@ -272,6 +283,7 @@ def format_calibration(c: Calibration) -> str:
                                             for r in c.unobserved_factor) + "]",
         f"RESIDUAL_SHAPE_LINE = ({c.shape_line[0]:.3f}, {c.shape_line[1]:.2f})",
         f"RESIDUAL_SCALE_LINE = ({c.scale_line[0]:.3f}, {c.scale_line[1]:.2f})",
+        f"LEAN_SCALE_LINE = ({c.lean_line[0]:.3f}, {c.lean_line[1]:.3f})",
         "SHAPE_CORR_Z = [\n" + "\n".join("    [" + ", ".join(f"{x:.2f}" for x in r) + "],"
                                          for r in c.shape_corr_z) + "\n]",
     ])

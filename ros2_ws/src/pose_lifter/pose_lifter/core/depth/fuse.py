@@ -79,6 +79,7 @@ from pose_lifter.core.depth.uncertainty import (
     SHAPE_CORR_Z,
     SHAPE_STD_M,
     body_std,
+    lean_factor,
     monocular_scale_std,
     residual_factor,
     shape_std,
@@ -239,8 +240,9 @@ class _Placed:
                  residuals: NDArray[np.float64] | None = None) -> None:
         pose = np.asarray(poses, dtype=np.float64)
         n = len(pose)
-        #: each lift's scales of its shape's and its placement's deviations (its fit's 2D residual)
-        self.shape_factor, self.scale_factor = (
+        #: each lift's scales of its shape's and its placement's deviations (its fit's 2D residual;
+        #: the placement's also its body's lean, :func:`~pose_lifter.core.depth.uncertainty.lean_factor`)
+        self.shape_factor, residual_scale = (
             np.broadcast_to(np.asarray(residual_factor(residuals, line), dtype=np.float64), (n,))
             for line in (RESIDUAL_SHAPE_LINE, RESIDUAL_SCALE_LINE))
         self.px = np.asarray(points, dtype=np.float64).reshape(n, N_JOINTS, 2)
@@ -249,6 +251,7 @@ class _Placed:
         self.x0 = place_poses(pose, self.scales, np.asarray(centres, dtype=np.float64).reshape(n, 2),
                               DEFAULT_LEG_LENGTH_M, (float(fx), float(fy)), (float(cx), float(cy)),
                               DEFAULT_DISTANCE_M)
+        self.scale_factor = residual_scale * lean_factor(self.x0)
         wt = np.asarray(weights, dtype=np.float64).reshape(n, N_JOINTS)
         self.observed = (wt >= opt.confidence_threshold) & np.isfinite(self.px).all(axis=-1)
 
