@@ -10,7 +10,8 @@ joint by that fraction of its own position. Both grow when the 2D shows less of 
 border, is lifted from a part of the body. The two are independent; :func:`body_std` adds them.
 Both also grow with the lift's own residual (:func:`fit_residual`, :func:`residual_factor`): a fit
 that cannot reach its 2D (a motion the prior knows badly, a 2D it misread) errs more, one that
-reaches it closely less.
+reaches it closely less. The slide grows as well with the body's lean out of the image plane
+(:func:`spine_lean`, :func:`lean_factor`): seen from above or below, its distance errs more.
 The depth fusion shrinks the second (the distance is read) and, where a joint is read, the first
 (:func:`pose_lifter.core.depth.fuse.fuse_depth`). The constants are measured on the training
 split's trials the packaged prior was not fitted on, at 1.5, 3 and 5 m (``make depth-calibration``,
