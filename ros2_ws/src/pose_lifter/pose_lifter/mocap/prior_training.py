@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from pose_lifter.core.model.metrics import p_mpjpe
 from pose_lifter.core.model.prior import FRAME_DIM, OUT_DIM, PosePrior, prior_features
-from pose_lifter.core.model.skeleton import LIMBS, N_JOINTS, RIGHT_LOWER_LEG
+from pose_lifter.core.model.skeleton import HIPS, LIMBS, N_JOINTS, RIGHT_LOWER_LEG
 from pose_lifter.mocap.detector_model import LOWER_LEG_JOINTS, autoregressive, joint_spreads
 from pose_lifter.mocap.pose_augment import mirror_poses, random_turns, transplant_limbs, turn_limbs
 from pose_lifter.mocap.scenes import corrupt_2d
@@ -98,10 +98,6 @@ class Augmentation:
 #: ``tools/cross_action.py``): mirrored people, limb transplants and turned limbs on top of the
 #: views and corruptions.
 GENERALISE: Augmentation = Augmentation(p_mirror=0.5, p_transplant=0.3, p_turn=0.5, p_lower_cut=0.1)
-
-
-#: Hips (:data:`pose_lifter.core.model.skeleton.JOINT_NAMES`).
-_HIPS = np.array([6, 9])
 
 
 @dataclass(frozen=True)
@@ -175,7 +171,7 @@ def make_batch(sequences: Sequence[NDArray[np.float64]], n: int, rng: np.random.
         cut = rng.random(n) < aug.p_lower_cut
         hips = cut & (rng.random(n) < 1.0 / 3.0)
         vis[np.ix_(cut, np.arange(window), LOWER_LEG_JOINTS)] = False
-        vis[np.ix_(hips, np.arange(window), _HIPS)] = False
+        vis[np.ix_(hips, np.arange(window), np.array(HIPS))] = False
     if aug.p_crop > 0:
         vis &= ~_cropped(pts, target, rng.random(n) < aug.p_crop, aug.crop_max, rng)
     # keep at least min_visible joints in the target frame

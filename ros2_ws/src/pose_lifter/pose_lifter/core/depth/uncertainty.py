@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
+from pose_lifter.core.model.skeleton import HIPS, SHOULDERS
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -108,9 +110,6 @@ LEAN_SCALE_LINE: Final[tuple[float, float]] = (0.880, 0.404)
 #: The least scale :func:`residual_factor` and :func:`lean_factor` give (a fit that meets its 2D
 #: exactly still errs).
 RESIDUAL_FACTOR_MIN: Final[float] = 0.5
-#: The joints (order of :data:`pose_lifter.core.model.skeleton.JOINT_NAMES`) of the spine's ends.
-_SHOULDERS: Final[list[int]] = [0, 3]
-_HIPS: Final[list[int]] = [6, 9]
 
 
 def fit_residual(results: Sequence[LiftResult]) -> NDArray[np.float64]:
@@ -140,7 +139,7 @@ def spine_lean(joints_m: NDArray[np.float64]) -> NDArray[np.float64]:
     camera optical frame: the hips' centre to the shoulders' centre) out of the image plane: 0 for
     an upright body seen level, ~0.5 seen from 30 degrees above; NaN for a degenerate spine."""
     x = np.asarray(joints_m, dtype=np.float64)
-    spine = x[:, _SHOULDERS].mean(axis=1) - x[:, _HIPS].mean(axis=1)
+    spine = x[:, list(SHOULDERS)].mean(axis=1) - x[:, list(HIPS)].mean(axis=1)
     norm = np.linalg.norm(spine, axis=1)
     ok = np.isfinite(norm) & (norm > 0)
     sine = np.abs(spine[:, 2]) / np.where(ok, norm, 1.0)

@@ -21,6 +21,7 @@ __all__ = [
     "ANTHROPOMETRIC_PROPORTIONS",
     "BONES_FOR_DRAWING",
     "COUNTERPART",
+    "HIPS",
     "JOINTS_LEFT",
     "JOINTS_RIGHT",
     "JOINT_NAMES",
@@ -32,6 +33,7 @@ __all__ = [
     "N_JOINTS",
     "RIGHT_LIMBS",
     "RIGHT_LOWER_LEG",
+    "SHOULDERS",
     "LimbVectors",
     "body_frame",
     "limb_lengths",
@@ -57,6 +59,9 @@ JOINT_NAMES: Final[tuple[str, ...]] = (
 N_JOINTS: Final[int] = len(JOINT_NAMES)
 JOINTS_LEFT: Final[tuple[int, ...]] = (0, 1, 2, 6, 7, 8)
 JOINTS_RIGHT: Final[tuple[int, ...]] = (3, 4, 5, 9, 10, 11)
+#: The spine's ends: the shoulders and the hips, (left, right) each.
+SHOULDERS: Final[tuple[int, int]] = (0, 3)
+HIPS: Final[tuple[int, int]] = (6, 9)
 #: Each joint's counterpart on the other side (left and right exchanged): the joint order of a
 #: mirror image, and of a detection whose left and right labels are swapped.
 COUNTERPART: Final[tuple[int, ...]] = tuple(
@@ -175,7 +180,7 @@ class LimbVectors(NamedTuple):
 
 
 #: The joints that define the body frame (:func:`body_frame`, :func:`normalise_pose_flat`).
-_LEFT_SHOULDER, _RIGHT_SHOULDER, _LEFT_HIP, _RIGHT_HIP = 0, 3, 6, 9
+(_LEFT_SHOULDER, _RIGHT_SHOULDER), (_LEFT_HIP, _RIGHT_HIP) = SHOULDERS, HIPS
 
 
 def body_frame(pose: NDArray[np.float64]) -> NDArray[np.float64]:
