@@ -19,7 +19,14 @@ from typing import Any, Final
 
 import numpy as np
 
-from pose_lifter.messages.frame import CheckedFrame, FramePipeline, SkeletonInput, frame_over_cap
+from pose_lifter.messages.frame import (
+    CheckedFrame,
+    FramePipeline,
+    SkeletonInput,
+    SkipSkeleton,
+    admitted_track,
+    frame_over_cap,
+)
 from pose_lifter.messages.layouts import Layout, get_layout
 
 __all__ = ["PASS_FRAMES", "check_frames"]
@@ -74,18 +81,17 @@ def _usual(msg: Any, pipeline: FramePipeline, layouts: dict[str, Layout | None])
         except Exception:  # unknown: the frame's own check words it
             layouts[name] = None
     lay = layouts[name]
-    if lay is None or lay.n_keypoints > st.max_keypoints:
+    if lay is None:
         return None
     seen: set[int] = set()
     for skel in skeletons:
         xyc = getattr(skel, "xyc", None)
         if xyc is None or xyc.shape != (lay.n_keypoints, 3):
             return None
-        track_id = int(skel.track_id)
-        if track_id >= 0:
-            if track_id in seen:
-                return None
-            seen.add(track_id)
+        try:  # the frame's own caps: too many keypoints, a repeated track id
+            admitted_track(skel, st, seen)
+        except SkipSkeleton:
+            return None
     return name, lay.n_keypoints
 
 
